@@ -1,0 +1,1 @@
+"""Tidy data frames from the study database, statistics, power, figures and reports."""

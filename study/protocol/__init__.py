@@ -1,0 +1,2 @@
+"""Study designs, counterbalancing, schedules, the session runner, simulated participants,
+and NASA-TLX."""

@@ -1,0 +1,1 @@
+"""The Textual terminal app the experimenter uses all day (`study tui`)."""
