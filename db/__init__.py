@@ -1,0 +1,22 @@
+"""The study database: SQLAlchemy 2.x models, engines, Alembic migrations, repositories.
+
+`db` knows nothing of the `study` application (an import-linter contract checks it):
+it stores studies, participants, schedules, trials and their samples, NASA-TLX
+questionnaires, calibrations and an audit log, on SQLite (embedded default) or
+PostgreSQL (multi-site), and upgrades older databases instead of recreating them.
+"""
+
+from db.engine import make_engine, make_session_factory, resolve_url, write_transaction
+from db.errors import DatabaseVersionError, DbInputError, MissingDatabaseError
+from db.migrate import open_database
+
+__all__ = [
+    "DatabaseVersionError",
+    "DbInputError",
+    "MissingDatabaseError",
+    "make_engine",
+    "make_session_factory",
+    "open_database",
+    "resolve_url",
+    "write_transaction",
+]

@@ -1,0 +1,131 @@
+"""Engines for the two supported backends, and the transaction helpers every writer uses.
+
+SQLite (the embedded default) is set up on every new connection: WAL journal so that
+readers (the TUI, `study schedule`) never block the session writing samples, foreign
+keys on, `synchronous=FULL` so a committed chunk survives a power cut, and a busy
+timeout so that two processes writing at once wait instead of failing. pysqlite's own
+implicit transaction handling is switched off and `BEGIN` is emitted by SQLAlchemy
+(the recipe in SQLAlchemy's SQLite dialect documentation), which makes transactional
+DDL work for Alembic and lets `write_transaction` take the write lock up front.
+
+PostgreSQL (multi-site studies) needs nothing special beyond `pool_pre_ping`; the
+same `write_transaction` serialises competing writers with an advisory lock.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from sqlalchemy import Connection, Engine, create_engine, event
+from sqlalchemy.engine import URL, make_url
+from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+from sqlalchemy.orm import Session, sessionmaker
+
+from db.errors import DbInputError
+
+DEFAULT_URL = "sqlite:///study.db"
+"""`./study.db` in the working directory, used when neither `--db` nor `STUDY_DB` is set."""
+
+SQLITE_BUSY_TIMEOUT_MS = 30_000
+
+_WRITE_LOCK_KEY = 7_240_001
+"""PostgreSQL advisory lock taken by `write_transaction` (an arbitrary project constant)."""
+
+
+def resolve_url(db: str | URL | None = None) -> URL:
+    """The database URL from `--db`, else `STUDY_DB`, else `./study.db`.
+
+    A value without `://` is a path to an SQLite file.
+    """
+    if isinstance(db, URL):
+        return db
+    raw = db or os.environ.get("STUDY_DB") or DEFAULT_URL
+    if "://" not in raw:
+        return URL.create("sqlite", database=str(Path(raw).expanduser()))
+    try:
+        url = make_url(raw)
+    except ArgumentError:
+        raise DbInputError(
+            f"database URL {raw!r} is not a URL; expected e.g. sqlite:///study.db "
+            "or postgresql+psycopg://user@host:5432/dbname"
+        ) from None
+    if url.get_backend_name() not in ("sqlite", "postgresql"):
+        raise DbInputError(
+            f"database URL {url.render_as_string(hide_password=True)!r} uses backend "
+            f"{url.get_backend_name()!r}; expected sqlite or postgresql"
+        )
+    return url
+
+
+def describe(url: URL | Engine) -> str:
+    """The URL as it can be shown to a user (password hidden)."""
+    if isinstance(url, Engine):
+        url = url.url
+    return url.render_as_string(hide_password=True)
+
+
+def is_sqlite(bind: Engine | Connection) -> bool:
+    return bind.dialect.name == "sqlite"
+
+
+def make_engine(url: str | URL) -> Engine:
+    """An engine for `url` with the per-backend settings described in the module docstring."""
+    url = make_url(url) if isinstance(url, str) else url
+    try:
+        if url.get_backend_name() == "sqlite":
+            engine = create_engine(url, connect_args={"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000})
+            # An in-memory or read-only (?mode=ro) database cannot switch to WAL.
+            wal = url.database not in (None, "", ":memory:") and url.query.get("mode") != "ro"
+            _configure_sqlite(engine, wal=wal)
+        else:
+            engine = create_engine(url, pool_pre_ping=True)
+    except (NoSuchModuleError, ArgumentError) as exc:
+        raise DbInputError(
+            f"cannot use database URL {describe(url)!r}: {exc}; "
+            "expected sqlite:///FILE or postgresql+psycopg://..."
+        ) from None
+    return engine
+
+
+def _configure_sqlite(engine: Engine, *, wal: bool) -> None:
+    @event.listens_for(engine, "connect")
+    def _on_connect(dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+        # Let SQLAlchemy, not pysqlite, decide when a transaction begins.
+        dbapi_connection.isolation_level = None
+        cursor = dbapi_connection.cursor()
+        if wal:
+            cursor.execute("PRAGMA journal_mode=WAL")
+        cursor.execute("PRAGMA foreign_keys=ON")
+        cursor.execute("PRAGMA synchronous=FULL")
+        cursor.execute(f"PRAGMA busy_timeout={SQLITE_BUSY_TIMEOUT_MS}")
+        cursor.close()
+
+    @event.listens_for(engine, "begin")
+    def _on_begin(conn: Connection) -> None:
+        mode = conn.get_execution_options().get("sqlite_begin", "")
+        conn.exec_driver_sql(f"BEGIN {mode}".strip())
+
+
+@contextmanager
+def write_transaction(engine: Engine) -> Iterator[Connection]:
+    """A transaction that holds the database's write lock from its first statement.
+
+    Use it for read-then-write work that must not interleave with another process
+    (the next participant code, a schema upgrade). SQLite: `BEGIN IMMEDIATE`;
+    PostgreSQL: a transaction-scoped advisory lock. Commits on success.
+    """
+    with engine.connect() as conn:
+        if is_sqlite(conn):
+            conn.execution_options(sqlite_begin="IMMEDIATE")
+        with conn.begin():
+            if not is_sqlite(conn):
+                conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({_WRITE_LOCK_KEY})")
+            yield conn
+
+
+def make_session_factory(engine: Engine) -> sessionmaker[Session]:
+    """ORM sessions bound to `engine`; objects stay readable after commit."""
+    return sessionmaker(engine, expire_on_commit=False)

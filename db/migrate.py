@@ -1,0 +1,265 @@
+"""Schema revisions: create, recognise and upgrade study databases with Alembic.
+
+Every database the tool opens goes through `open_database`. An empty database is
+brought to the newest revision (that is how a study database is created); an older
+one is upgraded in place, after an SQLite file has been copied aside as
+`NAME.before-REV.bak`; a database at a revision this version does not know, or one that
+holds tables but no revision at all, is refused with one line, never recreated.
+
+The migration scripts live in `db/migrations/versions`; `autogenerate_revision` is the
+developer's helper for writing the next one from the models.
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+from alembic import command
+from alembic.config import Config
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import URL, Connection, Engine, func, inspect, select, table
+from sqlalchemy.exc import DBAPIError
+
+from db.engine import describe, make_engine, resolve_url, write_transaction
+from db.errors import (
+    DatabaseVersionError,
+    DbInputError,
+    MissingDatabaseError,
+    NotAStudyDatabaseError,
+)
+
+MIGRATIONS_DIR = Path(__file__).parent / "migrations"
+
+
+class SchemaState(Enum):
+    EMPTY = "empty"
+    CURRENT = "current"
+    OLDER = "older"
+    NEWER = "newer"
+    FOREIGN = "foreign"
+
+
+def alembic_config(
+    connection: Connection | None = None, version_locations: Sequence[Path] = ()
+) -> Config:
+    """An Alembic configuration for this package's migrations (no alembic.ini needed).
+
+    `version_locations` adds directories of further revisions (tests use it to stage a
+    newer revision than the installed one).
+    """
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
+    cfg.set_main_option("path_separator", "os")
+    if version_locations:
+        locations = [MIGRATIONS_DIR / "versions", *version_locations]
+        cfg.set_main_option("version_locations", os.pathsep.join(str(p) for p in locations))
+    cfg.attributes["connection"] = connection
+    return cfg
+
+
+def script_directory(version_locations: Sequence[Path] = ()) -> ScriptDirectory:
+    return ScriptDirectory.from_config(alembic_config(version_locations=version_locations))
+
+
+def head_revision(version_locations: Sequence[Path] = ()) -> str:
+    head = script_directory(version_locations).get_current_head()
+    if head is None:  # pragma: no cover - the package always ships a first revision
+        raise RuntimeError("no migration scripts found")
+    return head
+
+
+def current_revision(conn: Connection) -> str | None:
+    return MigrationContext.configure(conn).get_current_revision()
+
+
+def schema_state(conn: Connection, version_locations: Sequence[Path] = ()) -> SchemaState:
+    revision = current_revision(conn)
+    if revision is None:
+        tables = set(inspect(conn).get_table_names()) - {"alembic_version"}
+        return SchemaState.FOREIGN if tables else SchemaState.EMPTY
+    scripts = script_directory(version_locations)
+    if revision == scripts.get_current_head():
+        return SchemaState.CURRENT
+    known = {s.revision for s in scripts.walk_revisions()}
+    return SchemaState.OLDER if revision in known else SchemaState.NEWER
+
+
+def upgrade(
+    engine: Engine, revision: str = "head", version_locations: Sequence[Path] = ()
+) -> tuple[str | None, str]:
+    """Upgrade the schema to `revision` under the write lock; return (before, after)."""
+    with write_transaction(engine) as conn:
+        state = schema_state(conn, version_locations)
+        before = current_revision(conn)
+        _refuse_unknown(state, before, describe(engine), version_locations)
+        command.upgrade(alembic_config(conn, version_locations), revision)
+        return before, current_revision(conn) or ""
+
+
+def _refuse_unknown(
+    state: SchemaState, revision: str | None, shown: str, version_locations: Sequence[Path]
+) -> None:
+    if state is SchemaState.NEWER:
+        raise DatabaseVersionError(
+            f"database {shown} is at schema revision {revision!r}, newer than this "
+            f"haptic-study knows (head {head_revision(version_locations)!r}); "
+            "expected an older or equal revision: upgrade haptic-study"
+        )
+    if state is SchemaState.FOREIGN:
+        raise NotAStudyDatabaseError(
+            f"database {shown} holds tables but no haptic-study schema revision; "
+            "expected a study database or an empty one"
+        )
+
+
+def _sqlite_path(url: URL) -> Path | None:
+    """The file of an SQLite URL; None for in-memory SQLite and for other backends."""
+    if url.get_backend_name() != "sqlite" or url.database in (None, "", ":memory:"):
+        return None
+    return Path(url.database)
+
+
+def _cannot_open(shown: str, exc: DBAPIError) -> DbInputError:
+    reason = str(exc.orig).strip().splitlines()[0] if exc.orig else str(exc)
+    return DbInputError(f"cannot open database {shown}: {reason}")
+
+
+@contextmanager
+def _reading_connection(url: URL) -> Iterator[Connection]:
+    """A connection that changes nothing: an SQLite file is opened read-only, so that a
+    file which turns out not to be a study database is left exactly as it was."""
+    path = _sqlite_path(url)
+    if path is not None:
+        url = url.set(database=f"file:{path}", query={"mode": "ro", "uri": "true"})
+    engine = make_engine(url)
+    try:
+        with engine.connect() as conn:
+            yield conn
+    except DBAPIError as exc:
+        raise _cannot_open(describe(url), exc) from None
+    finally:
+        engine.dispose()
+
+
+def _backup_sqlite(path: Path, revision: str | None) -> Path:
+    target = path.with_name(f"{path.name}.before-{revision}.bak")
+    with sqlite3.connect(path) as src, sqlite3.connect(target) as dst:
+        src.backup(dst)
+    return target
+
+
+def open_database(
+    db: str | URL | None = None,
+    *,
+    create: bool = True,
+    version_locations: Sequence[Path] = (),
+    on_upgrade: Callable[[str | None, str, Path | None], None] | None = None,
+) -> Engine:
+    """Open the study database at `db` (URL or SQLite path; see `resolve_url`).
+
+    Creates the schema in an empty database when `create`; upgrades an older one (an
+    SQLite file is backed up first) and reports it through `on_upgrade(before, after,
+    backup_path)`; refuses unknown or foreign schemas with a `DbInputError` before
+    anything is written.
+    """
+    url = resolve_url(db)
+    shown = describe(url)
+    path = _sqlite_path(url)
+    if path is not None and not path.parent.is_dir():
+        raise DbInputError(f"folder {path.parent} for database {path} does not exist")
+    if path is not None and not path.exists() and not create:
+        raise MissingDatabaseError(
+            f"no study database at {path}; expected an existing file (run `study init` first)"
+        )
+    state, revision = SchemaState.EMPTY, None
+    if path is None or path.exists():
+        with _reading_connection(url) as conn:
+            state = schema_state(conn, version_locations)
+            revision = current_revision(conn)
+    _refuse_unknown(state, revision, shown, version_locations)
+    if state is SchemaState.EMPTY and not create:
+        raise MissingDatabaseError(
+            f"database {shown} is empty; expected a study database (run `study init` first)"
+        )
+    engine = make_engine(url)
+    try:
+        if state in (SchemaState.EMPTY, SchemaState.OLDER):
+            older = state is SchemaState.OLDER
+            backup = _backup_sqlite(path, revision) if older and path is not None else None
+            before, after = upgrade(engine, version_locations=version_locations)
+            if on_upgrade is not None and older:
+                on_upgrade(before, after, backup)
+    except DBAPIError as exc:
+        engine.dispose()
+        raise _cannot_open(shown, exc) from None
+    except DbInputError:
+        engine.dispose()
+        raise
+    return engine
+
+
+@dataclass(frozen=True)
+class DatabaseInfo:
+    """What `inspect_database` found; `row_counts` maps table name to rows."""
+
+    url: str
+    backend: str
+    state: SchemaState
+    revision: str | None
+    head: str
+    row_counts: dict[str, int]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "state": self.state.value}
+
+
+def inspect_database(db: str | URL | None = None) -> DatabaseInfo:
+    """Describe the database at `db` without creating, upgrading or changing it."""
+    url = resolve_url(db)
+    path = _sqlite_path(url)
+    if path is not None and not path.exists():
+        raise MissingDatabaseError(f"no study database at {path}; expected an existing file")
+    with _reading_connection(url) as conn:
+        state = schema_state(conn)
+        revision = current_revision(conn)
+        tables = sorted(set(inspect(conn).get_table_names()) - {"alembic_version"})
+        counts = {
+            t: int(conn.execute(select(func.count()).select_from(table(t))).scalar_one())
+            for t in tables
+        }
+    return DatabaseInfo(
+        url=describe(url),
+        backend=url.get_backend_name(),
+        state=state,
+        revision=revision,
+        head=head_revision(),
+        row_counts=counts,
+    )
+
+
+def autogenerate_revision(message: str, rev_id: str) -> None:
+    """Developer helper: write the next migration from the models' difference to head.
+
+    Run against a scratch SQLite file brought to head first, then review the script:
+    `python -c "from db.migrate import autogenerate_revision as a; a('add x', '0002')"`.
+    """
+    scratch = Path("autogenerate-scratch.db")
+    scratch.unlink(missing_ok=True)
+    engine = make_engine(f"sqlite:///{scratch}")
+    try:
+        upgrade(engine)
+        with engine.begin() as conn:
+            command.revision(
+                alembic_config(conn), message=message, autogenerate=True, rev_id=rev_id
+            )
+    finally:
+        engine.dispose()
+        scratch.unlink(missing_ok=True)

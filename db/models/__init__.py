@@ -1,0 +1,25 @@
+"""The study database's tables, one module per role, re-exported here.
+
+`db.models` is the only place the schema is declared; Alembic migrations in
+`db/migrations/versions` must produce exactly this schema (a test compares them).
+"""
+
+from db.models.audit import AuditEntry
+from db.models.calibration import Calibration
+from db.models.study import Participant, ScheduleBlock, Study
+from db.models.tlx import TLX_SUBSCALES, TlxResponse
+from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, Sample, Trial
+
+__all__ = [
+    "SAMPLE_COLUMNS",
+    "TLX_SUBSCALES",
+    "TRIAL_STATUSES",
+    "AuditEntry",
+    "Calibration",
+    "Participant",
+    "Sample",
+    "ScheduleBlock",
+    "Study",
+    "TlxResponse",
+    "Trial",
+]
