@@ -1,0 +1,1 @@
+"""Subcommand groups of the `study` command, one module per group, registered in `study.cli`."""

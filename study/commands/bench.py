@@ -1,0 +1,58 @@
+"""`study bench ...`: measured figures for the README's Performance section."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+from study.bench.db_write import bench_sample_write
+from study.commands.base import StudyGroup
+
+
+@click.group("bench", cls=StudyGroup)
+def bench() -> None:
+    """Benchmarks: speed figures measured on this machine."""
+
+
+@bench.command("db")
+@click.option(
+    "--db",
+    "db_url",
+    metavar="URL",
+    default=None,
+    help="Benchmark against this server (PostgreSQL gets a private scratch schema) "
+    "[default: a temporary SQLite file].",
+)
+@click.option("--rows", type=click.IntRange(min=1), default=1_000_000, show_default=True)
+@click.option(
+    "--rate-hz",
+    type=click.FloatRange(min=0, min_open=True),
+    default=1000.0,
+    show_default=True,
+    help="Sample rate of the synthetic trial; one chunk is committed per second of it.",
+)
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | None) -> None:
+    """Write one trial's samples through the session writer and report rows/s."""
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        transient=True,
+        console=Console(stderr=True),
+    ) as progress:
+        task = progress.add_task("writing samples", total=rows)
+        result = bench_sample_write(
+            db_url, rows=rows, rate_hz=rate_hz, progress=lambda n: progress.advance(task, n)
+        )
+    click.echo(
+        f"{result.backend}: {result.rows:,} rows in {result.chunks:,} committed chunks, "
+        f"{result.seconds:.2f} s, {result.rows_per_s:,.0f} rows/s"
+    )
+    if json_path is not None:
+        json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
