@@ -1,0 +1,84 @@
+"""Shared fixtures: a study database on each backend.
+
+`db_url` runs a test on SQLite (a file in the test's temporary folder) and on
+PostgreSQL (a private schema on the server named by STUDY_TEST_PG_URL, dropped
+afterwards). PostgreSQL cases skip only when that variable is unset; a server that is
+set but unreachable fails them. The run ends with a line saying how many PostgreSQL
+cases ran, so CI's log shows they were not skipped.
+"""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Iterator
+
+import pytest
+from sqlalchemy import Engine, text
+from sqlalchemy.engine import make_url
+
+from db.engine import make_engine
+from db.migrate import open_database
+
+PG_ENV = "STUDY_TEST_PG_URL"
+
+
+def pg_schema_url(base: str, schema: str) -> str:
+    """`base` with every connection's search_path set to `schema`."""
+    url = make_url(base).update_query_dict({"options": f"-csearch_path={schema}"})
+    return url.render_as_string(hide_password=False)
+
+
+@pytest.fixture
+def pg_url() -> Iterator[str]:
+    """URL of a fresh, empty schema on the test PostgreSQL server."""
+    base = os.environ.get(PG_ENV)
+    if not base:
+        pytest.skip(f"{PG_ENV} is not set")
+    schema = f"t_{uuid.uuid4().hex[:16]}"
+    admin = make_engine(base)
+    with admin.begin() as conn:
+        conn.execute(text(f'CREATE SCHEMA "{schema}"'))
+    try:
+        yield pg_schema_url(base, schema)
+    finally:
+        with admin.begin() as conn:
+            conn.execute(text(f'DROP SCHEMA "{schema}" CASCADE'))
+        admin.dispose()
+
+
+@pytest.fixture
+def sqlite_url(tmp_path) -> str:  # type: ignore[no-untyped-def]
+    return f"sqlite:///{tmp_path / 'study.db'}"
+
+
+@pytest.fixture(params=["sqlite", pytest.param("postgresql", marks=pytest.mark.postgres)])
+def db_url(request: pytest.FixtureRequest) -> str:
+    """An empty database on each backend (no schema yet)."""
+    name = "sqlite_url" if request.param == "sqlite" else "pg_url"
+    return request.getfixturevalue(name)
+
+
+@pytest.fixture
+def engine(db_url: str) -> Iterator[Engine]:
+    """A study database at the newest schema, on each backend."""
+    eng = open_database(db_url)
+    try:
+        yield eng
+    finally:
+        eng.dispose()
+
+
+_pg_outcomes: dict[str, int] = {}
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if "postgres" in report.keywords and (report.when == "call" or report.skipped):
+        _pg_outcomes[report.outcome] = _pg_outcomes.get(report.outcome, 0) + 1
+
+
+def pytest_terminal_summary(terminalreporter) -> None:  # type: ignore[no-untyped-def]
+    if _pg_outcomes:
+        parts = ", ".join(f"{n} {outcome}" for outcome, n in sorted(_pg_outcomes.items()))
+        where = os.environ.get(PG_ENV) or f"{PG_ENV} unset"
+        terminalreporter.write_line(f"PostgreSQL cases ({where}): {parts}")

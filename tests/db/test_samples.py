@@ -1,0 +1,151 @@
+"""The sample write path: chunked commits, values kept exactly, bad samples refused."""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from sqlalchemy import Engine, func, select
+
+from db.engine import make_session_factory
+from db.errors import DbInputError
+from db.models import Participant, Sample, Study, Trial
+from db.samples import SampleWriter
+
+
+def _trial(engine: Engine) -> int:
+    with make_session_factory(engine).begin() as session:
+        study = Study(name="s", design_toml="", design={}, seed=1)
+        p = Participant(study=study, code="P001", group="expert", condition_order=["HV", "VO"])
+        trial = Trial(participant=p, task="lcca", condition="HV", block_index=0, trial_index=0)
+        session.add(trial)
+        session.flush()
+        return trial.id
+
+
+def _stored(engine: Engine, trial_id: int) -> int:
+    with engine.connect() as conn:
+        return conn.scalar(select(func.count()).where(Sample.trial_id == trial_id)) or 0
+
+
+def test_commits_one_chunk_per_second_of_trial_time(engine: Engine) -> None:
+    trial_id = _trial(engine)
+    t = np.arange(3500) / 1000.0  # 3.5 s at 1 kHz
+    writer = SampleWriter(engine, trial_id, chunk_s=1.0)
+    writer.extend({"t_s": t[:1500], "proximal_force_n": np.full(1500, 0.25)})
+    # [0, 1) s is committed; [1, 1.5) s waits in memory: at most one second at risk.
+    assert (writer.rows_committed, _stored(engine, trial_id)) == (1000, 1000)
+    writer.extend({"t_s": t[1500:], "proximal_force_n": np.full(2000, 0.25)})
+    assert (writer.rows_committed, writer.chunks_committed) == (3000, 3)
+    writer.close()
+    assert (_stored(engine, trial_id), writer.chunks_committed) == (3500, 4)
+
+
+def test_single_appends_follow_the_same_chunking(engine: Engine) -> None:
+    trial_id = _trial(engine)
+    with SampleWriter(engine, trial_id, chunk_s=0.5) as writer:
+        for k in range(250):  # 2.5 s at 100 Hz
+            writer.append(t_s=k / 100, distal_force_n=0.01 * k)
+            # Never more than half a second of samples unsaved.
+            assert (k + 1) - writer.rows_committed <= 50
+    assert writer.chunks_committed == 5
+    assert _stored(engine, trial_id) == 250
+
+
+def test_values_round_trip_exactly_with_nulls_for_missing_columns(engine: Engine) -> None:
+    trial_id = _trial(engine)
+    rng = np.random.default_rng(3)
+    force = rng.normal(0.3, 0.1, 20)
+    with SampleWriter(engine, trial_id, start_seq=100) as writer:
+        writer.extend(
+            {
+                "t_s": np.arange(20) / 100,
+                "proximal_force_n": force,
+                "branch": ["arch"] * 10 + ["lcca"] * 10,
+            }
+        )
+    with engine.connect() as conn:
+        rows = conn.execute(
+            select(
+                Sample.seq,
+                Sample.t_s,
+                Sample.proximal_force_n,
+                Sample.branch,
+                Sample.distal_force_n,
+            )
+            .where(Sample.trial_id == trial_id)
+            .order_by(Sample.seq)
+        ).all()
+    assert [r.seq for r in rows] == list(range(100, 120))
+    assert [r.proximal_force_n for r in rows] == force.tolist()  # bit-exact doubles
+    assert [r.branch for r in rows] == ["arch"] * 10 + ["lcca"] * 10
+    assert all(r.distal_force_n is None for r in rows)
+    assert math.isclose(rows[-1].t_s, 0.19)
+
+
+@pytest.mark.parametrize(
+    ("columns", "message"),
+    [
+        ({"t_s": [0.0, 0.02, 0.01]}, r"t_s=0.01 at sample 2 goes back in time"),
+        ({"t_s": [0.0, float("nan")]}, r"t_s=nan at sample 1 is not a finite"),
+        ({"t_s": [0.0], "force": [1.0]}, r"must include 't_s' and only names"),
+        ({"proximal_force_n": [1.0]}, r"must include 't_s'"),
+        (
+            {"t_s": [0.0, 0.1], "distal_force_n": [1.0]},
+            r"'distal_force_n' has 1 values; expected 2",
+        ),
+    ],
+)
+def test_bad_samples_are_refused_without_writing_them(
+    engine: Engine, columns: dict[str, list[float]], message: str
+) -> None:
+    trial_id = _trial(engine)
+    writer = SampleWriter(engine, trial_id)
+    with pytest.raises(DbInputError, match=message):
+        writer.extend(columns)
+    writer.close()
+    assert _stored(engine, trial_id) == 0
+
+
+def test_time_must_not_go_back_across_calls(engine: Engine) -> None:
+    trial_id = _trial(engine)
+    with SampleWriter(engine, trial_id) as writer:
+        writer.extend({"t_s": [0.0, 0.5]})
+        with pytest.raises(DbInputError, match=r"t_s=0\.4 at sample 2 goes back"):
+            writer.append(t_s=0.4)
+    assert _stored(engine, trial_id) == 2
+
+
+_WRITE_THEN_DIE = """
+import os, signal, sys
+import numpy as np
+from db.migrate import open_database
+from db.samples import SampleWriter
+engine = open_database(sys.argv[1])
+writer = SampleWriter(engine, int(sys.argv[2]), chunk_s=1.0)
+for k in range(2600):  # 2.6 s at 1 kHz, one sample at a time as a live session does
+    writer.append(t_s=k / 1000, proximal_force_n=0.5)
+print(writer.rows_committed, flush=True)
+os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_kill_9_loses_at_most_the_last_chunk(engine: Engine, db_url: str) -> None:
+    trial_id = _trial(engine)
+    proc = subprocess.run(
+        [sys.executable, "-c", _WRITE_THEN_DIE, db_url, str(trial_id)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == -signal.SIGKILL
+    committed = int(proc.stdout.strip())
+    assert committed == 2000  # chunks [0, 1) and [1, 2) s
+    assert _stored(engine, trial_id) == committed
+    with engine.connect() as conn:
+        last_t = conn.scalar(select(func.max(Sample.t_s)).where(Sample.trial_id == trial_id))
+    assert 2.599 - last_t <= 1.0  # lost: under one second of samples
