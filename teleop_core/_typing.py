@@ -1,0 +1,13 @@
+"""Shape-typed aliases for the arrays the core passes around (one place, as pysindy does)."""
+
+from typing import TypeAlias
+
+import numpy as np
+import numpy.typing as npt
+
+Float1D: TypeAlias = npt.NDArray[np.float64]
+"""A 1-D float64 array, shape (n,)."""
+Float2D: TypeAlias = npt.NDArray[np.float64]
+"""A 2-D float64 array, shape (n, m)."""
+Float3D: TypeAlias = npt.NDArray[np.float64]
+"""A 3-D float64 array, shape (n, t, m)."""

@@ -1,0 +1,263 @@
+"""The simulated friction-wheel guidewire drive: PMSM, FOC current loop, speed loop.
+
+What is simulated (seed 000, III-A and IV-A; parameters in `params.py`):
+
+- q-axis electrics, L di/dt = v - R i - e, with e = (2/3) K_t omega (amplitude-invariant
+  dq frame), integrated exactly over each current-loop period; d-axis held at zero;
+- the FOC current PI (tuned by pole-zero cancellation to the set bandwidth) with the
+  back-EMF fed forward and the voltage limited to the supply;
+- eq. 2 mechanics, J theta_dd + b theta_d + tau_friction = T_m - r F, where the friction
+  is a Stribeck curve with stiction (Karnopp stick/slip: the rotor stays stuck while
+  the applied torque is below the breakaway torque), larger when withdrawing, plus a
+  quadratic drag, and T_m = K_t(i) i with a saturating torque constant, plus optional
+  cogging; with `FollowerPlantParams.ideal()` this reduces to eqs. 1-2 exactly;
+- the speed PI at the 1 kHz device rate on the AS5600 angle (12-bit quantised),
+  differentiated and low-passed as the ESP32 firmware does, with anti-windup.
+
+The inner loops are compiled with numba: a trial runs a million current-loop steps,
+which Python would take seconds for; the kernel takes milliseconds. The state lives in
+one float64 array so that `FollowerDrive.step` can advance one 1 kHz tick at a time
+inside a closed loop, and `run` can advance a whole profile in one call, with the same
+arithmetic.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from teleop_core._typing import Float1D
+from teleop_core.errors import TeleopInputError
+from teleop_core.follower.params import FollowerControlParams, FollowerPlantParams
+
+# State vector layout.
+THETA, OMEGA, IQ, IQ_INT, W_INT, W_FILT, THETA_Q_PREV, IQ_CMD = range(8)
+STATE_SIZE = 8
+
+
+def _param_vector(plant: FollowerPlantParams, control: FollowerControlParams) -> Float1D:
+    substeps = round(control.current_loop_rate_hz / control.speed_loop_rate_hz)
+    if (
+        substeps < 1
+        or abs(substeps * control.speed_loop_rate_hz - control.current_loop_rate_hz) > 1e-6
+    ):
+        raise TeleopInputError(
+            f"current_loop_rate_hz {control.current_loop_rate_hz} is not a whole multiple of "
+            f"speed_loop_rate_hz {control.speed_loop_rate_hz}; expected e.g. 10000 and 1000"
+        )
+    wc = 2 * math.pi * control.current_loop_bandwidth_hz
+    return np.array(
+        [
+            plant.torque_constant_n_m_per_a,
+            plant.wheel_radius_m,
+            plant.inertia_kg_m2,
+            plant.viscous_damping_n_m_s_per_rad,
+            plant.coulomb_friction_n_m,
+            plant.static_friction_n_m,
+            plant.stribeck_speed_rad_s,
+            plant.torque_saturation_per_a2,
+            plant.cogging_torque_n_m,
+            float(plant.cogging_periods_per_rev),
+            plant.phase_resistance_ohm,
+            plant.phase_inductance_h,
+            plant.voltage_limit_v,
+            plant.phase_inductance_h * wc,  # current Kp [V/A]
+            plant.phase_resistance_ohm * wc,  # current Ki [V/(A s)]
+            1.0 / control.speed_loop_rate_hz,  # speed-loop period [s]
+            float(substeps),
+            control.speed_kp_a_s_per_rad,
+            control.speed_ki_a_per_rad,
+            control.velocity_filter_s,
+            control.current_limit_a,
+            plant.quadratic_drag_n_m_s2_per_rad2,
+            plant.retract_friction_ratio,
+        ]
+    )
+
+
+@numba.njit(cache=True)
+def _advance(
+    state: np.ndarray,
+    p: np.ndarray,
+    encoder_step_rad: float,
+    omega_cmd: np.ndarray,
+    load_n: np.ndarray,
+    out: np.ndarray,
+) -> None:  # pragma: no cover - compiled; exercised through FollowerDrive
+    kt, r, J, b, tc, ts, ws, ksat, cog, ncog, R, L, vmax, kpi, kii, dt, nsub, kpw, kiw, tf, ilim = (
+        p[0],
+        p[1],
+        p[2],
+        p[3],
+        p[4],
+        p[5],
+        p[6],
+        p[7],
+        p[8],
+        p[9],
+        p[10],
+        p[11],
+        p[12],
+        p[13],
+        p[14],
+        p[15],
+        p[16],
+        p[17],
+        p[18],
+        p[19],
+        p[20],
+    )
+    drag2, retract = p[21], p[22]
+    n_sub = int(nsub)
+    dte = dt / n_sub
+    decay = math.exp(-R * dte / L)
+    ke = (2.0 / 3.0) * kt
+    lpf = tf / (tf + dt)
+    for k in range(omega_cmd.shape[0]):
+        # Speed loop: quantised encoder angle, differentiated and low-passed.
+        theta_q = math.floor(state[THETA] / encoder_step_rad) * encoder_step_rad
+        w_raw = (theta_q - state[THETA_Q_PREV]) / dt
+        state[THETA_Q_PREV] = theta_q
+        state[W_FILT] = lpf * state[W_FILT] + (1.0 - lpf) * w_raw
+        e_w = omega_cmd[k] - state[W_FILT]
+        w_int = state[W_INT] + kiw * e_w * dt
+        w_int = min(max(w_int, -ilim), ilim)  # anti-windup
+        state[W_INT] = w_int
+        iq_cmd = min(max(kpw * e_w + w_int, -ilim), ilim)
+        state[IQ_CMD] = iq_cmd
+        iq_sum = 0.0
+        for _ in range(n_sub):
+            omega = state[OMEGA]
+            iq = state[IQ]
+            # FOC current PI with back-EMF feed-forward, voltage-limited.
+            e_i = iq_cmd - iq
+            v = kpi * e_i + state[IQ_INT] + ke * omega
+            if v > vmax:
+                v = vmax
+            elif v < -vmax:
+                v = -vmax
+            else:
+                state[IQ_INT] += kii * e_i * dte
+            # L di/dt = v - R i - e, exact over one current-loop period.
+            i_ss = (v - ke * omega) / R
+            iq = i_ss + (iq - i_ss) * decay
+            state[IQ] = iq
+            iq_sum += iq
+            # Eq. 2 with T_m = K_t(i) i, cogging and the load torque r F.
+            tau = kt * (1.0 - ksat * iq * iq) * iq - r * load_n[k]
+            if cog != 0.0:
+                tau -= cog * math.sin(ncog * state[THETA])
+            if omega == 0.0:
+                breakaway = ts if tau > 0.0 else ts * retract
+                if abs(tau) <= breakaway:
+                    continue  # stuck: friction balances the applied torque
+                tau_f = breakaway if tau > 0.0 else -breakaway
+            else:
+                mag = tc + (ts - tc) * math.exp(-(omega / ws) * (omega / ws))
+                tau_f = mag if omega > 0.0 else -mag * retract
+                tau_f += drag2 * omega * abs(omega)
+            omega_new = omega + dte * (tau - b * omega - tau_f) / J
+            if omega != 0.0 and omega_new * omega < 0.0:
+                omega_new = 0.0  # friction cannot reverse the motion: stick at zero speed
+            state[OMEGA] = omega_new
+            state[THETA] += omega_new * dte
+        out[k, 0] = state[THETA]
+        out[k, 1] = state[OMEGA]
+        out[k, 2] = iq_sum / n_sub
+        out[k, 3] = state[W_FILT]
+        out[k, 4] = iq_cmd
+
+
+@dataclass
+class DriveTrace:
+    """The drive's internal signals at the 1 kHz speed-loop rate (ground truth of a run).
+
+    `iq_a` is the mean q-axis current over each speed-loop period; `omega_est_rad_s` is
+    the firmware's velocity estimate from the AS5600 angle.
+    """
+
+    t_s: Float1D
+    theta_rad: Float1D
+    omega_rad_s: Float1D
+    iq_a: Float1D
+    omega_est_rad_s: Float1D
+    iq_cmd_a: Float1D
+    omega_cmd_rad_s: Float1D
+    load_force_n: Float1D
+
+
+@dataclass
+class FollowerDrive:
+    """A simulated guidewire drive that keeps its state between calls.
+
+    Parameters
+    ----------
+    plant, control
+        Physical and controller parameters (`params.py`).
+    encoder_counts_per_rev
+        Resolution of the angle the speed loop sees (AS5600: 4096).
+    """
+
+    plant: FollowerPlantParams = field(default_factory=FollowerPlantParams)
+    control: FollowerControlParams = field(default_factory=FollowerControlParams)
+    encoder_counts_per_rev: int = 4096
+    t_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        self._p = _param_vector(self.plant, self.control)
+        self._encoder_step = 2 * math.pi / self.encoder_counts_per_rev
+        self.state = np.zeros(STATE_SIZE)
+        self._one = np.empty((1, 5))
+
+    @property
+    def dt_s(self) -> float:
+        """Speed-loop (device physics) period, s."""
+        return 1.0 / self.control.speed_loop_rate_hz
+
+    def run(self, omega_cmd_rad_s: Float1D, load_force_n: Float1D) -> DriveTrace:
+        """Advance one speed-loop tick per element of the inputs (held over the tick).
+
+        Parameters
+        ----------
+        omega_cmd_rad_s : (n,) array
+            Speed command, rad/s (positive advances the guidewire).
+        load_force_n : (n,) array
+            External force on the guidewire opposing insertion, N.
+        """
+        cmd = np.ascontiguousarray(omega_cmd_rad_s, dtype=np.float64)
+        load = np.ascontiguousarray(load_force_n, dtype=np.float64)
+        if cmd.shape != load.shape or cmd.ndim != 1:
+            raise TeleopInputError(
+                f"speed command shape {cmd.shape} and load shape {load.shape} differ; "
+                "expected two 1-D arrays of one length"
+            )
+        out = np.empty((cmd.shape[0], 5))
+        _advance(self.state, self._p, self._encoder_step, cmd, load, out)
+        t = self.t_s + self.dt_s * np.arange(1, cmd.shape[0] + 1)
+        self.t_s = float(t[-1]) if len(t) else self.t_s
+        return DriveTrace(
+            t_s=t,
+            theta_rad=out[:, 0].copy(),
+            omega_rad_s=out[:, 1].copy(),
+            iq_a=out[:, 2].copy(),
+            omega_est_rad_s=out[:, 3].copy(),
+            iq_cmd_a=out[:, 4].copy(),
+            omega_cmd_rad_s=cmd.copy(),
+            load_force_n=load.copy(),
+        )
+
+    def step(self, omega_cmd_rad_s: float, load_force_n: float) -> tuple[float, float, float]:
+        """Advance one tick; return (theta_rad, omega_rad_s, iq_a) at its end."""
+        _advance(
+            self.state,
+            self._p,
+            self._encoder_step,
+            np.array([omega_cmd_rad_s]),
+            np.array([load_force_n]),
+            self._one,
+        )
+        self.t_s += self.dt_s
+        return float(self._one[0, 0]), float(self._one[0, 1]), float(self._one[0, 2])

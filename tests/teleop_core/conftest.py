@@ -1,0 +1,30 @@
+"""Small simulated follower recordings shared by the estimation tests."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from teleop_core.estimation.recording import FollowerRecording
+from teleop_core.follower import scenarios
+from teleop_core.follower.params import FollowerPlantParams, FollowerSensorParams
+from teleop_core.follower.plant import FollowerDrive
+from teleop_core.follower.sensors import acquire
+
+
+def simulate_recording(
+    seconds: float,
+    seed: int,
+    plant: FollowerPlantParams | None = None,
+    sensors: FollowerSensorParams | None = None,
+) -> FollowerRecording:
+    rng = np.random.default_rng(seed)
+    cmd, load = scenarios.teleoperation(seconds, rng, max_load_n=1.6)
+    trace = FollowerDrive(plant=plant or FollowerPlantParams()).run(cmd, load)
+    return acquire(trace, sensors or FollowerSensorParams(), rng)
+
+
+@pytest.fixture(scope="session")
+def short_recording() -> FollowerRecording:
+    """60 s of simulated navigation at 100 Hz (6,000 samples)."""
+    return simulate_recording(60.0, seed=11)
