@@ -1,0 +1,133 @@
+"""The physics stage of the force estimator: eq. 1 solved for the proximal force.
+
+    K_t I_q = J theta_dd + b theta_d + tau_c sgn(theta_d) + r F        (eq. 1)
+
+so that
+
+    F_physics = (K_t I_q - J theta_dd - b theta_d - tau_c sgn(theta_d)) / r + F_0
+
+with an offset F_0 for the load cell's zero. sgn is smoothed to tanh(theta_d / w_s):
+the measured speed of a wheel at rest dithers around zero, and a hard sign would turn
+that dither into +-tau_c/r of force noise (and the EKF needs a derivative).
+
+Only ratios to r can be identified from force data, so r is taken as known (the
+wheel's measured radius) and K_t, J, b, tau_c and F_0 are fitted by bounded linear
+least squares (`scipy.optimize.lsq_linear`; J, b, tau_c >= 0, K_t > 0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.optimize import lsq_linear
+
+from teleop_core._typing import Float1D, Float2D
+from teleop_core.errors import TeleopInputError
+from teleop_core.estimation.recording import FollowerRecording
+
+
+@dataclass(frozen=True)
+class PhysicsParams:
+    """Parameters of eq. 1 as fitted (or assumed); SI units."""
+
+    torque_constant_n_m_per_a: float = 0.043
+    """K_t, torque per q-axis ampere."""
+    inertia_kg_m2: float = 5.0e-6
+    """J_eq."""
+    viscous_damping_n_m_s_per_rad: float = 2.0e-5
+    """b."""
+    coulomb_friction_n_m: float = 0.8e-3
+    """tau_c."""
+    wheel_radius_m: float = 0.010
+    """r, not fitted."""
+    offset_n: float = 0.0
+    """F_0, the reference sensor's zero as seen by the model."""
+    sign_speed_rad_s: float = 0.3
+    """w_s of the smoothed sign tanh(theta_d / w_s); a setting, not fitted."""
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            if not math.isfinite(value):
+                raise TeleopInputError(
+                    f"PhysicsParams.{name} = {value!r}; expected a finite number"
+                )
+        if self.wheel_radius_m <= 0 or self.sign_speed_rad_s <= 0:
+            raise TeleopInputError(
+                f"wheel_radius_m {self.wheel_radius_m!r} and sign_speed_rad_s "
+                f"{self.sign_speed_rad_s!r} must be > 0"
+            )
+
+    def force(self, iq: Float1D, omega: Float1D, alpha: Float1D) -> Float1D:
+        """F_physics, N, for arrays (or floats) of current [A], speed [rad/s], accel [rad/s^2]."""
+        # F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn(theta_d)) / r + F_0
+        torque = (
+            self.torque_constant_n_m_per_a * iq
+            - self.inertia_kg_m2 * alpha
+            - self.viscous_damping_n_m_s_per_rad * omega
+            - self.coulomb_friction_n_m * np.tanh(omega / self.sign_speed_rad_s)
+        )
+        return torque / self.wheel_radius_m + self.offset_n
+
+    def force_gradient(self, omega: float, dt_s: float) -> tuple[float, float]:
+        """dF/dI_q and dF/dtheta_d at `omega`, the latter through alpha's backward difference."""
+        r = self.wheel_radius_m
+        sech2 = 1.0 / math.cosh(omega / self.sign_speed_rad_s) ** 2
+        d_omega = (
+            -(
+                self.viscous_damping_n_m_s_per_rad
+                + self.coulomb_friction_n_m * sech2 / self.sign_speed_rad_s
+                + self.inertia_kg_m2 / dt_s
+            )
+            / r
+        )
+        return self.torque_constant_n_m_per_a / r, d_omega
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+def regressors(omega: Float1D, iq: Float1D, alpha: Float1D, sign_speed: float) -> Float2D:
+    """Columns multiplying (K_t, J, b, tau_c)/r and F_0 in eq. 1 solved for F."""
+    return np.column_stack([iq, -alpha, -omega, -np.tanh(omega / sign_speed), np.ones_like(iq)])
+
+
+def fit_physics(
+    recording: FollowerRecording,
+    *,
+    wheel_radius_m: float = 0.010,
+    sign_speed_rad_s: float = 0.3,
+    mask: np.ndarray | None = None,
+) -> PhysicsParams:
+    """Fit eq. 1 to a recording by bounded linear least squares.
+
+    Parameters
+    ----------
+    recording
+        Bench recording with `f_ref`.
+    wheel_radius_m
+        Known wheel radius r, m.
+    sign_speed_rad_s
+        Smoothing speed of sgn, rad/s.
+    mask : (n,) bool array, optional
+        Samples to fit on (e.g. the training block); all when omitted.
+    """
+    use = np.ones(len(recording), bool) if mask is None else np.asarray(mask, bool)
+    A = regressors(recording.omega[use], recording.iq[use], recording.alpha[use], sign_speed_rad_s)
+    y = recording.f_ref[use]
+    # Scale columns so the solver sees comparable magnitudes (alpha is ~1e3 x iq).
+    scale = np.maximum(np.abs(A).max(axis=0), 1e-12)
+    lower = np.array([1e-9, 0.0, 0.0, 0.0, -np.inf])
+    result = lsq_linear(A / scale, y, bounds=(lower * scale, np.full(5, np.inf)))
+    beta = result.x / scale
+    r = wheel_radius_m
+    return PhysicsParams(
+        torque_constant_n_m_per_a=float(beta[0] * r),
+        inertia_kg_m2=float(beta[1] * r),
+        viscous_damping_n_m_s_per_rad=float(beta[2] * r),
+        coulomb_friction_n_m=float(beta[3] * r),
+        wheel_radius_m=r,
+        offset_n=float(beta[4]),
+        sign_speed_rad_s=sign_speed_rad_s,
+    )

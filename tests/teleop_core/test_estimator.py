@@ -1,0 +1,73 @@
+"""The estimator end to end: causal equals batch, and a saved model predicts the same."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from teleop_core.errors import TeleopInputError
+from teleop_core.estimation.estimator import MODEL_FILES, ForceEstimator, train_estimator
+from teleop_core.estimation.gru import GruConfig
+from teleop_core.estimation.recording import FollowerRecording
+
+SMALL = GruConfig(window=8, hidden_size=8, learning_rate=3e-3, max_epochs=3)
+
+
+@pytest.fixture(scope="module")
+def trained(short_recording: FollowerRecording) -> tuple[ForceEstimator, dict]:
+    estimator, summary = train_estimator(short_recording, SMALL, seed=1)
+    return estimator, summary.to_dict()
+
+
+def test_causal_updates_reproduce_the_batch_estimates(
+    trained, short_recording: FollowerRecording
+) -> None:
+    estimator, _ = trained
+    rec = short_recording.slice(0, 1500)
+    batch = estimator.predict(rec)
+    stream = estimator.stream()
+    causal = [stream.update(t, i, w) for t, i, w in zip(rec.t, rec.iq, rec.omega, strict=True)]
+    assert causal[: SMALL.window - 1] == [None] * (SMALL.window - 1)
+    got = np.array(causal[SMALL.window - 1 :])
+    for k, column in enumerate(("f_physics", "f_hybrid", "f_final")):
+        np.testing.assert_allclose(got[:, k], getattr(batch, column), rtol=0, atol=1e-12)
+
+
+def test_saved_model_predicts_the_same(
+    tmp_path: Path, trained, short_recording: FollowerRecording
+) -> None:
+    estimator, summary = trained
+    estimator.save(tmp_path / "model", summary)
+    assert sorted(p.name for p in (tmp_path / "model").iterdir()) == sorted(MODEL_FILES)
+    loaded = ForceEstimator.load(tmp_path / "model")
+    a = estimator.predict(short_recording.slice(0, 800))
+    b = loaded.predict(short_recording.slice(0, 800))
+    np.testing.assert_array_equal(a.f_final, b.f_final)
+
+
+def test_summary_reports_each_stage_on_both_splits(trained) -> None:
+    _, summary = trained
+    for split in ("train_rmse_n", "validation_rmse_n"):
+        assert set(summary[split]) == {"physics", "hybrid", "final"}
+    assert 1 <= summary["best_epoch"] <= summary["epochs_run"] == 3
+    assert summary["ekf_lag_s"] <= 1 / 50  # within one pipeline period
+
+
+def test_damaged_model_folder_is_refused(tmp_path: Path, trained) -> None:
+    estimator, summary = trained
+    estimator.save(tmp_path / "model", summary)
+    (tmp_path / "model" / "ekf.json").unlink()
+    with pytest.raises(TeleopInputError, match=r"has no ekf\.json"):
+        ForceEstimator.load(tmp_path / "model")
+    with pytest.raises(TeleopInputError, match="does not exist"):
+        ForceEstimator.load(tmp_path / "nowhere")
+
+
+def test_a_recording_at_another_rate_is_resampled_to_the_models(trained, short_recording) -> None:
+    estimator, _ = trained
+    rec = short_recording.slice(0, 1000)
+    fast = rec.resampled(200.0)
+    assert estimator.conform(fast).sample_rate_hz == pytest.approx(100.0, rel=1e-6)
+    assert estimator.conform(rec) is rec
