@@ -291,12 +291,14 @@ def train_estimator(
     sign_speed_rad_s: float = 0.3,
     pipeline_rate_hz: float = 50.0,
     physics: PhysicsParams | None = None,
+    ekf_q_n2: float | None = None,
     progress: Callable[[int, float, float], None] | None = None,
 ) -> tuple[ForceEstimator, TrainingSummary]:
     """Fit eq. 1, train the GRU on its residual, and set up the EKF, on one recording.
 
-    `physics` given (e.g. from a calibration) skips the eq. 1 fit. The physics fit, the
-    GRU's standardisation and the EKF noise all use the training blocks only.
+    `physics` given (e.g. from a calibration) skips the eq. 1 fit; `ekf_q_n2` given
+    fixes the EKF process noise (both states) instead of tuning it. The physics fit,
+    the GRU's standardisation and the EKF noise all use the training blocks only.
     """
     config = config or GruConfig()
     notes: list[str] = []
@@ -323,8 +325,13 @@ def train_estimator(
         )
     f_phys_all = physics.force(recording.iq, recording.omega, recording.alpha)
     residual = recording.f_ref - f_phys_all  # r_t = F_ref - F_physics   (eq. 13)
-    gru, history, train_idx, val_idx = train_gru(
-        features_of(recording), residual, config, seed=seed, progress=progress
+    gru, history, _, _ = train_gru(
+        features_of(recording),
+        residual,
+        config,
+        seed=seed,
+        split=(train_idx, val_idx),
+        progress=progress,
     )
     rate = recording.sample_rate_hz
     rest = rest_variances(
@@ -342,17 +349,24 @@ def train_estimator(
         )
     estimator = ForceEstimator(physics, gru, base, rate, pipeline_rate_hz)
     result = estimator.predict(recording)
-    train_rows = train_idx
-    settings, lag = tune_process_noise(
-        physics,
-        base,
-        1.0 / rate,
-        result.f_physics[train_rows],
-        result.f_hybrid[train_rows],
-        recording.omega[T - 1 :][train_rows],
-        result.f_ref[train_rows],
-        max_lag_samples=rate / pipeline_rate_hz,
-    )
+    f_physics, f_hybrid = result.f_physics[train_idx], result.f_hybrid[train_idx]
+    omega = recording.omega[T - 1 :][train_idx]
+    if ekf_q_n2 is None:
+        settings, lag = tune_process_noise(
+            physics,
+            base,
+            1.0 / rate,
+            f_physics,
+            f_hybrid,
+            omega,
+            result.f_ref[train_idx],
+            max_lag_samples=rate / pipeline_rate_hz,
+        )
+    else:
+        q = {"q_physics_n2": ekf_q_n2, "q_hybrid_n2": ekf_q_n2}
+        settings = EkfSettings(**{**base.to_dict(), **q})
+        final = filter_forces(settings, physics, 1.0 / rate, f_physics, f_hybrid, omega)
+        lag = lag_samples(final, f_hybrid)
     estimator = ForceEstimator(physics, gru, settings, rate, pipeline_rate_hz)
     result = estimator.predict(recording)
 

@@ -120,8 +120,9 @@ class FollowerRecording:
         if back.size:
             row = int(back[0]) + 1
             raise RecordingError(
-                f"recording {path}, line {row + 2}, column 't': {float(t[row])!r} does not come after "
-                f"{float(t[row - 1])!r} on the line before; expected strictly increasing times"
+                f"recording {path}, line {row + 2}, column 't': {float(t[row])!r} does not "
+                f"come after {float(t[row - 1])!r} on the line before; expected strictly "
+                "increasing times"
             )
         return cls.from_arrays(
             t,

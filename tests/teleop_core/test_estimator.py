@@ -55,6 +55,11 @@ def test_summary_reports_each_stage_on_both_splits(trained) -> None:
     assert summary["ekf_lag_s"] <= 1 / 50  # within one pipeline period
 
 
+def test_process_noise_can_be_set_instead_of_tuned(short_recording: FollowerRecording) -> None:
+    estimator, _ = train_estimator(short_recording.slice(0, 3000), SMALL, seed=1, ekf_q_n2=2.5e-4)
+    assert estimator.ekf.q_physics_n2 == estimator.ekf.q_hybrid_n2 == 2.5e-4
+
+
 def test_damaged_model_folder_is_refused(tmp_path: Path, trained) -> None:
     estimator, summary = trained
     estimator.save(tmp_path / "model", summary)
