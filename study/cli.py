@@ -17,6 +17,7 @@ from study import __version__
 from study.commands.base import USER_ERRORS, InputError, StudyGroup
 from study.commands.bench import bench
 from study.commands.database import database
+from study.commands.estimator import estimator
 
 EXIT_USER_ERROR = 2
 
@@ -38,6 +39,7 @@ def cli() -> None:
 
 cli.add_command(database)
 cli.add_command(bench)
+cli.add_command(estimator)
 
 
 def _one_line(message: str) -> str:

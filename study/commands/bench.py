@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -10,7 +11,9 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
 from study.bench.db_write import bench_sample_write
+from study.bench.follower import FollowerBenchConfig, run_follower_bench
 from study.commands.base import StudyGroup
+from study.errors import StudyInputError
 
 
 @click.group("bench", cls=StudyGroup)
@@ -56,3 +59,36 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
     )
     if json_path is not None:
         json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+
+
+@bench.command("follower")
+@click.option(
+    "--json",
+    "json_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write every table as JSON here.",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the Markdown tables and the figures.",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--quick",
+    is_flag=True,
+    help="Tiny data and 1-2 epochs: checks the pipeline in seconds, measures nothing.",
+)
+def bench_follower(json_path: Path, out_dir: Path, seed: int, quick: bool) -> None:
+    """Tables I-III and Fig. 8 of seed 000 on the simulated follower (about 30 min)."""
+    if not json_path.parent.is_dir():
+        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    config = FollowerBenchConfig.quick() if quick else FollowerBenchConfig()
+    config = replace(config, seed=seed)
+    with Console(stderr=True).status("follower bench") as status:
+        report = run_follower_bench(config, out_dir, progress=lambda msg: status.update(msg))
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
+    click.echo((out_dir / "follower_bench.md").read_text())

@@ -1,0 +1,139 @@
+"""`study estimator train/run` and `study bench follower` end to end, on small data."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from study.cli import main
+from teleop_core.estimation.estimator import MODEL_FILES
+from tests.teleop_core.conftest import simulate_recording
+
+
+@pytest.fixture(scope="module")
+def recording_csv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("rec") / "bench.csv"
+    simulate_recording(30.0, seed=3).to_csv(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def model_dir(recording_csv: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("models") / "m"
+    status = main(
+        [
+            "estimator",
+            "train",
+            str(recording_csv),
+            "--out",
+            str(out),
+            "--window",
+            "6",
+            "--epochs",
+            "2",
+            "--hidden-size",
+            "8",
+            "--seed",
+            "1",
+        ]
+    )
+    assert status == 0
+    return out
+
+
+def test_train_writes_the_model_folder_with_a_summary(model_dir: Path) -> None:
+    assert sorted(p.name for p in model_dir.iterdir()) == sorted(MODEL_FILES)
+    summary = json.loads((model_dir / "summary.json").read_text())
+    assert summary["window"] == 6 and summary["epochs_run"] == 2
+    assert (
+        set(summary["train_rmse_n"])
+        == set(summary["validation_rmse_n"])
+        == {"physics", "hybrid", "final"}
+    )
+    std = json.loads((model_dir / "standardisation.json").read_text())
+    assert len(std["feature_mean"]) == len(std["feature_std"]) == 3
+
+
+def test_run_writes_one_estimate_per_full_window(
+    model_dir: Path, recording_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "pred.csv"
+    assert main(["estimator", "run", str(model_dir), str(recording_csv), "--out", str(out)]) == 0
+    pred = pd.read_csv(out)
+    rows = len(pd.read_csv(recording_csv))
+    assert list(pred.columns) == ["t", "f_ref", "f_physics", "f_hybrid", "f_final"]
+    assert len(pred) == rows - 6 + 1
+    assert "RMSE against f_ref" in capsys.readouterr().out
+
+
+def _one_error_line(capsys: pytest.CaptureFixture[str], args: list[str]) -> str:
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_bad_recording_is_one_line_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], recording_csv: Path
+) -> None:
+    bad = tmp_path / "bad.csv"
+    lines = recording_csv.read_text().splitlines()
+    lines[40] = lines[40].replace(lines[40].split(",")[1], "oops", 1)
+    bad.write_text("\n".join(lines) + "\n")
+    line = _one_error_line(capsys, ["estimator", "train", str(bad), "--out", str(tmp_path / "m")])
+    assert "line 41, column 'iq': 'oops' is not a finite number" in line
+    assert not (tmp_path / "m").exists()
+
+
+def test_existing_model_folder_is_not_overwritten_without_force(
+    model_dir: Path, recording_csv: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    line = _one_error_line(
+        capsys, ["estimator", "train", str(recording_csv), "--out", str(model_dir)]
+    )
+    assert "exists and is not empty" in line
+
+
+def test_run_with_a_missing_model_is_one_line(
+    tmp_path: Path, recording_csv: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "pred.csv"
+    line = _one_error_line(
+        capsys, ["estimator", "run", str(tmp_path / "none"), str(recording_csv), "--out", str(out)]
+    )
+    assert "model folder" in line and "does not exist" in line
+    assert not out.exists()
+
+
+def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
+    out_json = tmp_path / "follower.json"
+    assert (
+        main(
+            [
+                "bench",
+                "follower",
+                "--quick",
+                "--json",
+                str(out_json),
+                "--out",
+                str(tmp_path / "fig"),
+            ]
+        )
+        == 0
+    )
+    report = json.loads(out_json.read_text())
+    assert set(report["table_i"]) == {"ramp", "step"}
+    assert set(report["table_ii"]) == {"0.5", "1", "1.5", "2", "2.5", "3"}
+    assert set(report["table_iii"]["pooled"]) == {"hybrid", "final", "direct", "physics"}
+    assert set(report["window_sweep"]) == {"2", "5"}
+    assert report["timing"]["median_ms"] > 0
+    for figure in (
+        "table_i_velocity.png",
+        "table_ii_fig6.png",
+        "table_iii_fig9.png",
+        "fig8_window.png",
+    ):
+        assert (tmp_path / "fig" / figure).stat().st_size > 10_000
