@@ -89,6 +89,29 @@ def sinusoidal_load(
     return np.zeros_like(t), ramp_in * (mean_n + amplitude_n * np.sin(2 * np.pi * frequency_hz * t))
 
 
+def characterisation(
+    duration_s: float, rng: np.random.Generator, *, segment_s: float = 10.0, dt_s: float = 1e-3
+) -> tuple[Float1D, Float1D]:
+    """The calibration platform of seed 000, IV-C: wheel at zero speed, sinusoidal loads.
+
+    Segments of `segment_s` with a random frequency (0.3-3.5 Hz), mean (0.4-1.2 N) and
+    amplitude (0.2-0.8 N), each taken up and released gently.
+    """
+    cmd_parts, load_parts = [], []
+    for _ in range(max(1, round(duration_s / segment_s))):
+        _, load = sinusoidal_load(
+            rng.uniform(0.3, 3.5),
+            segment_s,
+            mean_n=rng.uniform(0.4, 1.2),
+            amplitude_n=rng.uniform(0.2, 0.8),
+            dt_s=dt_s,
+        )
+        load *= np.clip((segment_s - np.arange(len(load)) * dt_s) / 0.5, 0.0, 1.0)  # release
+        cmd_parts.append(np.zeros_like(load))
+        load_parts.append(load)
+    return np.concatenate(cmd_parts), np.concatenate(load_parts)
+
+
 def ramp(
     peak_rad_s: float = 10.0, rise_s: float = 2.0, hold_s: float = 1.0, dt_s: float = 1e-3
 ) -> Float1D:
