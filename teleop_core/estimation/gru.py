@@ -116,8 +116,9 @@ class GruWeights:
     b_out: float
 
     @classmethod
-    def from_net(cls, net: GruNet) -> GruWeights:
-        sd = {k: v.detach().cpu().double().numpy() for k, v in net.state_dict().items()}
+    def from_state_dict(cls, state: dict[str, torch.Tensor]) -> GruWeights:
+        """From a `GruNet` state dict (any dtype), as float64 contiguous arrays."""
+        sd = {k: v.detach().cpu().double().numpy() for k, v in state.items()}
         return cls(
             np.ascontiguousarray(sd["gru.weight_ih_l0"]),
             np.ascontiguousarray(sd["gru.weight_hh_l0"]),
@@ -126,6 +127,20 @@ class GruWeights:
             np.ascontiguousarray(sd["head.weight"][0]),
             float(sd["head.bias"][0]),
         )
+
+    @classmethod
+    def from_net(cls, net: GruNet) -> GruWeights:
+        return cls.from_state_dict(net.state_dict())
+
+    def to_state_dict(self) -> dict[str, torch.Tensor]:
+        return {
+            "gru.weight_ih_l0": torch.tensor(self.w_ih),
+            "gru.weight_hh_l0": torch.tensor(self.w_hh),
+            "gru.bias_ih_l0": torch.tensor(self.b_ih),
+            "gru.bias_hh_l0": torch.tensor(self.b_hh),
+            "head.weight": torch.tensor(self.w_out[None, :]),
+            "head.bias": torch.tensor([self.b_out]),
+        }
 
 
 @numba.njit(cache=True)
@@ -349,26 +364,8 @@ def _fit(
 
 def save_weights(model: GruModel, path: str) -> None:
     """Save the weights as a PyTorch state dict (loadable into `GruNet`)."""
-    w = model.weights
-    state = {
-        "gru.weight_ih_l0": torch.tensor(w.w_ih),
-        "gru.weight_hh_l0": torch.tensor(w.w_hh),
-        "gru.bias_ih_l0": torch.tensor(w.b_ih),
-        "gru.bias_hh_l0": torch.tensor(w.b_hh),
-        "head.weight": torch.tensor(w.w_out[None, :]),
-        "head.bias": torch.tensor([w.b_out]),
-    }
-    torch.save(state, path)
+    torch.save(model.weights.to_state_dict(), path)
 
 
 def load_weights(path: str) -> GruWeights:
-    state = torch.load(path, weights_only=True)
-    sd = {k: v.double().numpy() for k, v in state.items()}
-    return GruWeights(
-        np.ascontiguousarray(sd["gru.weight_ih_l0"]),
-        np.ascontiguousarray(sd["gru.weight_hh_l0"]),
-        np.ascontiguousarray(sd["gru.bias_ih_l0"]),
-        np.ascontiguousarray(sd["gru.bias_hh_l0"]),
-        np.ascontiguousarray(sd["head.weight"][0]),
-        float(sd["head.bias"][0]),
-    )
+    return GruWeights.from_state_dict(torch.load(path, weights_only=True))
