@@ -45,20 +45,15 @@ def test_sqlite_runs_in_wal_mode_with_foreign_keys(sqlite_url: str) -> None:
     engine.dispose()
 
 
+def _tlx(pid: int, **overrides: object) -> dict[str, object]:
+    return {"participant_id": pid, "task": "lcca", "condition": "HV", **RATINGS, **overrides}
+
+
 @pytest.mark.parametrize("frustration", [0, 5, 55, 100])
 def test_tlx_ratings_on_the_scale_are_stored(engine: Engine, frustration: int) -> None:
     pid = _participant(engine)
     with engine.begin() as conn:
-        conn.execute(
-            insert(TlxResponse),
-            {
-                "participant_id": pid,
-                "task": "lcca",
-                "condition": "HV",
-                **RATINGS,
-                "frustration": frustration,
-            },
-        )
+        conn.execute(insert(TlxResponse), _tlx(pid, frustration=frustration))
         stored = conn.scalar(select(TlxResponse.frustration))
     assert stored == frustration
 
@@ -69,16 +64,7 @@ def test_tlx_ratings_off_the_scale_are_refused_by_the_database(
 ) -> None:
     pid = _participant(engine)
     with pytest.raises(IntegrityError, match="frustration_on_scale"), engine.begin() as conn:
-        conn.execute(
-            insert(TlxResponse),
-            {
-                "participant_id": pid,
-                "task": "lcca",
-                "condition": "HV",
-                **RATINGS,
-                "frustration": frustration,
-            },
-        )
+        conn.execute(insert(TlxResponse), _tlx(pid, frustration=frustration))
 
 
 WEIGHTS_OK = {
