@@ -17,6 +17,7 @@ three stages to one bench recording; `save`/`load` keep them in a model folder:
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import tempfile
 from collections.abc import Callable
@@ -203,28 +204,47 @@ class CausalEstimator:
         self._mean = np.asarray(std.feature_mean)
         self._std = np.asarray(std.feature_std)
 
-    def update(
-        self, t: float, iq: float, omega: float, alpha: float | None = None
-    ) -> tuple[float, float, float] | None:
-        """Add a sample (s, A, rad/s, optionally rad/s^2).
-
-        Returns (F_physics, F*_GRU, F*_Final) in N, or None while the window fills.
-        """
+    def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
+        """Add a sample (s, A, rad/s, optionally rad/s^2) to the window without estimating:
+        the 50 Hz pipeline sees every 100 Hz sample but estimates on every other one."""
         if alpha is None:
             # Backward difference, as FollowerRecording derives alpha.
             alpha = 0.0 if self._last is None else (omega - self._last[1]) / (t - self._last[0])
         self._last = (t, omega)
+        self._latest = (iq, omega, alpha)
         self._buffer[:-1] = self._buffer[1:]
-        self._buffer[-1] = (np.array([iq, omega, alpha]) - self._mean) / self._std
+        self._buffer[-1, 0] = (iq - self._mean[0]) / self._std[0]
+        self._buffer[-1, 1] = (omega - self._mean[1]) / self._std[1]
+        self._buffer[-1, 2] = (alpha - self._mean[2]) / self._std[2]
         self._count += 1
+
+    def estimate(self) -> tuple[float, float, float] | None:
+        """(F_physics, F*_GRU, F*_Final) in N from the samples pushed so far, or None
+        while the window fills."""
         if self._count < self.est.window:
             return None
-        f_physics = float(
-            self.est.physics.force(np.array([iq]), np.array([omega]), np.array([alpha]))[0]
-        )
+        iq, omega, alpha = self._latest
+        ph = self.est.physics
+        # F = (K_t I_q - J theta_dd - b theta_d - tau_c tanh(theta_d / w)) / r + F_0   (eq. 1)
+        f_physics = (
+            ph.torque_constant_n_m_per_a * iq
+            - ph.inertia_kg_m2 * alpha
+            - ph.viscous_damping_n_m_s_per_rad * omega
+            - ph.coulomb_friction_n_m * math.tanh(omega / ph.sign_speed_rad_s)
+        ) / ph.wheel_radius_m + ph.offset_n
         f_hybrid = f_physics + self.est.gru.predict_window(self._buffer)
         f_final = self._ekf.update(f_physics, f_hybrid, omega)
         return f_physics, f_hybrid, f_final
+
+    def update(
+        self, t: float, iq: float, omega: float, alpha: float | None = None
+    ) -> tuple[float, float, float] | None:
+        """Add a sample (s, A, rad/s, optionally rad/s^2) and estimate.
+
+        Returns (F_physics, F*_GRU, F*_Final) in N, or None while the window fills.
+        """
+        self.push(t, iq, omega, alpha)
+        return self.estimate()
 
 
 @dataclass

@@ -79,14 +79,15 @@ def _param_vector(plant: FollowerPlantParams, control: FollowerControlParams) ->
 
 
 @numba.njit(cache=True)
-def _advance(
+def follower_tick(
     state: np.ndarray,
     p: np.ndarray,
     encoder_step_rad: float,
-    omega_cmd: np.ndarray,
-    load_n: np.ndarray,
+    omega_cmd: float,
+    load_n: float,
     out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; exercised through FollowerDrive
+    """One speed-loop tick; writes theta, omega, mean iq, omega estimate, iq command to out."""
     kt, r, J, b, tc, ts, ws, ksat, cog, ncog, R, L, vmax, kpi, kii, dt, nsub, kpw, kiw, tf, ilim = (
         p[0],
         p[1],
@@ -116,59 +117,71 @@ def _advance(
     decay = math.exp(-R * dte / L)
     ke = (2.0 / 3.0) * kt
     lpf = tf / (tf + dt)
+    # Speed loop: quantised encoder angle, differentiated and low-passed.
+    theta_q = math.floor(state[THETA] / encoder_step_rad) * encoder_step_rad
+    w_raw = (theta_q - state[THETA_Q_PREV]) / dt
+    state[THETA_Q_PREV] = theta_q
+    state[W_FILT] = lpf * state[W_FILT] + (1.0 - lpf) * w_raw
+    e_w = omega_cmd - state[W_FILT]
+    w_int = state[W_INT] + kiw * e_w * dt
+    w_int = min(max(w_int, -ilim), ilim)  # anti-windup
+    state[W_INT] = w_int
+    iq_cmd = min(max(kpw * e_w + w_int, -ilim), ilim)
+    state[IQ_CMD] = iq_cmd
+    iq_sum = 0.0
+    for _ in range(n_sub):
+        omega = state[OMEGA]
+        iq = state[IQ]
+        # FOC current PI with back-EMF feed-forward, voltage-limited.
+        e_i = iq_cmd - iq
+        v = kpi * e_i + state[IQ_INT] + ke * omega
+        if v > vmax:
+            v = vmax
+        elif v < -vmax:
+            v = -vmax
+        else:
+            state[IQ_INT] += kii * e_i * dte
+        # L di/dt = v - R i - e, exact over one current-loop period.
+        i_ss = (v - ke * omega) / R
+        iq = i_ss + (iq - i_ss) * decay
+        state[IQ] = iq
+        iq_sum += iq
+        # Eq. 2 with T_m = K_t(i) i, cogging and the load torque r F.
+        tau = kt * (1.0 - ksat * iq * iq) * iq - r * load_n
+        if cog != 0.0:
+            tau -= cog * math.sin(ncog * state[THETA])
+        if omega == 0.0:
+            breakaway = ts if tau > 0.0 else ts * retract
+            if abs(tau) <= breakaway:
+                continue  # stuck: friction balances the applied torque
+            tau_f = breakaway if tau > 0.0 else -breakaway
+        else:
+            mag = tc + (ts - tc) * math.exp(-(omega / ws) * (omega / ws))
+            tau_f = mag if omega > 0.0 else -mag * retract
+            tau_f += drag2 * omega * abs(omega)
+        omega_new = omega + dte * (tau - b * omega - tau_f) / J
+        if omega != 0.0 and omega_new * omega < 0.0:
+            omega_new = 0.0  # friction cannot reverse the motion: stick at zero speed
+        state[OMEGA] = omega_new
+        state[THETA] += omega_new * dte
+    out[0] = state[THETA]
+    out[1] = state[OMEGA]
+    out[2] = iq_sum / n_sub
+    out[3] = state[W_FILT]
+    out[4] = iq_cmd
+
+
+@numba.njit(cache=True)
+def _advance(
+    state: np.ndarray,
+    p: np.ndarray,
+    encoder_step_rad: float,
+    omega_cmd: np.ndarray,
+    load_n: np.ndarray,
+    out: np.ndarray,
+) -> None:  # pragma: no cover - compiled; exercised through FollowerDrive
     for k in range(omega_cmd.shape[0]):
-        # Speed loop: quantised encoder angle, differentiated and low-passed.
-        theta_q = math.floor(state[THETA] / encoder_step_rad) * encoder_step_rad
-        w_raw = (theta_q - state[THETA_Q_PREV]) / dt
-        state[THETA_Q_PREV] = theta_q
-        state[W_FILT] = lpf * state[W_FILT] + (1.0 - lpf) * w_raw
-        e_w = omega_cmd[k] - state[W_FILT]
-        w_int = state[W_INT] + kiw * e_w * dt
-        w_int = min(max(w_int, -ilim), ilim)  # anti-windup
-        state[W_INT] = w_int
-        iq_cmd = min(max(kpw * e_w + w_int, -ilim), ilim)
-        state[IQ_CMD] = iq_cmd
-        iq_sum = 0.0
-        for _ in range(n_sub):
-            omega = state[OMEGA]
-            iq = state[IQ]
-            # FOC current PI with back-EMF feed-forward, voltage-limited.
-            e_i = iq_cmd - iq
-            v = kpi * e_i + state[IQ_INT] + ke * omega
-            if v > vmax:
-                v = vmax
-            elif v < -vmax:
-                v = -vmax
-            else:
-                state[IQ_INT] += kii * e_i * dte
-            # L di/dt = v - R i - e, exact over one current-loop period.
-            i_ss = (v - ke * omega) / R
-            iq = i_ss + (iq - i_ss) * decay
-            state[IQ] = iq
-            iq_sum += iq
-            # Eq. 2 with T_m = K_t(i) i, cogging and the load torque r F.
-            tau = kt * (1.0 - ksat * iq * iq) * iq - r * load_n[k]
-            if cog != 0.0:
-                tau -= cog * math.sin(ncog * state[THETA])
-            if omega == 0.0:
-                breakaway = ts if tau > 0.0 else ts * retract
-                if abs(tau) <= breakaway:
-                    continue  # stuck: friction balances the applied torque
-                tau_f = breakaway if tau > 0.0 else -breakaway
-            else:
-                mag = tc + (ts - tc) * math.exp(-(omega / ws) * (omega / ws))
-                tau_f = mag if omega > 0.0 else -mag * retract
-                tau_f += drag2 * omega * abs(omega)
-            omega_new = omega + dte * (tau - b * omega - tau_f) / J
-            if omega != 0.0 and omega_new * omega < 0.0:
-                omega_new = 0.0  # friction cannot reverse the motion: stick at zero speed
-            state[OMEGA] = omega_new
-            state[THETA] += omega_new * dte
-        out[k, 0] = state[THETA]
-        out[k, 1] = state[OMEGA]
-        out[k, 2] = iq_sum / n_sub
-        out[k, 3] = state[W_FILT]
-        out[k, 4] = iq_cmd
+        follower_tick(state, p, encoder_step_rad, omega_cmd[k], load_n[k], out[k])
 
 
 @dataclass
