@@ -28,3 +28,13 @@ def simulate_recording(
 def short_recording() -> FollowerRecording:
     """60 s of simulated navigation at 100 Hz (6,000 samples)."""
     return simulate_recording(60.0, seed=11)
+
+
+@pytest.fixture(scope="session")
+def small_estimator(short_recording: FollowerRecording):
+    """A physics + GRU + EKF estimator trained for two epochs (loop tests need one)."""
+    from teleop_core.estimation.estimator import train_estimator
+    from teleop_core.estimation.gru import GruConfig
+
+    estimator, _ = train_estimator(short_recording, GruConfig(max_epochs=2), seed=0)
+    return estimator

@@ -1,0 +1,1 @@
+"""The bilateral teleoperation loop: dial, follower, estimator and the link between them."""

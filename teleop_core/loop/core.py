@@ -1,0 +1,421 @@
+"""`TeleopLoop`: the dial, the follower and the estimator at their own rates, joined by a link.
+
+Rates (seed 000, IV-A): device physics and the master controller at 1 kHz (the compiled
+tick in `kernel.py`), acquisition at 100 Hz (the drive's ESP32 samples current, angle
+and speed; the master reads the dial and sends the rate command), estimation at 50 Hz
+(physics + GRU + EKF on the 100 Hz samples, every other one), the driver at 100 Hz.
+Time is kept in whole ticks, so no rate drifts against another.
+
+Where the estimate is computed: next to the drive, and the estimate crosses the link
+(the paper runs the GRU on the master laptop and sends the samples instead; the delay
+between the force and the dial is the same either way, and this way the link carries
+what the latency bench measures). Without an estimator the loop publishes the true
+proximal force (an ideal sensor), which isolates the loop from the estimator in tests.
+
+A `LoopResult` holds the 100 Hz samples with the columns the database stores.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from teleop_core.errors import TeleopInputError
+from teleop_core.estimation.estimator import ForceEstimator
+from teleop_core.follower.params import (
+    FollowerControlParams,
+    FollowerPlantParams,
+    FollowerSensorParams,
+)
+from teleop_core.follower.plant import STATE_SIZE, _param_vector
+from teleop_core.loop import kernel as K
+from teleop_core.loop.drivers import Driver, HandAction, OperatorView
+from teleop_core.loop.environments import Environment, free_space
+from teleop_core.loop.link import Link, LinkParams
+from teleop_core.master.dial import D_OMEGA, D_THETA, DIAL_STATE_SIZE, dial_param_vector
+from teleop_core.master.haptics import LOADING
+from teleop_core.master.params import DialParams, HapticParams
+
+SAMPLE_COLUMNS = (
+    "t_s",
+    "insertion_m",
+    "rotation_rad",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "branch",
+    "proximal_force_n",
+    "proximal_force_est_n",
+    "distal_force_n",
+    "dial_angle_rad",
+    "dial_torque_n_m",
+)
+"""One row per acquisition: the database's sample columns (branch as its code)."""
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    device_rate_hz: float = 1000.0
+    """Device physics and master controller rate (IV-A)."""
+    acquisition_rate_hz: float = 100.0
+    """Hardware acquisition rate (IV-A)."""
+    estimation_rate_hz: float = 50.0
+    """Estimation pipeline rate (IV-A)."""
+    driver_rate_hz: float = 100.0
+    """How often the driver decides."""
+    to_follower: LinkParams = field(default_factory=LinkParams)
+    """Master -> follower: rate and rotation commands."""
+    to_master: LinkParams = field(default_factory=LinkParams)
+    """Follower -> master: the force estimate."""
+    haptics: HapticParams = field(default_factory=HapticParams)
+    dial: DialParams = field(default_factory=DialParams)
+    plant: FollowerPlantParams = field(default_factory=FollowerPlantParams)
+    control: FollowerControlParams = field(default_factory=FollowerControlParams)
+    sensors: FollowerSensorParams = field(default_factory=FollowerSensorParams)
+    dial_encoder_counts_per_rev: int = 4096
+    """The dial's AS5600 (IV-A)."""
+    dial_velocity_filter_s: float = 0.002
+    """Low-pass on the dial's differentiated angle for eq. 8's damper; assumption."""
+
+    def __post_init__(self) -> None:
+        ticks = {}
+        for name in ("acquisition_rate_hz", "estimation_rate_hz", "driver_rate_hz"):
+            ratio = self.device_rate_hz / getattr(self, name)
+            if not (ratio >= 1 and abs(ratio - round(ratio)) < 1e-9):
+                raise TeleopInputError(
+                    f"{name} = {getattr(self, name)} does not divide device_rate_hz "
+                    f"{self.device_rate_hz}; expected e.g. 100 of 1000"
+                )
+            ticks[name] = round(ratio)
+        if ticks["estimation_rate_hz"] % ticks["acquisition_rate_hz"]:
+            raise TeleopInputError(
+                f"estimation_rate_hz {self.estimation_rate_hz} is not the acquisition rate "
+                f"{self.acquisition_rate_hz} divided by a whole number"
+            )
+        if abs(self.device_rate_hz - self.control.speed_loop_rate_hz) > 1e-9:
+            raise TeleopInputError(
+                f"device_rate_hz {self.device_rate_hz} differs from the drive's speed loop "
+                f"{self.control.speed_loop_rate_hz} Hz; expected them equal"
+            )
+
+
+@dataclass
+class LoopCounters:
+    """How many times each part ran (rate bookkeeping)."""
+
+    ticks: int = 0
+    acquisitions: int = 0
+    estimates: int = 0
+    driver_updates: int = 0
+    commands_sent: int = 0
+    forces_sent: int = 0
+
+
+@dataclass
+class LoopResult:
+    """The 100 Hz samples of a run, the 1 kHz log if kept, and the counters."""
+
+    samples: np.ndarray
+    counters: LoopCounters
+    branches: tuple[str, ...]
+    ticks: np.ndarray | None = None
+    success: bool = False
+    done_s: float = math.nan
+
+    def to_frame(self) -> pd.DataFrame:
+        frame = pd.DataFrame(self.samples, columns=list(SAMPLE_COLUMNS))
+        frame["branch"] = [self.branches[int(c)] for c in frame["branch"]]
+        return frame
+
+    def ticks_frame(self) -> pd.DataFrame:
+        if self.ticks is None:
+            raise TeleopInputError("this run kept no 1 kHz log; run with keep_ticks=True")
+        return pd.DataFrame(self.ticks, columns=list(K.LOG_COLUMNS))
+
+
+class TeleopLoop:
+    """One trial's closed loop. `run(seconds, driver)` or step it with `advance`.
+
+    Parameters
+    ----------
+    config : LoopConfig
+    environment : Environment
+        What the guidewire meets (default: free space).
+    estimator : ForceEstimator or None
+        The follower's force estimator; None publishes the true proximal force.
+    seed : int
+        Seeds sensor noise and the link's jitter and losses.
+    force_override : callable or None
+        t_s -> N replacing the published force (the latency bench's step).
+    """
+
+    def __init__(
+        self,
+        config: LoopConfig | None = None,
+        environment: Environment | None = None,
+        estimator: ForceEstimator | None = None,
+        seed: int = 0,
+        force_override: Callable[[float], float] | None = None,
+        keep_ticks: bool = False,
+    ) -> None:
+        self.config = cfg = config or LoopConfig()
+        self.environment = environment or free_space()
+        self.environment.reset()
+        self._kernel = K.kernel_for(self.environment.fn)
+        self.estimator = estimator
+        self.force_override = force_override
+        self.keep_ticks = keep_ticks
+        self.rng = np.random.default_rng(seed)
+        self.dt_s = 1.0 / cfg.device_rate_hz
+        self._acq_every = round(cfg.device_rate_hz / cfg.acquisition_rate_hz)
+        self._est_every = round(cfg.device_rate_hz / cfg.estimation_rate_hz)
+        self._drv_every = round(cfg.device_rate_hz / cfg.driver_rate_hz)
+        link_rng = np.random.default_rng(self.rng.integers(2**63))
+        self.to_follower: Link[tuple[float, float]] = Link(cfg.to_follower, link_rng)
+        self.to_master: Link[float] = Link(cfg.to_master, link_rng)
+        self.loop = np.zeros(K.LOOP_STATE_SIZE)
+        self.loop[K.L_BRANCH] = LOADING
+        self.mp = self._master_params()
+        self.dial = np.zeros(DIAL_STATE_SIZE)
+        self.dp = dial_param_vector(cfg.dial)
+        self.follower = np.zeros(STATE_SIZE)
+        self.fp = _param_vector(cfg.plant, cfg.control)
+        self.f_enc_step = 2 * math.pi / cfg.sensors.encoder_counts_per_rev
+        self.counters = LoopCounters()
+        self._stream = estimator.stream() if estimator is not None else None
+        self._log = np.zeros((max(self._acq_every, self._drv_every, self._est_every), K.LOG_WIDTH))
+        self._last_row = np.zeros(K.LOG_WIDTH)
+        self._noise = np.zeros(0)
+        self._noise_at = 0
+        self._force_est = 0.0
+        self._action = HandAction()
+        self._done_s = math.nan
+        self._success = False
+        self.driver: Driver | None = None
+
+    def _master_params(self) -> np.ndarray:
+        cfg, h, poly = self.config, self.config.haptics, self.config.dial.polynomials
+        mp = np.zeros(K.MASTER_PARAM_SIZE)
+        mp[K.M_KS], mp[K.M_BS], mp[K.M_THETA_REF] = (
+            h.spring_n_m_per_rad,
+            h.damper_n_m_s_per_rad,
+            h.reference_angle_rad,
+        )
+        mp[K.M_GH], mp[K.M_DEADBAND], mp[K.M_SAT] = (
+            h.haptic_gain_n_m_per_n,
+            h.deadband_n,
+            h.saturation_n_m,
+        )
+        mp[K.M_HAPTICS_ON] = 1.0 if h.haptics_on else 0.0
+        mp[K.M_LEVER], mp[K.M_IMAX] = poly.lever_arm_m, poly.max_current_ma
+        mp[K.M_ENC_STEP] = 2 * math.pi / cfg.dial_encoder_counts_per_rev
+        mp[K.M_VEL_FILTER_S] = cfg.dial_velocity_filter_s
+        mp[K.M_WHEEL_R] = cfg.plant.wheel_radius_m
+        mp[K.M_IQ_FILTER_S] = cfg.sensors.current_filter_s
+        mp[K.M_DT] = 1.0 / cfg.device_rate_hz
+        mp[K.M_POLY : K.M_POLY + 6] = [*poly.loading, *poly.unloading]
+        return mp
+
+    @property
+    def t_s(self) -> float:
+        return self.counters.ticks * self.dt_s
+
+    def view(self) -> OperatorView:
+        row = self._last_row
+        branch = self.environment.branches[int(row[16])]
+        return OperatorView(
+            t_s=self.t_s,
+            dial_angle_rad=float(self.dial[D_THETA]),
+            dial_speed_rad_s=float(self.dial[D_OMEGA]),
+            insertion_m=float(self.follower[0] * self.config.plant.wheel_radius_m),
+            rotation_rad=float(self.loop[K.L_ROTATION]),
+            tip_m=(float(row[13]), float(row[14]), float(row[15])),
+            branch=branch,
+            success=bool(row[17]),
+        )
+
+    def run(self, seconds: float, driver: Driver, stop_when_done: bool = True) -> LoopResult:
+        """Run up to `seconds` (or until the driver says done); return every sample."""
+        self.start(driver)
+        chunks, ticks = [], []
+        n_total = round(seconds / self.dt_s)
+        while self.counters.ticks < n_total:
+            samples, tick_log = self._advance_to(n_total)
+            chunks.append(samples)
+            if tick_log is not None:
+                ticks.append(tick_log)
+            if stop_when_done and not math.isnan(self._done_s):
+                break
+        return self._result(chunks, ticks)
+
+    def start(self, driver: Driver) -> None:
+        if self.driver is not None:
+            raise TeleopInputError("this loop has already started; build a new one per trial")
+        self.driver = driver
+        driver.start(np.random.default_rng(self.rng.integers(2**63)))
+        self.mp[K.M_DIAL_EXTERNAL] = 1.0 if driver.physical_dial else 0.0
+        self._wall_start = time.monotonic() - self.t_s
+
+    def advance(self, seconds: float) -> np.ndarray:
+        """Advance by `seconds` (whole ticks); return the samples acquired meanwhile."""
+        if self.driver is None:
+            raise TeleopInputError("call start(driver) before advance()")
+        samples, _ = self._advance_to(self.counters.ticks + round(seconds / self.dt_s))
+        return samples
+
+    @property
+    def done(self) -> bool:
+        return not math.isnan(self._done_s)
+
+    @property
+    def success(self) -> bool:
+        return self._success
+
+    def _result(self, chunks: list[np.ndarray], ticks: list[np.ndarray]) -> LoopResult:
+        return LoopResult(
+            samples=np.concatenate(chunks) if chunks else np.zeros((0, len(SAMPLE_COLUMNS))),
+            counters=self.counters,
+            branches=self.environment.branches,
+            ticks=np.concatenate(ticks) if ticks else None,
+            success=self._success,
+            done_s=self._done_s,
+        )
+
+    def _advance_to(self, end_tick: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Run events and kernel calls until `end_tick` or the driver is done."""
+        rows: list[np.ndarray] = []
+        logs: list[np.ndarray] = []
+        env = self.environment
+        c = self.counters
+        while c.ticks < end_tick and math.isnan(self._done_s):
+            k = c.ticks
+            # next event tick: acquisition, driver or a packet arriving
+            nxt = min(
+                (k // self._acq_every + 1) * self._acq_every,
+                (k // self._drv_every + 1) * self._drv_every,
+                end_tick,
+            )
+            for link in (self.to_follower, self.to_master):
+                arrival = link.next_arrival_s()
+                if arrival < math.inf:
+                    nxt = min(nxt, max(k + 1, math.ceil(arrival / self.dt_s - 1e-9)))
+            n = nxt - k
+            if n > len(self._log):
+                self._log = np.zeros((n, K.LOG_WIDTH))
+            self._kernel(
+                n,
+                self.loop,
+                self.mp,
+                self.dial,
+                self.dp,
+                self.follower,
+                self.fp,
+                self.f_enc_step,
+                env.state,
+                env.params,
+                self._log,
+            )
+            c.ticks = nxt
+            self._last_row = self._log[n - 1].copy()
+            if self.keep_ticks:
+                logs.append(self._log[:n].copy())
+            self._on_events(rows)
+        samples = np.array(rows) if rows else np.zeros((0, len(SAMPLE_COLUMNS)))
+        return samples, (np.concatenate(logs) if logs else None)
+
+    def _on_events(self, rows: list[np.ndarray]) -> None:
+        c = self.counters
+        if c.ticks % self._acq_every == 0:
+            self._acquire(rows)
+        if c.ticks % self._drv_every == 0:
+            self._drive()
+        # packets due now, including any just sent over a zero-delay link
+        t = self.t_s
+        command = self.to_follower.receive(t)
+        if command is not None:
+            self.loop[K.L_SPEED_CMD_RX], self.loop[K.L_ROT_RATE_RX] = command
+        force = self.to_master.receive(t)
+        if force is not None:
+            self.loop[K.L_FORCE_RX] = force
+
+    def _acquire(self, rows: list[np.ndarray]) -> None:
+        """The follower's ESP32 samples; the estimator runs on every other sample."""
+        c, t, row = self.counters, self.t_s, self._last_row
+        c.acquisitions += 1
+        if c.ticks % self._est_every == 0:
+            if self._stream is not None:
+                self._stream.push(t, row[9] + self._current_noise(), row[10])
+                estimate = self._stream.estimate()
+                self._force_est = estimate[2] if estimate is not None else 0.0
+            else:
+                self._force_est = row[11]
+            if self.force_override is not None:
+                self._force_est = self.force_override(t)
+            c.estimates += 1
+            c.forces_sent += 1
+            self.to_master.send(t, float(self._force_est))
+        elif self._stream is not None:
+            self._stream.push(t, row[9] + self._current_noise(), row[10])
+        r = self.config.plant.wheel_radius_m
+        rows.append(
+            np.array(
+                [
+                    t,
+                    row[6] * r,
+                    row[18],
+                    row[13],
+                    row[14],
+                    row[15],
+                    row[16],
+                    row[11],
+                    self._force_est,
+                    row[12],
+                    row[1],
+                    row[3],
+                ]
+            )
+        )
+        if row[17] and not self._success:
+            self._success = True
+
+    def _current_noise(self) -> float:
+        """INA240 noise on the acquired current, A (drawn in blocks: one call per sample
+        would cost more than the sample's whole share of the loop)."""
+        if self._noise_at >= len(self._noise):
+            self._noise = self.rng.normal(0.0, self.config.sensors.current_noise_a, 4096)
+            self._noise_at = 0
+        self._noise_at += 1
+        return float(self._noise[self._noise_at - 1])
+
+    def _drive(self) -> None:
+        """The driver decides; the master sends the rate command (eq. 5) to the follower."""
+        c = self.counters
+        c.driver_updates += 1
+        if self.driver.realtime:
+            # keep pace with the wall clock: the person at the hardware lives in it
+            lag = self._wall_start + self.t_s - time.monotonic()
+            if lag > 0:
+                time.sleep(lag)
+        if self.driver.physical_dial:
+            # the real dial: send Psi's current, read the angle the person set
+            state = self.driver.exchange(self.loop[K.L_I_CMD_MA] / 1000.0)  # mA -> A
+            self.dial[D_THETA], self.dial[D_OMEGA] = state.angle_rad, state.speed_rad_s
+        action = self.driver.act(self.view())
+        self._action = action
+        loop = self.loop
+        loop[K.L_HAND_TARGET] = action.dial_target_rad
+        loop[K.L_HAND_K] = action.grip_stiffness_n_m_per_rad
+        loop[K.L_HAND_B] = action.grip_damping_n_m_s_per_rad
+        loop[K.L_HAND_PUSH] = action.push_n_m
+        # v_gw = k_v theta_m (eq. 5), on the dial's encoder angle; omega = v / r at the wheel
+        v_gw = self.config.haptics.speed_gain_m_s_per_rad * loop[K.L_THETA_Q_PREV]
+        omega_cmd = v_gw / self.config.plant.wheel_radius_m
+        c.commands_sent += 1
+        self.to_follower.send(self.t_s, (omega_cmd, action.rotation_rate_rad_s))
+        if action.done:
+            self._done_s = self.t_s

@@ -1,0 +1,218 @@
+"""The loop's compiled 1 kHz tick: master controller, dial, environment, follower drive.
+
+Everything that must run at the device rate lives here, in one numba function over flat
+arrays, because the headless loop has to run >= 200x faster than real time: a Python
+call per tick costs more than the whole budget of 5 us per tick. Between two events
+(an acquisition, an estimate, a driver update or a packet arriving) the inputs that
+cross the link are held, so `run_ticks` advances many ticks per call; the Python side
+(`core.py`) handles the events.
+
+Per tick, in this order (seed 000, III-B and IV-A):
+1. master controller at 1 kHz on the dial's 12-bit encoder: tau_h (eq. 7, HV only) from
+   the last force received, tau_return (eq. 8), tau_total (eq. 9), i_cmd = Psi (eq. 10);
+2. the dial (eq. 6) under that current and the operator's hand;
+3. the environment (phantom) at the guidewire's insertion, speed and rotation;
+4. the follower drive under the last speed command received and the environment's
+   proximal force; the guidewire rotation follows the last joystick rate received;
+5. the firmware's current low-pass for the next acquisition; one log row.
+
+The environment is any numba function `env(state, params, insertion_m, speed_m_s,
+rotation_rad, dt_s, out)` that writes ENV_OUT values to `out`. `kernel_for(env)`
+compiles the tick with the environment bound in (once per environment and process,
+about two seconds), so a phantom plugs in without touching this kernel; passing the
+function as an argument instead costs ~20 us of numba type dispatch per call.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numba
+import numpy as np
+
+from teleop_core.follower.plant import follower_tick
+from teleop_core.master.dial import D_OMEGA, D_THETA, dial_tick
+from teleop_core.master.haptics import haptic_torque, psi, return_torque
+
+# Loop state (held inputs and the master controller's memory)
+(
+    L_THETA_Q_PREV,
+    L_OMEGA_FILT,
+    L_TAU_PREV,
+    L_BRANCH,
+    L_FORCE_RX,
+    L_SPEED_CMD_RX,
+    L_ROT_RATE_RX,
+    L_ROTATION,
+    L_HAND_TARGET,
+    L_HAND_K,
+    L_HAND_B,
+    L_HAND_PUSH,
+    L_IQ_FILT,
+    L_TAU_H,
+    L_TAU_TOTAL,
+    L_I_CMD_MA,
+    L_TICK,
+) = range(17)
+LOOP_STATE_SIZE = 17
+# Master parameters
+(
+    M_KS,
+    M_BS,
+    M_THETA_REF,
+    M_GH,
+    M_DEADBAND,
+    M_SAT,
+    M_HAPTICS_ON,
+    M_LEVER,
+    M_IMAX,
+    M_ENC_STEP,
+    M_VEL_FILTER_S,
+    M_WHEEL_R,
+    M_IQ_FILTER_S,
+    M_DT,
+    M_DIAL_EXTERNAL,
+) = range(15)
+M_POLY = 15  # six polynomial coefficients follow
+MASTER_PARAM_SIZE = 21
+# Environment output
+E_PROXIMAL, E_DISTAL, E_TIP_X, E_TIP_Y, E_TIP_Z, E_BRANCH, E_SUCCESS = range(7)
+ENV_OUT = 7
+# Log columns (one row per tick)
+LOG_COLUMNS = (
+    "t_s",
+    "dial_angle_rad",
+    "dial_speed_rad_s",
+    "dial_torque_n_m",
+    "haptic_torque_n_m",
+    "current_cmd_ma",
+    "wheel_angle_rad",
+    "wheel_speed_rad_s",
+    "iq_a",
+    "iq_filtered_a",
+    "omega_est_rad_s",
+    "proximal_force_n",
+    "distal_force_n",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "branch",
+    "success",
+    "rotation_rad",
+    "force_rx_n",
+    "speed_cmd_rx_rad_s",
+)
+LOG_WIDTH = len(LOG_COLUMNS)
+
+
+def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
+    @numba.njit
+    def run_ticks(
+        n_ticks: int,
+        loop: np.ndarray,
+        mp: np.ndarray,
+        dial: np.ndarray,
+        dp: np.ndarray,
+        follower: np.ndarray,
+        fp: np.ndarray,
+        f_enc_step: float,
+        env_state: np.ndarray,
+        env_params: np.ndarray,
+        log: np.ndarray,
+    ) -> None:  # pragma: no cover - compiled; exercised through TeleopLoop
+        dt = mp[M_DT]
+        poly = mp[M_POLY : M_POLY + 6]
+        lpf_w = mp[M_VEL_FILTER_S] / (mp[M_VEL_FILTER_S] + dt)
+        lpf_i = mp[M_IQ_FILTER_S] / (mp[M_IQ_FILTER_S] + dt)
+        env_out = np.zeros(ENV_OUT)
+        f_out = np.zeros(5)
+        r = mp[M_WHEEL_R]
+        for k in range(n_ticks):
+            # 1. master controller on the dial's quantised angle
+            theta_q = math.floor(dial[D_THETA] / mp[M_ENC_STEP]) * mp[M_ENC_STEP]
+            w_raw = (theta_q - loop[L_THETA_Q_PREV]) / dt
+            loop[L_THETA_Q_PREV] = theta_q
+            loop[L_OMEGA_FILT] = lpf_w * loop[L_OMEGA_FILT] + (1.0 - lpf_w) * w_raw
+            tau_h = 0.0
+            if mp[M_HAPTICS_ON] != 0.0:
+                tau_h = haptic_torque(loop[L_FORCE_RX], mp[M_GH], mp[M_DEADBAND], mp[M_SAT])
+            tau_ret = return_torque(
+                theta_q, loop[L_OMEGA_FILT], mp[M_KS], mp[M_BS], mp[M_THETA_REF]
+            )
+            # tau_total = tau_haptic + tau_return   (eq. 9)
+            tau_total = tau_h + tau_ret
+            # i_q,cmd = Psi(tau_total, sgn(d tau_total / dt))   (eq. 10)
+            i_cmd, branch = psi(
+                tau_total, loop[L_TAU_PREV], loop[L_BRANCH], poly, mp[M_LEVER], mp[M_IMAX]
+            )
+            loop[L_TAU_PREV] = tau_total
+            loop[L_BRANCH] = branch
+            loop[L_TAU_H] = tau_h
+            loop[L_TAU_TOTAL] = tau_total
+            loop[L_I_CMD_MA] = i_cmd
+            # 2. the dial under the motor and the hand (eq. 6); a real dial is read instead
+            tau_motor = tau_total
+            if mp[M_DIAL_EXTERNAL] == 0.0:
+                tau_motor = dial_tick(
+                    dial,
+                    dp,
+                    i_cmd,
+                    loop[L_HAND_TARGET],
+                    loop[L_HAND_K],
+                    loop[L_HAND_B],
+                    loop[L_HAND_PUSH],
+                    dt,
+                )
+            # 3. the environment at the guidewire
+            env_fn(
+                env_state,
+                env_params,
+                follower[0] * r,
+                follower[1] * r,
+                loop[L_ROTATION],
+                dt,
+                env_out,
+            )
+            # 4. the follower drive; the rotary platform follows the joystick rate
+            follower_tick(
+                follower, fp, f_enc_step, loop[L_SPEED_CMD_RX], env_out[E_PROXIMAL], f_out
+            )
+            loop[L_ROTATION] += loop[L_ROT_RATE_RX] * dt
+            # 5. the firmware's current low-pass (what the next acquisition reads)
+            loop[L_IQ_FILT] = lpf_i * loop[L_IQ_FILT] + (1.0 - lpf_i) * f_out[2]
+            loop[L_TICK] += 1.0
+            row = log[k]
+            row[0] = loop[L_TICK] * dt
+            row[1] = dial[D_THETA]
+            row[2] = dial[D_OMEGA]
+            row[3] = tau_motor
+            row[4] = tau_h
+            row[5] = i_cmd
+            row[6] = f_out[0]
+            row[7] = f_out[1]
+            row[8] = f_out[2]
+            row[9] = loop[L_IQ_FILT]
+            row[10] = f_out[3]
+            row[11] = env_out[E_PROXIMAL]
+            row[12] = env_out[E_DISTAL]
+            row[13] = env_out[E_TIP_X]
+            row[14] = env_out[E_TIP_Y]
+            row[15] = env_out[E_TIP_Z]
+            row[16] = env_out[E_BRANCH]
+            row[17] = env_out[E_SUCCESS]
+            row[18] = loop[L_ROTATION]
+            row[19] = loop[L_FORCE_RX]
+            row[20] = loop[L_SPEED_CMD_RX]
+
+    return run_ticks
+
+
+_KERNELS: dict[object, Callable[..., None]] = {}
+
+
+def kernel_for(env_fn: Callable[..., None]) -> Callable[..., None]:
+    """The compiled tick with `env_fn` bound in (compiled on first use, then reused)."""
+    if env_fn not in _KERNELS:
+        _KERNELS[env_fn] = _make(env_fn)
+    return _KERNELS[env_fn]

@@ -1,0 +1,88 @@
+"""The master-follower network link: delay, jitter and packet loss (seed 000, IV-A).
+
+Packets are datagrams: each is delayed by `delay_s` plus a jitter drawn uniformly from
+[0, jitter_s], dropped with probability `loss`, and a receiver keeps only the newest
+packet by send order (a late packet overtaken by a newer one is discarded, as a UDP
+receiver with sequence numbers does). Between packets the receiver holds the last
+value. Written here rather than taken from a network emulator (netem and friends act
+on real sockets; the loop needs the same behaviour inside a deterministic simulation).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass, field
+from typing import Generic, TypeVar
+
+import numpy as np
+
+from teleop_core.errors import TeleopInputError
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class LinkParams:
+    """One direction of the link."""
+
+    delay_s: float = 0.0
+    """Fixed one-way delay; 0 is the paper's wired Ethernet (IV-A)."""
+    jitter_s: float = 0.0
+    """Extra delay drawn uniformly from [0, jitter_s] per packet."""
+    loss: float = 0.0
+    """Probability that a packet is lost, in [0, 1]."""
+
+    def __post_init__(self) -> None:
+        for name in ("delay_s", "jitter_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise TeleopInputError(f"link {name} = {value!r}; expected a finite value >= 0")
+        if not (0.0 <= self.loss <= 1.0):
+            raise TeleopInputError(f"link loss = {self.loss!r}; expected a probability in [0, 1]")
+
+
+@dataclass
+class Link(Generic[T]):
+    """A one-way link carrying values of type T."""
+
+    params: LinkParams = field(default_factory=LinkParams)
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    sent: int = 0
+    lost: int = 0
+    delivered: int = 0
+    discarded_late: int = 0
+
+    def __post_init__(self) -> None:
+        self._queue: list[tuple[float, int, float, T]] = []
+        self._newest_seq = -1
+        self.value: T | None = None
+        self.value_sent_at_s = math.nan
+
+    def send(self, t_s: float, value: T) -> None:
+        """Send `value` at time t_s."""
+        seq = self.sent
+        self.sent += 1
+        p = self.params
+        if p.loss > 0.0 and self.rng.random() < p.loss:
+            self.lost += 1
+            return
+        jitter = self.rng.random() * p.jitter_s if p.jitter_s > 0.0 else 0.0
+        heapq.heappush(self._queue, (t_s + p.delay_s + jitter, seq, t_s, value))
+
+    def next_arrival_s(self) -> float:
+        """When the next queued packet arrives (inf when none is in flight)."""
+        return self._queue[0][0] if self._queue else math.inf
+
+    def receive(self, t_s: float) -> T | None:
+        """Deliver every packet due by t_s; return the newest value held (None before any)."""
+        while self._queue and self._queue[0][0] <= t_s + 1e-12:
+            _, seq, sent_at, value = heapq.heappop(self._queue)
+            if seq < self._newest_seq:
+                self.discarded_late += 1
+                continue
+            self._newest_seq = seq
+            self.value = value
+            self.value_sent_at_s = sent_at
+            self.delivered += 1
+        return self.value

@@ -1,0 +1,191 @@
+"""The closed loop: rate bookkeeping, link delays, VO/HV, the estimator in the loop."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from teleop_core.errors import TeleopInputError
+from teleop_core.loop.core import SAMPLE_COLUMNS, LoopConfig, TeleopLoop
+from teleop_core.loop.drivers import (
+    Driver,
+    HandAction,
+    KeyboardDriver,
+    OperatorView,
+    SimulatedOperator,
+)
+from teleop_core.loop.environments import free_space, tube_with_wall
+from teleop_core.loop.link import LinkParams
+from teleop_core.master.params import HapticParams
+
+
+class Hold(Driver):
+    """Holds the dial at a fixed aim with a firm grip; records every view."""
+
+    def __init__(self, aim_rad: float = 0.0, from_s: float = 0.0) -> None:
+        self.aim_rad, self.from_s, self.views = aim_rad, from_s, []
+
+    def act(self, view: OperatorView) -> HandAction:
+        self.views.append(view)
+        aim = self.aim_rad if view.t_s >= self.from_s else 0.0
+        return HandAction(aim, 2.0, 0.03)
+
+
+def test_each_part_runs_at_its_own_rate() -> None:
+    loop = TeleopLoop(seed=1)
+    result = loop.run(1.0, Hold())
+    c = result.counters
+    assert (c.ticks, c.acquisitions, c.estimates, c.driver_updates) == (1000, 100, 50, 100)
+    assert c.forces_sent == 50 and c.commands_sent == 100
+    frame = result.to_frame()
+    assert list(frame.columns) == list(SAMPLE_COLUMNS)
+    assert np.allclose(frame["t_s"], np.arange(1, 101) * 0.01)
+
+
+def test_stepping_in_pieces_equals_one_run() -> None:
+    whole = TeleopLoop(environment=tube_with_wall(), seed=3).run(2.0, SimulatedOperator())
+    loop = TeleopLoop(environment=tube_with_wall(), seed=3)
+    loop.start(SimulatedOperator())
+    pieces = np.concatenate([loop.advance(0.25) for _ in range(8)])
+    assert np.array_equal(pieces, whole.samples)
+
+
+def test_clockwise_dial_advances_the_guidewire_at_k_v_theta() -> None:
+    loop = TeleopLoop(seed=2)
+    frame = loop.run(2.0, Hold(aim_rad=0.4)).to_frame()
+    late = frame[frame["t_s"] > 1.0]
+    speed = np.polyfit(late["t_s"], late["insertion_m"], 1)[0]
+    # v = k_v theta (eq. 5), theta close to the aim under a firm grip
+    theta = late["dial_angle_rad"].mean()
+    assert theta > 0.35
+    assert speed == pytest.approx(HapticParams().speed_gain_m_s_per_rad * theta, rel=0.03)
+
+
+@pytest.mark.parametrize("delay_ms", [0.0, 7.0, 20.0])
+def test_the_force_reaches_the_master_after_the_link_delay(delay_ms: float) -> None:
+    cfg = LoopConfig(to_master=LinkParams(delay_s=delay_ms / 1000))
+    loop = TeleopLoop(cfg, force_override=lambda t: 1.0 if t >= 0.3 else 0.0, keep_ticks=True)
+    ticks = loop.run(0.5, Hold()).ticks_frame()
+    first = ticks["t_s"][ticks["force_rx_n"] == 1.0].iloc[0]
+    # published at the first 50 Hz estimate at or after 0.3 s; acts from the next tick
+    assert first == pytest.approx(0.3 + delay_ms / 1000 + 0.001, abs=1e-9)
+
+
+def test_the_rate_command_reaches_the_follower_after_the_link_delay() -> None:
+    delay = 0.015
+    cfg = LoopConfig(to_follower=LinkParams(delay_s=delay))
+    sent = TeleopLoop(keep_ticks=True).run(1.0, Hold(0.4, from_s=0.5)).ticks_frame()
+    late = TeleopLoop(cfg, keep_ticks=True).run(1.0, Hold(0.4, from_s=0.5)).ticks_frame()
+    t_sent = sent["t_s"][sent["speed_cmd_rx_rad_s"] > 0].iloc[0]
+    t_late = late["t_s"][late["speed_cmd_rx_rad_s"] > 0].iloc[0]
+    assert t_late - t_sent == pytest.approx(delay, abs=1e-9)
+
+
+def test_losing_every_packet_holds_the_last_command() -> None:
+    cfg = LoopConfig(to_follower=LinkParams(loss=1.0))
+    frame = TeleopLoop(cfg).run(1.0, Hold(0.4)).to_frame()
+    assert np.all(frame["insertion_m"] == 0.0)
+
+
+def test_released_dial_returns_to_centre_on_its_spring() -> None:
+    class Release(Driver):
+        def act(self, view: OperatorView) -> HandAction:
+            return HandAction(0.6, 2.0, 0.03) if view.t_s < 0.5 else HandAction()
+
+    frame = TeleopLoop(seed=4).run(2.0, Release()).to_frame()
+    assert frame["dial_angle_rad"][frame["t_s"] < 0.5].iloc[-1] > 0.5
+    # eq. 8 pulls it back until static friction holds it: |theta| <= ts / K_s
+    from teleop_core.master.params import DialParams
+
+    band = DialParams().static_friction_n_m / HapticParams().spring_n_m_per_rad
+    assert abs(frame["dial_angle_rad"].iloc[-1]) <= band + 2e-3
+
+
+def _trial(haptics: HapticParams) -> np.ndarray:
+    cfg = LoopConfig(haptics=haptics)
+    env = tube_with_wall(friction_n_per_m=8.0)
+    return TeleopLoop(cfg, env, seed=5).run(8.0, SimulatedOperator()).samples
+
+
+def test_hv_with_zero_gain_is_vo_and_hv_slows_the_hand() -> None:
+    vo = _trial(HapticParams(haptics_on=False))
+    hv0 = _trial(HapticParams(haptics_on=True, haptic_gain_n_m_per_n=0.0))
+    hv = _trial(HapticParams(haptics_on=True))
+    assert np.array_equal(vo, hv0)
+    col = SAMPLE_COLUMNS.index
+    # the felt torque deflects the grip: smaller dial angle, shorter insertion
+    assert hv[-1, col("insertion_m")] < vo[-1, col("insertion_m")]
+    assert np.all(hv[:, col("dial_torque_n_m")] <= vo[:, col("dial_torque_n_m")] + 1e-3)
+
+
+def test_the_estimator_in_the_loop_tracks_the_proximal_force(small_estimator) -> None:
+    env = tube_with_wall(friction_n_per_m=5.0)
+    frame = (
+        TeleopLoop(environment=env, estimator=small_estimator, seed=6)
+        .run(10.0, SimulatedOperator(target_depth_m=0.3))
+        .to_frame()
+    )
+    moving = frame[frame["t_s"] > 1.0]
+    error = moving["proximal_force_est_n"] - moving["proximal_force_n"]
+    assert moving["proximal_force_n"].max() > 0.5
+    assert math.sqrt(np.mean(error**2)) < 0.2
+
+
+def test_keyboard_driver_turns_and_releases_the_dial() -> None:
+    now = [0.0]
+    kb = KeyboardDriver(step_rad=0.1, clock=lambda: now[0])
+    view = TeleopLoop().view()
+    for _ in range(3):
+        kb.press("advance")
+    kb.press("rotate_cw")
+    action = kb.act(view)
+    assert action.dial_target_rad == pytest.approx(0.3)
+    assert action.grip_stiffness_n_m_per_rad > 0
+    assert action.rotation_rate_rad_s > 0
+    now[0] = 1.0  # the joystick key was not repeated: it springs back
+    assert kb.act(view).rotation_rate_rad_s == 0.0
+    kb.press("release")
+    assert kb.act(view).grip_stiffness_n_m_per_rad == 0.0
+    with pytest.raises(TeleopInputError, match="unknown key"):
+        kb.press("jump")
+
+
+def test_keyboard_in_the_loop_advances_the_guidewire() -> None:
+    kb = KeyboardDriver()
+    loop = TeleopLoop(environment=free_space())
+    loop.start(kb)
+    for _ in range(4):
+        kb.press("advance")
+    samples = loop.advance(1.0)
+    assert samples[-1, SAMPLE_COLUMNS.index("insertion_m")] > 0.005
+
+
+def test_rates_that_do_not_divide_the_device_rate_are_refused() -> None:
+    with pytest.raises(TeleopInputError, match="does not divide"):
+        LoopConfig(acquisition_rate_hz=300.0)
+    with pytest.raises(TeleopInputError, match="whole number"):
+        replace(LoopConfig(), estimation_rate_hz=40.0)
+
+
+@pytest.mark.parametrize("damper, settles", [(0.0, False), (None, True)])
+def test_the_return_damper_is_what_keeps_a_released_dial_stable(
+    damper: float | None, settles: bool
+) -> None:
+    """Through the current loop's lag, J tau s^3 + J s^2 + B_s s + K_s has a root in the
+    right half-plane when B_s = 0 (Routh-Hurwitz: a2 a1 = 0 < a3 a0)."""
+    from teleop_core.master.params import DialParams
+
+    dial = DialParams(static_friction_n_m=0.0, coulomb_friction_n_m=0.0)
+    haptics = HapticParams() if damper is None else HapticParams(damper_n_m_s_per_rad=damper)
+    cfg = LoopConfig(dial=dial, haptics=haptics)
+
+    class Release(Driver):
+        def act(self, view: OperatorView) -> HandAction:
+            return HandAction(0.3, 2.0, 0.03) if view.t_s < 0.3 else HandAction()
+
+    angle = TeleopLoop(cfg).run(3.0, Release()).to_frame()["dial_angle_rad"].to_numpy()
+    late_swing = np.ptp(angle[-50:])
+    assert (late_swing < 0.01) == settles
