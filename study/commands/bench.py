@@ -12,8 +12,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemaining
 
 from study.bench.db_write import bench_sample_write
 from study.bench.follower import FollowerBenchConfig, run_follower_bench
+from study.bench.master import MasterBenchConfig, run_master_bench
 from study.commands.base import StudyGroup
 from study.errors import StudyInputError
+from teleop_core.estimation.estimator import ForceEstimator
 
 
 @click.group("bench", cls=StudyGroup)
@@ -92,3 +94,44 @@ def bench_follower(json_path: Path, out_dir: Path, seed: int, quick: bool) -> No
         report = run_follower_bench(config, out_dir, progress=lambda msg: status.update(msg))
     json_path.write_text(json.dumps(report, indent=2) + "\n")
     click.echo((out_dir / "follower_bench.md").read_text())
+
+
+@bench.command("master")
+@click.option(
+    "--json",
+    "json_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write every table as JSON here.",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the Markdown tables and the figures.",
+)
+@click.option(
+    "--estimator",
+    "model_dir",
+    type=click.Path(file_okay=False, exists=True, path_type=Path),
+    help="Estimator (from `study estimator train`) for the closed-loop timing "
+    "[default: train a small one, which costs the same per update].",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--quick", is_flag=True, help="Short runs: checks the pipeline, measures little.")
+def bench_master(
+    json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
+) -> None:
+    """Figs. 10-11 of seed 000 on the simulated dial, latency, and the loop's speed."""
+    if not json_path.parent.is_dir():
+        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    config = MasterBenchConfig.quick() if quick else MasterBenchConfig()
+    config = replace(config, seed=seed)
+    estimator = ForceEstimator.load(model_dir) if model_dir is not None else None
+    with Console(stderr=True).status("master bench") as status:
+        report = run_master_bench(
+            config, out_dir, estimator=estimator, progress=lambda msg: status.update(msg)
+        )
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
+    click.echo((out_dir / "master_bench.md").read_text())
