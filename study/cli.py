@@ -18,6 +18,7 @@ from study.commands.base import USER_ERRORS, InputError, StudyGroup
 from study.commands.bench import bench
 from study.commands.database import database
 from study.commands.estimator import estimator
+from study.commands.simulate import simulate
 
 EXIT_USER_ERROR = 2
 
@@ -40,6 +41,7 @@ def cli() -> None:
 cli.add_command(database)
 cli.add_command(bench)
 cli.add_command(estimator)
+cli.add_command(simulate)
 
 
 def _one_line(message: str) -> str:

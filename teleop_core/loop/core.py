@@ -174,7 +174,7 @@ class TeleopLoop:
         self.dt_s = 1.0 / cfg.device_rate_hz
         self._acq_every = round(cfg.device_rate_hz / cfg.acquisition_rate_hz)
         self._est_every = round(cfg.device_rate_hz / cfg.estimation_rate_hz)
-        self._drv_every = round(cfg.device_rate_hz / cfg.driver_rate_hz)
+        self._drv_every = round(cfg.device_rate_hz / cfg.driver_rate_hz)  # see start()
         link_rng = np.random.default_rng(self.rng.integers(2**63))
         self.to_follower: Link[tuple[float, float]] = Link(cfg.to_follower, link_rng)
         self.to_master: Link[float] = Link(cfg.to_master, link_rng)
@@ -257,6 +257,14 @@ class TeleopLoop:
         if self.driver is not None:
             raise TeleopInputError("this loop has already started; build a new one per trial")
         self.driver = driver
+        if driver.rate_hz is not None:
+            ratio = self.config.device_rate_hz / driver.rate_hz
+            if not (ratio >= 1 and abs(ratio - round(ratio)) < 1e-9):
+                raise TeleopInputError(
+                    f"driver rate {driver.rate_hz} Hz does not divide the device rate "
+                    f"{self.config.device_rate_hz} Hz"
+                )
+            self._drv_every = round(ratio)
         driver.start(np.random.default_rng(self.rng.integers(2**63)))
         self.mp[K.M_DIAL_EXTERNAL] = 1.0 if driver.physical_dial else 0.0
         self._wall_start = time.monotonic() - self.t_s
@@ -330,10 +338,11 @@ class TeleopLoop:
 
     def _on_events(self, rows: list[np.ndarray]) -> None:
         c = self.counters
-        if c.ticks % self._acq_every == 0:
-            self._acquire(rows)
         if c.ticks % self._drv_every == 0:
             self._drive()
+        if c.ticks % self._acq_every == 0:
+            self._acquire(rows)
+            self._send_command()
         # packets due now, including any just sent over a zero-delay link
         t = self.t_s
         command = self.to_follower.receive(t)
@@ -392,8 +401,16 @@ class TeleopLoop:
         self._noise_at += 1
         return float(self._noise[self._noise_at - 1])
 
+    def _send_command(self) -> None:
+        """The master samples the dial and sends the rate command (eq. 5) to the follower."""
+        # v_gw = k_v theta_m (eq. 5), on the dial's encoder angle; omega = v / r at the wheel
+        v_gw = self.config.haptics.speed_gain_m_s_per_rad * self.loop[K.L_THETA_Q_PREV]
+        omega_cmd = v_gw / self.config.plant.wheel_radius_m
+        self.counters.commands_sent += 1
+        self.to_follower.send(self.t_s, (omega_cmd, self._action.rotation_rate_rad_s))
+
     def _drive(self) -> None:
-        """The driver decides; the master sends the rate command (eq. 5) to the follower."""
+        """The driver decides what the hand does until its next update."""
         c = self.counters
         c.driver_updates += 1
         if self.driver.realtime:
@@ -412,10 +429,5 @@ class TeleopLoop:
         loop[K.L_HAND_K] = action.grip_stiffness_n_m_per_rad
         loop[K.L_HAND_B] = action.grip_damping_n_m_s_per_rad
         loop[K.L_HAND_PUSH] = action.push_n_m
-        # v_gw = k_v theta_m (eq. 5), on the dial's encoder angle; omega = v / r at the wheel
-        v_gw = self.config.haptics.speed_gain_m_s_per_rad * loop[K.L_THETA_Q_PREV]
-        omega_cmd = v_gw / self.config.plant.wheel_radius_m
-        c.commands_sent += 1
-        self.to_follower.send(self.t_s, (omega_cmd, action.rotation_rate_rad_s))
         if action.done:
             self._done_s = self.t_s

@@ -90,6 +90,8 @@ class Driver(ABC):
     """True when the dial is real hardware (the loop then reads it instead of simulating it)."""
     realtime = False
     """True when the loop must keep pace with the wall clock (a person at real hardware)."""
+    rate_hz: float | None = None
+    """How often this driver decides; None takes the loop's `driver_rate_hz`."""
 
     def start(self, rng: np.random.Generator) -> None:  # noqa: B027 - optional hook
         """Called once before the first action with the loop's generator."""

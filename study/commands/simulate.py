@@ -1,0 +1,76 @@
+"""`study simulate`: one headless simulated trial, its samples, summary and figure."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+from rich.console import Console
+
+from study.commands.base import StudyCommand
+from study.errors import StudyInputError
+from study.protocol.default_estimator import load_estimator
+from study.protocol.lcca_trial import CONDITIONS, run_lcca_trial, simulated_participant
+from study.protocol.participants import GROUPS
+from teleop_core.estimation.recording import write_csv_atomically
+
+
+@click.command("simulate", cls=StudyCommand)
+@click.option("--task", type=click.Choice(["lcca"]), default="lcca", show_default=True)
+@click.option("--group", type=click.Choice(GROUPS), required=True)
+@click.option("--condition", type=click.Choice(CONDITIONS), required=True)
+@click.option(
+    "--haptic-gain",
+    type=float,
+    default=None,
+    help="G_h in N m per N (eq. 7) [default: the device's 0.02]; 0 with HV renders nothing.",
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="Seeds the participant and the run."
+)
+@click.option("--out", "out_csv", required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--estimator",
+    "model_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Force estimator folder [default: the model shipped with haptic-study].",
+)
+@click.option("--max-seconds", type=click.FloatRange(min=1), default=180.0, show_default=True)
+def simulate(
+    task: str,
+    group: str,
+    condition: str,
+    haptic_gain: float | None,
+    seed: int,
+    out_csv: Path,
+    plot_path: Path | None,
+    model_dir: Path | None,
+    max_seconds: float,
+) -> None:
+    """Run one simulated trial headless and write TRIAL.csv, TRIAL.json and a figure."""
+    for path in (out_csv, plot_path):
+        if path is not None and not path.parent.is_dir():
+            raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
+    estimator = load_estimator(model_dir)
+    traits = simulated_participant(group, seed)
+    with Console(stderr=True).status(f"simulating a {group} participant, {condition}"):
+        result = run_lcca_trial(traits, condition, seed, estimator, haptic_gain, max_seconds)
+    write_csv_atomically(result.frame, out_csv)
+    summary_path = out_csv.with_suffix(".json")
+    summary_path.write_text(json.dumps(result.summary, indent=2) + "\n")
+    if plot_path is not None:
+        from study.analysis.phantom_figures import plot_trial
+        from teleop_core.phantom.lcca import LccaPhantom
+
+        fig = plot_trial(result.frame, LccaPhantom(), f"{group}, {condition}, seed {seed}")
+        fig.savefig(plot_path, dpi=200)
+    s = result.summary
+    click.echo(
+        f"{task} {group} {condition} seed {seed}: "
+        f"{'success' if s['success'] else 'no success'} in {s['completion_time_s']:.1f} s, "
+        f"peak proximal {s['peak_proximal_force_n']:.3f} N, "
+        f"peak distal {s['peak_distal_force_n']:.3f} N, {s['wall_contacts']} wall contacts"
+    )
+    click.echo(f"samples: {out_csv}; summary: {summary_path}")

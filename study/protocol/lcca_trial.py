@@ -1,0 +1,111 @@
+"""One simulated LCCA trial: phantom + loop + a simulated participant, and its summary.
+
+The summary measures are those the study analyses (seed 000, IV-D): completion time,
+peak proximal force (the estimate the robot renders, as a sensorless drive measures it;
+the simulated reference is kept beside it), peak distal force (the phantom's sensor),
+success, and wall contacts (distal force rising through `CONTACT_THRESHOLD_N`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from study.errors import StudyInputError
+from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
+from teleop_core.estimation.estimator import ForceEstimator
+from teleop_core.loop.core import LoopConfig, TeleopLoop
+from teleop_core.master.params import HapticParams
+from teleop_core.phantom.lcca import LccaPhantom
+
+CONDITIONS = ("VO", "HV")
+CONTACT_THRESHOLD_N = 0.2
+"""Distal force above which the tip is taken to press a wall (above the ~0.1 N the
+angled tip exerts passing the LCCA's curve); assumption."""
+TRIAL_COLUMNS = {
+    "t_s": "t_s",
+    "insertion_m": "insertion_m",
+    "rotation_rad": "rotation_rad",
+    "tip_x_m": "tip_x_m",
+    "tip_y_m": "tip_y_m",
+    "tip_z_m": "tip_z_m",
+    "branch": "branch",
+    "proximal_force_est_n": "proximal_force_n",
+    "proximal_force_n": "reference_force_n",
+    "distal_force_n": "distal_force_n",
+    "dial_angle_rad": "dial_angle_rad",
+    "dial_torque_n_m": "dial_torque_n_m",
+}
+"""Loop sample column -> TRIAL.csv column: the one `proximal` column is the estimate."""
+
+
+@dataclass
+class TrialResult:
+    frame: pd.DataFrame
+    """TRIAL.csv's columns (see TRIAL_COLUMNS)."""
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+def condition_haptics(condition: str, haptic_gain: float | None = None) -> HapticParams:
+    """VO: haptic torque off (the dial still self-centres); HV: on, at `haptic_gain`."""
+    if condition not in CONDITIONS:
+        raise StudyInputError(f"condition {condition!r}; expected one of {', '.join(CONDITIONS)}")
+    base = HapticParams()
+    gain = base.haptic_gain_n_m_per_n if haptic_gain is None else haptic_gain
+    if not (math.isfinite(gain) and gain >= 0):
+        raise StudyInputError(f"haptic gain {haptic_gain!r}; expected a finite value >= 0 N m/N")
+    return HapticParams(haptics_on=condition == "HV", haptic_gain_n_m_per_n=gain)
+
+
+def wall_contacts(distal_n: np.ndarray, threshold_n: float = CONTACT_THRESHOLD_N) -> int:
+    """How many times the distal force rises through the threshold."""
+    above = np.asarray(distal_n) > threshold_n
+    return int(np.count_nonzero(above[1:] & ~above[:-1]) + (1 if len(above) and above[0] else 0))
+
+
+def run_lcca_trial(
+    traits: ParticipantTraits,
+    condition: str,
+    seed: int,
+    estimator: ForceEstimator | None,
+    haptic_gain: float | None = None,
+    max_s: float = 180.0,
+    phantom: LccaPhantom | None = None,
+) -> TrialResult:
+    """Run one headless trial to success or `max_s`."""
+    phantom = phantom or LccaPhantom()
+    config = LoopConfig(haptics=condition_haptics(condition, haptic_gain))
+    participant = SimulatedParticipant(traits, phantom, give_up_s=max_s)
+    loop = TeleopLoop(config, phantom.environment(), estimator=estimator, seed=seed)
+    result = loop.run(max_s, participant)
+    raw = result.to_frame()
+    frame = raw[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
+    completion = float(frame["t_s"].iloc[-1]) if len(frame) else 0.0
+    summary = {
+        "task": "lcca",
+        "group": traits.group,
+        "condition": condition,
+        "haptic_gain_n_m_per_n": config.haptics.haptic_gain_n_m_per_n,
+        "seed": seed,
+        "success": bool(result.success),
+        "completion_time_s": completion,
+        "peak_proximal_force_n": float(frame["proximal_force_n"].max()),
+        "peak_proximal_reference_force_n": float(frame["reference_force_n"].max()),
+        "peak_distal_force_n": float(frame["distal_force_n"].max()),
+        "wall_contacts": wall_contacts(frame["distal_force_n"].to_numpy()),
+        "attempts": participant.attempt,
+        "obstacles_felt": participant.obstacles_felt,
+        "obstacles_seen": participant.obstacles_seen,
+        "estimator": "physics + GRU + EKF" if estimator is not None else "ideal sensor",
+        "participant": traits.to_dict(),
+    }
+    return TrialResult(frame, summary)
+
+
+def simulated_participant(group: str, seed: int) -> ParticipantTraits:
+    """The traits of the participant a seed draws from `group` (same seed, same person)."""
+    return draw_traits(group, np.random.default_rng([seed, 0x5EED]))

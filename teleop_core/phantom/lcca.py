@@ -1,0 +1,244 @@
+"""The LCCA navigation phantom as a loop environment (called at the 1 kHz device rate).
+
+A reduced guidewire model, cheap enough for a numba tick yet physical in its effects:
+
+- The wire follows the vessel centreline: its tip sits `insertion - slack` along the
+  current path. Paths fork at the branch ostia: when the tip crosses an ostium moving
+  forward, it enters that branch if its angled tip, set by the rotation joystick, points
+  within the branch's half-width of the ostium's azimuth; otherwise it stays in the
+  aorta. Pulled back behind the ostium, it is in the aorta again.
+- Sliding friction grows with the inserted length (introducer and vessel contact,
+  `friction_n_per_m`) and with the wire's bending in curved vessel (normal force
+  EI kappa^2 per unit length, times the friction coefficient), and the whole is
+  amplified by the capstan effect over the turning angle up to the tip,
+  T_proximal = T_distal e^(mu Theta) (Euler-Eytelwein belt friction). Friction is
+  smoothed through zero speed over `smoothing_speed_m_s`.
+- A tip that crosses an ostium pointing off the branch by between one and two
+  half-widths catches the ostium's edge and is blocked there until pulled back.
+- At a dead end (the valve, the end of a branch, a caught edge) the tip presses the
+  wall with a stiff contact; past the wire's critical load (Euler buckling of the
+  unsupported length in the wide aorta) further insertion goes into a prolapsing loop
+  (`slack`) instead of the tip, and the loop's own wall contact adds friction; pulling
+  back takes the loop out first.
+- In curved vessel the tip bears on the outer wall with EI kappa / l_tip.
+
+Outputs per tick: proximal force (what the drive feels), distal force (tip on the
+wall), tip position, region code (`anatomy.REGIONS`) and success (tip `target_depth_m`
+inside the LCCA).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+
+from teleop_core.errors import TeleopInputError
+from teleop_core.follower.params import _require_positive
+from teleop_core.loop.environments import Environment
+from teleop_core.loop.kernel import (
+    E_BRANCH,
+    E_DISTAL,
+    E_PROXIMAL,
+    E_SUCCESS,
+    E_TIP_X,
+    E_TIP_Y,
+    E_TIP_Z,
+)
+from teleop_core.phantom.anatomy import (
+    GEOMETRY_COLUMNS,
+    REGIONS,
+    STEP_M,
+    ArchAnatomy,
+    build_paths,
+)
+
+
+@dataclass(frozen=True)
+class GuidewireParams:
+    """The guidewire in the phantom (a 0.035 in hydrophilic wire in a silicone model)."""
+
+    bending_stiffness_n_m2: float = 1.0e-5
+    """EI of a 0.035 in nitinol-core guidewire; assumption (published 0.5-2e-5 N m^2)."""
+    friction_coefficient: float = 0.15
+    """mu between the wire and the silicone wall (lubricated); assumption."""
+    friction_n_per_m: float = 1.2
+    """Sliding friction per metre inserted, straight (introducer, PTFE tube); assumption."""
+    tip_length_m: float = 0.02
+    """The angled tip's length, the lever of its wall contact; assumption."""
+    wall_stiffness_n_per_m: float = 150.0
+    """Contact stiffness of the blocked tip: the floppy distal segment bending plus the
+    soft silicone wall (1.4 N after ~9 mm of push); assumption."""
+    buckling_load_n: float = 1.4
+    """Critical load for the wire to prolapse into a loop when the tip is blocked:
+    pi^2 EI / (K l)^2 for l ~ 25 mm unsupported in the aorta, K ~ 1.7; assumption."""
+    slack_friction_n_per_m: float = 6.0
+    """Extra friction per metre of prolapsed loop pressing the aortic wall; assumption."""
+    smoothing_speed_m_s: float = 0.001
+    """Friction goes through zero over this speed (no stick-slip); assumption."""
+
+    def __post_init__(self) -> None:
+        _require_positive(
+            self,
+            "bending_stiffness_n_m2",
+            "friction_coefficient",
+            "friction_n_per_m",
+            "tip_length_m",
+            "wall_stiffness_n_per_m",
+            "buckling_load_n",
+            "slack_friction_n_per_m",
+            "smoothing_speed_m_s",
+        )
+
+
+# state
+S_PATH, S_SLACK, S_PREV_INSERTION, S_PREV_TIP, S_CAUGHT = range(5)
+STATE_SIZE = 5
+CATCH_DEPTH_M = 0.002
+"""How far past the ostium a tip that catches its edge gets before it is blocked."""
+# header of the parameter vector
+(
+    H_NPATHS,
+    H_NPTS,
+    H_STEP,
+    H_EI,
+    H_MU,
+    H_FLEN,
+    H_LTIP,
+    H_KWALL,
+    H_FCR,
+    H_FSLACK,
+    H_VS,
+    H_TARGET_PATH,
+    H_TARGET_DEPTH,
+) = range(13)
+HEADER = 13
+PATH_META = 4  # end, ostium, phi, half-width
+
+
+@numba.njit(cache=True)
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@numba.njit(cache=True)
+def lcca_phantom(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out):
+    n_paths, n_pts, step = int(params[H_NPATHS]), int(params[H_NPTS]), params[H_STEP]
+    meta = params[HEADER : HEADER + n_paths * PATH_META].reshape((n_paths, PATH_META))
+    geo = params[HEADER + n_paths * PATH_META :].reshape((n_paths, n_pts, GEOMETRY_COLUMNS))
+    path = int(state[S_PATH])
+    # a prolapsed loop comes out first when the wire is pulled back
+    d_ins = insertion_m - state[S_PREV_INSERTION]
+    state[S_PREV_INSERTION] = insertion_m
+    if d_ins < 0.0 and state[S_SLACK] > 0.0:
+        state[S_SLACK] = max(state[S_SLACK] + d_ins, 0.0)
+    tip = max(insertion_m - state[S_SLACK], 0.0)
+    prev_tip = state[S_PREV_TIP]
+    # branch choice at an ostium, by the angled tip's orientation: pointing within the
+    # half-width it enters; within twice that it catches the ostium's edge
+    caught = int(state[S_CAUGHT])
+    if path == 0 and tip > prev_tip and caught == 0:
+        for k in range(1, n_paths):
+            ostium = meta[k, 1]
+            if prev_tip < ostium <= tip:
+                off = abs(_wrap(rotation_rad - meta[k, 2]))
+                if off <= meta[k, 3]:
+                    path = k
+                    break
+                if off <= 2.0 * meta[k, 3]:
+                    caught = k
+                    break
+    elif path != 0 and tip < meta[path, 1]:
+        path = 0
+    if caught != 0 and tip < meta[caught, 1]:
+        caught = 0
+    state[S_PATH] = path
+    state[S_CAUGHT] = caught
+    # dead end (or a caught ostium edge): wall contact, then prolapse beyond the
+    # critical load
+    end = meta[path, 0] if caught == 0 else meta[caught, 1] + CATCH_DEPTH_M
+    f_wall = 0.0
+    if tip > end:
+        f_wall = params[H_KWALL] * (tip - end)
+        if f_wall > params[H_FCR]:
+            state[S_SLACK] += (f_wall - params[H_FCR]) / params[H_KWALL]
+            tip = insertion_m - state[S_SLACK]
+            f_wall = params[H_FCR]
+    state[S_PREV_TIP] = tip
+    # geometry at the tip
+    idx = min(int(min(tip, end) / step), n_pts - 1)
+    g = geo[path, idx]
+    theta = g[3]
+    kappa_tip = g[4]
+    # bending normal force along the inserted length: EI integral(kappa^2) ds
+    bend = params[H_EI] * g[6]
+    mu = params[H_MU]
+    capstan = math.exp(mu * theta)
+    f_curve_tip = params[H_EI] * kappa_tip / params[H_LTIP]
+    sliding = (
+        params[H_FLEN] * max(insertion_m, 0.0) + mu * bend + params[H_FSLACK] * state[S_SLACK]
+    ) * math.tanh(speed_m_s / params[H_VS])
+    # T_proximal = T_distal e^(mu Theta) (capstan), friction spread along the path
+    proximal = f_wall * capstan + sliding * math.sqrt(capstan)
+    out[E_PROXIMAL] = proximal
+    out[E_DISTAL] = f_wall + f_curve_tip
+    out[E_TIP_X] = g[0]
+    out[E_TIP_Y] = g[1]
+    out[E_TIP_Z] = g[2]
+    out[E_BRANCH] = g[5]
+    target = int(params[H_TARGET_PATH])
+    out[E_SUCCESS] = (
+        1.0 if (path == target and tip >= meta[target, 1] + params[H_TARGET_DEPTH]) else 0.0
+    )
+
+
+@dataclass
+class LccaPhantom:
+    """The phantom with its guidewire; `environment()` plugs it into a `TeleopLoop`."""
+
+    anatomy: ArchAnatomy = field(default_factory=ArchAnatomy)
+    wire: GuidewireParams = field(default_factory=GuidewireParams)
+
+    def __post_init__(self) -> None:
+        self.geometry, self.meta = build_paths(self.anatomy)
+        names = [b.name for b in self.anatomy.branches]
+        if self.anatomy.target not in names:
+            raise TeleopInputError(
+                f"target branch {self.anatomy.target!r}; expected one of {names}"
+            )
+        self.target_path = names.index(self.anatomy.target) + 1
+
+    def params(self) -> np.ndarray:
+        w, (n_paths, n_pts, _) = self.wire, self.geometry.shape
+        header = np.zeros(HEADER)
+        header[H_NPATHS], header[H_NPTS], header[H_STEP] = n_paths, n_pts, STEP_M
+        header[H_EI], header[H_MU] = w.bending_stiffness_n_m2, w.friction_coefficient
+        header[H_FLEN], header[H_LTIP] = w.friction_n_per_m, w.tip_length_m
+        header[H_KWALL], header[H_FCR] = w.wall_stiffness_n_per_m, w.buckling_load_n
+        header[H_FSLACK], header[H_VS] = w.slack_friction_n_per_m, w.smoothing_speed_m_s
+        header[H_TARGET_PATH] = self.target_path
+        header[H_TARGET_DEPTH] = self.anatomy.target_depth_m
+        meta = np.array([[m["end"], m["ostium"], m["phi"], m["half"]] for m in self.meta])
+        meta[0, 1] = 1e9  # the aorta has no ostium
+        return np.concatenate([header, meta.ravel(), self.geometry.ravel()])
+
+    def environment(self) -> Environment:
+        return Environment(
+            lcca_phantom,
+            self.params(),
+            np.zeros(STATE_SIZE),
+            name="LCCA phantom",
+            branches=REGIONS,
+        )
+
+    def ostium_m(self, branch: str) -> float:
+        """Arc length from the access point to a branch's ostium."""
+        names = [b.name for b in self.anatomy.branches]
+        return float(self.meta[names.index(branch) + 1]["ostium"])
+
+    def centreline(self, path: int) -> np.ndarray:
+        """(n, 3) points of one path, for drawing."""
+        n = round(self.meta[path]["end"] / STEP_M) + 1
+        return self.geometry[path, :n, :3]
