@@ -259,7 +259,7 @@ def latency(config: MasterBenchConfig, rng: np.random.Generator) -> tuple[dict, 
         row["increase_ms"] = row["latency_ms_mean"] - base
     ax.axhline(0.5, color="0.5", ls=":", lw=0.8)
     ax.set_xlabel("time after the force step is published (ms)")
-    ax.set_ylabel("rendered torque (fraction of step)")
+    ax.set_ylabel("torque change / step")
     ax.legend(fontsize=6)
     return {"threshold": "50 % of the torque step", "rows": rows}, fig
 

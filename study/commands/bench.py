@@ -12,9 +12,11 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemaining
 
 from study.bench.db_write import bench_sample_write
 from study.bench.follower import FollowerBenchConfig, run_follower_bench
+from study.bench.lcca import LccaBenchConfig, run_lcca_bench
 from study.bench.master import MasterBenchConfig, run_master_bench
 from study.commands.base import StudyGroup
 from study.errors import StudyInputError
+from study.protocol.default_estimator import load_estimator
 from teleop_core.estimation.estimator import ForceEstimator
 
 
@@ -135,3 +137,41 @@ def bench_master(
         )
     json_path.write_text(json.dumps(report, indent=2) + "\n")
     click.echo((out_dir / "master_bench.md").read_text())
+
+
+@bench.command("lcca")
+@click.option(
+    "--json",
+    "json_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the group table, the tests and the speed as JSON here.",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the trial CSV, the Markdown table and the figures.",
+)
+@click.option(
+    "--estimator",
+    "model_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Force estimator folder [default: the model shipped with haptic-study].",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--quick", is_flag=True, help="Two participants per group, 60 s at most each.")
+def bench_lcca(
+    json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
+) -> None:
+    """The paper's 20/8/8 user study with simulated participants, and its speed."""
+    if not json_path.parent.is_dir():
+        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    config = LccaBenchConfig.quick() if quick else LccaBenchConfig()
+    config = replace(config, seed=seed)
+    estimator = load_estimator(model_dir)
+    with Console(stderr=True).status("simulated study") as status:
+        report = run_lcca_bench(config, estimator, out_dir, progress=status.update)
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
+    click.echo((out_dir / "lcca_bench.md").read_text())

@@ -11,7 +11,12 @@ from rich.console import Console
 from study.commands.base import StudyCommand
 from study.errors import StudyInputError
 from study.protocol.default_estimator import load_estimator
-from study.protocol.lcca_trial import CONDITIONS, run_lcca_trial, simulated_participant
+from study.protocol.lcca_trial import (
+    CONDITIONS,
+    condition_haptics,
+    run_lcca_trial,
+    simulated_participant,
+)
 from study.protocol.participants import GROUPS
 from teleop_core.estimation.recording import write_csv_atomically
 
@@ -53,6 +58,7 @@ def simulate(
     for path in (out_csv, plot_path):
         if path is not None and not path.parent.is_dir():
             raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
+    condition_haptics(condition, haptic_gain)  # refuse a bad gain before any work
     estimator = load_estimator(model_dir)
     traits = simulated_participant(group, seed)
     with Console(stderr=True).status(f"simulating a {group} participant, {condition}"):

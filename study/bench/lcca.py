@@ -1,0 +1,241 @@
+"""`study bench lcca`: the paper's user study, rehearsed with simulated participants.
+
+The design of seed 000, IV-D: 20 engineering outsiders, 8 novice doctors, 8 expert
+physicians, each navigating into the LCCA under VO and HV (within-subject; the same
+simulated person, seed for seed, in both conditions). Reported per group: mean and SD
+of completion time, peak proximal force (the estimate the drive renders), peak distal
+force and success; HV against VO by the Wilcoxon signed-rank test (scipy), the paired
+test the analysis issue uses when differences are not normal. Beside it: HV with a
+haptic gain of 0 against VO (the participants must not tell them apart), and each
+trial's speed against real time with the whole loop inside.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from scipy.stats import wilcoxon
+
+from study.analysis.phantom_figures import CONDITION_COLORS, plot_tip_paths
+from study.protocol.lcca_trial import run_lcca_trial, simulated_participant
+from study.protocol.participants import GROUPS
+from teleop_core.estimation.estimator import ForceEstimator
+from teleop_core.phantom.lcca import LccaPhantom
+
+MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
+
+
+@dataclass(frozen=True)
+class LccaBenchConfig:
+    group_sizes: dict[str, int] = field(
+        default_factory=lambda: {"outsider": 20, "novice": 8, "expert": 8}
+    )
+    gain_zero_group: str = "novice"
+    max_s: float = 180.0
+    seed: int = 0
+
+    @classmethod
+    def quick(cls) -> LccaBenchConfig:
+        return cls(group_sizes={"outsider": 2, "novice": 2, "expert": 2}, max_s=60.0)
+
+
+def _paired(frame: pd.DataFrame, measure: str, a: str, b: str) -> dict[str, float]:
+    wide = frame.pivot(index="participant", columns="condition", values=measure)
+    diff = (wide[b] - wide[a]).to_numpy()
+    if np.allclose(diff, 0.0) or len(diff) < 2:
+        p = 1.0
+    else:
+        p = float(wilcoxon(wide[b], wide[a]).pvalue)
+    return {
+        f"mean_{a}": float(wide[a].mean()),
+        f"mean_{b}": float(wide[b].mean()),
+        "mean_difference": float(diff.mean()),
+        "p_wilcoxon": p,
+        "n": len(diff),
+    }
+
+
+def run_lcca_bench(
+    config: LccaBenchConfig,
+    estimator: ForceEstimator,
+    out_dir: Path,
+    progress: Callable[[str], None] = lambda _: None,
+) -> dict[str, Any]:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    phantom = LccaPhantom()
+    progress("compiling the loop")
+    run_lcca_trial(
+        simulated_participant("expert", 0), "HV", 0, estimator, max_s=1.0, phantom=phantom
+    )  # numba compiles here, outside the timing
+    rows, factors, paths = [], [], []
+    total = sum(config.group_sizes.values())
+    k = 0
+    for group, n in config.group_sizes.items():
+        if group not in GROUPS:
+            raise ValueError(f"group {group!r}; expected one of {GROUPS}")
+        for i in range(n):
+            k += 1
+            seed = config.seed + 1000 * GROUPS.index(group) + i
+            traits = simulated_participant(group, seed)
+            progress(f"participant {k}/{total} ({group})")
+            for condition in ("VO", "HV"):
+                start = time.perf_counter()
+                result = run_lcca_trial(
+                    traits, condition, seed, estimator, max_s=config.max_s, phantom=phantom
+                )
+                wall = time.perf_counter() - start
+                s = result.summary
+                factors.append(s["completion_time_s"] / wall)
+                rows.append(
+                    {
+                        "participant": f"{group}-{i:02d}",
+                        **{
+                            key: s[key]
+                            for key in (
+                                "group",
+                                "condition",
+                                "success",
+                                *MEASURES,
+                                "wall_contacts",
+                                "attempts",
+                                "obstacles_felt",
+                                "obstacles_seen",
+                            )
+                        },
+                    }
+                )
+                if group == "outsider" and i < 6:
+                    paths.append((result.frame, condition))
+    frame = pd.DataFrame(rows)
+    groups: dict[str, Any] = {}
+    tests = []
+    for group in config.group_sizes:
+        g = frame[frame["group"] == group]
+        groups[group] = {
+            condition: {
+                **{f"{m}_mean": float(c[m].mean()) for m in MEASURES},
+                **{f"{m}_sd": float(c[m].std(ddof=1)) if len(c) > 1 else 0.0 for m in MEASURES},
+                "success_rate": float(c["success"].mean()),
+                "wall_contacts_mean": float(c["wall_contacts"].mean()),
+            }
+            for condition, c in g.groupby("condition")
+        }
+        for measure in MEASURES:
+            tests.append({"group": group, "measure": measure, **_paired(g, measure, "VO", "HV")})
+    # HV at zero gain against VO: the participants must not tell them apart
+    progress("HV with haptic gain 0")
+    zero_rows = []
+    for i in range(config.group_sizes.get(config.gain_zero_group, 0)):
+        seed = config.seed + 1000 * GROUPS.index(config.gain_zero_group) + i
+        traits = simulated_participant(config.gain_zero_group, seed)
+        for condition, gain, loop_seed in (("VO", None, seed), ("HV", 0.0, seed + 500)):
+            s = run_lcca_trial(
+                traits,
+                condition,
+                loop_seed,
+                estimator,
+                haptic_gain=gain,
+                max_s=config.max_s,
+                phantom=phantom,
+            ).summary
+            zero_rows.append(
+                {"participant": i, "condition": condition, **{m: s[m] for m in MEASURES}}
+            )
+    zero = pd.DataFrame(zero_rows)
+    gain_zero = {m: _paired(zero, m, "VO", "HV") for m in MEASURES} if len(zero) else {}
+    report = {
+        "config": asdict(config),
+        "groups": groups,
+        "tests": tests,
+        "gain_zero_vs_vo": gain_zero,
+        "speed": {
+            "realtime_factor_median": float(np.median(factors)),
+            "realtime_factor_min": float(np.min(factors)),
+            "trials": len(factors),
+        },
+    }
+    frame.to_csv(out_dir / "lcca_trials.csv", index=False)
+    fig, ax = plt.subplots(figsize=(3.5, 4.2), layout="constrained")
+    plot_tip_paths(phantom, paths, ax)
+    ax.set_title("outsiders: tip paths, VO vs HV", fontsize=9)
+    fig.savefig(out_dir / "lcca_tip_paths.png", dpi=200)
+    plt.close(fig)
+    fig = plot_groups(frame)
+    fig.savefig(out_dir / "lcca_groups.png", dpi=200)
+    plt.close(fig)
+    (out_dir / "lcca_bench.json").write_text(json.dumps(report, indent=2) + "\n")
+    (out_dir / "lcca_bench.md").write_text(markdown(report))
+    return report
+
+
+def plot_groups(frame: pd.DataFrame) -> plt.Figure:
+    """Per group, VO vs HV: mean and SD of each measure."""
+    fig, axes = plt.subplots(1, len(MEASURES), figsize=(7.16, 2.4), layout="constrained")
+    groups = list(dict.fromkeys(frame["group"]))
+    x = np.arange(len(groups))
+    for ax, measure in zip(axes, MEASURES, strict=True):
+        for j, condition in enumerate(("VO", "HV")):
+            c = frame[frame["condition"] == condition].groupby("group")[measure]
+            mean, sd = c.mean().reindex(groups), c.std(ddof=1).reindex(groups).fillna(0.0)
+            ax.bar(
+                x + (j - 0.5) * 0.38,
+                mean,
+                0.36,
+                yerr=sd,
+                capsize=2,
+                label=condition,
+                color=CONDITION_COLORS[condition],
+                alpha=0.85,
+            )
+        ax.set_xticks(x, groups, fontsize=7)
+        ax.set_title(measure.replace("_", " "), fontsize=8)
+    axes[0].legend(fontsize=7)
+    return fig
+
+
+def markdown(report: dict[str, Any]) -> str:
+    lines = [
+        "# Simulated LCCA study",
+        "",
+        "| group | condition | time (s) | peak proximal (N) | peak distal (N) | success |",
+        "|---|---|---|---|---|---|",
+    ]
+    for group, conds in report["groups"].items():
+        for condition in ("VO", "HV"):
+            r = conds[condition]
+            lines.append(
+                f"| {group} | {condition} | {r['completion_time_s_mean']:.1f} ± "
+                f"{r['completion_time_s_sd']:.1f} | {r['peak_proximal_force_n_mean']:.3f} ± "
+                f"{r['peak_proximal_force_n_sd']:.3f} | {r['peak_distal_force_n_mean']:.3f} ± "
+                f"{r['peak_distal_force_n_sd']:.3f} | {r['success_rate']:.2f} |"
+            )
+    lines += ["", "| group | measure | mean VO | mean HV | p (Wilcoxon) |", "|---|---|---|---|---|"]
+    for t in report["tests"]:
+        lines.append(
+            f"| {t['group']} | {t['measure']} | {t['mean_VO']:.3f} | {t['mean_HV']:.3f} "
+            f"| {t['p_wilcoxon']:.3g} |"
+        )
+    lines += ["", "HV at haptic gain 0 vs VO:", ""]
+    for m, t in report["gain_zero_vs_vo"].items():
+        lines.append(
+            f"- {m}: VO {t['mean_VO']:.3f}, HV(0) {t['mean_HV']:.3f}, p = {t['p_wilcoxon']:.3g}"
+        )
+    sp = report["speed"]
+    lines += [
+        "",
+        f"Speed: median {sp['realtime_factor_median']:.0f}x real time, slowest "
+        f"{sp['realtime_factor_min']:.0f}x, over {sp['trials']} trials.",
+        "",
+    ]
+    return "\n".join(lines)

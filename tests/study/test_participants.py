@@ -1,0 +1,88 @@
+"""Simulated participants: drawn per group, and acting only on what a participant perceives."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from scipy.stats import wilcoxon
+
+from study.errors import StudyInputError
+from study.protocol.lcca_trial import run_lcca_trial, simulated_participant, wall_contacts
+from study.protocol.participants import GROUPS, draw_traits
+from teleop_core.loop.drivers import OperatorView
+from teleop_core.phantom.lcca import LccaPhantom
+
+
+def test_traits_are_reproducible_per_seed_and_differ_by_group() -> None:
+    assert simulated_participant("novice", 4) == simulated_participant("novice", 4)
+    rng = np.random.default_rng(0)
+    draws = {g: [draw_traits(g, rng) for _ in range(300)] for g in GROUPS}
+
+    def mean(g: str, field: str) -> float:
+        return float(np.mean([getattr(t, field) for t in draws[g]]))
+
+    # experts faster, steadier and quicker to react than engineering outsiders
+    assert mean("expert", "preferred_speed_m_s") > mean("outsider", "preferred_speed_m_s")
+    assert mean("expert", "steering_error_rad") < mean("outsider", "steering_error_rad")
+    assert mean("expert", "reaction_s") < mean("outsider", "reaction_s")
+
+
+def test_an_unknown_group_is_refused() -> None:
+    with pytest.raises(StudyInputError, match="unknown group 'surgeon'"):
+        draw_traits("surgeon", np.random.default_rng(0))
+
+
+def test_what_a_participant_sees_carries_no_condition_and_no_force() -> None:
+    names = {f.name for f in dataclasses.fields(OperatorView)}
+    assert not any("force" in n or "condition" in n or "haptic" in n for n in names)
+
+
+def test_wall_contacts_count_rising_crossings() -> None:
+    assert wall_contacts(np.array([0.0, 0.3, 0.3, 0.1, 0.5, 0.0])) == 2
+    assert wall_contacts(np.array([0.5, 0.1])) == 1
+
+
+@pytest.fixture(scope="module")
+def phantom() -> LccaPhantom:
+    return LccaPhantom()
+
+
+def test_hv_at_zero_gain_is_vo_draw_for_draw(phantom: LccaPhantom) -> None:
+    traits = simulated_participant("outsider", 3)
+    vo = run_lcca_trial(traits, "VO", 3, None, phantom=phantom, max_s=60)
+    hv0 = run_lcca_trial(traits, "HV", 3, None, haptic_gain=0.0, phantom=phantom, max_s=60)
+    assert vo.frame.equals(hv0.frame)
+
+
+def test_hv_at_zero_gain_is_statistically_indistinguishable_from_vo(
+    phantom: LccaPhantom,
+) -> None:
+    peaks = {"VO": [], "HV": []}
+    for i in range(10):
+        traits = simulated_participant("novice", 100 + i)
+        # separate runs: each condition with its own noise, as two real trials would be
+        peaks["VO"].append(
+            run_lcca_trial(traits, "VO", 10 + i, None, phantom=phantom, max_s=90)
+            .summary["peak_proximal_force_n"]
+        )
+        peaks["HV"].append(
+            run_lcca_trial(traits, "HV", 50 + i, None, haptic_gain=0.0, phantom=phantom, max_s=90)
+            .summary["peak_proximal_force_n"]
+        )
+    assert wilcoxon(peaks["VO"], peaks["HV"]).pvalue > 0.05
+
+
+def test_felt_torque_lowers_peak_forces(phantom: LccaPhantom) -> None:
+    """Outsiders catch the ostium often; in HV they feel it before the wire buckles."""
+    vo, hv = [], []
+    for i in range(8):
+        traits = simulated_participant("outsider", 200 + i)
+        vo.append(run_lcca_trial(traits, "VO", i, None, phantom=phantom, max_s=120).summary)
+        hv.append(run_lcca_trial(traits, "HV", i, None, phantom=phantom, max_s=120).summary)
+    assert np.mean([s["peak_distal_force_n"] for s in hv]) < np.mean(
+        [s["peak_distal_force_n"] for s in vo]
+    )
+    assert sum(s["obstacles_felt"] for s in hv) > 0
+    assert sum(s["obstacles_felt"] for s in vo) == 0  # nothing to feel without haptics
