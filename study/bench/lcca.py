@@ -34,6 +34,11 @@ from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.phantom.lcca import LccaPhantom
 
 MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
+LABELS = {
+    "completion_time_s": "completion time (s)",
+    "peak_proximal_force_n": "peak proximal force (N)",
+    "peak_distal_force_n": "peak distal force (N)",
+}
 
 
 @dataclass(frozen=True)
@@ -199,7 +204,7 @@ def plot_groups(frame: pd.DataFrame) -> plt.Figure:
                 alpha=0.85,
             )
         ax.set_xticks(x, groups, fontsize=7)
-        ax.set_title(measure.replace("_", " "), fontsize=8)
+        ax.set_title(LABELS[measure], fontsize=8)
     axes[0].legend(fontsize=7)
     return fig
 

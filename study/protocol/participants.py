@@ -43,6 +43,7 @@ from teleop_core.master.params import HapticParams
 from teleop_core.phantom.lcca import LccaPhantom
 
 GROUPS = ("outsider", "novice", "expert")
+AORTA = ("descending aorta", "aortic arch", "ascending aorta")
 
 
 @dataclass(frozen=True)
@@ -59,17 +60,37 @@ class GroupProfile:
     holds against the spring (Weber fractions for force are 7-10 %)."""
     visual_stall_s: tuple[float, float]
     """How long the tip must stand still on screen before it is taken as an obstacle."""
+    comfort_torque_n_m: tuple[float, float]
+    """Resistance on the hand it accepts before pushing more gently (HV)."""
 
 
 PROFILES: dict[str, GroupProfile] = {
     "outsider": GroupProfile(
-        (0.012, 0.003), (0.32, 0.06), (0.45, 0.10), (0.35, 0.10), (0.0070, 0.0015), (0.70, 0.15)
+        preferred_speed_m_s=(0.012, 0.003),
+        reaction_s=(0.32, 0.06),
+        steering_error_rad=(0.45, 0.10),
+        caution=(0.35, 0.10),
+        haptic_threshold_n_m=(0.0030, 0.0008),
+        visual_stall_s=(0.70, 0.15),
+        comfort_torque_n_m=(0.010, 0.0015),
     ),
     "novice": GroupProfile(
-        (0.014, 0.003), (0.28, 0.05), (0.32, 0.08), (0.50, 0.10), (0.0060, 0.0012), (0.55, 0.12)
+        preferred_speed_m_s=(0.014, 0.003),
+        reaction_s=(0.28, 0.05),
+        steering_error_rad=(0.32, 0.08),
+        caution=(0.50, 0.10),
+        haptic_threshold_n_m=(0.0025, 0.0006),
+        visual_stall_s=(0.55, 0.12),
+        comfort_torque_n_m=(0.009, 0.0012),
     ),
     "expert": GroupProfile(
-        (0.017, 0.003), (0.22, 0.04), (0.18, 0.05), (0.65, 0.10), (0.0045, 0.0010), (0.40, 0.10)
+        preferred_speed_m_s=(0.017, 0.003),
+        reaction_s=(0.22, 0.04),
+        steering_error_rad=(0.25, 0.05),
+        caution=(0.65, 0.10),
+        haptic_threshold_n_m=(0.0020, 0.0005),
+        visual_stall_s=(0.40, 0.10),
+        comfort_torque_n_m=(0.008, 0.0010),
     ),
 }
 
@@ -83,6 +104,7 @@ class ParticipantTraits:
     caution: float
     haptic_threshold_n_m: float
     visual_stall_s: float
+    comfort_torque_n_m: float
 
     def to_dict(self) -> dict[str, float | str]:
         return asdict(self)
@@ -105,6 +127,7 @@ def draw_traits(group: str, rng: np.random.Generator) -> ParticipantTraits:
         caution=draw(p.caution, 0.0, 1.0),
         haptic_threshold_n_m=draw(p.haptic_threshold_n_m, 0.002, 0.02),
         visual_stall_s=draw(p.visual_stall_s, 0.2, 1.5),
+        comfort_torque_n_m=draw(p.comfort_torque_n_m, 0.003, 0.02),
     )
 
 
@@ -153,9 +176,8 @@ class SimulatedParticipant(Driver):
         self.obstacles_felt = 0
         self.obstacles_seen = 0
         self._last_aim = 0.0
-        self._push_start = 0.0
+        self._felt = 0.0
         self._baseline = math.nan
-        self._yield = 0.0
         self._new_attempt()
 
     def _new_attempt(self) -> None:
@@ -195,25 +217,25 @@ class SimulatedParticipant(Driver):
             s_tip = self.ostium_m + math.dist(seen.tip_m, self.ostium_xyz)
         else:
             s_tip = self._arc_length(seen.tip_m)
-        # felt surplus torque: what the hand holds beyond what the spring alone explains;
-        # people sense a change of resistance, so it is compared with its recent level
-        hand = GRIP_STIFFNESS_N_M_PER_RAD * (self._last_aim - view.dial_angle_rad)
-        surplus = abs(hand) - self.spring_guess * abs(view.dial_angle_rad)
+        # felt torque: what the hand holds beyond what the spring alone explains
+        # (positive when the dial resists the forward push), smoothed over 0.1 s as a
+        # hand feels it; without haptics it stays near zero
         dt = 1.0 / self.rate_hz
-        # judged only in a steady forward push: not while the dial swings after a change
-        steady = (
-            self._last_aim > 0.02
-            and view.t_s - self._push_start > 0.5
-            and abs(view.dial_speed_rad_s) < 0.5
-        )
-        if steady and math.isnan(self._baseline):
-            self._baseline = surplus
-        rise = surplus - self._baseline if steady else 0.0
-        if steady:
-            self._baseline += (surplus - self._baseline) * dt / 3.0  # ~3 s memory
-        felt = steady and rise > tr.haptic_threshold_n_m
-        self.last_surplus, self.last_rise = surplus, rise
-        self._yield += ((1.0 if felt else 0.0) - self._yield) * dt / 0.2
+        hand = GRIP_STIFFNESS_N_M_PER_RAD * (self._last_aim - view.dial_angle_rad)
+        surplus = hand - self.spring_guess * view.dial_angle_rad
+        self._felt += (surplus - self._felt) * dt / 0.1
+        pushing = self._last_aim > 0.02
+        rise = 0.0
+        if pushing:
+            # people sense a change of resistance against what they felt just before
+            if math.isnan(self._baseline):
+                self._baseline = self._felt
+            rise = self._felt - self._baseline
+            self._baseline += (self._felt - self._baseline) * dt / 3.0
+        else:
+            self._baseline = math.nan
+        felt = pushing and rise > tr.haptic_threshold_n_m
+        self.last_surplus, self.last_rise = self._felt, rise
         if felt and math.isnan(self._felt_since):
             self._felt_since = view.t_s
         elif not felt:
@@ -228,7 +250,7 @@ class SimulatedParticipant(Driver):
             self._stall_clock += dt
         # a slow push needs longer to show a millimetre
         expected_speed = max(self.speed_gain_guess * self._last_aim, 0.001)
-        stalled = self._stall_clock >= tr.visual_stall_s + 0.001 / expected_speed
+        stalled = self._stall_clock >= tr.visual_stall_s + min(0.001 / expected_speed, 1.0)
         if self.phase in ("advance", "enter", "navigate") and (
             stalled or felt_for > tr.reaction_s * 0.6
         ):
@@ -243,13 +265,13 @@ class SimulatedParticipant(Driver):
             self._stall_clock = 0.0
             self._felt_since = math.nan
         speed, rotation = self._plan(view, seen, s_tip, in_target)
-        # yield to a rising resistance (HV only: without haptics the surplus stays ~0)
+        # asked to keep forces low, a participant who feels the resistance pushes more
+        # gently the more it exceeds what it finds comfortable (HV only: without
+        # haptics there is nothing to feel)
+        excess = min(max(self._felt - tr.comfort_torque_n_m, 0.0) / tr.comfort_torque_n_m, 3.0)
         if speed > 0:
-            speed *= 1.0 - 0.7 * tr.caution * self._yield
+            speed /= 1.0 + tr.caution * excess
         aim = speed / self.speed_gain_guess
-        if aim > 0.02 and self._last_aim <= 0.02:
-            self._push_start = view.t_s
-            self._baseline = math.nan
         self._last_aim = aim
         return HandAction(
             dial_target_rad=aim,
@@ -267,12 +289,18 @@ class SimulatedParticipant(Driver):
         approach = 0.02 + 0.03 * tr.caution
         phi_aim = self.target_phi + self.aim_error
         rot_err = math.remainder(phi_aim - seen.rotation_rad, 2 * math.pi)
-        rotation = min(max(4.0 * rot_err, -2.0), 2.0)
+        # turn towards the aim; a gain matched to the reaction delay keeps the delayed
+        # correction from overshooting into oscillation
+        rotation = min(max(0.8 / tr.reaction_s * rot_err, -2.0), 2.0)
         if self.phase == "back_off":
             if s_tip <= self.back_off_to or (in_target and s_tip <= self.back_off_to + 0.01):
                 self.phase = "navigate" if in_target else "advance"
                 if not in_target:
                     self._new_attempt()
+            return -v, rotation
+        if seen.branch not in AORTA and not in_target:
+            # the screen shows the tip in another branch: pull back into the arch
+            self.phase = "retract"
             return -v, rotation
         if self.phase == "retract":
             if s_tip < self.ostium_m - 0.01 and not in_target:
