@@ -134,9 +134,10 @@ def draw_traits(group: str, rng: np.random.Generator) -> ParticipantTraits:
 class SimulatedParticipant(Driver):
     """A participant with `traits` navigating `phantom` to its target branch."""
 
-    rate_hz = 50.0
-    """Decisions at 50 Hz: faster than fluoroscopy's 7.5-30 frames/s and than any
-    reaction; the hand's impedance still acts at the device rate."""
+    rate_hz = 25.0
+    """Decisions at 25 Hz, the frame rate of the fluoroscopy screen it watches (clinical
+    fluoroscopy runs at 7.5-30 frames/s), far faster than any reaction; the hand's
+    impedance still acts at the 1 kHz device rate."""
 
     def __init__(
         self,

@@ -35,6 +35,7 @@ from teleop_core.estimation.gru import (
     GruConfig,
     GruModel,
     Standardisation,
+    _window_forward,
     block_split,
     load_weights,
     save_weights,
@@ -203,6 +204,10 @@ class CausalEstimator:
         std = estimator.gru.standardisation
         self._mean = np.asarray(std.feature_mean)
         self._std = np.asarray(std.feature_std)
+        self._mean_f, self._std_f = self._mean.tolist(), self._std.tolist()  # Python floats
+        w = estimator.gru.weights
+        self._weights = (w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out)
+        self._target_std, self._target_mean = float(std.target_std), float(std.target_mean)
 
     def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
         """Add a sample (s, A, rad/s, optionally rad/s^2) to the window without estimating:
@@ -213,9 +218,8 @@ class CausalEstimator:
         self._last = (t, omega)
         self._latest = (iq, omega, alpha)
         self._buffer[:-1] = self._buffer[1:]
-        self._buffer[-1, 0] = (iq - self._mean[0]) / self._std[0]
-        self._buffer[-1, 1] = (omega - self._mean[1]) / self._std[1]
-        self._buffer[-1, 2] = (alpha - self._mean[2]) / self._std[2]
+        m, s = self._mean_f, self._std_f
+        self._buffer[-1] = ((iq - m[0]) / s[0], (omega - m[1]) / s[1], (alpha - m[2]) / s[2])
         self._count += 1
 
     def estimate(self) -> tuple[float, float, float] | None:
@@ -232,7 +236,10 @@ class CausalEstimator:
             - ph.viscous_damping_n_m_s_per_rad * omega
             - ph.coulomb_friction_n_m * math.tanh(omega / ph.sign_speed_rad_s)
         ) / ph.wheel_radius_m + ph.offset_n
-        f_hybrid = f_physics + self.est.gru.predict_window(self._buffer)
+        # the GRU kernel called directly (GruModel.predict_window's arithmetic, without
+        # its attribute look-ups on every call)
+        y = _window_forward(self._buffer, *self._weights)
+        f_hybrid = f_physics + y * self._target_std + self._target_mean
         f_final = self._ekf.update(f_physics, f_hybrid, omega)
         return f_physics, f_hybrid, f_final
 

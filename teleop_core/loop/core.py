@@ -41,6 +41,7 @@ from teleop_core.master.dial import D_OMEGA, D_THETA, DIAL_STATE_SIZE, dial_para
 from teleop_core.master.haptics import LOADING
 from teleop_core.master.params import DialParams, HapticParams
 
+_NO_PACKETS = np.zeros((0, 4))
 SAMPLE_COLUMNS = (
     "t_s",
     "insertion_m",
@@ -189,8 +190,9 @@ class TeleopLoop:
         self.counters = LoopCounters()
         self._stream = estimator.stream() if estimator is not None else None
         self._log = np.zeros((max(self._acq_every, self._drv_every, self._est_every), K.LOG_WIDTH))
-        self._last_row = np.zeros(K.LOG_WIDTH)
-        self._noise = np.zeros(0)
+        self._last_row = [0.0] * K.LOG_WIDTH
+        self._schedule = np.zeros((8, 4))
+        self._noise: list[float] = []
         self._noise_at = 0
         self._force_est = 0.0
         self._action = HandAction()
@@ -296,63 +298,69 @@ class TeleopLoop:
 
     def _advance_to(self, end_tick: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Run events and kernel calls until `end_tick` or the driver is done."""
-        rows: list[np.ndarray] = []
+        rows: list[tuple[float, ...]] = []
         logs: list[np.ndarray] = []
         env = self.environment
         c = self.counters
+        kernel, acq, drv = self._kernel, self._acq_every, self._drv_every
+        state = (self.loop, self.mp, self.dial, self.dp, self.follower, self.fp, self.f_enc_step)
         while c.ticks < end_tick and math.isnan(self._done_s):
             k = c.ticks
-            # next event tick: acquisition, driver or a packet arriving
-            nxt = min(
-                (k // self._acq_every + 1) * self._acq_every,
-                (k // self._drv_every + 1) * self._drv_every,
-                end_tick,
-            )
-            for link in (self.to_follower, self.to_master):
-                arrival = link.next_arrival_s()
-                if arrival < math.inf:
-                    nxt = min(nxt, max(k + 1, math.ceil(arrival / self.dt_s - 1e-9)))
+            # next event tick: an acquisition or a driver update
+            nxt = min((k // acq + 1) * acq, (k // drv + 1) * drv, end_tick)
             n = nxt - k
             if n > len(self._log):
                 self._log = np.zeros((n, K.LOG_WIDTH))
-            self._kernel(
-                n,
-                self.loop,
-                self.mp,
-                self.dial,
-                self.dp,
-                self.follower,
-                self.fp,
-                self.f_enc_step,
-                env.state,
-                env.params,
-                self._log,
-            )
+            log = self._log
+            kernel(n, *state, env.state, env.params, log, self._packets(k, nxt))
             c.ticks = nxt
-            self._last_row = self._log[n - 1].copy()
+            self._last_row = log[n - 1].tolist()  # Python floats: cheap to index
             if self.keep_ticks:
-                logs.append(self._log[:n].copy())
+                logs.append(log[:n].copy())
             self._on_events(rows)
         samples = np.array(rows) if rows else np.zeros((0, len(SAMPLE_COLUMNS)))
         return samples, (np.concatenate(logs) if logs else None)
 
-    def _on_events(self, rows: list[np.ndarray]) -> None:
+    def _on_events(self, rows: list[tuple[float, ...]]) -> None:
         c = self.counters
         if c.ticks % self._drv_every == 0:
             self._drive()
         if c.ticks % self._acq_every == 0:
             self._acquire(rows)
             self._send_command()
-        # packets due now, including any just sent over a zero-delay link
+        # packets that arrive at this very tick (a zero-delay link) act from the next
+        # tick on: set them now rather than through the kernel's schedule
         t = self.t_s
-        command = self.to_follower.receive(t)
-        if command is not None:
-            self.loop[K.L_SPEED_CMD_RX], self.loop[K.L_ROT_RATE_RX] = command
-        force = self.to_master.receive(t)
-        if force is not None:
-            self.loop[K.L_FORCE_RX] = force
+        if self.to_master.next_arrival_s() <= t + 1e-12:
+            self.loop[K.L_FORCE_RX] = self.to_master.receive(t)
+        if self.to_follower.next_arrival_s() <= t + 1e-12:
+            self.loop[K.L_SPEED_CMD_RX], self.loop[K.L_ROT_RATE_RX] = self.to_follower.receive(t)
 
-    def _acquire(self, rows: list[np.ndarray]) -> None:
+    def _packets(self, k: int, nxt: int) -> np.ndarray:
+        """The packets arriving during ticks k..nxt-1, as the kernel's schedule.
+
+        A packet arriving at tick K acts from the tick after it, as if received at K.
+        """
+        last = (nxt - 1) * self.dt_s
+        to_master, to_follower = self.to_master, self.to_follower
+        if to_master.next_arrival_s() > last and to_follower.next_arrival_s() > last:
+            return _NO_PACKETS
+        rows = []
+        for arrival, force in to_master.deliver_until(last):
+            j = max(math.ceil(arrival / self.dt_s - 1e-9) - k, 0)
+            rows.append((j, K.PACKET_FORCE, force, 0.0))
+        for arrival, (speed, rotation) in to_follower.deliver_until(last):
+            j = max(math.ceil(arrival / self.dt_s - 1e-9) - k, 0)
+            rows.append((j, K.PACKET_COMMAND, speed, rotation))
+        if len(rows) > len(self._schedule):
+            self._schedule = np.zeros((2 * len(rows), 4))
+        rows.sort(key=lambda row: row[0])
+        schedule = self._schedule[: len(rows)]
+        for i, row in enumerate(rows):
+            schedule[i] = row
+        return schedule
+
+    def _acquire(self, rows: list[tuple[float, ...]]) -> None:
         """The follower's ESP32 samples; the estimator runs on every other sample."""
         c, t, row = self.counters, self.t_s, self._last_row
         c.acquisitions += 1
@@ -372,21 +380,19 @@ class TeleopLoop:
             self._stream.push(t, row[9] + self._current_noise(), row[10])
         r = self.config.plant.wheel_radius_m
         rows.append(
-            np.array(
-                [
-                    t,
-                    row[6] * r,
-                    row[18],
-                    row[13],
-                    row[14],
-                    row[15],
-                    row[16],
-                    row[11],
-                    self._force_est,
-                    row[12],
-                    row[1],
-                    row[3],
-                ]
+            (
+                t,
+                row[6] * r,
+                row[18],
+                row[13],
+                row[14],
+                row[15],
+                row[16],
+                row[11],
+                self._force_est,
+                row[12],
+                row[1],
+                row[3],
             )
         )
         if row[17] and not self._success:
@@ -396,10 +402,10 @@ class TeleopLoop:
         """INA240 noise on the acquired current, A (drawn in blocks: one call per sample
         would cost more than the sample's whole share of the loop)."""
         if self._noise_at >= len(self._noise):
-            self._noise = self.rng.normal(0.0, self.config.sensors.current_noise_a, 4096)
+            self._noise = self.rng.normal(0.0, self.config.sensors.current_noise_a, 4096).tolist()
             self._noise_at = 0
         self._noise_at += 1
-        return float(self._noise[self._noise_at - 1])
+        return self._noise[self._noise_at - 1]
 
     def _send_command(self) -> None:
         """The master samples the dial and sends the rate command (eq. 5) to the follower."""

@@ -119,6 +119,7 @@ class SimulatedOperator(Driver):
     release_after_s: float = math.inf
     grip_stiffness_n_m_per_rad: float = GRIP_STIFFNESS_N_M_PER_RAD
     grip_damping_n_m_s_per_rad: float = GRIP_DAMPING_N_M_S_PER_RAD
+    rate_hz: float | None = 50.0
 
     def start(self, rng: np.random.Generator) -> None:
         self._seen: list[tuple[float, float]] = []

@@ -8,6 +8,8 @@ cross the link are held, so `run_ticks` advances many ticks per call; the Python
 (`core.py`) handles the events.
 
 Per tick, in this order (seed 000, III-B and IV-A):
+0. packets due from the link (scheduled by the caller, so that a packet arriving
+   between events does not cost a call of its own);
 1. master controller at 1 kHz on the dial's 12-bit encoder: tau_h (eq. 7, HV only) from
    the last force received, tau_return (eq. 8), tau_total (eq. 9), i_cmd = Psi (eq. 10);
 2. the dial (eq. 6) under that current and the operator's hand;
@@ -76,6 +78,8 @@ LOOP_STATE_SIZE = 17
 ) = range(15)
 M_POLY = 15  # six polynomial coefficients follow
 MASTER_PARAM_SIZE = 21
+# Packet schedule rows: (tick index in the call, kind, value, value)
+PACKET_FORCE, PACKET_COMMAND = 0.0, 1.0
 # Environment output
 E_PROXIMAL, E_DISTAL, E_TIP_X, E_TIP_Y, E_TIP_Z, E_BRANCH, E_SUCCESS = range(7)
 ENV_OUT = 7
@@ -120,6 +124,7 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         env_state: np.ndarray,
         env_params: np.ndarray,
         log: np.ndarray,
+        schedule: np.ndarray,
     ) -> None:  # pragma: no cover - compiled; exercised through TeleopLoop
         dt = mp[M_DT]
         poly = mp[M_POLY : M_POLY + 6]
@@ -128,7 +133,17 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         env_out = np.zeros(ENV_OUT)
         f_out = np.zeros(5)
         r = mp[M_WHEEL_R]
+        next_packet = 0
         for k in range(n_ticks):
+            # 0. packets that arrive over the link for this tick
+            while next_packet < schedule.shape[0] and schedule[next_packet, 0] <= k:
+                packet = schedule[next_packet]
+                if packet[1] == PACKET_FORCE:
+                    loop[L_FORCE_RX] = packet[2]
+                else:
+                    loop[L_SPEED_CMD_RX] = packet[2]
+                    loop[L_ROT_RATE_RX] = packet[3]
+                next_packet += 1
             # 1. master controller on the dial's quantised angle
             theta_q = math.floor(dial[D_THETA] / mp[M_ENC_STEP]) * mp[M_ENC_STEP]
             w_raw = (theta_q - loop[L_THETA_Q_PREV]) / dt

@@ -74,10 +74,12 @@ class Link(Generic[T]):
         """When the next queued packet arrives (inf when none is in flight)."""
         return self._queue[0][0] if self._queue else math.inf
 
-    def receive(self, t_s: float) -> T | None:
-        """Deliver every packet due by t_s; return the newest value held (None before any)."""
+    def deliver_until(self, t_s: float) -> list[tuple[float, T]]:
+        """Deliver every packet due by t_s; return (arrival time, value) of each one the
+        receiver accepts, in arrival order."""
+        accepted: list[tuple[float, T]] = []
         while self._queue and self._queue[0][0] <= t_s + 1e-12:
-            _, seq, sent_at, value = heapq.heappop(self._queue)
+            arrival, seq, sent_at, value = heapq.heappop(self._queue)
             if seq < self._newest_seq:
                 self.discarded_late += 1
                 continue
@@ -85,4 +87,10 @@ class Link(Generic[T]):
             self.value = value
             self.value_sent_at_s = sent_at
             self.delivered += 1
+            accepted.append((arrival, value))
+        return accepted
+
+    def receive(self, t_s: float) -> T | None:
+        """Deliver every packet due by t_s; return the newest value held (None before any)."""
+        self.deliver_until(t_s)
         return self.value

@@ -8,8 +8,9 @@ A reduced guidewire model, cheap enough for a numba tick yet physical in its eff
   within the branch's half-width of the ostium's azimuth; otherwise it stays in the
   aorta. Pulled back behind the ostium, it is in the aorta again.
 - Sliding friction grows with the inserted length (introducer and vessel contact,
-  `friction_n_per_m`, plus a viscous drag of the coated wire in saline) and with the wire's bending in curved vessel (normal force
-  EI kappa^2 per unit length, times the friction coefficient), and the whole is
+  `friction_n_per_m`, plus a viscous drag of the coated wire in saline) and with the
+  wire's bending in curved vessel (normal force EI kappa^2 per unit length, times the
+  friction coefficient), and the whole is
   amplified by the capstan effect over the turning angle up to the tip,
   T_proximal = T_distal e^(mu Theta) (Euler-Eytelwein belt friction). Friction is
   smoothed through zero speed over `smoothing_speed_m_s`.

@@ -64,12 +64,14 @@ def test_hv_at_zero_gain_is_statistically_indistinguishable_from_vo(
         traits = simulated_participant("novice", 100 + i)
         # separate runs: each condition with its own noise, as two real trials would be
         peaks["VO"].append(
-            run_lcca_trial(traits, "VO", 10 + i, None, phantom=phantom, max_s=90)
-            .summary["peak_proximal_force_n"]
+            run_lcca_trial(traits, "VO", 10 + i, None, phantom=phantom, max_s=90).summary[
+                "peak_proximal_force_n"
+            ]
         )
         peaks["HV"].append(
-            run_lcca_trial(traits, "HV", 50 + i, None, haptic_gain=0.0, phantom=phantom, max_s=90)
-            .summary["peak_proximal_force_n"]
+            run_lcca_trial(
+                traits, "HV", 50 + i, None, haptic_gain=0.0, phantom=phantom, max_s=90
+            ).summary["peak_proximal_force_n"]
         )
     assert wilcoxon(peaks["VO"], peaks["HV"]).pvalue > 0.05
 

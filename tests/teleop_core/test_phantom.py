@@ -60,9 +60,10 @@ def test_straight_run_friction_grows_with_inserted_length() -> None:
     out = wire.push(0.10, 0.0, speed_m_s=0.01)
     w = GuidewireParams()
     # no curvature, no turning: F = f_len L tanh(v / v_s) + c_v L v
-    expected = w.friction_n_per_m * 0.10 * math.tanh(
-        0.01 / w.smoothing_speed_m_s
-    ) + w.viscous_n_s_per_m2 * 0.10 * 0.01
+    expected = (
+        w.friction_n_per_m * 0.10 * math.tanh(0.01 / w.smoothing_speed_m_s)
+        + w.viscous_n_s_per_m2 * 0.10 * 0.01
+    )
     assert out[E_PROXIMAL] == pytest.approx(expected, rel=1e-2)
     assert out[E_DISTAL] == 0.0
 
