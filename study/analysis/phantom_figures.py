@@ -50,14 +50,21 @@ def plot_tip_paths(
     phantom: LccaPhantom,
     trials: Sequence[tuple[pd.DataFrame, str]],
     ax: Axes | None = None,
+    contact_threshold_n: float = 0.2,
 ) -> Axes:
-    """Tip paths of several trials on the phantom, coloured by condition (VO / HV)."""
+    """Tip paths of several trials on the phantom, coloured by condition (VO / HV).
+
+    The wire follows the centreline, so paths overlap; where the tip pressed a wall
+    (distal force above `contact_threshold_n`) a circle marks the spot, its area
+    proportional to the peak force there.
+    """
     ax = ax or plt.gca()
     ax.set_xlim(-120, 50)
     ax.set_ylim(120, 360)
     draw_phantom(phantom, ax)
     seen = set()
     for frame, condition in trials:
+        color = CONDITION_COLORS.get(condition, "k")
         label = condition if condition not in seen else None
         seen.add(condition)
         ax.plot(
@@ -65,9 +72,20 @@ def plot_tip_paths(
             frame["tip_z_m"] * 1000,
             lw=0.8,
             alpha=0.7,
-            color=CONDITION_COLORS.get(condition, "k"),
+            color=color,
             label=label,
         )
+        pressed = frame[frame["distal_force_n"] > contact_threshold_n]
+        if len(pressed):
+            ax.scatter(
+                pressed["tip_x_m"] * 1000,
+                pressed["tip_z_m"] * 1000,
+                s=60 * pressed["distal_force_n"],
+                facecolors="none",
+                edgecolors=color,
+                linewidths=0.6,
+                alpha=0.5,
+            )
     ax.legend(fontsize=7, loc="lower left")
     return ax
 

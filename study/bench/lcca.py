@@ -120,7 +120,7 @@ def run_lcca_bench(
                         },
                     }
                 )
-                if group == "outsider" and i < 6:
+                if group == "outsider":
                     paths.append((result.frame, condition))
     frame = pd.DataFrame(rows)
     groups: dict[str, Any] = {}
@@ -171,9 +171,10 @@ def run_lcca_bench(
         },
     }
     frame.to_csv(out_dir / "lcca_trials.csv", index=False)
-    fig, ax = plt.subplots(figsize=(3.5, 4.2), layout="constrained")
-    plot_tip_paths(phantom, paths, ax)
-    ax.set_title("outsiders: tip paths, VO vs HV", fontsize=9)
+    fig, axes = plt.subplots(1, 2, figsize=(7.16, 4.2), layout="constrained", sharey=True)
+    for ax, condition in zip(axes, ("VO", "HV"), strict=True):
+        plot_tip_paths(phantom, [p for p in paths if p[1] == condition], ax)
+        ax.set_title(f"all outsiders, {condition}: tip paths, wall contacts", fontsize=8)
     fig.savefig(out_dir / "lcca_tip_paths.png", dpi=200)
     plt.close(fig)
     fig = plot_groups(frame)
