@@ -33,8 +33,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from teleop_core.estimation.estimator import ForceEstimator, train_estimator
-from teleop_core.estimation.gru import GruConfig
+from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.core import LoopConfig, TeleopLoop
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
@@ -293,15 +292,6 @@ def closed_loop_speed(
     }
 
 
-def quick_estimator(seed: int) -> ForceEstimator:
-    """A small estimator for timing the loop (its accuracy does not change the cost)."""
-    from study.bench.follower import training_recording
-
-    recording = training_recording(60.0, seed)
-    estimator, _ = train_estimator(recording, GruConfig(max_epochs=3), seed=seed)
-    return estimator
-
-
 def markdown(report: dict[str, Any]) -> str:
     cal, fr, lat, cl = (
         report[k] for k in ("calibration", "frequency_response", "latency", "closed_loop")
@@ -360,7 +350,7 @@ def markdown(report: dict[str, Any]) -> str:
 def run_master_bench(
     config: MasterBenchConfig,
     out_dir: Path,
-    estimator: ForceEstimator | None = None,
+    estimator: ForceEstimator,
     progress: Callable[[str], None] = lambda _: None,
 ) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -380,9 +370,6 @@ def run_master_bench(
     report["latency"], fig = latency(config, rng)
     fig.savefig(out_dir / "latency.png", dpi=200)
     plt.close(fig)
-    if estimator is None:
-        progress("training a small estimator for the closed loop")
-        estimator = quick_estimator(config.seed)
     report["closed_loop"] = closed_loop_speed(config, estimator, progress)
     (out_dir / "master_bench.md").write_text(markdown(report))
     (out_dir / "master_bench.json").write_text(json.dumps(report, indent=2) + "\n")

@@ -17,7 +17,6 @@ from study.bench.master import MasterBenchConfig, run_master_bench
 from study.commands.base import StudyGroup
 from study.errors import StudyInputError
 from study.protocol.default_estimator import load_estimator
-from teleop_core.estimation.estimator import ForceEstimator
 
 
 @click.group("bench", cls=StudyGroup)
@@ -116,9 +115,9 @@ def bench_follower(json_path: Path, out_dir: Path, seed: int, quick: bool) -> No
 @click.option(
     "--estimator",
     "model_dir",
-    type=click.Path(file_okay=False, exists=True, path_type=Path),
-    help="Estimator (from `study estimator train`) for the closed-loop timing "
-    "[default: train a small one, which costs the same per update].",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Force estimator folder for the closed loop [default: the model shipped with "
+    "haptic-study].",
 )
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--quick", is_flag=True, help="Short runs: checks the pipeline, measures little.")
@@ -130,7 +129,7 @@ def bench_master(
         raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
     config = MasterBenchConfig.quick() if quick else MasterBenchConfig()
     config = replace(config, seed=seed)
-    estimator = ForceEstimator.load(model_dir) if model_dir is not None else None
+    estimator = load_estimator(model_dir)
     with Console(stderr=True).status("master bench") as status:
         report = run_master_bench(
             config, out_dir, estimator=estimator, progress=lambda msg: status.update(msg)

@@ -38,7 +38,7 @@ from teleop_core.loop.drivers import Driver, HandAction, OperatorView
 from teleop_core.loop.environments import Environment, free_space
 from teleop_core.loop.link import Link, LinkParams
 from teleop_core.master.dial import D_OMEGA, D_THETA, DIAL_STATE_SIZE, dial_param_vector
-from teleop_core.master.haptics import LOADING
+from teleop_core.master.haptics import LOADING, rate_command
 from teleop_core.master.params import DialParams, HapticParams
 
 _NO_PACKETS = np.zeros((0, 4))
@@ -410,7 +410,7 @@ class TeleopLoop:
     def _send_command(self) -> None:
         """The master samples the dial and sends the rate command (eq. 5) to the follower."""
         # v_gw = k_v theta_m (eq. 5), on the dial's encoder angle; omega = v / r at the wheel
-        v_gw = self.config.haptics.speed_gain_m_s_per_rad * self.loop[K.L_THETA_Q_PREV]
+        v_gw = rate_command(self.loop[K.L_THETA_Q_PREV], self.config.haptics.speed_gain_m_s_per_rad)
         omega_cmd = v_gw / self.config.plant.wheel_radius_m
         self.counters.commands_sent += 1
         self.to_follower.send(self.t_s, (omega_cmd, self._action.rotation_rate_rad_s))
