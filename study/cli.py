@@ -18,6 +18,8 @@ from study.commands.base import USER_ERRORS, InputError, StudyGroup
 from study.commands.bench import bench
 from study.commands.database import database
 from study.commands.estimator import estimator
+from study.commands.plan import design_group, init, participant, schedule_cmd
+from study.commands.run import run
 from study.commands.simulate import simulate
 
 EXIT_USER_ERROR = 2
@@ -42,6 +44,11 @@ cli.add_command(database)
 cli.add_command(bench)
 cli.add_command(estimator)
 cli.add_command(simulate)
+cli.add_command(init)
+cli.add_command(design_group)
+cli.add_command(participant)
+cli.add_command(schedule_cmd)
+cli.add_command(run)
 
 
 def _one_line(message: str) -> str:

@@ -67,6 +67,33 @@ def wall_contacts(distal_n: np.ndarray, threshold_n: float = CONTACT_THRESHOLD_N
     return int(np.count_nonzero(above[1:] & ~above[:-1]) + (1 if len(above) and above[0] else 0))
 
 
+def lcca_loop(
+    condition: str,
+    seed: int,
+    estimator: ForceEstimator | None,
+    haptic_gain: float | None = None,
+    phantom: LccaPhantom | None = None,
+) -> TeleopLoop:
+    """The closed loop of one LCCA trial under `condition` (not yet started)."""
+    phantom = phantom or LccaPhantom()
+    config = LoopConfig(haptics=condition_haptics(condition, haptic_gain))
+    return TeleopLoop(config, phantom.environment(), estimator=estimator, seed=seed)
+
+
+def measures(frame: pd.DataFrame, success: bool) -> dict[str, Any]:
+    """The study's summary measures of one trial from its TRIAL_COLUMNS frame."""
+    return {
+        "success": bool(success),
+        "completion_time_s": float(frame["t_s"].iloc[-1]) if len(frame) else 0.0,
+        "peak_proximal_force_n": float(frame["proximal_force_n"].max()) if len(frame) else 0.0,
+        "peak_proximal_reference_force_n": float(frame["reference_force_n"].max())
+        if len(frame)
+        else 0.0,
+        "peak_distal_force_n": float(frame["distal_force_n"].max()) if len(frame) else 0.0,
+        "wall_contacts": wall_contacts(frame["distal_force_n"].to_numpy()),
+    }
+
+
 def run_lcca_trial(
     traits: ParticipantTraits,
     condition: str,
@@ -78,25 +105,17 @@ def run_lcca_trial(
 ) -> TrialResult:
     """Run one headless trial to success or `max_s`."""
     phantom = phantom or LccaPhantom()
-    config = LoopConfig(haptics=condition_haptics(condition, haptic_gain))
+    loop = lcca_loop(condition, seed, estimator, haptic_gain, phantom)
     participant = SimulatedParticipant(traits, phantom, give_up_s=max_s)
-    loop = TeleopLoop(config, phantom.environment(), estimator=estimator, seed=seed)
     result = loop.run(max_s, participant)
-    raw = result.to_frame()
-    frame = raw[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
-    completion = float(frame["t_s"].iloc[-1]) if len(frame) else 0.0
+    frame = trial_frame(result.to_frame())
     summary = {
         "task": "lcca",
         "group": traits.group,
         "condition": condition,
-        "haptic_gain_n_m_per_n": config.haptics.haptic_gain_n_m_per_n,
+        "haptic_gain_n_m_per_n": loop.config.haptics.haptic_gain_n_m_per_n,
         "seed": seed,
-        "success": bool(result.success),
-        "completion_time_s": completion,
-        "peak_proximal_force_n": float(frame["proximal_force_n"].max()),
-        "peak_proximal_reference_force_n": float(frame["reference_force_n"].max()),
-        "peak_distal_force_n": float(frame["distal_force_n"].max()),
-        "wall_contacts": wall_contacts(frame["distal_force_n"].to_numpy()),
+        **measures(frame, result.success),
         "attempts": participant.attempt,
         "obstacles_felt": participant.obstacles_felt,
         "obstacles_seen": participant.obstacles_seen,
@@ -104,6 +123,11 @@ def run_lcca_trial(
         "participant": traits.to_dict(),
     }
     return TrialResult(frame, summary)
+
+
+def trial_frame(raw: pd.DataFrame) -> pd.DataFrame:
+    """TRIAL.csv's columns from the loop's sample frame."""
+    return raw[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
 
 
 def simulated_participant(group: str, seed: int) -> ParticipantTraits:

@@ -77,6 +77,8 @@ REGIONS = (
     "brachiocephalic",
 )
 """Region codes (index) the phantom writes as the tip's branch."""
+REGION_ABBREVIATIONS = ("DAo", "arch", "AAo", "LSA", "LCCA", "BCT")
+"""Short names of REGIONS, as the sample table stores them (16 characters at most)."""
 
 # geometry columns
 G_X, G_Y, G_Z, G_THETA, G_KAPPA, G_REGION, G_BEND = range(7)

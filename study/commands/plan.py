@@ -1,0 +1,96 @@
+"""`study init`, `study design template`, `study participant add`, `study schedule`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from db.migrate import open_database
+from study.commands.base import StudyCommand, StudyGroup, db_option
+from study.errors import StudyInputError
+from study.protocol.design import TEMPLATE, parse_design
+from study.protocol.roster import add_participant, create_study, schedule
+
+
+@click.command("init", cls=StudyCommand)
+@click.option(
+    "--design",
+    "design_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="The study design (TOML; `study design template` prints one).",
+)
+@db_option
+def init(design_path: Path, db_url: str | None) -> None:
+    """Create the study database from a design file."""
+    if not design_path.is_file():
+        raise StudyInputError(f"design file {design_path} does not exist")
+    text = design_path.read_text()
+    design = parse_design(text, str(design_path))  # all checks before anything is written
+    engine = open_database(db_url, create=True)
+    try:
+        create_study(engine, design, text)
+    finally:
+        engine.dispose()
+    sizes = ", ".join(f"{g} {n}" for g, n in design.groups.items())
+    click.echo(
+        f"created study {design.name!r}: groups {sizes}; conditions "
+        f"{'/'.join(design.conditions)} ({design.counterbalancing}); tasks "
+        f"{', '.join(design.tasks)}; {design.practice_trials} practice + "
+        f"{design.trials_per_condition} trials per block"
+    )
+
+
+@click.group("design", cls=StudyGroup)
+def design_group() -> None:
+    """Study design files."""
+
+
+@design_group.command("template")
+def template() -> None:
+    """Print a commented default design (the paper's 20/8/8 study)."""
+    click.echo(TEMPLATE, nl=False)
+
+
+@click.group("participant", cls=StudyGroup)
+def participant() -> None:
+    """Enrol participants (pseudonymous codes only)."""
+
+
+@participant.command("add")
+@click.option("--group", required=True, help="Experience group, by its name in the design.")
+@click.option("--site", default=None, help="Lab enrolling the participant (multi-site studies).")
+@db_option
+def participant_add(group: str, site: str | None, db_url: str | None) -> None:
+    """Enrol the next participant of a group: code, condition order and schedule."""
+    engine = open_database(db_url, create=False)
+    try:
+        p = add_participant(engine, group, site)
+    finally:
+        engine.dispose()
+    click.echo(f"{p.code} ({p.group}): conditions {' then '.join(p.condition_order)}")
+
+
+@click.command("schedule", cls=StudyCommand)
+@click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
+@db_option
+def schedule_cmd(as_json: bool, db_url: str | None) -> None:
+    """The plan and progress: groups filling up, each participant's blocks."""
+    engine = open_database(db_url, create=False)
+    try:
+        plan = schedule(engine)
+    finally:
+        engine.dispose()
+    if as_json:
+        click.echo(json.dumps(plan, indent=2))
+        return
+    click.echo(f"study: {plan['study']}")
+    for g, fill in plan["groups"].items():
+        click.echo(f"  {g:<10} {fill['enrolled']:>3} of {fill['target']}")
+    for p in plan["participants"]:
+        blocks = "  ".join(
+            f"{b['task']}/{b['condition']} {b['completed']}/{b['planned']}" for b in p["blocks"]
+        )
+        click.echo(f"{p['code']:<8} {p['group']:<10} {'-'.join(p['condition_order']):<6} {blocks}")

@@ -1,0 +1,212 @@
+"""Study designs: the TOML file a researcher writes, validated into a `StudyDesign`.
+
+Every problem is reported as one line naming the key, the value and what was expected
+(`StudyInputError`), before anything is written. Defaults follow seed 000, IV-D: 20
+engineering outsiders, 8 novice doctors, 8 expert physicians; conditions VO and HV; the
+LCCA task.
+
+Counterbalancing (`condition_orders`): with two conditions the orders AB and BA; with
+more, a balanced Latin square (Williams design: each condition once in every position
+and, over the square, before each other condition equally often; k rows for an even
+number of conditions, 2k for an odd one). Participants of a group get the order that
+group has used least so far (`next_order`), so after any number of participants the
+orders' counts differ by at most one.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from study.errors import StudyInputError
+
+KNOWN_TASKS = ("lcca", "notes")
+KNOWN_CONDITIONS = ("VO", "HV")
+
+TEMPLATE = """\
+# A haptic-teleoperation user study (seed 000, IV-D). `study init --design THIS_FILE`.
+
+name = "LCCA navigation, VO vs HV"
+seed = 1                       # seeds counterbalancing ties and simulated participants
+
+conditions = ["VO", "HV"]      # Visual-Only, Haptic-Visual
+tasks = ["lcca"]               # "lcca" (guidewire into the LCCA), "notes" (endoscopy)
+trials_per_condition = 3       # measured trials in each task x condition block
+practice_trials = 1            # unmeasured trials before them
+counterbalancing = "AB/BA"     # two conditions; with more use "latin-square"
+break_s = 120                  # planned rest after each block, seconds
+code_prefix = "P"              # participant codes: P001, P002, ...
+
+[groups]                       # experience groups and how many participants each
+outsider = 20                  # engineering outsiders
+novice = 8                     # novice doctors
+expert = 8                     # expert interventional physicians
+"""
+
+_KEYS = {
+    "name": str,
+    "seed": int,
+    "conditions": list,
+    "tasks": list,
+    "trials_per_condition": int,
+    "practice_trials": int,
+    "counterbalancing": str,
+    "break_s": (int, float),
+    "code_prefix": str,
+    "groups": dict,
+}
+
+
+@dataclass(frozen=True)
+class StudyDesign:
+    name: str = "LCCA navigation, VO vs HV"
+    seed: int = 1
+    conditions: tuple[str, ...] = KNOWN_CONDITIONS
+    tasks: tuple[str, ...] = ("lcca",)
+    trials_per_condition: int = 3
+    practice_trials: int = 1
+    counterbalancing: str = "AB/BA"
+    break_s: float = 120.0
+    code_prefix: str = "P"
+    groups: dict[str, int] = field(
+        default_factory=lambda: {"outsider": 20, "novice": 8, "expert": 8}
+    )
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        data["conditions"] = list(self.conditions)
+        data["tasks"] = list(self.tasks)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> StudyDesign:
+        return _validate(data)
+
+    @property
+    def orders(self) -> list[tuple[str, ...]]:
+        return condition_orders(self.conditions, self.counterbalancing)
+
+
+def parse_design(text: str, source: str = "design") -> StudyDesign:
+    """Parse and validate a TOML design."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise StudyInputError(f"{source} is not valid TOML: {exc}") from None
+    return _validate(data, source)
+
+
+def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
+    unknown = sorted(set(data) - set(_KEYS))
+    if unknown:
+        raise StudyInputError(
+            f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(sorted(_KEYS))}"
+        )
+    for key, kind in _KEYS.items():
+        if key in data and (
+            not isinstance(data[key], kind) or (kind is int and isinstance(data[key], bool))
+        ):
+            expected = kind.__name__ if isinstance(kind, type) else "a number"
+            raise StudyInputError(f"{source}: {key} = {data[key]!r}; expected {expected}")
+    d = StudyDesign()
+    conditions = tuple(data.get("conditions", d.conditions))
+    tasks = tuple(data.get("tasks", d.tasks))
+    groups = dict(data.get("groups", d.groups))
+    for c in conditions:
+        if c not in KNOWN_CONDITIONS:
+            raise StudyInputError(
+                f"{source}: condition {c!r}; expected {' or '.join(KNOWN_CONDITIONS)}"
+            )
+    if len(set(conditions)) != len(conditions) or len(conditions) < 2:
+        raise StudyInputError(
+            f"{source}: conditions = {list(conditions)}; expected at least two, each once"
+        )
+    for t in tasks:
+        if t not in KNOWN_TASKS:
+            raise StudyInputError(f"{source}: task {t!r}; expected one of {', '.join(KNOWN_TASKS)}")
+    if not tasks or len(set(tasks)) != len(tasks):
+        raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
+    if not groups:
+        raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
+    for g, n in groups.items():
+        if not (isinstance(n, int) and not isinstance(n, bool) and n >= 1):
+            raise StudyInputError(f"{source}: groups.{g} = {n!r}; expected a whole number >= 1")
+    for key, low in (("trials_per_condition", 1), ("practice_trials", 0)):
+        value = data.get(key, getattr(d, key))
+        if value < low:
+            raise StudyInputError(f"{source}: {key} = {value!r}; expected >= {low}")
+    if data.get("break_s", d.break_s) < 0:
+        raise StudyInputError(f"{source}: break_s = {data['break_s']!r}; expected >= 0")
+    prefix = data.get("code_prefix", d.code_prefix)
+    if not (1 <= len(prefix) <= 4 and prefix.isalpha() and prefix.isupper()):
+        raise StudyInputError(
+            f"{source}: code_prefix = {prefix!r}; expected 1-4 capital letters, e.g. P"
+        )
+    scheme = data.get("counterbalancing", d.counterbalancing)
+    design = StudyDesign(
+        name=data.get("name", d.name),
+        seed=data.get("seed", d.seed),
+        conditions=conditions,
+        tasks=tasks,
+        trials_per_condition=data.get("trials_per_condition", d.trials_per_condition),
+        practice_trials=data.get("practice_trials", d.practice_trials),
+        counterbalancing=scheme,
+        break_s=float(data.get("break_s", d.break_s)),
+        code_prefix=prefix,
+        groups=groups,
+    )
+    condition_orders(conditions, scheme, source)  # refuses a scheme that does not fit
+    return design
+
+
+def williams_square(n: int) -> list[list[int]]:
+    """Balanced Latin square rows for n treatments (2n rows when n is odd)."""
+    # first row 0, 1, n-1, 2, n-2, ...; row r adds r (mod n)
+    first, low, high = [0], 1, n - 1
+    while len(first) < n:
+        first.append(low)
+        low += 1
+        if len(first) < n:
+            first.append(high)
+            high -= 1
+    rows = [[(x + r) % n for x in first] for r in range(n)]
+    if n % 2:
+        rows += [row[::-1] for row in rows]
+    return rows
+
+
+def condition_orders(
+    conditions: tuple[str, ...], scheme: str, source: str = "design"
+) -> list[tuple[str, ...]]:
+    """The orders participants are assigned to."""
+    if scheme == "AB/BA":
+        if len(conditions) != 2:
+            raise StudyInputError(
+                f"{source}: counterbalancing = 'AB/BA' with {len(conditions)} conditions; "
+                "expected two conditions, or 'latin-square'"
+            )
+        return [tuple(conditions), tuple(reversed(conditions))]
+    if scheme == "latin-square":
+        return [tuple(conditions[i] for i in row) for row in williams_square(len(conditions))]
+    raise StudyInputError(
+        f"{source}: counterbalancing = {scheme!r}; expected 'AB/BA' or 'latin-square'"
+    )
+
+
+def next_order(design: StudyDesign, group: str, used: list[tuple[str, ...]]) -> tuple[str, ...]:
+    """The order for the next participant of `group`, given the orders its members have.
+
+    The least used order; ties are broken by a seeded shuffle of the orders that is
+    fixed per group and per round, so the plan is reproducible from the design's seed.
+    """
+    orders = design.orders
+    counts = [sum(1 for u in used if tuple(u) == o) for o in orders]
+    least = min(counts)
+    candidates = [i for i, c in enumerate(counts) if c == least]
+    rng = np.random.default_rng([design.seed, sorted(design.groups).index(group), least])
+    preference = rng.permutation(len(orders)).tolist()
+    best = min(candidates, key=preference.index)
+    return orders[best]

@@ -1,0 +1,153 @@
+"""The study in the database: creating it, enrolling participants, their schedules.
+
+Service functions own the queries (the CLI and the TUI call these, never SQL).
+Enrolment reads the group's orders and the highest code and writes the new participant
+inside one `write_transaction` (SQLite `BEGIN IMMEDIATE`, a PostgreSQL advisory lock),
+so two lab machines enrolling at once still get distinct codes and balanced orders.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import Engine, func, select
+from sqlalchemy.orm import Session
+
+from db.engine import write_transaction
+from db.models.study import Participant, ScheduleBlock, Study
+from db.models.trial import Trial
+from study.errors import StudyInputError
+from study.protocol.design import StudyDesign, next_order
+
+CODE_DIGITS = 3
+
+
+def create_study(engine: Engine, design: StudyDesign, design_toml: str) -> Study:
+    """Store the study; a database holds one study."""
+    with write_transaction(engine) as conn, Session(bind=conn) as session:
+        existing = session.scalars(select(Study)).first()
+        if existing is not None:
+            raise StudyInputError(
+                f"the database already holds the study {existing.name!r}; expected an empty "
+                "database (one study per database)"
+            )
+        study = Study(
+            name=design.name, design_toml=design_toml, design=design.to_dict(), seed=design.seed
+        )
+        session.add(study)
+        session.flush()
+        session.expunge(study)
+        session.commit()
+    return study
+
+
+def load_study(session: Session) -> tuple[Study, StudyDesign]:
+    study = session.scalars(select(Study)).first()
+    if study is None:
+        raise StudyInputError("the database holds no study; run `study init --design FILE` first")
+    return study, StudyDesign.from_dict(study.design)
+
+
+def plan_blocks(design: StudyDesign, order: tuple[str, ...]) -> list[dict[str, Any]]:
+    """A participant's blocks: each task, its conditions in the participant's order."""
+    blocks = []
+    for task in design.tasks:
+        for condition in order:
+            blocks.append(
+                {
+                    "block_index": len(blocks),
+                    "task": task,
+                    "condition": condition,
+                    "n_practice": design.practice_trials,
+                    "n_trials": design.trials_per_condition,
+                    "break_after_s": design.break_s,
+                }
+            )
+    return blocks
+
+
+def add_participant(engine: Engine, group: str, site: str | None = None) -> Participant:
+    """Enrol the next participant of `group`: next code, balancing order, schedule."""
+    with write_transaction(engine) as conn, Session(bind=conn) as session:
+        study, design = load_study(session)
+        if group not in design.groups:
+            raise StudyInputError(
+                f"unknown group {group!r}; expected one of {', '.join(design.groups)}"
+            )
+        used = session.scalars(
+            select(Participant.condition_order).where(
+                Participant.study_id == study.id, Participant.group == group
+            )
+        ).all()
+        order = next_order(design, group, [tuple(u) for u in used])
+        count = session.scalar(
+            select(func.count()).select_from(Participant).where(Participant.study_id == study.id)
+        )
+        code = f"{design.code_prefix}{count + 1:0{CODE_DIGITS}d}"
+        participant = Participant(
+            study_id=study.id, code=code, group=group, condition_order=list(order), site=site
+        )
+        participant.blocks = [ScheduleBlock(**b) for b in plan_blocks(design, order)]
+        session.add(participant)
+        session.flush()
+        session.expunge_all()
+        session.commit()
+    return participant
+
+
+@dataclass(frozen=True)
+class BlockProgress:
+    block_index: int
+    task: str
+    condition: str
+    planned: int
+    """Practice plus measured trials."""
+    completed: int
+    interrupted: int
+
+
+def schedule(engine: Engine) -> dict[str, Any]:
+    """The plan and progress of every participant, and each group's fill."""
+    with Session(engine) as session:
+        study, design = load_study(session)
+        participants = session.scalars(
+            select(Participant).where(Participant.study_id == study.id).order_by(Participant.id)
+        ).all()
+        rows = []
+        for p in participants:
+            status = session.execute(
+                select(Trial.block_index, Trial.status, func.count())
+                .where(Trial.participant_id == p.id)
+                .group_by(Trial.block_index, Trial.status)
+            ).all()
+            done = {(b, s): n for b, s, n in status}
+            blocks = [
+                BlockProgress(
+                    b.block_index,
+                    b.task,
+                    b.condition,
+                    b.n_practice + b.n_trials,
+                    done.get((b.block_index, "completed"), 0),
+                    done.get((b.block_index, "interrupted"), 0),
+                ).__dict__
+                for b in p.blocks
+            ]
+            planned = sum(b["planned"] for b in blocks)
+            completed = sum(b["completed"] for b in blocks)
+            rows.append(
+                {
+                    "code": p.code,
+                    "group": p.group,
+                    "site": p.site,
+                    "condition_order": list(p.condition_order),
+                    "trials_planned": planned,
+                    "trials_completed": completed,
+                    "blocks": blocks,
+                }
+            )
+        fill = {
+            g: {"target": n, "enrolled": sum(1 for r in rows if r["group"] == g)}
+            for g, n in design.groups.items()
+        }
+    return {"study": study.name, "groups": fill, "participants": rows}

@@ -1,0 +1,239 @@
+"""The session runner: a participant's next scheduled trials, streamed safely to the db.
+
+For each trial still to do (the participant's blocks in order, practice trials first),
+a `trials` row is committed as `running` before the first sample; samples go through
+`db.samples.SampleWriter`, one committed chunk per second of trial time; the summary
+and `completed` are written in one transaction at the end. If the process dies (kill
+-9, power loss), the row stays `running` with its samples up to the last chunk; the
+next run of the same participant marks it `interrupted` (with an audit entry) and
+repeats that trial as a new attempt, keeping the interrupted record.
+
+Drivers: `simulated` (the participant's simulated person: the same traits in every
+trial, drawn from the group's distributions with the study's seed and the code),
+`hardware` (the dial's ESP32 on a serial port). The keyboard drives from the TUI.
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import Engine, select, update
+from sqlalchemy.orm import Session
+
+from db.base import utcnow
+from db.models.audit import AuditEntry
+from db.models.study import Participant, ScheduleBlock
+from db.models.trial import Trial
+from db.samples import SampleWriter
+from study.errors import StudyInputError
+from study.protocol.lcca_trial import lcca_loop, measures, trial_frame
+from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
+from study.protocol.roster import load_study
+from teleop_core.estimation.estimator import ForceEstimator
+from teleop_core.loop.core import SAMPLE_COLUMNS
+from teleop_core.loop.drivers import Driver
+from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS
+from teleop_core.phantom.lcca import LccaPhantom
+
+MAX_TRIAL_S = 180.0
+"""A trial ends unsuccessfully after this long."""
+STEP_S = 0.5
+"""Simulated time advanced between writes to the sample writer."""
+
+
+@dataclass(frozen=True)
+class PendingTrial:
+    block: ScheduleBlock
+    practice: bool
+    trial_index: int
+
+
+def participant_traits(study_seed: int, code: str, group: str) -> ParticipantTraits:
+    """The simulated person behind a code: the same in every trial and every run."""
+    return draw_traits(group, np.random.default_rng([study_seed, zlib.crc32(code.encode())]))
+
+
+def recover_interrupted(engine: Engine, participant_id: int) -> int:
+    """Mark trials left `running` by a process that died as `interrupted`; return how many."""
+    with Session(engine) as session, session.begin():
+        stale = session.scalars(
+            select(Trial).where(Trial.participant_id == participant_id, Trial.status == "running")
+        ).all()
+        for trial in stale:
+            trial.status = "interrupted"
+            trial.ended_at = utcnow()
+            session.add(
+                AuditEntry(
+                    entity="trial",
+                    entity_id=trial.id,
+                    field="status",
+                    old_value="running",
+                    new_value="interrupted",
+                    reason="found running when a new session started (the process had died)",
+                )
+            )
+    return len(stale)
+
+
+def pending_trials(session: Session, participant: Participant) -> list[PendingTrial]:
+    done = {
+        (t.block_index, t.practice, t.trial_index)
+        for t in session.scalars(
+            select(Trial).where(Trial.participant_id == participant.id, Trial.status == "completed")
+        )
+    }
+    out = []
+    for block in participant.blocks:
+        for practice, n in ((True, block.n_practice), (False, block.n_trials)):
+            for i in range(n):
+                if (block.block_index, practice, i) not in done:
+                    out.append(PendingTrial(block, practice, i))
+    return out
+
+
+def _sample_columns(samples: np.ndarray) -> dict[str, list[object]]:
+    cols = {name: samples[:, k].tolist() for k, name in enumerate(SAMPLE_COLUMNS)}
+    cols["branch"] = [REGION_ABBREVIATIONS[int(c)] for c in cols["branch"]]
+    return cols
+
+
+def run_session(
+    engine: Engine,
+    code: str,
+    driver_kind: str,
+    estimator: ForceEstimator,
+    make_driver: Callable[[], Driver] | None = None,
+    pace: float | None = None,
+    on_trial: Callable[[PendingTrial, int, int], None] = lambda *_: None,
+    max_trials: int | None = None,
+) -> list[int]:
+    """Run the participant's remaining trials; return the ids of the trials completed.
+
+    `pace` slows a simulated session to `pace` times real time (to watch it, or to stop
+    it in the middle); `on_trial(pending, k, n)` reports progress.
+    """
+    with Session(engine) as session:
+        study, _ = load_study(session)
+        participant = session.scalars(
+            select(Participant).where(Participant.study_id == study.id, Participant.code == code)
+        ).first()
+        if participant is None:
+            raise StudyInputError(
+                f"unknown participant {code!r}; expected a code from `study schedule`"
+            )
+        _ = participant.blocks  # load the schedule while the session is open
+        todo = pending_trials(session, participant)
+        session.expunge_all()
+    recover_interrupted(engine, participant.id)
+    if any(p.block.task != "lcca" for p in todo):
+        raise StudyInputError(
+            "this schedule has NOTES blocks; the NOTES task is not available yet, "
+            "expected lcca blocks only"
+        )
+    phantom = LccaPhantom()
+    traits = participant_traits(study.seed, code, participant.group)
+    completed: list[int] = []
+    todo = todo[:max_trials] if max_trials is not None else todo
+    for k, item in enumerate(todo):
+        on_trial(item, k, len(todo))
+        completed.append(
+            _run_trial(
+                engine,
+                participant,
+                item,
+                driver_kind,
+                estimator,
+                traits,
+                phantom,
+                make_driver,
+                pace,
+                study.seed,
+            )
+        )
+    return completed
+
+
+def _run_trial(
+    engine: Engine,
+    participant: Participant,
+    item: PendingTrial,
+    driver_kind: str,
+    estimator: ForceEstimator,
+    traits: ParticipantTraits,
+    phantom: LccaPhantom,
+    make_driver: Callable[[], Driver] | None,
+    pace: float | None,
+    study_seed: int,
+) -> int:
+    block = item.block
+    with Session(engine) as session, session.begin():
+        attempts = session.scalars(
+            select(Trial.attempt).where(
+                Trial.participant_id == participant.id,
+                Trial.block_index == block.block_index,
+                Trial.practice == item.practice,
+                Trial.trial_index == item.trial_index,
+            )
+        ).all()
+        trial = Trial(
+            participant_id=participant.id,
+            block_id=block.id,
+            task=block.task,
+            condition=block.condition,
+            block_index=block.block_index,
+            trial_index=item.trial_index,
+            practice=item.practice,
+            attempt=max(attempts, default=0) + 1,
+            driver=driver_kind,
+            status="running",
+            started_at=utcnow(),
+        )
+        session.add(trial)
+        session.flush()
+        trial_id, attempt = trial.id, trial.attempt
+    seed = zlib.crc32(
+        f"{study_seed}/{participant.code}/{block.block_index}/{int(item.practice)}/"
+        f"{item.trial_index}/{attempt}".encode()
+    )
+    loop = lcca_loop(block.condition, seed, estimator, phantom=phantom)
+    driver = make_driver() if make_driver else SimulatedParticipant(traits, phantom, MAX_TRIAL_S)
+    loop.start(driver)
+    chunks = []
+    wall0 = time.monotonic()
+    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer:
+        while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
+            samples = loop.advance(min(STEP_S, MAX_TRIAL_S - loop.t_s))
+            if len(samples):
+                writer.extend(_sample_columns(samples))
+                chunks.append(samples)
+            if pace:
+                lag = wall0 + loop.t_s / pace - time.monotonic()
+                if lag > 0:
+                    time.sleep(lag)
+    raw = pd.DataFrame(np.concatenate(chunks), columns=list(SAMPLE_COLUMNS))
+    result = measures(trial_frame(raw), loop.success)
+    with Session(engine) as session, session.begin():
+        session.execute(
+            update(Trial)
+            .where(Trial.id == trial_id)
+            .values(
+                status="completed",
+                ended_at=utcnow(),
+                completion_time_s=result["completion_time_s"],
+                peak_proximal_force_n=max(result["peak_proximal_force_n"], 0.0),
+                peak_distal_force_n=max(result["peak_distal_force_n"], 0.0),
+                success=result["success"],
+                wall_contacts=result["wall_contacts"],
+                summary={
+                    "peak_proximal_reference_force_n": result["peak_proximal_reference_force_n"],
+                    "seed": seed,
+                    "samples": writer.rows_committed,
+                },
+            )
+        )
+    return trial_id

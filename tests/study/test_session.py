@@ -1,0 +1,129 @@
+"""`study run`: sessions stream to the database and survive kill -9."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from sqlalchemy import create_engine, func, select
+from sqlalchemy.orm import Session
+
+from db.models.audit import AuditEntry
+from db.models.trial import Sample, Trial
+from study.cli import main
+
+DESIGN = """\
+name = "session test"
+seed = 3
+trials_per_condition = 2
+practice_trials = 0
+[groups]
+novice = 2
+"""
+
+
+def _study(tmp_path: Path) -> str:
+    db = str(tmp_path / "s.db")
+    (tmp_path / "d.toml").write_text(DESIGN)
+    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
+    assert main(["participant", "add", "--group", "novice", "--db", db]) == 0
+    return db
+
+
+def _trials(db: str) -> list[tuple[int, int, str, int, int]]:
+    """(id, slot, status, attempt, samples) for every trial."""
+    engine = create_engine(f"sqlite:///{db}")
+    with Session(engine) as s:
+        rows = s.execute(
+            select(
+                Trial.id, Trial.block_index * 10 + Trial.trial_index, Trial.status, Trial.attempt
+            ).order_by(Trial.id)
+        ).all()
+        out = [
+            (*r, s.scalar(select(func.count()).select_from(Sample).where(Sample.trial_id == r[0])))
+            for r in rows
+        ]
+    engine.dispose()
+    return out
+
+
+def test_a_session_stores_every_trial_with_its_samples(tmp_path: Path) -> None:
+    db = _study(tmp_path)
+    assert main(["run", "--participant", "P001", "--db", db]) == 0
+    trials = _trials(db)
+    assert [t[2] for t in trials] == ["completed"] * 4
+    engine = create_engine(f"sqlite:///{db}")
+    with Session(engine) as s:
+        for trial in s.scalars(select(Trial)):
+            # one row per 100 Hz sample over the trial
+            n = s.scalar(
+                select(func.count()).select_from(Sample).where(Sample.trial_id == trial.id)
+            )
+            assert n == round(trial.completion_time_s * 100)
+            assert trial.summary["samples"] == n
+    engine.dispose()
+    # nothing left to do: a second run completes nothing new
+    assert main(["run", "--participant", "P001", "--db", db]) == 0
+    assert len(_trials(db)) == 4
+
+
+def test_kill_9_mid_trial_keeps_completed_trials_and_repeats_the_running_one(
+    tmp_path: Path,
+) -> None:
+    db = _study(tmp_path)
+    cmd = [sys.executable, "-c", "from study.cli import main; raise SystemExit(main())"]
+    proc = subprocess.Popen(
+        [*cmd, "run", "--participant", "P001", "--pace", "15", "--db", db],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            time.sleep(0.2)
+            trials = _trials(db) if Path(db).exists() else []
+            done = [t for t in trials if t[2] == "completed"]
+            running = [t for t in trials if t[2] == "running" and t[4] >= 200]
+            if done and running:
+                break
+        else:
+            pytest.fail("the session never had a completed and a running trial")
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    before = _trials(db)
+    killed = next(t for t in before if t[2] == "running")
+    # the completed trials are intact; the running one kept its committed chunks
+    assert killed[4] > 0 and killed[4] % 100 == 0  # whole seconds: the last chunk is lost
+    assert main(["run", "--participant", "P001", "--db", db]) == 0
+    after = {t[0]: t for t in _trials(db)}
+    for t in before:
+        if t[2] == "completed":
+            assert after[t[0]] == t
+    assert after[killed[0]][2] == "interrupted" and after[killed[0]][4] == killed[4]
+    repeats = [t for t in after.values() if t[1] == killed[1] and t[0] != killed[0]]
+    assert len(repeats) == 1 and repeats[0][2] == "completed" and repeats[0][3] == 2
+    assert sorted({t[1] for t in after.values() if t[2] == "completed"}) == [0, 1, 10, 11]
+    engine = create_engine(f"sqlite:///{db}")
+    with Session(engine) as s:
+        audit = s.scalars(select(AuditEntry).where(AuditEntry.entity_id == killed[0])).one()
+        assert (audit.old_value, audit.new_value) == ("running", "interrupted")
+    engine.dispose()
+
+
+def test_unknown_participant_and_keyboard_driver_are_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    db = _study(tmp_path)
+    capsys.readouterr()
+    assert main(["run", "--participant", "P404", "--db", db]) == 2
+    assert main(["run", "--participant", "P001", "--driver", "keyboard", "--db", db]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "P404" in err[0] and "study tui" in err[1]
