@@ -21,6 +21,7 @@ from study.commands.estimator import estimator
 from study.commands.plan import design_group, init, participant, schedule_cmd
 from study.commands.run import run
 from study.commands.simulate import simulate
+from study.commands.tlx import tlx
 
 EXIT_USER_ERROR = 2
 
@@ -49,6 +50,7 @@ cli.add_command(design_group)
 cli.add_command(participant)
 cli.add_command(schedule_cmd)
 cli.add_command(run)
+cli.add_command(tlx)
 
 
 def _one_line(message: str) -> str:

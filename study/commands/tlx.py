@@ -1,0 +1,129 @@
+"""`study tlx pairs|enter|show`: NASA-TLX questionnaires from the command line."""
+
+from __future__ import annotations
+
+import json
+
+import click
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db.migrate import open_database
+from db.models.study import Participant
+from db.models.tlx import TLX_SUBSCALES, TlxResponse
+from study.commands.base import StudyGroup, db_option
+from study.errors import StudyInputError
+from study.protocol.roster import load_study
+from study.protocol.tlx import pair_order, raw_tlx, store_tlx, weighted_tlx
+
+
+@click.group("tlx", cls=StudyGroup)
+def tlx() -> None:
+    """NASA-TLX: six ratings (0-100, steps of 5) and 15 pairwise comparisons per block."""
+
+
+@tlx.command("pairs")
+@click.option("--participant", "code", required=True)
+@db_option
+def pairs_cmd(code: str, db_url: str | None) -> None:
+    """The 15 comparisons in the order this participant is shown them."""
+    engine = open_database(db_url, create=False)
+    try:
+        with Session(engine) as session:
+            study, _ = load_study(session)
+            if session.scalars(select(Participant).where(Participant.code == code)).first() is None:
+                raise StudyInputError(
+                    f"unknown participant {code!r}; expected a code from `study schedule`"
+                )
+    finally:
+        engine.dispose()
+    for k, (left, right) in enumerate(pair_order(study.seed, code), 1):
+        click.echo(f"{k:>2}. {left} or {right}")
+
+
+def _rating(name: str):
+    return click.option(
+        f"--{name}", type=int, required=True, help=f"{name} rating, 0-100 in steps of 5"
+    )
+
+
+@tlx.command("enter")
+@click.option("--participant", "code", required=True)
+@click.option("--task", required=True)
+@click.option("--condition", required=True)
+@_rating("mental")
+@_rating("physical")
+@_rating("temporal")
+@_rating("performance")
+@_rating("effort")
+@_rating("frustration")
+@click.option(
+    "--choices",
+    help="The 15 subscales chosen, comma-separated, in the order of `study tlx pairs`.",
+)
+@click.option(
+    "--reason", help="Why a stored questionnaire is being edited (kept in the audit log)."
+)
+@db_option
+def enter_cmd(
+    code: str,
+    task: str,
+    condition: str,
+    choices: str | None,
+    reason: str | None,
+    db_url: str | None,
+    **ratings: int,
+) -> None:
+    """Store a questionnaire for one task x condition block (or edit the stored one)."""
+    chosen = [c.strip() for c in choices.split(",")] if choices else None
+    engine = open_database(db_url, create=False)
+    try:
+        response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason)
+    finally:
+        engine.dispose()
+    scores = f"raw TLX {raw_tlx(ratings):.1f}"
+    if response.w_mental is not None:
+        weights = {s: getattr(response, f"w_{s}") for s in TLX_SUBSCALES}
+        scores += f", weighted TLX {weighted_tlx(ratings, weights):.1f}"
+    click.echo(f"{code} {task}/{condition}: {'stored' if new else 'updated'}; {scores}")
+
+
+@tlx.command("show")
+@click.option("--participant", "code", default=None, help="One participant [default: all].")
+@click.option("--json", "as_json", is_flag=True)
+@db_option
+def show_cmd(code: str | None, as_json: bool, db_url: str | None) -> None:
+    """Stored questionnaires with their raw and weighted scores."""
+    engine = open_database(db_url, create=False)
+    rows = []
+    try:
+        with Session(engine) as session:
+            query = select(TlxResponse, Participant.code).join(Participant)
+            if code:
+                query = query.where(Participant.code == code)
+            for response, pcode in session.execute(query.order_by(Participant.code)):
+                ratings = {s: getattr(response, s) for s in TLX_SUBSCALES}
+                weights = {s: getattr(response, f"w_{s}") for s in TLX_SUBSCALES}
+                rows.append(
+                    {
+                        "participant": pcode,
+                        "task": response.task,
+                        "condition": response.condition,
+                        **ratings,
+                        "tlx_raw": raw_tlx(ratings),
+                        "tlx_weighted": weighted_tlx(ratings, weights)
+                        if weights["mental"] is not None
+                        else None,
+                    }
+                )
+    finally:
+        engine.dispose()
+    if as_json:
+        click.echo(json.dumps(rows, indent=2))
+        return
+    for r in rows:
+        weighted = "-" if r["tlx_weighted"] is None else f"{r['tlx_weighted']:.1f}"
+        click.echo(
+            f"{r['participant']} {r['task']}/{r['condition']}: raw {r['tlx_raw']:.1f}, "
+            f"weighted {weighted}"
+        )

@@ -1,0 +1,181 @@
+"""NASA-TLX: ratings, the 15 pairwise comparisons, raw and weighted scores, storage.
+
+Hart & Staveland (1988): six subscales rated 0-100 in steps of 5; the raw TLX is their
+mean; each of the 15 pairs of subscales is presented once and the participant picks
+the one that contributed more to the workload; a subscale's weight is how often it was
+picked (0-5, summing to 15); the weighted TLX is sum(weight x rating) / 15.
+
+The pairs are presented in an order (and left/right placement) drawn per participant
+from the study's seed, so it is random across participants and reproducible.
+A stored questionnaire can be edited; every changed value is written to the audit log
+first, with the old and new values and the reason.
+"""
+
+from __future__ import annotations
+
+import itertools
+import zlib
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from sqlalchemy import Engine, select
+from sqlalchemy.orm import Session
+
+from db.base import utcnow
+from db.models.audit import AuditEntry
+from db.models.study import Participant
+from db.models.tlx import TLX_SUBSCALES, TlxResponse
+from study.errors import StudyInputError
+from study.protocol.roster import load_study
+
+PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
+"""The 15 pairs of subscales."""
+
+
+def check_rating(subscale: str, value: object) -> int:
+    """A rating on the scale, or StudyInputError naming it."""
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int | float)
+        or value != int(value)
+        or not 0 <= value <= 100
+        or int(value) % 5
+    ):
+        raise StudyInputError(
+            f"{subscale} rating {value!r} is off the scale; expected 0-100 in steps of 5"
+        )
+    return int(value)
+
+
+def check_ratings(ratings: Mapping[str, object]) -> dict[str, int]:
+    missing = [s for s in TLX_SUBSCALES if s not in ratings]
+    if missing:
+        raise StudyInputError(f"TLX ratings lack {', '.join(missing)}; expected all six subscales")
+    return {s: check_rating(s, ratings[s]) for s in TLX_SUBSCALES}
+
+
+def check_weights(weights: Mapping[str, object]) -> dict[str, int]:
+    """Tallies of the 15 choices: whole numbers 0-5 summing to 15."""
+    out = {}
+    for s in TLX_SUBSCALES:
+        w = weights.get(s)
+        if isinstance(w, bool) or not isinstance(w, int | float) or w != int(w) or not 0 <= w <= 5:
+            raise StudyInputError(f"{s} weight {w!r}; expected a whole number of choices 0-5")
+        out[s] = int(w)
+    if sum(out.values()) != 15:
+        raise StudyInputError(
+            f"TLX weights sum to {sum(out.values())}; expected 15 (one per pairwise comparison)"
+        )
+    return out
+
+
+def pair_order(study_seed: int, code: str) -> list[tuple[str, str]]:
+    """The 15 pairs as this participant sees them: seeded order and left/right sides."""
+    rng = np.random.default_rng([study_seed, zlib.crc32(code.encode()), 0x71C])
+    pairs = [PAIRS[i] for i in rng.permutation(len(PAIRS))]
+    return [
+        (b, a) if flip else (a, b) for (a, b), flip in zip(pairs, rng.random(15) < 0.5, strict=True)
+    ]
+
+
+def weights_from_choices(pairs: Sequence[tuple[str, str]], chosen: Sequence[str]) -> dict[str, int]:
+    """Tally the subscale chosen from each pair (in the order the pairs were shown)."""
+    if len(chosen) != len(pairs):
+        raise StudyInputError(
+            f"{len(chosen)} pairwise choices; expected {len(pairs)}, one per pair shown"
+        )
+    weights = dict.fromkeys(TLX_SUBSCALES, 0)
+    for k, ((left, right), pick) in enumerate(zip(pairs, chosen, strict=True)):
+        if pick not in (left, right):
+            raise StudyInputError(
+                f"choice {k + 1} is {pick!r}; expected {left!r} or {right!r} (pair {k + 1})"
+            )
+        weights[pick] += 1
+    return weights
+
+
+def raw_tlx(ratings: Mapping[str, int]) -> float:
+    """Mean of the six ratings."""
+    return sum(ratings[s] for s in TLX_SUBSCALES) / len(TLX_SUBSCALES)
+
+
+def weighted_tlx(ratings: Mapping[str, int], weights: Mapping[str, int]) -> float:
+    """sum(weight x rating) / 15."""
+    return sum(weights[s] * ratings[s] for s in TLX_SUBSCALES) / 15.0
+
+
+def store_tlx(
+    engine: Engine,
+    code: str,
+    task: str,
+    condition: str,
+    ratings: Mapping[str, object],
+    chosen: Sequence[str] | None = None,
+    reason: str | None = None,
+) -> tuple[TlxResponse, bool]:
+    """Store (or edit) the questionnaire of one block; return it and whether it was new."""
+    ratings = check_ratings(ratings)
+    with Session(engine) as session, session.begin():
+        study, _ = load_study(session)
+        participant = session.scalars(
+            select(Participant).where(Participant.study_id == study.id, Participant.code == code)
+        ).first()
+        if participant is None:
+            raise StudyInputError(
+                f"unknown participant {code!r}; expected a code from `study schedule`"
+            )
+        blocks = {(b.task, b.condition) for b in participant.blocks}
+        if (task, condition) not in blocks:
+            raise StudyInputError(
+                f"{code} has no {task}/{condition} block; expected one of "
+                f"{', '.join(f'{t}/{c}' for t, c in sorted(blocks))}"
+            )
+        weights: dict[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
+        pairwise = None
+        if chosen is not None:
+            pairs = pair_order(study.seed, code)
+            weights = weights_from_choices(pairs, chosen)
+            pairwise = [[a, b, c] for (a, b), c in zip(pairs, chosen, strict=True)]
+        existing = session.scalars(
+            select(TlxResponse).where(
+                TlxResponse.participant_id == participant.id,
+                TlxResponse.task == task,
+                TlxResponse.condition == condition,
+            )
+        ).first()
+        values: dict[str, Any] = {**ratings, **{f"w_{s}": weights[s] for s in TLX_SUBSCALES}}
+        if existing is None:
+            response = TlxResponse(
+                participant_id=participant.id,
+                task=task,
+                condition=condition,
+                pairwise=pairwise,
+                **values,
+            )
+            session.add(response)
+            session.flush()
+            session.expunge(response)
+            return response, True
+        if chosen is None:  # keep the stored comparisons when only ratings are edited
+            values.update({f"w_{s}": getattr(existing, f"w_{s}") for s in TLX_SUBSCALES})
+            pairwise = existing.pairwise
+        for name, new in values.items():
+            old = getattr(existing, name)
+            if old != new:
+                session.add(
+                    AuditEntry(
+                        entity="tlx_response",
+                        entity_id=existing.id,
+                        field=name,
+                        old_value=None if old is None else str(old),
+                        new_value=None if new is None else str(new),
+                        reason=reason or "edited with `study tlx enter`",
+                    )
+                )
+                setattr(existing, name, new)
+        existing.pairwise = pairwise
+        existing.updated_at = utcnow()
+        session.flush()
+        session.expunge(existing)
+        return existing, False

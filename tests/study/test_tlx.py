@@ -1,0 +1,122 @@
+"""NASA-TLX scoring, the pairwise comparisons, storage and the audit trail."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db.migrate import open_database
+from db.models.audit import AuditEntry
+from study.cli import main
+from study.errors import StudyInputError
+from study.protocol.design import TEMPLATE, parse_design
+from study.protocol.roster import add_participant, create_study
+from study.protocol.tlx import (
+    PAIRS,
+    check_rating,
+    pair_order,
+    raw_tlx,
+    store_tlx,
+    weighted_tlx,
+    weights_from_choices,
+)
+
+RATINGS = {
+    "mental": 70,
+    "physical": 20,
+    "temporal": 50,
+    "performance": 30,
+    "effort": 60,
+    "frustration": 40,
+}
+WEIGHTS = {
+    "mental": 5,
+    "physical": 0,
+    "temporal": 3,
+    "performance": 2,
+    "effort": 4,
+    "frustration": 1,
+}
+
+
+def test_scores_by_hand() -> None:
+    # raw: (70 + 20 + 50 + 30 + 60 + 40) / 6 = 45
+    assert raw_tlx(RATINGS) == pytest.approx(45.0)
+    # weighted: (5*70 + 0*20 + 3*50 + 2*30 + 4*60 + 1*40) / 15 = 840 / 15 = 56
+    assert weighted_tlx(RATINGS, WEIGHTS) == pytest.approx(56.0)
+
+
+@pytest.mark.parametrize("value", [-5, 57, 105, 2.5, True, "50"])
+def test_off_scale_ratings_are_refused(value: object) -> None:
+    with pytest.raises(StudyInputError, match="off the scale"):
+        check_rating("effort", value)
+
+
+def test_each_pair_is_shown_once_in_a_seeded_order_per_participant() -> None:
+    a, b = pair_order(1, "P001"), pair_order(1, "P002")
+    assert a == pair_order(1, "P001") and a != b
+    assert sorted(tuple(sorted(p)) for p in a) == sorted(tuple(sorted(p)) for p in PAIRS)
+
+
+def test_weights_tally_the_choices() -> None:
+    pairs = pair_order(1, "P001")
+    # always pick the subscale that comes first in the form: mental wins all 5 of its pairs
+    order = list(RATINGS)
+    chosen = [min(p, key=order.index) for p in pairs]
+    w = weights_from_choices(pairs, chosen)
+    assert w == {
+        "mental": 5,
+        "physical": 4,
+        "temporal": 3,
+        "performance": 2,
+        "effort": 1,
+        "frustration": 0,
+    }
+    with pytest.raises(StudyInputError, match="choice 1"):
+        weights_from_choices(pairs, ["nobody", *chosen[1:]])
+
+
+def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
+    engine = open_database(db_url)
+    try:
+        create_study(engine, parse_design(TEMPLATE), TEMPLATE)
+        p = add_participant(engine, "novice")
+        pairs = pair_order(1, p.code)
+        chosen = [a for a, _ in pairs]
+        stored, new = store_tlx(engine, p.code, "lcca", "HV", RATINGS, chosen)
+        assert new and sum(getattr(stored, f"w_{s}") for s in RATINGS) == 15
+        edited, new = store_tlx(
+            engine, p.code, "lcca", "HV", {**RATINGS, "effort": 65}, reason="typo"
+        )
+        assert not new and edited.effort == 65 and edited.w_mental == stored.w_mental
+        with Session(engine) as s:
+            audit = s.scalars(select(AuditEntry).where(AuditEntry.entity == "tlx_response")).all()
+        assert [(a.field, a.old_value, a.new_value, a.reason) for a in audit] == [
+            ("effort", "60", "65", "typo")
+        ]
+        with pytest.raises(StudyInputError, match="no lcca/XX block"):
+            store_tlx(engine, p.code, "lcca", "XX", RATINGS)
+    finally:
+        engine.dispose()
+
+
+def test_cli_refuses_an_off_scale_rating_and_stores_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    db = str(tmp_path / "s.db")
+    (tmp_path / "d.toml").write_text(TEMPLATE)
+    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
+    assert main(["participant", "add", "--group", "expert", "--db", db]) == 0
+    args = ["tlx", "enter", "--participant", "P001", "--task", "lcca", "--condition", "VO"]
+    args += [f"--{k}={v}" for k, v in {**RATINGS, "mental": 57}.items()]
+    capsys.readouterr()
+    assert main([*args, "--db", db]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "study tlx enter: error: mental rating 57 is off the scale; expected 0-100 in steps of 5"
+    ]
+    assert main(["tlx", "show", "--json", "--db", db]) == 0
+    assert capsys.readouterr().out.strip() == "[]"
