@@ -18,6 +18,7 @@ from study.commands.base import USER_ERRORS, InputError, StudyGroup
 from study.commands.bench import bench
 from study.commands.database import database
 from study.commands.estimator import estimator
+from study.commands.exchange import export_cmd, import_cmd
 from study.commands.plan import design_group, init, participant, schedule_cmd
 from study.commands.run import run
 from study.commands.simulate import simulate
@@ -51,6 +52,8 @@ cli.add_command(participant)
 cli.add_command(schedule_cmd)
 cli.add_command(run)
 cli.add_command(tlx)
+cli.add_command(import_cmd)
+cli.add_command(export_cmd)
 
 
 def _one_line(message: str) -> str:
