@@ -62,15 +62,17 @@ def participant() -> None:
 @participant.command("add")
 @click.option("--group", required=True, help="Experience group, by its name in the design.")
 @click.option("--site", default=None, help="Lab enrolling the participant (multi-site studies).")
+@click.option("--count", type=click.IntRange(min=1), default=1, show_default=True)
 @db_option
-def participant_add(group: str, site: str | None, db_url: str | None) -> None:
-    """Enrol the next participant of a group: code, condition order and schedule."""
+def participant_add(group: str, site: str | None, count: int, db_url: str | None) -> None:
+    """Enrol the next participant(s) of a group: code, condition order and schedule."""
     engine = open_database(db_url, create=False)
     try:
-        p = add_participant(engine, group, site)
+        for _ in range(count):
+            p = add_participant(engine, group, site)
+            click.echo(f"{p.code} ({p.group}): conditions {' then '.join(p.condition_order)}")
     finally:
         engine.dispose()
-    click.echo(f"{p.code} ({p.group}): conditions {' then '.join(p.condition_order)}")
 
 
 @click.command("schedule", cls=StudyCommand)

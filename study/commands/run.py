@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
@@ -10,11 +12,22 @@ from db.migrate import open_database
 from study.commands.base import StudyCommand, db_option
 from study.errors import StudyInputError
 from study.protocol.default_estimator import load_estimator
-from study.protocol.session import run_session
+from study.protocol.roster import schedule
+from study.protocol.session import run_participants, run_session
 
 
 @click.command("run", cls=StudyCommand)
-@click.option("--participant", "code", required=True, help="Participant code, e.g. P003.")
+@click.option("--participant", "code", default=None, help="Participant code, e.g. P003.")
+@click.option(
+    "--all", "run_all", is_flag=True, help="Every enrolled participant's remaining trials."
+)
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Processes running participants side by side (with --all).",
+)
 @click.option(
     "--driver",
     type=click.Choice(["simulated", "keyboard", "hardware"]),
@@ -28,8 +41,23 @@ from study.protocol.session import run_session
     help="Run a simulated session at this many times real time [default: as fast as it goes].",
 )
 @db_option
-def run(code: str, driver: str, port: str | None, pace: float | None, db_url: str | None) -> None:
+def run(
+    code: str | None,
+    run_all: bool,
+    jobs: int,
+    driver: str,
+    port: str | None,
+    pace: float | None,
+    db_url: str | None,
+) -> None:
     """Run the participant's remaining scheduled trials and store every sample."""
+    if (code is None) == (not run_all):
+        raise StudyInputError("give --participant CODE or --all; expected exactly one")
+    if run_all:
+        if driver != "simulated":
+            raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
+        _run_all(db_url, jobs, pace)
+        return
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")
     make_driver = None
@@ -65,3 +93,28 @@ def run(code: str, driver: str, port: str | None, pace: float | None, db_url: st
     finally:
         engine.dispose()
     click.echo(f"{code}: {len(done)} trials completed and stored")
+
+
+def _run_all(db_url: str | None, jobs: int, pace: float | None) -> None:
+    engine = open_database(db_url, create=False)
+    try:
+        codes = [p["code"] for p in schedule(engine)["participants"]]
+    finally:
+        engine.dispose()
+    start = time.monotonic()
+    total = 0
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    ) as progress:
+        bar = progress.add_task("participants", total=len(codes))
+        for code, n in run_participants(db_url, codes, jobs, pace):
+            total += n
+            progress.update(bar, advance=1, description=f"participants ({code} done)")
+    click.echo(
+        f"{len(codes)} participants, {total} trials completed and stored in "
+        f"{time.monotonic() - start:.1f} s with {jobs} process(es)"
+    )

@@ -15,9 +15,11 @@ trial, drawn from the group's distributions with the study's seed and the code),
 
 from __future__ import annotations
 
+import multiprocessing
 import time
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +28,7 @@ from sqlalchemy import Engine, select, update
 from sqlalchemy.orm import Session
 
 from db.base import utcnow
+from db.engine import write_transaction
 from db.models.audit import AuditEntry
 from db.models.study import Participant, ScheduleBlock
 from db.models.trial import Trial
@@ -60,7 +63,9 @@ def participant_traits(study_seed: int, code: str, group: str) -> ParticipantTra
 
 def recover_interrupted(engine: Engine, participant_id: int) -> int:
     """Mark trials left `running` by a process that died as `interrupted`; return how many."""
-    with Session(engine) as session, session.begin():
+    # read-then-write: under the write lock (SQLite cannot upgrade a read transaction
+    # while another process writes)
+    with write_transaction(engine) as conn, Session(bind=conn) as session:
         stale = session.scalars(
             select(Trial).where(Trial.participant_id == participant_id, Trial.status == "running")
         ).all()
@@ -77,6 +82,7 @@ def recover_interrupted(engine: Engine, participant_id: int) -> int:
                     reason="found running when a new session started (the process had died)",
                 )
             )
+        session.commit()
     return len(stale)
 
 
@@ -171,7 +177,7 @@ def _run_trial(
     study_seed: int,
 ) -> int:
     block = item.block
-    with Session(engine) as session, session.begin():
+    with write_transaction(engine) as conn, Session(bind=conn) as session:
         attempts = session.scalars(
             select(Trial.attempt).where(
                 Trial.participant_id == participant.id,
@@ -196,6 +202,7 @@ def _run_trial(
         session.add(trial)
         session.flush()
         trial_id, attempt = trial.id, trial.attempt
+        session.commit()
     seed = zlib.crc32(
         f"{study_seed}/{participant.code}/{block.block_index}/{int(item.practice)}/"
         f"{item.trial_index}/{attempt}".encode()
@@ -217,8 +224,8 @@ def _run_trial(
                     time.sleep(lag)
     raw = pd.DataFrame(np.concatenate(chunks), columns=list(SAMPLE_COLUMNS))
     result = measures(trial_frame(raw), loop.success)
-    with Session(engine) as session, session.begin():
-        session.execute(
+    with write_transaction(engine) as conn:
+        conn.execute(
             update(Trial)
             .where(Trial.id == trial_id)
             .values(
@@ -237,3 +244,39 @@ def _run_trial(
             )
         )
     return trial_id
+
+
+_WORKER: dict[str, object] = {}
+
+
+def _worker_init(db_url: str | None) -> None:
+    from db.migrate import open_database
+    from study.protocol.default_estimator import load_estimator
+
+    _WORKER["engine"] = open_database(db_url, create=False)
+    _WORKER["estimator"] = load_estimator()
+
+
+def _worker_run(code: str) -> tuple[str, int]:
+    engine, estimator = _WORKER["engine"], _WORKER["estimator"]
+    return code, len(run_session(engine, code, "simulated", estimator))  # type: ignore[arg-type]
+
+
+def run_participants(
+    db_url: str | None, codes: list[str], jobs: int, pace: float | None = None
+) -> Iterator[tuple[str, int]]:
+    """Run simulated sessions for `codes` in `jobs` processes; yield (code, trials) as each
+    finishes. Each process opens its own connection and loads the estimator once."""
+    if jobs == 1 or pace is not None:
+        _worker_init(db_url)
+        for code in codes:
+            engine, estimator = _WORKER["engine"], _WORKER["estimator"]
+            yield code, len(run_session(engine, code, "simulated", estimator, pace=pace))  # type: ignore[arg-type]
+        return
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(
+        jobs, mp_context=context, initializer=_worker_init, initargs=(db_url,)
+    ) as pool:
+        futures = [pool.submit(_worker_run, code) for code in codes]
+        for future in as_completed(futures):
+            yield future.result()

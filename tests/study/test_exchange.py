@@ -14,15 +14,21 @@ from study.cli import main
 from study.protocol.design import TEMPLATE
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_COLUMNS
 
-TRIALS = ",".join(TRIAL_COLUMNS) + """
+TRIALS = (
+    ",".join(TRIAL_COLUMNS)
+    + """
 P001,novice,lcca,VO,1,31.5,0.81,0.42,true
 P001,novice,lcca,HV,1,35.0,0.55,0.18,true
 P002,expert,lcca,VO,1,22.0,0.70,0.30,false
 """
-TLX = ",".join(TLX_COLUMNS + TLX_WEIGHT_COLUMNS) + """
+)
+TLX = (
+    ",".join(TLX_COLUMNS + TLX_WEIGHT_COLUMNS)
+    + """
 P001,lcca,VO,70,20,50,30,60,40,5,0,3,2,4,1
 P001,lcca,HV,50,20,40,30,45,25,5,0,3,2,4,1
 """
+)
 
 
 def _init(tmp_path: Path, name: str) -> str:
@@ -116,3 +122,17 @@ def test_parquet_export_has_the_same_columns(tmp_path: Path) -> None:
     assert main(["import", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 0
     assert main(["export", "--out", str(tmp_path / "pq"), "--format", "parquet", "--db", db]) == 0
     assert tuple(pd.read_parquet(tmp_path / "pq" / "trials.parquet").columns) == TRIAL_COLUMNS
+
+
+def test_the_column_contracts_are_the_issues() -> None:
+    assert TRIAL_COLUMNS == (
+        "participant", "group", "task", "condition", "trial", "completion_time_s",
+        "peak_proximal_force_n", "peak_distal_force_n", "success",
+    )  # fmt: skip
+    assert TLX_COLUMNS == (
+        "participant", "task", "condition", "mental", "physical", "temporal", "performance",
+        "effort", "frustration",
+    )  # fmt: skip
+    assert TLX_WEIGHT_COLUMNS == tuple(
+        f"w_{s}" for s in ("mental", "physical", "temporal", "performance", "effort", "frustration")
+    )

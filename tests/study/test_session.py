@@ -127,3 +127,12 @@ def test_unknown_participant_and_keyboard_driver_are_one_line(
     assert main(["run", "--participant", "P001", "--driver", "keyboard", "--db", db]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2 and "P404" in err[0] and "study tui" in err[1]
+
+
+def test_run_all_runs_every_participant_in_two_processes(tmp_path: Path) -> None:
+    db = _study(tmp_path)
+    assert main(["participant", "add", "--group", "novice", "--db", db]) == 0
+    assert main(["run", "--all", "--jobs", "2", "--db", db]) == 0
+    trials = _trials(db)
+    assert len(trials) == 8 and all(t[2] == "completed" for t in trials)
+    assert main(["run", "--all", "--participant", "P001", "--db", db]) == 2
