@@ -46,8 +46,10 @@ def _count_trials(db: str) -> int:
     return n
 
 
-def test_import_then_export_round_trips_the_contract(tmp_path: Path) -> None:
-    db = _init(tmp_path, "a.db")
+def test_import_then_export_round_trips_the_contract(db_url: str, tmp_path: Path) -> None:
+    db = db_url
+    (tmp_path / "d.toml").write_text(TEMPLATE)
+    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
     (tmp_path / "t.csv").write_text(TRIALS)
     (tmp_path / "x.csv").write_text(TLX)
     argv = ["import", "--trials", str(tmp_path / "t.csv"), "--tlx", str(tmp_path / "x.csv")]
