@@ -17,7 +17,6 @@ three stages to one bench recording; `save`/`load` keep them in a model folder:
 from __future__ import annotations
 
 import json
-import math
 import shutil
 import tempfile
 from collections.abc import Callable
@@ -25,12 +24,20 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numba
 import numpy as np
 import pandas as pd
 
 from teleop_core._typing import Float1D, Float2D
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.ekf import EkfSettings, ForceEkf, filter_forces, rest_variances
+from teleop_core.estimation.ekf import (
+    EKF_STATE_SIZE,
+    EkfSettings,
+    ekf_update,
+    filter_forces,
+    rest_variances,
+    settings_vector,
+)
 from teleop_core.estimation.gru import (
     GruConfig,
     GruModel,
@@ -42,7 +49,7 @@ from teleop_core.estimation.gru import (
     train_gru,
 )
 from teleop_core.estimation.metrics import lag_samples, rmse
-from teleop_core.estimation.physics import PhysicsParams, fit_physics
+from teleop_core.estimation.physics import PhysicsParams, fit_physics, force_at
 from teleop_core.estimation.recording import FollowerRecording
 
 MODEL_FILES = ("physics.json", "gru.pt", "standardisation.json", "ekf.json", "summary.json")
@@ -192,56 +199,48 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 
 class CausalEstimator:
-    """The estimator fed one sample at a time; `update` returns None until a window is full."""
+    """The estimator fed one sample at a time; `update` returns None until a window is full.
+
+    Its state lives in arrays and its steps are numba functions (`stream_push`,
+    `stream_estimate`), so that the closed loop's compiled kernel can run the same
+    estimator between its events; `arrays()` hands them over.
+    """
 
     def __init__(self, estimator: ForceEstimator) -> None:
         self.est = estimator
-        T = estimator.window
-        self._buffer = np.zeros((T, 3))
-        self._count = 0
-        self._last: tuple[float, float] | None = None
-        self._ekf = ForceEkf(estimator.ekf, estimator.physics, estimator.dt_s)
         std = estimator.gru.standardisation
-        self._mean = np.asarray(std.feature_mean)
-        self._std = np.asarray(std.feature_std)
-        self._mean_f, self._std_f = self._mean.tolist(), self._std.tolist()  # Python floats
         w = estimator.gru.weights
-        self._weights = (w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out)
-        self._target_std, self._target_mean = float(std.target_std), float(std.target_mean)
+        self.buffer = np.zeros((estimator.window, 3))
+        self.state = np.zeros(STREAM_STATE_SIZE)
+        self.ekf_state = np.zeros(EKF_STATE_SIZE)
+        self.mean = np.asarray(std.feature_mean, dtype=np.float64)
+        self.std = np.asarray(std.feature_std, dtype=np.float64)
+        self.physics = estimator.physics.vector()
+        self.ekf_settings = settings_vector(estimator.ekf)
+        self.weights = (w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, float(w.b_out))
+        self.target = np.array([std.target_std, std.target_mean], dtype=np.float64)
+        self.dt_s = estimator.dt_s
+        self._out = np.zeros(3)
 
     def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
         """Add a sample (s, A, rad/s, optionally rad/s^2) to the window without estimating:
         the 50 Hz pipeline sees every 100 Hz sample but estimates on every other one."""
-        if alpha is None:
-            # Backward difference, as FollowerRecording derives alpha.
-            alpha = 0.0 if self._last is None else (omega - self._last[1]) / (t - self._last[0])
-        self._last = (t, omega)
-        self._latest = (iq, omega, alpha)
-        self._buffer[:-1] = self._buffer[1:]
-        m, s = self._mean_f, self._std_f
-        self._buffer[-1] = ((iq - m[0]) / s[0], (omega - m[1]) / s[1], (alpha - m[2]) / s[2])
-        self._count += 1
+        given = alpha is not None
+        stream_push(
+            self.state, self.buffer, self.mean, self.std, t, iq, omega,
+            alpha if given else 0.0, given,
+        )  # fmt: skip
 
     def estimate(self) -> tuple[float, float, float] | None:
         """(F_physics, F*_GRU, F*_Final) in N from the samples pushed so far, or None
         while the window fills."""
-        if self._count < self.est.window:
+        ok = stream_estimate(
+            self.state, self.buffer, self.physics, *self.weights, self.target,
+            self.ekf_state, self.ekf_settings, self.dt_s, self._out,
+        )  # fmt: skip
+        if not ok:
             return None
-        iq, omega, alpha = self._latest
-        ph = self.est.physics
-        # F = (K_t I_q - J theta_dd - b theta_d - tau_c tanh(theta_d / w)) / r + F_0   (eq. 1)
-        f_physics = (
-            ph.torque_constant_n_m_per_a * iq
-            - ph.inertia_kg_m2 * alpha
-            - ph.viscous_damping_n_m_s_per_rad * omega
-            - ph.coulomb_friction_n_m * math.tanh(omega / ph.sign_speed_rad_s)
-        ) / ph.wheel_radius_m + ph.offset_n
-        # the GRU kernel called directly (GruModel.predict_window's arithmetic, without
-        # its attribute look-ups on every call)
-        y = _window_forward(self._buffer, *self._weights)
-        f_hybrid = f_physics + y * self._target_std + self._target_mean
-        f_final = self._ekf.update(f_physics, f_hybrid, omega)
-        return f_physics, f_hybrid, f_final
+        return float(self._out[0]), float(self._out[1]), float(self._out[2])
 
     def update(
         self, t: float, iq: float, omega: float, alpha: float | None = None
@@ -252,6 +251,68 @@ class CausalEstimator:
         """
         self.push(t, iq, omega, alpha)
         return self.estimate()
+
+
+# stream state: samples pushed, last (t, omega) and whether there is one, latest sample
+S_COUNT, S_LAST_T, S_LAST_OMEGA, S_HAS_LAST, S_IQ, S_OMEGA, S_ALPHA = range(7)
+STREAM_STATE_SIZE = 7
+
+
+@numba.njit(cache=True)
+def stream_push(
+    st: np.ndarray,
+    buf: np.ndarray,
+    mean: np.ndarray,
+    std: np.ndarray,
+    t: float,
+    iq: float,
+    omega: float,
+    alpha: float,
+    alpha_given: bool,
+) -> None:  # pragma: no cover - compiled; exercised through CausalEstimator
+    if not alpha_given:
+        # Backward difference, as FollowerRecording derives alpha.
+        alpha = 0.0 if st[S_HAS_LAST] == 0.0 else (omega - st[S_LAST_OMEGA]) / (t - st[S_LAST_T])
+    st[S_LAST_T], st[S_LAST_OMEGA], st[S_HAS_LAST] = t, omega, 1.0
+    st[S_IQ], st[S_OMEGA], st[S_ALPHA] = iq, omega, alpha
+    n = buf.shape[0]
+    for i in range(n - 1):
+        buf[i, 0], buf[i, 1], buf[i, 2] = buf[i + 1, 0], buf[i + 1, 1], buf[i + 1, 2]
+    buf[n - 1, 0] = (iq - mean[0]) / std[0]
+    buf[n - 1, 1] = (omega - mean[1]) / std[1]
+    buf[n - 1, 2] = (alpha - mean[2]) / std[2]
+    st[S_COUNT] += 1.0
+
+
+@numba.njit(cache=True)
+def stream_estimate(
+    st: np.ndarray,
+    buf: np.ndarray,
+    pv: np.ndarray,
+    w_ih: np.ndarray,
+    w_hh: np.ndarray,
+    b_ih: np.ndarray,
+    b_hh: np.ndarray,
+    w_out: np.ndarray,
+    b_out: float,
+    target: np.ndarray,
+    ekf_state: np.ndarray,
+    ekf_settings: np.ndarray,
+    dt_s: float,
+    out: np.ndarray,
+) -> bool:  # pragma: no cover - compiled; exercised through CausalEstimator
+    """Physics, GRU and EKF on the current window; False while it fills."""
+    if st[S_COUNT] < buf.shape[0]:
+        return False
+    iq, omega, alpha = st[S_IQ], st[S_OMEGA], st[S_ALPHA]
+    f_physics = force_at(pv, iq, omega, alpha)
+    # F*_GRU = F_physics + GRU residual (eq. 3), de-standardised
+    y = _window_forward(buf, w_ih, w_hh, b_ih, b_hh, w_out, b_out)
+    f_hybrid = f_physics + y * target[0] + target[1]
+    out[0] = f_physics
+    out[1] = f_hybrid
+    out[2] = ekf_update(ekf_state, ekf_settings, pv, dt_s, f_physics, f_hybrid, omega)
+    return True
 
 
 @dataclass

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+import numba
 import numpy as np
 from scipy.optimize import lsq_linear
 
@@ -70,19 +71,24 @@ class PhysicsParams:
         )
         return torque / self.wheel_radius_m + self.offset_n
 
+    def vector(self) -> np.ndarray:
+        """The parameters as `force_at` and `gradient_at` take them."""
+        return np.array(
+            [
+                self.torque_constant_n_m_per_a,
+                self.inertia_kg_m2,
+                self.viscous_damping_n_m_s_per_rad,
+                self.coulomb_friction_n_m,
+                self.wheel_radius_m,
+                self.offset_n,
+                self.sign_speed_rad_s,
+            ]
+        )
+
     def force_gradient(self, omega: float, dt_s: float) -> tuple[float, float]:
         """dF/dI_q and dF/dtheta_d at `omega`, the latter through alpha's backward difference."""
-        r = self.wheel_radius_m
-        sech2 = 1.0 / math.cosh(omega / self.sign_speed_rad_s) ** 2
-        d_omega = (
-            -(
-                self.viscous_damping_n_m_s_per_rad
-                + self.coulomb_friction_n_m * sech2 / self.sign_speed_rad_s
-                + self.inertia_kg_m2 / dt_s
-            )
-            / r
-        )
-        return self.torque_constant_n_m_per_a / r, d_omega
+        g_i, g_w = gradient_at(self.vector(), float(omega), float(dt_s))
+        return float(g_i), float(g_w)
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -131,3 +137,22 @@ def fit_physics(
         offset_n=float(beta[4]),
         sign_speed_rad_s=sign_speed_rad_s,
     )
+
+
+@numba.njit(cache=True)
+def force_at(pv: np.ndarray, iq: float, omega: float, alpha: float) -> float:  # pragma: no cover
+    """Eq. 1 for one sample, `pv` = `PhysicsParams.vector()` (the streaming path)."""
+    # F = (K_t I_q - J theta_dd - b theta_d - tau_c tanh(theta_d / w)) / r + F_0   (eq. 1)
+    torque = pv[0] * iq - pv[1] * alpha - pv[2] * omega - pv[3] * math.tanh(omega / pv[6])
+    return torque / pv[4] + pv[5]
+
+
+@numba.njit(cache=True)
+def gradient_at(pv: np.ndarray, omega: float, dt_s: float) -> tuple[float, float]:
+    """dF/dI_q and dF/dtheta_d (`PhysicsParams.force_gradient`)."""
+    # dF/dtheta_d = -(b + tau_c sech^2(theta_d / w) / w + J / dt) / r, since
+    # theta_dd = (theta_d - theta_d,prev) / dt
+    r = pv[4]
+    sech2 = 1.0 / math.cosh(omega / pv[6]) ** 2
+    d_omega = -(pv[2] + pv[3] * sech2 / pv[6] + pv[1] / dt_s) / r
+    return pv[0] / r, d_omega

@@ -163,6 +163,7 @@ class TeleopLoop:
         seed: int = 0,
         force_override: Callable[[float], float] | None = None,
         keep_ticks: bool = False,
+        fast: bool = True,
     ) -> None:
         self.config = cfg = config or LoopConfig()
         self.environment = environment or free_space()
@@ -192,9 +193,11 @@ class TeleopLoop:
         self._log = np.zeros((max(self._acq_every, self._drv_every, self._est_every), K.LOG_WIDTH))
         self._last_row = [0.0] * K.LOG_WIDTH
         self._schedule = np.zeros((8, 4))
-        self._noise: list[float] = []
-        self._noise_at = 0
-        self._force_est = 0.0
+        self._noise = np.zeros(0)
+        self._fast_allowed = fast
+        self._fast = False
+        self._est_arrays = self._estimator_arrays()
+        self._samples = np.zeros((0, len(SAMPLE_COLUMNS)))
         self._action = HandAction()
         self._done_s = math.nan
         self._success = False
@@ -221,7 +224,22 @@ class TeleopLoop:
         mp[K.M_IQ_FILTER_S] = cfg.sensors.current_filter_s
         mp[K.M_DT] = 1.0 / cfg.device_rate_hz
         mp[K.M_POLY : K.M_POLY + 6] = [*poly.loading, *poly.unloading]
+        mp[K.M_ACQ_EVERY] = round(cfg.device_rate_hz / cfg.acquisition_rate_hz)
+        mp[K.M_EST_EVERY] = round(cfg.device_rate_hz / cfg.estimation_rate_hz)
+        mp[K.M_KV] = h.speed_gain_m_s_per_rad
+        mp[K.M_HAS_EST] = 1.0 if self.estimator is not None else 0.0
+        mp[K.M_EST_DT] = self.estimator.dt_s if self.estimator is not None else 0.0
         return mp
+
+    def _estimator_arrays(self) -> tuple:
+        """The causal estimator's arrays, in the order the kernel takes them (dummies of
+        the same types without an estimator, so one compiled kernel serves both)."""
+        s = self._stream
+        if s is None:
+            z1, z2 = np.zeros(1), np.zeros((1, 1))
+            return (np.zeros((1, 3)), z1, z1, z1, z1, z2, z2, z1, z1, z1, 0.0, z1, z1, z1)
+        return (s.buffer, s.state, s.mean, s.std, s.physics, *s.weights, s.target,
+                s.ekf_state, s.ekf_settings)  # fmt: skip
 
     @property
     def t_s(self) -> float:
@@ -269,6 +287,20 @@ class TeleopLoop:
             self._drv_every = round(ratio)
         driver.start(np.random.default_rng(self.rng.integers(2**63)))
         self.mp[K.M_DIAL_EXTERNAL] = 1.0 if driver.physical_dial else 0.0
+        ideal = all(
+            link.params.delay_s == 0.0 and link.params.jitter_s == 0.0 and link.params.loss == 0.0
+            for link in (self.to_follower, self.to_master)
+        )
+        # acquisitions between driver events run inside the kernel when nothing between
+        # the two sides needs Python: same arithmetic, same order, fewer calls
+        self._fast = (
+            self._fast_allowed
+            and ideal
+            and self.force_override is None
+            and not driver.physical_dial
+            and not driver.realtime
+        )
+        self.mp[K.M_FAST] = 1.0 if self._fast else 0.0
         self._wall_start = time.monotonic() - self.t_s
 
     def advance(self, seconds: float) -> np.ndarray:
@@ -304,16 +336,36 @@ class TeleopLoop:
         c = self.counters
         kernel, acq, drv = self._kernel, self._acq_every, self._drv_every
         state = (self.loop, self.mp, self.dial, self.dp, self.follower, self.fp, self.f_enc_step)
+        loop = self.loop
         while c.ticks < end_tick and math.isnan(self._done_s):
             k = c.ticks
-            # next event tick: an acquisition or a driver update
-            nxt = min((k // acq + 1) * acq, (k // drv + 1) * drv, end_tick)
+            # next event tick: a driver update, and (unless the kernel does them) an
+            # acquisition
+            nxt = min((k // drv + 1) * drv, end_tick)
+            if not self._fast:
+                nxt = min(nxt, (k // acq + 1) * acq)
             n = nxt - k
             if n > len(self._log):
                 self._log = np.zeros((n, K.LOG_WIDTH))
+            if self._fast:
+                self._reserve_noise(n // acq + 2)
+                if len(self._samples) < n // acq + 1:
+                    self._samples = np.zeros((n // acq + 1, len(SAMPLE_COLUMNS)))
             log = self._log
-            kernel(n, *state, env.state, env.params, log, self._packets(k, nxt))
+            loop[K.L_N_ACQ] = loop[K.L_N_EST] = 0.0
+            m = kernel(
+                n, *state, env.state, env.params, log, self._packets(k, nxt),
+                self._est_arrays, self._noise, self._samples,
+            )  # fmt: skip
             c.ticks = nxt
+            if m:
+                rows.extend(map(tuple, self._samples[:m].tolist()))
+                n_acq, n_est = int(loop[K.L_N_ACQ]), int(loop[K.L_N_EST])
+                c.acquisitions += n_acq
+                c.commands_sent += n_acq
+                c.estimates += n_est
+                c.forces_sent += n_est
+                self._success = self._success or loop[K.L_SUCCESS] != 0.0
             self._last_row = log[n - 1].tolist()  # Python floats: cheap to index
             if self.keep_ticks:
                 logs.append(log[:n].copy())
@@ -362,20 +414,20 @@ class TeleopLoop:
 
     def _acquire(self, rows: list[tuple[float, ...]]) -> None:
         """The follower's ESP32 samples; the estimator runs on every other sample."""
-        c, t, row = self.counters, self.t_s, self._last_row
+        c, t, row, loop = self.counters, self.t_s, self._last_row, self.loop
         c.acquisitions += 1
         if c.ticks % self._est_every == 0:
             if self._stream is not None:
                 self._stream.push(t, row[9] + self._current_noise(), row[10])
                 estimate = self._stream.estimate()
-                self._force_est = estimate[2] if estimate is not None else 0.0
+                loop[K.L_FORCE_EST] = estimate[2] if estimate is not None else 0.0
             else:
-                self._force_est = row[11]
+                loop[K.L_FORCE_EST] = row[11]
             if self.force_override is not None:
-                self._force_est = self.force_override(t)
+                loop[K.L_FORCE_EST] = self.force_override(t)
             c.estimates += 1
             c.forces_sent += 1
-            self.to_master.send(t, float(self._force_est))
+            self.to_master.send(t, float(loop[K.L_FORCE_EST]))
         elif self._stream is not None:
             self._stream.push(t, row[9] + self._current_noise(), row[10])
         r = self.config.plant.wheel_radius_m
@@ -389,7 +441,7 @@ class TeleopLoop:
                 row[15],
                 row[16],
                 row[11],
-                self._force_est,
+                float(loop[K.L_FORCE_EST]),
                 row[12],
                 row[1],
                 row[3],
@@ -399,13 +451,22 @@ class TeleopLoop:
             self._success = True
 
     def _current_noise(self) -> float:
-        """INA240 noise on the acquired current, A (drawn in blocks: one call per sample
-        would cost more than the sample's whole share of the loop)."""
-        if self._noise_at >= len(self._noise):
-            self._noise = self.rng.normal(0.0, self.config.sensors.current_noise_a, 4096).tolist()
-            self._noise_at = 0
-        self._noise_at += 1
-        return self._noise[self._noise_at - 1]
+        """INA240 noise on the acquired current, A, drawn in blocks (one call per sample
+        would cost more than the sample's whole share of the loop); the kernel reads the
+        same array at the same position."""
+        self._reserve_noise(1)
+        pos = int(self.loop[K.L_NOISE_POS])
+        self.loop[K.L_NOISE_POS] = pos + 1
+        return float(self._noise[pos])
+
+    def _reserve_noise(self, count: int) -> None:
+        """At least `count` unused noise values from the current position on; new values
+        continue the same random stream, so when they are drawn does not matter."""
+        pos = int(self.loop[K.L_NOISE_POS])
+        if len(self._noise) - pos < count:
+            fresh = self.rng.normal(0.0, self.config.sensors.current_noise_a, max(4096, count))
+            self._noise = np.concatenate([self._noise[pos:], fresh])
+            self.loop[K.L_NOISE_POS] = 0.0
 
     def _send_command(self) -> None:
         """The master samples the dial and sends the rate command (eq. 5) to the follower."""
@@ -431,6 +492,7 @@ class TeleopLoop:
         action = self.driver.act(self.view())
         self._action = action
         loop = self.loop
+        loop[K.L_ROT_ACTION] = action.rotation_rate_rad_s
         loop[K.L_HAND_TARGET] = action.dial_target_rad
         loop[K.L_HAND_K] = action.grip_stiffness_n_m_per_rad
         loop[K.L_HAND_B] = action.grip_damping_n_m_s_per_rad

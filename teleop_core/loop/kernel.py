@@ -33,9 +33,10 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
+from teleop_core.estimation.estimator import stream_estimate, stream_push
 from teleop_core.follower.plant import follower_tick
 from teleop_core.master.dial import D_OMEGA, D_THETA, dial_tick
-from teleop_core.master.haptics import haptic_torque, psi, return_torque
+from teleop_core.master.haptics import haptic_torque, psi, rate_command, return_torque
 
 # Loop state (held inputs and the master controller's memory)
 (
@@ -56,8 +57,14 @@ from teleop_core.master.haptics import haptic_torque, psi, return_torque
     L_TAU_TOTAL,
     L_I_CMD_MA,
     L_TICK,
-) = range(17)
-LOOP_STATE_SIZE = 17
+    L_NOISE_POS,
+    L_FORCE_EST,
+    L_ROT_ACTION,
+    L_SUCCESS,
+    L_N_ACQ,
+    L_N_EST,
+) = range(23)
+LOOP_STATE_SIZE = 23
 # Master parameters
 (
     M_KS,
@@ -77,7 +84,9 @@ LOOP_STATE_SIZE = 17
     M_DIAL_EXTERNAL,
 ) = range(15)
 M_POLY = 15  # six polynomial coefficients follow
-MASTER_PARAM_SIZE = 21
+# In-kernel acquisition (the fast path: ideal links, see `core.TeleopLoop`)
+M_FAST, M_ACQ_EVERY, M_EST_EVERY, M_KV, M_HAS_EST, M_EST_DT = range(21, 27)
+MASTER_PARAM_SIZE = 27
 # Packet schedule rows: (tick index in the call, kind, value, value)
 PACKET_FORCE, PACKET_COMMAND = 0.0, 1.0
 # Environment output
@@ -125,7 +134,10 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         env_params: np.ndarray,
         log: np.ndarray,
         schedule: np.ndarray,
-    ) -> None:  # pragma: no cover - compiled; exercised through TeleopLoop
+        est: tuple,
+        noise: np.ndarray,
+        samples: np.ndarray,
+    ) -> int:  # pragma: no cover - compiled; exercised through TeleopLoop
         dt = mp[M_DT]
         poly = mp[M_POLY : M_POLY + 6]
         lpf_w = mp[M_VEL_FILTER_S] / (mp[M_VEL_FILTER_S] + dt)
@@ -134,6 +146,10 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         f_out = np.zeros(5)
         r = mp[M_WHEEL_R]
         next_packet = 0
+        n_samples = 0
+        fast = mp[M_FAST] != 0.0
+        acq_every, est_every = int(mp[M_ACQ_EVERY]), int(mp[M_EST_EVERY])
+        est_out = np.zeros(3)
         for k in range(n_ticks):
             # 0. packets that arrive over the link for this tick
             while next_packet < schedule.shape[0] and schedule[next_packet, 0] <= k:
@@ -219,6 +235,41 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
             row[18] = loop[L_ROTATION]
             row[19] = loop[L_FORCE_RX]
             row[20] = loop[L_SPEED_CMD_RX]
+            # 6. fast path: acquisitions between driver events happen here, as
+            # TeleopLoop._acquire and _send_command do them over an ideal link
+            tick = int(loop[L_TICK])
+            if fast and k < n_ticks - 1 and tick % acq_every == 0:
+                t = tick * dt
+                loop[L_N_ACQ] += 1.0
+                estimating = tick % est_every == 0
+                if mp[M_HAS_EST] != 0.0:
+                    iq = row[9] + noise[int(loop[L_NOISE_POS])]
+                    loop[L_NOISE_POS] += 1.0
+                    buf, st, mean, std = est[0], est[1], est[2], est[3]
+                    stream_push(st, buf, mean, std, t, iq, row[10], 0.0, False)
+                    if estimating:
+                        ok = stream_estimate(
+                            st, buf, est[4], est[5], est[6], est[7], est[8], est[9], est[10],
+                            est[11], est[12], est[13], mp[M_EST_DT], est_out,
+                        )  # fmt: skip
+                        loop[L_FORCE_EST] = est_out[2] if ok else 0.0
+                elif estimating:
+                    loop[L_FORCE_EST] = row[11]
+                if estimating:
+                    loop[L_N_EST] += 1.0
+                    loop[L_FORCE_RX] = loop[L_FORCE_EST]
+                out = samples[n_samples]
+                out[0], out[1], out[2] = t, row[6] * r, row[18]
+                out[3], out[4], out[5], out[6] = row[13], row[14], row[15], row[16]
+                out[7], out[8], out[9] = row[11], loop[L_FORCE_EST], row[12]
+                out[10], out[11] = row[1], row[3]
+                n_samples += 1
+                if row[17] != 0.0:
+                    loop[L_SUCCESS] = 1.0
+                # the master samples the dial: v_gw = k_v theta_m (eq. 5), at the wheel
+                loop[L_SPEED_CMD_RX] = rate_command(loop[L_THETA_Q_PREV], mp[M_KV]) / r
+                loop[L_ROT_RATE_RX] = loop[L_ROT_ACTION]
+        return n_samples
 
     return run_ticks
 

@@ -189,3 +189,17 @@ def test_the_return_damper_is_what_keeps_a_released_dial_stable(
     angle = TeleopLoop(cfg).run(3.0, Release()).to_frame()["dial_angle_rad"].to_numpy()
     late_swing = np.ptp(angle[-50:])
     assert (late_swing < 0.01) == settles
+
+
+def test_in_kernel_acquisition_matches_the_event_by_event_loop(small_estimator) -> None:
+    """With ideal links the kernel runs the acquisitions between driver events itself;
+    the samples must be exactly those of the loop that stops at every acquisition."""
+    runs = []
+    for fast in (True, False):
+        loop = TeleopLoop(
+            environment=tube_with_wall(), estimator=small_estimator, seed=8, fast=fast
+        )
+        runs.append(loop.run(6.0, SimulatedOperator(target_depth_m=0.3)))
+        assert loop._fast is fast
+    assert np.array_equal(runs[0].samples, runs[1].samples)
+    assert runs[0].counters == runs[1].counters
