@@ -130,7 +130,8 @@ class LoopResult:
 
     def to_frame(self) -> pd.DataFrame:
         frame = pd.DataFrame(self.samples, columns=list(SAMPLE_COLUMNS))
-        frame["branch"] = [self.branches[int(c)] for c in frame["branch"]]
+        names = np.asarray(self.branches, dtype=object)
+        frame["branch"] = names[self.samples[:, SAMPLE_COLUMNS.index("branch")].astype(int)]
         return frame
 
     def ticks_frame(self) -> pd.DataFrame:
@@ -349,8 +350,8 @@ class TeleopLoop:
                 self._log = np.zeros((n, K.LOG_WIDTH))
             if self._fast:
                 self._reserve_noise(n // acq + 2)
-                if len(self._samples) < n // acq + 1:
-                    self._samples = np.zeros((n // acq + 1, len(SAMPLE_COLUMNS)))
+                if len(self._samples) < n // acq + 2:
+                    self._samples = np.zeros((n // acq + 2, len(SAMPLE_COLUMNS)))
             log = self._log
             loop[K.L_N_ACQ] = loop[K.L_N_EST] = 0.0
             m = kernel(
@@ -375,6 +376,13 @@ class TeleopLoop:
 
     def _on_events(self, rows: list[tuple[float, ...]]) -> None:
         c = self.counters
+        if self._fast:
+            # the kernel has acquired and sent the rate command for this tick; a driver
+            # update changes only the rotation rate the command carries
+            if c.ticks % self._drv_every == 0:
+                self._drive()
+                self.loop[K.L_ROT_RATE_RX] = self.loop[K.L_ROT_ACTION]
+            return
         if c.ticks % self._drv_every == 0:
             self._drive()
         if c.ticks % self._acq_every == 0:

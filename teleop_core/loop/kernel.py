@@ -235,10 +235,11 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
             row[18] = loop[L_ROTATION]
             row[19] = loop[L_FORCE_RX]
             row[20] = loop[L_SPEED_CMD_RX]
-            # 6. fast path: acquisitions between driver events happen here, as
-            # TeleopLoop._acquire and _send_command do them over an ideal link
+            # 6. fast path: every acquisition happens here, as TeleopLoop._acquire and
+            # _send_command do them over an ideal link (a driver update at the same
+            # tick then only changes the rotation command; see TeleopLoop._on_events)
             tick = int(loop[L_TICK])
-            if fast and k < n_ticks - 1 and tick % acq_every == 0:
+            if fast and tick % acq_every == 0:
                 t = tick * dt
                 loop[L_N_ACQ] += 1.0
                 estimating = tick % est_every == 0
