@@ -18,6 +18,26 @@ from study.commands.base import StudyGroup
 from study.errors import StudyInputError
 from study.protocol.default_estimator import load_estimator
 
+_json_option = click.option(
+    "--json",
+    "json_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write every table as JSON here.",
+)
+_out_option = click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the Markdown tables, the figures and any data files.",
+)
+
+
+def _check_json_folder(json_path: Path) -> None:
+    if not json_path.parent.is_dir():
+        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+
 
 @click.group("bench", cls=StudyGroup)
 def bench() -> None:
@@ -65,20 +85,8 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
 
 
 @bench.command("follower")
-@click.option(
-    "--json",
-    "json_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write every table as JSON here.",
-)
-@click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for the Markdown tables and the figures.",
-)
+@_json_option
+@_out_option
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option(
     "--quick",
@@ -87,8 +95,7 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
 )
 def bench_follower(json_path: Path, out_dir: Path, seed: int, quick: bool) -> None:
     """Tables I-III and Fig. 8 of seed 000 on the simulated follower (about 30 min)."""
-    if not json_path.parent.is_dir():
-        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    _check_json_folder(json_path)
     config = FollowerBenchConfig.quick() if quick else FollowerBenchConfig()
     config = replace(config, seed=seed)
     with Console(stderr=True).status("follower bench") as status:
@@ -98,20 +105,8 @@ def bench_follower(json_path: Path, out_dir: Path, seed: int, quick: bool) -> No
 
 
 @bench.command("master")
-@click.option(
-    "--json",
-    "json_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write every table as JSON here.",
-)
-@click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for the Markdown tables and the figures.",
-)
+@_json_option
+@_out_option
 @click.option(
     "--estimator",
     "model_dir",
@@ -125,8 +120,7 @@ def bench_master(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
     """Figs. 10-11 of seed 000 on the simulated dial, latency, and the loop's speed."""
-    if not json_path.parent.is_dir():
-        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    _check_json_folder(json_path)
     config = MasterBenchConfig.quick() if quick else MasterBenchConfig()
     config = replace(config, seed=seed)
     estimator = load_estimator(model_dir)
@@ -139,20 +133,8 @@ def bench_master(
 
 
 @bench.command("lcca")
-@click.option(
-    "--json",
-    "json_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write the group table, the tests and the speed as JSON here.",
-)
-@click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for the trial CSV, the Markdown table and the figures.",
-)
+@_json_option
+@_out_option
 @click.option(
     "--estimator",
     "model_dir",
@@ -165,8 +147,7 @@ def bench_lcca(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
     """The paper's 20/8/8 user study with simulated participants, and its speed."""
-    if not json_path.parent.is_dir():
-        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    _check_json_folder(json_path)
     config = LccaBenchConfig.quick() if quick else LccaBenchConfig()
     config = replace(config, seed=seed)
     estimator = load_estimator(model_dir)
