@@ -10,13 +10,8 @@ import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-from study.bench.db_write import bench_sample_write
-from study.bench.follower import FollowerBenchConfig, run_follower_bench
-from study.bench.lcca import LccaBenchConfig, run_lcca_bench
-from study.bench.master import MasterBenchConfig, run_master_bench
 from study.commands.base import StudyGroup
 from study.errors import StudyInputError
-from study.protocol.default_estimator import load_estimator
 
 _json_option = click.option(
     "--json",
@@ -64,6 +59,8 @@ def bench() -> None:
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
 def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | None) -> None:
     """Write one trial's samples through the session writer and report rows/s."""
+    from study.bench.db_write import bench_sample_write
+
     with Progress(
         "[progress.description]{task.description}",
         BarColumn(),
@@ -95,6 +92,8 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
 )
 def bench_follower(json_path: Path, out_dir: Path, seed: int, quick: bool) -> None:
     """Tables I-III and Fig. 8 of seed 000 on the simulated follower (about 30 min)."""
+    from study.bench.follower import FollowerBenchConfig, run_follower_bench
+
     _check_json_folder(json_path)
     config = FollowerBenchConfig.quick() if quick else FollowerBenchConfig()
     config = replace(config, seed=seed)
@@ -120,6 +119,9 @@ def bench_master(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
     """Figs. 10-11 of seed 000 on the simulated dial, latency, and the loop's speed."""
+    from study.bench.master import MasterBenchConfig, run_master_bench
+    from study.protocol.default_estimator import load_estimator
+
     _check_json_folder(json_path)
     config = MasterBenchConfig.quick() if quick else MasterBenchConfig()
     config = replace(config, seed=seed)
@@ -147,6 +149,9 @@ def bench_lcca(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
     """The paper's 20/8/8 user study with simulated participants, and its speed."""
+    from study.bench.lcca import LccaBenchConfig, run_lcca_bench
+    from study.protocol.default_estimator import load_estimator
+
     _check_json_folder(json_path)
     config = LccaBenchConfig.quick() if quick else LccaBenchConfig()
     config = replace(config, seed=seed)

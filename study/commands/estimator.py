@@ -10,10 +10,6 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from study.commands.base import StudyGroup
 from study.errors import StudyInputError
-from teleop_core.estimation.estimator import ForceEstimator, train_estimator
-from teleop_core.estimation.gru import GruConfig
-from teleop_core.estimation.metrics import rmse
-from teleop_core.estimation.recording import FollowerRecording, write_csv_atomically
 
 _err = Console(stderr=True)
 
@@ -81,6 +77,10 @@ def train_cmd(
 
     RECORDING is a follower CSV (t, iq, theta, omega, f_ref; alpha optional).
     """
+    from teleop_core.estimation.estimator import train_estimator
+    from teleop_core.estimation.gru import GruConfig
+    from teleop_core.estimation.recording import FollowerRecording
+
     if out_dir.exists() and any(out_dir.iterdir()) and not force:
         raise StudyInputError(
             f"model folder {out_dir} exists and is not empty; expected a new folder (or --force)"
@@ -135,6 +135,10 @@ def train_cmd(
 )
 def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
     """Estimate the proximal force over RECORDING with the model in MODEL_DIR."""
+    from teleop_core.estimation.estimator import ForceEstimator
+    from teleop_core.estimation.metrics import rmse
+    from teleop_core.estimation.recording import FollowerRecording, write_csv_atomically
+
     model = ForceEstimator.load(model_dir)
     data = FollowerRecording.from_csv(recording, min_rows=model.window)
     with _err.status("estimating"):

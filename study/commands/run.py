@@ -11,9 +11,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 from db.migrate import open_database
 from study.commands.base import StudyCommand, db_option
 from study.errors import StudyInputError
-from study.protocol.default_estimator import load_estimator
 from study.protocol.roster import schedule
-from study.protocol.session import run_participants, run_session
 
 
 @click.command("run", cls=StudyCommand)
@@ -51,6 +49,9 @@ def run(
     db_url: str | None,
 ) -> None:
     """Run the participant's remaining scheduled trials and store every sample."""
+    from study.protocol.default_estimator import load_estimator
+    from study.protocol.session import run_session
+
     if (code is None) == (not run_all):
         raise StudyInputError("give --participant CODE or --all; expected exactly one")
     if run_all:
@@ -96,6 +97,8 @@ def run(
 
 
 def _run_all(db_url: str | None, jobs: int, pace: float | None) -> None:
+    from study.protocol.session import run_participants
+
     engine = open_database(db_url, create=False)
     try:
         codes = [p["code"] for p in schedule(engine)["participants"]]

@@ -10,21 +10,13 @@ from rich.console import Console
 
 from study.commands.base import StudyCommand
 from study.errors import StudyInputError
-from study.protocol.default_estimator import load_estimator
-from study.protocol.lcca_trial import (
-    CONDITIONS,
-    condition_haptics,
-    run_lcca_trial,
-    simulated_participant,
-)
-from study.protocol.participants import GROUPS
-from teleop_core.estimation.recording import write_csv_atomically
+from study.protocol.design import DEFAULT_GROUPS, KNOWN_CONDITIONS
 
 
 @click.command("simulate", cls=StudyCommand)
 @click.option("--task", type=click.Choice(["lcca"]), default="lcca", show_default=True)
-@click.option("--group", type=click.Choice(GROUPS), required=True)
-@click.option("--condition", type=click.Choice(CONDITIONS), required=True)
+@click.option("--group", type=click.Choice(DEFAULT_GROUPS), required=True)
+@click.option("--condition", type=click.Choice(KNOWN_CONDITIONS), required=True)
 @click.option(
     "--haptic-gain",
     type=float,
@@ -55,6 +47,10 @@ def simulate(
     max_seconds: float,
 ) -> None:
     """Run one simulated trial headless and write TRIAL.csv, TRIAL.json and a figure."""
+    from study.protocol.default_estimator import load_estimator
+    from study.protocol.lcca_trial import condition_haptics, run_lcca_trial, simulated_participant
+    from teleop_core.estimation.recording import write_csv_atomically
+
     for path in (out_csv, plot_path):
         if path is not None and not path.parent.is_dir():
             raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")

@@ -25,6 +25,8 @@ from study.errors import StudyInputError
 
 KNOWN_TASKS = ("lcca", "notes")
 KNOWN_CONDITIONS = ("VO", "HV")
+DEFAULT_GROUPS = ("outsider", "novice", "expert")
+"""The paper's experience groups (seed 000, IV-D), the simulated participants' groups."""
 
 TEMPLATE = """\
 # A haptic-teleoperation user study (seed 000, IV-D). `study init --design THIS_FILE`.

@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from study.errors import StudyInputError
+from study.protocol.design import DEFAULT_GROUPS
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
     GRIP_STIFFNESS_N_M_PER_RAD,
@@ -42,7 +43,7 @@ from teleop_core.loop.drivers import (
 from teleop_core.master.params import HapticParams
 from teleop_core.phantom.lcca import LccaPhantom
 
-GROUPS = ("outsider", "novice", "expert")
+GROUPS = DEFAULT_GROUPS
 AORTA = ("descending aorta", "aortic arch", "ascending aorta")
 
 
