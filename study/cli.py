@@ -14,6 +14,7 @@ import sys
 import click
 
 from study import __version__
+from study.commands.analyze import analyze
 from study.commands.base import USER_ERRORS, InputError, StudyGroup
 from study.commands.bench import bench
 from study.commands.database import database
@@ -54,6 +55,7 @@ cli.add_command(run)
 cli.add_command(tlx)
 cli.add_command(import_cmd)
 cli.add_command(export_cmd)
+cli.add_command(analyze)
 
 
 def _one_line(message: str) -> str:

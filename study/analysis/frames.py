@@ -1,0 +1,97 @@
+"""Tidy frames from the study database (long format in, tidy out; pingouin's manner).
+
+- `trial_frame`: one row per measured trial (completed, not practice, the latest attempt
+  of each slot): participant, group, task, condition, trial, completion_time_s,
+  peak_proximal_force_n, peak_distal_force_n, success.
+- `tlx_frame`: one row per questionnaire: participant, group, task, condition,
+  tlx_raw, tlx_weighted (empty without the pairwise comparisons), tlx_mental ...
+- `participant_means`: long format, one row per participant x task x condition x measure
+  (the mean over that block's trials; TLX values as they are): the unit of analysis.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+from sqlalchemy import Engine, select
+from sqlalchemy.orm import Session
+
+from db.models.study import Participant
+from db.models.tlx import TLX_SUBSCALES, TlxResponse
+from db.models.trial import Trial
+
+TRIAL_MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
+TLX_MEASURES = ("tlx_raw", "tlx_weighted", *(f"tlx_{s}" for s in TLX_SUBSCALES))
+MEASURES = TRIAL_MEASURES + TLX_MEASURES
+
+
+def trial_frame(engine: Engine) -> pd.DataFrame:
+    with Session(engine) as session:
+        rows = session.execute(
+            select(Participant.code, Participant.group, Trial)
+            .join(Trial, Trial.participant_id == Participant.id)
+            .where(Trial.status == "completed", Trial.practice.is_(False))
+            .order_by(Participant.code, Trial.block_index, Trial.trial_index, Trial.attempt)
+        ).all()
+    latest = {}
+    for code, group, t in rows:
+        latest[(code, t.task, t.condition, t.trial_index)] = {
+            "participant": code,
+            "group": group,
+            "task": t.task,
+            "condition": t.condition,
+            "trial": t.trial_index + 1,
+            "completion_time_s": t.completion_time_s,
+            "peak_proximal_force_n": t.peak_proximal_force_n,
+            "peak_distal_force_n": t.peak_distal_force_n,
+            "success": bool(t.success),
+        }
+    return pd.DataFrame(
+        list(latest.values()),
+        columns=["participant", "group", "task", "condition", "trial", *TRIAL_MEASURES, "success"],
+    )
+
+
+def tlx_frame(engine: Engine) -> pd.DataFrame:
+    with Session(engine) as session:
+        rows = session.execute(
+            select(TlxResponse, Participant.code, Participant.group).join(Participant)
+        ).all()
+    out = []
+    for r, code, group in rows:
+        ratings = {s: getattr(r, s) for s in TLX_SUBSCALES}
+        weights = {s: getattr(r, f"w_{s}") for s in TLX_SUBSCALES}
+        weighted = (
+            sum(weights[s] * ratings[s] for s in TLX_SUBSCALES) / 15.0
+            if weights["mental"] is not None
+            else float("nan")
+        )
+        out.append(
+            {
+                "participant": code,
+                "group": group,
+                "task": r.task,
+                "condition": r.condition,
+                "tlx_raw": sum(ratings.values()) / len(ratings),
+                "tlx_weighted": weighted,
+                **{f"tlx_{s}": float(v) for s, v in ratings.items()},
+            }
+        )
+    return pd.DataFrame(out, columns=["participant", "group", "task", "condition", *TLX_MEASURES])
+
+
+def participant_means(trials: pd.DataFrame, tlx: pd.DataFrame) -> pd.DataFrame:
+    """Long format: participant, group, task, condition, measure, value."""
+    keys = ["participant", "group", "task", "condition"]
+    parts = []
+    if len(trials):
+        means = trials.groupby(keys, as_index=False)[list(TRIAL_MEASURES)].mean()
+        parts.append(means.melt(id_vars=keys, var_name="measure", value_name="value"))
+    if len(tlx):
+        parts.append(
+            tlx[keys + list(TLX_MEASURES)].melt(
+                id_vars=keys, var_name="measure", value_name="value"
+            )
+        )
+    if not parts:
+        return pd.DataFrame(columns=[*keys, "measure", "value"])
+    return pd.concat(parts, ignore_index=True).dropna(subset=["value"])

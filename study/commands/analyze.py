@@ -1,0 +1,53 @@
+"""`study analyze`: the statistics of the stored study."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+
+from db.migrate import open_database
+from study.commands.base import StudyCommand, db_option
+from study.errors import StudyInputError
+
+
+@click.command("analyze", cls=StudyCommand)
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option("--task", default=None, help="Only this task (e.g. lcca) [default: all].")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+              help="Write the JSON here [default: OUT/analysis.json].")  # fmt: skip
+@db_option
+def analyze(out_dir: Path, task: str | None, json_path: Path | None, db_url: str | None) -> None:
+    """Per-group VO vs HV tests, the mixed ANOVA and the mixed model, as tables and JSON."""
+    from study.analysis.frames import participant_means, tlx_frame, trial_frame
+    from study.analysis.report import write
+    from study.analysis.stats import analyze as run_analysis
+
+    if json_path is not None and not json_path.parent.is_dir():
+        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    start = time.monotonic()
+    engine = open_database(db_url, create=False)
+    try:
+        trials, tlx = trial_frame(engine), tlx_frame(engine)
+    finally:
+        engine.dispose()
+    if task is not None:
+        known = set(trials["task"]) | set(tlx["task"])
+        if task not in known:
+            raise StudyInputError(
+                f"no data for task {task!r}; expected one of "
+                f"{', '.join(sorted(known)) or 'none stored'}"
+            )
+        trials, tlx = trials[trials["task"] == task], tlx[tlx["task"] == task]
+    if not len(trials) and not len(tlx):
+        raise StudyInputError("the database holds no completed trials or questionnaires to analyse")
+    result = run_analysis(trials, participant_means(trials, tlx))
+    written = write(result, out_dir, json_path)
+    for path in written:
+        click.echo(str(path))
+    n_ex = len(result.exclusions)
+    click.echo(
+        f"{len(result.comparisons)} comparisons, {n_ex} exclusions, "
+        f"{len(result.warnings)} notes, in {time.monotonic() - start:.1f} s"
+    )
