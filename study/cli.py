@@ -20,6 +20,7 @@ from study.commands.bench import bench
 from study.commands.database import database
 from study.commands.estimator import estimator
 from study.commands.exchange import export_cmd, import_cmd
+from study.commands.figures import demo, figures
 from study.commands.plan import design_group, init, participant, schedule_cmd
 from study.commands.run import run
 from study.commands.simulate import simulate
@@ -56,6 +57,8 @@ cli.add_command(tlx)
 cli.add_command(import_cmd)
 cli.add_command(export_cmd)
 cli.add_command(analyze)
+cli.add_command(figures)
+cli.add_command(demo)
 
 
 def _one_line(message: str) -> str:

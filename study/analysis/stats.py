@@ -34,6 +34,10 @@ from scipy import stats
 from statsmodels.stats.multitest import multipletests
 
 ALPHA = 0.05
+COMPARISON_COLUMNS = (
+    "task", "measure", "group", "n", "mean_vo", "mean_hv", "sd_vo", "sd_hv", "shapiro_p",
+    "test", "statistic", "p", "effect_size", "effect_size_kind", "p_holm",
+)  # fmt: skip
 
 
 @dataclass
@@ -137,9 +141,8 @@ def compare_conditions(
                 effect_size_kind="rank_biserial",
             )
         rows.append(row)
-    frame = pd.DataFrame(rows)
+    frame = pd.DataFrame(rows, columns=list(COMPARISON_COLUMNS))
     if len(frame):
-        frame["p_holm"] = np.nan
         for _, idx in frame.groupby(["task", "measure"]).groups.items():
             frame.loc[idx, "p_holm"] = multipletests(frame.loc[idx, "p"], method="holm")[1]
     return frame, excluded
@@ -164,8 +167,13 @@ def mixed_anova(long: pd.DataFrame, a: str = "VO", b: str = "HV") -> tuple[pd.Da
                 f"{task}/{measure}: unequal group sizes {_sizes(sizes)}; pingouin's mixed ANOVA "
                 "handles unbalanced between-subject groups"
             )
-        table = pg.mixed_anova(data=g, dv="value", within="condition", subject="participant",
-                               between="group")  # fmt: skip
+        try:
+            table = pg.mixed_anova(
+                data=g, dv="value", within="condition", subject="participant", between="group"
+            )
+        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
+            notes.append(f"{task}/{measure}: mixed ANOVA could not be computed: {exc}")
+            continue
         names = {"group": "group", "condition": "condition", "Interaction": "interaction"}
         for _, r in table.iterrows():
             rows.append(
@@ -175,7 +183,9 @@ def mixed_anova(long: pd.DataFrame, a: str = "VO", b: str = "HV") -> tuple[pd.Da
                     "p": float(r["p_unc"] if "p_unc" in r else r["p-unc"]), "np2": float(r["np2"]),
                 }
             )  # fmt: skip
-    return pd.DataFrame(rows), notes
+    return pd.DataFrame(
+        rows, columns=["task", "measure", "source", "F", "df1", "df2", "p", "np2"]
+    ), notes
 
 
 def mixed_model(trials: pd.DataFrame, measures: tuple[str, ...]) -> tuple[pd.DataFrame, list[str]]:
@@ -189,12 +199,16 @@ def mixed_model(trials: pd.DataFrame, measures: tuple[str, ...]) -> tuple[pd.Dat
                 continue
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                model = smf.mixedlm(
-                    "value ~ C(condition, Treatment('VO')) * C(group)",
-                    data,
-                    groups=data["participant"],
-                )
-                fit = model.fit(reml=True)
+                try:
+                    model = smf.mixedlm(
+                        "value ~ C(condition, Treatment('VO')) * C(group)",
+                        data,
+                        groups=data["participant"],
+                    )
+                    fit = model.fit(reml=True)
+                except (np.linalg.LinAlgError, ValueError) as exc:
+                    notes.append(f"{task}/{measure}: mixed model could not be fitted: {exc}")
+                    continue
             for w in caught:
                 notes.append(f"{task}/{measure}: mixed model warning: {w.message}")
             for term in fit.fe_params.index:
@@ -205,7 +219,7 @@ def mixed_model(trials: pd.DataFrame, measures: tuple[str, ...]) -> tuple[pd.Dat
                         "p": float(fit.pvalues[term]),
                     }
                 )  # fmt: skip
-    return pd.DataFrame(rows), notes
+    return pd.DataFrame(rows, columns=["task", "measure", "term", "estimate", "se", "p"]), notes
 
 
 def analyze(trials: pd.DataFrame, long: pd.DataFrame) -> Analysis:

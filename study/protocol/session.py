@@ -164,6 +164,13 @@ def run_session(
     return completed
 
 
+def _driver_counts(driver: Driver) -> dict[str, int]:
+    """What a simulated participant noticed during the trial (by hand, by eye)."""
+    if isinstance(driver, SimulatedParticipant):
+        return {"obstacles_felt": driver.obstacles_felt, "obstacles_seen": driver.obstacles_seen}
+    return {}
+
+
 def _run_trial(
     engine: Engine,
     participant: Participant,
@@ -240,6 +247,7 @@ def _run_trial(
                     "peak_proximal_reference_force_n": result["peak_proximal_reference_force_n"],
                     "seed": seed,
                     "samples": writer.rows_committed,
+                    **_driver_counts(driver),
                 },
             )
         )

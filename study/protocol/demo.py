@@ -1,0 +1,96 @@
+"""`study demo`: the default study, simulated from enrolment to the paper's figures.
+
+Creates the study from the default design, enrols 20 outsiders, 8 novices and 8
+experts, runs every session with simulated participants in two processes, fills in
+their NASA-TLX (`simulated_tlx`: from each block's experience), and writes the
+analysis and the figures.
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections.abc import Callable
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db.migrate import open_database
+from db.models.study import Participant
+from db.models.trial import Trial
+from study.protocol.design import TEMPLATE, parse_design
+from study.protocol.roster import add_participant, create_study
+from study.protocol.session import run_participants
+from study.protocol.simulated_tlx import block_ratings, pairwise_choices, person_offsets
+from study.protocol.tlx import store_tlx
+
+
+def fill_tlx(db_url: str, study_seed: int) -> int:
+    """A questionnaire for every block of every participant; returns how many."""
+    engine = open_database(db_url, create=False)
+    stored = 0
+    try:
+        with Session(engine) as session:
+            people = session.scalars(select(Participant).order_by(Participant.code)).all()
+            trials = pd.DataFrame(
+                [
+                    (t.participant_id, t.task, t.condition, t.completion_time_s,
+                     t.wall_contacts, t.success, (t.summary or {}).get("obstacles_seen", 0))
+                    for t in session.scalars(
+                        select(Trial).where(Trial.status == "completed", Trial.practice.is_(False))
+                    )
+                ],
+                columns=["pid", "task", "condition", "time", "contacts", "success", "seen"],
+            )  # fmt: skip
+            plan = [(p.id, p.code, [(b.task, b.condition) for b in p.blocks]) for p in people]
+        for pid, code, blocks in plan:
+            rng = np.random.default_rng([study_seed, zlib.crc32(code.encode()), 0x7A])
+            offsets = person_offsets(rng)
+            chosen = pairwise_choices(study_seed, code, rng)
+            for task, condition in blocks:
+                block = trials[(trials["pid"] == pid) & (trials["task"] == task)
+                               & (trials["condition"] == condition)]  # fmt: skip
+                ratings = block_ratings(
+                    block["time"].tolist(), block["contacts"].tolist(),
+                    block["success"].tolist(), rng, offsets, int(block["seen"].sum()),
+                )  # fmt: skip
+                store_tlx(engine, code, task, condition, ratings, chosen)
+                stored += 1
+    finally:
+        engine.dispose()
+    return stored
+
+
+QUICK = {"outsider = 20": "outsider = 2", "novice = 8": "novice = 2", "expert = 8": "expert = 2",
+         "trials_per_condition = 3": "trials_per_condition = 1",
+         "practice_trials = 1": "practice_trials = 0"}  # fmt: skip
+"""The default design shrunk to 2/2/2 participants and one trial per block."""
+
+
+def run_demo(
+    db_url: str,
+    seed: int,
+    jobs: int = 2,
+    progress: Callable[[str], None] = lambda _: None,
+    quick: bool = False,
+) -> None:
+    """Create, enrol, run and fill in the questionnaires of the default study."""
+    text = TEMPLATE.replace("seed = 1 ", f"seed = {seed} ")
+    for old, new in QUICK.items() if quick else ():
+        text = text.replace(old, new)
+    design = parse_design(text)
+    engine = open_database(db_url, create=True)
+    try:
+        create_study(engine, design, text)
+        codes = [
+            add_participant(engine, group).code
+            for group, n in design.groups.items()
+            for _ in range(n)
+        ]
+    finally:
+        engine.dispose()
+    for k, (code, _) in enumerate(run_participants(db_url, codes, jobs), 1):
+        progress(f"sessions: {k}/{len(codes)} participants ({code})")
+    progress("NASA-TLX")
+    fill_tlx(db_url, design.seed)
