@@ -22,6 +22,7 @@ from study.commands.estimator import estimator
 from study.commands.exchange import export_cmd, import_cmd
 from study.commands.figures import demo, figures
 from study.commands.plan import design_group, init, participant, schedule_cmd
+from study.commands.power import power
 from study.commands.run import run
 from study.commands.simulate import simulate
 from study.commands.tlx import tlx
@@ -59,6 +60,7 @@ cli.add_command(export_cmd)
 cli.add_command(analyze)
 cli.add_command(figures)
 cli.add_command(demo)
+cli.add_command(power)
 
 
 def _one_line(message: str) -> str:

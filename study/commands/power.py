@@ -1,0 +1,98 @@
+"""`study power`: power of the VO-HV comparison at the design's group sizes, by simulation."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+from study.commands.base import StudyCommand
+from study.errors import StudyInputError
+from study.protocol.design import parse_design
+
+
+def _effects(text: str, groups: list[str]) -> dict[str, float]:
+    """'0.8' for every group, or 'outsider=0.5,novice=0.8,expert=0.8'."""
+    try:
+        if "=" not in text:
+            return dict.fromkeys(groups, float(text))
+        pairs = dict(item.split("=", 1) for item in text.split(","))
+        effects = {g.strip(): float(v) for g, v in pairs.items()}
+    except ValueError:
+        raise StudyInputError(
+            f"--effect {text!r}; expected a number or group=number pairs, e.g. novice=0.8"
+        ) from None
+    missing = [g for g in groups if g not in effects]
+    unknown = [g for g in effects if g not in groups]
+    if missing or unknown:
+        raise StudyInputError(
+            f"--effect {text!r} names {', '.join(unknown) or 'no unknown group'} and lacks "
+            f"{', '.join(missing) or 'none'}; expected every design group: {', '.join(groups)}"
+        )
+    return effects
+
+
+@click.command("power", cls=StudyCommand)
+@click.option(
+    "--design", "design_path", required=True, type=click.Path(dir_okay=False, path_type=Path)
+)
+@click.option(
+    "--effect",
+    default="0.8",
+    show_default=True,
+    help="Standardised HV-VO effect: one number, or group=number for each group.",
+)
+@click.option(
+    "--correlation",
+    "rho",
+    type=click.FloatRange(0, 1, max_open=True),
+    default=0.5,
+    show_default=True,
+    help="Correlation of a participant's VO and HV outcomes.",
+)
+@click.option("--n-sim", type=click.IntRange(min=10), default=500, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Write power.json and the power curve (PDF, PNG) here.",
+)
+def power(
+    design_path: Path, effect: str, rho: float, n_sim: int, seed: int, out_dir: Path | None
+) -> None:
+    """Power of VO vs HV in each group and of the group x condition interaction."""
+    from study.analysis.power import SCALES, power_curve
+
+    if not design_path.is_file():
+        raise StudyInputError(f"design file {design_path} does not exist")
+    design = parse_design(design_path.read_text(), str(design_path))
+    effects = _effects(effect, list(design.groups))
+    columns = ("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn())
+    with Progress(
+        *columns, TimeRemainingColumn(), console=Console(stderr=True), transient=True
+    ) as bar:
+        task = bar.add_task("simulated studies", total=n_sim * len(SCALES))
+        curve = power_curve(design.groups, effects, rho, n_sim, seed, lambda: bar.advance(task))
+    at_design = next(r for s, r in curve if s == 1.0)
+    for group, p in at_design.groups.items():
+        click.echo(f"{group:<10} n = {at_design.sizes[group]:>3}  power {p:.3f}")
+    if at_design.interaction is not None:
+        click.echo(f"group x condition interaction: power {at_design.interaction:.3f}")
+    if out_dir is not None:
+        from study.analysis.figures import save
+        from study.analysis.power_plot import plot_power_curve
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        report = {
+            "design": design.groups, "effects": effects, "correlation": rho, "n_sim": n_sim,
+            "seed": seed, "groups": at_design.groups, "interaction": at_design.interaction,
+            "curve": [{"scale": s, "sizes": r.sizes, "groups": r.groups,
+                       "interaction": r.interaction} for s, r in curve],
+        }  # fmt: skip
+        (out_dir / "power.json").write_text(json.dumps(report, indent=2) + "\n")
+        for path in save(plot_power_curve(curve), out_dir, "power_curve", ("pdf", "png")):
+            click.echo(str(path))
