@@ -128,6 +128,9 @@ def write(analysis: Analysis, out_dir: Path, json_path: Path | None) -> list[Pat
             analysis.comparisons.assign(analysis="paired comparison"),
             analysis.mixed_anova.assign(analysis="mixed ANOVA"),
             analysis.lmm.assign(analysis="linear mixed model"),
+            # the exclusions and notes travel with the tests
+            pd.DataFrame({"analysis": "exclusion", "note": analysis.exclusions}),
+            pd.DataFrame({"analysis": "note", "note": analysis.warnings}),
         ],
         ignore_index=True,
     )

@@ -227,8 +227,20 @@ def mixed_model(trials: pd.DataFrame, measures: tuple[str, ...]) -> tuple[pd.Dat
     return pd.DataFrame(rows, columns=["task", "measure", "term", "estimate", "se", "p"]), notes
 
 
+def _missing_questionnaires(trials: pd.DataFrame, long: pd.DataFrame) -> list[str]:
+    notes = []
+    tlx = long[long["measure"].str.startswith("tlx_")]
+    for task, g in trials.groupby("task", sort=False):
+        answered = set(tlx.loc[tlx["task"] == task, "participant"])
+        missing = sorted(set(g["participant"]) - answered)
+        if missing:
+            notes.append(f"{task}/tlx_*: excluded {', '.join(missing)} (no questionnaires)")
+    return notes
+
+
 def analyze(trials: pd.DataFrame, long: pd.DataFrame) -> Analysis:
     comparisons, excluded = compare_conditions(long)
+    excluded = _missing_questionnaires(trials, long) + excluded
     anova, anova_notes = mixed_anova(long)
     lmm, lmm_notes = mixed_model(trials, ("completion_time_s", "peak_proximal_force_n",
                                           "peak_distal_force_n"))  # fmt: skip

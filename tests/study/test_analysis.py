@@ -181,6 +181,12 @@ def test_study_analyze_writes_the_json_contract(
     assert tlx_novice[0]["n"] == 4  # P005 has no questionnaires: not in the TLX analyses
     for name in ("comparisons.md", "comparisons.tex", "tests.csv"):
         assert (out / name).stat().st_size > 100
+    # the exclusion (P005's questionnaires) is stated in every output
+    assert any("P005" in e for e in report["exclusions"])
+    assert "P005" in (out / "comparisons.md").read_text()
+    assert "P005" in (out / "comparisons.tex").read_text()
+    tests_csv = pd.read_csv(out / "tests.csv")
+    assert tests_csv["note"].fillna("").str.contains("P005").any()
     capsys.readouterr()
     assert main(["analyze", "--out", str(out), "--task", "notes", "--db", db]) == 2
     assert "no data for task 'notes'" in capsys.readouterr().err
