@@ -111,9 +111,9 @@ def force_traces(samples: pd.DataFrame, title: str = "", width: str = "single") 
     with plt.rc_context(STYLE):
         fig, ax = plt.subplots(figsize=(WIDTHS_IN[width], 1.8), layout="constrained")
         ax.plot(samples["t_s"], samples["proximal_force_n"], color=OKABE_ITO["grey"],
-                label="proximal, reference")  # fmt: skip
+                label="proximal (ref.)")  # fmt: skip
         ax.plot(samples["t_s"], samples["proximal_force_est_n"], color=OKABE_ITO["HV"],
-                label="proximal, estimated")  # fmt: skip
+                label="proximal (est.)")  # fmt: skip
         ax.plot(samples["t_s"], samples["distal_force_n"], color=OKABE_ITO["VO"], label="distal")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("force (N)")
