@@ -31,7 +31,10 @@ def _formats(text: str) -> list[str]:
               show_default=True, help="IEEE column width: 3.5 in or 7.16 in.")  # fmt: skip
 @db_option
 def figures(out_dir: Path, formats: str, width: str, db_url: str | None) -> None:
-    """The paper's figures: groups VO vs HV (Fig. 12), force traces (Fig. 9), TLX profile."""
+    """Draw the paper's figures: group comparison, force traces, NASA-TLX profile.
+
+    Fig. 12 (per group, VO vs HV), Fig. 9 (force traces of a trial) and the TLX profile.
+    """
     from study.analysis.paper import write_figures
 
     chosen = _formats(formats)
