@@ -36,12 +36,26 @@ from teleop_core.follower.plant import STATE_SIZE, _param_vector
 from teleop_core.loop import kernel as K
 from teleop_core.loop.drivers import Driver, HandAction, OperatorView
 from teleop_core.loop.environments import Environment, free_space
-from teleop_core.loop.link import Link, LinkParams
+from teleop_core.loop.link import (
+    LINK_STATE_SIZE,
+    LS_NEWEST,
+    QUEUE_ROWS,
+    QUEUE_WIDTH,
+    Link,
+    LinkParams,
+    kernel_send,
+    link_vector,
+)
 from teleop_core.master.dial import D_OMEGA, D_THETA, DIAL_STATE_SIZE, dial_param_vector
 from teleop_core.master.haptics import LOADING, rate_command
 from teleop_core.master.params import DialParams, HapticParams
 
 _NO_PACKETS = np.zeros((0, 4))
+_NO_LINKS = (
+    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(3),
+    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(3),
+    np.zeros(1), np.zeros(1),
+)  # fmt: skip
 SAMPLE_COLUMNS = (
     "t_s",
     "insertion_m",
@@ -179,6 +193,7 @@ class TeleopLoop:
         self._est_every = round(cfg.device_rate_hz / cfg.estimation_rate_hz)
         self._drv_every = round(cfg.device_rate_hz / cfg.driver_rate_hz)  # see start()
         link_rng = np.random.default_rng(self.rng.integers(2**63))
+        self._link_rng = link_rng
         self.to_follower: Link[tuple[float, float]] = Link(cfg.to_follower, link_rng)
         self.to_master: Link[float] = Link(cfg.to_master, link_rng)
         self.loop = np.zeros(K.LOOP_STATE_SIZE)
@@ -231,6 +246,33 @@ class TeleopLoop:
         mp[K.M_HAS_EST] = 1.0 if self.estimator is not None else 0.0
         mp[K.M_EST_DT] = self.estimator.dt_s if self.estimator is not None else 0.0
         return mp
+
+    def _kernel_links(self) -> tuple:
+        """Queues, states and parameters of both link directions for the kernel, and the
+        pool of uniform draws (from the links' generator, in `Link.send`'s order)."""
+
+        def state() -> np.ndarray:
+            ls = np.zeros(LINK_STATE_SIZE)
+            ls[LS_NEWEST] = -1.0
+            return ls
+
+        self._pool = np.zeros(0)
+        self._pool_pos = np.zeros(1)
+        return (
+            np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(self.to_master.params),
+            np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(self.to_follower.params),
+            self._pool, self._pool_pos,
+        )  # fmt: skip
+
+    def _reserve_draws(self, count: int) -> None:
+        pos = int(self._pool_pos[0])
+        if len(self._pool) - pos < count:
+            fresh = self._link_rng.random(max(4096, count))
+            self._pool = np.concatenate([self._pool[pos:], fresh])
+            self._pool_pos[0] = 0.0
+            links = list(self._links)
+            links[6] = self._pool
+            self._links = tuple(links)
 
     def _estimator_arrays(self) -> tuple:
         """The causal estimator's arrays, in the order the kernel takes them (dummies of
@@ -288,19 +330,16 @@ class TeleopLoop:
             self._drv_every = round(ratio)
         driver.start(np.random.default_rng(self.rng.integers(2**63)))
         self.mp[K.M_DIAL_EXTERNAL] = 1.0 if driver.physical_dial else 0.0
-        ideal = all(
-            link.params.delay_s == 0.0 and link.params.jitter_s == 0.0 and link.params.loss == 0.0
-            for link in (self.to_follower, self.to_master)
-        )
-        # acquisitions between driver events run inside the kernel when nothing between
-        # the two sides needs Python: same arithmetic, same order, fewer calls
+        # acquisitions, estimates and the link run inside the kernel between driver
+        # events unless something outside it must see each packet
         self._fast = (
             self._fast_allowed
-            and ideal
             and self.force_override is None
             and not driver.physical_dial
             and not driver.realtime
         )
+        if self._fast:
+            self._links = self._kernel_links()
         self.mp[K.M_FAST] = 1.0 if self._fast else 0.0
         self._wall_start = time.monotonic() - self.t_s
 
@@ -348,22 +387,27 @@ class TeleopLoop:
             n = nxt - k
             if n > len(self._log):
                 self._log = np.zeros((n, K.LOG_WIDTH))
+            links = _NO_LINKS
             if self._fast:
                 self._reserve_noise(n // acq + 2)
+                self._reserve_draws(4 * (n // acq + 2))
                 if len(self._samples) < n // acq + 2:
                     self._samples = np.zeros((n // acq + 2, len(SAMPLE_COLUMNS)))
+                # the command at a driver tick that ends this call waits for the driver
+                self.mp[K.M_DEFER_LAST] = 1.0 if nxt % drv == 0 and nxt % acq == 0 else 0.0
+                links = self._links
             log = self._log
-            loop[K.L_N_ACQ] = loop[K.L_N_EST] = 0.0
+            loop[K.L_N_ACQ] = loop[K.L_N_EST] = loop[K.L_N_CMD] = 0.0
             m = kernel(
                 n, *state, env.state, env.params, log, self._packets(k, nxt),
-                self._est_arrays, self._noise, self._samples,
+                self._est_arrays, self._noise, self._samples, links,
             )  # fmt: skip
             c.ticks = nxt
             if m:
                 rows.extend(map(tuple, self._samples[:m].tolist()))
                 n_acq, n_est = int(loop[K.L_N_ACQ]), int(loop[K.L_N_EST])
                 c.acquisitions += n_acq
-                c.commands_sent += n_acq
+                c.commands_sent += int(loop[K.L_N_CMD])
                 c.estimates += n_est
                 c.forces_sent += n_est
                 self._success = self._success or loop[K.L_SUCCESS] != 0.0
@@ -377,11 +421,19 @@ class TeleopLoop:
     def _on_events(self, rows: list[tuple[float, ...]]) -> None:
         c = self.counters
         if self._fast:
-            # the kernel has acquired and sent the rate command for this tick; a driver
-            # update changes only the rotation rate the command carries
+            # the kernel has acquired this tick; after a driver update the master sends
+            # the rate command, carrying the new rotation, into the kernel's link
             if c.ticks % self._drv_every == 0:
                 self._drive()
-                self.loop[K.L_ROT_RATE_RX] = self.loop[K.L_ROT_ACTION]
+                if c.ticks % self._acq_every == 0:
+                    loop = self.loop
+                    r = self.config.plant.wheel_radius_m
+                    kv = self.config.haptics.speed_gain_m_s_per_rad
+                    speed = rate_command(loop[K.L_THETA_Q_PREV], kv) / r
+                    q_f, ls_f, lp_f = self._links[3:6]
+                    kernel_send(q_f, ls_f, lp_f, self._pool, self._pool_pos, self.t_s, speed,
+                                loop[K.L_ROT_ACTION])  # fmt: skip
+                    c.commands_sent += 1
             return
         if c.ticks % self._drv_every == 0:
             self._drive()

@@ -35,6 +35,7 @@ import numpy as np
 
 from teleop_core.estimation.estimator import stream_estimate, stream_push
 from teleop_core.follower.plant import follower_tick
+from teleop_core.loop.link import kernel_deliver, kernel_send
 from teleop_core.master.dial import D_OMEGA, D_THETA, dial_tick
 from teleop_core.master.haptics import haptic_torque, psi, rate_command, return_torque
 
@@ -63,8 +64,9 @@ from teleop_core.master.haptics import haptic_torque, psi, rate_command, return_
     L_SUCCESS,
     L_N_ACQ,
     L_N_EST,
-) = range(23)
-LOOP_STATE_SIZE = 23
+    L_N_CMD,
+) = range(24)
+LOOP_STATE_SIZE = 24
 # Master parameters
 (
     M_KS,
@@ -85,8 +87,8 @@ LOOP_STATE_SIZE = 23
 ) = range(15)
 M_POLY = 15  # six polynomial coefficients follow
 # In-kernel acquisition (the fast path: ideal links, see `core.TeleopLoop`)
-M_FAST, M_ACQ_EVERY, M_EST_EVERY, M_KV, M_HAS_EST, M_EST_DT = range(21, 27)
-MASTER_PARAM_SIZE = 27
+M_FAST, M_ACQ_EVERY, M_EST_EVERY, M_KV, M_HAS_EST, M_EST_DT, M_DEFER_LAST = range(21, 28)
+MASTER_PARAM_SIZE = 28
 # Packet schedule rows: (tick index in the call, kind, value, value)
 PACKET_FORCE, PACKET_COMMAND = 0.0, 1.0
 # Environment output
@@ -137,6 +139,7 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         est: tuple,
         noise: np.ndarray,
         samples: np.ndarray,
+        links: tuple,
     ) -> int:  # pragma: no cover - compiled; exercised through TeleopLoop
         dt = mp[M_DT]
         poly = mp[M_POLY : M_POLY + 6]
@@ -150,7 +153,16 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         fast = mp[M_FAST] != 0.0
         acq_every, est_every = int(mp[M_ACQ_EVERY]), int(mp[M_EST_EVERY])
         est_out = np.zeros(3)
+        packet = np.zeros(2)
+        q_m, ls_m, lp_m, q_f, ls_f, lp_f, pool, pos = links
         for k in range(n_ticks):
+            # 0'. fast path: packets arriving over the in-kernel link for this tick
+            if fast:
+                if kernel_deliver(q_m, ls_m, loop[L_TICK], dt, packet):
+                    loop[L_FORCE_RX] = packet[0]
+                if kernel_deliver(q_f, ls_f, loop[L_TICK], dt, packet):
+                    loop[L_SPEED_CMD_RX] = packet[0]
+                    loop[L_ROT_RATE_RX] = packet[1]
             # 0. packets that arrive over the link for this tick
             while next_packet < schedule.shape[0] and schedule[next_packet, 0] <= k:
                 packet = schedule[next_packet]
@@ -236,8 +248,7 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
             row[19] = loop[L_FORCE_RX]
             row[20] = loop[L_SPEED_CMD_RX]
             # 6. fast path: every acquisition happens here, as TeleopLoop._acquire and
-            # _send_command do them over an ideal link (a driver update at the same
-            # tick then only changes the rotation command; see TeleopLoop._on_events)
+            # _send_command do them, with the link's queues and draws in the kernel
             tick = int(loop[L_TICK])
             if fast and tick % acq_every == 0:
                 t = tick * dt
@@ -258,7 +269,7 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
                     loop[L_FORCE_EST] = row[11]
                 if estimating:
                     loop[L_N_EST] += 1.0
-                    loop[L_FORCE_RX] = loop[L_FORCE_EST]
+                    kernel_send(q_m, ls_m, lp_m, pool, pos, t, loop[L_FORCE_EST], 0.0)
                 out = samples[n_samples]
                 out[0], out[1], out[2] = t, row[6] * r, row[18]
                 out[3], out[4], out[5], out[6] = row[13], row[14], row[15], row[16]
@@ -267,9 +278,12 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
                 n_samples += 1
                 if row[17] != 0.0:
                     loop[L_SUCCESS] = 1.0
-                # the master samples the dial: v_gw = k_v theta_m (eq. 5), at the wheel
-                loop[L_SPEED_CMD_RX] = rate_command(loop[L_THETA_Q_PREV], mp[M_KV]) / r
-                loop[L_ROT_RATE_RX] = loop[L_ROT_ACTION]
+                # the master samples the dial: v_gw = k_v theta_m (eq. 5), at the wheel; at
+                # a driver tick that ends the call, Python sends it after the driver acts
+                if not (k == n_ticks - 1 and mp[M_DEFER_LAST] != 0.0):
+                    speed = rate_command(loop[L_THETA_Q_PREV], mp[M_KV]) / r
+                    kernel_send(q_f, ls_f, lp_f, pool, pos, t, speed, loop[L_ROT_ACTION])
+                    loop[L_N_CMD] += 1.0
         return n_samples
 
     return run_ticks

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
+import numba
 import numpy as np
 
 from teleop_core.errors import TeleopInputError
@@ -94,3 +95,79 @@ class Link(Generic[T]):
         """Deliver every packet due by t_s; return the newest value held (None before any)."""
         self.deliver_until(t_s)
         return self.value
+
+
+# The same link inside the loop's compiled kernel (the fast path): a queue of packets in
+# flight per direction, and the random draws taken from a pre-drawn pool in the order
+# `Link.send` takes them, so both paths deliver the same packets at the same ticks.
+Q_ARRIVAL, Q_SEQ, Q_V1, Q_V2 = range(4)
+QUEUE_WIDTH = 4
+QUEUE_ROWS = 256
+LS_COUNT, LS_NEXT_SEQ, LS_NEWEST, LS_SENT, LS_LOST, LS_DELIVERED = range(6)
+LINK_STATE_SIZE = 6
+
+
+def link_vector(params: LinkParams) -> np.ndarray:
+    return np.array([params.delay_s, params.jitter_s, params.loss])
+
+
+@numba.njit(cache=True)
+def kernel_send(
+    queue: np.ndarray,
+    ls: np.ndarray,
+    lp: np.ndarray,
+    pool: np.ndarray,
+    pos: np.ndarray,
+    t_s: float,
+    v1: float,
+    v2: float,
+) -> None:  # pragma: no cover - compiled; exercised through TeleopLoop
+    """`Link.send` on the kernel's queue; `pos[0]` indexes the pool of uniform draws."""
+    seq = ls[LS_NEXT_SEQ]
+    ls[LS_NEXT_SEQ] += 1.0
+    ls[LS_SENT] += 1.0
+    if lp[2] > 0.0:
+        lost = pool[int(pos[0])] < lp[2]
+        pos[0] += 1.0
+        if lost:
+            ls[LS_LOST] += 1.0
+            return
+    jitter = 0.0
+    if lp[1] > 0.0:
+        jitter = pool[int(pos[0])] * lp[1]
+        pos[0] += 1.0
+    n = int(ls[LS_COUNT])
+    queue[n, Q_ARRIVAL] = t_s + lp[0] + jitter
+    queue[n, Q_SEQ] = seq
+    queue[n, Q_V1] = v1
+    queue[n, Q_V2] = v2
+    ls[LS_COUNT] = n + 1
+
+
+@numba.njit(cache=True)
+def kernel_deliver(
+    queue: np.ndarray, ls: np.ndarray, tick: float, dt: float, out: np.ndarray
+) -> bool:  # pragma: no cover - compiled; exercised through TeleopLoop
+    """Deliver the packets that have arrived by `tick` (a packet arriving at tick K acts
+    from K + 1); the newest by send order wins. True if `out` got a new value."""
+    n = int(ls[LS_COUNT])
+    best = -1.0
+    i = 0
+    while i < n:
+        if math.ceil(queue[i, Q_ARRIVAL] / dt - 1e-9) <= tick:
+            if queue[i, Q_SEQ] > ls[LS_NEWEST] and queue[i, Q_SEQ] > best:
+                best = queue[i, Q_SEQ]
+                out[0], out[1] = queue[i, Q_V1], queue[i, Q_V2]
+            # remove: move the last row here
+            n -= 1
+            queue[i, 0], queue[i, 1], queue[i, 2], queue[i, 3] = (
+                queue[n, 0], queue[n, 1], queue[n, 2], queue[n, 3],
+            )  # fmt: skip
+        else:
+            i += 1
+    ls[LS_COUNT] = n
+    if best >= 0.0:
+        ls[LS_NEWEST] = best
+        ls[LS_DELIVERED] += 1.0
+        return True
+    return False

@@ -191,14 +191,22 @@ def test_the_return_damper_is_what_keeps_a_released_dial_stable(
     assert (late_swing < 0.01) == settles
 
 
-def test_in_kernel_acquisition_matches_the_event_by_event_loop(small_estimator) -> None:
-    """With ideal links the kernel runs the acquisitions between driver events itself;
-    the samples must be exactly those of the loop that stops at every acquisition."""
+@pytest.mark.parametrize(
+    "link",
+    [LinkParams(), LinkParams(delay_s=0.002, jitter_s=0.001, loss=0.01),
+     LinkParams(delay_s=0.015, jitter_s=0.02, loss=0.2)],
+)  # fmt: skip
+def test_in_kernel_acquisition_matches_the_event_by_event_loop(
+    small_estimator,
+    link: LinkParams,
+) -> None:
+    """The kernel runs the acquisitions, the estimator and the link between driver events;
+    the samples must be exactly those of the loop that stops at every acquisition and
+    sends every packet through `Link` (same draws, same ticks)."""
     runs = []
     for fast in (True, False):
-        loop = TeleopLoop(
-            environment=tube_with_wall(), estimator=small_estimator, seed=8, fast=fast
-        )
+        cfg = LoopConfig(to_follower=link, to_master=link)
+        loop = TeleopLoop(cfg, tube_with_wall(), estimator=small_estimator, seed=8, fast=fast)
         runs.append(loop.run(6.0, SimulatedOperator(target_depth_m=0.3)))
         assert loop._fast is fast
     assert np.array_equal(runs[0].samples, runs[1].samples)
