@@ -29,6 +29,7 @@ from db.engine import write_transaction
 from db.models.study import CODE_PATTERN, Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import SAMPLE_COLUMNS, Sample, Trial
+from study.analysis.frames import trial_frame
 from study.errors import StudyInputError
 from study.protocol.design import StudyDesign
 from study.protocol.roster import load_study
@@ -286,26 +287,7 @@ def export_data(
     out_dir.mkdir(parents=True, exist_ok=True)
     with Session(engine) as session:
         load_study(session)
-        rows = session.execute(
-            select(Participant.code, Participant.group, Trial)
-            .join(Trial, Trial.participant_id == Participant.id)
-            .where(Trial.status == "completed", Trial.practice.is_(False))
-            .order_by(Participant.code, Trial.block_index, Trial.trial_index, Trial.attempt)
-        ).all()
-        latest: dict[tuple[Any, ...], dict[str, Any]] = {}
-        for code, group, t in rows:
-            latest[(code, t.task, t.condition, t.trial_index)] = {
-                "participant": code,
-                "group": group,
-                "task": t.task,
-                "condition": t.condition,
-                "trial": t.trial_index + 1,
-                "completion_time_s": t.completion_time_s,
-                "peak_proximal_force_n": t.peak_proximal_force_n,
-                "peak_distal_force_n": t.peak_distal_force_n,
-                "success": bool(t.success),
-            }
-        trials = pd.DataFrame(list(latest.values()), columns=list(TRIAL_COLUMNS))
+        trials = trial_frame(engine)[list(TRIAL_COLUMNS)]
         tlx_rows = [
             {
                 "participant": code,
