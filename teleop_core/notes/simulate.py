@@ -32,10 +32,15 @@ RAMP_RANGE = {"translation": (6.0, -4.0), "rotation": (0.190, -0.190)}
 """Commanded extremes of the static ramps: +6 to -4 N (Fig. 6), +/-190 N mm (Fig. 7)."""
 RAMP_DURATION_S = {"translation": 20.0, "rotation": 20.0}
 """Length of one ramp 0 -> max -> min -> 0; slow enough to be quasi-static (assumption)."""
-CHIRP_AMPLITUDE = {"translation": 2.0, "rotation": 0.06}
+CHIRP_AMPLITUDE = {"translation": 4.5, "rotation": 0.15}
 """Chirp amplitude, N or N m; within the continuous limits (assumption)."""
 CHIRP_BAND_HZ = (1.0, 30.0)
 """The paper's 1-30 Hz chirp (III-B)."""
+CHIRP_FADE_S = 0.5
+"""Fade-in and fade-out of the chirp's amplitude, s (assumption)."""
+CHIRP_TAIL_S = 1.0
+"""Rest after the chirp, so the response has died out when the recording ends and the
+whole-record Fourier ratio is the frequency response (assumption)."""
 STICK_VELOCITY = {"translation": 1.0e-4, "rotation": 1.0e-3}
 """Karnopp's stick band on the manipulator's speed, m/s or rad/s (assumption)."""
 
@@ -54,11 +59,17 @@ def ramp_command(dof: str, rate_hz: float = RATE_HZ) -> tuple[Float1D, Float1D]:
 def chirp_command(
     dof: str, rate_hz: float = RATE_HZ, duration_s: float = 20.0, amplitude: float | None = None
 ) -> tuple[Float1D, Float1D]:
-    """A logarithmic 1-30 Hz chirp (`scipy.signal.chirp`) of `dof`: (t in s, f_des)."""
+    """A logarithmic 1-30 Hz chirp (`scipy.signal.chirp`) of `dof` followed by
+    `CHIRP_TAIL_S` at rest: (t in s, f_des), shape (n,)."""
     amp = CHIRP_AMPLITUDE[dof] if amplitude is None else amplitude
-    t = np.arange(0.0, duration_s, 1.0 / rate_hz)
+    t = np.arange(0.0, duration_s + CHIRP_TAIL_S, 1.0 / rate_hz)
     f0, f1 = CHIRP_BAND_HZ
-    return t, amp * signal.chirp(t, f0, duration_s, f1, method="logarithmic", phi=-90)
+    u = amp * signal.chirp(t, f0, duration_s, f1, method="logarithmic", phi=-90)
+    # half-second cosine fade-in and -out, so the force's net impulse (the open end's
+    # drift) is near zero; it leaves the 1-30 Hz band's spectrum almost untouched
+    n = int(round(duration_s * rate_hz))
+    taper = signal.windows.tukey(n, alpha=2 * CHIRP_FADE_S / duration_s)
+    return t, np.concatenate([u[:n] * taper, np.zeros(len(t) - n)])
 
 
 @numba.njit(cache=True)
@@ -84,7 +95,10 @@ def _simulate_axis(
         # transmitted command: direction-dependent gain, then the actuator's limit
         f_act = u * (gain_pos if u >= 0.0 else gain_neg)
         f_act = min(max(f_act, -saturation), saturation)
-        for _ in range(substeps):
+        for j in range(substeps):
+            if j == substeps // 2:
+                # sampled mid-hold: cancels the zero-order hold's half-sample delay
+                out[i] = k_s * x_m + b_s * v_m if clamped else x_s
             # spring and damper force on the scope (= load-cell force when clamped)
             f_c = k_s * (x_m - x_s) + b_s * (v_m - v_s)
             f_net = f_act - b_m * v_m - f_c
@@ -102,10 +116,6 @@ def _simulate_axis(
             if not clamped:
                 v_s += h * f_c / m_s
                 x_s += h * v_s
-        if clamped:
-            out[i] = k_s * x_m + b_s * v_m
-        else:
-            out[i] = x_s
     return out
 
 
