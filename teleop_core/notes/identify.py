@@ -169,7 +169,7 @@ class GreyBoxFit:
 
         def build(x: Float1D) -> MsdParams:
             return self.start.scaled(
-                {n: float(np.exp(v)) / getattr(self.start, n) for n, v in zip(free, x)}
+                {n: float(np.exp(v)) / getattr(self.start, n) for n, v in zip(free, x, strict=True)}
             )
 
         def residual(x: Float1D) -> Float1D:
@@ -201,9 +201,9 @@ class RampMeasures:
     hysteresis: float
     """Mean gap between the rising and falling branches at the same command, N or N m."""
     gain_positive: float
-    """Slope of output over command, positive commands away from the limit."""
+    """Slope of output over command on the positive loading branch, below the limit."""
     gain_negative: float
-    """The same for negative commands."""
+    """The same on the negative loading branch."""
 
     @property
     def asymmetry(self) -> float:
@@ -239,11 +239,11 @@ def ramp_measures(recording: NotesRecording, limit: float | None = None) -> Ramp
         order = np.argsort(u[mask], kind="stable")
         branches.append(np.interp(grid, u[mask][order], y[mask][order]))
     hysteresis = float(np.mean(np.abs(branches[0] - branches[1])))
-    middle = 0.5 * (branches[0] + branches[1])
     gains = []
-    for sel in (grid > 0.2 * limit, grid < -0.2 * limit):
+    # loading branches (moving away from zero): output = g u -/+ F_c, slope g
+    for sel in (rising & (u > 0.2 * limit) & (u < limit), ~rising & (u < -0.2 * limit)):
         if np.count_nonzero(sel) < 2:
             gains.append(float("nan"))
             continue
-        gains.append(float(np.polyfit(grid[sel], middle[sel], 1)[0]))
+        gains.append(float(np.polyfit(u[sel], y[sel], 1)[0]))
     return RampMeasures(top, float(np.min(y)), hysteresis, gains[0], gains[1])

@@ -15,13 +15,19 @@ functions in `transfer.py`.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numba
 import numpy as np
 import pandas as pd
 from scipy import signal
 
 from teleop_core._typing import Float1D
+from teleop_core.notes.karnopp import compensated_command
 from teleop_core.notes.params import AxisParams, NotesParamsError
+
+if TYPE_CHECKING:
+    from teleop_core.notes.compensation import KarnoppCompensator
 
 BOUNDARIES = ("open", "clamped")
 RATE_HZ = 1000.0
@@ -67,7 +73,7 @@ def chirp_command(
     u = amp * signal.chirp(t, f0, duration_s, f1, method="logarithmic", phi=-90)
     # half-second cosine fade-in and -out, so the force's net impulse (the open end's
     # drift) is near zero; it leaves the 1-30 Hz band's spectrum almost untouched
-    n = int(round(duration_s * rate_hz))
+    n = round(duration_s * rate_hz)
     taper = signal.windows.tukey(n, alpha=2 * CHIRP_FADE_S / duration_s)
     return t, np.concatenate([u[:n] * taper, np.zeros(len(t) - n)])
 
@@ -85,13 +91,18 @@ def _simulate_axis(
     saturation: float,
     stick_velocity: float,
     clamped: bool,
+    comp: np.ndarray,
 ) -> np.ndarray:
     m_m, m_s, k_s, b_m, b_s = lin[0], lin[1], lin[2], lin[3], lin[4]
     h = dt / substeps
     x_m = v_m = x_s = v_s = 0.0
     out = np.empty(f_des.shape[0])
+    u_prev = 0.0
     for i in range(f_des.shape[0]):
         u = f_des[i]
+        if comp[0] > 0.0:
+            u = compensated_command(u, u - u_prev, v_m, stick_velocity, comp[1], comp[2], comp[3])
+        u_prev = f_des[i]
         # transmitted command: direction-dependent gain, then the actuator's limit
         f_act = u * (gain_pos if u >= 0.0 else gain_neg)
         f_act = min(max(f_act, -saturation), saturation)
@@ -125,6 +136,7 @@ def simulate_response(
     f_des: Float1D,
     boundary: str,
     nonlinear: bool = True,
+    compensator: KarnoppCompensator | None = None,
 ) -> Float1D:
     """The noise-free measured signal for a command sampled uniformly at `t`.
 
@@ -137,9 +149,13 @@ def simulate_response(
         the load-cell force f_ee, N or N m).
     nonlinear : False simulates the linear Fig. 8 model only (no friction, unit
         transmission, no saturation).
+    compensator : a fitted `KarnoppCompensator` between the command and the motors, or
+        None for the uncompensated device.
     """
     if boundary not in BOUNDARIES:
         raise NotesParamsError(f"boundary {boundary!r}; expected one of {', '.join(BOUNDARIES)}")
+    from teleop_core.notes.compensation import NO_COMPENSATION
+
     p = params if nonlinear else params.without_nonlinearities()
     saturation = p.max_continuous + p.coulomb if nonlinear else np.inf
     dt = float(t[1] - t[0])
@@ -156,6 +172,7 @@ def simulate_response(
         saturation,
         STICK_VELOCITY[p.dof],
         boundary == "clamped",
+        NO_COMPENSATION if compensator is None else compensator.as_array(),
     )
 
 
