@@ -72,6 +72,7 @@ class NotesParticipant(Driver):
         self.roll_error = float(rng.normal(0.0, 0.3 * self.traits.steering_error_rad))
         self._stall_since = math.nan
         self._stall_depth = 0.0
+        self._at_depth_since = math.nan
         self.stalls_seen = 0
         self.eased = 0
 
@@ -85,6 +86,13 @@ class NotesParticipant(Driver):
             return HandAction(done=True)
         if view.t_s >= self.give_up_s:
             return HandAction(done=True)
+        # at depth but off the target's roll: look again and correct the roll aim
+        if abs(task.TARGET_M - seen.insertion_m) < task.TARGET_TOLERANCE_M:
+            if math.isnan(self._at_depth_since):
+                self._at_depth_since = view.t_s
+            elif view.t_s - self._at_depth_since > tr.visual_stall_s:
+                self.roll_error *= 0.5
+                self._at_depth_since = view.t_s
         # depth: advance to the target, slowing over an approach zone
         approach = 0.02 * (1.0 + tr.caution)
         remaining = task.TARGET_M - seen.insertion_m

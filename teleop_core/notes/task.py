@@ -5,8 +5,10 @@ hand holds the physical scope; its insertion depth d and roll phi (the device's
 encoders) place the virtual scope, whose tissue model gives the force and torque the
 simulator *demands*. The device renders the demand, clipped at its continuous limits
 (5.62 N, 190.05 N mm), through the Fig. 8 dynamics of each axis with the Karnopp /
-direction compensator assumed ideal (the linear model with unit transmission); in VO
-it renders nothing and the scope moves against the device's passive impedance only.
+direction compensator assumed ideal (the linear model with unit transmission) and the
+manipulator's damping b_m compensated from the motor encoder's speed, as the paper
+plans for its impedance controller (IV); in VO it renders nothing and the scope moves
+against the device's passive impedance only.
 
 Tissue (per mm of depth d from the introitus; benchmarks of IV, [20]):
 - canal friction on the inserted length, resisting motion in both directions and
@@ -53,7 +55,7 @@ TARGET_ROLL_RAD = math.radians(60.0)
 TARGET_TOLERANCE_M = 0.01
 TARGET_ROLL_TOLERANCE_RAD = math.radians(10.0)
 """Target in the peritoneal cavity (depth, roll) and how close counts; assumptions."""
-FRICTION_SPEED_M_S = 0.002
+FRICTION_SPEED_M_S = 0.01
 FRICTION_SPEED_RAD_S = 0.05
 """Speeds over which tissue friction builds up (tanh regularisation); assumptions."""
 SPEED_GAIN_M_S_PER_RAD = 0.05
@@ -148,7 +150,9 @@ class _Axis:
 
     def step(self, command: float, hand: float, tissue_free: float, dt: float) -> float:
         """Advance one tick; returns the force the device puts on the scope."""
-        f_act = min(max(command, -self.limit), self.limit)
+        # impedance controller: the rendered force plus the manipulator's own damping
+        # (measured speed from the motor encoder), within the continuous limit
+        f_act = min(max(command + self.b_m * self.v_m, -self.limit), self.limit)
         # force of spring and damper on the scope
         f_c = self.k_s * (self.x_m - self.x_s) + self.b_s * (self.v_m - self.v_s)
         self.v_m += dt * (f_act - self.b_m * self.v_m - f_c) / self.m_m
