@@ -160,3 +160,26 @@ def bench_lcca(
         report = run_lcca_bench(config, estimator, out_dir, progress=status.update)
     json_path.write_text(json.dumps(report, indent=2) + "\n")
     click.echo((out_dir / "lcca_bench.md").read_text())
+
+
+@bench.command("notes")
+@_json_option
+@_out_option
+@click.option(
+    "--draws",
+    type=click.IntRange(min=1),
+    default=10,
+    show_default=True,
+    help="Seeded parameter draws per axis for the identification round trip.",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+def bench_notes(json_path: Path, out_dir: Path, draws: int, seed: int) -> None:
+    """Seed 001's NOTES device: bandwidth, settling, limits, identification round trip."""
+    from study.bench.notes import NotesBenchConfig, run_notes_bench
+
+    _check_json_folder(json_path)
+    config = NotesBenchConfig(draws=draws, seed=seed)
+    with Console(stderr=True).status("NOTES bench") as status:
+        report = run_notes_bench(config, out_dir, progress=status.update)
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
+    click.echo((out_dir / "notes_bench.md").read_text())
