@@ -38,6 +38,8 @@ class NotesBenchConfig:
     spread: float = 0.30
     noise: float = 0.02
     seed: int = 0
+    trials: int = 4
+    """NOTES trials per group and condition."""
 
 
 def round_trip(dof: str, draw: int, config: NotesBenchConfig) -> dict[str, Any]:
@@ -65,6 +67,44 @@ def round_trip(dof: str, draw: int, config: NotesBenchConfig) -> dict[str, Any]:
         **{f"err_{n}": float(e) for n, e in zip(MSD_FIELDS, err, strict=True)},
         "max_abs_err": float(np.max(np.abs(err))),
     }
+
+
+TRIAL_MEASURES = (
+    "success",
+    "completion_time_s",
+    "peak_force_demanded_n",
+    "peak_force_rendered_n",
+    "peak_torque_demanded_n_m",
+    "peak_torque_rendered_n_m",
+    "push_over_capacity_fraction",
+)
+
+
+def notes_trials(
+    config: NotesBenchConfig, progress: Callable[[str], None]
+) -> tuple[pd.DataFrame, float]:
+    """`trials` simulated NOTES trials per group and condition; (measures, wall seconds)."""
+    from study.protocol.lcca_trial import CONDITIONS, simulated_participant
+    from study.protocol.notes_trial import run_notes_trial
+    from study.protocol.participants import GROUPS
+
+    rows = []
+    t0 = time.perf_counter()
+    for group in GROUPS:
+        for k in range(config.trials):
+            traits = simulated_participant(group, config.seed * 1000 + k)
+            for condition in CONDITIONS:
+                progress(f"NOTES trial {group} {condition} {k + 1}/{config.trials}")
+                s = run_notes_trial(traits, condition, config.seed * 1000 + k).summary
+                rows.append(
+                    {
+                        "group": group,
+                        "condition": condition,
+                        "participant": k,
+                        **{m: float(s[m]) for m in TRIAL_MEASURES},
+                    }
+                )
+    return pd.DataFrame(rows), time.perf_counter() - t0
 
 
 def run_notes_bench(
@@ -115,7 +155,8 @@ def run_notes_bench(
     ]
     for r in rows:
         md.append(
-            f"| {r['dof']} | {r['bandwidth_linear_hz']:.2f} | {r['bandwidth_characterised_hz']:.2f} "
+            f"| {r['dof']} | {r['bandwidth_linear_hz']:.2f} "
+            f"| {r['bandwidth_characterised_hz']:.2f} "
             f"| {r['bandwidth_paper_hz']} | {r['settling_linear_s']:.3f} "
             f"| {r['settling_characterised_s']:.3f} | {r['max_continuous']:.5g} "
             f"| {r['max_continuous_paper']} |"
@@ -123,6 +164,21 @@ def run_notes_bench(
     md += ["", "| dof | draws | within 5 % | worst parameter error |", "|---|---|---|---|"]
     for dof, s in report["round_trip_summary"].items():
         md.append(f"| {dof} | {s['draws']} | {s['within_5_percent']} | {s['worst_abs_err']:.2%} |")
+    trials, wall = notes_trials(config, progress)
+    report["notes_trials"] = trials.to_dict(orient="records")
+    simulated = float(trials["completion_time_s"].sum())
+    report["notes_trials_real_time_factor"] = simulated / wall
+    means = trials.groupby(["group", "condition"], sort=False)[TRIAL_MEASURES].mean()
+    md += [
+        "",
+        f"NOTES trials ({config.trials} per group and condition; "
+        f"{simulated / wall:.0f}x real time):",
+        "",
+        "| group | condition | " + " | ".join(TRIAL_MEASURES) + " |",
+        "|---|---|" + "---|" * len(TRIAL_MEASURES),
+    ]
+    for (group, condition), row in means.iterrows():
+        md.append(f"| {group} | {condition} | " + " | ".join(f"{v:.3g}" for v in row) + " |")
     (out_dir / "notes_bench.md").write_text("\n".join(md) + "\n")
     frame.to_csv(out_dir / "notes_round_trip.csv", index=False)
     return report

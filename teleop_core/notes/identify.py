@@ -9,12 +9,15 @@ the static-ramp measures (continuous limit, hysteresis, direction asymmetry).
   4th-order Butterworth (`scipy.signal.butter`, run forward and backward with
   `filtfilt`, so it adds no phase), as in III-B. The command goes through the same
   filter, so the ratio of the two is not biased by the filter's roll-off near 30 Hz.
-- FRF: the H1 estimate S_uy / S_uu from Welch cross- and auto-spectra
-  (`scipy.signal.csd`, `welch`) with the coherence (`scipy.signal.coherence`) as a
-  weight, on the 1-30 Hz band of the chirp.
+- FRF: the whole-record Fourier ratio Y(f) / U(f) (`numpy.fft.rfft`) on the 1-30 Hz
+  band; a chirp run that starts and ends at rest needs no window, and Welch averaging
+  (`scipy.signal.csd`) was tried first and dropped: its segments cut a single sweep and
+  bias the response by several percent. Each bin is weighted by its share of the
+  input's energy times snr / (1 + snr), the noise measured in the run's quiet tail
+  (`scipy.signal.welch`); bins with snr < `MIN_SNR` are left out.
 - Fit: `scipy.optimize.least_squares` on the log of the parameters; the residual is the
   complex log ratio log(H_model / H_measured) (magnitude in natural-log units and
-  phase in rad) weighted by the square root of the coherence. V alone identifies all
+  phase in rad) weighted by the square root of the bin's weight. V alone identifies all
   five parameters (its DC gain is 1/b_m, and its three poles and zero fix the rest);
   F alone fixes only their ratios to M_m, so a clamped-only fit holds M_m and M_s at
   the starting values.
@@ -42,7 +45,7 @@ LOWPASS_ORDER = 4
 """Order of that filter (the paper does not give it; assumption)."""
 TAIL_S = 0.5
 """Length of the quiet end of a run from which the noise is measured, s."""
-MIN_SNR = 30.0
+MIN_SNR = 100.0
 """Bins whose output power is less than this many times the noise's are left out: the
 log of a noisy ratio is biased at low signal-to-noise ratio."""
 MIN_WEIGHT = 0.01
@@ -176,7 +179,7 @@ class GreyBoxFit:
             p = build(x)
             parts = []
             for frf in frfs:
-                # complex log ratio: log|H_m/H| + j (angle difference), coherence-weighted
+                # complex log ratio: log|H_m/H| + j (angle difference), weighted per bin
                 r = np.log(frequency_response(p, frf.which, frf.f_hz) / frf.h)
                 w = np.sqrt(frf.weight / frf.weight.sum())
                 parts += [w * r.real, w * np.angle(np.exp(1j * r.imag))]
