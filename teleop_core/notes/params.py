@@ -18,7 +18,8 @@ the grey-box fit use; the two axis classes carry the SI units in their field nam
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
+from typing import ClassVar, Self
 
 from teleop_core.errors import TeleopInputError
 
@@ -73,8 +74,59 @@ class MsdParams:
         return replace(self, **{k: getattr(self, k) * v for k, v in factors.items()})
 
 
+class _AxisParams:
+    """What both axes share, read through the names of their own fields."""
+
+    dof: ClassVar[str]
+    _linear: ClassVar[tuple[str, str, str, str, str]]
+    """The axis's fields for (m_m, m_s, k_s, b_m, b_s)."""
+    _friction: ClassVar[tuple[str, str]]
+    """The axis's (Coulomb, static) friction fields."""
+    _limit: ClassVar[str]
+
+    def _check(self) -> None:
+        _require_positive(self, *self._linear, self._limit)
+        coulomb, static = self._friction
+        _require_nonnegative(self, coulomb, static)
+        if getattr(self, static) < getattr(self, coulomb):
+            raise NotesParamsError(f"{static} = {getattr(self, static)}; expected >= {coulomb}")
+
+    @property
+    def linear(self) -> MsdParams:
+        """The Fig. 8 parameters in the axis's units."""
+        return MsdParams(*(getattr(self, name) for name in self._linear))
+
+    @property
+    def coulomb(self) -> float:
+        return float(getattr(self, self._friction[0]))
+
+    @property
+    def static(self) -> float:
+        return float(getattr(self, self._friction[1]))
+
+    @property
+    def max_continuous(self) -> float:
+        return float(getattr(self, self._limit))
+
+    @property
+    def gains(self) -> tuple[float, float]:
+        """Transmission of a positive (CW) and of a negative (CCW) command."""
+        return (1.0, 1.0)
+
+    def with_linear(self, msd: MsdParams) -> Self:
+        """A copy with the Fig. 8 parameters replaced."""
+        return replace(self, **dict(zip(self._linear, msd.as_tuple(), strict=True)))  # type: ignore[type-var]
+
+    def without_nonlinearities(self) -> Self:
+        """The same linear device: no friction, the same transmission both ways."""
+        return replace(self, **dict.fromkeys(self._friction, 0.0), **self._unit_gains())  # type: ignore[type-var]
+
+    def _unit_gains(self) -> dict[str, float]:
+        return {}
+
+
 @dataclass(frozen=True)
-class TranslationParams:
+class TranslationParams(_AxisParams):
     """Translation: two omni-directional friction rollers on RE40 motors, spring-preloaded
     against the scope (II-B, Fig. 3)."""
 
@@ -101,63 +153,23 @@ class TranslationParams:
     """Maximum continuous force at the end effector (abstract, III-A). The motors saturate
     at this plus the Coulomb friction, so the loading branch of a ramp tops out here."""
 
-    def __post_init__(self) -> None:
-        _require_positive(self, *(f.name for f in fields(self) if "friction" not in f.name))
-        _require_nonnegative(self, "coulomb_friction_n", "static_friction_n")
-        if self.static_friction_n < self.coulomb_friction_n:
-            raise NotesParamsError(
-                f"static_friction_n = {self.static_friction_n}; expected >= coulomb_friction_n"
-            )
-
     dof = "translation"
+    _linear = (
+        "manipulator_mass_kg",
+        "scope_mass_kg",
+        "spring_n_per_m",
+        "manipulator_damping_n_s_per_m",
+        "coupling_damping_n_s_per_m",
+    )
+    _friction = ("coulomb_friction_n", "static_friction_n")
+    _limit = "max_continuous_force_n"
 
-    @property
-    def linear(self) -> MsdParams:
-        """The Fig. 8 parameters (kg, N/m, N s/m)."""
-        return MsdParams(
-            self.manipulator_mass_kg,
-            self.scope_mass_kg,
-            self.spring_n_per_m,
-            self.manipulator_damping_n_s_per_m,
-            self.coupling_damping_n_s_per_m,
-        )
-
-    @property
-    def coulomb(self) -> float:
-        return self.coulomb_friction_n
-
-    @property
-    def static(self) -> float:
-        return self.static_friction_n
-
-    @property
-    def max_continuous(self) -> float:
-        return self.max_continuous_force_n
-
-    @property
-    def gains(self) -> tuple[float, float]:
-        """Transmission of a positive and of a negative command (both 1 in translation)."""
-        return (1.0, 1.0)
-
-    def with_linear(self, msd: MsdParams) -> TranslationParams:
-        """A copy with the Fig. 8 parameters replaced."""
-        m_m, m_s, k_s, b_m, b_s = msd.as_tuple()
-        return replace(
-            self,
-            manipulator_mass_kg=m_m,
-            scope_mass_kg=m_s,
-            spring_n_per_m=k_s,
-            manipulator_damping_n_s_per_m=b_m,
-            coupling_damping_n_s_per_m=b_s,
-        )
-
-    def without_nonlinearities(self) -> TranslationParams:
-        """The same linear device with no friction (the linear model of Fig. 8 exactly)."""
-        return replace(self, coulomb_friction_n=0.0, static_friction_n=0.0)
+    def __post_init__(self) -> None:
+        self._check()
 
 
 @dataclass(frozen=True)
-class RotationParams:
+class RotationParams(_AxisParams):
     """Rotation: one RE40 motor turning the scope through a 20-inch flexible drive shaft
     (II-B, Fig. 4). Torques in N m, angles in rad."""
 
@@ -187,66 +199,28 @@ class RotationParams:
     max_continuous_torque_n_m: float = 0.19005
     """Maximum continuous torque at the end effector, 190.05 N mm (abstract, III-A)."""
 
-    def __post_init__(self) -> None:
-        _require_positive(self, *(f.name for f in fields(self) if "friction" not in f.name))
-        _require_nonnegative(self, "coulomb_friction_n_m", "static_friction_n_m")
-        if self.static_friction_n_m < self.coulomb_friction_n_m:
-            raise NotesParamsError(
-                f"static_friction_n_m = {self.static_friction_n_m}; "
-                "expected >= coulomb_friction_n_m"
-            )
-
     dof = "rotation"
+    _linear = (
+        "manipulator_inertia_kg_m2",
+        "scope_inertia_kg_m2",
+        "shaft_stiffness_n_m_per_rad",
+        "manipulator_damping_n_m_s_per_rad",
+        "shaft_damping_n_m_s_per_rad",
+    )
+    _friction = ("coulomb_friction_n_m", "static_friction_n_m")
+    _limit = "max_continuous_torque_n_m"
 
-    @property
-    def linear(self) -> MsdParams:
-        """The Fig. 8 parameters (kg m^2, N m/rad, N m s/rad)."""
-        return MsdParams(
-            self.manipulator_inertia_kg_m2,
-            self.scope_inertia_kg_m2,
-            self.shaft_stiffness_n_m_per_rad,
-            self.manipulator_damping_n_m_s_per_rad,
-            self.shaft_damping_n_m_s_per_rad,
-        )
-
-    @property
-    def coulomb(self) -> float:
-        return self.coulomb_friction_n_m
-
-    @property
-    def static(self) -> float:
-        return self.static_friction_n_m
-
-    @property
-    def max_continuous(self) -> float:
-        return self.max_continuous_torque_n_m
+    def __post_init__(self) -> None:
+        self._check()
+        _require_positive(self, "ccw_transmission", "cw_transmission")
 
     @property
     def gains(self) -> tuple[float, float]:
         """Transmission of a positive (CW) and of a negative (CCW) command."""
         return (self.cw_transmission, self.ccw_transmission)
 
-    def with_linear(self, msd: MsdParams) -> RotationParams:
-        """A copy with the Fig. 8 parameters replaced."""
-        m_m, m_s, k_s, b_m, b_s = msd.as_tuple()
-        return replace(
-            self,
-            manipulator_inertia_kg_m2=m_m,
-            scope_inertia_kg_m2=m_s,
-            shaft_stiffness_n_m_per_rad=k_s,
-            manipulator_damping_n_m_s_per_rad=b_m,
-            shaft_damping_n_m_s_per_rad=b_s,
-        )
-
-    def without_nonlinearities(self) -> RotationParams:
-        """The same linear device: no friction, the same transmission both ways."""
-        return replace(
-            self,
-            coulomb_friction_n_m=0.0,
-            static_friction_n_m=0.0,
-            ccw_transmission=1.0,
-            cw_transmission=1.0,
-        )
+    def _unit_gains(self) -> dict[str, float]:
+        return {"ccw_transmission": 1.0, "cw_transmission": 1.0}
 
 
 AxisParams = TranslationParams | RotationParams
