@@ -168,7 +168,7 @@ def run_notes_bench(
     report["notes_trials"] = trials.to_dict(orient="records")
     simulated = float(trials["completion_time_s"].sum())
     report["notes_trials_real_time_factor"] = simulated / wall
-    means = trials.groupby(["group", "condition"], sort=False)[TRIAL_MEASURES].mean()
+    means = trials.groupby(["group", "condition"], sort=False)[list(TRIAL_MEASURES)].mean()
     md += [
         "",
         f"NOTES trials ({config.trials} per group and condition; "

@@ -7,8 +7,8 @@ simulator *demands*. The device renders the demand, clipped at its continuous li
 (5.62 N, 190.05 N mm), through the Fig. 8 dynamics of each axis with the Karnopp /
 direction compensator assumed ideal (the linear model with unit transmission) and the
 manipulator's damping b_m compensated from the motor encoder's speed, as the paper
-plans for its impedance controller (IV); in VO it renders nothing and the scope moves
-against the device's passive impedance only.
+plans for its impedance controller (IV); in VO it renders no tissue (the controller
+still cancels the damping, so the scope moves against the device's inertia only).
 
 Tissue (per mm of depth d from the introitus; benchmarks of IV, [20]):
 - canal friction on the inserted length, resisting motion in both directions and
