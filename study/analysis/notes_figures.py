@@ -12,12 +12,16 @@ House style of `figures.py` (IEEE widths, Okabe-Ito colours, `save`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Protocol
+
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
 from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN
 from teleop_core.notes.characterize import AxisCharacterisation
+from teleop_core.notes.identify import Frf, GreyBoxFit
 from teleop_core.notes.transfer import frequency_response
 
 UNITS = {
@@ -35,7 +39,18 @@ MODEL = OKABE_ITO["HV"]
 BEFORE = OKABE_ITO["VO"]
 
 
-def _measured(ch: AxisCharacterisation) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+class FittedAxis(Protocol):
+    """What `bode` draws: `AxisCharacterisation` or a recorded `ChirpFit`."""
+
+    dof: str
+    frfs: list[Frf]
+    fit: GreyBoxFit
+
+    @property
+    def bandwidth_hz(self) -> float: ...
+
+
+def _measured(ch: FittedAxis) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     frf = {f.which: f for f in ch.frfs}
     out = {k: (v.f_hz, v.h) for k, v in frf.items()}
     if "V" in frf and "F" in frf:
@@ -48,7 +63,7 @@ def _measured(ch: AxisCharacterisation) -> dict[str, tuple[np.ndarray, np.ndarra
     return out
 
 
-def bode(axes: list[AxisCharacterisation]) -> plt.Figure:
+def bode(axes: Sequence[FittedAxis]) -> plt.Figure:
     """Magnitude of F, V and Z_device per axis (columns), measured vs fitted."""
     with plt.rc_context(STYLE):
         fig, grid = plt.subplots(

@@ -20,7 +20,13 @@ def identify() -> None:
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--dof", type=click.Choice(["translation", "rotation"]), required=True)
 @click.option("--json", "json_path", required=True, type=click.Path(dir_okay=False, path_type=Path))
-def notes(recording: Path, dof: str, json_path: Path) -> None:
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Also draw the fit: a chirp's Bode plot (notes_identify_bode.png).",
+)
+def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> None:
     """Fit Fig. 8's model to a chirp, or measure a clamped ramp, from RECORDING.csv.
 
     Columns t, f_des and x (open end) or f_ee (clamped), SI units (rotation: N m, rad).
@@ -31,15 +37,20 @@ def notes(recording: Path, dof: str, json_path: Path) -> None:
 
     if not json_path.parent.is_dir():
         raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    if out_dir is not None and out_dir.exists() and not out_dir.is_dir():
+        raise StudyInputError(f"--out {out_dir} is a file; expected a folder")
     rec = NotesRecording.from_csv(recording)
-    result = {
-        "dof": dof,
-        "recording": str(recording),
-        **identify_recording(rec, default_params(dof).linear),
-    }
+    found, chirp = identify_recording(rec, default_params(dof).linear, dof)
+    result = {"dof": dof, "recording": str(recording), **found}
     tmp = json_path.with_name(json_path.name + ".tmp")
     tmp.write_text(json.dumps(result, indent=2) + "\n")
     tmp.replace(json_path)
+    if out_dir is not None and chirp is not None:
+        from study.analysis.figures import save
+        from study.analysis.notes_figures import bode
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        save(bode([chirp]), out_dir, "notes_identify_bode", ["png"])
     if "parameters" in result:
         fit = ", ".join(f"{k} {v:.4g}" for k, v in result["parameters"].items())
         click.echo(

@@ -107,7 +107,22 @@ def characterize_simulated(
     )
 
 
-def identify_recording(recording: NotesRecording, start: MsdParams) -> dict[str, object]:
+@dataclass(frozen=True)
+class ChirpFit:
+    """A grey-box fit to recorded chirp responses (what `bode` draws)."""
+
+    dof: str
+    frfs: list[Frf]
+    fit: GreyBoxFit
+
+    @property
+    def bandwidth_hz(self) -> float:
+        return force_bandwidth_hz(self.fit.params_)
+
+
+def identify_recording(
+    recording: NotesRecording, start: MsdParams, dof: str = "translation"
+) -> tuple[dict[str, object], ChirpFit | None]:
     """What one recorded file tells: a chirp's grey-box fit or a ramp's measures.
 
     A chirp (the command reverses often) is fitted from `start`: all five parameters
@@ -115,7 +130,7 @@ def identify_recording(recording: NotesRecording, start: MsdParams) -> dict[str,
     held at `start`). A clamped ramp gives the limit, hysteresis, direction gains and
     the fitted compensator. Keys: `experiment`, `boundary` and either `parameters`,
     `free_parameters`, `fit_quality`, `bandwidth_hz`, `settling_time_s` or `ramp`,
-    `compensator`.
+    `compensator`; and the `ChirpFit` of a chirp (None for a ramp).
     """
     out: dict[str, object] = {
         "experiment": recording.experiment,
@@ -126,11 +141,12 @@ def identify_recording(recording: NotesRecording, start: MsdParams) -> dict[str,
         out["ramp"] = ramp_measures(recording).to_dict()
         out["max_continuous"] = out["ramp"]["max_continuous"]  # type: ignore[index]
         out["compensator"] = KarnoppCompensator().fit(recording).to_dict()
-        return out
-    fit = GreyBoxFit(start).fit([measure_frf(recording)])
+        return out, None
+    frfs = [measure_frf(recording)]
+    fit = GreyBoxFit(start).fit(frfs)
     out["parameters"] = dict(zip(MSD_FIELDS, fit.params_.as_tuple(), strict=True))
     out["free_parameters"] = list(fit.free_)
     out["fit_quality"] = {f"fit_percent_{k}": v for k, v in fit.fit_percent_.items()}
     out["bandwidth_hz"] = force_bandwidth_hz(fit.params_)
     out["settling_time_s"] = settling_time_s(fit.params_)
-    return out
+    return out, ChirpFit(dof, frfs, fit)
