@@ -172,6 +172,8 @@ def _driver_counts(driver: Driver) -> dict[str, int]:
     """What a simulated participant noticed during the trial (by hand, by eye)."""
     if isinstance(driver, SimulatedParticipant):
         return {"obstacles_felt": driver.obstacles_felt, "obstacles_seen": driver.obstacles_seen}
+    if isinstance(driver, NotesParticipant):
+        return {"stalls_seen": driver.stalls_seen}
     return {}
 
 
