@@ -45,6 +45,10 @@ SIGN_SPEED_RAD_S = 0.3
 """Speed of the smoothed sign tanh(w / w0), as in the estimator's eq. 1 (physics.py)."""
 
 
+HYSTERESIS_DEGREE = 2
+"""Degree in the drive of the hysteresis loop's half-height."""
+
+
 def smooth_sign(speed: Float1D) -> Float1D:
     """sgn(w) smoothed as the estimator does: tanh(w / 0.3 rad/s)."""
     return np.tanh(speed / SIGN_SPEED_RAD_S)
@@ -198,11 +202,18 @@ class Hysteresis(Effect):
         # The state from the samples before the present one: the present current's
         # measurement noise is in the base model's current column already, and a state
         # that followed it would act as a noise filter rather than as a hysteresis.
-        h = play_operator(np.ascontiguousarray(s["drive"]), value)
-        return np.r_[0.0, h[:-1]][:, None]
+        x = s["drive"]
+        h = play_operator(np.ascontiguousarray(x), value)
+        h = np.r_[0.0, h[:-1]]
+        # half the loop's height, a polynomial in the drive (two calibrated branches
+        # such as eqs. 14-15 differ by a quadratic in the current)
+        return np.column_stack([h * x**j for j in range(HYSTERESIS_DEGREE + 1)])
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
-        return {f"half_loop_{unit}": coef[0] * out, "loop_half_width_drive_units": value}
+        names = [f"half_loop_{unit}", f"half_loop_{unit}_per_drive_unit"]
+        names.append(f"half_loop_{unit}_per_drive_unit2")
+        params = {name: c * out for name, c in zip(names, coef, strict=True)}
+        return {**params, "loop_half_width_drive_units": value}
 
 
 class Delay(Effect):

@@ -8,8 +8,12 @@
        parameter on the training block, refit base + effects + candidate, and measure
        the held-out RMSE;
     4. add the best candidate if its gain is significant: held-out RMSE lower by at
-       least `min_gain`, the Diebold-Mariano test (HAC variance) below `alpha` divided
-       by the number of candidates tried (Bonferroni), and a lower BIC on training;
+       least `min_gain`, the one-sided Diebold-Mariano test (HAC variance) below
+       `alpha`, and a lower BIC on training. The three guard each other: on long
+       recordings tiny gains are significant (the minimum gain stops them), on short
+       ones a gain made in a few bursts is not (the test stops it), and the BIC charges
+       for the parameters. `alpha` is per candidate, not divided among them: an effect
+       must pass all three, and on clean recordings the minimum gain is what rejects;
     5. repeat until no candidate passes or `max_effects` are in.
 
 The residual tests (`residual.py`) are reported before and after; they describe the
@@ -70,7 +74,7 @@ class Calibrator:
     held_out_fraction
         Share of the recording, at its end, held out for testing.
     alpha
-        Family-wise level of the Diebold-Mariano test in each round.
+        Level of each candidate's Diebold-Mariano test.
     min_gain
         Smallest relative cut in held-out RMSE worth an effect: 5 %, above the 3-4 %
         that the imperfect fit of an effect already in the model can leave for a wrong
@@ -161,7 +165,7 @@ class Calibrator:
                 )
                 found.append((cand, effect, c_coef, c_pred, c_k))
             for cand, *_ in found:
-                cand.reason = _verdict(cand, self.min_gain, self.alpha / len(found))
+                cand.reason = _verdict(cand, self.min_gain, self.alpha)
             passing = [f for f in found if not f[0].reason]
             self.candidates_.extend(f[0] for f in found)
             if progress is not None:

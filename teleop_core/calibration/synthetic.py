@@ -73,7 +73,8 @@ def _draw(family: str, rng: np.random.Generator, duration_s: float) -> dict[str,
     if family == "delay":
         return {"lag_s": float(rng.uniform(0.03, 0.08))}
     if family == "drift":
-        return {"time_constant_s": float(rng.uniform(0.1, 0.4) * duration_s)}
+        # a winding heats over minutes: still changing when the recording ends
+        return {"time_constant_s": float(rng.uniform(0.4, 1.5) * duration_s)}
     return {}
 
 
