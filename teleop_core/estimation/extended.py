@@ -19,10 +19,11 @@ from pathlib import Path
 from typing import Any
 
 from teleop_core._typing import Float1D
+from teleop_core.calibration.effects import SIGN_SPEED_RAD_S
 from teleop_core.calibration.fitting import CalibratedModel
 from teleop_core.calibration.models import FollowerBase
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.physics import PhysicsParams
+from teleop_core.estimation.physics import PhysicsParams, from_coefficients
 from teleop_core.estimation.recording import FollowerRecording
 
 
@@ -65,14 +66,8 @@ class ExtendedPhysics:
                 "the force estimator needs --model follower"
             )
         # F = (K_t I_q - J a - b w - tau_c sgn w) / r + F_0: the first five coefficients
-        c, r = calibrated.coef, calibrated.model.wheel_radius_m
-        base = PhysicsParams(
-            torque_constant_n_m_per_a=float(c[0] * r),
-            inertia_kg_m2=float(c[1] * r),
-            viscous_damping_n_m_s_per_rad=float(c[2] * r),
-            coulomb_friction_n_m=float(c[3] * r),
-            wheel_radius_m=r,
-            offset_n=float(c[4]),
+        base = from_coefficients(
+            calibrated.coef[:5], calibrated.model.wheel_radius_m, SIGN_SPEED_RAD_S
         )
         return cls(calibrated, base, d.get("source", source))
 

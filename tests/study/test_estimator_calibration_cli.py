@@ -8,19 +8,12 @@ from pathlib import Path
 import pytest
 
 from study.cli import main
-from teleop_core.calibration import Calibrator, FollowerBase
-from teleop_core.calibration.synthetic import follower_recording
+from tests.teleop_core.conftest import calibrated_folder
 
 
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory: pytest.TempPathFactory):
-    folder = tmp_path_factory.mktemp("ext")
-    rec, _ = follower_recording(30.0, ["position_periodic"], seed=8)
-    rec.to_csv(folder / "rec.csv")
-    model = FollowerBase()
-    report = Calibrator(model).fit(model.data(rec)).report()
-    (folder / "report.json").write_text(json.dumps(report))
-    return folder, rec, report
+    return calibrated_folder(tmp_path_factory.mktemp("ext"), ["position_periodic"], 30.0, 8)
 
 
 def test_estimator_train_cli_takes_a_calibration(calibrated, tmp_path: Path) -> None:

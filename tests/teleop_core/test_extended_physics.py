@@ -2,31 +2,23 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from teleop_core.calibration import Calibrator, FollowerBase
-from teleop_core.calibration.synthetic import follower_recording
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.estimator import ForceEstimator, train_estimator
 from teleop_core.estimation.extended import ExtendedPhysics
 from teleop_core.estimation.gru import GruConfig
+from tests.teleop_core.conftest import calibrated_folder
 
 TINY = GruConfig(window=6, hidden_size=8, max_epochs=1)
 
 
 @pytest.fixture(scope="module")
 def calibrated(tmp_path_factory: pytest.TempPathFactory):
-    folder = tmp_path_factory.mktemp("ext")
-    rec, _ = follower_recording(40.0, ["position_periodic"], seed=8)
-    rec.to_csv(folder / "rec.csv")
-    model = FollowerBase()
-    report = Calibrator(model).fit(model.data(rec)).report()
-    (folder / "report.json").write_text(json.dumps(report))
-    return folder, rec, report
+    return calibrated_folder(tmp_path_factory.mktemp("ext"), ["position_periodic"], 40.0, 8)
 
 
 def test_extended_force_is_the_calibrated_prediction(calibrated) -> None:
