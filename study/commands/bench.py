@@ -188,3 +188,33 @@ def bench_calibrate(
         report = run_calibrate_bench(config, out_dir, progress=status.update)
     json_path.write_text(json.dumps(report, indent=2) + "\n")
     click.echo((out_dir / "calibrate_bench.md").read_text())
+
+
+@bench.command("notes")
+@_json_option
+@_out_option
+@click.option(
+    "--draws",
+    type=click.IntRange(min=1),
+    default=10,
+    show_default=True,
+    help="Seeded parameter draws per axis for the identification round trip.",
+)
+@click.option(
+    "--trials",
+    type=click.IntRange(min=1),
+    default=4,
+    show_default=True,
+    help="Simulated NOTES trials per group and condition.",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+def bench_notes(json_path: Path, out_dir: Path, draws: int, trials: int, seed: int) -> None:
+    """Seed 001's NOTES device: bandwidth, settling, limits, identification round trip."""
+    from study.bench.notes import NotesBenchConfig, run_notes_bench
+
+    _check_json_folder(json_path)
+    config = NotesBenchConfig(draws=draws, seed=seed, trials=trials)
+    with Console(stderr=True).status("NOTES bench") as status:
+        report = run_notes_bench(config, out_dir, progress=status.update)
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
+    click.echo((out_dir / "notes_bench.md").read_text())
