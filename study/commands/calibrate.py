@@ -21,8 +21,13 @@ from study.commands.base import StudyCommand
 from study.errors import StudyInputError
 
 _err = Console(stderr=True)
-MODELS = ("follower", "master")
-DRIVE_LABELS = {"follower": "q-axis current (A)", "master": "current (mA)"}
+MODELS = ("follower", "master", "notes-translation", "notes-rotation")
+DRIVE_LABELS = {
+    "follower": "q-axis current (A)",
+    "master": "current (mA)",
+    "notes-translation": "commanded force (N)",
+    "notes-rotation": "commanded torque (N m)",
+}
 
 
 def write_json_atomically(data: dict[str, Any], path: Path) -> None:
@@ -119,8 +124,9 @@ def calibrate(
     """Fit the base model to RECORDING, find and add the effects it lacks, report.
 
     RECORDING is a follower CSV (t, iq, theta, omega, f_ref; alpha optional) for
-    --model follower, or the dial's calibration (t, current_ma, f_ref) for --model
-    master.
+    --model follower, the dial's calibration (t, current_ma, f_ref) for --model
+    master, or a clamped NOTES ramp or chirp run (t, f_des, f_ee) for --model
+    notes-translation or notes-rotation.
     """
     import pandas as pd
 

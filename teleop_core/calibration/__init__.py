@@ -8,12 +8,9 @@ result the estimator can use; `synthetic.py` makes recordings with undeclared ef
 from teleop_core.calibration.effects import EFFECTS, FAMILIES
 from teleop_core.calibration.fitting import CalibratedModel
 from teleop_core.calibration.loop import Calibrator
-from teleop_core.calibration.models import (
-    BASE_MODELS,
-    CalibrationData,
-    FollowerBase,
-    MasterBase,
-)
+from teleop_core.calibration.models import CalibrationData, FollowerBase, MasterBase
+from teleop_core.calibration.notes import NotesBase
+from teleop_core.calibration.registry import BASE_MODELS
 
 __all__ = [
     "BASE_MODELS",
@@ -24,4 +21,5 @@ __all__ = [
     "Calibrator",
     "FollowerBase",
     "MasterBase",
+    "NotesBase",
 ]

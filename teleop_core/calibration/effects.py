@@ -38,15 +38,12 @@ import numpy as np
 from teleop_core._typing import Float1D, Float2D
 
 Signals = dict[str, Float1D]
-"""Named signals of a recording: `t` [s], `drive` (current), and where the model has
-them `speed` [rad/s], `accel` [rad/s^2], `angle` [rad]."""
+"""Named signals of a recording: `t` [s], `drive` (current or command), and where the
+model has them `speed` [rad/s], `accel` [rad/s^2], `angle` [rad], `direction` (of
+motion or command), `linear` (a linear model's response)."""
 
 SIGN_SPEED_RAD_S = 0.3
 """Speed of the smoothed sign tanh(w / w0), as in the estimator's eq. 1 (physics.py)."""
-
-
-HYSTERESIS_DEGREE = 2
-"""Degree in the drive of the hysteresis loop's half-height."""
 
 
 def smooth_sign(speed: Float1D) -> Float1D:
@@ -140,13 +137,18 @@ class ViscousNonlinear(Effect):
 
 
 class DirectionAsymmetry(Effect):
+    """`direction` is the motion (the follower's wheel speed) or, for a clamped device,
+    the commanded force through its linear model; `direction_sign`, when the model
+    gives one, is its smoothed sign on the model's own scale."""
+
     family = "direction_asymmetry"
-    needs = ("speed",)
+    needs = ("direction",)
 
     def columns(self, s: Signals, value: float) -> Float2D:
-        w = s["speed"]
-        # extra Coulomb and viscous friction while withdrawing (w < 0)
-        return np.column_stack([-np.minimum(smooth_sign(w), 0.0), -np.minimum(w, 0.0)])
+        w = s["direction"]
+        sign = s["direction_sign"] if "direction_sign" in s else smooth_sign(w)
+        # extra Coulomb and viscous friction (or transmission loss) while w < 0
+        return np.column_stack([-np.minimum(sign, 0.0), -np.minimum(w, 0.0)])
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
         return {
@@ -187,8 +189,14 @@ def periods_to_search(angle: Float1D) -> Float1D:
 
 
 class Hysteresis(Effect):
+    """`degree`: the loop's half-height is a polynomial of this degree in the drive (0:
+    a constant, as Coulomb friction gives; 2: two calibrated quadratics, as eqs. 14-15)."""
+
     family = "hysteresis"
     searched = "loop_half_width_drive_units"
+
+    def __init__(self, degree: int = 0) -> None:
+        self.degree = degree
 
     def grid(self, s: Signals) -> Float1D:
         # A band narrower than the current's noise only follows the noise: start at
@@ -207,13 +215,20 @@ class Hysteresis(Effect):
         h = np.r_[0.0, h[:-1]]
         # half the loop's height, a polynomial in the drive (two calibrated branches
         # such as eqs. 14-15 differ by a quadratic in the current)
-        return np.column_stack([h * x**j for j in range(HYSTERESIS_DEGREE + 1)])
+        return np.column_stack([h * x**j for j in range(self.degree + 1)])
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
-        names = [f"half_loop_{unit}", f"half_loop_{unit}_per_drive_unit"]
-        names.append(f"half_loop_{unit}_per_drive_unit2")
+        names = [f"half_loop_{unit}"] + [
+            f"half_loop_{unit}_per_drive_unit{j if j > 1 else ''}"
+            for j in range(1, self.degree + 1)
+        ]
         params = {name: c * out for name, c in zip(names, coef, strict=True)}
         return {**params, "loop_half_width_drive_units": value}
+
+
+MAX_LAG_S = 0.1
+"""Longest lag searched, s: sensor and electrical lags are tens of ms. A longer one is
+a dynamic the base model lacks, and on a slow ramp it would pass for hysteresis."""
 
 
 class Delay(Effect):
@@ -224,11 +239,19 @@ class Delay(Effect):
     family = "delay"
     searched = "lag_s"
     refine = False
-    SHIFTED: ClassVar[tuple[str, ...]] = ("drive", "speed", "accel", "angle")
+    SHIFTED: ClassVar[tuple[str, ...]] = (
+        "drive",
+        "speed",
+        "accel",
+        "angle",
+        "direction",
+        "direction_sign",
+        "linear",
+    )
 
     def grid(self, s: Signals) -> Float1D:
         dt = float(np.median(np.diff(s["t"])))
-        return dt * np.arange(1, max(2, round(0.3 / dt)) + 1)
+        return dt * np.arange(1, max(2, round(MAX_LAG_S / dt)) + 1)
 
     def transform(self, s: Signals, value: float) -> Signals:
         t = s["t"]

@@ -27,8 +27,8 @@ from scipy.optimize import minimize_scalar
 from statsmodels.regression.linear_model import OLS
 
 from teleop_core._typing import Float1D, Float2D
-from teleop_core.calibration.effects import EFFECTS, Effect, Signals
-from teleop_core.calibration.models import BASE_MODELS, BaseModel, CalibrationData
+from teleop_core.calibration.effects import Effect, Signals
+from teleop_core.calibration.models import BaseModel, CalibrationData
 from teleop_core.errors import TeleopInputError
 
 Chain = list[tuple[Effect, float]]
@@ -182,12 +182,14 @@ class CalibratedModel:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> CalibratedModel:
+        from teleop_core.calibration.registry import BASE_MODELS
+
         try:
             base = BASE_MODELS[d["base"]]
             settings = dict(d.get("base_settings", {}))
             if settings:
                 base = type(base)(**settings)
-            chain = [(EFFECTS[e["family"]], float(e["searched_value"])) for e in d["effects"]]
+            chain = [(base.effect(e["family"]), float(e["searched_value"])) for e in d["effects"]]
             coef = np.asarray(d["coefficients"], float)
         except (KeyError, TypeError, ValueError) as exc:
             raise TeleopInputError(f"calibrated model is damaged: {exc!r}") from None
@@ -224,7 +226,8 @@ def confidence(
         out = [model.physical(c[: sizes[0]])]
         start = sizes[0]
         for i, ((e, v), k) in enumerate(zip(chain, sizes[1:], strict=True)):
-            out.append(e.physical(c[start : start + k], values.get(i, v), model.out, model.unit))
+            params = e.physical(c[start : start + k], values.get(i, v), model.out, model.unit)
+            out.append(model.rename(e.family, params))
             start += k
         return out
 

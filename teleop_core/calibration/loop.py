@@ -149,7 +149,7 @@ class Calibrator:
             for i, family in enumerate(remaining):
                 if progress is not None:
                     progress(i, len(remaining), f"round {round_ + 1}: {family}")
-                effect = EFFECTS[family]
+                effect = self.model.effect(family)
                 value = search(self.model, data, self.train_, chain, effect)
                 c_coef, c_pred, c_k = self._fit_chain(data, [*chain, (effect, value)])
                 c_rmse = _rmse(y_test - c_pred[self.test_])

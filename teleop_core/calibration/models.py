@@ -22,7 +22,14 @@ from pathlib import Path
 import numpy as np
 
 from teleop_core._typing import Float1D, Float2D
-from teleop_core.calibration.effects import FAMILIES, Signals, smooth_sign
+from teleop_core.calibration.effects import (
+    EFFECTS,
+    FAMILIES,
+    Effect,
+    Hysteresis,
+    Signals,
+    smooth_sign,
+)
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.recording import FollowerRecording, read_checked_csv
 
@@ -62,12 +69,22 @@ class BaseModel:
     """Candidate families that apply to this model's signals."""
     plot_against: tuple[str, ...] = ("t",)
     """Signals the residual figures are drawn against."""
+    overrides: dict[str, Effect] = {}  # noqa: RUF012 - read only
+    """This model's own settings of a family (the master's quadratic hysteresis loop)."""
+
+    def effect(self, family: str) -> Effect:
+        """The candidate `family` as this model uses it."""
+        return self.overrides.get(family, EFFECTS[family])
 
     def columns(self, s: Signals) -> Float2D:
         raise NotImplementedError
 
     def physical(self, coef: Float1D) -> dict[str, float]:
         raise NotImplementedError
+
+    def rename(self, family: str, params: dict[str, float]) -> dict[str, float]:
+        """An effect's physical parameters under this model's names (same order)."""
+        return params
 
     def read(self, path: str | Path) -> CalibrationData:
         raise NotImplementedError
@@ -109,7 +126,8 @@ class FollowerBase(BaseModel):
 
     def data(self, rec: FollowerRecording) -> CalibrationData:
         signals = {"t": rec.t, "drive": rec.iq, "speed": rec.omega, "accel": rec.alpha}
-        return CalibrationData({**signals, "angle": rec.theta}, rec.f_ref, rec.name)
+        signals.update(angle=rec.theta, direction=rec.omega)
+        return CalibrationData(signals, rec.f_ref, rec.name)
 
     def read(self, path: str | Path) -> CalibrationData:
         return self.data(FollowerRecording.from_csv(path))
@@ -121,6 +139,7 @@ class MasterBase(BaseModel):
 
     name = "master"
     families = ("hysteresis", "delay", "drift", "current_nonlinearity")
+    overrides = {"hysteresis": Hysteresis(degree=2)}  # noqa: RUF012 - read only
     plot_against = ("t", "drive")
 
     def columns(self, s: Signals) -> Float2D:
@@ -140,7 +159,3 @@ class MasterBase(BaseModel):
     def read(self, path: str | Path) -> CalibrationData:
         v = read_checked_csv(path, MASTER_COLUMNS)
         return self.data_from_arrays(v["t"], v["current_ma"], v["f_ref"], Path(path).name)
-
-
-BASE_MODELS: dict[str, BaseModel] = {"follower": FollowerBase(), "master": MasterBase()}
-"""Base models by their `--model` name (the NOTES models join when issue 6 lands)."""

@@ -12,6 +12,8 @@ import pytest
 
 from study.cli import main
 from teleop_core.calibration.synthetic import follower_recording, master_recording
+from teleop_core.notes.params import default_params
+from teleop_core.notes.simulate import simulate_recording
 
 REPORT_KEYS = {
     "rmse_before",
@@ -108,3 +110,18 @@ def test_a_bad_recording_is_refused_and_nothing_written(
     err = capsys.readouterr().err
     assert "study calibrate: error:" in err and "'f_ref' missing" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]
+
+
+def test_notes_rotation_ramp_names_the_ccw_loss(tmp_path: Path) -> None:
+    frame = simulate_recording(
+        default_params("rotation"), "ramp", "clamped", noise=0.02, seed=4, rate_hz=200.0
+    )
+    frame.to_csv(tmp_path / "ramp.csv", index=False)
+    args = ["calibrate", str(tmp_path / "ramp.csv"), "--model", "notes-rotation"]
+    out = ["--json", str(tmp_path / "r.json"), "--predictions", str(tmp_path / "p.csv")]
+    assert main([*args, *out, "--out", str(tmp_path / "figs")]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    added = {e["family"]: e for e in report["effects_added"]}
+    assert {"hysteresis", "direction_asymmetry"} <= set(added)
+    assert "reverse_loss" in added["direction_asymmetry"]["params"]
+    assert report["model"] == "notes-rotation"

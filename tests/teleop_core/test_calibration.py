@@ -3,8 +3,9 @@
 Each simulated recording carries one effect (or two, or none) that eq. 1 lacks, with
 its parameters drawn from the seed in the test; the loop must name it, cut the
 held-out error, and leave the clean recording alone. The references are the drawn
-parameters themselves, the published eqs. 14-15 for the dial, and direct computations
-(numpy's corrcoef, statsmodels' own Ljung-Box) for the residual tests.
+parameters themselves, the published eqs. 14-15 for the dial, the NOTES model's own
+friction and transmission parameters (issue 6), and direct computations (numpy's
+corrcoef, statsmodels' own Ljung-Box) for the residual tests.
 """
 
 from __future__ import annotations
@@ -20,12 +21,16 @@ from teleop_core.calibration import (
     Calibrator,
     FollowerBase,
     MasterBase,
+    NotesBase,
 )
 from teleop_core.calibration.effects import play_operator
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
 from teleop_core.calibration.synthetic import JND_N, follower_recording, master_recording
 from teleop_core.errors import TeleopInputError
 from teleop_core.master.params import CalibrationPolynomials
+from teleop_core.notes.params import default_params
+from teleop_core.notes.recording import NotesRecording
+from teleop_core.notes.simulate import simulate_recording
 
 SEED = 20261121
 SEARCHED_TRUTH = {
@@ -167,3 +172,32 @@ def test_bad_settings_are_refused() -> None:
     with pytest.raises(TeleopInputError, match="at least 200"):
         Calibrator(FollowerBase()).fit(FollowerBase().data(rec))
     assert set(FAMILIES) == set(EFFECTS)
+
+
+@pytest.mark.parametrize("dof", ["translation", "rotation"])
+def test_notes_ramps_show_the_papers_hysteresis_and_ccw_loss(dof: str) -> None:
+    """Seed 001's static ramps: friction hysteresis in both axes, and in rotation the
+    counter-clockwise loss; the linear Fig. 8 device gets nothing."""
+    params = default_params(dof)
+    model = NotesBase(dof)
+
+    def run(nonlinear: bool) -> Calibrator:
+        frame = simulate_recording(
+            params, "ramp", "clamped", nonlinear=nonlinear, noise=0.02, seed=3, rate_hz=200.0
+        )
+        return Calibrator(model).fit(model.data(NotesRecording.from_frame(frame)))
+
+    assert run(nonlinear=False).chain_ == []
+    cal = run(nonlinear=True)
+    effects = {e["family"]: e["params"] for e in cal.report()["effects_added"]}
+    unit = model.unit
+    # the loop's half height is the Coulomb friction: lower force while the command rises
+    assert effects["hysteresis"][f"half_loop_{unit}"] == pytest.approx(-params.coulomb, rel=0.6)
+    if dof == "rotation":
+        # CCW transmission relative to CW (the base gain takes the CW one)
+        loss = 1 - params.ccw_transmission / params.cw_transmission
+        assert effects["direction_asymmetry"]["reverse_loss"] == pytest.approx(loss, abs=0.03)
+    assert cal.rmse_after_ < cal.rmse_before_ / 3
+    with pytest.raises(TeleopInputError, match="expected a clamped run"):
+        open_run = simulate_recording(params, "ramp", "open", rate_hz=200.0)
+        model.data(NotesRecording.from_frame(open_run))
