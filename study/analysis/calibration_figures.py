@@ -33,8 +33,9 @@ def residual_against(
     after: np.ndarray,
     label: str,
     ax: plt.Axes | None = None,
+    unit: str = "N",
 ) -> plt.Axes:
-    """Residuals (N) before and after against `x`; points for signals, lines for time."""
+    """Residuals before and after against `x`; points for signals, lines for time."""
     if ax is None:
         _, ax = plt.subplots(figsize=(WIDTHS_IN["single"], 2.2), layout="constrained")
     as_line = label == AXIS_LABELS["t"]
@@ -45,7 +46,7 @@ def residual_against(
             ax.scatter(x, e, s=1.0, color=COLOURS[name], alpha=0.5, lw=0, label=name)
     ax.axhline(0.0, color="black", lw=0.4)
     ax.set_xlabel(label)
-    ax.set_ylabel("residual (N)")
+    ax.set_ylabel(f"residual ({unit})")
     ax.legend(loc="upper right", markerscale=4, frameon=False)
     return ax
 
@@ -77,13 +78,14 @@ def residual_figures(
     tests_after: dict[str, Any],
     against: Sequence[str],
     drive_label: str = "current",
+    unit: str = "N",
 ) -> list[Path]:
     """Write `residual_vs_<signal>.png` for each of `against` and `residual_acf.png`."""
     labels = {**AXIS_LABELS, "drive": drive_label}
     paths: list[Path] = []
     with plt.rc_context(STYLE):
         for key in against:
-            ax = residual_against(signals[key], before, after, labels[key])
+            ax = residual_against(signals[key], before, after, labels[key], unit=unit)
             paths += save(ax.figure, out_dir, f"residual_vs_{key}", ["png"])
         ax = autocorrelation(tests_before["autocorrelation"], tests_after["autocorrelation"])
         paths += save(ax.figure, out_dir, "residual_acf", ["png"])

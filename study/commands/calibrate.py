@@ -159,6 +159,7 @@ def calibrate(
         report["residual_tests_after"],
         calibrator.model.plot_against,
         DRIVE_LABELS.get(model_name, "current"),
+        "N m" if model_name == "notes-rotation" else "N",
     )
     write_csv_atomically(predictions, pred_path)
     write_json_atomically(report, json_path)
@@ -175,3 +176,5 @@ def calibrate(
             )
         )
         click.echo(f"  {effect['family']}: {params} -> {effect['rmse_after_step']:.4f} N")
+    for warning in report["warnings"]:
+        click.echo(f"note: {warning}")

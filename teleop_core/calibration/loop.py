@@ -238,9 +238,27 @@ class Calibrator:
                 "max_effects": self.max_effects,
                 "ci_level": 0.95,
             },
+            "warnings": self.warnings(),
             "candidates": [_candidate_dict(c) for c in self.candidates_],
             "calibrated_model": self.model_.to_dict(),
         }
+
+
+    def warnings(self) -> list[str]:
+        """Searched values that ended at an end of their search range: the effect may
+        stand in for something else there (a long lag for a slow dynamic)."""
+        notes = []
+        for effect, value in self.chain_:
+            if effect.searched is None or effect.family == "position_periodic":
+                continue
+            grid = effect.grid(self.data_.signals)
+            lo, hi = float(np.min(grid)), float(np.max(grid))
+            if value <= lo * 1.001 or value >= hi * 0.999:
+                notes.append(
+                    f"{effect.family}: {effect.searched} = {value:.4g} is at the end of its "
+                    f"search range [{lo:.4g}, {hi:.4g}]"
+                )
+        return notes
 
 
 def _rmse(e: Float1D) -> float:
