@@ -164,9 +164,10 @@ def calibrate(
     write_csv_atomically(predictions, pred_path)
     write_json_atomically(report, json_path)
     added = ", ".join(e["family"] for e in report["effects_added"]) or "none"
+    unit = "N m" if model_name == "notes-rotation" else "N"
     click.echo(
-        f"{recording.name}: held-out RMSE {report['rmse_before']:.4f} N -> "
-        f"{report['rmse_after']:.4f} N; effects added: {added}"
+        f"{recording.name}: held-out RMSE {report['rmse_before']:.4f} {unit} -> "
+        f"{report['rmse_after']:.4f} {unit}; effects added: {added}"
     )
     for effect in report["effects_added"]:
         params = ", ".join(
@@ -175,6 +176,6 @@ def calibrate(
                 effect["params"].items(), effect["ci"].values(), strict=True
             )
         )
-        click.echo(f"  {effect['family']}: {params} -> {effect['rmse_after_step']:.4f} N")
+        click.echo(f"  {effect['family']}: {params} -> {effect['rmse_after_step']:.4f} {unit}")
     for warning in report["warnings"]:
         click.echo(f"note: {warning}")
