@@ -51,14 +51,23 @@ class Candidate:
     """One candidate's evaluation in one round."""
 
     family: str
+    """The effect family's report name."""
     round: int
+    """Loop round, from 1."""
     searched_value: float
+    """Its searched parameter as found on the training block (nan when it has none)."""
     rmse_held_out_n: float
+    """Held-out RMSE of the model with it, N (N m for a torque model)."""
     gain_fraction: float
+    """Relative cut in held-out RMSE against the model of that round."""
     p_value: float
+    """One-sided Diebold-Mariano p-value of that cut."""
     bic_change: float
+    """Change of the training BIC when it is added (negative: better)."""
     accepted: bool = False
+    """Whether the loop added it in this round."""
     reason: str = ""
+    """Why it was not added ('' when it passed)."""
 
 
 @dataclass
@@ -242,7 +251,6 @@ class Calibrator:
             "candidates": [_candidate_dict(c) for c in self.candidates_],
             "calibrated_model": self.model_.to_dict(),
         }
-
 
     def warnings(self) -> list[str]:
         """Searched values that ended at an end of their search range: the effect may

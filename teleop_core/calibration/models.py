@@ -42,8 +42,11 @@ class CalibrationData:
     """What the loop fits: named signals (each (n,)) and the reference force y (N)."""
 
     signals: Signals
+    """Named inputs, each of shape (n,), `t` [s] among them (`effects.Signals`)."""
     y: Float1D
+    """The reference force (or torque) the model predicts, shape (n,)."""
     name: str = "recording"
+    """The recording's name in reports and errors."""
 
     def __post_init__(self) -> None:
         n = len(self.y)
