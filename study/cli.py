@@ -17,6 +17,7 @@ from study import __version__
 from study.commands.analyze import analyze
 from study.commands.base import USER_ERRORS, InputError, StudyGroup
 from study.commands.bench import bench
+from study.commands.calibrate import calibrate
 from study.commands.characterize import characterize
 from study.commands.database import database
 from study.commands.estimator import estimator
@@ -63,6 +64,7 @@ cli.add_command(analyze)
 cli.add_command(figures)
 cli.add_command(demo)
 cli.add_command(power)
+cli.add_command(calibrate)
 cli.add_command(characterize)
 cli.add_command(identify)
 
