@@ -26,6 +26,7 @@ from study.commands.power import power
 from study.commands.run import run
 from study.commands.simulate import simulate
 from study.commands.tlx import tlx
+from study.commands.tui import tui
 
 EXIT_USER_ERROR = 2
 
@@ -61,6 +62,7 @@ cli.add_command(analyze)
 cli.add_command(figures)
 cli.add_command(demo)
 cli.add_command(power)
+cli.add_command(tui)
 
 
 def _one_line(message: str) -> str:
