@@ -47,6 +47,9 @@ class TuiSettings:
     figures_dir: Path = Path("figures")
     """Where the analysis screen exports the paper's figures by default."""
     theme: str = "textual-dark"
+    prepare_simulation: bool = True
+    """Load the estimator and compile the loop when the run screen is first shown (a few
+    seconds of one core, in a worker); off, the first trial pays it instead."""
 
     def __post_init__(self) -> None:
         if self.simulated_pace is not None and not self.simulated_pace > 0:
@@ -92,7 +95,7 @@ class StudyApp(App[None]):
                 CalibrationPane(self.services, id="calibration-pane"),
             )
             for k, (tab, pane) in enumerate(zip(TABS, panes, strict=True)):
-                with TabPane(f"{k + 1} {TITLES[k]}", id=tab):
+                with TabPane(f"F{k + 1} {TITLES[k]}", id=tab):
                     yield pane
         yield Footer()
 
@@ -144,17 +147,18 @@ class StudyApp(App[None]):
 
     @on(TabbedContent.TabActivated)
     def _tab_shown(self, event: TabbedContent.TabActivated) -> None:
-        if event.pane.id == "run":
+        if event.pane.id == "run" and self.settings.prepare_simulation:
             self.query_one(RunPane).prepare()
 
     def action_tab(self, tab: str) -> None:
         self.query_one("#tabs", TabbedContent).active = tab
+        # focus inside the screen, so its key bindings work at once
         pane = self.query_one(f"#{tab}").children[0]
-        if pane.can_focus:
-            pane.focus()
-        else:
-            self.set_focus(None)
-            self.screen.focus_next()
+        target = pane if pane.focusable else next(
+            (w for w in pane.query("*") if w.focusable), None
+        )  # fmt: skip
+        if target is not None:
+            target.focus()
 
     def action_toggle_theme(self) -> None:
         self.theme = "textual-light" if self.theme == "textual-dark" else "textual-dark"

@@ -68,6 +68,8 @@ class PairChoice(Widget, can_focus=True):
         self.refresh()
 
     def render(self) -> str:
+        if self.pair[0] not in TLX_SCALES:
+            return f"{self.number:>2}. (pick a participant)"
         a, b = (TLX_SCALES[s][0] for s in self.pair)
         left = f"[reverse] {a} [/]" if self.choice == self.pair[0] else f" {a} "
         right = f"[reverse] {b} [/]" if self.choice == self.pair[1] else f" {b} "
@@ -114,6 +116,7 @@ class TlxPane(VerticalScroll):
         self.status = ""
         self.editing_id: int | None = None
         self._codes: list[str] = []
+        self._blocks_code: str | None = None
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="tlx-top", classes="row"):
@@ -131,7 +134,7 @@ class TlxPane(VerticalScroll):
                 yield Label(f" {high}", classes="anchor-high")
         yield Label("Which contributed more to the workload? (left / right)")
         for k in range(15):
-            yield PairChoice(k + 1, ("mental", "physical"), id=f"pair-{k}")
+            yield PairChoice(k + 1, ("", ""), id=f"pair-{k}")
         with Horizontal(classes="row"):
             yield Label("Reason for an edit ")
             yield Input(id="reason", placeholder="(edits only)", compact=True)
@@ -156,6 +159,9 @@ class TlxPane(VerticalScroll):
         self._load(code, task, condition)
 
     def _set_blocks(self, code: str) -> None:
+        if code == self._blocks_code:  # already shown (open_block, then Select.Changed)
+            return
+        self._blocks_code = code
         row = next((r for r in (self.roster.participants if self.roster else ()) if
                     r["code"] == code), None)  # fmt: skip
         blocks = [f"{b['task']}/{b['condition']}" for b in row["blocks"]] if row else []
@@ -211,16 +217,19 @@ class TlxPane(VerticalScroll):
             widget.refresh()
         self.query_one("#reason", Input).value = ""
         state = "stored: editing it needs a reason" if response is not None else "new"
-        self._set_status(note or state)
+        self._set_status(note or state, notify=bool(note))
         lines = [
             f"{a.at:%Y-%m-%d %H:%M} {a.field}: {a.old_value} -> {a.new_value} ({a.reason})"
             for a in audit[-5:]
         ]
         self.query_one("#audit", Static).update("\n".join(["audit log:", *lines]) if lines else "")
 
-    def _set_status(self, text: str) -> None:
+    def _set_status(self, text: str, notify: bool = False) -> None:
         self.status = text
         self.query_one("#tlx-status", Static).update(text)
+        if notify:  # the status line may be scrolled out of view at 80 x 24
+            refused = text.startswith("refused")
+            self.app.notify(text, severity="error" if refused else "information")
 
     # -- saving ---------------------------------------------------------------------------
 
@@ -233,7 +242,7 @@ class TlxPane(VerticalScroll):
         code = self.query_one("#tlx-participant", Select).value
         block = self.query_one("#tlx-block", Select).value
         if code is Select.NULL or block is Select.NULL:
-            self._set_status("refused: pick a participant and a block first")
+            self._set_status("refused: pick a participant and a block first", notify=True)
             return
         ratings = {
             s: _rating_value(self.query_one(f"#rating-{s}", Input).value) for s in TLX_SUBSCALES
@@ -253,7 +262,7 @@ class TlxPane(VerticalScroll):
             if self.editing_id is not None and reason is None:
                 raise StudyInputError("this block's TLX is stored; an edit needs a reason")
         except StudyInputError as exc:
-            self._set_status(f"refused: {exc}")
+            self._set_status(f"refused: {exc}", notify=True)
             return
         task, condition = str(block).split("/")
         picks = None if chosen[0] is None else [str(c) for c in chosen]
@@ -266,7 +275,7 @@ class TlxPane(VerticalScroll):
         try:
             _, new = store_tlx(self.services.engine, code, task, condition, ratings, chosen, reason)
         except ValueError as exc:
-            self.app.call_from_thread(self._set_status, f"refused: {exc}")
+            self.app.call_from_thread(self._set_status, f"refused: {exc}", True)
             return
         self.post_message(self.Saved(code, task, condition, new))
 
