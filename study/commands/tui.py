@@ -9,6 +9,13 @@ import click
 from study.commands.base import StudyCommand, db_option
 
 
+def _load_estimator():
+    """The shipped estimator, imported when first needed (its module loads torch)."""
+    from study.protocol.default_estimator import load_estimator
+
+    return load_estimator()
+
+
 @click.command("tui", cls=StudyCommand)
 @click.option(
     "--figures-dir",
@@ -29,12 +36,11 @@ from study.commands.base import StudyCommand, db_option
 def tui(figures_dir: Path, pace: float, light: bool, db_url: str | None) -> None:
     """The terminal app: overview, participants, sessions, NASA-TLX, analysis, calibration."""
     from db.migrate import open_database
-    from study.protocol.default_estimator import load_estimator
     from study.tui import StudyServices, TuiSettings, make_app
 
     engine = open_database(db_url, create=False)
     try:
-        services = StudyServices(engine, load_estimator, calibrate=None)
+        services = StudyServices(engine, _load_estimator, calibrate=None)
         settings = TuiSettings(
             simulated_pace=pace,
             figures_dir=figures_dir,

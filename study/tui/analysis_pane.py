@@ -77,10 +77,17 @@ class AnalysisPane(Vertical):
     class Exported(Message):
         paths: list[Path]
 
-    def __init__(self, services: StudyServices, figures_dir: Path, **kwargs: object) -> None:
+    def __init__(
+        self,
+        services: StudyServices,
+        figures_dir: Path,
+        formats: tuple[str, ...] = ("pdf", "svg", "png"),
+        **kwargs: object,
+    ) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
         self.services = services
         self.figures_dir = figures_dir
+        self.formats = formats
         self.result: Any = None
         self.exported: list[Path] = []
 
@@ -147,7 +154,7 @@ class AnalysisPane(Vertical):
     @work(thread=True, exclusive=True, group="figures")
     def _export(self, folder: Path) -> None:
         try:
-            paths = self.services.export_figures(folder)
+            paths = self.services.export_figures(folder, self.formats)
         except (ValueError, OSError) as exc:
             self.app.call_from_thread(self._status, f"refused: {exc}")
             return

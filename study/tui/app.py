@@ -22,6 +22,7 @@ from textual import on, work
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.message import Message
+from textual.widget import Widget
 from textual.widgets import Footer, TabbedContent, TabPane
 
 from study.tui.analysis_pane import AnalysisPane
@@ -46,6 +47,8 @@ class TuiSettings:
     """Times real time for a simulated participant at start (None: as fast as it goes)."""
     figures_dir: Path = Path("figures")
     """Where the analysis screen exports the paper's figures by default."""
+    figure_formats: tuple[str, ...] = ("pdf", "svg", "png")
+    """Formats of the exported figures (as `study figures --format`)."""
     theme: str = "textual-dark"
     prepare_simulation: bool = True
     """Load the estimator and compile the loop when the run screen is first shown (a few
@@ -83,21 +86,39 @@ class StudyApp(App[None]):
         self.started_at = time.monotonic()
         self.overview_shown_s: float | None = None
         """Seconds from the app's construction to the first overview with data."""
+        self.ready = False
+        """True once every screen is mounted (after the overview has shown)."""
 
     def compose(self) -> ComposeResult:
+        # only the overview at first: the other screens (some 300 widgets) are mounted
+        # once it shows, so the first paint waits for neither their layout nor their CSS
         with TabbedContent(id="tabs"):
-            panes = (
-                OverviewPane(id="overview-pane"),
-                ParticipantsPane(self.services, id="participants-pane"),
-                RunPane(self.services, self.settings.simulated_pace, id="run-pane"),
-                TlxPane(self.services, id="tlx-pane"),
-                AnalysisPane(self.services, self.settings.figures_dir, id="analysis-pane"),
-                CalibrationPane(self.services, id="calibration-pane"),
-            )
-            for k, (tab, pane) in enumerate(zip(TABS, panes, strict=True)):
+            for k, tab in enumerate(TABS):
                 with TabPane(f"F{k + 1} {TITLES[k]}", id=tab):
-                    yield pane
+                    if tab == "overview":
+                        yield OverviewPane(id="overview-pane")
         yield Footer()
+
+    def _later_panes(self) -> dict[str, Widget]:
+        return {
+            "participants": ParticipantsPane(self.services, id="participants-pane"),
+            "run": RunPane(self.services, self.settings.simulated_pace, id="run-pane"),
+            "tlx": TlxPane(self.services, id="tlx-pane"),
+            "analysis": AnalysisPane(
+                self.services,
+                self.settings.figures_dir,
+                self.settings.figure_formats,
+                id="analysis-pane",
+            ),  # fmt: skip,
+            "calibration": CalibrationPane(self.services, id="calibration-pane"),
+        }
+
+    async def _mount_later_panes(self) -> None:
+        for tab, pane in self._later_panes().items():
+            await self.query_one(f"#{tab}", TabPane).mount(pane)
+        self.ready = True
+        if self.roster is not None:
+            self._show(self.roster)
 
     def on_mount(self) -> None:
         self.theme = self.settings.theme
@@ -115,12 +136,17 @@ class StudyApp(App[None]):
     @on(RosterLoaded)
     def _roster_loaded(self, event: RosterLoaded) -> None:
         self.roster = event.roster
-        self.query_one(OverviewPane).show(event.roster)
-        self.query_one(ParticipantsPane).show(event.roster)
-        self.query_one(RunPane).show(event.roster)
-        self.query_one(TlxPane).show(event.roster)
+        self._show(event.roster)
         if self.overview_shown_s is None:
             self.overview_shown_s = time.monotonic() - self.started_at
+            self.call_after_refresh(self._mount_later_panes)
+
+    def _show(self, roster: Roster) -> None:
+        self.query_one(OverviewPane).show(roster)
+        if self.ready:
+            self.query_one(ParticipantsPane).show(roster)
+            self.query_one(RunPane).show(roster)
+            self.query_one(TlxPane).show(roster)
 
     @on(ParticipantsPane.Added)
     @on(TlxPane.Saved)
@@ -151,6 +177,8 @@ class StudyApp(App[None]):
             self.query_one(RunPane).prepare()
 
     def action_tab(self, tab: str) -> None:
+        if not self.ready:
+            return
         self.query_one("#tabs", TabbedContent).active = tab
         # focus inside the screen, so its key bindings work at once
         pane = self.query_one(f"#{tab}").children[0]
@@ -169,6 +197,8 @@ class StudyApp(App[None]):
         self.exit()
 
     async def stop_trial(self, timeout_s: float = 30.0) -> None:
+        if not self.ready:
+            return
         run = self.query_one(RunPane).run
         if run is not None:
             self.notify("stopping the trial: it is kept as interrupted")

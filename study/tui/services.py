@@ -148,7 +148,9 @@ class StudyServices:
             raise StudyInputError("the database holds no completed trials or questionnaires yet")
         return analyze(trials, participant_means(trials, tlx))
 
-    def export_figures(self, folder: Path) -> list[Path]:
+    def export_figures(
+        self, folder: Path, formats: tuple[str, ...] = ("pdf", "svg", "png")
+    ) -> list[Path]:
         from study.analysis.paper import write_figures
 
-        return write_figures(self.engine, folder)
+        return write_figures(self.engine, folder, formats)

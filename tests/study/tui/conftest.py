@@ -79,4 +79,4 @@ async def wait_for(pilot, condition: Callable[[], bool], timeout_s: float = 60.0
 
 
 async def loaded(pilot) -> None:
-    await wait_for(pilot, lambda: pilot.app.roster is not None)
+    await wait_for(pilot, lambda: pilot.app.ready and pilot.app.roster is not None)

@@ -196,7 +196,7 @@ async def test_analysis_tables_chart_and_figure_export(
 ) -> None:
     _store_trials(study_engine)
     out = tmp_path / "paper"
-    app = make_test_app(figures_dir=out)
+    app = make_test_app(figures_dir=out, figure_formats=("png",))
     async with app.run_test(size=(100, 30)) as pilot:
         await loaded(pilot)
         await pilot.press("f5", "r")
