@@ -13,10 +13,15 @@ on dark and light backgrounds; the vessels are drawn in the theme's dimmed foreg
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
+from rich.segment import Segment
+from rich.style import Style
 from rich.text import Text
+from textual.geometry import Region
+from textual.strip import Strip
 from textual.widget import Widget
 
 from study.tui.trial_runner import LiveFrame
@@ -32,6 +37,11 @@ MARGIN_M = 0.008
 TOP_ABOVE_ARCH_M = 0.06
 """How much of the branches above the arch's top the frame shows (the target depth is
 30 mm past the LCCA's ostium)."""
+
+
+@functools.cache
+def _style(spec: str) -> Style:
+    return Style.parse(spec)
 
 
 class BrailleCanvas:
@@ -53,6 +63,17 @@ class BrailleCanvas:
     def copy(self) -> BrailleCanvas:
         out = BrailleCanvas(self.cols, self.rows)
         out.bits, out.style = self.bits.copy(), self.style.copy()
+        return out
+
+    def row_segments(self, r: int, base_style: str = "dim") -> list[Segment]:
+        """Row r as segments, one per run of equally styled cells."""
+        chars = [chr(BRAILLE_BASE + int(b)) if b else " " for b in self.bits[r]]
+        styles = [st or base_style for st in self.style[r]]
+        out, start = [], 0
+        for c in range(1, self.cols + 1):
+            if c == self.cols or styles[c] != styles[start]:
+                out.append(Segment("".join(chars[start:c]), _style(styles[start])))
+                start = c
         return out
 
     def to_text(self, base_style: str = "dim") -> Text:
@@ -112,17 +133,23 @@ class PhantomFrame:
         dy = round(4 * self.rows - 1 - (z_m - self.lo[1]) * self.scale)
         return dx, dy
 
+    def tip_dots(self, frame: LiveFrame) -> tuple[list[tuple[int, int]], float | None]:
+        """The tip's 2 x 2 dot blob, and how far below the frame it is (m), if it is."""
+        x, z = frame.tip_xz_m
+        below = None
+        if z < self.z_bottom:
+            below, z = self.z_bottom - z, self.z_bottom
+        dx, dy = self.to_dot(x, z)
+        return [(dx + ox - 1, dy + oy - 1) for ox, oy in ((0, 0), (1, 0), (0, 1), (1, 1))], below
+
     def draw(self, frame: LiveFrame | None) -> Text:
+        """The whole view as Text (snapshots of a frame; the widget draws line by line)."""
         canvas = self.base.copy()
         below = None
         if frame is not None:
-            x, z = frame.tip_xz_m
-            if z < self.z_bottom:
-                below = self.z_bottom - z
-                z = self.z_bottom
-            dx, dy = self.to_dot(x, z)
-            for ox, oy in ((0, 0), (1, 0), (0, 1), (1, 1)):  # a 2 x 2 dot blob
-                canvas.dot(dx + ox - 1, dy + oy - 1, TIP_STYLE)
+            dots, below = self.tip_dots(frame)
+            for x, y in dots:
+                canvas.dot(x, y, TIP_STYLE)
         text = canvas.to_text()
         if below is not None:
             text.append(f"\n tip {below * 1000:.0f} mm below the frame", TIP_STYLE)
@@ -130,10 +157,15 @@ class PhantomFrame:
 
 
 class PhantomView(Widget):
-    """The phantom and the tip; `update_frame` redraws with the newest sample."""
+    """The phantom and the tip, drawn line by line (Textual's line API).
+
+    The vessels' lines are rendered once per size; a new frame re-renders and refreshes
+    only the one or two lines the tip leaves and the ones it enters, which keeps the
+    live view's redraws cheap at any terminal size.
+    """
 
     DEFAULT_CSS = """
-    PhantomView { width: 1fr; height: 1fr; min-height: 8; border: round $primary-muted; }
+    PhantomView { width: 1fr; height: 1fr; min-height: 6; }
     """
 
     def __init__(self, anatomy: ArchAnatomy | None = None, **kwargs: object) -> None:
@@ -141,17 +173,57 @@ class PhantomView(Widget):
         self.anatomy = anatomy or ArchAnatomy()
         self._frame: LiveFrame | None = None
         self._layout: PhantomFrame | None = None
-        self.border_title = "LCCA phantom (frontal)"
+        self._base: list[Strip] = []
+        self._overlay: dict[int, Strip] = {}
+
+    def _ensure_layout(self) -> PhantomFrame:
+        cols, rows = max(self.size.width, 4), max(self.size.height - 1, 3)
+        if self._layout is None or (self._layout.cols, self._layout.rows) != (cols, rows):
+            self._layout = PhantomFrame(self.anatomy, cols, rows)
+            canvas = self._layout.base
+            self._base = [Strip(canvas.row_segments(r), cols) for r in range(rows)]
+            self._base.append(Strip.blank(cols))
+            self._overlay = self._lines_for(self._frame)
+        return self._layout
+
+    def _lines_for(self, frame: LiveFrame | None) -> dict[int, Strip]:
+        """The lines that differ from the vessels' drawing: the tip's, the note below."""
+        layout = self._layout
+        if frame is None or layout is None:
+            return {}
+        dots, below = layout.tip_dots(frame)
+        lines: dict[int, Strip] = {}
+        for row in sorted({y // 4 for _, y in dots if 0 <= y < 4 * layout.rows}):
+            canvas = BrailleCanvas(layout.cols, 1)
+            canvas.bits[0], canvas.style[0] = layout.base.bits[row], layout.base.style[row]
+            canvas.bits, canvas.style = canvas.bits.copy(), canvas.style.copy()
+            for x, y in dots:
+                if y // 4 == row:
+                    canvas.dot(x, y % 4, TIP_STYLE)
+            lines[row] = Strip(canvas.row_segments(0), layout.cols)
+        if below is not None:
+            note = f" tip {below * 1000:.0f} mm below the frame"[: layout.cols]
+            lines[layout.rows] = Strip([Segment(note, _style(TIP_STYLE))]).extend_cell_length(
+                layout.cols
+            )
+        return lines
 
     def update_frame(self, frame: LiveFrame | None) -> None:
         self._frame = frame
-        self.refresh()
+        if self._layout is None:
+            self.refresh()
+            return
+        old, self._overlay = self._overlay, self._lines_for(frame)
+        width = self.size.width
+        for y in set(old) | set(self._overlay):
+            if old.get(y) != self._overlay.get(y):
+                self.refresh(Region(0, y, width, 1))
 
-    def render(self) -> Text:
-        cols, rows = max(self.content_size.width, 4), max(self.content_size.height - 1, 3)
-        if self._layout is None or (self._layout.cols, self._layout.rows) != (cols, rows):
-            self._layout = PhantomFrame(self.anatomy, cols, rows)
-        return self._layout.draw(self._frame)
+    def render_line(self, y: int) -> Strip:
+        self._ensure_layout()
+        if y in self._overlay:
+            return self._overlay[y]
+        return self._base[y] if y < len(self._base) else Strip.blank(self.size.width)
 
 
 def gauge(label: str, value: float, full_scale: float, width: int, unit: str = "N") -> Text:

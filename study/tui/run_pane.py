@@ -59,6 +59,7 @@ class RunPane(Vertical, can_focus=True):
     RunPane #participant { width: 14; }
     RunPane #next { height: 1; }
     RunPane #live { height: 1fr; }
+    RunPane #phantom-box { width: 1fr; height: 1fr; border: round $primary-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("s", "start", "Start"),
@@ -107,10 +108,12 @@ class RunPane(Vertical, can_focus=True):
             yield Label("", id="mode")
         yield Label("", id="next")
         with Horizontal(id="live"):
-            yield PhantomView(id="phantom")
+            with Vertical(id="phantom-box"):
+                yield PhantomView(id="phantom")
             yield LiveReadout(id="readout")
 
     def on_mount(self) -> None:
+        self.query_one("#phantom-box").border_title = "LCCA phantom (frontal)"
         self._show_mode()
         self._redraw()
         self.set_interval(1 / REDRAW_HZ, self._redraw)
