@@ -163,14 +163,9 @@ def bench_lcca(
 
 
 @bench.command("tui")
-@click.option(
-    "--db",
-    "db_url",
-    metavar="URL",
-    default=None,
-    help="A database holding a study, e.g. made by `study demo` [default: build the full "
-    "36-participant demo study in a temporary folder first, a few minutes].",
-)
+@click.option("--db", "db_url", metavar="URL", default=None,
+              help="A study database, e.g. made by `study demo` [default: build the "
+              "full 36-participant demo study in a temporary folder first, minutes].")  # fmt: skip
 @click.option("--runs", type=click.IntRange(min=1), default=5, show_default=True)
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
 def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
@@ -193,7 +188,10 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
     click.echo(
         f"study tui, {result.participants} participants: overview after "
         f"{result.median_s:.2f} s (median of {runs}; "
-        f"{', '.join(f'{s:.2f}' for s in result.seconds)} s); target <= {result.target_s} s"
+        f"{', '.join(f'{s:.2f}' for s in result.seconds)} s); target <= {result.target_s} s; "
+        f"CPU per run (start to exit) {', '.join(f'{s:.2f}' for s in result.cpu_seconds)} s; "
+        f"the app's own part (make_app to overview, headless) "
+        f"{', '.join(f'{s:.2f}' for s in result.app_seconds)} s"
     )
     if json_path is not None:
         json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")

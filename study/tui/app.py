@@ -21,6 +21,7 @@ from typing import ClassVar
 from textual import on, work
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
+from textual.css.query import NoMatches
 from textual.message import Message
 from textual.widget import Widget
 from textual.widgets import Footer, TabbedContent, TabPane
@@ -114,11 +115,14 @@ class StudyApp(App[None]):
         }
 
     async def _mount_later_panes(self) -> None:
-        for tab, pane in self._later_panes().items():
-            await self.query_one(f"#{tab}", TabPane).mount(pane)
-        self.ready = True
-        if self.roster is not None:
-            self._show(self.roster)
+        try:
+            for tab, pane in self._later_panes().items():
+                await self.query_one(f"#{tab}", TabPane).mount(pane)
+            self.ready = True
+            if self.roster is not None:
+                self._show(self.roster)
+        except NoMatches:  # the app closed while the screens were being mounted
+            self.ready = False
 
     def on_mount(self) -> None:
         self.theme = self.settings.theme

@@ -28,18 +28,24 @@ def _trials(engine) -> list[tuple[str, str, int]]:
         ]  # fmt: skip
 
 
+async def _start(pilot, code: str, *keys: str) -> RunPane:
+    """On the run screen, pick `code`, press `keys` (driver, pace), start the trial."""
+    await loaded(pilot)
+    await pilot.press("f3")
+    pane = pilot.app.query_one(RunPane)
+    pane.select_participant(code)
+    await pilot.pause()
+    await pilot.press(*keys, "s")
+    return pane
+
+
 async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
     make_test_app,
     study_engine,
 ) -> None:
     app = make_test_app(load_estimator=load_estimator, simulated_pace=None)
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f3")
-        pane = app.query_one(RunPane)
-        pane.select_participant("P001")
-        await pilot.pause()
-        await pilot.press("s")
+        pane = await _start(pilot, "P001")
         await wait_for(pilot, lambda: pane.status == "completed", 120)
         assert pane.last_outcome.startswith("P001: trial stored (id 1, peaks")
         # the live view was fed while the trial ran
@@ -61,13 +67,7 @@ async def test_quitting_mid_trial_marks_it_interrupted_and_keeps_its_samples(
 ) -> None:
     app = make_test_app(load_estimator=load_estimator, simulated_pace=1.0)
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f3")
-        pane = app.query_one(RunPane)
-        pane.select_participant("P002")
-        await pilot.pause()
-        await pilot.press("d")  # the keyboard drives
-        await pilot.press("s")
+        pane = await _start(pilot, "P002", "d")  # d: the keyboard drives
         await wait_for(pilot, lambda: pane.run is not None and pane.run.live.batches > 20, 120)
         await pilot.press("up", "up", "up")
         shown = pane.run.live.frame().t_s
