@@ -17,10 +17,13 @@ from study import __version__
 from study.commands.analyze import analyze
 from study.commands.base import USER_ERRORS, InputError, StudyGroup
 from study.commands.bench import bench
+from study.commands.calibrate import calibrate
+from study.commands.characterize import characterize
 from study.commands.database import database
 from study.commands.estimator import estimator
 from study.commands.exchange import export_cmd, import_cmd
 from study.commands.figures import demo, figures
+from study.commands.identify import identify
 from study.commands.plan import design_group, init, participant, schedule_cmd
 from study.commands.power import power
 from study.commands.run import run
@@ -63,6 +66,9 @@ cli.add_command(figures)
 cli.add_command(demo)
 cli.add_command(power)
 cli.add_command(tui)
+cli.add_command(calibrate)
+cli.add_command(characterize)
+cli.add_command(identify)
 
 
 def _one_line(message: str) -> str:

@@ -195,3 +195,61 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
     )
     if json_path is not None:
         json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+
+
+@bench.command("calibrate")
+@_json_option
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Folder for the Markdown table and a copy of the JSON [default: next to --json].",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--epochs", type=click.IntRange(min=1), default=None, help="GRU epochs [30].")
+@click.option("--quick", is_flag=True, help="One-minute recordings at 100 Hz, 2 epochs.")
+def bench_calibrate(
+    json_path: Path, out_dir: Path | None, seed: int, epochs: int | None, quick: bool
+) -> None:
+    """Calibration loop (issue 10): every family, the clean recording, speed, estimator."""
+    from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
+
+    _check_json_folder(json_path)
+    config = CalibrateBenchConfig.quick() if quick else CalibrateBenchConfig()
+    config = replace(config, seed=seed, **({"epochs": epochs} if epochs else {}))
+    out_dir = out_dir or json_path.parent
+    with Console(stderr=True).status("calibration bench") as status:
+        report = run_calibrate_bench(config, out_dir, progress=status.update)
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
+    click.echo((out_dir / "calibrate_bench.md").read_text())
+
+
+@bench.command("notes")
+@_json_option
+@_out_option
+@click.option(
+    "--draws",
+    type=click.IntRange(min=1),
+    default=10,
+    show_default=True,
+    help="Seeded parameter draws per axis for the identification round trip.",
+)
+@click.option(
+    "--trials",
+    type=click.IntRange(min=1),
+    default=4,
+    show_default=True,
+    help="Simulated NOTES trials per group and condition.",
+)
+@click.option("--seed", type=int, default=0, show_default=True)
+def bench_notes(json_path: Path, out_dir: Path, draws: int, trials: int, seed: int) -> None:
+    """Seed 001's NOTES device: bandwidth, settling, limits, identification round trip."""
+    from study.bench.notes import NotesBenchConfig, run_notes_bench
+
+    _check_json_folder(json_path)
+    config = NotesBenchConfig(draws=draws, seed=seed, trials=trials)
+    with Console(stderr=True).status("NOTES bench") as status:
+        report = run_notes_bench(config, out_dir, progress=status.update)
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
+    click.echo((out_dir / "notes_bench.md").read_text())

@@ -60,6 +60,15 @@ def estimator() -> None:
     default=None,
     help="EKF process noise per step, N^2 [default: tuned on the training blocks].",
 )
+@click.option(
+    "--calibration",
+    "calibration",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="A `study calibrate --model follower` report: its calibrated model (eq. 1 plus "
+    "the effects found) replaces eq. 1 as the physics stage, and the GRU learns what it "
+    "still misses.",
+)
 @click.option("--force", is_flag=True, help="Replace an existing model folder.")
 def train_cmd(
     recording: Path,
@@ -71,6 +80,7 @@ def train_cmd(
     learning_rate: float,
     patience: int | None,
     ekf_q: float | None,
+    calibration: Path | None,
     force: bool,
 ) -> None:
     """Fit eq. 1 to RECORDING, train the GRU on its residual, set up the EKF.
@@ -78,6 +88,7 @@ def train_cmd(
     RECORDING is a follower CSV (t, iq, theta, omega, f_ref; alpha optional).
     """
     from teleop_core.estimation.estimator import train_estimator
+    from teleop_core.estimation.extended import ExtendedPhysics
     from teleop_core.estimation.gru import GruConfig
     from teleop_core.estimation.recording import FollowerRecording
 
@@ -86,6 +97,7 @@ def train_cmd(
             f"model folder {out_dir} exists and is not empty; expected a new folder (or --force)"
         )
     data = FollowerRecording.from_csv(recording)
+    extension = ExtendedPhysics.read(calibration) if calibration is not None else None
     config = GruConfig(
         window=window,
         hidden_size=hidden_size,
@@ -111,7 +123,9 @@ def train_cmd(
                 rmse=f"train {train_rmse:.4f} N, validation {val_rmse:.4f} N",
             )
 
-        model, summary = train_estimator(data, config, seed=seed, ekf_q_n2=ekf_q, progress=report)
+        model, summary = train_estimator(
+            data, config, seed=seed, ekf_q_n2=ekf_q, progress=report, extension=extension
+        )
     model.save(out_dir, summary.to_dict())
     v = summary.validation_rmse_n
     click.echo(

@@ -14,7 +14,7 @@ from study.protocol.design import DEFAULT_GROUPS, KNOWN_CONDITIONS
 
 
 @click.command("simulate", cls=StudyCommand)
-@click.option("--task", type=click.Choice(["lcca"]), default="lcca", show_default=True)
+@click.option("--task", type=click.Choice(["lcca", "notes"]), default="lcca", show_default=True)
 @click.option("--group", type=click.Choice(DEFAULT_GROUPS), required=True)
 @click.option("--condition", type=click.Choice(KNOWN_CONDITIONS), required=True)
 @click.option(
@@ -55,6 +55,9 @@ def simulate(
         if path is not None and not path.parent.is_dir():
             raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
     condition_haptics(condition, haptic_gain)  # refuse a bad gain before any work
+    if task == "notes":
+        _simulate_notes(group, condition, seed, out_csv, plot_path, max_seconds)
+        return
     estimator = load_estimator(model_dir)
     traits = simulated_participant(group, seed)
     with Console(stderr=True).status(f"simulating a {group} participant, {condition}"):
@@ -74,5 +77,42 @@ def simulate(
         f"{'success' if s['success'] else 'no success'} in {s['completion_time_s']:.1f} s, "
         f"peak proximal {s['peak_proximal_force_n']:.3f} N, "
         f"peak distal {s['peak_distal_force_n']:.3f} N, {s['wall_contacts']} wall contacts"
+    )
+    click.echo(f"samples: {out_csv}; summary: {summary_path}")
+
+
+def _simulate_notes(
+    group: str,
+    condition: str,
+    seed: int,
+    out_csv: Path,
+    plot_path: Path | None,
+    max_seconds: float,
+) -> None:
+    """`--task notes`: one NOTES trial (seed 001) with the group's simulated participant."""
+    from study.protocol.lcca_trial import simulated_participant
+    from study.protocol.notes_trial import run_notes_trial
+    from teleop_core.estimation.recording import write_csv_atomically
+
+    traits = simulated_participant(group, seed)
+    with Console(stderr=True).status(f"simulating a {group} participant, NOTES, {condition}"):
+        result = run_notes_trial(traits, condition, seed, max_seconds)
+    write_csv_atomically(result.frame, out_csv)
+    summary_path = out_csv.with_suffix(".json")
+    summary_path.write_text(json.dumps(result.summary, indent=2) + "\n")
+    if plot_path is not None:
+        from study.analysis.notes_figures import notes_trial_plot
+
+        fig = notes_trial_plot(result.frame, f"NOTES, {group}, {condition}, seed {seed}")
+        fig.savefig(plot_path, dpi=200)
+    s = result.summary
+    click.echo(
+        f"notes {group} {condition} seed {seed}: "
+        f"{'success' if s['success'] else 'no success'} in {s['completion_time_s']:.1f} s, "
+        f"peak force demanded {s['peak_force_demanded_n']:.2f} N / rendered "
+        f"{s['peak_force_rendered_n']:.2f} N, peak torque demanded "
+        f"{s['peak_torque_demanded_n_m'] * 1e3:.1f} N mm / rendered "
+        f"{s['peak_torque_rendered_n_m'] * 1e3:.1f} N mm, push over capacity "
+        f"{s['push_over_capacity_fraction']:.1%} of the time"
     )
     click.echo(f"samples: {out_csv}; summary: {summary_path}")

@@ -21,6 +21,7 @@ import zlib
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -35,11 +36,16 @@ from db.models.trial import Trial
 from db.samples import SampleWriter
 from study.errors import StudyInputError
 from study.protocol.lcca_trial import lcca_loop, measures, trial_frame
+from study.protocol.notes_trial import NotesParticipant, notes_loop
+from study.protocol.notes_trial import measures as notes_measures
+from study.protocol.notes_trial import trial_frame as notes_trial_frame
 from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
 from study.protocol.roster import load_study
 from teleop_core.estimation.estimator import ForceEstimator
-from teleop_core.loop.core import SAMPLE_COLUMNS
+from teleop_core.loop.core import SAMPLE_COLUMNS, TeleopLoop
 from teleop_core.loop.drivers import Driver
+from teleop_core.notes.task import REGIONS as NOTES_REGIONS
+from teleop_core.notes.task import NotesLoop
 from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS
 from teleop_core.phantom.lcca import LccaPhantom
 
@@ -109,9 +115,9 @@ def pending_trials(session: Session, participant: Participant) -> list[PendingTr
     return out
 
 
-def _sample_columns(samples: np.ndarray) -> dict[str, list[object]]:
+def _sample_columns(samples: np.ndarray, regions: tuple[str, ...]) -> dict[str, list[object]]:
     cols = {name: samples[:, k].tolist() for k, name in enumerate(SAMPLE_COLUMNS)}
-    cols["branch"] = [REGION_ABBREVIATIONS[int(c)] for c in cols["branch"]]
+    cols["branch"] = [regions[int(c)] for c in cols["branch"]]
     return cols
 
 
@@ -147,11 +153,9 @@ def run_session(
         todo = pending_trials(session, participant)
         session.expunge_all()
     recover_interrupted(engine, participant.id)
-    if any(p.block.task != "lcca" for p in todo):
-        raise StudyInputError(
-            "this schedule has NOTES blocks; the NOTES task is not available yet, "
-            "expected lcca blocks only"
-        )
+    unknown = sorted({p.block.task for p in todo} - {"lcca", "notes"})
+    if unknown:
+        raise StudyInputError(f"task {unknown[0]!r} in the schedule; expected lcca or notes")
     phantom = LccaPhantom()
     traits = participant_traits(study.seed, code, participant.group)
     completed: list[int] = []
@@ -227,8 +231,18 @@ def _run_trial(
         f"{study_seed}/{participant.code}/{block.block_index}/{int(item.practice)}/"
         f"{item.trial_index}/{attempt}".encode()
     )
-    loop = lcca_loop(block.condition, seed, estimator, phantom=phantom)
-    driver = make_driver() if make_driver else SimulatedParticipant(traits, phantom, MAX_TRIAL_S)
+    loop: TeleopLoop | NotesLoop
+    if block.task == "notes":
+        # the NOTES loop's first columns are the database's sample columns
+        loop = notes_loop(block.condition, seed)
+        driver = make_driver() if make_driver else NotesParticipant(traits, MAX_TRIAL_S)
+        regions = NOTES_REGIONS
+    else:
+        loop = lcca_loop(block.condition, seed, estimator, phantom=phantom)
+        driver = (
+            make_driver() if make_driver else SimulatedParticipant(traits, phantom, MAX_TRIAL_S)
+        )
+        regions = REGION_ABBREVIATIONS
     loop.start(driver)
     chunks = []
     step_s = STEP_S if pace is None else PACED_STEP_S
@@ -237,7 +251,7 @@ def _run_trial(
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
             if len(samples):
-                writer.extend(_sample_columns(samples))
+                writer.extend(_sample_columns(samples, regions))
                 chunks.append(samples)
                 if on_samples is not None:
                     on_samples(samples)
@@ -245,29 +259,54 @@ def _run_trial(
                 lag = wall0 + loop.t_s / pace - time.monotonic()
                 if lag > 0:
                     time.sleep(lag)
-    raw = pd.DataFrame(np.concatenate(chunks), columns=list(SAMPLE_COLUMNS))
-    result = measures(trial_frame(raw), loop.success)
+    if block.task == "notes":
+        values = _notes_values(np.concatenate(chunks), loop.success)
+    else:
+        values = _lcca_values(np.concatenate(chunks), loop.success)
+    values["summary"] = {
+        **values["summary"],
+        "seed": seed,
+        "samples": writer.rows_committed,
+        **_driver_counts(driver),
+    }
     with write_transaction(engine) as conn:
         conn.execute(
             update(Trial)
             .where(Trial.id == trial_id)
-            .values(
-                status="completed",
-                ended_at=utcnow(),
-                completion_time_s=result["completion_time_s"],
-                peak_proximal_force_n=max(result["peak_proximal_force_n"], 0.0),
-                peak_distal_force_n=max(result["peak_distal_force_n"], 0.0),
-                success=result["success"],
-                wall_contacts=result["wall_contacts"],
-                summary={
-                    "peak_proximal_reference_force_n": result["peak_proximal_reference_force_n"],
-                    "seed": seed,
-                    "samples": writer.rows_committed,
-                    **_driver_counts(driver),
-                },
-            )
+            .values(status="completed", ended_at=utcnow(), **values)
         )
     return trial_id
+
+
+def _lcca_values(samples: np.ndarray, success: bool) -> dict[str, Any]:
+    raw = pd.DataFrame(samples, columns=list(SAMPLE_COLUMNS))
+    result = measures(trial_frame(raw), success)
+    return {
+        "completion_time_s": result["completion_time_s"],
+        "peak_proximal_force_n": max(result["peak_proximal_force_n"], 0.0),
+        "peak_distal_force_n": max(result["peak_distal_force_n"], 0.0),
+        "success": result["success"],
+        "wall_contacts": result["wall_contacts"],
+        "summary": {"peak_proximal_reference_force_n": result["peak_proximal_reference_force_n"]},
+    }
+
+
+def _notes_values(samples: np.ndarray, success: bool) -> dict[str, Any]:
+    """NOTES measures in the trial columns (see study.protocol.notes_trial)."""
+    result = notes_measures(notes_trial_frame(samples), success)
+    summary = {
+        k: v
+        for k, v in result.items()
+        if k not in ("success", "completion_time_s", "peak_force_demanded_n", "peak_tip_force_n")
+    }
+    return {
+        "completion_time_s": result["completion_time_s"],
+        "peak_proximal_force_n": result["peak_force_demanded_n"],
+        "peak_distal_force_n": result["peak_tip_force_n"],
+        "success": result["success"],
+        "wall_contacts": None,
+        "summary": summary,
+    }
 
 
 _WORKER: dict[str, object] = {}

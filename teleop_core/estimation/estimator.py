@@ -12,6 +12,8 @@ three stages to one bench recording; `save`/`load` keep them in a model folder:
 | `standardisation.json` | window, hidden size, input means/SDs, target scale |
 | `ekf.json` | EKF noise covariances |
 | `summary.json` | train/validation RMSE of each stage, epochs, sample rate, data digest |
+| `calibration.json` | only for a calibrated model: eq. 1 plus the effects of a
+  `study calibrate` report, the physics stage in place of eq. 1 (`extended.py`) |
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from teleop_core.estimation.ekf import (
     rest_variances,
     settings_vector,
 )
+from teleop_core.estimation.extended import ExtendedPhysics, physics_force
 from teleop_core.estimation.gru import (
     GruConfig,
     GruModel,
@@ -83,6 +86,8 @@ class ForceEstimator:
     ekf: EkfSettings
     sample_rate_hz: float
     pipeline_rate_hz: float = 50.0
+    extension: ExtendedPhysics | None = None
+    """The calibrated physics stage (issue 10) replacing eq. 1, if any."""
 
     @property
     def window(self) -> int:
@@ -107,7 +112,7 @@ class ForceEstimator:
                 f"recording {recording.name} has {len(recording)} samples; expected at least "
                 f"the estimator's window of {T}"
             )
-        f_phys_all = self.physics.force(recording.iq, recording.omega, recording.alpha)
+        f_phys_all = physics_force(self.physics, self.extension, recording)
         delta = self.gru.predict(features_of(recording))
         f_physics = f_phys_all[T - 1 :]
         f_hybrid = f_physics + delta  # F*_GRU = F_physics + dF_resistance   (eq. 4)
@@ -119,6 +124,12 @@ class ForceEstimator:
         )
 
     def stream(self) -> CausalEstimator:
+        if self.extension is not None:
+            effects = ", ".join(self.extension.families)
+            raise TeleopInputError(
+                f"this estimator's physics stage is calibrated ({effects}): its effects "
+                "need the whole recording, so it runs with predict(), not one sample at a time"
+            )
         return CausalEstimator(self)
 
     def save(self, folder: Path, summary: dict[str, Any]) -> None:
@@ -144,6 +155,8 @@ class ForceEstimator:
             )
             _write_json(tmp / "ekf.json", self.ekf.to_dict())
             _write_json(tmp / "summary.json", summary)
+            if self.extension is not None:
+                _write_json(tmp / "calibration.json", self.extension.to_dict())
             if folder.exists():
                 shutil.rmtree(folder)
             tmp.rename(folder)
@@ -178,8 +191,16 @@ class ForceEstimator:
                 load_weights(str(folder / "gru.pt")), std, int(meta["window"]), meta["target"]
             )
             ekf = EkfSettings(**_read_json(folder / "ekf.json"))
+            extension = None
+            if (folder / "calibration.json").is_file():
+                extension = ExtendedPhysics.from_dict(_read_json(folder / "calibration.json"))
             return cls(
-                physics, gru, ekf, float(meta["sample_rate_hz"]), float(meta["pipeline_rate_hz"])
+                physics,
+                gru,
+                ekf,
+                float(meta["sample_rate_hz"]),
+                float(meta["pipeline_rate_hz"]),
+                extension,
             )
         except (KeyError, TypeError, ValueError, RuntimeError) as exc:
             if isinstance(exc, TeleopInputError):
@@ -381,12 +402,16 @@ def train_estimator(
     physics: PhysicsParams | None = None,
     ekf_q_n2: float | None = None,
     progress: Callable[[int, float, float], None] | None = None,
+    extension: ExtendedPhysics | None = None,
 ) -> tuple[ForceEstimator, TrainingSummary]:
     """Fit eq. 1, train the GRU on its residual, and set up the EKF, on one recording.
 
     `physics` given (e.g. from a calibration) skips the eq. 1 fit; `ekf_q_n2` given
     fixes the EKF process noise (both states) instead of tuning it. The physics fit,
     the GRU's standardisation and the EKF noise all use the training blocks only.
+    `extension` (a `study calibrate` report, `extended.py`) replaces eq. 1 by the
+    calibrated model, whose eq. 1 part also serves the EKF, and the GRU learns what
+    that model still misses.
     """
     config = config or GruConfig()
     notes: list[str] = []
@@ -404,6 +429,12 @@ def train_estimator(
     train_idx, val_idx = block_split(n_windows, T, config, seed)
     train_mask = np.zeros(len(recording), bool)
     train_mask[train_idx + T - 1] = True
+    if extension is not None:
+        physics = extension.base
+        notes.append(
+            f"physics stage calibrated by {extension.source or 'a report'}: eq. 1 + "
+            + (", ".join(extension.families) or "no effect")
+        )
     if physics is None:
         physics = fit_physics(
             recording,
@@ -411,7 +442,7 @@ def train_estimator(
             sign_speed_rad_s=sign_speed_rad_s,
             mask=train_mask,
         )
-    f_phys_all = physics.force(recording.iq, recording.omega, recording.alpha)
+    f_phys_all = physics_force(physics, extension, recording)
     residual = recording.f_ref - f_phys_all  # r_t = F_ref - F_physics   (eq. 13)
     gru, history, _, _ = train_gru(
         features_of(recording),
@@ -435,7 +466,7 @@ def train_estimator(
         base = EkfSettings(
             **{**base.to_dict(), "r_iq_a2": max(rest[0], 1e-9), "r_omega_rad2_s2": rest[1]}
         )
-    estimator = ForceEstimator(physics, gru, base, rate, pipeline_rate_hz)
+    estimator = ForceEstimator(physics, gru, base, rate, pipeline_rate_hz, extension)
     result = estimator.predict(recording)
     f_physics, f_hybrid = result.f_physics[train_idx], result.f_hybrid[train_idx]
     omega = recording.omega[T - 1 :][train_idx]
@@ -455,7 +486,7 @@ def train_estimator(
         settings = EkfSettings(**{**base.to_dict(), **q})
         final = filter_forces(settings, physics, 1.0 / rate, f_physics, f_hybrid, omega)
         lag = lag_samples(final, f_hybrid)
-    estimator = ForceEstimator(physics, gru, settings, rate, pipeline_rate_hz)
+    estimator = ForceEstimator(physics, gru, settings, rate, pipeline_rate_hz, extension)
     # Only the EKF stage changed: refilter instead of running the GRU over the data again.
     result.f_final = filter_forces(
         settings, physics, 1.0 / rate, result.f_physics, result.f_hybrid, recording.omega[T - 1 :]

@@ -126,7 +126,13 @@ def fit_physics(
     scale = np.maximum(np.abs(A).max(axis=0), 1e-12)
     lower = np.array([1e-9, 0.0, 0.0, 0.0, -np.inf])
     result = lsq_linear(A / scale, y, bounds=(lower * scale, np.full(5, np.inf)))
-    beta = result.x / scale
+    return from_coefficients(result.x / scale, wheel_radius_m, sign_speed_rad_s)
+
+
+def from_coefficients(
+    beta: Float1D, wheel_radius_m: float, sign_speed_rad_s: float = 0.3
+) -> PhysicsParams:
+    """Eq. 1's parameters from the coefficients of `regressors`' five columns (N per unit)."""
     r = wheel_radius_m
     return PhysicsParams(
         torque_constant_n_m_per_a=float(beta[0] * r),

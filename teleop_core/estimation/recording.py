@@ -80,58 +80,15 @@ class FollowerRecording:
     @classmethod
     def from_csv(cls, path: str | Path, min_rows: int = MIN_ROWS) -> FollowerRecording:
         """Read and validate a recording; raise `RecordingError` naming the first problem."""
-        path = Path(path)
-        try:
-            frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
-        except FileNotFoundError:
-            raise RecordingError(f"recording {path} does not exist; expected a CSV file") from None
-        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            first = str(exc).strip().splitlines()[0]
-            raise RecordingError(f"recording {path} is not a readable CSV file: {first}") from None
-        except pd.errors.EmptyDataError:
-            raise RecordingError(
-                f"recording {path} is empty; expected a header row and data"
-            ) from None
-        frame.columns = [str(c).strip() for c in frame.columns]
-        missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
-        if missing:
-            raise RecordingError(
-                f"recording {path}: column {missing[0]!r} missing; expected columns "
-                f"{', '.join(REQUIRED_COLUMNS)} (alpha optional), found {', '.join(frame.columns)}"
-            )
-        wanted = [*REQUIRED_COLUMNS, *[c for c in OPTIONAL_COLUMNS if c in frame.columns]]
-        values: dict[str, Float1D] = {}
-        for column in wanted:
-            numbers = pd.to_numeric(frame[column].str.strip(), errors="coerce").to_numpy(float)
-            bad = np.flatnonzero(~np.isfinite(numbers))
-            if bad.size:
-                row = int(bad[0])
-                raise RecordingError(
-                    f"recording {path}, line {row + 2}, column {column!r}: "
-                    f"{frame[column].iloc[row]!r} is not a finite number"
-                )
-            values[column] = numbers
-        if len(frame) < min_rows:
-            raise RecordingError(
-                f"recording {path} has {len(frame)} data rows; expected at least {min_rows}"
-            )
-        t = values["t"]
-        back = np.flatnonzero(np.diff(t) <= 0)
-        if back.size:
-            row = int(back[0]) + 1
-            raise RecordingError(
-                f"recording {path}, line {row + 2}, column 't': {float(t[row])!r} does not "
-                f"come after {float(t[row - 1])!r} on the line before; expected strictly "
-                "increasing times"
-            )
+        values = read_checked_csv(path, REQUIRED_COLUMNS, OPTIONAL_COLUMNS, min_rows)
         return cls.from_arrays(
-            t,
+            values["t"],
             values["iq"],
             values["theta"],
             values["omega"],
             values["f_ref"],
             values.get("alpha"),
-            name=path.name,
+            name=Path(path).name,
         )
 
     def __len__(self) -> int:
@@ -184,6 +141,64 @@ class FollowerRecording:
     def sha256(self) -> str:
         """Digest of the recording's numbers (identifies the data a model was fitted on)."""
         return hashlib.sha256(self.to_frame().to_numpy().tobytes()).hexdigest()
+
+
+def read_checked_csv(
+    path: str | Path,
+    required: tuple[str, ...],
+    optional: tuple[str, ...] = (),
+    min_rows: int = MIN_ROWS,
+) -> dict[str, Float1D]:
+    """The named columns of a CSV recording with a strictly increasing `t`, as floats.
+
+    Raises `RecordingError` naming the first problem (file, line, column) before
+    anything is computed from the data; the other recording contracts (the master's
+    calibration, issue 10) share these checks.
+    """
+    path = Path(path)
+    try:
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except FileNotFoundError:
+        raise RecordingError(f"recording {path} does not exist; expected a CSV file") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0]
+        raise RecordingError(f"recording {path} is not a readable CSV file: {first}") from None
+    except pd.errors.EmptyDataError:
+        raise RecordingError(f"recording {path} is empty; expected a header row and data") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    missing = [c for c in required if c not in frame.columns]
+    if missing:
+        extra = f" ({', '.join(optional)} optional)" if optional else ""
+        raise RecordingError(
+            f"recording {path}: column {missing[0]!r} missing; expected columns "
+            f"{', '.join(required)}{extra}, found {', '.join(frame.columns)}"
+        )
+    wanted = [*required, *[c for c in optional if c in frame.columns]]
+    values: dict[str, Float1D] = {}
+    for column in wanted:
+        numbers = pd.to_numeric(frame[column].str.strip(), errors="coerce").to_numpy(float)
+        bad = np.flatnonzero(~np.isfinite(numbers))
+        if bad.size:
+            row = int(bad[0])
+            raise RecordingError(
+                f"recording {path}, line {row + 2}, column {column!r}: "
+                f"{frame[column].iloc[row]!r} is not a finite number"
+            )
+        values[column] = numbers
+    if len(frame) < min_rows:
+        raise RecordingError(
+            f"recording {path} has {len(frame)} data rows; expected at least {min_rows}"
+        )
+    t = values["t"]
+    back = np.flatnonzero(np.diff(t) <= 0)
+    if back.size:
+        row = int(back[0]) + 1
+        raise RecordingError(
+            f"recording {path}, line {row + 2}, column 't': {float(t[row])!r} does not "
+            f"come after {float(t[row - 1])!r} on the line before; expected strictly "
+            "increasing times"
+        )
+    return values
 
 
 def write_csv_atomically(frame: pd.DataFrame, path: Path) -> None:

@@ -38,3 +38,19 @@ def small_estimator(short_recording: FollowerRecording):
 
     estimator, _ = train_estimator(short_recording, GruConfig(max_epochs=2), seed=0)
     return estimator
+
+
+def calibrated_folder(folder, effects: list[str], seconds: float, seed: int):
+    """A simulated recording with `effects` written to folder/rec.csv and its
+    calibration report to folder/report.json; returns (folder, recording, report)."""
+    import json
+
+    from teleop_core.calibration import Calibrator, FollowerBase
+    from teleop_core.calibration.synthetic import follower_recording
+
+    rec, _ = follower_recording(seconds, effects, seed=seed)
+    rec.to_csv(folder / "rec.csv")
+    model = FollowerBase()
+    report = Calibrator(model).fit(model.data(rec)).report()
+    (folder / "report.json").write_text(json.dumps(report))
+    return folder, rec, report

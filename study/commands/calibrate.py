@@ -1,0 +1,181 @@
+"""`study calibrate`: what the physics model still lacks, found on a bench recording.
+
+Runs the calibration loop of `teleop_core.calibration` (base model, held-out residual,
+candidate effects added while they help significantly) and writes the report, the
+held-out predictions and the residual figures. Everything is computed before anything
+is written, and each file is written through a temporary name, so a refused or failed
+run leaves no half-written output.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from study.commands.base import StudyCommand
+from study.errors import StudyInputError
+
+_err = Console(stderr=True)
+MODELS = ("follower", "master", "notes-translation", "notes-rotation")
+DRIVE_LABELS = {
+    "follower": "q-axis current (A)",
+    "master": "current (mA)",
+    "notes-translation": "commanded force (N)",
+    "notes-rotation": "commanded torque (N m)",
+}
+
+
+def write_json_atomically(data: dict[str, Any], path: Path) -> None:
+    """JSON to `path` through a temporary sibling, so a failure leaves no partial file."""
+    tmp = path.with_name(f".{path.name}.partial")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    tmp.replace(path)
+
+
+def run_calibration(
+    recording: Path, model_name: str, held_out: float, max_effects: int, families: str | None
+) -> Any:
+    """Read RECORDING for `model_name` and run the loop with a progress display."""
+    from teleop_core.calibration import BASE_MODELS, Calibrator
+
+    model = BASE_MODELS[model_name]
+    data = model.read(recording)
+    chosen = [f.strip() for f in families.split(",")] if families else None
+    calibrator = Calibrator(
+        model, families=chosen, held_out_fraction=held_out, max_effects=max_effects
+    )
+    with Progress(
+        TextColumn("calibrating {task.fields[what]}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=_err,
+        transient=True,
+    ) as progress:
+        task = progress.add_task("loop", total=None, what="")
+
+        def report(done: int, total: int, what: str) -> None:
+            progress.update(task, completed=done, total=total, what=what)
+
+        calibrator.fit(data, progress=report)
+    return calibrator
+
+
+@click.command("calibrate", cls=StudyCommand)
+@click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--model",
+    "model_name",
+    type=click.Choice(MODELS),
+    default="follower",
+    show_default=True,
+    help="Base model and recording contract.",
+)
+@click.option(
+    "--json",
+    "json_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Report: RMSE before/after, effects added, candidates rejected, residual tests.",
+)
+@click.option(
+    "--predictions",
+    "pred_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Held-out predictions CSV: t, f_ref, f_base, f_final.",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the residual figures (created if its parent exists).",
+)
+@click.option(
+    "--held-out",
+    type=click.FloatRange(0.05, 0.5),
+    default=0.25,
+    show_default=True,
+    help="Share of the recording, at its end, held out for testing.",
+)
+@click.option("--max-effects", type=click.IntRange(min=0), default=4, show_default=True)
+@click.option(
+    "--families",
+    default=None,
+    metavar="LIST",
+    help="Comma-separated candidate families [default: all that apply to the model].",
+)
+def calibrate(
+    recording: Path,
+    model_name: str,
+    json_path: Path,
+    pred_path: Path,
+    out_dir: Path,
+    held_out: float,
+    max_effects: int,
+    families: str | None,
+) -> None:
+    """Fit the base model to RECORDING, find and add the effects it lacks, report.
+
+    RECORDING is a follower CSV (t, iq, theta, omega, f_ref; alpha optional) for
+    --model follower, the dial's calibration (t, current_ma, f_ref) for --model
+    master, or a clamped NOTES ramp or chirp run (t, f_des, f_ee) for --model
+    notes-translation or notes-rotation.
+    """
+    import pandas as pd
+
+    from study.analysis.calibration_figures import residual_figures
+    from teleop_core.estimation.recording import write_csv_atomically
+
+    for path in (json_path, pred_path, out_dir):
+        if not path.parent.is_dir():
+            raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
+    calibrator = run_calibration(recording, model_name, held_out, max_effects, families)
+    report = calibrator.report()
+    data, test = calibrator.data_, calibrator.test_
+    before = data.y[test] - calibrator.base_prediction_[test]
+    after = data.y[test] - calibrator.prediction_[test]
+    predictions = pd.DataFrame(
+        {
+            "t": data.signals["t"][test],
+            "f_ref": data.y[test],
+            "f_base": calibrator.base_prediction_[test],
+            "f_final": calibrator.prediction_[test],
+        }
+    )
+    out_dir.mkdir(exist_ok=True)
+    residual_figures(
+        out_dir,
+        {k: v[test] for k, v in data.signals.items()},
+        before,
+        after,
+        report["residual_tests_before"],
+        report["residual_tests_after"],
+        calibrator.model.plot_against,
+        DRIVE_LABELS.get(model_name, "current"),
+        "N m" if model_name == "notes-rotation" else "N",
+    )
+    write_csv_atomically(predictions, pred_path)
+    write_json_atomically(report, json_path)
+    added = ", ".join(e["family"] for e in report["effects_added"]) or "none"
+    unit = "N m" if model_name == "notes-rotation" else "N"
+    click.echo(
+        f"{recording.name}: held-out RMSE {report['rmse_before']:.4f} {unit} -> "
+        f"{report['rmse_after']:.4f} {unit}; effects added: {added}"
+    )
+    for effect in report["effects_added"]:
+        params = ", ".join(
+            f"{k} = {v:.4g} [{lo:.3g}, {hi:.3g}]"
+            for (k, v), (lo, hi) in zip(
+                effect["params"].items(), effect["ci"].values(), strict=True
+            )
+        )
+        click.echo(f"  {effect['family']}: {params} -> {effect['rmse_after_step']:.4f} {unit}")
+    for warning in report["warnings"]:
+        click.echo(f"note: {warning}")

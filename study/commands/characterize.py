@@ -1,0 +1,84 @@
+"""`study characterize notes`: the NOTES device's characterisation (seed 001, III)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import click
+from rich.console import Console
+
+from study.commands.base import StudyCommand, StudyGroup
+from study.errors import StudyInputError
+
+
+@click.group("characterize", cls=StudyGroup)
+def characterize() -> None:
+    """Characterise a haptic device: static ramps, chirps, grey-box fit, compensation."""
+
+
+@characterize.command("notes", cls=StudyCommand)
+@click.option(
+    "--json",
+    "json_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the numbers here (keys translation and rotation).",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the Bode and hysteresis figures and the compensation table.",
+)
+@click.option(
+    "--noise",
+    type=click.FloatRange(min=0, max=0.5),
+    default=0.0,
+    show_default=True,
+    help="Sensor noise as a fraction of each signal's standard deviation.",
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seeds the noise.")
+def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
+    """Run the paper's ramps and 1-30 Hz chirps on the simulated NOTES device, fit Fig. 8's
+    model, and compare the ramps with and without the friction/direction compensator."""
+    from study.analysis.figures import save
+    from study.analysis.notes_figures import bode, compensation_table, ramp_hysteresis
+    from teleop_core.estimation.recording import write_csv_atomically
+    from teleop_core.notes.characterize import characterize_simulated
+    from teleop_core.notes.params import DOFS, default_params
+
+    if not json_path.parent.is_dir():
+        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise StudyInputError(f"--out {out_dir} is a file; expected a folder")
+    results = []
+    with Console(stderr=True).status("characterising") as status:
+        for dof in DOFS:
+            status.update(f"characterising {dof}: ramps, chirps, fit")
+            results.append(characterize_simulated(default_params(dof), noise, seed))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    table = compensation_table(results)
+    write_csv_atomically(table, out_dir / "compensation.csv")
+    save(bode(results), out_dir, "notes_bode", ["png", "pdf"])
+    save(ramp_hysteresis(results), out_dir, "notes_ramp_compensation", ["png", "pdf"])
+    payload = {ch.dof: ch.to_dict() for ch in results}
+    tmp = json_path.with_name(json_path.name + ".tmp")
+    tmp.write_text(json.dumps(payload, indent=2, default=_finite) + "\n")
+    tmp.replace(json_path)
+    for ch in results:
+        click.echo(
+            f"{ch.dof}: bandwidth {ch.bandwidth_hz:.2f} Hz, settling {ch.settling_time_s:.3f} s, "
+            f"max continuous {ch.before.max_continuous:.5g}, hysteresis "
+            f"{ch.before.hysteresis:.3g} -> {ch.after.hysteresis:.3g}, asymmetry "
+            f"{ch.before.asymmetry:.1%} -> {ch.after.asymmetry:.1%}"
+        )
+    click.echo(f"json: {json_path}; figures and compensation.csv: {out_dir}")
+
+
+def _finite(value: object) -> object:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    raise TypeError(f"not JSON serialisable: {value!r}")

@@ -1,0 +1,55 @@
+"""`study identify notes`: fit the NOTES model to one recorded bench file (seed 001, III)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from study.commands.base import StudyCommand, StudyGroup
+from study.errors import StudyInputError
+
+
+@click.group("identify", cls=StudyGroup)
+def identify() -> None:
+    """Identify a haptic device's model from recorded bench data."""
+
+
+@identify.command("notes", cls=StudyCommand)
+@click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--dof", type=click.Choice(["translation", "rotation"]), required=True)
+@click.option("--json", "json_path", required=True, type=click.Path(dir_okay=False, path_type=Path))
+def notes(recording: Path, dof: str, json_path: Path) -> None:
+    """Fit Fig. 8's model to a chirp, or measure a clamped ramp, from RECORDING.csv.
+
+    Columns t, f_des and x (open end) or f_ee (clamped), SI units (rotation: N m, rad).
+    """
+    from teleop_core.notes.characterize import identify_recording
+    from teleop_core.notes.params import default_params
+    from teleop_core.notes.recording import NotesRecording
+
+    if not json_path.parent.is_dir():
+        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    rec = NotesRecording.from_csv(recording)
+    result = {
+        "dof": dof,
+        "recording": str(recording),
+        **identify_recording(rec, default_params(dof).linear),
+    }
+    tmp = json_path.with_name(json_path.name + ".tmp")
+    tmp.write_text(json.dumps(result, indent=2) + "\n")
+    tmp.replace(json_path)
+    if "parameters" in result:
+        fit = ", ".join(f"{k} {v:.4g}" for k, v in result["parameters"].items())
+        click.echo(
+            f"{dof} {rec.experiment} ({rec.boundary}): {fit}; "
+            f"bandwidth {result['bandwidth_hz']:.2f} Hz"
+        )
+    else:
+        ramp = result["ramp"]
+        click.echo(
+            f"{dof} ramp: max continuous {ramp['max_continuous']:.5g}, hysteresis "
+            f"{ramp['hysteresis']:.3g}, asymmetry {ramp['asymmetry']:.1%}"
+        )
+    click.echo(f"json: {json_path}")

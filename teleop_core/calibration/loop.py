@@ -1,0 +1,295 @@
+"""The calibration loop: fit, test the held-out residual, add the effect that helps most.
+
+    1. fit the base model on the training block (the first part of the recording);
+    2. compute the residual on the held-out block (the end of the recording: a
+       chronological split, never a random one, so that slow effects and correlated
+       noise cannot leak from training into the test);
+    3. for every candidate family not yet in the model, search its nonlinear
+       parameter on the training block, refit base + effects + candidate, and measure
+       the held-out RMSE;
+    4. add the best candidate if its gain is significant: held-out RMSE lower by at
+       least `min_gain`, the one-sided Diebold-Mariano test (HAC variance) below
+       `alpha`, and a lower BIC on training. The three guard each other: on long
+       recordings tiny gains are significant (the minimum gain stops them), on short
+       ones a gain made in a few bursts is not (the test stops it), and the BIC charges
+       for the parameters. `alpha` is per candidate, not divided among them: an effect
+       must pass all three, and on clean recordings the minimum gain is what rejects;
+    5. repeat until no candidate passes or `max_effects` are in.
+
+The residual tests (`residual.py`) are reported before and after; they describe the
+residual, while the decision rests on held-out prediction, which they cannot game.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from teleop_core._typing import Float1D
+from teleop_core.calibration.effects import EFFECTS, Effect
+from teleop_core.calibration.fitting import (
+    CalibratedModel,
+    Chain,
+    confidence,
+    design,
+    search,
+    solve,
+)
+from teleop_core.calibration.models import BaseModel, CalibrationData
+from teleop_core.calibration.residual import diebold_mariano, residual_tests
+from teleop_core.errors import TeleopInputError
+
+Progress = Callable[[int, int, str], None]
+"""progress(done, total, what): called before each candidate of each round."""
+
+
+@dataclass
+class Candidate:
+    """One candidate's evaluation in one round."""
+
+    family: str
+    """The effect family's report name."""
+    round: int
+    """Loop round, from 1."""
+    searched_value: float
+    """Its searched parameter as found on the training block (nan when it has none)."""
+    rmse_held_out_n: float
+    """Held-out RMSE of the model with it, N (N m for a torque model)."""
+    gain_fraction: float
+    """Relative cut in held-out RMSE against the model of that round."""
+    p_value: float
+    """One-sided Diebold-Mariano p-value of that cut."""
+    bic_change: float
+    """Change of the training BIC when it is added (negative: better)."""
+    accepted: bool = False
+    """Whether the loop added it in this round."""
+    reason: str = ""
+    """Why it was not added ('' when it passed)."""
+
+
+@dataclass
+class Calibrator:
+    """Greedy forward selection of effects on a base model, judged on a held-out block.
+
+    Parameters
+    ----------
+    model
+        Base model (`models.py`).
+    families
+        Candidate families to try; default: all that apply to the model's signals.
+    held_out_fraction
+        Share of the recording, at its end, held out for testing.
+    alpha
+        Level of each candidate's Diebold-Mariano test.
+    min_gain
+        Smallest relative cut in held-out RMSE worth an effect: 5 %, above the 3-4 %
+        that the imperfect fit of an effect already in the model can leave for a wrong
+        family to take (seen on simulated recordings).
+    max_effects
+        Most effects added.
+    max_lag
+        Lags, samples, of the residual tests.
+    """
+
+    model: BaseModel
+    families: Sequence[str] | None = None
+    held_out_fraction: float = 0.25
+    alpha: float = 0.01
+    min_gain: float = 0.05
+    max_effects: int = 4
+    max_lag: int = 25
+    candidates_: list[Candidate] = field(default_factory=list, init=False)
+
+    def __post_init__(self) -> None:
+        if not 0.05 <= self.held_out_fraction <= 0.5:
+            raise TeleopInputError(
+                f"held_out_fraction = {self.held_out_fraction!r}; expected 0.05 to 0.5"
+            )
+        unknown = [f for f in self.families or () if f not in EFFECTS]
+        if unknown:
+            raise TeleopInputError(
+                f"unknown effect family {unknown[0]!r}; expected one of {', '.join(EFFECTS)}"
+            )
+
+    def _split(self, n: int) -> tuple[slice, slice]:
+        cut = round(n * (1.0 - self.held_out_fraction))
+        return slice(0, cut), slice(cut, n)
+
+    def _fit_chain(self, data: CalibrationData, chain: Chain) -> tuple[Float1D, Float1D, int]:
+        """Coefficients on the training block, predictions everywhere, parameter count."""
+        X, _ = design(self.model, data.signals, chain)
+        coef = solve(X[self.train_], data.y[self.train_])
+        searched = sum(e.searched is not None for e, _ in chain)
+        return coef, X @ coef, X.shape[1] + searched
+
+    def _bic(self, data: CalibrationData, pred: Float1D, k: int) -> float:
+        e = data.y[self.train_] - pred[self.train_]
+        n = len(e)
+        return float(n * np.log(np.mean(e * e)) + k * np.log(n))
+
+    def fit(self, data: CalibrationData, progress: Progress | None = None) -> Calibrator:
+        """Run the loop on `data`; fitted attributes end in `_`."""
+        if len(data) < 200:
+            raise TeleopInputError(
+                f"recording {data.name} has {len(data)} samples; expected at least 200 "
+                "for a training and a held-out block"
+            )
+        families = list(self.families or self.model.families)
+        families = [f for f in families if all(k in data.signals for k in EFFECTS[f].needs)]
+        self.train_, self.test_ = self._split(len(data))
+        y_test = data.y[self.test_]
+        chain: Chain = []
+        coef, pred, k = self._fit_chain(data, chain)
+        self.base_prediction_ = pred
+        rmse = _rmse(y_test - pred[self.test_])
+        self.rmse_before_ = rmse
+        self.step_rmse_: list[float] = []
+        self.candidates_ = []
+        round_ = 0
+        while len(chain) < self.max_effects:
+            remaining = [f for f in families if f not in {e.family for e, _ in chain}]
+            if not remaining:
+                break
+            bic = self._bic(data, pred, k)
+            found: list[tuple[Candidate, Effect, Float1D, Float1D, int]] = []
+            for i, family in enumerate(remaining):
+                if progress is not None:
+                    progress(i, len(remaining), f"round {round_ + 1}: {family}")
+                effect = self.model.effect(family)
+                value = search(self.model, data, self.train_, chain, effect)
+                c_coef, c_pred, c_k = self._fit_chain(data, [*chain, (effect, value)])
+                c_rmse = _rmse(y_test - c_pred[self.test_])
+                p = diebold_mariano(y_test - pred[self.test_], y_test - c_pred[self.test_])
+                cand = Candidate(
+                    family,
+                    round_ + 1,
+                    value,
+                    c_rmse,
+                    1.0 - c_rmse / rmse,
+                    p,
+                    self._bic(data, c_pred, c_k) - bic,
+                )
+                found.append((cand, effect, c_coef, c_pred, c_k))
+            for cand, *_ in found:
+                cand.reason = _verdict(cand, self.min_gain, self.alpha)
+            passing = [f for f in found if not f[0].reason]
+            self.candidates_.extend(f[0] for f in found)
+            if progress is not None:
+                progress(len(remaining), len(remaining), f"round {round_ + 1} done")
+            if not passing:
+                break
+            best = min(passing, key=lambda f: f[0].rmse_held_out_n)
+            best[0].accepted = True
+            for other in passing:
+                if other is not best:
+                    other[0].reason = f"passed, but {best[0].family} cut the error more"
+            chain.append((best[1], best[0].searched_value))
+            coef, pred, k = best[2], best[3], best[4]
+            rmse = best[0].rmse_held_out_n
+            self.step_rmse_.append(rmse)
+            round_ += 1
+        self.rmse_after_ = rmse
+        self.model_ = CalibratedModel(self.model, chain, coef, _settings(self.model))
+        self.prediction_ = pred
+        self.chain_ = chain
+        inputs = {k: v[self.test_] for k, v in data.signals.items() if k != "t"}
+        self.tests_before_ = residual_tests(
+            y_test - self.base_prediction_[self.test_], inputs, self.max_lag
+        )
+        self.tests_after_ = residual_tests(y_test - pred[self.test_], inputs, self.max_lag)
+        self.base_params_, self.base_ci_, self.effect_params_ = confidence(
+            self.model_, data, self.train_
+        )
+        self.data_ = data
+        return self
+
+    def report(self) -> dict[str, Any]:
+        """The JSON report of issue 10: the contract keys first, then context."""
+        added = [
+            {
+                "family": e.family,
+                "params": p["params"],
+                "ci": p["ci"],
+                "rmse_after_step": r,
+            }
+            for (e, _), p, r in zip(self.chain_, self.effect_params_, self.step_rmse_, strict=True)
+        ]
+        in_model = {e.family for e, _ in self.chain_}
+        last: dict[str, Candidate] = {}
+        for c in self.candidates_:
+            if c.family not in in_model:
+                last[c.family] = c
+        rejected = [_candidate_dict(c) for c in last.values()]
+        t = self.data_.signals["t"]
+        return {
+            "rmse_before": self.rmse_before_,
+            "rmse_after": self.rmse_after_,
+            "effects_added": added,
+            "candidates_rejected": rejected,
+            "residual_tests_before": self.tests_before_,
+            "residual_tests_after": self.tests_after_,
+            "model": self.model.name,
+            "recording": self.data_.name,
+            "base_params": {"params": self.base_params_, "ci": self.base_ci_},
+            "held_out": {
+                "start_s": float(t[self.test_][0]),
+                "end_s": float(t[-1]),
+                "samples": len(t[self.test_]),
+                "training_samples": len(t[self.train_]),
+            },
+            "settings": {
+                "held_out_fraction": self.held_out_fraction,
+                "alpha": self.alpha,
+                "min_gain": self.min_gain,
+                "max_effects": self.max_effects,
+                "ci_level": 0.95,
+            },
+            "warnings": self.warnings(),
+            "candidates": [_candidate_dict(c) for c in self.candidates_],
+            "calibrated_model": self.model_.to_dict(),
+        }
+
+    def warnings(self) -> list[str]:
+        """Searched values that ended at an end of their search range: the effect may
+        stand in for something else there (a long lag for a slow dynamic)."""
+        notes = []
+        for effect, value in self.chain_:
+            if effect.searched is None or effect.family == "position_periodic":
+                continue
+            grid = effect.grid(self.data_.signals)
+            lo, hi = float(np.min(grid)), float(np.max(grid))
+            if value <= lo * 1.001 or value >= hi * 0.999:
+                notes.append(
+                    f"{effect.family}: {effect.searched} = {value:.4g} is at the end of its "
+                    f"search range [{lo:.4g}, {hi:.4g}]"
+                )
+        return notes
+
+
+def _rmse(e: Float1D) -> float:
+    return float(np.sqrt(np.mean(e * e)))
+
+
+def _verdict(c: Candidate, min_gain: float, level: float) -> str:
+    """Why a candidate fails the significance rule ('' when it passes)."""
+    if not c.gain_fraction >= min_gain:
+        return f"held-out RMSE cut {100 * c.gain_fraction:.2f} % < {100 * min_gain:.0f} %"
+    if not c.p_value < level:
+        return f"Diebold-Mariano p = {c.p_value:.3g} >= {level:.3g}"
+    if not c.bic_change < 0:
+        return f"training BIC rises by {c.bic_change:.1f}"
+    return ""
+
+
+def _candidate_dict(c: Candidate) -> dict[str, Any]:
+    d = asdict(c)
+    d["searched_value"] = None if np.isnan(c.searched_value) else c.searched_value
+    d["searched"] = EFFECTS[c.family].searched
+    return d
+
+
+def _settings(model: BaseModel) -> dict[str, Any]:
+    return asdict(model) if hasattr(model, "__dataclass_fields__") else {}

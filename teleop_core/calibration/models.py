@@ -1,0 +1,164 @@
+"""Base physics models the calibration loop starts from, and the data each one reads.
+
+A base model is linear in its coefficients: `columns(signals)` gives the regressors
+whose weighted sum is the reference force (N), `physical(coef)` names the fitted
+coefficients as physical parameters. This owns the link from a recording contract to
+the loop's named signals (`t`, `drive`, `speed`, `accel`, `angle`), so that the loop
+and the effect library never see a device's column names.
+
+- `FollowerBase`: eq. 1 of seed 000 solved for F, with the estimator's smoothed sign
+  and an offset: F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn theta_d) / r + F_0.
+- `MasterBase`: the dial's current-to-force calibration, one quadratic
+  F = a i^2 + b i + c (i in mA), i.e. eqs. 14-15 without the loading/unloading split;
+  the split is what the `hysteresis` effect should find. Its recording contract is
+  `t` [s], `current_ma` [mA], `f_ref` [N] (`MASTER_COLUMNS`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from teleop_core._typing import Float1D, Float2D
+from teleop_core.calibration.effects import (
+    EFFECTS,
+    FAMILIES,
+    Effect,
+    Hysteresis,
+    Signals,
+    smooth_sign,
+)
+from teleop_core.errors import TeleopInputError
+from teleop_core.estimation.recording import FollowerRecording, read_checked_csv
+
+MASTER_COLUMNS = ("t", "current_ma", "f_ref")
+"""The master's current-force calibration recording: time, commanded current, gauge force."""
+
+
+@dataclass(frozen=True)
+class CalibrationData:
+    """What the loop fits: named signals (each (n,)) and the reference force y (N)."""
+
+    signals: Signals
+    """Named inputs, each of shape (n,), `t` [s] among them (`effects.Signals`)."""
+    y: Float1D
+    """The reference force (or torque) the model predicts, shape (n,)."""
+    name: str = "recording"
+    """The recording's name in reports and errors."""
+
+    def __post_init__(self) -> None:
+        n = len(self.y)
+        if "t" not in self.signals or any(len(v) != n for v in self.signals.values()):
+            raise TeleopInputError(
+                f"calibration data {self.name}: signals {sorted(self.signals)} must include "
+                f"'t' and all have the {n} samples of the reference force"
+            )
+
+    def __len__(self) -> int:
+        return len(self.y)
+
+
+class BaseModel:
+    """A base model; subclasses set the class attributes and `columns`/`physical`."""
+
+    name: str = ""
+    unit: str = "n"
+    """Suffix of the output quantity in parameter names (`n_m` for torques)."""
+    out: float = 1.0
+    """Factor from a coefficient in N to the output quantity (r for torques)."""
+    families: tuple[str, ...] = FAMILIES
+    """Candidate families that apply to this model's signals."""
+    plot_against: tuple[str, ...] = ("t",)
+    """Signals the residual figures are drawn against."""
+    overrides: dict[str, Effect] = {}  # noqa: RUF012 - read only
+    """This model's own settings of a family (the master's quadratic hysteresis loop)."""
+
+    def effect(self, family: str) -> Effect:
+        """The candidate `family` as this model uses it."""
+        return self.overrides.get(family, EFFECTS[family])
+
+    def columns(self, s: Signals) -> Float2D:
+        raise NotImplementedError
+
+    def physical(self, coef: Float1D) -> dict[str, float]:
+        raise NotImplementedError
+
+    def rename(self, family: str, params: dict[str, float]) -> dict[str, float]:
+        """An effect's physical parameters under this model's names (same order)."""
+        return params
+
+    def read(self, path: str | Path) -> CalibrationData:
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class FollowerBase(BaseModel):
+    """Eq. 1 of seed 000 with an offset, for a follower recording (`recording.py`)."""
+
+    wheel_radius_m: float = 0.010
+    """r, known (the wheel's measured radius); only ratios to r are identifiable."""
+
+    name = "follower"
+    unit = "n_m"
+    plot_against = ("t", "speed", "angle")
+
+    def __post_init__(self) -> None:
+        if not self.wheel_radius_m > 0:
+            raise TeleopInputError(f"wheel_radius_m = {self.wheel_radius_m!r}; expected > 0")
+
+    @property
+    def out(self) -> float:  # type: ignore[override]
+        return self.wheel_radius_m
+
+    def columns(self, s: Signals) -> Float2D:
+        # F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn(theta_d)) / r + F_0   (eq. 1)
+        w = s["speed"]
+        return np.column_stack([s["drive"], -s["accel"], -w, -smooth_sign(w), np.ones_like(w)])
+
+    def physical(self, coef: Float1D) -> dict[str, float]:
+        r = self.wheel_radius_m
+        return {
+            "torque_constant_n_m_per_a": coef[0] * r,
+            "inertia_kg_m2": coef[1] * r,
+            "viscous_damping_n_m_s_per_rad": coef[2] * r,
+            "coulomb_friction_n_m": coef[3] * r,
+            "offset_n": coef[4],
+        }
+
+    def data(self, rec: FollowerRecording) -> CalibrationData:
+        signals = {"t": rec.t, "drive": rec.iq, "speed": rec.omega, "accel": rec.alpha}
+        signals.update(angle=rec.theta, direction=rec.omega)
+        return CalibrationData(signals, rec.f_ref, rec.name)
+
+    def read(self, path: str | Path) -> CalibrationData:
+        return self.data(FollowerRecording.from_csv(path))
+
+
+@dataclass(frozen=True)
+class MasterBase(BaseModel):
+    """One quadratic current-to-force characteristic (eqs. 14-15 without the split)."""
+
+    name = "master"
+    families = ("hysteresis", "delay", "drift", "current_nonlinearity")
+    overrides = {"hysteresis": Hysteresis(degree=2)}  # noqa: RUF012 - read only
+    plot_against = ("t", "drive")
+
+    def columns(self, s: Signals) -> Float2D:
+        i = s["drive"]
+        # F = a i^2 + b i + c   (eqs. 14-15, one branch)
+        return np.column_stack([i * i, i, np.ones_like(i)])
+
+    def physical(self, coef: Float1D) -> dict[str, float]:
+        return {"a_n_per_ma2": coef[0], "b_n_per_ma": coef[1], "c_n": coef[2]}
+
+    def data_from_arrays(
+        self, t: Float1D, current_ma: Float1D, f_ref: Float1D, name: str = "recording"
+    ) -> CalibrationData:
+        signals = {"t": np.asarray(t, float), "drive": np.asarray(current_ma, float)}
+        return CalibrationData(signals, np.asarray(f_ref, float), name)
+
+    def read(self, path: str | Path) -> CalibrationData:
+        v = read_checked_csv(path, MASTER_COLUMNS)
+        return self.data_from_arrays(v["t"], v["current_ma"], v["f_ref"], Path(path).name)

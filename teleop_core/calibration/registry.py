@@ -1,0 +1,15 @@
+"""Every base model by its `--model` name: one place that knows them all, so that the
+loop, a saved calibration and the command resolve a name the same way."""
+
+from __future__ import annotations
+
+from teleop_core.calibration.models import BaseModel, FollowerBase, MasterBase
+from teleop_core.calibration.notes import NotesBase
+
+BASE_MODELS: dict[str, BaseModel] = {
+    "follower": FollowerBase(),
+    "master": MasterBase(),
+    "notes-translation": NotesBase("translation"),
+    "notes-rotation": NotesBase("rotation"),
+}
+"""Base models by name (the report's `model`)."""
