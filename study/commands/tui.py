@@ -37,10 +37,11 @@ def tui(figures_dir: Path, pace: float, light: bool, db_url: str | None) -> None
     """The terminal app: overview, participants, sessions, NASA-TLX, analysis, calibration."""
     from db.migrate import open_database
     from study.tui import StudyServices, TuiSettings, make_app
+    from study.tui.services import calibrate_recording
 
     engine = open_database(db_url, create=False)
     try:
-        services = StudyServices(engine, _load_estimator, calibrate=None)
+        services = StudyServices(engine, _load_estimator, calibrate=calibrate_recording)
         settings = TuiSettings(
             simulated_pace=pace,
             figures_dir=figures_dir,

@@ -1,9 +1,10 @@
 """The calibration screen: run the calibration loop on a recording and show its report.
 
-The loop itself (issue 10) is passed into `make_app` as `StudyServices.calibrate`
-(recording, model, progress) -> report, with the keys of `study calibrate`'s REPORT.json
-(`rmse_before`, `rmse_after`, `effects_added`, `candidates_rejected`). Without one the
-screen says it is waiting for that issue. The loop runs in a worker; its progress
+The loop itself (issue 10, `teleop_core.calibration`) is passed into `make_app` as
+`StudyServices.calibrate` (recording, model, progress) -> report, with the keys of
+`study calibrate`'s REPORT.json (`rmse_before`, `rmse_after`, `effects_added`,
+`candidates_rejected`); `study tui` passes `services.calibrate_recording`. Without one
+the screen says it has no calibration loop. The loop runs in a worker; its progress
 lines come back as messages.
 """
 
@@ -25,7 +26,7 @@ from study.tui.services import StudyServices
 
 __all__ = ["MODELS", "CalibrationPane"]
 
-MODELS = ("follower", "notes-translation", "notes-rotation", "master")
+MODELS = ("follower", "master", "notes-translation", "notes-rotation")
 """`study calibrate --model` choices."""
 
 
@@ -75,7 +76,7 @@ class CalibrationPane(Vertical):
             )  # fmt: skip
         waiting = self.services.calibrate is None
         yield Static(
-            "waiting for the calibration loop (issue 10, `study calibrate`)"
+            "no calibration loop was given to this app"
             if waiting
             else "ctrl+r: run the calibration loop on the recording",
             id="calib-summary",
@@ -86,7 +87,7 @@ class CalibrationPane(Vertical):
 
     def action_calibrate(self) -> None:
         if self.services.calibrate is None:
-            self._summary("waiting for the calibration loop (issue 10): nothing to run yet")
+            self._summary("no calibration loop was given to this app: nothing to run")
             return
         path = Path(self.query_one("#recording", Input).value.strip())
         if not path.is_file():

@@ -154,3 +154,25 @@ class StudyServices:
         from study.analysis.paper import write_figures
 
         return write_figures(self.engine, folder, formats)
+
+
+def calibrate_recording(
+    recording: Path, model: str, progress: Callable[[str], None] = lambda _: None
+) -> dict[str, Any]:
+    """The calibration loop of `study calibrate` (issue 10) on one recording: its report.
+
+    The same steps as the command (`BASE_MODELS[model].read`, `Calibrator.fit`,
+    `report()`), without the files it writes; the app passes this into `make_app`.
+    """
+    from teleop_core.calibration import BASE_MODELS, Calibrator
+
+    if model not in BASE_MODELS:
+        from study.errors import StudyInputError
+
+        raise StudyInputError(f"model {model!r}; expected one of {', '.join(BASE_MODELS)}")
+    base = BASE_MODELS[model]
+    calibrator = Calibrator(base).fit(
+        base.read(recording),
+        progress=lambda done, total, what: progress(f"calibrating: {what} ({done}/{total})"),
+    )
+    return calibrator.report()

@@ -116,6 +116,8 @@ class LiveState:
     def push(self, samples: np.ndarray) -> None:
         """Take a batch of samples (in the worker); the first call resolves the columns."""
         COL = self._col = self._col or _columns()
+        if samples.shape[1] != len(COL):  # a NOTES trial: the view draws the LCCA phantom
+            return
         with self._lock:
             self._last = samples[-1].copy()
             self._prox.extend(samples[:, COL["proximal_force_est_n"]].tolist())

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from sqlalchemy import select
 from sqlalchemy.orm import Session
-from textual.widgets import DataTable, Input, Static
+from textual.widgets import DataTable, Input, Select, Static
 
 from db.models.audit import AuditEntry
 from db.models.study import Participant
@@ -16,6 +16,7 @@ from db.models.trial import Trial
 from db.samples import SampleWriter
 from study.protocol.roster import add_participant
 from study.protocol.tlx import load_tlx, store_tlx
+from study.tui.services import calibrate_recording
 from study.tui.tlx_pane import PairChoice, TlxPane
 from tests.study.tui.conftest import loaded, wait_for
 
@@ -228,7 +229,7 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
     async with app.run_test(size=(80, 24)) as pilot:
         await loaded(pilot)
         await pilot.press("f6")
-        assert _text(app, "#calib-summary").startswith("waiting for the calibration loop")
+        assert _text(app, "#calib-summary").startswith("no calibration loop")
     recording = tmp_path / "rec.csv"
     recording.write_text("t\n0\n")
     calls = []
@@ -254,3 +255,29 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
         ]  # fmt: skip
         assert app.query_one("#effects", DataTable).get_row_at(0)[1] == "stribeck"
     assert calls == [(recording, "follower")]
+
+
+async def test_calibration_screen_runs_the_loop_on_a_recording(make_test_app, tmp_path) -> None:
+    from teleop_core.notes.params import default_params
+    from teleop_core.notes.simulate import simulate_recording
+
+    # a clamped ramp of the NOTES rotation: seed 001 reports friction hysteresis and a
+    # counter-clockwise loss, which the loop must name (`direction_asymmetry`)
+    simulate_recording(
+        default_params("rotation"), "ramp", "clamped", noise=0.02, seed=4, rate_hz=200.0
+    ).to_csv(tmp_path / "ramp.csv", index=False)
+    app = make_test_app(calibrate=calibrate_recording)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f6")
+        app.query_one("#recording", Input).value = str(tmp_path / "ramp.csv")
+        app.query_one("#model", Select).value = "notes-rotation"
+        await pilot.press("ctrl+r")
+        pane = app.query_one("#calibration-pane")
+        await wait_for(pilot, lambda: pane.report is not None)
+        table = app.query_one("#effects", DataTable)
+        shown = {table.get_row_at(k)[1] for k in range(table.row_count)}
+        summary = _text(app, "#calib-summary").splitlines()[0]
+    assert {"hysteresis", "direction_asymmetry"} <= shown
+    assert pane.report["rmse_after"] < pane.report["rmse_before"]
+    assert summary.startswith("held-out RMSE") and summary.endswith("% lower)")
