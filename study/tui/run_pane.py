@@ -263,7 +263,10 @@ class RunPane(Vertical, can_focus=True):
     @on(TrialStarted)
     def _started(self, event: TrialStarted) -> None:
         self.status = "running"
-        self.query_one("#next", Label).update(f"running: {event.code} {event.description}  x: stop")
+        text = f"running: {event.code} {event.description}  x: stop"
+        if self.run is not None and self.run.keyboard is not None:
+            text += "  ↑↓ dial ←→ rotate space let go e end"
+        self.query_one("#next", Label).update(text)
 
     @on(TrialEnded)
     def _ended(self, event: TrialEnded) -> None:
