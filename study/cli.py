@@ -29,6 +29,7 @@ from study.commands.power import power
 from study.commands.run import run
 from study.commands.simulate import simulate
 from study.commands.tlx import tlx
+from study.commands.tui import tui
 
 EXIT_USER_ERROR = 2
 
@@ -64,6 +65,7 @@ cli.add_command(analyze)
 cli.add_command(figures)
 cli.add_command(demo)
 cli.add_command(power)
+cli.add_command(tui)
 cli.add_command(calibrate)
 cli.add_command(characterize)
 cli.add_command(identify)

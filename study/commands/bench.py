@@ -162,6 +162,41 @@ def bench_lcca(
     click.echo((out_dir / "lcca_bench.md").read_text())
 
 
+@bench.command("tui")
+@click.option("--db", "db_url", metavar="URL", default=None,
+              help="A study database, e.g. made by `study demo` [default: build the "
+              "full 36-participant demo study in a temporary folder first, minutes].")  # fmt: skip
+@click.option("--runs", type=click.IntRange(min=1), default=5, show_default=True)
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
+    """Time from starting `study tui` to the overview on the terminal (target 1.5 s)."""
+    import tempfile
+
+    from study.bench.tui import bench_tui as run_bench
+
+    if json_path is not None:
+        _check_json_folder(json_path)
+    with tempfile.TemporaryDirectory() as tmp, Console(stderr=True).status("tui") as status:
+        if db_url is None:
+            from study.protocol.demo import run_demo
+
+            db_url = str(Path(tmp) / "demo.db")
+            status.update("building the full demo study (36 participants)")
+            run_demo(db_url, seed=1, progress=status.update)
+        status.update(f"starting `study tui` {runs} times")
+        result = run_bench(db_url, runs)
+    click.echo(
+        f"study tui, {result.participants} participants: overview after "
+        f"{result.median_s:.2f} s (median of {runs}; "
+        f"{', '.join(f'{s:.2f}' for s in result.seconds)} s); target <= {result.target_s} s; "
+        f"CPU per run (start to exit) {', '.join(f'{s:.2f}' for s in result.cpu_seconds)} s; "
+        f"the app's own part (make_app to overview, headless) "
+        f"{', '.join(f'{s:.2f}' for s in result.app_seconds)} s"
+    )
+    if json_path is not None:
+        json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+
+
 @bench.command("calibrate")
 @_json_option
 @click.option(

@@ -8,7 +8,6 @@ import click
 
 from db.migrate import open_database
 from study.commands.base import StudyCommand, db_option
-from study.protocol.exchange import export_data, import_data
 
 
 @click.command("import", cls=StudyCommand)
@@ -19,6 +18,8 @@ from study.protocol.exchange import export_data, import_data
 @db_option
 def import_cmd(trials_csv: Path, tlx_csv: Path | None, db_url: str | None) -> None:
     """Import trial summaries (and NASA-TLX) collected elsewhere: all rows or none."""
+    from study.protocol.exchange import import_data  # pandas: only when a command runs
+
     engine = open_database(db_url, create=False)
     try:
         n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv)
@@ -36,6 +37,8 @@ def import_cmd(trials_csv: Path, tlx_csv: Path | None, db_url: str | None) -> No
 @db_option
 def export_cmd(out_dir: Path, fmt: str, samples: bool, db_url: str | None) -> None:
     """Export trials, TLX (and samples) with a codebook, for other tools."""
+    from study.protocol.exchange import export_data
+
     engine = open_database(db_url, create=False)
     try:
         written = export_data(engine, out_dir, fmt, samples)

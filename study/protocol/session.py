@@ -53,6 +53,10 @@ MAX_TRIAL_S = 180.0
 """A trial ends unsuccessfully after this long."""
 STEP_S = 0.5
 """Simulated time advanced between writes to the sample writer."""
+PACED_STEP_S = 0.05
+"""The same when paced: short enough that a watcher (the TUI's live view, 20 Hz and up)
+and a keyboard driver see and act at real time rather than in half-second bursts."""
+INTERRUPTED_BY_CRASH = "found running when a new session started (the process had died)"
 
 
 @dataclass(frozen=True)
@@ -67,8 +71,11 @@ def participant_traits(study_seed: int, code: str, group: str) -> ParticipantTra
     return draw_traits(group, np.random.default_rng([study_seed, zlib.crc32(code.encode())]))
 
 
-def recover_interrupted(engine: Engine, participant_id: int) -> int:
-    """Mark trials left `running` by a process that died as `interrupted`; return how many."""
+def recover_interrupted(
+    engine: Engine, participant_id: int, reason: str = INTERRUPTED_BY_CRASH
+) -> int:
+    """Mark trials left `running` (by a process that died, or a trial stopped in the
+    middle) as `interrupted`, with `reason` in the audit log; return how many."""
     # read-then-write: under the write lock (SQLite cannot upgrade a read transaction
     # while another process writes)
     with write_transaction(engine) as conn, Session(bind=conn) as session:
@@ -85,7 +92,7 @@ def recover_interrupted(engine: Engine, participant_id: int) -> int:
                     field="status",
                     old_value="running",
                     new_value="interrupted",
-                    reason="found running when a new session started (the process had died)",
+                    reason=reason,
                 )
             )
         session.commit()
@@ -123,11 +130,15 @@ def run_session(
     pace: float | None = None,
     on_trial: Callable[[PendingTrial, int, int], None] = lambda *_: None,
     max_trials: int | None = None,
+    on_samples: Callable[[np.ndarray], None] | None = None,
 ) -> list[int]:
     """Run the participant's remaining trials; return the ids of the trials completed.
 
     `pace` slows a simulated session to `pace` times real time (to watch it, or to stop
-    it in the middle); `on_trial(pending, k, n)` reports progress.
+    it in the middle); `on_trial(pending, k, n)` reports progress; `on_samples(rows)`
+    sees every batch of samples (SAMPLE_COLUMNS, branch as its code) as it is written.
+    An exception raised by a callback or the driver stops the session: the committed
+    samples stay and the trial stays `running` until `recover_interrupted`.
     """
     with Session(engine) as session:
         study, _ = load_study(session)
@@ -163,6 +174,7 @@ def run_session(
                 make_driver,
                 pace,
                 study.seed,
+                on_samples,
             )
         )
     return completed
@@ -188,6 +200,7 @@ def _run_trial(
     make_driver: Callable[[], Driver] | None,
     pace: float | None,
     study_seed: int,
+    on_samples: Callable[[np.ndarray], None] | None = None,
 ) -> int:
     block = item.block
     with write_transaction(engine) as conn, Session(bind=conn) as session:
@@ -234,13 +247,16 @@ def _run_trial(
         regions = REGION_ABBREVIATIONS
     loop.start(driver)
     chunks = []
+    step_s = STEP_S if pace is None else PACED_STEP_S
     wall0 = time.monotonic()
     with SampleWriter(engine, trial_id, chunk_s=1.0) as writer:
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
-            samples = loop.advance(min(STEP_S, MAX_TRIAL_S - loop.t_s))
+            samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
             if len(samples):
                 writer.extend(_sample_columns(samples, regions))
                 chunks.append(samples)
+                if on_samples is not None:
+                    on_samples(samples)
             if pace:
                 lag = wall0 + loop.t_s / pace - time.monotonic()
                 if lag > 0:

@@ -179,3 +179,41 @@ def store_tlx(
         session.flush()
         session.expunge(existing)
         return existing, False
+
+
+def load_tlx(engine: Engine, code: str, task: str, condition: str) -> TlxResponse | None:
+    """The stored questionnaire of one block (detached), or None (for editing it)."""
+    with Session(engine) as session:
+        response = session.scalars(
+            select(TlxResponse)
+            .join(Participant)
+            .where(
+                Participant.code == code,
+                TlxResponse.task == task,
+                TlxResponse.condition == condition,
+            )
+        ).first()
+        if response is not None:
+            session.expunge(response)
+    return response
+
+
+def answered_blocks(engine: Engine) -> set[tuple[str, str, str]]:
+    """(code, task, condition) of every block that has its questionnaire."""
+    with Session(engine) as session:
+        rows = session.execute(
+            select(Participant.code, TlxResponse.task, TlxResponse.condition).join(Participant)
+        ).all()
+    return {tuple(r) for r in rows}  # type: ignore[misc]
+
+
+def tlx_audit(engine: Engine, response_id: int) -> list[AuditEntry]:
+    """The audit trail of one questionnaire, oldest first (detached)."""
+    with Session(engine) as session:
+        entries = session.scalars(
+            select(AuditEntry)
+            .where(AuditEntry.entity == "tlx_response", AuditEntry.entity_id == response_id)
+            .order_by(AuditEntry.id)
+        ).all()
+        session.expunge_all()
+    return list(entries)

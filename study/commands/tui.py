@@ -1,0 +1,52 @@
+"""`study tui`: the terminal app over a study database."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from study.commands.base import StudyCommand, db_option
+
+
+def _load_estimator():
+    """The shipped estimator, imported when first needed (its module loads torch)."""
+    from study.protocol.default_estimator import load_estimator
+
+    return load_estimator()
+
+
+@click.command("tui", cls=StudyCommand)
+@click.option(
+    "--figures-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("figures"),
+    show_default=True,
+    help="Default folder for the analysis screen's figure export.",
+)
+@click.option(
+    "--pace",
+    type=click.FloatRange(min=0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="Times real time for a simulated participant (the screen's p key cycles it).",
+)
+@click.option("--light", is_flag=True, help="Start in the light theme (ctrl+t toggles).")
+@db_option
+def tui(figures_dir: Path, pace: float, light: bool, db_url: str | None) -> None:
+    """The terminal app: overview, participants, sessions, NASA-TLX, analysis, calibration."""
+    from db.migrate import open_database
+    from study.tui import StudyServices, TuiSettings, make_app
+    from study.tui.services import calibrate_recording
+
+    engine = open_database(db_url, create=False)
+    try:
+        services = StudyServices(engine, _load_estimator, calibrate=calibrate_recording)
+        settings = TuiSettings(
+            simulated_pace=pace,
+            figures_dir=figures_dir,
+            theme="textual-light" if light else "textual-dark",
+        )
+        make_app(services, settings).run()
+    finally:
+        engine.dispose()

@@ -1,0 +1,170 @@
+"""The analysis screen: per-group VO vs HV comparisons, a chart, and the paper's figures.
+
+The tables are `study.analysis.stats.analyze` on what is stored (the same numbers as
+`study analyze`); the chart draws one measure's group means under VO and HV as bars in
+the terminal; export writes the paper's figures (`study.analysis.paper.write_figures`,
+as `study figures`) to a folder. Everything runs in a worker: the statistics import
+pandas, pingouin and statsmodels on first use.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+from rich.text import Text
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding, BindingType
+from textual.containers import Horizontal, Vertical
+from textual.message import Message
+from textual.widgets import DataTable, Input, Label, Select, Static
+
+from study.tui.services import StudyServices
+
+__all__ = ["AnalysisPane", "bar_chart"]
+
+VO_STYLE = "#E69F00"
+HV_STYLE = "#0072B2"
+"""Okabe-Ito orange and blue, the colours of VO and HV in the paper's figures."""
+
+
+def bar_chart(comparisons: Any, measure: str, width: int = 40) -> Text:
+    """Group means of `measure` under VO and HV as horizontal bars (one scale)."""
+    rows = comparisons[comparisons["measure"] == measure]
+    text = Text(no_wrap=True)
+    if not len(rows):
+        return text.append(f"no comparison of {measure} yet")
+    top = float(max(rows["mean_vo"].max(), rows["mean_hv"].max()))
+    scale = width / top if top > 0 else 0.0
+    for _, r in rows.iterrows():
+        for label, value, style in (("VO", r["mean_vo"], VO_STYLE), ("HV", r["mean_hv"], HV_STYLE)):
+            name = r["group"] if label == "VO" else ""
+            n = round(value * scale) if math.isfinite(value) else 0
+            text.append(f"{name:<9}{label} ")
+            text.append("█" * n, style)
+            text.append(f" {value:.3g}\n")
+    text.append("p (Holm) per group: " + ", ".join(
+        f"{r['group']} {r['p_holm']:.3f}" for _, r in rows.iterrows()))  # fmt: skip
+    return text
+
+
+class AnalysisPane(Vertical):
+    """Run the analysis, read its tables and chart, export the figures."""
+
+    DEFAULT_CSS = """
+    AnalysisPane { height: 1fr; }
+    AnalysisPane .row { height: 1; }
+    AnalysisPane #measure { width: 28; }
+    AnalysisPane #out-dir { width: 1fr; }
+    AnalysisPane #comparisons { height: 1fr; min-height: 5; }
+    AnalysisPane #chart { height: auto; max-height: 9; }
+    AnalysisPane #analysis-status { height: auto; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("r", "analyze", "Analyse"),
+        Binding("ctrl+e", "export", "Export figures"),
+    ]
+
+    @dataclass
+    class Ready(Message):
+        result: Any
+        """`study.analysis.stats.Analysis`."""
+
+    @dataclass
+    class Exported(Message):
+        paths: list[Path]
+
+    def __init__(
+        self,
+        services: StudyServices,
+        figures_dir: Path,
+        formats: tuple[str, ...] = ("pdf", "svg", "png"),
+        **kwargs: object,
+    ) -> None:
+        super().__init__(**kwargs)  # type: ignore[arg-type]
+        self.services = services
+        self.figures_dir = figures_dir
+        self.formats = formats
+        self.result: Any = None
+        self.exported: list[Path] = []
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(classes="row"):
+            yield Label("Chart ")
+            yield Select[str]([], id="measure", compact=True, prompt="measure")
+            yield Label(" Figures to ")
+            yield Input(str(self.figures_dir), id="out-dir", compact=True)
+        table = DataTable(id="comparisons", zebra_stripes=True, cursor_type="row")
+        table.add_columns("measure", "group", "n", "VO", "HV", "test", "p Holm", "effect")
+        yield table
+        yield Static("", id="chart")
+        yield Static(
+            "r: run the analysis; ctrl+e: export the paper's figures", id="analysis-status"
+        )
+
+    def action_analyze(self) -> None:
+        self._status("analysing...")
+        self._analyze()
+
+    @work(thread=True, exclusive=True, group="analysis")
+    def _analyze(self) -> None:
+        try:
+            result = self.services.analysis()
+        except ValueError as exc:
+            self.app.call_from_thread(self._status, f"nothing to analyse: {exc}")
+            return
+        self.post_message(self.Ready(result))
+
+    @on(Ready)
+    def _ready(self, event: Ready) -> None:
+        self.result = event.result
+        comparisons = event.result.comparisons
+        table = self.query_one("#comparisons", DataTable)
+        table.clear()
+        for _, r in comparisons.iterrows():
+            table.add_row(
+                r["measure"], r["group"], str(r["n"]), f"{r['mean_vo']:.3g}", f"{r['mean_hv']:.3g}",
+                r["test"], f"{r['p_holm']:.3f}", f"{r['effect_size']:+.2f}",
+            )  # fmt: skip
+        measures = list(dict.fromkeys(comparisons["measure"]))
+        select = self.query_one("#measure", Select)
+        select.set_options([(m, m) for m in measures])
+        if measures:
+            select.value = "peak_proximal_force_n" if "peak_proximal_force_n" in measures else (
+                measures[0])  # fmt: skip
+        notes = len(event.result.exclusions) + len(event.result.warnings)
+        self._status(f"{len(comparisons)} comparisons, {notes} exclusions and notes")
+
+    @on(Select.Changed, "#measure")
+    def _measure(self, event: Select.Changed) -> None:
+        event.stop()
+        if self.result is not None and event.value is not Select.NULL:
+            width = max(self.content_size.width - 24, 10)
+            chart = bar_chart(self.result.comparisons, str(event.value), width)
+            self.query_one("#chart", Static).update(chart)
+
+    def action_export(self) -> None:
+        folder = Path(self.query_one("#out-dir", Input).value.strip() or self.figures_dir)
+        self._status(f"drawing the figures into {folder}...")
+        self._export(folder)
+
+    @work(thread=True, exclusive=True, group="figures")
+    def _export(self, folder: Path) -> None:
+        try:
+            paths = self.services.export_figures(folder, self.formats)
+        except (ValueError, OSError) as exc:
+            self.app.call_from_thread(self._status, f"refused: {exc}")
+            return
+        self.post_message(self.Exported(paths))
+
+    @on(Exported)
+    def _exported(self, event: Exported) -> None:
+        self.exported = event.paths
+        folder = event.paths[0].parent if event.paths else self.figures_dir
+        self._status(f"{len(event.paths)} figure files written to {folder}")
+
+    def _status(self, text: str) -> None:
+        self.query_one("#analysis-status", Static).update(text)

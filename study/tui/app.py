@@ -1,0 +1,215 @@
+"""The application: six screens as tabs, the roster loaded in a worker, a safe quit.
+
+`make_app(services, settings)` builds the app from its dependencies (the database
+engine, the estimator loader, the calibration loop), so `study tui` and the tests build
+it the same way and nothing inside reads global configuration. The app owns only the
+wiring between the screens: it loads the `Roster` (in a worker) at start and whenever a
+screen reports a change (a participant enrolled, a trial ended, a questionnaire saved),
+hands it to every screen, and opens the NASA-TLX form when a trial finishes a block.
+Quitting in the middle of a trial stops it first, so it is marked interrupted and
+every committed sample stays.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+from textual import on, work
+from textual.app import App, ComposeResult
+from textual.binding import Binding, BindingType
+from textual.css.query import NoMatches
+from textual.message import Message
+from textual.widget import Widget
+from textual.widgets import Footer, TabbedContent, TabPane
+
+from study.tui.analysis_pane import AnalysisPane
+from study.tui.calibration_pane import CalibrationPane
+from study.tui.overview import OverviewPane
+from study.tui.participants import ParticipantsPane
+from study.tui.run_pane import RunPane
+from study.tui.services import Roster, StudyServices
+from study.tui.tlx_pane import TlxPane
+
+__all__ = ["TABS", "StudyApp", "TuiSettings", "make_app"]
+
+TABS = ("overview", "participants", "run", "tlx", "analysis", "calibration")
+TITLES = ("Overview", "Participants", "Run", "NASA-TLX", "Analysis", "Calibration")
+
+
+@dataclass(frozen=True)
+class TuiSettings:
+    """How the app behaves (not what it works on: that is `StudyServices`)."""
+
+    simulated_pace: float | None = 1.0
+    """Times real time for a simulated participant at start (None: as fast as it goes)."""
+    figures_dir: Path = Path("figures")
+    """Where the analysis screen exports the paper's figures by default."""
+    figure_formats: tuple[str, ...] = ("pdf", "svg", "png")
+    """Formats of the exported figures (as `study figures --format`)."""
+    theme: str = "textual-dark"
+    prepare_simulation: bool = True
+    """Load the estimator and compile the loop when the run screen is first shown (a few
+    seconds of one core, in a worker); off, the first trial pays it instead."""
+
+    def __post_init__(self) -> None:
+        if self.simulated_pace is not None and not self.simulated_pace > 0:
+            raise ValueError(f"simulated pace {self.simulated_pace!r}; expected > 0 or None")
+
+
+class StudyApp(App[None]):
+    """`study tui`."""
+
+    TITLE = "haptic-study"
+    CSS = """
+    TabbedContent { height: 1fr; }
+    TabPane { padding: 0 1; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("ctrl+q", "quit", "Quit", priority=True),
+        Binding("ctrl+t", "toggle_theme", "Theme"),
+        *(Binding(f"f{k + 1}", f"tab('{t}')", TITLES[k], show=False) for k, t in enumerate(TABS)),
+        *(Binding(str(k + 1), f"tab('{t}')", TITLES[k], show=False) for k, t in enumerate(TABS)),
+    ]
+
+    @dataclass
+    class RosterLoaded(Message):
+        roster: Roster
+
+    def __init__(self, services: StudyServices, settings: TuiSettings) -> None:
+        super().__init__()
+        self.services = services
+        self.settings = settings
+        self.roster: Roster | None = None
+        self.started_at = time.monotonic()
+        self.overview_shown_s: float | None = None
+        """Seconds from the app's construction to the first overview with data."""
+        self.ready = False
+        """True once every screen is mounted (after the overview has shown)."""
+
+    def compose(self) -> ComposeResult:
+        # only the overview at first: the other screens (some 300 widgets) are mounted
+        # once it shows, so the first paint waits for neither their layout nor their CSS
+        with TabbedContent(id="tabs"):
+            for k, tab in enumerate(TABS):
+                with TabPane(f"F{k + 1} {TITLES[k]}", id=tab):
+                    if tab == "overview":
+                        yield OverviewPane(id="overview-pane")
+        yield Footer()
+
+    def _later_panes(self) -> dict[str, Widget]:
+        return {
+            "participants": ParticipantsPane(self.services, id="participants-pane"),
+            "run": RunPane(self.services, self.settings.simulated_pace, id="run-pane"),
+            "tlx": TlxPane(self.services, id="tlx-pane"),
+            "analysis": AnalysisPane(
+                self.services,
+                self.settings.figures_dir,
+                self.settings.figure_formats,
+                id="analysis-pane",
+            ),  # fmt: skip,
+            "calibration": CalibrationPane(self.services, id="calibration-pane"),
+        }
+
+    async def _mount_later_panes(self) -> None:
+        try:
+            for tab, pane in self._later_panes().items():
+                await self.query_one(f"#{tab}", TabPane).mount(pane)
+            self.ready = True
+            if self.roster is not None:
+                self._show(self.roster)
+        except NoMatches:  # the app closed while the screens were being mounted
+            self.ready = False
+
+    def on_mount(self) -> None:
+        self.theme = self.settings.theme
+        self.reload()
+
+    # -- the roster -----------------------------------------------------------------------
+
+    def reload(self) -> None:
+        self._load_roster()
+
+    @work(thread=True, exclusive=True, group="roster")
+    def _load_roster(self) -> None:
+        self.post_message(self.RosterLoaded(self.services.roster()))
+
+    @on(RosterLoaded)
+    def _roster_loaded(self, event: RosterLoaded) -> None:
+        self.roster = event.roster
+        self._show(event.roster)
+        if self.overview_shown_s is None:
+            self.overview_shown_s = time.monotonic() - self.started_at
+            self.call_after_refresh(self._mount_later_panes)
+
+    def _show(self, roster: Roster) -> None:
+        self.query_one(OverviewPane).show(roster)
+        if self.ready:
+            self.query_one(ParticipantsPane).show(roster)
+            self.query_one(RunPane).show(roster)
+            self.query_one(TlxPane).show(roster)
+
+    @on(ParticipantsPane.Added)
+    @on(TlxPane.Saved)
+    def _changed(self) -> None:
+        self.reload()
+
+    @on(RunPane.TrialEnded)
+    def _trial_ended(self, event: RunPane.TrialEnded) -> None:
+        self._after_trial(event.block)
+
+    @work(thread=True, exclusive=True, group="roster")
+    def _after_trial(self, block: tuple[str, str, str]) -> None:
+        roster = self.services.roster()
+        self.post_message(self.RosterLoaded(roster))
+        if block in roster.tlx_due():
+            self.call_from_thread(self._open_tlx, *block)
+
+    def _open_tlx(self, code: str, task: str, condition: str) -> None:
+        self.action_tab("tlx")
+        self.query_one(TlxPane).open_block(code, task, condition)
+        self.notify(f"{code} finished the {task}/{condition} block: NASA-TLX now")
+
+    # -- actions --------------------------------------------------------------------------
+
+    @on(TabbedContent.TabActivated)
+    def _tab_shown(self, event: TabbedContent.TabActivated) -> None:
+        if event.pane.id == "run" and self.settings.prepare_simulation:
+            self.query_one(RunPane).prepare()
+
+    def action_tab(self, tab: str) -> None:
+        if not self.ready:
+            return
+        self.query_one("#tabs", TabbedContent).active = tab
+        # focus inside the screen, so its key bindings work at once
+        pane = self.query_one(f"#{tab}").children[0]
+        target = pane if pane.focusable else next(
+            (w for w in pane.query("*") if w.focusable), None
+        )  # fmt: skip
+        if target is not None:
+            target.focus()
+
+    def action_toggle_theme(self) -> None:
+        self.theme = "textual-light" if self.theme == "textual-dark" else "textual-dark"
+
+    async def action_quit(self) -> None:
+        """Stop a running trial (marked interrupted, its samples kept), then exit."""
+        await self.stop_trial()
+        self.exit()
+
+    async def stop_trial(self, timeout_s: float = 30.0) -> None:
+        if not self.ready:
+            return
+        run = self.query_one(RunPane).run
+        if run is not None:
+            self.notify("stopping the trial: it is kept as interrupted")
+            run.stop()
+            await asyncio.to_thread(run.finished.wait, timeout_s)
+
+
+def make_app(services: StudyServices, settings: TuiSettings | None = None) -> StudyApp:
+    """The terminal app over `services` (see `study.tui.services.StudyServices`)."""
+    return StudyApp(services, settings or TuiSettings())

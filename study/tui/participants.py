@@ -1,0 +1,108 @@
+"""The participants screen: enrol one into a group; the list with codes, orders and progress.
+
+Enrolment is `study.protocol.roster.add_participant` in a worker (it takes the write
+lock, which another lab machine may hold for a moment); the new code comes back as a
+message and the app reloads the roster.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding, BindingType
+from textual.containers import Horizontal, Vertical
+from textual.message import Message
+from textual.widgets import Button, DataTable, Label, Select
+
+from study.tui.services import Roster, StudyServices
+
+__all__ = ["ParticipantsPane"]
+
+
+class ParticipantsPane(Vertical):
+    """Add a participant; list everyone with code, group, order and progress."""
+
+    DEFAULT_CSS = """
+    ParticipantsPane { height: 1fr; }
+    ParticipantsPane #add-row { height: auto; }
+    ParticipantsPane #add-row Label { padding: 0 1; }
+    ParticipantsPane #group { width: 24; }
+    ParticipantsPane #people { height: 1fr; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [Binding("a", "add", "Add participant")]
+
+    @dataclass
+    class Added(Message):
+        """A participant was enrolled."""
+
+        code: str
+        group: str
+
+    def __init__(self, services: StudyServices, **kwargs: object) -> None:
+        super().__init__(**kwargs)  # type: ignore[arg-type]
+        self.services = services
+        self.last_message = ""
+        self._groups: list[str] = []
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(id="add-row"):
+            yield Label("Group")
+            yield Select[str]([], id="group", compact=True, prompt="group")
+            yield Button("Add (a)", id="add", compact=True)
+            yield Label("", id="add-status")
+        table = DataTable(id="people", cursor_type="row", zebra_stripes=True)
+        table.add_columns("code", "group", "order", "progress", "next")
+        yield table
+
+    def show(self, roster: Roster) -> None:
+        groups = list(roster.groups)
+        if groups != self._groups:
+            self._groups = groups
+            select = self.query_one("#group", Select)
+            select.set_options([(g, g) for g in groups])
+            if groups:
+                select.value = groups[0]
+        table = self.query_one("#people", DataTable)
+        table.clear()
+        for r in roster.participants:
+            nxt = roster.next_trial(r["code"])
+            table.add_row(
+                r["code"],
+                r["group"],
+                " -> ".join(r["condition_order"]),
+                f"{r['trials_completed']}/{r['trials_planned']}",
+                nxt.describe() if nxt else "done",
+                key=r["code"],
+            )
+
+    @on(Button.Pressed, "#add")
+    def _add_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        self.action_add()
+
+    def action_add(self) -> None:
+        group = self.query_one("#group", Select).value
+        if group is Select.NULL:
+            return
+        self.query_one("#add-status", Label).update(f"enrolling a {group}...")
+        self._enrol(str(group))
+
+    @work(thread=True, exclusive=True, group="enrol")
+    def _enrol(self, group: str) -> None:
+        try:
+            code = self.services.add_participant(group)
+        except ValueError as exc:
+            self.app.call_from_thread(self._status, f"refused: {exc}")
+            return
+        self.post_message(self.Added(code, group))
+
+    def _status(self, text: str) -> None:
+        self.last_message = text
+        self.query_one("#add-status", Label).update(text)
+
+    @on(Added)
+    def _added(self, event: Added) -> None:
+        self._status(f"enrolled {event.code} ({event.group})")

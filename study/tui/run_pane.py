@@ -1,0 +1,329 @@
+"""The run-session screen: pick a participant, start and stop the next trial, watch it live.
+
+The trial runs in a thread worker (`TrialRun.run`, the session runner); the worker posts
+`TrialStarted` and `TrialEnded` back as messages. A 30 Hz timer redraws the live view
+from `LiveState` (never from the worker), so the screen moves at real time whatever the
+trial does. Drivers: the participant's simulated person (paced at 1x, 4x or as fast as
+it goes) or the keyboard, paced at real time: up/down aim the dial forward/back (the
+hand holds it there; in HV the felt torque deflects the dial from the aim, which slows
+the guidewire), left/right turn the rotation joystick, space lets go of the dial, `e`
+ends the trial (`KeyboardDriver.press`). `x` stops a trial in the middle: its samples
+stay, it is marked interrupted, and it is repeated as a new attempt.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import ClassVar
+
+from rich.text import Text
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding, BindingType
+from textual.containers import Horizontal, Vertical
+from textual.message import Message
+from textual.widgets import Label, Select
+
+from study.tui.live_view import LiveReadout, PhantomView, gauge, region, sparkline
+from study.tui.services import NextTrial, Roster, StudyServices
+from study.tui.trial_runner import Simulation, TrialOutcome, TrialRun, TuiKeyboardDriver
+
+__all__ = ["RunPane"]
+
+PACES: tuple[float | None, ...] = (1.0, 4.0, None)
+"""Pace choices for a simulated participant (times real time; None: as fast as it goes)."""
+REDRAW_HZ = 30.0
+"""Live-view redraws per second (the issue asks for >= 20 Hz; 30 leaves room on a busy machine)."""
+PROXIMAL_FULL_N = 2.0
+DISTAL_FULL_N = 1.0
+KEY_ACTIONS = {
+    "dial_forward": "advance",
+    "dial_back": "retract",
+    "rotate_cw": "rotate_cw",
+    "rotate_ccw": "rotate_ccw",
+    "release": "release",
+    "end_trial": "stop",
+}
+"""Pane action -> `KeyboardDriver.press` key."""
+
+
+class RunPane(Vertical, can_focus=True):
+    """Run a participant's next trial with a live view."""
+
+    DEFAULT_CSS = """
+    RunPane { height: 1fr; }
+    RunPane #run-top { height: 1; }
+    RunPane #run-top Label { padding: 0 1 0 0; }
+    RunPane #participant { width: 14; }
+    RunPane #next { height: 1; }
+    RunPane #live { height: 1fr; }
+    RunPane #phantom-box { width: 1fr; height: 1fr; border: round $primary-muted; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("s", "start", "Start"),
+        Binding("x", "stop", "Stop"),
+        Binding("d", "driver", "Driver"),
+        Binding("p", "pace", "Pace"),
+        Binding("up", "dial_forward", "Dial +", show=False),
+        Binding("down", "dial_back", "Dial -", show=False),
+        Binding("right", "rotate_cw", "Rotate", show=False),
+        Binding("left", "rotate_ccw", "Rotate", show=False),
+        Binding("space", "release", "Let go", show=False),
+        Binding("e", "end_trial", "End trial", show=False),
+    ]
+
+    @dataclass
+    class TrialStarted(Message):
+        code: str
+        description: str
+
+    @dataclass
+    class TrialEnded(Message):
+        outcome: TrialOutcome
+        block: tuple[str, str, str]
+        """(code, task, condition) of the trial's block."""
+
+    def __init__(
+        self, services: StudyServices, simulated_pace: float | None = 1.0, **kwargs: object
+    ) -> None:
+        super().__init__(**kwargs)  # type: ignore[arg-type]
+        self.services = services
+        self.roster: Roster | None = None
+        self.driver_kind = "simulated"
+        self.pace: float | None = simulated_pace
+        self.run: TrialRun | None = None
+        self.status = "idle"
+        self.simulation = Simulation(services.load_estimator)
+        self.last_outcome = ""
+        self._codes: list[str] = []
+        self._redraws: deque[float] = deque(maxlen=50)
+        self._next: NextTrial | None = None
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(id="run-top"):
+            yield Label("Participant")
+            yield Select[str]([], id="participant", compact=True, prompt="pick")
+            yield Label("", id="mode")
+        yield Label("", id="next")
+        with Horizontal(id="live"):
+            with Vertical(id="phantom-box"):
+                yield PhantomView(id="phantom")
+            yield LiveReadout(id="readout")
+
+    def on_mount(self) -> None:
+        self.query_one("#phantom-box").border_title = "LCCA phantom (frontal)"
+        self._show_mode()
+        self._redraw()
+        self.set_interval(1 / REDRAW_HZ, self._redraw)
+
+    # -- roster and selection -------------------------------------------------------------
+
+    def show(self, roster: Roster) -> None:
+        self.roster = roster
+        codes = [r["code"] for r in roster.participants]
+        select = self.query_one("#participant", Select)
+        if codes != self._codes:
+            self._codes = codes
+            current = select.value
+            select.set_options([(c, c) for c in codes])
+            if current in codes:
+                select.value = current
+        self._show_next()
+
+    def select_participant(self, code: str) -> None:
+        self.query_one("#participant", Select).value = code
+        self._show_next()
+
+    @property
+    def code(self) -> str | None:
+        value = self.query_one("#participant", Select).value
+        return None if value is Select.NULL else str(value)
+
+    @on(Select.Changed, "#participant")
+    def _picked(self, event: Select.Changed) -> None:
+        event.stop()
+        self._show_next()
+
+    def _show_next(self) -> None:
+        code = self.code
+        nxt = self.roster.next_trial(code) if (self.roster and code) else None
+        self._next = nxt
+        if code is None:
+            text = "pick a participant, then s to start"
+        elif nxt is None:
+            text = f"{code}: every scheduled trial is done"
+        else:
+            text = f"next: {code} {nxt.describe()} ({nxt.remaining} left)  s: start"
+        if self.run is None:
+            self.query_one("#next", Label).update(text)
+
+    def _show_mode(self) -> None:
+        pace = "real time" if self.driver_kind == "keyboard" else self._pace_text()
+        self.query_one("#mode", Label).update(f"driver: {self.driver_kind} (d)  pace: {pace} (p)")
+
+    def _pace_text(self) -> str:
+        return "as fast as it goes" if self.pace is None else f"{self.pace:g}x"
+
+    # -- actions --------------------------------------------------------------------------
+
+    def action_driver(self) -> None:
+        if self.run is None:
+            self.driver_kind = "keyboard" if self.driver_kind == "simulated" else "simulated"
+            self._show_mode()
+
+    def action_pace(self) -> None:
+        if self.run is None:
+            self.pace = PACES[(PACES.index(self.pace) + 1) % len(PACES)]
+            self._show_mode()
+
+    def action_start(self) -> None:
+        code, nxt = self.code, self._next
+        if self.run is not None or code is None or nxt is None:
+            return
+        keyboard = TuiKeyboardDriver() if self.driver_kind == "keyboard" else None
+        pace = 1.0 if keyboard is not None else self.pace
+        self.run = TrialRun(
+            self.services.engine, None, code, self.driver_kind, pace, keyboard=keyboard
+        )
+        self.status = "starting"
+        self.query_one("#next", Label).update(f"{code} {nxt.describe()}: loading...")
+        self.focus()
+        self._run_trial(self.run, (code, nxt.task, nxt.condition))
+
+    def action_stop(self) -> None:
+        if self.run is not None:
+            self.status = "stopping"
+            self.run.stop()
+
+    def _press(self, action: str) -> None:
+        run = self.run
+        if run is not None and run.keyboard is not None:
+            run.keyboard.press(KEY_ACTIONS[action])
+
+    def action_dial_forward(self) -> None:
+        self._press("dial_forward")
+
+    def action_dial_back(self) -> None:
+        self._press("dial_back")
+
+    def action_rotate_cw(self) -> None:
+        self._press("rotate_cw")
+
+    def action_rotate_ccw(self) -> None:
+        self._press("rotate_ccw")
+
+    def action_release(self) -> None:
+        self._press("release")
+
+    def action_end_trial(self) -> None:
+        self._press("end_trial")
+
+    # -- the workers ----------------------------------------------------------------------
+
+    def prepare(self) -> None:
+        """Load the estimator and compile the loop now (the app calls this when the screen
+        is first shown), so that `s` starts the trial at once."""
+        if self.simulation.estimator is None:
+            self.status = "preparing the simulation"
+            self._prepare()
+
+    @work(thread=True, exclusive=True, group="prepare")
+    def _prepare(self) -> None:
+        self.simulation.ready()
+        self.app.call_from_thread(self._prepared)
+
+    def _prepared(self) -> None:
+        if self.status == "preparing the simulation":
+            self.status = "idle"
+
+    @work(thread=True, exclusive=True, group="trial")
+    def _run_trial(self, run: TrialRun, block: tuple[str, str, str]) -> None:
+        try:
+            run.estimator = self.simulation.ready()
+            self._run_loaded(run, block)
+        finally:
+            run.finished.set()
+
+    def _run_loaded(self, run: TrialRun, block: tuple[str, str, str]) -> None:
+
+        def started(item) -> None:
+            kind = "practice" if item.practice else "trial"
+            desc = f"{item.block.task}/{item.block.condition} {kind} {item.trial_index + 1}"
+            self.post_message(self.TrialStarted(run.code, desc))
+
+        try:
+            outcome = run.run(started)
+        except Exception as exc:  # shown, not swallowed: the trial row says what is stored
+            outcome = TrialOutcome(run.code, [], 0, 0.0)
+            self.app.call_from_thread(self.app.notify, f"trial failed: {exc}", severity="error")
+        self.post_message(self.TrialEnded(outcome, block))
+
+    @on(TrialStarted)
+    def _started(self, event: TrialStarted) -> None:
+        self.status = "running"
+        text = f"running: {event.code} {event.description}  x: stop"
+        if self.run is not None and self.run.keyboard is not None:
+            text += "  ↑↓ dial ←→ rotate space let go e end"
+        self.query_one("#next", Label).update(text)
+
+    @on(TrialEnded)
+    def _ended(self, event: TrialEnded) -> None:
+        outcome, run = event.outcome, self.run
+        self.run = None
+        if outcome.trial_ids:
+            self.status = "completed"
+            peaks = ""
+            if run is not None:
+                peaks = (
+                    f", peaks {run.live.peak_proximal_n:.2f} N proximal,"
+                    f" {run.live.peak_distal_n:.2f} N distal"
+                )
+            text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
+        elif outcome.interrupted:
+            self.status = "interrupted"
+            text = f"{outcome.code}: trial stopped; kept as interrupted, to be repeated"
+        else:
+            self.status = "idle"
+            text = f"{outcome.code}: nothing run"
+        self.last_outcome = text
+        self._show_next()
+
+    # -- the live view --------------------------------------------------------------------
+
+    @property
+    def redraw_hz(self) -> float:
+        """Redraws per second over the last 50 redraws during a trial."""
+        r = self._redraws
+        return (len(r) - 1) / (r[-1] - r[0]) if len(r) > 1 and r[-1] > r[0] else 0.0
+
+    def _redraw(self) -> None:
+        run = self.run
+        frame = run.live.frame() if run is not None else None
+        readout = self.query_one(LiveReadout)
+        if run is None or frame is None:
+            self._redraws.clear()
+            text = Text(f"status: {self.status}")
+            if run is None and self.last_outcome:
+                text.append(f"\n{self.last_outcome}", "bold")
+            readout.show(text)
+            return
+        self._redraws.append(time.monotonic())
+        self.query_one(PhantomView).update_frame(frame)
+        width = max(readout.content_size.width, 10)
+        aim = run.keyboard.aim_rad if run.keyboard is not None else None
+        text = Text(f"t {frame.t_s:6.1f} s   status: {self.status}\n", no_wrap=True)
+        text.append(f"view {self.redraw_hz:4.1f} Hz\n", "dim")
+        text.append_text(gauge("proximal", frame.proximal_n, PROXIMAL_FULL_N, 14))
+        text.append("\n" + sparkline(frame.proximal_history_n, width, PROXIMAL_FULL_N) + "\n\n")
+        text.append_text(gauge("distal", frame.distal_n, DISTAL_FULL_N, 14))
+        text.append("\n" + sparkline(frame.distal_history_n, width, DISTAL_FULL_N) + "\n\n")
+        text.append(
+            f"tip in {region(frame.branch)}, inserted {frame.insertion_m * 1000:5.0f} mm\n"
+            f"rotation {frame.rotation_rad:+5.2f} rad\n"
+            f"dial {frame.dial_angle_rad:+5.2f} rad"
+            + (f" (aim {aim:+4.2f})" if aim is not None else "")
+            + f"\ntorque on the hand {frame.dial_torque_n_m * 1000:+5.1f} mN m"
+        )
+        readout.show(text)

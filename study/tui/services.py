@@ -1,0 +1,178 @@
+"""What the terminal app asks of the study: the roster, what is next, questionnaires, analysis.
+
+The app's widgets never touch the database themselves: they call these functions from
+worker threads, and these call the service functions of `study.protocol` and
+`study.analysis` (which own the queries). `StudyServices` bundles the engine with the
+dependencies `make_app` is given (the estimator loader, the calibration function), so
+tests hand the app their own. Heavy imports (pandas, pingouin, torch) happen on first
+use inside a worker, which keeps the overview's start fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from sqlalchemy import Engine
+from sqlalchemy.orm import Session
+
+from study.protocol.roster import load_study, schedule
+
+if TYPE_CHECKING:
+    from teleop_core.estimation.estimator import ForceEstimator
+
+CalibrateFn = Callable[[Path, str, Callable[[str], None]], dict[str, Any]]
+"""calibrate(recording, model, progress) -> the report (issue 10's REPORT.json keys)."""
+
+
+@dataclass(frozen=True)
+class NextTrial:
+    """The next scheduled trial of one participant."""
+
+    code: str
+    block_index: int
+    task: str
+    condition: str
+    practice: bool
+    number: int
+    """1-based among the block's practice trials or among its measured trials."""
+    remaining: int
+    """Trials the participant still has to do, this one included."""
+
+    def describe(self) -> str:
+        kind = "practice" if self.practice else "trial"
+        return f"{self.task}/{self.condition} {kind} {self.number}"
+
+
+@dataclass(frozen=True)
+class Roster:
+    """The study's plan and progress, as the overview and the participants list show it."""
+
+    study: str
+    seed: int
+    practice_trials: int
+    groups: dict[str, dict[str, int]]
+    """group -> {"target": n, "enrolled": n}."""
+    participants: list[dict[str, Any]]
+    """`study.protocol.roster.schedule` rows (code, group, condition_order, blocks, ...)."""
+    answered: set[tuple[str, str, str]] = field(default_factory=set)
+    """(code, task, condition) of the blocks with a stored NASA-TLX."""
+
+    def next_trial(self, code: str) -> NextTrial | None:
+        row = next((r for r in self.participants if r["code"] == code), None)
+        if row is None:
+            return None
+        remaining = row["trials_planned"] - row["trials_completed"]
+        for b in row["blocks"]:
+            if b["completed"] < b["planned"]:
+                k = b["completed"]
+                practice = k < self.practice_trials
+                number = k + 1 if practice else k - self.practice_trials + 1
+                return NextTrial(
+                    code, b["block_index"], b["task"], b["condition"], practice, number, remaining
+                )
+        return None
+
+    def tlx_due(self) -> list[tuple[str, str, str]]:
+        """Finished blocks still without their questionnaire, in schedule order."""
+        return [
+            (r["code"], b["task"], b["condition"])
+            for r in self.participants
+            for b in r["blocks"]
+            if b["completed"] >= b["planned"]
+            and (r["code"], b["task"], b["condition"]) not in self.answered
+        ]
+
+    def sessions_done(self) -> int:
+        return sum(
+            1
+            for r in self.participants
+            if r["trials_planned"] and r["trials_completed"] >= r["trials_planned"]
+        )
+
+    def what_next(self) -> list[str]:
+        """A few lines: questionnaires due, the next sessions, groups still to fill."""
+        lines = [f"NASA-TLX due: {c} {t}/{k}" for c, t, k in self.tlx_due()[:3]]
+        for r in self.participants:
+            nxt = self.next_trial(r["code"])
+            if nxt is not None:
+                lines.append(f"next trial: {r['code']} {nxt.describe()}")
+            if len(lines) >= 4:
+                break
+        for group, fill in self.groups.items():
+            if fill["enrolled"] < fill["target"]:
+                lines.append(f"enrol: {fill['target'] - fill['enrolled']} more {group}")
+        return lines or ["the study is complete: run the analysis"]
+
+
+@dataclass(frozen=True)
+class StudyServices:
+    """The app's dependencies: the database and what it cannot build itself."""
+
+    engine: Engine
+    load_estimator: Callable[[], ForceEstimator]
+    """Called once, in a worker, before the first trial (loading it imports torch)."""
+    calibrate: CalibrateFn | None = None
+    """The calibration loop (issue 10); None leaves the calibration screen waiting."""
+
+    def roster(self) -> Roster:
+        from study.protocol.tlx import answered_blocks
+
+        with Session(self.engine) as session:
+            study, design = load_study(session)
+        plan = schedule(self.engine)
+        return Roster(
+            study=plan["study"],
+            seed=study.seed,
+            practice_trials=design.practice_trials,
+            groups=plan["groups"],
+            participants=plan["participants"],
+            answered=answered_blocks(self.engine),
+        )
+
+    def add_participant(self, group: str) -> str:
+        from study.protocol.roster import add_participant
+
+        return add_participant(self.engine, group).code
+
+    def analysis(self) -> Any:
+        """`study.analysis.stats.Analysis` of everything stored."""
+        from study.analysis.frames import participant_means, tlx_frame, trial_frame
+        from study.analysis.stats import analyze
+        from study.errors import StudyInputError
+
+        trials, tlx = trial_frame(self.engine), tlx_frame(self.engine)
+        if not len(trials) and not len(tlx):
+            raise StudyInputError("the database holds no completed trials or questionnaires yet")
+        return analyze(trials, participant_means(trials, tlx))
+
+    def export_figures(
+        self, folder: Path, formats: tuple[str, ...] = ("pdf", "svg", "png")
+    ) -> list[Path]:
+        from study.analysis.paper import write_figures
+
+        return write_figures(self.engine, folder, formats)
+
+
+def calibrate_recording(
+    recording: Path, model: str, progress: Callable[[str], None] = lambda _: None
+) -> dict[str, Any]:
+    """The calibration loop of `study calibrate` (issue 10) on one recording: its report.
+
+    The same steps as the command (`BASE_MODELS[model].read`, `Calibrator.fit`,
+    `report()`), without the files it writes; the app passes this into `make_app`.
+    """
+    from teleop_core.calibration import BASE_MODELS, Calibrator
+
+    if model not in BASE_MODELS:
+        from study.errors import StudyInputError
+
+        raise StudyInputError(f"model {model!r}; expected one of {', '.join(BASE_MODELS)}")
+    base = BASE_MODELS[model]
+    calibrator = Calibrator(base).fit(
+        base.read(recording),
+        progress=lambda done, total, what: progress(f"calibrating: {what} ({done}/{total})"),
+    )
+    return calibrator.report()

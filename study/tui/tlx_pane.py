@@ -1,0 +1,286 @@
+"""The NASA-TLX screen: the form after a condition block, its validation, saving and editing.
+
+Six ratings, 0-100 in steps of 5, each with its question and the anchors of the paper
+form (Hart & Staveland 1988; NASA TLX manual); then the 15 pairwise comparisons in the
+participant's own order (`study.protocol.tlx.pair_order`), each picked with the left and
+right keys. Saving goes through `study.protocol.tlx.store_tlx`, the same checks as
+`study tlx enter`: an off-scale rating or a missing choice is refused with a message
+and nothing is stored. A block that already has its questionnaire opens filled in;
+saving it again is an edit, which needs a reason and is written to the audit log
+(shown below the form).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from textual import on, work
+from textual.app import ComposeResult
+from textual.binding import Binding, BindingType
+from textual.containers import Horizontal, VerticalScroll
+from textual.message import Message
+from textual.widget import Widget
+from textual.widgets import Button, Input, Label, Select, Static
+
+from db.models.tlx import TLX_SUBSCALES
+from study.errors import StudyInputError
+from study.protocol.tlx import check_rating, pair_order
+from study.tui.services import Roster, StudyServices
+
+__all__ = ["TLX_SCALES", "PairChoice", "TlxPane"]
+
+TLX_SCALES = {
+    "mental": ("Mental demand", "How mentally demanding was the task?", "Very low", "Very high"),
+    "physical": ("Physical demand", "How physically demanding was the task?", "Very low",
+                 "Very high"),
+    "temporal": ("Temporal demand", "How hurried or rushed was the pace of the task?",
+                 "Very low", "Very high"),
+    "performance": ("Performance", "How successful were you in accomplishing what you were "
+                    "asked to do?", "Perfect", "Failure"),
+    "effort": ("Effort", "How hard did you have to work to accomplish your level of "
+               "performance?", "Very low", "Very high"),
+    "frustration": ("Frustration", "How insecure, discouraged, irritated, stressed, and "
+                    "annoyed were you?", "Very low", "Very high"),
+}  # fmt: skip
+"""subscale -> (title, question, low anchor, high anchor), as on the NASA-TLX form."""
+
+
+class PairChoice(Widget, can_focus=True):
+    """One pairwise comparison: left/right picks the subscale that weighed more."""
+
+    DEFAULT_CSS = """
+    PairChoice { height: 1; padding: 0 1; }
+    PairChoice:focus { background: $boost; text-style: bold; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("left", "pick(0)", "Left", show=False),
+        Binding("right", "pick(1)", "Right", show=False),
+    ]
+
+    def __init__(self, number: int, pair: tuple[str, str], **kwargs: object) -> None:
+        super().__init__(**kwargs)  # type: ignore[arg-type]
+        self.number, self.pair = number, pair
+        self.choice: str | None = None
+
+    def action_pick(self, side: int) -> None:
+        self.choice = self.pair[side]
+        self.refresh()
+
+    def render(self) -> str:
+        if self.pair[0] not in TLX_SCALES:
+            return f"{self.number:>2}. (pick a participant)"
+        a, b = (TLX_SCALES[s][0] for s in self.pair)
+        left = f"[reverse] {a} [/]" if self.choice == self.pair[0] else f" {a} "
+        right = f"[reverse] {b} [/]" if self.choice == self.pair[1] else f" {b} "
+        return f"{self.number:>2}. {left} or {right}"
+
+
+def _rating_value(text: str) -> object:
+    """The typed rating as a number when it is one (check_rating then judges the scale)."""
+    try:
+        return int(text)
+    except ValueError:
+        return text
+
+
+class TlxPane(VerticalScroll):
+    """Enter or edit the questionnaire of one participant's block."""
+
+    DEFAULT_CSS = """
+    TlxPane { height: 1fr; }
+    TlxPane .row { height: 1; }
+    TlxPane .title { width: 17; }
+    TlxPane .anchor { width: 10; color: $text-muted; }
+    TlxPane .anchor-high { width: 10; color: $text-muted; }
+    TlxPane Input { width: 8; }
+    TlxPane #tlx-top Select { width: 16; }
+    TlxPane #tlx-status { height: auto; }
+    TlxPane #question { height: 1; color: $text-muted; }
+    TlxPane #audit { height: auto; color: $text-muted; }
+    TlxPane #reason { width: 1fr; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [Binding("ctrl+s", "save", "Save TLX")]
+
+    @dataclass
+    class Saved(Message):
+        code: str
+        task: str
+        condition: str
+        new: bool
+
+    def __init__(self, services: StudyServices, **kwargs: object) -> None:
+        super().__init__(**kwargs)  # type: ignore[arg-type]
+        self.services = services
+        self.roster: Roster | None = None
+        self.status = ""
+        self.editing_id: int | None = None
+        self._codes: list[str] = []
+        self._blocks_code: str | None = None
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(id="tlx-top", classes="row"):
+            yield Label("Participant ")
+            yield Select[str]([], id="tlx-participant", compact=True, prompt="pick")
+            yield Label(" Block ")
+            yield Select[str]([], id="tlx-block", compact=True, prompt="pick")
+        yield Label("", id="question")
+        for s in TLX_SUBSCALES:
+            title, _, low, high = TLX_SCALES[s]
+            with Horizontal(classes="row"):
+                yield Label(title, classes="title")
+                yield Label(f"{low:>9} ", classes="anchor")
+                yield Input(id=f"rating-{s}", type="integer", placeholder="0-100", compact=True)
+                yield Label(f" {high}", classes="anchor-high")
+        yield Label("Which contributed more to the workload? (left / right)")
+        for k in range(15):
+            yield PairChoice(k + 1, ("", ""), id=f"pair-{k}")
+        with Horizontal(classes="row"):
+            yield Label("Reason for an edit ")
+            yield Input(id="reason", placeholder="(edits only)", compact=True)
+        yield Button("Save (ctrl+s)", id="save", compact=True)
+        yield Static("", id="tlx-status")
+        yield Static("", id="audit")
+
+    # -- choosing the block ---------------------------------------------------------------
+
+    def show(self, roster: Roster) -> None:
+        self.roster = roster
+        codes = [r["code"] for r in roster.participants]
+        if codes != self._codes:
+            self._codes = codes
+            self.query_one("#tlx-participant", Select).set_options([(c, c) for c in codes])
+
+    def open_block(self, code: str, task: str, condition: str) -> None:
+        """Show the form for one block (from the run screen when a block ends)."""
+        self.query_one("#tlx-participant", Select).value = code
+        self._set_blocks(code)
+        self.query_one("#tlx-block", Select).value = f"{task}/{condition}"
+        self._load(code, task, condition)
+
+    def _set_blocks(self, code: str) -> None:
+        if code == self._blocks_code:  # already shown (open_block, then Select.Changed)
+            return
+        self._blocks_code = code
+        row = next((r for r in (self.roster.participants if self.roster else ()) if
+                    r["code"] == code), None)  # fmt: skip
+        blocks = [f"{b['task']}/{b['condition']}" for b in row["blocks"]] if row else []
+        self.query_one("#tlx-block", Select).set_options([(b, b) for b in blocks])
+        seed = self.roster.seed if self.roster else 0
+        for k, pair in enumerate(pair_order(seed, code)):
+            widget = self.query_one(f"#pair-{k}", PairChoice)
+            widget.pair, widget.choice = pair, None
+            widget.refresh()
+
+    @on(Select.Changed, "#tlx-participant")
+    def _participant_changed(self, event: Select.Changed) -> None:
+        event.stop()
+        if event.value is not Select.NULL:
+            self._set_blocks(str(event.value))
+
+    @on(Select.Changed, "#tlx-block")
+    def _block_changed(self, event: Select.Changed) -> None:
+        event.stop()
+        code = self.query_one("#tlx-participant", Select).value
+        if event.value is not Select.NULL and code is not Select.NULL:
+            task, condition = str(event.value).split("/")
+            self._load(str(code), task, condition)
+
+    @on(Input.Changed)
+    def _rating_typed(self, event: Input.Changed) -> None:
+        if event.input.id and event.input.id.startswith("rating-"):
+            s = event.input.id.removeprefix("rating-")
+            self.query_one("#question", Label).update(TLX_SCALES[s][1])
+            try:
+                check_rating(s, _rating_value(event.value))
+                event.input.remove_class("-invalid")
+            except StudyInputError:
+                event.input.set_class(bool(event.value), "-invalid")
+
+    @work(thread=True, exclusive=True, group="tlx")
+    def _load(self, code: str, task: str, condition: str, note: str = "") -> None:
+        from study.protocol.tlx import load_tlx, tlx_audit
+
+        response = load_tlx(self.services.engine, code, task, condition)
+        audit = tlx_audit(self.services.engine, response.id) if response is not None else []
+        self.app.call_from_thread(self._fill, response, audit, note)
+
+    def _fill(self, response, audit, note: str) -> None:
+        self.editing_id = None if response is None else response.id
+        for s in TLX_SUBSCALES:
+            value = "" if response is None else str(getattr(response, s))
+            self.query_one(f"#rating-{s}", Input).value = value
+        chosen = [c for _, _, c in (response.pairwise or [])] if response is not None else []
+        for k in range(15):
+            widget = self.query_one(f"#pair-{k}", PairChoice)
+            widget.choice = chosen[k] if k < len(chosen) else None
+            widget.refresh()
+        self.query_one("#reason", Input).value = ""
+        state = "stored: editing it needs a reason" if response is not None else "new"
+        self._set_status(note or state, notify=bool(note))
+        lines = [
+            f"{a.at:%Y-%m-%d %H:%M} {a.field}: {a.old_value} -> {a.new_value} ({a.reason})"
+            for a in audit[-5:]
+        ]
+        self.query_one("#audit", Static).update("\n".join(["audit log:", *lines]) if lines else "")
+
+    def _set_status(self, text: str, notify: bool = False) -> None:
+        self.status = text
+        self.query_one("#tlx-status", Static).update(text)
+        if notify:  # the status line may be scrolled out of view at 80 x 24
+            refused = text.startswith("refused")
+            self.app.notify(text, severity="error" if refused else "information")
+
+    # -- saving ---------------------------------------------------------------------------
+
+    @on(Button.Pressed, "#save")
+    def _save_pressed(self, event: Button.Pressed) -> None:
+        event.stop()
+        self.action_save()
+
+    def action_save(self) -> None:
+        code = self.query_one("#tlx-participant", Select).value
+        block = self.query_one("#tlx-block", Select).value
+        if code is Select.NULL or block is Select.NULL:
+            self._set_status("refused: pick a participant and a block first", notify=True)
+            return
+        ratings = {
+            s: _rating_value(self.query_one(f"#rating-{s}", Input).value) for s in TLX_SUBSCALES
+        }
+        pairs = [self.query_one(f"#pair-{k}", PairChoice) for k in range(15)]
+        chosen = [p.choice for p in pairs]
+        reason = self.query_one("#reason", Input).value.strip() or None
+        try:
+            for s, v in ratings.items():
+                check_rating(s, v)
+            missing = [p.number for p in pairs if p.choice is None]
+            if missing and len(missing) < 15:
+                raise StudyInputError(
+                    f"pairwise choices {', '.join(map(str, missing))} are missing; expected "
+                    "all 15 (or none, for a raw TLX only)"
+                )
+            if self.editing_id is not None and reason is None:
+                raise StudyInputError("this block's TLX is stored; an edit needs a reason")
+        except StudyInputError as exc:
+            self._set_status(f"refused: {exc}", notify=True)
+            return
+        task, condition = str(block).split("/")
+        picks = None if chosen[0] is None else [str(c) for c in chosen]
+        self._store(str(code), task, condition, ratings, picks, reason)
+
+    @work(thread=True, exclusive=True, group="tlx")
+    def _store(self, code, task, condition, ratings, chosen, reason) -> None:
+        from study.protocol.tlx import store_tlx
+
+        try:
+            _, new = store_tlx(self.services.engine, code, task, condition, ratings, chosen, reason)
+        except ValueError as exc:
+            self.app.call_from_thread(self._set_status, f"refused: {exc}", True)
+            return
+        self.post_message(self.Saved(code, task, condition, new))
+
+    @on(Saved)
+    def _saved(self, event: Saved) -> None:
+        verb = "stored" if event.new else "updated (changes in the audit log)"
+        self._load(event.code, event.task, event.condition, f"{event.code} {event.task}/"
+                   f"{event.condition}: {verb}")  # fmt: skip

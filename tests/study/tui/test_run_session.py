@@ -1,0 +1,84 @@
+"""The run-session screen: a simulated trial to its end, and quitting in the middle of one."""
+
+from __future__ import annotations
+
+import pytest
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from db.models.audit import AuditEntry
+from db.models.trial import Sample, Trial
+from study.protocol.default_estimator import load_estimator
+from study.tui.run_pane import RunPane
+from study.tui.tlx_pane import TlxPane
+from study.tui.trial_runner import STOPPED_REASON
+from tests.study.tui.conftest import loaded, wait_for
+
+pytestmark = pytest.mark.asyncio
+
+
+def _trials(engine) -> list[tuple[str, str, int]]:
+    """(status, driver, samples) of every trial."""
+    with Session(engine) as session:
+        rows = session.execute(select(Trial.id, Trial.status, Trial.driver)).all()
+        return [
+            (status, driver, session.scalar(
+                select(func.count()).select_from(Sample).where(Sample.trial_id == tid)))
+            for tid, status, driver in rows
+        ]  # fmt: skip
+
+
+async def _start(pilot, code: str, *keys: str) -> RunPane:
+    """On the run screen, pick `code`, press `keys` (driver, pace), start the trial."""
+    await loaded(pilot)
+    await pilot.press("f3")
+    pane = pilot.app.query_one(RunPane)
+    pane.select_participant(code)
+    await pilot.pause()
+    await pilot.press(*keys, "s")
+    return pane
+
+
+async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
+    make_test_app,
+    study_engine,
+) -> None:
+    app = make_test_app(load_estimator=load_estimator, simulated_pace=None)
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _start(pilot, "P001")
+        await wait_for(pilot, lambda: pane.status == "completed", 120)
+        assert pane.last_outcome.startswith("P001: trial stored (id 1, peaks")
+        # the live view was fed while the trial ran
+        assert app.query_one("#phantom")._frame is not None
+        # one trial per block in DESIGN: the block is done, the form opens for it
+        await wait_for(pilot, lambda: app.query_one("#tabs").active == "tlx")
+        await wait_for(pilot, lambda: app.query_one(TlxPane).status == "new")
+    with Session(study_engine) as session:
+        trial = session.scalars(select(Trial)).one()
+        n = session.scalar(select(func.count()).select_from(Sample))
+    assert (trial.status, trial.driver, trial.condition) == ("completed", "simulated", "VO")
+    # one 100 Hz sample per 10 ms of the trial, as `study run` stores them
+    assert n == round(trial.completion_time_s * 100) == trial.summary["samples"]
+
+
+async def test_quitting_mid_trial_marks_it_interrupted_and_keeps_its_samples(
+    make_test_app,
+    study_engine,
+) -> None:
+    app = make_test_app(load_estimator=load_estimator, simulated_pace=1.0)
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _start(pilot, "P002", "d")  # d: the keyboard drives
+        await wait_for(pilot, lambda: pane.run is not None and pane.run.live.batches > 20, 120)
+        await pilot.press("up", "up", "up")
+        shown = pane.run.live.frame().t_s
+        await pilot.press("ctrl+q")
+        await wait_for(pilot, lambda: not app.is_running, 30)
+    [(status, driver, samples)] = _trials(study_engine)
+    assert (status, driver) == ("interrupted", "keyboard")
+    # everything up to the last batch the view showed is stored (at 100 Hz)
+    assert samples >= round(shown * 100)
+    with Session(study_engine) as session:
+        entry = session.scalars(select(AuditEntry)).one()
+    assert (entry.old_value, entry.new_value, entry.reason) == (
+        "running", "interrupted", STOPPED_REASON
+    )  # fmt: skip

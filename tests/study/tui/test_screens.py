@@ -1,0 +1,283 @@
+"""Each screen's main path with Pilot: overview, participants, NASA-TLX, analysis, calibration."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+from textual.widgets import DataTable, Input, Select, Static
+
+from db.models.audit import AuditEntry
+from db.models.study import Participant
+from db.models.tlx import TLX_SUBSCALES
+from db.models.trial import Trial
+from db.samples import SampleWriter
+from study.protocol.roster import add_participant
+from study.protocol.tlx import load_tlx, store_tlx
+from study.tui.services import calibrate_recording
+from study.tui.tlx_pane import PairChoice, TlxPane
+from tests.study.tui.conftest import loaded, wait_for
+
+pytestmark = pytest.mark.asyncio
+
+
+def _text(app, selector: str) -> str:
+    return str(app.query_one(selector, Static).render())
+
+
+async def test_overview_shows_groups_sessions_and_what_is_next(make_test_app) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        table = app.query_one("#groups", DataTable)
+        # DESIGN: novice 2, expert 2; one of each enrolled
+        assert [table.get_row(g)[:3] for g in ("novice", "expert")] == [
+            ["novice", "1", "2"], ["expert", "1", "2"]
+        ]  # fmt: skip
+        progress = _text(app, "#progress")
+        assert "Sessions done: 0 of 2 enrolled (4 planned)" in progress
+        assert "Trials:        0 of 4" in progress
+        # P002 (expert) is second in the group's AB/BA balance: HV first
+        assert _text(app, "#next-up").splitlines()[:2] == [
+            "next trial: P001 lcca/VO trial 1",
+            "next trial: P002 lcca/HV trial 1",
+        ]
+        assert app.overview_shown_s is not None
+
+
+async def test_add_participant_from_the_keyboard(make_test_app, study_engine) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f2")
+        await pilot.press("a")  # the first group, novice, is preselected
+        table = app.query_one("#people", DataTable)
+        await wait_for(pilot, lambda: table.row_count == 3)
+        assert table.get_row("P003")[:4] == ["P003", "novice", "HV -> VO", "0/2"]
+        assert "enrolled P003 (novice)" in app.query_one("#participants-pane").last_message
+    with Session(study_engine) as session:
+        stored = session.scalars(select(Participant).where(Participant.code == "P003")).one()
+        assert (stored.group, stored.condition_order) == ("novice", ["HV", "VO"])
+
+
+async def _open_form(pilot, code: str = "P001", block: str = "lcca/VO") -> TlxPane:
+    await loaded(pilot)
+    await pilot.press("f4")
+    pane = pilot.app.query_one(TlxPane)
+    pane.open_block(code, *block.split("/"))
+    await wait_for(pilot, lambda: pane.status != "")
+    return pane
+
+
+async def _type_ratings(pilot, ratings: dict[str, str], typed: str = "mental") -> None:
+    """Fill the ratings: `typed` key by key, the others set (each key press costs a redraw)."""
+    for s, value in ratings.items():
+        field = pilot.app.query_one(f"#rating-{s}", Input)
+        field.value = ""
+        if s == typed:
+            field.focus()
+            await pilot.press(*value)
+        else:
+            field.value = value
+
+
+RATINGS = {"mental": "55", "physical": "10", "temporal": "40", "performance": "25",
+           "effort": "60", "frustration": "20"}  # fmt: skip
+
+
+async def test_tlx_entered_on_the_form_is_stored(make_test_app, study_engine) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _open_form(pilot)
+        await _type_ratings(pilot, RATINGS)
+        pairs = list(app.query(PairChoice))
+        for k, pair in enumerate(pairs):  # left, right, left, ...; the first two by key
+            if k < 2:
+                pair.focus()
+                await pilot.press("left" if k % 2 == 0 else "right")
+            else:
+                pair.action_pick(k % 2)
+        shown = [p.pair[k % 2] for k, p in enumerate(pairs)]
+        await pilot.press("ctrl+s")
+        await wait_for(pilot, lambda: pane.status == "P001 lcca/VO: stored", 10)
+    stored = load_tlx(study_engine, "P001", "lcca", "VO")
+    assert {s: getattr(stored, s) for s in TLX_SUBSCALES} == {s: int(v) for s, v in RATINGS.items()}
+    # weights: how often each subscale was picked on the screen
+    assert {s: getattr(stored, f"w_{s}") for s in TLX_SUBSCALES} == {
+        s: shown.count(s) for s in TLX_SUBSCALES
+    }
+    assert [c for _, _, c in stored.pairwise] == shown
+
+
+async def test_off_scale_tlx_is_refused_and_nothing_stored(make_test_app, study_engine) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _open_form(pilot)
+        await _type_ratings(pilot, {**RATINGS, "physical": "103"}, typed="physical")
+        await pilot.press("ctrl+s")
+        assert pane.status == (
+            "refused: physical rating 103 is off the scale; expected 0-100 in steps of 5"
+        )
+        await _type_ratings(pilot, {**RATINGS, "effort": "52"}, typed="effort")
+        await pilot.press("ctrl+s")
+        assert pane.status.startswith("refused: effort rating 52 is off the scale")
+        # a few pairwise choices but not all 15
+        app.query(PairChoice).first().focus()
+        await pilot.press("left")
+        await _type_ratings(pilot, RATINGS)
+        await pilot.press("ctrl+s")
+        assert pane.status.startswith("refused: pairwise choices 2, 3, 4")
+        await pilot.pause(0.2)
+    assert load_tlx(study_engine, "P001", "lcca", "VO") is None
+
+
+async def test_editing_a_stored_tlx_needs_a_reason_and_is_audited(
+    make_test_app,
+    study_engine,
+) -> None:
+    store_tlx(study_engine, "P001", "lcca", "VO", {s: int(v) for s, v in RATINGS.items()})
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _open_form(pilot)
+        assert app.query_one("#rating-mental", Input).value == "55"  # filled in
+        await _type_ratings(pilot, {"mental": "70"})
+        await pilot.press("ctrl+s")
+        assert pane.status == "refused: this block's TLX is stored; an edit needs a reason"
+        app.query_one("#reason", Input).focus()
+        await pilot.press(*"typo")
+        await pilot.press("ctrl+s")
+        await wait_for(pilot, lambda: "updated" in pane.status)
+        assert "mental: 55 -> 70 (typo)" in _text(app, "#audit")
+    assert load_tlx(study_engine, "P001", "lcca", "VO").mental == 70
+    with Session(study_engine) as session:
+        entry = session.scalars(select(AuditEntry).where(AuditEntry.field == "mental")).one()
+        assert (entry.old_value, entry.new_value, entry.reason) == ("55", "70", "typo")
+
+
+PEAKS = {  # (group, condition) -> peak proximal force of each participant's trial, N
+    ("novice", "VO"): (1.0, 1.2, 1.4), ("novice", "HV"): (0.5, 0.6, 0.7),
+    ("expert", "VO"): (0.8, 0.9, 1.0), ("expert", "HV"): (0.4, 0.5, 0.9),
+}  # fmt: skip
+
+
+def _store_trials(engine) -> None:
+    """Three participants per group with one completed trial per condition (and a few
+    samples each, which the force-trace figure draws)."""
+    for _ in range(2):
+        add_participant(engine, "novice")
+        add_participant(engine, "expert")
+    with Session(engine) as session:
+        people = session.scalars(select(Participant).order_by(Participant.code)).all()
+        counts = dict.fromkeys(PEAKS, 0)
+        for p in people:
+            for block in p.blocks:
+                k = counts[(p.group, block.condition)]
+                counts[(p.group, block.condition)] += 1
+                peak = PEAKS[(p.group, block.condition)][k]
+                session.add(Trial(
+                    participant_id=p.id, block_id=block.id, task="lcca",
+                    condition=block.condition, block_index=block.block_index, trial_index=0,
+                    status="completed", completion_time_s=20.0 + 10 * peak,
+                    peak_proximal_force_n=peak, peak_distal_force_n=peak / 2, success=True,
+                    wall_contacts=0,
+                ))  # fmt: skip
+        session.commit()
+        ids = session.scalars(select(Trial.id)).all()
+    for trial_id in ids:
+        with SampleWriter(engine, trial_id) as out:
+            force = [0.1, 0.2]
+            out.extend({"t_s": [0.0, 0.01], "proximal_force_n": force,
+                        "proximal_force_est_n": force, "distal_force_n": [0.0, 0.1]})  # fmt: skip
+
+
+async def test_analysis_tables_chart_and_figure_export(
+    make_test_app, study_engine, tmp_path
+) -> None:
+    _store_trials(study_engine)
+    out = tmp_path / "paper"
+    app = make_test_app(figures_dir=out, figure_formats=("png",))
+    async with app.run_test(size=(100, 30)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f5", "r")
+        pane = app.query_one("#analysis-pane")
+        await wait_for(pilot, lambda: pane.result is not None)
+        table = app.query_one("#comparisons", DataTable)
+        rows = [table.get_row_at(k) for k in range(table.row_count)]
+        peak = {r[1]: r for r in rows if r[0] == "peak_proximal_force_n"}
+        # means by hand: novice VO (1.0 + 1.2 + 1.4) / 3 = 1.2, HV 0.6; expert 0.9, 0.6
+        assert (peak["novice"][2], peak["novice"][3], peak["novice"][4]) == ("3", "1.2", "0.6")
+        assert (peak["expert"][3], peak["expert"][4]) == ("0.9", "0.6")
+        # the chart of peak proximal force: bars on one scale, the longest (1.2) full width
+        await wait_for(pilot, lambda: "novice" in _text(app, "#chart"))
+        chart = _text(app, "#chart").splitlines()
+        bars = {line[:12].strip(): line.count("█") for line in chart[:4]}
+        width = bars["novice   VO"]
+        assert abs(bars["HV"] - width / 2) <= 1  # novice HV 0.6 = half of 1.2 (last HV: expert)
+        assert abs(bars["expert   VO"] - width * 0.9 / 1.2) <= 1
+        await pilot.press("ctrl+e")
+        await wait_for(pilot, lambda: pane.exported != [])
+    assert (out / "fig12_groups.png").is_file()
+    assert all(Path(p).is_file() for p in pane.exported)
+
+
+async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
+    make_test_app, tmp_path
+) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f6")
+        assert _text(app, "#calib-summary").startswith("no calibration loop")
+    recording = tmp_path / "rec.csv"
+    recording.write_text("t\n0\n")
+    calls = []
+
+    def calibrate(path, model, progress):
+        calls.append((path, model))
+        progress("fitting the base model")
+        return {"rmse_before": 0.3, "rmse_after": 0.1, "candidates_rejected": ["delay"],
+                "effects_added": [{"family": "stribeck", "params": {"v_s_rad_s": 2.0},
+                                   "ci": {}, "rmse_after_step": 0.1}]}  # fmt: skip
+
+    app = make_test_app(calibrate=calibrate)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f6")
+        app.query_one("#recording", Input).value = str(recording)
+        await pilot.press("ctrl+r")
+        pane = app.query_one("#calibration-pane")
+        await wait_for(pilot, lambda: pane.report is not None)
+        # (0.3 - 0.1) / 0.3 = 67 % lower
+        assert _text(app, "#calib-summary").splitlines() == [
+            "held-out RMSE 0.3000 N -> 0.1000 N (67 % lower)", "rejected: delay"
+        ]  # fmt: skip
+        assert app.query_one("#effects", DataTable).get_row_at(0)[1] == "stribeck"
+    assert calls == [(recording, "follower")]
+
+
+async def test_calibration_screen_runs_the_loop_on_a_recording(make_test_app, tmp_path) -> None:
+    from teleop_core.notes.params import default_params
+    from teleop_core.notes.simulate import simulate_recording
+
+    # a clamped ramp of the NOTES rotation: seed 001 reports friction hysteresis and a
+    # counter-clockwise loss, which the loop must name (`direction_asymmetry`)
+    simulate_recording(
+        default_params("rotation"), "ramp", "clamped", noise=0.02, seed=4, rate_hz=200.0
+    ).to_csv(tmp_path / "ramp.csv", index=False)
+    app = make_test_app(calibrate=calibrate_recording)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f6")
+        app.query_one("#recording", Input).value = str(tmp_path / "ramp.csv")
+        app.query_one("#model", Select).value = "notes-rotation"
+        await pilot.press("ctrl+r")
+        pane = app.query_one("#calibration-pane")
+        await wait_for(pilot, lambda: pane.report is not None)
+        table = app.query_one("#effects", DataTable)
+        shown = {table.get_row_at(k)[1] for k in range(table.row_count)}
+        summary = _text(app, "#calib-summary").splitlines()[0]
+    assert {"hysteresis", "direction_asymmetry"} <= shown
+    assert pane.report["rmse_after"] < pane.report["rmse_before"]
+    assert summary.startswith("held-out RMSE") and summary.endswith("% lower)")
