@@ -11,7 +11,13 @@ from sqlalchemy import inspect, select, text
 
 from db.engine import make_engine, make_session_factory
 from db.errors import DatabaseVersionError, MissingDatabaseError, NotAStudyDatabaseError
-from db.migrate import SchemaState, head_revision, inspect_database, open_database
+from db.migrate import (
+    HEAD_REVISION,
+    SchemaState,
+    head_revision,
+    inspect_database,
+    open_database,
+)
 from db.models import Study
 
 NEXT_REVISION = '''
@@ -153,3 +159,21 @@ def test_two_processes_creating_one_database_at_once_both_succeed(db_url: str) -
     errors = [p.communicate(timeout=120)[1] for p in procs]
     assert [p.returncode for p in procs] == [0, 0], errors
     assert _revision(db_url) == head_revision()
+
+
+def test_the_head_constant_is_the_head_of_the_shipped_scripts() -> None:
+    # open_database trusts HEAD_REVISION to skip importing Alembic on a current database;
+    # Alembic's own ScriptDirectory is the reference.
+    assert HEAD_REVISION == head_revision()
+
+
+def test_a_current_database_opens_without_importing_alembic(tmp_path: Path) -> None:
+    db_file = tmp_path / "s.db"
+    open_database(str(db_file)).dispose()
+    code = (
+        "import sys; from db.migrate import open_database; "
+        f"open_database({str(db_file)!r}, create=False).dispose(); "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'alembic'))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
