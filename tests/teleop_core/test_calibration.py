@@ -197,6 +197,11 @@ def test_notes_ramps_show_the_papers_hysteresis_and_ccw_loss(dof: str) -> None:
         # CCW transmission relative to CW (the base gain takes the CW one)
         loss = 1 - params.ccw_transmission / params.cw_transmission
         assert effects["direction_asymmetry"]["reverse_loss"] == pytest.approx(loss, abs=0.03)
+    # the device has no lag between command and force: nothing else may be named
+    # (a delay pinned at its 0.1 s cap once stood in for the rotation's friction)
+    assert set(effects) == (
+        {"hysteresis", "direction_asymmetry"} if dof == "rotation" else {"hysteresis"}
+    )
     assert cal.rmse_after_ < cal.rmse_before_ / 3
     with pytest.raises(TeleopInputError, match="expected a clamped run"):
         open_run = simulate_recording(params, "ramp", "open", rate_hz=200.0)
