@@ -11,3 +11,7 @@ Float2D: TypeAlias = npt.NDArray[np.float64]
 """A 2-D float64 array, shape (n, m)."""
 Float3D: TypeAlias = npt.NDArray[np.float64]
 """A 3-D float64 array, shape (n, t, m)."""
+Int1D: TypeAlias = npt.NDArray[np.intp]
+"""A 1-D array of indices, shape (n,)."""
+Rows: TypeAlias = slice | Int1D
+"""Rows of a recording: a contiguous slice or an index array (blocked hold-out)."""

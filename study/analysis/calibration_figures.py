@@ -39,6 +39,13 @@ def residual_against(
     if ax is None:
         _, ax = plt.subplots(figsize=(WIDTHS_IN["single"], 2.2), layout="constrained")
     as_line = label == AXIS_LABELS["t"]
+    if as_line:
+        # blocked hold-out: break the line between blocks instead of bridging the gap
+        step = np.median(np.diff(x)) if len(x) > 1 else 0.0
+        gaps = np.flatnonzero(np.diff(x) > 1.5 * step) + 1
+        x, before, after = (
+            np.insert(np.asarray(v, float), gaps, np.nan) for v in (x, before, after)
+        )
     for name, e in (("before", before), ("after", after)):
         if as_line:
             ax.plot(x, e, color=COLOURS[name], lw=0.5, label=name)

@@ -102,7 +102,8 @@ def run_calibration(
     type=click.FloatRange(0.05, 0.5),
     default=0.25,
     show_default=True,
-    help="Share of the recording, at its end, held out for testing.",
+    help="Share of the recording held out for testing: at its end, or for a NOTES chirp at "
+    "the end of each of 8 segments of the sweep.",
 )
 @click.option("--max-effects", type=click.IntRange(min=0), default=4, show_default=True)
 @click.option(

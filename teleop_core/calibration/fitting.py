@@ -26,7 +26,7 @@ from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import minimize_scalar
 from statsmodels.regression.linear_model import OLS
 
-from teleop_core._typing import Float1D, Float2D
+from teleop_core._typing import Float1D, Float2D, Rows
 from teleop_core.calibration.effects import Effect, Signals
 from teleop_core.calibration.models import BaseModel, CalibrationData
 from teleop_core.errors import TeleopInputError
@@ -69,7 +69,7 @@ def solve(X: Float2D, y: Float1D) -> Float1D:
     return coef / scale
 
 
-def train_sse(model: BaseModel, data: CalibrationData, train: slice, chain: Chain) -> float:
+def train_sse(model: BaseModel, data: CalibrationData, train: Rows, chain: Chain) -> float:
     X, _ = design(model, data.signals, chain)
     coef = solve(X[train], data.y[train])
     e = data.y[train] - X[train] @ coef
@@ -77,7 +77,7 @@ def train_sse(model: BaseModel, data: CalibrationData, train: slice, chain: Chai
 
 
 def search(
-    model: BaseModel, data: CalibrationData, train: slice, chain: Chain, effect: Effect
+    model: BaseModel, data: CalibrationData, train: Rows, chain: Chain, effect: Effect
 ) -> float:
     """The searched value of `effect` (added to `chain`) that fits the training rows best."""
     if effect.searched is None:
@@ -129,7 +129,7 @@ def _bracket(grid: Float1D, i: int) -> tuple[float, float]:
 
 
 def _periodogram_peaks(
-    model: BaseModel, data: CalibrationData, train: slice, chain: Chain, count: int = 6
+    model: BaseModel, data: CalibrationData, train: Rows, chain: Chain, count: int = 6
 ) -> tuple[Float1D, list[tuple[float, float]]]:
     """Periods (rad) at the largest peaks of the training residual's periodogram in
     angle, each with the bracket (one frequency resolution either side) to refine in.
@@ -197,7 +197,7 @@ class CalibratedModel:
 
 
 def confidence(
-    fitted: CalibratedModel, data: CalibrationData, train: slice, hac_lags: int = 10
+    fitted: CalibratedModel, data: CalibrationData, train: Rows, hac_lags: int = 10
 ) -> tuple[dict[str, float], dict[str, list[float]], list[dict[str, Any]]]:
     """Physical parameters of the base and of each effect with 95 % intervals.
 

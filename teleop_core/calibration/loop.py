@@ -22,13 +22,14 @@ residual, while the decision rests on held-out prediction, which they cannot gam
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from teleop_core._typing import Float1D
+from teleop_core._typing import Float1D, Rows
 from teleop_core.calibration.effects import EFFECTS, Effect
 from teleop_core.calibration.fitting import (
     CalibratedModel,
@@ -114,9 +115,18 @@ class Calibrator:
                 f"unknown effect family {unknown[0]!r}; expected one of {', '.join(EFFECTS)}"
             )
 
-    def _split(self, n: int) -> tuple[slice, slice]:
-        cut = round(n * (1.0 - self.held_out_fraction))
-        return slice(0, cut), slice(cut, n)
+    def _split(self, n: int, blocks: int) -> tuple[Rows, Rows]:
+        """Training and held-out rows: the end of the recording, or with `blocks` > 1 the
+        end of each of `blocks` equal segments (blocked hold-out, still chronological
+        within each block: no sample is held out apart from its neighbours)."""
+        if blocks == 1:
+            cut = round(n * (1.0 - self.held_out_fraction))
+            return slice(0, cut), slice(cut, n)
+        edges = np.linspace(0, n, blocks + 1).round().astype(int)
+        held = np.zeros(n, dtype=bool)
+        for start, stop in itertools.pairwise(edges):
+            held[stop - round((stop - start) * self.held_out_fraction) : stop] = True
+        return np.flatnonzero(~held), np.flatnonzero(held)
 
     def _fit_chain(self, data: CalibrationData, chain: Chain) -> tuple[Float1D, Float1D, int]:
         """Coefficients on the training block, predictions everywhere, parameter count."""
@@ -139,7 +149,7 @@ class Calibrator:
             )
         families = list(self.families or self.model.families)
         families = [f for f in families if all(k in data.signals for k in EFFECTS[f].needs)]
-        self.train_, self.test_ = self._split(len(data))
+        self.train_, self.test_ = self._split(len(data), data.held_out_blocks)
         y_test = data.y[self.test_]
         chain: Chain = []
         coef, pred, k = self._fit_chain(data, chain)
@@ -176,8 +186,8 @@ class Calibrator:
             for cand, effect, *_ in found:
                 cand.reason = _verdict(cand, self.min_gain, self.alpha)
                 edge = _search_edge(effect, cand.searched_value, data.signals)
-                if not cand.reason and edge is not None and family_unlocated_at_edge(effect):
-                    cand.reason = f"not located: {edge}"
+                if not cand.reason and edge and UNLOCATED_AT.get(cand.family) == edge[0]:
+                    cand.reason = f"not located: {edge[1]}"
             passing = [f for f in found if not f[0].reason]
             self.candidates_.extend(f[0] for f in found)
             if progress is not None:
@@ -238,6 +248,7 @@ class Calibrator:
             "recording": self.data_.name,
             "base_params": {"params": self.base_params_, "ci": self.base_ci_},
             "held_out": {
+                "blocks": self.data_.held_out_blocks,
                 "start_s": float(t[self.test_][0]),
                 "end_s": float(t[-1]),
                 "samples": len(t[self.test_]),
@@ -262,35 +273,35 @@ class Calibrator:
         for effect, value in self.chain_:
             edge = _search_edge(effect, value, self.data_.signals)
             if edge is not None:
-                notes.append(f"{effect.family}: {edge}")
+                notes.append(f"{effect.family}: {edge[1]}")
         return notes
 
 
-def family_unlocated_at_edge(effect: Effect) -> bool:
-    """Whether a search ending at its range's end means the effect was not found.
-
-    True for `delay` only: its range ends at an arbitrary 0.1 s, and a lag pinned there
-    is not a lag of the drive but a stand-in for a slower dynamic (on the simulated
-    NOTES rotation ramp it took the friction's place before the direction asymmetry
-    could). The other ranges end where the physics does: a hysteresis loop of the
-    smallest width the noise allows is a sharp relay loop, a drift time constant
-    beyond the recording is a linear drift; for those the end is reported as a
-    warning, not refused."""
-    return effect.family == "delay"
+UNLOCATED_AT = {"delay": "upper", "drift": "lower"}
+"""Families whose searched value at that end of its range means the effect was not
+found. `delay`'s range ends at an arbitrary 0.1 s, and a lag pinned there stands in
+for a slower dynamic (on the simulated NOTES rotation ramp it took the friction's
+place before the direction asymmetry could). `drift`'s time constant at its lower end
+(2 % of the recording) is no slow change but a step in the gain at the start (seen on
+NOTES chirps). The other ends are physical: a hysteresis loop of the smallest width
+the noise allows is a sharp relay loop, a drift slower than the recording is linear;
+those are reported as warnings, not refused."""
 
 
-def _search_edge(effect: Effect, value: float, signals: dict[str, Float1D]) -> str | None:
-    """Where `value` sits at an end of `effect`'s search range, say so (else None)."""
+def _search_edge(
+    effect: Effect, value: float, signals: dict[str, Float1D]
+) -> tuple[str, str] | None:
+    """("lower" | "upper", message) when `value` sits at an end of `effect`'s search
+    range, else None."""
     if effect.searched is None or effect.family == "position_periodic":
         return None
     grid = effect.grid(signals)
     lo, hi = float(np.min(grid)), float(np.max(grid))
-    if value <= lo * 1.001 or value >= hi * 0.999:
-        return (
-            f"{effect.searched} = {value:.4g} is at the end of its search range "
-            f"[{lo:.4g}, {hi:.4g}]"
-        )
-    return None
+    side = "lower" if value <= lo * 1.001 else "upper" if value >= hi * 0.999 else None
+    if side is None:
+        return None
+    where = f"search range [{lo:.4g}, {hi:.4g}]"
+    return side, f"{effect.searched} = {value:.4g} is at the end of its {where}"
 
 
 def _rmse(e: Float1D) -> float:

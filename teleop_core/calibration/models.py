@@ -47,9 +47,18 @@ class CalibrationData:
     """The reference force (or torque) the model predicts, shape (n,)."""
     name: str = "recording"
     """The recording's name in reports and errors."""
+    held_out_blocks: int = 1
+    """How many blocks the held-out share is cut into, spread evenly over the recording
+    (1: one block at its end). A chirp sweeps its frequency with time, so its end holds
+    only the highest frequencies and says nothing about the rest; blocked hold-out
+    tests it on every part of the sweep."""
 
     def __post_init__(self) -> None:
         n = len(self.y)
+        if self.held_out_blocks < 1:
+            raise TeleopInputError(
+                f"held_out_blocks = {self.held_out_blocks!r}; expected a whole number >= 1"
+            )
         if "t" not in self.signals or any(len(v) != n for v in self.signals.values()):
             raise TeleopInputError(
                 f"calibration data {self.name}: signals {sorted(self.signals)} must include "

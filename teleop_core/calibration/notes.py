@@ -35,6 +35,9 @@ from teleop_core.notes.simulate import simulate_response
 
 SIGN_FRACTION = 0.02
 """Width of the smoothed sign of the command's direction, as a share of its range."""
+CHIRP_HELD_OUT_BLOCKS = 8
+"""Held-out blocks for a chirp: one per segment of the 1-30 Hz sweep, so that every
+frequency band is tested (its end alone holds the highest frequencies only)."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +93,8 @@ class NotesBase(BaseModel):
             "direction": linear,
             "direction_sign": np.tanh(linear / width),
         }
-        return CalibrationData(signals, rec.y, name)
+        blocks = CHIRP_HELD_OUT_BLOCKS if rec.experiment == "chirp" else 1
+        return CalibrationData(signals, rec.y, name, held_out_blocks=blocks)
 
     def read(self, path: str | Path) -> CalibrationData:
         return self.data(NotesRecording.from_csv(path), Path(path).name)

@@ -206,3 +206,36 @@ def test_notes_ramps_show_the_papers_hysteresis_and_ccw_loss(dof: str) -> None:
     with pytest.raises(TeleopInputError, match="expected a clamped run"):
         open_run = simulate_recording(params, "ramp", "open", rate_hz=200.0)
         model.data(NotesRecording.from_frame(open_run))
+
+
+def test_blocked_hold_out_takes_the_end_of_every_segment() -> None:
+    # n = 100 in 4 segments of 25 with a quarter held out: round(25 * 0.25) = 6 rows at
+    # the end of each, counted by hand
+    calibrator = Calibrator(NotesBase("rotation"), held_out_fraction=0.25)
+    train, test = calibrator._split(100, 4)
+    expected = [*range(19, 25), *range(44, 50), *range(69, 75), *range(94, 100)]
+    assert list(test) == expected
+    assert sorted([*train, *test]) == list(range(100))
+    # one block: the end of the recording, as before
+    assert calibrator._split(100, 1) == (slice(0, 75), slice(75, 100))
+
+
+def test_notes_rotation_chirp_names_the_papers_effects_on_blocked_hold_out() -> None:
+    """A chirp's end holds only its highest frequencies; tested on blocks over the whole
+    sweep, the loop names the friction hysteresis and the CCW loss on the rotation's
+    1-30 Hz chirp too, and nothing on the linear device."""
+    params = default_params("rotation")
+    model = NotesBase("rotation")
+
+    def run(nonlinear: bool) -> Calibrator:
+        frame = simulate_recording(
+            params, "chirp", "clamped", nonlinear=nonlinear, noise=0.02, seed=3
+        )
+        data = model.data(NotesRecording.from_frame(frame))
+        assert data.held_out_blocks > 1
+        return Calibrator(model).fit(data)
+
+    assert run(nonlinear=False).chain_ == []
+    cal = run(nonlinear=True)
+    assert {e.family for e, _ in cal.chain_} == {"hysteresis", "direction_asymmetry"}
+    assert cal.rmse_after_ < 0.85 * cal.rmse_before_
