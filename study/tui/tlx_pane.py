@@ -117,6 +117,8 @@ class TlxPane(VerticalScroll):
         self.editing_id: int | None = None
         self._codes: list[str] = []
         self._blocks_code: str | None = None
+        self._shown: tuple[str, str, str] | None = None
+        """The block the form shows (participant, task, condition)."""
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="tlx-top", classes="row"):
@@ -184,7 +186,10 @@ class TlxPane(VerticalScroll):
         code = self.query_one("#tlx-participant", Select).value
         if event.value is not Select.NULL and code is not Select.NULL:
             task, condition = str(event.value).split("/")
-            self._load(str(code), task, condition)
+            # open_block already loads the block it selects: a second load arriving
+            # after the user started typing would overwrite the ratings
+            if (str(code), task, condition) != self._shown:
+                self._load(str(code), task, condition)
 
     @on(Input.Changed)
     def _rating_typed(self, event: Input.Changed) -> None:
@@ -197,8 +202,13 @@ class TlxPane(VerticalScroll):
             except StudyInputError:
                 event.input.set_class(bool(event.value), "-invalid")
 
-    @work(thread=True, exclusive=True, group="tlx")
     def _load(self, code: str, task: str, condition: str, note: str = "") -> None:
+        """Fill the form with the stored answers of one block (in a worker)."""
+        self._shown = (code, task, condition)
+        self._load_worker(code, task, condition, note)
+
+    @work(thread=True, exclusive=True, group="tlx")
+    def _load_worker(self, code: str, task: str, condition: str, note: str) -> None:
         from study.protocol.tlx import load_tlx, tlx_audit
 
         response = load_tlx(self.services.engine, code, task, condition)
