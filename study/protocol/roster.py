@@ -49,6 +49,18 @@ def load_study(session: Session) -> tuple[Study, StudyDesign]:
     return study, StudyDesign.from_dict(study.design)
 
 
+def find_participant(session: Session, study: Study, code: str) -> Participant:
+    """The participant `code` of `study`; a one-line error naming it when there is none."""
+    participant = session.scalars(
+        select(Participant).where(Participant.study_id == study.id, Participant.code == code)
+    ).first()
+    if participant is None:
+        raise StudyInputError(
+            f"unknown participant {code!r}; expected a code from `study schedule`"
+        )
+    return participant
+
+
 def plan_blocks(design: StudyDesign, order: tuple[str, ...]) -> list[dict[str, Any]]:
     """A participant's blocks: each task, its conditions in the participant's order."""
     blocks = []

@@ -40,7 +40,7 @@ from study.protocol.notes_trial import NotesParticipant, notes_loop
 from study.protocol.notes_trial import measures as notes_measures
 from study.protocol.notes_trial import trial_frame as notes_trial_frame
 from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
-from study.protocol.roster import load_study
+from study.protocol.roster import find_participant, load_study
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.core import SAMPLE_COLUMNS, TeleopLoop
 from teleop_core.loop.drivers import Driver
@@ -142,13 +142,7 @@ def run_session(
     """
     with Session(engine) as session:
         study, _ = load_study(session)
-        participant = session.scalars(
-            select(Participant).where(Participant.study_id == study.id, Participant.code == code)
-        ).first()
-        if participant is None:
-            raise StudyInputError(
-                f"unknown participant {code!r}; expected a code from `study schedule`"
-            )
+        participant = find_participant(session, study, code)
         _ = participant.blocks  # load the schedule while the session is open
         todo = pending_trials(session, participant)
         session.expunge_all()

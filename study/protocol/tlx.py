@@ -27,7 +27,7 @@ from db.models.audit import AuditEntry
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from study.errors import StudyInputError
-from study.protocol.roster import load_study
+from study.protocol.roster import find_participant, load_study
 
 PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
 """The 15 pairs of subscales."""
@@ -118,13 +118,7 @@ def store_tlx(
     ratings = check_ratings(ratings)
     with Session(engine) as session, session.begin():
         study, _ = load_study(session)
-        participant = session.scalars(
-            select(Participant).where(Participant.study_id == study.id, Participant.code == code)
-        ).first()
-        if participant is None:
-            raise StudyInputError(
-                f"unknown participant {code!r}; expected a code from `study schedule`"
-            )
+        participant = find_participant(session, study, code)
         blocks = {(b.task, b.condition) for b in participant.blocks}
         if (task, condition) not in blocks:
             raise StudyInputError(
