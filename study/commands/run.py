@@ -71,13 +71,7 @@ def run(
     estimator = load_estimator()
     engine = open_database(db_url, create=False)
     try:
-        with Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            console=Console(stderr=True),
-            transient=True,
-        ) as progress:
+        with _progress() as progress:
             bar = progress.add_task(f"session {code}", total=None)
 
             def report(item, k, n) -> None:
@@ -96,6 +90,17 @@ def run(
     click.echo(f"{code}: {len(done)} trials completed and stored")
 
 
+def _progress() -> Progress:
+    """The bar both run modes show on stderr: what runs now, and k of n done."""
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    )
+
+
 def _run_all(db_url: str | None, jobs: int, pace: float | None) -> None:
     from study.protocol.session import run_participants
 
@@ -106,13 +111,7 @@ def _run_all(db_url: str | None, jobs: int, pace: float | None) -> None:
         engine.dispose()
     start = time.monotonic()
     total = 0
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        console=Console(stderr=True),
-        transient=True,
-    ) as progress:
+    with _progress() as progress:
         bar = progress.add_task("participants", total=len(codes))
         for code, n in run_participants(db_url, codes, jobs, pace):
             total += n
