@@ -4,42 +4,87 @@ Every error a user can cause ends here as one line on stderr, `study CMD: error:
 naming the bad value and what was expected, with exit status 2: click's usage errors
 (unknown option, bad value, missing argument) and the packages' input errors
 (`DbInputError`, `StudyInputError`, `TeleopInputError`, all `ValueError`s).
-Subcommand groups live in `study.commands`, one module each.
+Subcommands live in `study.commands`, imported only when they are called (`COMMANDS`).
 """
 
 from __future__ import annotations
 
+import importlib
 import sys
+from typing import Any
 
 import click
 
-from study import __version__
-from study.commands.analyze import analyze
 from study.commands.base import USER_ERRORS, InputError, StudyGroup
-from study.commands.bench import bench
-from study.commands.calibrate import calibrate
-from study.commands.characterize import characterize
-from study.commands.database import database
-from study.commands.estimator import estimator
-from study.commands.exchange import export_cmd, import_cmd
-from study.commands.figures import demo, figures
-from study.commands.identify import identify
-from study.commands.plan import design_group, init, participant, schedule_cmd
-from study.commands.power import power
-from study.commands.run import run
-from study.commands.simulate import simulate
-from study.commands.tlx import tlx
-from study.commands.tui import tui
 
 EXIT_USER_ERROR = 2
 
+COMMANDS = {
+    "analyze": "study.commands.analyze:analyze",
+    "bench": "study.commands.bench:bench",
+    "calibrate": "study.commands.calibrate:calibrate",
+    "characterize": "study.commands.characterize:characterize",
+    "db": "study.commands.database:database",
+    "demo": "study.commands.figures:demo",
+    "design": "study.commands.plan:design_group",
+    "estimator": "study.commands.estimator:estimator",
+    "export": "study.commands.exchange:export_cmd",
+    "figures": "study.commands.figures:figures",
+    "identify": "study.commands.identify:identify",
+    "import": "study.commands.exchange:import_cmd",
+    "init": "study.commands.plan:init",
+    "participant": "study.commands.plan:participant",
+    "power": "study.commands.power:power",
+    "run": "study.commands.run:run",
+    "schedule": "study.commands.plan:schedule_cmd",
+    "simulate": "study.commands.simulate:simulate",
+    "tlx": "study.commands.tlx:tlx",
+    "tui": "study.commands.tui:tui",
+}
+"""Every subcommand: its name -> "module:attribute", imported when it is called."""
+
+
+class LazyStudyGroup(StudyGroup):
+    """The top-level group: a subcommand's module is imported only when that command runs
+    (or `--help` lists them all).
+
+    Importing every command module up front pulled in SQLAlchemy's ORM, numpy and Rich
+    for any `study` call, about half a second before `study tui` could start drawing.
+    This is the pattern of click's documentation ("Lazily Loading Subcommands"); click
+    has no built-in lazy group.
+    """
+
+    def __init__(self, *args: Any, lazy: dict[str, str], **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.lazy = lazy
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted({*super().list_commands(ctx), *self.lazy})
+
+    def get_command(self, ctx: click.Context | None, cmd_name: str) -> click.Command | None:
+        if cmd_name not in self.commands and cmd_name in self.lazy:
+            module, _, attribute = self.lazy[cmd_name].partition(":")
+            command = getattr(importlib.import_module(module), attribute)
+            if command.name != cmd_name:  # pragma: no cover - a wrong COMMANDS entry
+                raise RuntimeError(f"{self.lazy[cmd_name]} is {command.name!r}, not {cmd_name!r}")
+            self.add_command(command)
+        return self.commands.get(cmd_name)
+
 
 @click.group(
-    cls=StudyGroup,
+    cls=LazyStudyGroup,
+    lazy=COMMANDS,
     context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
     no_args_is_help=True,
 )
-@click.version_option(__version__, prog_name="study")
+@click.option(
+    "--version",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=lambda ctx, _param, value: _print_version(ctx) if value else None,
+    help="Show the version and exit.",
+)
 def cli() -> None:
     """haptic-study: plan, run, store and analyse haptic teleoperation user studies.
 
@@ -49,26 +94,12 @@ def cli() -> None:
     """
 
 
-cli.add_command(database)
-cli.add_command(bench)
-cli.add_command(estimator)
-cli.add_command(simulate)
-cli.add_command(init)
-cli.add_command(design_group)
-cli.add_command(participant)
-cli.add_command(schedule_cmd)
-cli.add_command(run)
-cli.add_command(tlx)
-cli.add_command(import_cmd)
-cli.add_command(export_cmd)
-cli.add_command(analyze)
-cli.add_command(figures)
-cli.add_command(demo)
-cli.add_command(power)
-cli.add_command(tui)
-cli.add_command(calibrate)
-cli.add_command(characterize)
-cli.add_command(identify)
+def _print_version(ctx: click.Context) -> None:
+    """`study --version` (click's version_option needs the version when `study` starts)."""
+    import study
+
+    click.echo(f"study, version {study.__version__}")
+    ctx.exit()
 
 
 def _one_line(message: str) -> str:
@@ -79,7 +110,7 @@ def _command_path(args: list[str]) -> str:
     """`study SUB CMD` as far as `args` name known commands (for errors without a context)."""
     path, group = ["study"], cli
     for token in args:
-        command = group.commands.get(token) if isinstance(group, click.Group) else None
+        command = group.get_command(None, token) if isinstance(group, click.Group) else None
         if command is None:
             break
         path.append(token)

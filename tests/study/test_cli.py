@@ -15,8 +15,11 @@ from study.cli import cli, main
 
 
 def _command_paths(group: click.Group, prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    ctx = click.Context(group)
     paths = [prefix]
-    for name, command in group.commands.items():
+    for name in group.list_commands(ctx):
+        command = group.get_command(ctx, name)
+        assert command is not None, f"`study {' '.join((*prefix, name))}` does not load"
         if isinstance(command, click.Group):
             paths += _command_paths(command, (*prefix, name))
         else:
