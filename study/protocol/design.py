@@ -19,8 +19,6 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-import numpy as np
-
 from study.errors import StudyInputError
 
 KNOWN_TASKS = ("lcca", "notes")
@@ -208,6 +206,8 @@ def next_order(design: StudyDesign, group: str, used: list[tuple[str, ...]]) -> 
     counts = [sum(1 for u in used if tuple(u) == o) for o in orders]
     least = min(counts)
     candidates = [i for i, c in enumerate(counts) if c == least]
+    import numpy as np  # here, not at the top: `study tui` reads designs before numpy loads
+
     rng = np.random.default_rng([design.seed, sorted(design.groups).index(group), least])
     preference = rng.permutation(len(orders)).tolist()
     best = min(candidates, key=preference.index)

@@ -18,7 +18,6 @@ import zlib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import numpy as np
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
@@ -72,6 +71,8 @@ def check_weights(weights: Mapping[str, object]) -> dict[str, int]:
 
 def pair_order(study_seed: int, code: str) -> list[tuple[str, str]]:
     """The 15 pairs as this participant sees them: seeded order and left/right sides."""
+    import numpy as np  # here: `study tui` reads the answered blocks before numpy loads
+
     rng = np.random.default_rng([study_seed, zlib.crc32(code.encode()), 0x71C])
     pairs = [PAIRS[i] for i in rng.permutation(len(PAIRS))]
     return [

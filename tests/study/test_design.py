@@ -7,8 +7,12 @@ import json
 from pathlib import Path
 
 import pytest
+from sqlalchemy import event, select
+from sqlalchemy.orm import Session
 
 from db.migrate import open_database
+from db.models.study import Participant
+from db.models.trial import Trial
 from study.cli import main
 from study.errors import StudyInputError
 from study.protocol.design import TEMPLATE, StudyDesign, next_order, parse_design, williams_square
@@ -85,6 +89,54 @@ def test_enrolment_gives_codes_orders_and_schedules(db_url: str) -> None:
             add_participant(engine, "surgeon")
         with pytest.raises(StudyInputError, match="already holds the study"):
             create_study(engine, design, TEMPLATE)
+    finally:
+        engine.dispose()
+
+
+def _add_trials(engine, code: str, block_index: int, statuses: list[str]) -> None:
+    with Session(engine) as session:
+        p = session.scalars(select(Participant).where(Participant.code == code)).one()
+        block = p.blocks[block_index]
+        for k, status in enumerate(statuses):
+            session.add(Trial(
+                participant_id=p.id, block_id=block.id, task=block.task,
+                condition=block.condition, block_index=block_index, trial_index=k,
+                status=status,
+            ))  # fmt: skip
+        session.commit()
+
+
+def test_schedule_counts_each_participants_trials_in_a_fixed_number_of_queries(
+    db_url: str,
+) -> None:
+    engine = open_database(db_url)
+    queries: list[str] = []
+    event.listen(engine, "before_cursor_execute", lambda *args: queries.append(args[2]))
+    try:
+        design = parse_design(TEMPLATE)
+        create_study(engine, design, TEMPLATE)
+        for group in ("novice", "expert"):
+            add_participant(engine, group)
+        _add_trials(engine, "P001", 0, ["completed", "completed", "interrupted"])
+        _add_trials(engine, "P002", 1, ["completed"])
+        queries.clear()
+        plan = schedule(engine)
+        few = len(queries)
+        # hand counts of the rows just written, block by block
+        progress = {
+            r["code"]: [(b["completed"], b["interrupted"]) for b in r["blocks"]]
+            for r in plan["participants"]
+        }
+        assert progress == {"P001": [(2, 1), (0, 0)], "P002": [(0, 0), (1, 0)]}
+        assert [r["trials_completed"] for r in plan["participants"]] == [2, 1]
+        for _ in range(10):
+            add_participant(engine, "outsider")
+        _add_trials(engine, "P012", 0, ["completed"])
+        queries.clear()
+        plan = schedule(engine)
+        # twelve participants cost the same round trips as two (no query per participant)
+        assert len(queries) == few
+        assert [r["trials_completed"] for r in plan["participants"]] == [2, 1] + [0] * 9 + [1]
     finally:
         engine.dispose()
 
