@@ -16,7 +16,7 @@ import asyncio
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 from textual import on, work
 from textual.app import App, ComposeResult
@@ -26,13 +26,13 @@ from textual.message import Message
 from textual.widget import Widget
 from textual.widgets import Footer, TabbedContent, TabPane
 
-from study.tui.analysis_pane import AnalysisPane
-from study.tui.calibration_pane import CalibrationPane
 from study.tui.overview import OverviewPane
-from study.tui.participants import ParticipantsPane
-from study.tui.run_pane import RunPane
 from study.tui.services import Roster, StudyServices
-from study.tui.tlx_pane import TlxPane
+
+if TYPE_CHECKING:  # imported when first mounted, after the overview has shown
+    from study.tui.participants import ParticipantsPane
+    from study.tui.run_pane import RunPane
+    from study.tui.tlx_pane import TlxPane
 
 __all__ = ["TABS", "StudyApp", "TuiSettings", "make_app"]
 
@@ -89,6 +89,8 @@ class StudyApp(App[None]):
         """Seconds from the app's construction to the first overview with data."""
         self.ready = False
         """True once every screen is mounted (after the overview has shown)."""
+        self._later_mounted = asyncio.Event()
+        """Set when the screens mounted after the overview are in place (or gave up)."""
 
     def compose(self) -> ComposeResult:
         # only the overview at first: the other screens (some 300 widgets) are mounted
@@ -101,6 +103,14 @@ class StudyApp(App[None]):
         yield Footer()
 
     def _later_panes(self) -> dict[str, Widget]:
+        # imported here, not at the top: the run screen alone pulls in the teleoperation
+        # core, and none of them is needed for the first paint (`study bench tui`)
+        from study.tui.analysis_pane import AnalysisPane
+        from study.tui.calibration_pane import CalibrationPane
+        from study.tui.participants import ParticipantsPane
+        from study.tui.run_pane import RunPane
+        from study.tui.tlx_pane import TlxPane
+
         return {
             "participants": ParticipantsPane(self.services, id="participants-pane"),
             "run": RunPane(self.services, self.settings.simulated_pace, id="run-pane"),
@@ -123,6 +133,8 @@ class StudyApp(App[None]):
                 self._show(self.roster)
         except NoMatches:  # the app closed while the screens were being mounted
             self.ready = False
+        finally:
+            self._later_mounted.set()
 
     def on_mount(self) -> None:
         self.theme = self.settings.theme
@@ -145,20 +157,24 @@ class StudyApp(App[None]):
             self.overview_shown_s = time.monotonic() - self.started_at
             self.call_after_refresh(self._mount_later_panes)
 
+    def _pane(self, tab: str) -> Widget:
+        return self.query_one(f"#{tab}-pane")
+
     def _show(self, roster: Roster) -> None:
         self.query_one(OverviewPane).show(roster)
         if self.ready:
-            self.query_one(ParticipantsPane).show(roster)
-            self.query_one(RunPane).show(roster)
-            self.query_one(TlxPane).show(roster)
+            for tab in ("participants", "run", "tlx"):
+                self._pane(tab).show(roster)  # type: ignore[attr-defined]
 
-    @on(ParticipantsPane.Added)
-    @on(TlxPane.Saved)
-    def _changed(self) -> None:
+    # the later screens' messages, by handler name (their classes load after start)
+
+    def on_participants_pane_added(self, _event: ParticipantsPane.Added) -> None:
         self.reload()
 
-    @on(RunPane.TrialEnded)
-    def _trial_ended(self, event: RunPane.TrialEnded) -> None:
+    def on_tlx_pane_saved(self, _event: TlxPane.Saved) -> None:
+        self.reload()
+
+    def on_run_pane_trial_ended(self, event: RunPane.TrialEnded) -> None:
         self._after_trial(event.block)
 
     @work(thread=True, exclusive=True, group="roster")
@@ -170,7 +186,7 @@ class StudyApp(App[None]):
 
     def _open_tlx(self, code: str, task: str, condition: str) -> None:
         self.action_tab("tlx")
-        self.query_one(TlxPane).open_block(code, task, condition)
+        self._pane("tlx").open_block(code, task, condition)  # type: ignore[attr-defined]
         self.notify(f"{code} finished the {task}/{condition} block: NASA-TLX now")
 
     # -- actions --------------------------------------------------------------------------
@@ -178,7 +194,7 @@ class StudyApp(App[None]):
     @on(TabbedContent.TabActivated)
     def _tab_shown(self, event: TabbedContent.TabActivated) -> None:
         if event.pane.id == "run" and self.settings.prepare_simulation:
-            self.query_one(RunPane).prepare()
+            self._pane("run").prepare()  # type: ignore[attr-defined]
 
     def action_tab(self, tab: str) -> None:
         if not self.ready:
@@ -196,14 +212,20 @@ class StudyApp(App[None]):
         self.theme = "textual-light" if self.theme == "textual-dark" else "textual-dark"
 
     async def action_quit(self) -> None:
-        """Stop a running trial (marked interrupted, its samples kept), then exit."""
+        """Stop a running trial (marked interrupted, its samples kept), then exit.
+
+        Quitting while the later screens are still being mounted waits for them first:
+        exiting under a mounting `Select` made Textual print a NoMatches traceback.
+        """
+        if self.overview_shown_s is not None:
+            await asyncio.wait_for(self._later_mounted.wait(), timeout=10.0)
         await self.stop_trial()
         self.exit()
 
     async def stop_trial(self, timeout_s: float = 30.0) -> None:
         if not self.ready:
             return
-        run = self.query_one(RunPane).run
+        run = self._pane("run").run  # type: ignore[attr-defined]
         if run is not None:
             self.notify("stopping the trial: it is kept as interrupted")
             run.stop()

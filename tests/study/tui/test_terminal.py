@@ -1,8 +1,10 @@
-"""The real `study tui` command in a pseudo-terminal: it starts, shows the overview, quits."""
+"""The real `study tui` command in a pseudo-terminal: it starts, shows the overview, quits
+cleanly."""
 
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -31,8 +33,28 @@ def test_study_tui_in_a_pseudo_terminal(study_engine: Engine, tmp_path: Path) ->
         seen: set[int] = set()
         while len(seen) < len(wanted):
             seen.add(child.expect(wanted))
+        # quit at once, while the other screens are still being mounted: the app waits
+        # for them and exits cleanly (it used to print Textual's NoMatches traceback)
         child.sendcontrol("q")
         child.expect(pexpect.EOF)
     finally:
         child.close(force=True)
     assert child.exitstatus == 0
+    assert "Traceback" not in child.before and "NoMatches" not in child.before
+
+
+def test_the_overview_loads_neither_numpy_nor_the_other_screens(study_engine: Engine) -> None:
+    # `study bench tui` times the start; this keeps what it measured: the `study tui`
+    # command, the app and its roster query import no numerics and no later screen
+    db = study_engine.url.database
+    code = (
+        "import sys; from study.cli import cli; cli.get_command(None, 'tui'); "
+        "from db.migrate import open_database; from study.tui import StudyServices, make_app; "
+        f"engine = open_database({db!r}, create=False); "
+        "StudyServices(engine, lambda: None).roster(); engine.dispose(); "
+        "heavy = ('numpy', 'pandas', 'torch', 'scipy', 'alembic', 'study.tui.run_pane', "
+        "'study.tui.analysis_pane', 'study.tui.tlx_pane', 'study.commands.analyze'); "
+        "print(sorted(m for m in sys.modules if m.startswith(heavy)))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
