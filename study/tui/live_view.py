@@ -7,6 +7,10 @@ so one scale serves both axes. The view frames the arch and the branches (the st
 20 cm access run below them is cut, with the tip's distance to the arch written instead).
 The vessels are drawn once per size; each redraw adds only the tip.
 
+A NOTES trial has no vessels to draw: `notes_scene` shows the scope's depth along the
+canal (introitus, posterior fornix, peritoneal cavity, target) and its roll against the
+target roll, one character per step, redrawn whole at each frame (a few short lines).
+
 Colours are from the Okabe-Ito palette (`study.analysis.figures`), which stays readable
 on dark and light backgrounds; the vessels are drawn in the theme's dimmed foreground.
 """
@@ -226,12 +230,19 @@ class PhantomView(Widget):
         return self._base[y] if y < len(self._base) else Strip.blank(self.size.width)
 
 
-def gauge(label: str, value: float, full_scale: float, width: int, unit: str = "N") -> Text:
-    """`label  0.53 N  ██████░░░░` with the bar filled to value / full_scale."""
-    filled = 0 if not math.isfinite(value) else round(width * min(max(value, 0) / full_scale, 1))
+def gauge(
+    label: str, value: float, full_scale: float, width: int, unit: str = "N",
+    magnitude: bool = False,
+) -> Text:  # fmt: skip
+    """`label  0.53 N  ██████░░░░` with the bar filled to value / full_scale (with
+    `magnitude`, to |value| / full_scale, the number keeping its sign)."""
+    level = abs(value) if magnitude else value
+    filled = 0 if not math.isfinite(level) else round(width * min(max(level, 0) / full_scale, 1))
     text = Text(no_wrap=True)
-    text.append(f"{label:<9}{value:6.2f} {unit} ")
-    style = TIP_STYLE if value > 0.8 * full_scale else "bold"
+    text.append(
+        f"{label:<9}{value:+6.2f} {unit} " if magnitude else f"{label:<9}{value:6.2f} {unit} "
+    )
+    style = TIP_STYLE if level > 0.8 * full_scale else "bold"
     text.append("█" * filled, style)
     text.append("░" * (width - filled), "dim")
     return text
@@ -274,3 +285,112 @@ class LiveReadout(Widget):
 
 def region(code: int) -> str:
     return REGION_ABBREVIATIONS[code] if 0 <= code < len(REGION_ABBREVIATIONS) else "?"
+
+
+NOTES_DEPTH_PAST_TARGET_M = 0.02
+"""How far past the NOTES target the depth axis runs."""
+NOTES_ROLL_SPAN_RAD = math.pi / 2
+"""The roll axis runs from -90 to +90 degrees."""
+
+
+def _axis_column(value: float, lo: float, hi: float, cols: int) -> int:
+    """The column of `value` on an axis from lo (column 0) to hi (column cols - 1)."""
+    return min(max(round((cols - 1) * (value - lo) / (hi - lo)), 0), cols - 1)
+
+
+def notes_region(code: int) -> str:
+    from teleop_core.notes.task import REGIONS
+
+    return REGIONS[code] if 0 <= code < len(REGIONS) else "?"
+
+
+def notes_scene(frame: LiveFrame | None, cols: int) -> Text:
+    """The NOTES scope as text: its depth from the introitus and its roll, each on an axis
+    with the posterior fornix and the target marked (`teleop_core.notes.task`)."""
+    from teleop_core.notes.task import (
+        FORNIX_M,
+        TARGET_M,
+        TARGET_ROLL_RAD,
+        TARGET_ROLL_TOLERANCE_RAD,
+        TARGET_TOLERANCE_M,
+    )
+
+    cols = max(cols, 20)
+    end_m = TARGET_M + NOTES_DEPTH_PAST_TARGET_M
+    depth = frame.insertion_m if frame is not None else 0.0
+    roll = frame.rotation_rad if frame is not None else 0.0
+    breached = frame is not None and notes_region(frame.branch) in ("cavity", "target")
+
+    def column(v: float) -> int:
+        return _axis_column(v, 0.0, end_m, cols)
+
+    fornix = column(FORNIX_M)
+    target = range(column(TARGET_M - TARGET_TOLERANCE_M), column(TARGET_M + TARGET_TOLERANCE_M) + 1)
+    text = Text(no_wrap=True, overflow="crop")
+    where = notes_region(frame.branch) if frame is not None else "outside"
+    text.append(f"depth {depth * 1000:5.0f} mm   in the {where}\n")
+    # the canal, the fornix (dim once breached) and the target zone
+    for c in range(cols):
+        if c == fornix:
+            text.append("┃", "dim" if breached else "bold")
+        elif c in target:
+            text.append("▓", TARGET_STYLE)
+        else:
+            text.append("─", "dim")
+    text.append("\n")
+    tip = column(depth)
+    text.append("━" * tip, "bold")
+    text.append("●", TIP_STYLE)
+    text.append("\n")
+    labels = [" "] * cols
+    for at, word in ((0, "introitus"), (fornix, "fornix"), (target.start, "target")):
+        for k, ch in enumerate(word[: max(cols - at, 0)]):
+            labels[at + k] = ch
+    text.append("".join(labels), "dim")
+    # the roll
+    target_roll = range(
+        _axis_column(TARGET_ROLL_RAD - TARGET_ROLL_TOLERANCE_RAD, -NOTES_ROLL_SPAN_RAD,
+                     NOTES_ROLL_SPAN_RAD, cols),
+        _axis_column(TARGET_ROLL_RAD + TARGET_ROLL_TOLERANCE_RAD, -NOTES_ROLL_SPAN_RAD,
+                     NOTES_ROLL_SPAN_RAD, cols) + 1,
+    )  # fmt: skip
+    zero = _axis_column(0.0, -NOTES_ROLL_SPAN_RAD, NOTES_ROLL_SPAN_RAD, cols)
+    now = _axis_column(roll, -NOTES_ROLL_SPAN_RAD, NOTES_ROLL_SPAN_RAD, cols)
+    text.append(
+        f"\n\nroll {math.degrees(roll):+5.0f} deg   target "
+        f"{math.degrees(TARGET_ROLL_RAD):+.0f} +/- {math.degrees(TARGET_ROLL_TOLERANCE_RAD):.0f}\n"
+    )
+    for c in range(cols):
+        if c == now:
+            text.append("●", TIP_STYLE)
+        elif c in target_roll:
+            text.append("▓", TARGET_STYLE)
+        else:
+            text.append("┼" if c == zero else "─", "dim")
+    text.append("\n")
+    ends = f"-{math.degrees(NOTES_ROLL_SPAN_RAD):.0f}"
+    right = f"+{math.degrees(NOTES_ROLL_SPAN_RAD):.0f}"
+    middle = max(zero - len(ends), 1)
+    text.append(
+        (ends + " " * middle + "0").ljust(cols - len(right))[: cols - len(right)] + right, "dim"
+    )
+    return text
+
+
+class NotesView(Widget):
+    """The NOTES scope's depth and roll (`notes_scene`), redrawn whole at each frame."""
+
+    DEFAULT_CSS = """
+    NotesView { width: 1fr; height: 1fr; min-height: 8; }
+    """
+
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__(**kwargs)  # type: ignore[arg-type]
+        self._frame: LiveFrame | None = None
+
+    def update_frame(self, frame: LiveFrame | None) -> None:
+        self._frame = frame
+        self.refresh()
+
+    def render(self) -> Text:
+        return notes_scene(self._frame, self.size.width)

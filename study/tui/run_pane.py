@@ -26,7 +26,14 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Label, Select
 
-from study.tui.live_view import LiveReadout, PhantomView, gauge, region, sparkline
+from study.tui.live_view import (
+    LiveReadout,
+    NotesView,
+    PhantomView,
+    gauge,
+    region,
+    sparkline,
+)
 from study.tui.services import NextTrial, Roster, StudyServices
 from study.tui.trial_runner import Simulation, TrialOutcome, TrialRun, TuiKeyboardDriver
 
@@ -38,6 +45,14 @@ REDRAW_HZ = 30.0
 """Live-view redraws per second (the issue asks for >= 20 Hz; 30 leaves room on a busy machine)."""
 PROXIMAL_FULL_N = 2.0
 DISTAL_FULL_N = 1.0
+NOTES_FULL_N = 10.0
+"""Full scale of the NOTES force gauges: the fornix gives way at the mean max push of
+9.9 N (`teleop_core.notes.task.PUSH_BENCHMARK_N`)."""
+VIEW_TITLES = {"lcca": "LCCA phantom (frontal)", "notes": "NOTES: scope depth and roll"}
+KEY_HINTS = {
+    "lcca": "↑↓ dial ←→ rotate space let go e end",
+    "notes": "↑↓ push/pull ←→ roll space let go e end",
+}
 KEY_ACTIONS = {
     "dial_forward": "advance",
     "dial_back": "retract",
@@ -100,6 +115,8 @@ class RunPane(Vertical, can_focus=True):
         self._codes: list[str] = []
         self._redraws: deque[float] = deque(maxlen=50)
         self._next: NextTrial | None = None
+        self._trial_task = "lcca"
+        """The task of the trial running or run last."""
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="run-top"):
@@ -110,10 +127,11 @@ class RunPane(Vertical, can_focus=True):
         with Horizontal(id="live"):
             with Vertical(id="phantom-box"):
                 yield PhantomView(id="phantom")
+                yield NotesView(id="notes-view")
             yield LiveReadout(id="readout")
 
     def on_mount(self) -> None:
-        self.query_one("#phantom-box").border_title = "LCCA phantom (frontal)"
+        self._show_task("lcca")
         self._show_mode()
         self._redraw()
         self.set_interval(1 / REDRAW_HZ, self._redraw)
@@ -163,6 +181,12 @@ class RunPane(Vertical, can_focus=True):
         pace = "real time" if self.driver_kind == "keyboard" else self._pace_text()
         self.query_one("#mode", Label).update(f"driver: {self.driver_kind} (d)  pace: {pace} (p)")
 
+    def _show_task(self, task: str) -> None:
+        """The live view of `task`'s trials: the LCCA phantom or the NOTES scope."""
+        self.query_one("#phantom-box").border_title = VIEW_TITLES[task]
+        self.query_one(PhantomView).display = task == "lcca"
+        self.query_one(NotesView).display = task == "notes"
+
     def _pace_text(self) -> str:
         return "as fast as it goes" if self.pace is None else f"{self.pace:g}x"
 
@@ -188,6 +212,8 @@ class RunPane(Vertical, can_focus=True):
             self.services.engine, None, code, self.driver_kind, pace, keyboard=keyboard
         )
         self.status = "starting"
+        self._trial_task = nxt.task
+        self._show_task(nxt.task)
         self.query_one("#next", Label).update(f"{code} {nxt.describe()}: loading...")
         self.focus()
         self._run_trial(self.run, (code, nxt.task, nxt.condition))
@@ -265,7 +291,7 @@ class RunPane(Vertical, can_focus=True):
         self.status = "running"
         text = f"running: {event.code} {event.description}  x: stop"
         if self.run is not None and self.run.keyboard is not None:
-            text += "  ↑↓ dial ←→ rotate space let go e end"
+            text += "  " + KEY_HINTS[self._trial_task]
         self.query_one("#next", Label).update(text)
 
     @on(TrialEnded)
@@ -276,9 +302,13 @@ class RunPane(Vertical, can_focus=True):
             self.status = "completed"
             peaks = ""
             if run is not None:
+                first, second = (
+                    ("demanded", "on the fornix") if run.live.task == "notes"
+                    else ("proximal", "distal")
+                )  # fmt: skip
                 peaks = (
-                    f", peaks {run.live.peak_proximal_n:.2f} N proximal,"
-                    f" {run.live.peak_distal_n:.2f} N distal"
+                    f", peaks {run.live.peak_proximal_n:.2f} N {first},"
+                    f" {run.live.peak_distal_n:.2f} N {second}"
                 )
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
         elif outcome.interrupted:
@@ -310,12 +340,20 @@ class RunPane(Vertical, can_focus=True):
             readout.show(text)
             return
         self._redraws.append(time.monotonic())
-        self.query_one(PhantomView).update_frame(frame)
         width = max(readout.content_size.width, 10)
-        aim = run.keyboard.aim_rad if run.keyboard is not None else None
         text = Text(f"t {frame.t_s:6.1f} s   status: {self.status}\n", no_wrap=True)
         text.append(f"view {self.redraw_hz:4.1f} Hz\n", "dim")
-        text.append_text(gauge("proximal", frame.proximal_n, PROXIMAL_FULL_N, 14))
+        if frame.task == "notes":
+            self.query_one(NotesView).update_frame(frame)
+            text.append_text(self._notes_readout(frame, width))
+        else:
+            self.query_one(PhantomView).update_frame(frame)
+            text.append_text(self._lcca_readout(frame, width, run))
+        readout.show(text)
+
+    def _lcca_readout(self, frame, width: int, run: TrialRun) -> Text:
+        aim = run.keyboard.aim_rad if run.keyboard is not None else None
+        text = gauge("proximal", frame.proximal_n, PROXIMAL_FULL_N, 14)
         text.append("\n" + sparkline(frame.proximal_history_n, width, PROXIMAL_FULL_N) + "\n\n")
         text.append_text(gauge("distal", frame.distal_n, DISTAL_FULL_N, 14))
         text.append("\n" + sparkline(frame.distal_history_n, width, DISTAL_FULL_N) + "\n\n")
@@ -326,4 +364,17 @@ class RunPane(Vertical, can_focus=True):
             + (f" (aim {aim:+4.2f})" if aim is not None else "")
             + f"\ntorque on the hand {frame.dial_torque_n_m * 1000:+5.1f} mN m"
         )
-        readout.show(text)
+        return text
+
+    def _notes_readout(self, frame, width: int) -> Text:
+        # forces as magnitudes on the gauges, signed in the numbers (+ push, - pull)
+        text = gauge("demanded", frame.demanded_n, NOTES_FULL_N, 14, magnitude=True)
+        text.append("\n" + sparkline(frame.proximal_history_n, width, NOTES_FULL_N) + "\n\n")
+        text.append_text(gauge("rendered", frame.proximal_n, NOTES_FULL_N, 14, magnitude=True))
+        text.append("\n" + sparkline(frame.distal_history_n, width, NOTES_FULL_N) + "\n\n")
+        text.append(
+            f"tip on the fornix {frame.distal_n:5.2f} N\n"
+            f"torque demanded {frame.torque_demanded_n_m * 1000:+6.1f} mN m\n"
+            f"torque rendered {frame.dial_torque_n_m * 1000:+6.1f} mN m"
+        )
+        return text

@@ -11,11 +11,17 @@ This module adds what a terminal needs around it:
   what it holds, and the trial is marked `interrupted` with `recover_interrupted` (an
   audit entry says why). Closing the app mid-trial goes the same way.
 - `TuiKeyboardDriver`: `teleop_core`'s `KeyboardDriver`, ending the trial when the tip
-  reaches the target (a person at the keys sees it on the screen).
+  reaches the target (a person at the keys sees it on the screen). It drives NOTES
+  blocks too: the NOTES loop reads the same `Driver` (the dial's aim sets the scope's
+  insertion speed, the rotation keys its roll).
+
+LCCA and NOTES samples differ by one column (`teleop_core.notes.task.SAMPLE_COLUMNS`
+adds the demanded torque), which is how `LiveState` tells them apart.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import deque
@@ -76,7 +82,15 @@ class TuiKeyboardDriver(KeyboardDriver):
 
 @dataclass(frozen=True)
 class LiveFrame:
-    """What the live view draws at one redraw."""
+    """What the live view draws at one redraw.
+
+    LCCA: `proximal_n` is the estimate the robot renders (what the study reports),
+    `distal_n` the tip's force; the histories are these two. NOTES (the loop's columns
+    read the NOTES way, `teleop_core.notes.task`): `proximal_n` is the force the device
+    renders, `demanded_n` the force the tissue demands, `distal_n` the tip's force on
+    the fornix, `dial_torque_n_m` the rendered torque, `branch` an index into the NOTES
+    regions; the histories are the demanded and the rendered force's magnitudes.
+    """
 
     t_s: float
     tip_xz_m: tuple[float, float]
@@ -84,19 +98,42 @@ class LiveFrame:
     insertion_m: float
     rotation_rad: float
     proximal_n: float
-    """The estimate the robot renders (what the study reports)."""
     distal_n: float
     dial_angle_rad: float
     dial_torque_n_m: float
     proximal_history_n: tuple[float, ...]
     distal_history_n: tuple[float, ...]
+    task: str = "lcca"
+    demanded_n: float = math.nan
+    torque_demanded_n_m: float = math.nan
 
 
-def _columns() -> dict[str, int]:
-    """Sample column -> index (imported on first use: the loop's module loads torch)."""
+def _columns(width: int) -> tuple[str, dict[str, int]]:
+    """(task, sample column -> index) for samples `width` columns wide (imported on first
+    use: the loop's module loads torch)."""
     from teleop_core.loop.core import SAMPLE_COLUMNS
+    from teleop_core.notes.task import SAMPLE_COLUMNS as NOTES_COLUMNS
 
-    return {name: k for k, name in enumerate(SAMPLE_COLUMNS)}
+    for task, columns in (("lcca", SAMPLE_COLUMNS), ("notes", NOTES_COLUMNS)):
+        if width == len(columns):
+            return task, {name: k for k, name in enumerate(columns)}
+    raise ValueError(
+        f"samples with {width} columns; expected {len(SAMPLE_COLUMNS)} (LCCA) "
+        f"or {len(NOTES_COLUMNS)} (NOTES)"
+    )
+
+
+TRACES = {
+    "lcca": ("proximal_force_est_n", "distal_force_n"),
+    "notes": ("proximal_force_n", "proximal_force_est_n"),
+}
+"""The two force traces the live view plots, per task (NOTES: demanded, rendered)."""
+PEAKS = {
+    "lcca": ("proximal_force_est_n", "distal_force_n"),
+    "notes": ("proximal_force_n", "distal_force_n"),
+}
+"""The columns of the two peaks shown when a trial ends: as the trial's stored
+peak_proximal_force_n / peak_distal_force_n (NOTES: demanded force, tip force)."""
 
 
 class LiveState:
@@ -104,6 +141,8 @@ class LiveState:
 
     def __init__(self, rate_hz: float = 100.0) -> None:
         self._col: dict[str, int] = {}
+        self.task: str | None = None
+        """"lcca" or "notes", known from the first batch."""
         self._lock = threading.Lock()
         self._last: np.ndarray | None = None
         n = round(HISTORY_S * rate_hz)
@@ -115,20 +154,19 @@ class LiveState:
 
     def push(self, samples: np.ndarray) -> None:
         """Take a batch of samples (in the worker); the first call resolves the columns."""
-        COL = self._col = self._col or _columns()
-        if samples.shape[1] != len(COL):  # a NOTES trial: the view draws the LCCA phantom
-            return
+        if not self._col:
+            self.task, self._col = _columns(samples.shape[1])
+        COL, task = self._col, self.task or "lcca"
+        first, second, *peaks = (samples[:, COL[c]] for c in TRACES[task] + PEAKS[task])
+        if task == "notes":  # pushes and pulls alike, as the NOTES summary's peaks
+            first, second, *peaks = (np.abs(v) for v in (first, second, *peaks))
         with self._lock:
             self._last = samples[-1].copy()
-            self._prox.extend(samples[:, COL["proximal_force_est_n"]].tolist())
-            self._dist.extend(samples[:, COL["distal_force_n"]].tolist())
+            self._prox.extend(first.tolist())
+            self._dist.extend(second.tolist())
             self.batches += 1
-            self.peak_proximal_n = max(
-                self.peak_proximal_n, float(samples[:, COL["proximal_force_est_n"]].max())
-            )
-            self.peak_distal_n = max(
-                self.peak_distal_n, float(samples[:, COL["distal_force_n"]].max())
-            )
+            self.peak_proximal_n = max(self.peak_proximal_n, float(peaks[0].max()))
+            self.peak_distal_n = max(self.peak_distal_n, float(peaks[1].max()))
 
     def frame(self) -> LiveFrame | None:
         with self._lock:
@@ -137,6 +175,7 @@ class LiveState:
                 return None
             prox, dist = tuple(self._prox), tuple(self._dist)
         COL = self._col
+        notes = self.task == "notes"
         return LiveFrame(
             t_s=float(row[COL["t_s"]]),
             tip_xz_m=(float(row[COL["tip_x_m"]]), float(row[COL["tip_z_m"]])),
@@ -149,6 +188,9 @@ class LiveState:
             dial_torque_n_m=float(row[COL["dial_torque_n_m"]]),
             proximal_history_n=prox,
             distal_history_n=dist,
+            task=self.task or "lcca",
+            demanded_n=float(row[COL["proximal_force_n"]]) if notes else math.nan,
+            torque_demanded_n_m=float(row[COL["torque_demanded_n_m"]]) if notes else math.nan,
         )
 
 

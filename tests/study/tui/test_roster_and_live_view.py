@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
-from study.tui.live_view import BrailleCanvas, PhantomFrame, gauge, sparkline
+import numpy as np
+
+from study.tui.live_view import BrailleCanvas, PhantomFrame, gauge, notes_scene, sparkline
 from study.tui.services import Roster
+from study.tui.trial_runner import LiveFrame, LiveState
+from teleop_core.notes.task import REGIONS
+from teleop_core.notes.task import SAMPLE_COLUMNS as NOTES_COLUMNS
 from teleop_core.phantom.anatomy import ArchAnatomy
 
 
@@ -78,3 +83,51 @@ def test_gauge_and_sparkline_scale() -> None:
     # maximum of each bin, on eight levels: 0 -> lowest, full scale -> highest
     assert sparkline((0.0, 0.0, 1.0, 0.5), 2, 1.0) == "▁█"
     assert sparkline((), 5, 1.0) == ""
+    # NOTES pulls: the bar by magnitude, the number signed
+    pull = gauge("demanded", -4.0, 10.0, 10, magnitude=True).plain
+    assert pull.count("█") == 4 and "-4.00 N" in pull
+
+
+def test_notes_scene_puts_the_tip_fornix_and_targets_on_their_columns() -> None:
+    # 45 columns: depth 0-220 mm (target 200 mm + 20), roll -90..+90 deg, each over 44 steps
+    frame = LiveFrame(
+        t_s=1.0, tip_xz_m=(0.11, 0.0), branch=REGIONS.index("canal"), insertion_m=0.11,
+        rotation_rad=0.0, proximal_n=0.0, distal_n=0.0, dial_angle_rad=0.0,
+        dial_torque_n_m=0.0, proximal_history_n=(), distal_history_n=(), task="notes",
+        demanded_n=1.0, torque_demanded_n_m=0.0,
+    )  # fmt: skip
+    lines = notes_scene(frame, 45).plain.split("\n")
+    assert lines[0].startswith("depth   110 mm   in the canal")
+    axis, scope = lines[1], lines[2]
+    assert axis.index("┃") == 18  # the fornix: 44 x 90/220 = 18.0
+    # the target zone, 190-210 mm: 44 x 190/220 = 38.0 to 44 x 210/220 = 42.0
+    assert [k for k, ch in enumerate(axis) if ch == "▓"] == [38, 39, 40, 41, 42]
+    assert scope == "━" * 22 + "●"  # 110 mm: 44 x 110/220 = 22.0
+    roll_axis = lines[6]
+    # roll 0 sits on the zero mark (column 22); the target zone, 50-70 deg:
+    # 44 x 140/180 = 34.2 -> 34 to 44 x 160/180 = 39.1 -> 39
+    assert roll_axis.index("●") == 22 and "┼" not in roll_axis
+    assert [k for k, ch in enumerate(roll_axis) if ch == "▓"] == list(range(34, 40))
+
+
+def test_live_state_reads_notes_samples_the_notes_way() -> None:
+    # two NOTES samples: a push of 3 N demanded (2.5 rendered), then a pull of -6 N
+    col = {name: k for k, name in enumerate(NOTES_COLUMNS)}
+    samples = np.zeros((2, len(NOTES_COLUMNS)))
+    for k, (demanded, rendered, tip, torque) in enumerate(((3.0, 2.5, 1.0, 0.02),
+                                                          (-6.0, -5.6, 0.0, -0.05))):  # fmt: skip
+        samples[k, col["t_s"]] = 0.01 * (k + 1)
+        samples[k, col["proximal_force_n"]] = demanded
+        samples[k, col["proximal_force_est_n"]] = rendered
+        samples[k, col["distal_force_n"]] = tip
+        samples[k, col["torque_demanded_n_m"]] = torque
+        samples[k, col["insertion_m"]] = 0.05 * (k + 1)
+    live = LiveState()
+    live.push(samples)
+    frame = live.frame()
+    assert (live.task, frame.task) == ("notes", "notes")
+    assert (frame.demanded_n, frame.proximal_n, frame.torque_demanded_n_m) == (-6.0, -5.6, -0.05)
+    assert frame.insertion_m == 0.1
+    # the traces are magnitudes; the peaks are as the NOTES summary's (max |.|)
+    assert frame.proximal_history_n == (3.0, 6.0) and frame.distal_history_n == (2.5, 5.6)
+    assert (live.peak_proximal_n, live.peak_distal_n) == (6.0, 1.0)

@@ -1,14 +1,23 @@
-"""The run-session screen: a simulated trial to its end, and quitting in the middle of one."""
+"""The run-session screen: a simulated trial to its end, quitting in the middle of one, and
+NOTES trials (their own live view; the keyboard drives them too)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from pathlib import Path
+
 import pytest
-from sqlalchemy import func, select
+from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
+from db.migrate import open_database
 from db.models.audit import AuditEntry
 from db.models.trial import Sample, Trial
 from study.protocol.default_estimator import load_estimator
+from study.protocol.design import parse_design
+from study.protocol.roster import add_participant, create_study
+from study.tui import StudyServices, TuiSettings, make_app
+from study.tui.live_view import NotesView, PhantomView
 from study.tui.run_pane import RunPane
 from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON
@@ -82,3 +91,65 @@ async def test_quitting_mid_trial_marks_it_interrupted_and_keeps_its_samples(
     assert (entry.old_value, entry.new_value, entry.reason) == (
         "running", "interrupted", STOPPED_REASON
     )  # fmt: skip
+
+
+NOTES_DESIGN = """\
+name = "tui notes"
+seed = 4
+tasks = ["notes"]
+trials_per_condition = 1
+practice_trials = 0
+[groups]
+novice = 1
+"""
+
+
+@pytest.fixture
+def notes_engine(tmp_path: Path) -> Iterator[Engine]:
+    """A NOTES-only study with P001 (novice) enrolled."""
+    engine = open_database(str(tmp_path / "notes.db"), create=True)
+    create_study(engine, parse_design(NOTES_DESIGN), NOTES_DESIGN)
+    add_participant(engine, "novice")
+    try:
+        yield engine
+    finally:
+        engine.dispose()
+
+
+async def test_a_notes_trial_shows_the_scope_and_stores_its_samples(
+    notes_engine: Engine, tmp_path: Path
+) -> None:
+    services = StudyServices(notes_engine, load_estimator)
+    app = make_app(services, TuiSettings(simulated_pace=None, figures_dir=tmp_path / "f"))
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _start(pilot, "P001")
+        await wait_for(pilot, lambda: pane.status == "completed", 120)
+        # the NOTES view, not the LCCA phantom, was shown and fed
+        view = app.query_one(NotesView)
+        assert view.display and not app.query_one(PhantomView).display
+        assert view._frame is not None and view._frame.task == "notes"
+        assert app.query_one("#phantom-box").border_title == "NOTES: scope depth and roll"
+        peak = float(pane.last_outcome.split("peaks ")[1].split(" N demanded")[0])
+    with Session(notes_engine) as session:
+        trial = session.scalars(select(Trial)).one()
+        n = session.scalar(select(func.count()).select_from(Sample))
+    assert (trial.task, trial.status, trial.driver) == ("notes", "completed", "simulated")
+    assert n == round(trial.completion_time_s * 100)
+    # the peak shown is the stored one (the demanded force, as `study run` stores it)
+    assert peak == pytest.approx(trial.peak_proximal_force_n, abs=0.005)
+
+
+async def test_the_keyboard_drives_a_notes_trial(notes_engine: Engine, tmp_path: Path) -> None:
+    services = StudyServices(notes_engine, load_estimator)
+    app = make_app(services, TuiSettings(figures_dir=tmp_path / "f"))
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _start(pilot, "P001", "d")  # d: the keyboard drives
+        await wait_for(pilot, lambda: pane.run is not None and pane.run.live.batches > 2, 120)
+        await pilot.press("up", "up", "up", "right")
+        # the aim of 3 steps sets an insertion speed, so the scope goes in and rolls
+        await wait_for(pilot, lambda: pane.run.live.frame().insertion_m > 0.01, 30)
+        await wait_for(pilot, lambda: pane.run.live.frame().rotation_rad > 0.01, 30)
+        await pilot.press("x")
+        await wait_for(pilot, lambda: pane.status == "interrupted", 30)
+    [(status, driver, samples)] = _trials(notes_engine)
+    assert (status, driver) == ("interrupted", "keyboard") and samples > 0
