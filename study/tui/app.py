@@ -7,12 +7,14 @@ wiring between the screens: it loads the `Roster` (in a worker) at start and whe
 screen reports a change (a participant enrolled, a trial ended, a questionnaire saved),
 hands it to every screen, and opens the NASA-TLX form when a trial finishes a block.
 Quitting in the middle of a trial stops it first, so it is marked interrupted and
-every committed sample stays.
+every committed sample stays; closing the terminal (SIGHUP) or SIGTERM quits the same way.
 """
 
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,6 +91,8 @@ class StudyApp(App[None]):
         """Seconds from the app's construction to the first overview with data."""
         self.ready = False
         """True once every screen is mounted (after the overview has shown)."""
+        self.signalled: str | None = None
+        """The signal (SIGHUP, SIGTERM) that ended the app, if one did."""
         self._later_mounted = asyncio.Event()
         """Set when the screens mounted after the overview are in place (or gave up)."""
 
@@ -139,6 +143,28 @@ class StudyApp(App[None]):
     def on_mount(self) -> None:
         self.theme = self.settings.theme
         self.reload()
+        # closing the terminal window (SIGHUP) or `kill` (SIGTERM) quits as ctrl+q does:
+        # a running trial is stopped and marked interrupted, not left `running`
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGHUP, signal.SIGTERM):
+            try:
+                loop.add_signal_handler(sig, self._signalled, sig.name)
+            except (NotImplementedError, RuntimeError, ValueError):  # not the main thread
+                pass
+
+    def _signalled(self, name: str) -> None:
+        self.signalled = name
+        if name == "SIGHUP":
+            self.run_worker(self._hang_up(), exclusive=True, group="hang-up")
+        else:
+            self.call_next(self.action_quit)
+
+    async def _hang_up(self) -> None:
+        """The terminal is gone: stop the trial (marked interrupted, its samples kept),
+        then leave at once. Textual's own exit would restore a terminal that no longer
+        exists, and its writer thread blocks on it for good (seen in tmux)."""
+        await self.stop_trial()
+        os._exit(128 + signal.SIGHUP)
 
     # -- the roster -----------------------------------------------------------------------
 

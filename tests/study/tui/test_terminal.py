@@ -1,15 +1,21 @@
 """The real `study tui` command in a pseudo-terminal: it starts, shows the overview, quits
-cleanly."""
+cleanly; closing the terminal mid-trial keeps the trial as interrupted."""
 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pexpect
-from sqlalchemy import Engine
+from sqlalchemy import Engine, func, select
+from sqlalchemy.orm import Session
+
+from db.models.audit import AuditEntry
+from db.models.trial import Sample, Trial
+from study.tui.trial_runner import STOPPED_REASON
 
 
 def test_study_tui_in_a_pseudo_terminal(study_engine: Engine, tmp_path: Path) -> None:
@@ -58,3 +64,44 @@ def test_the_overview_loads_neither_numpy_nor_the_other_screens(study_engine: En
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_closing_the_terminal_mid_trial_marks_the_trial_interrupted(
+    study_engine: Engine, tmp_path: Path
+) -> None:
+    # the terminal window closes (SIGHUP) while P001's trial runs: the app stops the
+    # trial, which is kept as interrupted with its committed samples, and exits
+    db = study_engine.url.database
+    study = Path(sys.executable).with_name("study")
+    env = {**os.environ, "TERM": "xterm-256color"}
+    child = pexpect.spawn(
+        str(study), ["tui", "--db", str(db), "--pace", "1"], dimensions=(24, 80), env=env,
+        cwd=str(tmp_path), timeout=120, encoding="utf-8",
+    )  # fmt: skip
+    try:
+        child.expect("Sessions done")
+        child.send("\x1bOR")  # F3: the run screen
+        child.expect("pick a participant")
+        child.send("\t")  # to the participant list
+        child.send("\r")  # open it: its options are drawn
+        child.expect("P002")
+        child.send("\x1b[B")  # down to P001
+        child.send("\r")  # choose it
+        child.expect("next: P001")
+        child.send("s")
+        child.expect("running: P001")
+        child.expect(r"t +[1-9]\.\d s")  # a second of the trial has gone by
+        child.kill(signal.SIGHUP)
+        child.expect(pexpect.EOF)
+        child.wait()
+    finally:
+        child.close(force=True)
+    assert child.exitstatus == 128 + signal.SIGHUP
+    with Session(study_engine) as session:
+        trial = session.scalars(select(Trial)).one()
+        samples = session.scalar(select(func.count()).select_from(Sample))
+        entry = session.scalars(select(AuditEntry)).one()
+    assert trial.status == "interrupted" and samples >= 100
+    assert (entry.old_value, entry.new_value, entry.reason) == (
+        "running", "interrupted", STOPPED_REASON
+    )  # fmt: skip
