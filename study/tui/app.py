@@ -91,8 +91,6 @@ class StudyApp(App[None]):
         """Seconds from the app's construction to the first overview with data."""
         self.ready = False
         """True once every screen is mounted (after the overview has shown)."""
-        self.signalled: str | None = None
-        """The signal (SIGHUP, SIGTERM) that ended the app, if one did."""
         self._later_mounted = asyncio.Event()
         """Set when the screens mounted after the overview are in place (or gave up)."""
 
@@ -148,13 +146,12 @@ class StudyApp(App[None]):
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGHUP, signal.SIGTERM):
             try:
-                loop.add_signal_handler(sig, self._signalled, sig.name)
+                loop.add_signal_handler(sig, self._signalled, sig)
             except (NotImplementedError, RuntimeError, ValueError):  # not the main thread
                 pass
 
-    def _signalled(self, name: str) -> None:
-        self.signalled = name
-        if name == "SIGHUP":
+    def _signalled(self, sig: signal.Signals) -> None:
+        if sig == signal.SIGHUP:
             self.run_worker(self._hang_up(), exclusive=True, group="hang-up")
         else:
             self.call_next(self.action_quit)

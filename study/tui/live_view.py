@@ -321,59 +321,52 @@ def notes_scene(frame: LiveFrame | None, cols: int) -> Text:
     roll = frame.rotation_rad if frame is not None else 0.0
     breached = frame is not None and notes_region(frame.branch) in ("cavity", "target")
 
-    def column(v: float) -> int:
-        return _axis_column(v, 0.0, end_m, cols)
+    def column(depth_m: float) -> int:
+        return _axis_column(depth_m, 0.0, end_m, cols)
 
-    fornix = column(FORNIX_M)
-    target = range(column(TARGET_M - TARGET_TOLERANCE_M), column(TARGET_M + TARGET_TOLERANCE_M) + 1)
+    def roll_column(roll_rad: float) -> int:
+        return _axis_column(roll_rad, -NOTES_ROLL_SPAN_RAD, NOTES_ROLL_SPAN_RAD, cols)
+
+    def axis(marks: dict[int, tuple[str, str]], zone: range) -> None:
+        """One axis line: `marks` (column -> character, style) over the target zone."""
+        for c in range(cols):
+            if c in marks:
+                text.append(*marks[c])
+            elif c in zone:
+                text.append("▓", TARGET_STYLE)
+            else:
+                text.append("─", "dim")
+        text.append("\n")
+
     text = Text(no_wrap=True, overflow="crop")
     where = notes_region(frame.branch) if frame is not None else "outside"
     text.append(f"depth {depth * 1000:5.0f} mm   in the {where}\n")
-    # the canal, the fornix (dim once breached) and the target zone
-    for c in range(cols):
-        if c == fornix:
-            text.append("┃", "dim" if breached else "bold")
-        elif c in target:
-            text.append("▓", TARGET_STYLE)
-        else:
-            text.append("─", "dim")
-    text.append("\n")
-    tip = column(depth)
-    text.append("━" * tip, "bold")
-    text.append("●", TIP_STYLE)
-    text.append("\n")
+    # the canal, the fornix (dim once breached) and the target zone; then the scope
+    fornix = column(FORNIX_M)
+    target = range(column(TARGET_M - TARGET_TOLERANCE_M), column(TARGET_M + TARGET_TOLERANCE_M) + 1)
+    axis({fornix: ("┃", "dim" if breached else "bold")}, target)
+    text.append("━" * column(depth), "bold")
+    text.append("●\n", TIP_STYLE)
     labels = [" "] * cols
     for at, word in ((0, "introitus"), (fornix, "fornix"), (target.start, "target")):
         for k, ch in enumerate(word[: max(cols - at, 0)]):
             labels[at + k] = ch
     text.append("".join(labels), "dim")
-    # the roll
-    target_roll = range(
-        _axis_column(TARGET_ROLL_RAD - TARGET_ROLL_TOLERANCE_RAD, -NOTES_ROLL_SPAN_RAD,
-                     NOTES_ROLL_SPAN_RAD, cols),
-        _axis_column(TARGET_ROLL_RAD + TARGET_ROLL_TOLERANCE_RAD, -NOTES_ROLL_SPAN_RAD,
-                     NOTES_ROLL_SPAN_RAD, cols) + 1,
-    )  # fmt: skip
-    zero = _axis_column(0.0, -NOTES_ROLL_SPAN_RAD, NOTES_ROLL_SPAN_RAD, cols)
-    now = _axis_column(roll, -NOTES_ROLL_SPAN_RAD, NOTES_ROLL_SPAN_RAD, cols)
+    # the roll: the scope's mark over the zero mark and the target zone
     text.append(
         f"\n\nroll {math.degrees(roll):+5.0f} deg   target "
         f"{math.degrees(TARGET_ROLL_RAD):+.0f} +/- {math.degrees(TARGET_ROLL_TOLERANCE_RAD):.0f}\n"
     )
-    for c in range(cols):
-        if c == now:
-            text.append("●", TIP_STYLE)
-        elif c in target_roll:
-            text.append("▓", TARGET_STYLE)
-        else:
-            text.append("┼" if c == zero else "─", "dim")
-    text.append("\n")
-    ends = f"-{math.degrees(NOTES_ROLL_SPAN_RAD):.0f}"
-    right = f"+{math.degrees(NOTES_ROLL_SPAN_RAD):.0f}"
-    middle = max(zero - len(ends), 1)
-    text.append(
-        (ends + " " * middle + "0").ljust(cols - len(right))[: cols - len(right)] + right, "dim"
+    zero = roll_column(0.0)
+    target_roll = range(
+        roll_column(TARGET_ROLL_RAD - TARGET_ROLL_TOLERANCE_RAD),
+        roll_column(TARGET_ROLL_RAD + TARGET_ROLL_TOLERANCE_RAD) + 1,
     )
+    axis({zero: ("┼", "dim"), roll_column(roll): ("●", TIP_STYLE)}, target_roll)
+    left = f"-{math.degrees(NOTES_ROLL_SPAN_RAD):.0f}"
+    right = f"+{math.degrees(NOTES_ROLL_SPAN_RAD):.0f}"
+    scale = (left + " " * max(zero - len(left), 1) + "0").ljust(cols - len(right))
+    text.append(scale[: cols - len(right)] + right, "dim")
     return text
 
 
