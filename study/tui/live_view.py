@@ -339,8 +339,8 @@ def notes_scene(frame: LiveFrame | None, cols: int) -> Text:
         text.append("\n")
 
     text = Text(no_wrap=True, overflow="crop")
-    where = notes_region(frame.branch) if frame is not None else "outside"
-    text.append(f"depth {depth * 1000:5.0f} mm   in the {where}\n")
+    where = f"in the {notes_region(frame.branch)}" if frame is not None else "(no sample yet)"
+    text.append(f"depth {depth * 1000:5.0f} mm   {where}\n")
     # the canal, the fornix (dim once breached) and the target zone; then the scope
     fornix = column(FORNIX_M)
     target = range(column(TARGET_M - TARGET_TOLERANCE_M), column(TARGET_M + TARGET_TOLERANCE_M) + 1)
