@@ -47,7 +47,7 @@ def resolve_url(db: str | URL | None = None) -> URL:
         return URL.create("sqlite", database=str(Path(raw).expanduser()))
     try:
         url = make_url(raw)
-    except ArgumentError:
+    except (ArgumentError, ValueError):  # ValueError: a port that is not a number
         raise DbInputError(
             f"database URL {raw!r} is not a URL; expected e.g. sqlite:///study.db "
             "or postgresql+psycopg://user@host:5432/dbname"

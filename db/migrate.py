@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from alembic.script import ScriptDirectory
 
 MIGRATIONS_DIR = Path(__file__).parent / "migrations"
-HEAD_REVISION = "0001"
+HEAD_REVISION = "0002_integrity"
 """The newest revision in `db/migrations/versions` (kept equal to it by a test)."""
 VERSION_TABLE = "alembic_version"
 
@@ -164,6 +164,7 @@ def _reading_connection(url: URL) -> Iterator[Connection]:
     """A connection that changes nothing: an SQLite file is opened read-only, so that a
     file which turns out not to be a study database is left exactly as it was."""
     path = _sqlite_path(url)
+    shown = describe(url)
     if path is not None:
         url = url.set(database=f"file:{path}", query={"mode": "ro", "uri": "true"})
     engine = make_engine(url)
@@ -171,7 +172,7 @@ def _reading_connection(url: URL) -> Iterator[Connection]:
         with engine.connect() as conn:
             yield conn
     except DBAPIError as exc:
-        raise _cannot_open(describe(url), exc) from None
+        raise _cannot_open(shown, exc) from None
     finally:
         engine.dispose()
 

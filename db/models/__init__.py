@@ -6,6 +6,7 @@
 
 from db.models.audit import AuditEntry
 from db.models.calibration import Calibration
+from db.models.lease import SessionLease
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, Sample, Trial
@@ -19,6 +20,7 @@ __all__ = [
     "Participant",
     "Sample",
     "ScheduleBlock",
+    "SessionLease",
     "Study",
     "TlxResponse",
     "Trial",

@@ -24,12 +24,55 @@ class InputError(click.ClickException):
         self.ctx = ctx
 
 
+def database_failure(exc: BaseException, db_url: str | None = None) -> str | None:
+    """One line for a database that cannot be used (corrupted file, full disk, server
+    gone, permission), or None for anything else.
+
+    Integrity and programming errors are not here: they are bugs and keep their
+    traceback. SQLAlchemy is imported only when a command has failed.
+    """
+    module = type(exc).__module__.split(".")[0]
+    if module == "sqlalchemy":
+        from sqlalchemy.exc import DatabaseError, IntegrityError, ProgrammingError
+
+        if not isinstance(exc, DatabaseError) or isinstance(exc, IntegrityError | ProgrammingError):
+            return None
+        orig: BaseException | None = exc.orig
+    elif module in ("sqlite3", "psycopg") and type(exc).__name__ in (
+        "OperationalError",
+        "DatabaseError",
+        "DiskFull",
+    ):  # raised through a driver cursor (the sample writer's bulk path)
+        orig = exc
+    else:
+        return None
+    from db.engine import describe, resolve_url
+
+    try:
+        shown = describe(resolve_url(db_url))
+    except ValueError:
+        shown = "the study database"
+    text = str(orig).strip() if orig is not None else ""
+    reason = text.splitlines()[0] if text else type(exc).__name__
+    if "full" in reason.lower():
+        return f"database {shown} is full ({reason}); expected free space: nothing more was stored"
+    return (
+        f"database {shown} cannot be used: {reason}; expected an intact, reachable study "
+        "database (restore a corrupted file from its backup)"
+    )
+
+
 class StudyCommand(click.Command):
     def invoke(self, ctx: click.Context) -> Any:
         try:
             return super().invoke(ctx)
         except USER_ERRORS as exc:
             raise InputError(str(exc), ctx) from exc
+        except Exception as exc:
+            message = database_failure(exc, ctx.params.get("db_url"))
+            if message is None:
+                raise
+            raise InputError(message, ctx) from exc
 
 
 class StudyGroup(click.Group):
@@ -45,4 +88,13 @@ db_option = click.option(
     default=None,
     help="Study database: SQLite path or URL, or postgresql+psycopg://... "
     "[default: ./study.db; env STUDY_DB]",
+)
+
+
+actor_option = click.option(
+    "--actor",
+    metavar="NAME",
+    default=None,
+    help="Who acts, for the audit log and session leases, e.g. an experimenter code "
+    "[default: $STUDY_ACTOR, else user@host]",
 )

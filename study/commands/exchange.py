@@ -34,14 +34,101 @@ def import_cmd(trials_csv: Path, tlx_csv: Path | None, db_url: str | None) -> No
     "--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True
 )
 @click.option("--samples", is_flag=True, help="Also write every sample of every measured trial.")
+@click.option(
+    "--participant",
+    "participants",
+    multiple=True,
+    metavar="CODE",
+    help="Samples of this participant only (repeat for several).",
+)
+@click.option(
+    "--task", "tasks", multiple=True, metavar="NAME", help="Samples of this task only (repeatable)."
+)
+@click.option(
+    "--condition",
+    "conditions",
+    multiple=True,
+    metavar="NAME",
+    help="Samples of this condition only (repeatable).",
+)
+@click.option(
+    "--trial",
+    "trials",
+    multiple=True,
+    type=click.IntRange(min=1),
+    metavar="N",
+    help="Samples of measured trial N of each block only, from 1 (repeatable).",
+)
+@click.option(
+    "--from-s",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="Samples at or after this time since the trial started, s.",
+)
+@click.option(
+    "--to-s",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="Samples before this time since the trial started, s.",
+)
+@click.option(
+    "--per-trial",
+    is_flag=True,
+    help="One samples file per trial in OUT/samples/; a rerun skips the files already "
+    "complete (resumes an interrupted export).",
+)
 @db_option
-def export_cmd(out_dir: Path, fmt: str, samples: bool, db_url: str | None) -> None:
-    """Export trials, TLX (and samples) with a codebook, for other tools."""
-    from study.protocol.exchange import export_data
+def export_cmd(
+    out_dir: Path,
+    fmt: str,
+    samples: bool,
+    participants: tuple[str, ...],
+    tasks: tuple[str, ...],
+    conditions: tuple[str, ...],
+    trials: tuple[int, ...],
+    from_s: float | None,
+    to_s: float | None,
+    per_trial: bool,
+    db_url: str | None,
+) -> None:
+    """Export trials, TLX (and samples) with a codebook, for other tools.
 
+    Samples stream in bounded memory; --participant, --task, --condition, --trial,
+    --from-s and --to-s restrict the samples (not the trials and TLX files).
+    """
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    from study.protocol.exchange import export_data
+    from study.protocol.sample_export import SampleSelection
+
+    selection = SampleSelection(participants, tasks, conditions, trials, from_s, to_s)
     engine = open_database(db_url, create=False)
+    created = not out_dir.exists()
     try:
-        written = export_data(engine, out_dir, fmt, samples)
+        with Progress(
+            "[progress.description]{task.description}",
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeRemainingColumn(),
+            transient=True,
+            console=Console(stderr=True),
+        ) as bar:
+            task = bar.add_task("exporting samples (trials)", total=None)
+            written = export_data(
+                engine,
+                out_dir,
+                fmt,
+                samples,
+                selection,
+                per_trial=per_trial,
+                progress=lambda done, total: bar.update(task, completed=done, total=total),
+            )
+    except BaseException:
+        # nothing half-written: a folder this command made and left empty goes again
+        if created and out_dir.is_dir() and not any(out_dir.iterdir()):
+            out_dir.rmdir()
+        raise
     finally:
         engine.dispose()
     for path in written:

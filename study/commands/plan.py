@@ -25,13 +25,37 @@ from study.protocol.roster import add_participant, create_study, schedule
 @db_option
 def init(design_path: Path, db_url: str | None) -> None:
     """Create the study database from a design file."""
+    from db.engine import resolve_url
+
     if not design_path.is_file():
         raise StudyInputError(f"design file {design_path} does not exist")
-    text = design_path.read_text()
+    raw = design_path.read_bytes()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise StudyInputError(
+            f"design file {design_path} is not UTF-8 text (byte {raw[exc.start]:#04x} at "
+            f"offset {exc.start}); expected a UTF-8 TOML file"
+        ) from None
     design = parse_design(text, str(design_path))  # all checks before anything is written
-    engine = open_database(db_url, create=True)
+    url = resolve_url(db_url)
+    new_file = (
+        Path(url.database)
+        if url.get_backend_name() == "sqlite"
+        and url.database not in (None, "", ":memory:")
+        and not Path(url.database).exists()
+        else None
+    )
+    engine = open_database(url, create=True)
     try:
         create_study(engine, design, text)
+    except BaseException:
+        # nothing half-written: a database file this command created goes again
+        engine.dispose()
+        if new_file is not None:
+            for suffix in ("", "-wal", "-shm", "-journal"):
+                Path(f"{new_file}{suffix}").unlink(missing_ok=True)
+        raise
     finally:
         engine.dispose()
     sizes = ", ".join(f"{g} {n}" for g, n in design.groups.items())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 
 import click
@@ -9,7 +10,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, db_option
+from study.commands.base import StudyCommand, actor_option, db_option
 from study.errors import StudyInputError
 from study.protocol.roster import schedule
 
@@ -38,6 +39,7 @@ from study.protocol.roster import schedule
     type=click.FloatRange(min=0, min_open=True),
     help="Run a simulated session at this many times real time [default: as fast as it goes].",
 )
+@actor_option
 @db_option
 def run(
     code: str | None,
@@ -46,18 +48,27 @@ def run(
     driver: str,
     port: str | None,
     pace: float | None,
+    actor: str | None,
     db_url: str | None,
 ) -> None:
-    """Run the participant's remaining scheduled trials and store every sample."""
+    """Run the participant's remaining scheduled trials and store every sample.
+
+    One session per participant: while one runs (here or on another machine sharing the
+    database), a second is refused; one whose process died is taken over.
+    """
+    from study.protocol.actor import current_actor
     from study.protocol.default_estimator import load_estimator
     from study.protocol.session import run_session
 
     if (code is None) == (not run_all):
         raise StudyInputError("give --participant CODE or --all; expected exactly one")
+    if pace is not None and not math.isfinite(pace):
+        raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
+    who = current_actor(actor)
     if run_all:
         if driver != "simulated":
             raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
-        _run_all(db_url, jobs, pace)
+        _run_all(db_url, jobs, pace, who)
         return
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")
@@ -65,9 +76,17 @@ def run(
     if driver == "hardware":
         if not port:
             raise StudyInputError("--driver hardware needs --port, e.g. --port /dev/ttyUSB0")
-        from teleop_core.loop.hardware import HardwareDriver
+        from teleop_core.loop.hardware import HardwareDriver, HardwareError
 
-        make_driver = lambda: HardwareDriver.open(port)  # noqa: E731
+        def make_driver() -> HardwareDriver:
+            try:
+                return HardwareDriver.open(port)
+            except HardwareError as exc:  # before the trial's row: nothing is written
+                raise StudyInputError(
+                    f"--port {port}: {exc}; expected the serial port of the dial's ESP32, "
+                    "e.g. /dev/ttyUSB0"
+                ) from None
+
     estimator = load_estimator()
     engine = open_database(db_url, create=False)
     try:
@@ -84,7 +103,9 @@ def run(
                     f"{kind} {item.trial_index + 1}",
                 )
 
-            done = run_session(engine, code, driver, estimator, make_driver, pace, report)
+            done = run_session(
+                engine, code, driver, estimator, make_driver, pace, report, actor=who
+            )
     finally:
         engine.dispose()
     click.echo(f"{code}: {len(done)} trials completed and stored")
@@ -101,7 +122,7 @@ def _progress() -> Progress:
     )
 
 
-def _run_all(db_url: str | None, jobs: int, pace: float | None) -> None:
+def _run_all(db_url: str | None, jobs: int, pace: float | None, actor: str) -> None:
     from study.protocol.session import run_participants
 
     engine = open_database(db_url, create=False)
@@ -111,11 +132,23 @@ def _run_all(db_url: str | None, jobs: int, pace: float | None) -> None:
         engine.dispose()
     start = time.monotonic()
     total = 0
+    busy: list[str] = []
     with _progress() as progress:
         bar = progress.add_task("participants", total=len(codes))
-        for code, n in run_participants(db_url, codes, jobs, pace):
+
+        def skipped(code: str, message: str) -> None:
+            busy.append(code)
+            progress.console.print(f"study run: skipped: {message}", markup=False)
+
+        for code, n in run_participants(db_url, codes, jobs, pace, actor, skipped):
             total += n
             progress.update(bar, advance=1, description=f"participants ({code} done)")
+    if busy:
+        click.echo(
+            f"{len(busy)} participant(s) skipped, their sessions running elsewhere: "
+            + ", ".join(busy),
+            err=True,
+        )
     click.echo(
         f"{len(codes)} participants, {total} trials completed and stored in "
         f"{time.monotonic() - start:.1f} s with {jobs} process(es)"

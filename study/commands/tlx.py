@@ -11,7 +11,7 @@ from sqlalchemy.orm import Session
 from db.migrate import open_database
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from study.commands.base import StudyGroup, db_option
+from study.commands.base import StudyGroup, actor_option, db_option
 from study.errors import StudyInputError
 from study.protocol.roster import load_study
 from study.protocol.tlx import pair_order, raw_tlx, store_tlx, weighted_tlx
@@ -62,8 +62,11 @@ def _rating(name: str):
     help="The 15 subscales chosen, comma-separated, in the order of `study tlx pairs`.",
 )
 @click.option(
-    "--reason", help="Why a stored questionnaire is being edited (kept in the audit log)."
+    "--reason",
+    help="Why a stored questionnaire is being edited (required for an edit; kept in the "
+    "audit log).",
 )
+@actor_option
 @db_option
 def enter_cmd(
     code: str,
@@ -71,6 +74,7 @@ def enter_cmd(
     condition: str,
     choices: str | None,
     reason: str | None,
+    actor: str | None,
     db_url: str | None,
     **ratings: int,
 ) -> None:
@@ -78,7 +82,7 @@ def enter_cmd(
     chosen = [c.strip() for c in choices.split(",")] if choices else None
     engine = open_database(db_url, create=False)
     try:
-        response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason)
+        response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
     finally:
         engine.dispose()
     scores = f"raw TLX {raw_tlx(ratings):.1f}"

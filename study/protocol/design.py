@@ -15,6 +15,7 @@ orders' counts differ by at most one.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import asdict, dataclass, field
 from typing import Any
@@ -23,6 +24,19 @@ from study.errors import StudyInputError
 
 KNOWN_TASKS = ("lcca", "notes")
 KNOWN_CONDITIONS = ("VO", "HV")
+MAX_TRIAL_S = 180.0
+"""A trial ends unsuccessfully after this long (the session runner's limit), s."""
+MAX_SEED = 2**31 - 1
+"""Seeds are stored in an INTEGER column (32 bits on PostgreSQL) and fed to numpy (>= 0)."""
+MAX_TRIALS_PER_CONDITION = 100
+MAX_PRACTICE_TRIALS = 20
+MAX_GROUP_SIZE = 1000
+MAX_BREAK_S = 3600.0
+"""Sane sizes (issue 18: 2**63 trials, a group of 1e12 and a break of inf were accepted):
+far above any lab study, far below what breaks storage or a schedule."""
+MAX_GROUP_CHARS = 32
+MAX_NAME_CHARS = 200
+"""Column widths of `participants.group` and `studies.name` (PostgreSQL enforces them)."""
 DEFAULT_GROUPS = ("outsider", "novice", "expert")
 """The paper's experience groups (seed 000, IV-D), the simulated participants' groups."""
 
@@ -132,18 +146,37 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
     if not groups:
         raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
     for g, n in groups.items():
-        if not (isinstance(n, int) and not isinstance(n, bool) and n >= 1):
-            raise StudyInputError(f"{source}: groups.{g} = {n!r}; expected a whole number >= 1")
-    for key, low in (("trials_per_condition", 1), ("practice_trials", 0)):
+        if not (0 < len(g) <= MAX_GROUP_CHARS and g.isprintable() and g.strip() == g):
+            raise StudyInputError(
+                f"{source}: group name {g!r}; expected 1-{MAX_GROUP_CHARS} printable "
+                "characters without surrounding spaces"
+            )
+        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_GROUP_SIZE):
+            raise StudyInputError(
+                f"{source}: groups.{g} = {n!r}; expected a whole number from 1 to {MAX_GROUP_SIZE}"
+            )
+    for key, low, high in (
+        ("trials_per_condition", 1, MAX_TRIALS_PER_CONDITION),
+        ("practice_trials", 0, MAX_PRACTICE_TRIALS),
+        ("seed", 0, MAX_SEED),
+    ):
         value = data.get(key, getattr(d, key))
-        if value < low:
-            raise StudyInputError(f"{source}: {key} = {value!r}; expected >= {low}")
-    if data.get("break_s", d.break_s) < 0:
-        raise StudyInputError(f"{source}: break_s = {data['break_s']!r}; expected >= 0")
-    prefix = data.get("code_prefix", d.code_prefix)
-    if not (1 <= len(prefix) <= 4 and prefix.isalpha() and prefix.isupper()):
+        if not low <= value <= high:
+            raise StudyInputError(f"{source}: {key} = {value!r}; expected {low} to {high}")
+    break_s = data.get("break_s", d.break_s)
+    if not (math.isfinite(break_s) and 0 <= break_s <= MAX_BREAK_S):
         raise StudyInputError(
-            f"{source}: code_prefix = {prefix!r}; expected 1-4 capital letters, e.g. P"
+            f"{source}: break_s = {break_s!r}; expected 0 to {MAX_BREAK_S:g} s"
+        )
+    name = data.get("name", d.name)
+    if not (0 < len(name.strip()) and len(name) <= MAX_NAME_CHARS and name.isprintable()):
+        raise StudyInputError(
+            f"{source}: name = {name!r}; expected 1-{MAX_NAME_CHARS} printable characters"
+        )
+    prefix = data.get("code_prefix", d.code_prefix)
+    if not (1 <= len(prefix) <= 4 and prefix.isascii() and prefix.isalpha() and prefix.isupper()):
+        raise StudyInputError(
+            f"{source}: code_prefix = {prefix!r}; expected 1-4 capital letters A-Z, e.g. P"
         )
     scheme = data.get("counterbalancing", d.counterbalancing)
     design = StudyDesign(

@@ -19,6 +19,7 @@ from study.errors import StudyInputError
 from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.core import LoopConfig, TeleopLoop
+from teleop_core.loop.link import LinkParams
 from teleop_core.master.params import HapticParams
 from teleop_core.phantom.lcca import LccaPhantom
 
@@ -73,10 +74,15 @@ def lcca_loop(
     estimator: ForceEstimator | None,
     haptic_gain: float | None = None,
     phantom: LccaPhantom | None = None,
+    link: LinkParams | None = None,
 ) -> TeleopLoop:
-    """The closed loop of one LCCA trial under `condition` (not yet started)."""
+    """The closed loop of one LCCA trial under `condition` (not yet started); `link`
+    (delay, jitter, loss) applies to both directions, default the paper's wired link."""
     phantom = phantom or LccaPhantom()
-    config = LoopConfig(haptics=condition_haptics(condition, haptic_gain))
+    link = link or LinkParams()
+    config = LoopConfig(
+        haptics=condition_haptics(condition, haptic_gain), to_follower=link, to_master=link
+    )
     return TeleopLoop(config, phantom.environment(), estimator=estimator, seed=seed)
 
 
@@ -102,10 +108,11 @@ def run_lcca_trial(
     haptic_gain: float | None = None,
     max_s: float = 180.0,
     phantom: LccaPhantom | None = None,
+    link: LinkParams | None = None,
 ) -> TrialResult:
     """Run one headless trial to success or `max_s`."""
     phantom = phantom or LccaPhantom()
-    loop = lcca_loop(condition, seed, estimator, haptic_gain, phantom)
+    loop = lcca_loop(condition, seed, estimator, haptic_gain, phantom, link)
     participant = SimulatedParticipant(traits, phantom, give_up_s=max_s)
     result = loop.run(max_s, participant)
     frame = trial_frame(result.to_frame())

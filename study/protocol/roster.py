@@ -15,12 +15,14 @@ from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session, selectinload
 
 from db.engine import write_transaction
-from db.models.study import Participant, ScheduleBlock, Study
+from db.models.study import CODE_PATTERN, Participant, ScheduleBlock, Study
 from db.models.trial import Trial
 from study.errors import StudyInputError
 from study.protocol.design import StudyDesign, next_order
 
 CODE_DIGITS = 3
+MAX_SITE_CHARS = 64
+"""`participants.site` holds 64 characters (PostgreSQL refuses more; SQLite would not)."""
 
 
 def create_study(engine: Engine, design: StudyDesign, design_toml: str) -> Study:
@@ -79,6 +81,30 @@ def plan_blocks(design: StudyDesign, order: tuple[str, ...]) -> list[dict[str, A
     return blocks
 
 
+def next_code(session: Session, study: Study, prefix: str) -> str:
+    """The code after the highest `PREFIX<digits>` code of the study.
+
+    Not the participant count plus one: with imported participants (any code) that
+    collides with a code already taken (issue 18: P001-P002 enrolled, P004 imported,
+    the next enrolment chose P004 and every later one failed). Gaps are not reused, so
+    codes keep the order of enrolment.
+    """
+    codes = session.scalars(
+        select(Participant.code).where(
+            Participant.study_id == study.id, Participant.code.like(f"{prefix}%")
+        )
+    ).all()
+    digits = [c[len(prefix) :] for c in codes]
+    numbers = [int(d) for d in digits if d.isascii() and d.isdecimal()]
+    code = f"{prefix}{max(numbers, default=0) + 1:0{CODE_DIGITS}d}"
+    if not CODE_PATTERN.match(code):
+        raise StudyInputError(
+            f"next participant code {code!r} has more than 6 digits; expected codes "
+            f"{prefix}001 to {prefix}999999"
+        )
+    return code
+
+
 def add_participant(engine: Engine, group: str, site: str | None = None) -> Participant:
     """Enrol the next participant of `group`: next code, balancing order, schedule."""
     with write_transaction(engine) as conn, Session(bind=conn) as session:
@@ -87,16 +113,17 @@ def add_participant(engine: Engine, group: str, site: str | None = None) -> Part
             raise StudyInputError(
                 f"unknown group {group!r}; expected one of {', '.join(design.groups)}"
             )
+        if site is not None and not (0 < len(site) <= MAX_SITE_CHARS and site.isprintable()):
+            raise StudyInputError(
+                f"site {site!r}; expected 1-{MAX_SITE_CHARS} printable characters"
+            )
         used = session.scalars(
             select(Participant.condition_order).where(
                 Participant.study_id == study.id, Participant.group == group
             )
         ).all()
         order = next_order(design, group, [tuple(u) for u in used])
-        count = session.scalar(
-            select(func.count()).select_from(Participant).where(Participant.study_id == study.id)
-        )
-        code = f"{design.code_prefix}{count + 1:0{CODE_DIGITS}d}"
+        code = next_code(session, study, design.code_prefix)
         participant = Participant(
             study_id=study.id, code=code, group=group, condition_order=list(order), site=site
         )

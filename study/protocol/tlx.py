@@ -7,13 +7,16 @@ picked (0-5, summing to 15); the weighted TLX is sum(weight x rating) / 15.
 
 The pairs are presented in an order (and left/right placement) drawn per participant
 from the study's seed, so it is random across participants and reproducible.
-A stored questionnaire can be edited; every changed value is written to the audit log
-first, with the old and new values and the reason.
+A stored questionnaire can be edited, with a reason; every changed value (the pairwise
+choices too) is written to the audit log with the old and new values, the reason and
+the actor (`study.protocol.actor`).
 """
 
 from __future__ import annotations
 
 import itertools
+import json
+import math
 import zlib
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -26,6 +29,7 @@ from db.models.audit import AuditEntry
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from study.errors import StudyInputError
+from study.protocol.actor import current_actor
 from study.protocol.roster import find_participant, load_study
 
 PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
@@ -37,6 +41,7 @@ def check_rating(subscale: str, value: object) -> int:
     if (
         isinstance(value, bool)
         or not isinstance(value, int | float)
+        or not math.isfinite(value)
         or value != int(value)
         or not 0 <= value <= 100
         or int(value) % 5
@@ -59,7 +64,13 @@ def check_weights(weights: Mapping[str, object]) -> dict[str, int]:
     out = {}
     for s in TLX_SUBSCALES:
         w = weights.get(s)
-        if isinstance(w, bool) or not isinstance(w, int | float) or w != int(w) or not 0 <= w <= 5:
+        if (
+            isinstance(w, bool)
+            or not isinstance(w, int | float)
+            or not math.isfinite(w)
+            or w != int(w)
+            or not 0 <= w <= 5
+        ):
             raise StudyInputError(f"{s} weight {w!r}; expected a whole number of choices 0-5")
         out[s] = int(w)
     if sum(out.values()) != 15:
@@ -114,9 +125,15 @@ def store_tlx(
     ratings: Mapping[str, object],
     chosen: Sequence[str] | None = None,
     reason: str | None = None,
+    actor: str | None = None,
 ) -> tuple[TlxResponse, bool]:
-    """Store (or edit) the questionnaire of one block; return it and whether it was new."""
+    """Store (or edit) the questionnaire of one block; return it and whether it was new.
+
+    An edit needs a `reason`; `actor` defaults to `current_actor()`.
+    """
     ratings = check_ratings(ratings)
+    who = current_actor(actor)
+    reason = reason.strip() if reason is not None else None
     with Session(engine) as session, session.begin():
         study, _ = load_study(session)
         participant = find_participant(session, study, code)
@@ -152,9 +169,15 @@ def store_tlx(
             session.flush()
             session.expunge(response)
             return response, True
+        if not reason:
+            raise StudyInputError(
+                f"{code} {task}/{condition} already has a questionnaire; an edit needs a "
+                "reason (--reason TEXT), kept in the audit log"
+            )
         if chosen is None:  # keep the stored comparisons when only ratings are edited
             values.update({f"w_{s}": getattr(existing, f"w_{s}") for s in TLX_SUBSCALES})
             pairwise = existing.pairwise
+        values["pairwise"] = pairwise
         for name, new in values.items():
             old = getattr(existing, name)
             if old != new:
@@ -163,17 +186,24 @@ def store_tlx(
                         entity="tlx_response",
                         entity_id=existing.id,
                         field=name,
-                        old_value=None if old is None else str(old),
-                        new_value=None if new is None else str(new),
-                        reason=reason or "edited with `study tlx enter`",
+                        old_value=_audit_text(old),
+                        new_value=_audit_text(new),
+                        reason=reason,
+                        actor=who,
                     )
                 )
                 setattr(existing, name, new)
-        existing.pairwise = pairwise
         existing.updated_at = utcnow()
         session.flush()
         session.expunge(existing)
         return existing, False
+
+
+def _audit_text(value: object) -> str | None:
+    """A stored value as audit text (the pairwise choices as JSON)."""
+    if value is None:
+        return None
+    return json.dumps(value) if isinstance(value, list | dict) else str(value)
 
 
 def load_tlx(engine: Engine, code: str, task: str, condition: str) -> TlxResponse | None:

@@ -32,7 +32,7 @@ def test_the_template_is_the_papers_design() -> None:
         ("colour = 'red'", "unknown key 'colour'"),
         ("trials_per_condition = 'three'", "trials_per_condition = 'three'; expected int"),
         ("conditions = ['VO', 'XX']", "condition 'XX'"),
-        ("[groups]\nnovice = 0", "groups.novice = 0; expected a whole number >= 1"),
+        ("[groups]\nnovice = 0", "groups.novice = 0; expected a whole number from 1 to 1000"),
         ("counterbalancing = 'latin-square'\nconditions = ['VO']", "expected at least two"),
         ("counterbalancing = 'random'", "counterbalancing = 'random'"),
         ("tasks = ['lcca', 'surgery']", "task 'surgery'"),

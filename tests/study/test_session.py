@@ -136,3 +136,85 @@ def test_run_all_runs_every_participant_in_two_processes(tmp_path: Path) -> None
     trials = _trials(db)
     assert len(trials) == 8 and all(t[2] == "completed" for t in trials)
     assert main(["run", "--all", "--participant", "P001", "--db", db]) == 2
+
+
+_DIE_AT = """
+import os, signal, sys
+from db.migrate import open_database
+from study.protocol.default_estimator import load_estimator
+from study.protocol.participants import SimulatedParticipant
+from study.protocol.session import participant_traits, run_session
+from teleop_core.phantom.lcca import LccaPhantom
+
+die_at_s = float(sys.argv[2])
+engine = open_database(sys.argv[1], create=False)
+phantom = LccaPhantom()
+
+
+class DiesAt(SimulatedParticipant):
+    def act(self, view):
+        if view.t_s >= die_at_s:  # the loop has made every sample up to here
+            os.kill(os.getpid(), signal.SIGKILL)
+        return super().act(view)
+
+
+traits = participant_traits(3, "P001", "novice")
+run_session(engine, "P001", "simulated", load_estimator(),
+            make_driver=lambda: DiesAt(traits, phantom, 180.0))
+"""
+
+
+def test_an_unpaced_session_killed_at_any_time_loses_at_most_one_second(tmp_path: Path) -> None:
+    """Issue 18, point 4: unpaced runs hand the writer 0.5 s steps; a kill lost 1.5 s."""
+    db = _study(tmp_path)
+    # kill times drawn once (numpy.random.default_rng(18).uniform(1, 8, 2).round(2))
+    for die_at_s in (3.8, 6.02):
+        proc = subprocess.run(
+            [sys.executable, "-c", _DIE_AT, f"sqlite:///{db}", str(die_at_s)],
+            capture_output=True,
+            timeout=120,
+        )
+        assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()
+        engine = create_engine(f"sqlite:///{db}")
+        with Session(engine) as s:
+            trial = s.scalars(select(Trial).where(Trial.status == "running")).one()
+            kept_s = s.scalar(select(func.max(Sample.t_s)).where(Sample.trial_id == trial.id))
+        engine.dispose()
+        # samples up to die_at_s were made; the last kept one is at most 1 s before it
+        assert die_at_s - 1.0 <= kept_s + 0.01 <= die_at_s + 0.01
+    assert main(["run", "--participant", "P001", "--db", db]) == 0
+    assert sorted(t[2] for t in _trials(db)) == ["completed"] * 4 + ["interrupted"] * 2
+
+
+def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) -> None:
+    """Issue 18, point 5: a full disk gave 2-4 chained tracebacks. SQLite's page limit
+    makes the database full for real (SQLITE_FULL) a few pages into the first trial."""
+    from sqlalchemy import event
+
+    from db.migrate import open_database
+    from study.protocol.default_estimator import load_estimator
+    from study.protocol.session import SessionStorageError, run_session
+
+    db = _study(tmp_path)
+    engine = open_database(db, create=False)
+    with engine.connect() as conn:
+        pages = conn.exec_driver_sql("PRAGMA page_count").scalar()
+
+    @event.listens_for(engine, "connect")
+    def _limit(dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+        dbapi_connection.execute(f"PRAGMA max_page_count = {pages + 12}")
+
+    engine.dispose()  # new connections get the limit
+    try:
+        with pytest.raises(SessionStorageError) as caught:
+            run_session(engine, "P001", "simulated", load_estimator())
+    finally:
+        engine.dispose()
+    message = str(caught.value)
+    assert "\n" not in message and "full" in message
+    trials = _trials(db)
+    assert [t[2] for t in trials] == ["running"]  # kept as it was, for the next run
+    kept_s = float(message.split("samples up to t = ")[1].split(" s")[0])
+    assert abs(kept_s * 100 - trials[0][4]) <= 1  # the message matches what is stored (100 Hz)
+    assert main(["run", "--participant", "P001", "--db", db]) == 0
+    assert sorted(t[2] for t in _trials(db)) == ["completed"] * 4 + ["interrupted"]
