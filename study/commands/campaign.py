@@ -1,0 +1,109 @@
+"""`study campaign template|run|report`: simulation campaigns on Dask (study.campaign)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+from study.commands.base import StudyGroup
+from study.errors import StudyInputError
+
+if TYPE_CHECKING:
+    from study.campaign.store import CampaignDir
+
+
+@click.group("campaign", cls=StudyGroup)
+def campaign() -> None:
+    """Simulation campaigns: power and parameter sweeps of simulated studies on Dask."""
+
+
+@campaign.command("template")
+def template() -> None:
+    """Print a commented campaign file (TOML) to start from."""
+    from study.campaign.spec import TEMPLATE
+
+    click.echo(TEMPLATE, nl=False)
+
+
+@campaign.command("run")
+@click.argument("campaign_path", metavar="CAMPAIGN.toml",
+                type=click.Path(dir_okay=False, path_type=Path))  # fmt: skip
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Results folder; a folder holding this campaign is resumed.")  # fmt: skip
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes of the embedded Dask LocalCluster [default: 1].")  # fmt: skip
+@click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
+              help="Run on this Dask scheduler's workers instead of a LocalCluster.")  # fmt: skip
+def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str | None) -> None:
+    """Run CAMPAIGN.toml's units (skipping those already in --out) and write the results."""
+    from study.campaign.engine import open_client, run_pending
+    from study.campaign.spec import parse_campaign
+    from study.campaign.store import CampaignDir
+
+    if workers is not None and scheduler is not None:
+        raise StudyInputError(
+            f"--workers {workers} with --scheduler {scheduler}; expected one of them "
+            "(the scheduler's workers are started with `dask worker`)"
+        )
+    if not campaign_path.is_file():
+        raise StudyInputError(f"campaign file {campaign_path} does not exist")
+    text = campaign_path.read_text()
+    spec = parse_campaign(text, str(campaign_path))
+    folder = CampaignDir.open(out_dir, spec, text)
+    total = len(spec.units())
+    todo = len(folder.pending())
+    click.echo(f"{spec.name}: {len(spec.cells())} cells x {spec.replicates} replicates = "
+               f"{total} simulated studies; {total - todo} already in {out_dir}")  # fmt: skip
+    if todo:
+        err = Console(stderr=True)
+        with err.status("starting Dask" if scheduler is None else f"connecting to {scheduler}"):
+            client = open_client(workers, scheduler)
+        try:
+            folder.create()
+            with Progress("[progress.description]{task.description}", BarColumn(),
+                          MofNCompleteColumn(), TimeRemainingColumn(), console=err) as bar:  # fmt: skip
+                task = bar.add_task("units", total=total, completed=total - todo)
+                run_pending(
+                    folder, client,
+                    on_start=lambda i: bar.console.print(
+                        f"Dask: {i.workers} workers, dashboard {i.dashboard}"),
+                    on_unit=lambda _: bar.advance(task),
+                )  # fmt: skip
+        finally:
+            cluster = client.cluster
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    folder.create()
+    _write_outputs(folder)
+
+
+@campaign.command("report")
+@click.argument("out_dir", metavar="DIR", type=click.Path(file_okay=False, path_type=Path))
+def report(out_dir: Path) -> None:
+    """Rebuild DIR's tables from its finished units and redraw the figures."""
+    from study.campaign.store import CampaignDir
+
+    if not out_dir.is_dir():
+        raise StudyInputError(f"campaign folder {out_dir} does not exist")
+    _write_outputs(CampaignDir.existing(out_dir))
+
+
+def _write_outputs(folder: CampaignDir) -> None:
+    from study.campaign.figures import draw_figures
+
+    results, summary = folder.write_tables()
+    spec = folder.spec
+    done = results[["replicate", *spec.factors]].drop_duplicates().shape[0] if len(results) else 0
+    total = len(spec.units())
+    state = "complete" if done == total else f"INCOMPLETE: {done} of {total} units"
+    click.echo(f"results ({state}, simulated): {folder.root / 'results.csv'}, "
+               f"{folder.root / 'summary.csv'}")  # fmt: skip
+    if len(summary):
+        for path in draw_figures(summary, list(spec.factors), spec.name, folder.root / "figures"):
+            if path.suffix == ".png":
+                click.echo(f"figure: {path}")
