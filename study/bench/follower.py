@@ -40,7 +40,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from teleop_core.estimation.estimator import ForceEstimator, features_of, train_estimator
+from study.bench import generalisation
+from study.bench.generalisation import GeneralisationConfig, WindowBaseline
+from teleop_core.estimation.estimator import ForceEstimator, features_of
+from teleop_core.estimation.training import train_estimator
 from teleop_core.estimation.gru import GruConfig, train_gru
 from teleop_core.estimation.metrics import error_summary, tracking_score
 from teleop_core.estimation.recording import FollowerRecording
@@ -49,6 +52,7 @@ from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.plant import FollowerDrive
 from teleop_core.follower.sensors import acquire, decimation, reference_velocity
 
+PARTS = ("tables", "generalisation")
 TABLE_II_FREQUENCIES_HZ = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 TRAINING_PHANTOM = {"max_load_n": 1.2, "max_speed_rad_s": 8.0}
 """Loads and speeds of the bench phantom the estimator is trained on."""
@@ -65,6 +69,9 @@ vessel, an operator pushing into the wall (as VO participants do), faster motion
 
 @dataclass(frozen=True)
 class FollowerBenchConfig:
+    parts: tuple[str, ...] = PARTS
+    """Which parts to run: `tables` (Tables I-III, Fig. 8, cost), `generalisation`."""
+    generalisation: GeneralisationConfig = GeneralisationConfig()
     train_seconds: float = 600.0
     case_seconds: float = 60.0
     epochs: int = 100
@@ -85,6 +92,7 @@ class FollowerBenchConfig:
             sweep_epochs=1,
             table_ii_seconds=4.0,
             timing_updates=200,
+            generalisation=GeneralisationConfig.quick(),
         )
 
 
@@ -199,13 +207,23 @@ def table_iii(
     direct, history, _, _ = train_gru(
         features_of(recording), recording.f_ref, gru_config, seed=config.seed, target_kind="direct"
     )
+    progress("Table III: fitting the gradient-boosted baseline")
+    baseline = WindowBaseline(gru_config.window, config.seed).fit(
+        features_of(recording), recording.f_ref - estimator.physics.force(
+            recording.iq, recording.omega, recording.alpha
+        )
+    )
     per_case: dict[str, Any] = {}
-    pooled = {"hybrid": [], "final": [], "direct": [], "physics": [], "ref": []}
+    pooled: dict[str, list[np.ndarray]] = {
+        "hybrid": [], "final": [], "direct": [], "physics": [], "baseline": [], "ref": []
+    }  # fmt: skip
     fig, axes = plt.subplots(2, 2, figsize=(7.16, 4.2), layout="constrained")
     for k, (ax, (name, phantom)) in enumerate(zip(axes.ravel(), CASES.items(), strict=True)):
         rec = navigation_recording(config.case_seconds, config.seed + 100 + k, name, **phantom)
         result = estimator.predict(rec)
         f_direct = direct.predict(features_of(rec))
+        f_baseline = result.f_physics + baseline.predict(features_of(rec))
+        pooled["baseline"].append(f_baseline)
         pooled["hybrid"].append(result.f_hybrid)
         pooled["final"].append(result.f_final)
         pooled["direct"].append(f_direct)
@@ -218,6 +236,7 @@ def table_iii(
                 ("hybrid", result.f_hybrid),
                 ("final", result.f_final),
                 ("direct", f_direct),
+                ("baseline", f_baseline),
             )
         }
         span = slice(0, min(len(result.t), 2000))
@@ -239,7 +258,7 @@ def table_iii(
     ref = np.concatenate(pooled["ref"])
     table = {
         stage: error_summary(np.concatenate(pooled[stage]), ref)
-        for stage in ("hybrid", "final", "direct", "physics")
+        for stage in ("hybrid", "final", "direct", "physics", "baseline")
     }
     table["direct"]["validation_rmse_n"] = history.best_val_rmse
     residuals = np.concatenate(pooled["hybrid"]) - ref
@@ -292,9 +311,16 @@ def _row(label: object, *values: float) -> str:
 
 
 def markdown(report: dict[str, Any]) -> str:
+    lines = ["# Follower bench (simulated hardware)", ""]
+    if "generalisation" in report:
+        lines += generalisation.markdown(report["generalisation"])
+    if "table_i" in report:
+        lines += _tables_markdown(report)
+    return "\n".join(lines)
+
+
+def _tables_markdown(report: dict[str, Any]) -> list[str]:
     lines = [
-        "# Follower bench (simulated hardware)",
-        "",
         "## Table I: velocity sensing",
         "",
         "| metric | ramp | step |",
@@ -336,11 +362,20 @@ def markdown(report: dict[str, Any]) -> str:
         ("  ... after the EKF", "final"),
         ("Direct prediction of F", "direct"),
         ("Physics model alone", "physics"),
+        ("Physics + gradient-boosted trees (baseline)", "baseline"),
     ):
         lines.append(_row(label, t3[key]["rmse"], t3[key]["mean_error"], t3[key]["std_error"]))
-    lines += ["", "| case | physics | hybrid | final | direct |", "|---|---|---|---|---|"]
+    lines += [
+        "",
+        "| case | physics | hybrid | final | direct | baseline |",
+        "|---|---|---|---|---|---|",
+    ]
     for case, row in report["table_iii"]["cases"].items():
-        lines.append(_row(case, row["physics"], row["hybrid"], row["final"], row["direct"]))
+        lines.append(
+            _row(
+                case, row["physics"], row["hybrid"], row["final"], row["direct"], row["baseline"]
+            )
+        )
     lines += [
         "",
         "## Fig. 8: validation RMSE against window length",
@@ -363,7 +398,7 @@ def markdown(report: dict[str, Any]) -> str:
         + " N",
         "",
     ]
-    return "\n".join(lines)
+    return lines
 
 
 def run_follower_bench(
@@ -374,6 +409,24 @@ def run_follower_bench(
     """Run every experiment, write DIR/follower_bench.md and the figures; return the report."""
     out_dir.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {"config": asdict(config)}
+    if "generalisation" in config.parts:
+        report["generalisation"] = generalisation.run_generalisation(
+            config.generalisation, out_dir, progress
+        )
+    if "tables" in config.parts:
+        run_tables(config, out_dir, report, progress)
+    (out_dir / "follower_bench.md").write_text(markdown(report))
+    (out_dir / "follower_bench.json").write_text(json.dumps(report, indent=2) + "\n")
+    return report
+
+
+def run_tables(
+    config: FollowerBenchConfig,
+    out_dir: Path,
+    report: dict[str, Any],
+    progress: Callable[[str], None],
+) -> None:
+    """Tables I-III, Fig. 8 and the costs, into `report` and DIR's figures."""
     progress("Table I: velocity sensing")
     report["table_i"], fig = table_i()
     fig.savefig(out_dir / "table_i_velocity.png", dpi=200)
@@ -416,6 +469,3 @@ def run_follower_bench(
 
     progress("timing the causal update")
     report["timing"] = causal_update_timing(estimator, recording, config.timing_updates)
-    (out_dir / "follower_bench.md").write_text(markdown(report))
-    (out_dir / "follower_bench.json").write_text(json.dumps(report, indent=2) + "\n")
-    return report

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
@@ -10,6 +11,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from study.commands.base import StudyGroup
 from study.errors import StudyInputError
+
+if TYPE_CHECKING:
+    from teleop_core.estimation.estimator import EstimateResult
+    from teleop_core.estimation.recording import FollowerRecording
 
 _err = Console(stderr=True)
 
@@ -50,8 +55,27 @@ def estimator() -> None:
 @click.option(
     "--patience",
     type=click.IntRange(min=1),
-    default=None,
+    default=10,
+    show_default=True,
     help="Stop after this many epochs without a better validation RMSE.",
+)
+@click.option(
+    "--weight-decay",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="AdamW decoupled weight decay [default: GruConfig's].",
+)
+@click.option(
+    "--dropout",
+    type=click.FloatRange(min=0, max=1, max_open=True),
+    default=None,
+    help="Dropout on the GRU's last hidden state while training [default: GruConfig's].",
+)
+@click.option(
+    "--input-noise",
+    type=click.FloatRange(min=0),
+    default=None,
+    help="SD of noise added to the standardised training inputs [default: GruConfig's].",
 )
 @click.option(
     "--ekf-q",
@@ -78,7 +102,10 @@ def train_cmd(
     seed: int,
     hidden_size: int,
     learning_rate: float,
-    patience: int | None,
+    patience: int,
+    weight_decay: float | None,
+    dropout: float | None,
+    input_noise: float | None,
     ekf_q: float | None,
     calibration: Path | None,
     force: bool,
@@ -98,12 +125,22 @@ def train_cmd(
         )
     data = FollowerRecording.from_csv(recording)
     extension = ExtendedPhysics.read(calibration) if calibration is not None else None
+    regularisation = {
+        k: v
+        for k, v in (
+            ("weight_decay", weight_decay),
+            ("dropout", dropout),
+            ("input_noise", input_noise),
+        )
+        if v is not None
+    }
     config = GruConfig(
         window=window,
         hidden_size=hidden_size,
         learning_rate=learning_rate,
         max_epochs=epochs,
         patience=patience,
+        **regularisation,
     )
     with Progress(
         TextColumn("training GRU"),
@@ -133,8 +170,19 @@ def train_cmd(
         f"physics {v['physics']:.4f} N, physics+GRU {v['hybrid']:.4f} N, "
         f"after EKF {v['final']:.4f} N"
     )
+    _echo_regimes("validation RMSE per regime", summary.validation_rmse_by_regime_n)
     for note in summary.notes:
         click.echo(f"note: {note}")
+
+
+def _echo_regimes(title: str, table: dict[str, dict[str, float]]) -> None:
+    """One line per regime label: samples and the RMSE of each stage (N)."""
+    click.echo(f"{title} (physics / physics+GRU / after EKF, N):")
+    for label, row in table.items():
+        click.echo(
+            f"  {label:<20} {int(row['samples']):>7} samples  {row['physics']:.4f} / "
+            f"{row['hybrid']:.4f} / {row['final']:.4f}"
+        )
 
 
 @estimator.command("run")
@@ -145,10 +193,14 @@ def train_cmd(
     "out_csv",
     required=True,
     type=click.Path(dir_okay=False, path_type=Path),
-    help="Predictions CSV: t, f_ref, f_physics, f_hybrid, f_final.",
+    help="Predictions CSV: t, f_ref, f_physics, f_hybrid, f_final, in_range.",
 )
 def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
-    """Estimate the proximal force over RECORDING with the model in MODEL_DIR."""
+    """Estimate the proximal force over RECORDING with the model in MODEL_DIR.
+
+    `in_range` is 1 where the sample's inputs (iq, omega, alpha) lie inside the range
+    the model was trained on, 0 where one leaves it (empty for a model saved before the
+    range was kept)."""
     from teleop_core.estimation.estimator import ForceEstimator
     from teleop_core.estimation.metrics import rmse
     from teleop_core.estimation.recording import FollowerRecording, write_csv_atomically
@@ -169,4 +221,42 @@ def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
         f"{rmse(result.f_physics, result.f_ref):.4f} N, physics+GRU "
         f"{rmse(result.f_hybrid, result.f_ref):.4f} N, "
         f"after EKF {rmse(result.f_final, result.f_ref):.4f} N"
+    )
+    if result.in_range is None or model.input_range is None:
+        click.echo("note: the model keeps no training range (saved before it was kept)")
+    else:
+        from teleop_core.estimation.estimator import features_of
+
+        window = model.window
+        outside = model.input_range.outside_by_feature(features_of(conformed)[window - 1 :])
+        click.echo(
+            f"outside the training range: {100 * (1 - result.in_range.mean()):.1f} % of the "
+            "estimates (" + ", ".join(f"{k} {100 * v:.1f} %" for k, v in outside.items()) + ")"
+        )
+    regimes = _regimes_of(model_dir, conformed, result)
+    if regimes:
+        _echo_regimes("RMSE per regime", regimes)
+
+
+def _regimes_of(
+    model_dir: Path, recording: FollowerRecording, result: EstimateResult
+) -> dict[str, dict[str, float]]:
+    """RMSE per regime label, with the thresholds the model was trained with (if kept)."""
+    import json
+
+    from teleop_core.estimation.regimes import RegimeRules, label_samples, regime_rmse
+
+    rules = json.loads((model_dir / "summary.json").read_text()).get("regime_rules")
+    if not rules:
+        return {}
+    T = len(recording) - len(result.t) + 1
+    masks = label_samples(
+        recording.omega, recording.f_ref, recording.sample_rate_hz, RegimeRules(**rules)
+    )
+    return regime_rmse(
+        {k: m[T - 1 :] for k, m in masks.items()},
+        result.f_ref,
+        physics=result.f_physics,
+        hybrid=result.f_hybrid,
+        final=result.f_final,
     )

@@ -46,13 +46,19 @@ class EkfSettings:
     """Variance of eq. 1's own error (training residual), N^2."""
     r_gru_n2: float = 1e-3
     """Variance of the hybrid estimate's own error (GRU validation), N^2."""
+    passthrough: bool = False
+    """Pass F_GRU* through unfiltered: set by training where the filter did not improve
+    the hybrid estimate on the validation blocks (issue 17)."""
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():
-            if not (math.isfinite(value) and value > 0):
+            if name == "passthrough":
+                if not isinstance(value, bool):
+                    raise TeleopInputError(f"EkfSettings.passthrough = {value!r}; expected a bool")
+            elif not (math.isfinite(value) and value > 0):
                 raise TeleopInputError(f"EkfSettings.{name} = {value!r}; expected > 0")
 
-    def to_dict(self) -> dict[str, float]:
+    def to_dict(self) -> dict[str, float | bool]:
         return asdict(self)
 
 
@@ -88,6 +94,7 @@ def settings_vector(s: EkfSettings) -> np.ndarray:
             s.r_omega_rad2_s2,
             s.r_physics_model_n2,
             s.r_gru_n2,
+            1.0 if s.passthrough else 0.0,
         ]
     )
 
@@ -102,7 +109,11 @@ def ekf_update(
     f_hybrid: float,
     omega: float,
 ) -> float:  # pragma: no cover - compiled; exercised through ForceEkf
-    """One EKF step on `state` (flag, x1, x2, p11, p12, p22); returns F*_Final (N)."""
+    """One EKF step on `state` (flag, x1, x2, p11, p12, p22); returns F*_Final (N).
+
+    With the pass-through flag (sv[6]) set, F*_Final is F_GRU* itself."""
+    if sv[6] != 0.0:
+        return f_hybrid
     g_i, g_w = gradient_at(pv, omega, dt_s)
     # R = G R_z G' + diag(r_model, r_gru); both rows of G are eq. 1's gradient
     common = g_i * g_i * sv[2] + g_w * g_w * sv[3]

@@ -2,16 +2,18 @@
 
 `ForceEstimator.predict` runs over a whole recording; `ForceEstimator.stream()` gives a
 `CausalEstimator` that takes one new sample at a time, as the 50 Hz pipeline does, and
-produces the same numbers (a test holds them to 1e-12 N). `train_estimator` fits all
-three stages to one bench recording; `save`/`load` keep them in a model folder:
+produces the same numbers (a test holds them to 1e-12 N). `training.train_estimator`
+fits all three stages to one bench recording; `save`/`load` keep them in a model folder:
 
 | file | what |
 |---|---|
 | `physics.json` | fitted eq. 1 parameters (SI) |
 | `gru.pt` | GRU weights, a PyTorch state dict for `GruNet` |
-| `standardisation.json` | window, hidden size, input means/SDs, target scale |
-| `ekf.json` | EKF noise covariances |
-| `summary.json` | train/validation RMSE of each stage, epochs, sample rate, data digest |
+| `standardisation.json` | window, hidden size, input means/SDs, target scale, the
+  inputs' training range (`input_range`, `ranges.py`) |
+| `ekf.json` | EKF noise covariances, and whether it passes the hybrid estimate through |
+| `summary.json` | train/validation RMSE of each stage and per regime, epochs, sample
+  rate, data digest |
 | `calibration.json` | only for a calibrated model: eq. 1 plus the effects of a
   `study calibrate` report, the physics stage in place of eq. 1 (`extended.py`) |
 """
@@ -21,8 +23,7 @@ from __future__ import annotations
 import json
 import shutil
 import tempfile
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,22 +38,18 @@ from teleop_core.estimation.ekf import (
     EkfSettings,
     ekf_update,
     filter_forces,
-    rest_variances,
     settings_vector,
 )
 from teleop_core.estimation.extended import ExtendedPhysics, physics_force
 from teleop_core.estimation.gru import (
-    GruConfig,
     GruModel,
     Standardisation,
     _window_forward,
-    block_split,
     load_weights,
     save_weights,
-    train_gru,
 )
-from teleop_core.estimation.metrics import lag_samples, rmse
-from teleop_core.estimation.physics import PhysicsParams, fit_physics, force_at
+from teleop_core.estimation.physics import PhysicsParams, force_at
+from teleop_core.estimation.ranges import InputRange
 from teleop_core.estimation.recording import FollowerRecording
 
 MODEL_FILES = ("physics.json", "gru.pt", "standardisation.json", "ekf.json", "summary.json")
@@ -74,9 +71,15 @@ class EstimateResult:
     f_physics: Float1D
     f_hybrid: Float1D
     f_final: Float1D
+    in_range: np.ndarray | None = None
+    """Whether each sample's inputs lie inside the training range (None: range unknown)."""
 
     def to_frame(self) -> pd.DataFrame:
-        return pd.DataFrame(asdict(self))
+        """Columns t, f_ref, f_physics, f_hybrid, f_final and, when known, in_range (0/1)."""
+        frame = pd.DataFrame({k: v for k, v in asdict(self).items() if k != "in_range"})
+        if self.in_range is not None:
+            frame["in_range"] = self.in_range.astype(int)
+        return frame
 
 
 @dataclass
@@ -88,6 +91,8 @@ class ForceEstimator:
     pipeline_rate_hz: float = 50.0
     extension: ExtendedPhysics | None = None
     """The calibrated physics stage (issue 10) replacing eq. 1, if any."""
+    input_range: InputRange | None = None
+    """The inputs' range over the training samples (None for models saved before it)."""
 
     @property
     def window(self) -> int:
@@ -119,8 +124,11 @@ class ForceEstimator:
         f_final = filter_forces(
             self.ekf, self.physics, self.dt_s, f_physics, f_hybrid, recording.omega[T - 1 :]
         )
+        in_range = None
+        if self.input_range is not None:
+            in_range = self.input_range.contains(features_of(recording)[T - 1 :])
         return EstimateResult(
-            recording.t[T - 1 :], recording.f_ref[T - 1 :], f_physics, f_hybrid, f_final
+            recording.t[T - 1 :], recording.f_ref[T - 1 :], f_physics, f_hybrid, f_final, in_range
         )
 
     def stream(self) -> CausalEstimator:
@@ -151,6 +159,11 @@ class ForceEstimator:
                     "pipeline_rate_hz": self.pipeline_rate_hz,
                     "features": ["iq", "omega", "alpha"],
                     **self.gru.standardisation.to_dict(),
+                    **(
+                        {"input_range": self.input_range.to_dict()}
+                        if self.input_range is not None
+                        else {}
+                    ),
                 },
             )
             _write_json(tmp / "ekf.json", self.ekf.to_dict())
@@ -194,6 +207,9 @@ class ForceEstimator:
             extension = None
             if (folder / "calibration.json").is_file():
                 extension = ExtendedPhysics.from_dict(_read_json(folder / "calibration.json"))
+            input_range = None
+            if "input_range" in meta:
+                input_range = InputRange.from_dict(meta["input_range"])
             return cls(
                 physics,
                 gru,
@@ -201,6 +217,7 @@ class ForceEstimator:
                 float(meta["sample_rate_hz"]),
                 float(meta["pipeline_rate_hz"]),
                 extension,
+                input_range,
             )
         except (KeyError, TypeError, ValueError, RuntimeError) as exc:
             if isinstance(exc, TeleopInputError):
@@ -336,184 +353,13 @@ def stream_estimate(
     return True
 
 
-@dataclass
-class TrainingSummary:
-    window: int
-    epochs_run: int
-    best_epoch: int
-    sample_rate_hz: float
-    train_samples: int
-    validation_samples: int
-    train_rmse_n: dict[str, float]
-    validation_rmse_n: dict[str, float]
-    history: dict[str, list[float]]
-    ekf_rest_samples_found: bool
-    ekf_lag_s: float
-    recording: str
-    recording_sha256: str
-    seed: int
-    notes: list[str] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+_MOVED = ("train_estimator", "tune_process_noise", "TrainingSummary")
 
 
-def tune_process_noise(
-    physics: PhysicsParams,
-    base: EkfSettings,
-    dt_s: float,
-    f_physics: Float1D,
-    f_hybrid: Float1D,
-    omega: Float1D,
-    f_ref: Float1D,
-    max_lag_samples: float,
-) -> tuple[EkfSettings, float]:
-    """Choose Q on training data: the lowest error against F_ref among the settings that
-    trail the hybrid estimate by at most `max_lag_samples` (one pipeline period).
+def __getattr__(name: str) -> Any:
+    """Training moved to `training.py`; its names are still importable from here."""
+    if name in _MOVED:
+        from teleop_core.estimation import training
 
-    Seed 000, IV-C tuned Q "to minimise tracking delay", capped where noise grew; here
-    the cap is the lag and the choice the error. Returns the settings and their lag.
-    """
-    best: tuple[float, EkfSettings, float] | None = None
-    for q in np.logspace(-5, 0, 21):
-        settings = EkfSettings(
-            **{**base.to_dict(), "q_physics_n2": float(q), "q_hybrid_n2": float(q)}
-        )
-        final = filter_forces(settings, physics, dt_s, f_physics, f_hybrid, omega)
-        lag = lag_samples(final, f_hybrid)
-        if lag > max_lag_samples:
-            continue
-        error = rmse(final, f_ref)
-        if best is None or error < best[0]:
-            best = (error, settings, lag)
-    if best is None:  # pragma: no cover - the largest Q follows the hybrid estimate closely
-        raise TeleopInputError("no process noise keeps the EKF within one pipeline period")
-    return best[1], best[2]
-
-
-def train_estimator(
-    recording: FollowerRecording,
-    config: GruConfig | None = None,
-    *,
-    seed: int = 0,
-    wheel_radius_m: float = 0.010,
-    sign_speed_rad_s: float = 0.3,
-    pipeline_rate_hz: float = 50.0,
-    physics: PhysicsParams | None = None,
-    ekf_q_n2: float | None = None,
-    progress: Callable[[int, float, float], None] | None = None,
-    extension: ExtendedPhysics | None = None,
-) -> tuple[ForceEstimator, TrainingSummary]:
-    """Fit eq. 1, train the GRU on its residual, and set up the EKF, on one recording.
-
-    `physics` given (e.g. from a calibration) skips the eq. 1 fit; `ekf_q_n2` given
-    fixes the EKF process noise (both states) instead of tuning it. The physics fit,
-    the GRU's standardisation and the EKF noise all use the training blocks only.
-    `extension` (a `study calibrate` report, `extended.py`) replaces eq. 1 by the
-    calibrated model, whose eq. 1 part also serves the EKF, and the GRU learns what
-    that model still misses.
-    """
-    config = config or GruConfig()
-    notes: list[str] = []
-    dt = np.diff(recording.t)
-    if np.max(np.abs(dt / np.median(dt) - 1.0)) > 0.1:
-        recording = recording.resampled(recording.sample_rate_hz)
-        notes.append(f"irregular sampling: resampled to {recording.sample_rate_hz:.6g} Hz")
-    T = config.window
-    n_windows = len(recording) - T + 1
-    if n_windows < 2 * config.blocks:
-        raise TeleopInputError(
-            f"recording {recording.name} has {len(recording)} samples; expected at least "
-            f"{2 * config.blocks + T - 1} for a window of {T} and {config.blocks} blocks"
-        )
-    train_idx, val_idx = block_split(n_windows, T, config, seed)
-    train_mask = np.zeros(len(recording), bool)
-    train_mask[train_idx + T - 1] = True
-    if extension is not None:
-        physics = extension.base
-        notes.append(
-            f"physics stage calibrated by {extension.source or 'a report'}: eq. 1 + "
-            + (", ".join(extension.families) or "no effect")
-        )
-    if physics is None:
-        physics = fit_physics(
-            recording,
-            wheel_radius_m=wheel_radius_m,
-            sign_speed_rad_s=sign_speed_rad_s,
-            mask=train_mask,
-        )
-    f_phys_all = physics_force(physics, extension, recording)
-    residual = recording.f_ref - f_phys_all  # r_t = F_ref - F_physics   (eq. 13)
-    gru, history, _, _ = train_gru(
-        features_of(recording),
-        residual,
-        config,
-        seed=seed,
-        split=(train_idx, val_idx),
-        progress=progress,
-    )
-    rate = recording.sample_rate_hz
-    rest = rest_variances(
-        recording.iq[train_mask], recording.omega[train_mask], recording.alpha[train_mask]
-    )
-    physics_error = float(np.var(residual[train_mask]))
-    base = EkfSettings(
-        r_physics_model_n2=max(physics_error, 1e-6), r_gru_n2=max(history.best_val_rmse**2, 1e-6)
-    )
-    if rest is None:
-        notes.append("the wheel is never at rest: EKF R from the default sensor noise")
-    else:
-        base = EkfSettings(
-            **{**base.to_dict(), "r_iq_a2": max(rest[0], 1e-9), "r_omega_rad2_s2": rest[1]}
-        )
-    estimator = ForceEstimator(physics, gru, base, rate, pipeline_rate_hz, extension)
-    result = estimator.predict(recording)
-    f_physics, f_hybrid = result.f_physics[train_idx], result.f_hybrid[train_idx]
-    omega = recording.omega[T - 1 :][train_idx]
-    if ekf_q_n2 is None:
-        settings, lag = tune_process_noise(
-            physics,
-            base,
-            1.0 / rate,
-            f_physics,
-            f_hybrid,
-            omega,
-            result.f_ref[train_idx],
-            max_lag_samples=rate / pipeline_rate_hz,
-        )
-    else:
-        q = {"q_physics_n2": ekf_q_n2, "q_hybrid_n2": ekf_q_n2}
-        settings = EkfSettings(**{**base.to_dict(), **q})
-        final = filter_forces(settings, physics, 1.0 / rate, f_physics, f_hybrid, omega)
-        lag = lag_samples(final, f_hybrid)
-    estimator = ForceEstimator(physics, gru, settings, rate, pipeline_rate_hz, extension)
-    # Only the EKF stage changed: refilter instead of running the GRU over the data again.
-    result.f_final = filter_forces(
-        settings, physics, 1.0 / rate, result.f_physics, result.f_hybrid, recording.omega[T - 1 :]
-    )
-
-    def stage_rmse(rows: np.ndarray) -> dict[str, float]:
-        return {
-            "physics": rmse(result.f_physics[rows], result.f_ref[rows]),
-            "hybrid": rmse(result.f_hybrid[rows], result.f_ref[rows]),
-            "final": rmse(result.f_final[rows], result.f_ref[rows]),
-        }
-
-    summary = TrainingSummary(
-        window=T,
-        epochs_run=len(history.val_rmse),
-        best_epoch=history.best_epoch,
-        sample_rate_hz=rate,
-        train_samples=len(train_idx),
-        validation_samples=len(val_idx),
-        train_rmse_n=stage_rmse(train_idx),
-        validation_rmse_n=stage_rmse(val_idx),
-        history={"train_rmse_n": history.train_rmse, "validation_rmse_n": history.val_rmse},
-        ekf_rest_samples_found=rest is not None,
-        ekf_lag_s=lag / rate,
-        recording=recording.name,
-        recording_sha256=recording.sha256(),
-        seed=seed,
-        notes=notes,
-    )
-    return estimator, summary
+        return getattr(training, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

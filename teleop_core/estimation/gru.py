@@ -35,6 +35,14 @@ N_FEATURES = 3
 """[I_q, theta_d, theta_dd] per time step."""
 
 
+PATIENCE = 10
+WEIGHT_DECAY = 1e-3
+DROPOUT = 0.0
+INPUT_NOISE = 0.0
+"""Regularisation defaults (issue 17), chosen by `study bench follower`'s generalisation
+runs: see README."""
+
+
 @dataclass(frozen=True)
 class GruConfig:
     """Network and training settings (defaults: seed 000, IV-C)."""
@@ -47,16 +55,30 @@ class GruConfig:
     batch_size: int = 32
     max_epochs: int = 100
     validation_fraction: float = 0.2
-    blocks: int = 10
+    blocks: int = 20
     """Contiguous time blocks the recording is cut into for the train/validation split."""
-    patience: int | None = None
+    patience: int | None = PATIENCE
     """Stop after this many epochs without a better validation RMSE (None: never)."""
+    weight_decay: float = WEIGHT_DECAY
+    """Decoupled weight decay of AdamW (0: the paper's plain Adam)."""
+    dropout: float = DROPOUT
+    """Dropout on the last hidden state during training (0: none)."""
+    input_noise: float = INPUT_NOISE
+    """SD of Gaussian noise added to the standardised training inputs (0: none)."""
 
     def __post_init__(self) -> None:
         for name in ("window", "hidden_size", "batch_size", "max_epochs", "blocks"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise TeleopInputError(f"GruConfig.{name} = {value!r}; expected an integer >= 1")
+        if self.patience is not None and (not isinstance(self.patience, int) or self.patience < 1):
+            raise TeleopInputError(f"GruConfig.patience = {self.patience!r}; expected >= 1")
+        for name in ("weight_decay", "input_noise"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise TeleopInputError(f"GruConfig.{name} = {value!r}; expected >= 0")
+        if not 0 <= self.dropout < 1:
+            raise TeleopInputError(f"GruConfig.dropout = {self.dropout!r}; expected 0 <= p < 1")
         if not 0 < self.validation_fraction < 1:
             raise TeleopInputError(
                 f"validation_fraction {self.validation_fraction!r}; expected between 0 and 1"
@@ -94,14 +116,16 @@ class Standardisation:
 class GruNet(torch.nn.Module):
     """GRU(3 -> H), last hidden state -> Linear(H -> 1): sequence to one (eq. 3)."""
 
-    def __init__(self, hidden_size: int) -> None:
+    def __init__(self, hidden_size: int, dropout: float = 0.0) -> None:
         super().__init__()
         self.gru = torch.nn.GRU(N_FEATURES, hidden_size, batch_first=True)
+        # Dropout has no weights, so the state dict (and the numba kernel) is unchanged.
+        self.dropout = torch.nn.Dropout(dropout)
         self.head = torch.nn.Linear(hidden_size, 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         _, h = self.gru(x)
-        return self.head(h[-1]).squeeze(-1)
+        return self.head(self.dropout(h[-1])).squeeze(-1)
 
 
 @dataclass(frozen=True)
@@ -301,11 +325,13 @@ def train_gru(
     x_val = torch.tensor(windows[val_idx], dtype=torch.float32)
     y_val = torch.tensor(y[val_idx], dtype=torch.float32)
 
-    net = GruNet(config.hidden_size)
-    # Fused Adam and one thread: each step is a few small kernels, where thread
+    net = GruNet(config.hidden_size, config.dropout)
+    # Fused Adam(W) and one thread: each step is a few small kernels, where thread
     # hand-offs cost more than they save (3.6 against 5.4 ms a step on two cores here)
-    # and the fused update halves the optimiser's share.
-    optimiser = torch.optim.Adam(net.parameters(), lr=config.learning_rate, fused=True)
+    # and the fused update halves the optimiser's share. AdamW with weight_decay 0 is Adam.
+    optimiser = torch.optim.AdamW(
+        net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay, fused=True
+    )
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
@@ -342,8 +368,11 @@ def _fit(
         for lo in range(0, len(order), config.batch_size):
             batch = order[lo : lo + config.batch_size]
             optimiser.zero_grad(set_to_none=True)
+            x = x_train[batch]
+            if config.input_noise > 0:
+                x = x + config.input_noise * torch.randn(x.shape, generator=generator)
             # L = 1/N sum (f_GRU(window) - r_t)^2   (eq. 12)
-            loss = torch.nn.functional.mse_loss(net(x_train[batch]), y_train[batch])
+            loss = torch.nn.functional.mse_loss(net(x), y_train[batch])
             loss.backward()
             optimiser.step()
             se += loss.item() * len(batch)

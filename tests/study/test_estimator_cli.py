@@ -64,7 +64,7 @@ def test_run_writes_one_estimate_per_full_window(
     assert main(["estimator", "run", str(model_dir), str(recording_csv), "--out", str(out)]) == 0
     pred = pd.read_csv(out)
     rows = len(pd.read_csv(recording_csv))
-    assert list(pred.columns) == ["t", "f_ref", "f_physics", "f_hybrid", "f_final"]
+    assert list(pred.columns) == ["t", "f_ref", "f_physics", "f_hybrid", "f_final", "in_range"]
     assert len(pred) == rows - 6 + 1
     assert "RMSE against f_ref" in capsys.readouterr().out
 
@@ -127,7 +127,9 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
     report = json.loads(out_json.read_text())
     assert set(report["table_i"]) == {"ramp", "step"}
     assert set(report["table_ii"]) == {"0.5", "1", "1.5", "2", "2.5", "3"}
-    assert set(report["table_iii"]["pooled"]) == {"hybrid", "final", "direct", "physics"}
+    assert set(report["table_iii"]["pooled"]) == {
+        "hybrid", "final", "direct", "physics", "baseline"
+    }
     assert set(report["window_sweep"]) == {"2", "5"}
     assert report["timing"]["median_ms"] > 0
     for figure in (

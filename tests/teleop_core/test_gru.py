@@ -27,7 +27,7 @@ def test_inference_kernel_matches_torch_gru() -> None:
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_block_split_keeps_validation_windows_apart_from_training(seed: int) -> None:
-    config = GruConfig(window=20)
+    config = GruConfig(window=20, blocks=10)
     n_windows = 5000
     train, val = block_split(n_windows, 20, config, seed)
     train_samples = set((train[:, None] + np.arange(20)).ravel().tolist())
