@@ -37,12 +37,33 @@ def test_commits_one_chunk_per_second_of_trial_time(engine: Engine) -> None:
     t = np.arange(3500) / 1000.0  # 3.5 s at 1 kHz
     writer = SampleWriter(engine, trial_id, chunk_s=1.0)
     writer.extend({"t_s": t[:1500], "proximal_force_n": np.full(1500, 0.25)})
-    # [0, 1) s is committed; [1, 1.5) s waits in memory: at most one second at risk.
-    assert (writer.rows_committed, _stored(engine, trial_id)) == (1000, 1000)
+    # [0, 1) s and [1, 1.5) s are committed: holding [1, 1.5) s while the caller computes
+    # its next 1.5 s step would put 2 s at risk.
+    assert (writer.rows_committed, writer.chunks_committed) == (1500, 2)
+    assert _stored(engine, trial_id) == 1500
     writer.extend({"t_s": t[1500:], "proximal_force_n": np.full(2000, 0.25)})
-    assert (writer.rows_committed, writer.chunks_committed) == (3000, 3)
+    # [1.5, 2.5) and [2.5, 3.5) s: no chunk spans more than one second
+    assert (writer.rows_committed, writer.chunks_committed) == (3500, 4)
     writer.close()
     assert (_stored(engine, trial_id), writer.chunks_committed) == (3500, 4)
+
+
+@pytest.mark.parametrize("step_s", [0.05, 0.25, 0.5, 0.7, 1.0, 2.5])
+def test_held_plus_the_next_step_never_exceeds_one_second(engine: Engine, step_s: float) -> None:
+    """A crash loses what the writer holds plus the step being computed (issue 18: 0.5 s
+    steps used to put 1.5 s at risk)."""
+    trial_id = _trial(engine)
+    per_step = round(step_s * 100)  # 100 Hz, as the loops sample
+    handed = 0
+    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer:
+        for _ in range(round(6 / step_s)):
+            t = (handed + np.arange(per_step)) / 100
+            writer.extend({"t_s": t})
+            handed += per_step
+            held = handed - writer.rows_committed
+            # at risk if killed during the next step: the samples held and the next step's
+            assert held + min(per_step, 100) <= 100 or held == 0
+    assert _stored(engine, trial_id) == handed
 
 
 def test_single_appends_follow_the_same_chunking(engine: Engine) -> None:

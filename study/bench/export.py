@@ -1,0 +1,180 @@
+"""`study bench export`: time and peak memory of `study export --samples` on a large study.
+
+The benchmark builds a scratch study database (a temporary SQLite file, or a private
+schema on a PostgreSQL server, dropped afterwards: `study.bench.db_write.
+scratch_database`), with the template design, `participants` x 8 completed trials
+and `samples` samples in all, written at 1 kHz through `db.samples.SampleWriter`, the
+session runner's writer. The samples are synthetic (seeded random values in every
+column, a `branch` name per sample): they measure the storage and the export, not a
+participant. It then runs the real command, `study export --samples --format F`, in
+a child process per format and reads the child's wall time and peak resident memory
+(`os.wait4`'s `ru_maxrss`), and the bytes per sample of the database and of the file.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from sqlalchemy import URL, Engine, text
+
+from db.engine import is_sqlite, make_session_factory
+from db.models import Participant, Trial
+from db.samples import SampleWriter
+from study.bench.db_write import scratch_database
+from study.protocol.design import TEMPLATE, parse_design
+from study.protocol.roster import create_study
+
+TRIALS_PER_PARTICIPANT = 8
+"""Template design with two tasks' worth of blocks: 2 conditions x 4 trials."""
+RATE_HZ = 1000.0
+
+
+@dataclass(frozen=True)
+class ExportRun:
+    fmt: str
+    seconds: float
+    samples_per_s: float
+    peak_rss_mb: float
+    file_bytes_per_sample: float
+
+
+@dataclass(frozen=True)
+class ExportBenchResult:
+    backend: str
+    samples: int
+    trials: int
+    build_seconds: float
+    write_rows_per_s: float
+    db_bytes_per_sample: float
+    runs: list[ExportRun] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def _columns(rng: np.random.Generator, n: int) -> dict[str, object]:
+    t = np.arange(n) / RATE_HZ
+    names = np.array(["DAo", "arch", "AAo", "LSA", "LCCA", "BCT"], dtype=object)
+    return {
+        "t_s": t,
+        "insertion_m": 0.002 * t,
+        "rotation_rad": rng.normal(0, 3, n),
+        "tip_x_m": rng.normal(0, 0.05, n),
+        "tip_y_m": rng.normal(0, 0.05, n),
+        "tip_z_m": rng.normal(0, 0.05, n),
+        "branch": names[rng.integers(0, len(names), n)],
+        "proximal_force_n": np.abs(rng.normal(0.5, 0.2, n)),
+        "proximal_force_est_n": np.abs(rng.normal(0.5, 0.2, n)),
+        "distal_force_n": np.abs(rng.normal(0.1, 0.05, n)),
+        "dial_angle_rad": rng.normal(0.0, 0.3, n),
+        "dial_torque_n_m": rng.normal(0.0, 0.01, n),
+    }
+
+
+def build_study(
+    engine: Engine,
+    samples: int,
+    participants: int,
+    *,
+    seed: int = 0,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[int, float]:
+    """Write the benchmark study; returns (trials, seconds spent in the sample writer)."""
+    design = parse_design(TEMPLATE)
+    study = create_study(engine, design, TEMPLATE)
+    n_trials = participants * TRIALS_PER_PARTICIPANT
+    with make_session_factory(engine).begin() as session:
+        trials = []
+        for p in range(participants):
+            person = Participant(
+                study_id=study.id, code=f"P{p + 1:03d}", group="novice",
+                condition_order=list(design.conditions),
+            )  # fmt: skip
+            for k in range(TRIALS_PER_PARTICIPANT):
+                block, index = divmod(k, TRIALS_PER_PARTICIPANT // 2)
+                trials.append(
+                    Trial(
+                        participant=person, task="lcca", condition=design.conditions[block],
+                        block_index=block, trial_index=index, status="completed",
+                        driver="simulated",
+                    )
+                )  # fmt: skip
+        session.add_all(trials)
+        session.flush()
+        ids = [t.id for t in trials]
+    rng = np.random.default_rng(seed)
+    per_trial = np.full(n_trials, samples // n_trials)
+    per_trial[: samples % n_trials] += 1
+    writing = 0.0
+    for trial_id, n in zip(ids, per_trial, strict=True):
+        columns = _columns(rng, int(n))
+        start = time.perf_counter()
+        with SampleWriter(engine, trial_id) as writer:
+            for lo in range(0, int(n), int(RATE_HZ)):
+                writer.extend({k: v[lo : lo + int(RATE_HZ)] for k, v in columns.items()})
+        writing += time.perf_counter() - start
+        if progress is not None:
+            progress(int(n))
+    return n_trials, writing
+
+
+def _db_bytes(engine: Engine) -> int:
+    with engine.connect() as conn:
+        if is_sqlite(conn):
+            conn.exec_driver_sql("PRAGMA wal_checkpoint(TRUNCATE)")
+            return Path(engine.url.database).stat().st_size
+        return int(conn.scalar(text("SELECT pg_total_relation_size('samples')")))
+
+
+def run_export(url: str, fmt: str, out_dir: Path, samples: int) -> ExportRun:
+    """`study export --samples` in a child process: wall time and peak memory."""
+    cmd = [sys.executable, "-m", "study.cli", "export", "--samples", "--format", fmt,
+           "--out", str(out_dir), "--db", url]  # fmt: skip
+    start = time.perf_counter()
+    child = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(child.pid, 0)
+    seconds = time.perf_counter() - start
+    child.returncode = os.waitstatus_to_exitcode(status)
+    err = child.stderr.read().decode() if child.stderr else ""
+    if child.returncode != 0:
+        raise RuntimeError(f"study export failed ({child.returncode}): {err.strip()}")
+    size = (out_dir / f"samples.{fmt}").stat().st_size
+    return ExportRun(fmt, seconds, samples / seconds, usage.ru_maxrss / 1024, size / samples)
+
+
+def bench_export(
+    db: str | URL | None = None,
+    *,
+    samples: int = 10_000_000,
+    participants: int = 360,
+    formats: tuple[str, ...] = ("parquet", "csv"),
+    progress: Callable[[int], None] | None = None,
+) -> ExportBenchResult:
+    """Build the study, then export it once per format (files in a temporary folder)."""
+    with scratch_database(db) as engine:
+        start = time.perf_counter()
+        trials, writing = build_study(engine, samples, participants, progress=progress)
+        build = time.perf_counter() - start
+        db_bytes = _db_bytes(engine)
+        url = engine.url.render_as_string(hide_password=False)
+        runs = []
+        with tempfile.TemporaryDirectory() as tmp:
+            for fmt in formats:
+                runs.append(run_export(url, fmt, Path(tmp) / fmt, samples))
+        return ExportBenchResult(
+            backend=engine.dialect.name,
+            samples=samples,
+            trials=trials,
+            build_seconds=build,
+            write_rows_per_s=samples / writing,
+            db_bytes_per_sample=db_bytes / samples,
+            runs=runs,
+        )
