@@ -144,6 +144,14 @@ def tlx_profile(tlx: pd.DataFrame, width: str = "single") -> plt.Figure:
     return fig
 
 
+def label_source(fig: plt.Figure, note: str) -> plt.Figure:
+    """Write the data-source note (`DataSource.note`) into the figure, above the panels;
+    nothing when the note is empty (measured data)."""
+    if note:
+        fig.suptitle(note, x=0.0, ha="left", fontsize=8, fontstyle="italic", color="#444444")
+    return fig
+
+
 def save(fig: plt.Figure, out_dir: Path, name: str, formats: Sequence[str]) -> list[Path]:
     paths = []
     with plt.rc_context(STYLE):  # the font types apply when the file is written

@@ -2,7 +2,8 @@
 
 - `trial_frame`: one row per measured trial (completed, not practice, the latest attempt
   of each slot): participant, group, task, condition, trial, completion_time_s,
-  peak_proximal_force_n, peak_distal_force_n, success.
+  peak_proximal_force_n, peak_distal_force_n, success, driver (simulated, keyboard,
+  hardware or imported: `study.analysis.source` labels every output by it).
 - `tlx_frame`: one row per questionnaire: participant, group, task, condition,
   tlx_raw, tlx_weighted (empty without the pairwise comparisons), tlx_mental ...
 - `participant_means`: long format, one row per participant x task x condition x measure
@@ -44,10 +45,12 @@ def trial_frame(engine: Engine) -> pd.DataFrame:
             "peak_proximal_force_n": t.peak_proximal_force_n,
             "peak_distal_force_n": t.peak_distal_force_n,
             "success": bool(t.success),
+            "driver": t.driver,
         }
     return pd.DataFrame(
         list(latest.values()),
-        columns=["participant", "group", "task", "condition", "trial", *TRIAL_MEASURES, "success"],
+        columns=["participant", "group", "task", "condition", "trial", *TRIAL_MEASURES, "success",
+                 "driver"],  # fmt: skip
     )
 
 

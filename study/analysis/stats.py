@@ -6,15 +6,18 @@
   Shapiro-Wilk on the differences (alpha .05) picks a paired t-test (effect size Hedges'
   g_av, Lakens 2013: d_av = mean difference / mean of the two SDs, times Hedges'
   correction 1 - 3 / (4 (2n) - 9)) or the Wilcoxon signed-rank test (effect size the
-  matched-pairs rank-biserial correlation, Kerby 2014). Holm's correction runs across the
+  matched-pairs rank-biserial correlation, Kerby 2014; exact or asymptotic p by R's
+  `wilcox.test` rule, `wilcoxon_signed_rank`). Holm's correction runs across the
   groups of one task x measure (pingouin's `multicomp`; statsmodels' `multipletests`
   gives the same values but runs a garbage collection on every call, 0.2 s each).
-- `mixed_anova`: group (between) x condition (within), pingouin's `mixed_anova` with
-  partial eta squared; unequal group sizes are allowed (its sums of squares are for
-  unbalanced between-subject groups) and the sizes are stated.
+- `mixed_anova`: group (between) x condition (within) with partial eta squared and
+  Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
+  pingouin's `mixed_anova` has Type II only, so both come from two statsmodels OLS fits
+  (`_anova_rows` says how); unequal group sizes are stated.
 - `mixed_model`: a linear mixed model over all trials, value ~ condition * group with a
-  random intercept per participant (statsmodels `mixedlm`, REML); convergence warnings
-  are returned with the table, never hidden.
+  random intercept per participant (statsmodels `mixedlm`, REML); its p-values are Wald
+  z tests (statsmodels has no Satterthwaite df; lmerTest's are a little larger on small
+  samples). Convergence warnings are returned with the table, never hidden.
 
 Participants without both conditions of a comparison are excluded from it, and each
 exclusion is stated.
@@ -32,12 +35,19 @@ import pandas as pd
 import pingouin as pg
 import statsmodels.formula.api as smf
 from scipy import stats
+from statsmodels.stats.anova import anova_lm
+
+from study.analysis.source import DRIVERS, DataSource
+from study.errors import StudyInputError
 
 ALPHA = 0.05
 COMPARISON_COLUMNS = (
     "task", "measure", "group", "n", "mean_vo", "mean_hv", "sd_vo", "sd_hv", "shapiro_p",
-    "test", "statistic", "p", "effect_size", "effect_size_kind", "p_holm",
+    "test", "statistic", "p", "effect_size", "effect_size_kind", "p_holm", "p_method",
 )  # fmt: skip
+EXACT_MAX_N = 50
+"""The Wilcoxon p is exact below this many non-zero differences (R's `wilcox.test`)."""
+ANOVA_COLUMNS = ("task", "measure", "source", "F", "df1", "df2", "p", "np2", "ss_type")
 
 
 @dataclass
@@ -48,6 +58,33 @@ class Analysis:
     lmm: pd.DataFrame
     exclusions: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    source: DataSource = field(default_factory=lambda: DataSource(dict.fromkeys(DRIVERS, 0)))
+    """The analysed trials by driver; every output says when they are simulated."""
+    ss_type: int = 2
+    """Sums-of-squares type of the mixed ANOVA."""
+
+    @property
+    def tasks(self) -> list[str]:
+        frames = (self.descriptives, self.comparisons, self.mixed_anova, self.lmm)
+        return list(dict.fromkeys(t for f in frames if len(f) for t in f["task"]))
+
+    def warnings_about(self, kind: str) -> list[str]:
+        """The notes of one analysis ('mixed ANOVA', 'mixed model')."""
+        return [w for w in self.warnings if kind in w]
+
+    def for_task(self, task: str) -> Analysis:
+        """The same analysis restricted to one task (its tables, notes and exclusions)."""
+
+        def keep(frame: pd.DataFrame) -> pd.DataFrame:
+            return frame[frame["task"] == task].reset_index(drop=True) if len(frame) else frame
+
+        return Analysis(
+            descriptives=keep(self.descriptives), comparisons=keep(self.comparisons),
+            mixed_anova=keep(self.mixed_anova), lmm=keep(self.lmm),
+            exclusions=[e for e in self.exclusions if e.startswith(f"{task}/")],
+            warnings=[w for w in self.warnings if w.startswith(f"{task}/")],
+            source=self.source, ss_type=self.ss_type,
+        )  # fmt: skip
 
 
 def descriptives(long: pd.DataFrame) -> pd.DataFrame:
@@ -91,6 +128,27 @@ def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
     return float((ranks[d > 0].sum() - ranks[d < 0].sum()) / total) if total else 0.0
 
 
+def wilcoxon_signed_rank(diff: np.ndarray) -> tuple[float, float, str]:
+    """Two-sided Wilcoxon signed-rank test of paired differences: (W, p, method).
+
+    The rule is R's `wilcox.test` default, written out so that it does not depend on the
+    scipy version (scipy's `method="auto"` changed between releases): the p-value is
+    exact when there are fewer than 50 differences, none zero and no two of equal size;
+    otherwise zero differences are dropped (Wilcoxon's convention) and p is the normal
+    approximation with the tie-corrected variance and a continuity correction
+    ("asymptotic"). W is the smaller of the signed-rank sums, as scipy reports it (R's V
+    is the positive one).
+    """
+    d = diff[diff != 0]
+    if not len(d):
+        return 0.0, 1.0, "exact"
+    ties = len(np.unique(np.abs(d))) < len(d)
+    exact = len(d) == len(diff) and len(d) < EXACT_MAX_N and not ties
+    method = "exact" if exact else "asymptotic"
+    w = stats.wilcoxon(d, method=method, correction=method == "asymptotic")
+    return float(w.statistic), float(w.pvalue), method
+
+
 def compare_conditions(
     long: pd.DataFrame, a: str = "VO", b: str = "HV"
 ) -> tuple[pd.DataFrame, list[str]]:
@@ -129,19 +187,17 @@ def compare_conditions(
                 p=float(t.pvalue),
                 effect_size=hedges_g_av(vo, hv),
                 effect_size_kind="hedges_g_av",
+                p_method="t distribution",
             )
         else:
-            if np.all(diff == 0):
-                w_stat, w_p = 0.0, 1.0
-            else:
-                w = stats.wilcoxon(hv, vo)
-                w_stat, w_p = float(w.statistic), float(w.pvalue)
+            w_stat, w_p, method = wilcoxon_signed_rank(diff)
             row.update(
                 test="wilcoxon",
                 statistic=w_stat,
                 p=w_p,
                 effect_size=rank_biserial(vo, hv),
                 effect_size_kind="rank_biserial",
+                p_method=method,
             )
         rows.append(row)
     frame = pd.DataFrame(rows, columns=list(COMPARISON_COLUMNS))
@@ -157,40 +213,84 @@ def _sizes(counts: pd.Series) -> str:
     return ", ".join(f"{g} {int(n)}" for g, n in counts.items())
 
 
-def mixed_anova(long: pd.DataFrame, a: str = "VO", b: str = "HV") -> tuple[pd.DataFrame, list[str]]:
+SS_TYPES = (2, 3)
+DEFAULT_SS_TYPE = 2
+"""Type II by default: with unequal groups it tests the condition effect on the
+participant-weighted mean (pingouin's `mixed_anova`, R `afex::aov_ez(type = 2)`); Type III
+(afex's default, `type = 3`, sum contrasts) tests it on the unweighted mean of the group
+means. The group and interaction terms are the same under both."""
+
+
+def _anova_rows(wide: pd.DataFrame, a: str, b: str, ss_type: int) -> list[dict[str, Any]]:
+    """Group (between) x condition (two levels, within) on one participant per row.
+
+    With two conditions the mixed ANOVA splits into two between-subject models (the
+    multivariate approach car::Anova and afex use): the participant sums
+    s = (a + b) / sqrt 2 carry the group effect; the differences d = (b - a) / sqrt 2
+    carry the condition effect (the intercept of d ~ group) and the interaction (the
+    group term of d ~ group). statsmodels fits both with sum-to-zero group contrasts;
+    its Type III table gives the intercept's SS (Type III condition), and the Type II
+    condition SS is that of the intercept alone, N mean(d)^2.
+    """
+    data = pd.DataFrame({
+        "group": wide["group"].to_numpy(),
+        "s": (wide[a] + wide[b]).to_numpy(float) / math.sqrt(2),
+        "d": (wide[b] - wide[a]).to_numpy(float) / math.sqrt(2),
+    })  # fmt: skip
+    between = anova_lm(smf.ols("s ~ C(group, Sum)", data).fit(), typ=3)
+    within = anova_lm(smf.ols("d ~ C(group, Sum)", data).fit(), typ=3)
+    n = len(data)
+    # Type II: SS(condition) = N dbar^2; Type III: the sum-coded intercept's SS
+    ss_condition = n * data["d"].mean() ** 2 if ss_type == 2 else within.loc["Intercept", "sum_sq"]
+    terms = (
+        ("group", between.loc["C(group, Sum)"], between.loc["Residual"]),
+        ("condition", pd.Series({"sum_sq": ss_condition, "df": 1.0}), within.loc["Residual"]),
+        ("interaction", within.loc["C(group, Sum)"], within.loc["Residual"]),
+    )
+    rows = []
+    for source, effect, error in terms:
+        # F = (SS_effect / df_effect) / (SS_error / df_error); partial eta^2 = SS / (SS + SS_err)
+        f = (effect["sum_sq"] / effect["df"]) / (error["sum_sq"] / error["df"])
+        rows.append({
+            "source": source, "F": float(f), "df1": float(effect["df"]),
+            "df2": float(error["df"]), "p": float(stats.f.sf(f, effect["df"], error["df"])),
+            "np2": float(effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])),
+            "ss_type": ss_type,
+        })  # fmt: skip
+    return rows
+
+
+def mixed_anova(
+    long: pd.DataFrame, a: str = "VO", b: str = "HV", ss_type: int = DEFAULT_SS_TYPE
+) -> tuple[pd.DataFrame, list[str]]:
+    """Group x condition mixed ANOVA per task x measure, with Type II or III sums of squares.
+
+    Returns columns task, measure, source (group, condition, interaction), F, df1, df2,
+    p, np2 (partial eta squared), ss_type; and notes (skipped analyses, unequal sizes).
+    """
+    if ss_type not in SS_TYPES:
+        raise StudyInputError(f"sums-of-squares type {ss_type!r}; expected 2 or 3")
     rows, notes = [], []
-    for (task, measure), g in long.groupby(["task", "measure"], sort=False):
-        both = g.groupby("participant")["condition"].nunique()
-        keep = both[both == 2].index
-        g = g[g["participant"].isin(keep)]
-        sizes = g.drop_duplicates("participant")["group"].value_counts()
+    pairs = long[long["condition"].isin((a, b))]
+    for (task, measure), g in pairs.groupby(["task", "measure"], sort=False):
+        wide = g.pivot_table(index=["participant", "group"], columns="condition",
+                             values="value").reset_index()  # fmt: skip
+        wide = wide.dropna(subset=[c for c in (a, b) if c in wide])
+        sizes = wide["group"].value_counts(sort=False) if {a, b} <= set(wide) else pd.Series()
         if len(sizes) < 2 or (sizes < 2).any():
             notes.append(f"{task}/{measure}: mixed ANOVA skipped (groups {_sizes(sizes)})")
             continue
         if sizes.nunique() > 1:
             notes.append(
-                f"{task}/{measure}: unequal group sizes {_sizes(sizes)}; pingouin's mixed ANOVA "
-                "handles unbalanced between-subject groups"
+                f"{task}/{measure}: mixed ANOVA on unequal group sizes {_sizes(sizes)}, "
+                f"Type {'II' if ss_type == 2 else 'III'} sums of squares"
             )
-        try:
-            table = pg.mixed_anova(
-                data=g, dv="value", within="condition", subject="participant", between="group"
-            )
-        except (np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
-            notes.append(f"{task}/{measure}: mixed ANOVA could not be computed: {exc}")
+        if (wide.groupby("group")[[a, b]].var() == 0).all().all():
+            notes.append(f"{task}/{measure}: mixed ANOVA skipped (no variance within groups)")
             continue
-        names = {"group": "group", "condition": "condition", "Interaction": "interaction"}
-        for _, r in table.iterrows():
-            rows.append(
-                {
-                    "task": task, "measure": measure, "source": names[r["Source"]],
-                    "F": float(r["F"]), "df1": float(r["DF1"]), "df2": float(r["DF2"]),
-                    "p": float(r["p_unc"] if "p_unc" in r else r["p-unc"]), "np2": float(r["np2"]),
-                }
-            )  # fmt: skip
-    return pd.DataFrame(
-        rows, columns=["task", "measure", "source", "F", "df1", "df2", "p", "np2"]
-    ), notes
+        for row in _anova_rows(wide, a, b, ss_type):
+            rows.append({"task": task, "measure": measure, **row})
+    return pd.DataFrame(rows, columns=ANOVA_COLUMNS), notes
 
 
 def mixed_model(trials: pd.DataFrame, measures: tuple[str, ...]) -> tuple[pd.DataFrame, list[str]]:
@@ -221,10 +321,11 @@ def mixed_model(trials: pd.DataFrame, measures: tuple[str, ...]) -> tuple[pd.Dat
                     {
                         "task": task, "measure": measure, "term": term,
                         "estimate": float(fit.fe_params[term]), "se": float(fit.bse[term]),
-                        "p": float(fit.pvalues[term]),
+                        "p": float(fit.pvalues[term]), "p_method": "Wald z",
                     }
                 )  # fmt: skip
-    return pd.DataFrame(rows, columns=["task", "measure", "term", "estimate", "se", "p"]), notes
+    columns = ["task", "measure", "term", "estimate", "se", "p", "p_method"]
+    return pd.DataFrame(rows, columns=columns), notes
 
 
 def _missing_questionnaires(trials: pd.DataFrame, long: pd.DataFrame) -> list[str]:
@@ -238,10 +339,12 @@ def _missing_questionnaires(trials: pd.DataFrame, long: pd.DataFrame) -> list[st
     return notes
 
 
-def analyze(trials: pd.DataFrame, long: pd.DataFrame) -> Analysis:
+def analyze(
+    trials: pd.DataFrame, long: pd.DataFrame, ss_type: int = DEFAULT_SS_TYPE
+) -> Analysis:
     comparisons, excluded = compare_conditions(long)
     excluded = _missing_questionnaires(trials, long) + excluded
-    anova, anova_notes = mixed_anova(long)
+    anova, anova_notes = mixed_anova(long, ss_type=ss_type)
     lmm, lmm_notes = mixed_model(trials, ("completion_time_s", "peak_proximal_force_n",
                                           "peak_distal_force_n"))  # fmt: skip
     return Analysis(
@@ -251,4 +354,6 @@ def analyze(trials: pd.DataFrame, long: pd.DataFrame) -> Analysis:
         lmm=lmm,
         exclusions=excluded,
         warnings=anova_notes + lmm_notes,
+        source=DataSource.of(trials),
+        ss_type=ss_type,
     )

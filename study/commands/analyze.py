@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
+from study.analysis.source import DRIVERS
 from study.commands.base import StudyCommand, db_option
 from study.errors import StudyInputError
 
@@ -17,11 +18,26 @@ from study.errors import StudyInputError
 @click.option("--task", default=None, help="Only this task (e.g. lcca) [default: all].")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
               help="Write the JSON here [default: OUT/analysis.json].")  # fmt: skip
+@click.option("--driver", type=click.Choice(DRIVERS), default=None,
+              help="Only trials of this driver (and their blocks' questionnaires) "
+                   "[default: all, their mix stated in every output].")  # fmt: skip
+@click.option("--ss-type", type=click.Choice(["2", "3"]), default="2", show_default=True,
+              help="Sums of squares of the mixed ANOVA: Type II (participant-weighted "
+                   "condition effect) or Type III (afex's default).")  # fmt: skip
 @db_option
-def analyze(out_dir: Path, task: str | None, json_path: Path | None, db_url: str | None) -> None:
-    """Per-group VO vs HV tests, the mixed ANOVA and the mixed model, as tables and JSON."""
+def analyze(
+    out_dir: Path, task: str | None, json_path: Path | None, driver: str | None,
+    ss_type: str, db_url: str | None,
+) -> None:  # fmt: skip
+    """Per-group VO vs HV tests, the mixed ANOVA and the mixed model: methods.md, tables
+    (CSV, Markdown, LaTeX; one set per task too when there are several) and JSON.
+
+    Every output counts the trials by driver (simulated, keyboard, hardware, imported) and
+    says so when any is simulated.
+    """
     from study.analysis.frames import participant_means, tlx_frame, trial_frame
     from study.analysis.report import write
+    from study.analysis.source import restrict
     from study.analysis.stats import analyze as run_analysis
 
     if json_path is not None and not json_path.parent.is_dir():
@@ -42,11 +58,14 @@ def analyze(out_dir: Path, task: str | None, json_path: Path | None, db_url: str
         trials, tlx = trials[trials["task"] == task], tlx[tlx["task"] == task]
     if not len(trials) and not len(tlx):
         raise StudyInputError("the database holds no completed trials or questionnaires to analyse")
-    result = run_analysis(trials, participant_means(trials, tlx))
+    trials, tlx = restrict(trials, tlx, driver)
+    result = run_analysis(trials, participant_means(trials, tlx), ss_type=int(ss_type))
     written = write(result, out_dir, json_path)
     for path in written:
         click.echo(str(path))
     n_ex = len(result.exclusions)
+    if result.source.note:
+        click.echo(result.source.note)
     click.echo(
         f"{len(result.comparisons)} comparisons, {n_ex} exclusions, "
         f"{len(result.warnings)} notes, in {time.monotonic() - start:.1f} s"

@@ -9,6 +9,7 @@ import click
 from rich.console import Console
 
 from db.migrate import open_database
+from study.analysis.source import DRIVERS
 from study.commands.base import StudyCommand, db_option
 from study.errors import StudyInputError
 
@@ -29,8 +30,13 @@ def _formats(text: str) -> list[str]:
               help="Comma-separated: pdf, svg, png (300 dpi).")  # fmt: skip
 @click.option("--width", type=click.Choice(["single", "double"]), default="double",
               show_default=True, help="IEEE column width: 3.5 in or 7.16 in.")  # fmt: skip
+@click.option("--driver", type=click.Choice(DRIVERS), default=None,
+              help="Only trials of this driver [default: all; a simulated share is "
+                   "written on every figure].")  # fmt: skip
 @db_option
-def figures(out_dir: Path, formats: str, width: str, db_url: str | None) -> None:
+def figures(
+    out_dir: Path, formats: str, width: str, driver: str | None, db_url: str | None
+) -> None:
     """Draw the paper's figures: group comparison, force traces, NASA-TLX profile.
 
     Fig. 12 (per group, VO vs HV), Fig. 9 (force traces of a trial) and the TLX profile.
@@ -40,7 +46,7 @@ def figures(out_dir: Path, formats: str, width: str, db_url: str | None) -> None
     chosen = _formats(formats)
     engine = open_database(db_url, create=False)
     try:
-        for path in write_figures(engine, out_dir, chosen, width):
+        for path in write_figures(engine, out_dir, chosen, width, driver):
             click.echo(str(path))
     finally:
         engine.dispose()
@@ -80,5 +86,6 @@ def demo(out_dir: Path, db_url: str | None, seed: int, jobs: int, quick: bool) -
             write_figures(engine, out_dir / "figures")
         finally:
             engine.dispose()
-    click.echo(f"demo study in {db_url}; analysis in {out_dir / 'analysis'}; figures in "
+    click.echo(f"SIMULATED demo study (every participant, trial and questionnaire simulated) "
+               f"in {db_url}; analysis in {out_dir / 'analysis'}; figures in "
                f"{out_dir / 'figures'} ({time.monotonic() - start:.0f} s)")  # fmt: skip

@@ -136,7 +136,9 @@ class AnalysisPane(Vertical):
             select.value = "peak_proximal_force_n" if "peak_proximal_force_n" in measures else (
                 measures[0])  # fmt: skip
         notes = len(event.result.exclusions) + len(event.result.warnings)
-        self._status(f"{len(comparisons)} comparisons, {notes} exclusions and notes")
+        note = event.result.source.note
+        self._status(f"{len(comparisons)} comparisons, {notes} exclusions and notes"
+                     + (f"; data: {note}" if note else ""))  # fmt: skip
 
     @on(Select.Changed, "#measure")
     def _measure(self, event: Select.Changed) -> None:

@@ -12,7 +12,13 @@ import pingouin as pg
 import pytest
 from scipy import stats
 
-from study.analysis.stats import compare_conditions, hedges_g_av, mixed_anova, mixed_model
+from study.analysis.stats import (
+    compare_conditions,
+    hedges_g_av,
+    mixed_anova,
+    mixed_model,
+    wilcoxon_signed_rank,
+)
 from study.cli import main
 from study.protocol.design import TEMPLATE
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_COLUMNS
@@ -170,17 +176,31 @@ def test_study_analyze_writes_the_json_contract(
     first = report["comparisons"][0]
     assert list(first) == ["task", "measure", "group", "n", "mean_vo", "mean_hv", "sd_vo",
                            "sd_hv", "test", "statistic", "p", "p_holm", "effect_size",
-                           "effect_size_kind"]  # fmt: skip
+                           "effect_size_kind", "p_method"]  # fmt: skip
     measures = {c["measure"] for c in report["comparisons"]}
     assert {"completion_time_s", "peak_proximal_force_n", "tlx_raw", "tlx_weighted",
             "tlx_mental"} <= measures  # fmt: skip
     assert {a["source"] for a in report["mixed_anova"]} == {"group", "condition", "interaction"}
-    assert set(report["lmm"][0]) == {"task", "measure", "term", "estimate", "se", "p"}
+    assert set(report["lmm"][0]) == {"task", "measure", "term", "estimate", "se", "p", "p_method"}
+    assert {r["p_method"] for r in report["lmm"]} == {"Wald z"}
+    assert report["methods"]["mixed_anova"]["ss_type"] == 2  # the default, stated
+    assert {a["ss_type"] for a in report["mixed_anova"]} == {2}
     tlx_novice = [c for c in report["comparisons"]
                   if c["measure"] == "tlx_raw" and c["group"] == "novice"]  # fmt: skip
     assert tlx_novice[0]["n"] == 4  # P005 has no questionnaires: not in the TLX analyses
-    for name in ("comparisons.md", "comparisons.tex", "tests.csv"):
+    for name in ("comparisons.md", "comparisons.tex", "tests.csv", "methods.md"):
         assert (out / name).stat().st_size > 100
+    for table in ("descriptives", "comparisons", "mixed_anova", "lmm"):
+        tex = (out / f"{table}.tex").read_text()
+        assert "\\toprule" in tex and "\\bottomrule" in tex and "\\caption{" in tex  # booktabs
+        assert (out / f"{table}.md").read_text().startswith(f"**Table: {table}.**")
+        assert len(pd.read_csv(out / f"{table}.csv")) > 0
+    methods = (out / "methods.md").read_text()
+    for phrase in ("Type II sums of squares (the default)", "Holm", "Wald z", "REML",
+                   "Shapiro-Wilk", "exact p when", "scipy "):  # fmt: skip
+        assert phrase in methods
+    assert "Type II sums of squares (the default)" in (out / "mixed_anova.tex").read_text()
+    assert "Wald z" in (out / "lmm.md").read_text()
     # the exclusion (P005's questionnaires) is stated in every output
     assert any("P005" in e for e in report["exclusions"])
     assert "P005" in (out / "comparisons.md").read_text()
@@ -190,3 +210,92 @@ def test_study_analyze_writes_the_json_contract(
     capsys.readouterr()
     assert main(["analyze", "--out", str(out), "--task", "notes", "--db", db]) == 2
     assert "no data for task 'notes'" in capsys.readouterr().err
+    out3 = tmp_path / "type3"
+    assert main(["analyze", "--out", str(out3), "--ss-type", "3", "--db", db]) == 0
+    report3 = json.loads((out3 / "analysis.json").read_text())
+    assert {a["ss_type"] for a in report3["mixed_anova"]} == {3}
+    assert "Type III sums of squares," in (out3 / "methods.md").read_text()
+    assert main(["analyze", "--out", str(out3), "--ss-type", "1", "--db", db]) == 2
+
+
+DEMO_MEANS = Path(__file__).parent.parent / "data" / "demo_seed1_means.csv"
+"""Participant means of `study demo --seed 1` (36 participants: 20 outsiders, 8 novices,
+8 experts; four measures), written by `participant_means` on the demo database."""
+
+# R 4.2.2, afex 1.2.1, on tests/data/demo_seed1_means.csv:
+#   d <- read.csv("demo_seed1_means.csv"); s <- d[d$measure == m, ]
+#   aov_ez("participant", "value", s, between = "group", within = "condition",
+#          type = ty, anova_table = list(es = "pes", correction = "none"))
+# columns: F, Pr(>F), pes for group, condition, group:condition (printed to 12 digits)
+AFEX = {
+    ("completion_time_s", 2): [(7.231398183085, 0.00248685346378, 0.304718589579),
+                               (10.515660560822, 0.00270840837380, 0.241652325285),
+                               (0.586604591339, 0.56190757305701, 0.034331255704)],
+    ("completion_time_s", 3): [(7.231398183085, 0.00248685346378, 0.304718589579),
+                               (9.352709648518, 0.00439463346009, 0.220829073892),
+                               (0.586604591339, 0.56190757305701, 0.034331255704)],
+    ("peak_proximal_force_n", 2): [(8.62982649650, 9.66848644552e-04, 0.343409712666),
+                                   (62.18117468232, 4.31381047181e-09, 0.653292784943),
+                                   (8.06629639128, 1.40565984701e-03, 0.328348085638)],
+    ("peak_proximal_force_n", 3): [(8.62982649650, 9.66848644552e-04, 0.343409712666),
+                                   (31.20052626357, 3.27245769090e-06, 0.485985521917),
+                                   (8.06629639128, 1.40565984701e-03, 0.328348085638)],
+    ("peak_distal_force_n", 2): [(10.47839736752, 2.99722020478e-04, 0.388399548897),
+                                 (62.22883097912, 4.27780649359e-09, 0.653466291031),
+                                 (8.46827963717, 1.07540699069e-03, 0.339161518544)],
+    ("peak_distal_force_n", 3): [(10.47839736752, 2.99722020478e-04, 0.388399548897),
+                                 (30.98900515267, 3.46101863991e-06, 0.484286403246),
+                                 (8.46827963717, 1.07540699069e-03, 0.339161518544)],
+    ("tlx_raw", 2): [(3.53683391095, 4.05793380547e-02, 0.176516605701),
+                     (26.52060292459, 1.18599402508e-05, 0.445570132382),
+                     (2.34088410618, 1.12024751717e-01, 0.124244918284)],
+    ("tlx_raw", 3): [(3.53683391095, 0.040579338054718, 0.176516605701),
+                     (14.65882210787, 0.000545671878993, 0.307578355056),
+                     (2.34088410618, 0.112024751716547, 0.124244918284)],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("ss_type", [2, 3])
+def test_mixed_anova_equals_afex_on_the_demo_study(ss_type: int) -> None:
+    long = pd.read_csv(DEMO_MEANS)
+    table, notes = mixed_anova(long, ss_type=ss_type)
+    assert any("unequal group sizes outsider 20, novice 8, expert 8" in n for n in notes)
+    for measure in ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n",
+                    "tlx_raw"):  # fmt: skip
+        rows = table[table["measure"] == measure].set_index("source")
+        for source, (f, p, pes) in zip(("group", "condition", "interaction"),
+                                       AFEX[(measure, ss_type)], strict=True):  # fmt: skip
+            assert rows.loc[source, "F"] == pytest.approx(f, abs=1e-6), (measure, source)
+            assert rows.loc[source, "p"] == pytest.approx(p, abs=1e-6), (measure, source)
+            assert rows.loc[source, "np2"] == pytest.approx(pes, abs=1e-6), (measure, source)
+            assert rows.loc[source, "df2"] == 33  # 36 participants - 3 groups
+    if ss_type == 2:  # Type II is also pingouin's mixed ANOVA
+        g = long[long["measure"] == "peak_proximal_force_n"]
+        pg_table = pg.mixed_anova(data=g, dv="value", within="condition",
+                                  subject="participant", between="group")  # fmt: skip
+        assert table.loc[table["measure"] == "peak_proximal_force_n", "F"].tolist() == (
+            pytest.approx(pg_table["F"].tolist(), rel=1e-9)
+        )
+
+
+def test_mixed_anova_refuses_an_unknown_ss_type() -> None:
+    with pytest.raises(ValueError, match="sums-of-squares type 1; expected 2 or 3"):
+        mixed_anova(pd.read_csv(DEMO_MEANS), ss_type=1)
+
+
+# R 4.2.2: wilcox.test(d)$p.value (exact = NULL, correct = TRUE: the defaults)
+#   d1 four zeros -> 0.100348246462291 ("cannot compute exact p-value with zeroes")
+#   d2 a tie      -> 0.0420627333567661 ("cannot compute exact p-value with ties")
+#   d3 distinct   -> 0.0546875, V = 32 (so W = min(32, 36 - 32) = 4)
+@pytest.mark.parametrize(
+    ("diff", "p", "w", "method"),
+    [
+        ([0, 0, 0, 0, 0.05, 0.12, 0.03, 0.2], 0.100348246462291, 0.0, "asymptotic"),
+        ([0.1, 0.1, 0.3, -0.2, 0.5, 0.6, 0.7, 0.9], 0.0420627333567661, 3.0, "asymptotic"),
+        ([0.11, 0.32, -0.25, 0.54, 0.61, 0.73, 0.95, -0.05], 0.0546875, 4.0, "exact"),
+    ],
+)
+def test_wilcoxon_rule_is_r_wilcox_test(diff: list[float], p: float, w: float, method: str) -> None:
+    got = wilcoxon_signed_rank(np.array(diff))
+    assert got[0] == w and got[2] == method
+    assert got[1] == pytest.approx(p, abs=1e-12)

@@ -181,7 +181,7 @@ def _store_trials(engine) -> None:
                     condition=block.condition, block_index=block.block_index, trial_index=0,
                     status="completed", completion_time_s=20.0 + 10 * peak,
                     peak_proximal_force_n=peak, peak_distal_force_n=peak / 2, success=True,
-                    wall_contacts=0,
+                    wall_contacts=0, driver="simulated",
                 ))  # fmt: skip
         session.commit()
         ids = session.scalars(select(Trial.id)).all()
@@ -209,6 +209,9 @@ async def test_analysis_tables_chart_and_figure_export(
         # means by hand: novice VO (1.0 + 1.2 + 1.4) / 3 = 1.2, HV 0.6; expert 0.9, 0.6
         assert (peak["novice"][2], peak["novice"][3], peak["novice"][4]) == ("3", "1.2", "0.6")
         assert (peak["expert"][3], peak["expert"][4]) == ("0.9", "0.6")
+        # simulated trials: the screen says so beside the tables
+        status = _text(app, "#analysis-status")
+        assert "Simulated participants: all 12 trials simulated, none measured" in status
         # the chart of peak proximal force: bars on one scale, the longest (1.2) full width
         await wait_for(pilot, lambda: "novice" in _text(app, "#chart"))
         chart = _text(app, "#chart").splitlines()

@@ -1,0 +1,131 @@
+"""The methods as a reviewer reads them: one sentence per analysis for table captions, and
+`methods.md`, a paragraph a paper can start from, with the software versions.
+
+The sentences state what `study.analysis.stats` does (test, correction, sums-of-squares
+type, df or p method, exact or asymptotic) and nothing it does not; they live beside
+the numbers' code so that a change of method is a change of text in one place.
+"""
+
+from __future__ import annotations
+
+import platform
+from importlib.metadata import PackageNotFoundError, version
+from typing import TYPE_CHECKING, Any
+
+from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE, EXACT_MAX_N
+
+if TYPE_CHECKING:
+    from study.analysis.stats import Analysis
+
+PACKAGES = ("haptic-study", "numpy", "scipy", "pandas", "statsmodels", "pingouin", "matplotlib")
+
+WILCOXON_RULE = (
+    f"exact p when there are fewer than {EXACT_MAX_N} differences, none zero and none tied "
+    "in absolute value; otherwise zero differences are dropped and p is the normal "
+    "approximation with tie-corrected variance and continuity correction (the rule of R's "
+    "wilcox.test)"
+)
+
+
+def comparison_method() -> str:
+    return (
+        "VO vs HV within each group on participant means. Shapiro-Wilk on the paired "
+        f"differences (alpha = {ALPHA:g}) chooses the test: a two-sided paired t-test (effect "
+        "size Hedges' g_av, Lakens 2013) when they look normal, otherwise a two-sided "
+        f"Wilcoxon signed-rank test ({WILCOXON_RULE}; effect size the matched-pairs "
+        "rank-biserial correlation, Kerby 2014). p (Holm): Holm-corrected across the groups "
+        "of each task and measure."
+    )
+
+
+def anova_method(ss_type: int) -> str:
+    default = " (the default)" if ss_type == DEFAULT_SS_TYPE else ""
+    weighting = (
+        "the condition effect is tested on the participant-weighted mean"
+        if ss_type == 2
+        else "the condition effect is tested on the unweighted mean of the group means"
+    )
+    return (
+        "Mixed ANOVA on participant means: group between, condition within. "
+        f"Type {'II' if ss_type == 2 else 'III'} sums of squares{default}, sum-to-zero "
+        f"contrasts; with unequal groups {weighting}. "
+        "F tests with their exact df (two conditions, so no sphericity correction); effect "
+        "size partial eta squared."
+    )
+
+
+def lmm_method() -> str:
+    return (
+        "Linear mixed model over all measured trials, value ~ condition * group + "
+        "(1 | participant), fitted by REML (statsmodels MixedLM); treatment coding with "
+        "VO and the alphabetically first group as reference. p from Wald z tests "
+        "(no Satterthwaite or Kenward-Roger df)."
+    )
+
+
+def software_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def methods_json(analysis: Analysis) -> dict[str, Any]:
+    return {
+        "comparisons": {
+            "unit": "participant means per task x condition",
+            "normality": f"Shapiro-Wilk on the paired differences, alpha {ALPHA:g}",
+            "tests": {"paired_t": "two-sided paired t-test, effect size Hedges' g_av",
+                      "wilcoxon": "two-sided Wilcoxon signed-rank test, effect size "
+                                  "matched-pairs rank-biserial correlation"},
+            "wilcoxon_p": WILCOXON_RULE,
+            "correction": "Holm across the groups of each task x measure",
+        },  # fmt: skip
+        "mixed_anova": {
+            "ss_type": analysis.ss_type,
+            "default_ss_type": DEFAULT_SS_TYPE,
+            "contrasts": "sum-to-zero",
+            "df": "exact (two conditions: no sphericity correction)",
+            "effect_size": "partial eta squared",
+        },
+        "lmm": {"estimation": "REML", "p": "Wald z", "df": "none (z tests)",
+                "formula": "value ~ condition * group + (1 | participant)"},  # fmt: skip
+        "software": software_versions(),
+    }
+
+
+def _groups(analysis: Analysis) -> str:
+    d = analysis.descriptives
+    if not len(d):
+        return "no participants"
+    sizes = d.groupby("group", sort=False)["n"].max()
+    return ", ".join(f"{n} {g}" for g, n in sizes.items())
+
+
+def methods_markdown(analysis: Analysis) -> str:
+    """`methods.md`: the statistics paragraph, the data source and the software."""
+    counts = ", ".join(f"{n} {d}" for d, n in analysis.source.trials_by_driver.items() if n)
+    measures = ", ".join(dict.fromkeys(analysis.descriptives.get("measure", [])))
+    source = (
+        f"**{analysis.source.note}.** These results describe simulated participants and "
+        "are not evidence about people.\n\n"
+        if analysis.source.note
+        else ""
+    )
+    software = ", ".join(f"{k} {v}" for k, v in software_versions().items())
+    return (
+        "# Statistical methods\n\n"
+        f"{source}"
+        f"Data: {counts or 'no trials'} (trials by driver); participants per group at most "
+        f"{_groups(analysis)}. Measures: {measures or 'none'}. Each participant's trials of "
+        "a block were averaged, and participant means were the unit of analysis; "
+        "participants without both conditions of a comparison were excluded from it "
+        f"({len(analysis.exclusions)} exclusions, listed with the tables).\n\n"
+        f"{comparison_method()}\n\n"
+        f"{anova_method(analysis.ss_type)}\n\n"
+        f"{lmm_method()}\n\n"
+        f"Software: {software}.\n"
+    )

@@ -1,0 +1,158 @@
+"""The results tables a paper takes: one display frame per table, written as CSV (raw
+numbers), Markdown and LaTeX (booktabs, pandas' Styler), each with a caption that names
+its methods, the data source and the exclusions.
+
+Every caption is built here from the same facts as `methods.md` (`study.analysis.methods`),
+so a table never says less than the methods paragraph.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from study.analysis.methods import anova_method, comparison_method, lmm_method
+from study.analysis.stats import Analysis
+
+
+@dataclass(frozen=True)
+class Table:
+    """One results table: raw numbers for the CSV, formatted cells and a caption."""
+
+    name: str
+    raw: pd.DataFrame
+    display: pd.DataFrame
+    caption: str
+
+    def markdown(self) -> str:
+        header = "| " + " | ".join(self.display.columns) + " |"
+        rule = "|" + "---|" * len(self.display.columns)
+        body = ["| " + " | ".join(map(str, r)) + " |" for r in self.display.to_numpy()]
+        if not body:
+            body = ["| " + " | ".join(["-"] * len(self.display.columns)) + " |"]
+        lines = [f"**Table: {self.name}.** {self.caption}", "", header, rule, *body]
+        return "\n".join(lines) + "\n"
+
+    def latex(self) -> str:
+        styler = (
+            self.display.style.hide(axis="index")
+            .format(escape="latex")
+            .format_index(escape="latex", axis=1)
+        )
+        text = styler.to_latex(
+            hrules=True, caption=tex_escape(self.caption), label=f"tab:{self.name}",
+            position_float="centering",
+        )  # fmt: skip
+        return text.replace("< .001", "$<$ .001")  # '<' is a text-mode glyph only in T1
+
+    def write(self, folder: Path, data_source: str) -> list[Path]:
+        """NAME.csv (raw numbers; a data_source column, for a table may travel alone),
+        NAME.md and NAME.tex (formatted, captioned)."""
+        paths = [folder / f"{self.name}.{ext}" for ext in ("csv", "md", "tex")]
+        self.raw.assign(data_source=data_source).to_csv(paths[0], index=False)
+        paths[1].write_text(self.markdown())
+        paths[2].write_text(self.latex())
+        return paths
+
+
+TEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#",
+               "_": r"\_", "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}",
+               "^": r"\textasciicircum{}"}  # fmt: skip
+
+
+def tex_escape(text: str) -> str:
+    return "".join(TEX_SPECIAL.get(c, c) for c in text)
+
+
+def p_text(p: float | None) -> str:
+    if p is None or not math.isfinite(p):
+        return "n/a"
+    return "< .001" if p < 0.001 else f"{p:.3f}".lstrip("0")
+
+
+def _num(x: float | None, digits: int = 3) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else f"{x:.{digits}f}"
+
+
+def _mean_sd(means: pd.Series, sds: pd.Series) -> list[str]:
+    return [f"{_num(m)} ({_num(s)})" for m, s in zip(means, sds, strict=True)]
+
+
+def _preamble(analysis: Analysis) -> str:
+    return f"{analysis.source.note}. " if analysis.source.note else ""
+
+
+def comparisons_table(analysis: Analysis) -> Table:
+    c = analysis.comparisons
+    display = pd.DataFrame({
+        "task": c["task"], "measure": c["measure"], "group": c["group"], "n": c["n"],
+        "VO mean (SD)": _mean_sd(c["mean_vo"], c["sd_vo"]),
+        "HV mean (SD)": _mean_sd(c["mean_hv"], c["sd_hv"]),
+        "test": c["test"].map({"paired_t": "paired t", "wilcoxon": "Wilcoxon"}),
+        "statistic": [_num(v) for v in c["statistic"]],
+        "p": [p_text(v) for v in c["p"]], "p from": c["p_method"],
+        "p (Holm)": [p_text(v) for v in c["p_holm"]],
+        "effect size": [f"{_num(v, 2)} ({k})"
+                        for v, k in zip(c["effect_size"], c["effect_size_kind"], strict=True)],
+    })  # fmt: skip
+    exclusions = "; ".join(analysis.exclusions) or "none"
+    caption = f"{_preamble(analysis)}{comparison_method()} Exclusions: {exclusions}."
+    return Table("comparisons", c, display, caption)
+
+
+def anova_table(analysis: Analysis) -> Table:
+    a = analysis.mixed_anova
+    display = pd.DataFrame({
+        "task": a["task"], "measure": a["measure"], "source": a["source"],
+        "F": [_num(v, 2) for v in a["F"]],
+        "df": [f"{d1:g}, {d2:g}" for d1, d2 in zip(a["df1"], a["df2"], strict=True)],
+        "p": [p_text(v) for v in a["p"]], "partial eta squared": [_num(v) for v in a["np2"]],
+        "SS type": a["ss_type"].map(lambda t: "II" if t == 2 else "III"),
+    })  # fmt: skip
+    notes = "; ".join(analysis.warnings_about("mixed ANOVA")) or "none"
+    caption = f"{_preamble(analysis)}{anova_method(analysis.ss_type)} Notes: {notes}."
+    return Table("mixed_anova", a, display, caption)
+
+
+def lmm_table(analysis: Analysis) -> Table:
+    m = analysis.lmm
+    display = pd.DataFrame({
+        "task": m["task"], "measure": m["measure"], "term": m["term"],
+        "estimate": [_num(v, 4) for v in m["estimate"]], "SE": [_num(v, 4) for v in m["se"]],
+        "p (Wald z)": [p_text(v) for v in m["p"]],
+    })  # fmt: skip
+    notes = "; ".join(analysis.warnings_about("mixed model")) or "none"
+    caption = f"{_preamble(analysis)}{lmm_method()} Notes: {notes}."
+    return Table("lmm", m, display, caption)
+
+
+def descriptives_table(analysis: Analysis) -> Table:
+    d = analysis.descriptives
+    display = pd.DataFrame({
+        "task": d.get("task", []), "measure": d.get("measure", []),
+        "group": d.get("group", []), "condition": d.get("condition", []), "n": d.get("n", []),
+        "mean": [_num(v) for v in d.get("mean", [])], "SD": [_num(v) for v in d.get("sd", [])],
+        "median": [_num(v) for v in d.get("median", [])],
+        "IQR": [_num(v) for v in d.get("iqr", [])],
+        "95 % CI": [f"[{_num(lo)}, {_num(hi)}]"
+                    for lo, hi in zip(d.get("ci_low", []), d.get("ci_high", []),
+                                      strict=True)],
+    })  # fmt: skip
+    caption = (
+        f"{_preamble(analysis)}Participant means (the mean of each block's measured trials; "
+        "NASA-TLX as rated): n, mean, SD, median, interquartile range and the t-based 95 % "
+        "confidence interval of the mean."
+    )
+    return Table("descriptives", d, display, caption)
+
+
+def all_tables(analysis: Analysis) -> list[Table]:
+    return [
+        descriptives_table(analysis),
+        comparisons_table(analysis),
+        anova_table(analysis),
+        lmm_table(analysis),
+    ]
