@@ -129,11 +129,22 @@ def notes_runs(config: CalibrateBenchConfig) -> dict[str, Any]:
 
 
 def run_calibrate_bench(
-    config: CalibrateBenchConfig, out_dir: Path, progress: Callable[[str], None] | None = None
-) -> dict[str, Any]:
+    config: CalibrateBenchConfig, out_dir: Path, progress: Callable[[str], None] | None = None,
+    only_open: bool = False,
+) -> dict[str, Any]:  # fmt: skip
     """Run every part, write `calibrate_bench.md` and `calibrate.json` to `out_dir`."""
+    from study.bench.calibrate_open import markdown as open_markdown
+    from study.bench.calibrate_open import open_part
+
     say = progress or (lambda _msg: None)
     out_dir.mkdir(parents=True, exist_ok=True)
+    measured = open_part(config.duration_s, config.rate_hz, config.seed, say)
+    if only_open:
+        report = {"config": config.__dict__, "open": measured}
+        lines = open_markdown(measured, config.duration_s, config.rate_hz)
+        (out_dir / "calibrate.json").write_text(json.dumps(report, indent=2) + "\n")
+        (out_dir / "calibrate_bench.md").write_text("\n".join(lines) + "\n")
+        return report
     families = {}
     for i, family in enumerate(FAMILIES):
         say(f"{family} ({i + 1}/{len(FAMILIES)})")
@@ -163,6 +174,7 @@ def run_calibrate_bench(
         },
         "estimator": estimator,
         "notes": notes,
+        "open": measured,
         "targets_met": {
             "every_family_named_first": all(r["added"][:1] == [f] for f, r in families.items()),
             "every_family_cut_by_a_third": all(
@@ -173,7 +185,9 @@ def run_calibrate_bench(
         },
     }
     (out_dir / "calibrate.json").write_text(json.dumps(report, indent=2) + "\n")
-    (out_dir / "calibrate_bench.md").write_text(markdown(report))
+    text = markdown(report) + "\n" + "\n".join(
+        open_markdown(measured, config.duration_s, config.rate_hz)) + "\n"  # fmt: skip
+    (out_dir / "calibrate_bench.md").write_text(text)
     return report
 
 

@@ -21,13 +21,24 @@ from study.commands.base import StudyCommand
 from study.errors import StudyInputError
 
 _err = Console(stderr=True)
-MODELS = ("follower", "master", "notes-translation", "notes-rotation")
+MODELS = ("follower", "master", "notes-translation", "notes-rotation", "rigid-axis")
 DRIVE_LABELS = {
     "follower": "q-axis current (A)",
     "master": "current (mA)",
     "notes-translation": "commanded force (N)",
     "notes-rotation": "commanded torque (N m)",
+    "rigid-axis": "force u (N or N m)",
 }
+
+
+def _mat_columns(text: str) -> tuple[str, str, str]:
+    """`t=t,q=qm,u=gtau*vir` -> ("t", "qm", "gtau*vir")."""
+    pairs = dict(p.split("=", 1) for p in text.split(",") if "=" in p)
+    if set(pairs) != {"t", "q", "u"} or len(text.split(",")) != 3:
+        raise StudyInputError(
+            f"--mat-columns {text!r}; expected t=NAME,q=NAME,u=NAME (products allowed: u=gtau*vir)"
+        )
+    return pairs["t"].strip(), pairs["q"].strip(), pairs["u"].strip()
 
 
 def write_json_atomically(data: dict[str, Any], path: Path) -> None:
@@ -38,12 +49,16 @@ def write_json_atomically(data: dict[str, Any], path: Path) -> None:
 
 
 def run_calibration(
-    recording: Path, model_name: str, held_out: float, max_effects: int, families: str | None
-) -> Any:
+    recording: Path, model_name: str, held_out: float, max_effects: int, families: str | None,
+    mat_columns: str = "t=t,q=qm,u=gtau*vir",
+) -> Any:  # fmt: skip
     """Read RECORDING for `model_name` and run the loop with a progress display."""
     from teleop_core.calibration import BASE_MODELS, Calibrator
+    from teleop_core.calibration.rigid_axis import RigidAxisBase
 
     model = BASE_MODELS[model_name]
+    if model_name == "rigid-axis":  # its derivative cutoff is fitted on the training share
+        model = RigidAxisBase(train_fraction=1.0 - held_out, mat_columns=_mat_columns(mat_columns))
     data = model.read(recording)
     chosen = [f.strip() for f in families.split(",")] if families else None
     calibrator = Calibrator(
@@ -107,6 +122,13 @@ def run_calibration(
 )
 @click.option("--max-effects", type=click.IntRange(min=0), default=4, show_default=True)
 @click.option(
+    "--mat-columns",
+    default="t=t,q=qm,u=gtau*vir",
+    show_default=True,
+    help="For a MATLAB .mat RECORDING (--model rigid-axis): the variables, or products of "
+    "them, that give t, q and u; every other vector of the same length is an extra channel.",
+)
+@click.option(
     "--families",
     default=None,
     metavar="LIST",
@@ -120,6 +142,7 @@ def calibrate(
     out_dir: Path,
     held_out: float,
     max_effects: int,
+    mat_columns: str,
     families: str | None,
 ) -> None:
     """Fit the base model to RECORDING, find and add the effects it lacks, report.
@@ -127,7 +150,9 @@ def calibrate(
     RECORDING is a follower CSV (t, iq, theta, omega, f_ref; alpha optional) for
     --model follower, the dial's calibration (t, current_ma, f_ref) for --model
     master, or a clamped NOTES ramp or chirp run (t, f_des, f_ee) for --model
-    notes-translation or notes-rotation.
+    notes-translation or notes-rotation, or any drive's recording (t, q, u: position
+    in m or rad, force in N or N m; other numeric columns are extra channels) for
+    --model rigid-axis, which also reads a MATLAB v5 .mat file (see --mat-columns).
     """
     import pandas as pd
 
@@ -137,7 +162,9 @@ def calibrate(
     for path in (json_path, pred_path, out_dir):
         if not path.parent.is_dir():
             raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
-    calibrator = run_calibration(recording, model_name, held_out, max_effects, families)
+    calibrator = run_calibration(
+        recording, model_name, held_out, max_effects, families, mat_columns
+    )
     report = calibrator.report()
     data, test = calibrator.data_, calibrator.test_
     before = data.y[test] - calibrator.base_prediction_[test]
@@ -168,8 +195,10 @@ def calibrate(
     unit = "N m" if model_name == "notes-rotation" else "N"
     click.echo(
         f"{recording.name}: held-out RMSE {report['rmse_before']:.4f} {unit} -> "
-        f"{report['rmse_after']:.4f} {unit}; effects added: {added}"
+        f"{report['rmse_after']:.4f} {unit} (fit {report['fit_percent_before']:.1f} % -> "
+        f"{report['fit_percent_after']:.1f} %); effects added: {added}"
     )
+    click.echo(_verdict_line(report))
     for effect in report["effects_added"]:
         params = ", ".join(
             f"{k} = {v:.4g} [{lo:.3g}, {hi:.3g}]"
@@ -180,3 +209,16 @@ def calibrate(
         click.echo(f"  {effect['family']}: {params} -> {effect['rmse_after_step']:.4f} {unit}")
     for warning in report["warnings"]:
         click.echo(f"note: {warning}")
+
+
+def _verdict_line(report: dict[str, Any]) -> str:
+    """The verdict in one line: white, or where the structure that remains lies."""
+    if report["verdict"] == "white":
+        return "verdict: white (the held-out residual shows no structure left)"
+    where = report["unexplained"]
+    if where["share_beyond_chance"] >= 0.02:
+        place = (f"{where['quantity']} explains {100 * where['share_of_variance']:.0f} % of "
+                 f"the held-out residual's variance")  # fmt: skip
+    else:
+        place = "no recorded channel or derived quantity explains it beyond chance"
+    return f"verdict: structure remains, unexplained; {place}"

@@ -28,6 +28,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+from statsmodels.stats.stattools import durbin_watson
 
 from teleop_core._typing import Float1D, Rows
 from teleop_core.calibration.effects import EFFECTS, Effect
@@ -39,8 +40,11 @@ from teleop_core.calibration.fitting import (
     search,
     solve,
 )
+from teleop_core.calibration.library import OPEN_TERMS, OpenTerm, term_report
 from teleop_core.calibration.models import BaseModel, CalibrationData
+from teleop_core.calibration.plausibility import effect_coefficients, implausible
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
+from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
 
 Progress = Callable[[int, int, str], None]
@@ -140,6 +144,19 @@ class Calibrator:
         n = len(e)
         return float(n * np.log(np.mean(e * e)) + k * np.log(n))
 
+    def _reason(self, cand: Candidate, effect: Effect, coef: Float1D, data: CalibrationData) -> str:
+        """Why a candidate is refused ("" when it passes): the held-out rules, then
+        plausibility, then an unlocated search."""
+        reason = _verdict(cand, self.min_gain, self.alpha)
+        if not reason:
+            own = effect_coefficients(coef, effect, data.signals, cand.searched_value)
+            reason = implausible(effect, own, cand.searched_value, self.model.out,
+                                 self.model.unit, data.signals) or ""  # fmt: skip
+        edge = _search_edge(effect, cand.searched_value, data.signals)
+        if not reason and edge and UNLOCATED_AT.get(cand.family) == edge[0]:
+            reason = f"not located: {edge[1]}"
+        return reason
+
     def fit(self, data: CalibrationData, progress: Progress | None = None) -> Calibrator:
         """Run the loop on `data`; fitted attributes end in `_`."""
         if len(data) < 200:
@@ -149,6 +166,9 @@ class Calibrator:
             )
         families = list(self.families or self.model.families)
         families = [f for f in families if all(k in data.signals for k in EFFECTS[f].needs)]
+        open_terms = [] if self.families else [
+            f for f, e in OPEN_TERMS.items() if all(k in data.signals for k in e.needs)
+        ]  # fmt: skip
         self.train_, self.test_ = self._split(len(data), data.held_out_blocks)
         y_test = data.y[self.test_]
         chain: Chain = []
@@ -160,12 +180,15 @@ class Calibrator:
         self.candidates_ = []
         round_ = 0
         while len(chain) < self.max_effects:
-            remaining = [f for f in families if f not in {e.family for e, _ in chain}]
+            remaining = _remaining(families, chain, marker=bool(open_terms))
             if not remaining:
                 break
             bic = self._bic(data, pred, k)
             found: list[tuple[Candidate, Effect, Float1D, Float1D, int]] = []
             for i, family in enumerate(remaining):
+                if family == OPEN:
+                    remaining.extend(_remaining(open_terms, chain, marker=False))
+                    continue
                 if progress is not None:
                     progress(i, len(remaining), f"round {round_ + 1}: {family}")
                 effect = self.model.effect(family)
@@ -183,18 +206,14 @@ class Calibrator:
                     self._bic(data, c_pred, c_k) - bic,
                 )
                 found.append((cand, effect, c_coef, c_pred, c_k))
-            for cand, effect, *_ in found:
-                cand.reason = _verdict(cand, self.min_gain, self.alpha)
-                edge = _search_edge(effect, cand.searched_value, data.signals)
-                if not cand.reason and edge and UNLOCATED_AT.get(cand.family) == edge[0]:
-                    cand.reason = f"not located: {edge[1]}"
+                cand.reason = self._reason(cand, effect, c_coef, data)
             passing = [f for f in found if not f[0].reason]
             self.candidates_.extend(f[0] for f in found)
             if progress is not None:
                 progress(len(remaining), len(remaining), f"round {round_ + 1} done")
             if not passing:
                 break
-            best = min(passing, key=lambda f: f[0].rmse_held_out_n)
+            best = _best(passing, self.min_gain)
             best[0].accepted = True
             for other in passing:
                 if other is not best:
@@ -213,6 +232,14 @@ class Calibrator:
             y_test - self.base_prediction_[self.test_], inputs, self.max_lag
         )
         self.tests_after_ = residual_tests(y_test - pred[self.test_], inputs, self.max_lag)
+        held_out = {k: v[self.test_] for k, v in data.signals.items()}
+        self.unexplained_ = unexplained(y_test - pred[self.test_], held_out, pred[self.test_])
+        self.verdict_ = verdict(y_test - pred[self.test_], self.unexplained_)
+        self.unexplained_["durbin_watson"] = float(durbin_watson(y_test - pred[self.test_]))
+        self.fit_percent_ = (
+            fit_percent(y_test, self.base_prediction_[self.test_]),
+            fit_percent(y_test, pred[self.test_]),
+        )
         self.base_params_, self.base_ci_, self.effect_params_ = confidence(
             self.model_, data, self.train_
         )
@@ -221,15 +248,19 @@ class Calibrator:
 
     def report(self) -> dict[str, Any]:
         """The JSON report of issue 10: the contract keys first, then context."""
-        added = [
-            {
-                "family": e.family,
-                "params": p["params"],
-                "ci": p["ci"],
-                "rmse_after_step": r,
-            }
-            for (e, _), p, r in zip(self.chain_, self.effect_params_, self.step_rmse_, strict=True)
-        ]
+        added, discovered = [], []
+        mse = [self.rmse_before_**2] + [r**2 for r in self.step_rmse_]
+        explained = mse[0] - mse[-1]
+        for i, ((e, _), p, r) in enumerate(
+            zip(self.chain_, self.effect_params_, self.step_rmse_, strict=True)
+        ):
+            share = (mse[i] - mse[i + 1]) / explained if explained > 0 else 0.0
+            if isinstance(e, OpenTerm):
+                discovered.append({**term_report(e, p["params"], p["ci"], share),
+                                   "rmse_after_step": r})  # fmt: skip
+            else:
+                added.append({"family": e.family, "params": p["params"], "ci": p["ci"],
+                              "rmse_after_step": r, "share_of_explained_variance": share})  # fmt: skip
         in_model = {e.family for e, _ in self.chain_}
         last: dict[str, Candidate] = {}
         for c in self.candidates_:
@@ -241,12 +272,18 @@ class Calibrator:
             "rmse_before": self.rmse_before_,
             "rmse_after": self.rmse_after_,
             "effects_added": added,
+            "discovered_terms": discovered,
             "candidates_rejected": rejected,
             "residual_tests_before": self.tests_before_,
             "residual_tests_after": self.tests_after_,
+            "verdict": self.verdict_,
+            "unexplained": self.unexplained_ if self.verdict_ == "structure_remains" else None,
+            "fit_percent_before": self.fit_percent_[0],
+            "fit_percent_after": self.fit_percent_[1],
             "model": self.model.name,
             "recording": self.data_.name,
             "base_params": {"params": self.base_params_, "ci": self.base_ci_},
+            "preparation": self.data_.preparation,
             "held_out": {
                 "blocks": self.data_.held_out_blocks,
                 "start_s": float(t[self.test_][0]),
@@ -275,6 +312,32 @@ class Calibrator:
             if edge is not None:
                 notes.append(f"{effect.family}: {edge[1]}")
         return notes
+
+
+OPEN = "(open library)"
+"""Marks where in a round the open library's terms join the candidates."""
+REPEATABLE = {"position_periodic": 3}
+"""Families that may enter more than once (several ripple periods), and how often."""
+
+
+def _best(passing: list, min_gain: float):  # type: ignore[no-untyped-def]
+    """The passing candidate with the lowest held-out error; a named family keeps its
+    place unless an open library term cuts the error by `min_gain` more than it."""
+    best = min(passing, key=lambda f: f[0].rmse_held_out_n)
+    named = [f for f in passing if not isinstance(f[1], OpenTerm)]
+    if named and isinstance(best[1], OpenTerm):
+        top = min(named, key=lambda f: f[0].rmse_held_out_n)
+        if best[0].rmse_held_out_n > (1.0 - min_gain) * top[0].rmse_held_out_n:
+            return top
+    return best
+
+
+def _remaining(families: Sequence[str], chain: Chain, marker: bool = True) -> list[str]:
+    """Candidates of a round: families not yet in the chain (a repeatable one until its
+    count), then the marker after which the open library may join."""
+    used = [e.family for e, _ in chain]
+    out = [f for f in families if used.count(f) < REPEATABLE.get(f, 1)]
+    return [*out, OPEN] if marker else out
 
 
 UNLOCATED_AT = {"delay": "upper", "drift": "lower"}
@@ -322,7 +385,7 @@ def _verdict(c: Candidate, min_gain: float, level: float) -> str:
 def _candidate_dict(c: Candidate) -> dict[str, Any]:
     d = asdict(c)
     d["searched_value"] = None if np.isnan(c.searched_value) else c.searched_value
-    d["searched"] = EFFECTS[c.family].searched
+    d["searched"] = {**EFFECTS, **OPEN_TERMS}[c.family].searched
     return d
 
 

@@ -52,6 +52,9 @@ class CalibrationData:
     (1: one block at its end). A chirp sweeps its frequency with time, so its end holds
     only the highest frequencies and says nothing about the rest; blocked hold-out
     tests it on every part of the sweep."""
+    preparation: dict[str, float] | None = None
+    """How the signals were derived from the recording (the rigid axis's fitted
+    derivative cutoff), reported with the result."""
 
     def __post_init__(self) -> None:
         n = len(self.y)
@@ -85,7 +88,11 @@ class BaseModel:
     """This model's own settings of a family (the master's quadratic hysteresis loop)."""
 
     def effect(self, family: str) -> Effect:
-        """The candidate `family` as this model uses it."""
+        """The candidate `family` (or open library term) as this model uses it."""
+        from teleop_core.calibration.library import OPEN_TERMS
+
+        if family in OPEN_TERMS and family not in self.overrides:
+            return OPEN_TERMS[family]
         return self.overrides.get(family, EFFECTS[family])
 
     def columns(self, s: Signals) -> Float2D:

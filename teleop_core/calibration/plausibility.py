@@ -1,0 +1,47 @@
+"""Plausible names only (issue 16, point 3): a family is named only when its fitted
+parameters are physically possible; otherwise the candidate is refused under that name
+and its evidence stays in the residual (and in the verdict's `unexplained`).
+
+- `stribeck`: the friction must fall with speed, static above Coulomb: the fitted
+  static-minus-Coulomb excess must be positive.
+
+Not gated: the sign of a `hysteresis` loop, which depends on the device (the master's
+and the NOTES device's loops of the papers have opposite signs in this library's
+convention, and the tests find both).
+- `drift`: a time constant at either end of its search range locates nothing (a step
+  at the start, or a change slower than the recording that a gain change explains).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from teleop_core._typing import Float1D
+from teleop_core.calibration.effects import Effect, Signals
+
+
+def implausible(
+    effect: Effect, coef: Float1D, value: float, out: float, unit: str, signals: Signals
+) -> str | None:
+    """Why `effect` with its coefficients `coef` (its own columns only) cannot be the
+    physical family it names, or None when it can."""
+    params = effect.physical(np.asarray(coef, float), value, out, unit)
+    if effect.family == "stribeck":
+        excess = next(v for k, v in params.items() if k.startswith("static_minus_coulomb"))
+        if excess <= 0:
+            return (f"implausible: static - Coulomb friction {excess:.3g} <= 0 (a Stribeck "
+                    "friction falls with speed)")  # fmt: skip
+    if effect.family == "drift" and effect.searched is not None:
+        grid = effect.grid(signals)
+        lo, hi = float(np.min(grid)), float(np.max(grid))
+        if value <= lo * 1.001 or value >= hi * 0.999:
+            return (f"implausible: drift time constant {value:.3g} s at the end of its "
+                    f"search range [{lo:.3g}, {hi:.3g}] s")  # fmt: skip
+    return None
+
+
+def effect_coefficients(coef: Float1D, effect: Effect, signals: Signals, value: float) -> Float1D:
+    """The last coefficients of a chain's fit: those of `effect`, appended last."""
+    probe = {k: v[:4] for k, v in signals.items()}
+    k = effect.columns(effect.transform(probe, value), value).shape[1]
+    return np.asarray(coef, float)[len(coef) - k :] if k else np.empty(0)
