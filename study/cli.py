@@ -23,6 +23,7 @@ COMMANDS = {
     "analyze": "study.commands.analyze:analyze",
     "bench": "study.commands.bench:bench",
     "calibrate": "study.commands.calibrate:calibrate",
+    "campaign": "study.commands.campaign:campaign",
     "characterize": "study.commands.characterize:characterize",
     "db": "study.commands.database:database",
     "demo": "study.commands.figures:demo",

@@ -81,6 +81,54 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
         json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
 
 
+@bench.command("export")
+@click.option(
+    "--db",
+    "db_url",
+    metavar="URL",
+    default=None,
+    help="Benchmark against this server (PostgreSQL gets a private scratch schema) "
+    "[default: a temporary SQLite file].",
+)
+@click.option("--samples", type=click.IntRange(min=1), default=10_000_000, show_default=True)
+@click.option("--participants", type=click.IntRange(min=1), default=360, show_default=True)
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+def bench_export(db_url: str | None, samples: int, participants: int, json_path: Path | None) -> None:
+    """Build a study of SAMPLES samples, export them to Parquet and CSV: time, memory, size."""
+    from study.bench.export import bench_export as run_bench
+
+    if json_path is not None:
+        _check_json_folder(json_path)
+    with Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        transient=True,
+        console=Console(stderr=True),
+    ) as progress:
+        task = progress.add_task("writing the study's samples", total=samples)
+        result = run_bench(
+            db_url,
+            samples=samples,
+            participants=participants,
+            progress=lambda n: progress.advance(task, n),
+        )
+    click.echo(
+        f"{result.backend}: {result.samples:,} samples in {result.trials:,} trials, written at "
+        f"{result.write_rows_per_s:,.0f} rows/s, {result.db_bytes_per_sample:.0f} bytes/sample "
+        "in the database"
+    )
+    for run in result.runs:
+        click.echo(
+            f"  export --samples --format {run.fmt}: {run.seconds:.1f} s, "
+            f"{run.samples_per_s:,.0f} samples/s, peak memory {run.peak_rss_mb:.0f} MB, "
+            f"{run.file_bytes_per_sample:.1f} bytes/sample"
+        )
+    if json_path is not None:
+        json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+
+
 @bench.command("follower")
 @_json_option
 @_out_option
@@ -90,13 +138,43 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
     is_flag=True,
     help="Tiny data and 1-2 epochs: checks the pipeline in seconds, measures nothing.",
 )
-def bench_follower(json_path: Path, out_dir: Path, seed: int, quick: bool) -> None:
-    """Tables I-III and Fig. 8 of seed 000 on the simulated follower (about 30 min)."""
-    from study.bench.follower import FollowerBenchConfig, run_follower_bench
+@click.option(
+    "--only",
+    type=click.Choice(["tables", "generalisation"]),
+    default=None,
+    help="Run one part: the paper's tables, or the estimator trained on the first 60 % of "
+    "recordings with unmodelled effects and run on the rest [default: both].",
+)
+@click.option(
+    "--generalisation-seeds",
+    type=str,
+    default=None,
+    help="Comma-separated seeds of the generalisation part [default: 0,1,2,3,4].",
+)
+def bench_follower(
+    json_path: Path,
+    out_dir: Path,
+    seed: int,
+    quick: bool,
+    only: str | None,
+    generalisation_seeds: str | None,
+) -> None:
+    """Tables I-III and Fig. 8 of seed 000 on the simulated follower, and the estimator on
+    recordings it never saw (about 30 min and several hours)."""
+    from study.bench.follower import PARTS, FollowerBenchConfig, run_follower_bench
 
     _check_json_folder(json_path)
     config = FollowerBenchConfig.quick() if quick else FollowerBenchConfig()
-    config = replace(config, seed=seed)
+    config = replace(config, seed=seed, parts=(only,) if only else PARTS)
+    if generalisation_seeds is not None:
+        try:
+            seeds = tuple(int(s) for s in generalisation_seeds.split(","))
+        except ValueError:
+            raise StudyInputError(
+                f"--generalisation-seeds {generalisation_seeds!r}; expected comma-separated "
+                "integers such as 0,1,2"
+            ) from None
+        config = replace(config, generalisation=replace(config.generalisation, seeds=seeds))
     with Console(stderr=True).status("follower bench") as status:
         report = run_follower_bench(config, out_dir, progress=lambda msg: status.update(msg))
     json_path.write_text(json.dumps(report, indent=2) + "\n")
@@ -209,9 +287,12 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--epochs", type=click.IntRange(min=1), default=None, help="GRU epochs [30].")
 @click.option("--quick", is_flag=True, help="One-minute recordings at 100 Hz, 2 epochs.")
+@click.option("--only-open", is_flag=True,
+              help="Only measured data (EMPS), effects outside the families, clean seeds.")
 def bench_calibrate(
-    json_path: Path, out_dir: Path | None, seed: int, epochs: int | None, quick: bool
-) -> None:
+    json_path: Path, out_dir: Path | None, seed: int, epochs: int | None, quick: bool,
+    only_open: bool,
+) -> None:  # fmt: skip
     """Calibration loop (issue 10): every family, the clean recording, speed, estimator."""
     from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
 
@@ -220,7 +301,8 @@ def bench_calibrate(
     config = replace(config, seed=seed, **({"epochs": epochs} if epochs else {}))
     out_dir = out_dir or json_path.parent
     with Console(stderr=True).status("calibration bench") as status:
-        report = run_calibrate_bench(config, out_dir, progress=status.update)
+        report = run_calibrate_bench(config, out_dir, progress=status.update,
+                                     only_open=only_open)  # fmt: skip
     json_path.write_text(json.dumps(report, indent=2) + "\n")
     click.echo((out_dir / "calibrate_bench.md").read_text())
 
