@@ -44,7 +44,8 @@ from study.bench import generalisation
 from study.bench.generalisation import GeneralisationConfig, WindowBaseline
 from teleop_core.estimation.estimator import ForceEstimator, features_of
 from teleop_core.estimation.training import train_estimator
-from teleop_core.estimation.gru import GruConfig, train_gru
+from teleop_core.estimation.gru import GruConfig
+from teleop_core.estimation.gru_torch import train_gru
 from teleop_core.estimation.metrics import error_summary, tracking_score
 from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.follower import scenarios

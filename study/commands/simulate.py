@@ -63,6 +63,9 @@ def simulate(
         if path is not None and not path.parent.is_dir():
             raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
     condition_haptics(condition, haptic_gain)  # refuse a bad gain before any work
+    from teleop_core.loop import kernel
+
+    kernel.COMPILE_NOTICE = lambda message: click.echo(f"study simulate: {message}", err=True)
     if task == "notes":
         result, plot, line = _simulate_notes(group, condition, seed, max_seconds)
     else:

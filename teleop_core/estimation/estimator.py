@@ -8,7 +8,9 @@ fits all three stages to one bench recording; `save`/`load` keep them in a model
 | file | what |
 |---|---|
 | `physics.json` | fitted eq. 1 parameters (SI) |
-| `gru.pt` | GRU weights, a PyTorch state dict for `GruNet` |
+| `gru.npz` | GRU weights as plain float64 arrays: what inference reads (no PyTorch) |
+| `gru.pt` | the same weights as a PyTorch state dict for `GruNet` (for further training;
+  read only where a folder older than `gru.npz` has no `gru.npz`) |
 | `standardisation.json` | window, hidden size, input means/SDs, target scale, the
   inputs' training range (`input_range`, `ranges.py`) |
 | `ekf.json` | EKF noise covariances, and whether it passes the hybrid estimate through |
@@ -41,18 +43,13 @@ from teleop_core.estimation.ekf import (
     settings_vector,
 )
 from teleop_core.estimation.extended import ExtendedPhysics, physics_force
-from teleop_core.estimation.gru import (
-    GruModel,
-    Standardisation,
-    _window_forward,
-    load_weights,
-    save_weights,
-)
+from teleop_core.estimation.gru import GruModel, GruWeights, Standardisation, _window_forward
 from teleop_core.estimation.physics import PhysicsParams, force_at
 from teleop_core.estimation.ranges import InputRange
 from teleop_core.estimation.recording import FollowerRecording
 
-MODEL_FILES = ("physics.json", "gru.pt", "standardisation.json", "ekf.json", "summary.json")
+MODEL_FILES = ("physics.json", "standardisation.json", "ekf.json", "summary.json")
+"""Besides one of `gru.npz` (read) or `gru.pt` (a folder older than `gru.npz`)."""
 RATE_TOLERANCE = 0.02
 """A recording whose rate differs from the model's by more than this is resampled."""
 
@@ -148,7 +145,10 @@ class ForceEstimator:
         tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
         try:
             _write_json(tmp / "physics.json", self.physics.to_dict())
-            save_weights(self.gru, str(tmp / "gru.pt"))
+            self.gru.weights.save_npz(tmp / "gru.npz")
+            from teleop_core.estimation.gru_torch import save_torch_weights
+
+            save_torch_weights(self.gru.weights, tmp / "gru.pt")
             _write_json(
                 tmp / "standardisation.json",
                 {
@@ -186,6 +186,8 @@ class ForceEstimator:
                 "expected the --out of `study estimator train`"
             )
         missing = [f for f in MODEL_FILES if not (folder / f).is_file()]
+        if not (folder / "gru.npz").is_file() and not (folder / "gru.pt").is_file():
+            missing.append("gru.npz")
         if missing:
             raise TeleopInputError(
                 f"model folder {folder} has no {missing[0]}; expected a folder written by "
@@ -200,9 +202,7 @@ class ForceEstimator:
                 float(meta["target_mean"]),
                 float(meta["target_std"]),
             )
-            gru = GruModel(
-                load_weights(str(folder / "gru.pt")), std, int(meta["window"]), meta["target"]
-            )
+            gru = GruModel(_load_gru_weights(folder), std, int(meta["window"]), meta["target"])
             ekf = EkfSettings(**_read_json(folder / "ekf.json"))
             extension = None
             if (folder / "calibration.json").is_file():
@@ -363,3 +363,12 @@ def __getattr__(name: str) -> Any:
 
         return getattr(training, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def _load_gru_weights(folder: Path) -> GruWeights:
+    """`gru.npz` without PyTorch; a folder written before it existed has only `gru.pt`."""
+    if (folder / "gru.npz").is_file():
+        return GruWeights.load_npz(folder / "gru.npz")
+    from teleop_core.estimation.gru_torch import load_torch_weights
+
+    return load_torch_weights(folder / "gru.pt")

@@ -16,15 +16,18 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from teleop_core._typing import Float1D
-from teleop_core.calibration.effects import SIGN_SPEED_RAD_S
-from teleop_core.calibration.fitting import CalibratedModel
-from teleop_core.calibration.models import FollowerBase
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.physics import PhysicsParams, from_coefficients
 from teleop_core.estimation.recording import FollowerRecording
+
+if TYPE_CHECKING:
+    from teleop_core.calibration.fitting import CalibratedModel
+
+# The calibration package (and scipy.signal under it, about 1 s) is imported only where a
+# calibrated model is read or run, not by every process that loads the estimator.
 
 
 @dataclass
@@ -43,6 +46,8 @@ class ExtendedPhysics:
 
     def force(self, recording: FollowerRecording) -> Float1D:
         """F_physics (N) over every sample: eq. 1 plus the calibrated effects."""
+        from teleop_core.calibration.models import FollowerBase
+
         model = self.calibrated.model
         if not isinstance(model, FollowerBase):  # pragma: no cover - from_dict checks it
             raise TeleopInputError("the calibration is not of the follower model")
@@ -54,6 +59,10 @@ class ExtendedPhysics:
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "") -> ExtendedPhysics:
         """From a `study calibrate` report (or `to_dict`'s output)."""
+        from teleop_core.calibration.effects import SIGN_SPEED_RAD_S
+        from teleop_core.calibration.fitting import CalibratedModel
+        from teleop_core.calibration.models import FollowerBase
+
         if "calibrated_model" not in d:
             raise TeleopInputError(
                 f"calibration {source or 'report'} has no 'calibrated_model'; expected the "

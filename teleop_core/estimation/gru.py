@@ -8,24 +8,27 @@ block (windows that straddle a train/validation boundary are dropped), never by
 random samples, so validation windows share no samples with training windows. The
 direct variant (Table III) learns F_ref itself with the same network.
 
-Inference does not use PyTorch: the trained weights run through a small numba kernel
+Inference does not use PyTorch, and this module does not import it (1.7-4 s of a fresh
+process's start): the weights are saved at training time as plain arrays (`gru.npz`,
+`GruWeights.save_npz`) beside PyTorch's `gru.pt`, and run through a small numba kernel
 in float64. One window costs ~40 us there against ~300 us for `torch.nn.GRU` on this
 machine's CPU, which is what lets the estimator sit inside a 1 kHz simulation loop.
 The same compiled function serves one window (causal, sample by sample) and every
 window of a recording (batch), so the two agree to the last bit. A test checks the
-kernel against `torch.nn.GRU`.
+kernel against `torch.nn.GRU`. Training, and everything else that needs PyTorch, is in
+`gru_torch.py`.
 """
 
 from __future__ import annotations
 
-import copy
 import math
-from collections.abc import Callable
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numba
 import numpy as np
-import torch
 from numpy.lib.stride_tricks import sliding_window_view
 
 from teleop_core._typing import Float1D, Float2D, Float3D
@@ -113,21 +116,6 @@ class Standardisation:
         return asdict(self)
 
 
-class GruNet(torch.nn.Module):
-    """GRU(3 -> H), last hidden state -> Linear(H -> 1): sequence to one (eq. 3)."""
-
-    def __init__(self, hidden_size: int, dropout: float = 0.0) -> None:
-        super().__init__()
-        self.gru = torch.nn.GRU(N_FEATURES, hidden_size, batch_first=True)
-        # Dropout has no weights, so the state dict (and the numba kernel) is unchanged.
-        self.dropout = torch.nn.Dropout(dropout)
-        self.head = torch.nn.Linear(hidden_size, 1)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        _, h = self.gru(x)
-        return self.head(self.dropout(h[-1])).squeeze(-1)
-
-
 @dataclass(frozen=True)
 class GruWeights:
     """A trained network in float64 numpy arrays for the inference kernel."""
@@ -140,9 +128,9 @@ class GruWeights:
     b_out: float
 
     @classmethod
-    def from_state_dict(cls, state: dict[str, torch.Tensor]) -> GruWeights:
-        """From a `GruNet` state dict (any dtype), as float64 contiguous arrays."""
-        sd = {k: v.detach().cpu().double().numpy() for k, v in state.items()}
+    def from_state_dict(cls, state: Mapping[str, Any]) -> GruWeights:
+        """From a `GruNet` state dict (tensors of any dtype), as float64 contiguous arrays."""
+        sd = {k: np.asarray(v.detach().cpu().double()) for k, v in state.items()}
         return cls(
             np.ascontiguousarray(sd["gru.weight_ih_l0"]),
             np.ascontiguousarray(sd["gru.weight_hh_l0"]),
@@ -152,19 +140,37 @@ class GruWeights:
             float(sd["head.bias"][0]),
         )
 
-    @classmethod
-    def from_net(cls, net: GruNet) -> GruWeights:
-        return cls.from_state_dict(net.state_dict())
+    def save_npz(self, path: Path) -> None:
+        """The weights as plain float64 arrays (`gru.npz`): what inference reads."""
+        with open(path, "wb") as f:
+            np.savez(f, **{name: np.asarray(getattr(self, name)) for name in _WEIGHT_NAMES})
 
-    def to_state_dict(self) -> dict[str, torch.Tensor]:
-        return {
-            "gru.weight_ih_l0": torch.tensor(self.w_ih),
-            "gru.weight_hh_l0": torch.tensor(self.w_hh),
-            "gru.bias_ih_l0": torch.tensor(self.b_ih),
-            "gru.bias_hh_l0": torch.tensor(self.b_hh),
-            "head.weight": torch.tensor(self.w_out[None, :]),
-            "head.bias": torch.tensor([self.b_out]),
-        }
+    @classmethod
+    def load_npz(cls, path: Path) -> GruWeights:
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays: dict[str, Any] = {
+                    name: np.ascontiguousarray(data[name], dtype=np.float64)
+                    for name in _WEIGHT_NAMES[:-1]
+                }
+                arrays["b_out"] = float(data["b_out"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise TeleopInputError(
+                f"{path}: {exc}; expected the GRU weights written by `study estimator train`"
+            ) from None
+        weights = cls(**arrays)
+        hidden = weights.w_hh.shape[1] if weights.w_hh.ndim == 2 else -1
+        shapes = {"w_ih": (3 * hidden, N_FEATURES), "w_hh": (3 * hidden, hidden),
+                  "b_ih": (3 * hidden,), "b_hh": (3 * hidden,), "w_out": (hidden,)}
+        for name, shape in shapes.items():
+            if getattr(weights, name).shape != shape:
+                raise TeleopInputError(
+                    f"{path}: {name} has shape {getattr(weights, name).shape}; expected {shape}"
+                )
+        return weights
+
+
+_WEIGHT_NAMES = ("w_ih", "w_hh", "b_ih", "b_hh", "w_out", "b_out")
 
 
 @numba.njit(cache=True, fastmath={"reassoc", "contract", "arcp", "nsz", "afn"})
@@ -283,118 +289,3 @@ class TrainingHistory:
     @property
     def best_val_rmse(self) -> float:
         return self.val_rmse[self.best_epoch - 1]
-
-
-def _rmse_of(net: GruNet, x: torch.Tensor, y: torch.Tensor, target_std: float) -> float:
-    with torch.inference_mode():
-        se = 0.0
-        for lo in range(0, len(x), 4096):
-            se += float(((net(x[lo : lo + 4096]) - y[lo : lo + 4096]) ** 2).sum())
-    return math.sqrt(se / max(len(x), 1)) * target_std
-
-
-def train_gru(
-    features: Float2D,
-    target: Float1D,
-    config: GruConfig,
-    *,
-    seed: int = 0,
-    target_kind: str = "residual",
-    split: tuple[np.ndarray, np.ndarray] | None = None,
-    progress: Callable[[int, float, float], None] | None = None,
-) -> tuple[GruModel, TrainingHistory, np.ndarray, np.ndarray]:
-    """Train the compensator on per-sample `features` (n, 3) and `target` (n,), N.
-
-    The target of window i is the value at its last sample. `split` gives the training
-    and validation window indices (default: `block_split` with `seed`). Returns the
-    model at the best validation epoch, the history (RMSE in N per epoch), and the
-    indices of the training and validation windows.
-    """
-    torch.manual_seed(seed)
-    generator = torch.Generator().manual_seed(seed)
-    T = config.window
-    n_windows = len(features) - T + 1
-    train_idx, val_idx = split or block_split(n_windows, T, config, seed)
-    # Standardise with statistics of the training samples only.
-    train_samples = np.unique((train_idx[:, None] + np.arange(T)).ravel())
-    std = Standardisation.fit(features[train_samples], target[train_idx + T - 1])
-    windows = make_windows(std.features(features), T)
-    y = (target[T - 1 :] - std.target_mean) / std.target_std
-    x_train = torch.tensor(windows[train_idx], dtype=torch.float32)
-    y_train = torch.tensor(y[train_idx], dtype=torch.float32)
-    x_val = torch.tensor(windows[val_idx], dtype=torch.float32)
-    y_val = torch.tensor(y[val_idx], dtype=torch.float32)
-
-    net = GruNet(config.hidden_size, config.dropout)
-    # Fused Adam(W) and one thread: each step is a few small kernels, where thread
-    # hand-offs cost more than they save (3.6 against 5.4 ms a step on two cores here)
-    # and the fused update halves the optimiser's share. AdamW with weight_decay 0 is Adam.
-    optimiser = torch.optim.AdamW(
-        net.parameters(), lr=config.learning_rate, weight_decay=config.weight_decay, fused=True
-    )
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        history, best_state = _fit(
-            net, optimiser, x_train, y_train, x_val, y_val, std, config, generator, progress
-        )
-    finally:
-        torch.set_num_threads(threads)
-    net.load_state_dict(best_state)
-    model = GruModel(GruWeights.from_net(net), std, T, target_kind)
-    return model, history, train_idx, val_idx
-
-
-def _fit(
-    net: GruNet,
-    optimiser: torch.optim.Optimizer,
-    x_train: torch.Tensor,
-    y_train: torch.Tensor,
-    x_val: torch.Tensor,
-    y_val: torch.Tensor,
-    std: Standardisation,
-    config: GruConfig,
-    generator: torch.Generator,
-    progress: Callable[[int, float, float], None] | None,
-) -> tuple[TrainingHistory, dict[str, torch.Tensor]]:
-    """The epoch loop; returns the history and the best validation state."""
-    history = TrainingHistory()
-    best_state = copy.deepcopy(net.state_dict())
-    best = math.inf
-    for epoch in range(1, config.max_epochs + 1):
-        net.train()
-        order = torch.randperm(len(x_train), generator=generator)
-        se = 0.0
-        for lo in range(0, len(order), config.batch_size):
-            batch = order[lo : lo + config.batch_size]
-            optimiser.zero_grad(set_to_none=True)
-            x = x_train[batch]
-            if config.input_noise > 0:
-                x = x + config.input_noise * torch.randn(x.shape, generator=generator)
-            # L = 1/N sum (f_GRU(window) - r_t)^2   (eq. 12)
-            loss = torch.nn.functional.mse_loss(net(x), y_train[batch])
-            loss.backward()
-            optimiser.step()
-            se += loss.item() * len(batch)
-        net.eval()
-        train_rmse = math.sqrt(se / len(x_train)) * std.target_std
-        val_rmse = _rmse_of(net, x_val, y_val, std.target_std)
-        history.train_rmse.append(train_rmse)
-        history.val_rmse.append(val_rmse)
-        if val_rmse < best:
-            best, history.best_epoch = val_rmse, epoch
-            best_state = copy.deepcopy(net.state_dict())
-        if progress is not None:
-            progress(epoch, train_rmse, val_rmse)
-        if config.patience is not None and epoch - history.best_epoch >= config.patience:
-            break
-    return history, best_state
-
-
-def save_weights(model: GruModel, path: str) -> None:
-    """Save the weights as a PyTorch state dict (loadable into `GruNet`)."""
-    torch.save(model.weights.to_state_dict(), path)
-
-
-def load_weights(path: str) -> GruWeights:
-    return GruWeights.from_state_dict(torch.load(path, weights_only=True))

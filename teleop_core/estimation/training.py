@@ -29,7 +29,8 @@ from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.ekf import EkfSettings, filter_forces, rest_variances
 from teleop_core.estimation.estimator import ForceEstimator, features_of
 from teleop_core.estimation.extended import ExtendedPhysics, physics_force
-from teleop_core.estimation.gru import GruConfig, train_gru
+from teleop_core.estimation.gru import GruConfig
+from teleop_core.estimation.gru_torch import train_gru
 from teleop_core.estimation.metrics import lag_samples, rmse
 from teleop_core.estimation.physics import PhysicsParams, fit_physics
 from teleop_core.estimation.ranges import InputRange

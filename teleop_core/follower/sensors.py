@@ -12,7 +12,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.signal
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
@@ -31,6 +30,8 @@ def lowpass(x: Float1D, tau_s: float, dt_s: float) -> Float1D:
     """First-order low-pass y += dt/(tau + dt) (x - y), started at x[0] (tau 0: no filter)."""
     if tau_s == 0:
         return np.asarray(x, float).copy()
+    import scipy.signal  # only for whole recordings (0.8 s to import)
+
     return scipy.signal.lfilter(
         [dt_s / (tau_s + dt_s)],
         [1.0, -tau_s / (tau_s + dt_s)],

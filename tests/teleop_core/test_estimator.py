@@ -40,11 +40,34 @@ def test_saved_model_predicts_the_same(
 ) -> None:
     estimator, summary = trained
     estimator.save(tmp_path / "model", summary)
-    assert sorted(p.name for p in (tmp_path / "model").iterdir()) == sorted(MODEL_FILES)
+    assert sorted(p.name for p in (tmp_path / "model").iterdir()) == sorted(
+        [*MODEL_FILES, "gru.npz", "gru.pt"]
+    )
     loaded = ForceEstimator.load(tmp_path / "model")
     a = estimator.predict(short_recording.slice(0, 800))
     b = loaded.predict(short_recording.slice(0, 800))
     np.testing.assert_array_equal(a.f_final, b.f_final)
+    # a folder written before gru.npz existed has only PyTorch's gru.pt: the same numbers
+    (tmp_path / "model" / "gru.npz").unlink()
+    old = ForceEstimator.load(tmp_path / "model")
+    np.testing.assert_array_equal(a.f_final, old.predict(short_recording.slice(0, 800)).f_final)
+
+
+def test_damaged_gru_weights_are_refused_with_the_file_named(tmp_path: Path, trained) -> None:
+    estimator, summary = trained
+    estimator.save(tmp_path / "model", summary)
+    (tmp_path / "model" / "gru.npz").write_bytes(b"not an npz")
+    with pytest.raises(TeleopInputError, match=r"gru\.npz: .*expected the GRU weights"):
+        ForceEstimator.load(tmp_path / "model")
+    hidden = estimator.gru.weights.w_hh.shape[1]
+    weights = estimator.gru.weights
+    np.savez(
+        tmp_path / "model" / "gru.npz",
+        w_ih=weights.w_ih, w_hh=weights.w_hh[:-1], b_ih=weights.b_ih, b_hh=weights.b_hh,
+        w_out=weights.w_out, b_out=weights.b_out,
+    )  # fmt: skip
+    with pytest.raises(TeleopInputError, match=rf"w_hh has shape .*expected \({3 * hidden}"):
+        ForceEstimator.load(tmp_path / "model")
 
 
 def test_summary_reports_each_stage_on_both_splits(trained) -> None:

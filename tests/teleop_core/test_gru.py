@@ -7,7 +7,8 @@ import pytest
 import torch
 
 from teleop_core.estimation.estimator import train_estimator
-from teleop_core.estimation.gru import GruConfig, GruNet, GruWeights, _batch_forward, block_split
+from teleop_core.estimation.gru import GruConfig, GruWeights, _batch_forward, block_split
+from teleop_core.estimation.gru_torch import GruNet, weights_from_net
 from teleop_core.estimation.physics import PhysicsParams
 from teleop_core.estimation.recording import FollowerRecording
 
@@ -18,7 +19,7 @@ def test_inference_kernel_matches_torch_gru() -> None:
     x = torch.randn(50, 20, 3, dtype=torch.float64)
     with torch.no_grad():
         expected = net(x).numpy()
-    w = GruWeights.from_net(net)
+    w = weights_from_net(net)
     got = _batch_forward(
         np.ascontiguousarray(x.numpy()), w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out
     )
