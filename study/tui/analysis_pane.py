@@ -22,6 +22,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import DataTable, Input, Label, Select, Static
 
+from study.tui.db_errors import SafeWorkers
 from study.tui.services import StudyServices
 
 __all__ = ["AnalysisPane", "bar_chart"]
@@ -51,7 +52,7 @@ def bar_chart(comparisons: Any, measure: str, width: int = 40) -> Text:
     return text
 
 
-class AnalysisPane(Vertical):
+class AnalysisPane(SafeWorkers, Vertical):
     """Run the analysis, read its tables and chart, export the figures."""
 
     DEFAULT_CSS = """
@@ -109,7 +110,7 @@ class AnalysisPane(Vertical):
         self._status("analysing...")
         self._analyze()
 
-    @work(thread=True, exclusive=True, group="analysis")
+    @work(thread=True, exclusive=True, group="analysis", exit_on_error=False)
     def _analyze(self) -> None:
         try:
             result = self.services.analysis()
@@ -153,7 +154,7 @@ class AnalysisPane(Vertical):
         self._status(f"drawing the figures into {folder}...")
         self._export(folder)
 
-    @work(thread=True, exclusive=True, group="figures")
+    @work(thread=True, exclusive=True, group="figures", exit_on_error=False)
     def _export(self, folder: Path) -> None:
         try:
             paths = self.services.export_figures(folder, self.formats)
@@ -170,3 +171,8 @@ class AnalysisPane(Vertical):
 
     def _status(self, text: str) -> None:
         self.query_one("#analysis-status", Static).update(text)
+
+    def worker_failed(self, group: str, line: str) -> None:
+        what = "the analysis" if group == "analysis" else "the figures"
+        self._status(f"{what} failed: {line}")
+        super().worker_failed(group, line)

@@ -28,6 +28,7 @@ from textual.message import Message
 from textual.widget import Widget
 from textual.widgets import Footer, TabbedContent, TabPane
 
+from study.tui.db_errors import SafeWorkers
 from study.tui.overview import OverviewPane
 from study.tui.services import Roster, StudyServices
 
@@ -62,7 +63,7 @@ class TuiSettings:
             raise ValueError(f"simulated pace {self.simulated_pace!r}; expected > 0 or None")
 
 
-class StudyApp(App[None]):
+class StudyApp(SafeWorkers, App[None]):
     """`study tui`."""
 
     TITLE = "haptic-study"
@@ -168,7 +169,7 @@ class StudyApp(App[None]):
     def reload(self) -> None:
         self._load_roster()
 
-    @work(thread=True, exclusive=True, group="roster")
+    @work(thread=True, exclusive=True, group="roster", exit_on_error=False)
     def _load_roster(self) -> None:
         self.post_message(self.RosterLoaded(self.services.roster()))
 
@@ -200,7 +201,7 @@ class StudyApp(App[None]):
     def on_run_pane_trial_ended(self, event: RunPane.TrialEnded) -> None:
         self._after_trial(event.block)
 
-    @work(thread=True, exclusive=True, group="roster")
+    @work(thread=True, exclusive=True, group="roster", exit_on_error=False)
     def _after_trial(self, block: tuple[str, str, str]) -> None:
         roster = self.services.roster()
         self.post_message(self.RosterLoaded(roster))

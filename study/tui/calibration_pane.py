@@ -22,6 +22,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import DataTable, Input, Label, Select, Static
 
+from study.tui.db_errors import SafeWorkers
 from study.tui.services import StudyServices
 
 __all__ = ["MODELS", "CalibrationPane"]
@@ -40,7 +41,7 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-class CalibrationPane(Vertical):
+class CalibrationPane(SafeWorkers, Vertical):
     """Pick a recording and a model, run the loop, read the report."""
 
     DEFAULT_CSS = """
@@ -97,7 +98,7 @@ class CalibrationPane(Vertical):
         self._summary(f"calibrating {path.name} ({model})...")
         self._run(path, model)
 
-    @work(thread=True, exclusive=True, group="calibrate")
+    @work(thread=True, exclusive=True, group="calibrate", exit_on_error=False)
     def _run(self, path: Path, model: str) -> None:
         calibrate = self.services.calibrate
         if calibrate is None:  # pragma: no cover - checked before the worker starts

@@ -17,12 +17,13 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Button, DataTable, Label, Select
 
+from study.tui.db_errors import SafeWorkers
 from study.tui.services import Roster, StudyServices
 
 __all__ = ["ParticipantsPane"]
 
 
-class ParticipantsPane(Vertical):
+class ParticipantsPane(SafeWorkers, Vertical):
     """Add a participant; list everyone with code, group, order and progress."""
 
     DEFAULT_CSS = """
@@ -90,7 +91,7 @@ class ParticipantsPane(Vertical):
         self.query_one("#add-status", Label).update(f"enrolling a {group}...")
         self._enrol(str(group))
 
-    @work(thread=True, exclusive=True, group="enrol")
+    @work(thread=True, exclusive=True, group="enrol", exit_on_error=False)
     def _enrol(self, group: str) -> None:
         try:
             code = self.services.add_participant(group)
@@ -98,6 +99,10 @@ class ParticipantsPane(Vertical):
             self.app.call_from_thread(self._status, f"refused: {exc}")
             return
         self.post_message(self.Added(code, group))
+
+    def worker_failed(self, group: str, line: str) -> None:
+        self._status(f"not enrolled: {line}")
+        super().worker_failed(group, line)
 
     def _status(self, text: str) -> None:
         self.last_message = text

@@ -26,6 +26,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Label, Select
 
+from study.tui.db_errors import SafeWorkers, plain_line
 from study.tui.live_view import (
     LiveReadout,
     NotesView,
@@ -64,7 +65,7 @@ KEY_ACTIONS = {
 """Pane action -> `KeyboardDriver.press` key."""
 
 
-class RunPane(Vertical, can_focus=True):
+class RunPane(SafeWorkers, Vertical, can_focus=True):
     """Run a participant's next trial with a live view."""
 
     DEFAULT_CSS = """
@@ -255,16 +256,22 @@ class RunPane(Vertical, can_focus=True):
             self.status = "preparing the simulation"
             self._prepare()
 
-    @work(thread=True, exclusive=True, group="prepare")
+    @work(thread=True, exclusive=True, group="prepare", exit_on_error=False)
     def _prepare(self) -> None:
         self.simulation.ready()
         self.app.call_from_thread(self._prepared)
+
+    def worker_failed(self, group: str, line: str) -> None:
+        if group == "prepare":
+            self.status = "idle"
+            line = f"the simulation could not be prepared: {line}"
+        super().worker_failed(group, line)
 
     def _prepared(self) -> None:
         if self.status == "preparing the simulation":
             self.status = "idle"
 
-    @work(thread=True, exclusive=True, group="trial")
+    @work(thread=True, exclusive=True, group="trial", exit_on_error=False)
     def _run_trial(self, run: TrialRun, block: tuple[str, str, str]) -> None:
         try:
             run.estimator = self.simulation.ready()
@@ -283,7 +290,8 @@ class RunPane(Vertical, can_focus=True):
             outcome = run.run(started)
         except Exception as exc:  # shown, not swallowed: the trial row says what is stored
             outcome = TrialOutcome(run.code, [], 0, 0.0)
-            self.app.call_from_thread(self.app.notify, f"trial failed: {exc}", severity="error")
+            line = f"trial failed: {plain_line(exc)}"
+            self.app.call_from_thread(self.app.notify, line, severity="error", timeout=15)
         self.post_message(self.TrialEnded(outcome, block))
 
     @on(TrialStarted)

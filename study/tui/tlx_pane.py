@@ -26,6 +26,7 @@ from textual.widgets import Button, Input, Label, Select, Static
 from db.models.tlx import TLX_SUBSCALES
 from study.errors import StudyInputError
 from study.protocol.tlx import check_rating, pair_order
+from study.tui.db_errors import SafeWorkers
 from study.tui.services import Roster, StudyServices
 
 __all__ = ["TLX_SCALES", "PairChoice", "TlxPane"]
@@ -84,7 +85,7 @@ def _rating_value(text: str) -> object:
         return text
 
 
-class TlxPane(VerticalScroll):
+class TlxPane(SafeWorkers, VerticalScroll):
     """Enter or edit the questionnaire of one participant's block."""
 
     DEFAULT_CSS = """
@@ -207,7 +208,7 @@ class TlxPane(VerticalScroll):
         self._shown = (code, task, condition)
         self._load_worker(code, task, condition, note)
 
-    @work(thread=True, exclusive=True, group="tlx")
+    @work(thread=True, exclusive=True, group="tlx", exit_on_error=False)
     def _load_worker(self, code: str, task: str, condition: str, note: str) -> None:
         from study.protocol.tlx import load_tlx, tlx_audit
 
@@ -233,6 +234,10 @@ class TlxPane(VerticalScroll):
             for a in audit[-5:]
         ]
         self.query_one("#audit", Static).update("\n".join(["audit log:", *lines]) if lines else "")
+
+    def worker_failed(self, group: str, line: str) -> None:
+        # the form is left as it is: what was typed stays for the next ctrl+s
+        self._set_status(f"refused: {line}; the form keeps what was typed", notify=True)
 
     def _set_status(self, text: str, notify: bool = False) -> None:
         self.status = text
@@ -278,7 +283,7 @@ class TlxPane(VerticalScroll):
         picks = None if chosen[0] is None else [str(c) for c in chosen]
         self._store(str(code), task, condition, ratings, picks, reason)
 
-    @work(thread=True, exclusive=True, group="tlx")
+    @work(thread=True, exclusive=True, group="tlx", exit_on_error=False)
     def _store(self, code, task, condition, ratings, chosen, reason) -> None:
         from study.protocol.tlx import store_tlx
 

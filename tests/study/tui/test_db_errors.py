@@ -1,0 +1,124 @@
+"""The app never ends on a database error: a read-only or locked database gives one
+plain line, the screen stays, and what was typed is kept (issue 19, first point).
+
+The database is a real SQLite file made read-only per connection (`PRAGMA query_only`:
+the tests run as root, for whom file permissions do not stop a write) or write-locked by
+a second connection holding `BEGIN EXCLUSIVE`, as another program would.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+from sqlalchemy import Engine, event, func, insert, select
+from sqlalchemy.exc import OperationalError
+from sqlalchemy.orm import Session
+from textual.widgets import Input
+
+from db.models.study import Participant
+from study.protocol.tlx import load_tlx
+from study.tui.db_errors import plain_line
+from study.tui.tlx_pane import PairChoice
+from tests.study.tui.conftest import loaded, wait_for
+from tests.study.tui.test_screens import RATINGS, _open_form, _type_ratings
+
+@contextmanager
+def pragma(engine: Engine, statement: str) -> Iterator[None]:
+    """Every new connection of `engine` runs `statement` (the pool is emptied first)."""
+
+    def on_connect(dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+        dbapi_connection.execute(statement)
+
+    engine.dispose()
+    event.listen(engine, "connect", on_connect)
+    try:
+        yield
+    finally:
+        event.remove(engine, "connect", on_connect)
+        engine.dispose()
+
+
+def _participants(engine: Engine) -> int:
+    with Session(engine) as session:
+        return session.scalar(select(func.count()).select_from(Participant)) or 0
+
+
+def test_a_real_read_only_error_reads_as_one_plain_line(study_engine: Engine) -> None:
+    with pragma(study_engine, "PRAGMA query_only = 1"), study_engine.begin() as conn:
+        with pytest.raises(OperationalError) as caught:
+            conn.execute(insert(Participant).values(code="P900", group="novice"))
+    line = plain_line(caught.value)
+    assert line.startswith("the database is read-only: nothing was written")
+    assert "INSERT" not in line and "\n" not in line and "sqlalche.me" not in line
+    assert "INSERT" in str(caught.value)  # what SQLAlchemy itself would have shown
+
+
+@pytest.mark.asyncio
+async def test_enrolling_on_a_read_only_database_says_so_and_the_app_stays(
+    make_test_app, study_engine: Engine
+) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        pane = app.query_one("#participants-pane")
+        with pragma(study_engine, "PRAGMA query_only = 1"):
+            await pilot.press("f2")
+            await pilot.press("a")
+            await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 30)
+            assert pane.last_message.startswith("not enrolled: the database is read-only")
+            assert app.is_running
+        # writable again: the same key enrols, the app never left
+        await pilot.press("a")
+        await wait_for(pilot, lambda: pane.last_message.startswith("enrolled P003"), 30)
+    assert _participants(study_engine) == 3
+
+
+@pytest.mark.asyncio
+async def test_enrolling_while_another_program_holds_the_lock_says_so(
+    make_test_app, study_engine: Engine, tmp_path
+) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        pane = app.query_one("#participants-pane")
+        other = sqlite3.connect(tmp_path / "study.db", isolation_level=None)
+        other.execute("BEGIN EXCLUSIVE")
+        try:
+            with pragma(study_engine, "PRAGMA busy_timeout = 300"):
+                await pilot.press("f2")
+                await pilot.press("a")
+                await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 30)
+                assert "locked by another program" in pane.last_message
+                assert app.is_running
+        finally:
+            other.execute("ROLLBACK")
+            other.close()
+    assert _participants(study_engine) == 2
+
+
+@pytest.mark.asyncio
+async def test_a_questionnaire_refused_by_a_read_only_database_keeps_what_was_typed(
+    make_test_app, study_engine: Engine
+) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _open_form(pilot)
+        await _type_ratings(pilot, RATINGS)
+        for k, pair in enumerate(app.query(PairChoice)):
+            pair.action_pick(k % 2)
+        with pragma(study_engine, "PRAGMA query_only = 1"):
+            await pilot.press("ctrl+s")
+            await wait_for(pilot, lambda: pane.status.startswith("refused"), 30)
+            assert pane.status.startswith("refused: the database is read-only")
+            assert pane.status.endswith("the form keeps what was typed")
+            assert app.is_running
+        typed = {s: app.query_one(f"#rating-{s}", Input).value for s in RATINGS}
+        assert typed == RATINGS
+        assert load_tlx(study_engine, "P001", "lcca", "VO") is None
+        await pilot.press("ctrl+s")  # the database is writable again: the same form saves
+        await wait_for(pilot, lambda: pane.status == "P001 lcca/VO: stored", 30)
+    stored = load_tlx(study_engine, "P001", "lcca", "VO")
+    assert stored is not None and stored.mental == int(RATINGS["mental"])
