@@ -122,8 +122,13 @@ def _legend_handles() -> list[Line2D]:
     ]
 
 
-MARKS_CAPTION = ("Points: participant means (jittered). Marks: Holm-corrected p of the "
-                 "test named under each group; * < .05, ** < .01, *** < .001, n.s. ≥ .05.")
+_NB = "\u00a0"  # no line break inside a mark's threshold
+MARKS_CAPTION = (
+    "Points: participant means (jittered). Marks: Holm-corrected p of the test named "
+    "under each group; "
+    + ", ".join(f"{m}{_NB}<{_NB}{t}" for m, t in (("*", ".05"), ("**", ".01"), ("***", ".001")))
+    + f", n.s.{_NB}≥{_NB}.05."
+)
 
 
 def fig12(
@@ -160,7 +165,13 @@ def fig12(
             _panel(ax, long[long["measure"] == measure], comparisons, measure, groups)
         for ax in axes.ravel()[len(measures) :]:
             ax.set_visible(False)
-        figure_key(fig, _legend_handles(), MARKS_CAPTION, ncols=2 if width == "single" else 4)
+        untested = any(
+            not len(comparisons[(comparisons["measure"] == m) & (comparisons["group"] == g)])
+            for m in measures for g in groups
+        )  # fmt: skip
+        caption = MARKS_CAPTION + (" n/a: no test (fewer than 3 complete pairs)." if untested
+                                   else "")  # fmt: skip
+        figure_key(fig, _legend_handles(), caption, ncols=2 if width == "single" else 4)
     return fig
 
 

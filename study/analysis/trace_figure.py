@@ -37,9 +37,9 @@ TRACES = {
 }
 SIGNS = {
     "lcca": "Proximal force: positive resists insertion (pushing the wire in), negative "
-    "resists withdrawal. Distal force: tip-wall contact, ≥ 0.",
+    "resists withdrawal. Distal force: tip-wall contact, ≥\u00a00.",
     "notes": "Force on the scope: positive resists insertion (pushing in), negative "
-    "resists withdrawal. Tip force: the fornix on the tip, ≥ 0.",
+    "resists withdrawal. Tip force: the fornix on the tip, ≥\u00a00.",
 }
 STYLES = {
     # the reference on top of the estimate, thin and dark over a wide light line
