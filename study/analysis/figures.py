@@ -65,7 +65,7 @@ panel is tall."""
 CHARS_PER_IN = 13.0
 """Characters of 8 pt text per inch of width, with room to spare (DejaVu Sans averages
 about 15)."""
-JITTER = 0.12
+JITTER = 0.18
 """Half-width of the horizontal jitter of participant points, in x units (1 = VO to HV)."""
 
 

@@ -245,3 +245,32 @@ def test_study_figures_task_option(study_db: str, tmp_path: Path,
     capsys.readouterr()
     assert main([*argv, "--task", "knee"]) == 2
     assert "no data for task 'knee'; expected one of lcca, notes" in capsys.readouterr().err
+
+
+DEMO_MEANS = Path(__file__).parent.parent / "data" / "demo_seed1_means.csv"
+"""Participant means of `study demo --seed 1` (20/8/8; see test_analysis.py)."""
+
+
+@pytest.mark.parametrize("width", ["single", "double"])
+def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
+    from study.analysis.figures import fig12, label_source
+    from study.analysis.paper import _marks
+    from study.analysis.stats import compare_conditions
+
+    long = pd.read_csv(DEMO_MEANS)
+    comparisons, _ = compare_conditions(long)
+    note = "Simulated participants: all 288 trials simulated, none measured"
+    fig = label_source(fig12(long, comparisons, width), note)
+    marks = _marks(long, comparisons)
+    assert len(marks) == 12 and check_figure(fig, marks) == []
+    # the expert distal force: 4 of 8 zero differences, R's asymptotic p .361 -> n.s.
+    assert marks["peak_distal_force_n/expert"] == pytest.approx(0.36131, abs=1e-5)
+    ax = fig.axes[2]
+    assert "expert\nWilcoxon\n(asymptotic)" in [t.get_text() for t in ax.get_xticklabels()]
+    # five expert VO values of 0.112 N: jittered apart, not one dot
+    expert_vo = ax.collections[4].get_offsets()  # scatter order: group x (VO, HV)
+    tied = expert_vo[np.isclose(expert_vo[:, 1], 0.112, atol=5e-4)]
+    assert len(tied) == 5 and len(np.unique(np.round(tied[:, 0], 3))) == 5
+    again = fig12(long, comparisons, width).axes[2].collections[4].get_offsets()
+    assert np.array_equal(again, expert_vo)  # seeded: the same figure on every run
+    plt.close("all")
