@@ -274,3 +274,15 @@ def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
     again = fig12(long, comparisons, width).axes[2].collections[4].get_offsets()
     assert np.array_equal(again, expert_vo)  # seeded: the same figure on every run
     plt.close("all")
+
+
+def test_notes_device_figures_pass_the_check_in_the_shared_style() -> None:
+    """`study characterize notes` draws these in the same style (now 8 pt)."""
+    from study.analysis.notes_figures import bode, ramp_hysteresis
+    from teleop_core.notes.characterize import characterize_simulated
+    from teleop_core.notes.params import DOFS, default_params
+
+    results = [characterize_simulated(default_params(dof), 0.02, 0) for dof in DOFS]
+    for fig in (bode(results), ramp_hysteresis(results)):
+        assert check_figure(fig) == []
+        plt.close(fig)
