@@ -46,6 +46,8 @@ def stars(p: float | None) -> str:
 
 @contextmanager
 def _recording() -> Iterator[list[Text]]:
+    """Record every `Text` drawn while open (by wrapping `Text.draw` for the duration:
+    one check at a time per process, which is how the CLI and the TUI's worker run it)."""
     drawn: list[Text] = []
     original = Text.draw
 

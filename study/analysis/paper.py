@@ -129,8 +129,9 @@ def draw_figures(
         t_long = long[long["task"] == name]
         t_comp = comparisons[comparisons["task"] == name] if len(comparisons) else comparisons
         marks = _marks(t_long, t_comp)
-        fig = label_source(fig12(t_long, t_comp, width), note)
-        drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks))
+        if marks:  # else none of Fig. 12's measures was recorded in this task
+            fig = label_source(fig12(t_long, t_comp, width), note)
+            drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks))
         panels = [(_samples(engine, i), title) for i, title in _trace_trials(engine, name, driver)]
         if panels:
             fig = label_source(force_traces(panels, name, width), note)
