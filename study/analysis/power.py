@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from study.analysis.stats import ALPHA
+from study.analysis.stats import ALPHA, wilcoxon_signed_rank
 
 SCALES = (0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
 """Group sizes of the power curve, as multiples of the design's."""
@@ -50,9 +50,11 @@ class PowerResult:
 
 
 def _group_test(vo: np.ndarray, hv: np.ndarray) -> float:
+    """The p of `compare_conditions`' rule, with its Wilcoxon (R's exact/asymptotic rule,
+    not scipy's version-dependent default)."""
     diff = hv - vo
     normal = stats.shapiro(diff).pvalue >= ALPHA
-    return float(stats.ttest_rel(hv, vo).pvalue if normal else stats.wilcoxon(hv, vo).pvalue)
+    return float(stats.ttest_rel(hv, vo).pvalue if normal else wilcoxon_signed_rank(diff)[1])
 
 
 def simulate_power(
