@@ -1,18 +1,24 @@
-"""Figures for the paper, in one style: IEEE widths, embedded fonts, colour-blind-safe.
+"""The paper figures' one style, and Fig. 12.
 
-- `fig12`: per group, VO vs HV strips of participant means with paired lines and the
-  significance of each test (completion time, peak proximal force, peak distal force,
-  raw TLX), as the paper's Fig. 12;
-- `force_traces`: one stored trial's proximal (estimated and reference) and distal
-  forces over time, as Fig. 9;
-- `tlx_profile`: mean rating of each NASA-TLX subscale per condition and group.
+The style (`STYLE`, `WIDTHS_IN`, Okabe-Ito colours) is shared by every figure of the
+project: IEEE single (3.5 in) and double (7.16 in) column widths, every text at 8 pt
+(IEEE's minimum at column width; `figcheck` verifies it on the drawn figure), Type 42
+(TrueType) fonts in PDF so text stays text, colour-blind-safe colours (Okabe & Ito
+2008). Helpers every figure uses: `label_source` (the simulated-data note, issue 25),
+`figure_key` (the legend under the panels, its title the caption: sign convention,
+interval method), `jitter`
+(seeded, so a figure is the same on every run) and `save`.
 
-Okabe-Ito colours (Okabe & Ito 2008) and Type 42 (TrueType) fonts in PDF, so text
-stays text; each plot function takes an Axes (or makes its own figure) and returns it.
+- `fig12`: one task's Fig. 12: per measure, per group, VO and HV participant means
+  (jittered), paired lines, group means, the Holm-corrected mark of the within-group
+  test, and the test under each group. Other figures: `trace_figure` (Fig. 9) and
+  `tlx_figure` (NASA-TLX profile).
 """
 
 from __future__ import annotations
 
+import textwrap
+import zlib
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -22,38 +28,107 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.artist import Artist
+from matplotlib.lines import Line2D
 
-from db.models.tlx import TLX_SUBSCALES
+from study.analysis.figcheck import MARK_GID, stars
 
 WIDTHS_IN = {"single": 3.5, "double": 7.16}
 """IEEE column widths."""
+FONT_PT = 8
 OKABE_ITO = {"VO": "#D55E00", "HV": "#0072B2", "grey": "#999999"}
 STYLE = {
-    "font.size": 7,
-    "axes.titlesize": 7,
-    "axes.labelsize": 7,
-    "xtick.labelsize": 6,
-    "ytick.labelsize": 6,
-    "legend.fontsize": 6,
+    "font.size": FONT_PT,
+    "axes.titlesize": FONT_PT,
+    "axes.labelsize": FONT_PT,
+    "xtick.labelsize": FONT_PT,
+    "ytick.labelsize": FONT_PT,
+    "legend.fontsize": FONT_PT,
+    "figure.titlesize": FONT_PT,
+    "figure.labelsize": FONT_PT,
     "pdf.fonttype": 42,
     "ps.fonttype": 42,
     "svg.fonttype": "none",
     "axes.spines.top": False,
     "axes.spines.right": False,
     "lines.linewidth": 0.8,
+    "legend.frameon": False,
 }
 LABELS = {
-    "completion_time_s": "completion time (s)",
-    "peak_proximal_force_n": "peak proximal force (N)",
-    "peak_distal_force_n": "peak distal force (N)",
-    "tlx_raw": "raw NASA-TLX",
+    "completion_time_s": "completion\ntime (s)",
+    "peak_proximal_force_n": "peak proximal\nforce (N)",
+    "peak_distal_force_n": "peak distal\nforce (N)",
+    "tlx_raw": "raw NASA-TLX\n(0-100)",
 }
+"""Fig. 12's measures and their y-labels, on two lines so that they stay shorter than a
+panel is tall."""
+CHARS_PER_IN = 13.0
+"""Characters of 8 pt text per inch of width, with room to spare (DejaVu Sans averages
+about 15)."""
+JITTER = 0.18
+"""Half-width of the horizontal jitter of participant points, in x units (1 = VO to HV)."""
 
 
-def _stars(p: float | None) -> str:
-    if p is None or not np.isfinite(p):
-        return "n/a"
-    return "***" if p < 0.001 else "**" if p < 0.01 else "*" if p < 0.05 else "n.s."
+def wrap(text: str, width_in: float) -> str:
+    """`text` broken into lines that fit `width_in` inches at 8 pt."""
+    return "\n".join(textwrap.wrap(text, max(int(width_in * CHARS_PER_IN), 10)))
+
+
+def label_source(fig: plt.Figure, note: str) -> plt.Figure:
+    """Write the data-source note (`DataSource.note`) into the figure, above the panels;
+    nothing when the note is empty (measured data)."""
+    if note:
+        fig.suptitle(wrap(note, fig.get_figwidth()), x=0.02, ha="left", fontsize=FONT_PT,
+                     fontstyle="italic", color="#444444")  # fmt: skip
+    return fig
+
+
+def figure_key(
+    fig: plt.Figure, handles: Sequence[Artist], caption: str, ncols: int
+) -> plt.Figure:
+    """The figure's legend under the panels, with `caption` (sign convention, what the
+    marks and bars are) as its title, wrapped to fit: one artist, so the layout keeps it
+    clear of the data-source note above the panels."""
+    fig.legend(handles=list(handles), loc="outside lower center", ncols=ncols,
+               title=wrap(caption, fig.get_figwidth()), title_fontsize=FONT_PT,
+               handlelength=1.5, columnspacing=1.0)  # fmt: skip
+    return fig
+
+
+def jitter(n: int, key: str, half_width: float = JITTER) -> np.ndarray:
+    """`n` horizontal offsets, the same for the same `key` on every run."""
+    rng = np.random.default_rng(zlib.crc32(key.encode()))
+    return rng.uniform(-half_width, half_width, n)
+
+
+def method_label(row: pd.Series | None) -> str:
+    """What `compare_conditions` ran, as the figure says it under the group: 'paired t',
+    or 'Wilcoxon' and '(exact)' or '(asymptotic)' on two lines (narrow enough that the
+    first group's label clears the y-axis)."""
+    if row is None:
+        return "no test"
+    if row["test"] == "paired_t":
+        return "paired t"
+    return f"Wilcoxon\n({row['p_method']})"
+
+
+def _legend_handles() -> list[Line2D]:
+    point = {"ls": "none", "marker": "o", "ms": 3.5}
+    return [
+        Line2D([], [], color=OKABE_ITO["VO"], label="VO, participant", **point),
+        Line2D([], [], color=OKABE_ITO["HV"], label="HV, participant", **point),
+        Line2D([], [], color=OKABE_ITO["grey"], lw=0.6, label="same participant"),
+        Line2D([], [], color="black", lw=1.4, label="group mean"),
+    ]
+
+
+_NB = "\u00a0"  # no line break inside a mark's threshold
+MARKS_CAPTION = (
+    "Points: participant means (jittered). Marks: Holm-corrected p of the test named "
+    "under each group; "
+    + ", ".join(f"{m}{_NB}<{_NB}{t}" for m, t in (("*", ".05"), ("**", ".01"), ("***", ".001")))
+    + f", n.s.{_NB}≥{_NB}.05."
+)
 
 
 def fig12(
@@ -62,94 +137,81 @@ def fig12(
     width: str = "double",
     measures: Sequence[str] = tuple(LABELS),
 ) -> plt.Figure:
-    """Per group and measure: VO and HV participant means, paired lines, Holm-corrected
-    significance of the within-group test."""
+    """Fig. 12 of ONE task: per measure (panel) and group, VO and HV participant means.
+
+    Parameters
+    ----------
+    long
+        Participant means of one task (`frames.participant_means`): participant, group,
+        condition, measure, value.
+    comparisons
+        `stats.compare_conditions` rows of the same task; each group's mark is the
+        star of its `p_holm`, the test under it is its `test` (and `p_method`).
+    width
+        'single' (3.5 in, panels stacked) or 'double' (7.16 in, two columns).
+
+    Each mark is a text with gid `mark:<measure>/<group>` (`figcheck` reads them back).
+    """
+    if long["task"].nunique() > 1:
+        raise ValueError("fig12 draws one task; select it first (paper.draw_figures does)")
     measures = [m for m in measures if m in set(long["measure"])]
     groups = list(dict.fromkeys(long["group"]))
     with plt.rc_context(STYLE):
-        ncol = 2 if width == "single" else len(measures)
+        ncol = 1 if width == "single" else 2
         nrow = int(np.ceil(len(measures) / ncol))
-        fig, axes = plt.subplots(
-            nrow, ncol, figsize=(WIDTHS_IN[width], 1.9 * nrow), layout="constrained",
-            squeeze=False,
-        )  # fmt: skip
+        fig, axes = plt.subplots(nrow, ncol, figsize=(WIDTHS_IN[width], 1.2 + 1.5 * nrow),
+                                 layout="constrained", squeeze=False)  # fmt: skip
         for ax, measure in zip(axes.ravel(), measures, strict=False):
-            data = long[long["measure"] == measure]
-            for gi, group in enumerate(groups):
-                wide = (
-                    data[data["group"] == group]
-                    .pivot_table(index="participant", columns="condition", values="value")
-                    .dropna()
-                )
-                x0 = gi * 3.0
-                for _, r in wide.iterrows():
-                    ax.plot([x0, x0 + 1], [r["VO"], r["HV"]], color=OKABE_ITO["grey"], lw=0.4,
-                            alpha=0.6, zorder=1)  # fmt: skip
-                for k, cond in enumerate(("VO", "HV")):
-                    label = cond if gi == 0 else None
-                    ax.scatter(np.full(len(wide), x0 + k), wide[cond], s=6,
-                               color=OKABE_ITO[cond], zorder=2, label=label)  # fmt: skip
-                    ax.plot([x0 + k - 0.25, x0 + k + 0.25], [wide[cond].mean()] * 2,
-                            color="black", lw=1.2, zorder=3)  # fmt: skip
-                row = comparisons[(comparisons["measure"] == measure)
-                                  & (comparisons["group"] == group)]  # fmt: skip
-                p = float(row["p_holm"].iloc[0]) if len(row) else None
-                top = float(np.nanmax(wide.to_numpy())) if len(wide) else 0.0
-                ax.text(x0 + 0.5, top * 1.04, _stars(p), ha="center", va="bottom", fontsize=6)
-            ax.set_xticks([3.0 * g + 0.5 for g in range(len(groups))], groups)
-            ax.set_ylabel(LABELS.get(measure, measure))
-            ax.set_ylim(bottom=0)
-            ax.margins(y=0.12)
+            _panel(ax, long[long["measure"] == measure], comparisons, measure, groups)
         for ax in axes.ravel()[len(measures) :]:
             ax.set_visible(False)
-        axes.ravel()[0].legend(loc="lower left", frameon=False, handletextpad=0.2)
+        untested = any(
+            not len(comparisons[(comparisons["measure"] == m) & (comparisons["group"] == g)])
+            for m in measures for g in groups
+        )  # fmt: skip
+        caption = MARKS_CAPTION + (" n/a: no test (fewer than 3 complete pairs)." if untested
+                                   else "")  # fmt: skip
+        figure_key(fig, _legend_handles(), caption, ncols=2 if width == "single" else 4)
     return fig
 
 
-def force_traces(samples: pd.DataFrame, title: str = "", width: str = "single") -> plt.Figure:
-    """Proximal (estimated, reference) and distal force over one trial."""
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(WIDTHS_IN[width], 1.8), layout="constrained")
-        ax.plot(samples["t_s"], samples["proximal_force_n"], color=OKABE_ITO["grey"],
-                label="proximal (ref.)")  # fmt: skip
-        ax.plot(samples["t_s"], samples["proximal_force_est_n"], color=OKABE_ITO["HV"],
-                label="proximal (est.)")  # fmt: skip
-        ax.plot(samples["t_s"], samples["distal_force_n"], color=OKABE_ITO["VO"], label="distal")
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel("force (N)")
-        low, high = ax.get_ylim()
-        ax.set_ylim(low, high + 0.35 * (high - low))  # room for the legend above the data
-        ax.legend(frameon=False, ncols=3, loc="upper left")
-        if title:
-            ax.set_title(title)
-    return fig
-
-
-def tlx_profile(tlx: pd.DataFrame, width: str = "single") -> plt.Figure:
-    """Mean rating per subscale, VO vs HV (all groups pooled; 95 % CI bars)."""
-    with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(WIDTHS_IN[width], 1.9), layout="constrained")
-        x = np.arange(len(TLX_SUBSCALES))
+def _panel(
+    ax: plt.Axes, data: pd.DataFrame, comparisons: pd.DataFrame, measure: str,
+    groups: list[str],
+) -> plt.Axes:  # fmt: skip
+    ticks, top = [], 0.0
+    for gi, group in enumerate(groups):
+        wide = (
+            data[data["group"] == group]
+            .pivot_table(index="participant", columns="condition", values="value")
+            .reindex(columns=["VO", "HV"])
+            .dropna()
+        )
+        x0 = gi * 3.0
+        dx = {c: jitter(len(wide), f"{measure}/{group}/{c}") for c in ("VO", "HV")}
+        for i, (_, r) in enumerate(wide.iterrows()):
+            ax.plot([x0 + dx["VO"][i], x0 + 1 + dx["HV"][i]], [r["VO"], r["HV"]],
+                    color=OKABE_ITO["grey"], lw=0.4, alpha=0.7, zorder=1)  # fmt: skip
         for k, cond in enumerate(("VO", "HV")):
-            c = tlx[tlx["condition"] == cond]
-            cols = [f"tlx_{s}" for s in TLX_SUBSCALES]
-            mean = c[cols].mean().to_numpy()
-            half = 1.96 * c[cols].std(ddof=1).to_numpy() / np.sqrt(max(len(c), 1))
-            ax.bar(x + (k - 0.5) * 0.38, mean, 0.36, yerr=half, capsize=1.5,
-                   color=OKABE_ITO[cond], label=cond, error_kw={"lw": 0.6})  # fmt: skip
-        ax.set_xticks(x, [s[:4] + "." if len(s) > 6 else s for s in TLX_SUBSCALES])
-        ax.set_ylabel("rating (0-100)")
-        ax.set_ylim(0, 100)
-        ax.legend(frameon=False, ncols=2, loc="upper right")
-    return fig
-
-
-def label_source(fig: plt.Figure, note: str) -> plt.Figure:
-    """Write the data-source note (`DataSource.note`) into the figure, above the panels;
-    nothing when the note is empty (measured data)."""
-    if note:
-        fig.suptitle(note, x=0.0, ha="left", fontsize=8, fontstyle="italic", color="#444444")
-    return fig
+            ax.scatter(x0 + k + dx[cond], wide[cond], s=9, color=OKABE_ITO[cond], zorder=2,
+                       linewidths=0)  # fmt: skip
+            if len(wide):
+                ax.plot([x0 + k - 0.3, x0 + k + 0.3], [wide[cond].mean()] * 2,
+                        color="black", lw=1.4, zorder=3)  # fmt: skip
+        rows = comparisons[(comparisons["measure"] == measure) & (comparisons["group"] == group)]
+        row = rows.iloc[0] if len(rows) else None
+        p = float(row["p_holm"]) if row is not None else None
+        high = float(np.nanmax(wide.to_numpy())) if len(wide) else 0.0
+        top = max(top, high)
+        ax.annotate(stars(p), (x0 + 0.5, high), xytext=(0, 3), textcoords="offset points",
+                    ha="center", va="bottom", gid=f"{MARK_GID}{measure}/{group}")  # fmt: skip
+        ticks.append((x0 + 0.5, f"{group}\n{method_label(row)}"))
+    ax.set_xticks([t for t, _ in ticks], [label for _, label in ticks])
+    ax.tick_params(axis="x", length=0)
+    ax.set_xlim(-0.6, 3.0 * len(groups) - 1.4)
+    ax.set_ylabel(LABELS.get(measure, measure))
+    ax.set_ylim(0, (top or 1.0) * 1.3)
+    return ax
 
 
 def save(fig: plt.Figure, out_dir: Path, name: str, formats: Sequence[str]) -> list[Path]:

@@ -1,21 +1,38 @@
-"""The paper's figures from the study database (`study figures`, `study demo`)."""
+"""The paper's figures from the study database (`study figures`, `study demo`).
+
+One set per task (`--task`, all tasks by default): Fig. 12 (`fig12_groups_<task>`),
+Fig. 9 (`fig9_forces_<task>`, when the task's trials have samples) and the NASA-TLX
+profile (`tlx_profile_<task>`). A task's Fig. 12 takes its marks from that task's own
+comparisons (`compare_conditions`, Holm within task x measure: the p values `study
+analyze` reports). `draw_figures` draws them; `write_figures` checks every one
+(`figcheck`) before writing any.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import pandas as pd
 from sqlalchemy import Engine, exists, select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
 from db.models.trial import SAMPLE_COLUMNS, Sample, Trial
-from study.analysis.figures import fig12, force_traces, label_source, save, tlx_profile
+from study.analysis.figcheck import FigureCheckError, check_figure
+from study.analysis.figures import LABELS as FIG12_LABELS
+from study.analysis.figures import fig12, label_source, save
 from study.analysis.frames import participant_means, tlx_frame, trial_frame
 from study.analysis.source import DataSource, restrict
 from study.analysis.stats import compare_conditions
+from study.analysis.tlx_figure import tlx_profile
+from study.analysis.trace_figure import force_traces
 from study.errors import StudyInputError
+
+
+FIG12_MEASURES = tuple(FIG12_LABELS)
 
 
 def _samples(engine: Engine, trial_id: int) -> pd.DataFrame:
@@ -26,16 +43,16 @@ def _samples(engine: Engine, trial_id: int) -> pd.DataFrame:
     return pd.DataFrame([{c: getattr(s, c) for c in SAMPLE_COLUMNS} for s in rows])
 
 
-def _trace_trials(engine: Engine, driver: str | None = None) -> list[tuple[int, str]]:
-    """The VO trial with the highest peak distal force, and the same participant's
+def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[tuple[int, str]]:
+    """The task's VO trial with the highest peak distal force, and the same participant's
     HV trial with the same number: a collision felt and not felt. Only trials with
     samples (imported ones have none)."""
     recorded = exists().where(Sample.trial_id == Trial.id)
+    measured = (Trial.status == "completed", Trial.practice.is_(False), Trial.task == task)
     query = (
         select(Trial, Participant.code)
         .join(Participant)
-        .where(Trial.status == "completed", Trial.practice.is_(False), Trial.condition == "VO")
-        .where(recorded)
+        .where(*measured, Trial.condition == "VO", recorded)
         .order_by(Trial.peak_distal_force_n.desc())
     )
     if driver is not None:
@@ -47,10 +64,9 @@ def _trace_trials(engine: Engine, driver: str | None = None) -> list[tuple[int, 
         trial, code = vo
         hv = session.scalars(
             select(Trial).where(
-                Trial.participant_id == trial.participant_id, Trial.condition == "HV",
-                Trial.trial_index == trial.trial_index, Trial.status == "completed",
-                Trial.practice.is_(False), recorded,
-            )
+                *measured, Trial.participant_id == trial.participant_id, Trial.condition == "HV",
+                Trial.trial_index == trial.trial_index, recorded,
+            ).order_by(Trial.attempt.desc())
         ).first()  # fmt: skip
     out = [(trial.id, f"{code}, VO, trial {trial.trial_index + 1}")]
     if hv is not None:
@@ -58,26 +74,89 @@ def _trace_trials(engine: Engine, driver: str | None = None) -> list[tuple[int, 
     return out
 
 
-def write_figures(
-    engine: Engine, out_dir: Path, formats: Sequence[str] = ("pdf", "svg", "png"),
-    width: str = "double", driver: str | None = None,
-) -> list[Path]:  # fmt: skip
-    """Every figure carries the data-source note when any drawn trial is simulated."""
+@dataclass
+class DrawnFigure:
+    name: str
+    """File name without the extension."""
+    figure: plt.Figure
+    expected_marks: dict[str, float | None] | None = None
+    """Fig. 12: measure/group -> the reported Holm p (None: no test); else None."""
+
+    def problems(self) -> list[str]:
+        """The figure check's findings (`figcheck.check_figure`); [] when legible."""
+        return check_figure(self.figure, self.expected_marks)
+
+
+def _marks(long: pd.DataFrame, comparisons: pd.DataFrame) -> dict[str, float | None]:
+    """The mark each measure x group of Fig. 12 must show, from the reported p_holm."""
+    out: dict[str, float | None] = {}
+    measures = [m for m in FIG12_MEASURES if m in set(long["measure"])]
+    for measure in measures:
+        for group in dict.fromkeys(long["group"]):
+            rows = comparisons[(comparisons["measure"] == measure)
+                               & (comparisons["group"] == group)]  # fmt: skip
+            out[f"{measure}/{group}"] = float(rows["p_holm"].iloc[0]) if len(rows) else None
+    return out
+
+
+def tasks_of(trials: pd.DataFrame, tlx: pd.DataFrame, task: str | None) -> list[str]:
+    """The tasks to draw: `task` (checked against the stored ones) or all of them."""
+    known = list(dict.fromkeys([*trials["task"], *tlx["task"]]))
+    if task is None:
+        return known
+    if task not in known:
+        raise StudyInputError(
+            f"no data for task {task!r}; expected one of {', '.join(known) or 'none stored'}"
+        )
+    return [task]
+
+
+def draw_figures(
+    engine: Engine, width: str = "double", driver: str | None = None, task: str | None = None
+) -> list[DrawnFigure]:
+    """Every figure of every task (or of `task`), each with the data-source note of the
+    trials it draws."""
     trials, tlx = trial_frame(engine), tlx_frame(engine)
     if not len(trials):
         raise StudyInputError("the database holds no completed trials to draw")
     trials, tlx = restrict(trials, tlx, driver)
-    note = DataSource.of(trials).note
-    out_dir.mkdir(parents=True, exist_ok=True)
     long = participant_means(trials, tlx)
-    comparisons, _ = compare_conditions(long)
-    fig = label_source(fig12(long, comparisons, width), note)
-    paths = save(fig, out_dir, "fig12_groups", formats)
-    for trial_id, title in _trace_trials(engine, driver):
-        name = "fig9_forces_" + title.split(",")[1].strip().lower()
-        fig = label_source(force_traces(_samples(engine, trial_id), title), note)
-        paths += save(fig, out_dir, name, formats)
-    if len(tlx):
-        fig = label_source(tlx_profile(tlx, "single"), note)
-        paths += save(fig, out_dir, "tlx_profile", formats)
+    comparisons, _ = compare_conditions(long)  # Holm within task x measure, as analyze
+    drawn = []
+    for name in tasks_of(trials, tlx, task):
+        t_trials, t_tlx = trials[trials["task"] == name], tlx[tlx["task"] == name]
+        note = DataSource.of(t_trials).note
+        t_long = long[long["task"] == name]
+        t_comp = comparisons[comparisons["task"] == name] if len(comparisons) else comparisons
+        marks = _marks(t_long, t_comp)
+        if marks:  # else none of Fig. 12's measures was recorded in this task
+            fig = label_source(fig12(t_long, t_comp, width), note)
+            drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks))
+        panels = [(_samples(engine, i), title) for i, title in _trace_trials(engine, name, driver)]
+        if panels:
+            fig = label_source(force_traces(panels, name, width), note)
+            drawn.append(DrawnFigure(f"fig9_forces_{name}", fig))
+        if len(t_tlx):
+            fig = label_source(tlx_profile(t_tlx, width), note)
+            drawn.append(DrawnFigure(f"tlx_profile_{name}", fig))
+    return drawn
+
+
+def write_figures(
+    engine: Engine, out_dir: Path, formats: Sequence[str] = ("pdf", "svg", "png"),
+    width: str = "double", driver: str | None = None, task: str | None = None,
+) -> list[Path]:  # fmt: skip
+    """Draw, check and write every figure; nothing is written when one fails the check."""
+    drawn = draw_figures(engine, width, driver, task)
+    problems = [f"{d.name}: {p}" for d in drawn for p in d.problems()]
+    if problems:
+        for d in drawn:
+            plt.close(d.figure)
+        raise FigureCheckError(
+            f"{len(problems)} figure check failure(s), nothing written: " + "; ".join(problems)
+        )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for d in drawn:
+        paths += save(d.figure, out_dir, d.name, formats)
     return paths

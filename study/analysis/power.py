@@ -13,18 +13,21 @@ group's standardised effect (HV - VO over the per-condition SD).
   paired t-test or the Wilcoxon signed-rank test), p < alpha.
 - Group x condition interaction: with two conditions it is exactly the one-way ANOVA
   across groups of the paired differences (F and p identical to the mixed ANOVA's
-  interaction term), which is what is computed.
+  interaction term), which is what is computed. Its rejection rate is power only when
+  the groups' effects differ; with equal effects there is no interaction and the rate is
+  the test's type I error rate (about alpha), which `PowerResult.interaction_is_power`
+  says and the figure labels.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
 
-from study.analysis.stats import ALPHA
+from study.analysis.stats import ALPHA, wilcoxon_signed_rank
 
 SCALES = (0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
 """Group sizes of the power curve, as multiples of the design's."""
@@ -35,12 +38,23 @@ class PowerResult:
     sizes: dict[str, int]
     groups: dict[str, float]
     interaction: float | None
+    """Rejection rate of the group x condition test (see `interaction_is_power`)."""
+    effects: dict[str, float] = field(default_factory=dict)
+    """The standardised effect simulated in each group."""
+
+    @property
+    def interaction_is_power(self) -> bool:
+        """False when every group has the same effect: no interaction exists, so the
+        interaction's rejection rate is a type I error rate."""
+        return len(set(self.effects.values())) > 1
 
 
 def _group_test(vo: np.ndarray, hv: np.ndarray) -> float:
+    """The p of `compare_conditions`' rule, with its Wilcoxon (R's exact/asymptotic rule,
+    not scipy's version-dependent default)."""
     diff = hv - vo
     normal = stats.shapiro(diff).pvalue >= ALPHA
-    return float(stats.ttest_rel(hv, vo).pvalue if normal else stats.wilcoxon(hv, vo).pvalue)
+    return float(stats.ttest_rel(hv, vo).pvalue if normal else wilcoxon_signed_rank(diff)[1])
 
 
 def simulate_power(
@@ -68,6 +82,7 @@ def simulate_power(
         sizes=dict(sizes),
         groups={g: hits[g] / n_sim for g in sizes},
         interaction=interaction_hits / n_sim if len(sizes) > 1 else None,
+        effects={g: float(effects[g]) for g in sizes},
     )
 
 

@@ -1,4 +1,11 @@
-"""The power curve figure (same style as the paper figures)."""
+"""The power curve figure (the paper figures' style, `figures.STYLE`).
+
+Two panels. Left: the power of each group's VO-HV test against that group's own size
+(the curve scales every group with the design), one marker and line style per group so
+the lines stay apart where they overlap and in grey print. Right: the group x condition
+test against the total N, labelled as what it is: power when the simulated effects
+differ, a type I error rate (with alpha drawn) when they are equal.
+"""
 
 from __future__ import annotations
 
@@ -9,25 +16,47 @@ import matplotlib.pyplot as plt
 
 from study.analysis.figures import STYLE, WIDTHS_IN
 from study.analysis.power import PowerResult
+from study.analysis.stats import ALPHA
 
-COLORS = ("#E69F00", "#56B4E9", "#009E73", "#CC79A7")
+COLORS = ("#E69F00", "#56B4E9", "#009E73", "#CC79A7", "#0072B2", "#D55E00")
+MARKERS = ("o", "s", "^", "D", "v", "P")
+LINESTYLES = ("-", "--", ":", "-.", (0, (5, 1)), (0, (1, 1)))
 
 
-def plot_power_curve(curve: list[tuple[float, PowerResult]]) -> plt.Figure:
-    """Power against total sample size, per group and for the interaction."""
+def plot_power_curve(curve: list[tuple[float, PowerResult]], width: str = "single") -> plt.Figure:
+    """Per-group power against the group's n; the interaction against total N."""
+    first = curve[0][1]
+    has_interaction = first.interaction is not None
     with plt.rc_context(STYLE):
-        fig, ax = plt.subplots(figsize=(WIDTHS_IN["single"], 2.2), layout="constrained")
-        totals = [sum(r.sizes.values()) for _, r in curve]
-        groups = list(curve[0][1].groups)
-        for color, group in zip(COLORS, groups, strict=False):
-            ax.plot(totals, [r.groups[group] for _, r in curve], "o-", ms=2.5, color=color,
-                    label=group)  # fmt: skip
-        if curve[0][1].interaction is not None:
-            ax.plot(totals, [r.interaction for _, r in curve], "s--", ms=2.5, color="black",
-                    label="group x condition")  # fmt: skip
+        ncols = 2 if has_interaction else 1
+        rows = 2 if (width == "single" and has_interaction) else 1
+        cols = 1 if rows == 2 else ncols
+        fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], 2.2 * rows + 0.2),
+                                 layout="constrained", squeeze=False)  # fmt: skip
+        ax = axes.ravel()[0]
+        for k, group in enumerate(first.groups):
+            ax.plot([r.sizes[group] for _, r in curve], [r.groups[group] for _, r in curve],
+                    marker=MARKERS[k % 6], ls=LINESTYLES[k % 6], ms=3.5,
+                    color=COLORS[k % 6], label=group)  # fmt: skip
         ax.axhline(0.8, color="#999999", lw=0.6, ls=":")
-        ax.set_xlabel("total participants (group sizes scaled with the design's)")
-        ax.set_ylabel("power")
+        ax.set_xlabel("participants in the group")
+        ax.set_ylabel("power, VO vs HV in the group")
         ax.set_ylim(0, 1.02)
-        ax.legend(frameon=False)
+        ax.legend(loc="lower right")
+        if has_interaction:
+            ax = axes.ravel()[1]
+            totals = [sum(r.sizes.values()) for _, r in curve]
+            rates = [r.interaction for _, r in curve]
+            if first.interaction_is_power:
+                ax.plot(totals, rates, "s--", ms=3.5, color="black")
+                ax.axhline(0.8, color="#999999", lw=0.6, ls=":")
+                ax.set_ylabel("power, group x condition")
+                ax.set_ylim(0, 1.02)
+            else:
+                ax.plot(totals, rates, "s--", ms=3.5, color="black", label="rejection rate")
+                ax.axhline(ALPHA, color="#999999", lw=0.6, ls=":", label=f"alpha = {ALPHA:g}")
+                ax.set_ylabel("type I error rate,\ngroup x condition (equal effects)")
+                ax.set_ylim(0, max(0.2, *rates) * 1.1)
+                ax.legend(loc="upper right")
+            ax.set_xlabel("participants in all groups")
     return fig

@@ -33,20 +33,27 @@ def _formats(text: str) -> list[str]:
 @click.option("--driver", type=click.Choice(DRIVERS), default=None,
               help="Only trials of this driver [default: all; a simulated share is "
                    "written on every figure].")  # fmt: skip
+@click.option("--task", default=None,
+              help="Only this task's figures (e.g. lcca) [default: one set per task].")  # fmt: skip
 @db_option
 def figures(
-    out_dir: Path, formats: str, width: str, driver: str | None, db_url: str | None
-) -> None:
-    """Draw the paper's figures: group comparison, force traces, NASA-TLX profile.
+    out_dir: Path, formats: str, width: str, driver: str | None, task: str | None,
+    db_url: str | None,
+) -> None:  # fmt: skip
+    """Draw the paper's figures, one set per task: group comparison, force traces,
+    NASA-TLX profile (FIGURE_TASK.pdf, e.g. fig12_groups_lcca.pdf).
 
-    Fig. 12 (per group, VO vs HV), Fig. 9 (force traces of a trial) and the TLX profile.
+    Fig. 12 (per group, VO vs HV, marks from that task's Holm-corrected tests), Fig. 9
+    (a VO and an HV trial's forces) and the TLX profile per group. Every figure passes
+    the figure check (text >= 8 pt, no overlapping text, marks equal to the reported p)
+    before any is written.
     """
     from study.analysis.paper import write_figures
 
     chosen = _formats(formats)
     engine = open_database(db_url, create=False)
     try:
-        for path in write_figures(engine, out_dir, chosen, width, driver):
+        for path in write_figures(engine, out_dir, chosen, width, driver, task):
             click.echo(str(path))
     finally:
         engine.dispose()

@@ -81,7 +81,8 @@ def power(
     for group, p in at_design.groups.items():
         click.echo(f"{group:<10} n = {at_design.sizes[group]:>3}  power {p:.3f}")
     if at_design.interaction is not None:
-        click.echo(f"group x condition interaction: power {at_design.interaction:.3f}")
+        what = "power" if at_design.interaction_is_power else "type I error rate (equal effects)"
+        click.echo(f"group x condition interaction: {what} {at_design.interaction:.3f}")
     if out_dir is not None:
         from study.analysis.figures import save
         from study.analysis.power_plot import plot_power_curve
@@ -90,6 +91,7 @@ def power(
         report = {
             "design": design.groups, "effects": effects, "correlation": rho, "n_sim": n_sim,
             "seed": seed, "groups": at_design.groups, "interaction": at_design.interaction,
+            "interaction_is_power": at_design.interaction_is_power,
             "curve": [{"scale": s, "sizes": r.sizes, "groups": r.groups,
                        "interaction": r.interaction} for s, r in curve],
         }  # fmt: skip

@@ -36,16 +36,17 @@ def test_quick_demo_writes_analysis_and_figures(
     # two per group: too few pairs for a test, and the analysis says so instead of failing
     assert report["comparisons"] == []
     assert any("too few to test" in e for e in report["exclusions"])
-    for name in ("fig12_groups", "fig9_forces_vo", "tlx_profile"):
+    # one set per task (the quick demo has lcca only); write_figures ran the figure check
+    for name in ("fig12_groups_lcca", "fig9_forces_lcca", "tlx_profile_lcca"):
         for fmt in ("pdf", "svg", "png"):
             assert (demo / "figures" / f"{name}.{fmt}").stat().st_size > 5_000
-    pdf = (demo / "figures" / "fig12_groups.pdf").read_bytes()
+    pdf = (demo / "figures" / "fig12_groups_lcca.pdf").read_bytes()
     assert b"/FontFile2" in pdf  # TrueType fonts embedded (pdf.fonttype 42)
-    # the figures command redraws them at single-column width, PNG only
+    # the figures command redraws them at single-column width, PNG only (checked again)
     figs = tmp_path / "single"
     argv = ["figures", "--db", str(demo / "demo.db"), "--out", str(figs), "--width", "single"]
     assert main([*argv, "--format", "png"]) == 0
-    assert sorted(p.suffix for p in figs.iterdir()) == [".png"] * 4
+    assert sorted(p.suffix for p in figs.iterdir()) == [".png"] * 3
     capsys.readouterr()
     assert (
         main(["figures", "--db", str(demo / "demo.db"), "--out", str(figs), "--format", "gif"])
@@ -67,7 +68,7 @@ def test_every_demo_output_says_simulated(demo: Path) -> None:
     for name in ("tests.csv", "descriptives.csv"):
         assert set(pd.read_csv(demo / "analysis" / name)["data_source"]) == {"simulated"}
     pdfs = sorted((demo / "figures").glob("*.pdf"))
-    assert len(pdfs) == 4  # Fig. 12, Fig. 9 VO and HV, TLX profile
+    assert len(pdfs) == 3  # Fig. 12, Fig. 9 (VO and HV panels), TLX profile
     for pdf in pdfs:  # the text drawn in the figure itself, read back from the PDF
         assert "simulated" in _pdf_text(pdf).lower(), pdf.name
 
@@ -99,7 +100,7 @@ def test_mixed_database_reports_the_mix_and_driver_restricts(
     assert "Mixed data: 12 of 18 trials simulated" in capsys.readouterr().out
     figs = tmp_path / "figs"
     assert main(["figures", "--db", str(db), "--out", str(figs), "--format", "pdf"]) == 0
-    assert "12 of 18 trials simulated" in _pdf_text(figs / "fig12_groups.pdf")
+    assert "12 of 18 trials simulated" in _pdf_text(figs / "fig12_groups_lcca.pdf")
     # --driver imported: the measured trials only, and nothing says simulated
     only = tmp_path / "imported"
     argv = ["analyze", "--out", str(only), "--driver", "imported", "--db", str(db)]

@@ -221,7 +221,7 @@ async def test_analysis_tables_chart_and_figure_export(
         assert abs(bars["expert   VO"] - width * 0.9 / 1.2) <= 1
         await pilot.press("ctrl+e")
         await wait_for(pilot, lambda: pane.exported != [])
-    assert (out / "fig12_groups.png").is_file()
+    assert (out / "fig12_groups_lcca.png").is_file()  # one set per task
     assert all(Path(p).is_file() for p in pane.exported)
 
 

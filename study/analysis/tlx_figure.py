@@ -1,0 +1,89 @@
+"""The NASA-TLX profile: mean rating of each subscale, VO vs HV, one panel per group.
+
+Groups are not pooled (the largest group would dominate). The intervals are
+within-subject 95 % confidence intervals (Cousineau 2005 with Morey's 2008
+correction), the right intervals for a VO-HV comparison made on the same people: each
+participant's ratings are centred on the grand mean (their own mean over the
+conditions removed), and the t-based interval of the centred ratings is widened by
+sqrt(J / (J - 1)) for J conditions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from db.models.tlx import TLX_SUBSCALES
+from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_key
+
+CONDITIONS = ("VO", "HV")
+NOTE = ("Bars: mean; whiskers: 95 % within-subject CI (Cousineau-Morey). Lower is better "
+        "on every subscale: performance reads 0 = perfect.")  # fmt: skip
+
+
+def cousineau_morey(wide: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
+    """Within-subject means and confidence intervals of one measure.
+
+    Parameters
+    ----------
+    wide
+        One row per participant, one column per condition (participants missing a
+        condition are dropped).
+    level
+        Confidence level.
+
+    Returns
+    -------
+    DataFrame indexed by condition: mean, half (half-width of the interval), n.
+    """
+    wide = wide.dropna()
+    n, j = wide.shape
+    # y'_ij = y_ij - mean_j(y_ij) + grand mean (Cousineau 2005)
+    centred = wide.sub(wide.mean(axis=1), axis=0) + wide.to_numpy().mean()
+    if n < 2 or j < 2:
+        half = pd.Series(np.nan, index=wide.columns)
+    else:
+        # half = t(1 - alpha/2, n - 1) * SD(y') / sqrt(n) * sqrt(J / (J - 1)) (Morey 2008)
+        t = stats.t.ppf(0.5 + level / 2, n - 1)
+        half = t * centred.std(ddof=1) / math.sqrt(n) * math.sqrt(j / (j - 1))
+    return pd.DataFrame({"mean": wide.mean(), "half": half, "n": n})
+
+
+def tlx_profile(tlx: pd.DataFrame, width: str = "double") -> plt.Figure:
+    """Per group (panel), per subscale: VO and HV mean ratings with within-subject CIs.
+
+    `tlx` is one task's questionnaires (`frames.tlx_frame`).
+    """
+    groups = list(dict.fromkeys(tlx["group"]))
+    with plt.rc_context(STYLE):
+        rows, cols = (len(groups), 1) if width == "single" else (1, len(groups))
+        height = (1.5 * rows + 1.6) if width == "single" else 3.0
+        fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], height), sharey=True,
+                                 sharex=True, layout="constrained", squeeze=False)  # fmt: skip
+        x = np.arange(len(TLX_SUBSCALES))
+        for ax, group in zip(axes.ravel(), groups, strict=True):
+            data = tlx[tlx["group"] == group]
+            n = 0
+            for s_i, sub in enumerate(TLX_SUBSCALES):
+                wide = data.pivot_table(index="participant", columns="condition",
+                                        values=f"tlx_{sub}")  # fmt: skip
+                cm = cousineau_morey(wide.reindex(columns=list(CONDITIONS)))
+                n = max(n, int(cm["n"].iloc[0]))
+                for k, cond in enumerate(CONDITIONS):
+                    ax.bar(x[s_i] + (k - 0.5) * 0.4, cm.loc[cond, "mean"], 0.38,
+                           yerr=cm.loc[cond, "half"], capsize=1.5, color=OKABE_ITO[cond],
+                           label=cond if s_i == 0 else None, error_kw={"lw": 0.6})  # fmt: skip
+            ax.set_title(f"{group} (n = {n})")
+            ax.set_ylim(0, 100)
+        for ax in axes[:, 0]:
+            ax.set_ylabel("rating (0-100)")
+        for ax in axes[-1, :]:
+            ax.set_xticks(x, list(TLX_SUBSCALES), rotation=90)
+            ax.set_xlabel("NASA-TLX subscale")
+        handles, _ = axes.ravel()[0].get_legend_handles_labels()
+        figure_key(fig, handles, NOTE, ncols=2)
+    return fig

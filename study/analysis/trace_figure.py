@@ -1,0 +1,83 @@
+"""Fig. 9: the forces of one participant's VO and HV trial, in one figure.
+
+VO and HV panels share the y-axis so that the forces compare at a glance; the
+reference force is drawn above (zorder) the estimate it is compared with; the caption
+states the sign convention of the task's model:
+
+- lcca (`teleop_core.phantom.lcca`): the proximal force is what the drive feels, the
+  wall and sliding friction resisting the wire; positive while inserting, negative
+  while withdrawing (friction follows the speed's sign). The distal force is the tip's
+  contact force on the vessel wall, never negative.
+- notes (`teleop_core.notes.task`): the demanded force is the tissue's resistance on
+  the scope, positive resisting insertion; the rendered force is what the device
+  applies (it saturates at its continuous limit); the tip force is the fornix's push.
+
+Sample columns as `db.models.trial.Sample` stores them; a NOTES trial keeps the
+demanded force in `proximal_force_n` and the rendered one in `proximal_force_est_n`.
+"""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import pandas as pd
+
+from study.analysis.figures import STYLE, WIDTHS_IN, figure_key
+
+TRACES = {
+    "lcca": {
+        "proximal_force_n": "proximal, reference",
+        "proximal_force_est_n": "proximal, estimated",
+        "distal_force_n": "distal (tip on wall)",
+    },
+    "notes": {
+        "proximal_force_n": "demanded (tissue)",
+        "proximal_force_est_n": "rendered (device)",
+        "distal_force_n": "tip (fornix)",
+    },
+}
+SIGNS = {
+    "lcca": "Proximal force: positive resists insertion (pushing the wire in), negative "
+    "resists withdrawal. Distal force: tip-wall contact, ≥\u00a00.",
+    "notes": "Force on the scope: positive resists insertion (pushing in), negative "
+    "resists withdrawal. Tip force: the fornix on the tip, ≥\u00a00.",
+}
+STYLES = {
+    # the reference on top of the estimate, thin and dark over a wide light line
+    "proximal_force_n": {"color": "black", "lw": 0.7, "zorder": 3},
+    "proximal_force_est_n": {"color": "#56B4E9", "lw": 1.6, "zorder": 2},
+    "distal_force_n": {"color": "#D55E00", "lw": 0.9, "zorder": 1},
+}
+
+
+def force_traces(
+    trials: list[tuple[pd.DataFrame, str]], task: str = "lcca", width: str = "double"
+) -> plt.Figure:
+    """One panel per trial (VO, then HV), sharing the y-axis.
+
+    Parameters
+    ----------
+    trials
+        (samples, title) per panel; samples with t_s and the force columns (N).
+    task
+        Names the traces and the sign convention ('lcca' or 'notes').
+    width
+        'single' (panels stacked) or 'double' (side by side).
+    """
+    names = TRACES.get(task, TRACES["lcca"])
+    with plt.rc_context(STYLE):
+        rows, cols = (len(trials), 1) if width == "single" else (1, len(trials))
+        height = 1.6 * rows + 1.1
+        fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], height), sharey=True,
+                                 layout="constrained", squeeze=False)  # fmt: skip
+        for ax, (samples, title) in zip(axes.ravel(), trials, strict=True):
+            for column, label in names.items():
+                if column in samples and samples[column].notna().any():
+                    ax.plot(samples["t_s"], samples[column], label=label, **STYLES[column])
+            ax.axhline(0.0, color="#999999", lw=0.4, zorder=0)
+            ax.set_xlabel("time (s)")
+            ax.set_title(title)
+        for ax in axes[:, 0]:
+            ax.set_ylabel("force (N)")
+        handles, _ = axes.ravel()[0].get_legend_handles_labels()
+        figure_key(fig, handles, SIGNS.get(task, SIGNS["lcca"]), 3 if width == "double" else 2)
+    return fig

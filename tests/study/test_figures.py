@@ -1,0 +1,288 @@
+"""The paper figures: the figure check on every figure at both widths, one Fig. 12 per
+task with that task's marks, the within-subject TLX interval by hand, Fig. 9's shared
+axis and drawing order, the power curve's labels.
+
+The study is built in a second (no simulation): two tasks imported from CSV, a few
+trials given samples, every trial marked simulated so the data-source note is drawn
+(and checked) on every figure.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+import pytest
+from sqlalchemy import Engine, select, update
+from sqlalchemy.orm import Session
+
+from db.migrate import open_database
+from db.models.trial import Sample, Trial
+from study.analysis.figcheck import FigureCheckError, check_figure, require_legible, stars
+from study.analysis.frames import participant_means, tlx_frame, trial_frame
+from study.analysis.paper import draw_figures
+from study.analysis.power import power_curve
+from study.analysis.power_plot import plot_power_curve
+from study.analysis.stats import analyze
+from study.analysis.tlx_figure import cousineau_morey
+from study.cli import main
+from study.protocol.design import TEMPLATE
+from study.protocol.exchange import TLX_COLUMNS, TRIAL_COLUMNS
+
+GROUPS = {"outsider": 6, "novice": 5, "expert": 5}
+
+
+def _trial_rows(rng: np.random.Generator) -> list[list[object]]:
+    rows, k = [], 0
+    for group, n in GROUPS.items():
+        for _ in range(n):
+            k += 1
+            code = f"P{k:03d}"
+            for task, effect in (("lcca", -0.3), ("notes", 0.0)):
+                for cond in ("VO", "HV"):
+                    shift = effect if cond == "HV" else 0.0
+                    for trial in (1, 2):
+                        force = 0.8 + shift + rng.normal(0, 0.05)
+                        if task == "lcca" and group == "expert" and cond == "VO" and k != 16:
+                            force = 0.112  # tied values, as the demo's expert distal force
+                        distal = 0.4 + shift / 2 + rng.normal(0, 0.03)
+                        rows.append([code, group, task, cond, trial, 30 + rng.normal(0, 3),
+                                     force, distal, "true"])  # fmt: skip
+    return rows
+
+
+def _tlx_rows(rng: np.random.Generator) -> list[list[object]]:
+    rows = []
+    for k in range(1, sum(GROUPS.values()) + 1):
+        for task in ("lcca", "notes"):
+            for cond in ("VO", "HV"):
+                ratings = [int(v) for v in rng.integers(4, 16, 6) * 5]
+                rows.append([f"P{k:03d}", task, cond, *ratings])
+    return rows
+
+
+def _give_samples(engine: Engine) -> None:
+    """Samples (a push and a pull-back) for every trial 1 of P001 in both tasks."""
+    t = np.linspace(0, 10, 200)
+    push = np.sin(t / 10 * 2 * np.pi)  # positive while inserting, negative withdrawing
+    with Session(engine) as session:
+        trials = session.scalars(select(Trial).where(Trial.trial_index == 0)).all()
+        for trial in trials:
+            if trial.participant.code != "P001":
+                continue
+            gain = 1.0 if trial.condition == "VO" else 0.4
+            for seq, ti in enumerate(t):
+                session.add(Sample(
+                    trial_id=trial.id, seq=seq, t_s=float(ti),
+                    proximal_force_n=float(2.5 * gain * push[seq]),
+                    proximal_force_est_n=float(2.5 * gain * push[seq] + 0.05),
+                    distal_force_n=float(max(gain * push[seq], 0.0)),
+                ))  # fmt: skip
+        session.execute(update(Trial).values(driver="simulated"))
+        session.commit()
+
+
+@pytest.fixture(scope="module")
+def study_db(tmp_path_factory: pytest.TempPathFactory) -> str:
+    folder = tmp_path_factory.mktemp("two_tasks")
+    db = str(folder / "s.db")
+    design = TEMPLATE.replace('tasks = ["lcca"]', 'tasks = ["lcca", "notes"]')
+    for group, n in GROUPS.items():
+        design = design.replace(f"{group} = {20 if group == 'outsider' else 8} ", f"{group} = {n} ")
+    (folder / "d.toml").write_text(design)
+    assert main(["init", "--design", str(folder / "d.toml"), "--db", db]) == 0
+    rng = np.random.default_rng(7)
+    pd.DataFrame(_trial_rows(rng), columns=TRIAL_COLUMNS).to_csv(folder / "t.csv", index=False)
+    pd.DataFrame(_tlx_rows(rng), columns=TLX_COLUMNS).to_csv(folder / "x.csv", index=False)
+    argv = ["import", "--trials", str(folder / "t.csv"), "--tlx", str(folder / "x.csv")]
+    assert main([*argv, "--db", db]) == 0
+    engine = open_database(db, create=False)
+    try:
+        _give_samples(engine)
+    finally:
+        engine.dispose()
+    return db
+
+
+@pytest.fixture
+def engine(study_db: str) -> Iterator[Engine]:
+    eng = open_database(study_db, create=False)
+    yield eng
+    eng.dispose()
+    plt.close("all")
+
+
+@pytest.mark.parametrize("width", ["single", "double"])
+def test_every_figure_passes_the_check_at_both_widths(engine: Engine, width: str) -> None:
+    drawn = draw_figures(engine, width)
+    names = sorted(d.name for d in drawn)
+    assert names == sorted(f"{f}_{t}" for t in ("lcca", "notes")
+                           for f in ("fig12_groups", "fig9_forces", "tlx_profile"))  # fmt: skip
+    for d in drawn:
+        assert d.problems() == [], d.name
+        texts = [t.get_text() for t in d.figure.findobj(plt.Text)]
+        assert any("Simulated participants" in t for t in texts), d.name  # issue 25
+        assert d.figure.get_figwidth() == {"single": 3.5, "double": 7.16}[width]
+
+
+def test_each_task_gets_its_own_fig12_with_its_own_marks(engine: Engine) -> None:
+    trials, tlx = trial_frame(engine), tlx_frame(engine)
+    reported = analyze(trials, participant_means(trials, tlx)).comparisons
+    drawn = {d.name: d for d in draw_figures(engine, "double")}
+    seen = {}
+    for task in ("lcca", "notes"):
+        d = drawn[f"fig12_groups_{task}"]
+        rows = reported[(reported["task"] == task)
+                        & reported["measure"].isin(["completion_time_s", "peak_proximal_force_n",
+                                                    "peak_distal_force_n", "tlx_raw"])]  # fmt: skip
+        expected = {f"{r.measure}/{r.group}": r.p_holm for r in rows.itertuples()}
+        assert d.expected_marks == pytest.approx(expected)  # the p values analyze reports
+        assert check_figure(d.figure, expected) == []
+        marks = {t.get_gid(): t.get_text() for t in d.figure.findobj(plt.Text)
+                 if (t.get_gid() or "").startswith("mark:")}  # fmt: skip
+        seen[task] = marks["mark:peak_proximal_force_n/novice"]
+    # HV lowers the lcca force (-0.3 N) and not the notes force: the marks differ by task
+    assert seen["lcca"] in {"*", "**", "***"} and seen["notes"] == "n.s."
+    # the tied expert VO forces give a Wilcoxon, named under its group
+    ticks = [t.get_text() for ax in drawn["fig12_groups_lcca"].figure.axes
+             for t in ax.get_xticklabels()]  # fmt: skip
+    assert "expert\nWilcoxon\n(exact)" in ticks
+    assert any(t.endswith("\npaired t") for t in ticks)
+
+
+def test_the_check_catches_small_text_overlaps_and_wrong_marks() -> None:
+    fig, ax = plt.subplots(figsize=(3.5, 2.0), layout="constrained")
+    ax.tick_params(labelsize=8)
+    ax.set_xlabel("time (s)", fontsize=8)
+    ax.set_ylabel("force (N)", fontsize=8)
+    assert check_figure(fig) == []
+    small = ax.text(0.1, 0.1, "tiny", fontsize=6)
+    assert check_figure(fig) == ["text 'tiny' at 6 pt < 8 pt"]
+    small.set_fontsize(8)
+    ax.text(0.1, 0.12, "on top", fontsize=8)
+    assert check_figure(fig) == ["texts 'tiny' and 'on top' overlap"]
+    with pytest.raises(FigureCheckError, match="overlap"):
+        require_legible(fig, "example")
+    fig.clear()
+    ax = fig.add_subplot()
+    ax.tick_params(labelsize=8)
+    ax.text(0.5, 0.5, "*", fontsize=8, gid="mark:m/novice")
+    assert check_figure(fig, {"m/novice": 0.03}) == []
+    assert check_figure(fig, {"m/novice": 0.2}) == [
+        "mark of m/novice is '*'; the reported p gives 'n.s.'"
+    ]
+    assert check_figure(fig, {"m/novice": 0.03, "m/expert": None}) == [
+        "mark of m/expert missing (expected 'n/a')"
+    ]
+    ax.text(1.5, 0.5, "outside", fontsize=8)
+    assert check_figure(fig, {"m/novice": 0.03}) == ["text 'outside' reaches outside the figure"]
+    plt.close(fig)
+    assert [stars(p) for p in (0.0009, 0.009, 0.049, 0.05, None)] == [
+        "***", "**", "*", "n.s.", "n/a"
+    ]
+
+
+def test_cousineau_morey_interval_by_hand() -> None:
+    wide = pd.DataFrame({"VO": [50.0, 60.0, 70.0, 40.0], "HV": [40.0, 55.0, 50.0, 35.0]})
+    cm = cousineau_morey(wide)
+    # participant means 45, 57.5, 60, 37.5; grand mean 50
+    # centred VO: 50 - 45 + 50 = 55, 52.5, 60, 52.5 (SD 3.5355); HV: 45, 47.5, 40, 47.5
+    # half = t(.975, 3) * 3.5355 / 2 * sqrt(2 / 1) = 3.182446 * 1.767767 * 1.414214
+    half = 3.182446305284263 * 3.5355339059327378 / 2 * math.sqrt(2)
+    assert cm.loc["VO", "half"] == pytest.approx(half) == pytest.approx(7.9561, abs=1e-4)
+    assert cm.loc["HV", "half"] == pytest.approx(half)  # two conditions: the same width
+    assert cm.loc["VO", "mean"] == 55.0 and cm.loc["HV", "mean"] == 45.0
+    # narrower than the between-subject interval of the raw VO ratings (SD 12.91)
+    assert half < 3.182446 * 12.9099 / 2
+
+
+def test_fig9_one_figure_shared_axis_reference_above_estimate(engine: Engine) -> None:
+    fig = next(d.figure for d in draw_figures(engine, "double", task="lcca")
+               if d.name == "fig9_forces_lcca")  # fmt: skip
+    vo, hv = [ax for ax in fig.axes if ax.get_title()]
+    assert vo.get_title().split(", ")[1] == "VO" and hv.get_title().split(", ")[1] == "HV"
+    assert vo.get_ylim() == hv.get_ylim()
+    lines = {line.get_label(): line for line in vo.get_lines()}
+    assert lines["proximal, reference"].get_zorder() > lines["proximal, estimated"].get_zorder()
+    caption = fig.legends[0].get_title().get_text().replace("\n", " ")
+    assert "positive resists insertion" in caption and "negative resists withdrawal" in caption
+
+
+def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> None:
+    sizes = {"outsider": 20, "novice": 8, "expert": 8}
+    equal = power_curve(sizes, dict.fromkeys(sizes, 0.8), 0.5, 20, 0, scales=(0.5, 1.0))
+    for width in ("single", "double"):
+        fig = plot_power_curve(equal, width)
+        assert check_figure(fig) == []
+        ax_groups, ax_inter = fig.axes
+        lines = {line.get_label(): line for line in ax_groups.get_lines()
+                 if not line.get_label().startswith("_")}  # fmt: skip
+        assert list(lines["novice"].get_xdata()) == [4, 8]  # the group's own n
+        assert list(lines["outsider"].get_xdata()) == [10, 20]
+        styles = {(line.get_marker(), line.get_linestyle()) for line in lines.values()}
+        assert len(styles) == 3  # distinguishable without colour
+        assert "type I error" in ax_inter.get_ylabel()
+        plt.close(fig)
+    unequal = power_curve(sizes, {"outsider": 0.2, "novice": 0.8, "expert": 1.2}, 0.5, 20, 0,
+                          scales=(1.0,))  # fmt: skip
+    fig = plot_power_curve(unequal, "single")
+    assert "power" in fig.axes[1].get_ylabel() and "type I" not in fig.axes[1].get_ylabel()
+    plt.close(fig)
+
+
+def test_study_figures_task_option(study_db: str, tmp_path: Path,
+                                   capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+    out = tmp_path / "figs"
+    argv = ["figures", "--db", study_db, "--out", str(out), "--format", "png"]
+    assert main([*argv, "--task", "notes", "--width", "single"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [
+        "fig12_groups_notes.png", "fig9_forces_notes.png", "tlx_profile_notes.png"
+    ]
+    capsys.readouterr()
+    assert main([*argv, "--task", "knee"]) == 2
+    assert "no data for task 'knee'; expected one of lcca, notes" in capsys.readouterr().err
+
+
+DEMO_MEANS = Path(__file__).parent.parent / "data" / "demo_seed1_means.csv"
+"""Participant means of `study demo --seed 1` (20/8/8; see test_analysis.py)."""
+
+
+@pytest.mark.parametrize("width", ["single", "double"])
+def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
+    from study.analysis.figures import fig12, label_source
+    from study.analysis.paper import _marks
+    from study.analysis.stats import compare_conditions
+
+    long = pd.read_csv(DEMO_MEANS)
+    comparisons, _ = compare_conditions(long)
+    note = "Simulated participants: all 288 trials simulated, none measured"
+    fig = label_source(fig12(long, comparisons, width), note)
+    marks = _marks(long, comparisons)
+    assert len(marks) == 12 and check_figure(fig, marks) == []
+    # the expert distal force: 4 of 8 zero differences, R's asymptotic p .361 -> n.s.
+    assert marks["peak_distal_force_n/expert"] == pytest.approx(0.36131, abs=1e-5)
+    ax = fig.axes[2]
+    assert "expert\nWilcoxon\n(asymptotic)" in [t.get_text() for t in ax.get_xticklabels()]
+    # five expert VO values of 0.112 N: jittered apart, not one dot
+    expert_vo = ax.collections[4].get_offsets()  # scatter order: group x (VO, HV)
+    tied = expert_vo[np.isclose(expert_vo[:, 1], 0.112, atol=5e-4)]
+    assert len(tied) == 5 and len(np.unique(np.round(tied[:, 0], 3))) == 5
+    again = fig12(long, comparisons, width).axes[2].collections[4].get_offsets()
+    assert np.array_equal(again, expert_vo)  # seeded: the same figure on every run
+    plt.close("all")
+
+
+def test_notes_device_figures_pass_the_check_in_the_shared_style() -> None:
+    """`study characterize notes` draws these in the same style (now 8 pt)."""
+    from study.analysis.notes_figures import bode, ramp_hysteresis
+    from teleop_core.notes.characterize import characterize_simulated
+    from teleop_core.notes.params import DOFS, default_params
+
+    results = [characterize_simulated(default_params(dof), 0.02, 0) for dof in DOFS]
+    for fig in (bode(results), ramp_hysteresis(results)):
+        assert check_figure(fig) == []
+        plt.close(fig)
