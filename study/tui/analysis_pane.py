@@ -66,7 +66,8 @@ class AnalysisPane(SafeWorkers, Vertical):
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("r", "analyze", "Analyse"),
-        Binding("ctrl+e", "export", "Export figures"),
+        # priority: the folder field (an Input) would take ctrl+e as "end of line"
+        Binding("ctrl+e", "export", "Export figures", priority=True),
     ]
 
     @dataclass

@@ -75,7 +75,11 @@ class StudyApp(SafeWorkers, App[None]):
         Binding("ctrl+q", "quit", "Quit", priority=True),
         Binding("ctrl+t", "toggle_theme", "Theme"),
         *(Binding(f"f{k + 1}", f"tab('{t}')", TITLES[k], show=False) for k, t in enumerate(TABS)),
-        *(Binding(str(k + 1), f"tab('{t}')", TITLES[k], show=False) for k, t in enumerate(TABS)),
+        *(
+            Binding(str(k + 1), f"digit_tab('{t}')", TITLES[k], show=False)
+            for k, t in enumerate(TABS)
+        ),
+        Binding("question_mark", "toggle_help", "Help"),
     ]
 
     @dataclass
@@ -155,7 +159,7 @@ class StudyApp(SafeWorkers, App[None]):
         if sig == signal.SIGHUP:
             self.run_worker(self._hang_up(), exclusive=True, group="hang-up")
         else:
-            self.call_next(self.action_quit)
+            self.call_next(self._quit_now)  # `kill`: no question asked
 
     async def _hang_up(self) -> None:
         """The terminal is gone: stop the trial (marked interrupted, its samples kept),
@@ -232,6 +236,21 @@ class StudyApp(SafeWorkers, App[None]):
         if target is not None:
             target.focus()
 
+    def action_digit_tab(self, tab: str) -> None:
+        """1-6 switch screens only where no form field has the focus: in a form the digit
+        belongs to the field (a Select or a pairwise choice does not take digits, and
+        the key used to fall through to here and leave the form). F1-F6 always switch."""
+        if self.focused is not None and _is_form_field(self.focused):
+            return
+        self.action_tab(tab)
+
+    def action_toggle_help(self) -> None:
+        """`?`: every key of the current screen and the app, beside the screen."""
+        if self.screen.query("HelpPanel"):
+            self.action_hide_help_panel()
+        else:
+            self.action_show_help_panel()
+
     def action_toggle_theme(self) -> None:
         self.theme = "textual-light" if self.theme == "textual-dark" else "textual-dark"
 
@@ -241,6 +260,20 @@ class StudyApp(SafeWorkers, App[None]):
         Quitting while the later screens are still being mounted waits for them first:
         exiting under a mounting `Select` made Textual print a NoMatches traceback.
         """
+        if self.ready and self._pane("run").run is not None:  # type: ignore[attr-defined]
+            from study.tui.confirm import Confirm
+
+            async def answered(yes: bool | None) -> None:
+                if yes:
+                    await self._quit_now()
+
+            self.push_screen(
+                Confirm("A trial is running. Stop it (kept as interrupted) and quit?"), answered
+            )
+            return
+        await self._quit_now()
+
+    async def _quit_now(self) -> None:
         if self.overview_shown_s is not None:
             await asyncio.wait_for(self._later_mounted.wait(), timeout=10.0)
         await self.stop_trial()
@@ -254,6 +287,15 @@ class StudyApp(SafeWorkers, App[None]):
             self.notify("stopping the trial: it is kept as interrupted")
             run.stop()
             await asyncio.to_thread(run.finished.wait, timeout_s)
+
+
+def _is_form_field(widget: Widget) -> bool:
+    from textual.widgets import Input, Select, SelectionList
+
+    from study.tui.tlx_pane import PairChoice
+
+    chain = [widget, *widget.ancestors]
+    return any(isinstance(w, (Input, Select, SelectionList, PairChoice)) for w in chain)
 
 
 def make_app(services: StudyServices, settings: TuiSettings | None = None) -> StudyApp:

@@ -47,6 +47,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.services = services
         self.last_message = ""
         self._groups: list[str] = []
+        self._fill: dict[str, dict[str, int]] = {}
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="add-row"):
@@ -59,6 +60,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         yield table
 
     def show(self, roster: Roster) -> None:
+        self._fill = roster.groups
         groups = list(roster.groups)
         if groups != self._groups:
             self._groups = groups
@@ -88,8 +90,26 @@ class ParticipantsPane(SafeWorkers, Vertical):
         group = self.query_one("#group", Select).value
         if group is Select.NULL:
             return
+        fill = self._fill.get(str(group))
+        if fill is not None and fill["enrolled"] >= fill["target"]:
+            from study.tui.confirm import Confirm
+
+            def answered(yes: bool | None) -> None:
+                if yes:
+                    self._start_enrolment(str(group))
+                else:
+                    self._status(f"not enrolled: the {group} group is full")
+
+            self.app.push_screen(
+                Confirm(f"The {group} group has its {fill['target']} participants. "
+                        f"Enrol one more {group} all the same?"), answered,
+            )  # fmt: skip
+            return
+        self._start_enrolment(str(group))
+
+    def _start_enrolment(self, group: str) -> None:
         self.query_one("#add-status", Label).update(f"enrolling a {group}...")
-        self._enrol(str(group))
+        self._enrol(group)
 
     @work(thread=True, exclusive=True, group="enrol", exit_on_error=False)
     def _enrol(self, group: str) -> None:

@@ -220,9 +220,22 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         self._run_trial(self.run, (code, nxt.task, nxt.condition))
 
     def action_stop(self) -> None:
-        if self.run is not None:
-            self.status = "stopping"
-            self.run.stop()
+        """Stop the running trial, once the operator confirms (it is kept as interrupted)."""
+        if self.run is None:
+            return
+        run = self.run
+
+        def answered(yes: bool | None) -> None:
+            if yes and self.run is run:
+                self.status = "stopping"
+                run.stop()
+
+        from study.tui.confirm import Confirm
+
+        self.app.push_screen(
+            Confirm(f"Stop {run.code}'s running trial? It is kept as interrupted and "
+                    "repeated later."), answered,
+        )  # fmt: skip
 
     def _press(self, action: str) -> None:
         run = self.run

@@ -17,6 +17,7 @@ from study.protocol.default_estimator import load_estimator
 from study.protocol.design import parse_design
 from study.protocol.roster import add_participant, create_study
 from study.tui import StudyServices, TuiSettings, make_app
+from study.tui.confirm import Confirm
 from study.tui.live_view import NotesView, PhantomView
 from study.tui.run_pane import RunPane
 from study.tui.tlx_pane import TlxPane
@@ -81,6 +82,13 @@ async def test_quitting_mid_trial_marks_it_interrupted_and_keeps_its_samples(
         await pilot.press("up", "up", "up")
         shown = pane.run.live.frame().t_s
         await pilot.press("ctrl+q")
+        # a trial is running: asked first, and "n" keeps it running
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        await pilot.press("n")
+        assert app.is_running and pane.run is not None
+        await pilot.press("ctrl+q")
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        await pilot.press("y")
         await wait_for(pilot, lambda: not app.is_running, 30)
     [(status, driver, samples)] = _trials(study_engine)
     assert (status, driver) == ("interrupted", "keyboard")
@@ -150,6 +158,8 @@ async def test_the_keyboard_drives_a_notes_trial(notes_engine: Engine, tmp_path:
         await wait_for(pilot, lambda: pane.run.live.frame().insertion_m > 0.01, 30)
         await wait_for(pilot, lambda: pane.run.live.frame().rotation_rad > 0.01, 30)
         await pilot.press("x")
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        await pilot.press("y")
         await wait_for(pilot, lambda: pane.status == "interrupted", 30)
     [(status, driver, samples)] = _trials(notes_engine)
     assert (status, driver) == ("interrupted", "keyboard") and samples > 0

@@ -1,0 +1,90 @@
+"""A lab day's keys (issue 19): digits in a form stay in the form, every shown key works
+where it is shown, `?` lists the keys, and what cannot be undone is asked first."""
+
+from __future__ import annotations
+
+import pytest
+from sqlalchemy import Engine, func, select
+from sqlalchemy.orm import Session
+from textual.widgets import Input, Select, Static
+
+from db.models.study import Participant
+from study.protocol.roster import add_participant
+from study.tui.confirm import Confirm
+from tests.study.tui.conftest import loaded, wait_for
+
+pytestmark = pytest.mark.asyncio
+
+
+def _count(engine: Engine, group: str) -> int:
+    with Session(engine) as session:
+        query = select(func.count()).select_from(Participant).where(Participant.group == group)
+        return session.scalar(query) or 0
+
+
+async def test_a_digit_in_a_focused_select_does_not_leave_the_form(make_test_app) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f4")
+        pane = app.query_one("#tlx-pane")
+        pane.query(Select).first().focus()
+        await pilot.press("5")
+        assert app.query_one("#tabs").active == "tlx"
+        # away from the form's fields, the digit switches as before
+        app.set_focus(None)
+        await pilot.press("5")
+        assert app.query_one("#tabs").active == "analysis"
+
+
+async def test_ctrl_e_exports_from_inside_the_folder_field(make_test_app, tmp_path) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f5")
+        field = app.query_one("#out-dir", Input)
+        field.focus()
+        field.value = str(tmp_path / "figs")
+        await pilot.press("ctrl+e")
+        status = app.query_one("#analysis-status", Static)
+        # the export ran (this study has no trials, so it is refused with one line)
+        await wait_for(pilot, lambda: "figures" in str(status.render()) or "refused" in str(
+            status.render()), 30)  # fmt: skip
+        assert str(status.render()) != "r: run the analysis; ctrl+e: export the paper's figures"
+        assert field.value == str(tmp_path / "figs")
+
+
+async def test_question_mark_shows_and_hides_the_keys(make_test_app) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f2")
+        app.query_one("#people").focus()
+        await pilot.press("question_mark")
+        assert len(app.screen.query("HelpPanel")) == 1
+        await pilot.press("question_mark")
+        await pilot.pause()
+        assert len(app.screen.query("HelpPanel")) == 0
+
+
+async def test_enrolling_past_a_groups_target_is_asked_first(
+    make_test_app, study_engine: Engine
+) -> None:
+    add_participant(study_engine, "novice")  # DESIGN's novice target is 2: now full
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f2")
+        pane = app.query_one("#participants-pane")
+        await pilot.press("a")  # novice, the first group, is preselected
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        assert "has its 2 participants" in str(app.screen.query_one("#question").render())
+        await pilot.press("n")
+        await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 10)
+        assert pane.last_message == "not enrolled: the novice group is full"
+        assert _count(study_engine, "novice") == 2
+        await pilot.press("a")
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        await pilot.press("y")
+        await wait_for(pilot, lambda: pane.last_message.startswith("enrolled"), 30)
+    assert _count(study_engine, "novice") == 3
