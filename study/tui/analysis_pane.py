@@ -22,6 +22,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import DataTable, Input, Label, Select, Static
 
+from study.analysis.tables import p_text
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import StudyServices
 
@@ -66,6 +67,7 @@ class AnalysisPane(SafeWorkers, Vertical):
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("r", "analyze", "Analyse"),
+        Binding("n", "notes", "Notes"),
         # priority: the folder field (an Input) would take ctrl+e as "end of line"
         Binding("ctrl+e", "export", "Export figures", priority=True),
     ]
@@ -100,7 +102,7 @@ class AnalysisPane(SafeWorkers, Vertical):
             yield Label(" Figures to ")
             yield Input(str(self.figures_dir), id="out-dir", compact=True)
         table = DataTable(id="comparisons", zebra_stripes=True, cursor_type="row")
-        table.add_columns("measure", "group", "n", "VO", "HV", "test", "p Holm", "effect")
+        table.add_columns("measure", "group", "n", "VO", "HV", "test", "p (Holm)", "effect size")
         yield table
         yield Static("", id="chart")
         yield Static(
@@ -129,7 +131,7 @@ class AnalysisPane(SafeWorkers, Vertical):
         for _, r in comparisons.iterrows():
             table.add_row(
                 r["measure"], r["group"], str(r["n"]), f"{r['mean_vo']:.3g}", f"{r['mean_hv']:.3g}",
-                r["test"], f"{r['p_holm']:.3f}", f"{r['effect_size']:+.2f}",
+                r["test"], p_text(r["p_holm"]), _effect(r["effect_size"], r["effect_size_kind"]),
             )  # fmt: skip
         measures = list(dict.fromkeys(comparisons["measure"]))
         select = self.query_one("#measure", Select)
@@ -139,8 +141,19 @@ class AnalysisPane(SafeWorkers, Vertical):
                 measures[0])  # fmt: skip
         notes = len(event.result.exclusions) + len(event.result.warnings)
         note = event.result.source.note
-        self._status(f"{len(comparisons)} comparisons, {notes} exclusions and notes"
+        self._status(f"{len(comparisons)} comparisons, {notes} exclusions and notes "
+                     "(n: read them, with the mixed ANOVA)"
                      + (f"; data: {note}" if note else ""))  # fmt: skip
+
+    def action_notes(self) -> None:
+        """The exclusions, the analysis's notes and the mixed ANOVA, over the screen."""
+        from study.tui.confirm import TextScreen
+
+        if self.result is None:
+            self._status("r: run the analysis first; n then shows its notes")
+            return
+        self.app.push_screen(TextScreen("Exclusions, notes and the mixed ANOVA",
+                                        details_text(self.result)))  # fmt: skip
 
     @on(Select.Changed, "#measure")
     def _measure(self, event: Select.Changed) -> None:
@@ -177,3 +190,37 @@ class AnalysisPane(SafeWorkers, Vertical):
         what = "the analysis" if group == "analysis" else "the figures"
         self._status(f"{what} failed: {line}")
         super().worker_failed(group, line)
+
+
+EFFECT_LABELS = {"hedges_g_av": "g_av", "rank_biserial": "r_rb"}
+"""Hedges' g_av (after a paired t) and the matched-pairs rank-biserial r (after a
+Wilcoxon), named in each cell so that the two are never read as one scale."""
+
+
+def _effect(value: float, kind: str) -> str:
+    if value is None or not math.isfinite(value):
+        return "n/a"
+    return f"{EFFECT_LABELS.get(kind, kind)} {value:+.2f}"
+
+
+def details_text(result: Any) -> str:
+    """What the table leaves out: exclusions, notes, and the mixed ANOVA (APA p)."""
+    lines = ["Exclusions:"]
+    lines += [f"  {e}" for e in result.exclusions] or ["  none"]
+    lines += ["", "Notes:"]
+    lines += [f"  {w}" for w in result.warnings] or ["  none"]
+    anova = result.mixed_anova
+    lines += ["", f"Mixed ANOVA (Type {result.ss_type} sums of squares), group x condition:"]
+    if len(anova) == 0:
+        lines.append("  not computed (see the notes)")
+    for _, r in anova.iterrows():
+        lines.append(
+            f"  {r['task']}/{r['measure']} {r['source']}: F({r['df1']:.0f}, {r['df2']:.0f}) = "
+            f"{r['F']:.2f}, p {_apa(r['p'])}, partial eta^2 = {r['np2']:.3f}"
+        )
+    return "\n".join(lines)
+
+
+def _apa(p: float) -> str:
+    text = p_text(p)
+    return text if text.startswith("<") or text == "n/a" else f"= {text}"

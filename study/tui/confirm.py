@@ -1,7 +1,6 @@
-"""A yes/no question over the current screen: `y` answers yes, `n` or Esc no.
-
-Asked before what cannot be undone in a session: stopping a running trial, quitting
-during one, enrolling past a group's target.
+"""Screens over the current one: a yes/no question (`Confirm`: `y` answers yes, `n` or
+Esc no), asked before what cannot be undone in a session (stopping a running trial,
+quitting during one, enrolling past a group's target); and a text to read (`TextScreen`).
 """
 
 from __future__ import annotations
@@ -10,9 +9,9 @@ from typing import ClassVar
 
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
-from textual.containers import Vertical
+from textual.containers import Vertical, VerticalScroll
 from textual.screen import ModalScreen
-from textual.widgets import Label
+from textual.widgets import Label, Static
 
 
 class Confirm(ModalScreen[bool]):
@@ -41,3 +40,31 @@ class Confirm(ModalScreen[bool]):
 
     def action_answer(self, yes: bool) -> None:
         self.dismiss(yes)
+
+
+class TextScreen(ModalScreen[None]):
+    """A titled, scrollable text over the screen; Esc or q closes it."""
+
+    DEFAULT_CSS = """
+    TextScreen { align: center middle; }
+    TextScreen #text-box { width: 90%; height: 80%; border: thick $primary; padding: 0 1;
+                           background: $surface; }
+    TextScreen #text-title { text-style: bold; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("escape", "close", "Close"),
+        Binding("q", "close", "Close", show=False),
+    ]
+
+    def __init__(self, title: str, text: str) -> None:
+        super().__init__()
+        self.title_text = title
+        self.text = text
+
+    def compose(self) -> ComposeResult:
+        with VerticalScroll(id="text-box"):
+            yield Label(self.title_text, id="text-title")
+            yield Static(self.text, id="text", markup=False)
+
+    def action_close(self) -> None:
+        self.dismiss(None)

@@ -88,3 +88,35 @@ async def test_enrolling_past_a_groups_target_is_asked_first(
         await pilot.press("y")
         await wait_for(pilot, lambda: pane.last_message.startswith("enrolled"), 30)
     assert _count(study_engine, "novice") == 3
+
+
+async def test_analysis_prints_p_as_apa_labels_effects_and_shows_notes_and_anova(
+    make_test_app, study_engine: Engine
+) -> None:
+    import re
+
+    from textual.widgets import DataTable
+
+    from tests.study.tui.test_screens import _store_trials
+
+    _store_trials(study_engine)  # 3 novices, 3 experts, one trial per condition each
+    app = make_test_app()
+    async with app.run_test(size=(100, 30)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f5", "r")
+        pane = app.query_one("#analysis-pane")
+        await wait_for(pilot, lambda: pane.result is not None)
+        table = app.query_one("#comparisons", DataTable)
+        rows = [table.get_row_at(k) for k in range(table.row_count)]
+        for row in rows:
+            assert re.fullmatch(r"< \.001|\.\d{3}|n/a", row[6]), row[6]  # APA: no "0.000"
+            assert re.fullmatch(r"(g_av|r_rb) [+-]\d\.\d\d|n/a", row[7]), row[7]
+            assert row[7].startswith("g_av") == (row[5] == "paired_t") or row[7] == "n/a"
+        await pilot.press("n")
+        await wait_for(pilot, lambda: len(app.screen.query("#text")) == 1, 10)
+        text = str(app.screen.query_one("#text", Static).render())
+        assert "Exclusions:" in text and "Notes:" in text
+        # 6 participants in 2 groups: the condition effect has df (1, 6 - 2)
+        assert re.search(r"lcca/peak_proximal_force_n condition: F\(1, 4\) = \d", text)
+        await pilot.press("escape")
+        await wait_for(pilot, lambda: len(app.screen.query("#text")) == 0, 10)
