@@ -260,6 +260,18 @@ class StudyApp(SafeWorkers, App[None]):
         Quitting while the later screens are still being mounted waits for them first:
         exiting under a mounting `Select` made Textual print a NoMatches traceback.
         """
+        unsaved = self._pane("tlx").unsaved() if self.ready else []  # type: ignore[attr-defined]
+        if unsaved:
+            from study.tui.confirm import Confirm
+
+            async def leave(yes: bool | None) -> None:
+                if yes:
+                    await self._quit_now()
+
+            blocks = ", ".join(f"{c} {t}/{k}" for c, t, k in unsaved)
+            self.push_screen(Confirm(f"NASA-TLX answers typed and not saved ({blocks}). "
+                                     "Quit without saving them?"), leave)  # fmt: skip
+            return
         if self.ready and self._pane("run").run is not None:  # type: ignore[attr-defined]
             from study.tui.confirm import Confirm
 

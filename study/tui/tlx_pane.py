@@ -85,6 +85,15 @@ def _rating_value(text: str) -> object:
         return text
 
 
+@dataclass(frozen=True)
+class FormState:
+    """What the form holds: the six ratings as typed, the 15 choices, the edit reason."""
+
+    ratings: tuple[str, ...]
+    choices: tuple[str | None, ...]
+    reason: str
+
+
 class TlxPane(SafeWorkers, VerticalScroll):
     """Enter or edit the questionnaire of one participant's block."""
 
@@ -120,6 +129,10 @@ class TlxPane(SafeWorkers, VerticalScroll):
         self._blocks_code: str | None = None
         self._shown: tuple[str, str, str] | None = None
         """The block the form shows (participant, task, condition)."""
+        self._baseline: FormState | None = None
+        """The form as filled from the database (what counts as nothing typed)."""
+        self.drafts: dict[tuple[str, str, str], FormState] = {}
+        """What was typed for a block and not saved, kept when another block is shown."""
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="tlx-top", classes="row"):
@@ -156,6 +169,7 @@ class TlxPane(SafeWorkers, VerticalScroll):
 
     def open_block(self, code: str, task: str, condition: str) -> None:
         """Show the form for one block (from the run screen when a block ends)."""
+        self._keep_draft()
         self.query_one("#tlx-participant", Select).value = code
         self._set_blocks(code)
         self.query_one("#tlx-block", Select).value = f"{task}/{condition}"
@@ -179,6 +193,7 @@ class TlxPane(SafeWorkers, VerticalScroll):
     def _participant_changed(self, event: Select.Changed) -> None:
         event.stop()
         if event.value is not Select.NULL:
+            self._keep_draft()  # before the pairs are reset for the new participant
             self._set_blocks(str(event.value))
 
     @on(Select.Changed, "#tlx-block")
@@ -205,6 +220,7 @@ class TlxPane(SafeWorkers, VerticalScroll):
 
     def _load(self, code: str, task: str, condition: str, note: str = "") -> None:
         """Fill the form with the stored answers of one block (in a worker)."""
+        self._keep_draft()
         self._shown = (code, task, condition)
         self._load_worker(code, task, condition, note)
 
@@ -228,12 +244,50 @@ class TlxPane(SafeWorkers, VerticalScroll):
             widget.refresh()
         self.query_one("#reason", Input).value = ""
         state = "stored: editing it needs a reason" if response is not None else "new"
+        self._baseline = self.form_state()
+        draft = self.drafts.get(self._shown) if self._shown is not None else None
+        if draft is not None and not note:
+            self._apply(draft)
+            state = "draft restored (typed earlier, not saved yet): ctrl+s saves it"
         self._set_status(note or state, notify=bool(note))
         lines = [
             f"{a.at:%Y-%m-%d %H:%M} {a.field}: {a.old_value} -> {a.new_value} ({a.reason})"
             for a in audit[-5:]
         ]
         self.query_one("#audit", Static).update("\n".join(["audit log:", *lines]) if lines else "")
+
+    # -- drafts ---------------------------------------------------------------------------
+
+    def form_state(self) -> FormState:
+        ratings = tuple(self.query_one(f"#rating-{s}", Input).value for s in TLX_SUBSCALES)
+        choices = tuple(self.query_one(f"#pair-{k}", PairChoice).choice for k in range(15))
+        return FormState(ratings, choices, self.query_one("#reason", Input).value)
+
+    def _apply(self, state: FormState) -> None:
+        for s, value in zip(TLX_SUBSCALES, state.ratings, strict=True):
+            self.query_one(f"#rating-{s}", Input).value = value
+        for k, choice in enumerate(state.choices):
+            widget = self.query_one(f"#pair-{k}", PairChoice)
+            widget.choice = choice
+            widget.refresh()
+        self.query_one("#reason", Input).value = state.reason
+
+    def is_dirty(self) -> bool:
+        """Something typed on the shown block and not saved."""
+        return self._baseline is not None and self.form_state() != self._baseline
+
+    def unsaved(self) -> list[tuple[str, str, str]]:
+        """The blocks with answers typed and not saved (the shown one and the drafts)."""
+        self._keep_draft()
+        return list(self.drafts)
+
+    def _keep_draft(self) -> None:
+        if self._shown is None:
+            return
+        if self.is_dirty():
+            self.drafts[self._shown] = self.form_state()
+        else:
+            self.drafts.pop(self._shown, None)
 
     def worker_failed(self, group: str, line: str) -> None:
         # the form is left as it is: what was typed stays for the next ctrl+s
@@ -296,6 +350,8 @@ class TlxPane(SafeWorkers, VerticalScroll):
 
     @on(Saved)
     def _saved(self, event: Saved) -> None:
+        self.drafts.pop((event.code, event.task, event.condition), None)
+        self._baseline = None  # the reload below sets it from what is now stored
         verb = "stored" if event.new else "updated (changes in the audit log)"
         self._load(event.code, event.task, event.condition, f"{event.code} {event.task}/"
                    f"{event.condition}: {verb}")  # fmt: skip

@@ -120,3 +120,34 @@ async def test_analysis_prints_p_as_apa_labels_effects_and_shows_notes_and_anova
         assert re.search(r"lcca/peak_proximal_force_n condition: F\(1, 4\) = \d", text)
         await pilot.press("escape")
         await wait_for(pilot, lambda: len(app.screen.query("#text")) == 0, 10)
+
+
+async def test_typed_answers_survive_switching_blocks_and_quitting_asks(make_test_app) -> None:
+    from study.tui.tlx_pane import PairChoice
+    from tests.study.tui.test_screens import _open_form
+
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _open_form(pilot, "P001", "lcca/VO")
+        app.query_one("#rating-mental", Input).focus()
+        await pilot.press("7", "0")
+        app.query_one("#rating-physical", Input).value = "70"
+        app.query_one("#pair-0", PairChoice).action_pick(1)
+        picked = app.query_one("#pair-0", PairChoice).choice
+        # to the HV block: its own (empty) form
+        app.query_one("#tlx-block", Select).value = "lcca/HV"
+        await wait_for(pilot, lambda: pane.status == "new" and pane._shown[2] == "HV", 10)
+        assert app.query_one("#rating-mental", Input).value == ""
+        # and back: what was typed is there, said to be a draft
+        app.query_one("#tlx-block", Select).value = "lcca/VO"
+        await wait_for(pilot, lambda: pane.status.startswith("draft restored"), 10)
+        assert app.query_one("#rating-mental", Input).value == "70"
+        assert app.query_one("#rating-physical", Input).value == "70"
+        assert app.query_one("#pair-0", PairChoice).choice == picked
+        # quitting with it unsaved asks; "n" stays
+        await pilot.press("ctrl+q")
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        assert "P001 lcca/VO" in str(app.screen.query_one("#question").render())
+        await pilot.press("n")
+        await pilot.pause()
+        assert app.is_running
