@@ -240,3 +240,6 @@ def test_a_hidden_force_remains_unexplained_and_the_cli_says_so(
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["verdict"] == "structure_remains" and report["unexplained"]["quantity"]
     assert report["rmse_after"] <= report["rmse_before"]
+    # the figures of the blocks and of the residual against the named quantity
+    figs = {p.name for p in (tmp_path / "f").iterdir()}
+    assert {"residual_blocks.png", "residual_vs_unexplained.png"} <= figs
