@@ -151,7 +151,8 @@ class Calibrator:
         if not reason:
             own = effect_coefficients(coef, effect, data.signals, cand.searched_value)
             reason = implausible(effect, own, cand.searched_value, self.model.out,
-                                 self.model.unit, data.signals) or ""  # fmt: skip
+                                 self.model.unit, data.signals,
+                                 self.model.passive_loop_sign) or ""  # fmt: skip
         edge = _search_edge(effect, cand.searched_value, data.signals)
         if not reason and edge and UNLOCATED_AT.get(cand.family) == edge[0]:
             reason = f"not located: {edge[1]}"

@@ -86,6 +86,9 @@ class BaseModel:
     """Signals the residual figures are drawn against."""
     overrides: dict[str, Effect] = {}  # noqa: RUF012 - read only
     """This model's own settings of a family (the master's quadratic hysteresis loop)."""
+    passive_loop_sign: int | None = None
+    """Sign of a physical `hysteresis` loop's half height in this model's convention
+    (`plausibility.py`): +1, -1, or None where the sign is not checked."""
 
     def effect(self, family: str) -> Effect:
         """The candidate `family` (or open library term) as this model uses it."""
@@ -119,6 +122,10 @@ class FollowerBase(BaseModel):
     name = "follower"
     unit = "n_m"
     plot_against = ("t", "speed", "angle")
+    passive_loop_sign = +1
+    """The load is what the speed loop's current answers: the force leads the current
+    drawn for it, so a loss between them reads as a force above eq. 1 while the current
+    rises (the loop `synthetic.py` injects). A negative one is no such loss."""
 
     def __post_init__(self) -> None:
         if not self.wheel_radius_m > 0:
@@ -158,6 +165,8 @@ class MasterBase(BaseModel):
 
     name = "master"
     families = ("hysteresis", "delay", "drift", "current_nonlinearity")
+    # passive_loop_sign stays None: the paper's loading and unloading branches (eqs.
+    # 14-15) cross near 2 mA, so the dial's own loop changes sign over its range
     overrides = {"hysteresis": Hysteresis(degree=2)}  # noqa: RUF012 - read only
     plot_against = ("t", "drive")
 

@@ -199,6 +199,39 @@ def test_a_friction_that_rises_with_speed_is_not_named_stribeck() -> None:
     assert report["verdict"] == "structure_remains"
 
 
+class _UngatedFollower(FollowerBase):
+    """eq. 1 without the hysteresis sign check: the loop as it was before it."""
+
+    passive_loop_sign = None
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_a_negative_hysteresis_loop_is_not_named(seed: int) -> None:
+    # a force no channel carries: without the sign check, a play operator on the current
+    # took part of it as a hysteresis with a negative loop (seeds 1 and 3 of 0-5)
+    data, _, _ = undeclared_recording("hidden_force", duration_s=60.0, rate_hz=200.0, seed=seed)
+    ungated = Calibrator(_UngatedFollower()).fit(data).report()
+    named = [e for e in ungated["effects_added"] if e["family"] == "hysteresis"]
+    assert named and named[0]["params"]["half_loop_n_m"] < 0
+    report = Calibrator(FollowerBase()).fit(data).report()
+    assert "hysteresis" not in [e["family"] for e in report["effects_added"]]
+    refused = [c for c in report["candidates"] if c["family"] == "hysteresis"
+               and c["reason"].startswith("implausible: hysteresis half loop")]  # fmt: skip
+    assert refused and "negative loop" in refused[0]["reason"]
+    assert report["verdict"] == "structure_remains"
+    assert report["rmse_after"] <= report["rmse_before"]
+
+
+def test_a_positive_loop_is_still_named_on_the_follower() -> None:
+    # the loop the follower simulator injects (a loss: force above eq. 1 while the
+    # current rises) passes the sign check
+    rec, truth = follower_recording(60.0, ["hysteresis"], rate_hz=200.0, seed=4)
+    model = FollowerBase()
+    report = Calibrator(model).fit(model.data(rec)).report()
+    assert report["effects_added"][0]["family"] == "hysteresis"
+    assert report["effects_added"][0]["params"]["half_loop_n_m"] > 0
+
+
 @pytest.mark.parametrize("kind", ["load_friction", "gain_change", "ripple_harmonics",
                                   "presliding_memory"])  # fmt: skip
 def test_effects_outside_the_families_reach_the_oracle(kind: str) -> None:
