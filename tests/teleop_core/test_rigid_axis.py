@@ -199,6 +199,39 @@ def test_a_friction_that_rises_with_speed_is_not_named_stribeck() -> None:
     assert report["verdict"] == "structure_remains"
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_sharp_coulomb_step_gets_nothing_added(seed: int) -> None:
+    # a clean drive whose Coulomb step is sharp (w_s = 0.02 rad/s, not eq. 1's 0.3):
+    # the loop fits the sign's width on training, and nothing is added
+    rec, _ = follower_recording(120.0, (), rate_hz=200.0, seed=500 + seed, sign_speed_rad_s=0.02)
+    model = FollowerBase()
+    cal = Calibrator(model).fit(model.data(rec))
+    report = cal.report()
+    assert report["effects_added"] == [] and report["discovered_terms"] == []
+    width = report["preparation"]["sign_speed_rad_s"]
+    assert 0.02 <= width <= 0.1  # as sharp as the speed sensor's 0.01 rad/s noise allows
+    assert report["calibrated_model"]["base_settings"]["sign_speed_rad_s"] == width
+
+
+def test_eq1_with_its_fixed_sign_width_names_a_spurious_stribeck() -> None:
+    # what the fitted width prevents (issue 16): eq. 1's tanh(w / 0.3) on the same
+    # recording as seed 0 above leaves a residual near rest that `stribeck` takes
+    rec, _ = follower_recording(120.0, (), rate_hz=200.0, seed=500, sign_speed_rad_s=0.02)
+    model = FollowerBase(sign_speed_rad_s=0.3)
+    report = Calibrator(model).fit(model.data(rec)).report()
+    assert [e["family"] for e in report["effects_added"]] == ["stribeck"]
+
+
+def test_the_sign_width_of_eq1s_own_recording_comes_back() -> None:
+    rec, _ = follower_recording(60.0, (), rate_hz=200.0, seed=7)
+    model = FollowerBase()
+    data = model.data(rec)
+    train = slice(0, int(0.75 * len(data)))
+    assert model.fitted_to(data, train).sign_speed_rad_s == pytest.approx(0.3, rel=0.1)
+    # a width given is kept
+    assert FollowerBase(sign_speed_rad_s=0.05).fitted_to(data, train).sign_speed_rad_s == 0.05
+
+
 class _UngatedFollower(FollowerBase):
     """eq. 1 without the hysteresis sign check: the loop as it was before it."""
 
