@@ -286,7 +286,8 @@ class Calibrator:
             "model": self.model.name,
             "recording": self.data_.name,
             "base_params": {"params": self.base_params_, "ci": self.base_ci_},
-            "preparation": {**(self.data_.preparation or {}), **_fitted_settings(self)} or None,
+            "preparation": {**(self.data_.preparation or {}), **_fitted_settings(self)}
+            or None,
             "held_out": {
                 "blocks": self.data_.held_out_blocks,
                 "start_s": float(t[self.test_][0]),
