@@ -149,6 +149,14 @@ def test_binned_share_and_fit_percent_against_hand_values() -> None:
     x = np.repeat([0.0, 1.0], 50)
     e = np.where(x > 0, 1.0, -1.0)  # wholly explained by x's two bins
     assert binned_share(e, x, bins=2)[0] == pytest.approx(1.0)
+    # a two-valued quantity (the direction of motion) is binned by value, not merged
+    # into one quantile bin
+    direction = np.repeat([-1.0, 1.0], [30, 70])
+    share, table = binned_share(0.5 * direction + np.tile([0.1, -0.1], 50), direction)
+    # bin means -0.5 and 0.5 about the overall 0.2: between = 30 * 0.7^2 + 70 * 0.3^2
+    # = 21; the alternating +-0.1 adds 100 * 0.01 = 1 within the bins
+    assert share == pytest.approx(21.0 / 22.0)
+    assert [(b["low"], b["high"], b["n"]) for b in table] == [(-1.0, -1.0, 30), (1.0, 1.0, 70)]
     y = np.array([1.0, 2.0, 3.0, 4.0])
     # ||y - yhat|| = 1, ||y - 2.5|| = sqrt(5)
     assert fit_percent(y, y + np.array([1.0, 0, 0, 0])) == pytest.approx(100 * (1 - 1 / 5**0.5))
