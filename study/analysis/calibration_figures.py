@@ -222,7 +222,8 @@ def residual_blocks(
     # block labels in the top panel's upper margin: axis fraction in y, data in x
     trans = top.get_xaxis_transform()
     labelled = [r for r in runs if r[1] - r[0] > 0.04 * len(t)]
-    for start, stop, is_held in labelled if len(labelled) <= 4 else labelled[:2]:
+    # a few blocks are named in place; many (a NOTES chirp's 8) by a legend above
+    for start, stop, is_held in labelled if len(labelled) <= 4 else []:
         middle = 0.5 * (t[start] + t[stop - 1])
         top.text(middle, 0.97, "held out" if is_held else "training", transform=trans,
                  ha="center", va="top", color=OKABE_ITO["VO"] if is_held else "black",
@@ -233,7 +234,8 @@ def residual_blocks(
         top.legend(handles=[Patch(color=OKABE_ITO["VO"], alpha=0.12, label="held out"),
                             Patch(facecolor="white", edgecolor="black", lw=0.4,
                                   label="training")],
-                   loc="upper right", frameon=False, ncols=2)  # fmt: skip
+                   loc="lower right", bbox_to_anchor=(1.0, 1.0), frameon=False,
+                   ncols=2, borderaxespad=0.2)  # fmt: skip
     return np.asarray(axes)
 
 

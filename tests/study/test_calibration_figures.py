@@ -110,3 +110,17 @@ def test_overview_writes_the_unexplained_figure_only_when_structure_remains(
     white = {"verdict": "white", "unexplained": None}
     written = overview_figures(tmp_path / "b", t, residual, residual, held, white, None, "follower")
     assert [p.name for p in written] == ["residual_blocks.png"]
+
+
+def test_many_blocks_are_named_by_a_legend() -> None:
+    # a NOTES chirp's blocked hold-out: the end of each of 8 segments
+    t = np.arange(0.0, 16.0, 0.01)
+    ends = range(200, 1601, 200)
+    held = held_out_mask(len(t), np.concatenate([np.arange(s - 50, s) for s in ends]))
+    e = np.random.default_rng(2).normal(0, 0.1, len(t))
+    with plt.rc_context(CAL_STYLE):
+        axes = residual_blocks(t, e, e, held)
+    assert len(axes[0].patches) == 8 and len(axes[0].texts) == 0
+    legend = axes[0].get_legend()
+    assert [x.get_text() for x in legend.get_texts()] == ["held out", "training"]
+    plt.close(axes[0].figure)
