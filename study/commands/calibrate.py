@@ -156,7 +156,8 @@ def calibrate(
     """
     import pandas as pd
 
-    from study.analysis.calibration_figures import residual_figures
+    from study.analysis.calibration_figures import held_out_mask, overview_figures, residual_figures
+    from teleop_core.calibration.verdict import quantities
     from teleop_core.estimation.recording import write_csv_atomically
 
     for path in (json_path, pred_path, out_dir):
@@ -177,7 +178,25 @@ def calibrate(
             "f_final": calibrator.prediction_[test],
         }
     )
+    unit = "N m" if model_name == "notes-rotation" else "N"
+    held = held_out_mask(len(data), test)
+    named = report["unexplained"]["quantity"] if report["unexplained"] else None
+    # the quantity as the verdict binned it (smoothed channels), over the held-out rows
+    x_named = quantities(
+        {k: v[test] for k, v in data.signals.items()}, calibrator.prediction_[test]
+    ).get(named) if named else None  # fmt: skip
     out_dir.mkdir(exist_ok=True)
+    overview_figures(
+        out_dir,
+        data.signals["t"],
+        data.y - calibrator.base_prediction_,
+        data.y - calibrator.prediction_,
+        held,
+        report,
+        x_named,
+        model_name,
+        unit,
+    )
     residual_figures(
         out_dir,
         {k: v[test] for k, v in data.signals.items()},
@@ -187,12 +206,11 @@ def calibrate(
         report["residual_tests_after"],
         calibrator.model.plot_against,
         DRIVE_LABELS.get(model_name, "current"),
-        "N m" if model_name == "notes-rotation" else "N",
+        unit,
     )
     write_csv_atomically(predictions, pred_path)
     write_json_atomically(report, json_path)
     added = ", ".join(e["family"] for e in report["effects_added"]) or "none"
-    unit = "N m" if model_name == "notes-rotation" else "N"
     click.echo(
         f"{recording.name}: held-out RMSE {report['rmse_before']:.4f} {unit} -> "
         f"{report['rmse_after']:.4f} {unit} (fit {report['fit_percent_before']:.1f} % -> "

@@ -46,9 +46,9 @@ SIGN_SPEED_RAD_S = 0.3
 """Speed of the smoothed sign tanh(w / w0), as in the estimator's eq. 1 (physics.py)."""
 
 
-def smooth_sign(speed: Float1D) -> Float1D:
-    """sgn(w) smoothed as the estimator does: tanh(w / 0.3 rad/s)."""
-    return np.tanh(speed / SIGN_SPEED_RAD_S)
+def smooth_sign(speed: Float1D, width_rad_s: float = SIGN_SPEED_RAD_S) -> Float1D:
+    """sgn(w) smoothed as tanh(w / w_s); by default the estimator's w_s = 0.3 rad/s."""
+    return np.tanh(speed / width_rad_s)
 
 
 @numba.njit(cache=True)

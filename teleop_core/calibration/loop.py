@@ -134,7 +134,7 @@ class Calibrator:
 
     def _fit_chain(self, data: CalibrationData, chain: Chain) -> tuple[Float1D, Float1D, int]:
         """Coefficients on the training block, predictions everywhere, parameter count."""
-        X, _ = design(self.model, data.signals, chain)
+        X, _ = design(self.base_, data.signals, chain)
         coef = solve(X[self.train_], data.y[self.train_])
         searched = sum(e.searched is not None for e, _ in chain)
         return coef, X @ coef, X.shape[1] + searched
@@ -150,8 +150,9 @@ class Calibrator:
         reason = _verdict(cand, self.min_gain, self.alpha)
         if not reason:
             own = effect_coefficients(coef, effect, data.signals, cand.searched_value)
-            reason = implausible(effect, own, cand.searched_value, self.model.out,
-                                 self.model.unit, data.signals) or ""  # fmt: skip
+            reason = implausible(effect, own, cand.searched_value, self.base_.out,
+                                 self.base_.unit, data.signals,
+                                 self.base_.passive_loop_sign) or ""  # fmt: skip
         edge = _search_edge(effect, cand.searched_value, data.signals)
         if not reason and edge and UNLOCATED_AT.get(cand.family) == edge[0]:
             reason = f"not located: {edge[1]}"
@@ -170,6 +171,8 @@ class Calibrator:
             f for f, e in OPEN_TERMS.items() if all(k in data.signals for k in e.needs)
         ]  # fmt: skip
         self.train_, self.test_ = self._split(len(data), data.held_out_blocks)
+        # the base model's own assumptions (eq. 1's sign width) fitted on training only
+        self.base_ = self.model.fitted_to(data, self.train_)
         y_test = data.y[self.test_]
         chain: Chain = []
         coef, pred, k = self._fit_chain(data, chain)
@@ -191,8 +194,8 @@ class Calibrator:
                     continue
                 if progress is not None:
                     progress(i, len(remaining), f"round {round_ + 1}: {family}")
-                effect = self.model.effect(family)
-                value = search(self.model, data, self.train_, chain, effect)
+                effect = self.base_.effect(family)
+                value = search(self.base_, data, self.train_, chain, effect)
                 c_coef, c_pred, c_k = self._fit_chain(data, [*chain, (effect, value)])
                 c_rmse = _rmse(y_test - c_pred[self.test_])
                 p = diebold_mariano(y_test - pred[self.test_], y_test - c_pred[self.test_])
@@ -224,7 +227,7 @@ class Calibrator:
             self.step_rmse_.append(rmse)
             round_ += 1
         self.rmse_after_ = rmse
-        self.model_ = CalibratedModel(self.model, chain, coef, _settings(self.model))
+        self.model_ = CalibratedModel(self.base_, chain, coef, _settings(self.base_))
         self.prediction_ = pred
         self.chain_ = chain
         inputs = {k: v[self.test_] for k, v in data.signals.items() if k != "t"}
@@ -283,7 +286,8 @@ class Calibrator:
             "model": self.model.name,
             "recording": self.data_.name,
             "base_params": {"params": self.base_params_, "ci": self.base_ci_},
-            "preparation": self.data_.preparation,
+            "preparation": {**(self.data_.preparation or {}), **_fitted_settings(self)}
+            or None,
             "held_out": {
                 "blocks": self.data_.held_out_blocks,
                 "start_s": float(t[self.test_][0]),
@@ -387,6 +391,12 @@ def _candidate_dict(c: Candidate) -> dict[str, Any]:
     d["searched_value"] = None if np.isnan(c.searched_value) else c.searched_value
     d["searched"] = {**EFFECTS, **OPEN_TERMS}[c.family].searched
     return d
+
+
+def _fitted_settings(cal: Calibrator) -> dict[str, Any]:
+    """The base model's settings that the loop fitted (given as None, fitted here)."""
+    given, fitted = _settings(cal.model), _settings(cal.base_)
+    return {k: v for k, v in fitted.items() if given.get(k) is None and v is not None}
 
 
 def _settings(model: BaseModel) -> dict[str, Any]:

@@ -6,8 +6,12 @@ coefficients as physical parameters. This owns the link from a recording contrac
 the loop's named signals (`t`, `drive`, `speed`, `accel`, `angle`), so that the loop
 and the effect library never see a device's column names.
 
-- `FollowerBase`: eq. 1 of seed 000 solved for F, with the estimator's smoothed sign
-  and an offset: F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn theta_d) / r + F_0.
+- `FollowerBase`: eq. 1 of seed 000 solved for F, with a smoothed sign and an offset:
+  F = (K_t I_q - J theta_dd - b theta_d - tau_c tanh(theta_d / w_s)) / r + F_0. The
+  sign's width w_s is one of the base model's own assumptions (issue 16, point 5), so
+  the loop fits it on the training block (`fit_sign_speed`) before anything else: a
+  drive whose Coulomb step is sharper than the estimator's 0.3 rad/s would otherwise
+  leave a residual near rest that a wrong family (`stribeck`) takes.
 - `MasterBase`: the dial's current-to-force calibration, one quadratic
   F = a i^2 + b i + c (i in mA), i.e. eqs. 14-15 without the loading/unloading split;
   the split is what the `hysteresis` effect should find. Its recording contract is
@@ -16,7 +20,7 @@ and the effect library never see a device's column names.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +29,7 @@ from teleop_core._typing import Float1D, Float2D
 from teleop_core.calibration.effects import (
     EFFECTS,
     FAMILIES,
+    SIGN_SPEED_RAD_S,
     Effect,
     Hysteresis,
     Signals,
@@ -86,6 +91,14 @@ class BaseModel:
     """Signals the residual figures are drawn against."""
     overrides: dict[str, Effect] = {}  # noqa: RUF012 - read only
     """This model's own settings of a family (the master's quadratic hysteresis loop)."""
+    passive_loop_sign: int | None = None
+    """Sign of a physical `hysteresis` loop's half height in this model's convention
+    (`plausibility.py`): +1, -1, or None where the sign is not checked."""
+
+    def fitted_to(self, data: CalibrationData, train: slice | np.ndarray) -> BaseModel:
+        """This model with its own assumptions fitted on the `train` rows of `data` (the
+        loop calls it before anything else); the model itself where it has none."""
+        return self
 
     def effect(self, family: str) -> Effect:
         """The candidate `family` (or open library term) as this model uses it."""
@@ -115,14 +128,37 @@ class FollowerBase(BaseModel):
 
     wheel_radius_m: float = 0.010
     """r, known (the wheel's measured radius); only ratios to r are identifiable."""
+    sign_speed_rad_s: float | None = None
+    """w_s of the smoothed sign tanh(theta_d / w_s), rad/s; > 0. None: fitted on the
+    training block by the loop (`fitted_to`), and the estimator's 0.3 rad/s where the
+    model is used unfitted."""
 
     name = "follower"
     unit = "n_m"
     plot_against = ("t", "speed", "angle")
+    passive_loop_sign = +1
+    """The load is what the speed loop's current answers: the force leads the current
+    drawn for it, so a loss between them reads as a force above eq. 1 while the current
+    rises (the loop `synthetic.py` injects). A negative one is no such loss."""
 
     def __post_init__(self) -> None:
         if not self.wheel_radius_m > 0:
             raise TeleopInputError(f"wheel_radius_m = {self.wheel_radius_m!r}; expected > 0")
+        if self.sign_speed_rad_s is not None and not self.sign_speed_rad_s > 0:
+            raise TeleopInputError(
+                f"sign_speed_rad_s = {self.sign_speed_rad_s!r}; expected > 0 or None (fitted)"
+            )
+
+    @property
+    def sign_width_rad_s(self) -> float:
+        """w_s in use: the fitted or given one, else the estimator's."""
+        return SIGN_SPEED_RAD_S if self.sign_speed_rad_s is None else self.sign_speed_rad_s
+
+    def fitted_to(self, data: CalibrationData, train: slice | np.ndarray) -> FollowerBase:
+        if self.sign_speed_rad_s is not None:
+            return self
+        width = fit_sign_speed(self, data.signals, data.y, train)
+        return replace(self, sign_speed_rad_s=width)
 
     @property
     def out(self) -> float:  # type: ignore[override]
@@ -131,7 +167,8 @@ class FollowerBase(BaseModel):
     def columns(self, s: Signals) -> Float2D:
         # F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn(theta_d)) / r + F_0   (eq. 1)
         w = s["speed"]
-        return np.column_stack([s["drive"], -s["accel"], -w, -smooth_sign(w), np.ones_like(w)])
+        sign = smooth_sign(w, self.sign_width_rad_s)
+        return np.column_stack([s["drive"], -s["accel"], -w, -sign, np.ones_like(w)])
 
     def physical(self, coef: Float1D) -> dict[str, float]:
         r = self.wheel_radius_m
@@ -158,6 +195,8 @@ class MasterBase(BaseModel):
 
     name = "master"
     families = ("hysteresis", "delay", "drift", "current_nonlinearity")
+    # passive_loop_sign stays None: the paper's loading and unloading branches (eqs.
+    # 14-15) cross near 2 mA, so the dial's own loop changes sign over its range
     overrides = {"hysteresis": Hysteresis(degree=2)}  # noqa: RUF012 - read only
     plot_against = ("t", "drive")
 
@@ -178,3 +217,34 @@ class MasterBase(BaseModel):
     def read(self, path: str | Path) -> CalibrationData:
         v = read_checked_csv(path, MASTER_COLUMNS)
         return self.data_from_arrays(v["t"], v["current_ma"], v["f_ref"], Path(path).name)
+
+
+SIGN_WIDTHS_RAD_S = np.geomspace(0.002, SIGN_SPEED_RAD_S, 25)
+"""Widths w_s of eq. 1's smoothed sign tried, rad/s: from a step sharper than any
+speed sensor resolves up to the estimator's 0.3 rad/s, never wider. A wider "step"
+is friction that changes with speed, which is the families' to name: left free, the
+width goes to 2 rad/s on a recording with a nonlinear drag and stands in for it."""
+
+
+def fit_sign_speed(
+    model: FollowerBase, signals: Signals, y: Float1D, train: slice | np.ndarray
+) -> float:
+    """The width w_s of eq. 1's sign as sharp as the training data allow, rad/s.
+
+    The base model's least-squares fit on the `train` rows for each width of
+    `SIGN_WIDTHS_RAD_S`; the sharpest width whose training SSE is within 0.1 % of the
+    best is taken. A drive's Coulomb step is sharp; only the speed sensor's noise and
+    a real pre-sliding range smear it, and those the data show. On eq. 1's own
+    recordings (w_s = 0.3) it gives back 0.3; on ones with a step of 0.02 rad/s and
+    the speed sensor's 0.01 rad/s noise, 0.06-0.08.
+    """
+    s = {k: v[train] for k, v in signals.items()}
+    target = np.asarray(y, float)[train]
+    sse = []
+    for width in SIGN_WIDTHS_RAD_S:
+        X = replace(model, sign_speed_rad_s=float(width)).columns(s)
+        coef, *_ = np.linalg.lstsq(X, target, rcond=None)
+        e = target - X @ coef
+        sse.append(float(e @ e))
+    near = np.flatnonzero(np.asarray(sse) <= 1.001 * min(sse))
+    return float(SIGN_WIDTHS_RAD_S[near[0]])

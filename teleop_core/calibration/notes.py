@@ -49,6 +49,9 @@ class NotesBase(BaseModel):
 
     families = ("hysteresis", "direction_asymmetry", "delay", "drift", "current_nonlinearity")
     plot_against = ("t", "drive")
+    passive_loop_sign = -1
+    """The force follows the command through the friction: lower while the command
+    rises (the half loop is minus the Coulomb friction)."""
 
     def __post_init__(self) -> None:
         if self.dof not in DOFS:

@@ -4,10 +4,14 @@ and its evidence stays in the residual (and in the verdict's `unexplained`).
 
 - `stribeck`: the friction must fall with speed, static above Coulomb: the fitted
   static-minus-Coulomb excess must be positive.
-
-Not gated: the sign of a `hysteresis` loop, which depends on the device (the master's
-and the NOTES device's loops of the papers have opposite signs in this library's
-convention, and the tests find both).
+- `hysteresis`: the loop must not be negative: its half height must have the sign a
+  loss between the drive and the measured force gives in the base model's convention
+  (`BaseModel.passive_loop_sign`), which depends on which of the two causes the
+  other: + for the follower (the load leads the current the speed loop draws), - for
+  a NOTES axis (the force lags the command through the friction). The master is not
+  checked: the paper's own branches (eqs. 14-15) cross near 2 mA. A loop of the wrong
+  sign is a play operator standing in for something periodic or slow (a second
+  ripple harmonic, a force no channel carries), not a hysteresis.
 - `drift`: a time constant at either end of its search range locates nothing (a step
   at the start, or a change slower than the recording that a gain change explains).
 """
@@ -21,11 +25,28 @@ from teleop_core.calibration.effects import Effect, Signals
 
 
 def implausible(
-    effect: Effect, coef: Float1D, value: float, out: float, unit: str, signals: Signals
+    effect: Effect,
+    coef: Float1D,
+    value: float,
+    out: float,
+    unit: str,
+    signals: Signals,
+    loop_sign: int | None = None,
 ) -> str | None:
     """Why `effect` with its coefficients `coef` (its own columns only) cannot be the
-    physical family it names, or None when it can."""
+    physical family it names, or None when it can. `loop_sign`: the base model's
+    `passive_loop_sign` (None: a hysteresis loop's sign is not checked)."""
     params = effect.physical(np.asarray(coef, float), value, out, unit)
+    half = params.get(f"half_loop_{unit}")
+    # only a constant half height has one sign (the master's quadratic loop has three
+    # coefficients and its own sign changes)
+    constant = len(coef) == 1
+    if effect.family == "hysteresis" and loop_sign and constant and half is not None:
+        if half * loop_sign <= 0:
+            side = "positive" if loop_sign > 0 else "negative"
+            return (f"implausible: hysteresis half loop {half:.3g} {unit.replace('_', ' ')} "
+                    f"is a negative loop (a loss between drive and force gives a {side} "
+                    "one here)")  # fmt: skip
     if effect.family == "stribeck":
         excess = next(v for k, v in params.items() if k.startswith("static_minus_coulomb"))
         if excess <= 0:

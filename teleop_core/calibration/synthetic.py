@@ -24,7 +24,12 @@ from typing import Any
 import numpy as np
 
 from teleop_core._typing import Float1D
-from teleop_core.calibration.effects import EFFECTS, play_operator, smooth_sign
+from teleop_core.calibration.effects import (
+    EFFECTS,
+    SIGN_SPEED_RAD_S,
+    play_operator,
+    smooth_sign,
+)
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.physics import PhysicsParams
 from teleop_core.estimation.recording import FollowerRecording
@@ -86,6 +91,7 @@ def follower_recording(
     size_n: float = JND_N,
     seed: int = 0,
     physics: PhysicsParams | None = None,
+    sign_speed_rad_s: float = SIGN_SPEED_RAD_S,
 ) -> tuple[FollowerRecording, dict[str, dict[str, Any]]]:
     """A follower recording whose true model is eq. 1 plus `effects`.
 
@@ -101,6 +107,9 @@ def follower_recording(
         RMS force of each injected effect over the recording, N (not for `delay`).
     seed
         Seed of the session, the effects' parameters and the noise.
+    sign_speed_rad_s
+        Width w_s of the drive's Coulomb step tanh(w / w_s), rad/s: by default eq. 1's
+        0.3; a real drive's is sharper.
 
     Returns
     -------
@@ -124,7 +133,7 @@ def follower_recording(
     torque = (
         pp.inertia_kg_m2 * alpha
         + pp.viscous_damping_n_m_s_per_rad * omega
-        + pp.coulomb_friction_n_m * smooth_sign(omega)
+        + pp.coulomb_friction_n_m * smooth_sign(omega, sign_speed_rad_s)
         + r * (load - pp.offset_n)
     )
     iq = torque / kt

@@ -110,12 +110,24 @@ def _raw_quantities(signals: dict[str, Float1D], prediction: Float1D) -> dict[st
 
 
 def binned_share(residual: Float1D, x: Float1D, bins: int = BINS) -> tuple[float, list[dict]]:
-    """Share of var(residual) explained by its means in quantile bins of x, and the bins."""
+    """Share of var(residual) explained by its means in quantile bins of x, and the bins.
+
+    A quantity with at most `bins` distinct values (the direction of motion, -1/0/+1)
+    is binned by value: its quantiles would merge them all into one bin.
+    """
     e = np.asarray(residual, float)
-    edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
-    if len(edges) < 2:
-        return 0.0, []
-    k = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+    x = np.asarray(x, float)
+    values = np.unique(x)
+    if len(values) <= bins:
+        if len(values) < 2:
+            return 0.0, []
+        k = np.searchsorted(values, x)
+        edges = np.r_[values, values[-1]]
+        lows, highs = values, values
+    else:
+        edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
+        k = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+        lows, highs = edges[:-1], edges[1:]
     count = np.bincount(k, minlength=len(edges) - 1)
     total = np.bincount(k, weights=e, minlength=len(edges) - 1)
     mean = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
@@ -123,7 +135,7 @@ def binned_share(residual: Float1D, x: Float1D, bins: int = BINS) -> tuple[float
     ss_between = float(np.sum(count * (mean - e.mean()) ** 2))
     share = ss_between / ss_total if ss_total > 0 else 0.0
     table = [
-        {"low": float(edges[i]), "high": float(edges[i + 1]), "n": int(count[i]),
+        {"low": float(lows[i]), "high": float(highs[i]), "n": int(count[i]),
          "mean_residual": float(mean[i])}
         for i in range(len(count)) if count[i]
     ]  # fmt: skip

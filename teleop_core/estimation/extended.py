@@ -59,7 +59,6 @@ class ExtendedPhysics:
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "") -> ExtendedPhysics:
         """From a `study calibrate` report (or `to_dict`'s output)."""
-        from teleop_core.calibration.effects import SIGN_SPEED_RAD_S
         from teleop_core.calibration.fitting import CalibratedModel
         from teleop_core.calibration.models import FollowerBase
 
@@ -75,8 +74,10 @@ class ExtendedPhysics:
                 "the force estimator needs --model follower"
             )
         # F = (K_t I_q - J a - b w - tau_c sgn w) / r + F_0: the first five coefficients
+        # with the sign width the calibration fitted (the estimator's 0.3 rad/s in a
+        # calibration made before it was fitted)
         base = from_coefficients(
-            calibrated.coef[:5], calibrated.model.wheel_radius_m, SIGN_SPEED_RAD_S
+            calibrated.coef[:5], calibrated.model.wheel_radius_m, calibrated.model.sign_width_rad_s
         )
         return cls(calibrated, base, d.get("source", source))
 

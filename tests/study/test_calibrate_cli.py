@@ -82,11 +82,16 @@ def test_predictions_cover_the_held_out_block(calibrated: Path) -> None:
 
 def test_figures_are_written(calibrated: Path) -> None:
     names = {p.name for p in (calibrated / "figs").iterdir()}
+    report = json.loads((calibrated / "report.json").read_text())
+    # the unexplained quantity's figure only when the verdict names one
+    remains = {"residual_vs_unexplained.png"} if report["verdict"] == "structure_remains" else set()
     assert names == {
+        "residual_blocks.png",
         "residual_vs_t.png",
         "residual_vs_speed.png",
         "residual_vs_angle.png",
         "residual_acf.png",
+        *remains,
     }
 
 
@@ -98,10 +103,13 @@ def test_master_model_reads_its_own_contract(tmp_path: Path) -> None:
     assert main([*args, *out, "--out", str(tmp_path / "figs")]) == 0
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["effects_added"][0]["family"] == "hysteresis"
+    remains = {"residual_vs_unexplained.png"} if report["verdict"] == "structure_remains" else set()
     assert {p.name for p in (tmp_path / "figs").iterdir()} == {
+        "residual_blocks.png",
         "residual_vs_t.png",
         "residual_vs_drive.png",
         "residual_acf.png",
+        *remains,
     }
 
 

@@ -149,6 +149,14 @@ def test_binned_share_and_fit_percent_against_hand_values() -> None:
     x = np.repeat([0.0, 1.0], 50)
     e = np.where(x > 0, 1.0, -1.0)  # wholly explained by x's two bins
     assert binned_share(e, x, bins=2)[0] == pytest.approx(1.0)
+    # a two-valued quantity (the direction of motion) is binned by value, not merged
+    # into one quantile bin
+    direction = np.repeat([-1.0, 1.0], [30, 70])
+    share, table = binned_share(0.5 * direction + np.tile([0.1, -0.1], 50), direction)
+    # bin means -0.5 and 0.5 about the overall 0.2: between = 30 * 0.7^2 + 70 * 0.3^2
+    # = 21; the alternating +-0.1 adds 100 * 0.01 = 1 within the bins
+    assert share == pytest.approx(21.0 / 22.0)
+    assert [(b["low"], b["high"], b["n"]) for b in table] == [(-1.0, -1.0, 30), (1.0, 1.0, 70)]
     y = np.array([1.0, 2.0, 3.0, 4.0])
     # ||y - yhat|| = 1, ||y - 2.5|| = sqrt(5)
     assert fit_percent(y, y + np.array([1.0, 0, 0, 0])) == pytest.approx(100 * (1 - 1 / 5**0.5))
@@ -199,6 +207,72 @@ def test_a_friction_that_rises_with_speed_is_not_named_stribeck() -> None:
     assert report["verdict"] == "structure_remains"
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_sharp_coulomb_step_gets_nothing_added(seed: int) -> None:
+    # a clean drive whose Coulomb step is sharp (w_s = 0.02 rad/s, not eq. 1's 0.3):
+    # the loop fits the sign's width on training, and nothing is added
+    rec, _ = follower_recording(120.0, (), rate_hz=200.0, seed=500 + seed, sign_speed_rad_s=0.02)
+    model = FollowerBase()
+    cal = Calibrator(model).fit(model.data(rec))
+    report = cal.report()
+    assert report["effects_added"] == [] and report["discovered_terms"] == []
+    width = report["preparation"]["sign_speed_rad_s"]
+    assert 0.02 <= width <= 0.1  # as sharp as the speed sensor's 0.01 rad/s noise allows
+    assert report["calibrated_model"]["base_settings"]["sign_speed_rad_s"] == width
+
+
+def test_eq1_with_its_fixed_sign_width_names_a_spurious_stribeck() -> None:
+    # what the fitted width prevents (issue 16): eq. 1's tanh(w / 0.3) on the same
+    # recording as seed 0 above leaves a residual near rest that `stribeck` takes
+    rec, _ = follower_recording(120.0, (), rate_hz=200.0, seed=500, sign_speed_rad_s=0.02)
+    model = FollowerBase(sign_speed_rad_s=0.3)
+    report = Calibrator(model).fit(model.data(rec)).report()
+    assert [e["family"] for e in report["effects_added"]] == ["stribeck"]
+
+
+def test_the_sign_width_of_eq1s_own_recording_comes_back() -> None:
+    rec, _ = follower_recording(60.0, (), rate_hz=200.0, seed=7)
+    model = FollowerBase()
+    data = model.data(rec)
+    train = slice(0, int(0.75 * len(data)))
+    assert model.fitted_to(data, train).sign_speed_rad_s == pytest.approx(0.3, rel=0.1)
+    # a width given is kept
+    assert FollowerBase(sign_speed_rad_s=0.05).fitted_to(data, train).sign_speed_rad_s == 0.05
+
+
+class _UngatedFollower(FollowerBase):
+    """eq. 1 without the hysteresis sign check: the loop as it was before it."""
+
+    passive_loop_sign = None
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_a_negative_hysteresis_loop_is_not_named(seed: int) -> None:
+    # a force no channel carries: without the sign check, a play operator on the current
+    # took part of it as a hysteresis with a negative loop (seeds 1 and 3 of 0-5)
+    data, _, _ = undeclared_recording("hidden_force", duration_s=60.0, rate_hz=200.0, seed=seed)
+    ungated = Calibrator(_UngatedFollower()).fit(data).report()
+    named = [e for e in ungated["effects_added"] if e["family"] == "hysteresis"]
+    assert named and named[0]["params"]["half_loop_n_m"] < 0
+    report = Calibrator(FollowerBase()).fit(data).report()
+    assert "hysteresis" not in [e["family"] for e in report["effects_added"]]
+    refused = [c for c in report["candidates"] if c["family"] == "hysteresis"
+               and c["reason"].startswith("implausible: hysteresis half loop")]  # fmt: skip
+    assert refused and "negative loop" in refused[0]["reason"]
+    assert report["verdict"] == "structure_remains"
+    assert report["rmse_after"] <= report["rmse_before"]
+
+
+def test_a_positive_loop_is_still_named_on_the_follower() -> None:
+    # the loop the follower simulator injects (a loss: force above eq. 1 while the
+    # current rises) passes the sign check
+    rec, truth = follower_recording(60.0, ["hysteresis"], rate_hz=200.0, seed=4)
+    model = FollowerBase()
+    report = Calibrator(model).fit(model.data(rec)).report()
+    assert report["effects_added"][0]["family"] == "hysteresis"
+    assert report["effects_added"][0]["params"]["half_loop_n_m"] > 0
+
+
 @pytest.mark.parametrize("kind", ["load_friction", "gain_change", "ripple_harmonics",
                                   "presliding_memory"])  # fmt: skip
 def test_effects_outside_the_families_reach_the_oracle(kind: str) -> None:
@@ -240,3 +314,6 @@ def test_a_hidden_force_remains_unexplained_and_the_cli_says_so(
     report = json.loads((tmp_path / "r.json").read_text())
     assert report["verdict"] == "structure_remains" and report["unexplained"]["quantity"]
     assert report["rmse_after"] <= report["rmse_before"]
+    # the figures of the blocks and of the residual against the named quantity
+    figs = {p.name for p in (tmp_path / "f").iterdir()}
+    assert {"residual_blocks.png", "residual_vs_unexplained.png"} <= figs
