@@ -51,6 +51,8 @@ class TuiSettings:
     """Times real time for a simulated participant at start (None: as fast as it goes)."""
     figures_dir: Path = Path("figures")
     """Where the analysis screen exports the paper's figures by default."""
+    calibrations_dir: Path = Path("calibrations")
+    """Where the calibration screen writes each result's report file."""
     figure_formats: tuple[str, ...] = ("pdf", "svg", "png")
     """Formats of the exported figures (as `study figures --format`)."""
     theme: str = "textual-dark"
@@ -128,7 +130,9 @@ class StudyApp(SafeWorkers, App[None]):
                 self.settings.figure_formats,
                 id="analysis-pane",
             ),  # fmt: skip,
-            "calibration": CalibrationPane(self.services, id="calibration-pane"),
+            "calibration": CalibrationPane(
+                self.services, self.settings.calibrations_dir, id="calibration-pane"
+            ),
         }
 
     async def _mount_later_panes(self) -> None:

@@ -50,7 +50,8 @@ class CalibrationPane(SafeWorkers, Vertical):
     CalibrationPane #recording { width: 1fr; }
     CalibrationPane #model { width: 22; }
     CalibrationPane #calib-summary { height: auto; }
-    CalibrationPane #effects { height: 1fr; }
+    CalibrationPane #effects { height: 1fr; min-height: 4; }
+    CalibrationPane #stored { height: 7; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("ctrl+r", "calibrate", "Calibrate")]
 
@@ -62,10 +63,24 @@ class CalibrationPane(SafeWorkers, Vertical):
     class Done(Message):
         report: dict[str, Any]
 
-    def __init__(self, services: StudyServices, **kwargs: object) -> None:
+    @dataclass
+    class Stored(Message):
+        calibration_id: int
+        path: Path
+        stored: list[dict[str, Any]]
+
+    @dataclass
+    class Listed(Message):
+        stored: list[dict[str, Any]]
+
+    def __init__(
+        self, services: StudyServices, out_dir: Path = Path("calibrations"), **kwargs: object
+    ) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
         self.services = services
+        self.out_dir = out_dir
         self.report: dict[str, Any] | None = None
+        self.stored_path: Path | None = None
 
     def compose(self) -> ComposeResult:
         with Horizontal(classes="row"):
@@ -85,12 +100,42 @@ class CalibrationPane(SafeWorkers, Vertical):
         table = DataTable(id="effects", zebra_stripes=True, cursor_type="row")
         table.add_columns("step", "effect added", "held-out RMSE (N)", "parameters")
         yield table
+        yield Label("Stored calibrations (newest first)")
+        stored = DataTable(id="stored", zebra_stripes=True, cursor_type="row")
+        stored.add_columns("id", "when (UTC)", "model", "recording", "RMSE before -> after",
+                           "verdict")  # fmt: skip
+        yield stored
+
+    def on_mount(self) -> None:
+        self._list()
+
+    @work(thread=True, exclusive=True, group="calibrations", exit_on_error=False)
+    def _list(self) -> None:
+        from study.protocol.calibrations import list_calibrations
+
+        self.post_message(self.Listed(list_calibrations(self.services.engine)))
+
+    @on(Listed)
+    def _listed(self, event: Listed) -> None:
+        self._show_stored(event.stored)
+
+    def _show_stored(self, stored: list[dict[str, Any]]) -> None:
+        table = self.query_one("#stored", DataTable)
+        table.clear()
+        for r in stored:
+            rmse = f"{_fmt(r['rmse_before'])} -> {_fmt(r['rmse_after'])}"
+            table.add_row(str(r["id"]), f"{r['at']:%Y-%m-%d %H:%M}", r["model"], r["recording"],
+                          rmse, r["verdict"] or "")  # fmt: skip
 
     def action_calibrate(self) -> None:
         if self.services.calibrate is None:
             self._summary("no calibration loop was given to this app: nothing to run")
             return
-        path = Path(self.query_one("#recording", Input).value.strip())
+        typed = self.query_one("#recording", Input).value.strip()
+        if not typed:
+            self._summary("refused: type the path of a recording first (a CSV or .mat file)")
+            return
+        path = Path(typed)
         if not path.is_file():
             self._summary(f"refused: recording {str(path)!r} is not a file")
             return
@@ -109,6 +154,25 @@ class CalibrationPane(SafeWorkers, Vertical):
             self.app.call_from_thread(self._summary, f"refused: {exc}")
             return
         self.post_message(self.Done(report))
+        from study.protocol.calibrations import list_calibrations, store_calibration
+
+        calibration_id, stored_at = store_calibration(
+            self.services.engine, model, path, report, self.out_dir
+        )
+        self.post_message(
+            self.Stored(calibration_id, stored_at, list_calibrations(self.services.engine))
+        )
+
+    @on(Stored)
+    def _stored(self, event: Stored) -> None:
+        self.stored_path = event.path
+        self._show_stored(event.stored)
+        self.app.notify(f"calibration {event.calibration_id} stored; report in {event.path}")
+
+    def worker_failed(self, group: str, line: str) -> None:
+        if group == "calibrate":
+            line = f"the calibration failed or was not stored: {line}"
+        super().worker_failed(group, line)
 
     @on(Progress)
     def _progress(self, event: Progress) -> None:

@@ -50,6 +50,9 @@ def plain_line(error: BaseException | None) -> str:
         for needles, line in _CAUSES:
             if any(n in text for n in needles):
                 return line
+        if orig is None:  # SQLAlchemy's own error, not the database's: a bug, said so
+            first = str(error).split(" (Background on this error")[0].splitlines()[0]
+            return f"unexpected {type(error).__name__}: {first}"
         first = detail[0] if detail else type(error).__name__
         return f"the database refused the operation ({first}); nothing was written"
     if isinstance(error, ValueError):  # the project's input errors: already one line

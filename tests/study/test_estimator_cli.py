@@ -45,7 +45,8 @@ def model_dir(recording_csv: Path, tmp_path_factory: pytest.TempPathFactory) -> 
 
 
 def test_train_writes_the_model_folder_with_a_summary(model_dir: Path) -> None:
-    assert sorted(p.name for p in model_dir.iterdir()) == sorted(MODEL_FILES)
+    written = sorted(p.name for p in model_dir.iterdir())
+    assert written == sorted([*MODEL_FILES, "gru.npz", "gru.pt"])
     summary = json.loads((model_dir / "summary.json").read_text())
     assert summary["window"] == 6 and summary["epochs_run"] == 2
     assert (

@@ -63,6 +63,7 @@ def make_test_app(study_engine: Engine, tmp_path: Path) -> Callable[..., StudyAp
     def build(load_estimator=_no_estimator, calibrate=None, **settings) -> StudyApp:
         settings.setdefault("prepare_simulation", False)
         settings.setdefault("figures_dir", tmp_path / "figures")
+        settings.setdefault("calibrations_dir", tmp_path / "calibrations")
         services = StudyServices(study_engine, load_estimator, calibrate)
         return make_app(services, TuiSettings(**settings))
 

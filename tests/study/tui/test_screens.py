@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 
 import pytest
@@ -10,6 +12,7 @@ from sqlalchemy.orm import Session
 from textual.widgets import DataTable, Input, Select, Static
 
 from db.models.audit import AuditEntry
+from db.models.calibration import Calibration
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES
 from db.models.trial import Trial
@@ -226,7 +229,7 @@ async def test_analysis_tables_chart_and_figure_export(
 
 
 async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
-    make_test_app, tmp_path
+    make_test_app, study_engine, tmp_path
 ) -> None:
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
@@ -257,7 +260,28 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
             "held-out RMSE 0.3000 N -> 0.1000 N (67 % lower)", "rejected: delay"
         ]  # fmt: skip
         assert app.query_one("#effects", DataTable).get_row_at(0)[1] == "stribeck"
+        # the result is kept: a row in the calibrations table, a report file, the list
+        await wait_for(pilot, lambda: pane.stored_path is not None)
+        stored = app.query_one("#stored", DataTable)
+        assert stored.row_count == 1
+        assert stored.get_row_at(0)[2:5] == ["follower", "rec.csv", "0.3 -> 0.1"]
+        # an empty path is named as such (it read "recording '.' is not a file")
+        app.query_one("#recording", Input).value = "  "
+        await pilot.press("ctrl+r")
+        assert _text(app, "#calib-summary") == (
+            "refused: type the path of a recording first (a CSV or .mat file)"
+        )
     assert calls == [(recording, "follower")]
+    with Session(study_engine) as session:
+        row = session.scalars(select(Calibration)).one()
+    assert (row.model, row.recording_name, row.rmse_before, row.rmse_after) == (
+        "follower", "rec.csv", 0.3, 0.1
+    )
+    assert row.recording_sha256 == hashlib.sha256(b"t\n0\n").hexdigest()
+    assert row.report["effects_added"][0]["family"] == "stribeck"
+    written = json.loads(pane.stored_path.read_text())
+    assert pane.stored_path == tmp_path / "calibrations" / f"calibration-{row.id:04d}-rec.json"
+    assert (written["id"], written["recording_sha256"]) == (row.id, row.recording_sha256)
 
 
 async def test_calibration_screen_runs_the_loop_on_a_recording(make_test_app, tmp_path) -> None:
