@@ -116,6 +116,11 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         self._codes: list[str] = []
         self._redraws: deque[float] = deque(maxlen=50)
         self._next: NextTrial | None = None
+        self._breaks: dict[str, float] = {}
+        """Participant -> time.monotonic() when their last finished block ended."""
+        self._ended_at: tuple[tuple[str, str, str], float] | None = None
+        """The block of the last completed trial and when it ended (until the roster says
+        whether that block is finished)."""
         self._trial_task = "lcca"
         """The task of the trial running or run last."""
 
@@ -136,11 +141,25 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         self._show_mode()
         self._redraw()
         self.set_interval(1 / REDRAW_HZ, self._redraw)
+        self.set_interval(1.0, self._count_down)
+
+    def _count_down(self) -> None:
+        """The break's countdown on the status line, once a second while it lasts."""
+        if self.run is None and self.code is not None and self.code in self._breaks:
+            self._show_next()
 
     # -- roster and selection -------------------------------------------------------------
 
     def show(self, roster: Roster) -> None:
         self.roster = roster
+        if self._ended_at is not None:
+            (code, task, condition), at = self._ended_at
+            row = next((r for r in roster.participants if r["code"] == code), None)
+            blocks = row["blocks"] if row else []
+            if any(b["task"] == task and b["condition"] == condition
+                   and b["completed"] >= b["planned"] for b in blocks):  # fmt: skip
+                self._breaks[code] = at
+                self._ended_at = None
         codes = [r["code"] for r in roster.participants]
         select = self.query_one("#participant", Select)
         if codes != self._codes:
@@ -175,6 +194,12 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             text = f"{code}: every scheduled trial is done"
         else:
             text = f"next: {code} {nxt.describe()} ({nxt.remaining} left)  s: start"
+            left = self.break_left_s(code)
+            due = self._tlx_due(code)
+            if due is not None:
+                text = f"{code}: the NASA-TLX of {due[0]}/{due[1]} is due first (F4), then s"
+            elif left > 0:
+                text = f"break: {int(left) // 60}:{int(left) % 60:02d} left, then {text[6:]}"
         if self.run is None:
             self.query_one("#next", Label).update(text)
 
@@ -207,6 +232,43 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         code, nxt = self.code, self._next
         if self.run is not None or code is None or nxt is None:
             return
+        due = self._tlx_due(code)
+        if due:  # the session flow: a finished block's questionnaire before the next block
+            task, condition = due
+            self._show_next()
+            self.app.notify(f"{code} finished {task}/{condition}: its NASA-TLX comes before "
+                            "the next block (F4)", severity="warning")  # fmt: skip
+            return
+        left = self.break_left_s(code)
+        if left > 0:
+            from study.tui.confirm import Confirm
+
+            def answered(yes: bool | None) -> None:
+                if yes and self._next is nxt:
+                    self._breaks.pop(code, None)
+                    self._start(code, nxt)
+
+            self.app.push_screen(
+                Confirm(f"{code}'s break after the last block has {left:.0f} s left of the "
+                        f"design's {self.roster.break_s if self.roster else 0:g} s. Start the "
+                        "next block now?"), answered,
+            )  # fmt: skip
+            return
+        self._start(code, nxt)
+
+    def _tlx_due(self, code: str) -> tuple[str, str] | None:
+        """(task, condition) of `code`'s finished block still without its questionnaire."""
+        due = [b for b in (self.roster.tlx_due() if self.roster else []) if b[0] == code]
+        return (due[0][1], due[0][2]) if due else None
+
+    def break_left_s(self, code: str) -> float:
+        """Seconds left of the break that began when `code`'s last block ended (0: none)."""
+        ended = self._breaks.get(code)
+        if ended is None or self.roster is None:
+            return 0.0
+        return max(0.0, self.roster.break_s - (time.monotonic() - ended))
+
+    def _start(self, code: str, nxt: NextTrial) -> None:
         keyboard = TuiKeyboardDriver() if self.driver_kind == "keyboard" else None
         pace = 1.0 if keyboard is not None else self.pace
         self.run = TrialRun(
@@ -319,6 +381,8 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
     def _ended(self, event: TrialEnded) -> None:
         outcome, run = event.outcome, self.run
         self.run = None
+        if outcome.trial_ids:  # the break starts if this trial finished its block
+            self._ended_at = (event.block, time.monotonic())
         if outcome.trial_ids:
             self.status = "completed"
             peaks = ""

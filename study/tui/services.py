@@ -59,6 +59,8 @@ class Roster:
     """`study.protocol.roster.schedule` rows (code, group, condition_order, blocks, ...)."""
     answered: set[tuple[str, str, str]] = field(default_factory=set)
     """(code, task, condition) of the blocks with a stored NASA-TLX."""
+    break_s: float = 120.0
+    """The design's planned rest after each block."""
 
     def next_trial(self, code: str) -> NextTrial | None:
         row = next((r for r in self.participants if r["code"] == code), None)
@@ -130,6 +132,7 @@ class StudyServices:
             groups=plan["groups"],
             participants=plan["participants"],
             answered=answered_blocks(self.engine),
+            break_s=design.break_s,
         )
 
     def add_participant(self, group: str) -> str:

@@ -9,13 +9,16 @@ from pathlib import Path
 import pytest
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
+from textual.widgets import Label
 
 from db.migrate import open_database
 from db.models.audit import AuditEntry
+from db.models.tlx import TLX_SUBSCALES
 from db.models.trial import Sample, Trial
 from study.protocol.default_estimator import load_estimator
 from study.protocol.design import parse_design
 from study.protocol.roster import add_participant, create_study
+from study.protocol.tlx import store_tlx
 from study.tui import StudyServices, TuiSettings, make_app
 from study.tui.confirm import Confirm
 from study.tui.live_view import NotesView, PhantomView
@@ -63,6 +66,23 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
         # one trial per block in DESIGN: the block is done, the form opens for it
         await wait_for(pilot, lambda: app.query_one("#tabs").active == "tlx")
         await wait_for(pilot, lambda: app.query_one(TlxPane).status == "new")
+        # the session flow: the next block waits for this block's questionnaire ...
+        await pilot.press("f3")
+        await pilot.press("s")
+        label = app.query_one("#next", Label)
+        assert "the NASA-TLX of lcca/VO is due first" in str(label.render())
+        assert pane.run is None
+        store_tlx(study_engine, "P001", "lcca", "VO", dict.fromkeys(TLX_SUBSCALES, 50))
+        app.reload()
+        await wait_for(pilot, lambda: not app.query_one(RunPane).roster.tlx_due(), 30)
+        # ... and the design's break is counted down; starting early is asked first
+        await wait_for(pilot, lambda: str(label.render()).startswith("break: 1:"), 10)
+        await pilot.press("s")
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        assert "break after the last block has" in str(app.screen.query_one("#question").render())
+        await pilot.press("n")
+        await pilot.pause()
+        assert pane.run is None
     with Session(study_engine) as session:
         trial = session.scalars(select(Trial)).one()
         n = session.scalar(select(func.count()).select_from(Sample))
