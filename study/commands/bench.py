@@ -240,6 +240,34 @@ def bench_lcca(
     click.echo((out_dir / "lcca_bench.md").read_text())
 
 
+@bench.command("campaign")
+@click.option("--replicates", type=click.IntRange(min=1), default=8, show_default=True,
+              help="Simulated studies in the campaign (units).")  # fmt: skip
+@click.option("--group-size", type=click.IntRange(min=3), default=3, show_default=True,
+              help="Participants per group in each simulated study.")  # fmt: skip
+@click.option("--workers", type=click.IntRange(min=2), default=2, show_default=True)
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+def bench_campaign(replicates: int, group_size: int, workers: int, json_path: Path | None) -> None:
+    """A campaign on 1 and on N Dask workers: units per hour, speed-up, overhead per unit."""
+    from study.bench.campaign import run_campaign_bench
+
+    if json_path is not None:
+        _check_json_folder(json_path)
+    with Console(stderr=True).status("campaign bench") as status:
+        result = run_campaign_bench(replicates, group_size, workers, status.update)
+    for run in result.runs:
+        mean = sum(run.unit_seconds) / len(run.unit_seconds)
+        click.echo(f"{run.workers} worker(s): {run.units} units in {run.wall_s:.1f} s, "
+                   f"{run.units_per_hour:.0f} units/h, {mean:.2f} s per unit inside the "
+                   f"worker, Dask overhead {100 * run.overhead:.1f} %")  # fmt: skip
+    load = ", ".join(f"{x:.1f}" for x in result.load_average)
+    click.echo(f"speed-up {workers} workers / 1: {result.speedup:.2f}x (target 1.8x for 2); "
+               f"results identical: {'yes' if result.identical else 'NO'}; "
+               f"{result.cpus} CPUs, load average {load} (simulated participants)")  # fmt: skip
+    if json_path is not None:
+        json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+
+
 @bench.command("tui")
 @click.option("--db", "db_url", metavar="URL", default=None,
               help="A study database, e.g. made by `study demo` [default: build the "
