@@ -14,7 +14,10 @@ or `study identify` writes anything:
   not a measurement, and would overflow the fits' squares);
 - time strictly increasing (a repeated time is named as such), at least the contract's
   minimum number of rows, and a median sampling rate from `MIN_RATE_HZ` to
-  `MAX_RATE_HZ` (a time column in ms or in µs read as seconds lands outside it).
+  `MAX_RATE_HZ` (a time column in ms or in µs read as seconds lands outside it);
+- for a recording a model is fitted to (`calibrate`, `estimator train`, `identify`),
+  signals that vary (`check_varies`: an all-zero file has nothing to fit). Not for
+  `estimator run`, whose load cell may well read a constant.
 
 The contract modules keep their own error classes (each a `TeleopInputError`) and
 pass them in, so callers catching `RecordingError` or `NotesRecordingError` still do.
@@ -134,4 +137,19 @@ def check_time(
                 f"{source}, column 't', {row_word}s 2-{len(t) + 1}: median step {median:g} s "
                 f"({rate:g} Hz); expected a sampling rate from {MIN_RATE_HZ:g} Hz to "
                 f"{MAX_RATE_HZ:g} Hz with t in seconds"
+            )
+
+
+def check_varies(
+    values: dict[str, Float1D], columns: tuple[str, ...], source: str, error: ErrorType
+) -> None:
+    """Refuse a recording to fit a model to whose signal `columns` never change (an
+    all-zero file, a sensor left unplugged): the fit has nothing to go on, and its
+    variance-based steps would divide by zero."""
+    for column in columns:
+        v = values[column]
+        if len(v) and float(np.max(v)) == float(np.min(v)):
+            raise error(
+                f"{source}, column {column!r}: {float(v[0])!r} on every line; expected a "
+                "signal that varies (a recording that excites the model)"
             )

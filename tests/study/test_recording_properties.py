@@ -88,7 +88,8 @@ def _valid(columns: tuple[str, ...]) -> list[list[str]]:
     t = np.arange(N_ROWS) * 1e-3
     rows = [list(columns)]
     for k, tk in enumerate(t):
-        rows.append([repr(float(tk)), *(repr(float(np.sin(0.1 * k + j))) for j in range(1, len(columns)))])
+        signals = (repr(float(np.sin(0.1 * k + j))) for j in range(1, len(columns)))
+        rows.append([repr(float(tk)), *signals])
     return rows
 
 
@@ -195,3 +196,20 @@ def test_a_refused_recording_stops_its_command_with_one_line_and_no_output(
         assert rc == 2, err
         assert len(err) == 1 and err[0].endswith(message), (err, message)
         assert list(out.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", list(CONTRACTS))
+def test_an_all_zero_recording_is_one_line_and_no_output(name: str, tmp_path: Path) -> None:
+    """Issue 18, point 5: all-zero recordings gave tracebacks (a division by zero in the
+    fit) from calibrate, estimator train and identify notes."""
+    contract = CONTRACTS[name]
+    rows = _valid(contract.columns)
+    path = tmp_path / "zero.csv"
+    path.write_text("".join(",".join([r[0], *("0" for _ in r[1:])]) + "\n" if i else
+                            ",".join(r) + "\n" for i, r in enumerate(rows)))  # fmt: skip
+    out = tmp_path / "out"
+    out.mkdir()
+    rc, err = _run(contract.argv(path, out))
+    assert rc == 2 and len(err) == 1, err
+    assert "on every" in err[0] and "expected" in err[0]
+    assert list(out.iterdir()) == []
