@@ -19,8 +19,9 @@ tasks, conditions, trial numbers and a time range `from_s <= t_s < to_s`. Files 
 written under a temporary name, flushed to disk and renamed over the target when
 complete (`study.protocol.export_files`), so an error or an interrupt leaves no
 half-written file and the previous file intact; a target that is a symbolic link is
-refused, and CSV text a spreadsheet would run as a formula gets a leading quote; with one file per trial, a rerun skips the trials whose
-file is already there (a resumed export).
+refused, and CSV text a spreadsheet would run as a formula gets a leading quote. With
+one file per trial, a rerun skips the trials whose file is already there (a resumed
+export).
 """
 
 from __future__ import annotations

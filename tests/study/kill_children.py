@@ -58,7 +58,8 @@ def run_all_jobs_2(url: str, codes: list[str]) -> None:
     import study.protocol.session as session
 
     fork = multiprocessing.get_context("fork")
-    session.multiprocessing = types.SimpleNamespace(get_context=lambda _method: fork)  # type: ignore[assignment]
+    shim = types.SimpleNamespace(get_context=lambda _method: fork)
+    session.multiprocessing = shim  # type: ignore[assignment]
     for _ in session.run_participants(url, codes, jobs=2):
         pass
 

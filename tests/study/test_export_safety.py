@@ -134,3 +134,28 @@ def test_an_interrupted_export_leaves_the_previous_files(
     monkeypatch.undo()
     assert main(["export", "--out", str(out), "--db", db_url]) == 0
     assert len(pd.read_csv(out / "trials.csv")) == 3
+
+
+def test_a_symlinked_per_trial_samples_file_is_refused_before_any_is_written(
+    tmp_path: Path,
+) -> None:
+    from db.migrate import open_database
+    from study.protocol.export_files import ExportTargetError
+    from study.protocol.sample_export import ExportTrial, write_samples_per_trial
+
+    db = str(tmp_path / "s.db")
+    _study(tmp_path, db)
+    trials = [ExportTrial(k, "P001", "lcca", "VO", k, 1) for k in (1, 2)]
+    folder = tmp_path / "samples"
+    folder.mkdir()
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    (folder / f"{trials[1].file_stem}.csv").symlink_to(victim)
+    engine = open_database(db, create=False)
+    try:
+        with pytest.raises(ExportTargetError, match="symbolic link"):
+            write_samples_per_trial(engine, trials, folder, "csv")
+    finally:
+        engine.dispose()
+    assert victim.read_text() == "precious\n"
+    assert [p.name for p in folder.iterdir()] == [f"{trials[1].file_stem}.csv"]

@@ -105,7 +105,9 @@ def _check_invariants(trials: dict[int, dict], before: dict[int, dict]) -> None:
             assert trials[trial_id] == t, "a completed trial changed"
 
 
-def _run(server: multiprocessing.context.BaseContext, target, *args) -> int:  # type: ignore[no-untyped-def]
+def _run(  # type: ignore[no-untyped-def]
+    server: multiprocessing.context.BaseContext, target, *args
+) -> int:
     process = server.Process(target=target, args=args)
     process.start()
     process.join(timeout=240)
