@@ -159,3 +159,17 @@ def test_a_symlinked_per_trial_samples_file_is_refused_before_any_is_written(
         engine.dispose()
     assert victim.read_text() == "precious\n"
     assert [p.name for p in folder.iterdir()] == [f"{trials[1].file_stem}.csv"]
+
+
+def test_an_analysis_table_csv_escapes_a_formula_group_and_keeps_negative_numbers(
+    tmp_path: Path,
+) -> None:
+    from study.analysis.tables import Table
+
+    raw = pd.DataFrame({"group": [EVIL, "novice"], "hedges_g": [-0.5, 0.25]})
+    table = Table("comparisons", raw, raw, "caption")
+    csv_path = table.write(tmp_path, "simulated")[0]
+    with open(csv_path, newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["group"] for r in rows] == ["'" + EVIL, "novice"]
+    assert [r["hedges_g"] for r in rows] == ["-0.5", "0.25"]
