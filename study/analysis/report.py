@@ -64,6 +64,8 @@ def _write_set(analysis: Analysis, folder: Path) -> list[Path]:
 
 
 def write(analysis: Analysis, out_dir: Path, json_path: Path | None) -> list[Path]:
+    from study.protocol.export_files import escape_frame
+
     paths = _write_set(analysis, out_dir)
     tests = pd.concat(
         [
@@ -76,7 +78,7 @@ def write(analysis: Analysis, out_dir: Path, json_path: Path | None) -> list[Pat
         ],
         ignore_index=True,
     ).assign(data_source=analysis.source.label)
-    tests.to_csv(out_dir / "tests.csv", index=False)
+    escape_frame(tests).to_csv(out_dir / "tests.csv", index=False)  # spreadsheet-safe text
     target = json_path or out_dir / "analysis.json"
     target.write_text(json.dumps(to_json(analysis), indent=2) + "\n")
     paths += [out_dir / "tests.csv", target]

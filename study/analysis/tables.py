@@ -51,8 +51,10 @@ class Table:
     def write(self, folder: Path, data_source: str) -> list[Path]:
         """NAME.csv (raw numbers; a data_source column, for a table may travel alone),
         NAME.md and NAME.tex (formatted, captioned)."""
+        from study.protocol.export_files import escape_frame  # spreadsheet-safe text
+
         paths = [folder / f"{self.name}.{ext}" for ext in ("csv", "md", "tex")]
-        self.raw.assign(data_source=data_source).to_csv(paths[0], index=False)
+        escape_frame(self.raw.assign(data_source=data_source)).to_csv(paths[0], index=False)
         paths[1].write_text(self.markdown())
         paths[2].write_text(self.latex())
         return paths

@@ -114,16 +114,24 @@ def train_cmd(
 
     RECORDING is a follower CSV (t, iq, theta, omega, f_ref; alpha optional).
     """
+    from teleop_core.errors import TeleopInputError
     from teleop_core.estimation.estimator import train_estimator
     from teleop_core.estimation.extended import ExtendedPhysics
     from teleop_core.estimation.gru import GruConfig
     from teleop_core.estimation.recording import FollowerRecording
+    from teleop_core.recording_checks import check_varies
 
     if out_dir.exists() and any(out_dir.iterdir()) and not force:
         raise StudyInputError(
             f"model folder {out_dir} exists and is not empty; expected a new folder (or --force)"
         )
     data = FollowerRecording.from_csv(recording)
+    check_varies(
+        {"iq": data.iq, "omega": data.omega, "f_ref": data.f_ref},
+        ("iq", "omega", "f_ref"),
+        f"recording {recording}",
+        TeleopInputError,
+    )
     extension = ExtendedPhysics.read(calibration) if calibration is not None else None
     regularisation = {
         k: v

@@ -8,6 +8,7 @@ import click
 
 from db.migrate import open_database
 from study.commands.base import StudyCommand, db_option
+from study.errors import StudyInputError
 
 
 @click.command("import", cls=StudyCommand)
@@ -124,10 +125,15 @@ def export_cmd(
                 per_trial=per_trial,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
             )
-    except BaseException:
+    except BaseException as exc:
         # nothing half-written: a folder this command made and left empty goes again
         if created and out_dir.is_dir() and not any(out_dir.iterdir()):
             out_dir.rmdir()
+        if isinstance(exc, OSError):
+            raise StudyInputError(
+                f"export to {out_dir} failed: {exc.strerror or exc}; expected a writable "
+                "folder with free space (the files already there are unchanged)"
+            ) from exc
         raise
     finally:
         engine.dispose()

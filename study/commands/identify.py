@@ -33,13 +33,17 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
     """
     from teleop_core.notes.characterize import identify_recording
     from teleop_core.notes.params import default_params
-    from teleop_core.notes.recording import NotesRecording
+    from teleop_core.notes.recording import NotesRecording, NotesRecordingError
+    from teleop_core.recording_checks import check_varies
 
     if not json_path.parent.is_dir():
         raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
     if out_dir is not None and out_dir.exists() and not out_dir.is_dir():
         raise StudyInputError(f"--out {out_dir} is a file; expected a folder")
     rec = NotesRecording.from_csv(recording)
+    measured = "x" if rec.boundary == "open" else "f_ee"
+    check_varies({"f_des": rec.f_des, measured: rec.y}, ("f_des", measured),
+                 f"recording {recording}", NotesRecordingError)  # fmt: skip
     found, chirp = identify_recording(rec, default_params(dof).linear, dof)
     result = {"dof": dof, "recording": str(recording), **found}
     tmp = json_path.with_name(json_path.name + ".tmp")

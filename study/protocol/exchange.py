@@ -25,7 +25,9 @@ lies within the trial limit (`MAX_TRIAL_S`), a peak force within `MAX_FORCE_N` o
 task's device, a trial number within the design's trials per block.
 
 Export writes the measured (non-practice), completed trials, the latest attempt of each,
-and a codebook of every column.
+and a codebook of every column. Files are safe to open in a spreadsheet and replaced
+atomically, never through a symbolic link (`study.protocol.export_files`): formula-like
+text is exported with a leading single quote, which an import removes again.
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ from db.models.trial import Trial
 from study.analysis.frames import trial_frame
 from study.errors import StudyInputError
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
+from study.protocol.export_files import AtomicFile, escape_frame, refuse_symlink, unescape_cell
 from study.protocol.roster import load_study, plan_blocks
 from study.protocol.tlx import check_rating, check_weights
 
@@ -57,6 +60,7 @@ unit slip. LCCA: the guidewire drive (K_t 0.043 N m/A, wheel radius 10 mm) would
 NOTES: the hand's force bound of the NOTES task, `teleop_core.notes.task.HAND_MAX_FORCE_N`."""
 _DECIMAL = re.compile(r"^[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?$")
 _TRIAL_NUMBER = re.compile(r"^[0-9]{1,6}$")
+_TEXT_COLUMNS = {"participant", "group", "task", "condition"}
 
 if TYPE_CHECKING:
     from study.protocol.sample_export import Progress, SampleSelection
@@ -143,6 +147,8 @@ def _read(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ())
         )
     if frame.empty:
         raise StudyInputError(f"{path} has a header but no rows; expected at least one data row")
+    for column in _TEXT_COLUMNS.intersection(frame.columns):
+        frame[column] = frame[column].map(unescape_cell)  # an exported file imports back
     return frame
 
 
@@ -503,21 +509,26 @@ def export_data(
         ]
     )
     out_dir.mkdir(parents=True, exist_ok=True)
-    staged: list[tuple[Path, Path]] = []
+    # every target checked before anything is written: a link refuses the whole export
+    names = [f"{name}.{fmt}" for name in frames] + ["codebook.csv"]
+    if samples and not per_trial:
+        names.append(f"samples.{fmt}")
+    for name in names:
+        refuse_symlink(out_dir / name)
+    staged: list[AtomicFile] = []
 
-    def stage(name: str) -> Path:
-        path = out_dir / name
-        staged.append((path.with_name(f".{path.name}.partial"), path))
-        return staged[-1][0]
+    def stage(name: str) -> AtomicFile:
+        staged.append(AtomicFile(out_dir / name))
+        return staged[-1]
 
     try:
         for name, frame in frames.items():
-            tmp = stage(f"{name}.{fmt}")
+            out = stage(f"{name}.{fmt}")
             if fmt == "csv":
-                frame.to_csv(tmp, index=False)
+                escape_frame(frame).to_csv(out.file, index=False, encoding="utf-8")
             else:
-                frame.to_parquet(tmp, index=False)
-        codebook.to_csv(stage("codebook.csv"), index=False)
+                frame.to_parquet(out.file, index=False)
+        escape_frame(codebook).to_csv(stage("codebook.csv").file, index=False, encoding="utf-8")
         sample_paths: list[Path] = []
         if samples and per_trial:
             result = write_samples_per_trial(
@@ -528,11 +539,11 @@ def export_data(
             path = out_dir / f"samples.{fmt}"
             write_samples(engine, export_trials, path, fmt, selection, progress=progress)
             sample_paths = [path]
-        for tmp, path in staged:
-            tmp.replace(path)
+        for out in staged:
+            out.commit()
     except BaseException:
-        for tmp, _ in staged:
-            tmp.unlink(missing_ok=True)
+        for out in staged:
+            out.abort()
         raise
-    written = [path for _, path in staged]
+    written = [out.path for out in staged]
     return written[:2] + sample_paths + written[2:]

@@ -16,9 +16,12 @@ The column contract (other tools rely on it; keep it exactly):
 Rows are the samples of the measured (non-practice), completed trials, ordered by trial
 (as stored) and `seq`. A selection (`SampleSelection`) restricts them to participants,
 tasks, conditions, trial numbers and a time range `from_s <= t_s < to_s`. Files are
-written under a temporary name and renamed when complete, so an error or an interrupt
-leaves no half-written file; with one file per trial, a rerun skips the trials whose
-file is already there (a resumed export).
+written under a temporary name, flushed to disk and renamed over the target when
+complete (`study.protocol.export_files`), so an error or an interrupt leaves no
+half-written file and the previous file intact; a target that is a symbolic link is
+refused, and CSV text a spreadsheet would run as a formula gets a leading quote. With
+one file per trial, a rerun skips the trials whose file is already there (a resumed
+export).
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from db.models.trial import SAMPLE_COLUMNS, Trial
 from db.samples import SAMPLE_SCHEMA, SampleReader
 from study.errors import StudyInputError
 from study.protocol.design import StudyDesign
+from study.protocol.export_files import AtomicFile, escape_array, refuse_symlink
 
 SAMPLE_EXPORT_COLUMNS = ("participant", "task", "condition", "trial", "seq", *SAMPLE_COLUMNS)
 _KEY_FIELDS = [
@@ -166,11 +170,12 @@ def _check_names(what: str, given: Iterable[str], known: tuple[str, ...]) -> Non
 
 
 class _StagedFile:
-    """An incremental CSV or Parquet writer to `.NAME.partial`, renamed to NAME on commit."""
+    """An incremental CSV or Parquet writer into an `AtomicFile`, renamed to NAME on commit."""
 
     def __init__(self, path: Path, fmt: str) -> None:
         self.path = path
-        self.tmp = path.with_name(f".{path.name}.partial")
+        self._out = AtomicFile(path)
+        self.tmp = self._out.tmp
         self.fmt = fmt
         self.rows = 0
         self._row_group_rows = ROW_GROUP_ROWS
@@ -180,26 +185,30 @@ class _StagedFile:
             # Dictionary encoding only for the text columns: tried on every float column
             # (pyarrow's default) it took 80 % of the writing time and gave a larger file.
             self._writer: pq.ParquetWriter | pa_csv.CSVWriter = pq.ParquetWriter(
-                self.tmp,
+                self._out.file,
                 SAMPLE_EXPORT_SCHEMA,
                 compression="snappy",
                 use_dictionary=["participant", "task", "condition", "branch"],
             )
         else:
             # The header as pandas wrote it (unquoted); values quoted where pyarrow needs.
-            with open(self.tmp, "wb") as f:
-                f.write((",".join(SAMPLE_EXPORT_SCHEMA.names) + "\n").encode())
-            self._file = open(self.tmp, "ab")  # noqa: SIM115 (closed in close())
+            self._out.file.write((",".join(SAMPLE_EXPORT_SCHEMA.names) + "\n").encode())
             self._writer = pa_csv.CSVWriter(
-                self._file,
+                self._out.file,
                 SAMPLE_EXPORT_SCHEMA,
                 write_options=pa_csv.WriteOptions(include_header=False),
             )
+        self._closed = False
 
     def write(self, batch: pa.RecordBatch) -> None:
         self.rows += batch.num_rows
         if self.fmt == "csv":
-            self._writer.write_batch(batch)
+            # text a spreadsheet would run gets a leading quote (export_files)
+            self._writer.write_batch(
+                pa.RecordBatch.from_arrays(
+                    [escape_array(c) for c in batch.columns], schema=batch.schema
+                )
+            )
             return
         # Parquet: one row group per ROW_GROUP_ROWS samples, not one per (small) batch.
         self._pending.append(batch)
@@ -216,20 +225,19 @@ class _StagedFile:
     def commit(self) -> Path:
         self._flush()
         self._close()
-        self.tmp.replace(self.path)
-        return self.path
+        return self._out.commit()
 
     def abort(self) -> None:
         self._pending = []
         try:
             self._close()
         finally:
-            self.tmp.unlink(missing_ok=True)
+            self._out.abort()
 
     def _close(self) -> None:
-        self._writer.close()
-        if self.fmt == "csv":
-            self._file.close()
+        if not self._closed:
+            self._closed = True
+            self._writer.close()
 
 
 def _keyed(trial: ExportTrial, batch: pa.RecordBatch) -> pa.RecordBatch:
@@ -304,6 +312,8 @@ def write_samples_per_trial(
     whole: a rerun after an interruption skips it and writes the rest.
     """
     folder.mkdir(parents=True, exist_ok=True)
+    for trial in trials:  # a link anywhere refuses the export before a file is written
+        refuse_symlink(folder / f"{trial.file_stem}.{fmt}")
     written, skipped, rows = [], [], 0
     with SampleReader(engine, batch_rows=batch_rows) as reader:
         for done, trial in enumerate(trials, 1):

@@ -72,6 +72,20 @@ class CalibrationData:
                 f"calibration data {self.name}: signals {sorted(self.signals)} must include "
                 f"'t' and all have the {n} samples of the reference force"
             )
+        # an all-zero recording (issue 18) has nothing to fit: one line, not a traceback
+        y = np.asarray(self.y, float)
+        if n and float(np.ptp(y)) == 0.0:
+            raise TeleopInputError(
+                f"calibration data {self.name}: the reference force (or torque) is "
+                f"{float(y[0])!r} on every sample; expected a measured force that varies "
+                "(a recording that excites the model)"
+            )
+        inputs = {k: np.asarray(v, float) for k, v in self.signals.items() if k != "t"}
+        if inputs and all(float(np.ptp(v)) == 0.0 for v in inputs.values() if len(v)):
+            raise TeleopInputError(
+                f"calibration data {self.name}: every signal ({', '.join(sorted(inputs))}) "
+                "is constant; expected a recording that moves the axis"
+            )
 
     def __len__(self) -> int:
         return len(self.y)

@@ -45,9 +45,12 @@ from teleop_core.calibration.effects import DirectionAsymmetry, Signals, Stribec
 from teleop_core.calibration.models import BaseModel, CalibrationData
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.recording import RecordingError
+from teleop_core.recording_checks import check_time, numbers, read_cells
 
 RIGID_COLUMNS = ("t", "q", "u")
 """The rigid-axis recording contract: time [s], position [m or rad], force [N or N m]."""
+MIN_ROWS = 200
+"""Fewest samples of a rigid-axis recording."""
 CUTOFF_FRACTION = 1.0 / 40.0
 """Low-pass cutoff as a fraction of the sampling rate where none is given or fitted."""
 
@@ -184,16 +187,10 @@ def fit_cutoff(t: Float1D, q: Float1D, u: Float1D, columns, n_train: int) -> flo
 
 
 def read_numeric_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
-    """A CSV whose every column is numeric and finite, `t` strictly increasing; one line
-    naming the first problem otherwise."""
-    try:
-        frame = pd.read_csv(path, skipinitialspace=True)
-    except FileNotFoundError:
-        raise RecordingError(f"recording {path} does not exist; expected a CSV file") from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        first = (str(exc).strip().splitlines() or ["empty"])[0]
-        raise RecordingError(f"recording {path} is not a readable CSV file: {first}") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
+    """A CSV whose every column is numeric and finite, `t` strictly increasing at a
+    plausible rate (`teleop_core.recording_checks`); one line naming the first problem
+    otherwise."""
+    frame = read_cells(path, RecordingError)
     missing = [c for c in required if c not in frame.columns]
     if missing:
         raise RecordingError(
@@ -201,29 +198,15 @@ def read_numeric_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
             f"{', '.join(required)} (other numeric columns are extra channels), found "
             f"{', '.join(frame.columns)}"
         )
-    for column in frame.columns:
-        values = pd.to_numeric(frame[column], errors="coerce")
-        bad = np.flatnonzero(~np.isfinite(values.to_numpy(float)))
-        if len(bad):
-            raise RecordingError(
-                f"recording {path}, line {bad[0] + 2}, column {column}: "
-                f"{frame[column].iloc[bad[0]]!r}; expected a finite number"
-            )
-        frame[column] = values
-    _check_time(frame["t"].to_numpy(float), str(path))
-    return frame
+    out = pd.DataFrame(
+        {c: numbers(frame, c, f"recording {path}", RecordingError) for c in frame.columns}
+    )
+    _check_time(out["t"].to_numpy(float), str(path))
+    return out
 
 
 def _check_time(t: Float1D, name: str) -> None:
-    if len(t) < 200:
-        raise RecordingError(f"recording {name} has {len(t)} rows; expected at least 200")
-    steps = np.diff(t)
-    if np.any(steps <= 0):
-        k = int(np.flatnonzero(steps <= 0)[0])
-        raise RecordingError(
-            f"recording {name}: t = {t[k + 1]!r} at row {k + 2} does not increase; "
-            "expected strictly increasing time"
-        )
+    check_time(t, f"recording {name}", RecordingError, MIN_ROWS)
 
 
 _PRODUCT = re.compile(r"^\s*[A-Za-z_]\w*(\s*\*\s*[A-Za-z_]\w*)*\s*$")
@@ -276,7 +259,7 @@ def mat_to_frame(
         if name not in used and v.size == n and np.issubdtype(v.dtype, np.number):
             columns[name] = v.astype(float).ravel()
     frame = pd.DataFrame(columns)
-    if not np.all(np.isfinite(frame.to_numpy(float))):
-        raise RecordingError(f"{path}: non-finite values; expected finite numbers")
+    for name in frame.columns:  # the same cell checks as a CSV's
+        numbers(frame, name, f"recording {path}", RecordingError, "sample", first_row=1)
     _check_time(frame["t"].to_numpy(float), str(path))
     return frame

@@ -12,8 +12,9 @@ CSV with a header row and the columns
 | `alpha` | rad/s^2 | optional; derived from `omega` when absent     |
 
 Other columns are ignored. A file that breaks the contract (missing column, a cell that
-is not a finite number, time that does not increase, too few rows) is refused with one
-line naming the line or column, before anything is computed from it.
+is not a finite number or beyond any signal, time that does not increase, too few rows,
+an absurd sampling rate: `teleop_core.recording_checks`) is refused with one line
+naming the line and column, before anything is computed from it.
 
 `alpha` is derived causally (a backward difference of `omega` over `t`) so that the
 one-sample-at-a-time estimator and the batch estimator see the same acceleration.
@@ -31,6 +32,7 @@ import pandas as pd
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
+from teleop_core.recording_checks import check_time, numbers, read_cells
 
 REQUIRED_COLUMNS = ("t", "iq", "theta", "omega", "f_ref")
 OPTIONAL_COLUMNS = ("alpha",)
@@ -156,16 +158,7 @@ def read_checked_csv(
     calibration, issue 10) share these checks.
     """
     path = Path(path)
-    try:
-        frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
-    except FileNotFoundError:
-        raise RecordingError(f"recording {path} does not exist; expected a CSV file") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        first = str(exc).strip().splitlines()[0]
-        raise RecordingError(f"recording {path} is not a readable CSV file: {first}") from None
-    except pd.errors.EmptyDataError:
-        raise RecordingError(f"recording {path} is empty; expected a header row and data") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
+    frame = read_cells(path, RecordingError)
     missing = [c for c in required if c not in frame.columns]
     if missing:
         extra = f" ({', '.join(optional)} optional)" if optional else ""
@@ -174,30 +167,9 @@ def read_checked_csv(
             f"{', '.join(required)}{extra}, found {', '.join(frame.columns)}"
         )
     wanted = [*required, *[c for c in optional if c in frame.columns]]
-    values: dict[str, Float1D] = {}
-    for column in wanted:
-        numbers = pd.to_numeric(frame[column].str.strip(), errors="coerce").to_numpy(float)
-        bad = np.flatnonzero(~np.isfinite(numbers))
-        if bad.size:
-            row = int(bad[0])
-            raise RecordingError(
-                f"recording {path}, line {row + 2}, column {column!r}: "
-                f"{frame[column].iloc[row]!r} is not a finite number"
-            )
-        values[column] = numbers
-    if len(frame) < min_rows:
-        raise RecordingError(
-            f"recording {path} has {len(frame)} data rows; expected at least {min_rows}"
-        )
-    t = values["t"]
-    back = np.flatnonzero(np.diff(t) <= 0)
-    if back.size:
-        row = int(back[0]) + 1
-        raise RecordingError(
-            f"recording {path}, line {row + 2}, column 't': {float(t[row])!r} does not "
-            f"come after {float(t[row - 1])!r} on the line before; expected strictly "
-            "increasing times"
-        )
+    source = f"recording {path}"
+    values = {column: numbers(frame, column, source, RecordingError) for column in wanted}
+    check_time(values["t"], source, RecordingError, min_rows)
     return values
 
 

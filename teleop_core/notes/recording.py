@@ -22,6 +22,8 @@ import pandas as pd
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
+from teleop_core.recording_checks import check_time, read_cells
+from teleop_core.recording_checks import numbers as check_numbers
 
 MIN_ROWS = 200
 """Fewest rows: 0.2 s at 1 kHz, below which no 1 Hz content is measurable."""
@@ -79,30 +81,9 @@ class NotesRecording:
                 f"{source}: {what}; expected exactly one (x open-ended, f_ee clamped)"
             )
         columns = ["t", "f_des", has[0]]
-        numbers = {}
-        for column in columns:
-            raw = frame[column]
-            values = pd.to_numeric(raw.astype(str).str.strip(), errors="coerce").to_numpy(float)
-            bad = np.flatnonzero(~np.isfinite(values))
-            if bad.size:
-                row = int(bad[0])
-                raise NotesRecordingError(
-                    f"{source}, row {row + 2}, column {column!r}: {raw.iloc[row]!r} "
-                    "is not a finite number"
-                )
-            numbers[column] = values
-        if len(frame) < MIN_ROWS:
-            raise NotesRecordingError(
-                f"{source}: {len(frame)} data rows; expected at least {MIN_ROWS}"
-            )
+        numbers = {c: check_numbers(frame, c, source, NotesRecordingError, "row") for c in columns}
+        check_time(numbers["t"], source, NotesRecordingError, MIN_ROWS, "row")
         step = np.diff(numbers["t"])
-        bad = np.flatnonzero(step <= 0)
-        if bad.size:
-            row = int(bad[0]) + 1
-            raise NotesRecordingError(
-                f"{source}, row {row + 2}, column 't': {numbers['t'][row]!r} does not come "
-                "after the row before; expected strictly increasing times"
-            )
         median = float(np.median(step))
         bad = np.flatnonzero(np.abs(step - median) > UNIFORM_TOLERANCE * median)
         if bad.size:
@@ -118,13 +99,5 @@ class NotesRecording:
     def from_csv(cls, path: str | Path) -> NotesRecording:
         """Read and validate a CSV file; raise `NotesRecordingError` naming the problem."""
         path = Path(path)
-        try:
-            frame = pd.read_csv(path, dtype=str, keep_default_na=False)
-        except FileNotFoundError:
-            raise NotesRecordingError(f"recording {path} does not exist") from None
-        except pd.errors.EmptyDataError:
-            raise NotesRecordingError(f"recording {path} is empty; expected a header") from None
-        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            first = str(exc).strip().splitlines()[0]
-            raise NotesRecordingError(f"recording {path} is not a readable CSV: {first}") from None
+        frame = read_cells(path, NotesRecordingError)
         return cls.from_frame(frame, f"recording {path}")

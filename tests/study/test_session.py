@@ -218,3 +218,41 @@ def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) 
     assert abs(kept_s * 100 - trials[0][4]) <= 1  # the message matches what is stored (100 Hz)
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     assert sorted(t[2] for t in _trials(db)) == ["completed"] * 4 + ["interrupted"]
+
+
+def test_a_full_disk_after_a_completed_trial_is_one_line_and_keeps_that_trial(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`study run` as the lab runs it: the database fills up in the second trial (the
+    sample writer's 70th commit raises what SQLite raises then). One line, exit 2, saying
+    what was kept up to which trial time; the completed trial is intact."""
+    import sqlite3
+
+    from db import samples as sample_store
+
+    db = _study(tmp_path)
+    real = sample_store._write_rows
+    commits: list[int] = []  # rows of each commit that went through
+
+    def fills_up(conn, rows):  # type: ignore[no-untyped-def]
+        if len(commits) >= 69:
+            raise sqlite3.OperationalError("database or disk is full")
+        real(conn, rows)
+        commits.append(len(rows))
+
+    monkeypatch.setattr(sample_store, "_write_rows", fills_up)
+    capsys.readouterr()
+    assert main(["run", "--participant", "P001", "--db", db]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    trials = _trials(db)
+    assert [t[2] for t in trials] == ["completed", "running"]
+    assert trials[0][4] + trials[1][4] == sum(commits)  # every commit before the failure
+    kept_s = float(err[0].split("samples up to t = ")[1].split(" s")[0])
+    assert abs(kept_s * 100 + 1 - trials[1][4]) <= 1  # the line matches what is stored
+    assert "database or disk is full" in err[0] and "kept 1 trial(s) completed" in err[0]
+    monkeypatch.undo()
+    assert main(["run", "--participant", "P001", "--db", db]) == 0
+    after = _trials(db)
+    assert after[0] == trials[0]  # the completed trial untouched
+    assert sorted(t[2] for t in after) == ["completed"] * 4 + ["interrupted"]

@@ -1,0 +1,143 @@
+"""Export files that are safe to open in a spreadsheet and never half-written (issue 18).
+
+This module owns how `study export` puts a file on disk, so the rule lives in one place
+for the trials, TLX, codebook and samples files:
+
+- **Formula-like text is escaped, at export.** A text cell that starts with `=`, `+`,
+  `-`, `@`, a tab or a carriage return gets a single quote in front (OWASP, "CSV
+  Injection"), so a spreadsheet shows it as text instead of running it: a group named
+  `=HYPERLINK(...)` in the design is exported as `'=HYPERLINK(...)`. Numbers are left
+  alone: a float column is never text, and a text cell that is a plain decimal (`-0.5`)
+  is a number to a spreadsheet too, not a formula. Escaping at export rather than
+  refusing such names at entry also covers databases written before this rule and
+  names that come from a design file; `study import` removes the quote again
+  (`unescape_cell`), so an exported file imports back as it was. Parquet files keep
+  the text verbatim (no spreadsheet opens them).
+- **Replaced atomically.** A file is written under a temporary name in its own
+  directory (created exclusively, so never through a planted link), flushed to disk
+  (`fsync`), and renamed over the target with `os.replace`; an error or an interrupt
+  leaves the previous file as it was and no temporary file behind.
+- **Never through a symbolic link.** A target that is a symbolic link is refused with
+  one line naming it (`ExportTargetError`, exit status 2); the file the link points to
+  is not touched.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from pathlib import Path
+from typing import IO
+
+import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from study.errors import StudyInputError
+
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+"""First characters that make a spreadsheet read a cell as a formula (OWASP)."""
+_PLAIN_NUMBER = re.compile(r"^[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?$")
+_FORMULA_REGEX = "^[=+\\-@\t\r]"
+_ESCAPED = re.compile(r"^'[=+\-@\t\r]")
+
+
+class ExportTargetError(StudyInputError):
+    """An export target that must not be written (a symbolic link)."""
+
+
+def escape_cell(value: object) -> object:
+    """`value` with a leading single quote if it is text a spreadsheet would run.
+
+    >>> escape_cell('=HYPERLINK("http://x")'), escape_cell("-0.5"), escape_cell(-0.5)
+    ('\\'=HYPERLINK("http://x")', '-0.5', -0.5)
+    """
+    if isinstance(value, str) and value.startswith(FORMULA_START):
+        if not _PLAIN_NUMBER.match(value):
+            return "'" + value
+    return value
+
+
+def unescape_cell(value: str) -> str:
+    """Undo `escape_cell` on a cell read back from an exported file."""
+    return value[1:] if _ESCAPED.match(value) else value
+
+
+def escape_frame(frame: pd.DataFrame) -> pd.DataFrame:
+    """A copy of `frame` with every text cell passed through `escape_cell`."""
+    out = frame.copy()
+    for column in out.columns:
+        if out[column].dtype == object or pd.api.types.is_string_dtype(out[column]):
+            out[column] = out[column].map(escape_cell)
+    return out
+
+
+def escape_array(values: pa.Array) -> pa.Array:
+    """`escape_cell` over a pyarrow string array (numbers and nulls pass unchanged)."""
+    if not pa.types.is_string(values.type) and not pa.types.is_large_string(values.type):
+        return values
+    risky = pc.and_(
+        pc.match_substring_regex(values, _FORMULA_REGEX),
+        pc.invert(pc.match_substring_regex(values, _PLAIN_NUMBER.pattern)),
+    )
+    if not pc.any(risky).as_py():
+        return values
+    quoted = pc.binary_join_element_wise(pa.scalar("'", values.type), values, "")
+    return pc.if_else(risky, quoted, values)
+
+
+def refuse_symlink(path: Path) -> None:
+    """Raise `ExportTargetError` if `path` is a symbolic link (dangling or not)."""
+    if path.is_symlink():
+        raise ExportTargetError(
+            f"{path} is a symbolic link; expected a regular file or no file there "
+            "(an export never writes through a link)"
+        )
+
+
+class AtomicFile:
+    """A binary file written as a temporary sibling of `path`, renamed over it on commit.
+
+    `commit()` flushes it to disk and replaces `path` in one step; `abort()` removes it.
+    """
+
+    def __init__(self, path: Path) -> None:
+        refuse_symlink(path)
+        self.path = path
+        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".partial")
+        self.tmp = Path(name)
+        self.file: IO[bytes] = os.fdopen(fd, "wb")
+
+    def _finish(self) -> None:
+        if not self.file.closed:
+            self.file.flush()
+            os.fsync(self.file.fileno())
+            self.file.close()
+
+    def commit(self) -> Path:
+        self._finish()
+        refuse_symlink(self.path)  # made a link while we wrote: still not through it
+        os.replace(self.tmp, self.path)
+        _fsync_dir(self.path.parent)
+        return self.path
+
+    def abort(self) -> None:
+        try:
+            self.file.close()
+        finally:
+            self.tmp.unlink(missing_ok=True)
+
+
+def _fsync_dir(folder: Path) -> None:
+    """Make a rename durable (POSIX); a no-op where directories cannot be opened."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some file systems refuse fsync on a directory; the rename still happened
+    finally:
+        os.close(fd)
