@@ -6,6 +6,7 @@ test process (`_serial`); a unit itself is checked against `study run` on a data
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
@@ -329,3 +330,17 @@ def test_report_redraws_labelled_figures(notes_reference: bytes, tmp_path: Path,
     import json
 
     assert json.loads((out / "campaign.json").read_text())["data_source"] == "simulated"
+
+
+def test_bench_campaign_runs_both_clusters_and_reports_identical_results(tmp_path: Path) -> None:
+    out = tmp_path / "bench.json"
+    assert main(["bench", "campaign", "--replicates", "2", "--group-size", "3",
+                 "--json", str(out)]) == 0  # fmt: skip
+    report = json.loads(out.read_text())
+    assert [r["workers"] for r in report["runs"]] == [1, 2]
+    assert all(r["units"] == 2 and len(r["unit_seconds"]) == 2 for r in report["runs"])
+    assert report["identical_results"] is True
+    # the speed-up is the ratio of the two runs' throughputs, as reported
+    one, two = report["runs"]
+    assert report["speedup"] == pytest.approx(two["units_per_hour"] / one["units_per_hour"])
+    assert "simulated" in report["note"]
