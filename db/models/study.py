@@ -67,6 +67,11 @@ class Participant(Base):
     site: Mapped[str | None] = mapped_column(String(64))
     """Lab that enrolled the participant (multi-site studies)."""
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    withdrawn_at: Mapped[datetime | None]
+    """When the participant withdrew (kept, marked, left out of the analysis)."""
+    withdrawal_reason: Mapped[str | None] = mapped_column(Text)
+    note: Mapped[str | None] = mapped_column(Text)
+    """The experimenter's note on this participant (no personal data)."""
 
     study: Mapped[Study] = relationship(back_populates="participants")
     blocks: Mapped[list[ScheduleBlock]] = relationship(

@@ -82,6 +82,28 @@ def tlx_frame(engine: Engine) -> pd.DataFrame:
     return pd.DataFrame(out, columns=["participant", "group", "task", "condition", *TLX_MEASURES])
 
 
+def without_withdrawn(
+    engine: Engine, trials: pd.DataFrame, tlx: pd.DataFrame
+) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+    """The frames without withdrawn participants, and one exclusion note per task and
+    withdrawn participant who had data in it (their data stay in the database)."""
+    from study.protocol.withdrawal import withdrawn_participants
+
+    withdrawn = withdrawn_participants(engine)
+    if not withdrawn:
+        return trials, tlx, []
+    notes = []
+    for frame in (trials, tlx):
+        gone = frame[frame["participant"].isin(list(withdrawn))]
+        for task, code in gone[["task", "participant"]].drop_duplicates().itertuples(index=False):
+            note = f"{task}/all measures: excluded {code} (withdrawn: {withdrawn[code]})"
+            if note not in notes:
+                notes.append(note)
+    keep_trials = trials[~trials["participant"].isin(list(withdrawn))]
+    keep_tlx = tlx[~tlx["participant"].isin(list(withdrawn))]
+    return keep_trials.reset_index(drop=True), keep_tlx.reset_index(drop=True), notes
+
+
 def participant_means(trials: pd.DataFrame, tlx: pd.DataFrame) -> pd.DataFrame:
     """Long format: participant, group, task, condition, measure, value."""
     keys = ["participant", "group", "task", "condition"]

@@ -24,7 +24,7 @@ from db.models.trial import SAMPLE_COLUMNS, Sample, Trial
 from study.analysis.figcheck import FigureCheckError, check_figure
 from study.analysis.figures import LABELS as FIG12_LABELS
 from study.analysis.figures import fig12, label_source, save
-from study.analysis.frames import participant_means, tlx_frame, trial_frame
+from study.analysis.frames import participant_means, tlx_frame, trial_frame, without_withdrawn
 from study.analysis.source import DataSource, restrict
 from study.analysis.stats import compare_conditions
 from study.analysis.tlx_figure import tlx_profile
@@ -116,7 +116,7 @@ def draw_figures(
 ) -> list[DrawnFigure]:
     """Every figure of every task (or of `task`), each with the data-source note of the
     trials it draws."""
-    trials, tlx = trial_frame(engine), tlx_frame(engine)
+    trials, tlx, _ = without_withdrawn(engine, trial_frame(engine), tlx_frame(engine))
     if not len(trials):
         raise StudyInputError("the database holds no completed trials to draw")
     trials, tlx = restrict(trials, tlx, driver)

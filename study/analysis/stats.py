@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -340,10 +341,15 @@ def _missing_questionnaires(trials: pd.DataFrame, long: pd.DataFrame) -> list[st
 
 
 def analyze(
-    trials: pd.DataFrame, long: pd.DataFrame, ss_type: int = DEFAULT_SS_TYPE
+    trials: pd.DataFrame,
+    long: pd.DataFrame,
+    ss_type: int = DEFAULT_SS_TYPE,
+    withdrawn: Sequence[str] = (),
 ) -> Analysis:
+    """The analysis of `trials` and the participant means `long`; `withdrawn` are the
+    exclusion notes of participants already left out (`frames.without_withdrawn`)."""
     comparisons, excluded = compare_conditions(long)
-    excluded = _missing_questionnaires(trials, long) + excluded
+    excluded = [*withdrawn, *_missing_questionnaires(trials, long), *excluded]
     anova, anova_notes = mixed_anova(long, ss_type=ss_type)
     lmm, lmm_notes = mixed_model(trials, ("completion_time_s", "peak_proximal_force_n",
                                           "peak_distal_force_n"))  # fmt: skip

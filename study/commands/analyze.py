@@ -35,7 +35,7 @@ def analyze(
     Every output counts the trials by driver (simulated, keyboard, hardware, imported) and
     says so when any is simulated.
     """
-    from study.analysis.frames import participant_means, tlx_frame, trial_frame
+    from study.analysis.frames import participant_means, tlx_frame, trial_frame, without_withdrawn
     from study.analysis.report import write
     from study.analysis.source import restrict
     from study.analysis.stats import analyze as run_analysis
@@ -46,6 +46,7 @@ def analyze(
     engine = open_database(db_url, create=False)
     try:
         trials, tlx = trial_frame(engine), tlx_frame(engine)
+        trials, tlx, withdrawn = without_withdrawn(engine, trials, tlx)
     finally:
         engine.dispose()
     if task is not None:
@@ -59,7 +60,10 @@ def analyze(
     if not len(trials) and not len(tlx):
         raise StudyInputError("the database holds no completed trials or questionnaires to analyse")
     trials, tlx = restrict(trials, tlx, driver)
-    result = run_analysis(trials, participant_means(trials, tlx), ss_type=int(ss_type))
+    withdrawn = [n for n in withdrawn if task is None or n.startswith(f"{task}/")]
+    result = run_analysis(
+        trials, participant_means(trials, tlx), ss_type=int(ss_type), withdrawn=withdrawn
+    )
     written = write(result, out_dir, json_path)
     for path in written:
         click.echo(str(path))

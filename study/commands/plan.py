@@ -99,6 +99,40 @@ def participant_add(group: str, site: str | None, count: int, db_url: str | None
         engine.dispose()
 
 
+@participant.command("withdraw")
+@click.argument("code")
+@click.option("--reason", required=True, help="Why (kept in the audit log and the analysis).")
+@click.option("--actor", default=None, help="Who records it [default: $STUDY_ACTOR or user@host].")
+@db_option
+def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str | None) -> None:
+    """Withdraw a participant: kept and marked, no more sessions, left out of the analysis."""
+    from study.protocol.withdrawal import withdraw
+
+    engine = open_database(db_url, create=False)
+    try:
+        withdraw(engine, code, reason, actor)
+    finally:
+        engine.dispose()
+    click.echo(f"{code} withdrawn ({reason}); their data are kept and left out of the analysis")
+
+
+@participant.command("note")
+@click.argument("code")
+@click.argument("text")
+@click.option("--actor", default=None, help="Who records it [default: $STUDY_ACTOR or user@host].")
+@db_option
+def participant_note(code: str, text: str, actor: str | None, db_url: str | None) -> None:
+    """Set a participant's note (pseudonymous: no names or contact details)."""
+    from study.protocol.withdrawal import set_note
+
+    engine = open_database(db_url, create=False)
+    try:
+        set_note(engine, code, text, actor)
+    finally:
+        engine.dispose()
+    click.echo(f"{code}: note kept")
+
+
 @click.command("schedule", cls=StudyCommand)
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @db_option

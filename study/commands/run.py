@@ -127,7 +127,7 @@ def _run_all(db_url: str | None, jobs: int, pace: float | None, actor: str) -> N
 
     engine = open_database(db_url, create=False)
     try:
-        codes = [p["code"] for p in schedule(engine)["participants"]]
+        codes = [p["code"] for p in schedule(engine)["participants"] if not p["withdrawn"]]
     finally:
         engine.dispose()
     start = time.monotonic()

@@ -193,6 +193,8 @@ def schedule(engine: Engine) -> dict[str, Any]:
                     "trials_planned": planned,
                     "trials_completed": completed,
                     "blocks": blocks,
+                    "withdrawn": p.withdrawal_reason if p.withdrawn_at is not None else None,
+                    "note": p.note,
                 }
             )
         fill = {

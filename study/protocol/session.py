@@ -172,6 +172,11 @@ def run_session(
         study, _ = load_study(session)
         participant = find_participant(session, study, code)
         participant_id = participant.id
+        if participant.withdrawn_at is not None:
+            raise StudyInputError(
+                f"participant {code} withdrew ({participant.withdrawal_reason}); "
+                "expected a participant still in the study"
+            )
     with hold_lease(engine, participant_id, code, actor) as lease:
         # read the schedule and what is done only once no other session can change it
         with Session(engine) as session:

@@ -203,6 +203,9 @@ class StudyApp(SafeWorkers, App[None]):
     def on_participants_pane_added(self, _event: ParticipantsPane.Added) -> None:
         self.reload()
 
+    def on_participants_pane_withdrawn(self, _event: ParticipantsPane.Withdrawn) -> None:
+        self.reload()
+
     def on_tlx_pane_saved(self, _event: TlxPane.Saved) -> None:
         self.reload()
 

@@ -11,7 +11,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Vertical, VerticalScroll
 from textual.screen import ModalScreen
-from textual.widgets import Label, Static
+from textual.widgets import Input, Label, Static
 
 
 class Confirm(ModalScreen[bool]):
@@ -67,4 +67,34 @@ class TextScreen(ModalScreen[None]):
             yield Static(self.text, id="text", markup=False)
 
     def action_close(self) -> None:
+        self.dismiss(None)
+
+
+class ReasonScreen(ModalScreen[str | None]):
+    """A question answered with a line of text: Enter gives it (not empty), Esc cancels."""
+
+    DEFAULT_CSS = """
+    ReasonScreen { align: center middle; }
+    ReasonScreen #reason-box { width: 64; height: auto; border: thick $warning; padding: 1 2;
+                               background: $surface; }
+    ReasonScreen #reason-keys { color: $text-muted; }
+    """
+    BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]
+
+    def __init__(self, question: str) -> None:
+        super().__init__()
+        self.question = question
+
+    def compose(self) -> ComposeResult:
+        with Vertical(id="reason-box"):
+            yield Label(self.question, id="question")
+            yield Input(id="reason-text", placeholder="reason")
+            yield Label("Enter: record it    Esc: cancel", id="reason-keys")
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        if event.value.strip():
+            self.dismiss(event.value.strip())
+
+    def action_cancel(self) -> None:
         self.dismiss(None)

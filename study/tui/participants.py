@@ -33,7 +33,10 @@ class ParticipantsPane(SafeWorkers, Vertical):
     ParticipantsPane #group { width: 24; }
     ParticipantsPane #people { height: 1fr; }
     """
-    BINDINGS: ClassVar[list[BindingType]] = [Binding("a", "add", "Add participant")]
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("a", "add", "Add participant"),
+        Binding("w", "withdraw", "Withdraw"),
+    ]
 
     @dataclass
     class Added(Message):
@@ -41,6 +44,12 @@ class ParticipantsPane(SafeWorkers, Vertical):
 
         code: str
         group: str
+
+    @dataclass
+    class Withdrawn(Message):
+        """A participant was withdrawn."""
+
+        code: str
 
     def __init__(self, services: StudyServices, **kwargs: object) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
@@ -77,7 +86,8 @@ class ParticipantsPane(SafeWorkers, Vertical):
                 r["group"],
                 " -> ".join(r["condition_order"]),
                 f"{r['trials_completed']}/{r['trials_planned']}",
-                nxt.describe() if nxt else "done",
+                (f"withdrawn: {r['withdrawn']}" if r.get("withdrawn")
+                 else nxt.describe() if nxt else "done"),  # fmt: skip
                 key=r["code"],
             )
 
@@ -107,6 +117,34 @@ class ParticipantsPane(SafeWorkers, Vertical):
             return
         self._start_enrolment(str(group))
 
+    def action_withdraw(self) -> None:
+        """Withdraw the participant under the list's cursor, with a reason (audited)."""
+        table = self.query_one("#people", DataTable)
+        if table.row_count == 0:
+            return
+        code = str(table.get_row_at(table.cursor_row)[0])
+        from study.tui.confirm import ReasonScreen
+
+        def answered(reason: str | None) -> None:
+            if reason:
+                self._status(f"withdrawing {code}...")
+                self._withdraw(code, reason)
+
+        self.app.push_screen(
+            ReasonScreen(f"Withdraw {code}? Their data are kept and marked, no more sessions "
+                         "run, and the analysis leaves them out. Why?"), answered,
+        )  # fmt: skip
+
+    @work(thread=True, exclusive=True, group="withdraw", exit_on_error=False)
+    def _withdraw(self, code: str, reason: str) -> None:
+        try:
+            self.services.withdraw(code, reason)
+        except ValueError as exc:
+            self.app.call_from_thread(self._status, f"refused: {exc}")
+            return
+        self.app.call_from_thread(self._status, f"withdrew {code} ({reason})")
+        self.post_message(self.Withdrawn(code))  # the app reloads the roster
+
     def _start_enrolment(self, group: str) -> None:
         self.query_one("#add-status", Label).update(f"enrolling a {group}...")
         self._enrol(group)
@@ -121,7 +159,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.post_message(self.Added(code, group))
 
     def worker_failed(self, group: str, line: str) -> None:
-        self._status(f"not enrolled: {line}")
+        self._status(f"not enrolled: {line}" if group == "enrol" else f"not withdrawn: {line}")
         super().worker_failed(group, line)
 
     def _status(self, text: str) -> None:

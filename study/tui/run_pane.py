@@ -190,6 +190,8 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         self._next = nxt
         if code is None:
             text = "pick a participant, then s to start"
+        elif nxt is None and self.roster is not None and self.roster.withdrawn(code):
+            text = f"{code} withdrew ({self.roster.withdrawn(code)}): no more sessions"
         elif nxt is None:
             text = f"{code}: every scheduled trial is done"
         else:

@@ -62,9 +62,14 @@ class Roster:
     break_s: float = 120.0
     """The design's planned rest after each block."""
 
+    def withdrawn(self, code: str) -> str | None:
+        """The withdrawal reason of `code`, or None while they are in the study."""
+        row = next((r for r in self.participants if r["code"] == code), None)
+        return row.get("withdrawn") if row is not None else None
+
     def next_trial(self, code: str) -> NextTrial | None:
         row = next((r for r in self.participants if r["code"] == code), None)
-        if row is None:
+        if row is None or row.get("withdrawn"):
             return None
         remaining = row["trials_planned"] - row["trials_completed"]
         for b in row["blocks"]:
@@ -82,6 +87,7 @@ class Roster:
         return [
             (r["code"], b["task"], b["condition"])
             for r in self.participants
+            if not r.get("withdrawn")
             for b in r["blocks"]
             if b["completed"] >= b["planned"]
             and (r["code"], b["task"], b["condition"]) not in self.answered
@@ -135,6 +141,11 @@ class StudyServices:
             break_s=design.break_s,
         )
 
+    def withdraw(self, code: str, reason: str) -> None:
+        from study.protocol.withdrawal import withdraw
+
+        withdraw(self.engine, code, reason)
+
     def add_participant(self, group: str) -> str:
         from study.protocol.roster import add_participant
 
@@ -142,14 +153,21 @@ class StudyServices:
 
     def analysis(self) -> Any:
         """`study.analysis.stats.Analysis` of everything stored."""
-        from study.analysis.frames import participant_means, tlx_frame, trial_frame
+        from study.analysis.frames import (
+            participant_means,
+            tlx_frame,
+            trial_frame,
+            without_withdrawn,
+        )
         from study.analysis.stats import analyze
         from study.errors import StudyInputError
 
-        trials, tlx = trial_frame(self.engine), tlx_frame(self.engine)
+        trials, tlx, withdrawn = without_withdrawn(
+            self.engine, trial_frame(self.engine), tlx_frame(self.engine)
+        )
         if not len(trials) and not len(tlx):
             raise StudyInputError("the database holds no completed trials or questionnaires yet")
-        return analyze(trials, participant_means(trials, tlx))
+        return analyze(trials, participant_means(trials, tlx), withdrawn=withdrawn)
 
     def export_figures(
         self, folder: Path, formats: tuple[str, ...] = ("pdf", "svg", "png")

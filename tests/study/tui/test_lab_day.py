@@ -151,3 +151,37 @@ async def test_typed_answers_survive_switching_blocks_and_quitting_asks(make_tes
         await pilot.press("n")
         await pilot.pause()
         assert app.is_running
+
+
+async def test_withdrawing_from_the_list_asks_why_and_marks_the_row(
+    make_test_app, study_engine: Engine
+) -> None:
+    from textual.widgets import DataTable
+
+    from study.tui.confirm import ReasonScreen
+
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f2")
+        table = app.query_one("#people", DataTable)
+        table.focus()
+        table.move_cursor(row=1)  # P002
+        await pilot.press("w")
+        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+        await pilot.press("escape")  # cancelled: nothing recorded
+        await pilot.pause()
+        await pilot.press("w")
+        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+        await pilot.press(*"ended early", "enter")
+        await wait_for(pilot, lambda: table.get_row("P002")[4] == "withdrawn: ended early", 30)
+        # the run screen says so instead of offering the next trial
+        await pilot.press("f3")
+        app.query_one("#run-pane").select_participant("P002")
+        await pilot.pause()
+        assert "P002 withdrew (ended early): no more sessions" in str(
+            app.query_one("#next").render())  # fmt: skip
+    with Session(study_engine) as session:
+        p = session.scalars(select(Participant).where(Participant.code == "P002")).one()
+        p1 = session.scalars(select(Participant).where(Participant.code == "P001")).one()
+    assert p.withdrawal_reason == "ended early" and p1.withdrawn_at is None

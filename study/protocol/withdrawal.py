@@ -1,0 +1,75 @@
+"""Withdrawing a participant, and a note per participant (issue 19).
+
+A participant who withdraws is kept, not deleted: their trials, samples and
+questionnaires stay in the database and in every export, the participant is marked
+(`withdrawn_at`, `withdrawal_reason`), no further session runs for them, and the analysis
+leaves them out and lists them with the reason among its exclusions. Each change is an
+audit row with its actor and reason. A note is free text for the experimenter (no
+personal data: the codes are the only identity the database holds).
+"""
+
+from __future__ import annotations
+
+from sqlalchemy import Engine, select
+from sqlalchemy.orm import Session
+
+from db.base import utcnow
+from db.models.audit import AuditEntry
+from db.models.study import Participant
+from study.errors import StudyInputError
+from study.protocol.actor import current_actor
+from study.protocol.roster import find_participant, load_study
+
+MAX_TEXT_CHARS = 500
+
+
+def _check_text(what: str, text: str) -> str:
+    value = " ".join(text.split())
+    if not value or len(value) > MAX_TEXT_CHARS:
+        raise StudyInputError(
+            f"{what} {text!r}; expected 1-{MAX_TEXT_CHARS} characters of text"
+        )
+    return value
+
+
+def withdraw(engine: Engine, code: str, reason: str, actor: str | None = None) -> None:
+    """Mark `code` withdrawn with `reason`; one-line errors for an unknown or withdrawn one."""
+    reason = _check_text("withdrawal reason", reason)
+    who = current_actor(actor)
+    with Session(engine) as session, session.begin():
+        study, _ = load_study(session)
+        p = find_participant(session, study, code)
+        if p.withdrawn_at is not None:
+            raise StudyInputError(
+                f"participant {code} withdrew on {p.withdrawn_at:%Y-%m-%d} "
+                f"({p.withdrawal_reason}); expected an enrolled participant"
+            )
+        p.withdrawn_at = utcnow()
+        p.withdrawal_reason = reason
+        session.add(AuditEntry(entity="participant", entity_id=p.id, field="status",
+                               old_value="enrolled", new_value="withdrawn", reason=reason,
+                               actor=who))  # fmt: skip
+
+
+def set_note(engine: Engine, code: str, note: str, actor: str | None = None) -> None:
+    """Replace `code`'s note (the old one goes into the audit log)."""
+    note = _check_text("note", note)
+    who = current_actor(actor)
+    with Session(engine) as session, session.begin():
+        study, _ = load_study(session)
+        p = find_participant(session, study, code)
+        session.add(AuditEntry(entity="participant", entity_id=p.id, field="note",
+                               old_value=p.note, new_value=note, reason="note edited",
+                               actor=who))  # fmt: skip
+        p.note = note
+
+
+def withdrawn_participants(engine: Engine) -> dict[str, str]:
+    """Code -> withdrawal reason, for every withdrawn participant."""
+    with Session(engine) as session:
+        rows = session.execute(
+            select(Participant.code, Participant.withdrawal_reason).where(
+                Participant.withdrawn_at.is_not(None)
+            )
+        ).all()
+    return {code: reason or "" for code, reason in rows}
