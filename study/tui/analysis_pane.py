@@ -158,9 +158,17 @@ class AnalysisPane(SafeWorkers, Vertical):
     @on(Select.Changed, "#measure")
     def _measure(self, event: Select.Changed) -> None:
         event.stop()
-        if self.result is not None and event.value is not Select.NULL:
+        self._draw_chart()
+
+    def on_resize(self) -> None:
+        """The chart's bars are drawn to the width: redrawn when the terminal changes."""
+        self._draw_chart()
+
+    def _draw_chart(self) -> None:
+        measure = self.query_one("#measure", Select).value
+        if self.result is not None and measure is not Select.NULL:
             width = max(self.content_size.width - 24, 10)
-            chart = bar_chart(self.result.comparisons, str(event.value), width)
+            chart = bar_chart(self.result.comparisons, str(measure), width)
             self.query_one("#chart", Static).update(chart)
 
     def action_export(self) -> None:

@@ -72,6 +72,9 @@ class StudyApp(SafeWorkers, App[None]):
     CSS = """
     TabbedContent { height: 1fr; }
     TabPane { padding: 0 1; }
+    /* focus that reads in both themes (the default was one grey step on the dark one) */
+    Input:focus, Select:focus > SelectCurrent, DataTable:focus, Button:focus,
+    PairChoice:focus { background-tint: $accent 35%; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("ctrl+q", "quit", "Quit", priority=True),

@@ -169,7 +169,7 @@ class PhantomView(Widget):
     """
 
     DEFAULT_CSS = """
-    PhantomView { width: 1fr; height: 1fr; min-height: 6; }
+    PhantomView { width: 1fr; height: 1fr; min-height: 6; background: $surface; }
     """
 
     def __init__(self, anatomy: ArchAnatomy | None = None, **kwargs: object) -> None:
@@ -374,7 +374,7 @@ class NotesView(Widget):
     """The NOTES scope's depth and roll (`notes_scene`), redrawn whole at each frame."""
 
     DEFAULT_CSS = """
-    NotesView { width: 1fr; height: 1fr; min-height: 8; }
+    NotesView { width: 1fr; height: 1fr; min-height: 8; background: $surface; }
     """
 
     def __init__(self, **kwargs: object) -> None:

@@ -174,6 +174,8 @@ class TlxPane(SafeWorkers, VerticalScroll):
         self._set_blocks(code)
         self.query_one("#tlx-block", Select).value = f"{task}/{condition}"
         self._load(code, task, condition)
+        # the first rating takes the keys at once (it took three Tabs to reach)
+        self.query_one(f"#rating-{TLX_SUBSCALES[0]}", Input).focus()
 
     def _set_blocks(self, code: str) -> None:
         if code == self._blocks_code:  # already shown (open_block, then Select.Changed)

@@ -185,3 +185,32 @@ async def test_withdrawing_from_the_list_asks_why_and_marks_the_row(
         p = session.scalars(select(Participant).where(Participant.code == "P002")).one()
         p1 = session.scalars(select(Participant).where(Participant.code == "P001")).one()
     assert p.withdrawal_reason == "ended early" and p1.withdrawn_at is None
+
+
+async def test_the_chart_follows_a_resize_and_the_form_opens_on_its_first_rating(
+    make_test_app, study_engine: Engine
+) -> None:
+    from tests.study.tui.test_screens import _store_trials
+
+    _store_trials(study_engine)
+    app = make_test_app()
+    async with app.run_test(size=(120, 30)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f5", "r")
+        pane = app.query_one("#analysis-pane")
+        await wait_for(pilot, lambda: pane.result is not None)
+        chart = app.query_one("#chart", Static)
+        await wait_for(pilot, lambda: "novice" in str(chart.render()), 10)
+
+        def longest() -> int:
+            return max(line.count("█") for line in str(chart.render()).splitlines())
+
+        wide = longest()
+        await pilot.resize_terminal(80, 24)
+        await wait_for(pilot, lambda: longest() < wide, 10)
+        # the longest bar fills the new width (content width - 24 columns of labels)
+        assert longest() == max(pane.content_size.width - 24, 10)
+        # a block's questionnaire opens with the first rating focused
+        app.query_one("#tlx-pane").open_block("P001", "lcca", "VO")
+        await pilot.pause()
+        assert app.focused is app.query_one("#rating-mental", Input)
