@@ -63,8 +63,8 @@ def _rating(name: str):
 )
 @click.option(
     "--reason",
-    help="Why a stored questionnaire is being edited (required for an edit; kept in the "
-    "audit log).",
+    help="Why a stored questionnaire is being edited, or why a block with no completed "
+    "trial gets one (required for both; kept in the audit log).",
 )
 @actor_option
 @db_option

@@ -21,13 +21,14 @@ import zlib
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from sqlalchemy import Engine, select
+from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
 from db.base import utcnow
 from db.models.audit import AuditEntry
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
+from db.models.trial import Trial
 from study.errors import StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.roster import find_participant, load_study
@@ -129,7 +130,9 @@ def store_tlx(
 ) -> tuple[TlxResponse, bool]:
     """Store (or edit) the questionnaire of one block; return it and whether it was new.
 
-    An edit needs a `reason`; `actor` defaults to `current_actor()`.
+    An edit needs a `reason`, and so does a questionnaire for a block with no completed
+    trial yet (issue 19: the lab confirms why; the reason goes to the audit log);
+    `actor` defaults to `current_actor()`.
     """
     ratings = check_ratings(ratings)
     who = current_actor(actor)
@@ -158,6 +161,18 @@ def store_tlx(
         ).first()
         values: dict[str, Any] = {**ratings, **{f"w_{s}": weights[s] for s in TLX_SUBSCALES}}
         if existing is None:
+            ran = session.scalar(
+                select(func.count()).select_from(Trial).where(
+                    Trial.participant_id == participant.id, Trial.task == task,
+                    Trial.condition == condition, Trial.status == "completed",
+                )
+            )  # fmt: skip
+            if not ran and not reason:
+                raise StudyInputError(
+                    f"{code} {task}/{condition} has no completed trial yet; a questionnaire "
+                    "for a block that has not run needs a reason (--reason TEXT), kept in "
+                    "the audit log"
+                )
             response = TlxResponse(
                 participant_id=participant.id,
                 task=task,
@@ -167,6 +182,12 @@ def store_tlx(
             )
             session.add(response)
             session.flush()
+            if not ran:  # stored before its block ran: why, and by whom
+                session.add(AuditEntry(entity="tlx_response", entity_id=response.id,
+                                       field="stored_before_block_ran", old_value=None,
+                                       new_value="0 completed trials", reason=reason,
+                                       actor=who))  # fmt: skip
+                session.flush()
             session.expunge(response)
             return response, True
         if not reason:

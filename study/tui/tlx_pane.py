@@ -152,8 +152,9 @@ class TlxPane(SafeWorkers, VerticalScroll):
         for k in range(15):
             yield PairChoice(k + 1, ("", ""), id=f"pair-{k}")
         with Horizontal(classes="row"):
-            yield Label("Reason for an edit ")
-            yield Input(id="reason", placeholder="(edits only)", compact=True)
+            yield Label("Reason ")
+            yield Input(id="reason", placeholder="for an edit, or a block not run yet",
+                        compact=True)  # fmt: skip
         yield Button("Save (ctrl+s)", id="save", compact=True)
         yield Static("", id="tlx-status")
         yield Static("", id="audit")

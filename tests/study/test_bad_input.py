@@ -75,6 +75,8 @@ def init(toml: bytes, expect: str, id: str) -> Case:
 ENTER = ["tlx", "enter", "--participant", "P001", "--task", "lcca", "--condition", "VO",
          "--mental=70", "--physical=20", "--temporal=50", "--performance=30", "--effort=60",
          "--frustration=40"]  # fmt: skip
+ENTER_UNRUN = [*ENTER, "--reason", "paper form, block not run"]
+"""ENTER for a block with no trial yet: that needs a reason too (issue 19)."""
 
 CASES = [
     # 5: tracebacks
@@ -83,7 +85,7 @@ CASES = [
     Case("tlx for a block that has one", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
          "P001/lcca/VO already has a questionnaire",
          {"t.csv": trials("P001,novice,lcca,HV,1,31.5,0.81,0.42,true"), "x.csv": tlx(TLX_ROW)},
-         [ENTER]),  # fmt: skip
+         [ENTER_UNRUN]),  # fmt: skip
     imp(b"", "t.csv is empty", "empty csv"),
     imp(trials(), "t.csv has a header but no rows", "header only"),
     Case("rating inf", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
@@ -146,7 +148,8 @@ CASES = [
                       "/dev/no-such-port"], "--port /dev/no-such-port: cannot open"),  # fmt: skip
     # 9: an edit needs a reason
     Case("tlx edit without reason", [*ENTER[:12], "--effort=65", *ENTER[13:]], "needs a reason",
-         before=[ENTER]),  # fmt: skip
+         before=[ENTER_UNRUN]),  # fmt: skip
+    Case("tlx for a block not run, no reason", ENTER, "has no completed trial yet"),
     Case("actor too long", [*ENTER, "--actor", "a" * 65], "--actor 'aaaa"),
 ]
 

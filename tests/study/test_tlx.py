@@ -86,7 +86,10 @@ def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
         p = add_participant(engine, "novice")
         pairs = pair_order(1, p.code)
         chosen = [a for a, _ in pairs]
-        stored, new = store_tlx(engine, p.code, "lcca", "HV", RATINGS, chosen)
+        with pytest.raises(StudyInputError, match="has no completed trial yet"):
+            store_tlx(engine, p.code, "lcca", "HV", RATINGS, chosen)
+        stored, new = store_tlx(engine, p.code, "lcca", "HV", RATINGS, chosen,
+                                reason="paper form before the block")  # fmt: skip
         assert new and sum(getattr(stored, f"w_{s}") for s in RATINGS) == 15
         edited, new = store_tlx(
             engine, p.code, "lcca", "HV", {**RATINGS, "effort": 65}, reason="typo"
@@ -95,7 +98,8 @@ def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
         with Session(engine) as s:
             audit = s.scalars(select(AuditEntry).where(AuditEntry.entity == "tlx_response")).all()
         assert [(a.field, a.old_value, a.new_value, a.reason) for a in audit] == [
-            ("effort", "60", "65", "typo")
+            ("stored_before_block_ran", None, "0 completed trials", "paper form before the block"),
+            ("effort", "60", "65", "typo"),
         ]
         with pytest.raises(StudyInputError, match="no lcca/XX block"):
             store_tlx(engine, p.code, "lcca", "XX", RATINGS)

@@ -81,3 +81,23 @@ async def wait_for(pilot, condition: Callable[[], bool], timeout_s: float = 60.0
 
 async def loaded(pilot) -> None:
     await wait_for(pilot, lambda: pilot.app.ready and pilot.app.roster is not None)
+
+
+def complete_block(engine: Engine, code: str, task: str, condition: str) -> None:
+    """One completed (simulated) trial in `code`'s `task`/`condition` block, so that the
+    block has run and its questionnaire can be stored without a reason."""
+    from sqlalchemy import select
+    from sqlalchemy.orm import Session
+
+    from db.models.study import Participant
+    from db.models.trial import Trial
+
+    with Session(engine) as session, session.begin():
+        p = session.scalars(select(Participant).where(Participant.code == code)).one()
+        block = next(b for b in p.blocks if (b.task, b.condition) == (task, condition))
+        session.add(Trial(
+            participant_id=p.id, block_id=block.id, task=task, condition=condition,
+            block_index=block.block_index, trial_index=0, status="completed",
+            completion_time_s=30.0, peak_proximal_force_n=0.5, peak_distal_force_n=0.2,
+            success=True, wall_contacts=0, driver="simulated",
+        ))  # fmt: skip

@@ -22,7 +22,7 @@ from db.models.study import Participant
 from study.protocol.tlx import load_tlx
 from study.tui.db_errors import plain_line
 from study.tui.tlx_pane import PairChoice
-from tests.study.tui.conftest import loaded, wait_for
+from tests.study.tui.conftest import complete_block, loaded, wait_for
 from tests.study.tui.test_screens import RATINGS, _open_form, _type_ratings
 
 @contextmanager
@@ -103,6 +103,7 @@ async def test_enrolling_while_another_program_holds_the_lock_says_so(
 async def test_a_questionnaire_refused_by_a_read_only_database_keeps_what_was_typed(
     make_test_app, study_engine: Engine
 ) -> None:
+    complete_block(study_engine, "P001", "lcca", "VO")
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
         pane = await _open_form(pilot)

@@ -21,7 +21,7 @@ from study.protocol.roster import add_participant
 from study.protocol.tlx import load_tlx, store_tlx
 from study.tui.services import calibrate_recording
 from study.tui.tlx_pane import PairChoice, TlxPane
-from tests.study.tui.conftest import loaded, wait_for
+from tests.study.tui.conftest import complete_block, loaded, wait_for
 
 pytestmark = pytest.mark.asyncio
 
@@ -91,6 +91,7 @@ RATINGS = {"mental": "55", "physical": "10", "temporal": "40", "performance": "2
 
 
 async def test_tlx_entered_on_the_form_is_stored(make_test_app, study_engine) -> None:
+    complete_block(study_engine, "P001", "lcca", "VO")
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
         pane = await _open_form(pilot)
@@ -140,6 +141,7 @@ async def test_editing_a_stored_tlx_needs_a_reason_and_is_audited(
     make_test_app,
     study_engine,
 ) -> None:
+    complete_block(study_engine, "P001", "lcca", "VO")
     store_tlx(study_engine, "P001", "lcca", "VO", {s: int(v) for s, v in RATINGS.items()})
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
@@ -308,3 +310,24 @@ async def test_calibration_screen_runs_the_loop_on_a_recording(make_test_app, tm
     assert {"hysteresis", "direction_asymmetry"} <= shown
     assert pane.report["rmse_after"] < pane.report["rmse_before"]
     assert summary.startswith("held-out RMSE") and summary.endswith("% lower)")
+
+
+async def test_a_questionnaire_for_a_block_not_run_needs_a_reason(
+    make_test_app, study_engine
+) -> None:
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _open_form(pilot, "P002", "lcca/HV")  # P002 has run nothing
+        await _type_ratings(pilot, RATINGS)
+        await pilot.press("ctrl+s")
+        await wait_for(pilot, lambda: pane.status.startswith("refused"), 30)
+        assert "P002 lcca/HV has no completed trial yet" in pane.status
+        assert load_tlx(study_engine, "P002", "lcca", "HV") is None
+        app.query_one("#reason", Input).value = "paper form, session cut short"
+        await pilot.press("ctrl+s")
+        await wait_for(pilot, lambda: pane.status == "P002 lcca/HV: stored", 30)
+    with Session(study_engine) as session:
+        entry = session.scalars(
+            select(AuditEntry).where(AuditEntry.field == "stored_before_block_ran")
+        ).one()
+    assert entry.reason == "paper form, session cut short"
