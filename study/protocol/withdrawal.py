@@ -1,4 +1,4 @@
-"""Withdrawing a participant, and a note per participant (issue 19).
+"""Withdrawing a participant, a note per participant, the session checklist (issue 19).
 
 A participant who withdraws is kept, not deleted: their trials, samples and
 questionnaires stay in the database and in every export, the participant is marked
@@ -62,6 +62,21 @@ def set_note(engine: Engine, code: str, note: str, actor: str | None = None) -> 
                                old_value=p.note, new_value=note, reason="note edited",
                                actor=who))  # fmt: skip
         p.note = note
+
+
+CHECKLIST = "consent confirmed; device checked"
+
+
+def record_checklist(engine: Engine, code: str, actor: str | None = None) -> None:
+    """The operator confirmed the session checklist before `code`'s session: an audit row."""
+    who = current_actor(actor)
+    with Session(engine) as session, session.begin():
+        study, _ = load_study(session)
+        p = find_participant(session, study, code)
+        session.add(AuditEntry(entity="participant", entity_id=p.id, field="session_checklist",
+                               old_value=None, new_value=CHECKLIST,
+                               reason="confirmed before the session's first trial",
+                               actor=who))  # fmt: skip
 
 
 def withdrawn_participants(engine: Engine) -> dict[str, str]:

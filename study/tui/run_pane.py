@@ -116,6 +116,8 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         self._codes: list[str] = []
         self._redraws: deque[float] = deque(maxlen=50)
         self._next: NextTrial | None = None
+        self._checked: set[str] = set()
+        """Participants whose session checklist was confirmed in this app."""
         self._breaks: dict[str, float] = {}
         """Participant -> time.monotonic() when their last finished block ended."""
         self._ended_at: tuple[tuple[str, str, str], float] | None = None
@@ -256,6 +258,19 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
                         "next block now?"), answered,
             )  # fmt: skip
             return
+        if code not in self._checked:  # the session checklist, once per participant
+            from study.tui.confirm import Confirm
+
+            def confirmed(yes: bool | None) -> None:
+                if yes and self._next is nxt and self.run is None:
+                    self._checked.add(code)
+                    self._start(code, nxt, checklist=True)
+
+            self.app.push_screen(
+                Confirm(f"Session checklist for {code}: consent confirmed and the device "
+                        "checked? (recorded with the session)"), confirmed,
+            )  # fmt: skip
+            return
         self._start(code, nxt)
 
     def _tlx_due(self, code: str) -> tuple[str, str] | None:
@@ -270,7 +285,7 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             return 0.0
         return max(0.0, self.roster.break_s - (time.monotonic() - ended))
 
-    def _start(self, code: str, nxt: NextTrial) -> None:
+    def _start(self, code: str, nxt: NextTrial, checklist: bool = False) -> None:
         keyboard = TuiKeyboardDriver() if self.driver_kind == "keyboard" else None
         pace = 1.0 if keyboard is not None else self.pace
         self.run = TrialRun(
@@ -281,7 +296,7 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         self._show_task(nxt.task)
         self.query_one("#next", Label).update(f"{code} {nxt.describe()}: loading...")
         self.focus()
-        self._run_trial(self.run, (code, nxt.task, nxt.condition))
+        self._run_trial(self.run, (code, nxt.task, nxt.condition), checklist)
 
     def action_stop(self) -> None:
         """Stop the running trial, once the operator confirms (it is kept as interrupted)."""
@@ -349,8 +364,10 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             self.status = "idle"
 
     @work(thread=True, exclusive=True, group="trial", exit_on_error=False)
-    def _run_trial(self, run: TrialRun, block: tuple[str, str, str]) -> None:
+    def _run_trial(self, run: TrialRun, block: tuple[str, str, str], checklist: bool) -> None:
         try:
+            if checklist:
+                self.services.record_checklist(run.code)
             run.estimator = self.simulation.ready()
             self._run_loaded(run, block)
         finally:

@@ -141,6 +141,12 @@ class StudyServices:
             break_s=design.break_s,
         )
 
+    def record_checklist(self, code: str) -> None:
+        """The session checklist (consent confirmed, device checked) as an audit row."""
+        from study.protocol.withdrawal import record_checklist
+
+        record_checklist(self.engine, code)
+
     def withdraw(self, code: str, reason: str) -> None:
         from study.protocol.withdrawal import withdraw
 

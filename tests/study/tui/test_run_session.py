@@ -49,6 +49,10 @@ async def _start(pilot, code: str, *keys: str) -> RunPane:
     pane.select_participant(code)
     await pilot.pause()
     await pilot.press(*keys, "s")
+    # the session checklist, asked before a participant's first trial in the app
+    await wait_for(pilot, lambda: isinstance(pilot.app.screen, Confirm), 10)
+    assert "consent confirmed" in str(pilot.app.screen.query_one("#question").render())
+    await pilot.press("y")
     return pane
 
 
@@ -87,6 +91,11 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
         trial = session.scalars(select(Trial)).one()
         n = session.scalar(select(func.count()).select_from(Sample))
     assert (trial.status, trial.driver, trial.condition) == ("completed", "simulated", "VO")
+    with Session(study_engine) as session:
+        checklist = session.scalars(
+            select(AuditEntry).where(AuditEntry.field == "session_checklist")
+        ).one()
+    assert checklist.new_value == "consent confirmed; device checked"
     # one 100 Hz sample per 10 ms of the trial, as `study run` stores them
     assert n == round(trial.completion_time_s * 100) == trial.summary["samples"]
 
@@ -115,7 +124,7 @@ async def test_quitting_mid_trial_marks_it_interrupted_and_keeps_its_samples(
     # everything up to the last batch the view showed is stored (at 100 Hz)
     assert samples >= round(shown * 100)
     with Session(study_engine) as session:
-        entry = session.scalars(select(AuditEntry)).one()
+        entry = session.scalars(select(AuditEntry).where(AuditEntry.field == "status")).one()
     assert (entry.old_value, entry.new_value, entry.reason) == (
         "running", "interrupted", STOPPED_REASON
     )  # fmt: skip
