@@ -82,6 +82,7 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         Binding("x", "stop", "Stop"),
         Binding("d", "driver", "Driver"),
         Binding("p", "pace", "Pace"),
+        Binding("n", "next_participant", "Next participant", show=False),
         Binding("up", "dial_forward", "Dial +", show=False),
         Binding("down", "dial_back", "Dial -", show=False),
         Binding("right", "rotate_cw", "Rotate", show=False),
@@ -196,6 +197,9 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             text = f"{code} withdrew ({self.roster.withdrawn(code)}): no more sessions"
         elif nxt is None:
             text = f"{code}: every scheduled trial is done"
+            after = self.next_participant()
+            if after is not None:
+                text += f"; n: on to {after}"
         else:
             text = f"next: {code} {nxt.describe()} ({nxt.remaining} left)  s: start"
             left = self.break_left_s(code)
@@ -272,6 +276,25 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             )  # fmt: skip
             return
         self._start(code, nxt)
+
+    def next_participant(self) -> str | None:
+        """The first participant after the selected one (in code order, then from the
+        start) who still has trials to run and has not withdrawn."""
+        if self.roster is None:
+            return None
+        codes = [r["code"] for r in self.roster.participants]
+        start = codes.index(self.code) + 1 if self.code in codes else 0
+        for code in codes[start:] + codes[:start]:
+            if code != self.code and self.roster.next_trial(code) is not None:
+                return code
+        return None
+
+    def action_next_participant(self) -> None:
+        """A finished participant leads to the next one."""
+        if self.run is None and self.code is not None and self._next is None:
+            after = self.next_participant()
+            if after is not None:
+                self.select_participant(after)
 
     def _tlx_due(self, code: str) -> tuple[str, str] | None:
         """(task, condition) of `code`'s finished block still without its questionnaire."""

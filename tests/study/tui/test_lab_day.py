@@ -214,3 +214,26 @@ async def test_the_chart_follows_a_resize_and_the_form_opens_on_its_first_rating
         app.query_one("#tlx-pane").open_block("P001", "lcca", "VO")
         await pilot.pause()
         assert app.focused is app.query_one("#rating-mental", Input)
+
+
+async def test_a_finished_participant_leads_to_the_next_one(
+    make_test_app, study_engine: Engine
+) -> None:
+    from tests.study.tui.conftest import complete_block
+
+    for condition in ("VO", "HV"):  # P001's whole schedule: one trial per block
+        complete_block(study_engine, "P001", "lcca", condition)
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f3")
+        pane = app.query_one("#run-pane")
+        pane.select_participant("P001")
+        await pilot.pause()
+        label = app.query_one("#next")
+        assert str(label.render()) == "P001: every scheduled trial is done; n: on to P002"
+        pane.focus()
+        await pilot.press("n")
+        await pilot.pause()
+        assert pane.code == "P002"
+        assert str(label.render()).startswith("next: P002 lcca/")
