@@ -15,7 +15,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
-from textual.widgets import Button, DataTable, Label, Select
+from textual.widgets import Button, DataTable, Input, Label, Select
 
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import Roster, StudyServices
@@ -29,6 +29,8 @@ class ParticipantsPane(SafeWorkers, Vertical):
     DEFAULT_CSS = """
     ParticipantsPane { height: 1fr; }
     ParticipantsPane #add-row { height: auto; }
+    ParticipantsPane #filter-row { height: 1; }
+    ParticipantsPane #filter { width: 1fr; }
     ParticipantsPane #add-row Label { padding: 0 1; }
     ParticipantsPane #group { width: 24; }
     ParticipantsPane #people { height: 1fr; }
@@ -57,6 +59,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.last_message = ""
         self._groups: list[str] = []
         self._fill: dict[str, dict[str, int]] = {}
+        self._roster: Roster | None = None
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="add-row"):
@@ -64,11 +67,16 @@ class ParticipantsPane(SafeWorkers, Vertical):
             yield Select[str]([], id="group", compact=True, prompt="group")
             yield Button("Add (a)", id="add", compact=True)
             yield Label("", id="add-status")
+        with Horizontal(id="filter-row"):
+            yield Label("Find ")
+            yield Input(id="filter", placeholder="code, group or state (e.g. P01, expert, "
+                        "withdrawn, done)", compact=True)  # fmt: skip
         table = DataTable(id="people", cursor_type="row", zebra_stripes=True)
         table.add_columns("code", "group", "order", "progress", "next")
         yield table
 
     def show(self, roster: Roster) -> None:
+        self._roster = roster
         self._fill = roster.groups
         groups = list(roster.groups)
         if groups != self._groups:
@@ -77,19 +85,34 @@ class ParticipantsPane(SafeWorkers, Vertical):
             select.set_options([(g, g) for g in groups])
             if groups:
                 select.value = groups[0]
+        self._fill_table()
+
+    def _fill_table(self) -> None:
+        """The list, with only the rows that match the Find field (any column, any case)."""
+        roster = self._roster
+        if roster is None:
+            return
+        wanted = self.query_one("#filter", Input).value.strip().lower()
         table = self.query_one("#people", DataTable)
         table.clear()
         for r in roster.participants:
             nxt = roster.next_trial(r["code"])
-            table.add_row(
+            row = (
                 r["code"],
                 r["group"],
                 " -> ".join(r["condition_order"]),
                 f"{r['trials_completed']}/{r['trials_planned']}",
                 (f"withdrawn: {r['withdrawn']}" if r.get("withdrawn")
                  else nxt.describe() if nxt else "done"),  # fmt: skip
-                key=r["code"],
             )
+            if wanted and not any(wanted in str(cell).lower() for cell in row):
+                continue
+            table.add_row(*row, key=r["code"])
+
+    @on(Input.Changed, "#filter")
+    def _filter_changed(self, event: Input.Changed) -> None:
+        event.stop()
+        self._fill_table()
 
     @on(Button.Pressed, "#add")
     def _add_pressed(self, event: Button.Pressed) -> None:

@@ -237,3 +237,24 @@ async def test_a_finished_participant_leads_to_the_next_one(
         await pilot.pause()
         assert pane.code == "P002"
         assert str(label.render()).startswith("next: P002 lcca/")
+
+
+async def test_the_participant_list_can_be_searched(make_test_app, study_engine: Engine) -> None:
+    from textual.widgets import DataTable
+
+    add_participant(study_engine, "novice")
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f2")
+        table = app.query_one("#people", DataTable)
+        await wait_for(pilot, lambda: table.row_count == 3)
+        app.query_one("#filter", Input).focus()
+        await pilot.press(*"EXPERT")  # any case, any column
+        await wait_for(pilot, lambda: table.row_count == 1)
+        assert table.get_row_at(0)[1] == "expert"
+        await pilot.press(*["backspace"] * 6, *"p003")
+        await wait_for(pilot, lambda: table.row_count == 1)
+        assert table.get_row_at(0)[0] == "P003"
+        await pilot.press(*["backspace"] * 4)
+        await wait_for(pilot, lambda: table.row_count == 3)
