@@ -14,7 +14,9 @@ the first run after install does):
 - the sample writer (`db.samples.SampleWriter`, through `study bench db`'s path)
   against a plain `sqlite3` multi-row INSERT of the same rows into the same schema
   with the same settings (WAL, synchronous=FULL, a commit per 1,000 rows), measured in
-  the same run, alternately, as rows/s and their ratio.
+  the same run, alternately, as rows/s and their ratio; and against the same INSERT
+  with `PRAGMA foreign_keys=ON`, which every connection to a study database has (the
+  writer's rows pay a lookup of their trial each; the plain reference does not).
 
 This module imports only the standard library at its top: the run-screen probe
 imports it in the subprocess it times.
@@ -34,6 +36,7 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 from study.errors import StudyInputError
 
@@ -69,8 +72,13 @@ class WriterRatio:
     """`SampleWriter`, each run."""
     sqlite3_rows_per_s: list[float]
     """The plain sqlite3 multi-row INSERT, each run."""
+    sqlite3_foreign_keys_rows_per_s: list[float]
+    """The same with `PRAGMA foreign_keys=ON`, as the study database's connections have
+    (each sample's trial_id is then looked up in `trials`), each run."""
     ratio: float
-    """Median writer rows/s over median sqlite3 rows/s."""
+    """Median writer rows/s over median plain sqlite3 rows/s (the issue's target)."""
+    ratio_foreign_keys: float
+    """Median writer rows/s over median sqlite3 rows/s with foreign keys checked."""
     target_ratio: float = WRITER_TARGET_RATIO
 
 
@@ -131,7 +139,10 @@ def bench_analyze(db_url: str, tmp: Path, runs: int) -> Timing:
 
 
 def bench_run_screen(db_url: str, runs: int) -> Timing:
-    code = "import sys; from study.bench.startup import probe_run_screen; probe_run_screen(sys.argv[1])"
+    code = (
+        "import sys; from study.bench.startup import probe_run_screen; "
+        "probe_run_screen(sys.argv[1])"
+    )
 
     def once() -> float:
         proc = subprocess.run(
@@ -164,8 +175,8 @@ def probe_run_screen(db_url: str) -> None:
                 await pilot.pause(0.005)
             overview_at = app.started_at + app.overview_shown_s  # type: ignore[operator]
             app.action_tab("run")
-            pane = app.query_one("#run-pane")
-            while pane.simulation.estimator is None or pane.status != "idle":  # type: ignore[attr-defined]
+            pane: Any = app.query_one("#run-pane")
+            while pane.simulation.estimator is None or pane.status != "idle":
                 await pilot.pause(0.005)
             return time.monotonic() - overview_at
 
@@ -176,10 +187,13 @@ def probe_run_screen(db_url: str) -> None:
     print(json.dumps({"seconds": seconds}))
 
 
-def _reference_insert(path: Path, trial_id: int, columns: dict, names: tuple[str, ...]) -> float:
+def _reference_insert(
+    path: Path, trial_id: int, columns: dict, names: tuple[str, ...], foreign_keys: bool = False
+) -> float:
     """Seconds for a plain sqlite3 multi-row INSERT of `columns` (numpy arrays, as the
     writer is handed them) into `samples` of the SQLite file `path`: WAL,
-    synchronous=FULL, one statement and one commit per 1,000 rows, 14 columns."""
+    synchronous=FULL, one statement and one commit per 1,000 rows, 14 columns; foreign
+    keys checked if `foreign_keys`."""
     import itertools
 
     rows = len(columns["t_s"])
@@ -187,6 +201,7 @@ def _reference_insert(path: Path, trial_id: int, columns: dict, names: tuple[str
     try:
         conn.execute("PRAGMA journal_mode=WAL")
         conn.execute("PRAGMA synchronous=FULL")
+        conn.execute(f"PRAGMA foreign_keys={'ON' if foreign_keys else 'OFF'}")
         head = f"INSERT INTO samples ({', '.join(names)}) VALUES "
         one = "(" + ", ".join("?" * len(names)) + ")"
         full = head + ", ".join([one] * _REFERENCE_ROWS_PER_COMMIT)
@@ -224,16 +239,21 @@ def bench_writer(rows: int, runs: int, rate_hz: float = 1000.0) -> WriterRatio:
     names = ("trial_id", "seq", *SAMPLE_COLUMNS)
     columns = synthetic_columns(rows, rate_hz, seed=0)  # bench_sample_write's rows
     writer: list[float] = []
-    reference: list[float] = []
+    reference: dict[bool, list[float]] = {False: [], True: []}
     for _ in range(runs):
         writer.append(bench_sample_write(None, rows=rows, rate_hz=rate_hz).rows_per_s)
-        with scratch_database(None) as engine:
-            trial_id = scratch_trial(engine)
-            path = Path(engine.url.database)  # type: ignore[arg-type]
-            engine.dispose()
-            reference.append(rows / _reference_insert(path, trial_id, columns, names))
-    ratio = statistics.median(writer) / statistics.median(reference)
-    return WriterRatio(rows, writer, reference, ratio)
+        for foreign_keys, rates in reference.items():
+            with scratch_database(None) as engine:
+                trial_id = scratch_trial(engine)
+                path = Path(engine.url.database)  # type: ignore[arg-type]
+                engine.dispose()
+                seconds = _reference_insert(path, trial_id, columns, names, foreign_keys)
+                rates.append(rows / seconds)
+    w = statistics.median(writer)
+    return WriterRatio(
+        rows, writer, reference[False], reference[True],
+        w / statistics.median(reference[False]), w / statistics.median(reference[True]),
+    )  # fmt: skip
 
 
 def bench_startup(

@@ -51,4 +51,7 @@ def test_bench_startup_reports_every_figure_as_json(
     assert writer["ratio"] == pytest.approx(
         writer["writer_rows_per_s"][0] / writer["sqlite3_rows_per_s"][0]
     )
+    assert writer["ratio_foreign_keys"] == pytest.approx(
+        writer["writer_rows_per_s"][0] / writer["sqlite3_foreign_keys_rows_per_s"][0]
+    )
     assert "load average" in capsys.readouterr().out
