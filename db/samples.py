@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Mapping, Sequence
+from itertools import chain
 from types import TracebackType
 from typing import Any
 
@@ -91,7 +92,7 @@ class SampleWriter:
         self.next_seq = start_seq
         self.rows_committed = 0
         self.chunks_committed = 0
-        self._buffer: list[np.ndarray] = []
+        self._buffer: list[_Block] = []
         self._chunk_start_t: float | None = None
         self._last_t = -np.inf
         self._period_s = 0.0
@@ -114,16 +115,15 @@ class SampleWriter:
         if n == 0:
             return
         self._check_times(t)
-        block = np.empty((n, len(SAMPLE_COLUMNS)), dtype=object)
-        for k, name in enumerate(SAMPLE_COLUMNS):
+        given: list[list[Any] | None] = []
+        for name in SAMPLE_COLUMNS:
             col = columns.get(name)
-            if col is None:
-                block[:, k] = None
-            elif len(col) != n:
+            if col is not None and len(col) != n:
                 raise DbInputError(f"sample column {name!r} has {len(col)} values; expected {n}")
-            else:
-                # An object array stores Python floats/ints/str, which every driver binds.
-                block[:, k] = col
+            # .tolist() gives Python floats/ints/str, which every driver binds, in one C
+            # call per column instead of one object per value
+            given.append(None if col is None else np.asarray(col).tolist())
+        block = _Block(n, given)
         self._add_block(t, block)
 
     def _check_times(self, t: np.ndarray) -> None:
@@ -142,9 +142,9 @@ class SampleWriter:
             )
 
     def _buffered(self) -> int:
-        return sum(len(b) for b in self._buffer)
+        return sum(b.n for b in self._buffer)
 
-    def _add_block(self, t: np.ndarray, block: np.ndarray) -> None:
+    def _add_block(self, t: np.ndarray, block: _Block) -> None:
         before_t = self._last_t
         steps = np.diff(np.concatenate(([before_t], t)) if np.isfinite(before_t) else t)
         if (steps > 0).any():
@@ -175,12 +175,18 @@ class SampleWriter:
         if n == 0:
             self._buffer.clear()
             return
-        rows = np.empty((n, len(_ALL_COLUMNS)), dtype=object)
-        rows[:, 0] = self.trial_id
-        rows[:, 1] = range(self.next_seq, self.next_seq + n)
-        rows[:, 2:] = np.concatenate(self._buffer)
+        columns: list[Sequence[Any]] = [
+            [self.trial_id] * n,
+            range(self.next_seq, self.next_seq + n),
+        ]
+        for k in range(len(SAMPLE_COLUMNS)):
+            values: list[Any] = []
+            for b in self._buffer:
+                given = b.columns[k]
+                values += [None] * b.n if given is None else given
+            columns.append(values)
         with self.engine.begin() as conn:
-            _write_rows(conn, rows)
+            _write_rows(conn, columns, n)
         self.next_seq += n
         self.rows_committed += n
         self.chunks_committed += 1
@@ -209,19 +215,35 @@ class SampleWriter:
             self._buffer.clear()
 
 
-def _write_rows(conn: Connection, rows: np.ndarray) -> None:
+class _Block:
+    """Samples handed in one call, held as columns (a Python list per column, None for a
+    column not given) so that no object is built per row."""
+
+    __slots__ = ("columns", "n")
+
+    def __init__(self, n: int, columns: list[list[Any] | None]) -> None:
+        self.n = n
+        self.columns = columns
+
+    def __getitem__(self, rows: slice) -> _Block:
+        lo, hi, _ = rows.indices(self.n)
+        return _Block(max(hi - lo, 0), [None if c is None else c[rows] for c in self.columns])
+
+
+def _write_rows(conn: Connection, columns: list[Sequence[Any]], n: int) -> None:
+    """Insert `n` rows given as columns in `_ALL_COLUMNS` order."""
     cursor = conn.connection.cursor()
     try:
         if is_sqlite(conn):
-            for lo in range(0, len(rows), _ROWS_PER_STATEMENT):
-                part = rows[lo : lo + _ROWS_PER_STATEMENT]
-                full = len(part) == _ROWS_PER_STATEMENT
-                cursor.execute(
-                    _FULL_INSERT_SQL if full else _insert_sql(len(part)), part.ravel().tolist()
-                )
+            for lo in range(0, n, _ROWS_PER_STATEMENT):
+                hi = min(lo + _ROWS_PER_STATEMENT, n)
+                # row-major parameters straight from the columns: zip pairs them in C
+                params = list(chain.from_iterable(zip(*(c[lo:hi] for c in columns))))
+                full = hi - lo == _ROWS_PER_STATEMENT
+                cursor.execute(_FULL_INSERT_SQL if full else _insert_sql(hi - lo), params)
         else:
             with cursor.copy(_COPY_SQL) as copy:
-                for row in rows.tolist():
+                for row in zip(*columns):
                     copy.write_row(row)
     finally:
         cursor.close()

@@ -8,8 +8,10 @@
   correction 1 - 3 / (4 (2n) - 9)) or the Wilcoxon signed-rank test (effect size the
   matched-pairs rank-biserial correlation, Kerby 2014; exact or asymptotic p by R's
   `wilcox.test` rule, `wilcoxon_signed_rank`). Holm's correction runs across the
-  groups of one task x measure (pingouin's `multicomp`; statsmodels' `multipletests`
-  gives the same values but runs a garbage collection on every call, 0.2 s each).
+  groups of one task x measure (`holm`, pingouin's `multicomp(method="holm")` line for
+  line: importing pingouin for it cost 2.3 s of `study analyze`'s start, issue 21;
+  statsmodels' `multipletests` gives the same values but runs a garbage collection on
+  every call, 0.2 s each).
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
   pingouin's `mixed_anova` has Type II only, so both come from two statsmodels OLS fits
@@ -33,9 +35,9 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-import pingouin as pg
-import statsmodels.formula.api as smf
 from scipy import stats
+from statsmodels.regression.linear_model import OLS
+from statsmodels.regression.mixed_linear_model import MixedLM
 from statsmodels.stats.anova import anova_lm
 
 from study.analysis.source import DRIVERS, DataSource
@@ -118,6 +120,35 @@ def hedges_g_av(vo: np.ndarray, hv: np.ndarray) -> float:
         return float("nan")  # no spread: no standardised effect
     d_av = (np.mean(hv) - np.mean(vo)) / sd_av
     return float(d_av * (1 - 3 / (4 * (2 * n) - 9)))
+
+
+def holm(p: np.ndarray) -> np.ndarray:
+    """Holm's step-down adjusted p-values of one family; NaN stays NaN and is no member.
+
+    Parameters
+    ----------
+    p : Float1D
+        Unadjusted p-values, NaN for a test that could not be run.
+
+    Returns
+    -------
+    Float1D
+        Adjusted p-values, same order, at most 1: the running maximum of the sorted
+        finite p-values times m, m - 1, ..., 1 (pingouin's `multicomp(method="holm")`).
+
+    >>> holm(np.array([0.01, np.nan, 0.04, 0.03])).tolist()
+    [0.03, nan, 0.06, 0.06]
+    """
+    p = np.asarray(p, dtype=float)
+    valid = ~np.isnan(p)
+    adjusted = np.full(p.shape, np.nan)
+    finite = p[valid]
+    order = np.argsort(finite)
+    corrected = np.empty(finite.size)
+    # p_(i) (m - i + 1), then a running maximum so that adjusted p-values keep the order
+    corrected[order] = np.maximum.accumulate(finite[order] * np.arange(finite.size, 0, -1))
+    adjusted[valid] = np.clip(corrected, None, 1)
+    return adjusted
 
 
 def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
@@ -204,9 +235,7 @@ def compare_conditions(
     frame = pd.DataFrame(rows, columns=list(COMPARISON_COLUMNS))
     if len(frame):
         for _, idx in frame.groupby(["task", "measure"]).groups.items():
-            frame.loc[idx, "p_holm"] = pg.multicomp(frame.loc[idx, "p"].to_numpy(), method="holm")[
-                1
-            ]
+            frame.loc[idx, "p_holm"] = holm(frame.loc[idx, "p"].to_numpy())
     return frame, excluded
 
 
@@ -238,8 +267,8 @@ def _anova_rows(wide: pd.DataFrame, a: str, b: str, ss_type: int) -> list[dict[s
         "s": (wide[a] + wide[b]).to_numpy(float) / math.sqrt(2),
         "d": (wide[b] - wide[a]).to_numpy(float) / math.sqrt(2),
     })  # fmt: skip
-    between = anova_lm(smf.ols("s ~ C(group, Sum)", data).fit(), typ=3)
-    within = anova_lm(smf.ols("d ~ C(group, Sum)", data).fit(), typ=3)
+    between = anova_lm(OLS.from_formula("s ~ C(group, Sum)", data).fit(), typ=3)
+    within = anova_lm(OLS.from_formula("d ~ C(group, Sum)", data).fit(), typ=3)
     n = len(data)
     # Type II: SS(condition) = N dbar^2; Type III: the sum-coded intercept's SS
     ss_condition = n * data["d"].mean() ** 2 if ss_type == 2 else within.loc["Intercept", "sum_sq"]
@@ -306,7 +335,7 @@ def mixed_model(trials: pd.DataFrame, measures: tuple[str, ...]) -> tuple[pd.Dat
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 try:
-                    model = smf.mixedlm(
+                    model = MixedLM.from_formula(
                         "value ~ C(condition, Treatment('VO')) * C(group)",
                         data,
                         groups=data["participant"],

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from study.analysis.apa import p_text
 from study.analysis.methods import anova_method, comparison_method, lmm_method
 from study.analysis.stats import Analysis
 
@@ -67,12 +68,6 @@ TEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#
 
 def tex_escape(text: str) -> str:
     return "".join(TEX_SPECIAL.get(c, c) for c in text)
-
-
-def p_text(p: float | None) -> str:
-    if p is None or not math.isfinite(p):
-        return "n/a"
-    return "< .001" if p < 0.001 else f"{p:.3f}".lstrip("0")
 
 
 def _num(x: float | None, digits: int = 3) -> str:

@@ -73,7 +73,7 @@ def scratch_database(db: str | None) -> Iterator[Engine]:
         admin.dispose()
 
 
-def _scratch_trial(engine: Engine) -> int:
+def scratch_trial(engine: Engine) -> int:
     with make_session_factory(engine).begin() as session:
         study = Study(name="bench", design_toml="", design={}, seed=0)
         participant = Participant(study=study, code="P001", group="bench", condition_order=[])
@@ -91,7 +91,7 @@ def _scratch_trial(engine: Engine) -> int:
         return trial.id
 
 
-def _synthetic_columns(rows: int, rate_hz: float, seed: int) -> dict[str, np.ndarray]:
+def synthetic_columns(rows: int, rate_hz: float, seed: int) -> dict[str, np.ndarray]:
     rng = np.random.default_rng(seed)
     t = np.arange(rows) / rate_hz
     return {
@@ -117,8 +117,8 @@ def bench_sample_write(
 ) -> WriteBenchResult:
     """Write `rows` samples of one trial and time the writing (set-up excluded)."""
     with scratch_database(db) as engine:
-        trial_id = _scratch_trial(engine)
-        columns = _synthetic_columns(rows, rate_hz, seed)
+        trial_id = scratch_trial(engine)
+        columns = synthetic_columns(rows, rate_hz, seed)
         per_second = max(1, int(rate_hz))
         start = time.perf_counter()
         with SampleWriter(engine, trial_id, chunk_s=chunk_s) as writer:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import statistics
 from dataclasses import replace
 from pathlib import Path
 
@@ -299,6 +300,47 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
         f"the app's own part (make_app to overview, headless) "
         f"{', '.join(f'{s:.2f}' for s in result.app_seconds)} s"
     )
+    if json_path is not None:
+        json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
+
+
+@bench.command("startup")
+@click.option("--runs", type=click.IntRange(min=1), default=5, show_default=True,
+              help="Fresh processes per figure (after one warm-up each); the median counts.")
+@click.option("--db", "db_url", metavar="URL", default=None,
+              help="Study database for `study analyze` and the run screen, e.g. made by "
+              "`study demo` [default: a quick 6-participant demo study built first].")
+@click.option("--rows", type=click.IntRange(min=1), default=1_000_000, show_default=True,
+              help="Samples written by the writer and by plain sqlite3, each run.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+def bench_startup(db_url: str | None, runs: int, rows: int, json_path: Path | None) -> None:
+    """From a cold process (issue 21): simulate, the run screen, analyze, the writer."""
+    from study.bench.startup import bench_startup as run_bench
+
+    if json_path is not None:
+        _check_json_folder(json_path)
+    with Console(stderr=True).status("startup") as status:
+        result = run_bench(runs, db_url, rows, progress=status.update)
+
+    def line(name: str, t) -> str:  # type: ignore[no-untyped-def]
+        each = ", ".join(f"{s:.2f}" for s in t.seconds)
+        return f"{name}: {t.median_s:.2f} s (median of {runs}; {each}); target <= {t.target_s} s"
+
+    w = result.writer
+    trial = f"a {result.simulate_trial_s:.0f} s LCCA trial"
+    click.echo(line(f"study simulate, {trial}", result.simulate))
+    click.echo(line("run screen ready after the overview (headless)", result.run_screen))
+    click.echo(line(f"study analyze of {result.analyze_db}", result.analyze))
+    click.echo(
+        f"sample writer {statistics.median(w.writer_rows_per_s):,.0f} rows/s, plain sqlite3 "
+        f"{statistics.median(w.sqlite3_rows_per_s):,.0f} rows/s ({w.rows:,} rows): "
+        f"{w.ratio:.2f}x; target >= {w.target_ratio}x; against sqlite3 with foreign keys "
+        f"checked as the study database does "
+        f"({statistics.median(w.sqlite3_foreign_keys_rows_per_s):,.0f} rows/s) "
+        f"{w.ratio_foreign_keys:.2f}x"
+    )
+    load = ", ".join(f"{x:.2f}" for x in result.load_average)
+    click.echo(f"load average {load}")
     if json_path is not None:
         json_path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
 

@@ -22,7 +22,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import DataTable, Input, Label, Select, Static
 
-from study.analysis.tables import p_text
+from study.analysis.apa import p_text
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import StudyServices
 

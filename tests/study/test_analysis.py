@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +17,7 @@ from scipy import stats
 from study.analysis.stats import (
     compare_conditions,
     hedges_g_av,
+    holm,
     mixed_anova,
     mixed_model,
     wilcoxon_signed_rank,
@@ -94,6 +97,33 @@ def test_holm_across_groups_by_hand() -> None:
         running = max(running, min(1.0, p[k] * (3 - rank)))
         adjusted[k] = running
     assert np.allclose(result["p_holm"], adjusted)
+
+
+@pytest.mark.parametrize(
+    "p",
+    [
+        [0.01, 0.04, 0.03, 0.2],
+        [0.03, float("nan"), 0.03, 0.5, 0.001],  # a tie and a test that could not run
+        [float("nan"), float("nan")],
+        [0.9, 0.8],  # clipped at 1
+        [],
+    ],
+)
+def test_holm_equals_pingouin(p: list[float]) -> None:
+    # the reference: pingouin.multicomp(p, method="holm"), which the analysis used before
+    expected = pg.multicomp(np.array(p, dtype=float), method="holm")[1]
+    assert np.array_equal(holm(np.array(p, dtype=float)), expected, equal_nan=True)
+
+
+def test_study_analyze_imports_neither_pingouin_nor_plotting() -> None:
+    # a fresh process (issue 21): pingouin pulled in seaborn, matplotlib and xarray, 2.3 s
+    code = (
+        "import sys, study.commands.analyze, study.analysis.report, study.analysis.frames; "
+        "print(sorted(m for m in ('pingouin', 'matplotlib', 'seaborn', 'statsmodels.formula.api')"
+        " if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"
 
 
 def test_participants_missing_a_condition_are_excluded_and_said_so() -> None:

@@ -66,6 +66,22 @@ def test_the_overview_loads_neither_numpy_nor_the_other_screens(study_engine: En
     assert out.stdout.strip() == "[]"
 
 
+def test_the_later_screens_load_no_statistics() -> None:
+    # they are mounted before the run screen can prepare the simulation (issue 21):
+    # the analysis screen loads scipy.stats and statsmodels only when it analyses
+    code = (
+        "import sys; from study.tui.app import StudyApp; "
+        "from study.tui.analysis_pane import AnalysisPane; "
+        "from study.tui.calibration_pane import CalibrationPane; "
+        "from study.tui.participants import ParticipantsPane; "
+        "from study.tui.run_pane import RunPane; from study.tui.tlx_pane import TlxPane; "
+        "heavy = ('pandas', 'scipy', 'statsmodels', 'pingouin', 'matplotlib'); "
+        "print(sorted(m for m in sys.modules if m.startswith(heavy)))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
 def test_closing_the_terminal_mid_trial_marks_the_trial_interrupted(
     study_engine: Engine, tmp_path: Path
 ) -> None:
