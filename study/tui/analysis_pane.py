@@ -100,7 +100,8 @@ class AnalysisPane(SafeWorkers, Vertical):
             yield Label("Chart ")
             yield Select[str]([], id="measure", compact=True, prompt="measure")
             yield Label(" Figures to ")
-            yield Input(str(self.figures_dir), id="out-dir", compact=True)
+            # select_on_focus off: Tab into the field and a key no longer replaces the path
+            yield Input(str(self.figures_dir), id="out-dir", compact=True, select_on_focus=False)
         table = DataTable(id="comparisons", zebra_stripes=True, cursor_type="row")
         table.add_columns("measure", "group", "n", "VO", "HV", "test", "p (Holm)", "effect size")
         yield table

@@ -85,7 +85,8 @@ class CalibrationPane(SafeWorkers, Vertical):
     def compose(self) -> ComposeResult:
         with Horizontal(classes="row"):
             yield Label("Recording ")
-            yield Input(placeholder="path to RECORDING.csv", id="recording", compact=True)
+            yield Input(placeholder="path to RECORDING.csv", id="recording", compact=True,
+                        select_on_focus=False)  # fmt: skip
             yield Select[str](
                 [(m, m) for m in MODELS], id="model", value="follower", compact=True,
                 allow_blank=False,

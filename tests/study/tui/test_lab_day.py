@@ -258,3 +258,18 @@ async def test_the_participant_list_can_be_searched(make_test_app, study_engine:
         assert table.get_row_at(0)[0] == "P003"
         await pilot.press(*["backspace"] * 4)
         await wait_for(pilot, lambda: table.row_count == 3)
+
+
+async def test_tab_into_the_folder_field_and_a_key_does_not_replace_the_path(
+    make_test_app, tmp_path
+) -> None:
+    app = make_test_app(figures_dir=tmp_path / "figs")
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f5")
+        field = app.query_one("#out-dir", Input)
+        while app.focused is not field:
+            await pilot.press("tab")
+        await pilot.press("r")
+        assert field.value in (str(tmp_path / "figs"), str(tmp_path / "figs") + "r")
+        assert field.value != "r"
