@@ -234,11 +234,11 @@ def test_a_full_disk_after_a_completed_trial_is_one_line_and_keeps_that_trial(
     real = sample_store._write_rows
     commits: list[int] = []  # rows of each commit that went through
 
-    def fills_up(conn, rows):  # type: ignore[no-untyped-def]
+    def fills_up(conn, columns, n):  # type: ignore[no-untyped-def]
         if len(commits) >= 69:
             raise sqlite3.OperationalError("database or disk is full")
-        real(conn, rows)
-        commits.append(len(rows))
+        real(conn, columns, n)
+        commits.append(n)
 
     monkeypatch.setattr(sample_store, "_write_rows", fills_up)
     capsys.readouterr()
