@@ -5,6 +5,12 @@ ends `completed`, `interrupted` (the process died or the operator closed the app
 `aborted` (stopped on purpose). Repeating an interrupted trial adds a new row with
 `attempt + 1`; the interrupted record and its samples stay.
 
+A trial's summary measures are rows of `trial_measures` under the task's own names
+(`peak_proximal_force_n` for LCCA, `peak_force_demanded_n` for NOTES, whatever a new
+task declares, `study.protocol.tasks`); `completion_time_s` and `success`, which every
+task has, are columns of the trial. `Trial.measure_values` reads and writes them as a
+dict.
+
 Samples are one row per sample, keyed by (trial, sequence number), with SI columns.
 They are written by `db.samples.SampleWriter` in committed chunks; the ORM class here
 is for reading and for the schema, not for the write path.
@@ -23,7 +29,8 @@ from sqlalchemy import (
     String,
     UniqueConstraint,
 )
-from sqlalchemy.orm import Mapped, mapped_column, relationship
+from sqlalchemy.ext.associationproxy import AssociationProxy, association_proxy
+from sqlalchemy.orm import Mapped, attribute_keyed_dict, mapped_column, relationship
 
 from db.base import Base, utcnow
 
@@ -44,9 +51,6 @@ class Trial(Base):
         CheckConstraint("trial_index >= 0", name="trial_index_nonneg"),
         CheckConstraint("attempt >= 1", name="attempt_positive"),
         CheckConstraint("completion_time_s >= 0", name="completion_time_nonneg"),
-        CheckConstraint("peak_proximal_force_n >= 0", name="peak_proximal_nonneg"),
-        CheckConstraint("peak_distal_force_n >= 0", name="peak_distal_nonneg"),
-        CheckConstraint("wall_contacts >= 0", name="wall_contacts_nonneg"),
     )
 
     id: Mapped[int] = mapped_column(primary_key=True)
@@ -68,15 +72,35 @@ class Trial(Base):
     started_at: Mapped[datetime | None]
     ended_at: Mapped[datetime | None]
     completion_time_s: Mapped[float | None]
-    peak_proximal_force_n: Mapped[float | None]
-    peak_distal_force_n: Mapped[float | None]
     success: Mapped[bool | None]
-    wall_contacts: Mapped[int | None]
     summary: Mapped[dict[str, Any] | None]
-    """Further task-specific summary measures (SI units in the key names)."""
+    """Further values of the trial (seed, sample count, what a simulated participant
+    noticed), SI units in the key names; the measures are in `measures`."""
 
     participant: Mapped[Participant] = relationship(back_populates="trials")
     block: Mapped[ScheduleBlock | None] = relationship(back_populates="trials")
+    measures: Mapped[dict[str, TrialMeasure]] = relationship(
+        collection_class=attribute_keyed_dict("name"),
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+        lazy="selectin",
+    )
+    measure_values: AssociationProxy[dict[str, float]] = association_proxy(
+        "measures", "value", creator=lambda name, value: TrialMeasure(name=name, value=value)
+    )
+    """The trial's measures by name (read and write)."""
+
+
+class TrialMeasure(Base):
+    """One summary measure of a trial, under its task's name for it."""
+
+    __tablename__ = "trial_measures"
+
+    trial_id: Mapped[int] = mapped_column(
+        ForeignKey("trials.id", ondelete="CASCADE"), primary_key=True, autoincrement=False
+    )
+    name: Mapped[str] = mapped_column(String(64), primary_key=True)
+    value: Mapped[float]
 
 
 SAMPLE_COLUMNS = (

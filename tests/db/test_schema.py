@@ -136,10 +136,10 @@ def test_trial_status_must_be_known(engine: Engine) -> None:
         conn.execute(insert(Trial), _trial(pid, status="done", trial_index=99))
 
 
-def test_negative_peak_force_is_refused(engine: Engine) -> None:
+def test_negative_completion_time_is_refused(engine: Engine) -> None:
     pid = _participant(engine)
-    with pytest.raises(IntegrityError, match="peak_proximal_nonneg"), engine.begin() as conn:
-        conn.execute(insert(Trial), _trial(pid, peak_proximal_force_n=-0.1))
+    with pytest.raises(IntegrityError, match="completion_time_nonneg"), engine.begin() as conn:
+        conn.execute(insert(Trial), _trial(pid, completion_time_s=-0.1))
 
 
 def test_repeated_trial_needs_a_new_attempt_number(engine: Engine) -> None:
