@@ -123,7 +123,7 @@ def _progress() -> Progress:
 
 
 def _run_all(db_url: str | None, jobs: int, pace: float | None, actor: str) -> None:
-    from study.protocol.session import run_participants
+    from study.protocol.parallel import run_participants
 
     engine = open_database(db_url, create=False)
     try:

@@ -20,8 +20,8 @@ from db.migrate import open_database
 from db.models.study import Participant
 from db.models.trial import Trial
 from study.protocol.design import TEMPLATE, parse_design
+from study.protocol.parallel import run_participants
 from study.protocol.roster import add_participant, create_study
-from study.protocol.session import run_participants
 from study.protocol.simulated_tlx import block_ratings, pairwise_choices, person_offsets
 from study.protocol.tlx import store_tlx
 
@@ -36,7 +36,8 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
             trials = pd.DataFrame(
                 [
                     (t.participant_id, t.task, t.condition, t.completion_time_s,
-                     t.wall_contacts, t.success, (t.summary or {}).get("obstacles_seen", 0))
+                     t.measure_values.get("wall_contacts", 0), t.success,
+                     (t.summary or {}).get("obstacles_seen", 0))
                     for t in session.scalars(
                         select(Trial).where(Trial.status == "completed", Trial.practice.is_(False))
                     )

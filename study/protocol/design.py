@@ -22,7 +22,6 @@ from typing import Any
 
 from study.errors import StudyInputError
 
-KNOWN_TASKS = ("lcca", "notes")
 KNOWN_CONDITIONS = ("VO", "HV")
 MAX_TRIAL_S = 180.0
 """A trial ends unsuccessfully after this long (the session runner's limit), s."""
@@ -54,6 +53,9 @@ counterbalancing = "AB/BA"     # two conditions; with more use "latin-square"
 break_s = 120                  # planned rest after each block, seconds
 code_prefix = "P"              # participant codes: P001, P002, ...
 
+[haptic_gain_n_m_per_n]        # the dial's torque per newton of estimated force (LCCA)
+HV = 0.02                      # the paper's gain (seed 000); VO renders nothing (0)
+
 [groups]                       # experience groups and how many participants each
 outsider = 20                  # engineering outsiders
 novice = 8                     # novice doctors
@@ -71,7 +73,10 @@ _KEYS = {
     "break_s": (int, float),
     "code_prefix": str,
     "groups": dict,
+    "haptic_gain_n_m_per_n": dict,
 }
+MAX_HAPTIC_GAIN_N_M_PER_N = 1.0
+"""Far above any usable gain (the paper's is 0.02 N m/N; the dial saturates at 0.1 N m)."""
 
 
 @dataclass(frozen=True)
@@ -88,11 +93,19 @@ class StudyDesign:
     groups: dict[str, int] = field(
         default_factory=lambda: {"outsider": 20, "novice": 8, "expert": 8}
     )
+    haptic_gain_n_m_per_n: dict[str, float] = field(default_factory=dict)
+    """Per condition, the haptic dial's gain (tasks with a dial); a condition not listed
+    uses the paper's (`teleop_core.master.params.HapticParams`); VO renders none."""
+
+    def haptic_gain_for(self, condition: str) -> float | None:
+        """The dial's gain in `condition`; None: the task's default (the paper's)."""
+        return self.haptic_gain_n_m_per_n.get(condition)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         data["conditions"] = list(self.conditions)
         data["tasks"] = list(self.tasks)
+        data["haptic_gain_n_m_per_n"] = dict(self.haptic_gain_n_m_per_n)
         return data
 
     @classmethod
@@ -138,9 +151,12 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         raise StudyInputError(
             f"{source}: conditions = {list(conditions)}; expected at least two, each once"
         )
+    from study.protocol.tasks import task_names
+
+    known = task_names()
     for t in tasks:
-        if t not in KNOWN_TASKS:
-            raise StudyInputError(f"{source}: task {t!r}; expected one of {', '.join(KNOWN_TASKS)}")
+        if t not in known:
+            raise StudyInputError(f"{source}: task {t!r}; expected one of {', '.join(known)}")
     if not tasks or len(set(tasks)) != len(tasks):
         raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
     if not groups:
@@ -179,6 +195,7 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
             f"{source}: code_prefix = {prefix!r}; expected 1-4 capital letters A-Z, e.g. P"
         )
     scheme = data.get("counterbalancing", d.counterbalancing)
+    gains = _haptic_gains(data.get("haptic_gain_n_m_per_n", {}), conditions, source)
     design = StudyDesign(
         name=data.get("name", d.name),
         seed=data.get("seed", d.seed),
@@ -190,9 +207,32 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         break_s=float(data.get("break_s", d.break_s)),
         code_prefix=prefix,
         groups=groups,
+        haptic_gain_n_m_per_n=gains,
     )
     condition_orders(conditions, scheme, source)  # refuses a scheme that does not fit
     return design
+
+
+def _haptic_gains(
+    table: dict[str, Any], conditions: tuple[str, ...], source: str
+) -> dict[str, float]:
+    gains = {}
+    for condition, gain in table.items():
+        key = f"{source}: haptic_gain_n_m_per_n.{condition}"
+        if condition not in conditions:
+            raise StudyInputError(
+                f"{key} names no condition of the design; expected one of {', '.join(conditions)}"
+            )
+        if isinstance(gain, bool) or not isinstance(gain, int | float):
+            raise StudyInputError(f"{key} = {gain!r}; expected a number (N m/N)")
+        if condition == "VO" and gain != 0:
+            raise StudyInputError(f"{key} = {gain!r}; expected 0 (Visual-Only renders no force)")
+        if not (math.isfinite(gain) and 0 <= gain <= MAX_HAPTIC_GAIN_N_M_PER_N):
+            raise StudyInputError(
+                f"{key} = {gain!r}; expected 0 to {MAX_HAPTIC_GAIN_N_M_PER_N:g} N m/N"
+            )
+        gains[condition] = float(gain)
+    return gains
 
 
 def williams_square(n: int) -> list[list[int]]:

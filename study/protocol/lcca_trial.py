@@ -9,7 +9,6 @@ success, and wall contacts (distal force rising through `CONTACT_THRESHOLD_N`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -17,6 +16,7 @@ import pandas as pd
 
 from study.errors import StudyInputError
 from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
+from study.protocol.tasks import TrialResult
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.core import LoopConfig, TeleopLoop
 from teleop_core.loop.link import LinkParams
@@ -42,13 +42,6 @@ TRIAL_COLUMNS = {
     "dial_torque_n_m": "dial_torque_n_m",
 }
 """Loop sample column -> TRIAL.csv column: the one `proximal` column is the estimate."""
-
-
-@dataclass
-class TrialResult:
-    frame: pd.DataFrame
-    """TRIAL.csv's columns (see TRIAL_COLUMNS)."""
-    summary: dict[str, Any] = field(default_factory=dict)
 
 
 def condition_haptics(condition: str, haptic_gain: float | None = None) -> HapticParams:
@@ -91,11 +84,16 @@ def measures(frame: pd.DataFrame, success: bool) -> dict[str, Any]:
     return {
         "success": bool(success),
         "completion_time_s": float(frame["t_s"].iloc[-1]) if len(frame) else 0.0,
-        "peak_proximal_force_n": float(frame["proximal_force_n"].max()) if len(frame) else 0.0,
+        # the largest force resisting insertion (0 if the estimate never turned positive)
+        "peak_proximal_force_n": max(float(frame["proximal_force_n"].max()), 0.0)
+        if len(frame)
+        else 0.0,
         "peak_proximal_reference_force_n": float(frame["reference_force_n"].max())
         if len(frame)
         else 0.0,
-        "peak_distal_force_n": float(frame["distal_force_n"].max()) if len(frame) else 0.0,
+        "peak_distal_force_n": max(float(frame["distal_force_n"].max()), 0.0)
+        if len(frame)
+        else 0.0,
         "wall_contacts": wall_contacts(frame["distal_force_n"].to_numpy()),
     }
 

@@ -13,9 +13,8 @@ nothing physical does, so only the virtual tissue's demand rises).
 
 Summary (seed 001, IV): completion time, peak demanded and rendered force and torque,
 and the fraction of the time the demanded push exceeds the device's continuous force
-(the paper's surgeons: 23.57 %). The study database's columns hold the NOTES measures
-as: peak_proximal_force_n = peak demanded force (all tissue resistance on the scope),
-peak_distal_force_n = peak force of the fornix on the tip; the rest go in `summary`.
+(the paper's surgeons: 23.57 %). The study database stores them under these names
+(`study.protocol.tasks.notes`).
 """
 
 from __future__ import annotations
@@ -28,8 +27,9 @@ import numpy as np
 import pandas as pd
 
 from study.errors import StudyInputError
-from study.protocol.lcca_trial import CONDITIONS, TrialResult
+from study.protocol.lcca_trial import CONDITIONS
 from study.protocol.participants import ParticipantTraits
+from study.protocol.tasks import TrialResult
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
     GRIP_STIFFNESS_N_M_PER_RAD,

@@ -55,7 +55,7 @@ def run_all_jobs_2(url: str, codes: list[str]) -> None:
     """`study run --all --jobs 2` as its parent process runs it (`run_participants`),
     with the workers forked from this process instead of spawned (the same parent and
     parent-watch, without two interpreter starts per case)."""
-    import study.protocol.session as session
+    import study.protocol.parallel as session
 
     fork = multiprocessing.get_context("fork")
     shim = types.SimpleNamespace(get_context=lambda _method: fork)

@@ -1,0 +1,115 @@
+"""Sessions of many participants at once: `study run --all --jobs N`, `study demo`.
+
+Each worker process opens its own connection, loads the estimator once and runs whole
+sessions (`study.protocol.session.run_session`) one participant at a time; a worker
+ends when its parent dies (it watches the parent's pid), marking its running trial
+interrupted first.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import threading
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+
+from study.protocol.session import run_session
+
+_WORKER: dict[str, object] = {}
+PARENT_POLL_S = 0.5
+"""How often a `--jobs` worker checks that its parent is alive."""
+STOP_GRACE_S = 10.0
+"""How long a worker whose parent died may take to mark its trial and leave."""
+
+
+def _watch_parent(parent_pid: int, stop: threading.Event, idle: threading.Event) -> None:
+    """End this worker when its parent dies (issue 18: after `kill -9` of `study run
+    --all --jobs 2` the workers kept running and writing). The session stops at its next
+    step and marks its trial interrupted; a worker stuck longer exits hard, which leaves
+    a lease of a gone process that the next run takes over at once."""
+    while os.getppid() == parent_pid:
+        time.sleep(PARENT_POLL_S)
+    stop.set()
+    idle.wait(STOP_GRACE_S)
+    os._exit(1)
+
+
+def _worker_init(
+    db_url: str | None, parent_pid: int | None = None, actor: str | None = None
+) -> None:
+    from db.migrate import open_database
+    from study.protocol.default_estimator import load_estimator
+
+    _WORKER["engine"] = open_database(db_url, create=False)
+    _WORKER["estimator"] = load_estimator()
+    _WORKER["actor"] = actor
+    stop, idle = threading.Event(), threading.Event()
+    idle.set()
+    _WORKER["stop"], _WORKER["idle"] = stop, idle
+    if parent_pid is not None:
+        threading.Thread(
+            target=_watch_parent, args=(parent_pid, stop, idle), name="parent-watch", daemon=True
+        ).start()
+
+
+def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
+    idle: threading.Event = _WORKER["idle"]  # type: ignore[assignment]
+    idle.clear()
+    try:
+        done = run_session(
+            _WORKER["engine"],  # type: ignore[arg-type]
+            code,
+            "simulated",
+            _WORKER["estimator"],  # type: ignore[arg-type]
+            pace=pace,
+            actor=_WORKER["actor"],  # type: ignore[arg-type]
+            stop=_WORKER["stop"],  # type: ignore[arg-type]
+        )
+    finally:
+        idle.set()
+    return code, len(done)
+
+
+def run_participants(
+    db_url: str | None,
+    codes: list[str],
+    jobs: int,
+    pace: float | None = None,
+    actor: str | None = None,
+    on_busy: Callable[[str, str], None] | None = None,
+) -> Iterator[tuple[str, int]]:
+    """Run simulated sessions for `codes` in `jobs` processes; yield (code, trials) as each
+    finishes. Each process opens its own connection and loads the estimator once, and
+    ends when this process dies.
+
+    A participant whose session runs elsewhere (`SessionBusyError`) is skipped and
+    reported through `on_busy(code, message)` (raised when `on_busy` is None).
+    """
+    from study.protocol.lease import SessionBusyError
+
+    def busy(code: str, exc: SessionBusyError) -> tuple[str, int]:
+        if on_busy is None:
+            raise exc
+        on_busy(code, str(exc))
+        return code, 0
+
+    if jobs == 1:
+        _worker_init(db_url, actor=actor)
+        for code in codes:
+            try:
+                yield _worker_run(code, pace)
+            except SessionBusyError as exc:
+                yield busy(code, exc)
+        return
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(
+        jobs, mp_context=context, initializer=_worker_init, initargs=(db_url, os.getpid(), actor)
+    ) as pool:
+        futures = {pool.submit(_worker_run, code, pace): code for code in codes}
+        for future in as_completed(futures):
+            try:
+                yield future.result()
+            except SessionBusyError as exc:
+                yield busy(futures[future], exc)

@@ -1,0 +1,351 @@
+"""Tasks: what a trial is, in one place per task, and the registry that knows them.
+
+A task (the LCCA guidewire navigation, the NOTES endoscopy, or one a lab adds) is a
+`Task`: it builds the trial's closed loop and the simulated participant's driver, names
+its regions, its sample columns (with units, and which column of the `samples` table
+stores each), its summary measures (stored in `trial_measures` under their own names,
+exported and analysed under them), and what the live view and the figures draw. The
+session runner, `study simulate`, `study run`, the exports, the analysis and the TUI ask
+the registry (`get_task`, `task_names`); nothing outside a task's module compares task
+names.
+
+The built-in tasks are listed in `BUILTIN`; `register(task)` adds one (a test, a lab's
+own module), and installed packages may add theirs under the entry-point group
+`haptic_study.tasks` (each entry point names a `Task` instance). "Adding a task" in the
+README walks through it.
+
+This module imports nothing heavy (the TUI and `study` read designs before numpy loads):
+a task's module imports its loop and its numerics inside its methods.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
+
+from study.errors import StudyInputError
+
+if TYPE_CHECKING:
+    import numpy as np
+    import pandas as pd
+
+    from study.protocol.participants import ParticipantTraits
+    from teleop_core.loop.drivers import Driver
+
+BUILTIN = ("study.protocol.tasks.lcca", "study.protocol.tasks.notes")
+"""The modules of the tasks that come with the tool, each registering its `TASK`."""
+ENTRY_POINT_GROUP = "haptic_study.tasks"
+COMPLETION_TIME = "completion_time_s"
+"""Every task's first measure: seconds from the first sample to the trial's end."""
+
+
+@dataclass(frozen=True)
+class Measure:
+    """One summary measure of a trial: stored, exported and analysed by `name`."""
+
+    name: str
+    """With its unit in the name (`peak_tip_force_n`)."""
+    unit: str
+    label: str
+    """Axis label, without the unit (`peak tip force`)."""
+    description: str
+    """What it is (the codebook's text)."""
+    analysed: bool = True
+    """In the statistics and figures (else stored and exported only)."""
+    max_value: float | None = None
+    """Largest value an import accepts (a device's bound); None: no bound."""
+    integer: bool = False
+
+    @property
+    def axis_label(self) -> str:
+        return f"{self.label} ({self.unit})" if self.unit else self.label
+
+
+@dataclass(frozen=True)
+class SampleColumn:
+    """One column of the task's sample rows, in the loop's order."""
+
+    name: str
+    """The task's own name for it (TRIAL.csv, live view, figures)."""
+    stored_as: str | None
+    """The `samples` table column that stores it; None: not stored."""
+    unit: str
+    description: str
+
+
+@dataclass(frozen=True)
+class LiveTrace:
+    """A force the live view plots (and whose peak it shows when the trial ends)."""
+
+    column: str
+    """A `SampleColumn.name`."""
+    label: str
+    full_scale: float
+    """The gauge's full scale, in the column's unit."""
+    magnitude: bool = False
+    """Plot |value| (pushes and pulls alike)."""
+
+
+@dataclass
+class TrialResult:
+    """One headless simulated trial: its TRIAL.csv frame and its summary."""
+
+    frame: pd.DataFrame
+    """TRIAL.csv: the task's sample columns under its own names."""
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+class TrialLoop(Protocol):
+    """What the session runner needs of a task's closed loop."""
+
+    t_s: float
+    done: bool
+    success: bool
+
+    def start(self, driver: Driver) -> None: ...
+    def advance(self, duration_s: float) -> np.ndarray: ...
+
+
+class Task:
+    """One task of a study. Subclass, set the class attributes, implement the methods."""
+
+    name: ClassVar[str]
+    """The design's and the database's name for it (`lcca`)."""
+    title: ClassVar[str]
+    """For people: `LCCA guidewire navigation`."""
+    has_dial: ClassVar[bool] = False
+    """The haptic dial renders force in HV at a gain (`haptic_gain_n_m_per_n`)."""
+    default_haptic_gain_n_m_per_n: ClassVar[float | None] = None
+    has_link: ClassVar[bool] = False
+    """Master and follower talk over a link whose delay, jitter and loss can be set."""
+    regions: ClassVar[tuple[str, ...]]
+    """Where the tip can be; `samples.branch` stores the name, the loop the index."""
+    sample_columns: ClassVar[tuple[SampleColumn, ...]]
+    measures: ClassVar[tuple[Measure, ...]]
+    """The trial's summary measures after `completion_time_s` (see `all_measures`)."""
+    live_traces: ClassVar[tuple[LiveTrace, LiveTrace]]
+    live_peaks: ClassVar[tuple[LiveTrace, LiveTrace]]
+    """The two peaks reported when a trial ends (as stored measures)."""
+    live_scene: ClassVar[str] = "track"
+    """What the TUI draws beside the readout: `lcca` (the phantom), `notes` (the scope's
+    depth and roll) or `track` (the insertion along a bar, for any task)."""
+    key_hints: ClassVar[str] = "↑↓ dial ←→ rotate space let go e end"
+    track_length_m: ClassVar[float] = 0.5
+    """The `track` scene's full length of insertion, m."""
+    trace_names: ClassVar[dict[str, str]]
+    """TRIAL.csv force columns -> legend label, for the force-trace figure."""
+    sign_note: ClassVar[str] = ""
+    """The sign convention of the traced forces, under the figure."""
+    trace_measure: ClassVar[str] = ""
+    """The measure whose highest VO trial Fig. 9 draws (default: the last analysed one)."""
+    trial_figure: ClassVar[str] = "traces"
+    """How `study simulate --plot` draws one trial: `lcca` (the path in the phantom),
+    `notes` (depth, roll and forces) or `traces` (the live traces over time, any task)."""
+
+    # -- the trial --------------------------------------------------------------------
+
+    def session_context(self) -> Any:
+        """What the trials of one session share (built once per session), e.g. a
+        phantom; handed to `make_loop` and `simulated_driver`."""
+        return None
+
+    def make_loop(
+        self,
+        condition: str,
+        seed: int,
+        *,
+        haptic_gain_n_m_per_n: float | None = None,
+        estimator: Any = None,
+        context: Any = None,
+        link: Any = None,
+    ) -> TrialLoop:
+        """The closed loop of one trial (not started). `link`: the master-follower link's
+        delay, jitter and loss (`teleop_core.loop.link.LinkParams`) where the task has one."""
+        raise NotImplementedError
+
+    def simulated_driver(self, traits: ParticipantTraits, max_s: float, context: Any) -> Driver:
+        raise NotImplementedError
+
+    def trial_measures(
+        self, samples: np.ndarray, success: bool
+    ) -> tuple[dict[str, float], dict[str, Any]]:
+        """(the stored measures by name, further summary values) of one trial's samples
+        (the loop's rows); `completion_time_s` is added by the caller."""
+        raise NotImplementedError
+
+    def simulate(
+        self,
+        traits: ParticipantTraits,
+        condition: str,
+        seed: int,
+        max_s: float,
+        *,
+        haptic_gain_n_m_per_n: float | None = None,
+        estimator: Any = None,
+        link: Any = None,
+        context: Any = None,
+    ) -> TrialResult:
+        """One headless trial of the simulated participant `traits`, to its end or `max_s`."""
+        import numpy as np
+
+        context = self.session_context() if context is None else context
+        loop = self.make_loop(condition, seed, haptic_gain_n_m_per_n=haptic_gain_n_m_per_n,
+                              estimator=estimator, context=context, link=link)  # fmt: skip
+        driver = self.simulated_driver(traits, max_s, context)
+        loop.start(driver)
+        chunks = []
+        while loop.t_s < max_s - 1e-9 and not loop.done:
+            chunks.append(loop.advance(min(1.0, max_s - loop.t_s)))
+        samples = np.concatenate(chunks)
+        values, extras = self.trial_measures(samples, loop.success)
+        t = samples[:, self.column_index()[self.stored_name("t_s")]]
+        summary = {
+            "task": self.name, "group": traits.group, "condition": condition, "seed": seed,
+            "success": bool(loop.success), COMPLETION_TIME: float(t[-1]) if len(t) else 0.0,
+            **values, **extras, **self.driver_counts(driver), "participant": traits.to_dict(),
+        }  # fmt: skip
+        return TrialResult(self.trial_frame(samples), summary)
+
+    def summary_line(self, summary: Mapping[str, Any]) -> str:
+        """The measures of a simulated trial's summary, for one printed line."""
+        return ", ".join(
+            f"{m.label} {summary[m.name]:.3g}{' ' + m.unit if m.unit else ''}"
+            for m in self.measures
+            if m.name in summary
+        )
+
+    def driver_counts(self, driver: Driver) -> dict[str, int]:
+        """What a simulated participant noticed during the trial (kept in the summary)."""
+        return {}
+
+    def trial_frame(self, samples: np.ndarray) -> pd.DataFrame:
+        """TRIAL.csv: the samples under the task's own column names, regions by name."""
+        import numpy as np
+        import pandas as pd
+
+        frame = pd.DataFrame(samples, columns=[c.name for c in self.sample_columns])
+        region = self.region_column
+        codes = frame[region].to_numpy().astype(int)
+        frame[region] = np.asarray(self.regions, dtype=object)[codes]
+        return frame
+
+    def live_lines(self, values: Mapping[str, float]) -> list[str]:
+        """Readout lines under the live gauges, from the newest sample by column name."""
+        region = self.regions[int(values[self.region_column])]
+        return [
+            f"in {region}, inserted {values[self.stored_name('insertion_m')] * 1000:5.0f} mm",
+            f"rotation {values[self.stored_name('rotation_rad')]:+5.2f} rad",
+        ]
+
+    # -- derived ----------------------------------------------------------------------
+
+    @property
+    def all_measures(self) -> tuple[Measure, ...]:
+        return (
+            Measure(COMPLETION_TIME, "s", "completion time", "seconds to the trial's end"),
+            *self.measures,
+        )
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if not cls.__dict__.get("trace_measure") and "measures" in cls.__dict__:
+            analysed = [m.name for m in cls.measures if m.analysed]
+            cls.trace_measure = analysed[-1] if analysed else COMPLETION_TIME
+
+    @property
+    def analysed_measures(self) -> tuple[str, ...]:
+        return tuple(m.name for m in self.all_measures if m.analysed)
+
+    def stored_name(self, stored_as: str) -> str:
+        """The task's name of the sample column the `samples` table stores as `stored_as`."""
+        return next(c.name for c in self.sample_columns if c.stored_as == stored_as)
+
+    @property
+    def region_column(self) -> str:
+        """The sample column `samples.branch` stores: the region's index in `regions`."""
+        return self.stored_name("branch")
+
+    def column_index(self) -> dict[str, int]:
+        return {c.name: k for k, c in enumerate(self.sample_columns)}
+
+    def stored_columns(self, samples: np.ndarray) -> dict[str, list[object]]:
+        """The `samples` table's columns of a batch of loop rows (regions by name)."""
+        out: dict[str, list[object]] = {}
+        for k, column in enumerate(self.sample_columns):
+            if column.stored_as is None:
+                continue
+            values = samples[:, k].tolist()
+            if column.stored_as == "branch":
+                values = [self.regions[int(v)] for v in values]
+            out[column.stored_as] = values
+        return out
+
+    def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
+        """The dial's gain a trial uses: `gain_n_m_per_n`, else the task's default;
+        refused with one line for a task without a dial."""
+        if gain_n_m_per_n is None:
+            return self.default_haptic_gain_n_m_per_n
+        if not self.has_dial:
+            raise StudyInputError(
+                f"haptic gain {gain_n_m_per_n!r} for the {self.name} task, which has no "
+                "haptic dial; expected no gain for it"
+            )
+        return gain_n_m_per_n
+
+
+_REGISTRY: dict[str, Task] = {}
+_LOADED = False
+
+
+def register(task: Task) -> Task:
+    """Add `task` to the registry (replacing one of the same name); returns it."""
+    if not getattr(task, "name", "") or not task.name.isidentifier() or len(task.name) > 16:
+        raise ValueError(f"task name {getattr(task, 'name', None)!r}; expected an identifier "
+                         "of at most 16 characters")  # fmt: skip
+    stored = [c.stored_as for c in task.sample_columns]
+    for required in ("t_s", "branch", "insertion_m", "rotation_rad"):
+        if required not in stored:
+            raise ValueError(f"task {task.name}: no sample column stored as {required!r}")
+    _REGISTRY[task.name] = task
+    return task
+
+
+def unregister(name: str) -> None:
+    _REGISTRY.pop(name, None)
+
+
+def _load() -> None:
+    global _LOADED
+    if _LOADED:
+        return
+    _LOADED = True
+    for module in BUILTIN:
+        importlib.import_module(module)
+    from importlib.metadata import entry_points
+
+    for entry in entry_points(group=ENTRY_POINT_GROUP):
+        register(entry.load())
+
+
+def task_names() -> tuple[str, ...]:
+    """The tasks a design may name: the built-in ones first, then those registered."""
+    _load()
+    return tuple(_REGISTRY)
+
+
+def get_task(name: str) -> Task:
+    """The task called `name`; an unknown name gets one line listing the known ones."""
+    _load()
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise StudyInputError(
+            f"task {name!r}; expected one of {', '.join(_REGISTRY)}"
+        ) from None
+
+
+def tasks() -> tuple[Task, ...]:
+    _load()
+    return tuple(_REGISTRY.values())

@@ -1,0 +1,136 @@
+"""The LCCA task: a guidewire from the descending aorta into the left common carotid
+(seed 000), driven by the friction-wheel robot through the haptic dial.
+
+Its trials are `study.protocol.lcca_trial` (loop, simulated participant, measures);
+this module says what they are to the rest of the tool (`study.protocol.tasks`).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, register
+
+MAX_FORCE_N = 20.0
+"""Largest peak force the guidewire drive can produce, N; beyond it an imported value is
+a typo or a unit slip: the drive (K_t 0.043 N m/A, wheel radius 10 mm) would need
+4.7 A, above a 2804 gimbal motor's rating (assumption, see teleop_core.follower.params)."""
+
+
+class LccaTask(Task):
+    name = "lcca"
+    title = "LCCA guidewire navigation"
+    has_dial = True
+    default_haptic_gain_n_m_per_n = 0.02
+    """The paper's G_h (`teleop_core.master.params.HapticParams`; a test keeps them equal)."""
+    has_link = True
+    regions = ("DAo", "arch", "AAo", "LSA", "LCCA", "BCT")
+    """`teleop_core.phantom.anatomy.REGION_ABBREVIATIONS` (a test keeps them equal)."""
+    sample_columns = (
+        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
+        SampleColumn("insertion_m", "insertion_m", "m", "guidewire inserted"),
+        SampleColumn("rotation_rad", "rotation_rad", "rad", "guidewire roll"),
+        SampleColumn("tip_x_m", "tip_x_m", "m", "tip position, phantom frame"),
+        SampleColumn("tip_y_m", "tip_y_m", "m", "tip position, phantom frame"),
+        SampleColumn("tip_z_m", "tip_z_m", "m", "tip position, phantom frame"),
+        SampleColumn("branch", "branch", "", "vessel the tip is in (DAo, arch, ...)"),
+        SampleColumn("reference_force_n", "proximal_force_n", "N",
+                     "true proximal insertion force (simulation) or reference sensor"),
+        SampleColumn("proximal_force_n", "proximal_force_est_n", "N",
+                     "proximal force estimated from the motor current (what is rendered)"),
+        SampleColumn("distal_force_n", "distal_force_n", "N", "tip force on the vessel wall"),
+        SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "haptic dial angle"),
+        SampleColumn("dial_torque_n_m", "dial_torque_n_m", "N m", "torque on the hand"),
+    )  # fmt: skip
+    measures = (
+        Measure("peak_proximal_force_n", "N", "peak proximal force",
+                "largest proximal insertion force (the drive's estimate)",
+                max_value=MAX_FORCE_N),
+        Measure("peak_distal_force_n", "N", "peak distal force",
+                "largest distal force on the phantom", max_value=MAX_FORCE_N),
+        Measure("wall_contacts", "", "wall contacts",
+                "times the distal force rose through 0.2 N", analysed=False, integer=True),
+    )  # fmt: skip
+    live_traces = (
+        LiveTrace("proximal_force_n", "proximal", 2.0),
+        LiveTrace("distal_force_n", "distal", 1.0),
+    )
+    live_peaks = live_traces
+    live_scene = "lcca"
+    key_hints = "↑↓ dial ←→ rotate space let go e end"
+    trace_names: ClassVar[dict[str, str]] = {
+        "proximal_force_n": "proximal, reference",
+        "proximal_force_est_n": "proximal, estimated",
+        "distal_force_n": "distal (tip on wall)",
+    }
+    sign_note = (
+        "Proximal force: positive resists insertion (pushing the wire in), negative "
+        "resists withdrawal. Distal force: tip-wall contact, ≥\u00a00."
+    )
+
+    def session_context(self) -> Any:
+        from teleop_core.phantom.lcca import LccaPhantom
+
+        return LccaPhantom()
+
+    trial_figure = "lcca"
+
+    def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
+                  context=None, link=None):  # fmt: skip
+        from study.protocol.lcca_trial import lcca_loop
+
+        return lcca_loop(condition, seed, estimator, haptic_gain_n_m_per_n, context, link)
+
+    def simulate(self, traits, condition, seed, max_s, *, haptic_gain_n_m_per_n=None,
+                 estimator=None, link=None, context=None):  # fmt: skip
+        from study.protocol.lcca_trial import run_lcca_trial
+
+        return run_lcca_trial(traits, condition, seed, estimator, haptic_gain_n_m_per_n,
+                              max_s, context, link)  # fmt: skip
+
+    def summary_line(self, summary):
+        return (
+            f"peak proximal {summary['peak_proximal_force_n']:.3f} N, "
+            f"peak distal {summary['peak_distal_force_n']:.3f} N, "
+            f"{summary['wall_contacts']} wall contacts"
+        )
+
+    def simulated_driver(self, traits, max_s, context):
+        from study.protocol.participants import SimulatedParticipant
+
+        return SimulatedParticipant(traits, context, max_s)
+
+    def trial_measures(self, samples, success):
+        from study.protocol.lcca_trial import measures
+
+        result = measures(self.trial_frame(samples), success)
+        stored = {m.name: result[m.name] for m in self.measures}
+        return stored, {
+            "peak_proximal_reference_force_n": result["peak_proximal_reference_force_n"]
+        }
+
+    def driver_counts(self, driver):
+        from study.protocol.participants import SimulatedParticipant
+
+        if isinstance(driver, SimulatedParticipant):
+            return {"obstacles_felt": driver.obstacles_felt,
+                    "obstacles_seen": driver.obstacles_seen}  # fmt: skip
+        return {}
+
+    def trial_frame(self, samples):
+        from study.protocol.lcca_trial import TRIAL_COLUMNS
+
+        frame = super().trial_frame(samples)
+        return frame[list(TRIAL_COLUMNS.values())]
+
+    def live_lines(self, values):
+        return [
+            f"tip in {self.regions[int(values['branch'])]}, inserted "
+            f"{values['insertion_m'] * 1000:5.0f} mm",
+            f"rotation {values['rotation_rad']:+5.2f} rad",
+            f"dial {values['dial_angle_rad']:+5.2f} rad",
+            f"torque on the hand {values['dial_torque_n_m'] * 1000:+5.1f} mN m",
+        ]
+
+
+TASK = register(LccaTask())

@@ -1,0 +1,134 @@
+"""The NOTES task: the 2-DOF haptic device rolling and pushing an endoscope through the
+posterior fornix to a target in the abdomen (seed 001).
+
+Its trials are `study.protocol.notes_trial` (loop, simulated participant, measures);
+this module says what they are to the rest of the tool (`study.protocol.tasks`). The
+device has no haptic dial gain: HV renders the tissue's resistance within the device's
+continuous limits, VO nothing.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, register
+
+MAX_FORCE_N = 25.0
+"""Largest force the NOTES hand can push (`teleop_core.notes.task.HAND_MAX_FORCE_N`);
+beyond it an imported value is a typo or a unit slip."""
+FULL_SCALE_N = 10.0
+"""Full scale of the live force gauges: the fornix gives way at the mean max push of
+9.9 N (`teleop_core.notes.task.PUSH_BENCHMARK_N`)."""
+
+
+class NotesTask(Task):
+    name = "notes"
+    title = "NOTES endoscopy"
+    has_dial = False
+    regions = ("canal", "fornix", "cavity", "target")
+    """`teleop_core.notes.task.REGIONS` (a test keeps them equal)."""
+    sample_columns = (
+        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
+        SampleColumn("insertion_m", "insertion_m", "m", "scope depth from the introitus"),
+        SampleColumn("rotation_rad", "rotation_rad", "rad", "scope roll"),
+        SampleColumn("tip_x_m", "tip_x_m", "m", "tip position"),
+        SampleColumn("tip_y_m", "tip_y_m", "m", "tip position"),
+        SampleColumn("tip_z_m", "tip_z_m", "m", "tip position"),
+        SampleColumn("region", "branch", "", "where the tip is (canal, fornix, ...)"),
+        SampleColumn("force_demanded_n", "proximal_force_n", "N",
+                     "tissue resistance on the scope, positive resisting insertion"),
+        SampleColumn("force_rendered_n", "proximal_force_est_n", "N",
+                     "force the device renders (saturates at its continuous limit)"),
+        SampleColumn("tip_force_n", "distal_force_n", "N", "the fornix's push on the tip"),
+        SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "the hand's aim (rate input)"),
+        SampleColumn("torque_rendered_n_m", "dial_torque_n_m", "N m", "torque rendered"),
+        SampleColumn("torque_demanded_n_m", None, "N m",
+                     "tissue resistance to roll, positive resisting clockwise roll"),
+    )  # fmt: skip
+    measures = (
+        Measure("peak_force_demanded_n", "N", "peak demanded force",
+                "largest |force| the tissue demanded of the scope", max_value=MAX_FORCE_N),
+        Measure("peak_tip_force_n", "N", "peak tip force",
+                "largest force of the fornix on the tip", max_value=MAX_FORCE_N),
+        Measure("peak_force_rendered_n", "N", "peak rendered force",
+                "largest |force| the device rendered", analysed=False, max_value=MAX_FORCE_N),
+        Measure("peak_torque_demanded_n_m", "N m", "peak demanded torque",
+                "largest |torque| the tissue demanded", analysed=False),
+        Measure("peak_torque_rendered_n_m", "N m", "peak rendered torque",
+                "largest |torque| the device rendered", analysed=False),
+        Measure("push_over_capacity_fraction", "", "push over capacity",
+                "share of samples with the demanded push above the device's continuous "
+                "force (5.62 N)", analysed=False, max_value=1.0),
+    )  # fmt: skip
+    live_traces = (
+        LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
+        LiveTrace("force_rendered_n", "rendered", FULL_SCALE_N, magnitude=True),
+    )
+    live_peaks = (
+        LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
+        LiveTrace("tip_force_n", "on the fornix", FULL_SCALE_N, magnitude=True),
+    )
+    live_scene = "notes"
+    key_hints = "↑↓ push/pull ←→ roll space let go e end"
+    trace_names: ClassVar[dict[str, str]] = {
+        "proximal_force_n": "demanded (tissue)",
+        "proximal_force_est_n": "rendered (device)",
+        "distal_force_n": "tip (fornix)",
+    }
+    sign_note = (
+        "Force on the scope: positive resists insertion (pushing in), negative "
+        "resists withdrawal. Tip force: the fornix on the tip, ≥\u00a00."
+    )
+
+    trial_figure = "notes"
+
+    def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
+                  context=None, link=None):  # fmt: skip
+        from study.protocol.notes_trial import notes_loop
+
+        self.haptic_gain(haptic_gain_n_m_per_n)  # refuses a gain: the device has no dial
+        return notes_loop(condition, seed)
+
+    def simulate(self, traits, condition, seed, max_s, *, haptic_gain_n_m_per_n=None,
+                 estimator=None, link=None, context=None):  # fmt: skip
+        from study.protocol.notes_trial import run_notes_trial
+
+        self.haptic_gain(haptic_gain_n_m_per_n)
+        return run_notes_trial(traits, condition, seed, max_s)
+
+    def summary_line(self, summary):
+        return (
+            f"peak force demanded {summary['peak_force_demanded_n']:.2f} N / rendered "
+            f"{summary['peak_force_rendered_n']:.2f} N, peak torque demanded "
+            f"{summary['peak_torque_demanded_n_m'] * 1e3:.1f} N mm / rendered "
+            f"{summary['peak_torque_rendered_n_m'] * 1e3:.1f} N mm, push over capacity "
+            f"{summary['push_over_capacity_fraction']:.1%} of the time"
+        )
+
+    def simulated_driver(self, traits, max_s, context):
+        from study.protocol.notes_trial import NotesParticipant
+
+        return NotesParticipant(traits, max_s)
+
+    def trial_measures(self, samples, success):
+        from study.protocol.notes_trial import measures
+
+        result = measures(self.trial_frame(samples), success)
+        stored = {m.name: result[m.name] for m in self.measures}
+        extras = {"device_limits": result["device_limits"]}
+        return stored, extras
+
+    def driver_counts(self, driver):
+        from study.protocol.notes_trial import NotesParticipant
+
+        return {"stalls_seen": driver.stalls_seen} if isinstance(driver, NotesParticipant) else {}
+
+    def live_lines(self, values):
+        return [
+            f"tip on the fornix {values['tip_force_n']:5.2f} N",
+            f"torque demanded {values['torque_demanded_n_m'] * 1000:+6.1f} mN m",
+            f"torque rendered {values['torque_rendered_n_m'] * 1000:+6.1f} mN m",
+        ]
+
+
+TASK = register(NotesTask())
