@@ -100,7 +100,7 @@ def export_cmd(
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-    from study.protocol.exchange import export_data
+    from study.protocol.export import export_data
     from study.protocol.sample_export import SampleSelection
 
     selection = SampleSelection(participants, tasks, conditions, trials, from_s, to_s)

@@ -13,7 +13,7 @@ from db.engine import make_engine
 from db.models.study import Participant, ScheduleBlock
 from db.models.trial import Trial
 from study.cli import main
-from study.protocol.exchange import TRIAL_COLUMNS
+from study.protocol.export import trial_columns
 from study.protocol.session import pending_trials
 
 DESIGN = """\
@@ -26,7 +26,8 @@ practice_trials = 1
 novice = 4
 expert = 4
 """
-HEADER = ",".join(TRIAL_COLUMNS)
+HEADER = ",".join(trial_columns(["lcca", "notes"]))
+"""Both tasks' measures, each under its own name: LCCA's two peaks, then NOTES's."""
 
 
 def _init(tmp_path: Path, db: str, enrol: int = 2) -> None:
@@ -45,7 +46,7 @@ def test_an_imported_code_does_not_collide_with_enrolment(
     db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     _init(tmp_path, db_url)
-    assert _import(tmp_path, db_url, "P004,novice,lcca,VO,1,31.5,0.81,0.42,true\n") == 0
+    assert _import(tmp_path, db_url, "P004,novice,lcca,VO,1,31.5,0.81,0.42,,,true\n") == 0
     capsys.readouterr()
     for _ in range(2):
         assert main(["participant", "add", "--group", "novice", "--db", db_url]) == 0
@@ -68,10 +69,10 @@ def test_imported_trials_land_in_the_block_of_their_task_and_condition(
     _init(tmp_path, db_url)
     code = next(c for c in ("P001", "P002") if _order(db_url, c)[0] == "HV")
     rows = (
-        f"{code},novice,lcca,VO,1,31.5,0.81,0.42,true\n"
-        f"{code},novice,notes,HV,2,40.0,3.10,1.20,false\n"
-        "P007,expert,lcca,HV,1,22.0,0.70,0.30,true\n"
-        "P007,expert,notes,HV,1,50.0,4.00,2.00,true\n"
+        f"{code},novice,lcca,VO,1,31.5,0.81,0.42,,,true\n"
+        f"{code},novice,notes,HV,2,40.0,,,3.10,1.20,false\n"
+        "P007,expert,lcca,HV,1,22.0,0.70,0.30,,,true\n"
+        "P007,expert,notes,HV,1,50.0,,,4.00,2.00,true\n"
     )
     assert _import(tmp_path, db_url, rows) == 0
     engine = make_engine(db_url)
@@ -107,13 +108,20 @@ def test_imported_trials_land_in_the_block_of_their_task_and_condition(
         ["lcca", "VO", 1],
         ["notes", "HV", 2],
     ]
+    # each task's measures under its own names, the other task's left empty
+    notes = mine[mine.task == "notes"].iloc[0]
+    assert (notes["peak_force_demanded_n"], notes["peak_tip_force_n"]) == (3.10, 1.20)
+    assert pd.isna(notes["peak_proximal_force_n"]) and pd.isna(notes["peak_distal_force_n"])
+    lcca = mine[mine.task == "lcca"].iloc[0]
+    assert (lcca["peak_proximal_force_n"], lcca["peak_distal_force_n"]) == (0.81, 0.42)
+    assert pd.isna(lcca["peak_force_demanded_n"])
 
 
 def test_the_same_file_imported_twice_is_refused_with_one_line(
     db_url: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     _init(tmp_path, db_url)
-    rows = "P001,novice,lcca,VO,1,31.5,0.81,0.42,true\nP009,expert,lcca,HV,2,22.0,0.7,0.3,true\n"
+    rows = "P001,novice,lcca,VO,1,31.5,0.81,0.42,,,true\nP009,expert,lcca,HV,2,22.0,0.7,0.3,,,true\n"
     assert _import(tmp_path, db_url, rows) == 0
     capsys.readouterr()
     assert _import(tmp_path, db_url, rows) == 2

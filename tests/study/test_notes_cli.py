@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from sqlalchemy import create_engine
+from sqlalchemy import create_engine, text
 
 from study.analysis.frames import trial_frame
 from study.cli import main
@@ -106,7 +106,21 @@ def test_a_study_with_lcca_and_notes_runs_notes_blocks(tmp_path: Path) -> None:
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     engine = create_engine(f"sqlite:///{db}")
     frame = trial_frame(engine)
+    with engine.connect() as conn:
+        demanded = dict(conn.execute(text(
+            "SELECT trial_id, MAX(ABS(proximal_force_n)) FROM samples GROUP BY trial_id"
+        )).all())  # fmt: skip
+        stored = dict(conn.execute(text(
+            "SELECT trial_id, value FROM trial_measures WHERE name = 'peak_force_demanded_n'"
+        )).all())  # fmt: skip
     engine.dispose()
     assert list(frame["task"]) == ["notes", "notes"]
     assert sorted(frame["condition"]) == ["HV", "VO"]
-    assert frame["completion_time_s"].notna().all() and frame["peak_proximal_force_n"].gt(0).all()
+    # NOTES measures under their own names, not in the LCCA's columns
+    assert "peak_proximal_force_n" not in frame.columns
+    assert frame["completion_time_s"].notna().all() and frame["peak_force_demanded_n"].gt(0).all()
+    assert frame["peak_tip_force_n"].notna().all()
+    # the stored peak is the largest |demanded force| of the trial's stored samples
+    assert stored.keys() == demanded.keys() and len(stored) == 2
+    for trial_id, value in stored.items():
+        assert value == pytest.approx(demanded[trial_id])

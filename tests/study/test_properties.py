@@ -36,7 +36,8 @@ from study.protocol.design import (
     StudyDesign,
     parse_design,
 )
-from study.protocol.exchange import MAX_FORCE_N, TRIAL_COLUMNS
+from study.protocol.exchange import TRIAL_COLUMNS
+from study.protocol.tasks.lcca import MAX_FORCE_N
 
 JUNK = ["", " ", "inf", "-inf", "nan", "NaN", "-1", "1e400", "1e308", "3_0", "²", "0x10",
         "99999999999999999999999", "1e6", "=1+1", "+1", "P1", "lcca", "HV", "true", "yes",
@@ -141,7 +142,7 @@ def test_an_import_is_accepted_and_round_trips_or_refused_with_one_line(
         for column in ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n"):
             assert out[column] == pytest.approx(float(r[column]))
         assert 0 <= out.completion_time_s <= MAX_TRIAL_S
-        assert 0 <= max(out.peak_proximal_force_n, out.peak_distal_force_n) <= MAX_FORCE_N["lcca"]
+        assert 0 <= max(out.peak_proximal_force_n, out.peak_distal_force_n) <= MAX_FORCE_N
         assert bool(out.success) == (r["success"].strip().lower() in ("true", "1", "yes"))
 
 

@@ -27,7 +27,7 @@ from db.models.trial import SAMPLE_COLUMNS
 from db.samples import SampleReader, SampleWriter
 from study.cli import main
 from study.protocol.design import TEMPLATE
-from study.protocol.exchange import export_data
+from study.protocol.export import export_data
 from study.protocol.sample_export import SAMPLE_EXPORT_COLUMNS
 
 _REFERENCE_SQL = """
@@ -276,7 +276,7 @@ _MEMORY_PROBE = """
 import json, resource, sys
 from pathlib import Path
 from db.migrate import open_database
-from study.protocol.exchange import export_data
+from study.protocol.export import export_data
 engine = open_database(sys.argv[1], create=False)
 out = Path(sys.argv[2])
 export_data(engine, out / "warm", "parquet", samples=False)  # imports, caches

@@ -1,0 +1,88 @@
+"""Reading a researcher's CSV: every problem one line naming the file, the row (as a
+spreadsheet numbers it: the header is row 1), the column and what was expected."""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from study.errors import StudyInputError
+from study.protocol.export_files import unescape_cell
+
+DECIMAL = re.compile(r"^[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?$")
+
+
+@dataclass
+class Problems:
+    source: str
+    items: list[str]
+
+    def add(self, row: int, column: str, message: str) -> None:
+        self.items.append(f"{self.source} row {row}, column {column}: {message}")
+
+    def raise_if_any(self) -> None:
+        if self.items:
+            more = f" (and {len(self.items) - 1} more)" if len(self.items) > 1 else ""
+            raise StudyInputError(self.items[0] + more)
+
+
+def read_csv(
+    path: Path,
+    required: tuple[str, ...],
+    optional: tuple[str, ...] = (),
+    text_columns: tuple[str, ...] = (),
+) -> pd.DataFrame:
+    """A CSV of text cells with exactly the `required` and any `optional` columns; the
+    `text_columns` unescaped as an export escaped them."""
+    if not path.is_file():
+        raise StudyInputError(f"{path} does not exist")
+    try:
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False, encoding="utf-8")
+    except pd.errors.EmptyDataError:
+        raise StudyInputError(f"{path} is empty; expected a header row and data rows") from None
+    except UnicodeDecodeError as exc:
+        raise StudyInputError(
+            f"{path} is not UTF-8 text (byte {exc.object[exc.start]:#04x} at offset "
+            f"{exc.start}); expected a UTF-8 CSV"
+        ) from None
+    except (pd.errors.ParserError, OSError) as exc:
+        raise StudyInputError(f"{path} is not a readable CSV: {first_line(exc)}") from None
+    missing = [c for c in required if c not in frame.columns]
+    if missing:
+        raise StudyInputError(f"{path} lacks column {missing[0]!r}; expected {', '.join(required)}")
+    extra = [c for c in frame.columns if c not in required + optional]
+    if extra:
+        raise StudyInputError(
+            f"{path} has unknown column {extra[0]!r}; expected {', '.join(required + optional)}"
+        )
+    if frame.empty:
+        raise StudyInputError(f"{path} has a header but no rows; expected at least one data row")
+    for column in set(text_columns).intersection(frame.columns):
+        frame[column] = frame[column].map(unescape_cell)  # an exported file imports back
+    return frame
+
+
+def first_line(exc: BaseException) -> str:
+    return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+
+
+def number(
+    p: Problems, row: int, col: str, text: str, minimum: float = 0.0, maximum: float = math.inf
+) -> float | None:
+    """A plain decimal within [minimum, maximum], else a problem naming it."""
+    expected = f"a number from {minimum:g} to {maximum:g}"
+    if not DECIMAL.match(text.strip()):
+        p.add(row, col, f"{text!r} is not a plain decimal number; expected {expected}")
+        return None
+    value = float(text)
+    if not (math.isfinite(value) and minimum <= value <= maximum):
+        p.add(row, col, f"{text!r} is out of range; expected {expected}")
+        return None
+    return value
+
+
+BOOL = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}

@@ -1,0 +1,182 @@
+"""Export of a study: trials, NASA-TLX (and samples) with the contract's columns, and a
+codebook of every column (`study export`).
+
+The trials' columns (`trial_columns`) are the common ones and the measures of the
+study's tasks under their own names; the codebook says what each measure and each
+`samples` column holds for each task (`study.protocol.tasks`). See
+`study.protocol.exchange` for the contracts and their import.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import pandas as pd
+from sqlalchemy import Engine, select
+from sqlalchemy.orm import Session
+
+from db.models.study import Participant
+from db.models.tlx import TLX_SUBSCALES, TlxResponse
+from study.analysis.frames import measure_columns, trial_frame
+from study.errors import StudyInputError
+from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_KEYS
+from study.protocol.export_files import AtomicFile, escape_frame, refuse_symlink
+from study.protocol.roster import load_study
+from study.protocol.tasks import COMPLETION_TIME, get_task
+
+if TYPE_CHECKING:
+    from study.protocol.sample_export import Progress, SampleSelection
+
+CODEBOOK = {
+    "participant": ("", "pseudonymous participant code, e.g. P007"),
+    "group": ("", "experience group, by its name in the study design"),
+    "task": ("", "lcca (guidewire into the left common carotid) or notes (endoscopy)"),
+    "condition": ("", "VO (visual only) or HV (haptic-visual)"),
+    "trial": ("", "measured trial number within the task x condition block, from 1"),
+    "completion_time_s": ("s", "time from start to success (or to the time limit)"),
+    "success": ("", "true if the tip reached the target"),
+    **{s: ("0-100", f"NASA-TLX {s} rating, steps of 5") for s in TLX_SUBSCALES},
+    **{
+        f"w_{s}": ("count", f"times {s} was chosen in the 15 pairwise comparisons")
+        for s in TLX_SUBSCALES
+    },
+    "seq": ("", "sample number within the trial"),
+}
+"""The columns every study has; each task's measures and sample columns are described
+by the task (`codebook`)."""
+
+
+def trial_columns(tasks: Iterable[str]) -> tuple[str, ...]:
+    """The trials file's columns for a study of `tasks`: keys, every task's analysed
+    measures (each once, in the tasks' order), success. (The other measures, such as
+    LCCA's wall contacts, stay in the database: the file keeps the contract's columns.)"""
+    measures = [m for m in measure_columns(tasks, analysed_only=True) if m != COMPLETION_TIME]
+    return (*TRIAL_KEYS, *measures, "success")
+
+
+def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
+    """Column -> (unit, meaning) for a study of `tasks`: the common columns, each task's
+    measures, and the `samples` columns with what each task keeps in them."""
+    tasks = [get_task(t) for t in tasks]
+    out = dict(CODEBOOK)
+    out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in tasks))
+    for t in tasks:
+        for m in t.measures:
+            out.setdefault(m.name, (m.unit, f"{t.name}: {m.description}"))
+    stored: dict[str, list[tuple[str, object]]] = {}
+    for t in tasks:
+        for c in t.sample_columns:
+            if c.stored_as is not None:
+                stored.setdefault(c.stored_as, []).append((t.name, c))
+    for column, uses in stored.items():
+        units = {c.unit for _, c in uses}
+        meaning = "; ".join(f"{name}: {c.description}"
+                            + (f" ({c.name})" if c.name != column else "")
+                            for name, c in uses)  # fmt: skip
+        out.setdefault(column, ("/".join(sorted(units)), meaning))
+    return out
+
+
+
+def export_data(
+    engine: Engine,
+    out_dir: Path,
+    fmt: str = "csv",
+    samples: bool = False,
+    selection: SampleSelection | None = None,
+    *,
+    per_trial: bool = False,
+    progress: Progress | None = None,
+) -> list[Path]:
+    """Write trials, tlx (and samples) with the contract's columns, plus the codebook.
+
+    Samples stream in bounded memory (`study.protocol.sample_export`); `selection`
+    restricts them, `per_trial` writes one file per trial under `samples/` and skips
+    the files an earlier run left complete. Every file is written under a temporary
+    name and renamed only once all of them are complete.
+    """
+    from study.protocol.sample_export import (
+        SAMPLE_EXPORT_COLUMNS,
+        SampleSelection,
+        select_trials,
+        write_samples,
+        write_samples_per_trial,
+    )
+
+    if fmt not in ("csv", "parquet"):
+        raise StudyInputError(f"format {fmt!r}; expected csv or parquet")
+    selection = selection or SampleSelection()
+    if not samples and (selection.restricted or per_trial):
+        raise StudyInputError(
+            "a sample selection or --per-trial was given without --samples; expected --samples"
+        )
+    with Session(engine) as session:
+        _, design = load_study(session)
+        export_trials = select_trials(session, design, selection) if samples else []
+        tlx_rows = [
+            {
+                "participant": code,
+                "task": r.task,
+                "condition": r.condition,
+                **{s: getattr(r, s) for s in TLX_SUBSCALES},
+                **{f"w_{s}": getattr(r, f"w_{s}") for s in TLX_SUBSCALES},
+            }
+            for r, code in session.execute(
+                select(TlxResponse, Participant.code).join(Participant).order_by(Participant.code)
+            )
+        ]
+    trials = trial_frame(engine, design.tasks)
+    trials = trials[list(trial_columns(dict.fromkeys([*design.tasks, *trials["task"]])))]
+    tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
+    frames = {"trials": trials, "tlx": tlx}
+    columns = [c for f in frames.values() for c in f.columns]
+    if samples:
+        columns += SAMPLE_EXPORT_COLUMNS
+    book = codebook(dict.fromkeys([*design.tasks, *trials["task"]]))
+    book_frame = pd.DataFrame(
+        [
+            {"column": c, "unit": book[c][0], "meaning": book[c][1]}
+            for c in sorted(set(columns), key=list(book).index)
+        ]
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    # every target checked before anything is written: a link refuses the whole export
+    names = [f"{name}.{fmt}" for name in frames] + ["codebook.csv"]
+    if samples and not per_trial:
+        names.append(f"samples.{fmt}")
+    for name in names:
+        refuse_symlink(out_dir / name)
+    staged: list[AtomicFile] = []
+
+    def stage(name: str) -> AtomicFile:
+        staged.append(AtomicFile(out_dir / name))
+        return staged[-1]
+
+    try:
+        for name, frame in frames.items():
+            out = stage(f"{name}.{fmt}")
+            if fmt == "csv":
+                escape_frame(frame).to_csv(out.file, index=False, encoding="utf-8")
+            else:
+                frame.to_parquet(out.file, index=False)
+        escape_frame(book_frame).to_csv(stage("codebook.csv").file, index=False, encoding="utf-8")
+        sample_paths: list[Path] = []
+        if samples and per_trial:
+            result = write_samples_per_trial(
+                engine, export_trials, out_dir / "samples", fmt, selection, progress=progress
+            )
+            sample_paths = result.written + result.skipped
+        elif samples:
+            path = out_dir / f"samples.{fmt}"
+            write_samples(engine, export_trials, path, fmt, selection, progress=progress)
+            sample_paths = [path]
+        for out in staged:
+            out.commit()
+    except BaseException:
+        for out in staged:
+            out.abort()
+        raise
+    written = [out.path for out in staged]
+    return written[:2] + sample_paths + written[2:]
