@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import textwrap
 import zlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -60,8 +60,24 @@ LABELS = {
     "peak_distal_force_n": "peak distal\nforce (N)",
     "tlx_raw": "raw NASA-TLX\n(0-100)",
 }
-"""Fig. 12's measures and their y-labels, on two lines so that they stay shorter than a
-panel is tall."""
+"""Fig. 12's measures of the LCCA task and their y-labels, on two lines so that they
+stay shorter than a panel is tall; other tasks' from `fig12_labels`."""
+
+
+def fig12_labels(task: str) -> dict[str, str]:
+    """Fig. 12's measures of `task` (its analysed measures and the raw NASA-TLX), each
+    with its y-label on two lines."""
+    from study.protocol.tasks import get_task
+
+    out = {}
+    for m in get_task(task).all_measures:
+        if m.analysed:
+            words = m.label.split()
+            cut = max(len(words) - 1, 1)
+            first, second = " ".join(words[:cut]), " ".join(words[cut:])
+            unit = f" ({m.unit})" if m.unit else ""
+            out[m.name] = LABELS.get(m.name, f"{first}\n{second}{unit}".strip())
+    return {**out, "tlx_raw": LABELS["tlx_raw"]}
 CHARS_PER_IN = 13.0
 """Characters of 8 pt text per inch of width, with room to spare (DejaVu Sans averages
 about 15)."""
@@ -135,7 +151,7 @@ def fig12(
     long: pd.DataFrame,
     comparisons: pd.DataFrame,
     width: str = "double",
-    measures: Sequence[str] = tuple(LABELS),
+    measures: Sequence[str] | Mapping[str, str] = tuple(LABELS),
 ) -> plt.Figure:
     """Fig. 12 of ONE task: per measure (panel) and group, VO and HV participant means.
 
@@ -149,11 +165,14 @@ def fig12(
         star of its `p_holm`, the test under it is its `test` (and `p_method`).
     width
         'single' (3.5 in, panels stacked) or 'double' (7.16 in, two columns).
+    measures
+        The panels' measures, or measure -> y-label (`fig12_labels(task)`).
 
     Each mark is a text with gid `mark:<measure>/<group>` (`figcheck` reads them back).
     """
     if long["task"].nunique() > 1:
         raise ValueError("fig12 draws one task; select it first (paper.draw_figures does)")
+    labels = {**LABELS, **measures} if isinstance(measures, Mapping) else LABELS
     measures = [m for m in measures if m in set(long["measure"])]
     groups = list(dict.fromkeys(long["group"]))
     with plt.rc_context(STYLE):
@@ -163,6 +182,7 @@ def fig12(
                                  layout="constrained", squeeze=False)  # fmt: skip
         for ax, measure in zip(axes.ravel(), measures, strict=False):
             _panel(ax, long[long["measure"] == measure], comparisons, measure, groups)
+            ax.set_ylabel(labels.get(measure, measure))
         for ax in axes.ravel()[len(measures) :]:
             ax.set_visible(False)
         untested = any(
@@ -209,7 +229,6 @@ def _panel(
     ax.set_xticks([t for t, _ in ticks], [label for _, label in ticks])
     ax.tick_params(axis="x", length=0)
     ax.set_xlim(-0.6, 3.0 * len(groups) - 1.4)
-    ax.set_ylabel(LABELS.get(measure, measure))
     ax.set_ylim(0, (top or 1.0) * 1.3)
     return ax
 

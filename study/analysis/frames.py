@@ -1,9 +1,12 @@
 """Tidy frames from the study database (long format in, tidy out; pingouin's manner).
 
 - `trial_frame`: one row per measured trial (completed, not practice, the latest attempt
-  of each slot): participant, group, task, condition, trial, completion_time_s,
-  peak_proximal_force_n, peak_distal_force_n, success, driver (simulated, keyboard,
-  hardware or imported: `study.analysis.source` labels every output by it).
+  of each slot): participant, group, task, condition, trial, completion_time_s, the
+  measures of every task in the frame under their own names (`study.protocol.tasks`:
+  peak_proximal_force_n and peak_distal_force_n for LCCA, peak_force_demanded_n and
+  peak_tip_force_n for NOTES, ...; empty for another task's rows), success, driver
+  (simulated, keyboard, hardware or imported: `study.analysis.source` labels every
+  output by it).
 - `tlx_frame`: one row per questionnaire: participant, group, task, condition,
   tlx_raw, tlx_weighted (empty without the pairwise comparisons), tlx_mental ...
 - `participant_means`: long format, one row per participant x task x condition x measure
@@ -12,6 +15,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import pandas as pd
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
@@ -19,13 +24,25 @@ from sqlalchemy.orm import Session
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import Trial
+from study.protocol.tasks import COMPLETION_TIME, get_task
 
-TRIAL_MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
 TLX_MEASURES = ("tlx_raw", "tlx_weighted", *(f"tlx_{s}" for s in TLX_SUBSCALES))
-MEASURES = TRIAL_MEASURES + TLX_MEASURES
+TRIAL_KEYS = ("participant", "group", "task", "condition", "trial")
 
 
-def trial_frame(engine: Engine) -> pd.DataFrame:
+def measure_columns(tasks: Iterable[str], analysed_only: bool = False) -> list[str]:
+    """The measure columns of `tasks`' trials, in the tasks' order, each once."""
+    out: list[str] = []
+    for name in tasks:
+        task = get_task(name)
+        for m in task.all_measures:
+            if m.name not in out and (m.analysed or not analysed_only):
+                out.append(m.name)
+    return out
+
+
+def trial_frame(engine: Engine, tasks: Iterable[str] = ()) -> pd.DataFrame:
+    """The measured trials; the measure columns of `tasks` and of every task with trials."""
     with Session(engine) as session:
         rows = session.execute(
             select(Participant.code, Participant.group, Trial)
@@ -33,25 +50,27 @@ def trial_frame(engine: Engine) -> pd.DataFrame:
             .where(Trial.status == "completed", Trial.practice.is_(False))
             .order_by(Participant.code, Trial.block_index, Trial.trial_index, Trial.attempt)
         ).all()
-    latest = {}
-    for code, group, t in rows:
-        latest[(code, t.task, t.condition, t.trial_index)] = {
-            "participant": code,
-            "group": group,
-            "task": t.task,
-            "condition": t.condition,
-            "trial": t.trial_index + 1,
-            "completion_time_s": t.completion_time_s,
-            "peak_proximal_force_n": t.peak_proximal_force_n,
-            "peak_distal_force_n": t.peak_distal_force_n,
-            "success": bool(t.success),
-            "driver": t.driver,
-        }
-    return pd.DataFrame(
-        list(latest.values()),
-        columns=["participant", "group", "task", "condition", "trial", *TRIAL_MEASURES, "success",
-                 "driver"],  # fmt: skip
-    )
+        latest = {}
+        for code, group, t in rows:
+            latest[(code, t.task, t.condition, t.trial_index)] = {
+                "participant": code,
+                "group": group,
+                "task": t.task,
+                "condition": t.condition,
+                "trial": t.trial_index + 1,
+                COMPLETION_TIME: t.completion_time_s,
+                **t.measure_values,
+                "success": bool(t.success),
+                "driver": t.driver,
+            }
+    names = list(dict.fromkeys([*tasks, *(r["task"] for r in latest.values())]))
+    columns = [*TRIAL_KEYS, *measure_columns(names), "success", "driver"]
+    return pd.DataFrame(list(latest.values()), columns=columns)
+
+
+def trial_measures(trials: pd.DataFrame) -> list[str]:
+    """The analysed measure columns of the tasks in `trials`."""
+    return measure_columns(trials["task"].unique().tolist(), analysed_only=True)
 
 
 def tlx_frame(engine: Engine) -> pd.DataFrame:
@@ -109,7 +128,7 @@ def participant_means(trials: pd.DataFrame, tlx: pd.DataFrame) -> pd.DataFrame:
     keys = ["participant", "group", "task", "condition"]
     parts = []
     if len(trials):
-        means = trials.groupby(keys, as_index=False)[list(TRIAL_MEASURES)].mean()
+        means = trials.groupby(keys, as_index=False)[trial_measures(trials)].mean()
         parts.append(means.melt(id_vars=keys, var_name="measure", value_name="value"))
     if len(tlx):
         parts.append(

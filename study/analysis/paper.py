@@ -20,19 +20,16 @@ from sqlalchemy import Engine, exists, select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
-from db.models.trial import SAMPLE_COLUMNS, Sample, Trial
+from db.models.trial import SAMPLE_COLUMNS, Sample, Trial, TrialMeasure
 from study.analysis.figcheck import FigureCheckError, check_figure
-from study.analysis.figures import LABELS as FIG12_LABELS
-from study.analysis.figures import fig12, label_source, save
+from study.analysis.figures import fig12, fig12_labels, label_source, save
 from study.analysis.frames import participant_means, tlx_frame, trial_frame, without_withdrawn
 from study.analysis.source import DataSource, restrict
 from study.analysis.stats import compare_conditions
 from study.analysis.tlx_figure import tlx_profile
 from study.analysis.trace_figure import force_traces
 from study.errors import StudyInputError
-
-
-FIG12_MEASURES = tuple(FIG12_LABELS)
+from study.protocol.tasks import get_task
 
 
 def _samples(engine: Engine, trial_id: int) -> pd.DataFrame:
@@ -44,16 +41,22 @@ def _samples(engine: Engine, trial_id: int) -> pd.DataFrame:
 
 
 def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[tuple[int, str]]:
-    """The task's VO trial with the highest peak distal force, and the same participant's
-    HV trial with the same number: a collision felt and not felt. Only trials with
-    samples (imported ones have none)."""
+    """The task's VO trial with the highest `trace_measure` (LCCA: peak distal force),
+    and the same participant's HV trial with the same number: a collision felt and not
+    felt. Only trials with samples (imported ones have none)."""
     recorded = exists().where(Sample.trial_id == Trial.id)
     measured = (Trial.status == "completed", Trial.practice.is_(False), Trial.task == task)
+    pick = (
+        select(TrialMeasure.value)
+        .where(TrialMeasure.trial_id == Trial.id,
+               TrialMeasure.name == get_task(task).trace_measure)  # fmt: skip
+        .scalar_subquery()
+    )
     query = (
         select(Trial, Participant.code)
         .join(Participant)
         .where(*measured, Trial.condition == "VO", recorded)
-        .order_by(Trial.peak_distal_force_n.desc())
+        .order_by(pick.desc(), Trial.id)
     )
     if driver is not None:
         query = query.where(Trial.driver == driver)
@@ -87,10 +90,12 @@ class DrawnFigure:
         return check_figure(self.figure, self.expected_marks)
 
 
-def _marks(long: pd.DataFrame, comparisons: pd.DataFrame) -> dict[str, float | None]:
+def _marks(
+    long: pd.DataFrame, comparisons: pd.DataFrame, task: str
+) -> dict[str, float | None]:
     """The mark each measure x group of Fig. 12 must show, from the reported p_holm."""
     out: dict[str, float | None] = {}
-    measures = [m for m in FIG12_MEASURES if m in set(long["measure"])]
+    measures = [m for m in fig12_labels(task) if m in set(long["measure"])]
     for measure in measures:
         for group in dict.fromkeys(long["group"]):
             rows = comparisons[(comparisons["measure"] == measure)
@@ -128,9 +133,9 @@ def draw_figures(
         note = DataSource.of(t_trials).note
         t_long = long[long["task"] == name]
         t_comp = comparisons[comparisons["task"] == name] if len(comparisons) else comparisons
-        marks = _marks(t_long, t_comp)
+        marks = _marks(t_long, t_comp, name)
         if marks:  # else none of Fig. 12's measures was recorded in this task
-            fig = label_source(fig12(t_long, t_comp, width), note)
+            fig = label_source(fig12(t_long, t_comp, width, fig12_labels(name)), note)
             drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks))
         panels = [(_samples(engine, i), title) for i, title in _trace_trials(engine, name, driver)]
         if panels:

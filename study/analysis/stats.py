@@ -323,10 +323,16 @@ def mixed_anova(
     return pd.DataFrame(rows, columns=ANOVA_COLUMNS), notes
 
 
-def mixed_model(trials: pd.DataFrame, measures: tuple[str, ...]) -> tuple[pd.DataFrame, list[str]]:
+def mixed_model(
+    trials: pd.DataFrame, measures: tuple[str, ...] | None = None
+) -> tuple[pd.DataFrame, list[str]]:
+    """The linear mixed model of every trial measure (default: each task's analysed
+    measures, `study.protocol.tasks`), per task."""
+    from study.protocol.tasks import get_task
+
     rows, notes = [], []
     for task, g in trials.groupby("task", sort=False):
-        for measure in measures:
+        for measure in measures or get_task(task).analysed_measures:
             data = g[["participant", "group", "condition", measure]].dropna()
             data = data.rename(columns={measure: "value"})
             if data["participant"].nunique() < 3:
@@ -380,8 +386,7 @@ def analyze(
     comparisons, excluded = compare_conditions(long)
     excluded = [*withdrawn, *_missing_questionnaires(trials, long), *excluded]
     anova, anova_notes = mixed_anova(long, ss_type=ss_type)
-    lmm, lmm_notes = mixed_model(trials, ("completion_time_s", "peak_proximal_force_n",
-                                          "peak_distal_force_n"))  # fmt: skip
+    lmm, lmm_notes = mixed_model(trials)
     return Analysis(
         descriptives=descriptives(long),
         comparisons=comparisons,

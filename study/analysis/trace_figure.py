@@ -12,8 +12,10 @@ states the sign convention of the task's model:
   the scope, positive resisting insertion; the rendered force is what the device
   applies (it saturates at its continuous limit); the tip force is the fornix's push.
 
-Sample columns as `db.models.trial.Sample` stores them; a NOTES trial keeps the
-demanded force in `proximal_force_n` and the rendered one in `proximal_force_est_n`.
+Sample columns as `db.models.trial.Sample` stores them; which of them a task traces,
+under what names and with which sign convention, its `Task` says (`trace_names`,
+`sign_note`): a NOTES trial keeps the demanded force in `proximal_force_n` and the
+rendered one in `proximal_force_est_n`.
 """
 
 from __future__ import annotations
@@ -22,25 +24,8 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from study.analysis.figures import STYLE, WIDTHS_IN, figure_key
+from study.protocol.tasks import get_task
 
-TRACES = {
-    "lcca": {
-        "proximal_force_n": "proximal, reference",
-        "proximal_force_est_n": "proximal, estimated",
-        "distal_force_n": "distal (tip on wall)",
-    },
-    "notes": {
-        "proximal_force_n": "demanded (tissue)",
-        "proximal_force_est_n": "rendered (device)",
-        "distal_force_n": "tip (fornix)",
-    },
-}
-SIGNS = {
-    "lcca": "Proximal force: positive resists insertion (pushing the wire in), negative "
-    "resists withdrawal. Distal force: tip-wall contact, ≥\u00a00.",
-    "notes": "Force on the scope: positive resists insertion (pushing in), negative "
-    "resists withdrawal. Tip force: the fornix on the tip, ≥\u00a00.",
-}
 STYLES = {
     # the reference on top of the estimate, thin and dark over a wide light line
     "proximal_force_n": {"color": "black", "lw": 0.7, "zorder": 3},
@@ -59,11 +44,13 @@ def force_traces(
     trials
         (samples, title) per panel; samples with t_s and the force columns (N).
     task
-        Names the traces and the sign convention ('lcca' or 'notes').
+        The task whose `trace_names` and `sign_note` name the traces and the sign
+        convention (`study.protocol.tasks`).
     width
         'single' (panels stacked) or 'double' (side by side).
     """
-    names = TRACES.get(task, TRACES["lcca"])
+    the_task = get_task(task)
+    names = the_task.trace_names
     with plt.rc_context(STYLE):
         rows, cols = (len(trials), 1) if width == "single" else (1, len(trials))
         height = 1.6 * rows + 1.1
@@ -72,12 +59,12 @@ def force_traces(
         for ax, (samples, title) in zip(axes.ravel(), trials, strict=True):
             for column, label in names.items():
                 if column in samples and samples[column].notna().any():
-                    ax.plot(samples["t_s"], samples[column], label=label, **STYLES[column])
+                    ax.plot(samples["t_s"], samples[column], label=label, **STYLES.get(column, {}))
             ax.axhline(0.0, color="#999999", lw=0.4, zorder=0)
             ax.set_xlabel("time (s)")
             ax.set_title(title)
         for ax in axes[:, 0]:
             ax.set_ylabel("force (N)")
         handles, _ = axes.ravel()[0].get_legend_handles_labels()
-        figure_key(fig, handles, SIGNS.get(task, SIGNS["lcca"]), 3 if width == "double" else 2)
+        figure_key(fig, handles, the_task.sign_note, 3 if width == "double" else 2)
     return fig

@@ -18,8 +18,8 @@ others do and the benchmark's per-unit figures are the steady state.
 from __future__ import annotations
 
 import hashlib
-import logging
 import json
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -50,14 +50,12 @@ class WarmUp(WorkerPlugin):
 def warm_up(task: str) -> None:
     """One second of a trial of `task` (LCCA: numba compiles the kernel)."""
     from study.campaign.unit import _estimator
-    from study.protocol.lcca_trial import run_lcca_trial, simulated_participant
-    from study.protocol.notes_trial import run_notes_trial
+    from study.protocol.lcca_trial import simulated_participant
+    from study.protocol.tasks import get_task
 
-    traits = simulated_participant("expert", 0)
-    if task == "lcca":
-        run_lcca_trial(traits, "HV", 0, _estimator(), max_s=1.0)
-    else:
-        run_notes_trial(traits, "HV", 0, max_s=1.0)
+    the_task = get_task(task)
+    estimator = _estimator() if the_task.has_dial else None
+    the_task.simulate(simulated_participant("expert", 0), "HV", 0, 1.0, estimator=estimator)
 
 
 def compute_unit(spec: CampaignSpec, cell: Cell, replicate: int) -> tuple[pd.DataFrame, float]:

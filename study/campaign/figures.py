@@ -20,7 +20,6 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from study.analysis.figures import STYLE, WIDTHS_IN, save
-from study.campaign.unit import MEASURES
 
 GROUP_COLORS = ("#E69F00", "#0072B2", "#009E73", "#CC79A7", "#D55E00")
 MARKERS = ("o", "s", "^", "D", "v")
@@ -59,16 +58,17 @@ def plot_factor(
     """Power (kind 'power') or mean effect ('effect') against factor `x` (None: groups)."""
     rows = _rows(summary, factors, x) if x else [("", summary)]
     groups = list(dict.fromkeys(summary["group"]))
+    measures = list(dict.fromkeys(summary["measure"]))
     y, low, high = (("power", "power_ci_low", "power_ci_high") if kind == "power"
                     else ("effect_mean", "effect_ci_low", "effect_ci_high"))  # fmt: skip
     with plt.rc_context({**STYLE, "font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8,
                          "xtick.labelsize": 8, "ytick.labelsize": 8, "legend.fontsize": 8}):  # fmt: skip
         fig, axes = plt.subplots(
-            len(rows), len(MEASURES), figsize=(WIDTHS_IN["double"], 0.6 + 1.9 * len(rows)),
+            len(rows), len(measures), figsize=(WIDTHS_IN["double"], 0.6 + 1.9 * len(rows)),
             squeeze=False, sharex=True, sharey=kind == "power", layout="constrained",
         )  # fmt: skip
         for r, (label, part) in enumerate(rows):
-            for c, measure in enumerate(MEASURES):
+            for c, measure in enumerate(measures):
                 ax = axes[r][c]
                 for k, group in enumerate(groups):
                     d = part[(part["measure"] == measure) & (part["group"] == group)]

@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from study.errors import StudyInputError
-from study.protocol.design import DEFAULT_GROUPS, KNOWN_TASKS
+from study.protocol.design import DEFAULT_GROUPS
+from study.protocol.tasks import get_task, task_names
 
 FACTORS = ("haptic_gain", "link_delay_ms", "link_jitter_ms", "link_loss", "group_scale")
 """Factor names in the order of the results' columns."""
@@ -194,8 +195,10 @@ def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
                 f"{source}: {key} = {data[key]!r}; expected {getattr(kind, '__name__', kind)}"
             )
     task = data.get("task", "lcca")
-    if task not in KNOWN_TASKS:
-        raise StudyInputError(f"{source}: task = {task!r}; expected one of {', '.join(KNOWN_TASKS)}")
+    known = task_names()
+    if task not in known:
+        raise StudyInputError(f"{source}: task = {task!r}; expected one of {', '.join(known)}")
+    the_task = get_task(task)
     groups = data["groups"]
     if not groups:
         raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
@@ -212,10 +215,13 @@ def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
             raise StudyInputError(
                 f"{source}: unknown factor {name!r}; expected any of {', '.join(FACTORS)}"
             )
-        if task == "notes" and name in LOOP_FACTORS:
+        lacks = ("haptic dial" if name == "haptic_gain" and not the_task.has_dial
+                 else "master-follower link" if name.startswith("link_") and not the_task.has_link
+                 else None)  # fmt: skip
+        if lacks:
             raise StudyInputError(
-                f"{source}: factors.{name} with task = 'notes'; expected only group_scale "
-                "(the NOTES device is driven directly: no link, no haptic gain)"
+                f"{source}: factors.{name} with task = {task!r}, which has no {lacks}; "
+                "expected only the factors its trials use"
             )
     factors = {n: _factor(source, n, factors_in[n]) for n in FACTORS if n in factors_in}
     spec = CampaignSpec(

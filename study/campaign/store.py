@@ -32,7 +32,7 @@ from scipy import stats
 from statsmodels.stats.proportion import proportion_confint
 
 from study.campaign.spec import DEFAULTS, CampaignSpec, Cell, parse_campaign, unit_id
-from study.campaign.unit import MEASURES, UNIT_COLUMNS
+from study.campaign.unit import UNIT_COLUMNS
 from study.errors import StudyInputError
 
 DATA_SOURCE = "simulated"
@@ -181,7 +181,7 @@ def summarise(results: pd.DataFrame, factors: list[str], groups: list[str]) -> p
             "data_source": DATA_SOURCE,
         })  # fmt: skip
     out = pd.DataFrame(rows)
-    order = {m: k for k, m in enumerate(MEASURES)}
+    order = {m: k for k, m in enumerate(dict.fromkeys(results["measure"]))}
     rank = {g: k for k, g in enumerate(groups)}
     out["_g"], out["_m"] = out["group"].map(rank), out["measure"].map(order)
     out = out.sort_values([*factors, "_g", "_m"], kind="stable").drop(columns=["_g", "_m"])

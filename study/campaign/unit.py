@@ -9,9 +9,10 @@ estimator with the seed `study run` gives that trial (first attempt). Practice t
 are not run: a simulated participant does not learn between trials, and a trial's seed
 does not depend on the trials before it, so they change no measured value.
 
-The measures are the database's trial columns (for NOTES, peak demanded force and peak
-tip force in the proximal and distal columns), averaged per participant and condition
-as `participant_means` does, and tested with the analysis's own `compare_conditions`.
+The measures are the task's analysed measures as `study run` stores them
+(`study.protocol.tasks`: completion time and, for LCCA, peak proximal and distal force;
+for NOTES, peak demanded and tip force), averaged per participant and condition as
+`participant_means` does, and tested with the analysis's own `compare_conditions`.
 """
 
 from __future__ import annotations
@@ -26,17 +27,17 @@ import pandas as pd
 from study.analysis.stats import ALPHA, compare_conditions, hedges_g_av
 from study.campaign.spec import CampaignSpec, Cell, study_seed
 from study.protocol.design import KNOWN_CONDITIONS, StudyDesign, next_order
-from study.protocol.lcca_trial import run_lcca_trial
-from study.protocol.notes_trial import run_notes_trial
 from study.protocol.participants import ParticipantTraits
 from study.protocol.roster import CODE_DIGITS, plan_blocks
 from study.protocol.session import MAX_TRIAL_S, participant_traits
+from study.protocol.tasks import get_task
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.link import LinkParams
-from teleop_core.phantom.lcca import LccaPhantom
 
-MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
-"""The trial measures the analysis compares (`study.analysis.frames.TRIAL_MEASURES`)."""
+
+def measures(task: str) -> tuple[str, ...]:
+    """The trial measures the analysis compares for `task`."""
+    return get_task(task).analysed_measures
 UNIT_COLUMNS = (
     "replicate", "group", "measure", "n", "mean_vo", "mean_hv", "effect", "p",
     "significant", "test", "p_holm", "seed",
@@ -75,28 +76,19 @@ def run_trial(
     condition: str,
     seed: int,
     cell: Cell,
-    phantom: LccaPhantom,
+    context: object,
 ) -> dict[str, float]:
-    """One measured trial's database columns (peak forces as `study run` stores them)."""
-    v = cell.values
-    if task == "notes":
-        s = run_notes_trial(traits, condition, seed, MAX_TRIAL_S).summary
-        return {
-            "completion_time_s": s["completion_time_s"],
-            "peak_proximal_force_n": s["peak_force_demanded_n"],
-            "peak_distal_force_n": s["peak_tip_force_n"],
-        }
+    """One measured trial's analysed measures (as `study run` stores them)."""
+    v, the_task = cell.values, get_task(task)
     link = LinkParams(
         delay_s=v["link_delay_ms"] / 1e3, jitter_s=v["link_jitter_ms"] / 1e3, loss=v["link_loss"]
     )
-    s = run_lcca_trial(
-        traits, condition, seed, _estimator(), v["haptic_gain"], MAX_TRIAL_S, phantom, link
-    ).summary
-    return {
-        "completion_time_s": s["completion_time_s"],
-        "peak_proximal_force_n": max(s["peak_proximal_force_n"], 0.0),
-        "peak_distal_force_n": max(s["peak_distal_force_n"], 0.0),
-    }
+    s = the_task.simulate(
+        traits, condition, seed, MAX_TRIAL_S,
+        haptic_gain_n_m_per_n=v["haptic_gain"] if the_task.has_dial else None,
+        estimator=_estimator() if the_task.has_dial else None, link=link, context=context,
+    ).summary  # fmt: skip
+    return {m: float(s[m]) for m in the_task.analysed_measures}
 
 
 def simulate_study(spec: CampaignSpec, cell: Cell, replicate: int) -> pd.DataFrame:
@@ -107,14 +99,14 @@ def simulate_study(spec: CampaignSpec, cell: Cell, replicate: int) -> pd.DataFra
         trials_per_condition=spec.trials_per_condition, practice_trials=0,
         groups=spec.sizes(cell),
     )  # fmt: skip
-    phantom = LccaPhantom()
+    context = get_task(spec.task).session_context()
     rows = []
     for code, group, order in enrol(design):
         traits = participant_traits(seed, code, group)
         for block in plan_blocks(design, order):
             for i in range(block["n_trials"]):
                 s = trial_seed(seed, code, block["block_index"], i)
-                values = run_trial(spec.task, traits, block["condition"], s, cell, phantom)
+                values = run_trial(spec.task, traits, block["condition"], s, cell, context)
                 rows.append({"participant": code, "group": group,
                              "condition": block["condition"], "trial": i + 1, **values})  # fmt: skip
     return pd.DataFrame(rows)
@@ -127,7 +119,7 @@ def compare_unit(trials: pd.DataFrame, task: str) -> pd.DataFrame:
     whichever test the analysis picks), p (that test's), significant (p < ALPHA),
     test (paired_t or wilcoxon), p_holm (Holm across the groups of a measure).
     """
-    means = trials.groupby(["participant", "group", "condition"], sort=False)[list(MEASURES)]
+    means = trials.groupby(["participant", "group", "condition"], sort=False)[list(measures(task))]
     long = means.mean().reset_index().melt(
         id_vars=["participant", "group", "condition"], var_name="measure", value_name="value"
     )
@@ -151,7 +143,7 @@ def run_unit(spec: CampaignSpec, cell: Cell, replicate: int) -> tuple[pd.DataFra
     long it took to compute, in seconds (kept apart: the rows must not depend on it)."""
     start = time.perf_counter()
     tested = compare_unit(simulate_study(spec, cell, replicate), spec.task)
-    order = {(g, m): k for k, (g, m) in enumerate((g, m) for g in spec.groups for m in MEASURES)}
+    order = {(g, m): k for k, (g, m) in enumerate((g, m) for g in spec.groups for m in measures(spec.task))}
     tested = tested.iloc[np.argsort([order[(g, m)] for g, m in zip(
         tested["group"], tested["measure"], strict=True)], kind="stable")]  # fmt: skip
     tested.insert(0, "replicate", replicate)

@@ -200,9 +200,10 @@ def test_a_unit_is_the_study_that_study_run_simulates(tmp_path: Path) -> None:
     engine = create_engine(f"sqlite:///{db}")
     with Session(engine) as s:
         stored = pd.DataFrame(
-            s.execute(select(Participant.code, Trial.condition, Trial.completion_time_s,
-                             Trial.peak_proximal_force_n, Trial.peak_distal_force_n)
-                      .join(Trial).order_by(Participant.code, Trial.condition)).all(),
+            [(code, t.condition, t.completion_time_s, t.measure_values["peak_proximal_force_n"],
+              t.measure_values["peak_distal_force_n"])
+             for code, t in s.execute(select(Participant.code, Trial).join(Trial)
+                                      .order_by(Participant.code, Trial.condition))],
             columns=["participant", "condition", "completion_time_s", "peak_proximal_force_n",
                      "peak_distal_force_n"])  # fmt: skip
     engine.dispose()

@@ -1,0 +1,51 @@
+"""The figure `study simulate --plot` draws of one trial, by the task's `trial_figure`.
+
+`lcca`: the tip's path in the phantom (`phantom_figures.plot_trial`); `notes`: depth,
+roll and forces (`notes_figures.notes_trial_plot`); `traces` (any task, e.g. one a lab
+adds): the insertion and the task's two live forces over time.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import matplotlib.pyplot as plt
+
+from study.analysis.figures import STYLE, WIDTHS_IN
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from study.protocol.tasks import Task
+
+
+def trial_plot(task: Task, frame: pd.DataFrame, title: str) -> plt.Figure:
+    if task.trial_figure == "lcca":
+        from study.analysis.phantom_figures import plot_trial
+        from teleop_core.phantom.lcca import LccaPhantom
+
+        return plot_trial(frame, LccaPhantom(), title)
+    if task.trial_figure == "notes":
+        from study.analysis.notes_figures import notes_trial_plot
+
+        return notes_trial_plot(frame, title)
+    return traces_plot(task, frame, title)
+
+
+def traces_plot(task: Task, frame: pd.DataFrame, title: str) -> plt.Figure:
+    """Insertion (top) and the task's two live forces (bottom) against time."""
+    t = frame[task.stored_name("t_s")]
+    with plt.rc_context(STYLE):
+        fig, (top, bottom) = plt.subplots(
+            2, 1, sharex=True, figsize=(WIDTHS_IN["single"], 2.6), layout="constrained"
+        )
+        top.plot(t, frame[task.stored_name("insertion_m")] * 1e3, color="black", lw=0.8)
+        top.set_ylabel("inserted (mm)")
+        for trace, color in zip(task.live_traces, ("#0072B2", "#D55E00"), strict=True):
+            unit = next(c.unit for c in task.sample_columns if c.name == trace.column)
+            bottom.plot(t, frame[trace.column], color=color, lw=0.8,
+                        label=f"{trace.label} ({unit})")  # fmt: skip
+        bottom.set_xlabel("time (s)")
+        bottom.legend(loc="upper left", frameon=False)
+        top.set_title(title)
+    return fig
