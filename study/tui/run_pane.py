@@ -18,7 +18,6 @@ from collections import deque
 from dataclasses import dataclass
 from typing import ClassVar
 
-from rich.text import Text
 from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
@@ -26,17 +25,18 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Label, Select
 
+from study.protocol.tasks import Task, get_task, tasks
 from study.tui.db_errors import SafeWorkers, plain_line
-from study.tui.live_view import (
-    LiveReadout,
-    NotesView,
-    PhantomView,
-    gauge,
-    region,
-    sparkline,
-)
+from study.tui.live_view import LiveReadout, PhantomView
+from study.tui.run_live import KeyboardMixin, LiveViewMixin
+from study.tui.scenes import NotesView, TrackView
 from study.tui.services import NextTrial, Roster, StudyServices
-from study.tui.trial_runner import Simulation, TrialOutcome, TrialRun, TuiKeyboardDriver
+from study.tui.trial_runner import (
+    Simulation,
+    TrialOutcome,
+    TrialRun,
+    TuiKeyboardDriver,
+)
 
 __all__ = ["RunPane"]
 
@@ -44,28 +44,7 @@ PACES: tuple[float | None, ...] = (1.0, 4.0, None)
 """Pace choices for a simulated participant (times real time; None: as fast as it goes)."""
 REDRAW_HZ = 30.0
 """Live-view redraws per second (the issue asks for >= 20 Hz; 30 leaves room on a busy machine)."""
-PROXIMAL_FULL_N = 2.0
-DISTAL_FULL_N = 1.0
-NOTES_FULL_N = 10.0
-"""Full scale of the NOTES force gauges: the fornix gives way at the mean max push of
-9.9 N (`teleop_core.notes.task.PUSH_BENCHMARK_N`)."""
-VIEW_TITLES = {"lcca": "LCCA phantom (frontal)", "notes": "NOTES: scope depth and roll"}
-KEY_HINTS = {
-    "lcca": "↑↓ dial ←→ rotate space let go e end",
-    "notes": "↑↓ push/pull ←→ roll space let go e end",
-}
-KEY_ACTIONS = {
-    "dial_forward": "advance",
-    "dial_back": "retract",
-    "rotate_cw": "rotate_cw",
-    "rotate_ccw": "rotate_ccw",
-    "release": "release",
-    "end_trial": "stop",
-}
-"""Pane action -> `KeyboardDriver.press` key."""
-
-
-class RunPane(SafeWorkers, Vertical, can_focus=True):
+class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=True):
     """Run a participant's next trial with a live view."""
 
     DEFAULT_CSS = """
@@ -124,7 +103,7 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         self._ended_at: tuple[tuple[str, str, str], float] | None = None
         """The block of the last completed trial and when it ended (until the roster says
         whether that block is finished)."""
-        self._trial_task = "lcca"
+        self._trial_task: Task = tasks()[0]
         """The task of the trial running or run last."""
 
     def compose(self) -> ComposeResult:
@@ -137,10 +116,11 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             with Vertical(id="phantom-box"):
                 yield PhantomView(id="phantom")
                 yield NotesView(id="notes-view")
+                yield TrackView(id="track-view")
             yield LiveReadout(id="readout")
 
     def on_mount(self) -> None:
-        self._show_task("lcca")
+        self._show_task(self._trial_task)
         self._show_mode()
         self._redraw()
         self.set_interval(1 / REDRAW_HZ, self._redraw)
@@ -214,12 +194,6 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
     def _show_mode(self) -> None:
         pace = "real time" if self.driver_kind == "keyboard" else self._pace_text()
         self.query_one("#mode", Label).update(f"driver: {self.driver_kind} (d)  pace: {pace} (p)")
-
-    def _show_task(self, task: str) -> None:
-        """The live view of `task`'s trials: the LCCA phantom or the NOTES scope."""
-        self.query_one("#phantom-box").border_title = VIEW_TITLES[task]
-        self.query_one(PhantomView).display = task == "lcca"
-        self.query_one(NotesView).display = task == "notes"
 
     def _pace_text(self) -> str:
         return "as fast as it goes" if self.pace is None else f"{self.pace:g}x"
@@ -315,8 +289,8 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             self.services.engine, None, code, self.driver_kind, pace, keyboard=keyboard
         )
         self.status = "starting"
-        self._trial_task = nxt.task
-        self._show_task(nxt.task)
+        self._trial_task = get_task(nxt.task)
+        self._show_task(self._trial_task)
         self.query_one("#next", Label).update(f"{code} {nxt.describe()}: loading...")
         self.focus()
         self._run_trial(self.run, (code, nxt.task, nxt.condition), checklist)
@@ -338,29 +312,6 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             Confirm(f"Stop {run.code}'s running trial? It is kept as interrupted and "
                     "repeated later."), answered,
         )  # fmt: skip
-
-    def _press(self, action: str) -> None:
-        run = self.run
-        if run is not None and run.keyboard is not None:
-            run.keyboard.press(KEY_ACTIONS[action])
-
-    def action_dial_forward(self) -> None:
-        self._press("dial_forward")
-
-    def action_dial_back(self) -> None:
-        self._press("dial_back")
-
-    def action_rotate_cw(self) -> None:
-        self._press("rotate_cw")
-
-    def action_rotate_ccw(self) -> None:
-        self._press("rotate_ccw")
-
-    def action_release(self) -> None:
-        self._press("release")
-
-    def action_end_trial(self) -> None:
-        self._press("end_trial")
 
     # -- the workers ----------------------------------------------------------------------
 
@@ -416,7 +367,7 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         self.status = "running"
         text = f"running: {event.code} {event.description}  x: stop"
         if self.run is not None and self.run.keyboard is not None:
-            text += "  " + KEY_HINTS[self._trial_task]
+            text += "  " + self._trial_task.key_hints
         self.query_one("#next", Label).update(text)
 
     @on(TrialEnded)
@@ -428,14 +379,11 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
         if outcome.trial_ids:
             self.status = "completed"
             peaks = ""
-            if run is not None:
-                first, second = (
-                    ("demanded", "on the fornix") if run.live.task == "notes"
-                    else ("proximal", "distal")
-                )  # fmt: skip
+            if run is not None and run.live.task is not None:
+                first, second = run.live.task.live_peaks
                 peaks = (
-                    f", peaks {run.live.peak_proximal_n:.2f} N {first},"
-                    f" {run.live.peak_distal_n:.2f} N {second}"
+                    f", peaks {run.live.peaks[0]:.2f} N {first.label},"
+                    f" {run.live.peaks[1]:.2f} N {second.label}"
                 )
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
         elif outcome.interrupted:
@@ -446,62 +394,3 @@ class RunPane(SafeWorkers, Vertical, can_focus=True):
             text = f"{outcome.code}: nothing run"
         self.last_outcome = text
         self._show_next()
-
-    # -- the live view --------------------------------------------------------------------
-
-    @property
-    def redraw_hz(self) -> float:
-        """Redraws per second over the last 50 redraws during a trial."""
-        r = self._redraws
-        return (len(r) - 1) / (r[-1] - r[0]) if len(r) > 1 and r[-1] > r[0] else 0.0
-
-    def _redraw(self) -> None:
-        run = self.run
-        frame = run.live.frame() if run is not None else None
-        readout = self.query_one(LiveReadout)
-        if run is None or frame is None:
-            self._redraws.clear()
-            text = Text(f"status: {self.status}")
-            if run is None and self.last_outcome:
-                text.append(f"\n{self.last_outcome}", "bold")
-            readout.show(text)
-            return
-        self._redraws.append(time.monotonic())
-        width = max(readout.content_size.width, 10)
-        text = Text(f"t {frame.t_s:6.1f} s   status: {self.status}\n", no_wrap=True)
-        text.append(f"view {self.redraw_hz:4.1f} Hz\n", "dim")
-        if frame.task == "notes":
-            self.query_one(NotesView).update_frame(frame)
-            text.append_text(self._notes_readout(frame, width))
-        else:
-            self.query_one(PhantomView).update_frame(frame)
-            text.append_text(self._lcca_readout(frame, width, run))
-        readout.show(text)
-
-    def _lcca_readout(self, frame, width: int, run: TrialRun) -> Text:
-        aim = run.keyboard.aim_rad if run.keyboard is not None else None
-        text = gauge("proximal", frame.proximal_n, PROXIMAL_FULL_N, 14)
-        text.append("\n" + sparkline(frame.proximal_history_n, width, PROXIMAL_FULL_N) + "\n\n")
-        text.append_text(gauge("distal", frame.distal_n, DISTAL_FULL_N, 14))
-        text.append("\n" + sparkline(frame.distal_history_n, width, DISTAL_FULL_N) + "\n\n")
-        text.append(
-            f"tip in {region(frame.branch)}, inserted {frame.insertion_m * 1000:5.0f} mm\n"
-            f"rotation {frame.rotation_rad:+5.2f} rad\n"
-            f"dial {frame.dial_angle_rad:+5.2f} rad"
-            + (f" (aim {aim:+4.2f})" if aim is not None else "")
-            + f"\ntorque on the hand {frame.dial_torque_n_m * 1000:+5.1f} mN m"
-        )
-        return text
-
-    def _notes_readout(self, frame, width: int) -> Text:
-        # forces as magnitudes on the gauges, signed in the numbers (+ push, - pull)
-        text = gauge("demanded", frame.demanded_n, NOTES_FULL_N, 14, magnitude=True)
-        text.append("\n" + sparkline(frame.proximal_history_n, width, NOTES_FULL_N) + "\n\n")
-        text.append_text(gauge("rendered", frame.proximal_n, NOTES_FULL_N, 14, magnitude=True))
-        text.append("\n" + sparkline(frame.distal_history_n, width, NOTES_FULL_N) + "\n\n")
-        text.append(
-            f"tip on the fornix {frame.distal_n:5.2f} N\n"
-            f"torque demanded {frame.torque_demanded_n_m * 1000:+6.1f} mN m\n"
-            f"torque rendered {frame.dial_torque_n_m * 1000:+6.1f} mN m"
-        )
-        return text

@@ -15,13 +15,13 @@ This module adds what a terminal needs around it:
   blocks too: the NOTES loop reads the same `Driver` (the dial's aim sets the scope's
   insertion speed, the rotation keys its roll).
 
-LCCA and NOTES samples differ by one column (`teleop_core.notes.task.SAMPLE_COLUMNS`
-adds the demanded torque), which is how `LiveState` tells them apart.
+What the live view shows of a trial (its columns, traces and peaks) the trial's task
+says (`study.protocol.tasks`): the runner hands the task to `LiveState` when the trial
+starts.
 """
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections import deque
@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from study.protocol.tasks import LiveTrace, Task
 from teleop_core.loop.drivers import HandAction, KeyboardDriver, OperatorView
 
 STOPPED_REASON = "stopped from the terminal app in the middle of the trial"
@@ -55,13 +56,17 @@ class Simulation:
         """The estimator, after the loop's kernel has been compiled."""
         with self._lock:
             if self.estimator is None:
-                from study.protocol.lcca_trial import lcca_loop
+                from study.protocol.tasks import tasks
                 from teleop_core.loop.drivers import SimulatedOperator
 
                 estimator = self._load()
-                loop = lcca_loop("HV", 0, estimator)  # type: ignore[arg-type]
-                loop.start(SimulatedOperator())
-                loop.advance(0.05)
+                for task in tasks():  # the tasks with a dial share the compiled loop
+                    if task.has_dial:
+                        loop = task.make_loop("HV", 0, estimator=estimator,
+                                              context=task.session_context())  # fmt: skip
+                        loop.start(SimulatedOperator())
+                        loop.advance(0.05)
+                        break
                 self.estimator = estimator
             return self.estimator
 
@@ -82,116 +87,103 @@ class TuiKeyboardDriver(KeyboardDriver):
 
 @dataclass(frozen=True)
 class LiveFrame:
-    """What the live view draws at one redraw.
+    """What the live view draws at one redraw: the newest sample by the task's column
+    names (`values`), and the history of the task's two live traces (`live_traces`).
 
-    LCCA: `proximal_n` is the estimate the robot renders (what the study reports),
-    `distal_n` the tip's force; the histories are these two. NOTES (the loop's columns
-    read the NOTES way, `teleop_core.notes.task`): `proximal_n` is the force the device
-    renders, `demanded_n` the force the tissue demands, `distal_n` the tip's force on
-    the fornix, `dial_torque_n_m` the rendered torque, `branch` an index into the NOTES
-    regions; the histories are the demanded and the rendered force's magnitudes.
-    """
+    The properties read the columns every task stores (`Task.stored_name`): where the
+    tip is, how far in, its roll, the dial."""
 
-    t_s: float
-    tip_xz_m: tuple[float, float]
-    branch: int
-    insertion_m: float
-    rotation_rad: float
-    proximal_n: float
-    distal_n: float
-    dial_angle_rad: float
-    dial_torque_n_m: float
-    proximal_history_n: tuple[float, ...]
-    distal_history_n: tuple[float, ...]
-    task: str = "lcca"
-    demanded_n: float = math.nan
-    torque_demanded_n_m: float = math.nan
+    task: Task
+    values: dict[str, float]
+    first_history: tuple[float, ...]
+    second_history: tuple[float, ...]
 
+    def _stored(self, column: str) -> float:
+        return self.values[self.task.stored_name(column)]
 
-def _columns(width: int) -> tuple[str, dict[str, int]]:
-    """(task, sample column -> index) for samples `width` columns wide (imported on first
-    use: the loop's module loads torch)."""
-    from teleop_core.loop.core import SAMPLE_COLUMNS
-    from teleop_core.notes.task import SAMPLE_COLUMNS as NOTES_COLUMNS
+    @property
+    def t_s(self) -> float:
+        return self._stored("t_s")
 
-    for task, columns in (("lcca", SAMPLE_COLUMNS), ("notes", NOTES_COLUMNS)):
-        if width == len(columns):
-            return task, {name: k for k, name in enumerate(columns)}
-    raise ValueError(
-        f"samples with {width} columns; expected {len(SAMPLE_COLUMNS)} (LCCA) "
-        f"or {len(NOTES_COLUMNS)} (NOTES)"
-    )
+    @property
+    def branch(self) -> int:
+        return int(self._stored("branch"))
 
+    @property
+    def insertion_m(self) -> float:
+        return self._stored("insertion_m")
 
-TRACES = {
-    "lcca": ("proximal_force_est_n", "distal_force_n"),
-    "notes": ("proximal_force_n", "proximal_force_est_n"),
-}
-"""The two force traces the live view plots, per task (NOTES: demanded, rendered)."""
-PEAKS = {
-    "lcca": ("proximal_force_est_n", "distal_force_n"),
-    "notes": ("proximal_force_n", "distal_force_n"),
-}
-"""The columns of the two peaks shown when a trial ends: as the trial's stored
-peak_proximal_force_n / peak_distal_force_n (NOTES: demanded force, tip force)."""
+    @property
+    def rotation_rad(self) -> float:
+        return self._stored("rotation_rad")
+
+    @property
+    def tip_xz_m(self) -> tuple[float, float]:
+        return (self._stored("tip_x_m"), self._stored("tip_z_m"))
+
+    @property
+    def dial_angle_rad(self) -> float:
+        return self._stored("dial_angle_rad")
+
+    def trace(self, k: int) -> float:
+        """The newest value of live trace `k` (0 or 1), as its gauge shows it."""
+        trace = self.task.live_traces[k]
+        value = self.values[trace.column]
+        return abs(value) if trace.magnitude else value
 
 
 class LiveState:
     """The newest samples of the running trial, handed from the worker to the view."""
 
     def __init__(self, rate_hz: float = 100.0) -> None:
-        self._col: dict[str, int] = {}
-        self.task: str | None = None
-        """"lcca" or "notes", known from the first batch."""
+        self.task: Task | None = None
+        """The running trial's task, set by `start` before its first samples."""
         self._lock = threading.Lock()
         self._last: np.ndarray | None = None
+        self._index: dict[str, int] = {}
         n = round(HISTORY_S * rate_hz)
-        self._prox: deque[float] = deque(maxlen=n)
-        self._dist: deque[float] = deque(maxlen=n)
+        self._first: deque[float] = deque(maxlen=n)
+        self._second: deque[float] = deque(maxlen=n)
         self.batches = 0
-        self.peak_proximal_n = 0.0
-        self.peak_distal_n = 0.0
+        self.peaks = [0.0, 0.0]
+        """The largest values of the task's two `live_peaks` so far."""
+
+    def start(self, task: Task) -> None:
+        """A trial of `task` begins (in the worker, before its samples)."""
+        with self._lock:
+            self.task = task
+            self._index = task.column_index()
+            self._last = None
+            self._first.clear()
+            self._second.clear()
+            self.peaks = [0.0, 0.0]
+
+    def _column(self, samples: np.ndarray, trace: LiveTrace) -> np.ndarray:
+        values = samples[:, self._index[trace.column]]
+        return np.abs(values) if trace.magnitude else values
 
     def push(self, samples: np.ndarray) -> None:
-        """Take a batch of samples (in the worker); the first call resolves the columns."""
-        if not self._col:
-            self.task, self._col = _columns(samples.shape[1])
-        COL, task = self._col, self.task or "lcca"
-        first, second, *peaks = (samples[:, COL[c]] for c in TRACES[task] + PEAKS[task])
-        if task == "notes":  # pushes and pulls alike, as the NOTES summary's peaks
-            first, second, *peaks = (np.abs(v) for v in (first, second, *peaks))
+        """Take a batch of samples (in the worker)."""
+        task = self.task
+        if task is None:
+            raise RuntimeError("LiveState.push before start(task)")
+        first, second = (self._column(samples, t) for t in task.live_traces)
+        peaks = [float(self._column(samples, t).max()) for t in task.live_peaks]
         with self._lock:
             self._last = samples[-1].copy()
-            self._prox.extend(first.tolist())
-            self._dist.extend(second.tolist())
+            self._first.extend(first.tolist())
+            self._second.extend(second.tolist())
             self.batches += 1
-            self.peak_proximal_n = max(self.peak_proximal_n, float(peaks[0].max()))
-            self.peak_distal_n = max(self.peak_distal_n, float(peaks[1].max()))
+            self.peaks = [max(a, b) for a, b in zip(self.peaks, peaks, strict=True)]
 
     def frame(self) -> LiveFrame | None:
         with self._lock:
-            row = self._last
-            if row is None:
+            row, task = self._last, self.task
+            if row is None or task is None:
                 return None
-            prox, dist = tuple(self._prox), tuple(self._dist)
-        COL = self._col
-        notes = self.task == "notes"
-        return LiveFrame(
-            t_s=float(row[COL["t_s"]]),
-            tip_xz_m=(float(row[COL["tip_x_m"]]), float(row[COL["tip_z_m"]])),
-            branch=int(row[COL["branch"]]),
-            insertion_m=float(row[COL["insertion_m"]]),
-            rotation_rad=float(row[COL["rotation_rad"]]),
-            proximal_n=float(row[COL["proximal_force_est_n"]]),
-            distal_n=float(row[COL["distal_force_n"]]),
-            dial_angle_rad=float(row[COL["dial_angle_rad"]]),
-            dial_torque_n_m=float(row[COL["dial_torque_n_m"]]),
-            proximal_history_n=prox,
-            distal_history_n=dist,
-            task=self.task or "lcca",
-            demanded_n=float(row[COL["proximal_force_n"]]) if notes else math.nan,
-            torque_demanded_n_m=float(row[COL["torque_demanded_n_m"]]) if notes else math.nan,
-        )
+            first, second = tuple(self._first), tuple(self._second)
+        values = {c.name: float(row[k]) for k, c in enumerate(task.sample_columns)}
+        return LiveFrame(task, values, first, second)
 
 
 @dataclass(frozen=True)
@@ -244,7 +236,10 @@ class TrialRun:
             return TrialOutcome(self.code, [], 0, 0.0)
 
         def started(item, _k: int, _n: int) -> None:
+            from study.protocol.tasks import get_task
+
             self.participant_id = item.block.participant_id
+            self.live.start(get_task(item.block.task))
             on_start(item)
 
         keyboard = self.keyboard

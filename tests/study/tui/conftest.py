@@ -98,6 +98,7 @@ def complete_block(engine: Engine, code: str, task: str, condition: str) -> None
         session.add(Trial(
             participant_id=p.id, block_id=block.id, task=task, condition=condition,
             block_index=block.block_index, trial_index=0, status="completed",
-            completion_time_s=30.0, peak_proximal_force_n=0.5, peak_distal_force_n=0.2,
-            success=True, wall_contacts=0, driver="simulated",
+            completion_time_s=30.0, success=True, driver="simulated",
+            measure_values={"peak_proximal_force_n": 0.5, "peak_distal_force_n": 0.2,
+                            "wall_contacts": 0},
         ))  # fmt: skip

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from study.tui.live_view import BrailleCanvas, PhantomFrame, gauge, notes_scene, sparkline
+from study.protocol.tasks import get_task
+from study.tui.live_view import BrailleCanvas, PhantomFrame, gauge, sparkline
+from study.tui.scenes import notes_scene
 from study.tui.services import Roster
 from study.tui.trial_runner import LiveFrame, LiveState
 from teleop_core.notes.task import REGIONS
@@ -90,12 +92,12 @@ def test_gauge_and_sparkline_scale() -> None:
 
 def test_notes_scene_puts_the_tip_fornix_and_targets_on_their_columns() -> None:
     # 45 columns: depth 0-220 mm (target 200 mm + 20), roll -90..+90 deg, each over 44 steps
-    frame = LiveFrame(
-        t_s=1.0, tip_xz_m=(0.11, 0.0), branch=REGIONS.index("canal"), insertion_m=0.11,
-        rotation_rad=0.0, proximal_n=0.0, distal_n=0.0, dial_angle_rad=0.0,
-        dial_torque_n_m=0.0, proximal_history_n=(), distal_history_n=(), task="notes",
-        demanded_n=1.0, torque_demanded_n_m=0.0,
-    )  # fmt: skip
+    task = get_task("notes")
+    values = {c.name: 0.0 for c in task.sample_columns} | {
+        "t_s": 1.0, "tip_x_m": 0.11, "region": REGIONS.index("canal"), "insertion_m": 0.11,
+        "force_demanded_n": 1.0,
+    }  # fmt: skip
+    frame = LiveFrame(task, values, (), ())
     lines = notes_scene(frame, 45).plain.split("\n")
     assert lines[0].startswith("depth   110 mm   in the canal")
     axis, scope = lines[1], lines[2]
@@ -123,11 +125,15 @@ def test_live_state_reads_notes_samples_the_notes_way() -> None:
         samples[k, col["torque_demanded_n_m"]] = torque
         samples[k, col["insertion_m"]] = 0.05 * (k + 1)
     live = LiveState()
+    live.start(get_task("notes"))
     live.push(samples)
     frame = live.frame()
-    assert (live.task, frame.task) == ("notes", "notes")
-    assert (frame.demanded_n, frame.proximal_n, frame.torque_demanded_n_m) == (-6.0, -5.6, -0.05)
+    assert frame.task.name == "notes"
+    v = frame.values
+    assert (v["force_demanded_n"], v["force_rendered_n"], v["torque_demanded_n_m"]) == (
+        -6.0, -5.6, -0.05,
+    )  # fmt: skip
     assert frame.insertion_m == 0.1
     # the traces are magnitudes; the peaks are as the NOTES summary's (max |.|)
-    assert frame.proximal_history_n == (3.0, 6.0) and frame.distal_history_n == (2.5, 5.6)
-    assert (live.peak_proximal_n, live.peak_distal_n) == (6.0, 1.0)
+    assert frame.first_history == (3.0, 6.0) and frame.second_history == (2.5, 5.6)
+    assert live.peaks == [6.0, 1.0]

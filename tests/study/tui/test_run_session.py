@@ -21,8 +21,9 @@ from study.protocol.roster import add_participant, create_study
 from study.protocol.tlx import store_tlx
 from study.tui import StudyServices, TuiSettings, make_app
 from study.tui.confirm import Confirm
-from study.tui.live_view import NotesView, PhantomView
+from study.tui.live_view import PhantomView
 from study.tui.run_pane import RunPane
+from study.tui.scenes import NotesView
 from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON
 from tests.study.tui.conftest import loaded, wait_for
@@ -164,7 +165,7 @@ async def test_a_notes_trial_shows_the_scope_and_stores_its_samples(
         # the NOTES view, not the LCCA phantom, was shown and fed
         view = app.query_one(NotesView)
         assert view.display and not app.query_one(PhantomView).display
-        assert view._frame is not None and view._frame.task == "notes"
+        assert view._frame is not None and view._frame.task.name == "notes"
         assert app.query_one("#phantom-box").border_title == "NOTES: scope depth and roll"
         peak = float(pane.last_outcome.split("peaks ")[1].split(" N demanded")[0])
     with Session(notes_engine) as session:
@@ -173,7 +174,7 @@ async def test_a_notes_trial_shows_the_scope_and_stores_its_samples(
     assert (trial.task, trial.status, trial.driver) == ("notes", "completed", "simulated")
     assert n == round(trial.completion_time_s * 100)
     # the peak shown is the stored one (the demanded force, as `study run` stores it)
-    assert peak == pytest.approx(trial.peak_proximal_force_n, abs=0.005)
+    assert peak == pytest.approx(trial.measure_values["peak_force_demanded_n"], abs=0.005)
 
 
 async def test_the_keyboard_drives_a_notes_trial(notes_engine: Engine, tmp_path: Path) -> None:

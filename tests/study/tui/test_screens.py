@@ -185,8 +185,9 @@ def _store_trials(engine) -> None:
                     participant_id=p.id, block_id=block.id, task="lcca",
                     condition=block.condition, block_index=block.block_index, trial_index=0,
                     status="completed", completion_time_s=20.0 + 10 * peak,
-                    peak_proximal_force_n=peak, peak_distal_force_n=peak / 2, success=True,
-                    wall_contacts=0, driver="simulated",
+                    success=True, driver="simulated",
+                    measure_values={"peak_proximal_force_n": peak,
+                                    "peak_distal_force_n": peak / 2, "wall_contacts": 0},
                 ))  # fmt: skip
         session.commit()
         ids = session.scalars(select(Trial.id)).all()

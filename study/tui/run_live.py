@@ -1,0 +1,117 @@
+"""The run screen's live view and keyboard, as mixins of `RunPane`.
+
+`LiveViewMixin`: what the 30 Hz timer draws from `LiveState` (never from the worker):
+the scene the trial's task names (`Task.live_scene`: the LCCA phantom, the NOTES scope,
+or the insertion along a track) and the readout of the task's two live forces and its
+own lines. `KeyboardMixin`: the pane's key actions, handed to the keyboard driver.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+from rich.text import Text
+
+from study.tui.live_view import LiveReadout, PhantomView, gauge, sparkline
+from study.tui.scenes import NotesView, TrackView
+
+if TYPE_CHECKING:
+    from study.protocol.tasks import Task
+    from study.tui.trial_runner import LiveFrame, TrialRun
+
+VIEW_TITLES = {"lcca": "LCCA phantom (frontal)", "notes": "NOTES: scope depth and roll",
+               "track": "{title}: insertion"}  # fmt: skip
+"""Title of the view beside the readout, by the task's `live_scene`."""
+KEY_ACTIONS = {
+    "dial_forward": "advance",
+    "dial_back": "retract",
+    "rotate_cw": "rotate_cw",
+    "rotate_ccw": "rotate_ccw",
+    "release": "release",
+    "end_trial": "stop",
+}
+"""Pane action -> `KeyboardDriver.press` key."""
+
+
+class LiveViewMixin:
+    """The live view of `RunPane` (which provides run, status, last_outcome, _redraws)."""
+
+    def _show_task(self, task: Task) -> None:
+        """The live view of `task`'s trials, by its `live_scene`: the LCCA phantom, the
+        NOTES scope, or the insertion along a track (any other task)."""
+        scene = task.live_scene if task.live_scene in VIEW_TITLES else "track"
+        self.query_one("#phantom-box").border_title = VIEW_TITLES[scene].format(title=task.title)
+        self.query_one(PhantomView).display = scene == "lcca"
+        self.query_one(NotesView).display = scene == "notes"
+        self.query_one(TrackView).display = scene == "track"
+
+    @property
+    def redraw_hz(self) -> float:
+        """Redraws per second over the last 50 redraws during a trial."""
+        r = self._redraws
+        return (len(r) - 1) / (r[-1] - r[0]) if len(r) > 1 and r[-1] > r[0] else 0.0
+
+    def _redraw(self) -> None:
+        run = self.run
+        frame = run.live.frame() if run is not None else None
+        readout = self.query_one(LiveReadout)
+        if run is None or frame is None:
+            self._redraws.clear()
+            text = Text(f"status: {self.status}")
+            if run is None and self.last_outcome:
+                text.append(f"\n{self.last_outcome}", "bold")
+            readout.show(text)
+            return
+        self._redraws.append(time.monotonic())
+        width = max(readout.content_size.width, 10)
+        text = Text(f"t {frame.t_s:6.1f} s   status: {self.status}\n", no_wrap=True)
+        text.append(f"view {self.redraw_hz:4.1f} Hz\n", "dim")
+        scene = frame.task.live_scene
+        view = {"lcca": PhantomView, "notes": NotesView}.get(scene, TrackView)
+        self.query_one(view).update_frame(frame)
+        text.append_text(self._readout(frame, width, run))
+        readout.show(text)
+
+    def _readout(self, frame: LiveFrame, width: int, run: TrialRun) -> Text:
+        """The task's two live forces (gauge and history), then its own lines."""
+        text = Text()
+        histories = (frame.first_history, frame.second_history)
+        for k, trace in enumerate(frame.task.live_traces):
+            value = frame.values[trace.column]  # signed; the bar shows |value| if magnitude
+            text.append_text(gauge(trace.label, value, trace.full_scale, 14,
+                                   magnitude=trace.magnitude))  # fmt: skip
+            text.append("\n" + sparkline(histories[k], width, trace.full_scale) + "\n\n")
+        lines = frame.task.live_lines(frame.values)
+        if run.keyboard is not None:
+            lines.append(f"dial aim {run.keyboard.aim_rad:+4.2f} rad")
+        text.append("\n".join(lines))
+        return text
+
+
+class KeyboardMixin:
+    """The pane's keys, pressed on the running trial's keyboard driver."""
+
+    def _press(self, action: str) -> None:
+        run = self.run
+        if run is not None and run.keyboard is not None:
+            run.keyboard.press(KEY_ACTIONS[action])
+
+    def action_dial_forward(self) -> None:
+        self._press("dial_forward")
+
+    def action_dial_back(self) -> None:
+        self._press("dial_back")
+
+    def action_rotate_cw(self) -> None:
+        self._press("rotate_cw")
+
+    def action_rotate_ccw(self) -> None:
+        self._press("rotate_ccw")
+
+    def action_release(self) -> None:
+        self._press("release")
+
+    def action_end_trial(self) -> None:
+        self._press("end_trial")
+
