@@ -248,7 +248,7 @@ class CausalEstimator:
         self.est = estimator
         std = estimator.gru.standardisation
         w = estimator.gru.weights
-        self.buffer = np.zeros((estimator.window, 3))
+        self.buffer = np.zeros((estimator.window, N_FEATURES))
         self.state = np.zeros(STREAM_STATE_SIZE)
         self.ekf_state = np.zeros(EKF_STATE_SIZE)
         self.mean = np.asarray(std.feature_mean, dtype=np.float64)
@@ -258,7 +258,7 @@ class CausalEstimator:
         self.weights = (w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, float(w.b_out))
         self.target = np.array([std.target_std, std.target_mean], dtype=np.float64)
         self.dt_s = estimator.dt_s
-        self._out = np.zeros(3)
+        self._out = np.zeros(ESTIMATE_OUT)
 
     def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
         """Add a sample (s, A, rad/s, optionally rad/s^2) to the window without estimating:
@@ -278,7 +278,8 @@ class CausalEstimator:
         )  # fmt: skip
         if not ok:
             return None
-        return float(self._out[0]), float(self._out[1]), float(self._out[2])
+        out = self._out
+        return float(out[EST_PHYSICS]), float(out[EST_HYBRID]), float(out[EST_FINAL])
 
     def update(
         self, t: float, iq: float, omega: float, alpha: float | None = None
@@ -294,6 +295,13 @@ class CausalEstimator:
 # stream state: samples pushed, last (t, omega) and whether there is one, latest sample
 S_COUNT, S_LAST_T, S_LAST_OMEGA, S_HAS_LAST, S_IQ, S_OMEGA, S_ALPHA = range(7)
 STREAM_STATE_SIZE = 7
+# window columns (standardised features) and the target's de-standardisation
+X_IQ, X_OMEGA, X_ALPHA = range(3)
+N_FEATURES = 3
+T_STD, T_MEAN = range(2)
+# what `stream_estimate` writes to `out`: F_physics, F*_GRU and F*_Final
+EST_PHYSICS, EST_HYBRID, EST_FINAL = range(3)
+ESTIMATE_OUT = 3
 
 
 @numba.njit(cache=True)
@@ -315,10 +323,12 @@ def stream_push(
     st[S_IQ], st[S_OMEGA], st[S_ALPHA] = iq, omega, alpha
     n = buf.shape[0]
     for i in range(n - 1):
-        buf[i, 0], buf[i, 1], buf[i, 2] = buf[i + 1, 0], buf[i + 1, 1], buf[i + 1, 2]
-    buf[n - 1, 0] = (iq - mean[0]) / std[0]
-    buf[n - 1, 1] = (omega - mean[1]) / std[1]
-    buf[n - 1, 2] = (alpha - mean[2]) / std[2]
+        buf[i, X_IQ], buf[i, X_OMEGA], buf[i, X_ALPHA] = (
+            buf[i + 1, X_IQ], buf[i + 1, X_OMEGA], buf[i + 1, X_ALPHA],
+        )  # fmt: skip
+    buf[n - 1, X_IQ] = (iq - mean[X_IQ]) / std[X_IQ]
+    buf[n - 1, X_OMEGA] = (omega - mean[X_OMEGA]) / std[X_OMEGA]
+    buf[n - 1, X_ALPHA] = (alpha - mean[X_ALPHA]) / std[X_ALPHA]
     st[S_COUNT] += 1.0
 
 
@@ -346,10 +356,10 @@ def stream_estimate(
     f_physics = force_at(pv, iq, omega, alpha)
     # F*_GRU = F_physics + GRU residual (eq. 3), de-standardised
     y = _window_forward(buf, w_ih, w_hh, b_ih, b_hh, w_out, b_out)
-    f_hybrid = f_physics + y * target[0] + target[1]
-    out[0] = f_physics
-    out[1] = f_hybrid
-    out[2] = ekf_update(ekf_state, ekf_settings, pv, dt_s, f_physics, f_hybrid, omega)
+    f_hybrid = f_physics + y * target[T_STD] + target[T_MEAN]
+    out[EST_PHYSICS] = f_physics
+    out[EST_HYBRID] = f_hybrid
+    out[EST_FINAL] = ekf_update(ekf_state, ekf_settings, pv, dt_s, f_physics, f_hybrid, omega)
     return True
 
 

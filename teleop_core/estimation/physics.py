@@ -27,6 +27,13 @@ from teleop_core._typing import Float1D, Float2D
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.recording import FollowerRecording
 
+# `PhysicsParams.vector()` layout, as `force_at` and `gradient_at` read it
+PV_KT, PV_J, PV_B, PV_TC, PV_R, PV_F0, PV_W = range(7)
+PV_SIZE = 7
+# `regressors` columns: K_t, J, b, tau_c (each over r) and F_0
+RC_KT, RC_J, RC_B, RC_TC, RC_F0 = range(5)
+REGRESSORS = 5
+
 
 @dataclass(frozen=True)
 class PhysicsParams:
@@ -72,17 +79,15 @@ class PhysicsParams:
 
     def vector(self) -> np.ndarray:
         """The parameters as `force_at` and `gradient_at` take them."""
-        return np.array(
-            [
-                self.torque_constant_n_m_per_a,
-                self.inertia_kg_m2,
-                self.viscous_damping_n_m_s_per_rad,
-                self.coulomb_friction_n_m,
-                self.wheel_radius_m,
-                self.offset_n,
-                self.sign_speed_rad_s,
-            ]
+        pv = np.empty(PV_SIZE)
+        pv[PV_KT], pv[PV_J], pv[PV_B] = (
+            self.torque_constant_n_m_per_a,
+            self.inertia_kg_m2,
+            self.viscous_damping_n_m_s_per_rad,
         )
+        pv[PV_TC], pv[PV_R] = self.coulomb_friction_n_m, self.wheel_radius_m
+        pv[PV_F0], pv[PV_W] = self.offset_n, self.sign_speed_rad_s
+        return pv
 
     def force_gradient(self, omega: float, dt_s: float) -> tuple[float, float]:
         """dF/dI_q and dF/dtheta_d at `omega`, the latter through alpha's backward difference."""
@@ -126,7 +131,7 @@ def fit_physics(
     lower = np.array([1e-9, 0.0, 0.0, 0.0, -np.inf])
     from scipy.optimize import lsq_linear  # only when fitting (0.5-0.7 s to import)
 
-    result = lsq_linear(A / scale, y, bounds=(lower * scale, np.full(5, np.inf)))
+    result = lsq_linear(A / scale, y, bounds=(lower * scale, np.full(REGRESSORS, np.inf)))
     return from_coefficients(result.x / scale, wheel_radius_m, sign_speed_rad_s)
 
 
@@ -136,12 +141,12 @@ def from_coefficients(
     """Eq. 1's parameters from the coefficients of `regressors`' five columns (N per unit)."""
     r = wheel_radius_m
     return PhysicsParams(
-        torque_constant_n_m_per_a=float(beta[0] * r),
-        inertia_kg_m2=float(beta[1] * r),
-        viscous_damping_n_m_s_per_rad=float(beta[2] * r),
-        coulomb_friction_n_m=float(beta[3] * r),
+        torque_constant_n_m_per_a=float(beta[RC_KT] * r),
+        inertia_kg_m2=float(beta[RC_J] * r),
+        viscous_damping_n_m_s_per_rad=float(beta[RC_B] * r),
+        coulomb_friction_n_m=float(beta[RC_TC] * r),
         wheel_radius_m=r,
-        offset_n=float(beta[4]),
+        offset_n=float(beta[RC_F0]),
         sign_speed_rad_s=sign_speed_rad_s,
     )
 
@@ -150,8 +155,13 @@ def from_coefficients(
 def force_at(pv: np.ndarray, iq: float, omega: float, alpha: float) -> float:  # pragma: no cover
     """Eq. 1 for one sample, `pv` = `PhysicsParams.vector()` (the streaming path)."""
     # F = (K_t I_q - J theta_dd - b theta_d - tau_c tanh(theta_d / w)) / r + F_0   (eq. 1)
-    torque = pv[0] * iq - pv[1] * alpha - pv[2] * omega - pv[3] * math.tanh(omega / pv[6])
-    return torque / pv[4] + pv[5]
+    torque = (
+        pv[PV_KT] * iq
+        - pv[PV_J] * alpha
+        - pv[PV_B] * omega
+        - pv[PV_TC] * math.tanh(omega / pv[PV_W])
+    )
+    return torque / pv[PV_R] + pv[PV_F0]
 
 
 @numba.njit(cache=True)
@@ -159,7 +169,7 @@ def gradient_at(pv: np.ndarray, omega: float, dt_s: float) -> tuple[float, float
     """dF/dI_q and dF/dtheta_d (`PhysicsParams.force_gradient`)."""
     # dF/dtheta_d = -(b + tau_c sech^2(theta_d / w) / w + J / dt) / r, since
     # theta_dd = (theta_d - theta_d,prev) / dt
-    r = pv[4]
-    sech2 = 1.0 / math.cosh(omega / pv[6]) ** 2
-    d_omega = -(pv[2] + pv[3] * sech2 / pv[6] + pv[1] / dt_s) / r
-    return pv[0] / r, d_omega
+    r = pv[PV_R]
+    sech2 = 1.0 / math.cosh(omega / pv[PV_W]) ** 2
+    d_omega = -(pv[PV_B] + pv[PV_TC] * sech2 / pv[PV_W] + pv[PV_J] / dt_s) / r
+    return pv[PV_KT] / r, d_omega

@@ -26,19 +26,23 @@ import numpy as np
 import pandas as pd
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.estimator import ForceEstimator
+from teleop_core.estimation.estimator import EST_FINAL, ForceEstimator
 from teleop_core.follower.params import (
     FollowerControlParams,
     FollowerPlantParams,
     FollowerSensorParams,
 )
-from teleop_core.follower.plant import STATE_SIZE, _param_vector
-from teleop_core.loop import kernel as K
+from teleop_core.follower.plant import STATE_SIZE, THETA, _param_vector
+from teleop_core.loop import layout as K
 from teleop_core.loop.drivers import Driver, HandAction, OperatorView
 from teleop_core.loop.environments import Environment, free_space
+from teleop_core.loop.kernel import kernel_for
+from teleop_core.loop.layout import SAMPLE_COLUMNS
 from teleop_core.loop.link import (
+    LINK_PARAM_SIZE,
     LINK_STATE_SIZE,
     LS_NEWEST,
+    POOL_NEXT,
     QUEUE_ROWS,
     QUEUE_WIDTH,
     Link,
@@ -50,27 +54,12 @@ from teleop_core.master.dial import D_OMEGA, D_THETA, DIAL_STATE_SIZE, dial_para
 from teleop_core.master.haptics import LOADING, rate_command
 from teleop_core.master.params import DialParams, HapticParams
 
-_NO_PACKETS = np.zeros((0, 4))
+_NO_PACKETS = np.zeros((0, K.SCHEDULE_WIDTH))
 _NO_LINKS = (
-    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(3),
-    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(3),
+    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(LINK_PARAM_SIZE),
+    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(LINK_PARAM_SIZE),
     np.zeros(1), np.zeros(1),
 )  # fmt: skip
-SAMPLE_COLUMNS = (
-    "t_s",
-    "insertion_m",
-    "rotation_rad",
-    "tip_x_m",
-    "tip_y_m",
-    "tip_z_m",
-    "branch",
-    "proximal_force_n",
-    "proximal_force_est_n",
-    "distal_force_n",
-    "dial_angle_rad",
-    "dial_torque_n_m",
-)
-"""One row per acquisition: the database's sample columns (branch as its code)."""
 
 
 @dataclass(frozen=True)
@@ -183,7 +172,7 @@ class TeleopLoop:
         self.config = cfg = config or LoopConfig()
         self.environment = environment or free_space()
         self.environment.reset()
-        self._kernel = K.kernel_for(self.environment.fn)
+        self._kernel = kernel_for(self.environment.fn)
         self.estimator = estimator
         self.force_override = force_override
         self.keep_ticks = keep_ticks
@@ -208,7 +197,7 @@ class TeleopLoop:
         self._stream = estimator.stream() if estimator is not None else None
         self._log = np.zeros((max(self._acq_every, self._drv_every, self._est_every), K.LOG_WIDTH))
         self._last_row = [0.0] * K.LOG_WIDTH
-        self._schedule = np.zeros((8, 4))
+        self._schedule = np.zeros((8, K.SCHEDULE_WIDTH))
         self._noise = np.zeros(0)
         self._fast_allowed = fast
         self._fast = False
@@ -239,7 +228,7 @@ class TeleopLoop:
         mp[K.M_WHEEL_R] = cfg.plant.wheel_radius_m
         mp[K.M_IQ_FILTER_S] = cfg.sensors.current_filter_s
         mp[K.M_DT] = 1.0 / cfg.device_rate_hz
-        mp[K.M_POLY : K.M_POLY + 6] = [*poly.loading, *poly.unloading]
+        mp[K.M_POLY : K.M_POLY_END] = [*poly.loading, *poly.unloading]
         mp[K.M_ACQ_EVERY] = round(cfg.device_rate_hz / cfg.acquisition_rate_hz)
         mp[K.M_EST_EVERY] = round(cfg.device_rate_hz / cfg.estimation_rate_hz)
         mp[K.M_KV] = h.speed_gain_m_s_per_rad
@@ -265,13 +254,13 @@ class TeleopLoop:
         )  # fmt: skip
 
     def _reserve_draws(self, count: int) -> None:
-        pos = int(self._pool_pos[0])
+        pos = int(self._pool_pos[POOL_NEXT])
         if len(self._pool) - pos < count:
             fresh = self._link_rng.random(max(4096, count))
             self._pool = np.concatenate([self._pool[pos:], fresh])
-            self._pool_pos[0] = 0.0
+            self._pool_pos[POOL_NEXT] = 0.0
             links = list(self._links)
-            links[6] = self._pool
+            links[K.LK_POOL] = self._pool
             self._links = tuple(links)
 
     def _estimator_arrays(self) -> tuple:
@@ -290,16 +279,16 @@ class TeleopLoop:
 
     def view(self) -> OperatorView:
         row = self._last_row
-        branch = self.environment.branches[int(row[16])]
+        branch = self.environment.branches[int(row[K.LOG_BRANCH])]
         return OperatorView(
             t_s=self.t_s,
             dial_angle_rad=float(self.dial[D_THETA]),
             dial_speed_rad_s=float(self.dial[D_OMEGA]),
-            insertion_m=float(self.follower[0] * self.config.plant.wheel_radius_m),
+            insertion_m=float(self.follower[THETA] * self.config.plant.wheel_radius_m),
             rotation_rad=float(self.loop[K.L_ROTATION]),
-            tip_m=(float(row[13]), float(row[14]), float(row[15])),
+            tip_m=(float(row[K.LOG_TIP_X]), float(row[K.LOG_TIP_Y]), float(row[K.LOG_TIP_Z])),
             branch=branch,
-            success=bool(row[17]),
+            success=bool(row[K.LOG_SUCCESS]),
         )
 
     def run(self, seconds: float, driver: Driver, stop_when_done: bool = True) -> LoopResult:
@@ -430,7 +419,7 @@ class TeleopLoop:
                     r = self.config.plant.wheel_radius_m
                     kv = self.config.haptics.speed_gain_m_s_per_rad
                     speed = rate_command(loop[K.L_THETA_Q_PREV], kv) / r
-                    q_f, ls_f, lp_f = self._links[3:6]
+                    q_f, ls_f, lp_f = self._links[K.LK_Q_F : K.LK_LP_F + 1]
                     kernel_send(q_f, ls_f, lp_f, self._pool, self._pool_pos, self.t_s, speed,
                                 loop[K.L_ROT_ACTION])  # fmt: skip
                     c.commands_sent += 1
@@ -465,8 +454,8 @@ class TeleopLoop:
             j = max(math.ceil(arrival / self.dt_s - 1e-9) - k, 0)
             rows.append((j, K.PACKET_COMMAND, speed, rotation))
         if len(rows) > len(self._schedule):
-            self._schedule = np.zeros((2 * len(rows), 4))
-        rows.sort(key=lambda row: row[0])
+            self._schedule = np.zeros((2 * len(rows), K.SCHEDULE_WIDTH))
+        rows.sort(key=lambda row: row[K.SCH_TICK])
         schedule = self._schedule[: len(rows)]
         for i, row in enumerate(rows):
             schedule[i] = row
@@ -478,36 +467,36 @@ class TeleopLoop:
         c.acquisitions += 1
         if c.ticks % self._est_every == 0:
             if self._stream is not None:
-                self._stream.push(t, row[9] + self._current_noise(), row[10])
+                self._stream.push(
+                    t, row[K.LOG_IQ_FILT] + self._current_noise(), row[K.LOG_OMEGA_EST]
+                )
                 estimate = self._stream.estimate()
-                loop[K.L_FORCE_EST] = estimate[2] if estimate is not None else 0.0
+                loop[K.L_FORCE_EST] = estimate[EST_FINAL] if estimate is not None else 0.0
             else:
-                loop[K.L_FORCE_EST] = row[11]
+                loop[K.L_FORCE_EST] = row[K.LOG_PROXIMAL]
             if self.force_override is not None:
                 loop[K.L_FORCE_EST] = self.force_override(t)
             c.estimates += 1
             c.forces_sent += 1
             self.to_master.send(t, float(loop[K.L_FORCE_EST]))
         elif self._stream is not None:
-            self._stream.push(t, row[9] + self._current_noise(), row[10])
+            self._stream.push(t, row[K.LOG_IQ_FILT] + self._current_noise(), row[K.LOG_OMEGA_EST])
         r = self.config.plant.wheel_radius_m
-        rows.append(
-            (
-                t,
-                row[6] * r,
-                row[18],
-                row[13],
-                row[14],
-                row[15],
-                row[16],
-                row[11],
-                float(loop[K.L_FORCE_EST]),
-                row[12],
-                row[1],
-                row[3],
-            )
-        )
-        if row[17] and not self._success:
+        sample = [0.0] * K.SAMPLE_WIDTH
+        sample[K.S_T] = t
+        sample[K.S_INSERTION] = row[K.LOG_WHEEL_ANGLE] * r
+        sample[K.S_ROTATION] = row[K.LOG_ROTATION]
+        sample[K.S_TIP_X] = row[K.LOG_TIP_X]
+        sample[K.S_TIP_Y] = row[K.LOG_TIP_Y]
+        sample[K.S_TIP_Z] = row[K.LOG_TIP_Z]
+        sample[K.S_BRANCH] = row[K.LOG_BRANCH]
+        sample[K.S_PROXIMAL] = row[K.LOG_PROXIMAL]
+        sample[K.S_PROXIMAL_EST] = float(loop[K.L_FORCE_EST])
+        sample[K.S_DISTAL] = row[K.LOG_DISTAL]
+        sample[K.S_DIAL_ANGLE] = row[K.LOG_DIAL_ANGLE]
+        sample[K.S_DIAL_TORQUE] = row[K.LOG_DIAL_TORQUE]
+        rows.append(tuple(sample))
+        if row[K.LOG_SUCCESS] and not self._success:
             self._success = True
 
     def _current_noise(self) -> float:

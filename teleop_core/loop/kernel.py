@@ -42,92 +42,121 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from teleop_core.estimation.estimator import stream_estimate, stream_push
-from teleop_core.follower.plant import follower_tick
-from teleop_core.loop.link import kernel_deliver, kernel_send
-from teleop_core.master.dial import D_OMEGA, D_THETA, dial_tick
-from teleop_core.master.haptics import haptic_torque, psi, rate_command, return_torque
-
-# Loop state (held inputs and the master controller's memory)
-(
-    L_THETA_Q_PREV,
-    L_OMEGA_FILT,
-    L_TAU_PREV,
+from teleop_core.estimation.estimator import (
+    EST_FINAL,
+    ESTIMATE_OUT,
+    stream_estimate,
+    stream_push,
+)
+from teleop_core.follower.plant import (
+    F_IQ,
+    F_OMEGA,
+    F_OMEGA_EST,
+    F_THETA,
+    FOLLOWER_OUT,
+    follower_tick,
+)
+from teleop_core.follower.plant import OMEGA as FS_OMEGA
+from teleop_core.follower.plant import THETA as FS_THETA
+from teleop_core.loop.layout import (
+    E_BRANCH,
+    E_DISTAL,
+    E_PROXIMAL,
+    E_SUCCESS,
+    E_TIP_X,
+    E_TIP_Y,
+    E_TIP_Z,
+    ENV_OUT,
     L_BRANCH,
+    L_FORCE_EST,
     L_FORCE_RX,
-    L_SPEED_CMD_RX,
+    L_HAND_B,
+    L_HAND_K,
+    L_HAND_PUSH,
+    L_HAND_TARGET,
+    L_I_CMD_MA,
+    L_IQ_FILT,
+    L_N_ACQ,
+    L_N_CMD,
+    L_N_EST,
+    L_NOISE_POS,
+    L_OMEGA_FILT,
+    L_ROT_ACTION,
     L_ROT_RATE_RX,
     L_ROTATION,
-    L_HAND_TARGET,
-    L_HAND_K,
-    L_HAND_B,
-    L_HAND_PUSH,
-    L_IQ_FILT,
-    L_TAU_H,
-    L_TAU_TOTAL,
-    L_I_CMD_MA,
-    L_TICK,
-    L_NOISE_POS,
-    L_FORCE_EST,
-    L_ROT_ACTION,
+    L_SPEED_CMD_RX,
     L_SUCCESS,
-    L_N_ACQ,
-    L_N_EST,
-    L_N_CMD,
-) = range(24)
-LOOP_STATE_SIZE = 24
-# Master parameters
-(
-    M_KS,
+    L_TAU_H,
+    L_TAU_PREV,
+    L_TAU_TOTAL,
+    L_THETA_Q_PREV,
+    L_TICK,
+    LOG_BRANCH,
+    LOG_CURRENT_CMD,
+    LOG_DIAL_ANGLE,
+    LOG_DIAL_SPEED,
+    LOG_DIAL_TORQUE,
+    LOG_DISTAL,
+    LOG_FORCE_RX,
+    LOG_HAPTIC_TORQUE,
+    LOG_IQ,
+    LOG_IQ_FILT,
+    LOG_OMEGA_EST,
+    LOG_PROXIMAL,
+    LOG_ROTATION,
+    LOG_SPEED_CMD_RX,
+    LOG_SUCCESS,
+    LOG_T,
+    LOG_TIP_X,
+    LOG_TIP_Y,
+    LOG_TIP_Z,
+    LOG_WHEEL_ANGLE,
+    LOG_WHEEL_SPEED,
+    M_ACQ_EVERY,
     M_BS,
-    M_THETA_REF,
-    M_GH,
     M_DEADBAND,
-    M_SAT,
-    M_HAPTICS_ON,
-    M_LEVER,
-    M_IMAX,
+    M_DEFER_LAST,
+    M_DIAL_EXTERNAL,
+    M_DT,
     M_ENC_STEP,
+    M_EST_DT,
+    M_EST_EVERY,
+    M_FAST,
+    M_GH,
+    M_HAPTICS_ON,
+    M_HAS_EST,
+    M_IMAX,
+    M_IQ_FILTER_S,
+    M_KS,
+    M_KV,
+    M_LEVER,
+    M_POLY,
+    M_POLY_END,
+    M_SAT,
+    M_THETA_REF,
     M_VEL_FILTER_S,
     M_WHEEL_R,
-    M_IQ_FILTER_S,
-    M_DT,
-    M_DIAL_EXTERNAL,
-) = range(15)
-M_POLY = 15  # six polynomial coefficients follow
-# In-kernel acquisition (the fast path: ideal links, see `core.TeleopLoop`)
-M_FAST, M_ACQ_EVERY, M_EST_EVERY, M_KV, M_HAS_EST, M_EST_DT, M_DEFER_LAST = range(21, 28)
-MASTER_PARAM_SIZE = 28
-# Packet schedule rows: (tick index in the call, kind, value, value)
-PACKET_FORCE, PACKET_COMMAND = 0.0, 1.0
-# Environment output
-E_PROXIMAL, E_DISTAL, E_TIP_X, E_TIP_Y, E_TIP_Z, E_BRANCH, E_SUCCESS = range(7)
-ENV_OUT = 7
-# Log columns (one row per tick)
-LOG_COLUMNS = (
-    "t_s",
-    "dial_angle_rad",
-    "dial_speed_rad_s",
-    "dial_torque_n_m",
-    "haptic_torque_n_m",
-    "current_cmd_ma",
-    "wheel_angle_rad",
-    "wheel_speed_rad_s",
-    "iq_a",
-    "iq_filtered_a",
-    "omega_est_rad_s",
-    "proximal_force_n",
-    "distal_force_n",
-    "tip_x_m",
-    "tip_y_m",
-    "tip_z_m",
-    "branch",
-    "success",
-    "rotation_rad",
-    "force_rx_n",
-    "speed_cmd_rx_rad_s",
+    PACKET_FORCE,
+    S_BRANCH,
+    S_DIAL_ANGLE,
+    S_DIAL_TORQUE,
+    S_DISTAL,
+    S_INSERTION,
+    S_PROXIMAL,
+    S_PROXIMAL_EST,
+    S_ROTATION,
+    S_T,
+    S_TIP_X,
+    S_TIP_Y,
+    S_TIP_Z,
+    SCH_KIND,
+    SCH_TICK,
+    SCH_V1,
+    SCH_V2,
 )
-LOG_WIDTH = len(LOG_COLUMNS)
+from teleop_core.loop.link import DELIVERED_WIDTH, PK_V1, PK_V2, kernel_deliver, kernel_send
+from teleop_core.master.dial import D_OMEGA, D_THETA, dial_tick
+from teleop_core.master.haptics import haptic_torque, psi, rate_command, return_torque
 
 
 def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
@@ -151,35 +180,37 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         links: tuple,
     ) -> int:  # pragma: no cover - compiled; exercised through TeleopLoop
         dt = mp[M_DT]
-        poly = mp[M_POLY : M_POLY + 6]
+        poly = mp[M_POLY:M_POLY_END]
         lpf_w = mp[M_VEL_FILTER_S] / (mp[M_VEL_FILTER_S] + dt)
         lpf_i = mp[M_IQ_FILTER_S] / (mp[M_IQ_FILTER_S] + dt)
         env_out = np.zeros(ENV_OUT)
-        f_out = np.zeros(5)
+        f_out = np.zeros(FOLLOWER_OUT)
         r = mp[M_WHEEL_R]
         next_packet = 0
         n_samples = 0
         fast = mp[M_FAST] != 0.0
         acq_every, est_every = int(mp[M_ACQ_EVERY]), int(mp[M_EST_EVERY])
-        est_out = np.zeros(3)
-        packet = np.zeros(2)
+        est_out = np.zeros(ESTIMATE_OUT)
+        packet = np.zeros(DELIVERED_WIDTH)
         q_m, ls_m, lp_m, q_f, ls_f, lp_f, pool, pos = links
+        # the estimator's arrays, in `TeleopLoop._estimator_arrays` order
+        buf, st, mean, std, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v = est
         for k in range(n_ticks):
             # 0'. fast path: packets arriving over the in-kernel link for this tick
             if fast:
                 if kernel_deliver(q_m, ls_m, loop[L_TICK], dt, packet):
-                    loop[L_FORCE_RX] = packet[0]
+                    loop[L_FORCE_RX] = packet[PK_V1]
                 if kernel_deliver(q_f, ls_f, loop[L_TICK], dt, packet):
-                    loop[L_SPEED_CMD_RX] = packet[0]
-                    loop[L_ROT_RATE_RX] = packet[1]
+                    loop[L_SPEED_CMD_RX] = packet[PK_V1]
+                    loop[L_ROT_RATE_RX] = packet[PK_V2]
             # 0. packets that arrive over the link for this tick
-            while next_packet < schedule.shape[0] and schedule[next_packet, 0] <= k:
+            while next_packet < schedule.shape[0] and schedule[next_packet, SCH_TICK] <= k:
                 packet = schedule[next_packet]
-                if packet[1] == PACKET_FORCE:
-                    loop[L_FORCE_RX] = packet[2]
+                if packet[SCH_KIND] == PACKET_FORCE:
+                    loop[L_FORCE_RX] = packet[SCH_V1]
                 else:
-                    loop[L_SPEED_CMD_RX] = packet[2]
-                    loop[L_ROT_RATE_RX] = packet[3]
+                    loop[L_SPEED_CMD_RX] = packet[SCH_V1]
+                    loop[L_ROT_RATE_RX] = packet[SCH_V2]
                 next_packet += 1
             # 1. master controller on the dial's quantised angle
             theta_q = math.floor(dial[D_THETA] / mp[M_ENC_STEP]) * mp[M_ENC_STEP]
@@ -220,8 +251,8 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
             env_fn(
                 env_state,
                 env_params,
-                follower[0] * r,
-                follower[1] * r,
+                follower[FS_THETA] * r,
+                follower[FS_OMEGA] * r,
                 loop[L_ROTATION],
                 dt,
                 env_out,
@@ -232,30 +263,30 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
             )
             loop[L_ROTATION] += loop[L_ROT_RATE_RX] * dt
             # 5. the firmware's current low-pass (what the next acquisition reads)
-            loop[L_IQ_FILT] = lpf_i * loop[L_IQ_FILT] + (1.0 - lpf_i) * f_out[2]
+            loop[L_IQ_FILT] = lpf_i * loop[L_IQ_FILT] + (1.0 - lpf_i) * f_out[F_IQ]
             loop[L_TICK] += 1.0
             row = log[k]
-            row[0] = loop[L_TICK] * dt
-            row[1] = dial[D_THETA]
-            row[2] = dial[D_OMEGA]
-            row[3] = tau_motor
-            row[4] = tau_h
-            row[5] = i_cmd
-            row[6] = f_out[0]
-            row[7] = f_out[1]
-            row[8] = f_out[2]
-            row[9] = loop[L_IQ_FILT]
-            row[10] = f_out[3]
-            row[11] = env_out[E_PROXIMAL]
-            row[12] = env_out[E_DISTAL]
-            row[13] = env_out[E_TIP_X]
-            row[14] = env_out[E_TIP_Y]
-            row[15] = env_out[E_TIP_Z]
-            row[16] = env_out[E_BRANCH]
-            row[17] = env_out[E_SUCCESS]
-            row[18] = loop[L_ROTATION]
-            row[19] = loop[L_FORCE_RX]
-            row[20] = loop[L_SPEED_CMD_RX]
+            row[LOG_T] = loop[L_TICK] * dt
+            row[LOG_DIAL_ANGLE] = dial[D_THETA]
+            row[LOG_DIAL_SPEED] = dial[D_OMEGA]
+            row[LOG_DIAL_TORQUE] = tau_motor
+            row[LOG_HAPTIC_TORQUE] = tau_h
+            row[LOG_CURRENT_CMD] = i_cmd
+            row[LOG_WHEEL_ANGLE] = f_out[F_THETA]
+            row[LOG_WHEEL_SPEED] = f_out[F_OMEGA]
+            row[LOG_IQ] = f_out[F_IQ]
+            row[LOG_IQ_FILT] = loop[L_IQ_FILT]
+            row[LOG_OMEGA_EST] = f_out[F_OMEGA_EST]
+            row[LOG_PROXIMAL] = env_out[E_PROXIMAL]
+            row[LOG_DISTAL] = env_out[E_DISTAL]
+            row[LOG_TIP_X] = env_out[E_TIP_X]
+            row[LOG_TIP_Y] = env_out[E_TIP_Y]
+            row[LOG_TIP_Z] = env_out[E_TIP_Z]
+            row[LOG_BRANCH] = env_out[E_BRANCH]
+            row[LOG_SUCCESS] = env_out[E_SUCCESS]
+            row[LOG_ROTATION] = loop[L_ROTATION]
+            row[LOG_FORCE_RX] = loop[L_FORCE_RX]
+            row[LOG_SPEED_CMD_RX] = loop[L_SPEED_CMD_RX]
             # 6. fast path: every acquisition happens here, as TeleopLoop._acquire and
             # _send_command do them, with the link's queues and draws in the kernel
             tick = int(loop[L_TICK])
@@ -264,28 +295,30 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
                 loop[L_N_ACQ] += 1.0
                 estimating = tick % est_every == 0
                 if mp[M_HAS_EST] != 0.0:
-                    iq = row[9] + noise[int(loop[L_NOISE_POS])]
+                    iq = row[LOG_IQ_FILT] + noise[int(loop[L_NOISE_POS])]
                     loop[L_NOISE_POS] += 1.0
-                    buf, st, mean, std = est[0], est[1], est[2], est[3]
-                    stream_push(st, buf, mean, std, t, iq, row[10], 0.0, False)
+                    stream_push(st, buf, mean, std, t, iq, row[LOG_OMEGA_EST], 0.0, False)
                     if estimating:
                         ok = stream_estimate(
-                            st, buf, est[4], est[5], est[6], est[7], est[8], est[9], est[10],
-                            est[11], est[12], est[13], mp[M_EST_DT], est_out,
+                            st, buf, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target,
+                            ekf_s, ekf_v, mp[M_EST_DT], est_out,
                         )  # fmt: skip
-                        loop[L_FORCE_EST] = est_out[2] if ok else 0.0
+                        loop[L_FORCE_EST] = est_out[EST_FINAL] if ok else 0.0
                 elif estimating:
-                    loop[L_FORCE_EST] = row[11]
+                    loop[L_FORCE_EST] = row[LOG_PROXIMAL]
                 if estimating:
                     loop[L_N_EST] += 1.0
                     kernel_send(q_m, ls_m, lp_m, pool, pos, t, loop[L_FORCE_EST], 0.0)
                 out = samples[n_samples]
-                out[0], out[1], out[2] = t, row[6] * r, row[18]
-                out[3], out[4], out[5], out[6] = row[13], row[14], row[15], row[16]
-                out[7], out[8], out[9] = row[11], loop[L_FORCE_EST], row[12]
-                out[10], out[11] = row[1], row[3]
+                out[S_T], out[S_INSERTION] = t, row[LOG_WHEEL_ANGLE] * r
+                out[S_ROTATION] = row[LOG_ROTATION]
+                out[S_TIP_X], out[S_TIP_Y] = row[LOG_TIP_X], row[LOG_TIP_Y]
+                out[S_TIP_Z], out[S_BRANCH] = row[LOG_TIP_Z], row[LOG_BRANCH]
+                out[S_PROXIMAL], out[S_PROXIMAL_EST] = row[LOG_PROXIMAL], loop[L_FORCE_EST]
+                out[S_DISTAL] = row[LOG_DISTAL]
+                out[S_DIAL_ANGLE], out[S_DIAL_TORQUE] = row[LOG_DIAL_ANGLE], row[LOG_DIAL_TORQUE]
                 n_samples += 1
-                if row[17] != 0.0:
+                if row[LOG_SUCCESS] != 0.0:
                     loop[L_SUCCESS] = 1.0
                 # the master samples the dial: v_gw = k_v theta_m (eq. 5), at the wheel; at
                 # a driver tick that ends the call, Python sends it after the driver acts

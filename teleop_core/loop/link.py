@@ -105,10 +105,17 @@ QUEUE_WIDTH = 4
 QUEUE_ROWS = 256
 LS_COUNT, LS_NEXT_SEQ, LS_NEWEST, LS_SENT, LS_LOST, LS_DELIVERED = range(6)
 LINK_STATE_SIZE = 6
+LP_DELAY, LP_JITTER, LP_LOSS = range(3)  # `link_vector`
+LINK_PARAM_SIZE = 3
+PK_V1, PK_V2 = range(2)  # what `kernel_deliver` writes to `out`
+DELIVERED_WIDTH = 2
+POOL_NEXT = 0  # `pos[POOL_NEXT]`: the next unused draw of the pool
 
 
 def link_vector(params: LinkParams) -> np.ndarray:
-    return np.array([params.delay_s, params.jitter_s, params.loss])
+    lp = np.empty(LINK_PARAM_SIZE)
+    lp[LP_DELAY], lp[LP_JITTER], lp[LP_LOSS] = params.delay_s, params.jitter_s, params.loss
+    return lp
 
 
 @numba.njit(cache=True)
@@ -122,22 +129,22 @@ def kernel_send(
     v1: float,
     v2: float,
 ) -> None:  # pragma: no cover - compiled; exercised through TeleopLoop
-    """`Link.send` on the kernel's queue; `pos[0]` indexes the pool of uniform draws."""
+    """`Link.send` on the kernel's queue; `pos[POOL_NEXT]` indexes the pool of uniform draws."""
     seq = ls[LS_NEXT_SEQ]
     ls[LS_NEXT_SEQ] += 1.0
     ls[LS_SENT] += 1.0
-    if lp[2] > 0.0:
-        lost = pool[int(pos[0])] < lp[2]
-        pos[0] += 1.0
+    if lp[LP_LOSS] > 0.0:
+        lost = pool[int(pos[POOL_NEXT])] < lp[LP_LOSS]
+        pos[POOL_NEXT] += 1.0
         if lost:
             ls[LS_LOST] += 1.0
             return
     jitter = 0.0
-    if lp[1] > 0.0:
-        jitter = pool[int(pos[0])] * lp[1]
-        pos[0] += 1.0
+    if lp[LP_JITTER] > 0.0:
+        jitter = pool[int(pos[POOL_NEXT])] * lp[LP_JITTER]
+        pos[POOL_NEXT] += 1.0
     n = int(ls[LS_COUNT])
-    queue[n, Q_ARRIVAL] = t_s + lp[0] + jitter
+    queue[n, Q_ARRIVAL] = t_s + lp[LP_DELAY] + jitter
     queue[n, Q_SEQ] = seq
     queue[n, Q_V1] = v1
     queue[n, Q_V2] = v2
@@ -157,11 +164,11 @@ def kernel_deliver(
         if math.ceil(queue[i, Q_ARRIVAL] / dt - 1e-9) <= tick:
             if queue[i, Q_SEQ] > ls[LS_NEWEST] and queue[i, Q_SEQ] > best:
                 best = queue[i, Q_SEQ]
-                out[0], out[1] = queue[i, Q_V1], queue[i, Q_V2]
+                out[PK_V1], out[PK_V2] = queue[i, Q_V1], queue[i, Q_V2]
             # remove: move the last row here
             n -= 1
-            queue[i, 0], queue[i, 1], queue[i, 2], queue[i, 3] = (
-                queue[n, 0], queue[n, 1], queue[n, 2], queue[n, 3],
+            queue[i, Q_ARRIVAL], queue[i, Q_SEQ], queue[i, Q_V1], queue[i, Q_V2] = (
+                queue[n, Q_ARRIVAL], queue[n, Q_SEQ], queue[n, Q_V1], queue[n, Q_V2],
             )  # fmt: skip
         else:
             i += 1

@@ -25,6 +25,7 @@ from teleop_core.errors import TeleopInputError
 
 DOFS = ("translation", "rotation")
 MSD_FIELDS = ("m_m", "m_s", "k_s", "b_m", "b_s")
+MSD_M_M, MSD_M_S, MSD_K_S, MSD_B_M, MSD_B_S = range(len(MSD_FIELDS))  # `as_tuple` indices
 """Order of the linear parameters in every vector the fit and the transfer functions use."""
 
 
