@@ -36,7 +36,7 @@ from teleop_core.calibration.effects import (
     smooth_sign,
 )
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.recording import FollowerRecording, read_checked_csv
+from teleop_core.follower.recording import FollowerRecording, read_checked_csv
 
 MASTER_COLUMNS = ("t", "current_ma", "f_ref")
 """The master's current-force calibration recording: time, commanded current, gauge force."""

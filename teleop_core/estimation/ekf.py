@@ -27,7 +27,7 @@ import numpy as np
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.physics import PhysicsParams, gradient_at
+from teleop_core.follower.physics import PhysicsParams, gradient_at
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.physics import PhysicsParams, from_coefficients
-from teleop_core.estimation.recording import FollowerRecording
+from teleop_core.follower.physics import PhysicsParams, from_coefficients
+from teleop_core.follower.recording import FollowerRecording
 
 if TYPE_CHECKING:
     from teleop_core.calibration.fitting import CalibratedModel

@@ -26,7 +26,8 @@ import numpy as np
 import pandas as pd
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.estimator import EST_FINAL, ForceEstimator
+from teleop_core.estimation.model import ForceEstimator
+from teleop_core.estimation.stream import EST_FINAL
 from teleop_core.follower.params import (
     FollowerControlParams,
     FollowerPlantParams,

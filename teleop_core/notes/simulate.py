@@ -30,6 +30,7 @@ from teleop_core.notes.karnopp import (
     COMP_ON,
     compensated_command,
 )
+from teleop_core.notes.params import CHIRP_BAND_HZ as CHIRP_BAND_HZ  # re-exported
 from teleop_core.notes.params import (
     MSD_B_M,
     MSD_B_S,
@@ -55,8 +56,6 @@ RAMP_DURATION_S = {"translation": 20.0, "rotation": 20.0}
 """Length of one ramp 0 -> max -> min -> 0; slow enough to be quasi-static (assumption)."""
 CHIRP_AMPLITUDE = {"translation": 4.5, "rotation": 0.15}
 """Chirp amplitude, N or N m; within the continuous limits (assumption)."""
-CHIRP_BAND_HZ = (1.0, 30.0)
-"""The paper's 1-30 Hz chirp (III-B)."""
 CHIRP_FADE_S = 0.5
 """Fade-in and fade-out of the chirp's amplitude, s (assumption)."""
 CHIRP_TAIL_S = 1.0
