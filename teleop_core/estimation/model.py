@@ -264,6 +264,12 @@ class CausalEstimator:
         self.dt_s = estimator.dt_s
         self._out = np.zeros(ESTIMATE_OUT)
 
+    def kernel_arrays(self) -> tuple:
+        """The arrays in the order the loop's kernel unpacks them (`stream.NO_STREAM_ARRAYS`
+        has dummies of the same types)."""
+        return (self.buffer, self.state, self.mean, self.std, self.physics, *self.weights,
+                self.target, self.ekf_state, self.ekf_settings)  # fmt: skip
+
     def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
         """Add a sample (s, A, rad/s, optionally rad/s^2) to the window without estimating:
         the 50 Hz pipeline sees every 100 Hz sample but estimates on every other one."""

@@ -23,6 +23,13 @@ EST_PHYSICS, EST_HYBRID, EST_FINAL = range(3)
 ESTIMATE_OUT = 3
 
 
+_Z1, _Z2 = np.zeros(1), np.zeros((1, 1))
+NO_STREAM_ARRAYS = (np.zeros((1, N_FEATURES)), _Z1, _Z1, _Z1, _Z1, _Z2, _Z2, _Z1, _Z1, _Z1, 0.0,
+                    _Z1, _Z1, _Z1)  # fmt: skip
+"""`CausalEstimator.kernel_arrays()` without an estimator: dummies of the same types, so
+one compiled loop kernel serves both."""
+
+
 @numba.njit(cache=True)
 def stream_push(
     st: np.ndarray,

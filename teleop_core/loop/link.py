@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from teleop_core.errors import TeleopInputError
+from teleop_core.loop.layout import PACKET_COMMAND, PACKET_FORCE, SCH_TICK, SCHEDULE_WIDTH
 
 T = TypeVar("T")
 
@@ -178,3 +179,61 @@ def kernel_deliver(
         ls[LS_DELIVERED] += 1.0
         return True
     return False
+
+
+NO_LINKS = (
+    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(LINK_PARAM_SIZE),
+    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(LINK_PARAM_SIZE),
+    np.zeros(1), np.zeros(1),
+)  # fmt: skip
+"""The kernel's link arrays when the loop runs its links in Python (same types)."""
+NO_PACKETS = np.zeros((0, SCHEDULE_WIDTH))
+
+
+def kernel_links(to_master: LinkParams, to_follower: LinkParams) -> tuple:
+    """Queues, states and parameters of both link directions for the kernel, and an empty
+    pool of uniform draws with its position (`layout.LK_*`); the caller fills the pool
+    from the links' generator, in `Link.send`'s order."""
+
+    def state() -> np.ndarray:
+        ls = np.zeros(LINK_STATE_SIZE)
+        ls[LS_NEWEST] = -1.0
+        return ls
+
+    return (
+        np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(to_master),
+        np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(to_follower),
+        np.zeros(0), np.zeros(1),
+    )  # fmt: skip
+
+
+def packet_schedule(
+    to_master: Link[float],
+    to_follower: Link[tuple[float, float]],
+    k: int,
+    nxt: int,
+    dt_s: float,
+    buffer: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The packets arriving during ticks k..nxt-1, as the kernel's schedule (`layout.SCH_*`
+    rows in `buffer`, grown if needed); returns (schedule, buffer).
+
+    A packet arriving at tick K acts from the tick after it, as if received at K.
+    """
+    last = (nxt - 1) * dt_s
+    if to_master.next_arrival_s() > last and to_follower.next_arrival_s() > last:
+        return NO_PACKETS, buffer
+    rows = []
+    for arrival, force in to_master.deliver_until(last):
+        j = max(math.ceil(arrival / dt_s - 1e-9) - k, 0)
+        rows.append((j, PACKET_FORCE, force, 0.0))
+    for arrival, (speed, rotation) in to_follower.deliver_until(last):
+        j = max(math.ceil(arrival / dt_s - 1e-9) - k, 0)
+        rows.append((j, PACKET_COMMAND, speed, rotation))
+    if len(rows) > len(buffer):
+        buffer = np.zeros((2 * len(rows), SCHEDULE_WIDTH))
+    rows.sort(key=lambda row: row[SCH_TICK])
+    schedule = buffer[: len(rows)]
+    for i, row in enumerate(rows):
+        schedule[i] = row
+    return schedule, buffer

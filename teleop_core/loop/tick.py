@@ -183,7 +183,7 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         est_out = np.zeros(ESTIMATE_OUT)
         packet = np.zeros(DELIVERED_WIDTH)
         q_m, ls_m, lp_m, q_f, ls_f, lp_f, pool, pos = links
-        # the estimator's arrays, in `TeleopLoop._estimator_arrays` order
+        # the estimator's arrays, in `CausalEstimator.kernel_arrays` order
         buf, st, mean, std, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v = est
         for k in range(n_ticks):
             # 0'. fast path: packets arriving over the in-kernel link for this tick

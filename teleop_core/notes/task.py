@@ -38,8 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 from teleop_core.loop.drivers import GRIP_STIFFNESS_N_M_PER_RAD, Driver, HandAction, OperatorView
+from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 from teleop_core.notes.params import RotationParams, TranslationParams
 
 PULL_BENCHMARK_N = 4.5
