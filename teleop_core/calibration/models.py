@@ -36,6 +36,7 @@ from teleop_core.calibration.effects import (
     smooth_sign,
 )
 from teleop_core.errors import TeleopInputError
+from teleop_core.follower.params import FollowerPlantParams
 from teleop_core.follower.recording import FollowerRecording, read_checked_csv
 
 MASTER_COLUMNS = ("t", "current_ma", "f_ref")
@@ -140,7 +141,7 @@ class BaseModel:
 class FollowerBase(BaseModel):
     """Eq. 1 of seed 000 with an offset, for a follower recording (`recording.py`)."""
 
-    wheel_radius_m: float = 0.010
+    wheel_radius_m: float = FollowerPlantParams.wheel_radius_m
     """r, known (the wheel's measured radius); only ratios to r are identifiable."""
     sign_speed_rad_s: float | None = None
     """w_s of the smoothed sign tanh(theta_d / w_s), rad/s; > 0. None: fitted on the

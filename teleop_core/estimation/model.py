@@ -49,6 +49,7 @@ from teleop_core.estimation.stream import (
     stream_estimate,
     stream_push,
 )
+from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.physics import PhysicsParams
 from teleop_core.follower.recording import FollowerRecording
 
@@ -89,7 +90,7 @@ class ForceEstimator:
     gru: GruModel
     ekf: EkfSettings
     sample_rate_hz: float
-    pipeline_rate_hz: float = 50.0
+    pipeline_rate_hz: float = FollowerSensorParams.estimation_rate_hz
     extension: ExtendedPhysics | None = None
     """The calibrated physics stage (issue 10) replacing eq. 1, if any."""
     input_range: InputRange | None = None

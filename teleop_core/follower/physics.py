@@ -25,6 +25,7 @@ import numpy as np
 
 from teleop_core._typing import Float1D, Float2D
 from teleop_core.errors import TeleopInputError
+from teleop_core.follower.params import FollowerPlantParams
 from teleop_core.follower.recording import FollowerRecording
 
 # `PhysicsParams.vector()` layout, as `force_at` and `gradient_at` read it
@@ -47,8 +48,8 @@ class PhysicsParams:
     """b."""
     coulomb_friction_n_m: float = 0.8e-3
     """tau_c."""
-    wheel_radius_m: float = 0.010
-    """r, not fitted."""
+    wheel_radius_m: float = FollowerPlantParams.wheel_radius_m
+    """r, not fitted (the drive's wheel)."""
     offset_n: float = 0.0
     """F_0, the reference sensor's zero as seen by the model."""
     sign_speed_rad_s: float = 0.3
@@ -106,8 +107,8 @@ def regressors(omega: Float1D, iq: Float1D, alpha: Float1D, sign_speed: float) -
 def fit_physics(
     recording: FollowerRecording,
     *,
-    wheel_radius_m: float = 0.010,
-    sign_speed_rad_s: float = 0.3,
+    wheel_radius_m: float = PhysicsParams.wheel_radius_m,
+    sign_speed_rad_s: float = PhysicsParams.sign_speed_rad_s,
     mask: np.ndarray | None = None,
 ) -> PhysicsParams:
     """Fit eq. 1 to a recording by bounded linear least squares.
@@ -136,7 +137,9 @@ def fit_physics(
 
 
 def from_coefficients(
-    beta: Float1D, wheel_radius_m: float, sign_speed_rad_s: float = 0.3
+    beta: Float1D,
+    wheel_radius_m: float,
+    sign_speed_rad_s: float = PhysicsParams.sign_speed_rad_s,
 ) -> PhysicsParams:
     """Eq. 1's parameters from the coefficients of `regressors`' five columns (N per unit)."""
     r = wheel_radius_m

@@ -32,7 +32,7 @@ class LoopConfig:
     """Device physics and master controller rate (IV-A)."""
     acquisition_rate_hz: float = 100.0
     """Hardware acquisition rate (IV-A)."""
-    estimation_rate_hz: float = 50.0
+    estimation_rate_hz: float = FollowerSensorParams.estimation_rate_hz
     """Estimation pipeline rate (IV-A)."""
     driver_rate_hz: float = 100.0
     """How often the driver decides."""
