@@ -30,6 +30,7 @@ from scipy.ndimage import maximum_filter1d
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
+from teleop_core.estimation.blocks import sample_blocks, windows_by_block
 from teleop_core.estimation.metrics import rmse
 
 SPEED = ("rest", "slow", "fast", "reversal")
@@ -139,7 +140,7 @@ def representative_split(
         raise TeleopInputError(
             f"validation_fraction {validation_fraction!r}; expected between 0 and 1"
         )
-    block_of = np.minimum(np.arange(n_samples) * blocks // n_samples, blocks - 1)
+    block_of = sample_blocks(n_samples, blocks)
     counts = _block_counts(masks, block_of, blocks)
     total = counts.sum(axis=0)
     share = total / n_samples
@@ -160,15 +161,7 @@ def representative_split(
     )
     best = np.lexsort((deviation, missing))[0]  # fewest labels missing, then closest
     val_blocks = np.sort(chosen[best])
-    in_val = np.concatenate(([0], np.cumsum(np.isin(block_of, val_blocks))))
-    val_count = in_val[window:] - in_val[:-window]
-    train_idx = np.flatnonzero(val_count == 0)
-    val_idx = np.flatnonzero(val_count == window)
-    if len(train_idx) == 0 or len(val_idx) == 0:
-        raise TeleopInputError(
-            f"{n_samples} samples are too few to split into {blocks} blocks of "
-            f"windows of {window}; expected a longer recording"
-        )
+    train_idx, val_idx = windows_by_block(block_of, val_blocks, window, blocks)
     last = np.arange(window - 1, n_samples)
     report = {
         "validation_blocks": val_blocks.tolist(),
