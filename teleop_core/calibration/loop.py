@@ -249,7 +249,8 @@ class Calibrator:
                                    "rmse_after_step": r})  # fmt: skip
             else:
                 added.append({"family": e.family, "params": p["params"], "ci": p["ci"],
-                              "rmse_after_step": r, "share_of_explained_variance": share})  # fmt: skip
+                              "rmse_after_step": r,
+                              "share_of_explained_variance": share})  # fmt: skip
         in_model = {e.family for e, _ in self.chain_}
         last: dict[str, Candidate] = {}
         for c in self.candidates_:

@@ -4,11 +4,13 @@ A network validated on blocks that hold little of what it must learn picks the e
 that learned nothing (issue 17: two random blocks out of ten, with a third of the
 training blocks' physics error). So every sample gets a label in three dimensions:
 
-| dimension | labels | rule |
-|---|---|---|
-| speed | `rest`, `slow`, `fast`, `reversal` | `reversal`: speeds of both signs beyond `rest_speed_rad_s` within `reversal_window_s`; else by abs(theta_d): below `rest_speed_rad_s`, below `slow_speed_rad_s`, above |
-| direction | `forward`, `backward`, `none` | the sign of theta_d beyond `rest_speed_rad_s` |
-| load | `low`, `mid`, `high` | abs(F_ref) against its tertiles over the training recording |
+- speed: `rest`, `slow`, `fast`, `reversal`. `reversal`: speeds of both signs beyond
+  `rest_speed_rad_s` within `reversal_window_s`; else by abs(theta_d): below
+  `rest_speed_rad_s`, below `slow_speed_rad_s`, above;
+- direction: `forward`, `backward`, `none`: the sign of theta_d beyond
+  `rest_speed_rad_s`;
+- load: `low`, `mid`, `high`: abs(F_ref) against its tertiles over the training
+  recording;
 
 and `representative_split` chooses, among seeded candidate sets of contiguous time
 blocks, the validation blocks whose mixture of labels is closest to the whole
@@ -87,7 +89,7 @@ def label_samples(
     """Boolean masks, one per label of `LABELS`, over the samples (speeds rad/s, forces N)."""
     omega = np.asarray(omega, float)
     moving = np.abs(omega) >= rules.rest_speed_rad_s
-    span = max(1, int(round(rules.reversal_window_s * rate_hz)))
+    span = max(1, round(rules.reversal_window_s * rate_hz))
     fwd = np.where(omega > rules.rest_speed_rad_s, 1.0, 0.0)
     bwd = np.where(omega < -rules.rest_speed_rad_s, 1.0, 0.0)
     reversal = (maximum_filter1d(fwd, span) > 0) & (maximum_filter1d(bwd, span) > 0)
