@@ -37,6 +37,7 @@ from teleop_core.calibration.effects import (
 )
 from teleop_core.errors import TeleopInputError
 from teleop_core.follower.params import FollowerPlantParams
+from teleop_core.follower.physics import RC_B, RC_F0, RC_J, RC_KT, RC_TC
 from teleop_core.follower.recording import FollowerRecording, read_checked_csv
 
 MASTER_COLUMNS = ("t", "current_ma", "f_ref")
@@ -180,7 +181,8 @@ class FollowerBase(BaseModel):
         return self.wheel_radius_m
 
     def columns(self, s: Signals) -> Float2D:
-        # F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn(theta_d)) / r + F_0   (eq. 1)
+        # F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn(theta_d)) / r + F_0   (eq. 1),
+        # the columns of `follower.physics.regressors` (RC_*)
         w = s["speed"]
         sign = smooth_sign(w, self.sign_width_rad_s)
         return np.column_stack([s["drive"], -s["accel"], -w, -sign, np.ones_like(w)])
@@ -188,11 +190,11 @@ class FollowerBase(BaseModel):
     def physical(self, coef: Float1D) -> dict[str, float]:
         r = self.wheel_radius_m
         return {
-            "torque_constant_n_m_per_a": coef[0] * r,
-            "inertia_kg_m2": coef[1] * r,
-            "viscous_damping_n_m_s_per_rad": coef[2] * r,
-            "coulomb_friction_n_m": coef[3] * r,
-            "offset_n": coef[4],
+            "torque_constant_n_m_per_a": coef[RC_KT] * r,
+            "inertia_kg_m2": coef[RC_J] * r,
+            "viscous_damping_n_m_s_per_rad": coef[RC_B] * r,
+            "coulomb_friction_n_m": coef[RC_TC] * r,
+            "offset_n": coef[RC_F0],
         }
 
     def data(self, rec: FollowerRecording) -> CalibrationData:

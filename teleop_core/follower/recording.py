@@ -75,9 +75,9 @@ class FollowerRecording:
         name: str = "recording",
     ) -> FollowerRecording:
         t = np.asarray(t, dtype=float)
-        arrays = [np.asarray(a, dtype=float) for a in (iq, theta, omega, f_ref)]
-        alpha_arr = backward_difference(arrays[2], t) if alpha is None else np.asarray(alpha, float)
-        return cls(t, *arrays, alpha_arr, name=name)
+        iq, theta, omega, f_ref = (np.asarray(a, dtype=float) for a in (iq, theta, omega, f_ref))
+        alpha_arr = backward_difference(omega, t) if alpha is None else np.asarray(alpha, float)
+        return cls(t, iq, theta, omega, f_ref, alpha_arr, name=name)
 
     @classmethod
     def from_csv(cls, path: str | Path, min_rows: int = MIN_ROWS) -> FollowerRecording:
