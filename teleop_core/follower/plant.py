@@ -116,29 +116,14 @@ def follower_tick(
     out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; exercised through FollowerDrive
     """One speed-loop tick; writes theta, omega, mean iq, omega estimate, iq command to out."""
-    kt = p[P_KT]
-    r = p[P_WHEEL_R]
-    J = p[P_INERTIA]
-    b = p[P_VISCOUS]
-    tc = p[P_COULOMB]
-    ts = p[P_STATIC]
-    ws = p[P_STRIBECK]
-    ksat = p[P_KSAT]
-    cog = p[P_COG]
-    ncog = p[P_NCOG]
-    R = p[P_R]
-    L = p[P_L]
-    vmax = p[P_VMAX]
-    kpi = p[P_KPI]
-    kii = p[P_KII]
-    dt = p[P_DT]
-    nsub = p[P_NSUB]
-    kpw = p[P_KPW]
-    kiw = p[P_KIW]
-    tf = p[P_TF]
-    ilim = p[P_ILIM]
-    drag2 = p[P_DRAG2]
-    retract = p[P_RETRACT]
+    # (grouped: mechanics, friction, saturation and cogging, electrics and current PI,
+    # speed PI, filter, limit and the withdrawal terms)
+    kt, r, J, b = p[P_KT], p[P_WHEEL_R], p[P_INERTIA], p[P_VISCOUS]
+    tc, ts, ws = p[P_COULOMB], p[P_STATIC], p[P_STRIBECK]
+    ksat, cog, ncog = p[P_KSAT], p[P_COG], p[P_NCOG]
+    R, L, vmax, kpi, kii = p[P_R], p[P_L], p[P_VMAX], p[P_KPI], p[P_KII]
+    dt, nsub, kpw, kiw = p[P_DT], p[P_NSUB], p[P_KPW], p[P_KIW]
+    tf, ilim, drag2, retract = p[P_TF], p[P_ILIM], p[P_DRAG2], p[P_RETRACT]
     n_sub = int(nsub)
     dte = dt / n_sub
     decay = math.exp(-R * dte / L)

@@ -19,34 +19,12 @@ import sys
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numba
 
-from teleop_core.loop.layout import (
-    E_BRANCH,
-    E_DISTAL,
-    E_PROXIMAL,
-    E_SUCCESS,
-    E_TIP_X,
-    E_TIP_Y,
-    E_TIP_Z,
-    ENV_OUT,
-)
+from teleop_core.loop import layout
 from teleop_core.loop.tick import _make
-
-__all__ = [  # the environment's outputs are re-exported: an environment writes them
-    "COMPILE_NOTICE",
-    "ENV_OUT",
-    "E_BRANCH",
-    "E_DISTAL",
-    "E_PROXIMAL",
-    "E_SUCCESS",
-    "E_TIP_X",
-    "E_TIP_Y",
-    "E_TIP_Z",
-    "kernel_for",
-]
-
 
 _KERNELS: dict[object, Callable[..., None]] = {}
 
@@ -140,3 +118,11 @@ def _cached_kernel(env_fn: Callable[..., None]) -> Callable[..., None] | None:
 
 
 _DIGEST = ""
+
+
+def __getattr__(name: str) -> Any:
+    """The environment's outputs (`E_*`, `ENV_OUT`) are defined in `layout.py`; an
+    environment may still import them from here, where they were first."""
+    if name == "ENV_OUT" or name.startswith("E_"):
+        return getattr(layout, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
