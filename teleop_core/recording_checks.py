@@ -1,6 +1,6 @@
 """What every CSV recording contract checks before anything is computed from it.
 
-The follower (`teleop_core.estimation.recording`), the master's calibration, the NOTES
+The follower (`teleop_core.follower.recording`), the master's calibration, the NOTES
 bench (`teleop_core.notes.recording`) and any drive's rigid-axis recording
 (`teleop_core.calibration.rigid_axis`) each have their own columns, but a file that is
 not a recording at all must be refused the same way by all of them (issue 18), with

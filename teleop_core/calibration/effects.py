@@ -36,13 +36,14 @@ import numba
 import numpy as np
 
 from teleop_core._typing import Float1D, Float2D
+from teleop_core.follower.physics import PhysicsParams
 
 Signals = dict[str, Float1D]
 """Named signals of a recording: `t` [s], `drive` (current or command), and where the
 model has them `speed` [rad/s], `accel` [rad/s^2], `angle` [rad], `direction` (of
 motion or command), `linear` (a linear model's response)."""
 
-SIGN_SPEED_RAD_S = 0.3
+SIGN_SPEED_RAD_S = PhysicsParams.sign_speed_rad_s
 """Speed of the smoothed sign tanh(w / w0), as in the estimator's eq. 1 (physics.py)."""
 
 

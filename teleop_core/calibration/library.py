@@ -4,11 +4,14 @@ When no named family passes a round of the loop, these terms compete under the s
 held-out rules (gain, Diebold-Mariano, BIC; `loop.py`). Each is a function of the
 recorded channels and their history with at most one searched parameter:
 
-| term                 | column (coefficient in N)                          | searched     | family it maps to                 |
-|----------------------|----------------------------------------------------|--------------|-----------------------------------|
-| `load_friction`      | -sgn(w) abs(drive)                                 | -            | no named family (load-dependent friction) |
-| `gain_change`        | drive * [t >= t_c]                                 | t_c (s)      | no named family (gain change point)       |
-| `presliding_memory`  | -sgn(w) exp(-d / delta), d = distance since reversal | delta      | no named family (pre-sliding friction)    |
+| term                | column (coefficient in N)             | searched | what it stands for      |
+|---------------------|---------------------------------------|----------|-------------------------|
+| `load_friction`     | -sgn(w) abs(drive)                    | -        | load-dependent friction |
+| `gain_change`       | drive * [t >= t_c]                    | t_c (s)  | a gain change point     |
+| `presliding_memory` | -sgn(w) exp(-d / delta), d = distance | delta    | pre-sliding friction    |
+|                     | since reversal                        |          |                         |
+
+None maps to a named family.
 
 Lags of the inputs are the `delay` family's, and powers of speed `viscous_nonlinear`'s.
 A second ripple harmonic needs no term here: `position_periodic` may be added more

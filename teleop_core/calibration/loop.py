@@ -31,6 +31,16 @@ import numpy as np
 from statsmodels.stats.stattools import durbin_watson
 
 from teleop_core._typing import Float1D, Rows
+from teleop_core.calibration.candidates import (
+    OPEN,
+    UNLOCATED_AT,
+    Candidate,
+    _best,
+    _candidate_dict,
+    _remaining,
+    _search_edge,
+    _verdict,
+)
 from teleop_core.calibration.effects import EFFECTS, Effect
 from teleop_core.calibration.fitting import (
     CalibratedModel,
@@ -49,30 +59,6 @@ from teleop_core.errors import TeleopInputError
 
 Progress = Callable[[int, int, str], None]
 """progress(done, total, what): called before each candidate of each round."""
-
-
-@dataclass
-class Candidate:
-    """One candidate's evaluation in one round."""
-
-    family: str
-    """The effect family's report name."""
-    round: int
-    """Loop round, from 1."""
-    searched_value: float
-    """Its searched parameter as found on the training block (nan when it has none)."""
-    rmse_held_out_n: float
-    """Held-out RMSE of the model with it, N (N m for a torque model)."""
-    gain_fraction: float
-    """Relative cut in held-out RMSE against the model of that round."""
-    p_value: float
-    """One-sided Diebold-Mariano p-value of that cut."""
-    bic_change: float
-    """Change of the training BIC when it is added (negative: better)."""
-    accepted: bool = False
-    """Whether the loop added it in this round."""
-    reason: str = ""
-    """Why it was not added ('' when it passed)."""
 
 
 @dataclass
@@ -263,7 +249,8 @@ class Calibrator:
                                    "rmse_after_step": r})  # fmt: skip
             else:
                 added.append({"family": e.family, "params": p["params"], "ci": p["ci"],
-                              "rmse_after_step": r, "share_of_explained_variance": share})  # fmt: skip
+                              "rmse_after_step": r,
+                              "share_of_explained_variance": share})  # fmt: skip
         in_model = {e.family for e, _ in self.chain_}
         last: dict[str, Candidate] = {}
         for c in self.candidates_:
@@ -286,8 +273,7 @@ class Calibrator:
             "model": self.model.name,
             "recording": self.data_.name,
             "base_params": {"params": self.base_params_, "ci": self.base_ci_},
-            "preparation": {**(self.data_.preparation or {}), **_fitted_settings(self)}
-            or None,
+            "preparation": {**(self.data_.preparation or {}), **_fitted_settings(self)} or None,
             "held_out": {
                 "blocks": self.data_.held_out_blocks,
                 "start_s": float(t[self.test_][0]),
@@ -318,79 +304,8 @@ class Calibrator:
         return notes
 
 
-OPEN = "(open library)"
-"""Marks where in a round the open library's terms join the candidates."""
-REPEATABLE = {"position_periodic": 3}
-"""Families that may enter more than once (several ripple periods), and how often."""
-
-
-def _best(passing: list, min_gain: float):  # type: ignore[no-untyped-def]
-    """The passing candidate with the lowest held-out error; a named family keeps its
-    place unless an open library term cuts the error by `min_gain` more than it."""
-    best = min(passing, key=lambda f: f[0].rmse_held_out_n)
-    named = [f for f in passing if not isinstance(f[1], OpenTerm)]
-    if named and isinstance(best[1], OpenTerm):
-        top = min(named, key=lambda f: f[0].rmse_held_out_n)
-        if best[0].rmse_held_out_n > (1.0 - min_gain) * top[0].rmse_held_out_n:
-            return top
-    return best
-
-
-def _remaining(families: Sequence[str], chain: Chain, marker: bool = True) -> list[str]:
-    """Candidates of a round: families not yet in the chain (a repeatable one until its
-    count), then the marker after which the open library may join."""
-    used = [e.family for e, _ in chain]
-    out = [f for f in families if used.count(f) < REPEATABLE.get(f, 1)]
-    return [*out, OPEN] if marker else out
-
-
-UNLOCATED_AT = {"delay": "upper", "drift": "lower"}
-"""Families whose searched value at that end of its range means the effect was not
-found. `delay`'s range ends at an arbitrary 0.1 s, and a lag pinned there stands in
-for a slower dynamic (on the simulated NOTES rotation ramp it took the friction's
-place before the direction asymmetry could). `drift`'s time constant at its lower end
-(2 % of the recording) is no slow change but a step in the gain at the start (seen on
-NOTES chirps). The other ends are physical: a hysteresis loop of the smallest width
-the noise allows is a sharp relay loop, a drift slower than the recording is linear;
-those are reported as warnings, not refused."""
-
-
-def _search_edge(
-    effect: Effect, value: float, signals: dict[str, Float1D]
-) -> tuple[str, str] | None:
-    """("lower" | "upper", message) when `value` sits at an end of `effect`'s search
-    range, else None."""
-    if effect.searched is None or effect.family == "position_periodic":
-        return None
-    grid = effect.grid(signals)
-    lo, hi = float(np.min(grid)), float(np.max(grid))
-    side = "lower" if value <= lo * 1.001 else "upper" if value >= hi * 0.999 else None
-    if side is None:
-        return None
-    where = f"search range [{lo:.4g}, {hi:.4g}]"
-    return side, f"{effect.searched} = {value:.4g} is at the end of its {where}"
-
-
 def _rmse(e: Float1D) -> float:
     return float(np.sqrt(np.mean(e * e)))
-
-
-def _verdict(c: Candidate, min_gain: float, level: float) -> str:
-    """Why a candidate fails the significance rule ('' when it passes)."""
-    if not c.gain_fraction >= min_gain:
-        return f"held-out RMSE cut {100 * c.gain_fraction:.2f} % < {100 * min_gain:.0f} %"
-    if not c.p_value < level:
-        return f"Diebold-Mariano p = {c.p_value:.3g} >= {level:.3g}"
-    if not c.bic_change < 0:
-        return f"training BIC rises by {c.bic_change:.1f}"
-    return ""
-
-
-def _candidate_dict(c: Candidate) -> dict[str, Any]:
-    d = asdict(c)
-    d["searched_value"] = None if np.isnan(c.searched_value) else c.searched_value
-    d["searched"] = {**EFFECTS, **OPEN_TERMS}[c.family].searched
-    return d
 
 
 def _fitted_settings(cal: Calibrator) -> dict[str, Any]:

@@ -36,7 +36,9 @@ from teleop_core.calibration.effects import (
     smooth_sign,
 )
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.recording import FollowerRecording, read_checked_csv
+from teleop_core.follower.params import FollowerPlantParams
+from teleop_core.follower.physics import RC_B, RC_F0, RC_J, RC_KT, RC_TC
+from teleop_core.follower.recording import FollowerRecording, read_checked_csv
 
 MASTER_COLUMNS = ("t", "current_ma", "f_ref")
 """The master's current-force calibration recording: time, commanded current, gauge force."""
@@ -140,7 +142,7 @@ class BaseModel:
 class FollowerBase(BaseModel):
     """Eq. 1 of seed 000 with an offset, for a follower recording (`recording.py`)."""
 
-    wheel_radius_m: float = 0.010
+    wheel_radius_m: float = FollowerPlantParams.wheel_radius_m
     """r, known (the wheel's measured radius); only ratios to r are identifiable."""
     sign_speed_rad_s: float | None = None
     """w_s of the smoothed sign tanh(theta_d / w_s), rad/s; > 0. None: fitted on the
@@ -179,7 +181,8 @@ class FollowerBase(BaseModel):
         return self.wheel_radius_m
 
     def columns(self, s: Signals) -> Float2D:
-        # F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn(theta_d)) / r + F_0   (eq. 1)
+        # F = (K_t I_q - J theta_dd - b theta_d - tau_c sgn(theta_d)) / r + F_0   (eq. 1),
+        # the columns of `follower.physics.regressors` (RC_*)
         w = s["speed"]
         sign = smooth_sign(w, self.sign_width_rad_s)
         return np.column_stack([s["drive"], -s["accel"], -w, -sign, np.ones_like(w)])
@@ -187,11 +190,11 @@ class FollowerBase(BaseModel):
     def physical(self, coef: Float1D) -> dict[str, float]:
         r = self.wheel_radius_m
         return {
-            "torque_constant_n_m_per_a": coef[0] * r,
-            "inertia_kg_m2": coef[1] * r,
-            "viscous_damping_n_m_s_per_rad": coef[2] * r,
-            "coulomb_friction_n_m": coef[3] * r,
-            "offset_n": coef[4],
+            "torque_constant_n_m_per_a": coef[RC_KT] * r,
+            "inertia_kg_m2": coef[RC_J] * r,
+            "viscous_damping_n_m_s_per_rad": coef[RC_B] * r,
+            "coulomb_friction_n_m": coef[RC_TC] * r,
+            "offset_n": coef[RC_F0],
         }
 
     def data(self, rec: FollowerRecording) -> CalibrationData:

@@ -44,7 +44,7 @@ from teleop_core._typing import Float1D, Float2D
 from teleop_core.calibration.effects import DirectionAsymmetry, Signals, Stribeck
 from teleop_core.calibration.models import BaseModel, CalibrationData
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.recording import RecordingError
+from teleop_core.follower.recording import RecordingError
 from teleop_core.recording_checks import check_time, numbers, read_cells
 
 RIGID_COLUMNS = ("t", "q", "u")
@@ -229,9 +229,7 @@ def mat_to_frame(
     except FileNotFoundError:
         raise RecordingError(f"recording {path} does not exist; expected a .mat file") from None
     except (ValueError, TypeError, OSError) as exc:
-        raise RecordingError(
-            f"recording {path} is not a readable MATLAB v5 file: {exc}"
-        ) from None
+        raise RecordingError(f"recording {path} is not a readable MATLAB v5 file: {exc}") from None
     variables = {k: np.asarray(v) for k, v in raw.items() if not k.startswith("__")}
 
     def value(expr: str) -> Float1D:
@@ -251,9 +249,7 @@ def mat_to_frame(
     n = len(columns["t"])
     for name, column in columns.items():
         if len(column) != n:
-            raise RecordingError(
-                f"{path}: {name} has {len(column)} samples; expected {n} like t"
-            )
+            raise RecordingError(f"{path}: {name} has {len(column)} samples; expected {n} like t")
     used = {p.strip() for e in (q, u, t) for p in e.split("*")}
     for name, v in variables.items():
         if name not in used and v.size == n and np.issubdtype(v.dtype, np.number):

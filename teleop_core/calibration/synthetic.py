@@ -31,8 +31,8 @@ from teleop_core.calibration.effects import (
     smooth_sign,
 )
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.physics import PhysicsParams
-from teleop_core.estimation.recording import FollowerRecording
+from teleop_core.follower.physics import PhysicsParams
+from teleop_core.follower.recording import FollowerRecording
 from teleop_core.follower.scenarios import teleoperation
 from teleop_core.master.dial import gauge_force
 from teleop_core.master.params import DialParams

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from teleop_core._typing import Float1D, Float2D
+from teleop_core.calibration.effects import SIGN_SPEED_RAD_S
 from teleop_core.calibration.models import CalibrationData, FollowerBase
 from teleop_core.calibration.synthetic import JND_N, follower_recording
 from teleop_core.calibration.verdict import distance_since_reversal
@@ -37,7 +38,7 @@ VISIBLE = UNDECLARED[:-1]
 
 def _shape(kind: str, s: dict[str, Float1D], rng: np.random.Generator) -> tuple[Float2D, dict]:
     w, t, theta = s["speed"], s["t"], s["angle"]
-    sign = np.tanh(w / 0.3)
+    sign = np.tanh(w / SIGN_SPEED_RAD_S)
     if kind == "load_friction":
         return (-sign * np.abs(s["drive"]))[:, None], {}
     if kind == "gain_change":
@@ -46,7 +47,9 @@ def _shape(kind: str, s: dict[str, Float1D], rng: np.random.Generator) -> tuple[
     if kind == "ripple_harmonics":
         p1, p2 = rng.uniform(0.3, 1.2), rng.uniform(0.05, 0.25)
         phase = rng.uniform(0, 2 * np.pi, 2)
-        col = np.sin(2 * np.pi * theta / p1 + phase[0]) + 0.8 * np.sin(2 * np.pi * theta / p2 + phase[1])
+        col = np.sin(2 * np.pi * theta / p1 + phase[0]) + 0.8 * np.sin(
+            2 * np.pi * theta / p2 + phase[1]
+        )
         return col[:, None], {"period_1_rad": p1, "period_2_rad": p2}
     if kind == "presliding_memory":
         delta = rng.uniform(0.2, 1.0)

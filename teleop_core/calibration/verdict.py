@@ -86,7 +86,7 @@ def quantities(signals: dict[str, Float1D], prediction: Float1D) -> dict[str, Fl
     """The channels and derived quantities the residual is binned against (smoothed
     over `SMOOTH_S`; direction and time as they are)."""
     t = signals["t"]
-    width = max(3, int(round(SMOOTH_S / float(np.median(np.diff(t))))) | 1)
+    width = max(3, round(SMOOTH_S / float(np.median(np.diff(t)))) | 1)
     return {
         name: (x if name in ("direction", "time window") else _smooth(x, width))
         for name, x in _raw_quantities(signals, prediction).items()

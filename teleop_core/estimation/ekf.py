@@ -27,7 +27,7 @@ import numpy as np
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.physics import PhysicsParams, gradient_at
+from teleop_core.follower.physics import PhysicsParams, gradient_at
 
 
 @dataclass(frozen=True)
@@ -82,21 +82,21 @@ class ForceEkf:
         return ekf_update(self.state, self._sv, self._pv, self.dt_s, f_physics, f_hybrid, omega)
 
 
+# state: initialised flag, x = (F_physics, F_GRU*), P as p11, p12, p22
+EK_INIT, EK_X1, EK_X2, EK_P11, EK_P12, EK_P22 = range(6)
 EKF_STATE_SIZE = 6
+# settings vector (`settings_vector`): process noise Q, sensor noise R_z, model noise, flag
+SV_Q_PHYSICS, SV_Q_HYBRID, SV_R_IQ, SV_R_OMEGA, SV_R_MODEL, SV_R_GRU, SV_PASSTHROUGH = range(7)
+SETTINGS_SIZE = 7
 
 
 def settings_vector(s: EkfSettings) -> np.ndarray:
-    return np.array(
-        [
-            s.q_physics_n2,
-            s.q_hybrid_n2,
-            s.r_iq_a2,
-            s.r_omega_rad2_s2,
-            s.r_physics_model_n2,
-            s.r_gru_n2,
-            1.0 if s.passthrough else 0.0,
-        ]
-    )
+    sv = np.empty(SETTINGS_SIZE)
+    sv[SV_Q_PHYSICS], sv[SV_Q_HYBRID] = s.q_physics_n2, s.q_hybrid_n2
+    sv[SV_R_IQ], sv[SV_R_OMEGA] = s.r_iq_a2, s.r_omega_rad2_s2
+    sv[SV_R_MODEL], sv[SV_R_GRU] = s.r_physics_model_n2, s.r_gru_n2
+    sv[SV_PASSTHROUGH] = 1.0 if s.passthrough else 0.0
+    return sv
 
 
 @numba.njit(cache=True)
@@ -111,22 +111,22 @@ def ekf_update(
 ) -> float:  # pragma: no cover - compiled; exercised through ForceEkf
     """One EKF step on `state` (flag, x1, x2, p11, p12, p22); returns F*_Final (N).
 
-    With the pass-through flag (sv[6]) set, F*_Final is F_GRU* itself."""
-    if sv[6] != 0.0:
+    With the pass-through flag (sv[SV_PASSTHROUGH]) set, F*_Final is F_GRU* itself."""
+    if sv[SV_PASSTHROUGH] != 0.0:
         return f_hybrid
     g_i, g_w = gradient_at(pv, omega, dt_s)
     # R = G R_z G' + diag(r_model, r_gru); both rows of G are eq. 1's gradient
-    common = g_i * g_i * sv[2] + g_w * g_w * sv[3]
-    r11, r12, r22 = common + sv[4], common, common + sv[5]
-    if state[0] == 0.0:
-        state[0] = 1.0
-        state[1], state[2] = f_physics, f_hybrid
-        state[3], state[4], state[5] = r11, r12, r22
+    common = g_i * g_i * sv[SV_R_IQ] + g_w * g_w * sv[SV_R_OMEGA]
+    r11, r12, r22 = common + sv[SV_R_MODEL], common, common + sv[SV_R_GRU]
+    if state[EK_INIT] == 0.0:
+        state[EK_INIT] = 1.0
+        state[EK_X1], state[EK_X2] = f_physics, f_hybrid
+        state[EK_P11], state[EK_P12], state[EK_P22] = r11, r12, r22
         return f_hybrid
     # Predict: x = x (random walk); P = P + Q
-    p11 = state[3] + sv[0]
-    p12 = state[4]
-    p22 = state[5] + sv[1]
+    p11 = state[EK_P11] + sv[SV_Q_PHYSICS]
+    p12 = state[EK_P12]
+    p22 = state[EK_P22] + sv[SV_Q_HYBRID]
     # S = H P H' + R with H = I
     s11, s12, s22 = p11 + r11, p12 + r12, p22 + r22
     det = s11 * s22 - s12 * s12
@@ -137,15 +137,15 @@ def ekf_update(
     k21 = p12 * i11 + p22 * i12
     k22 = p12 * i12 + p22 * i22
     # y = z - h(x); x = x + K y
-    y1 = f_physics - state[1]
-    y2 = f_hybrid - state[2]
-    x1 = state[1] + k11 * y1 + k12 * y2
-    x2 = state[2] + k21 * y1 + k22 * y2
-    state[1], state[2] = x1, x2
+    y1 = f_physics - state[EK_X1]
+    y2 = f_hybrid - state[EK_X2]
+    x1 = state[EK_X1] + k11 * y1 + k12 * y2
+    x2 = state[EK_X2] + k21 * y1 + k22 * y2
+    state[EK_X1], state[EK_X2] = x1, x2
     # P = (I - K) P
-    state[3] = (1 - k11) * p11 - k12 * p12
-    state[4] = (1 - k11) * p12 - k12 * p22
-    state[5] = -k21 * p12 + (1 - k22) * p22
+    state[EK_P11] = (1 - k11) * p11 - k12 * p12
+    state[EK_P12] = (1 - k11) * p12 - k12 * p22
+    state[EK_P22] = -k21 * p12 + (1 - k22) * p22
     return x2
 
 

@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.physics import PhysicsParams, from_coefficients
-from teleop_core.estimation.recording import FollowerRecording
+from teleop_core.follower.physics import REGRESSORS, PhysicsParams, from_coefficients
+from teleop_core.follower.recording import FollowerRecording
 
 if TYPE_CHECKING:
     from teleop_core.calibration.fitting import CalibratedModel
@@ -77,7 +77,9 @@ class ExtendedPhysics:
         # with the sign width the calibration fitted (the estimator's 0.3 rad/s in a
         # calibration made before it was fitted)
         base = from_coefficients(
-            calibrated.coef[:5], calibrated.model.wheel_radius_m, calibrated.model.sign_width_rad_s
+            calibrated.coef[:REGRESSORS],
+            calibrated.model.wheel_radius_m,
+            calibrated.model.sign_width_rad_s,
         )
         return cls(calibrated, base, d.get("source", source))
 

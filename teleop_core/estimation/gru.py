@@ -33,6 +33,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 from teleop_core._typing import Float1D, Float2D, Float3D
 from teleop_core.errors import TeleopInputError
+from teleop_core.estimation.blocks import sample_blocks, windows_by_block
 
 N_FEATURES = 3
 """[I_q, theta_d, theta_dd] per time step."""
@@ -261,23 +262,11 @@ def block_split(
     A window is used only if all its samples lie in blocks of one kind.
     """
     n_samples = n_windows + window - 1
-    block_of_sample = np.minimum(
-        np.arange(n_samples) * config.blocks // n_samples, config.blocks - 1
-    )
+    block_of_sample = sample_blocks(n_samples, config.blocks)
     n_val = max(1, round(config.blocks * config.validation_fraction))
     rng = np.random.default_rng(seed)
     val_blocks = rng.choice(config.blocks, size=n_val, replace=False)
-    # Validation samples inside each window: cumulative sums give them in O(n).
-    in_val = np.concatenate(([0], np.cumsum(np.isin(block_of_sample, val_blocks))))
-    val_count = in_val[window:] - in_val[:-window]
-    train = np.flatnonzero(val_count == 0)
-    val = np.flatnonzero(val_count == window)
-    if len(train) == 0 or len(val) == 0:
-        raise TeleopInputError(
-            f"{n_samples} samples are too few to split into {config.blocks} blocks of "
-            f"windows of {window}; expected a longer recording"
-        )
-    return train, val
+    return windows_by_block(block_of_sample, val_blocks, window, config.blocks)
 
 
 @dataclass

@@ -4,11 +4,13 @@ A network validated on blocks that hold little of what it must learn picks the e
 that learned nothing (issue 17: two random blocks out of ten, with a third of the
 training blocks' physics error). So every sample gets a label in three dimensions:
 
-| dimension | labels | rule |
-|---|---|---|
-| speed | `rest`, `slow`, `fast`, `reversal` | `reversal`: speeds of both signs beyond `rest_speed_rad_s` within `reversal_window_s`; else by abs(theta_d): below `rest_speed_rad_s`, below `slow_speed_rad_s`, above |
-| direction | `forward`, `backward`, `none` | the sign of theta_d beyond `rest_speed_rad_s` |
-| load | `low`, `mid`, `high` | abs(F_ref) against its tertiles over the training recording |
+- speed: `rest`, `slow`, `fast`, `reversal`. `reversal`: speeds of both signs beyond
+  `rest_speed_rad_s` within `reversal_window_s`; else by abs(theta_d): below
+  `rest_speed_rad_s`, below `slow_speed_rad_s`, above;
+- direction: `forward`, `backward`, `none`: the sign of theta_d beyond
+  `rest_speed_rad_s`;
+- load: `low`, `mid`, `high`: abs(F_ref) against its tertiles over the training
+  recording;
 
 and `representative_split` chooses, among seeded candidate sets of contiguous time
 blocks, the validation blocks whose mixture of labels is closest to the whole
@@ -30,6 +32,7 @@ from scipy.ndimage import maximum_filter1d
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
+from teleop_core.estimation.blocks import sample_blocks, windows_by_block
 from teleop_core.estimation.metrics import rmse
 
 SPEED = ("rest", "slow", "fast", "reversal")
@@ -86,7 +89,7 @@ def label_samples(
     """Boolean masks, one per label of `LABELS`, over the samples (speeds rad/s, forces N)."""
     omega = np.asarray(omega, float)
     moving = np.abs(omega) >= rules.rest_speed_rad_s
-    span = max(1, int(round(rules.reversal_window_s * rate_hz)))
+    span = max(1, round(rules.reversal_window_s * rate_hz))
     fwd = np.where(omega > rules.rest_speed_rad_s, 1.0, 0.0)
     bwd = np.where(omega < -rules.rest_speed_rad_s, 1.0, 0.0)
     reversal = (maximum_filter1d(fwd, span) > 0) & (maximum_filter1d(bwd, span) > 0)
@@ -139,7 +142,7 @@ def representative_split(
         raise TeleopInputError(
             f"validation_fraction {validation_fraction!r}; expected between 0 and 1"
         )
-    block_of = np.minimum(np.arange(n_samples) * blocks // n_samples, blocks - 1)
+    block_of = sample_blocks(n_samples, blocks)
     counts = _block_counts(masks, block_of, blocks)
     total = counts.sum(axis=0)
     share = total / n_samples
@@ -160,15 +163,7 @@ def representative_split(
     )
     best = np.lexsort((deviation, missing))[0]  # fewest labels missing, then closest
     val_blocks = np.sort(chosen[best])
-    in_val = np.concatenate(([0], np.cumsum(np.isin(block_of, val_blocks))))
-    val_count = in_val[window:] - in_val[:-window]
-    train_idx = np.flatnonzero(val_count == 0)
-    val_idx = np.flatnonzero(val_count == window)
-    if len(train_idx) == 0 or len(val_idx) == 0:
-        raise TeleopInputError(
-            f"{n_samples} samples are too few to split into {blocks} blocks of "
-            f"windows of {window}; expected a longer recording"
-        )
+    train_idx, val_idx = windows_by_block(block_of, val_blocks, window, blocks)
     last = np.arange(window - 1, n_samples)
     report = {
         "validation_blocks": val_blocks.tolist(),

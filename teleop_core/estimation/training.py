@@ -27,20 +27,20 @@ import numpy as np
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.ekf import EkfSettings, filter_forces, rest_variances
-from teleop_core.estimation.estimator import ForceEstimator, features_of
 from teleop_core.estimation.extended import ExtendedPhysics, physics_force
 from teleop_core.estimation.gru import GruConfig
 from teleop_core.estimation.gru_torch import train_gru
 from teleop_core.estimation.metrics import lag_samples, rmse
-from teleop_core.estimation.physics import PhysicsParams, fit_physics
+from teleop_core.estimation.model import ForceEstimator, features_of
 from teleop_core.estimation.ranges import InputRange
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.regimes import (
     RegimeRules,
     label_samples,
     regime_rmse,
     representative_split,
 )
+from teleop_core.follower.physics import PhysicsParams, fit_physics
+from teleop_core.follower.recording import FollowerRecording
 
 R_PHYSICS_SCALES = (1.0, 4.0, 16.0)
 """Multiples of eq. 1's training error variance tried as the EKF's physics-model R."""
@@ -140,9 +140,9 @@ def train_estimator(
     config: GruConfig | None = None,
     *,
     seed: int = 0,
-    wheel_radius_m: float = 0.010,
-    sign_speed_rad_s: float = 0.3,
-    pipeline_rate_hz: float = 50.0,
+    wheel_radius_m: float = PhysicsParams.wheel_radius_m,
+    sign_speed_rad_s: float = PhysicsParams.sign_speed_rad_s,
+    pipeline_rate_hz: float = ForceEstimator.pipeline_rate_hz,
     physics: PhysicsParams | None = None,
     ekf_q_n2: float | None = None,
     progress: Callable[[int, float, float], None] | None = None,
@@ -208,9 +208,7 @@ def train_estimator(
     base, rest_found = _ekf_base(recording, train_mask, residual, history.best_val_rmse)
     if not rest_found:
         notes.append("the wheel is never at rest: EKF R from the default sensor noise")
-    estimator = ForceEstimator(
-        physics, gru, base, rate, pipeline_rate_hz, extension, input_range
-    )
+    estimator = ForceEstimator(physics, gru, base, rate, pipeline_rate_hz, extension, input_range)
     result = estimator.predict(recording)
     omega = recording.omega[T - 1 :]
 

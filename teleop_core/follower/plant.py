@@ -36,6 +36,36 @@ from teleop_core.follower.params import FollowerControlParams, FollowerPlantPara
 # State vector layout.
 THETA, OMEGA, IQ, IQ_INT, W_INT, W_FILT, THETA_Q_PREV, IQ_CMD = range(8)
 STATE_SIZE = 8
+# Parameter vector layout (`_param_vector`, read by `follower_tick`).
+(
+    P_KT,
+    P_WHEEL_R,
+    P_INERTIA,
+    P_VISCOUS,
+    P_COULOMB,
+    P_STATIC,
+    P_STRIBECK,
+    P_KSAT,
+    P_COG,
+    P_NCOG,
+    P_R,
+    P_L,
+    P_VMAX,
+    P_KPI,
+    P_KII,
+    P_DT,
+    P_NSUB,
+    P_KPW,
+    P_KIW,
+    P_TF,
+    P_ILIM,
+    P_DRAG2,
+    P_RETRACT,
+) = range(23)
+PARAM_SIZE = 23
+# Output layout of one tick (`follower_tick`'s `out`).
+F_THETA, F_OMEGA, F_IQ, F_OMEGA_EST, F_IQ_CMD = range(5)
+FOLLOWER_OUT = 5
 
 
 def _param_vector(plant: FollowerPlantParams, control: FollowerControlParams) -> Float1D:
@@ -49,33 +79,31 @@ def _param_vector(plant: FollowerPlantParams, control: FollowerControlParams) ->
             f"speed_loop_rate_hz {control.speed_loop_rate_hz}; expected e.g. 10000 and 1000"
         )
     wc = 2 * math.pi * control.current_loop_bandwidth_hz
-    return np.array(
-        [
-            plant.torque_constant_n_m_per_a,
-            plant.wheel_radius_m,
-            plant.inertia_kg_m2,
-            plant.viscous_damping_n_m_s_per_rad,
-            plant.coulomb_friction_n_m,
-            plant.static_friction_n_m,
-            plant.stribeck_speed_rad_s,
-            plant.torque_saturation_per_a2,
-            plant.cogging_torque_n_m,
-            float(plant.cogging_periods_per_rev),
-            plant.phase_resistance_ohm,
-            plant.phase_inductance_h,
-            plant.voltage_limit_v,
-            plant.phase_inductance_h * wc,  # current Kp [V/A]
-            plant.phase_resistance_ohm * wc,  # current Ki [V/(A s)]
-            1.0 / control.speed_loop_rate_hz,  # speed-loop period [s]
-            float(substeps),
-            control.speed_kp_a_s_per_rad,
-            control.speed_ki_a_per_rad,
-            control.velocity_filter_s,
-            control.current_limit_a,
-            plant.quadratic_drag_n_m_s2_per_rad2,
-            plant.retract_friction_ratio,
-        ]
-    )
+    p = np.empty(PARAM_SIZE)
+    p[P_KT] = plant.torque_constant_n_m_per_a
+    p[P_WHEEL_R] = plant.wheel_radius_m
+    p[P_INERTIA] = plant.inertia_kg_m2
+    p[P_VISCOUS] = plant.viscous_damping_n_m_s_per_rad
+    p[P_COULOMB] = plant.coulomb_friction_n_m
+    p[P_STATIC] = plant.static_friction_n_m
+    p[P_STRIBECK] = plant.stribeck_speed_rad_s
+    p[P_KSAT] = plant.torque_saturation_per_a2
+    p[P_COG] = plant.cogging_torque_n_m
+    p[P_NCOG] = float(plant.cogging_periods_per_rev)
+    p[P_R] = plant.phase_resistance_ohm
+    p[P_L] = plant.phase_inductance_h
+    p[P_VMAX] = plant.voltage_limit_v
+    p[P_KPI] = plant.phase_inductance_h * wc  # current Kp [V/A]
+    p[P_KII] = plant.phase_resistance_ohm * wc  # current Ki [V/(A s)]
+    p[P_DT] = 1.0 / control.speed_loop_rate_hz  # speed-loop period [s]
+    p[P_NSUB] = float(substeps)
+    p[P_KPW] = control.speed_kp_a_s_per_rad
+    p[P_KIW] = control.speed_ki_a_per_rad
+    p[P_TF] = control.velocity_filter_s
+    p[P_ILIM] = control.current_limit_a
+    p[P_DRAG2] = plant.quadratic_drag_n_m_s2_per_rad2
+    p[P_RETRACT] = plant.retract_friction_ratio
+    return p
 
 
 @numba.njit(cache=True)
@@ -88,30 +116,14 @@ def follower_tick(
     out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled; exercised through FollowerDrive
     """One speed-loop tick; writes theta, omega, mean iq, omega estimate, iq command to out."""
-    kt, r, J, b, tc, ts, ws, ksat, cog, ncog, R, L, vmax, kpi, kii, dt, nsub, kpw, kiw, tf, ilim = (
-        p[0],
-        p[1],
-        p[2],
-        p[3],
-        p[4],
-        p[5],
-        p[6],
-        p[7],
-        p[8],
-        p[9],
-        p[10],
-        p[11],
-        p[12],
-        p[13],
-        p[14],
-        p[15],
-        p[16],
-        p[17],
-        p[18],
-        p[19],
-        p[20],
-    )
-    drag2, retract = p[21], p[22]
+    # (grouped: mechanics, friction, saturation and cogging, electrics and current PI,
+    # speed PI, filter, limit and the withdrawal terms)
+    kt, r, J, b = p[P_KT], p[P_WHEEL_R], p[P_INERTIA], p[P_VISCOUS]
+    tc, ts, ws = p[P_COULOMB], p[P_STATIC], p[P_STRIBECK]
+    ksat, cog, ncog = p[P_KSAT], p[P_COG], p[P_NCOG]
+    R, L, vmax, kpi, kii = p[P_R], p[P_L], p[P_VMAX], p[P_KPI], p[P_KII]
+    dt, nsub, kpw, kiw = p[P_DT], p[P_NSUB], p[P_KPW], p[P_KIW]
+    tf, ilim, drag2, retract = p[P_TF], p[P_ILIM], p[P_DRAG2], p[P_RETRACT]
     n_sub = int(nsub)
     dte = dt / n_sub
     decay = math.exp(-R * dte / L)
@@ -164,11 +176,11 @@ def follower_tick(
             omega_new = 0.0  # friction cannot reverse the motion: stick at zero speed
         state[OMEGA] = omega_new
         state[THETA] += omega_new * dte
-    out[0] = state[THETA]
-    out[1] = state[OMEGA]
-    out[2] = iq_sum / n_sub
-    out[3] = state[W_FILT]
-    out[4] = iq_cmd
+    out[F_THETA] = state[THETA]
+    out[F_OMEGA] = state[OMEGA]
+    out[F_IQ] = iq_sum / n_sub
+    out[F_OMEGA_EST] = state[W_FILT]
+    out[F_IQ_CMD] = iq_cmd
 
 
 @numba.njit(cache=True)
@@ -223,7 +235,7 @@ class FollowerDrive:
         self._p = _param_vector(self.plant, self.control)
         self._encoder_step = 2 * math.pi / self.encoder_counts_per_rev
         self.state = np.zeros(STATE_SIZE)
-        self._one = np.empty((1, 5))
+        self._one = np.empty((1, FOLLOWER_OUT))
 
     @property
     def dt_s(self) -> float:
@@ -247,17 +259,17 @@ class FollowerDrive:
                 f"speed command shape {cmd.shape} and load shape {load.shape} differ; "
                 "expected two 1-D arrays of one length"
             )
-        out = np.empty((cmd.shape[0], 5))
+        out = np.empty((cmd.shape[0], FOLLOWER_OUT))
         _advance(self.state, self._p, self._encoder_step, cmd, load, out)
         t = self.t_s + self.dt_s * np.arange(1, cmd.shape[0] + 1)
         self.t_s = float(t[-1]) if len(t) else self.t_s
         return DriveTrace(
             t_s=t,
-            theta_rad=out[:, 0].copy(),
-            omega_rad_s=out[:, 1].copy(),
-            iq_a=out[:, 2].copy(),
-            omega_est_rad_s=out[:, 3].copy(),
-            iq_cmd_a=out[:, 4].copy(),
+            theta_rad=out[:, F_THETA].copy(),
+            omega_rad_s=out[:, F_OMEGA].copy(),
+            iq_a=out[:, F_IQ].copy(),
+            omega_est_rad_s=out[:, F_OMEGA_EST].copy(),
+            iq_cmd_a=out[:, F_IQ_CMD].copy(),
             omega_cmd_rad_s=cmd.copy(),
             load_force_n=load.copy(),
         )
@@ -273,4 +285,5 @@ class FollowerDrive:
             self._one,
         )
         self.t_s += self.dt_s
-        return float(self._one[0, 0]), float(self._one[0, 1]), float(self._one[0, 2])
+        one = self._one[0]
+        return float(one[F_THETA]), float(one[F_OMEGA]), float(one[F_IQ])

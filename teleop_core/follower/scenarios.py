@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from teleop_core._typing import Float1D
+from teleop_core.follower.params import FollowerPlantParams
 
 
 def _smooth(x: Float1D, tau_s: float, dt_s: float) -> Float1D:
@@ -32,7 +33,7 @@ def teleoperation(
     rng: np.random.Generator,
     *,
     dt_s: float = 1e-3,
-    wheel_radius_m: float = 0.010,
+    wheel_radius_m: float = FollowerPlantParams.wheel_radius_m,
     max_speed_rad_s: float = 10.0,
     load_scale: float = 1.0,
     max_load_n: float = 2.5,

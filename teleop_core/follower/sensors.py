@@ -15,9 +15,9 @@ import numpy as np
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.plant import DriveTrace
+from teleop_core.follower.recording import FollowerRecording
 
 
 def quantise(angle_rad: Float1D, counts_per_rev: int) -> Float1D:

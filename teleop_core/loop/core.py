@@ -12,7 +12,8 @@ between the force and the dial is the same either way, and this way the link car
 what the latency bench measures). Without an estimator the loop publishes the true
 proximal force (an ideal sensor), which isolates the loop from the estimator in tests.
 
-A `LoopResult` holds the 100 Hz samples with the columns the database stores.
+A `LoopResult` holds the 100 Hz samples with the columns the database stores
+(`layout.SAMPLE_COLUMNS`); `LoopConfig` and the results are in `config.py`.
 """
 
 from __future__ import annotations
@@ -20,138 +21,37 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
-import pandas as pd
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.estimator import ForceEstimator
-from teleop_core.follower.params import (
-    FollowerControlParams,
-    FollowerPlantParams,
-    FollowerSensorParams,
-)
-from teleop_core.follower.plant import STATE_SIZE, _param_vector
-from teleop_core.loop import kernel as K
+from teleop_core.estimation.model import ForceEstimator
+from teleop_core.estimation.stream import EST_FINAL, NO_STREAM_ARRAYS
+from teleop_core.follower.plant import STATE_SIZE, THETA, _param_vector
+from teleop_core.loop import layout as K
+from teleop_core.loop.config import LoopConfig, LoopCounters, LoopResult, master_vector
 from teleop_core.loop.drivers import Driver, HandAction, OperatorView
 from teleop_core.loop.environments import Environment, free_space
+from teleop_core.loop.kernel import kernel_for
+from teleop_core.loop.layout import SAMPLE_COLUMNS
 from teleop_core.loop.link import (
-    LINK_STATE_SIZE,
-    LS_NEWEST,
-    QUEUE_ROWS,
-    QUEUE_WIDTH,
+    NO_LINKS,
+    POOL_NEXT,
     Link,
-    LinkParams,
+    kernel_links,
     kernel_send,
-    link_vector,
+    packet_schedule,
 )
 from teleop_core.master.dial import D_OMEGA, D_THETA, DIAL_STATE_SIZE, dial_param_vector
 from teleop_core.master.haptics import LOADING, rate_command
-from teleop_core.master.params import DialParams, HapticParams
 
-_NO_PACKETS = np.zeros((0, 4))
-_NO_LINKS = (
-    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(3),
-    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(3),
-    np.zeros(1), np.zeros(1),
-)  # fmt: skip
-SAMPLE_COLUMNS = (
-    "t_s",
-    "insertion_m",
-    "rotation_rad",
-    "tip_x_m",
-    "tip_y_m",
-    "tip_z_m",
-    "branch",
-    "proximal_force_n",
-    "proximal_force_est_n",
-    "distal_force_n",
-    "dial_angle_rad",
-    "dial_torque_n_m",
-)
-"""One row per acquisition: the database's sample columns (branch as its code)."""
-
-
-@dataclass(frozen=True)
-class LoopConfig:
-    device_rate_hz: float = 1000.0
-    """Device physics and master controller rate (IV-A)."""
-    acquisition_rate_hz: float = 100.0
-    """Hardware acquisition rate (IV-A)."""
-    estimation_rate_hz: float = 50.0
-    """Estimation pipeline rate (IV-A)."""
-    driver_rate_hz: float = 100.0
-    """How often the driver decides."""
-    to_follower: LinkParams = field(default_factory=LinkParams)
-    """Master -> follower: rate and rotation commands."""
-    to_master: LinkParams = field(default_factory=LinkParams)
-    """Follower -> master: the force estimate."""
-    haptics: HapticParams = field(default_factory=HapticParams)
-    dial: DialParams = field(default_factory=DialParams)
-    plant: FollowerPlantParams = field(default_factory=FollowerPlantParams)
-    control: FollowerControlParams = field(default_factory=FollowerControlParams)
-    sensors: FollowerSensorParams = field(default_factory=FollowerSensorParams)
-    dial_encoder_counts_per_rev: int = 4096
-    """The dial's AS5600 (IV-A)."""
-    dial_velocity_filter_s: float = 0.002
-    """Low-pass on the dial's differentiated angle for eq. 8's damper; assumption."""
-
-    def __post_init__(self) -> None:
-        ticks = {}
-        for name in ("acquisition_rate_hz", "estimation_rate_hz", "driver_rate_hz"):
-            ratio = self.device_rate_hz / getattr(self, name)
-            if not (ratio >= 1 and abs(ratio - round(ratio)) < 1e-9):
-                raise TeleopInputError(
-                    f"{name} = {getattr(self, name)} does not divide device_rate_hz "
-                    f"{self.device_rate_hz}; expected e.g. 100 of 1000"
-                )
-            ticks[name] = round(ratio)
-        if ticks["estimation_rate_hz"] % ticks["acquisition_rate_hz"]:
-            raise TeleopInputError(
-                f"estimation_rate_hz {self.estimation_rate_hz} is not the acquisition rate "
-                f"{self.acquisition_rate_hz} divided by a whole number"
-            )
-        if abs(self.device_rate_hz - self.control.speed_loop_rate_hz) > 1e-9:
-            raise TeleopInputError(
-                f"device_rate_hz {self.device_rate_hz} differs from the drive's speed loop "
-                f"{self.control.speed_loop_rate_hz} Hz; expected them equal"
-            )
-
-
-@dataclass
-class LoopCounters:
-    """How many times each part ran (rate bookkeeping)."""
-
-    ticks: int = 0
-    acquisitions: int = 0
-    estimates: int = 0
-    driver_updates: int = 0
-    commands_sent: int = 0
-    forces_sent: int = 0
-
-
-@dataclass
-class LoopResult:
-    """The 100 Hz samples of a run, the 1 kHz log if kept, and the counters."""
-
-    samples: np.ndarray
-    counters: LoopCounters
-    branches: tuple[str, ...]
-    ticks: np.ndarray | None = None
-    success: bool = False
-    done_s: float = math.nan
-
-    def to_frame(self) -> pd.DataFrame:
-        frame = pd.DataFrame(self.samples, columns=list(SAMPLE_COLUMNS))
-        names = np.asarray(self.branches, dtype=object)
-        frame["branch"] = names[self.samples[:, SAMPLE_COLUMNS.index("branch")].astype(int)]
-        return frame
-
-    def ticks_frame(self) -> pd.DataFrame:
-        if self.ticks is None:
-            raise TeleopInputError("this run kept no 1 kHz log; run with keep_ticks=True")
-        return pd.DataFrame(self.ticks, columns=list(K.LOG_COLUMNS))
+__all__ = [  # LoopConfig and the results moved to config.py, the columns to layout.py
+    "SAMPLE_COLUMNS",
+    "LoopConfig",
+    "LoopCounters",
+    "LoopResult",
+    "TeleopLoop",
+]
 
 
 class TeleopLoop:
@@ -183,7 +83,7 @@ class TeleopLoop:
         self.config = cfg = config or LoopConfig()
         self.environment = environment or free_space()
         self.environment.reset()
-        self._kernel = K.kernel_for(self.environment.fn)
+        self._kernel = kernel_for(self.environment.fn)
         self.estimator = estimator
         self.force_override = force_override
         self.keep_ticks = keep_ticks
@@ -198,7 +98,7 @@ class TeleopLoop:
         self.to_master: Link[float] = Link(cfg.to_master, link_rng)
         self.loop = np.zeros(K.LOOP_STATE_SIZE)
         self.loop[K.L_BRANCH] = LOADING
-        self.mp = self._master_params()
+        self.mp = master_vector(cfg, estimator)
         self.dial = np.zeros(DIAL_STATE_SIZE)
         self.dp = dial_param_vector(cfg.dial)
         self.follower = np.zeros(STATE_SIZE)
@@ -208,81 +108,28 @@ class TeleopLoop:
         self._stream = estimator.stream() if estimator is not None else None
         self._log = np.zeros((max(self._acq_every, self._drv_every, self._est_every), K.LOG_WIDTH))
         self._last_row = [0.0] * K.LOG_WIDTH
-        self._schedule = np.zeros((8, 4))
+        self._schedule = np.zeros((8, K.SCHEDULE_WIDTH))
         self._noise = np.zeros(0)
         self._fast_allowed = fast
         self._fast = False
-        self._est_arrays = self._estimator_arrays()
+        self._est_arrays = (
+            self._stream.kernel_arrays() if self._stream is not None else NO_STREAM_ARRAYS
+        )
         self._samples = np.zeros((0, len(SAMPLE_COLUMNS)))
         self._action = HandAction()
         self._done_s = math.nan
         self._success = False
         self.driver: Driver | None = None
 
-    def _master_params(self) -> np.ndarray:
-        cfg, h, poly = self.config, self.config.haptics, self.config.dial.polynomials
-        mp = np.zeros(K.MASTER_PARAM_SIZE)
-        mp[K.M_KS], mp[K.M_BS], mp[K.M_THETA_REF] = (
-            h.spring_n_m_per_rad,
-            h.damper_n_m_s_per_rad,
-            h.reference_angle_rad,
-        )
-        mp[K.M_GH], mp[K.M_DEADBAND], mp[K.M_SAT] = (
-            h.haptic_gain_n_m_per_n,
-            h.deadband_n,
-            h.saturation_n_m,
-        )
-        mp[K.M_HAPTICS_ON] = 1.0 if h.haptics_on else 0.0
-        mp[K.M_LEVER], mp[K.M_IMAX] = poly.lever_arm_m, poly.max_current_ma
-        mp[K.M_ENC_STEP] = 2 * math.pi / cfg.dial_encoder_counts_per_rev
-        mp[K.M_VEL_FILTER_S] = cfg.dial_velocity_filter_s
-        mp[K.M_WHEEL_R] = cfg.plant.wheel_radius_m
-        mp[K.M_IQ_FILTER_S] = cfg.sensors.current_filter_s
-        mp[K.M_DT] = 1.0 / cfg.device_rate_hz
-        mp[K.M_POLY : K.M_POLY + 6] = [*poly.loading, *poly.unloading]
-        mp[K.M_ACQ_EVERY] = round(cfg.device_rate_hz / cfg.acquisition_rate_hz)
-        mp[K.M_EST_EVERY] = round(cfg.device_rate_hz / cfg.estimation_rate_hz)
-        mp[K.M_KV] = h.speed_gain_m_s_per_rad
-        mp[K.M_HAS_EST] = 1.0 if self.estimator is not None else 0.0
-        mp[K.M_EST_DT] = self.estimator.dt_s if self.estimator is not None else 0.0
-        return mp
-
-    def _kernel_links(self) -> tuple:
-        """Queues, states and parameters of both link directions for the kernel, and the
-        pool of uniform draws (from the links' generator, in `Link.send`'s order)."""
-
-        def state() -> np.ndarray:
-            ls = np.zeros(LINK_STATE_SIZE)
-            ls[LS_NEWEST] = -1.0
-            return ls
-
-        self._pool = np.zeros(0)
-        self._pool_pos = np.zeros(1)
-        return (
-            np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(self.to_master.params),
-            np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(self.to_follower.params),
-            self._pool, self._pool_pos,
-        )  # fmt: skip
-
     def _reserve_draws(self, count: int) -> None:
-        pos = int(self._pool_pos[0])
+        pos = int(self._pool_pos[POOL_NEXT])
         if len(self._pool) - pos < count:
             fresh = self._link_rng.random(max(4096, count))
             self._pool = np.concatenate([self._pool[pos:], fresh])
-            self._pool_pos[0] = 0.0
+            self._pool_pos[POOL_NEXT] = 0.0
             links = list(self._links)
-            links[6] = self._pool
+            links[K.LK_POOL] = self._pool
             self._links = tuple(links)
-
-    def _estimator_arrays(self) -> tuple:
-        """The causal estimator's arrays, in the order the kernel takes them (dummies of
-        the same types without an estimator, so one compiled kernel serves both)."""
-        s = self._stream
-        if s is None:
-            z1, z2 = np.zeros(1), np.zeros((1, 1))
-            return (np.zeros((1, 3)), z1, z1, z1, z1, z2, z2, z1, z1, z1, 0.0, z1, z1, z1)
-        return (s.buffer, s.state, s.mean, s.std, s.physics, *s.weights, s.target,
-                s.ekf_state, s.ekf_settings)  # fmt: skip
 
     @property
     def t_s(self) -> float:
@@ -290,16 +137,16 @@ class TeleopLoop:
 
     def view(self) -> OperatorView:
         row = self._last_row
-        branch = self.environment.branches[int(row[16])]
+        branch = self.environment.branches[int(row[K.LOG_BRANCH])]
         return OperatorView(
             t_s=self.t_s,
             dial_angle_rad=float(self.dial[D_THETA]),
             dial_speed_rad_s=float(self.dial[D_OMEGA]),
-            insertion_m=float(self.follower[0] * self.config.plant.wheel_radius_m),
+            insertion_m=float(self.follower[THETA] * self.config.plant.wheel_radius_m),
             rotation_rad=float(self.loop[K.L_ROTATION]),
-            tip_m=(float(row[13]), float(row[14]), float(row[15])),
+            tip_m=(float(row[K.LOG_TIP_X]), float(row[K.LOG_TIP_Y]), float(row[K.LOG_TIP_Z])),
             branch=branch,
-            success=bool(row[17]),
+            success=bool(row[K.LOG_SUCCESS]),
         )
 
     def run(self, seconds: float, driver: Driver, stop_when_done: bool = True) -> LoopResult:
@@ -339,7 +186,8 @@ class TeleopLoop:
             and not driver.realtime
         )
         if self._fast:
-            self._links = self._kernel_links()
+            self._links = kernel_links(self.to_master.params, self.to_follower.params)
+            self._pool, self._pool_pos = self._links[K.LK_POOL], self._links[K.LK_POS]
         self.mp[K.M_FAST] = 1.0 if self._fast else 0.0
         self._wall_start = time.monotonic() - self.t_s
 
@@ -387,7 +235,7 @@ class TeleopLoop:
             n = nxt - k
             if n > len(self._log):
                 self._log = np.zeros((n, K.LOG_WIDTH))
-            links = _NO_LINKS
+            links = NO_LINKS
             if self._fast:
                 self._reserve_noise(n // acq + 2)
                 self._reserve_draws(4 * (n // acq + 2))
@@ -430,7 +278,7 @@ class TeleopLoop:
                     r = self.config.plant.wheel_radius_m
                     kv = self.config.haptics.speed_gain_m_s_per_rad
                     speed = rate_command(loop[K.L_THETA_Q_PREV], kv) / r
-                    q_f, ls_f, lp_f = self._links[3:6]
+                    q_f, ls_f, lp_f = self._links[K.LK_Q_F : K.LK_LP_F + 1]
                     kernel_send(q_f, ls_f, lp_f, self._pool, self._pool_pos, self.t_s, speed,
                                 loop[K.L_ROT_ACTION])  # fmt: skip
                     c.commands_sent += 1
@@ -449,27 +297,9 @@ class TeleopLoop:
             self.loop[K.L_SPEED_CMD_RX], self.loop[K.L_ROT_RATE_RX] = self.to_follower.receive(t)
 
     def _packets(self, k: int, nxt: int) -> np.ndarray:
-        """The packets arriving during ticks k..nxt-1, as the kernel's schedule.
-
-        A packet arriving at tick K acts from the tick after it, as if received at K.
-        """
-        last = (nxt - 1) * self.dt_s
-        to_master, to_follower = self.to_master, self.to_follower
-        if to_master.next_arrival_s() > last and to_follower.next_arrival_s() > last:
-            return _NO_PACKETS
-        rows = []
-        for arrival, force in to_master.deliver_until(last):
-            j = max(math.ceil(arrival / self.dt_s - 1e-9) - k, 0)
-            rows.append((j, K.PACKET_FORCE, force, 0.0))
-        for arrival, (speed, rotation) in to_follower.deliver_until(last):
-            j = max(math.ceil(arrival / self.dt_s - 1e-9) - k, 0)
-            rows.append((j, K.PACKET_COMMAND, speed, rotation))
-        if len(rows) > len(self._schedule):
-            self._schedule = np.zeros((2 * len(rows), 4))
-        rows.sort(key=lambda row: row[0])
-        schedule = self._schedule[: len(rows)]
-        for i, row in enumerate(rows):
-            schedule[i] = row
+        schedule, self._schedule = packet_schedule(
+            self.to_master, self.to_follower, k, nxt, self.dt_s, self._schedule
+        )
         return schedule
 
     def _acquire(self, rows: list[tuple[float, ...]]) -> None:
@@ -478,36 +308,36 @@ class TeleopLoop:
         c.acquisitions += 1
         if c.ticks % self._est_every == 0:
             if self._stream is not None:
-                self._stream.push(t, row[9] + self._current_noise(), row[10])
+                self._stream.push(
+                    t, row[K.LOG_IQ_FILT] + self._current_noise(), row[K.LOG_OMEGA_EST]
+                )
                 estimate = self._stream.estimate()
-                loop[K.L_FORCE_EST] = estimate[2] if estimate is not None else 0.0
+                loop[K.L_FORCE_EST] = estimate[EST_FINAL] if estimate is not None else 0.0
             else:
-                loop[K.L_FORCE_EST] = row[11]
+                loop[K.L_FORCE_EST] = row[K.LOG_PROXIMAL]
             if self.force_override is not None:
                 loop[K.L_FORCE_EST] = self.force_override(t)
             c.estimates += 1
             c.forces_sent += 1
             self.to_master.send(t, float(loop[K.L_FORCE_EST]))
         elif self._stream is not None:
-            self._stream.push(t, row[9] + self._current_noise(), row[10])
+            self._stream.push(t, row[K.LOG_IQ_FILT] + self._current_noise(), row[K.LOG_OMEGA_EST])
         r = self.config.plant.wheel_radius_m
-        rows.append(
-            (
-                t,
-                row[6] * r,
-                row[18],
-                row[13],
-                row[14],
-                row[15],
-                row[16],
-                row[11],
-                float(loop[K.L_FORCE_EST]),
-                row[12],
-                row[1],
-                row[3],
-            )
-        )
-        if row[17] and not self._success:
+        sample = [0.0] * K.SAMPLE_WIDTH
+        sample[K.S_T] = t
+        sample[K.S_INSERTION] = row[K.LOG_WHEEL_ANGLE] * r
+        sample[K.S_ROTATION] = row[K.LOG_ROTATION]
+        sample[K.S_TIP_X] = row[K.LOG_TIP_X]
+        sample[K.S_TIP_Y] = row[K.LOG_TIP_Y]
+        sample[K.S_TIP_Z] = row[K.LOG_TIP_Z]
+        sample[K.S_BRANCH] = row[K.LOG_BRANCH]
+        sample[K.S_PROXIMAL] = row[K.LOG_PROXIMAL]
+        sample[K.S_PROXIMAL_EST] = float(loop[K.L_FORCE_EST])
+        sample[K.S_DISTAL] = row[K.LOG_DISTAL]
+        sample[K.S_DIAL_ANGLE] = row[K.LOG_DIAL_ANGLE]
+        sample[K.S_DIAL_TORQUE] = row[K.LOG_DIAL_TORQUE]
+        rows.append(tuple(sample))
+        if row[K.LOG_SUCCESS] and not self._success:
             self._success = True
 
     def _current_noise(self) -> float:

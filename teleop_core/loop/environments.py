@@ -15,7 +15,7 @@ import numba
 import numpy as np
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.loop.kernel import E_DISTAL, E_PROXIMAL, E_SUCCESS, E_TIP_X
+from teleop_core.loop.layout import E_DISTAL, E_PROXIMAL, E_SUCCESS, E_TIP_X
 
 
 @dataclass
@@ -39,15 +39,18 @@ def _free_space(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out):
     out[E_TIP_X] = insertion_m
 
 
+# `tube_with_wall`'s parameter vector
+TW_FRICTION, TW_WALL_DEPTH, TW_WALL_K, TW_V_SCALE, TW_TARGET = range(5)
+
+
 @numba.njit(cache=True)
 def _tube_with_wall(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out):
-    friction_per_m, wall_depth, wall_k, v_scale, target = (
-        params[0],
-        params[1],
-        params[2],
-        params[3],
-        params[4],
+    friction_per_m, wall_depth, wall_k = (
+        params[TW_FRICTION],
+        params[TW_WALL_DEPTH],
+        params[TW_WALL_K],
     )
+    v_scale, target = params[TW_V_SCALE], params[TW_TARGET]
     # sliding friction along the inserted length, smoothed through zero speed
     inserted = max(insertion_m, 0.0)
     f_friction = friction_per_m * inserted * math.tanh(speed_m_s / v_scale)

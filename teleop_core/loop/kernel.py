@@ -1,22 +1,4 @@
-"""The loop's compiled 1 kHz tick: master controller, dial, environment, follower drive.
-
-Everything that must run at the device rate lives here, in one numba function over flat
-arrays, because the headless loop has to run >= 200x faster than real time: a Python
-call per tick costs more than the whole budget of 5 us per tick. Between two events
-(an acquisition, an estimate, a driver update or a packet arriving) the inputs that
-cross the link are held, so `run_ticks` advances many ticks per call; the Python side
-(`core.py`) handles the events.
-
-Per tick, in this order (seed 000, III-B and IV-A):
-0. packets due from the link (scheduled by the caller, so that a packet arriving
-   between events does not cost a call of its own);
-1. master controller at 1 kHz on the dial's 12-bit encoder: tau_h (eq. 7, HV only) from
-   the last force received, tau_return (eq. 8), tau_total (eq. 9), i_cmd = Psi (eq. 10);
-2. the dial (eq. 6) under that current and the operator's hand;
-3. the environment (phantom) at the guidewire's insertion, speed and rotation;
-4. the follower drive under the last speed command received and the environment's
-   proximal force; the guidewire rotation follows the last joystick rate received;
-5. the firmware's current low-pass for the next acquisition; one log row.
+"""The loop's compiled 1 kHz tick (`tick.py`) with an environment bound in: `kernel_for`.
 
 The environment is any numba function `env(state, params, insertion_m, speed_m_s,
 rotation_rad, dt_s, out)` that writes ENV_OUT values to `out`. `kernel_for(env)`
@@ -32,271 +14,17 @@ import hashlib
 import importlib
 import importlib.util
 import inspect
-import math
 import os
 import sys
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numba
-import numpy as np
 
-from teleop_core.estimation.estimator import stream_estimate, stream_push
-from teleop_core.follower.plant import follower_tick
-from teleop_core.loop.link import kernel_deliver, kernel_send
-from teleop_core.master.dial import D_OMEGA, D_THETA, dial_tick
-from teleop_core.master.haptics import haptic_torque, psi, rate_command, return_torque
-
-# Loop state (held inputs and the master controller's memory)
-(
-    L_THETA_Q_PREV,
-    L_OMEGA_FILT,
-    L_TAU_PREV,
-    L_BRANCH,
-    L_FORCE_RX,
-    L_SPEED_CMD_RX,
-    L_ROT_RATE_RX,
-    L_ROTATION,
-    L_HAND_TARGET,
-    L_HAND_K,
-    L_HAND_B,
-    L_HAND_PUSH,
-    L_IQ_FILT,
-    L_TAU_H,
-    L_TAU_TOTAL,
-    L_I_CMD_MA,
-    L_TICK,
-    L_NOISE_POS,
-    L_FORCE_EST,
-    L_ROT_ACTION,
-    L_SUCCESS,
-    L_N_ACQ,
-    L_N_EST,
-    L_N_CMD,
-) = range(24)
-LOOP_STATE_SIZE = 24
-# Master parameters
-(
-    M_KS,
-    M_BS,
-    M_THETA_REF,
-    M_GH,
-    M_DEADBAND,
-    M_SAT,
-    M_HAPTICS_ON,
-    M_LEVER,
-    M_IMAX,
-    M_ENC_STEP,
-    M_VEL_FILTER_S,
-    M_WHEEL_R,
-    M_IQ_FILTER_S,
-    M_DT,
-    M_DIAL_EXTERNAL,
-) = range(15)
-M_POLY = 15  # six polynomial coefficients follow
-# In-kernel acquisition (the fast path: ideal links, see `core.TeleopLoop`)
-M_FAST, M_ACQ_EVERY, M_EST_EVERY, M_KV, M_HAS_EST, M_EST_DT, M_DEFER_LAST = range(21, 28)
-MASTER_PARAM_SIZE = 28
-# Packet schedule rows: (tick index in the call, kind, value, value)
-PACKET_FORCE, PACKET_COMMAND = 0.0, 1.0
-# Environment output
-E_PROXIMAL, E_DISTAL, E_TIP_X, E_TIP_Y, E_TIP_Z, E_BRANCH, E_SUCCESS = range(7)
-ENV_OUT = 7
-# Log columns (one row per tick)
-LOG_COLUMNS = (
-    "t_s",
-    "dial_angle_rad",
-    "dial_speed_rad_s",
-    "dial_torque_n_m",
-    "haptic_torque_n_m",
-    "current_cmd_ma",
-    "wheel_angle_rad",
-    "wheel_speed_rad_s",
-    "iq_a",
-    "iq_filtered_a",
-    "omega_est_rad_s",
-    "proximal_force_n",
-    "distal_force_n",
-    "tip_x_m",
-    "tip_y_m",
-    "tip_z_m",
-    "branch",
-    "success",
-    "rotation_rad",
-    "force_rx_n",
-    "speed_cmd_rx_rad_s",
-)
-LOG_WIDTH = len(LOG_COLUMNS)
-
-
-def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
-    @numba.njit
-    def run_ticks(
-        n_ticks: int,
-        loop: np.ndarray,
-        mp: np.ndarray,
-        dial: np.ndarray,
-        dp: np.ndarray,
-        follower: np.ndarray,
-        fp: np.ndarray,
-        f_enc_step: float,
-        env_state: np.ndarray,
-        env_params: np.ndarray,
-        log: np.ndarray,
-        schedule: np.ndarray,
-        est: tuple,
-        noise: np.ndarray,
-        samples: np.ndarray,
-        links: tuple,
-    ) -> int:  # pragma: no cover - compiled; exercised through TeleopLoop
-        dt = mp[M_DT]
-        poly = mp[M_POLY : M_POLY + 6]
-        lpf_w = mp[M_VEL_FILTER_S] / (mp[M_VEL_FILTER_S] + dt)
-        lpf_i = mp[M_IQ_FILTER_S] / (mp[M_IQ_FILTER_S] + dt)
-        env_out = np.zeros(ENV_OUT)
-        f_out = np.zeros(5)
-        r = mp[M_WHEEL_R]
-        next_packet = 0
-        n_samples = 0
-        fast = mp[M_FAST] != 0.0
-        acq_every, est_every = int(mp[M_ACQ_EVERY]), int(mp[M_EST_EVERY])
-        est_out = np.zeros(3)
-        packet = np.zeros(2)
-        q_m, ls_m, lp_m, q_f, ls_f, lp_f, pool, pos = links
-        for k in range(n_ticks):
-            # 0'. fast path: packets arriving over the in-kernel link for this tick
-            if fast:
-                if kernel_deliver(q_m, ls_m, loop[L_TICK], dt, packet):
-                    loop[L_FORCE_RX] = packet[0]
-                if kernel_deliver(q_f, ls_f, loop[L_TICK], dt, packet):
-                    loop[L_SPEED_CMD_RX] = packet[0]
-                    loop[L_ROT_RATE_RX] = packet[1]
-            # 0. packets that arrive over the link for this tick
-            while next_packet < schedule.shape[0] and schedule[next_packet, 0] <= k:
-                packet = schedule[next_packet]
-                if packet[1] == PACKET_FORCE:
-                    loop[L_FORCE_RX] = packet[2]
-                else:
-                    loop[L_SPEED_CMD_RX] = packet[2]
-                    loop[L_ROT_RATE_RX] = packet[3]
-                next_packet += 1
-            # 1. master controller on the dial's quantised angle
-            theta_q = math.floor(dial[D_THETA] / mp[M_ENC_STEP]) * mp[M_ENC_STEP]
-            w_raw = (theta_q - loop[L_THETA_Q_PREV]) / dt
-            loop[L_THETA_Q_PREV] = theta_q
-            loop[L_OMEGA_FILT] = lpf_w * loop[L_OMEGA_FILT] + (1.0 - lpf_w) * w_raw
-            tau_h = 0.0
-            if mp[M_HAPTICS_ON] != 0.0:
-                tau_h = haptic_torque(loop[L_FORCE_RX], mp[M_GH], mp[M_DEADBAND], mp[M_SAT])
-            tau_ret = return_torque(
-                theta_q, loop[L_OMEGA_FILT], mp[M_KS], mp[M_BS], mp[M_THETA_REF]
-            )
-            # tau_total = tau_haptic + tau_return   (eq. 9)
-            tau_total = tau_h + tau_ret
-            # i_q,cmd = Psi(tau_total, sgn(d tau_total / dt))   (eq. 10)
-            i_cmd, branch = psi(
-                tau_total, loop[L_TAU_PREV], loop[L_BRANCH], poly, mp[M_LEVER], mp[M_IMAX]
-            )
-            loop[L_TAU_PREV] = tau_total
-            loop[L_BRANCH] = branch
-            loop[L_TAU_H] = tau_h
-            loop[L_TAU_TOTAL] = tau_total
-            loop[L_I_CMD_MA] = i_cmd
-            # 2. the dial under the motor and the hand (eq. 6); a real dial is read instead
-            tau_motor = tau_total
-            if mp[M_DIAL_EXTERNAL] == 0.0:
-                tau_motor = dial_tick(
-                    dial,
-                    dp,
-                    i_cmd,
-                    loop[L_HAND_TARGET],
-                    loop[L_HAND_K],
-                    loop[L_HAND_B],
-                    loop[L_HAND_PUSH],
-                    dt,
-                )
-            # 3. the environment at the guidewire
-            env_fn(
-                env_state,
-                env_params,
-                follower[0] * r,
-                follower[1] * r,
-                loop[L_ROTATION],
-                dt,
-                env_out,
-            )
-            # 4. the follower drive; the rotary platform follows the joystick rate
-            follower_tick(
-                follower, fp, f_enc_step, loop[L_SPEED_CMD_RX], env_out[E_PROXIMAL], f_out
-            )
-            loop[L_ROTATION] += loop[L_ROT_RATE_RX] * dt
-            # 5. the firmware's current low-pass (what the next acquisition reads)
-            loop[L_IQ_FILT] = lpf_i * loop[L_IQ_FILT] + (1.0 - lpf_i) * f_out[2]
-            loop[L_TICK] += 1.0
-            row = log[k]
-            row[0] = loop[L_TICK] * dt
-            row[1] = dial[D_THETA]
-            row[2] = dial[D_OMEGA]
-            row[3] = tau_motor
-            row[4] = tau_h
-            row[5] = i_cmd
-            row[6] = f_out[0]
-            row[7] = f_out[1]
-            row[8] = f_out[2]
-            row[9] = loop[L_IQ_FILT]
-            row[10] = f_out[3]
-            row[11] = env_out[E_PROXIMAL]
-            row[12] = env_out[E_DISTAL]
-            row[13] = env_out[E_TIP_X]
-            row[14] = env_out[E_TIP_Y]
-            row[15] = env_out[E_TIP_Z]
-            row[16] = env_out[E_BRANCH]
-            row[17] = env_out[E_SUCCESS]
-            row[18] = loop[L_ROTATION]
-            row[19] = loop[L_FORCE_RX]
-            row[20] = loop[L_SPEED_CMD_RX]
-            # 6. fast path: every acquisition happens here, as TeleopLoop._acquire and
-            # _send_command do them, with the link's queues and draws in the kernel
-            tick = int(loop[L_TICK])
-            if fast and tick % acq_every == 0:
-                t = tick * dt
-                loop[L_N_ACQ] += 1.0
-                estimating = tick % est_every == 0
-                if mp[M_HAS_EST] != 0.0:
-                    iq = row[9] + noise[int(loop[L_NOISE_POS])]
-                    loop[L_NOISE_POS] += 1.0
-                    buf, st, mean, std = est[0], est[1], est[2], est[3]
-                    stream_push(st, buf, mean, std, t, iq, row[10], 0.0, False)
-                    if estimating:
-                        ok = stream_estimate(
-                            st, buf, est[4], est[5], est[6], est[7], est[8], est[9], est[10],
-                            est[11], est[12], est[13], mp[M_EST_DT], est_out,
-                        )  # fmt: skip
-                        loop[L_FORCE_EST] = est_out[2] if ok else 0.0
-                elif estimating:
-                    loop[L_FORCE_EST] = row[11]
-                if estimating:
-                    loop[L_N_EST] += 1.0
-                    kernel_send(q_m, ls_m, lp_m, pool, pos, t, loop[L_FORCE_EST], 0.0)
-                out = samples[n_samples]
-                out[0], out[1], out[2] = t, row[6] * r, row[18]
-                out[3], out[4], out[5], out[6] = row[13], row[14], row[15], row[16]
-                out[7], out[8], out[9] = row[11], loop[L_FORCE_EST], row[12]
-                out[10], out[11] = row[1], row[3]
-                n_samples += 1
-                if row[17] != 0.0:
-                    loop[L_SUCCESS] = 1.0
-                # the master samples the dial: v_gw = k_v theta_m (eq. 5), at the wheel; at
-                # a driver tick that ends the call, Python sends it after the driver acts
-                if not (k == n_ticks - 1 and mp[M_DEFER_LAST] != 0.0):
-                    speed = rate_command(loop[L_THETA_Q_PREV], mp[M_KV]) / r
-                    kernel_send(q_f, ls_f, lp_f, pool, pos, t, speed, loop[L_ROT_ACTION])
-                    loop[L_N_CMD] += 1.0
-        return n_samples
-
-    return run_ticks
-
+from teleop_core.loop import layout
+from teleop_core.loop.tick import _make
 
 _KERNELS: dict[object, Callable[..., None]] = {}
 
@@ -348,8 +76,8 @@ def _kernel_source(module: str, name: str) -> str:
         'numba can cache it on disk (see kernel_for)."""\n\n'
         "import numba\n"
         "import numpy as np\n\n"
-        "import teleop_core.loop.kernel as _kernel\n\n"
-        "globals().update({k: v for k, v in vars(_kernel).items() if not k.startswith('__')})\n"
+        "import teleop_core.loop.tick as _tick\n\n"
+        "globals().update({k: v for k, v in vars(_tick).items() if not k.startswith('__')})\n"
         f"from {module} import {name} as env_fn  # noqa: E402\n\n\n"
         f"{body}\n"
     )
@@ -390,3 +118,11 @@ def _cached_kernel(env_fn: Callable[..., None]) -> Callable[..., None] | None:
 
 
 _DIGEST = ""
+
+
+def __getattr__(name: str) -> Any:
+    """The environment's outputs (`E_*`, `ENV_OUT`) are defined in `layout.py`; an
+    environment may still import them from here, where they were first."""
+    if name == "ENV_OUT" or name.startswith("E_"):
+        return getattr(layout, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -19,6 +19,7 @@ import numba
 import numpy as np
 
 from teleop_core.errors import TeleopInputError
+from teleop_core.loop.layout import PACKET_COMMAND, PACKET_FORCE, SCH_TICK, SCHEDULE_WIDTH
 
 T = TypeVar("T")
 
@@ -105,10 +106,17 @@ QUEUE_WIDTH = 4
 QUEUE_ROWS = 256
 LS_COUNT, LS_NEXT_SEQ, LS_NEWEST, LS_SENT, LS_LOST, LS_DELIVERED = range(6)
 LINK_STATE_SIZE = 6
+LP_DELAY, LP_JITTER, LP_LOSS = range(3)  # `link_vector`
+LINK_PARAM_SIZE = 3
+PK_V1, PK_V2 = range(2)  # what `kernel_deliver` writes to `out`
+DELIVERED_WIDTH = 2
+POOL_NEXT = 0  # `pos[POOL_NEXT]`: the next unused draw of the pool
 
 
 def link_vector(params: LinkParams) -> np.ndarray:
-    return np.array([params.delay_s, params.jitter_s, params.loss])
+    lp = np.empty(LINK_PARAM_SIZE)
+    lp[LP_DELAY], lp[LP_JITTER], lp[LP_LOSS] = params.delay_s, params.jitter_s, params.loss
+    return lp
 
 
 @numba.njit(cache=True)
@@ -122,22 +130,22 @@ def kernel_send(
     v1: float,
     v2: float,
 ) -> None:  # pragma: no cover - compiled; exercised through TeleopLoop
-    """`Link.send` on the kernel's queue; `pos[0]` indexes the pool of uniform draws."""
+    """`Link.send` on the kernel's queue; `pos[POOL_NEXT]` indexes the pool of uniform draws."""
     seq = ls[LS_NEXT_SEQ]
     ls[LS_NEXT_SEQ] += 1.0
     ls[LS_SENT] += 1.0
-    if lp[2] > 0.0:
-        lost = pool[int(pos[0])] < lp[2]
-        pos[0] += 1.0
+    if lp[LP_LOSS] > 0.0:
+        lost = pool[int(pos[POOL_NEXT])] < lp[LP_LOSS]
+        pos[POOL_NEXT] += 1.0
         if lost:
             ls[LS_LOST] += 1.0
             return
     jitter = 0.0
-    if lp[1] > 0.0:
-        jitter = pool[int(pos[0])] * lp[1]
-        pos[0] += 1.0
+    if lp[LP_JITTER] > 0.0:
+        jitter = pool[int(pos[POOL_NEXT])] * lp[LP_JITTER]
+        pos[POOL_NEXT] += 1.0
     n = int(ls[LS_COUNT])
-    queue[n, Q_ARRIVAL] = t_s + lp[0] + jitter
+    queue[n, Q_ARRIVAL] = t_s + lp[LP_DELAY] + jitter
     queue[n, Q_SEQ] = seq
     queue[n, Q_V1] = v1
     queue[n, Q_V2] = v2
@@ -157,11 +165,11 @@ def kernel_deliver(
         if math.ceil(queue[i, Q_ARRIVAL] / dt - 1e-9) <= tick:
             if queue[i, Q_SEQ] > ls[LS_NEWEST] and queue[i, Q_SEQ] > best:
                 best = queue[i, Q_SEQ]
-                out[0], out[1] = queue[i, Q_V1], queue[i, Q_V2]
+                out[PK_V1], out[PK_V2] = queue[i, Q_V1], queue[i, Q_V2]
             # remove: move the last row here
             n -= 1
-            queue[i, 0], queue[i, 1], queue[i, 2], queue[i, 3] = (
-                queue[n, 0], queue[n, 1], queue[n, 2], queue[n, 3],
+            queue[i, Q_ARRIVAL], queue[i, Q_SEQ], queue[i, Q_V1], queue[i, Q_V2] = (
+                queue[n, Q_ARRIVAL], queue[n, Q_SEQ], queue[n, Q_V1], queue[n, Q_V2],
             )  # fmt: skip
         else:
             i += 1
@@ -171,3 +179,61 @@ def kernel_deliver(
         ls[LS_DELIVERED] += 1.0
         return True
     return False
+
+
+NO_LINKS = (
+    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(LINK_PARAM_SIZE),
+    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(LINK_PARAM_SIZE),
+    np.zeros(1), np.zeros(1),
+)  # fmt: skip
+"""The kernel's link arrays when the loop runs its links in Python (same types)."""
+NO_PACKETS = np.zeros((0, SCHEDULE_WIDTH))
+
+
+def kernel_links(to_master: LinkParams, to_follower: LinkParams) -> tuple:
+    """Queues, states and parameters of both link directions for the kernel, and an empty
+    pool of uniform draws with its position (`layout.LK_*`); the caller fills the pool
+    from the links' generator, in `Link.send`'s order."""
+
+    def state() -> np.ndarray:
+        ls = np.zeros(LINK_STATE_SIZE)
+        ls[LS_NEWEST] = -1.0
+        return ls
+
+    return (
+        np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(to_master),
+        np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(to_follower),
+        np.zeros(0), np.zeros(1),
+    )  # fmt: skip
+
+
+def packet_schedule(
+    to_master: Link[float],
+    to_follower: Link[tuple[float, float]],
+    k: int,
+    nxt: int,
+    dt_s: float,
+    buffer: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The packets arriving during ticks k..nxt-1, as the kernel's schedule (`layout.SCH_*`
+    rows in `buffer`, grown if needed); returns (schedule, buffer).
+
+    A packet arriving at tick K acts from the tick after it, as if received at K.
+    """
+    last = (nxt - 1) * dt_s
+    if to_master.next_arrival_s() > last and to_follower.next_arrival_s() > last:
+        return NO_PACKETS, buffer
+    rows = []
+    for arrival, force in to_master.deliver_until(last):
+        j = max(math.ceil(arrival / dt_s - 1e-9) - k, 0)
+        rows.append((j, PACKET_FORCE, force, 0.0))
+    for arrival, (speed, rotation) in to_follower.deliver_until(last):
+        j = max(math.ceil(arrival / dt_s - 1e-9) - k, 0)
+        rows.append((j, PACKET_COMMAND, speed, rotation))
+    if len(rows) > len(buffer):
+        buffer = np.zeros((2 * len(rows), SCHEDULE_WIDTH))
+    rows.sort(key=lambda row: row[SCH_TICK])
+    schedule = buffer[: len(rows)]
+    for i, row in enumerate(rows):
+        schedule[i] = row
+    return schedule, buffer

@@ -28,6 +28,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from teleop_core.notes.identify import ramp_measures
+from teleop_core.notes.karnopp import (
+    COMP_COULOMB,
+    COMP_GAIN_NEG,
+    COMP_GAIN_POS,
+    COMP_ON,
+    COMPENSATION_SIZE,
+)
 from teleop_core.notes.recording import NotesRecording
 
 
@@ -52,7 +59,10 @@ class KarnoppCompensator:
 
     def as_array(self) -> np.ndarray:
         """(enabled, coulomb, gain_pos, gain_neg), the kernel's compensation vector."""
-        return np.array([1.0, self.coulomb_, self.gain_positive_, self.gain_negative_])
+        comp = np.empty(COMPENSATION_SIZE)
+        comp[COMP_ON], comp[COMP_COULOMB] = 1.0, self.coulomb_
+        comp[COMP_GAIN_POS], comp[COMP_GAIN_NEG] = self.gain_positive_, self.gain_negative_
+        return comp
 
     def to_dict(self) -> dict[str, float]:
         return {
@@ -62,5 +72,7 @@ class KarnoppCompensator:
         }
 
 
-NO_COMPENSATION = np.array([0.0, 0.0, 1.0, 1.0])
+NO_COMPENSATION = np.empty(COMPENSATION_SIZE)
+NO_COMPENSATION[COMP_ON], NO_COMPENSATION[COMP_COULOMB] = 0.0, 0.0
+NO_COMPENSATION[COMP_GAIN_POS], NO_COMPENSATION[COMP_GAIN_NEG] = 1.0, 1.0
 """The kernel's compensation vector with the compensator off."""

@@ -34,9 +34,8 @@ import pandas as pd
 from scipy import optimize, signal
 
 from teleop_core._typing import Float1D
-from teleop_core.notes.params import MSD_FIELDS, MsdParams
+from teleop_core.notes.params import CHIRP_BAND_HZ, MSD_FIELDS, MsdParams
 from teleop_core.notes.recording import NotesRecording, NotesRecordingError
-from teleop_core.notes.simulate import CHIRP_BAND_HZ
 from teleop_core.notes.transfer import frequency_response
 
 LOWPASS_HZ = 30.0

@@ -4,6 +4,11 @@ so the simulated device's kernel (`simulate.py`) can call it without an import c
 import numba
 import numpy as np
 
+# the kernel's compensation vector (`KarnoppCompensator.as_array`): on flag, Coulomb
+# level and the gains by direction
+COMP_ON, COMP_COULOMB, COMP_GAIN_POS, COMP_GAIN_NEG = range(4)
+COMPENSATION_SIZE = 4
+
 
 @numba.njit(cache=True)
 def compensated_command(

@@ -24,8 +24,11 @@ from typing import ClassVar, Self
 from teleop_core.errors import TeleopInputError
 
 DOFS = ("translation", "rotation")
+CHIRP_BAND_HZ = (1.0, 30.0)
+"""The paper's 1-30 Hz chirp (III-B): what `simulate.py` drives and `identify.py` fits."""
 MSD_FIELDS = ("m_m", "m_s", "k_s", "b_m", "b_s")
 """Order of the linear parameters in every vector the fit and the transfer functions use."""
+MSD_M_M, MSD_M_S, MSD_K_S, MSD_B_M, MSD_B_S = range(len(MSD_FIELDS))  # `as_tuple` indices
 
 
 class NotesParamsError(TeleopInputError):

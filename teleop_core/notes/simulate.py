@@ -23,8 +23,23 @@ import pandas as pd
 from scipy import signal
 
 from teleop_core._typing import Float1D
-from teleop_core.notes.karnopp import compensated_command
-from teleop_core.notes.params import AxisParams, NotesParamsError
+from teleop_core.notes.karnopp import (
+    COMP_COULOMB,
+    COMP_GAIN_NEG,
+    COMP_GAIN_POS,
+    COMP_ON,
+    compensated_command,
+)
+from teleop_core.notes.params import CHIRP_BAND_HZ as CHIRP_BAND_HZ  # re-exported
+from teleop_core.notes.params import (
+    MSD_B_M,
+    MSD_B_S,
+    MSD_K_S,
+    MSD_M_M,
+    MSD_M_S,
+    AxisParams,
+    NotesParamsError,
+)
 
 if TYPE_CHECKING:
     from teleop_core.notes.compensation import KarnoppCompensator
@@ -41,8 +56,6 @@ RAMP_DURATION_S = {"translation": 20.0, "rotation": 20.0}
 """Length of one ramp 0 -> max -> min -> 0; slow enough to be quasi-static (assumption)."""
 CHIRP_AMPLITUDE = {"translation": 4.5, "rotation": 0.15}
 """Chirp amplitude, N or N m; within the continuous limits (assumption)."""
-CHIRP_BAND_HZ = (1.0, 30.0)
-"""The paper's 1-30 Hz chirp (III-B)."""
 CHIRP_FADE_S = 0.5
 """Fade-in and fade-out of the chirp's amplitude, s (assumption)."""
 CHIRP_TAIL_S = 1.0
@@ -94,15 +107,23 @@ def _simulate_axis(
     clamped: bool,
     comp: np.ndarray,
 ) -> np.ndarray:
-    m_m, m_s, k_s, b_m, b_s = lin[0], lin[1], lin[2], lin[3], lin[4]
+    m_m, m_s, k_s = lin[MSD_M_M], lin[MSD_M_S], lin[MSD_K_S]
+    b_m, b_s = lin[MSD_B_M], lin[MSD_B_S]
     h = dt / substeps
     x_m = v_m = x_s = v_s = 0.0
     out = np.empty(f_des.shape[0])
     u_prev = 0.0
     for i in range(f_des.shape[0]):
         u = f_des[i]
-        if comp[0] > 0.0:
-            u = compensated_command(u, u - u_prev, v_m, stick_velocity, comp[1], comp[2], comp[3])
+        if comp[COMP_ON] > 0.0:
+            coulomb_c, gain_pos_c, gain_neg_c = (
+                comp[COMP_COULOMB],
+                comp[COMP_GAIN_POS],
+                comp[COMP_GAIN_NEG],
+            )
+            u = compensated_command(
+                u, u - u_prev, v_m, stick_velocity, coulomb_c, gain_pos_c, gain_neg_c
+            )
         u_prev = f_des[i]
         # transmitted command: direction-dependent gain, then the actuator's limit
         f_act = u * (gain_pos if u >= 0.0 else gain_neg)

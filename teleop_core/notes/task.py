@@ -38,8 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from teleop_core.loop.core import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 from teleop_core.loop.drivers import GRIP_STIFFNESS_N_M_PER_RAD, Driver, HandAction, OperatorView
+from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 from teleop_core.notes.params import RotationParams, TranslationParams
 
 PULL_BENCHMARK_N = 4.5
@@ -72,7 +72,7 @@ SAMPLE_RATE_HZ = 100.0
 REGIONS = ("canal", "fornix", "cavity", "target")
 """Region names, stored as the samples' `branch`."""
 SAMPLE_COLUMNS = (*LOOP_SAMPLE_COLUMNS, "torque_demanded_n_m")
-"""Per sample: the loop's columns (as `teleop_core.loop.core.SAMPLE_COLUMNS`) read the
+"""Per sample: the loop's columns (as `teleop_core.loop.layout.SAMPLE_COLUMNS`) read the
 NOTES way: proximal_force_n = demanded force, proximal_force_est_n = rendered force,
 distal_force_n = the tip's force on the fornix, dial_torque_n_m = rendered torque; plus
 the demanded torque."""

@@ -39,7 +39,7 @@ import numpy as np
 from teleop_core.errors import TeleopInputError
 from teleop_core.follower.params import _require_positive
 from teleop_core.loop.environments import Environment
-from teleop_core.loop.kernel import (
+from teleop_core.loop.layout import (
     E_BRANCH,
     E_DISTAL,
     E_PROXIMAL,
@@ -49,6 +49,13 @@ from teleop_core.loop.kernel import (
     E_TIP_Z,
 )
 from teleop_core.phantom.anatomy import (
+    G_BEND,
+    G_KAPPA,
+    G_REGION,
+    G_THETA,
+    G_X,
+    G_Y,
+    G_Z,
     GEOMETRY_COLUMNS,
     REGIONS,
     STEP_M,
@@ -122,7 +129,9 @@ CATCH_DEPTH_M = 0.002
     H_VISC,
 ) = range(14)
 HEADER = 14
-PATH_META = 4  # end, ostium, phi, half-width
+# per-path meta rows: end, ostium (arc length, m), ostium direction phi, half-width (rad)
+PM_END, PM_OSTIUM, PM_PHI, PM_HALF = range(4)
+PATH_META = 4
 
 
 @numba.njit(cache=True)
@@ -148,24 +157,24 @@ def lcca_phantom(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out)
     caught = int(state[S_CAUGHT])
     if path == 0 and tip > prev_tip and caught == 0:
         for k in range(1, n_paths):
-            ostium = meta[k, 1]
+            ostium = meta[k, PM_OSTIUM]
             if prev_tip < ostium <= tip:
-                off = abs(_wrap(rotation_rad - meta[k, 2]))
-                if off <= meta[k, 3]:
+                off = abs(_wrap(rotation_rad - meta[k, PM_PHI]))
+                if off <= meta[k, PM_HALF]:
                     path = k
                     break
-                if off <= 2.0 * meta[k, 3]:
+                if off <= 2.0 * meta[k, PM_HALF]:
                     caught = k
                     break
-    elif path != 0 and tip < meta[path, 1]:
+    elif path != 0 and tip < meta[path, PM_OSTIUM]:
         path = 0
-    if caught != 0 and tip < meta[caught, 1]:
+    if caught != 0 and tip < meta[caught, PM_OSTIUM]:
         caught = 0
     state[S_PATH] = path
     state[S_CAUGHT] = caught
     # dead end (or a caught ostium edge): wall contact, then prolapse beyond the
     # critical load
-    end = meta[path, 0] if caught == 0 else meta[caught, 1] + CATCH_DEPTH_M
+    end = meta[path, PM_END] if caught == 0 else meta[caught, PM_OSTIUM] + CATCH_DEPTH_M
     f_wall = 0.0
     if tip > end:
         f_wall = params[H_KWALL] * (tip - end)
@@ -177,10 +186,10 @@ def lcca_phantom(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out)
     # geometry at the tip
     idx = min(int(min(tip, end) / step), n_pts - 1)
     g = geo[path, idx]
-    theta = g[3]
-    kappa_tip = g[4]
+    theta = g[G_THETA]
+    kappa_tip = g[G_KAPPA]
     # bending normal force along the inserted length: EI integral(kappa^2) ds
-    bend = params[H_EI] * g[6]
+    bend = params[H_EI] * g[G_BEND]
     mu = params[H_MU]
     capstan = math.exp(mu * theta)
     f_curve_tip = params[H_EI] * kappa_tip / params[H_LTIP]
@@ -191,13 +200,13 @@ def lcca_phantom(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out)
     proximal = f_wall * capstan + sliding * math.sqrt(capstan)
     out[E_PROXIMAL] = proximal
     out[E_DISTAL] = f_wall + f_curve_tip
-    out[E_TIP_X] = g[0]
-    out[E_TIP_Y] = g[1]
-    out[E_TIP_Z] = g[2]
-    out[E_BRANCH] = g[5]
+    out[E_TIP_X] = g[G_X]
+    out[E_TIP_Y] = g[G_Y]
+    out[E_TIP_Z] = g[G_Z]
+    out[E_BRANCH] = g[G_REGION]
     target = int(params[H_TARGET_PATH])
     out[E_SUCCESS] = (
-        1.0 if (path == target and tip >= meta[target, 1] + params[H_TARGET_DEPTH]) else 0.0
+        1.0 if (path == target and tip >= meta[target, PM_OSTIUM] + params[H_TARGET_DEPTH]) else 0.0
     )
 
 
@@ -229,7 +238,7 @@ class LccaPhantom:
         header[H_TARGET_DEPTH] = self.anatomy.target_depth_m
         header[H_VISC] = w.viscous_n_s_per_m2
         meta = np.array([[m["end"], m["ostium"], m["phi"], m["half"]] for m in self.meta])
-        meta[0, 1] = 1e9  # the aorta has no ostium
+        meta[0, PM_OSTIUM] = 1e9  # the aorta has no ostium
         return np.concatenate([header, meta.ravel(), self.geometry.ravel()])
 
     def environment(self) -> Environment:
@@ -249,4 +258,4 @@ class LccaPhantom:
     def centreline(self, path: int) -> np.ndarray:
         """(n, 3) points of one path, for drawing."""
         n = round(self.meta[path]["end"] / STEP_M) + 1
-        return self.geometry[path, :n, :3]
+        return self.geometry[path, :n, G_X : G_Z + 1]

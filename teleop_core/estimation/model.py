@@ -1,0 +1,312 @@
+"""The force estimator end to end (`estimator.py` re-exports it; the streaming kernels are
+in `stream.py`): physics (eq. 1) -> GRU residual (eqs. 3-4) -> EKF.
+
+`ForceEstimator.predict` runs over a whole recording; `ForceEstimator.stream()` gives a
+`CausalEstimator` that takes one new sample at a time, as the 50 Hz pipeline does, and
+produces the same numbers (a test holds them to 1e-12 N). `training.train_estimator`
+fits all three stages to one bench recording; `save`/`load` keep them in a model folder:
+
+| file | what |
+|---|---|
+| `physics.json` | fitted eq. 1 parameters (SI) |
+| `gru.npz` | GRU weights as plain float64 arrays: what inference reads (no PyTorch) |
+| `gru.pt` | the same weights as a PyTorch state dict for `GruNet` (for further training;
+  read only where a folder older than `gru.npz` has no `gru.npz`) |
+| `standardisation.json` | window, hidden size, input means/SDs, target scale, the
+  inputs' training range (`input_range`, `ranges.py`) |
+| `ekf.json` | EKF noise covariances, and whether it passes the hybrid estimate through |
+| `summary.json` | train/validation RMSE of each stage and per regime, epochs, sample
+  rate, data digest |
+| `calibration.json` | only for a calibrated model: eq. 1 plus the effects of a
+  `study calibrate` report, the physics stage in place of eq. 1 (`extended.py`) |
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from teleop_core._typing import Float1D, Float2D
+from teleop_core.errors import TeleopInputError
+from teleop_core.estimation.ekf import EKF_STATE_SIZE, EkfSettings, filter_forces, settings_vector
+from teleop_core.estimation.extended import ExtendedPhysics, physics_force
+from teleop_core.estimation.gru import GruModel, GruWeights, Standardisation
+from teleop_core.estimation.ranges import InputRange
+from teleop_core.estimation.stream import (
+    EST_FINAL,
+    EST_HYBRID,
+    EST_PHYSICS,
+    ESTIMATE_OUT,
+    N_FEATURES,
+    STREAM_STATE_SIZE,
+    stream_estimate,
+    stream_push,
+)
+from teleop_core.follower.params import FollowerSensorParams
+from teleop_core.follower.physics import PhysicsParams
+from teleop_core.follower.recording import FollowerRecording
+
+MODEL_FILES = ("physics.json", "standardisation.json", "ekf.json", "summary.json")
+"""Besides one of `gru.npz` (read) or `gru.pt` (a folder older than `gru.npz`)."""
+RATE_TOLERANCE = 0.02
+"""A recording whose rate differs from the model's by more than this is resampled."""
+
+
+def features_of(recording: FollowerRecording) -> Float2D:
+    """Per-sample GRU inputs [I_q, theta_d, theta_dd], shape (n, 3)."""
+    return np.column_stack([recording.iq, recording.omega, recording.alpha])
+
+
+@dataclass
+class EstimateResult:
+    """Estimates for every sample with a full window; arrays of shape (n - T + 1,)."""
+
+    t: Float1D
+    f_ref: Float1D
+    f_physics: Float1D
+    f_hybrid: Float1D
+    f_final: Float1D
+    in_range: np.ndarray | None = None
+    """Whether each sample's inputs lie inside the training range (None: range unknown)."""
+
+    def to_frame(self) -> pd.DataFrame:
+        """Columns t, f_ref, f_physics, f_hybrid, f_final and, when known, in_range (0/1)."""
+        frame = pd.DataFrame({k: v for k, v in asdict(self).items() if k != "in_range"})
+        if self.in_range is not None:
+            frame["in_range"] = self.in_range.astype(int)
+        return frame
+
+
+@dataclass
+class ForceEstimator:
+    physics: PhysicsParams
+    gru: GruModel
+    ekf: EkfSettings
+    sample_rate_hz: float
+    pipeline_rate_hz: float = FollowerSensorParams.estimation_rate_hz
+    extension: ExtendedPhysics | None = None
+    """The calibrated physics stage (issue 10) replacing eq. 1, if any."""
+    input_range: InputRange | None = None
+    """The inputs' range over the training samples (None for models saved before it)."""
+
+    @property
+    def window(self) -> int:
+        return self.gru.window
+
+    @property
+    def dt_s(self) -> float:
+        return 1.0 / self.sample_rate_hz
+
+    def conform(self, recording: FollowerRecording) -> FollowerRecording:
+        """The recording at the model's sample rate (resampled only if it differs)."""
+        rate = recording.sample_rate_hz
+        if abs(rate / self.sample_rate_hz - 1.0) > RATE_TOLERANCE:
+            return recording.resampled(self.sample_rate_hz)
+        return recording
+
+    def predict(self, recording: FollowerRecording) -> EstimateResult:
+        """Estimate the force over a recording already at the model's rate."""
+        T = self.window
+        if len(recording) < T:
+            raise TeleopInputError(
+                f"recording {recording.name} has {len(recording)} samples; expected at least "
+                f"the estimator's window of {T}"
+            )
+        f_phys_all = physics_force(self.physics, self.extension, recording)
+        delta = self.gru.predict(features_of(recording))
+        f_physics = f_phys_all[T - 1 :]
+        f_hybrid = f_physics + delta  # F*_GRU = F_physics + dF_resistance   (eq. 4)
+        f_final = filter_forces(
+            self.ekf, self.physics, self.dt_s, f_physics, f_hybrid, recording.omega[T - 1 :]
+        )
+        in_range = None
+        if self.input_range is not None:
+            in_range = self.input_range.contains(features_of(recording)[T - 1 :])
+        return EstimateResult(
+            recording.t[T - 1 :], recording.f_ref[T - 1 :], f_physics, f_hybrid, f_final, in_range
+        )
+
+    def stream(self) -> CausalEstimator:
+        if self.extension is not None:
+            effects = ", ".join(self.extension.families)
+            raise TeleopInputError(
+                f"this estimator's physics stage is calibrated ({effects}): its effects "
+                "need the whole recording, so it runs with predict(), not one sample at a time"
+            )
+        return CausalEstimator(self)
+
+    def save(self, folder: Path, summary: dict[str, Any]) -> None:
+        """Write the model folder, all or nothing (through a temporary sibling folder)."""
+        folder = Path(folder)
+        if not folder.parent.is_dir():
+            raise TeleopInputError(f"folder {folder.parent} for the model does not exist")
+        tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+        try:
+            _write_json(tmp / "physics.json", self.physics.to_dict())
+            self.gru.weights.save_npz(tmp / "gru.npz")
+            from teleop_core.estimation.gru_torch import save_torch_weights
+
+            save_torch_weights(self.gru.weights, tmp / "gru.pt")
+            _write_json(
+                tmp / "standardisation.json",
+                {
+                    "window": self.window,
+                    "hidden_size": int(self.gru.weights.w_hh.shape[1]),
+                    "target": self.gru.target,
+                    "sample_rate_hz": self.sample_rate_hz,
+                    "pipeline_rate_hz": self.pipeline_rate_hz,
+                    "features": ["iq", "omega", "alpha"],
+                    **self.gru.standardisation.to_dict(),
+                    **(
+                        {"input_range": self.input_range.to_dict()}
+                        if self.input_range is not None
+                        else {}
+                    ),
+                },
+            )
+            _write_json(tmp / "ekf.json", self.ekf.to_dict())
+            _write_json(tmp / "summary.json", summary)
+            if self.extension is not None:
+                _write_json(tmp / "calibration.json", self.extension.to_dict())
+            if folder.exists():
+                shutil.rmtree(folder)
+            tmp.rename(folder)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+
+    @classmethod
+    def load(cls, folder: Path) -> ForceEstimator:
+        folder = Path(folder)
+        if not folder.is_dir():
+            raise TeleopInputError(
+                f"model folder {folder} does not exist; "
+                "expected the --out of `study estimator train`"
+            )
+        missing = [f for f in MODEL_FILES if not (folder / f).is_file()]
+        if not (folder / "gru.npz").is_file() and not (folder / "gru.pt").is_file():
+            missing.append("gru.npz")
+        if missing:
+            raise TeleopInputError(
+                f"model folder {folder} has no {missing[0]}; expected a folder written by "
+                "`study estimator train`"
+            )
+        try:
+            physics = PhysicsParams(**_read_json(folder / "physics.json"))
+            meta = _read_json(folder / "standardisation.json")
+            std = Standardisation(
+                tuple(meta["feature_mean"]),
+                tuple(meta["feature_std"]),
+                float(meta["target_mean"]),
+                float(meta["target_std"]),
+            )
+            gru = GruModel(_load_gru_weights(folder), std, int(meta["window"]), meta["target"])
+            ekf = EkfSettings(**_read_json(folder / "ekf.json"))
+            extension = None
+            if (folder / "calibration.json").is_file():
+                extension = ExtendedPhysics.from_dict(_read_json(folder / "calibration.json"))
+            input_range = None
+            if "input_range" in meta:
+                input_range = InputRange.from_dict(meta["input_range"])
+            return cls(
+                physics,
+                gru,
+                ekf,
+                float(meta["sample_rate_hz"]),
+                float(meta["pipeline_rate_hz"]),
+                extension,
+                input_range,
+            )
+        except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+            if isinstance(exc, TeleopInputError):
+                raise
+            raise TeleopInputError(f"model folder {folder} is damaged: {exc}") from None
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    path.write_text(json.dumps(data, indent=2) + "\n")
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise TeleopInputError(f"{path} is not valid JSON: {exc}") from None
+
+
+class CausalEstimator:
+    """The estimator fed one sample at a time; `update` returns None until a window is full.
+
+    Its state lives in arrays and its steps are numba functions (`stream_push`,
+    `stream_estimate`), so that the closed loop's compiled kernel can run the same
+    estimator between its events; `arrays()` hands them over.
+    """
+
+    def __init__(self, estimator: ForceEstimator) -> None:
+        self.est = estimator
+        std = estimator.gru.standardisation
+        w = estimator.gru.weights
+        self.buffer = np.zeros((estimator.window, N_FEATURES))
+        self.state = np.zeros(STREAM_STATE_SIZE)
+        self.ekf_state = np.zeros(EKF_STATE_SIZE)
+        self.mean = np.asarray(std.feature_mean, dtype=np.float64)
+        self.std = np.asarray(std.feature_std, dtype=np.float64)
+        self.physics = estimator.physics.vector()
+        self.ekf_settings = settings_vector(estimator.ekf)
+        self.weights = (w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, float(w.b_out))
+        self.target = np.array([std.target_std, std.target_mean], dtype=np.float64)
+        self.dt_s = estimator.dt_s
+        self._out = np.zeros(ESTIMATE_OUT)
+
+    def kernel_arrays(self) -> tuple:
+        """The arrays in the order the loop's kernel unpacks them (`stream.NO_STREAM_ARRAYS`
+        has dummies of the same types)."""
+        return (self.buffer, self.state, self.mean, self.std, self.physics, *self.weights,
+                self.target, self.ekf_state, self.ekf_settings)  # fmt: skip
+
+    def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
+        """Add a sample (s, A, rad/s, optionally rad/s^2) to the window without estimating:
+        the 50 Hz pipeline sees every 100 Hz sample but estimates on every other one."""
+        given = alpha is not None
+        stream_push(
+            self.state, self.buffer, self.mean, self.std, t, iq, omega,
+            alpha if given else 0.0, given,
+        )  # fmt: skip
+
+    def estimate(self) -> tuple[float, float, float] | None:
+        """(F_physics, F*_GRU, F*_Final) in N from the samples pushed so far, or None
+        while the window fills."""
+        ok = stream_estimate(
+            self.state, self.buffer, self.physics, *self.weights, self.target,
+            self.ekf_state, self.ekf_settings, self.dt_s, self._out,
+        )  # fmt: skip
+        if not ok:
+            return None
+        out = self._out
+        return float(out[EST_PHYSICS]), float(out[EST_HYBRID]), float(out[EST_FINAL])
+
+    def update(
+        self, t: float, iq: float, omega: float, alpha: float | None = None
+    ) -> tuple[float, float, float] | None:
+        """Add a sample (s, A, rad/s, optionally rad/s^2) and estimate.
+
+        Returns (F_physics, F*_GRU, F*_Final) in N, or None while the window fills.
+        """
+        self.push(t, iq, omega, alpha)
+        return self.estimate()
+
+
+def _load_gru_weights(folder: Path) -> GruWeights:
+    """`gru.npz` without PyTorch; a folder written before it existed has only `gru.pt`."""
+    if (folder / "gru.npz").is_file():
+        return GruWeights.load_npz(folder / "gru.npz")
+    from teleop_core.estimation.gru_torch import load_torch_weights
+
+    return load_torch_weights(folder / "gru.pt")

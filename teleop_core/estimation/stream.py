@@ -1,0 +1,89 @@
+"""The causal estimator's steps as numba functions over flat arrays (`CausalEstimator`
+in `model.py` holds the arrays): the closed loop's compiled kernel calls them too, so
+this module imports only the numeric stages, not the model folder's reader."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from teleop_core.estimation.ekf import ekf_update
+from teleop_core.estimation.gru import _window_forward
+from teleop_core.follower.physics import force_at
+
+# stream state: samples pushed, last (t, omega) and whether there is one, latest sample
+S_COUNT, S_LAST_T, S_LAST_OMEGA, S_HAS_LAST, S_IQ, S_OMEGA, S_ALPHA = range(7)
+STREAM_STATE_SIZE = 7
+# window columns (standardised features) and the target's de-standardisation
+X_IQ, X_OMEGA, X_ALPHA = range(3)
+N_FEATURES = 3
+T_STD, T_MEAN = range(2)
+# what `stream_estimate` writes to `out`: F_physics, F*_GRU and F*_Final
+EST_PHYSICS, EST_HYBRID, EST_FINAL = range(3)
+ESTIMATE_OUT = 3
+
+
+_Z1, _Z2 = np.zeros(1), np.zeros((1, 1))
+NO_STREAM_ARRAYS = (np.zeros((1, N_FEATURES)), _Z1, _Z1, _Z1, _Z1, _Z2, _Z2, _Z1, _Z1, _Z1, 0.0,
+                    _Z1, _Z1, _Z1)  # fmt: skip
+"""`CausalEstimator.kernel_arrays()` without an estimator: dummies of the same types, so
+one compiled loop kernel serves both."""
+
+
+@numba.njit(cache=True)
+def stream_push(
+    st: np.ndarray,
+    buf: np.ndarray,
+    mean: np.ndarray,
+    std: np.ndarray,
+    t: float,
+    iq: float,
+    omega: float,
+    alpha: float,
+    alpha_given: bool,
+) -> None:  # pragma: no cover - compiled; exercised through CausalEstimator
+    if not alpha_given:
+        # Backward difference, as FollowerRecording derives alpha.
+        alpha = 0.0 if st[S_HAS_LAST] == 0.0 else (omega - st[S_LAST_OMEGA]) / (t - st[S_LAST_T])
+    st[S_LAST_T], st[S_LAST_OMEGA], st[S_HAS_LAST] = t, omega, 1.0
+    st[S_IQ], st[S_OMEGA], st[S_ALPHA] = iq, omega, alpha
+    n = buf.shape[0]
+    for i in range(n - 1):
+        buf[i, X_IQ], buf[i, X_OMEGA], buf[i, X_ALPHA] = (
+            buf[i + 1, X_IQ], buf[i + 1, X_OMEGA], buf[i + 1, X_ALPHA],
+        )  # fmt: skip
+    buf[n - 1, X_IQ] = (iq - mean[X_IQ]) / std[X_IQ]
+    buf[n - 1, X_OMEGA] = (omega - mean[X_OMEGA]) / std[X_OMEGA]
+    buf[n - 1, X_ALPHA] = (alpha - mean[X_ALPHA]) / std[X_ALPHA]
+    st[S_COUNT] += 1.0
+
+
+@numba.njit(cache=True)
+def stream_estimate(
+    st: np.ndarray,
+    buf: np.ndarray,
+    pv: np.ndarray,
+    w_ih: np.ndarray,
+    w_hh: np.ndarray,
+    b_ih: np.ndarray,
+    b_hh: np.ndarray,
+    w_out: np.ndarray,
+    b_out: float,
+    target: np.ndarray,
+    ekf_state: np.ndarray,
+    ekf_settings: np.ndarray,
+    dt_s: float,
+    out: np.ndarray,
+) -> bool:  # pragma: no cover - compiled; exercised through CausalEstimator
+    """Physics, GRU and EKF on the current window; False while it fills."""
+    if st[S_COUNT] < buf.shape[0]:
+        return False
+    iq, omega, alpha = st[S_IQ], st[S_OMEGA], st[S_ALPHA]
+    f_physics = force_at(pv, iq, omega, alpha)
+    # F*_GRU = F_physics + GRU residual (eq. 3), de-standardised
+    y = _window_forward(buf, w_ih, w_hh, b_ih, b_hh, w_out, b_out)
+    f_hybrid = f_physics + y * target[T_STD] + target[T_MEAN]
+    out[EST_PHYSICS] = f_physics
+    out[EST_HYBRID] = f_hybrid
+    out[EST_FINAL] = ekf_update(ekf_state, ekf_settings, pv, dt_s, f_physics, f_hybrid, omega)
+    return True

@@ -1,0 +1,1 @@
+"""The follower: the friction-wheel guidewire drive, its parameters, sensors and scenarios."""
