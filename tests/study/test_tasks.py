@@ -1,0 +1,43 @@
+"""The task registry and the built-in tasks' declarations, against the loops they name."""
+
+from __future__ import annotations
+
+import pytest
+
+from db.models.trial import SAMPLE_COLUMNS as DB_SAMPLE_COLUMNS
+from study.errors import StudyInputError
+from study.protocol.tasks import get_task, task_names
+from teleop_core.loop.core import SAMPLE_COLUMNS as LOOP_COLUMNS
+from teleop_core.notes import task as notes
+from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS
+
+
+def test_the_builtin_tasks_are_known_and_an_unknown_one_gets_one_line() -> None:
+    assert task_names()[:2] == ("lcca", "notes")
+    with pytest.raises(StudyInputError, match=r"^task 'endo'; expected one of lcca, notes"):
+        get_task("endo")
+
+
+def test_the_lcca_task_stores_the_loops_columns_in_order() -> None:
+    lcca = get_task("lcca")
+    assert tuple(c.stored_as for c in lcca.sample_columns) == LOOP_COLUMNS
+    assert set(LOOP_COLUMNS) == set(DB_SAMPLE_COLUMNS)
+    assert lcca.regions == REGION_ABBREVIATIONS
+
+
+def test_the_notes_task_names_the_notes_loops_columns() -> None:
+    task = get_task("notes")
+    assert len(task.sample_columns) == len(notes.SAMPLE_COLUMNS)
+    # the loop's first columns are the database's; the demanded torque is not stored
+    stored = [c.stored_as for c in task.sample_columns]
+    assert stored[: len(LOOP_COLUMNS)] == list(LOOP_COLUMNS) and stored[-1] is None
+    assert task.sample_columns[-1].name == notes.SAMPLE_COLUMNS[-1] == "torque_demanded_n_m"
+    assert task.regions == notes.REGIONS
+    assert not task.has_dial and get_task("lcca").has_dial
+
+
+def test_every_measure_has_its_unit_in_its_name() -> None:
+    suffix = {"N": "_n", "N m": "_n_m", "s": "_s", "": ""}
+    for name in task_names():
+        for m in get_task(name).all_measures:
+            assert m.name.endswith(suffix[m.unit]) or m.unit == "", (name, m.name)
