@@ -30,11 +30,15 @@ FACTOR_LABELS = {
     "link_loss": "packet loss",
     "group_scale": "group size scale",
 }
-MEASURE_LABELS = {
-    "completion_time_s": "completion time",
-    "peak_proximal_force_n": "peak proximal force",
-    "peak_distal_force_n": "peak distal force",
-}
+
+
+def _measure_label(name: str) -> str:
+    """The task's label of a measure (`study.protocol.tasks`), or its name."""
+    from study.protocol.tasks import measure_named
+
+    measure = measure_named(name)
+    return measure.label if measure is not None else name
+
 SIMULATED_NOTE = "simulated participants: a simulation campaign, not measured data"
 
 
@@ -84,7 +88,7 @@ def plot_factor(
                     ax.set_ylim(0, 1.02)
                 else:
                     ax.axhline(0.0, color="#999999", lw=0.6)
-                ax.set_title(MEASURE_LABELS[measure] + (f"\n{label}" if label else ""))
+                ax.set_title(_measure_label(measure) + (f"\n{label}" if label else ""))
                 if c == 0:
                     ax.set_ylabel("power (p < .05)" if kind == "power"
                                   else "effect, Hedges' g_av (HV - VO)")  # fmt: skip

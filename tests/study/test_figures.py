@@ -31,7 +31,8 @@ from study.analysis.stats import analyze
 from study.analysis.tlx_figure import cousineau_morey
 from study.cli import main
 from study.protocol.design import TEMPLATE
-from study.protocol.exchange import TLX_COLUMNS, TRIAL_COLUMNS
+from study.protocol.exchange import TLX_COLUMNS
+from study.protocol.export import trial_columns
 
 GROUPS = {"outsider": 6, "novice": 5, "expert": 5}
 
@@ -50,8 +51,11 @@ def _trial_rows(rng: np.random.Generator) -> list[list[object]]:
                         if task == "lcca" and group == "expert" and cond == "VO" and k != 16:
                             force = 0.112  # tied values, as the demo's expert distal force
                         distal = 0.4 + shift / 2 + rng.normal(0, 0.03)
+                        # each task's two analysed peaks in its own columns
+                        peaks = [force, distal, "", ""] if task == "lcca" else ["", "", force,
+                                                                                 distal]  # fmt: skip
                         rows.append([code, group, task, cond, trial, 30 + rng.normal(0, 3),
-                                     force, distal, "true"])  # fmt: skip
+                                     *peaks, "true"])  # fmt: skip
     return rows
 
 
@@ -96,7 +100,8 @@ def study_db(tmp_path_factory: pytest.TempPathFactory) -> str:
     (folder / "d.toml").write_text(design)
     assert main(["init", "--design", str(folder / "d.toml"), "--db", db]) == 0
     rng = np.random.default_rng(7)
-    pd.DataFrame(_trial_rows(rng), columns=TRIAL_COLUMNS).to_csv(folder / "t.csv", index=False)
+    columns = trial_columns(["lcca", "notes"])
+    pd.DataFrame(_trial_rows(rng), columns=columns).to_csv(folder / "t.csv", index=False)
     pd.DataFrame(_tlx_rows(rng), columns=TLX_COLUMNS).to_csv(folder / "x.csv", index=False)
     argv = ["import", "--trials", str(folder / "t.csv"), "--tlx", str(folder / "x.csv")]
     assert main([*argv, "--db", db]) == 0
@@ -134,17 +139,20 @@ def test_each_task_gets_its_own_fig12_with_its_own_marks(engine: Engine) -> None
     reported = analyze(trials, participant_means(trials, tlx)).comparisons
     drawn = {d.name: d for d in draw_figures(engine, "double")}
     seen = {}
+    # each task's own force measure (the LCCA's proximal, the NOTES's demanded force)
+    force = {"lcca": "peak_proximal_force_n", "notes": "peak_force_demanded_n"}
+    tip = {"lcca": "peak_distal_force_n", "notes": "peak_tip_force_n"}
     for task in ("lcca", "notes"):
         d = drawn[f"fig12_groups_{task}"]
         rows = reported[(reported["task"] == task)
-                        & reported["measure"].isin(["completion_time_s", "peak_proximal_force_n",
-                                                    "peak_distal_force_n", "tlx_raw"])]  # fmt: skip
+                        & reported["measure"].isin(["completion_time_s", force[task],
+                                                    tip[task], "tlx_raw"])]  # fmt: skip
         expected = {f"{r.measure}/{r.group}": r.p_holm for r in rows.itertuples()}
         assert d.expected_marks == pytest.approx(expected)  # the p values analyze reports
         assert check_figure(d.figure, expected) == []
         marks = {t.get_gid(): t.get_text() for t in d.figure.findobj(plt.Text)
                  if (t.get_gid() or "").startswith("mark:")}  # fmt: skip
-        seen[task] = marks["mark:peak_proximal_force_n/novice"]
+        seen[task] = marks[f"mark:{force[task]}/novice"]
     # HV lowers the lcca force (-0.3 N) and not the notes force: the marks differ by task
     assert seen["lcca"] in {"*", "**", "***"} and seen["notes"] == "n.s."
     # the tied expert VO forces give a Wilcoxon, named under its group
@@ -261,7 +269,7 @@ def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
     comparisons, _ = compare_conditions(long)
     note = "Simulated participants: all 288 trials simulated, none measured"
     fig = label_source(fig12(long, comparisons, width), note)
-    marks = _marks(long, comparisons)
+    marks = _marks(long, comparisons, "lcca")
     assert len(marks) == 12 and check_figure(fig, marks) == []
     # the expert distal force: 4 of 8 zero differences, R's asymptotic p .361 -> n.s.
     assert marks["peak_distal_force_n/expert"] == pytest.approx(0.36131, abs=1e-5)

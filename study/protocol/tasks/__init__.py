@@ -346,6 +346,15 @@ def get_task(name: str) -> Task:
         ) from None
 
 
+def measure_named(name: str) -> Measure | None:
+    """The measure called `name` in the first registered task that has it."""
+    for task in tasks():
+        for m in task.all_measures:
+            if m.name == name:
+                return m
+    return None
+
+
 def tasks() -> tuple[Task, ...]:
     _load()
     return tuple(_REGISTRY.values())
