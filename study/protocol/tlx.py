@@ -118,6 +118,39 @@ def weighted_tlx(ratings: Mapping[str, int], weights: Mapping[str, int]) -> floa
     return sum(weights[s] * ratings[s] for s in TLX_SUBSCALES) / 15.0
 
 
+def response_scores(response: TlxResponse) -> tuple[dict[str, int], float, float | None]:
+    """A stored questionnaire's ratings, raw TLX and weighted TLX (None without the
+    pairwise comparisons): the one scorer `study tlx` and the analysis frames share."""
+    ratings = {s: getattr(response, s) for s in TLX_SUBSCALES}
+    weights = {s: getattr(response, f"w_{s}") for s in TLX_SUBSCALES}
+    weighted = weighted_tlx(ratings, weights) if weights["mental"] is not None else None
+    return ratings, raw_tlx(ratings), weighted
+
+
+def scored_tlx(engine: Engine, code: str | None = None) -> list[dict[str, Any]]:
+    """Every stored questionnaire (or one participant's), in the order they were stored:
+    participant, group, task, condition, the six ratings, tlx_raw and tlx_weighted."""
+    query = select(TlxResponse, Participant.code, Participant.group).join(Participant)
+    if code:
+        query = query.where(Participant.code == code)
+    rows = []
+    with Session(engine) as session:
+        for response, pcode, group in session.execute(query.order_by(TlxResponse.id)):
+            ratings, raw, weighted = response_scores(response)
+            rows.append(
+                {
+                    "participant": pcode,
+                    "group": group,
+                    "task": response.task,
+                    "condition": response.condition,
+                    **ratings,
+                    "tlx_raw": raw,
+                    "tlx_weighted": weighted,
+                }
+            )
+    return rows
+
+
 def store_tlx(
     engine: Engine,
     code: str,
