@@ -280,6 +280,7 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
     import tempfile
 
     from study.bench.tui import bench_tui as run_bench
+    from study.tui.probes import overview_seconds
 
     if json_path is not None:
         _check_json_folder(json_path)
@@ -291,7 +292,7 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
             status.update("building the full demo study (36 participants)")
             run_demo(db_url, seed=1, progress=status.update)
         status.update(f"starting `study tui` {runs} times")
-        result = run_bench(db_url, runs)
+        result = run_bench(db_url, overview_seconds, runs)
     click.echo(
         f"study tui, {result.participants} participants: overview after "
         f"{result.median_s:.2f} s (median of {runs}; "
