@@ -18,8 +18,8 @@ others do and the benchmark's per-unit figures are the steady state.
 from __future__ import annotations
 
 import hashlib
-import logging
 import json
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -102,6 +102,15 @@ def open_client(workers: int | None, scheduler: str | None) -> Client:
     )  # fmt: skip
     client = Client(cluster)
     return client
+
+
+def close_client(client: Client) -> None:
+    """Close a client from `open_client` and the LocalCluster it started, if any (a
+    scheduler of someone else's keeps running)."""
+    cluster = client.cluster
+    client.close()
+    if cluster is not None:
+        cluster.close()
 
 
 def run_pending(

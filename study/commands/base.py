@@ -3,13 +3,18 @@ input errors into one-line usage errors, and the common `--db` option."""
 
 from __future__ import annotations
 
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from db.errors import DbInputError
 from study.errors import StudyInputError
 from teleop_core.errors import TeleopInputError
+
+if TYPE_CHECKING:
+    from rich.console import Console
+    from rich.progress import Progress
 
 USER_ERRORS = (DbInputError, StudyInputError, TeleopInputError)
 
@@ -98,3 +103,25 @@ actor_option = click.option(
     help="Who acts, for the audit log and session leases, e.g. an experimenter code "
     "[default: $STUDY_ACTOR, else user@host]",
 )
+
+
+def progress_bar(transient: bool = True, console: Console | None = None) -> Progress:
+    """The bar long commands show on stderr: what runs, k of n done, time remaining
+    (Rich is imported only when a command shows it)."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    return Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        transient=transient,
+        console=console or Console(stderr=True),
+    )
+
+
+def check_parent_folder(path: Path) -> None:
+    """StudyInputError unless the folder a file is to be written in exists."""
+    if not path.parent.is_dir():
+        raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")

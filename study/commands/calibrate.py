@@ -17,7 +17,7 @@ import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from study.commands.base import StudyCommand
+from study.commands.base import StudyCommand, check_parent_folder
 from study.errors import StudyInputError
 
 _err = Console(stderr=True)
@@ -161,8 +161,7 @@ def calibrate(
     from teleop_core.estimation.recording import write_csv_atomically
 
     for path in (json_path, pred_path, out_dir):
-        if not path.parent.is_dir():
-            raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
+        check_parent_folder(path)
     calibrator = run_calibration(
         recording, model_name, held_out, max_effects, families, mat_columns
     )

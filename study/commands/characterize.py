@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from study.commands.base import StudyCommand, StudyGroup
+from study.commands.base import StudyCommand, StudyGroup, check_parent_folder
 from study.errors import StudyInputError
 
 
@@ -50,8 +50,7 @@ def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
     from teleop_core.notes.characterize import characterize_simulated
     from teleop_core.notes.params import DOFS, default_params
 
-    if not json_path.parent.is_dir():
-        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    check_parent_folder(json_path)
     if out_dir.exists() and not out_dir.is_dir():
         raise StudyInputError(f"--out {out_dir} is a file; expected a folder")
     results = []

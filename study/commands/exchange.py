@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, db_option
+from study.commands.base import StudyCommand, db_option, progress_bar
 from study.errors import StudyInputError
 
 
@@ -97,9 +97,6 @@ def export_cmd(
     Samples stream in bounded memory; --participant, --task, --condition, --trial,
     --from-s and --to-s restrict the samples (not the trials and TLX files).
     """
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
     from study.protocol.exchange import export_data
     from study.protocol.sample_export import SampleSelection
 
@@ -107,14 +104,7 @@ def export_cmd(
     engine = open_database(db_url, create=False)
     created = not out_dir.exists()
     try:
-        with Progress(
-            "[progress.description]{task.description}",
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeRemainingColumn(),
-            transient=True,
-            console=Console(stderr=True),
-        ) as bar:
+        with progress_bar() as bar:
             task = bar.add_task("exporting samples (trials)", total=None)
             written = export_data(
                 engine,

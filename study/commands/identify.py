@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from study.commands.base import StudyCommand, StudyGroup
+from study.commands.base import StudyCommand, StudyGroup, check_parent_folder
 from study.errors import StudyInputError
 
 
@@ -36,8 +36,7 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
     from teleop_core.notes.recording import NotesRecording, NotesRecordingError
     from teleop_core.recording_checks import check_varies
 
-    if not json_path.parent.is_dir():
-        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    check_parent_folder(json_path)
     if out_dir is not None and out_dir.exists() and not out_dir.is_dir():
         raise StudyInputError(f"--out {out_dir} is a file; expected a folder")
     rec = NotesRecording.from_csv(recording)

@@ -6,10 +6,8 @@ import json
 from pathlib import Path
 
 import click
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-from study.commands.base import StudyCommand
+from study.commands.base import StudyCommand, progress_bar
 from study.errors import StudyInputError
 from study.protocol.design import parse_design
 
@@ -71,10 +69,7 @@ def power(
         raise StudyInputError(f"design file {design_path} does not exist")
     design = parse_design(design_path.read_text(), str(design_path))
     effects = _effects(effect, list(design.groups))
-    columns = ("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn())
-    with Progress(
-        *columns, TimeRemainingColumn(), console=Console(stderr=True), transient=True
-    ) as bar:
+    with progress_bar() as bar:
         task = bar.add_task("simulated studies", total=n_sim * len(SCALES))
         curve = power_curve(design.groups, effects, rho, n_sim, seed, lambda: bar.advance(task))
     at_design = next(r for s, r in curve if s == 1.0)
