@@ -14,23 +14,11 @@ from typing import Any
 
 import click
 
-from study.commands.base import StudyCommand, check_parent_folder
+from study.commands.base import StudyCommand, check_parent_folder, json_option, out_dir_option
 from study.errors import StudyInputError
 
-json_option = click.option(
-    "--json",
-    "json_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write every table as JSON here.",
-)
-_out_option = click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for the Markdown tables, the figures and any data files.",
-)
+_json_option = json_option("Write every table as JSON here.")
+_out_option = out_dir_option("Folder for the Markdown tables, the figures and any data files.")
 _seed_option = click.option("--seed", type=int, default=0, show_default=True)
 
 
@@ -79,7 +67,7 @@ def _estimator_option(help: str) -> Callable[[Callable[..., Any]], Callable[...,
 
 
 @click.command("follower", cls=StudyCommand)
-@json_option
+@_json_option
 @_out_option
 @_seed_option
 @click.option(
@@ -131,7 +119,7 @@ def bench_follower(
 
 
 @click.command("master", cls=StudyCommand)
-@json_option
+@_json_option
 @_out_option
 @_estimator_option(
     "Force estimator folder for the closed loop [default: the model shipped with "
@@ -154,7 +142,7 @@ def bench_master(
 
 
 @click.command("lcca", cls=StudyCommand)
-@json_option
+@_json_option
 @_out_option
 @_estimator_option("Force estimator folder [default: the model shipped with haptic-study].")
 @_seed_option
@@ -173,13 +161,10 @@ def bench_lcca(
 
 
 @click.command("calibrate", cls=StudyCommand)
-@json_option
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Folder for the Markdown table and a copy of the JSON [default: next to --json].",
+@_json_option
+@out_dir_option(
+    "Folder for the Markdown table and a copy of the JSON [default: next to --json].",
+    required=False,
 )
 @_seed_option
 @click.option("--epochs", type=click.IntRange(min=1), default=None, help="GRU epochs [30].")
@@ -205,7 +190,7 @@ def bench_calibrate(
 
 
 @click.command("notes", cls=StudyCommand)
-@json_option
+@_json_option
 @_out_option
 @click.option(
     "--draws",

@@ -9,7 +9,13 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from study.commands.base import StudyCommand, StudyGroup, check_parent_folder
+from study.commands.base import (
+    StudyCommand,
+    StudyGroup,
+    check_parent_folder,
+    json_option,
+    out_dir_option,
+)
 from study.errors import StudyInputError
 
 
@@ -19,20 +25,8 @@ def characterize() -> None:
 
 
 @characterize.command("notes", cls=StudyCommand)
-@click.option(
-    "--json",
-    "json_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write the numbers here (keys translation and rotation).",
-)
-@click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for the Bode and hysteresis figures and the compensation table.",
-)
+@json_option("Write the numbers here (keys translation and rotation).")
+@out_dir_option("Folder for the Bode and hysteresis figures and the compensation table.")
 @click.option(
     "--noise",
     type=click.FloatRange(min=0, max=0.5),

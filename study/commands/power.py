@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from study.commands.base import StudyCommand, progress_bar
+from study.commands.base import StudyCommand, out_dir_option, progress_bar
 from study.errors import StudyInputError
 from study.protocol.design import parse_design
 
@@ -53,12 +53,7 @@ def _effects(text: str, groups: list[str]) -> dict[str, float]:
 )
 @click.option("--n-sim", type=click.IntRange(min=10), default=500, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Write power.json and the power curve (PDF, PNG) here.",
-)
+@out_dir_option("Write power.json and the power curve (PDF, PNG) here.", required=False)
 def power(
     design_path: Path, effect: str, rho: float, n_sim: int, seed: int, out_dir: Path | None
 ) -> None:

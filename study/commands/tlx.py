@@ -8,9 +8,8 @@ import click
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from db.migrate import open_database
 from db.models.study import Participant
-from study.commands.base import StudyGroup, actor_option, db_option
+from study.commands.base import StudyGroup, actor_option, db_option, opened_database
 from study.errors import StudyInputError
 from study.protocol.roster import load_study
 from study.protocol.tlx import pair_order, response_scores, scored_tlx, store_tlx
@@ -26,16 +25,13 @@ def tlx() -> None:
 @db_option
 def pairs_cmd(code: str, db_url: str | None) -> None:
     """The 15 comparisons in the order this participant is shown them."""
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         with Session(engine) as session:
             study, _ = load_study(session)
             if session.scalars(select(Participant).where(Participant.code == code)).first() is None:
                 raise StudyInputError(
                     f"unknown participant {code!r}; expected a code from `study schedule`"
                 )
-    finally:
-        engine.dispose()
     for k, (left, right) in enumerate(pair_order(study.seed, code), 1):
         click.echo(f"{k:>2}. {left} or {right}")
 
@@ -79,11 +75,8 @@ def enter_cmd(
 ) -> None:
     """Store a questionnaire for one task x condition block (or edit the stored one)."""
     chosen = [c.strip() for c in choices.split(",")] if choices else None
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
-    finally:
-        engine.dispose()
     _, raw, weighted = response_scores(response)
     scores = f"raw TLX {raw:.1f}"
     if weighted is not None:
@@ -97,11 +90,8 @@ def enter_cmd(
 @db_option
 def show_cmd(code: str | None, as_json: bool, db_url: str | None) -> None:
     """Stored questionnaires with their raw and weighted scores."""
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         scored = scored_tlx(engine, code)
-    finally:
-        engine.dispose()
     rows = [
         {k: v for k, v in r.items() if k != "group"}
         for r in sorted(scored, key=lambda r: r["participant"])
