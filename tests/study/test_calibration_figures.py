@@ -8,11 +8,11 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
 
-from study.analysis.calibration_figures import (  # noqa: E402
+from study.analysis.calibration_figures import (
     CAL_STYLE,
     held_out_mask,
     overview_figures,
@@ -20,7 +20,7 @@ from study.analysis.calibration_figures import (  # noqa: E402
     residual_against_unexplained,
     residual_blocks,
 )
-from teleop_core.calibration.verdict import quantities, unexplained  # noqa: E402
+from teleop_core.calibration.verdict import quantities, unexplained
 
 
 def _held_out_residual_over_speed(seed: int = 0) -> tuple[dict, np.ndarray, np.ndarray]:

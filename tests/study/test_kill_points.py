@@ -38,6 +38,7 @@ from db.models.trial import Sample, Trial
 from study.cli import main
 from study.protocol.lease import process_alive
 from tests.study import kill_children
+from tests.study.conftest import samples_of_trial
 
 DESIGN = """\
 name = "kill points"
@@ -77,10 +78,7 @@ def _trials(url: str) -> dict[int, dict]:
                 Trial.trial_index,
                 Trial.status,
                 Trial.summary,
-                select(func.count())
-                .select_from(Sample)
-                .where(Sample.trial_id == Trial.id)
-                .scalar_subquery(),
+                samples_of_trial(),
                 select(func.max(Sample.t_s)).where(Sample.trial_id == Trial.id).scalar_subquery(),
             )
             .join(Participant, Trial.participant_id == Participant.id)

@@ -17,7 +17,6 @@ import pandas as pd
 import psycopg
 import pyarrow.parquet as pq
 import pytest
-from sqlalchemy import Engine
 from sqlalchemy.engine import make_url
 
 from db.engine import make_session_factory

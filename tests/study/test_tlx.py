@@ -23,6 +23,7 @@ from study.protocol.tlx import (
     weighted_tlx,
     weights_from_choices,
 )
+from tests.study.conftest import init_study
 
 RATINGS = {
     "mental": 70,
@@ -110,10 +111,7 @@ def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
 def test_cli_refuses_an_off_scale_rating_and_stores_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    db = str(tmp_path / "s.db")
-    (tmp_path / "d.toml").write_text(TEMPLATE)
-    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
-    assert main(["participant", "add", "--group", "expert", "--db", db]) == 0
+    db = init_study(tmp_path, groups=("expert",))
     args = ["tlx", "enter", "--participant", "P001", "--task", "lcca", "--condition", "VO"]
     args += [f"--{k}={v}" for k, v in {**RATINGS, "mental": 57}.items()]
     capsys.readouterr()
@@ -135,11 +133,7 @@ def test_show_and_the_analysis_frame_give_the_hand_computed_scores(
 
     from study.analysis.frames import tlx_frame
 
-    db = str(tmp_path / "s.db")
-    (tmp_path / "d.toml").write_text(TEMPLATE)
-    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
-    for _ in range(2):
-        assert main(["participant", "add", "--group", "expert", "--db", db]) == 0
+    db = init_study(tmp_path, groups=("expert", "expert"))
     # pick the subscale WEIGHTS ranks higher in every pair: the tallies are WEIGHTS
     chosen = [max(pair, key=WEIGHTS.__getitem__) for pair in pair_order(1, "P001")]
     assert weights_from_choices(pair_order(1, "P001"), chosen) == WEIGHTS

@@ -25,6 +25,7 @@ from study.tui.tlx_pane import PairChoice
 from tests.study.tui.conftest import complete_block, loaded, wait_for
 from tests.study.tui.test_screens import RATINGS, _open_form, _type_ratings
 
+
 @contextmanager
 def pragma(engine: Engine, statement: str) -> Iterator[None]:
     """Every new connection of `engine` runs `statement` (the pool is emptied first)."""
