@@ -53,3 +53,21 @@ def one_error_line(capsys: Any, argv: list[str]) -> str:
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
     return err[0]
+
+
+def assert_workers_end(workers: list[int], timeout_s: float) -> None:
+    """Wait up to `timeout_s` for the processes `workers` to end; fail if one is left."""
+    import time
+
+    from study.protocol.lease import process_alive
+
+    deadline = time.monotonic() + timeout_s
+    while any(process_alive(w) for w in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not any(process_alive(w) for w in workers), "workers outlived their parent"
+
+
+def assert_figures(folder: Path, *names: str) -> None:
+    """Each figure file is in `folder` and is a real picture (over 10 kB)."""
+    small = {n: (folder / n).stat().st_size for n in names if (folder / n).stat().st_size <= 10_000}
+    assert not small, f"figures of 10 kB or less: {small}"

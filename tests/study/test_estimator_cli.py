@@ -10,7 +10,7 @@ import pytest
 
 from study.cli import main
 from teleop_core.estimation.estimator import MODEL_FILES
-from tests.study.conftest import one_error_line
+from tests.study.conftest import assert_figures, one_error_line
 from tests.teleop_core.conftest import simulate_recording
 
 
@@ -127,10 +127,10 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
     }
     assert set(report["window_sweep"]) == {"2", "5"}
     assert report["timing"]["median_ms"] > 0
-    for figure in (
+    assert_figures(
+        tmp_path / "fig",
         "table_i_velocity.png",
         "table_ii_fig6.png",
         "table_iii_fig9.png",
         "fig8_window.png",
-    ):
-        assert (tmp_path / "fig" / figure).stat().st_size > 10_000
+    )

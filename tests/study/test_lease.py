@@ -38,7 +38,7 @@ from study.protocol.lease import (
     process_alive,
 )
 from study.protocol.roster import add_participant, create_study
-from tests.study.conftest import init_study, samples_of_trial
+from tests.study.conftest import assert_workers_end, init_study, samples_of_trial
 
 DESIGN = """\
 name = "lease test"
@@ -211,10 +211,7 @@ def test_jobs_workers_end_with_their_parent_and_no_slot_completes_twice(
     finally:
         if parent.poll() is None:
             parent.kill()
-    deadline = time.monotonic() + 30
-    while any(process_alive(w) for w in workers) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    assert not any(process_alive(w) for w in workers), "workers outlived their parent"
+    assert_workers_end(workers, 30)
     stopped = _trials(url)
     # each worker marked its own trial interrupted on the way out, and writes no more
     assert not [t for t in stopped if t[2] == "running"]
