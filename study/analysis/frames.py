@@ -50,7 +50,7 @@ def trial_frame(engine: Engine) -> pd.DataFrame:
     return pd.DataFrame(
         list(latest.values()),
         columns=["participant", "group", "task", "condition", "trial", *TRIAL_MEASURES, "success",
-                 "driver"],  # fmt: skip
+                 "driver"],
     )
 
 

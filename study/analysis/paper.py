@@ -31,7 +31,6 @@ from study.analysis.tlx_figure import tlx_profile
 from study.analysis.trace_figure import force_traces
 from study.errors import StudyInputError
 
-
 FIG12_MEASURES = tuple(FIG12_LABELS)
 
 

@@ -195,7 +195,9 @@ def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
             )
     task = data.get("task", "lcca")
     if task not in KNOWN_TASKS:
-        raise StudyInputError(f"{source}: task = {task!r}; expected one of {', '.join(KNOWN_TASKS)}")
+        raise StudyInputError(
+            f"{source}: task = {task!r}; expected one of {', '.join(KNOWN_TASKS)}"
+        )
     groups = data["groups"]
     if not groups:
         raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")

@@ -87,11 +87,11 @@ ENTER_UNRUN = [*ENTER, "--reason", "paper form, block not run"]
 CASES = [
     # 5: tracebacks
     imp(trials(TRIAL_ROW), "P001 lcca/VO trial 1 is already stored", "same file twice",
-        before=[["import", "--trials", "t.csv"]]),  # fmt: skip
+        before=[["import", "--trials", "t.csv"]]),
     Case("tlx for a block that has one", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
          "P001/lcca/VO already has a questionnaire",
          {"t.csv": trials("P001,novice,lcca,HV,1,31.5,0.81,0.42,true"), "x.csv": tlx(TLX_ROW)},
-         [ENTER_UNRUN]),  # fmt: skip
+         [ENTER_UNRUN]),
     imp(b"", "t.csv is empty", "empty csv"),
     imp(trials(), "t.csv has a header but no rows", "header only"),
     imp_tlx(TLX_ROW.replace(",70,", ",inf,"),
@@ -108,7 +108,7 @@ CASES = [
     init(design(seed="-1"), "seed = -1; expected 0 to 2147483647", "seed -1"),
     init(design(seed=str(2**70)), f"seed = {2**70}; expected 0 to 2147483647", "seed 2**70"),
     init(design(trials_per_condition=str(2**63)), "trials_per_condition = 9223372036854775808;"
-         " expected 1 to 100", "trials 2**63"),  # fmt: skip
+         " expected 1 to 100", "trials 2**63"),
     Case("corrupted database", ["schedule", "--db", "bad.db"], "bad.db", {}),
     Case("corrupted database, add", ["participant", "add", "--group", "novice", "--db", "bad.db"],
          "bad.db"),
@@ -146,10 +146,10 @@ CASES = [
             "column condition: 'XX'; expected one of VO, HV", "tlx condition XX"),
     # 8: a bad --port leaves no trial behind
     Case("bad port", ["run", "--participant", "P001", "--driver", "hardware", "--port",
-                      "/dev/no-such-port"], "--port /dev/no-such-port: cannot open"),  # fmt: skip
+                      "/dev/no-such-port"], "--port /dev/no-such-port: cannot open"),
     # 9: an edit needs a reason
     Case("tlx edit without reason", [*ENTER[:12], "--effort=65", *ENTER[13:]], "needs a reason",
-         before=[ENTER_UNRUN]),  # fmt: skip
+         before=[ENTER_UNRUN]),
     Case("tlx for a block not run, no reason", ENTER, "has no completed trial yet"),
     Case("actor too long", [*ENTER, "--actor", "a" * 65], "--actor 'aaaa"),
 ]

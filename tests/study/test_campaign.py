@@ -86,7 +86,8 @@ def _cluster_run(text: str, root: Path, workers: int) -> bytes:
     folder = CampaignDir.open(root, spec, text)
     folder.create()
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, host="127.0.0.1") as cluster, Client(cluster) as c:  # fmt: skip
+                      dashboard_address=None, host="127.0.0.1") as cluster, \
+            Client(cluster) as c:  # fmt: skip
         assert len(c.scheduler_info()["workers"]) == workers
         assert run_pending(folder, c) == len(spec.units())
     folder.write_tables()
@@ -144,7 +145,7 @@ def test_bad_loss_scheduler_and_folder_are_one_line(
         (["campaign", "run", str(lossy), "--out", out], "link_loss value 1"),
         (["campaign", "run", str(path), "--out", out, "--scheduler", "localhost"], "'localhost'"),
         (["campaign", "run", str(path), "--out", out, "--workers", "2", "--scheduler",
-          "tcp://127.0.0.1:1"], "--workers 2 with --scheduler"),  # fmt: skip
+          "tcp://127.0.0.1:1"], "--workers 2 with --scheduler"),
         (["campaign", "run", str(tmp_path / "none.toml"), "--out", out], "none.toml"),
         (["campaign", "report", out], "does not exist"),
     ]
