@@ -60,10 +60,23 @@ def _run_with_estimator(
     _run_report(json_path, markdown, status, lambda progress: run(estimator, progress))
 
 
-def _estimator_option(help: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    return click.option(
-        "--estimator", "model_dir", type=click.Path(file_okay=False, path_type=Path), help=help
-    )
+def _estimator_bench(
+    name: str, estimator_help: str, quick_help: str
+) -> Callable[[Callable[..., Any]], click.Command]:
+    """`study bench NAME --json --out --estimator --seed --quick`: a bench that runs the
+    force estimator (the options in that order, as --help lists them)."""
+
+    def command(f: Callable[..., Any]) -> click.Command:
+        for option in reversed((
+            _json_option, _out_option,
+            click.option("--estimator", "model_dir",
+                         type=click.Path(file_okay=False, path_type=Path), help=estimator_help),
+            _seed_option, click.option("--quick", is_flag=True, help=quick_help),
+        )):  # fmt: skip
+            f = option(f)
+        return click.command(name, cls=StudyCommand)(f)
+
+    return command
 
 
 @click.command("follower", cls=StudyCommand)
@@ -118,15 +131,11 @@ def bench_follower(
     )  # fmt: skip
 
 
-@click.command("master", cls=StudyCommand)
-@_json_option
-@_out_option
-@_estimator_option(
-    "Force estimator folder for the closed loop [default: the model shipped with "
-    "haptic-study]."
+@_estimator_bench(
+    "master",
+    "Force estimator folder for the closed loop [default: the model shipped with haptic-study].",
+    "Short runs: checks the pipeline, measures little.",
 )
-@_seed_option
-@click.option("--quick", is_flag=True, help="Short runs: checks the pipeline, measures little.")
 def bench_master(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
@@ -141,12 +150,11 @@ def bench_master(
     )  # fmt: skip
 
 
-@click.command("lcca", cls=StudyCommand)
-@_json_option
-@_out_option
-@_estimator_option("Force estimator folder [default: the model shipped with haptic-study].")
-@_seed_option
-@click.option("--quick", is_flag=True, help="Two participants per group, 60 s at most each.")
+@_estimator_bench(
+    "lcca",
+    "Force estimator folder [default: the model shipped with haptic-study].",
+    "Two participants per group, 60 s at most each.",
+)
 def bench_lcca(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
