@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from teleop_core.estimation.estimator import train_estimator
-from teleop_core.estimation.gru import GruConfig, GruWeights, _batch_forward, block_split
+from teleop_core.estimation.gru import GruConfig, _batch_forward, block_split
 from teleop_core.estimation.gru_torch import GruNet, weights_from_net
 from teleop_core.estimation.physics import PhysicsParams
 from teleop_core.estimation.recording import FollowerRecording

@@ -16,10 +16,10 @@ import pytest
 
 from study.cli import main
 from teleop_core.calibration import Calibrator
+from teleop_core.calibration.models import FollowerBase
 from teleop_core.calibration.rigid_axis import RigidAxisBase, derivatives, mat_to_frame
 from teleop_core.calibration.synthetic import follower_recording
 from teleop_core.calibration.undeclared import oracle_rmse, undeclared_recording
-from teleop_core.calibration.models import FollowerBase
 from teleop_core.calibration.verdict import (
     binned_share,
     distance_since_reversal,
@@ -266,7 +266,7 @@ def test_a_negative_hysteresis_loop_is_not_named(seed: int) -> None:
 def test_a_positive_loop_is_still_named_on_the_follower() -> None:
     # the loop the follower simulator injects (a loss: force above eq. 1 while the
     # current rises) passes the sign check
-    rec, truth = follower_recording(60.0, ["hysteresis"], rate_hz=200.0, seed=4)
+    rec, _ = follower_recording(60.0, ["hysteresis"], rate_hz=200.0, seed=4)
     model = FollowerBase()
     report = Calibrator(model).fit(model.data(rec)).report()
     assert report["effects_added"][0]["family"] == "hysteresis"
