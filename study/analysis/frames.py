@@ -22,7 +22,7 @@ from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
-from db.models.tlx import TLX_SUBSCALES, TlxResponse
+from db.models.tlx import TLX_SUBSCALES
 from db.models.trial import Trial
 from study.protocol.tasks import COMPLETION_TIME, get_task
 
@@ -74,30 +74,20 @@ def trial_measures(trials: pd.DataFrame) -> list[str]:
 
 
 def tlx_frame(engine: Engine) -> pd.DataFrame:
-    with Session(engine) as session:
-        rows = session.execute(
-            select(TlxResponse, Participant.code, Participant.group).join(Participant)
-        ).all()
-    out = []
-    for r, code, group in rows:
-        ratings = {s: getattr(r, s) for s in TLX_SUBSCALES}
-        weights = {s: getattr(r, f"w_{s}") for s in TLX_SUBSCALES}
-        weighted = (
-            sum(weights[s] * ratings[s] for s in TLX_SUBSCALES) / 15.0
-            if weights["mental"] is not None
-            else float("nan")
-        )
-        out.append(
-            {
-                "participant": code,
-                "group": group,
-                "task": r.task,
-                "condition": r.condition,
-                "tlx_raw": sum(ratings.values()) / len(ratings),
-                "tlx_weighted": weighted,
-                **{f"tlx_{s}": float(v) for s, v in ratings.items()},
-            }
-        )
+    from study.protocol.tlx import scored_tlx
+
+    out = [
+        {
+            "participant": r["participant"],
+            "group": r["group"],
+            "task": r["task"],
+            "condition": r["condition"],
+            "tlx_raw": r["tlx_raw"],
+            "tlx_weighted": float("nan") if r["tlx_weighted"] is None else r["tlx_weighted"],
+            **{f"tlx_{s}": float(r[s]) for s in TLX_SUBSCALES},
+        }
+        for r in scored_tlx(engine)
+    ]
     return pd.DataFrame(out, columns=["participant", "group", "task", "condition", *TLX_MEASURES])
 
 

@@ -83,7 +83,7 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
                                   "matched-pairs rank-biserial correlation"},
             "wilcoxon_p": WILCOXON_RULE,
             "correction": "Holm across the groups of each task x measure",
-        },  # fmt: skip
+        },
         "mixed_anova": {
             "ss_type": analysis.ss_type,
             "default_ss_type": DEFAULT_SS_TYPE,
@@ -92,7 +92,7 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
             "effect_size": "partial eta squared",
         },
         "lmm": {"estimation": "REML", "p": "Wald z", "df": "none (z tests)",
-                "formula": "value ~ condition * group + (1 | participant)"},  # fmt: skip
+                "formula": "value ~ condition * group + (1 | participant)"},
         "software": software_versions(),
     }
 

@@ -109,9 +109,8 @@ def anova_table(analysis: Analysis) -> Table:
         "p": [p_text(v) for v in a["p"]], "partial eta squared": [_num(v) for v in a["np2"]],
         "SS type": a["ss_type"].map(lambda t: "II" if t == 2 else "III"),
     })  # fmt: skip
-    notes = "; ".join(analysis.warnings_about("mixed ANOVA")) or "none"
-    caption = f"{_preamble(analysis)}{anova_method(analysis.ss_type)} Notes: {notes}."
-    return Table("mixed_anova", a, display, caption)
+    return _model_table(analysis, "mixed_anova", a, display, anova_method(analysis.ss_type),
+                        "mixed ANOVA")  # fmt: skip
 
 
 def lmm_table(analysis: Analysis) -> Table:
@@ -121,9 +120,16 @@ def lmm_table(analysis: Analysis) -> Table:
         "estimate": [_num(v, 4) for v in m["estimate"]], "SE": [_num(v, 4) for v in m["se"]],
         "p (Wald z)": [p_text(v) for v in m["p"]],
     })  # fmt: skip
-    notes = "; ".join(analysis.warnings_about("mixed model")) or "none"
-    caption = f"{_preamble(analysis)}{lmm_method()} Notes: {notes}."
-    return Table("lmm", m, display, caption)
+    return _model_table(analysis, "lmm", m, display, lmm_method(), "mixed model")
+
+
+def _model_table(
+    analysis: Analysis, name: str, frame: pd.DataFrame, display: pd.DataFrame, method: str,
+    model: str,
+) -> Table:  # fmt: skip
+    """A model's table, its caption noting the warnings the fit of `model` raised."""
+    notes = "; ".join(analysis.warnings_about(model)) or "none"
+    return Table(name, frame, display, f"{_preamble(analysis)}{method} Notes: {notes}.")
 
 
 def descriptives_table(analysis: Analysis) -> Table:

@@ -64,12 +64,12 @@ def emps_run(path: Path = EMPS_FILE) -> dict[str, Any]:
         "reference_rmse_n": float(np.sqrt(np.mean((y[test] - pred) ** 2))),
         "reference_fit_percent": fit_percent(y[test], pred),
         "reference_params": dict(zip(["M", "Fv+", "Fv-", "Fc+", "Fc-", "offset"],
-                                     map(float, coef), strict=True)),  # fmt: skip
+                                     map(float, coef), strict=True)),
         "verdict": report["verdict"],
         "unexplained": report["unexplained"] and {
             k: report["unexplained"][k] for k in ("quantity", "share_of_variance",
                                                   "share_beyond_chance")
-        },  # fmt: skip
+        },
         "seconds": seconds,
     }
 
@@ -131,12 +131,12 @@ def open_part(duration_s: float, rate_hz: float, seed: int,
             "emps_direction_named": "direction_asymmetry" in emps["added"],
             "visible_within_2x_oracle": all(r["ratio_to_oracle"] <= 2.0
                                             for r in undeclared.values()
-                                            if r["visible_in_channels"]),  # fmt: skip
+                                            if r["visible_in_channels"]),
             "invisible_structure_remains": all(r["verdict"] == "structure_remains"
                                                for r in undeclared.values()
-                                               if not r["visible_in_channels"]),  # fmt: skip
+                                               if not r["visible_in_channels"]),
             "clean_white_nothing_added": sum(not r["added"] and r["verdict"] == "white"
-                                             for r in clean),  # fmt: skip
+                                             for r in clean),
             "slowest_open_calibration_s": max(r["seconds"] for r in undeclared.values()),
             "slowest_open_calibration_cpu_s": max(r["cpu_seconds"] for r in undeclared.values()),
         },
@@ -153,7 +153,7 @@ def markdown(part: dict[str, Any], duration_s: float, rate_hz: float) -> list[st
             f"{k} = {v:.4g} [{lo:.4g}, {hi:.4g}]"
             for (k, v), (lo, hi) in zip(e["base_params"]["params"].items(),
                                          e["base_params"]["ci"].values(), strict=True)
-        ) + ".",  # fmt: skip
+        ) + ".",
         "",
         "| model | held-out RMSE (N) | fit (%) |",
         "|---|---|---|",
@@ -166,7 +166,7 @@ def markdown(part: dict[str, Any], duration_s: float, rate_hz: float) -> list[st
         f"Verdict: {e['verdict']}" + (
             f" (largest share: {e['unexplained']['quantity']}, "
             f"{100 * e['unexplained']['share_beyond_chance']:.1f} % beyond chance)"
-            if e["unexplained"] else "") + f"; {e['seconds']:.1f} s.",  # fmt: skip
+            if e["unexplained"] else "") + f"; {e['seconds']:.1f} s.",
         "",
         f"## Effects outside the named families ({duration_s:.0f} s at {rate_hz:.0f} Hz, "
         "JND size)",

@@ -95,7 +95,7 @@ class CampaignBench:
 def run_campaign_bench(
     replicates: int, group_size: int, workers: int, progress: Callable[[str], None]
 ) -> CampaignBench:
-    from study.campaign.engine import open_client, run_pending
+    from study.campaign.engine import close_client, open_client, run_pending
     from study.campaign.spec import parse_campaign
     from study.campaign.store import CampaignDir
 
@@ -115,7 +115,7 @@ def run_campaign_bench(
                 client.wait_for_workers(n)
                 done = 0
 
-                def unit_done(_: str) -> None:
+                def unit_done(_: str, n: int = n) -> None:
                     nonlocal done
                     done += 1
                     progress(f"{n} worker(s): {done} of {len(spec.units())} units")
@@ -124,10 +124,7 @@ def run_campaign_bench(
                 ran = run_pending(folder, client, on_unit=unit_done)
                 wall = time.perf_counter() - start
             finally:
-                cluster = client.cluster
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+                close_client(client)
             folder.write_tables()
             digest = hashlib.sha256((folder.root / "results.csv").read_bytes()).hexdigest()
             seconds = [float(s) for s in folder.unit_times()]

@@ -22,7 +22,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +50,7 @@ class GeneralisationConfig:
     train_fraction: float = 0.6
     effects: tuple[str, ...] = EFFECTS
     seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
-    gru: GruConfig = GruConfig()
+    gru: GruConfig = field(default_factory=GruConfig)
     """The estimator's settings: the defaults, as a user would train."""
 
     @classmethod
@@ -192,7 +192,7 @@ def spread(runs: Sequence[dict[str, Any]], effects: Sequence[str]) -> dict[str, 
 def markdown(report: dict[str, Any]) -> list[str]:
     """The generalisation section of follower_bench.md."""
     lines = [
-        "## Generalisation: trained on the first 60 %, run on the last 40 % (issue 17)",
+        "## Generalisation: trained on the first 60 %, run on the last 40 %",
         "",
         f"Targets: physics+GRU <= {HYBRID_TARGET} x physics; final <= {FINAL_TARGET} x "
         "physics+GRU. Baseline: gradient-boosted trees (scikit-learn) on the same windows.",

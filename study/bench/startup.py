@@ -36,7 +36,6 @@ import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
 
 from study.errors import StudyInputError
 
@@ -49,10 +48,6 @@ TARGETS_S = {"simulate": 1.0, "run_screen": 1.0, "analyze": 2.0}
 """The issue's targets, s; the writer's is `WRITER_TARGET_RATIO`."""
 WRITER_TARGET_RATIO = 0.9
 _REFERENCE_ROWS_PER_COMMIT = 1000
-_POLL_S = 0.05
-"""How often the run-screen probe looks, s: its resolution. Each look waits for the app
-to settle; looking every 5 ms doubled the time measured (the app's main thread then
-holds the GIL the preparing worker needs)."""
 
 
 @dataclass(frozen=True)
@@ -144,8 +139,8 @@ def bench_analyze(db_url: str, tmp: Path, runs: int) -> Timing:
 
 def bench_run_screen(db_url: str, runs: int) -> Timing:
     code = (
-        "import sys; from study.bench.startup import probe_run_screen; "
-        "probe_run_screen(sys.argv[1])"
+        "import sys; from study.tui.probes import print_run_screen_seconds; "
+        "print_run_screen_seconds(sys.argv[1])"
     )
 
     def once() -> float:
@@ -159,43 +154,6 @@ def bench_run_screen(db_url: str, runs: int) -> Timing:
 
     once()
     return Timing.of([once() for _ in range(runs)], TARGETS_S["run_screen"])
-
-
-def _give_up_after(started_at: float, limit_s: float = 120.0) -> None:
-    if time.monotonic() - started_at > limit_s:
-        raise StudyInputError(f"the run screen was not ready {limit_s:.0f} s after the start")
-
-
-def probe_run_screen(db_url: str) -> None:
-    """In a fresh process: print JSON with the seconds from the overview showing to the run
-    screen prepared (headless, 80 x 24)."""
-    import asyncio
-
-    from db.migrate import open_database
-    from study.commands.tui import _load_estimator
-    from study.tui import StudyServices, TuiSettings, make_app
-
-    engine = open_database(db_url, create=False)
-
-    async def run() -> float:
-        app = make_app(StudyServices(engine, _load_estimator), TuiSettings())
-        async with app.run_test(size=(80, 24)) as pilot:
-            while not app.ready:  # the run screen can be opened once mounted
-                _give_up_after(app.started_at)
-                await pilot.pause(_POLL_S)
-            overview_at = app.started_at + app.overview_shown_s  # type: ignore[operator]
-            app.action_tab("run")
-            pane: Any = app.query_one("#run-pane")
-            while pane.simulation.estimator is None or pane.status != "idle":
-                _give_up_after(app.started_at)  # e.g. the estimator failed to load
-                await pilot.pause(_POLL_S)
-            return time.monotonic() - overview_at
-
-    try:
-        seconds = asyncio.run(run())
-    finally:
-        engine.dispose()
-    print(json.dumps({"seconds": seconds}))
 
 
 def _reference_insert(
@@ -229,7 +187,7 @@ def _reference_insert(
             n = hi - lo
             sql = full if n == _REFERENCE_ROWS_PER_COMMIT else head + ", ".join([one] * n)
             conn.execute("BEGIN")
-            conn.execute(sql, list(itertools.chain.from_iterable(zip(*part))))
+            conn.execute(sql, list(itertools.chain.from_iterable(zip(*part, strict=False))))
             conn.execute("COMMIT")
         return time.perf_counter() - start
     finally:
@@ -241,10 +199,10 @@ def bench_writer(rows: int, runs: int, rate_hz: float = 1000.0) -> WriterRatio:
     alternating, `runs` each (a fresh temporary SQLite file every time)."""
     from db.models.trial import SAMPLE_COLUMNS
     from study.bench.db_write import (
-        scratch_trial,
-        synthetic_columns,
         bench_sample_write,
         scratch_database,
+        scratch_trial,
+        synthetic_columns,
     )
 
     names = ("trial_id", "seq", *SAMPLE_COLUMNS)

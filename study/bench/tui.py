@@ -15,16 +15,15 @@ import os
 import pty
 import resource
 import select
-import shutil
 import statistics
 import struct
 import subprocess
-import sys
 import termios
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
+from study.bench.startup import study_command
 from study.errors import StudyInputError
 
 MARKER = b"Sessions done"
@@ -50,13 +49,6 @@ class TuiBenchResult:
         return asdict(self)
 
 
-def _study_command() -> list[str]:
-    exe = shutil.which("study", path=str(Path(sys.executable).parent)) or shutil.which("study")
-    if exe is None:
-        return [sys.executable, "-c", "import sys; from study.cli import main; sys.exit(main())"]
-    return [exe]
-
-
 def _children_cpu_s() -> float:
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
     return usage.ru_utime + usage.ru_stime
@@ -71,7 +63,7 @@ def time_to_overview(db_url: str, timeout_s: float = 60.0) -> tuple[float, float
     env = {**os.environ, "TERM": "xterm-256color"}
     start = time.monotonic()
     proc = subprocess.Popen(
-        [*_study_command(), "tui", "--db", db_url],
+        [*study_command(), "tui", "--db", db_url],
         stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True,
     )  # fmt: skip
     os.close(slave)
@@ -115,29 +107,11 @@ def _drain_until_exit(proc: subprocess.Popen, master: int, timeout_s: float = 20
     proc.wait(timeout=max(end - time.monotonic(), 1.0))
 
 
-def app_to_overview(db_url: str) -> float:
-    """Seconds from `make_app` to the overview with data, headless in this process."""
-    import asyncio
-
-    from db.migrate import open_database
-    from study.tui import StudyServices, TuiSettings, make_app
-
-    engine = open_database(db_url, create=False)
-
-    async def run() -> float:
-        app = make_app(StudyServices(engine, lambda: None), TuiSettings())
-        async with app.run_test(size=(80, 24)) as pilot:
-            while not app.ready:  # the overview shows first, the other screens follow
-                await pilot.pause(0.01)
-            return app.overview_shown_s  # type: ignore[return-value]
-
-    try:
-        return asyncio.run(run())
-    finally:
-        engine.dispose()
-
-
-def bench_tui(db_url: str, runs: int = 5) -> TuiBenchResult:
+def bench_tui(
+    db_url: str, app_seconds: Callable[[str], float], runs: int = 5
+) -> TuiBenchResult:
+    """`runs` starts of `study tui` on a terminal, and `runs` of the app's own part
+    (`app_seconds(db_url)`: make_app to the overview, `study.tui.probes`)."""
     from db.migrate import open_database
     from study.protocol.roster import schedule
 
@@ -150,5 +124,5 @@ def bench_tui(db_url: str, runs: int = 5) -> TuiBenchResult:
     seconds = [wall for wall, _ in runs_s]
     return TuiBenchResult(
         seconds, statistics.median(seconds), participants, [cpu for _, cpu in runs_s],
-        [app_to_overview(db_url) for _ in range(runs)],
+        [app_seconds(db_url) for _ in range(runs)],
     )  # fmt: skip

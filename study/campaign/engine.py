@@ -102,6 +102,15 @@ def open_client(workers: int | None, scheduler: str | None) -> Client:
     return client
 
 
+def close_client(client: Client) -> None:
+    """Close a client from `open_client` and the LocalCluster it started, if any (a
+    scheduler of someone else's keeps running)."""
+    cluster = client.cluster
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
 def run_pending(
     folder: CampaignDir,
     client: Client,

@@ -66,7 +66,8 @@ def plot_factor(
     y, low, high = (("power", "power_ci_low", "power_ci_high") if kind == "power"
                     else ("effect_mean", "effect_ci_low", "effect_ci_high"))  # fmt: skip
     with plt.rc_context({**STYLE, "font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8,
-                         "xtick.labelsize": 8, "ytick.labelsize": 8, "legend.fontsize": 8}):  # fmt: skip
+                         "xtick.labelsize": 8, "ytick.labelsize": 8,
+                         "legend.fontsize": 8}):  # fmt: skip
         fig, axes = plt.subplots(
             len(rows), len(measures), figsize=(WIDTHS_IN["double"], 0.6 + 1.9 * len(rows)),
             squeeze=False, sharex=True, sharey=kind == "power", layout="constrained",
@@ -78,8 +79,9 @@ def plot_factor(
                     d = part[(part["measure"] == measure) & (part["group"] == group)]
                     xs = d[x].to_numpy() if x else [k] * len(d)
                     color = GROUP_COLORS[k % len(GROUP_COLORS)]
+                    sizes = "/".join(map(str, dict.fromkeys(d["n"])))
                     ax.plot(xs, d[y], marker=MARKERS[k % len(MARKERS)], ms=3, color=color,
-                            label=f"{group} (n = {'/'.join(map(str, dict.fromkeys(d['n'])))})")  # fmt: skip
+                            label=f"{group} (n = {sizes})")  # fmt: skip
                     ax.fill_between(xs, d[low], d[high], color=color, alpha=0.15, lw=0)
                     if not x:
                         ax.vlines(xs, d[low], d[high], color=color)

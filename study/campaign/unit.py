@@ -108,7 +108,8 @@ def simulate_study(spec: CampaignSpec, cell: Cell, replicate: int) -> pd.DataFra
                 s = trial_seed(seed, code, block["block_index"], i)
                 values = run_trial(spec.task, traits, block["condition"], s, cell, context)
                 rows.append({"participant": code, "group": group,
-                             "condition": block["condition"], "trial": i + 1, **values})  # fmt: skip
+                             "condition": block["condition"], "trial": i + 1,
+                             **values})  # fmt: skip
     return pd.DataFrame(rows)
 
 

@@ -9,7 +9,7 @@ import click
 
 from db.migrate import open_database
 from study.analysis.source import DRIVERS
-from study.commands.base import StudyCommand, db_option
+from study.commands.base import StudyCommand, check_parent_folder, db_option
 from study.errors import StudyInputError
 
 
@@ -40,8 +40,8 @@ def analyze(
     from study.analysis.source import restrict
     from study.analysis.stats import analyze as run_analysis
 
-    if json_path is not None and not json_path.parent.is_dir():
-        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    if json_path is not None:
+        check_parent_folder(json_path)
     start = time.monotonic()
     engine = open_database(db_url, create=False)
     try:

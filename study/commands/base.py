@@ -3,13 +3,21 @@ input errors into one-line usage errors, and the common `--db` option."""
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from db.errors import DbInputError
 from study.errors import StudyInputError
 from teleop_core.errors import TeleopInputError
+
+if TYPE_CHECKING:
+    from rich.console import Console
+    from rich.progress import Progress
+    from sqlalchemy import Engine
 
 USER_ERRORS = (DbInputError, StudyInputError, TeleopInputError)
 
@@ -98,3 +106,55 @@ actor_option = click.option(
     help="Who acts, for the audit log and session leases, e.g. an experimenter code "
     "[default: $STUDY_ACTOR, else user@host]",
 )
+
+
+def json_option(help: str | None = None) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """`--json FILE` (required, as `json_path`): where a command writes its numbers."""
+    return click.option(
+        "--json", "json_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
+        help=help,
+    )  # fmt: skip
+
+
+def out_dir_option(
+    help: str, required: bool = True
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """`--out DIR` (as `out_dir`): the folder a command writes its files in."""
+    return click.option(
+        "--out", "out_dir", required=required, type=click.Path(file_okay=False, path_type=Path),
+        help=help,
+    )  # fmt: skip
+
+
+def progress_bar(transient: bool = True, console: Console | None = None) -> Progress:
+    """The bar long commands show on stderr: what runs, k of n done, time remaining
+    (Rich is imported only when a command shows it)."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    return Progress(
+        "[progress.description]{task.description}",
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        transient=transient,
+        console=console or Console(stderr=True),
+    )
+
+
+def check_parent_folder(path: Path) -> None:
+    """StudyInputError unless the folder a file is to be written in exists."""
+    if not path.parent.is_dir():
+        raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
+
+
+@contextmanager
+def opened_database(db_url: str | None) -> Iterator[Engine]:
+    """The existing study database of `--db`, disposed of when the block ends."""
+    from db.migrate import open_database
+
+    engine = open_database(db_url, create=False)
+    try:
+        yield engine
+    finally:
+        engine.dispose()

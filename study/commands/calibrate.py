@@ -17,7 +17,7 @@ import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from study.commands.base import StudyCommand
+from study.commands.base import StudyCommand, check_parent_folder, json_option, out_dir_option
 from study.errors import StudyInputError
 
 _err = Console(stderr=True)
@@ -91,13 +91,7 @@ def run_calibration(
     show_default=True,
     help="Base model and recording contract.",
 )
-@click.option(
-    "--json",
-    "json_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Report: RMSE before/after, effects added, candidates rejected, residual tests.",
-)
+@json_option("Report: RMSE before/after, effects added, candidates rejected, residual tests.")
 @click.option(
     "--predictions",
     "pred_path",
@@ -105,13 +99,7 @@ def run_calibration(
     type=click.Path(dir_okay=False, path_type=Path),
     help="Held-out predictions CSV: t, f_ref, f_base, f_final.",
 )
-@click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for the residual figures (created if its parent exists).",
-)
+@out_dir_option("Folder for the residual figures (created if its parent exists).")
 @click.option(
     "--held-out",
     type=click.FloatRange(0.05, 0.5),
@@ -161,8 +149,7 @@ def calibrate(
     from teleop_core.estimation.recording import write_csv_atomically
 
     for path in (json_path, pred_path, out_dir):
-        if not path.parent.is_dir():
-            raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
+        check_parent_folder(path)
     calibrator = run_calibration(
         recording, model_name, held_out, max_effects, families, mat_columns
     )

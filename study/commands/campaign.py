@@ -7,9 +7,8 @@ from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-from study.commands.base import StudyGroup
+from study.commands.base import StudyGroup, progress_bar
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
@@ -40,7 +39,7 @@ def template() -> None:
               help="Run on this Dask scheduler's workers instead of a LocalCluster.")  # fmt: skip
 def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str | None) -> None:
     """Run CAMPAIGN.toml's units (skipping those already in --out) and write the results."""
-    from study.campaign.engine import open_client, run_pending
+    from study.campaign.engine import close_client, open_client, run_pending
     from study.campaign.spec import parse_campaign
     from study.campaign.store import CampaignDir
 
@@ -64,8 +63,7 @@ def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str 
             client = open_client(workers, scheduler)
         try:
             folder.create()
-            with Progress("[progress.description]{task.description}", BarColumn(),
-                          MofNCompleteColumn(), TimeRemainingColumn(), console=err) as bar:  # fmt: skip
+            with progress_bar(transient=False, console=err) as bar:
                 task = bar.add_task("units", total=total, completed=total - todo)
                 run_pending(
                     folder, client,
@@ -74,10 +72,7 @@ def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str 
                     on_unit=lambda _: bar.advance(task),
                 )  # fmt: skip
         finally:
-            cluster = client.cluster
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            close_client(client)
     folder.create()
     _write_outputs(folder)
 

@@ -9,7 +9,13 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from study.commands.base import StudyCommand, StudyGroup
+from study.commands.base import (
+    StudyCommand,
+    StudyGroup,
+    check_parent_folder,
+    json_option,
+    out_dir_option,
+)
 from study.errors import StudyInputError
 
 
@@ -19,20 +25,8 @@ def characterize() -> None:
 
 
 @characterize.command("notes", cls=StudyCommand)
-@click.option(
-    "--json",
-    "json_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Write the numbers here (keys translation and rotation).",
-)
-@click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Folder for the Bode and hysteresis figures and the compensation table.",
-)
+@json_option("Write the numbers here (keys translation and rotation).")
+@out_dir_option("Folder for the Bode and hysteresis figures and the compensation table.")
 @click.option(
     "--noise",
     type=click.FloatRange(min=0, max=0.5),
@@ -50,8 +44,7 @@ def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
     from teleop_core.notes.characterize import characterize_simulated
     from teleop_core.notes.params import DOFS, default_params
 
-    if not json_path.parent.is_dir():
-        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    check_parent_folder(json_path)
     if out_dir.exists() and not out_dir.is_dir():
         raise StudyInputError(f"--out {out_dir} is a file; expected a folder")
     results = []

@@ -9,7 +9,7 @@ import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-from study.commands.base import StudyGroup
+from study.commands.base import StudyGroup, out_dir_option
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
@@ -26,13 +26,7 @@ def estimator() -> None:
 
 @estimator.command("train")
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "--out",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Model folder to write (weights, standardisation, physics, EKF, summary.json).",
-)
+@out_dir_option("Model folder to write (weights, standardisation, physics, EKF, summary.json).")
 @click.option(
     "--window",
     type=click.IntRange(min=1),

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, db_option
+from study.commands.base import StudyCommand, db_option, opened_database, progress_bar
 from study.errors import StudyInputError
 
 
@@ -21,11 +21,8 @@ def import_cmd(trials_csv: Path, tlx_csv: Path | None, db_url: str | None) -> No
     """Import trial summaries (and NASA-TLX) collected elsewhere: all rows or none."""
     from study.protocol.exchange import import_data  # pandas: only when a command runs
 
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv)
-    finally:
-        engine.dispose()
     click.echo(f"imported {n_trials} trials and {n_tlx} questionnaires")
 
 
@@ -97,9 +94,6 @@ def export_cmd(
     Samples stream in bounded memory; --participant, --task, --condition, --trial,
     --from-s and --to-s restrict the samples (not the trials and TLX files).
     """
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
     from study.protocol.export import export_data
     from study.protocol.sample_export import SampleSelection
 
@@ -107,14 +101,7 @@ def export_cmd(
     engine = open_database(db_url, create=False)
     created = not out_dir.exists()
     try:
-        with Progress(
-            "[progress.description]{task.description}",
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeRemainingColumn(),
-            transient=True,
-            console=Console(stderr=True),
-        ) as bar:
+        with progress_bar() as bar:
             task = bar.add_task("exporting samples (trials)", total=None)
             written = export_data(
                 engine,

@@ -7,7 +7,13 @@ from pathlib import Path
 
 import click
 
-from study.commands.base import StudyCommand, StudyGroup
+from study.commands.base import (
+    StudyCommand,
+    StudyGroup,
+    check_parent_folder,
+    json_option,
+    out_dir_option,
+)
 from study.errors import StudyInputError
 
 
@@ -19,12 +25,9 @@ def identify() -> None:
 @identify.command("notes", cls=StudyCommand)
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--dof", type=click.Choice(["translation", "rotation"]), required=True)
-@click.option("--json", "json_path", required=True, type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Also draw the fit: a chirp's Bode plot (notes_identify_bode.png).",
+@json_option()
+@out_dir_option(
+    "Also draw the fit: a chirp's Bode plot (notes_identify_bode.png).", required=False
 )
 def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> None:
     """Fit Fig. 8's model to a chirp, or measure a clamped ramp, from RECORDING.csv.
@@ -36,8 +39,7 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
     from teleop_core.notes.recording import NotesRecording, NotesRecordingError
     from teleop_core.recording_checks import check_varies
 
-    if not json_path.parent.is_dir():
-        raise StudyInputError(f"folder {json_path.parent} for {json_path.name} does not exist")
+    check_parent_folder(json_path)
     if out_dir is not None and out_dir.exists() and not out_dir.is_dir():
         raise StudyInputError(f"--out {out_dir} is a file; expected a folder")
     rec = NotesRecording.from_csv(recording)

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, StudyGroup, db_option
+from study.commands.base import StudyCommand, StudyGroup, db_option, opened_database
 from study.errors import StudyInputError
 from study.protocol.design import TEMPLATE, parse_design
 from study.protocol.roster import add_participant, create_study, schedule
@@ -90,13 +90,10 @@ def participant() -> None:
 @db_option
 def participant_add(group: str, site: str | None, count: int, db_url: str | None) -> None:
     """Enrol the next participant(s) of a group: code, condition order and schedule."""
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         for _ in range(count):
             p = add_participant(engine, group, site)
             click.echo(f"{p.code} ({p.group}): conditions {' then '.join(p.condition_order)}")
-    finally:
-        engine.dispose()
 
 
 @participant.command("withdraw")
@@ -108,11 +105,8 @@ def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str 
     """Withdraw a participant: kept and marked, no more sessions, left out of the analysis."""
     from study.protocol.withdrawal import withdraw
 
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         withdraw(engine, code, reason, actor)
-    finally:
-        engine.dispose()
     click.echo(f"{code} withdrawn ({reason}); their data are kept and left out of the analysis")
 
 
@@ -125,11 +119,8 @@ def participant_note(code: str, text: str, actor: str | None, db_url: str | None
     """Set a participant's note (pseudonymous: no names or contact details)."""
     from study.protocol.withdrawal import set_note
 
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         set_note(engine, code, text, actor)
-    finally:
-        engine.dispose()
     click.echo(f"{code}: note kept")
 
 
@@ -138,11 +129,8 @@ def participant_note(code: str, text: str, actor: str | None, db_url: str | None
 @db_option
 def schedule_cmd(as_json: bool, db_url: str | None) -> None:
     """The plan and progress: groups filling up, each participant's blocks."""
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         plan = schedule(engine)
-    finally:
-        engine.dispose()
     if as_json:
         click.echo(json.dumps(plan, indent=2))
         return

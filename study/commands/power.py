@@ -6,10 +6,8 @@ import json
 from pathlib import Path
 
 import click
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-from study.commands.base import StudyCommand
+from study.commands.base import StudyCommand, out_dir_option, progress_bar
 from study.errors import StudyInputError
 from study.protocol.design import parse_design
 
@@ -55,12 +53,7 @@ def _effects(text: str, groups: list[str]) -> dict[str, float]:
 )
 @click.option("--n-sim", type=click.IntRange(min=10), default=500, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Write power.json and the power curve (PDF, PNG) here.",
-)
+@out_dir_option("Write power.json and the power curve (PDF, PNG) here.", required=False)
 def power(
     design_path: Path, effect: str, rho: float, n_sim: int, seed: int, out_dir: Path | None
 ) -> None:
@@ -71,10 +64,7 @@ def power(
         raise StudyInputError(f"design file {design_path} does not exist")
     design = parse_design(design_path.read_text(), str(design_path))
     effects = _effects(effect, list(design.groups))
-    columns = ("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn())
-    with Progress(
-        *columns, TimeRemainingColumn(), console=Console(stderr=True), transient=True
-    ) as bar:
+    with progress_bar() as bar:
         task = bar.add_task("simulated studies", total=n_sim * len(SCALES))
         curve = power_curve(design.groups, effects, rho, n_sim, seed, lambda: bar.advance(task))
     at_design = next(r for s, r in curve if s == 1.0)

@@ -8,13 +8,11 @@ import click
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from db.migrate import open_database
 from db.models.study import Participant
-from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from study.commands.base import StudyGroup, actor_option, db_option
+from study.commands.base import StudyGroup, actor_option, db_option, opened_database
 from study.errors import StudyInputError
 from study.protocol.roster import load_study
-from study.protocol.tlx import pair_order, raw_tlx, store_tlx, weighted_tlx
+from study.protocol.tlx import pair_order, response_scores, scored_tlx, store_tlx
 
 
 @click.group("tlx", cls=StudyGroup)
@@ -27,16 +25,13 @@ def tlx() -> None:
 @db_option
 def pairs_cmd(code: str, db_url: str | None) -> None:
     """The 15 comparisons in the order this participant is shown them."""
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         with Session(engine) as session:
             study, _ = load_study(session)
             if session.scalars(select(Participant).where(Participant.code == code)).first() is None:
                 raise StudyInputError(
                     f"unknown participant {code!r}; expected a code from `study schedule`"
                 )
-    finally:
-        engine.dispose()
     for k, (left, right) in enumerate(pair_order(study.seed, code), 1):
         click.echo(f"{k:>2}. {left} or {right}")
 
@@ -80,15 +75,12 @@ def enter_cmd(
 ) -> None:
     """Store a questionnaire for one task x condition block (or edit the stored one)."""
     chosen = [c.strip() for c in choices.split(",")] if choices else None
-    engine = open_database(db_url, create=False)
-    try:
+    with opened_database(db_url) as engine:
         response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
-    finally:
-        engine.dispose()
-    scores = f"raw TLX {raw_tlx(ratings):.1f}"
-    if response.w_mental is not None:
-        weights = {s: getattr(response, f"w_{s}") for s in TLX_SUBSCALES}
-        scores += f", weighted TLX {weighted_tlx(ratings, weights):.1f}"
+    _, raw, weighted = response_scores(response)
+    scores = f"raw TLX {raw:.1f}"
+    if weighted is not None:
+        scores += f", weighted TLX {weighted:.1f}"
     click.echo(f"{code} {task}/{condition}: {'stored' if new else 'updated'}; {scores}")
 
 
@@ -98,30 +90,12 @@ def enter_cmd(
 @db_option
 def show_cmd(code: str | None, as_json: bool, db_url: str | None) -> None:
     """Stored questionnaires with their raw and weighted scores."""
-    engine = open_database(db_url, create=False)
-    rows = []
-    try:
-        with Session(engine) as session:
-            query = select(TlxResponse, Participant.code).join(Participant)
-            if code:
-                query = query.where(Participant.code == code)
-            for response, pcode in session.execute(query.order_by(Participant.code)):
-                ratings = {s: getattr(response, s) for s in TLX_SUBSCALES}
-                weights = {s: getattr(response, f"w_{s}") for s in TLX_SUBSCALES}
-                rows.append(
-                    {
-                        "participant": pcode,
-                        "task": response.task,
-                        "condition": response.condition,
-                        **ratings,
-                        "tlx_raw": raw_tlx(ratings),
-                        "tlx_weighted": weighted_tlx(ratings, weights)
-                        if weights["mental"] is not None
-                        else None,
-                    }
-                )
-    finally:
-        engine.dispose()
+    with opened_database(db_url) as engine:
+        scored = scored_tlx(engine, code)
+    rows = [
+        {k: v for k, v in r.items() if k != "group"}
+        for r in sorted(scored, key=lambda r: r["participant"])
+    ]
     if as_json:
         click.echo(json.dumps(rows, indent=2))
         return

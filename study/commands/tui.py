@@ -9,13 +9,6 @@ import click
 from study.commands.base import StudyCommand, db_option
 
 
-def _load_estimator():
-    """The shipped estimator, imported when first needed (its module loads torch)."""
-    from study.protocol.default_estimator import load_estimator
-
-    return load_estimator()
-
-
 @click.command("tui", cls=StudyCommand)
 @click.option(
     "--figures-dir",
@@ -37,11 +30,11 @@ def tui(figures_dir: Path, pace: float, light: bool, db_url: str | None) -> None
     """The terminal app: overview, participants, sessions, NASA-TLX, analysis, calibration."""
     from db.migrate import open_database
     from study.tui import StudyServices, TuiSettings, make_app
-    from study.tui.services import calibrate_recording
+    from study.tui.services import calibrate_recording, load_shipped_estimator
 
     engine = open_database(db_url, create=False)
     try:
-        services = StudyServices(engine, _load_estimator, calibrate=calibrate_recording)
+        services = StudyServices(engine, load_shipped_estimator, calibrate=calibrate_recording)
         settings = TuiSettings(
             simulated_pace=pace,
             figures_dir=figures_dir,

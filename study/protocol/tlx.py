@@ -37,16 +37,20 @@ PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
 """The 15 pairs of subscales."""
 
 
+def _whole_number(value: object, top: int) -> bool:
+    """Whether `value` is a finite whole number from 0 to `top` (a bool is not one)."""
+    return (
+        not isinstance(value, bool)
+        and isinstance(value, int | float)
+        and math.isfinite(value)
+        and value == int(value)
+        and 0 <= value <= top
+    )
+
+
 def check_rating(subscale: str, value: object) -> int:
     """A rating on the scale, or StudyInputError naming it."""
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, int | float)
-        or not math.isfinite(value)
-        or value != int(value)
-        or not 0 <= value <= 100
-        or int(value) % 5
-    ):
+    if not _whole_number(value, 100) or int(value) % 5:
         raise StudyInputError(
             f"{subscale} rating {value!r} is off the scale; expected 0-100 in steps of 5"
         )
@@ -65,13 +69,7 @@ def check_weights(weights: Mapping[str, object]) -> dict[str, int]:
     out = {}
     for s in TLX_SUBSCALES:
         w = weights.get(s)
-        if (
-            isinstance(w, bool)
-            or not isinstance(w, int | float)
-            or not math.isfinite(w)
-            or w != int(w)
-            or not 0 <= w <= 5
-        ):
+        if not _whole_number(w, 5):
             raise StudyInputError(f"{s} weight {w!r}; expected a whole number of choices 0-5")
         out[s] = int(w)
     if sum(out.values()) != 15:
@@ -116,6 +114,39 @@ def raw_tlx(ratings: Mapping[str, int]) -> float:
 def weighted_tlx(ratings: Mapping[str, int], weights: Mapping[str, int]) -> float:
     """sum(weight x rating) / 15."""
     return sum(weights[s] * ratings[s] for s in TLX_SUBSCALES) / 15.0
+
+
+def response_scores(response: TlxResponse) -> tuple[dict[str, int], float, float | None]:
+    """A stored questionnaire's ratings, raw TLX and weighted TLX (None without the
+    pairwise comparisons): the one scorer `study tlx` and the analysis frames share."""
+    ratings = {s: getattr(response, s) for s in TLX_SUBSCALES}
+    weights = {s: getattr(response, f"w_{s}") for s in TLX_SUBSCALES}
+    weighted = weighted_tlx(ratings, weights) if weights["mental"] is not None else None
+    return ratings, raw_tlx(ratings), weighted
+
+
+def scored_tlx(engine: Engine, code: str | None = None) -> list[dict[str, Any]]:
+    """Every stored questionnaire (or one participant's), in the order they were stored:
+    participant, group, task, condition, the six ratings, tlx_raw and tlx_weighted."""
+    query = select(TlxResponse, Participant.code, Participant.group).join(Participant)
+    if code:
+        query = query.where(Participant.code == code)
+    rows = []
+    with Session(engine) as session:
+        for response, pcode, group in session.execute(query.order_by(TlxResponse.id)):
+            ratings, raw, weighted = response_scores(response)
+            rows.append(
+                {
+                    "participant": pcode,
+                    "group": group,
+                    "task": response.task,
+                    "condition": response.condition,
+                    **ratings,
+                    "tlx_raw": raw,
+                    "tlx_weighted": weighted,
+                }
+            )
+    return rows
 
 
 def store_tlx(

@@ -10,6 +10,9 @@ personal data: the codes are the only identity the database holds).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
@@ -21,6 +24,8 @@ from study.protocol.actor import current_actor
 from study.protocol.roster import find_participant, load_study
 
 MAX_TEXT_CHARS = 500
+Change = tuple[Participant, Callable[[str, "str | None", str, str], None]]
+"""A participant being changed and audit(field, old, new, reason), which logs a change."""
 
 
 def _check_text(what: str, text: str) -> str:
@@ -32,13 +37,27 @@ def _check_text(what: str, text: str) -> str:
     return value
 
 
-def withdraw(engine: Engine, code: str, reason: str, actor: str | None = None) -> None:
-    """Mark `code` withdrawn with `reason`; one-line errors for an unknown or withdrawn one."""
-    reason = _check_text("withdrawal reason", reason)
+@contextmanager
+def _audited_change(engine: Engine, code: str, actor: str | None) -> Iterator[Change]:
+    """One transaction on participant `code` (a one-line error if unknown) whose audit
+    rows name `actor` (`current_actor` by default)."""
     who = current_actor(actor)
     with Session(engine) as session, session.begin():
         study, _ = load_study(session)
         p = find_participant(session, study, code)
+
+        def audit(field: str, old: str | None, new: str, reason: str) -> None:
+            session.add(AuditEntry(entity="participant", entity_id=p.id, field=field,
+                                   old_value=old, new_value=new, reason=reason,
+                                   actor=who))  # fmt: skip
+
+        yield p, audit
+
+
+def withdraw(engine: Engine, code: str, reason: str, actor: str | None = None) -> None:
+    """Mark `code` withdrawn with `reason`; one-line errors for an unknown or withdrawn one."""
+    reason = _check_text("withdrawal reason", reason)
+    with _audited_change(engine, code, actor) as (p, audit):
         if p.withdrawn_at is not None:
             raise StudyInputError(
                 f"participant {code} withdrew on {p.withdrawn_at:%Y-%m-%d} "
@@ -46,21 +65,14 @@ def withdraw(engine: Engine, code: str, reason: str, actor: str | None = None) -
             )
         p.withdrawn_at = utcnow()
         p.withdrawal_reason = reason
-        session.add(AuditEntry(entity="participant", entity_id=p.id, field="status",
-                               old_value="enrolled", new_value="withdrawn", reason=reason,
-                               actor=who))  # fmt: skip
+        audit("status", "enrolled", "withdrawn", reason)
 
 
 def set_note(engine: Engine, code: str, note: str, actor: str | None = None) -> None:
     """Replace `code`'s note (the old one goes into the audit log)."""
     note = _check_text("note", note)
-    who = current_actor(actor)
-    with Session(engine) as session, session.begin():
-        study, _ = load_study(session)
-        p = find_participant(session, study, code)
-        session.add(AuditEntry(entity="participant", entity_id=p.id, field="note",
-                               old_value=p.note, new_value=note, reason="note edited",
-                               actor=who))  # fmt: skip
+    with _audited_change(engine, code, actor) as (p, audit):
+        audit("note", p.note, note, "note edited")
         p.note = note
 
 
@@ -69,14 +81,8 @@ CHECKLIST = "consent confirmed; device checked"
 
 def record_checklist(engine: Engine, code: str, actor: str | None = None) -> None:
     """The operator confirmed the session checklist before `code`'s session: an audit row."""
-    who = current_actor(actor)
-    with Session(engine) as session, session.begin():
-        study, _ = load_study(session)
-        p = find_participant(session, study, code)
-        session.add(AuditEntry(entity="participant", entity_id=p.id, field="session_checklist",
-                               old_value=None, new_value=CHECKLIST,
-                               reason="confirmed before the session's first trial",
-                               actor=who))  # fmt: skip
+    with _audited_change(engine, code, actor) as (_, audit):
+        audit("session_checklist", None, CHECKLIST, "confirmed before the session's first trial")
 
 
 def withdrawn_participants(engine: Engine) -> dict[str, str]:

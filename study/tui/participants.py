@@ -103,7 +103,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
                 " -> ".join(r["condition_order"]),
                 f"{r['trials_completed']}/{r['trials_planned']}",
                 (f"withdrawn: {r['withdrawn']}" if r.get("withdrawn")
-                 else nxt.describe() if nxt else "done"),  # fmt: skip
+                 else nxt.describe() if nxt else "done"),
             )
             if wanted and not any(wanted in str(cell).lower() for cell in row):
                 continue

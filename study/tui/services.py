@@ -203,3 +203,11 @@ def calibrate_recording(
         progress=lambda done, total, what: progress(f"calibrating: {what} ({done}/{total})"),
     )
     return calibrator.report()
+
+
+def load_shipped_estimator() -> ForceEstimator:
+    """The estimator shipped with haptic-study, imported when first needed (its module
+    loads torch); `study tui` passes this into `make_app`."""
+    from study.protocol.default_estimator import load_estimator
+
+    return load_estimator()

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,8 +21,8 @@ from study.analysis.stats import (
     wilcoxon_signed_rank,
 )
 from study.cli import main
-from study.protocol.design import TEMPLATE
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_COLUMNS
+from tests.study.conftest import init_study, modules_loaded
 
 
 def _long(values: dict[str, tuple[list[float], list[float]]], measure: str = "m") -> pd.DataFrame:
@@ -117,13 +115,9 @@ def test_holm_equals_pingouin(p: list[float]) -> None:
 
 def test_study_analyze_imports_neither_pingouin_nor_plotting() -> None:
     # a fresh process (issue 21): pingouin pulled in seaborn, matplotlib and xarray, 2.3 s
-    code = (
-        "import sys, study.commands.analyze, study.analysis.report, study.analysis.frames; "
-        "print(sorted(m for m in ('pingouin', 'matplotlib', 'seaborn', 'statsmodels.formula.api')"
-        " if m in sys.modules))"
-    )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert done.stdout.strip() == "[]"
+    code = "import study.commands.analyze, study.analysis.report, study.analysis.frames"
+    heavy = ("pingouin", "matplotlib", "seaborn", "statsmodels.formula.api")
+    assert modules_loaded(code, heavy) == []
 
 
 def test_participants_missing_a_condition_are_excluded_and_said_so() -> None:
@@ -176,9 +170,7 @@ def test_mixed_model_condition_effect_is_the_mean_paired_difference() -> None:
 def test_study_analyze_writes_the_json_contract(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    db = str(tmp_path / "s.db")
-    (tmp_path / "d.toml").write_text(TEMPLATE)
-    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
+    db = init_study(tmp_path)
     rng = np.random.default_rng(0)
     trials, tlx = [], []
     for k, group in enumerate(["novice"] * 5 + ["expert"] * 5):

@@ -68,6 +68,12 @@ def imp(csv: bytes, expect: str, id: str, before: list[list[str]] | None = None)
     return Case(id, ["import", "--trials", "t.csv"], expect, {"t.csv": csv}, before or [])
 
 
+def imp_tlx(tlx_row: str, expect: str, id: str) -> Case:
+    """`study import` of a good trial and a questionnaire row with one bad value."""
+    return Case(id, ["import", "--trials", "t.csv", "--tlx", "x.csv"], expect,
+                {"t.csv": trials(TRIAL_ROW), "x.csv": tlx(tlx_row)})  # fmt: skip
+
+
 def init(toml: bytes, expect: str, id: str) -> Case:
     return Case(id, ["init", "--design", "d2.toml", "--db", "new.db"], expect, {"d2.toml": toml})
 
@@ -88,15 +94,12 @@ CASES = [
          [ENTER_UNRUN]),
     imp(b"", "t.csv is empty", "empty csv"),
     imp(trials(), "t.csv has a header but no rows", "header only"),
-    Case("rating inf", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
-         "column mental: 'inf' is not a plain decimal",
-         {"t.csv": trials(TRIAL_ROW), "x.csv": tlx(TLX_ROW.replace(",70,", ",inf,"))}),
-    Case("rating 1e400", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
-         "mental rating inf is off the scale",
-         {"t.csv": trials(TRIAL_ROW), "x.csv": tlx(TLX_ROW.replace(",70,", ",1e400,"))}),
-    Case("weight 1e400", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
-         "mental weight inf; expected a whole number of choices 0-5",
-         {"t.csv": trials(TRIAL_ROW), "x.csv": tlx(TLX_ROW.replace(",5,0,", ",1e400,0,"))}),
+    imp_tlx(TLX_ROW.replace(",70,", ",inf,"),
+            "column mental: 'inf' is not a plain decimal", "rating inf"),
+    imp_tlx(TLX_ROW.replace(",70,", ",1e400,"),
+            "mental rating inf is off the scale", "rating 1e400"),
+    imp_tlx(TLX_ROW.replace(",5,0,", ",1e400,0,"),
+            "mental weight inf; expected a whole number of choices 0-5", "weight 1e400"),
     imp(trials(TRIAL_ROW.replace(",1,31.5", ",²,31.5")), "'²'; expected a whole number from 1 to 3",
         "trial superscript two"),
     imp(trials(TRIAL_ROW.replace(",1,31.5", ",99999999999999999999999,31.5")),
@@ -137,12 +140,10 @@ CASES = [
     Case("pace nan", ["run", "--participant", "P001", "--pace", "nan"],
          "--pace nan; expected a finite number > 0"),
     Case("pace inf", ["run", "--all", "--pace", "inf"], "--pace inf; expected a finite number"),
-    Case("tlx task banana", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
-         "column task: 'banana'; expected one of lcca",
-         {"t.csv": trials(TRIAL_ROW), "x.csv": tlx(TLX_ROW.replace("lcca,VO", "banana,VO"))}),
-    Case("tlx condition XX", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
-         "column condition: 'XX'; expected one of VO, HV",
-         {"t.csv": trials(TRIAL_ROW), "x.csv": tlx(TLX_ROW.replace("lcca,VO", "lcca,XX"))}),
+    imp_tlx(TLX_ROW.replace("lcca,VO", "banana,VO"),
+            "column task: 'banana'; expected one of lcca", "tlx task banana"),
+    imp_tlx(TLX_ROW.replace("lcca,VO", "lcca,XX"),
+            "column condition: 'XX'; expected one of VO, HV", "tlx condition XX"),
     # 8: a bad --port leaves no trial behind
     Case("bad port", ["run", "--participant", "P001", "--driver", "hardware", "--port",
                       "/dev/no-such-port"], "--port /dev/no-such-port: cannot open"),

@@ -86,7 +86,8 @@ def _cluster_run(text: str, root: Path, workers: int) -> bytes:
     folder = CampaignDir.open(root, spec, text)
     folder.create()
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, host="127.0.0.1") as cluster, Client(cluster) as c:
+                      dashboard_address=None, host="127.0.0.1") as cluster, \
+            Client(cluster) as c:  # fmt: skip
         assert len(c.scheduler_info()["workers"]) == workers
         assert run_pending(folder, c) == len(spec.units())
     folder.write_tables()

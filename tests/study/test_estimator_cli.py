@@ -10,6 +10,7 @@ import pytest
 
 from study.cli import main
 from teleop_core.estimation.estimator import MODEL_FILES
+from tests.study.conftest import assert_figures, one_error_line
 from tests.teleop_core.conftest import simulate_recording
 
 
@@ -70,13 +71,6 @@ def test_run_writes_one_estimate_per_full_window(
     assert "RMSE against f_ref" in capsys.readouterr().out
 
 
-def _one_error_line(capsys: pytest.CaptureFixture[str], args: list[str]) -> str:
-    assert main(args) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    return err[0]
-
-
 def test_bad_recording_is_one_line_and_writes_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], recording_csv: Path
 ) -> None:
@@ -84,7 +78,7 @@ def test_bad_recording_is_one_line_and_writes_nothing(
     lines = recording_csv.read_text().splitlines()
     lines[40] = lines[40].replace(lines[40].split(",")[1], "oops", 1)
     bad.write_text("\n".join(lines) + "\n")
-    line = _one_error_line(capsys, ["estimator", "train", str(bad), "--out", str(tmp_path / "m")])
+    line = one_error_line(capsys, ["estimator", "train", str(bad), "--out", str(tmp_path / "m")])
     assert "line 41, column 'iq': 'oops' is not a finite number" in line
     assert not (tmp_path / "m").exists()
 
@@ -92,7 +86,7 @@ def test_bad_recording_is_one_line_and_writes_nothing(
 def test_existing_model_folder_is_not_overwritten_without_force(
     model_dir: Path, recording_csv: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    line = _one_error_line(
+    line = one_error_line(
         capsys, ["estimator", "train", str(recording_csv), "--out", str(model_dir)]
     )
     assert "exists and is not empty" in line
@@ -102,7 +96,7 @@ def test_run_with_a_missing_model_is_one_line(
     tmp_path: Path, recording_csv: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "pred.csv"
-    line = _one_error_line(
+    line = one_error_line(
         capsys, ["estimator", "run", str(tmp_path / "none"), str(recording_csv), "--out", str(out)]
     )
     assert "model folder" in line and "does not exist" in line
@@ -133,10 +127,10 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
     }
     assert set(report["window_sweep"]) == {"2", "5"}
     assert report["timing"]["median_ms"] > 0
-    for figure in (
+    assert_figures(
+        tmp_path / "fig",
         "table_i_velocity.png",
         "table_ii_fig6.png",
         "table_iii_fig9.png",
         "fig8_window.png",
-    ):
-        assert (tmp_path / "fig" / figure).stat().st_size > 10_000
+    )

@@ -16,6 +16,7 @@ from pypdf import PdfReader
 
 from study.cli import main
 from study.protocol.exchange import TRIAL_COLUMNS
+from tests.study.conftest import init_study
 
 
 @pytest.fixture(scope="module")
@@ -120,11 +121,7 @@ def test_mixed_database_reports_the_mix_and_driver_restricts(
 def test_imported_database_carries_no_simulated_label(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from study.protocol.design import TEMPLATE
-
-    db = str(tmp_path / "s.db")
-    (tmp_path / "d.toml").write_text(TEMPLATE)
-    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
+    db = init_study(tmp_path)
     codes = [f"M{k:02d}" for k in range(9)]
     assert main(["import", "--trials", str(_measured_csv(tmp_path / "t.csv", codes)),
                  "--db", db]) == 0  # fmt: skip

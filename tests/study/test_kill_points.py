@@ -36,8 +36,8 @@ from db.engine import make_engine
 from db.models.study import Participant
 from db.models.trial import Sample, Trial
 from study.cli import main
-from study.protocol.lease import process_alive
 from tests.study import kill_children
+from tests.study.conftest import assert_workers_end, samples_of_trial
 
 DESIGN = """\
 name = "kill points"
@@ -77,10 +77,7 @@ def _trials(url: str) -> dict[int, dict]:
                 Trial.trial_index,
                 Trial.status,
                 Trial.summary,
-                select(func.count())
-                .select_from(Sample)
-                .where(Sample.trial_id == Trial.id)
-                .scalar_subquery(),
+                samples_of_trial(),
                 select(func.max(Sample.t_s)).where(Sample.trial_id == Trial.id).scalar_subquery(),
             )
             .join(Participant, Trial.participant_id == Participant.id)
@@ -177,10 +174,7 @@ def test_the_parent_of_jobs_2_killed_at_random_points_loses_nothing_completed(
         finally:
             if parent.is_alive():
                 parent.kill()
-        deadline = time.monotonic() + 60
-        while any(process_alive(w) for w in workers) and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert not any(process_alive(w) for w in workers), "workers outlived their parent"
+        assert_workers_end(workers, 60)
         stopped = _trials(url)
         _check_invariants(stopped, before)
         # samples lost: none of those stored at the kill (the workers were not killed;

@@ -26,7 +26,7 @@ from db.base import utcnow
 from db.engine import make_engine
 from db.models.audit import AuditEntry
 from db.models.lease import SessionLease
-from db.models.trial import Sample, Trial
+from db.models.trial import Trial
 from study.cli import main
 from study.protocol.actor import current_actor
 from study.protocol.design import parse_design
@@ -38,6 +38,7 @@ from study.protocol.lease import (
     process_alive,
 )
 from study.protocol.roster import add_participant, create_study
+from tests.study.conftest import assert_workers_end, init_study, samples_of_trial
 
 DESIGN = """\
 name = "lease test"
@@ -108,10 +109,7 @@ def _trials(url: str) -> list[tuple[int, int, str, int, int]]:
                 Trial.participant_id * 100 + Trial.block_index * 10 + Trial.trial_index,
                 Trial.status,
                 Trial.attempt,
-                select(func.count())
-                .select_from(Sample)
-                .where(Sample.trial_id == Trial.id)
-                .scalar_subquery(),
+                samples_of_trial(),
             ).order_by(Trial.id)
         ).all()
     engine.dispose()
@@ -194,11 +192,7 @@ def _children(pid: int) -> list[int]:
 def test_jobs_workers_end_with_their_parent_and_no_slot_completes_twice(
     tmp_path: Path,
 ) -> None:
-    db = str(tmp_path / "s.db")
-    (tmp_path / "d.toml").write_text(DESIGN)
-    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
-    for _ in range(2):
-        assert main(["participant", "add", "--group", "novice", "--db", db]) == 0
+    db = init_study(tmp_path, DESIGN, groups=("novice", "novice"))
     url = f"sqlite:///{db}"
     parent = subprocess.Popen(
         [*CLI, "run", "--all", "--jobs", "2", "--pace", "5", "--db", db],
@@ -217,10 +211,7 @@ def test_jobs_workers_end_with_their_parent_and_no_slot_completes_twice(
     finally:
         if parent.poll() is None:
             parent.kill()
-    deadline = time.monotonic() + 30
-    while any(process_alive(w) for w in workers) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    assert not any(process_alive(w) for w in workers), "workers outlived their parent"
+    assert_workers_end(workers, 30)
     stopped = _trials(url)
     # each worker marked its own trial interrupted on the way out, and writes no more
     assert not [t for t in stopped if t[2] == "running"]

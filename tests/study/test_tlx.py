@@ -23,6 +23,7 @@ from study.protocol.tlx import (
     weighted_tlx,
     weights_from_choices,
 )
+from tests.study.conftest import init_study
 
 RATINGS = {
     "mental": 70,
@@ -110,10 +111,7 @@ def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
 def test_cli_refuses_an_off_scale_rating_and_stores_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    db = str(tmp_path / "s.db")
-    (tmp_path / "d.toml").write_text(TEMPLATE)
-    assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
-    assert main(["participant", "add", "--group", "expert", "--db", db]) == 0
+    db = init_study(tmp_path, groups=("expert",))
     args = ["tlx", "enter", "--participant", "P001", "--task", "lcca", "--condition", "VO"]
     args += [f"--{k}={v}" for k, v in {**RATINGS, "mental": 57}.items()]
     capsys.readouterr()
@@ -124,3 +122,44 @@ def test_cli_refuses_an_off_scale_rating_and_stores_nothing(
     ]
     assert main(["tlx", "show", "--json", "--db", db]) == 0
     assert capsys.readouterr().out.strip() == "[]"
+
+
+def test_show_and_the_analysis_frame_give_the_hand_computed_scores(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One scorer behind `study tlx show` and `frames.tlx_frame`: raw 45, weighted 56."""
+    import json
+    import math
+
+    from study.analysis.frames import tlx_frame
+
+    db = init_study(tmp_path, groups=("expert", "expert"))
+    # pick the subscale WEIGHTS ranks higher in every pair: the tallies are WEIGHTS
+    chosen = [max(pair, key=WEIGHTS.__getitem__) for pair in pair_order(1, "P001")]
+    assert weights_from_choices(pair_order(1, "P001"), chosen) == WEIGHTS
+    ratings = [f"--{k}={v}" for k, v in RATINGS.items()]
+    block = ["--task", "lcca", "--condition", "VO", "--reason", "paper form", "--db", db]
+    assert main(["tlx", "enter", "--participant", "P001", *block, *ratings,
+                 "--choices", ",".join(chosen)]) == 0  # fmt: skip
+    assert main(["tlx", "enter", "--participant", "P002", *block, *ratings]) == 0
+    assert capsys.readouterr().out.splitlines()[-2:] == [
+        "P001 lcca/VO: stored; raw TLX 45.0, weighted TLX 56.0",
+        "P002 lcca/VO: stored; raw TLX 45.0",
+    ]
+    assert main(["tlx", "show", "--json", "--db", db]) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert [(r["participant"], r["tlx_raw"], r["tlx_weighted"]) for r in shown] == [
+        ("P001", pytest.approx(45.0), pytest.approx(56.0)),
+        ("P002", pytest.approx(45.0), None),
+    ]
+    assert main(["tlx", "show", "--participant", "P001", "--db", db]) == 0
+    assert capsys.readouterr().out.strip() == "P001 lcca/VO: raw 45.0, weighted 56.0"
+    engine = open_database("sqlite:///" + db, create=False)
+    try:
+        frame = tlx_frame(engine).set_index("participant")
+    finally:
+        engine.dispose()
+    assert frame.loc["P001", "tlx_raw"] == pytest.approx(45.0)
+    assert frame.loc["P001", "tlx_weighted"] == pytest.approx(56.0)
+    assert math.isnan(frame.loc["P002", "tlx_weighted"])
+    assert frame.loc["P001", "tlx_mental"] == 70.0

@@ -17,8 +17,8 @@ from db.models.study import Participant
 from study.cli import main
 from study.protocol.design import parse_design
 from study.protocol.roster import create_study
-from tests.study.tui.conftest import DESIGN
-from tests.study.tui.test_screens import PEAKS, _store_trials
+from tests.study.conftest import one_error_line
+from tests.study.tui.conftest import DESIGN, PEAKS, store_trials
 
 
 @pytest.fixture
@@ -31,16 +31,9 @@ def db(tmp_path: Path) -> str:
     create_study(engine, parse_design(DESIGN), DESIGN)
     add_participant(engine, "novice")
     add_participant(engine, "expert")
-    _store_trials(engine)
+    store_trials(engine)
     engine.dispose()
     return url
-
-
-def _line(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    return err[0]
 
 
 def test_withdrawal_is_kept_audited_and_left_out_of_the_analysis(
@@ -81,21 +74,22 @@ def test_withdrawal_is_kept_audited_and_left_out_of_the_analysis(
     trials = pd.read_csv(exported / "trials.csv")
     assert (trials["participant"] == code).sum() == 2
     # no more sessions for them
-    line = _line(capsys, ["run", "--participant", code, "--db", db])
+    line = one_error_line(capsys, ["run", "--participant", code, "--db", db])
     assert line.endswith(f"participant {code} withdrew (felt unwell); expected a participant "
                          "still in the study")  # fmt: skip
     engine.dispose()
 
 
 def test_bad_withdrawals_are_one_line(db: str, capsys: pytest.CaptureFixture[str]) -> None:
-    assert "P999" in _line(capsys, ["participant", "withdraw", "P999", "--reason", "x",
+    assert "P999" in one_error_line(capsys, ["participant", "withdraw", "P999", "--reason", "x",
                                     "--db", db])  # fmt: skip
-    assert "expected 1-500 characters" in _line(
+    assert "expected 1-500 characters" in one_error_line(
         capsys, ["participant", "withdraw", "P001", "--reason", "  ", "--db", db]
     )
     assert main(["participant", "withdraw", "P001", "--reason", "moved away", "--db", db]) == 0
     capsys.readouterr()
-    line = _line(capsys, ["participant", "withdraw", "P001", "--reason", "again", "--db", db])
+    again = ["participant", "withdraw", "P001", "--reason", "again", "--db", db]
+    line = one_error_line(capsys, again)
     assert "P001 withdrew on" in line and "(moved away)" in line
 
 

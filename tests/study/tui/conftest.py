@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
+from contextlib import asynccontextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 from sqlalchemy import Engine
@@ -81,6 +83,71 @@ async def wait_for(pilot, condition: Callable[[], bool], timeout_s: float = 60.0
 
 async def loaded(pilot) -> None:
     await wait_for(pilot, lambda: pilot.app.ready and pilot.app.roster is not None)
+
+
+@asynccontextmanager
+async def on_screen(app: StudyApp, key: str) -> AsyncIterator[Any]:
+    """`app` headless on an 80 x 24 terminal, loaded, with the screen of `key` open: the
+    pilot."""
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press(key)
+        yield pilot
+
+
+async def analysed(pilot) -> Any:
+    """Open the analysis screen (f5), run the analysis (r) and wait for its result;
+    return the analysis pane."""
+    await loaded(pilot)
+    await pilot.press("f5", "r")
+    pane = pilot.app.query_one("#analysis-pane")
+    await wait_for(pilot, lambda: pane.result is not None)
+    return pane
+
+
+PEAKS = {  # (group, condition) -> peak proximal force of each participant's trial, N
+    ("novice", "VO"): (1.0, 1.2, 1.4), ("novice", "HV"): (0.5, 0.6, 0.7),
+    ("expert", "VO"): (0.8, 0.9, 1.0), ("expert", "HV"): (0.4, 0.5, 0.9),
+}  # fmt: skip
+
+
+def store_trials(engine: Engine) -> None:
+    """Three participants per group with one completed trial per condition (and a few
+    samples each, which the force-trace figure draws)."""
+    from sqlalchemy import select
+    from sqlalchemy.orm import Session
+
+    from db.models.study import Participant
+    from db.models.trial import Trial
+    from db.samples import SampleWriter
+
+    for _ in range(2):
+        add_participant(engine, "novice")
+        add_participant(engine, "expert")
+    with Session(engine) as session:
+        people = session.scalars(select(Participant).order_by(Participant.code)).all()
+        counts = dict.fromkeys(PEAKS, 0)
+        for p in people:
+            for block in p.blocks:
+                k = counts[(p.group, block.condition)]
+                counts[(p.group, block.condition)] += 1
+                peak = PEAKS[(p.group, block.condition)][k]
+                session.add(Trial(
+                    participant_id=p.id, block_id=block.id, task="lcca",
+                    condition=block.condition, block_index=block.block_index, trial_index=0,
+                    status="completed", completion_time_s=20.0 + 10 * peak,
+                    success=True, driver="simulated",
+                    measure_values={"peak_proximal_force_n": peak,
+                                    "peak_distal_force_n": peak / 2, "wall_contacts": 0},
+                ))  # fmt: skip
+        session.commit()
+        ids = session.scalars(select(Trial.id)).all()
+    for trial_id in ids:
+        with SampleWriter(engine, trial_id) as out:
+            force = [0.1, 0.2]
+            out.extend({"t_s": [0.0, 0.01], "proximal_force_n": force,
+                        "proximal_force_est_n": force, "distal_force_n": [0.0, 0.1]})  # fmt: skip
+
 
 
 def complete_block(engine: Engine, code: str, task: str, condition: str) -> None:

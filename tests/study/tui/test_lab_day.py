@@ -11,7 +11,7 @@ from textual.widgets import Input, Select, Static
 from db.models.study import Participant
 from study.protocol.roster import add_participant
 from study.tui.confirm import Confirm
-from tests.study.tui.conftest import loaded, wait_for
+from tests.study.tui.conftest import analysed, on_screen, store_trials, wait_for
 
 pytestmark = pytest.mark.asyncio
 
@@ -24,9 +24,7 @@ def _count(engine: Engine, group: str) -> int:
 
 async def test_a_digit_in_a_focused_select_does_not_leave_the_form(make_test_app) -> None:
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
+    async with on_screen(app, "f4") as pilot:
         pane = app.query_one("#tlx-pane")
         pane.query(Select).first().focus()
         await pilot.press("5")
@@ -39,9 +37,7 @@ async def test_a_digit_in_a_focused_select_does_not_leave_the_form(make_test_app
 
 async def test_ctrl_e_exports_from_inside_the_folder_field(make_test_app, tmp_path) -> None:
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f5")
+    async with on_screen(app, "f5") as pilot:
         field = app.query_one("#out-dir", Input)
         field.focus()
         field.value = str(tmp_path / "figs")
@@ -56,9 +52,7 @@ async def test_ctrl_e_exports_from_inside_the_folder_field(make_test_app, tmp_pa
 
 async def test_question_mark_shows_and_hides_the_keys(make_test_app) -> None:
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f2")
+    async with on_screen(app, "f2") as pilot:
         app.query_one("#people").focus()
         await pilot.press("question_mark")
         assert len(app.screen.query("HelpPanel")) == 1
@@ -72,9 +66,7 @@ async def test_enrolling_past_a_groups_target_is_asked_first(
 ) -> None:
     add_participant(study_engine, "novice")  # DESIGN's novice target is 2: now full
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f2")
+    async with on_screen(app, "f2") as pilot:
         pane = app.query_one("#participants-pane")
         await pilot.press("a")  # novice, the first group, is preselected
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
@@ -97,15 +89,10 @@ async def test_analysis_prints_p_as_apa_labels_effects_and_shows_notes_and_anova
 
     from textual.widgets import DataTable
 
-    from tests.study.tui.test_screens import _store_trials
-
-    _store_trials(study_engine)  # 3 novices, 3 experts, one trial per condition each
+    store_trials(study_engine)  # 3 novices, 3 experts, one trial per condition each
     app = make_test_app()
     async with app.run_test(size=(100, 30)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f5", "r")
-        pane = app.query_one("#analysis-pane")
-        await wait_for(pilot, lambda: pane.result is not None)
+        await analysed(pilot)
         table = app.query_one("#comparisons", DataTable)
         rows = [table.get_row_at(k) for k in range(table.row_count)]
         for row in rows:
@@ -161,9 +148,7 @@ async def test_withdrawing_from_the_list_asks_why_and_marks_the_row(
     from study.tui.confirm import ReasonScreen
 
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f2")
+    async with on_screen(app, "f2") as pilot:
         table = app.query_one("#people", DataTable)
         table.focus()
         table.move_cursor(row=1)  # P002
@@ -190,15 +175,10 @@ async def test_withdrawing_from_the_list_asks_why_and_marks_the_row(
 async def test_the_chart_follows_a_resize_and_the_form_opens_on_its_first_rating(
     make_test_app, study_engine: Engine
 ) -> None:
-    from tests.study.tui.test_screens import _store_trials
-
-    _store_trials(study_engine)
+    store_trials(study_engine)
     app = make_test_app()
     async with app.run_test(size=(120, 30)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f5", "r")
-        pane = app.query_one("#analysis-pane")
-        await wait_for(pilot, lambda: pane.result is not None)
+        pane = await analysed(pilot)
         chart = app.query_one("#chart", Static)
         await wait_for(pilot, lambda: "novice" in str(chart.render()), 10)
 
@@ -224,9 +204,7 @@ async def test_a_finished_participant_leads_to_the_next_one(
     for condition in ("VO", "HV"):  # P001's whole schedule: one trial per block
         complete_block(study_engine, "P001", "lcca", condition)
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f3")
+    async with on_screen(app, "f3") as pilot:
         pane = app.query_one("#run-pane")
         pane.select_participant("P001")
         await pilot.pause()
@@ -244,9 +222,7 @@ async def test_the_participant_list_can_be_searched(make_test_app, study_engine:
 
     add_participant(study_engine, "novice")
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f2")
+    async with on_screen(app, "f2") as pilot:
         table = app.query_one("#people", DataTable)
         await wait_for(pilot, lambda: table.row_count == 3)
         app.query_one("#filter", Input).focus()
@@ -264,9 +240,7 @@ async def test_tab_into_the_folder_field_and_a_key_does_not_replace_the_path(
     make_test_app, tmp_path
 ) -> None:
     app = make_test_app(figures_dir=tmp_path / "figs")
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f5")
+    async with on_screen(app, "f5") as pilot:
         field = app.query_one("#out-dir", Input)
         while app.focused is not field:
             await pilot.press("tab")

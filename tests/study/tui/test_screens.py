@@ -15,13 +15,17 @@ from db.models.audit import AuditEntry
 from db.models.calibration import Calibration
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES
-from db.models.trial import Trial
-from db.samples import SampleWriter
-from study.protocol.roster import add_participant
 from study.protocol.tlx import load_tlx, store_tlx
 from study.tui.services import calibrate_recording
 from study.tui.tlx_pane import PairChoice, TlxPane
-from tests.study.tui.conftest import complete_block, loaded, wait_for
+from tests.study.tui.conftest import (
+    analysed,
+    complete_block,
+    loaded,
+    on_screen,
+    store_trials,
+    wait_for,
+)
 
 pytestmark = pytest.mark.asyncio
 
@@ -52,9 +56,7 @@ async def test_overview_shows_groups_sessions_and_what_is_next(make_test_app) ->
 
 async def test_add_participant_from_the_keyboard(make_test_app, study_engine) -> None:
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f2")
+    async with on_screen(app, "f2") as pilot:
         await pilot.press("a")  # the first group, novice, is preselected
         table = app.query_one("#people", DataTable)
         await wait_for(pilot, lambda: table.row_count == 3)
@@ -161,54 +163,14 @@ async def test_editing_a_stored_tlx_needs_a_reason_and_is_audited(
         assert (entry.old_value, entry.new_value, entry.reason) == ("55", "70", "typo")
 
 
-PEAKS = {  # (group, condition) -> peak proximal force of each participant's trial, N
-    ("novice", "VO"): (1.0, 1.2, 1.4), ("novice", "HV"): (0.5, 0.6, 0.7),
-    ("expert", "VO"): (0.8, 0.9, 1.0), ("expert", "HV"): (0.4, 0.5, 0.9),
-}  # fmt: skip
-
-
-def _store_trials(engine) -> None:
-    """Three participants per group with one completed trial per condition (and a few
-    samples each, which the force-trace figure draws)."""
-    for _ in range(2):
-        add_participant(engine, "novice")
-        add_participant(engine, "expert")
-    with Session(engine) as session:
-        people = session.scalars(select(Participant).order_by(Participant.code)).all()
-        counts = dict.fromkeys(PEAKS, 0)
-        for p in people:
-            for block in p.blocks:
-                k = counts[(p.group, block.condition)]
-                counts[(p.group, block.condition)] += 1
-                peak = PEAKS[(p.group, block.condition)][k]
-                session.add(Trial(
-                    participant_id=p.id, block_id=block.id, task="lcca",
-                    condition=block.condition, block_index=block.block_index, trial_index=0,
-                    status="completed", completion_time_s=20.0 + 10 * peak,
-                    success=True, driver="simulated",
-                    measure_values={"peak_proximal_force_n": peak,
-                                    "peak_distal_force_n": peak / 2, "wall_contacts": 0},
-                ))  # fmt: skip
-        session.commit()
-        ids = session.scalars(select(Trial.id)).all()
-    for trial_id in ids:
-        with SampleWriter(engine, trial_id) as out:
-            force = [0.1, 0.2]
-            out.extend({"t_s": [0.0, 0.01], "proximal_force_n": force,
-                        "proximal_force_est_n": force, "distal_force_n": [0.0, 0.1]})  # fmt: skip
-
-
 async def test_analysis_tables_chart_and_figure_export(
     make_test_app, study_engine, tmp_path
 ) -> None:
-    _store_trials(study_engine)
+    store_trials(study_engine)
     out = tmp_path / "paper"
     app = make_test_app(figures_dir=out, figure_formats=("png",))
     async with app.run_test(size=(100, 30)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f5", "r")
-        pane = app.query_one("#analysis-pane")
-        await wait_for(pilot, lambda: pane.result is not None)
+        pane = await analysed(pilot)
         table = app.query_one("#comparisons", DataTable)
         rows = [table.get_row_at(k) for k in range(table.row_count)]
         peak = {r[1]: r for r in rows if r[0] == "peak_proximal_force_n"}
@@ -235,9 +197,7 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
     make_test_app, study_engine, tmp_path
 ) -> None:
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f6")
+    async with on_screen(app, "f6") as pilot:
         assert _text(app, "#calib-summary").startswith("no calibration loop")
     recording = tmp_path / "rec.csv"
     recording.write_text("t\n0\n")
@@ -251,9 +211,7 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
                                    "ci": {}, "rmse_after_step": 0.1}]}  # fmt: skip
 
     app = make_test_app(calibrate=calibrate)
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f6")
+    async with on_screen(app, "f6") as pilot:
         app.query_one("#recording", Input).value = str(recording)
         await pilot.press("ctrl+r")
         pane = app.query_one("#calibration-pane")
@@ -297,9 +255,7 @@ async def test_calibration_screen_runs_the_loop_on_a_recording(make_test_app, tm
         default_params("rotation"), "ramp", "clamped", noise=0.02, seed=4, rate_hz=200.0
     ).to_csv(tmp_path / "ramp.csv", index=False)
     app = make_test_app(calibrate=calibrate_recording)
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f6")
+    async with on_screen(app, "f6") as pilot:
         app.query_one("#recording", Input).value = str(tmp_path / "ramp.csv")
         app.query_one("#model", Select).value = "notes-rotation"
         await pilot.press("ctrl+r")

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
 import sys
 from pathlib import Path
 
@@ -16,6 +15,7 @@ from sqlalchemy.orm import Session
 from db.models.audit import AuditEntry
 from db.models.trial import Sample, Trial
 from study.tui.trial_runner import STOPPED_REASON
+from tests.study.conftest import modules_loaded
 
 
 def test_study_tui_in_a_pseudo_terminal(study_engine: Engine, tmp_path: Path) -> None:
@@ -54,32 +54,28 @@ def test_the_overview_loads_neither_numpy_nor_the_other_screens(study_engine: En
     # command, the app and its roster query import no numerics and no later screen
     db = study_engine.url.database
     code = (
-        "import sys; from study.cli import cli; cli.get_command(None, 'tui'); "
+        "from study.cli import cli; cli.get_command(None, 'tui'); "
         "from db.migrate import open_database; from study.tui import StudyServices, make_app; "
         f"engine = open_database({db!r}, create=False); "
-        "StudyServices(engine, lambda: None).roster(); engine.dispose(); "
-        "heavy = ('numpy', 'pandas', 'torch', 'scipy', 'alembic', 'study.tui.run_pane', "
-        "'study.tui.analysis_pane', 'study.tui.tlx_pane', 'study.commands.analyze'); "
-        "print(sorted(m for m in sys.modules if m.startswith(heavy)))"
+        "StudyServices(engine, lambda: None).roster(); engine.dispose()"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]"
+    heavy = ("numpy", "pandas", "torch", "scipy", "alembic", "study.tui.run_pane",
+             "study.tui.analysis_pane", "study.tui.tlx_pane", "study.commands.analyze")  # fmt: skip
+    assert modules_loaded(code, heavy) == []
 
 
 def test_the_later_screens_load_no_statistics() -> None:
     # they are mounted before the run screen can prepare the simulation (issue 21):
     # the analysis screen loads scipy.stats and statsmodels only when it analyses
     code = (
-        "import sys; from study.tui.app import StudyApp; "
+        "from study.tui.app import StudyApp; "
         "from study.tui.analysis_pane import AnalysisPane; "
         "from study.tui.calibration_pane import CalibrationPane; "
         "from study.tui.participants import ParticipantsPane; "
-        "from study.tui.run_pane import RunPane; from study.tui.tlx_pane import TlxPane; "
-        "heavy = ('pandas', 'scipy', 'statsmodels', 'pingouin', 'matplotlib'); "
-        "print(sorted(m for m in sys.modules if m.startswith(heavy)))"
+        "from study.tui.run_pane import RunPane; from study.tui.tlx_pane import TlxPane"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "[]"
+    heavy = ("pandas", "scipy", "statsmodels", "pingouin", "matplotlib")
+    assert modules_loaded(code, heavy) == []
 
 
 def test_closing_the_terminal_mid_trial_marks_the_trial_interrupted(

@@ -1,0 +1,230 @@
+"""`study bench follower|master|lcca|calibrate|notes`: the paper's tables and figures
+regenerated on the simulated hardware, each written as Markdown, JSON and figures.
+
+The commands are added to the `study bench` group in `study.commands.bench`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import click
+
+from study.commands.base import StudyCommand, check_parent_folder, json_option, out_dir_option
+from study.errors import StudyInputError
+
+_json_option = json_option("Write every table as JSON here.")
+_out_option = out_dir_option("Folder for the Markdown tables, the figures and any data files.")
+_seed_option = click.option("--seed", type=int, default=0, show_default=True)
+
+
+def write_json(json_path: Path | None, data: dict[str, Any]) -> None:
+    """Write a bench's report as indented JSON (nothing when no --json was given)."""
+    if json_path is not None:
+        json_path.write_text(json.dumps(data, indent=2) + "\n")
+
+
+def _run_report(
+    json_path: Path,
+    markdown: Path,
+    status: str,
+    run: Callable[[Callable[[str], None]], dict[str, Any]],
+) -> None:
+    """Run a bench under a status line on stderr, write its JSON, show its Markdown
+    (the command has checked the JSON's folder before loading anything)."""
+    from rich.console import Console
+
+    with Console(stderr=True).status(status) as line:
+        report = run(line.update)
+    write_json(json_path, report)
+    click.echo(markdown.read_text())
+
+
+def _run_with_estimator(
+    json_path: Path,
+    model_dir: Path | None,
+    markdown: Path,
+    status: str,
+    run: Callable[[Any, Callable[[str], None]], dict[str, Any]],
+) -> None:
+    """`_run_report` of a bench that runs the force estimator of --estimator (loaded
+    after the JSON's folder is checked): `run(estimator, progress)`."""
+    from study.protocol.default_estimator import load_estimator
+
+    check_parent_folder(json_path)
+    estimator = load_estimator(model_dir)
+    _run_report(json_path, markdown, status, lambda progress: run(estimator, progress))
+
+
+def _estimator_bench(
+    name: str, estimator_help: str, quick_help: str
+) -> Callable[[Callable[..., Any]], click.Command]:
+    """`study bench NAME --json --out --estimator --seed --quick`: a bench that runs the
+    force estimator (the options in that order, as --help lists them)."""
+
+    def command(f: Callable[..., Any]) -> click.Command:
+        for option in reversed((
+            _json_option, _out_option,
+            click.option("--estimator", "model_dir",
+                         type=click.Path(file_okay=False, path_type=Path), help=estimator_help),
+            _seed_option, click.option("--quick", is_flag=True, help=quick_help),
+        )):  # fmt: skip
+            f = option(f)
+        return click.command(name, cls=StudyCommand)(f)
+
+    return command
+
+
+@click.command("follower", cls=StudyCommand)
+@_json_option
+@_out_option
+@_seed_option
+@click.option(
+    "--quick",
+    is_flag=True,
+    help="Tiny data and 1-2 epochs: checks the pipeline in seconds, measures nothing.",
+)
+@click.option(
+    "--only",
+    type=click.Choice(["tables", "generalisation"]),
+    default=None,
+    help="Run one part: the paper's tables, or the estimator trained on the first 60 % of "
+    "recordings with unmodelled effects and run on the rest [default: both].",
+)
+@click.option(
+    "--generalisation-seeds",
+    type=str,
+    default=None,
+    help="Comma-separated seeds of the generalisation part [default: 0,1,2,3,4].",
+)
+def bench_follower(
+    json_path: Path,
+    out_dir: Path,
+    seed: int,
+    quick: bool,
+    only: str | None,
+    generalisation_seeds: str | None,
+) -> None:
+    """Tables I-III and Fig. 8 of seed 000 on the simulated follower, and the estimator on
+    recordings it never saw (about 30 min and several hours)."""
+    from study.bench.follower import PARTS, FollowerBenchConfig, run_follower_bench
+
+    check_parent_folder(json_path)
+    config = FollowerBenchConfig.quick() if quick else FollowerBenchConfig()
+    config = replace(config, seed=seed, parts=(only,) if only else PARTS)
+    if generalisation_seeds is not None:
+        try:
+            seeds = tuple(int(s) for s in generalisation_seeds.split(","))
+        except ValueError:
+            raise StudyInputError(
+                f"--generalisation-seeds {generalisation_seeds!r}; expected comma-separated "
+                "integers such as 0,1,2"
+            ) from None
+        config = replace(config, generalisation=replace(config.generalisation, seeds=seeds))
+    _run_report(
+        json_path, out_dir / "follower_bench.md", "follower bench",
+        lambda progress: run_follower_bench(config, out_dir, progress=progress),
+    )  # fmt: skip
+
+
+@_estimator_bench(
+    "master",
+    "Force estimator folder for the closed loop [default: the model shipped with haptic-study].",
+    "Short runs: checks the pipeline, measures little.",
+)
+def bench_master(
+    json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
+) -> None:
+    """Figs. 10-11 of seed 000 on the simulated dial, latency, and the loop's speed."""
+    from study.bench.master import MasterBenchConfig, run_master_bench
+
+    config = replace(MasterBenchConfig.quick() if quick else MasterBenchConfig(), seed=seed)
+    _run_with_estimator(
+        json_path, model_dir, out_dir / "master_bench.md", "master bench",
+        lambda estimator, progress: run_master_bench(config, out_dir, estimator=estimator,
+                                                     progress=progress),
+    )  # fmt: skip
+
+
+@_estimator_bench(
+    "lcca",
+    "Force estimator folder [default: the model shipped with haptic-study].",
+    "Two participants per group, 60 s at most each.",
+)
+def bench_lcca(
+    json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
+) -> None:
+    """The paper's 20/8/8 user study with simulated participants, and its speed."""
+    from study.bench.lcca import LccaBenchConfig, run_lcca_bench
+
+    config = replace(LccaBenchConfig.quick() if quick else LccaBenchConfig(), seed=seed)
+    _run_with_estimator(
+        json_path, model_dir, out_dir / "lcca_bench.md", "simulated study",
+        lambda estimator, progress: run_lcca_bench(config, estimator, out_dir, progress=progress),
+    )  # fmt: skip
+
+
+@click.command("calibrate", cls=StudyCommand)
+@_json_option
+@out_dir_option(
+    "Folder for the Markdown table and a copy of the JSON [default: next to --json].",
+    required=False,
+)
+@_seed_option
+@click.option("--epochs", type=click.IntRange(min=1), default=None, help="GRU epochs [30].")
+@click.option("--quick", is_flag=True, help="One-minute recordings at 100 Hz, 2 epochs.")
+@click.option("--only-open", is_flag=True,
+              help="Only measured data (EMPS), effects outside the families, clean seeds.")
+def bench_calibrate(
+    json_path: Path, out_dir: Path | None, seed: int, epochs: int | None, quick: bool,
+    only_open: bool,
+) -> None:  # fmt: skip
+    """Calibration loop: every family, the clean recording, speed, estimator."""
+    from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
+
+    check_parent_folder(json_path)
+    config = CalibrateBenchConfig.quick() if quick else CalibrateBenchConfig()
+    config = replace(config, seed=seed, **({"epochs": epochs} if epochs else {}))
+    folder = out_dir or json_path.parent
+    _run_report(
+        json_path, folder / "calibrate_bench.md", "calibration bench",
+        lambda progress: run_calibrate_bench(config, folder, progress=progress,
+                                             only_open=only_open),
+    )  # fmt: skip
+
+
+@click.command("notes", cls=StudyCommand)
+@_json_option
+@_out_option
+@click.option(
+    "--draws",
+    type=click.IntRange(min=1),
+    default=10,
+    show_default=True,
+    help="Seeded parameter draws per axis for the identification round trip.",
+)
+@click.option(
+    "--trials",
+    type=click.IntRange(min=1),
+    default=4,
+    show_default=True,
+    help="Simulated NOTES trials per group and condition.",
+)
+@_seed_option
+def bench_notes(json_path: Path, out_dir: Path, draws: int, trials: int, seed: int) -> None:
+    """Seed 001's NOTES device: bandwidth, settling, limits, identification round trip."""
+    from study.bench.notes import NotesBenchConfig, run_notes_bench
+
+    check_parent_folder(json_path)
+    config = NotesBenchConfig(draws=draws, seed=seed, trials=trials)
+    _run_report(
+        json_path, out_dir / "notes_bench.md", "NOTES bench",
+        lambda progress: run_notes_bench(config, out_dir, progress=progress),
+    )  # fmt: skip
+
+
+PAPER_BENCHES = (bench_follower, bench_master, bench_lcca, bench_calibrate, bench_notes)

@@ -1,0 +1,72 @@
+"""Headless timings of the terminal app, for `study bench tui` and `study bench startup`.
+
+They drive the app under a Textual pilot (80 x 24) and read the moments it records
+(`StudyApp.started_at`, `overview_shown_s`, `ready`), so they live beside the app; the
+benches call them (the run-screen probe in a fresh process: `python -c`, see
+`study.bench.startup`) and stay below the screens.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from typing import Any
+
+from db.migrate import open_database
+from study.errors import StudyInputError
+from study.tui.app import TuiSettings, make_app
+from study.tui.services import StudyServices, load_shipped_estimator
+
+POLL_S = 0.05
+"""How often the run-screen probe looks, s: its resolution. Each look waits for the app
+to settle; looking every 5 ms doubled the time measured (the app's main thread then
+holds the GIL the preparing worker needs)."""
+
+
+def overview_seconds(db_url: str) -> float:
+    """Seconds from `make_app` to the overview with data, headless in this process."""
+    engine = open_database(db_url, create=False)
+
+    async def run() -> float:
+        app = make_app(StudyServices(engine, lambda: None), TuiSettings())
+        async with app.run_test(size=(80, 24)) as pilot:
+            while not app.ready:  # the overview shows first, the other screens follow
+                await pilot.pause(0.01)
+            return app.overview_shown_s  # type: ignore[return-value]
+
+    try:
+        return asyncio.run(run())
+    finally:
+        engine.dispose()
+
+
+def _give_up_after(started_at: float, limit_s: float = 120.0) -> None:
+    if time.monotonic() - started_at > limit_s:
+        raise StudyInputError(f"the run screen was not ready {limit_s:.0f} s after the start")
+
+
+def print_run_screen_seconds(db_url: str) -> None:
+    """In a fresh process: print JSON with the seconds from the overview showing to the run
+    screen prepared (headless, 80 x 24)."""
+    engine = open_database(db_url, create=False)
+
+    async def run() -> float:
+        app = make_app(StudyServices(engine, load_shipped_estimator), TuiSettings())
+        async with app.run_test(size=(80, 24)) as pilot:
+            while not app.ready:  # the run screen can be opened once mounted
+                _give_up_after(app.started_at)
+                await pilot.pause(POLL_S)
+            overview_at = app.started_at + app.overview_shown_s  # type: ignore[operator]
+            app.action_tab("run")
+            pane: Any = app.query_one("#run-pane")
+            while pane.simulation.estimator is None or pane.status != "idle":
+                _give_up_after(app.started_at)  # e.g. the estimator failed to load
+                await pilot.pause(POLL_S)
+            return time.monotonic() - overview_at
+
+    try:
+        seconds = asyncio.run(run())
+    finally:
+        engine.dispose()
+    print(json.dumps({"seconds": seconds}))
