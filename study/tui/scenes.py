@@ -96,12 +96,8 @@ def notes_scene(frame: LiveFrame | None, cols: int) -> Text:
     return text
 
 
-class NotesView(Widget):
-    """The NOTES scope's depth and roll (`notes_scene`), redrawn whole at each frame."""
-
-    DEFAULT_CSS = """
-    NotesView { width: 1fr; height: 1fr; min-height: 8; background: $surface; }
-    """
+class SceneView(Widget):
+    """A scene (`scene(frame, columns) -> Text`) redrawn whole at each frame."""
 
     def __init__(self, **kwargs: object) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
@@ -111,8 +107,22 @@ class NotesView(Widget):
         self._frame = frame
         self.refresh()
 
+    def scene(self, frame: LiveFrame | None, cols: int) -> Text:
+        raise NotImplementedError
+
     def render(self) -> Text:
-        return notes_scene(self._frame, self.size.width)
+        return self.scene(self._frame, self.size.width)
+
+
+class NotesView(SceneView):
+    """The NOTES scope's depth and roll (`notes_scene`)."""
+
+    DEFAULT_CSS = """
+    NotesView { width: 1fr; height: 1fr; min-height: 8; background: $surface; }
+    """
+
+    def scene(self, frame: LiveFrame | None, cols: int) -> Text:
+        return notes_scene(frame, cols)
 
 
 def track_scene(frame: LiveFrame | None, cols: int) -> Text:
@@ -134,20 +144,12 @@ def track_scene(frame: LiveFrame | None, cols: int) -> Text:
     return text
 
 
-class TrackView(Widget):
-    """`track_scene`, redrawn whole at each frame: the view of a task without its own."""
+class TrackView(SceneView):
+    """`track_scene`: the view of a task without its own."""
 
     DEFAULT_CSS = """
     TrackView { width: 1fr; height: 1fr; min-height: 4; background: $surface; }
     """
 
-    def __init__(self, **kwargs: object) -> None:
-        super().__init__(**kwargs)  # type: ignore[arg-type]
-        self._frame: LiveFrame | None = None
-
-    def update_frame(self, frame: LiveFrame | None) -> None:
-        self._frame = frame
-        self.refresh()
-
-    def render(self) -> Text:
-        return track_scene(self._frame, self.size.width)
+    def scene(self, frame: LiveFrame | None, cols: int) -> Text:
+        return track_scene(frame, cols)
