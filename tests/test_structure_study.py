@@ -24,3 +24,18 @@ def test_no_study_module_is_over_the_limit() -> None:
         f"modules over {MAX_LINES} lines (split them along a real seam): "
         + ", ".join(f"{rel} ({n})" for rel, n in too_long.items())
     )
+
+
+def test_study_has_no_import_cycle() -> None:
+    """No module of `study` imports itself back through others (grimp sees what
+    import-linter sees, lazy and type-checking imports included)."""
+    import graphlib
+
+    import grimp
+
+    graph = grimp.build_graph("study")
+    edges = {m: graph.find_modules_directly_imported_by(m) for m in graph.modules}
+    try:
+        tuple(graphlib.TopologicalSorter(edges).static_order())
+    except graphlib.CycleError as exc:
+        raise AssertionError(f"import cycle: {' -> '.join(exc.args[1])}") from None

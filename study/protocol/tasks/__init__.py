@@ -31,7 +31,6 @@ if TYPE_CHECKING:
     import numpy as np
     import pandas as pd
 
-    from study.protocol.participants import ParticipantTraits
     from teleop_core.loop.drivers import Driver
 
 BUILTIN = ("study.protocol.tasks.lcca", "study.protocol.tasks.notes")
@@ -95,6 +94,15 @@ class TrialResult:
     frame: pd.DataFrame
     """TRIAL.csv: the task's sample columns under its own names."""
     summary: dict[str, Any] = field(default_factory=dict)
+
+
+class Traits(Protocol):
+    """A simulated person (`study.protocol.participants.ParticipantTraits`; named here by
+    what a task uses of it, so that the registry does not import the participants)."""
+
+    group: str
+
+    def to_dict(self) -> dict[str, Any]: ...
 
 
 class TrialLoop(Protocol):
@@ -165,7 +173,7 @@ class Task:
         delay, jitter and loss (`teleop_core.loop.link.LinkParams`) where the task has one."""
         raise NotImplementedError
 
-    def simulated_driver(self, traits: ParticipantTraits, max_s: float, context: Any) -> Driver:
+    def simulated_driver(self, traits: Traits, max_s: float, context: Any) -> Driver:
         raise NotImplementedError
 
     def trial_measures(
@@ -177,7 +185,7 @@ class Task:
 
     def simulate(
         self,
-        traits: ParticipantTraits,
+        traits: Traits,
         condition: str,
         seed: int,
         max_s: float,
