@@ -190,6 +190,9 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 text = f"break: {int(left) // 60}:{int(left) % 60:02d} left, then {text[6:]}"
         if self.run is None:
             self.query_one("#next", Label).update(text)
+            if nxt is not None:  # the view of the task the next trial is in
+                self._trial_task = get_task(nxt.task)
+                self._show_task(self._trial_task)
 
     def _show_mode(self) -> None:
         pace = "real time" if self.driver_kind == "keyboard" else self._pace_text()
