@@ -215,7 +215,8 @@ async def test_the_run_screen_shows_a_registered_task(probe: ProbeTask, tmp_path
     db = _study(tmp_path, 1)
     engine = open_database(db)
     services = StudyServices(engine, load_estimator)
-    app = make_app(services, TuiSettings(simulated_pace=None, figures_dir=tmp_path / "f"))
+    # at real time (the trial lasts 2 s), so that the 30 Hz view draws it
+    app = make_app(services, TuiSettings(simulated_pace=1.0, figures_dir=tmp_path / "f"))
     async with app.run_test(size=(80, 24)) as pilot:
         await loaded(pilot)
         await pilot.press("f3")
