@@ -113,15 +113,20 @@ def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str 
 @participant.command("note")
 @click.argument("code")
 @click.argument("text")
+@click.option("--session", "on_session", is_flag=True,
+              help="A note on today's session, kept beside the others (audit log).")  # fmt: skip
 @click.option("--actor", default=None, help="Who records it [default: $STUDY_ACTOR or user@host].")
 @db_option
-def participant_note(code: str, text: str, actor: str | None, db_url: str | None) -> None:
-    """Set a participant's note (pseudonymous: no names or contact details)."""
-    from study.protocol.withdrawal import set_note
+def participant_note(
+    code: str, text: str, on_session: bool, actor: str | None, db_url: str | None
+) -> None:
+    """Set a participant's note, or add a note on their session (pseudonymous: no names
+    or contact details)."""
+    from study.protocol.withdrawal import add_session_note, set_note
 
     with opened_database(db_url) as engine:
-        set_note(engine, code, text, actor)
-    click.echo(f"{code}: note kept")
+        (add_session_note if on_session else set_note)(engine, code, text, actor)
+    click.echo(f"{code}: {'session note' if on_session else 'note'} kept")
 
 
 @click.command("schedule", cls=StudyCommand)

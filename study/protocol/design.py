@@ -51,6 +51,7 @@ trials_per_condition = 3       # measured trials in each task x condition block
 practice_trials = 1            # unmeasured trials before them
 counterbalancing = "AB/BA"     # two conditions; with more use "latin-square"
 break_s = 120                  # planned rest after each block, seconds
+tlx_before_next_block = true   # a block's NASA-TLX is due before the next block starts
 code_prefix = "P"              # participant codes: P001, P002, ...
 
 [haptic_gain_n_m_per_n]        # the dial's torque per newton of estimated force (LCCA)
@@ -71,6 +72,7 @@ _KEYS = {
     "practice_trials": int,
     "counterbalancing": str,
     "break_s": (int, float),
+    "tlx_before_next_block": bool,
     "code_prefix": str,
     "groups": dict,
     "haptic_gain_n_m_per_n": dict,
@@ -89,6 +91,9 @@ class StudyDesign:
     practice_trials: int = 1
     counterbalancing: str = "AB/BA"
     break_s: float = 120.0
+    tlx_before_next_block: bool = True
+    """The session flow: a finished block's questionnaire before the next block starts
+    (the terminal app holds the next block until it is stored)."""
     code_prefix: str = "P"
     groups: dict[str, int] = field(
         default_factory=lambda: {"outsider": 20, "novice": 8, "expert": 8}
@@ -205,6 +210,7 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         practice_trials=data.get("practice_trials", d.practice_trials),
         counterbalancing=scheme,
         break_s=float(data.get("break_s", d.break_s)),
+        tlx_before_next_block=data.get("tlx_before_next_block", d.tlx_before_next_block),
         code_prefix=prefix,
         groups=groups,
         haptic_gain_n_m_per_n=gains,

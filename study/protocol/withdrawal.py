@@ -76,6 +76,14 @@ def set_note(engine: Engine, code: str, note: str, actor: str | None = None) -> 
         p.note = note
 
 
+def add_session_note(engine: Engine, code: str, note: str, actor: str | None = None) -> None:
+    """A note on `code`'s session (today's): kept beside the participant's note as an
+    audit row `session_note`, one per call, never replaced."""
+    note = _check_text("session note", note)
+    with _audited_change(engine, code, actor) as (_, audit):
+        audit("session_note", None, note, f"note on the session of {utcnow():%Y-%m-%d}")
+
+
 CHECKLIST = "consent confirmed; device checked"
 
 

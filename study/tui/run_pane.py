@@ -101,8 +101,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._breaks: dict[str, float] = {}
         """Participant -> time.monotonic() when their last finished block ended."""
         self._ended_at: tuple[tuple[str, str, str], float] | None = None
-        """The block of the last completed trial and when it ended (until the roster says
-        whether that block is finished)."""
+        """The last completed trial's block and when it ended (until the roster knows)."""
         self._trial_task: Task = tasks()[0]
         """The task of the trial running or run last."""
 
@@ -191,8 +190,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         if self.run is None:
             self.query_one("#next", Label).update(text)
             if nxt is not None:  # the view of the task the next trial is in
-                self._trial_task = get_task(nxt.task)
-                self._show_task(self._trial_task)
+                self._show_task(get_task(nxt.task))
 
     def _show_mode(self) -> None:
         pace = "real time" if self.driver_kind == "keyboard" else self._pace_text()
@@ -274,8 +272,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 self.select_participant(after)
 
     def _tlx_due(self, code: str) -> tuple[str, str] | None:
-        """(task, condition) of `code`'s finished block still without its questionnaire."""
-        due = [b for b in (self.roster.tlx_due() if self.roster else []) if b[0] == code]
+        """(task, condition) of `code`'s finished block awaiting its questionnaire, if the
+        design says it comes first (`tlx_before_next_block`)."""
+        if self.roster is None or not self.roster.tlx_first:
+            return None
+        due = [b for b in self.roster.tlx_due() if b[0] == code]
         return (due[0][1], due[0][2]) if due else None
 
     def break_left_s(self, code: str) -> float:

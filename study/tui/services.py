@@ -61,6 +61,9 @@ class Roster:
     """(code, task, condition) of the blocks with a stored NASA-TLX."""
     break_s: float = 120.0
     """The design's planned rest after each block."""
+    tlx_first: bool = True
+    """The design's `tlx_before_next_block`: a finished block's questionnaire is due
+    before the next block starts."""
 
     def withdrawn(self, code: str) -> str | None:
         """The withdrawal reason of `code`, or None while they are in the study."""
@@ -139,6 +142,7 @@ class StudyServices:
             participants=plan["participants"],
             answered=answered_blocks(self.engine),
             break_s=design.break_s,
+            tlx_first=design.tlx_before_next_block,
         )
 
     def record_checklist(self, code: str) -> None:

@@ -105,3 +105,23 @@ def test_a_note_is_kept_and_its_edits_audited(db: str) -> None:
     assert [(e.old_value, e.new_value) for e in edits] == [
         (None, "prefers the left hand"), ("prefers the left hand", "left-handed grip")
     ]  # fmt: skip
+
+
+def test_session_notes_are_added_beside_the_participants_note(db: str) -> None:
+    assert main(["participant", "note", "P002", "left-handed grip", "--db", db]) == 0
+    for text in ("dial recalibrated after trial 2", "fire alarm: 5 min pause"):
+        assert main(["participant", "note", "P002", text, "--session", "--db", db]) == 0
+    assert main(["participant", "note", "P009", "x", "--session", "--db", db]) == 2
+    engine = open_database(db)
+    with Session(engine) as session:
+        p = session.scalars(select(Participant).where(Participant.code == "P002")).one()
+        notes = session.scalars(
+            select(AuditEntry).where(AuditEntry.field == "session_note").order_by(AuditEntry.id)
+        ).all()
+    engine.dispose()
+    # the participant's note stays; each session note is its own row, none replaced
+    assert p.note == "left-handed grip"
+    assert [(n.entity_id, n.old_value, n.new_value) for n in notes] == [
+        (p.id, None, "dial recalibrated after trial 2"), (p.id, None, "fire alarm: 5 min pause")
+    ]  # fmt: skip
+    assert all(n.reason.startswith("note on the session of 20") for n in notes)

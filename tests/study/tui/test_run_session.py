@@ -13,6 +13,7 @@ from textual.widgets import Label
 
 from db.migrate import open_database
 from db.models.audit import AuditEntry
+from db.models.study import ScheduleBlock
 from db.models.tlx import TLX_SUBSCALES
 from db.models.trial import Sample, Trial
 from study.protocol.default_estimator import load_estimator
@@ -193,3 +194,36 @@ async def test_the_keyboard_drives_a_notes_trial(notes_engine: Engine, tmp_path:
         await wait_for(pilot, lambda: pane.status == "interrupted", 30)
     [(status, driver, samples)] = _trials(notes_engine)
     assert (status, driver) == ("interrupted", "keyboard") and samples > 0
+
+
+async def test_a_design_can_let_the_next_block_start_before_the_questionnaire(
+    tmp_path: Path,
+) -> None:
+    from tests.study.tui.conftest import complete_block
+
+    text = NOTES_DESIGN.replace('tasks = ["notes"]', 'tasks = ["lcca"]\nbreak_s = 0\n'
+                                'tlx_before_next_block = false')  # fmt: skip
+    design = parse_design(text)
+    assert design.tlx_before_next_block is False
+    assert parse_design(NOTES_DESIGN).tlx_before_next_block  # on by default
+    engine = open_database(str(tmp_path / "s.db"), create=True)
+    create_study(engine, design, text)
+    add_participant(engine, "novice")
+    with Session(engine) as session:
+        first = session.scalars(select(ScheduleBlock).order_by(ScheduleBlock.block_index)).first()
+        task, condition = first.task, first.condition
+    complete_block(engine, "P001", task, condition)
+    app = make_app(StudyServices(engine, load_estimator), TuiSettings(figures_dir=tmp_path / "f"))
+    try:
+        async with app.run_test(size=(80, 24)) as pilot:
+            await loaded(pilot)
+            await pilot.press("f3")
+            pane = app.query_one(RunPane)
+            pane.select_participant("P001")
+            await pilot.pause()
+            # the questionnaire is still listed as due, but it does not hold the next block
+            assert pane.roster.tlx_due() == [("P001", task, condition)]
+            label = str(app.query_one("#next", Label).render())
+            assert label.startswith("next: P001 ") and "due first" not in label
+    finally:
+        engine.dispose()
