@@ -194,9 +194,12 @@ class CalibrationPane(SafeWorkers, Vertical):
         table = self.query_one("#effects", DataTable)
         table.clear()
         for k, e in enumerate(report.get("effects_added") or [], 1):
-            table.add_row(
-                str(k), str(e.get("family")), _fmt(e.get("rmse_after_step")), _fmt(e.get("params"))
-            )
+            # one parameter per line: a row grows in height, not past the screen's width
+            params = e.get("params")
+            cell = ("\n".join(f"{name} {_fmt(v)}" for name, v in params.items())
+                    if isinstance(params, dict) else _fmt(params))  # fmt: skip
+            table.add_row(str(k), str(e.get("family")), _fmt(e.get("rmse_after_step")), cell,
+                          height=None)  # fmt: skip
 
     def _summary(self, text: str | Text) -> None:
         self.query_one("#calib-summary", Static).update(text)

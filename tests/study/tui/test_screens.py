@@ -207,8 +207,10 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
         calls.append((path, model))
         progress("fitting the base model")
         return {"rmse_before": 0.3, "rmse_after": 0.1, "candidates_rejected": ["delay"],
-                "effects_added": [{"family": "stribeck", "params": {"v_s_rad_s": 2.0},
-                                   "ci": {}, "rmse_after_step": 0.1}]}  # fmt: skip
+                "effects_added": [{"family": "stribeck", "params": {
+                    "v_s_rad_s": 2.0, "f_static_over_coulomb": 1.35, "shape_exponent": 2.0,
+                    "coulomb_scale": 0.987654, "viscous_scale": 1.0123}, "ci": {},
+                    "rmse_after_step": 0.1}]}  # fmt: skip
 
     app = make_test_app(calibrate=calibrate)
     async with on_screen(app, "f6") as pilot:
@@ -220,7 +222,15 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
         assert _text(app, "#calib-summary").splitlines() == [
             "held-out RMSE 0.3000 N -> 0.1000 N (67 % lower)", "rejected: delay"
         ]  # fmt: skip
-        assert app.query_one("#effects", DataTable).get_row_at(0)[1] == "stribeck"
+        effects = app.query_one("#effects", DataTable)
+        assert effects.get_row_at(0)[1] == "stribeck"
+        # five parameters, one per line: the row is five lines tall, no wider than a line
+        assert effects.get_row_at(0)[3].split("\n") == [
+            "v_s_rad_s 2", "f_static_over_coulomb 1.35", "shape_exponent 2",
+            "coulomb_scale 0.9877", "viscous_scale 1.012",
+        ]  # fmt: skip
+        assert effects.rows[effects.coordinate_to_cell_key((0, 0)).row_key].height == 5
+        assert effects.virtual_size.width <= 80
         # the result is kept: a row in the calibrations table, a report file, the list
         await wait_for(pilot, lambda: pane.stored_path is not None)
         stored = app.query_one("#stored", DataTable)
