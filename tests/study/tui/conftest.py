@@ -85,6 +85,18 @@ async def loaded(pilot) -> None:
     await wait_for(pilot, lambda: pilot.app.ready and pilot.app.roster is not None)
 
 
+async def run_screen(pilot, code: str) -> Any:
+    """The run screen (F3) with participant `code` picked, once the app has loaded."""
+    from study.tui.run_pane import RunPane
+
+    await loaded(pilot)
+    await pilot.press("f3")
+    pane = pilot.app.query_one(RunPane)
+    pane.select_participant(code)
+    await pilot.pause()
+    return pane
+
+
 @asynccontextmanager
 async def on_screen(app: StudyApp, key: str) -> AsyncIterator[Any]:
     """`app` headless on an 80 x 24 terminal, loaded, with the screen of `key` open: the

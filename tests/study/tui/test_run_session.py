@@ -27,7 +27,7 @@ from study.tui.run_pane import RunPane
 from study.tui.scenes import NotesView
 from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON
-from tests.study.tui.conftest import loaded, wait_for
+from tests.study.tui.conftest import run_screen, wait_for
 
 pytestmark = pytest.mark.asyncio
 
@@ -45,11 +45,7 @@ def _trials(engine) -> list[tuple[str, str, int]]:
 
 async def _start(pilot, code: str, *keys: str) -> RunPane:
     """On the run screen, pick `code`, press `keys` (driver, pace), start the trial."""
-    await loaded(pilot)
-    await pilot.press("f3")
-    pane = pilot.app.query_one(RunPane)
-    pane.select_participant(code)
-    await pilot.pause()
+    pane = await run_screen(pilot, code)
     await pilot.press(*keys, "s")
     # the session checklist, asked before a participant's first trial in the app
     await wait_for(pilot, lambda: isinstance(pilot.app.screen, Confirm), 10)
@@ -216,11 +212,7 @@ async def test_a_design_can_let_the_next_block_start_before_the_questionnaire(
     app = make_app(StudyServices(engine, load_estimator), TuiSettings(figures_dir=tmp_path / "f"))
     try:
         async with app.run_test(size=(80, 24)) as pilot:
-            await loaded(pilot)
-            await pilot.press("f3")
-            pane = app.query_one(RunPane)
-            pane.select_participant("P001")
-            await pilot.pause()
+            pane = await run_screen(pilot, "P001")
             # the questionnaire is still listed as due, but it does not hold the next block
             assert pane.roster.tlx_due() == [("P001", task, condition)]
             label = str(app.query_one("#next", Label).render())
