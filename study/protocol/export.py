@@ -60,11 +60,16 @@ def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
     """Column -> (unit, meaning) for a study of `tasks`: the common columns, each task's
     measures, and the `samples` columns with what each task keeps in them."""
     tasks = [get_task(t) for t in tasks]
-    out = dict(CODEBOOK)
-    out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in tasks))
+    measures: dict[str, tuple[str, str]] = {}
     for t in tasks:
         for m in t.measures:
-            out.setdefault(m.name, (m.unit, f"{t.name}: {m.description}"))
+            measures.setdefault(m.name, (m.unit, f"{t.name}: {m.description}"))
+    out: dict[str, tuple[str, str]] = {}
+    for column, entry in CODEBOOK.items():  # the measures right after completion_time_s
+        out[column] = entry
+        if column == COMPLETION_TIME:
+            out.update(measures)
+    out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in tasks))
     stored: dict[str, list[tuple[str, object]]] = {}
     for t in tasks:
         for c in t.sample_columns:
