@@ -25,7 +25,7 @@ from sqlalchemy.engine import URL, make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.errors import DbInputError
+from db.errors import DatabaseGoneError, DbInputError
 
 DEFAULT_URL = "sqlite:///study.db"
 """`./study.db` in the working directory, used when neither `--db` nor `STUDY_DB` is set."""
@@ -82,6 +82,8 @@ def make_engine(url: str | URL) -> Engine:
             # An in-memory or read-only (?mode=ro) database cannot switch to WAL.
             wal = url.database not in (None, "", ":memory:") and url.query.get("mode") != "ro"
             _configure_sqlite(engine, wal=wal, busy_timeout_ms=timeout_ms)
+            if wal and not url.query.get("uri"):
+                _watch_sqlite_file(engine, Path(url.database))
         else:
             engine = create_engine(url, pool_pre_ping=True)
     except (NoSuchModuleError, ArgumentError) as exc:
@@ -128,6 +130,46 @@ def _configure_sqlite(engine: Engine, *, wal: bool, busy_timeout_ms: int) -> Non
     def _on_begin(conn: Connection) -> None:
         mode = conn.get_execution_options().get("sqlite_begin", "")
         conn.exec_driver_sql(f"BEGIN {mode}".strip())
+
+
+def _watch_sqlite_file(engine: Engine, path: Path) -> None:
+    """Refuse every transaction once the SQLite file is no longer at `path`.
+
+    An open SQLite connection keeps a deleted or renamed file (and its WAL) open and
+    goes on committing into it, so that what is written after `rm study.db` is lost
+    without a word; a new connection would create an empty file at the path. Once the
+    file has been opened, each transaction and each new connection first checks that the
+    same file is still there, and raises `DatabaseGoneError` if not.
+    """
+    path = path.expanduser().absolute()
+    identity: list[tuple[int, int]] = []  # (device, inode) of the file first opened
+
+    def still_there() -> None:
+        if not identity:
+            return
+        try:
+            st = os.stat(path)
+        except FileNotFoundError:
+            st = None
+        if st is None or (st.st_dev, st.st_ino) != identity[0]:
+            raise DatabaseGoneError(
+                f"the study database file {path} is gone (deleted or moved?): nothing "
+                "was written; put it back there and restart"
+            )
+
+    @event.listens_for(engine, "do_connect")
+    def _before_connect(_dialect, _record, _cargs, _cparams) -> None:  # type: ignore[no-untyped-def]
+        still_there()
+
+    @event.listens_for(engine, "connect")
+    def _connected(_dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+        if not identity:
+            st = os.stat(path)
+            identity.append((st.st_dev, st.st_ino))
+
+    @event.listens_for(engine, "begin", insert=True)  # before BEGIN is sent
+    def _before_begin(_conn: Connection) -> None:
+        still_there()
 
 
 @contextmanager
