@@ -146,6 +146,10 @@ async def test_a_database_file_removed_mid_session_is_named_and_the_app_stays(
             f"not enrolled: the study database file {db} is gone (deleted or moved?): "
             "nothing was written; put it back there and restart"
         )
+        await pilot.pause()
+        status, table = pane.query_one("#add-status"), pane.query_one("#people")
+        # the whole line is on the screen at 80 columns: it wraps, the list moves down
+        assert status.region.height > 1 and table.region.y > status.region.bottom
         await pilot.press("f1")
         await pilot.press("f2")
         assert app.is_running and app.screen.query_one("#participants-pane") is pane
