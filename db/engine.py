@@ -3,7 +3,8 @@
 SQLite (the embedded default) is set up on every new connection: WAL journal so that
 readers (the TUI, `study schedule`) never block the session writing samples, foreign
 keys on, `synchronous=FULL` so a committed chunk survives a power cut, and a busy
-timeout so that two processes writing at once wait instead of failing. pysqlite's own
+timeout so that two processes writing at once wait instead of failing (30 s, or
+`?timeout=SECONDS` in the URL). pysqlite's own
 implicit transaction handling is switched off and `BEGIN` is emitted by SQLAlchemy
 (the recipe in SQLAlchemy's SQLite dialect documentation), which makes transactional
 DDL work for Alembic and lets `write_transaction` take the write lock up front.
@@ -24,7 +25,7 @@ from sqlalchemy.engine import URL, make_url
 from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
 
-from db.errors import DbInputError
+from db.errors import DatabaseGoneError, DbInputError
 
 DEFAULT_URL = "sqlite:///study.db"
 """`./study.db` in the working directory, used when neither `--db` nor `STUDY_DB` is set."""
@@ -76,10 +77,13 @@ def make_engine(url: str | URL) -> Engine:
     url = make_url(url) if isinstance(url, str) else url
     try:
         if url.get_backend_name() == "sqlite":
-            engine = create_engine(url, connect_args={"timeout": SQLITE_BUSY_TIMEOUT_MS / 1000})
+            timeout_ms = _busy_timeout_ms(url)
+            engine = create_engine(url, connect_args={"timeout": timeout_ms / 1000})
             # An in-memory or read-only (?mode=ro) database cannot switch to WAL.
             wal = url.database not in (None, "", ":memory:") and url.query.get("mode") != "ro"
-            _configure_sqlite(engine, wal=wal)
+            _configure_sqlite(engine, wal=wal, busy_timeout_ms=timeout_ms)
+            if wal and not url.query.get("uri"):
+                _watch_sqlite_file(engine, Path(url.database))
         else:
             engine = create_engine(url, pool_pre_ping=True)
     except (NoSuchModuleError, ArgumentError) as exc:
@@ -90,7 +94,26 @@ def make_engine(url: str | URL) -> Engine:
     return engine
 
 
-def _configure_sqlite(engine: Engine, *, wal: bool) -> None:
+def _busy_timeout_ms(url: URL) -> int:
+    """How long a writer waits for another's lock: `?timeout=SECONDS` in the URL (as
+    pysqlite spells it), else `SQLITE_BUSY_TIMEOUT_MS`."""
+    raw = url.query.get("timeout")
+    if raw is None:
+        return SQLITE_BUSY_TIMEOUT_MS
+    text = raw if isinstance(raw, str) else raw[-1]
+    try:
+        seconds = float(text)
+    except ValueError:
+        seconds = -1.0
+    if not seconds >= 0:
+        raise DbInputError(
+            f"database URL {describe(url)!r} has timeout={text!r}; expected a number of "
+            "seconds, e.g. ?timeout=30"
+        )
+    return round(seconds * 1000)
+
+
+def _configure_sqlite(engine: Engine, *, wal: bool, busy_timeout_ms: int) -> None:
     @event.listens_for(engine, "connect")
     def _on_connect(dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
         # Let SQLAlchemy, not pysqlite, decide when a transaction begins.
@@ -100,13 +123,53 @@ def _configure_sqlite(engine: Engine, *, wal: bool) -> None:
             cursor.execute("PRAGMA journal_mode=WAL")
         cursor.execute("PRAGMA foreign_keys=ON")
         cursor.execute("PRAGMA synchronous=FULL")
-        cursor.execute(f"PRAGMA busy_timeout={SQLITE_BUSY_TIMEOUT_MS}")
+        cursor.execute(f"PRAGMA busy_timeout={busy_timeout_ms}")
         cursor.close()
 
     @event.listens_for(engine, "begin")
     def _on_begin(conn: Connection) -> None:
         mode = conn.get_execution_options().get("sqlite_begin", "")
         conn.exec_driver_sql(f"BEGIN {mode}".strip())
+
+
+def _watch_sqlite_file(engine: Engine, path: Path) -> None:
+    """Refuse every transaction once the SQLite file is no longer at `path`.
+
+    An open SQLite connection keeps a deleted or renamed file (and its WAL) open and
+    goes on committing into it, so that what is written after `rm study.db` is lost
+    without a word; a new connection would create an empty file at the path. Once the
+    file has been opened, each transaction and each new connection first checks that the
+    same file is still there, and raises `DatabaseGoneError` if not.
+    """
+    path = path.expanduser().absolute()
+    identity: list[tuple[int, int]] = []  # (device, inode) of the file first opened
+
+    def still_there() -> None:
+        if not identity:
+            return
+        try:
+            st = os.stat(path)
+        except FileNotFoundError:
+            st = None
+        if st is None or (st.st_dev, st.st_ino) != identity[0]:
+            raise DatabaseGoneError(
+                f"the study database file {path} is gone (deleted or moved?): nothing "
+                "was written; put it back there and restart"
+            )
+
+    @event.listens_for(engine, "do_connect")
+    def _before_connect(_dialect, _record, _cargs, _cparams) -> None:  # type: ignore[no-untyped-def]
+        still_there()
+
+    @event.listens_for(engine, "connect")
+    def _connected(_dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+        if not identity:
+            st = os.stat(path)
+            identity.append((st.st_dev, st.st_ino))
+
+    @event.listens_for(engine, "begin", insert=True)  # before BEGIN is sent
+    def _before_begin(_conn: Connection) -> None:
+        still_there()
 
 
 @contextmanager

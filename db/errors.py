@@ -20,3 +20,11 @@ class NotAStudyDatabaseError(DbInputError):
 
 class MissingDatabaseError(DbInputError):
     """No database exists at the given location and creating one was not asked for."""
+
+
+class DatabaseGoneError(OSError):
+    """The SQLite file an open engine uses was deleted, moved or replaced meanwhile.
+
+    Not a `DbInputError`: nothing the user typed was wrong, and code that turns a
+    `ValueError` into "refused: ..." must not mistake it for a bad value. `study`
+    commands print it as one line all the same (it is among their user errors)."""

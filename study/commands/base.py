@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from db.errors import DbInputError
+from db.errors import DatabaseGoneError, DbInputError
 from study.errors import StudyInputError
 from teleop_core.errors import TeleopInputError
 
@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from rich.progress import Progress
     from sqlalchemy import Engine
 
-USER_ERRORS = (DbInputError, StudyInputError, TeleopInputError)
+USER_ERRORS = (DbInputError, DatabaseGoneError, StudyInputError, TeleopInputError)
 
 
 class InputError(click.ClickException):

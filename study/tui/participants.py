@@ -32,6 +32,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
     ParticipantsPane #filter-row { height: 1; }
     ParticipantsPane #filter { width: 1fr; }
     ParticipantsPane #add-row Label { padding: 0 1; }
+    ParticipantsPane #add-status { width: 1fr; }
     ParticipantsPane #group { width: 24; }
     ParticipantsPane #people { height: 1fr; }
     """
@@ -188,6 +189,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
     def _status(self, text: str) -> None:
         self.last_message = text
         self.query_one("#add-status", Label).update(text)
+        self.refresh(layout=True)  # a long line wraps: the list below moves down
 
     @on(Added)
     def _added(self, event: Added) -> None:

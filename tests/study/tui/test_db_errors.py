@@ -124,3 +124,33 @@ async def test_a_questionnaire_refused_by_a_read_only_database_keeps_what_was_ty
         await wait_for(pilot, lambda: pane.status == "P001 lcca/VO: stored", 30)
     stored = load_tlx(study_engine, "P001", "lcca", "VO")
     assert stored is not None and stored.mental == int(RATINGS["mental"])
+
+
+@pytest.mark.asyncio
+async def test_a_database_file_removed_mid_session_is_named_and_the_app_stays(
+    make_test_app, study_engine: Engine, tmp_path
+) -> None:
+    # an open SQLite connection would go on committing into the deleted file (and a new
+    # one would create an empty study.db): the enrolment is refused with one line
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        pane = app.query_one("#participants-pane")
+        for name in ("study.db", "study.db-wal", "study.db-shm"):
+            (tmp_path / name).unlink(missing_ok=True)
+        await pilot.press("f2")
+        await pilot.press("a")
+        await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 30)
+        db = tmp_path / "study.db"
+        assert pane.last_message == (
+            f"not enrolled: the study database file {db} is gone (deleted or moved?): "
+            "nothing was written; put it back there and restart"
+        )
+        await pilot.pause()
+        status, table = pane.query_one("#add-status"), pane.query_one("#people")
+        # the whole line is on the screen at 80 columns: it wraps, the list moves down
+        assert status.region.height > 1 and table.region.y > status.region.bottom
+        await pilot.press("f1")
+        await pilot.press("f2")
+        assert app.is_running and app.screen.query_one("#participants-pane") is pane
+    assert not db.exists()  # no empty database was created in its place
