@@ -94,7 +94,8 @@ db_option = click.option(
     envvar="STUDY_DB",
     metavar="URL",
     default=None,
-    help="Study database: SQLite path or URL, or postgresql+psycopg://... "
+    help="Study database: SQLite path or URL (sqlite:///PATH?timeout=S waits S seconds for "
+    "another program's lock; default 30), or postgresql+psycopg://... "
     "[default: ./study.db; env STUDY_DB]",
 )
 
