@@ -2,10 +2,11 @@
 
 Starts the real `study tui --db URL` in a pseudo-terminal (80 x 24) and times from the
 process's start to the moment the overview's progress line ("Sessions done") reaches
-the terminal, then quits it with ctrl+q. This counts everything a user waits for:
-the interpreter, the imports, the database's schema check, the roster query and the
-first paint. The standard library's `pty` does the terminal (pexpect is only a test
-dependency).
+the terminal, then quits it with ctrl+q (timed to the exit). Further runs time F3 to a
+run screen ready to start a trial, and ctrl+q while it is still preparing. This counts
+everything a user waits for: the interpreter, the imports, the database's schema check,
+the roster query and the first paint. The standard library's `pty` does the terminal
+(pexpect is only a test dependency).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import subprocess
 import termios
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 from study.bench.startup import study_command
 from study.errors import StudyInputError
@@ -43,6 +44,12 @@ class TuiBenchResult:
     app_seconds: list[float]
     """The app's own part: from building it to the overview with data, in this process
     (headless, imports done), s."""
+    quit_seconds: list[float] = field(default_factory=list)
+    """ctrl+q on the overview to the process's exit, s."""
+    run_ready_seconds: list[float] = field(default_factory=list)
+    """F3 to the run screen ready ("status: idle" after preparing the simulation), s."""
+    quit_preparing_seconds: list[float] = field(default_factory=list)
+    """ctrl+q while the run screen prepares the simulation, to the exit, s."""
     target_s: float = TARGET_S
 
     def to_dict(self) -> dict[str, object]:
@@ -54,44 +61,94 @@ def _children_cpu_s() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def time_to_overview(db_url: str, timeout_s: float = 60.0) -> tuple[float, float]:
-    """(seconds from starting `study tui --db db_url` to the overview on its terminal,
-    CPU seconds of the whole run)."""
-    cpu0 = _children_cpu_s()
-    master, slave = pty.openpty()
-    fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
-    env = {**os.environ, "TERM": "xterm-256color"}
-    start = time.monotonic()
-    proc = subprocess.Popen(
-        [*study_command(), "tui", "--db", db_url],
-        stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True,
-    )  # fmt: skip
-    os.close(slave)
-    seen = b""
-    try:
-        while MARKER not in seen:
-            if time.monotonic() - start > timeout_s:
+class _Terminal:
+    """`study tui --db URL` on a pseudo-terminal of 80 x 24, read as it draws."""
+
+    def __init__(self, db_url: str) -> None:
+        self.db_url = db_url
+        self.master, slave = pty.openpty()
+        fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 80, 0, 0))
+        env = {**os.environ, "TERM": "xterm-256color"}
+        self.start = time.monotonic()
+        self.proc = subprocess.Popen(
+            [*study_command(), "tui", "--db", db_url],
+            stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True,
+        )  # fmt: skip
+        os.close(slave)
+        self.seen = b""
+
+    def wait_for(self, marker: bytes, timeout_s: float = 60.0) -> float:
+        """Read until `marker` is drawn; the time it took since the process started."""
+        self.seen = b""
+        while marker not in self.seen:
+            if time.monotonic() - self.start > timeout_s + 60.0:
                 raise StudyInputError(
-                    f"`study tui --db {db_url}` showed no overview in {timeout_s:.0f} s; "
+                    f"`study tui --db {self.db_url}` never drew {marker.decode()!r}; "
                     "expected a study database"
                 )
-            ready, _, _ = select.select([master], [], [], 0.05)
+            ready, _, _ = select.select([self.master], [], [], 0.05)
             if ready:
                 try:
-                    seen = seen[-64:] + os.read(master, 65536)
+                    self.seen = self.seen[-64:] + os.read(self.master, 65536)
                 except OSError:  # the app ended (its terminal closed)
                     raise StudyInputError(
-                        f"`study tui --db {db_url}` ended before showing the overview"
+                        f"`study tui --db {self.db_url}` ended before drawing "
+                        f"{marker.decode()!r}"
                     ) from None
-        elapsed = time.monotonic() - start
-        os.write(master, b"\x11")  # ctrl+q
-        _drain_until_exit(proc, master)
+        return time.monotonic() - self.start
+
+    def press(self, keys: bytes) -> float:
+        os.write(self.master, keys)
+        return time.monotonic()
+
+    def quit(self) -> float:
+        """ctrl+q; seconds until the process has exited."""
+        t0 = self.press(b"\x11")
+        _drain_until_exit(self.proc, self.master)
+        return time.monotonic() - t0
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        os.close(self.master)
+
+
+F3 = b"\x1bOR"
+PREPARING = b"preparing the simulation"
+READY = b"status: idle"
+
+
+def time_to_overview(db_url: str, timeout_s: float = 60.0) -> tuple[float, float, float]:
+    """(seconds from starting `study tui --db db_url` to the overview on its terminal,
+    seconds from ctrl+q to the process's exit, CPU seconds of the whole run)."""
+    cpu0 = _children_cpu_s()
+    term = _Terminal(db_url)
+    try:
+        elapsed = term.wait_for(MARKER, timeout_s)
+        quit_s = term.quit()
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        os.close(master)
-    return elapsed, _children_cpu_s() - cpu0
+        term.close()
+    return elapsed, quit_s, _children_cpu_s() - cpu0
+
+
+def time_run_screen(db_url: str, quit_while_preparing: bool) -> float:
+    """F3 from the overview: seconds until the run screen has prepared the simulation
+    (estimator loaded, loop compiled or read from its cache) and says idle; or, with
+    `quit_while_preparing`, seconds from ctrl+q during the preparation to the exit."""
+    term = _Terminal(db_url)
+    try:
+        term.wait_for(MARKER)
+        t0 = term.press(F3)
+        term.wait_for(PREPARING)
+        if quit_while_preparing:
+            return term.quit()
+        term.wait_for(READY)
+        ready_s = time.monotonic() - t0
+        term.quit()
+        return ready_s
+    finally:
+        term.close()
 
 
 def _drain_until_exit(proc: subprocess.Popen, master: int, timeout_s: float = 20.0) -> None:
@@ -121,8 +178,11 @@ def bench_tui(
     finally:
         engine.dispose()
     runs_s = [time_to_overview(db_url) for _ in range(runs)]
-    seconds = [wall for wall, _ in runs_s]
+    seconds = [wall for wall, _, _ in runs_s]
     return TuiBenchResult(
-        seconds, statistics.median(seconds), participants, [cpu for _, cpu in runs_s],
+        seconds, statistics.median(seconds), participants, [cpu for _, _, cpu in runs_s],
         [app_seconds(db_url) for _ in range(runs)],
+        quit_seconds=[q for _, q, _ in runs_s],
+        run_ready_seconds=[time_run_screen(db_url, False) for _ in range(runs)],
+        quit_preparing_seconds=[time_run_screen(db_url, True) for _ in range(runs)],
     )  # fmt: skip

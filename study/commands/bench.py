@@ -155,7 +155,10 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
         f"{', '.join(f'{s:.2f}' for s in result.seconds)} s); target <= {result.target_s} s; "
         f"CPU per run (start to exit) {', '.join(f'{s:.2f}' for s in result.cpu_seconds)} s; "
         f"the app's own part (make_app to overview, headless) "
-        f"{', '.join(f'{s:.2f}' for s in result.app_seconds)} s"
+        f"{', '.join(f'{s:.2f}' for s in result.app_seconds)} s; "
+        f"quit {', '.join(f'{s:.2f}' for s in result.quit_seconds)} s; "
+        f"F3 to run screen ready {', '.join(f'{s:.2f}' for s in result.run_ready_seconds)} s; "
+        f"quit while preparing {', '.join(f'{s:.2f}' for s in result.quit_preparing_seconds)} s"
     )
     write_json(json_path, result.to_dict())
 

@@ -320,16 +320,16 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
     # -- the workers ----------------------------------------------------------------------
 
     def prepare(self) -> None:
-        """Load the estimator and compile the loop now (the app calls this when the screen
-        is first shown), so that `s` starts the trial at once."""
+        """Load the estimator and compile the loop when the screen is first shown."""
         if self.simulation.estimator is None:
             self.status = "preparing the simulation"
             self._prepare()
 
-    @work(thread=True, exclusive=True, group="prepare", exit_on_error=False)
-    def _prepare(self) -> None:
-        self.simulation.ready()
-        self.app.call_from_thread(self._prepared)
+    def _prepare(self) -> None:  # not a worker: quitting meanwhile does not wait for it
+        self.simulation.prepare_in_background(
+            lambda: self.app.call_from_thread(self._prepared),
+            lambda exc: self.app.call_from_thread(self.worker_failed, "prepare", plain_line(exc)),
+        )
 
     def worker_failed(self, group: str, line: str) -> None:
         if group == "prepare":

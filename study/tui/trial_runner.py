@@ -71,6 +71,31 @@ class Simulation:
             return self.estimator
 
 
+    def prepare_in_background(
+        self, done: Callable[[], None], failed: Callable[[BaseException], None]
+    ) -> None:
+        """`ready()` in a daemon thread, then `done()` or `failed(error)`. Quitting the app
+        does not wait for it (it only loads and compiles; the loop's kernel cache is
+        written to a temporary file and renamed, so an exit halfway leaves none)."""
+
+        def run() -> None:
+            try:
+                self.ready()
+            except Exception as exc:
+                _if_app_alive(failed, exc)
+                return
+            _if_app_alive(done)
+
+        threading.Thread(target=run, name="prepare-simulation", daemon=True).start()
+
+
+def _if_app_alive(callback: Callable[..., None], *args: object) -> None:
+    try:
+        callback(*args)
+    except RuntimeError:  # the app has ended meanwhile: nobody to tell
+        pass
+
+
 class TrialStopped(Exception):
     """Raised inside the runner to stop the trial (not an error of the user's input)."""
 
