@@ -137,3 +137,42 @@ def test_live_state_reads_notes_samples_the_notes_way() -> None:
     # the traces are magnitudes; the peaks are as the NOTES summary's (max |.|)
     assert frame.first_history == (3.0, 6.0) and frame.second_history == (2.5, 5.6)
     assert live.peaks == [6.0, 1.0]
+
+
+def test_the_simulation_prepares_in_a_daemon_thread_that_an_exit_does_not_wait_for() -> None:
+    import threading
+
+    from study.tui.trial_runner import Simulation
+
+    seen: list[object] = []
+    started = threading.Event()
+    release = threading.Event()
+
+    def load() -> object:
+        started.set()
+        release.wait(10)
+        return "estimator"
+
+    sim = Simulation(load)
+    sim.ready = lambda: load()  # type: ignore[method-assign]  (no loop compiled here)
+    sim.prepare_in_background(lambda: seen.append("done"), seen.append)
+    assert started.wait(10)
+    [thread] = [t for t in threading.enumerate() if t.name == "prepare-simulation"]
+    assert thread.daemon  # the interpreter's exit does not wait for it
+    release.set()
+    thread.join(10)
+    assert seen == ["done"]
+
+    # a failure is handed to `failed`; a callback into an app that has gone is dropped
+    def broken() -> object:
+        raise OSError("estimator folder unreadable")
+
+    def gone() -> None:
+        raise RuntimeError("the app is not running")
+
+    sim.ready = broken  # type: ignore[method-assign]
+    sim.prepare_in_background(gone, seen.append)
+    sim.prepare_in_background(gone, lambda exc: gone())
+    for t in [t for t in threading.enumerate() if t.name == "prepare-simulation"]:
+        t.join(10)
+    assert [str(e) for e in seen[1:]] == ["estimator folder unreadable"]
