@@ -81,14 +81,15 @@ class ReasonScreen(ModalScreen[str | None]):
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, question: str) -> None:
+    def __init__(self, question: str, placeholder: str = "reason") -> None:
         super().__init__()
         self.question = question
+        self.placeholder = placeholder
 
     def compose(self) -> ComposeResult:
         with Vertical(id="reason-box"):
             yield Label(self.question, id="question")
-            yield Input(id="reason-text", placeholder="reason")
+            yield Input(id="reason-text", placeholder=self.placeholder)
             yield Label("Enter: record it    Esc: cancel", id="reason-keys")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:

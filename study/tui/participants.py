@@ -39,6 +39,8 @@ class ParticipantsPane(SafeWorkers, Vertical):
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("a", "add", "Add participant"),
         Binding("w", "withdraw", "Withdraw"),
+        Binding("n", "note", "Note"),
+        Binding("o", "session_note", "Session note"),
     ]
 
     @dataclass
@@ -140,6 +142,40 @@ class ParticipantsPane(SafeWorkers, Vertical):
             )  # fmt: skip
             return
         self._start_enrolment(str(group))
+
+    def _under_cursor(self) -> str | None:
+        table = self.query_one("#people", DataTable)
+        return str(table.get_row_at(table.cursor_row)[0]) if table.row_count else None
+
+    def action_note(self, session: bool = False) -> None:
+        """A note on the participant under the cursor (replacing theirs) or, with
+        `session`, on their session (added beside the others); both audited."""
+        code = self._under_cursor()
+        if code is None:
+            return
+        from study.tui.confirm import ReasonScreen
+
+        what = f"a note on {code}'s session" if session else f"{code}'s note (it replaces theirs)"
+
+        def answered(text: str | None) -> None:
+            if text:
+                self._note(code, text, session)
+
+        self.app.push_screen(ReasonScreen(f"{what[0].upper()}{what[1:]}; no names or contact "
+                                          "details:", "note"), answered)  # fmt: skip
+
+    def action_session_note(self) -> None:
+        self.action_note(session=True)
+
+    @work(thread=True, group="note", exit_on_error=False)
+    def _note(self, code: str, text: str, session: bool) -> None:
+        try:
+            self.services.note(code, text, session)
+        except ValueError as exc:
+            self.app.call_from_thread(self._status, f"refused: {exc}")
+            return
+        kind = "session note" if session else "note"
+        self.app.call_from_thread(self._status, f"{code}: {kind} kept")
 
     def action_withdraw(self) -> None:
         """Withdraw the participant under the list's cursor, with a reason (audited)."""

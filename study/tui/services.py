@@ -156,6 +156,12 @@ class StudyServices:
 
         withdraw(self.engine, code, reason)
 
+    def note(self, code: str, text: str, session: bool = False) -> None:
+        """Set `code`'s note, or (`session`) add a note on their session (audited)."""
+        from study.protocol.withdrawal import add_session_note, set_note
+
+        (add_session_note if session else set_note)(self.engine, code, text)
+
     def add_participant(self, group: str) -> str:
         from study.protocol.roster import add_participant
 

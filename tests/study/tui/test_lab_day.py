@@ -247,3 +247,37 @@ async def test_tab_into_the_folder_field_and_a_key_does_not_replace_the_path(
         await pilot.press("r")
         assert field.value in (str(tmp_path / "figs"), str(tmp_path / "figs") + "r")
         assert field.value != "r"
+
+
+async def test_notes_on_a_participant_and_on_their_session_from_the_list(
+    make_test_app, study_engine: Engine
+) -> None:
+    from textual.widgets import DataTable
+
+    from db.models.audit import AuditEntry
+    from study.tui.confirm import ReasonScreen
+
+    app = make_test_app()
+    async with on_screen(app, "f2") as pilot:
+        table = app.query_one("#people", DataTable)
+        table.focus()
+        table.move_cursor(row=1)  # P002
+        notes = (("n", "left-handed grip"), ("o", "dial recalibrated"),
+                 ("o", "fire alarm, 5 min pause"), ("n", "prefers the left hand"))
+        for key, text in notes:
+            await pilot.press(key)
+            await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+            assert "no names or contact details" in str(app.screen.query_one("#question").render())
+            await pilot.press(*text, "enter")
+            kind = "session note" if key == "o" else "note"
+            await wait_for(pilot, lambda kind=kind: any(
+                f"P002: {kind} kept" in str(w.render()) for w in app.query("#add-status")), 30)
+    with Session(study_engine) as session:
+        p = session.scalars(select(Participant).where(Participant.code == "P002")).one()
+        sessions = session.scalars(
+            select(AuditEntry.new_value).where(AuditEntry.field == "session_note")
+            .order_by(AuditEntry.id)
+        ).all()
+    # the participant's note is replaced; the session notes are kept, each its own row
+    assert p.note == "prefers the left hand"
+    assert sessions == ["dial recalibrated", "fire alarm, 5 min pause"]
