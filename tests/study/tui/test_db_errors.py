@@ -154,3 +154,41 @@ async def test_a_database_file_removed_mid_session_is_named_and_the_app_stays(
         await pilot.press("f2")
         assert app.is_running and app.screen.query_one("#participants-pane") is pane
     assert not db.exists()  # no empty database was created in its place
+
+
+def test_a_real_full_disk_reads_as_one_plain_line(tmp_path) -> None:
+    # SQLite's own SQLITE_FULL: the file may not grow past the pages it has
+    from sqlalchemy import create_engine, text
+
+    engine = create_engine(f"sqlite:///{tmp_path / 'full.db'}")
+    with pytest.raises(OperationalError) as caught, engine.begin() as conn:
+        conn.execute(text("CREATE TABLE t (x TEXT)"))
+        pages = conn.execute(text("PRAGMA page_count")).scalar()
+        conn.execute(text(f"PRAGMA max_page_count = {pages}"))
+        for _ in range(1000):
+            conn.execute(text("INSERT INTO t VALUES (:x)"), {"x": "x" * 200})
+    engine.dispose()
+    assert "database or disk is full" in str(caught.value)
+    line = plain_line(caught.value)
+    assert line.startswith("the disk holding the database is full: nothing more was written")
+    assert "\n" not in line and "INSERT" not in line
+
+
+@pytest.mark.postgres
+def test_a_real_lost_server_connection_reads_as_one_plain_line(pg_url: str) -> None:
+    # the server ends the session (as a restart or a dropped network would)
+    from sqlalchemy import create_engine, text
+
+    engine = create_engine(pg_url, pool_pre_ping=False)
+    killer = create_engine(pg_url)
+    with engine.connect() as conn:
+        pid = conn.execute(text("SELECT pg_backend_pid()")).scalar()
+        with killer.begin() as other:
+            other.execute(text("SELECT pg_terminate_backend(:pid)"), {"pid": pid})
+        with pytest.raises(OperationalError) as caught:
+            conn.execute(text("SELECT 1"))
+    engine.dispose()
+    killer.dispose()
+    line = plain_line(caught.value)
+    assert line.startswith("the database server cannot be reached: nothing was written"), line
+    assert "\n" not in line
