@@ -196,7 +196,10 @@ class StudyApp(SafeWorkers, App[None]):
         return self.query_one(f"#{tab}-pane")
 
     def _show(self, roster: Roster) -> None:
-        self.query_one(OverviewPane).show(roster)
+        overviews = self.query(OverviewPane)
+        if not overviews:  # a roster that arrives while the app closes: nothing to show
+            return
+        overviews.first().show(roster)
         if self.ready:
             for tab in ("participants", "run", "tlx"):
                 self._pane(tab).show(roster)  # type: ignore[attr-defined]
