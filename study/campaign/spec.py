@@ -24,7 +24,7 @@ import numpy as np
 
 from study.errors import StudyInputError
 from study.protocol.design import DEFAULT_GROUPS
-from study.protocol.tasks import get_task, task_names
+from study.protocol.tasks import get_task, is_task, task_names
 
 FACTORS = ("haptic_gain", "link_delay_ms", "link_jitter_ms", "link_loss", "group_scale")
 """Factor names in the order of the results' columns."""
@@ -195,9 +195,10 @@ def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
                 f"{source}: {key} = {data[key]!r}; expected {getattr(kind, '__name__', kind)}"
             )
     task = data.get("task", "lcca")
-    known = task_names()
-    if task not in known:
-        raise StudyInputError(f"{source}: task = {task!r}; expected one of {', '.join(known)}")
+    if not is_task(task):
+        raise StudyInputError(
+            f"{source}: task = {task!r}; expected one of {', '.join(task_names())}"
+        )
     the_task = get_task(task)
     groups = data["groups"]
     if not groups:

@@ -156,12 +156,13 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         raise StudyInputError(
             f"{source}: conditions = {list(conditions)}; expected at least two, each once"
         )
-    from study.protocol.tasks import task_names
+    from study.protocol.tasks import is_task, task_names
 
-    known = task_names()
     for t in tasks:
-        if t not in known:
-            raise StudyInputError(f"{source}: task {t!r}; expected one of {', '.join(known)}")
+        if not is_task(t):
+            raise StudyInputError(
+                f"{source}: task {t!r}; expected one of {', '.join(task_names())}"
+            )
     if not tasks or len(set(tasks)) != len(tasks):
         raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
     if not groups:

@@ -56,7 +56,7 @@ from study.errors import StudyInputError
 from study.protocol.csv_input import BOOL, DECIMAL, Problems, number, read_csv
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.roster import load_study, plan_blocks
-from study.protocol.tasks import COMPLETION_TIME, get_task, task_names
+from study.protocol.tasks import COMPLETION_TIME, get_task, is_task
 from study.protocol.tlx import check_rating, check_weights
 
 _TRIAL_NUMBER = re.compile(r"^[0-9]{1,6}$")
@@ -136,7 +136,7 @@ def _measures(p: Problems, row: int, r: dict[str, str], columns: Iterable[str]
               ) -> dict[str, float | None]:  # fmt: skip
     """The row's task's measures: an analysed one must be given, another may be empty;
     a measure of another task must be empty."""
-    if r["task"] not in task_names():
+    if not is_task(r["task"]):
         return {}
     task = get_task(r["task"])
     own = {m.name for m in task.measures}

@@ -333,7 +333,7 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
         "samples": writer.rows_committed,
         **task.driver_counts(driver),
     }
-    completion_s = float(samples[-1, task.column_index()["t_s"]]) if len(samples) else 0.0
+    completion_s = task.completion_time_s(samples)
     with write_transaction(engine) as conn:
         # only while still ours: a session that took the lease over has recovered it
         done = conn.execute(

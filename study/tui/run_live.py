@@ -20,9 +20,16 @@ if TYPE_CHECKING:
     from study.protocol.tasks import Task
     from study.tui.trial_runner import LiveFrame, TrialRun
 
-VIEW_TITLES = {"lcca": "LCCA phantom (frontal)", "notes": "NOTES: scope depth and roll",
-               "track": "{title}: insertion"}  # fmt: skip
-"""Title of the view beside the readout, by the task's `live_scene`."""
+SCENES = {
+    "lcca": (PhantomView, "LCCA phantom (frontal)"),
+    "notes": (NotesView, "NOTES: scope depth and roll"),
+    "track": (TrackView, "{title}: insertion"),
+}
+"""A task's `live_scene` -> the view drawn beside the readout, and its title."""
+
+
+def _scene(task: Task) -> tuple[type, str]:
+    return SCENES.get(task.live_scene, SCENES["track"])
 KEY_ACTIONS = {
     "dial_forward": "advance",
     "dial_back": "retract",
@@ -40,11 +47,10 @@ class LiveViewMixin:
     def _show_task(self, task: Task) -> None:
         """The live view of `task`'s trials, by its `live_scene`: the LCCA phantom, the
         NOTES scope, or the insertion along a track (any other task)."""
-        scene = task.live_scene if task.live_scene in VIEW_TITLES else "track"
-        self.query_one("#phantom-box").border_title = VIEW_TITLES[scene].format(title=task.title)
-        self.query_one(PhantomView).display = scene == "lcca"
-        self.query_one(NotesView).display = scene == "notes"
-        self.query_one(TrackView).display = scene == "track"
+        shown, title = _scene(task)
+        self.query_one("#phantom-box").border_title = title.format(title=task.title)
+        for view, _ in SCENES.values():
+            self.query_one(view).display = view is shown
 
     @property
     def redraw_hz(self) -> float:
@@ -67,9 +73,7 @@ class LiveViewMixin:
         width = max(readout.content_size.width, 10)
         text = Text(f"t {frame.t_s:6.1f} s   status: {self.status}\n", no_wrap=True)
         text.append(f"view {self.redraw_hz:4.1f} Hz\n", "dim")
-        scene = frame.task.live_scene
-        view = {"lcca": PhantomView, "notes": NotesView}.get(scene, TrackView)
-        self.query_one(view).update_frame(frame)
+        self.query_one(_scene(frame.task)[0]).update_frame(frame)
         text.append_text(self._readout(frame, width, run))
         readout.show(text)
 

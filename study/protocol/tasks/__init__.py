@@ -208,13 +208,18 @@ class Task:
             chunks.append(loop.advance(min(1.0, max_s - loop.t_s)))
         samples = np.concatenate(chunks)
         values, extras = self.trial_measures(samples, loop.success)
-        t = samples[:, self.column_index()[self.stored_name("t_s")]]
         summary = {
             "task": self.name, "group": traits.group, "condition": condition, "seed": seed,
-            "success": bool(loop.success), COMPLETION_TIME: float(t[-1]) if len(t) else 0.0,
+            "success": bool(loop.success), COMPLETION_TIME: self.completion_time_s(samples),
             **values, **extras, **self.driver_counts(driver), "participant": traits.to_dict(),
         }  # fmt: skip
         return TrialResult(self.trial_frame(samples), summary)
+
+    def completion_time_s(self, samples: np.ndarray) -> float:
+        """The time of the trial's last sample (0 without samples), s."""
+        if not len(samples):
+            return 0.0
+        return float(samples[-1, self.column_index()[self.stored_name("t_s")]])
 
     def summary_line(self, summary: Mapping[str, Any]) -> str:
         """The measures of a simulated trial's summary, for one printed line."""
@@ -305,6 +310,7 @@ class Task:
 
 _REGISTRY: dict[str, Task] = {}
 _LOADED = False
+_ENTRY_POINTS_LOADED = False
 
 
 def register(task: Task) -> Task:
@@ -324,34 +330,42 @@ def unregister(name: str) -> None:
     _REGISTRY.pop(name, None)
 
 
-def _load() -> None:
-    global _LOADED
-    if _LOADED:
-        return
-    _LOADED = True
-    for module in BUILTIN:
-        importlib.import_module(module)
-    from importlib.metadata import entry_points
+def _load(entry_points_too: bool = False) -> None:
+    """The built-in tasks on first use; the installed packages' (entry points, a scan of
+    every installed distribution's metadata) only when a name is not built in or the
+    whole list is asked for, so that reading a design of built-in tasks does not pay it."""
+    global _LOADED, _ENTRY_POINTS_LOADED
+    if not _LOADED:
+        _LOADED = True
+        for module in BUILTIN:
+            importlib.import_module(module)
+    if entry_points_too and not _ENTRY_POINTS_LOADED:
+        _ENTRY_POINTS_LOADED = True
+        from importlib.metadata import entry_points
 
-    for entry in entry_points(group=ENTRY_POINT_GROUP):
-        register(entry.load())
+        for entry in entry_points(group=ENTRY_POINT_GROUP):
+            register(entry.load())
+
+
+def is_task(name: str) -> bool:
+    """Whether a task called `name` is registered (or installed)."""
+    _load()
+    if name not in _REGISTRY:
+        _load(entry_points_too=True)
+    return name in _REGISTRY
 
 
 def task_names() -> tuple[str, ...]:
     """The tasks a design may name: the built-in ones first, then those registered."""
-    _load()
+    _load(entry_points_too=True)
     return tuple(_REGISTRY)
 
 
 def get_task(name: str) -> Task:
     """The task called `name`; an unknown name gets one line listing the known ones."""
-    _load()
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise StudyInputError(
-            f"task {name!r}; expected one of {', '.join(_REGISTRY)}"
-        ) from None
+    if not is_task(name):
+        raise StudyInputError(f"task {name!r}; expected one of {', '.join(task_names())}")
+    return _REGISTRY[name]
 
 
 def measure_named(name: str) -> Measure | None:
@@ -364,5 +378,5 @@ def measure_named(name: str) -> Measure | None:
 
 
 def tasks() -> tuple[Task, ...]:
-    _load()
+    _load(entry_points_too=True)
     return tuple(_REGISTRY.values())
