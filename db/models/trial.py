@@ -33,6 +33,7 @@ from sqlalchemy.ext.associationproxy import AssociationProxy, association_proxy
 from sqlalchemy.orm import Mapped, attribute_keyed_dict, mapped_column, relationship
 
 from db.base import Base, utcnow
+from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 
 if TYPE_CHECKING:
     from db.models.study import Participant, ScheduleBlock
@@ -103,21 +104,9 @@ class TrialMeasure(Base):
     value: Mapped[float]
 
 
-SAMPLE_COLUMNS = (
-    "t_s",
-    "insertion_m",
-    "rotation_rad",
-    "tip_x_m",
-    "tip_y_m",
-    "tip_z_m",
-    "branch",
-    "proximal_force_n",
-    "proximal_force_est_n",
-    "distal_force_n",
-    "dial_angle_rad",
-    "dial_torque_n_m",
-)
-"""Value columns of `samples`, in table order (the key `trial_id, seq` comes first)."""
+SAMPLE_COLUMNS = LOOP_SAMPLE_COLUMNS
+"""Value columns of `samples`, in table order (the key `trial_id, seq` comes first): one
+row per acquisition of the loop, so the loop's layout is the one list of them."""
 
 
 class Sample(Base):

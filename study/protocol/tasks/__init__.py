@@ -74,6 +74,24 @@ class SampleColumn:
     description: str
 
 
+def pose_columns(
+    insertion: str,
+    rotation: str,
+    tip: str,
+    *,
+    insertion_name: str = "insertion_m",
+    rotation_name: str = "rotation_rad",
+) -> tuple[SampleColumn, ...]:
+    """The first six columns every task's rows start with (the loop's layout): time,
+    insertion depth, roll and the tip's position, each described in the task's words."""
+    return (
+        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
+        SampleColumn(insertion_name, "insertion_m", "m", insertion),
+        SampleColumn(rotation_name, "rotation_rad", "rad", rotation),
+        *(SampleColumn(f"tip_{axis}_m", f"tip_{axis}_m", "m", tip) for axis in "xyz"),
+    )
+
+
 @dataclass(frozen=True)
 class LiveTrace:
     """A force the live view plots (and whose peak it shows when the trial ends)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, register
+from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, pose_columns, register
 
 MAX_FORCE_N = 20.0
 """Largest peak force the guidewire drive can produce, N; beyond it an imported value is
@@ -27,12 +27,7 @@ class LccaTask(Task):
     regions = ("DAo", "arch", "AAo", "LSA", "LCCA", "BCT")
     """`teleop_core.phantom.anatomy.REGION_ABBREVIATIONS` (a test keeps them equal)."""
     sample_columns = (
-        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
-        SampleColumn("insertion_m", "insertion_m", "m", "guidewire inserted"),
-        SampleColumn("rotation_rad", "rotation_rad", "rad", "guidewire roll"),
-        SampleColumn("tip_x_m", "tip_x_m", "m", "tip position, phantom frame"),
-        SampleColumn("tip_y_m", "tip_y_m", "m", "tip position, phantom frame"),
-        SampleColumn("tip_z_m", "tip_z_m", "m", "tip position, phantom frame"),
+        *pose_columns("guidewire inserted", "guidewire roll", "tip position, phantom frame"),
         SampleColumn("branch", "branch", "", "vessel the tip is in (DAo, arch, ...)"),
         SampleColumn("reference_force_n", "proximal_force_n", "N",
                      "true proximal insertion force (simulation) or reference sensor"),

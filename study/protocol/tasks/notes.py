@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, register
+from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, pose_columns, register
 
 MAX_FORCE_N = 25.0
 """Largest force the NOTES hand can push (`teleop_core.notes.task.HAND_MAX_FORCE_N`);
@@ -28,12 +28,7 @@ class NotesTask(Task):
     regions = ("canal", "fornix", "cavity", "target")
     """`teleop_core.notes.task.REGIONS` (a test keeps them equal)."""
     sample_columns = (
-        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
-        SampleColumn("insertion_m", "insertion_m", "m", "scope depth from the introitus"),
-        SampleColumn("rotation_rad", "rotation_rad", "rad", "scope roll"),
-        SampleColumn("tip_x_m", "tip_x_m", "m", "tip position"),
-        SampleColumn("tip_y_m", "tip_y_m", "m", "tip position"),
-        SampleColumn("tip_z_m", "tip_z_m", "m", "tip position"),
+        *pose_columns("scope depth from the introitus", "scope roll", "tip position"),
         SampleColumn("region", "branch", "", "where the tip is (canal, fornix, ...)"),
         SampleColumn("force_demanded_n", "proximal_force_n", "N",
                      "tissue resistance on the scope, positive resisting insertion"),

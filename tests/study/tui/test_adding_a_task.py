@@ -33,6 +33,7 @@ from study.protocol.tasks import (
     SampleColumn,
     Task,
     get_task,
+    pose_columns,
     register,
     unregister,
 )
@@ -99,12 +100,8 @@ class ProbeTask(Task):
     title = "Probe insertion"
     regions = ("medium", "depth")
     sample_columns = (
-        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
-        SampleColumn("depth_m", "insertion_m", "m", "probe depth"),
-        SampleColumn("roll_rad", "rotation_rad", "rad", "probe roll (none)"),
-        SampleColumn("tip_x_m", "tip_x_m", "m", "tip position"),
-        SampleColumn("tip_y_m", "tip_y_m", "m", "tip position"),
-        SampleColumn("tip_z_m", "tip_z_m", "m", "tip position"),
+        *pose_columns("probe depth", "probe roll (none)", "tip position",
+                      insertion_name="depth_m", rotation_name="roll_rad"),
         SampleColumn("where", "branch", "", "medium or at depth"),
         SampleColumn("push_force_n", "proximal_force_n", "N", "the medium's push back"),
         SampleColumn("aim_rad", "dial_angle_rad", "rad", "the hand's aim"),

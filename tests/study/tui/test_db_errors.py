@@ -9,8 +9,8 @@ a second connection holding `BEGIN EXCLUSIVE`, as another program would.
 from __future__ import annotations
 
 import sqlite3
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import AsyncIterator, Iterator
+from contextlib import asynccontextmanager, contextmanager
 
 import pytest
 from sqlalchemy import Engine, event, func, insert, select
@@ -42,6 +42,14 @@ def pragma(engine: Engine, statement: str) -> Iterator[None]:
         engine.dispose()
 
 
+@asynccontextmanager
+async def participants_pane(app) -> AsyncIterator[tuple]:
+    """`app` running on an 80 x 24 screen, loaded: (its pilot, its participants pane)."""
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        yield pilot, app.query_one("#participants-pane")
+
+
 def _participants(engine: Engine) -> int:
     with Session(engine) as session:
         return session.scalar(select(func.count()).select_from(Participant)) or 0
@@ -62,9 +70,7 @@ async def test_enrolling_on_a_read_only_database_says_so_and_the_app_stays(
     make_test_app, study_engine: Engine
 ) -> None:
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        pane = app.query_one("#participants-pane")
+    async with participants_pane(app) as (pilot, pane):
         with pragma(study_engine, "PRAGMA query_only = 1"):
             await pilot.press("f2")
             await pilot.press("a")
@@ -82,9 +88,7 @@ async def test_enrolling_while_another_program_holds_the_lock_says_so(
     make_test_app, study_engine: Engine, tmp_path
 ) -> None:
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        pane = app.query_one("#participants-pane")
+    async with participants_pane(app) as (pilot, pane):
         other = sqlite3.connect(tmp_path / "study.db", isolation_level=None)
         other.execute("BEGIN EXCLUSIVE")
         try:
@@ -133,9 +137,7 @@ async def test_a_database_file_removed_mid_session_is_named_and_the_app_stays(
     # an open SQLite connection would go on committing into the deleted file (and a new
     # one would create an empty study.db): the enrolment is refused with one line
     app = make_test_app()
-    async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        pane = app.query_one("#participants-pane")
+    async with participants_pane(app) as (pilot, pane):
         for name in ("study.db", "study.db-wal", "study.db-shm"):
             (tmp_path / name).unlink(missing_ok=True)
         await pilot.press("f2")

@@ -6,11 +6,11 @@ from __future__ import annotations
 import pytest
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
-from textual.widgets import Input, Select, Static
+from textual.widgets import DataTable, Input, Select, Static
 
 from db.models.study import Participant
 from study.protocol.roster import add_participant
-from study.tui.confirm import Confirm
+from study.tui.confirm import Confirm, ReasonScreen
 from tests.study.tui.conftest import analysed, on_screen, store_trials, wait_for
 
 pytestmark = pytest.mark.asyncio
@@ -20,6 +20,14 @@ def _count(engine: Engine, group: str) -> int:
     with Session(engine) as session:
         query = select(func.count()).select_from(Participant).where(Participant.group == group)
         return session.scalar(query) or 0
+
+
+def _people_at_row(app, row: int) -> DataTable:
+    """The participants screen's list, focused, its cursor on `row`."""
+    table = app.query_one("#people", DataTable)
+    table.focus()
+    table.move_cursor(row=row)
+    return table
 
 
 async def test_a_digit_in_a_focused_select_does_not_leave_the_form(make_test_app) -> None:
@@ -143,15 +151,9 @@ async def test_typed_answers_survive_switching_blocks_and_quitting_asks(make_tes
 async def test_withdrawing_from_the_list_asks_why_and_marks_the_row(
     make_test_app, study_engine: Engine
 ) -> None:
-    from textual.widgets import DataTable
-
-    from study.tui.confirm import ReasonScreen
-
     app = make_test_app()
     async with on_screen(app, "f2") as pilot:
-        table = app.query_one("#people", DataTable)
-        table.focus()
-        table.move_cursor(row=1)  # P002
+        table = _people_at_row(app, 1)  # P002
         await pilot.press("w")
         await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
         await pilot.press("escape")  # cancelled: nothing recorded
@@ -252,16 +254,11 @@ async def test_tab_into_the_folder_field_and_a_key_does_not_replace_the_path(
 async def test_notes_on_a_participant_and_on_their_session_from_the_list(
     make_test_app, study_engine: Engine
 ) -> None:
-    from textual.widgets import DataTable
-
     from db.models.audit import AuditEntry
-    from study.tui.confirm import ReasonScreen
 
     app = make_test_app()
     async with on_screen(app, "f2") as pilot:
-        table = app.query_one("#people", DataTable)
-        table.focus()
-        table.move_cursor(row=1)  # P002
+        _people_at_row(app, 1)  # P002
         notes = (("n", "left-handed grip"), ("o", "dial recalibrated"),
                  ("o", "fire alarm, 5 min pause"), ("n", "prefers the left hand"))
         for key, text in notes:
