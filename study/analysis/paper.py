@@ -46,10 +46,10 @@ def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[
     felt. Only trials with samples (imported ones have none)."""
     recorded = exists().where(Sample.trial_id == Trial.id)
     measured = (Trial.status == "completed", Trial.practice.is_(False), Trial.task == task)
+    traced = get_task(task).trace_measure
     pick = (
         select(TrialMeasure.value)
-        .where(TrialMeasure.trial_id == Trial.id,
-               TrialMeasure.name == get_task(task).trace_measure)  # fmt: skip
+        .where(TrialMeasure.trial_id == Trial.id, TrialMeasure.name == traced)
         .scalar_subquery()
     )
     query = (
@@ -90,9 +90,7 @@ class DrawnFigure:
         return check_figure(self.figure, self.expected_marks)
 
 
-def _marks(
-    long: pd.DataFrame, comparisons: pd.DataFrame, task: str
-) -> dict[str, float | None]:
+def _marks(long: pd.DataFrame, comparisons: pd.DataFrame, task: str) -> dict[str, float | None]:
     """The mark each measure x group of Fig. 12 must show, from the reported p_holm."""
     out: dict[str, float | None] = {}
     measures = [m for m in fig12_labels(task) if m in set(long["measure"])]

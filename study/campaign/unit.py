@@ -38,6 +38,8 @@ from teleop_core.loop.link import LinkParams
 def measures(task: str) -> tuple[str, ...]:
     """The trial measures the analysis compares for `task`."""
     return get_task(task).analysed_measures
+
+
 UNIT_COLUMNS = (
     "replicate", "group", "measure", "n", "mean_vo", "mean_hv", "effect", "p",
     "significant", "test", "p_holm", "seed",
@@ -121,8 +123,10 @@ def compare_unit(trials: pd.DataFrame, task: str) -> pd.DataFrame:
     test (paired_t or wilcoxon), p_holm (Holm across the groups of a measure).
     """
     means = trials.groupby(["participant", "group", "condition"], sort=False)[list(measures(task))]
-    long = means.mean().reset_index().melt(
-        id_vars=["participant", "group", "condition"], var_name="measure", value_name="value"
+    long = (
+        means.mean()
+        .reset_index()
+        .melt(id_vars=["participant", "group", "condition"], var_name="measure", value_name="value")
     )
     long["task"] = task
     table, _ = compare_conditions(long)
@@ -144,9 +148,10 @@ def run_unit(spec: CampaignSpec, cell: Cell, replicate: int) -> tuple[pd.DataFra
     long it took to compute, in seconds (kept apart: the rows must not depend on it)."""
     start = time.perf_counter()
     tested = compare_unit(simulate_study(spec, cell, replicate), spec.task)
-    order = {(g, m): k for k, (g, m) in enumerate((g, m) for g in spec.groups for m in measures(spec.task))}
-    tested = tested.iloc[np.argsort([order[(g, m)] for g, m in zip(
-        tested["group"], tested["measure"], strict=True)], kind="stable")]  # fmt: skip
+    names = measures(spec.task)
+    order = {key: k for k, key in enumerate((g, m) for g in spec.groups for m in names)}
+    keys = [order[key] for key in zip(tested["group"], tested["measure"], strict=True)]
+    tested = tested.iloc[np.argsort(keys, kind="stable")]
     tested.insert(0, "replicate", replicate)
     tested["seed"] = study_seed(spec.seed, replicate)
     rows = tested[list(UNIT_COLUMNS)].reset_index(drop=True)

@@ -127,20 +127,21 @@ def out_dir_option(
     )  # fmt: skip
 
 
-def progress_bar(transient: bool = True, console: Console | None = None) -> Progress:
-    """The bar long commands show on stderr: what runs, k of n done, time remaining
-    (Rich is imported only when a command shows it)."""
+def progress_bar(*columns: Any, transient: bool = True, console: Console | None = None) -> Progress:
+    """The bar long commands show on stderr: by default what runs, k of n done, time
+    remaining; `columns`: other Rich columns (Rich is imported only when a command shows
+    it)."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
-    return Progress(
-        "[progress.description]{task.description}",
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeRemainingColumn(),
-        transient=transient,
-        console=console or Console(stderr=True),
-    )
+    if not columns:
+        columns = (
+            "[progress.description]{task.description}",
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeRemainingColumn(),
+        )
+    return Progress(*columns, transient=transient, console=console or Console(stderr=True))
 
 
 def check_parent_folder(path: Path) -> None:

@@ -15,9 +15,15 @@ from typing import Any
 
 import click
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsedColumn
 
-from study.commands.base import StudyCommand, check_parent_folder, json_option, out_dir_option
+from study.commands.base import (
+    StudyCommand,
+    check_parent_folder,
+    json_option,
+    out_dir_option,
+    progress_bar,
+)
 from study.errors import StudyInputError
 
 _err = Console(stderr=True)
@@ -64,13 +70,12 @@ def run_calibration(
     calibrator = Calibrator(
         model, families=chosen, held_out_fraction=held_out, max_effects=max_effects
     )
-    with Progress(
+    with progress_bar(
         TextColumn("calibrating {task.fields[what]}"),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
         console=_err,
-        transient=True,
     ) as progress:
         task = progress.add_task("loop", total=None, what="")
 

@@ -7,9 +7,9 @@ from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
-from study.commands.base import StudyGroup, out_dir_option
+from study.commands.base import StudyGroup, out_dir_option, progress_bar
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
@@ -144,14 +144,13 @@ def train_cmd(
         patience=patience,
         **regularisation,
     )
-    with Progress(
+    with progress_bar(
         TextColumn("training GRU"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("{task.fields[rmse]}"),
         TimeRemainingColumn(),
         console=_err,
-        transient=True,
     ) as progress:
         task = progress.add_task("epochs", total=epochs, rmse="")
 

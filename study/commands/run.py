@@ -6,11 +6,10 @@ import math
 import time
 
 import click
-from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, actor_option, db_option
+from study.commands.base import StudyCommand, actor_option, db_option, progress_bar
 from study.errors import StudyInputError
 from study.protocol.roster import schedule
 
@@ -113,13 +112,7 @@ def run(
 
 def _progress() -> Progress:
     """The bar both run modes show on stderr: what runs now, and k of n done."""
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        console=Console(stderr=True),
-        transient=True,
-    )
+    return progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
 
 
 def _run_all(db_url: str | None, jobs: int, pace: float | None, actor: str) -> None:

@@ -67,8 +67,14 @@ def simulate(
     estimator = load_estimator(model_dir) if the_task.has_dial else None
     traits = simulated_participant(group, seed)
     with Console(stderr=True).status(f"simulating a {group} participant, {task}, {condition}"):
-        result = the_task.simulate(traits, condition, seed, max_seconds,
-                                   haptic_gain_n_m_per_n=haptic_gain, estimator=estimator)  # fmt: skip
+        result = the_task.simulate(
+            traits,
+            condition,
+            seed,
+            max_seconds,
+            haptic_gain_n_m_per_n=haptic_gain,
+            estimator=estimator,
+        )
     write_csv_atomically(result.frame, out_csv)
     summary_path = out_csv.with_suffix(".json")
     summary_path.write_text(json.dumps(result.summary, indent=2) + "\n")

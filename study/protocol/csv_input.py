@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,6 +24,13 @@ class Problems:
 
     def add(self, row: int, column: str, message: str) -> None:
         self.items.append(f"{self.source} row {row}, column {column}: {message}")
+
+    def one_of(self, row: int, record: dict, column: str, allowed: Sequence[str]) -> bool:
+        """Whether `record[column]` is one of `allowed`; adds the problem where not."""
+        if record[column] in allowed:
+            return True
+        self.add(row, column, f"{record[column]!r}; expected one of {', '.join(allowed)}")
+        return False
 
     def raise_if_any(self) -> None:
         if self.items:

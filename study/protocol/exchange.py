@@ -70,8 +70,6 @@ TLX_WEIGHT_COLUMNS = tuple(f"w_{s}" for s in TLX_SUBSCALES)
 _TEXT_COLUMNS = ("participant", "group", "task", "condition")
 
 
-
-
 def _check_trials(
     frame: pd.DataFrame, design: StudyDesign, source: str, known: dict[str, str]
 ) -> list[dict[str, Any]]:
@@ -82,27 +80,19 @@ def _check_trials(
         code = r["participant"].strip()
         if not CODE_PATTERN.match(code):
             p.add(row, "participant", f"{code!r} is not a pseudonymous code; expected e.g. P007")
-        if r["group"] not in design.groups:
-            p.add(row, "group", f"{r['group']!r}; expected one of {', '.join(design.groups)}")
-        elif known.setdefault(code, r["group"]) != r["group"]:
+        if p.one_of(row, r, "group", design.groups) and (
+            known.setdefault(code, r["group"]) != r["group"]
+        ):
             p.add(row, "group", f"{r['group']!r} but {code} is in group {known[code]!r}")
-        if r["task"] not in design.tasks:
-            p.add(row, "task", f"{r['task']!r}; expected one of {', '.join(design.tasks)}")
-        if r["condition"] not in design.conditions:
-            p.add(
-                row,
-                "condition",
-                f"{r['condition']!r}; expected one of {', '.join(design.conditions)}",
-            )
+        p.one_of(row, r, "task", design.tasks)
+        p.one_of(row, r, "condition", design.conditions)
         trial = r["trial"].strip()
         n_max = design.trials_per_condition
         if not _TRIAL_NUMBER.match(trial) or not 1 <= int(trial) <= n_max:
             p.add(row, "trial", f"{trial!r}; expected a whole number from 1 to {n_max}")
             trial = "0"
         values = {
-            COMPLETION_TIME: number(
-                p, row, COMPLETION_TIME, r[COMPLETION_TIME], 0.0, MAX_TRIAL_S
-            ),
+            COMPLETION_TIME: number(p, row, COMPLETION_TIME, r[COMPLETION_TIME], 0.0, MAX_TRIAL_S),
             **_measures(p, row, r, frame.columns),
         }
         success = BOOL.get(r["success"].strip().lower())
@@ -239,14 +229,8 @@ def _check_tlx(
                 "participant",
                 f"{r['participant']!r} has no trials; expected a known participant",
             )
-        if r["task"] not in design.tasks:
-            p.add(row, "task", f"{r['task']!r}; expected one of {', '.join(design.tasks)}")
-        if r["condition"] not in design.conditions:
-            p.add(
-                row,
-                "condition",
-                f"{r['condition']!r}; expected one of {', '.join(design.conditions)}",
-            )
+        p.one_of(row, r, "task", design.tasks)
+        p.one_of(row, r, "condition", design.conditions)
         key = (r["participant"], r["task"], r["condition"])
         if key in stored:
             p.add(

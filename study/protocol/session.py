@@ -263,6 +263,14 @@ class TrialSetup:
     check: Callable[[], None] = lambda: None
 
 
+def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
+    """The summary's record of the dial's gain the trial rendered with (VO renders
+    nothing); empty where the task has no dial."""
+    if gain is None:
+        return {}
+    return {"haptic_gain_n_m_per_n": 0.0 if condition == "VO" else gain}
+
+
 def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
                run: TrialSetup) -> int | None:  # fmt: skip
     """Run one trial; its id, or None if it was no longer `running` at the end (another
@@ -326,9 +334,7 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     values, extras = task.trial_measures(samples, loop.success)
     summary = {
         **extras,
-        # the dial's gain the trial rendered with (VO renders nothing)
-        **({"haptic_gain_n_m_per_n": 0.0 if block.condition == "VO" else gain}
-           if gain is not None else {}),  # fmt: skip
+        **_rendered_gain(block.condition, gain),
         "seed": seed,
         "samples": writer.rows_committed,
         **task.driver_counts(driver),

@@ -100,15 +100,25 @@ class ProbeTask(Task):
     title = "Probe insertion"
     regions = ("medium", "depth")
     sample_columns = (
-        *pose_columns("probe depth", "probe roll (none)", "tip position",
-                      insertion_name="depth_m", rotation_name="roll_rad"),
+        *pose_columns(
+            "probe depth",
+            "probe roll (none)",
+            "tip position",
+            insertion_name="depth_m",
+            rotation_name="roll_rad",
+        ),
         SampleColumn("where", "branch", "", "medium or at depth"),
         SampleColumn("push_force_n", "proximal_force_n", "N", "the medium's push back"),
         SampleColumn("aim_rad", "dial_angle_rad", "rad", "the hand's aim"),
     )
     measures = (
-        Measure("peak_push_force_n", "N", "peak push force", "largest push of the medium",
-                max_value=10.0),  # fmt: skip
+        Measure(
+            "peak_push_force_n",
+            "N",
+            "peak push force",
+            "largest push of the medium",
+            max_value=10.0,
+        ),
     )
     live_traces = (LiveTrace("push_force_n", "push", 2.0), LiveTrace("aim_rad", "aim", 1.0))
     live_peaks = (LiveTrace("push_force_n", "push", 2.0), LiveTrace("aim_rad", "aim", 1.0))
