@@ -22,6 +22,13 @@ from db.migrate import open_database
 
 PG_ENV = "STUDY_TEST_PG_URL"
 
+# pytest-xdist runs one worker per core: a worker's OpenMP pool (scikit-learn's
+# gradient boosting, PyTorch) of one thread per core as well would put cores x cores
+# spinning threads on the machine, and under other load the boosting's split loop
+# slowed by a factor of tens (a quick bench hit the 300 s timeout). Read by the OpenMP
+# runtimes when they start, so it is set before any test imports them.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
 
 def pg_schema_url(base: str, schema: str) -> str:
     """`base` with every connection's search_path set to `schema`."""
