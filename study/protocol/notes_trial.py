@@ -90,9 +90,10 @@ class NotesParticipant(Driver):
 
     When the felt force (HV) passes its comfort it settles for a pace slower in
     proportion to its caution. It keeps its pace: where the screen shows the scope
-    covering less than half the aimed way over `visual_stall_s`, it pushes (or twists)
+    covering less than half the aimed way over `visual_stall_s`, it pushes (or pulls)
     `PUSH_GROWTH` harder (against a felt resistance, the cautious less so), and eases
-    back once it keeps up. Its fastest roll is `ROLL_RATE_RAD_S` scaled by its pace.
+    back once it keeps up. It rolls in proportion to the roll error (gain `ROLL_GAIN`
+    / reaction_s) up to `ROLL_RATE_RAD_S` scaled by its pace.
     """
 
     rate_hz = 25.0
@@ -105,14 +106,14 @@ class NotesParticipant(Driver):
     def start(self, rng: np.random.Generator) -> None:
         self.rng = rng
         self._seen: deque[OperatorView] = deque()
-        self.effort = [1.0, 1.0]
-        """How much harder than its pace it pushes (depth) and twists (roll)."""
+        self.effort = 1.0
+        """How much harder than its pace it pushes (or pulls)."""
         self.phase = "insert"
         self.attempt = 0
         self.roll_error = float(rng.normal(0.0, 0.3 * self.traits.steering_error_rad))
         self.clear_aim = task.FOLD_CLEAR_ROLL_RAD
         self.back_off_to = 0.0
-        self._pace_axis = -1
+        self._pace_sign = 0.0
         self._last_aim = 0.0
         self._uneasy = False
         self._pace_since = self._pace_from = self._pace_expected = 0.0
@@ -143,7 +144,10 @@ class NotesParticipant(Driver):
                 return -v, 0.0
             self.phase = "turn"
         if self.phase == "turn":
-            if abs(self.clear_aim - seen.rotation_rad) > 0.05:
+            # turned once near its aim, or clearly past the fold's edge (in HV the
+            # proportional roll may stall on the tissue's friction short of its aim)
+            near = abs(self.clear_aim - seen.rotation_rad) <= 0.05
+            if not near and seen.rotation_rad > task.FOLD_CLEAR_ROLL_RAD - FOLD_MARGIN_RAD / 2:
                 return 0.0, self._roll_rate(self.clear_aim, seen)
             self.phase = "pass"
         if self.phase == "pass":
@@ -166,29 +170,27 @@ class NotesParticipant(Driver):
             roll = self._roll_rate(task.TARGET_ROLL_RAD + self.roll_error, seen)
         return speed, roll
 
-    def _keep_pace(self, view: OperatorView, seen: OperatorView, speed: float, roll: float) -> None:
-        """Push (or twist) harder when the screen shows the scope falling behind the
-        aimed motion over `visual_stall_s` (less than half the way), ease back when it
-        keeps up; the axis judged is the depth while it aims to move it, else the roll."""
+    def _keep_pace(self, view: OperatorView, seen: OperatorView, speed: float) -> None:
+        """Push harder when the screen shows the scope falling behind the aimed speed
+        over `visual_stall_s` (less than half the way), ease back when it keeps up."""
         tr = self.traits
-        axis, aimed = (0, speed) if speed != 0 else (1, roll)
-        where = (seen.insertion_m, seen.rotation_rad)[axis]
-        if aimed == 0 or axis != self._pace_axis:
-            self._pace_axis, self._pace_since, self._pace_from = axis, view.t_s, where
+        if speed == 0 or math.copysign(1.0, speed) != self._pace_sign:
+            self._pace_sign = math.copysign(1.0, speed) if speed != 0 else 0.0
+            self._pace_since, self._pace_from = view.t_s, seen.insertion_m
             self._pace_expected = 0.0
             return
-        self._pace_expected += abs(aimed) / self.rate_hz
+        self._pace_expected += abs(speed) / self.rate_hz
         if view.t_s - self._pace_since < tr.visual_stall_s:
             return
-        progress = math.copysign(1.0, aimed) * (where - self._pace_from)
+        progress = self._pace_sign * (seen.insertion_m - self._pace_from)
         if progress < 0.5 * self._pace_expected:
             # against a resistance it feels, the cautious add effort more slowly
             growth = PUSH_GROWTH if not self._uneasy else 1 + (PUSH_GROWTH - 1) * (1 - tr.caution)
-            self.effort[axis] = min(self.effort[axis] * growth, 20.0)
+            self.effort = min(self.effort * growth, 20.0)
             self.stalls_seen += 1
         elif progress > self._pace_expected:
-            self.effort[axis] = max(self.effort[axis] / PUSH_GROWTH, 1.0)
-        self._pace_since, self._pace_from, self._pace_expected = view.t_s, where, 0.0
+            self.effort = max(self.effort / PUSH_GROWTH, 1.0)
+        self._pace_since, self._pace_from, self._pace_expected = view.t_s, seen.insertion_m, 0.0
 
     def act(self, view: OperatorView) -> HandAction:
         tr = self.traits
@@ -209,12 +211,12 @@ class NotesParticipant(Driver):
             speed *= 1.0 - 0.5 * tr.caution
             self.eased += 1
         # and keeps that pace: harder where the scope falls behind it
-        self._keep_pace(view, seen, speed, roll_rate)
-        aim = speed * self.effort[0]
+        self._keep_pace(view, seen, speed)
+        aim = speed * self.effort
         self._last_aim = aim
-        # twisting harder brings the roll up to its pace, not past it
+        # the roll: proportional, up to its fastest
         top = ROLL_RATE_RAD_S * tr.preferred_speed_m_s / ROLL_PACE_M_S
-        roll_rate = min(max(roll_rate * self.effort[1], -top), top)
+        roll_rate = min(max(roll_rate, -top), top)
         return HandAction(
             dial_target_rad=aim / task.SPEED_GAIN_M_S_PER_RAD,
             grip_stiffness_n_m_per_rad=GRIP_STIFFNESS_N_M_PER_RAD,
