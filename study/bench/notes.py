@@ -6,7 +6,10 @@
   moved by up to +/-30 % from its default, simulated open and clamped chirps with 2 %
   sensor noise, grey-box fit from the defaults; the largest relative error of any
   parameter per draw (target: every parameter within 5 %).
-- NOTES trials: one per group and condition, the paper's measures.
+- NOTES trials: `trials` per group and condition, the paper's measures.
+- The surgeons' benchmark (`notes_surgeons`): `surgeons` simulated experts in VO
+  against the 10 surgeons' mean max pull / push, CW / CCW torque and time above
+  5.62 N, with the spread across the simulated people.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from study.bench.notes_surgeons import surgeons_report, surgeons_trials
 from teleop_core.notes.characterize import characterize_simulated
 from teleop_core.notes.identify import GreyBoxFit, measure_frf
 from teleop_core.notes.params import DOFS, MSD_FIELDS, default_params
@@ -40,6 +44,8 @@ class NotesBenchConfig:
     seed: int = 0
     trials: int = 4
     """NOTES trials per group and condition."""
+    surgeons: int = 10
+    """Simulated experts for the surgeons' benchmark (the paper had 10 surgeons)."""
 
 
 def round_trip(dof: str, draw: int, config: NotesBenchConfig) -> dict[str, Any]:
@@ -76,6 +82,8 @@ TRIAL_MEASURES = (
     "peak_force_rendered_n",
     "peak_torque_demanded_n_m",
     "peak_torque_rendered_n_m",
+    "peak_push_n",
+    "peak_pull_n",
     "push_over_capacity_fraction",
 )
 
@@ -171,7 +179,7 @@ def run_notes_bench(
     means = trials.groupby(["group", "condition"], sort=False)[list(TRIAL_MEASURES)].mean()
     md += [
         "",
-        f"NOTES trials ({config.trials} per group and condition; "
+        f"SIMULATED NOTES trials ({config.trials} per group and condition; "
         f"{simulated / wall:.0f}x real time):",
         "",
         "| group | condition | " + " | ".join(TRIAL_MEASURES) + " |",
@@ -179,6 +187,10 @@ def run_notes_bench(
     ]
     for (group, condition), row in means.iterrows():
         md.append(f"| {group} | {condition} | " + " | ".join(f"{v:.3g}" for v in row) + " |")
+    surgeons = surgeons_trials(config.surgeons, config.seed, progress)
+    report["surgeons_benchmark"], lines = surgeons_report(surgeons)
+    md += lines
+    surgeons.to_csv(out_dir / "notes_surgeons.csv", index=False)
     (out_dir / "notes_bench.md").write_text("\n".join(md) + "\n")
     frame.to_csv(out_dir / "notes_round_trip.csv", index=False)
     return report

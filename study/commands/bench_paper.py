@@ -214,13 +214,18 @@ def bench_calibrate(
     show_default=True,
     help="Simulated NOTES trials per group and condition.",
 )
+@click.option("--surgeons", type=click.IntRange(min=2), default=10, show_default=True,
+              help="Simulated experts for the surgeons' benchmark (seed 001 had 10).")
 @_seed_option
-def bench_notes(json_path: Path, out_dir: Path, draws: int, trials: int, seed: int) -> None:
-    """Seed 001's NOTES device: bandwidth, settling, limits, identification round trip."""
+def bench_notes(
+    json_path: Path, out_dir: Path, draws: int, trials: int, surgeons: int, seed: int
+) -> None:
+    """Seed 001's NOTES device: bandwidth, settling, limits, identification round trip,
+    and the surgeons' benchmark on simulated experts."""
     from study.bench.notes import NotesBenchConfig, run_notes_bench
 
     check_parent_folder(json_path)
-    config = NotesBenchConfig(draws=draws, seed=seed, trials=trials)
+    config = NotesBenchConfig(draws=draws, seed=seed, trials=trials, surgeons=surgeons)
     _run_report(
         json_path, out_dir / "notes_bench.md", "NOTES bench",
         lambda progress: run_notes_bench(config, out_dir, progress=progress),

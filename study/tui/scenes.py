@@ -45,7 +45,7 @@ def notes_scene(frame: LiveFrame | None, cols: int) -> Text:
     end_m = TARGET_M + NOTES_DEPTH_PAST_TARGET_M
     depth = frame.insertion_m if frame is not None else 0.0
     roll = frame.rotation_rad if frame is not None else 0.0
-    breached = frame is not None and notes_region(frame.branch) in ("cavity", "target")
+    breached = frame is not None and notes_region(frame.branch) in ("cavity", "target", "fold")
 
     def column(depth_m: float) -> int:
         return _axis_column(depth_m, 0.0, end_m, cols)

@@ -10,16 +10,13 @@ manipulator's damping b_m compensated from the motor encoder's speed, as the pap
 plans for its impedance controller (IV); in VO it renders no tissue (the controller
 still cancels the damping, so the scope moves against the device's inertia only).
 
-Tissue (per mm of depth d from the introitus; benchmarks of IV, [20]):
-- canal friction on the inserted length, resisting motion in both directions and
-  reaching the mean max pull of 4.5 N at the target depth;
-- the posterior fornix at `FORNIX_M`: a membrane pushed by the tip (stiffness
-  `FORNIX_STIFFNESS_N_PER_M`) that is breached when canal plus membrane reach the mean
-  max push of 9.9 N; after the breach it drags lightly;
-- torsional friction growing with depth to 76.7 N mm clockwise and 85 N mm
-  counter-clockwise at the target depth.
-The target lies at `TARGET_M` and roll `TARGET_ROLL_RAD`; the trial succeeds when the
-tip is within `TARGET_TOLERANCE_M` and `TARGET_ROLL_TOLERANCE_RAD` of it.
+The tissue (`teleop_core.notes.tissue`): canal wall friction, the posterior fornix
+torn at a tenting, the colpotomy's grip, the bowed shaft's push-only resistance in the
+cavity, a fold that only a tip rolled counter-clockwise passes, and the roll's torque
+through the scope's tube; its coefficients are assumptions tuned against the surgeons'
+benchmark of seed 001 (IV). The target lies at `TARGET_M` and roll `TARGET_ROLL_RAD`;
+the trial succeeds when the tip is within `TARGET_TOLERANCE_M` and
+`TARGET_ROLL_TOLERANCE_RAD` of it.
 
 The operator is any `teleop_core.loop.drivers.Driver`, read the NOTES way: the hand
 aims the scope's insertion speed at `dial_target_rad` x `SPEED_GAIN_M_S_PER_RAD` (the
@@ -34,31 +31,34 @@ are assumptions.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from teleop_core.loop.drivers import GRIP_STIFFNESS_N_M_PER_RAD, Driver, HandAction, OperatorView
 from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 from teleop_core.notes.params import RotationParams, TranslationParams
+from teleop_core.notes.tissue import NotesAbdomen as TissueAbdomen
+from teleop_core.notes.tissue import TissueParams
 
 PULL_BENCHMARK_N = 4.5
 PUSH_BENCHMARK_N = 9.9
 CW_BENCHMARK_N_M = 0.0767
 CCW_BENCHMARK_N_M = 0.085
-"""Mean max pull / push force and CW / CCW torque of 10 surgeons on a porcine model (IV)."""
-FORNIX_M = 0.09
-"""Depth of the posterior fornix from the introitus; assumption (vaginal length ~9 cm)."""
-FORNIX_STIFFNESS_N_PER_M = 600.0
-"""Membrane stiffness against the tip; assumption."""
+PUSH_OVER_LIMIT_BENCHMARK = 0.2357
+"""Mean max pull / push force, CW / CCW torque of 10 surgeons on a porcine model, and the
+share of the procedure's time their push exceeded the device's 5.62 N (IV, [20])."""
+TISSUE = TissueParams()
+FORNIX_M = TISSUE.fornix_depth_m
+"""Depth of the posterior fornix from the introitus (`TissueParams.fornix_depth_m`)."""
+FOLD_M = TISSUE.fold_depth_m
+FOLD_CLEAR_ROLL_RAD = TISSUE.fold_clear_roll_rad
+"""The fold between fornix and target, and the roll counter-clockwise of which the tip
+passes it (`TissueParams`)."""
 TARGET_M = 0.20
 TARGET_ROLL_RAD = math.radians(60.0)
 TARGET_TOLERANCE_M = 0.01
 TARGET_ROLL_TOLERANCE_RAD = math.radians(10.0)
 """Target in the peritoneal cavity (depth, roll) and how close counts; assumptions."""
-FRICTION_SPEED_M_S = 0.01
-FRICTION_SPEED_RAD_S = 0.05
-"""Speeds over which tissue friction builds up (tanh regularisation); assumptions."""
 SPEED_GAIN_M_S_PER_RAD = 0.05
 """Aimed speed per rad of `dial_target_rad` (the LCCA dial's k_v; assumption)."""
 HAND_DAMPING_N_S_PER_M = 150.0
@@ -69,40 +69,25 @@ HAND_MAX_TORQUE_N_M = 0.4
 """Strongest push and twist a hand applies to the scope; assumptions."""
 DEVICE_RATE_HZ = 1000.0
 SAMPLE_RATE_HZ = 100.0
-REGIONS = ("canal", "fornix", "cavity", "target")
-"""Region names, stored as the samples' `branch`."""
+REGIONS = ("canal", "fornix", "cavity", "target", "fold")
+"""Region names, stored as the samples' `branch` (the fold last, so older codes keep
+their meaning): "fold" is the tip against the fold, the screen's red-out."""
 SAMPLE_COLUMNS = (*LOOP_SAMPLE_COLUMNS, "torque_demanded_n_m")
 """Per sample: the loop's columns (as `teleop_core.loop.layout.SAMPLE_COLUMNS`) read the
 NOTES way: proximal_force_n = demanded force, proximal_force_est_n = rendered force,
-distal_force_n = the tip's force on the fornix, dial_torque_n_m = rendered torque; plus
-the demanded torque."""
+distal_force_n = the tissue's force on the tip (fornix or fold), dial_torque_n_m =
+rendered torque; plus the demanded torque."""
 
 
-@dataclass(frozen=True)
-class TissueState:
-    force_n: float
-    """Demanded force on the scope, positive resisting insertion (push)."""
-    tip_force_n: float
-    """The fornix membrane's part of it."""
-    torque_n_m: float
-    """Demanded torque, positive resisting clockwise roll."""
-
-
-class NotesAbdomen:
-    """The virtual tissue along the transvaginal path; `reset` before each trial."""
-
-    def __init__(self) -> None:
-        self.reset()
-
-    def reset(self) -> None:
-        self.breached = False
+class NotesAbdomen(TissueAbdomen):
+    """The tissue plus where the tip is, as the screen shows it (`REGIONS`)."""
 
     def region(self, depth_m: float, roll_rad: float) -> str:
         if self.at_target(depth_m, roll_rad):
             return "target"
         if not self.breached:
             return "fornix" if depth_m >= FORNIX_M - 0.005 else "canal"
-        return "cavity"
+        return "fold" if self.at_fold(depth_m, roll_rad) else "cavity"
 
     @staticmethod
     def at_target(depth_m: float, roll_rad: float) -> bool:
@@ -110,21 +95,6 @@ class NotesAbdomen:
             abs(depth_m - TARGET_M) < TARGET_TOLERANCE_M
             and abs(roll_rad - TARGET_ROLL_RAD) < TARGET_ROLL_TOLERANCE_RAD
         )
-
-    def forces(self, depth_m: float, speed_m_s: float, roll_rate_rad_s: float) -> TissueState:
-        inserted = min(max(depth_m, 0.0), TARGET_M) / TARGET_M
-        # canal friction: up to the mean max pull at the target depth
-        canal = PULL_BENCHMARK_N * inserted * math.tanh(speed_m_s / FRICTION_SPEED_M_S)
-        tip = 0.0
-        if not self.breached and depth_m > FORNIX_M:
-            tip = FORNIX_STIFFNESS_N_PER_M * (depth_m - FORNIX_M)
-            # breached when the push reaches the mean max push (IV)
-            if tip + max(canal, 0.0) >= PUSH_BENCHMARK_N:
-                self.breached = True
-        # torsion: CW (positive roll) up to 76.7 N mm, CCW up to 85 N mm at the target
-        level = CW_BENCHMARK_N_M if roll_rate_rad_s >= 0 else CCW_BENCHMARK_N_M
-        torque = level * inserted * math.tanh(roll_rate_rad_s / FRICTION_SPEED_RAD_S)
-        return TissueState(canal + tip, tip, torque)
 
 
 class _Axis:
@@ -205,7 +175,7 @@ class NotesLoop:
             a = self._action
             grip_share = a.grip_stiffness_n_m_per_rad / GRIP_STIFFNESS_N_M_PER_RAD
             tr, ro = self.trans, self.rot
-            tissue = self.abdomen.forces(tr.x_s, tr.v_s, ro.v_s)
+            tissue = self.abdomen.step(tr.x_s, ro.x_s, tr.v_s, ro.v_s, dt)
             # the hand drives the scope towards the aimed speeds, within its strength
             aim = a.dial_target_rad * SPEED_GAIN_M_S_PER_RAD
             hand_f = HAND_DAMPING_N_S_PER_M * grip_share * (aim - tr.v_s)

@@ -17,15 +17,15 @@ MAX_FORCE_N = 25.0
 """Largest force the NOTES hand can push (`teleop_core.notes.task.HAND_MAX_FORCE_N`);
 beyond it an imported value is a typo or a unit slip."""
 FULL_SCALE_N = 10.0
-"""Full scale of the live force gauges: the fornix gives way at the mean max push of
-9.9 N (`teleop_core.notes.task.PUSH_BENCHMARK_N`)."""
+"""Full scale of the live force gauges: the surgeons' mean max push, 9.9 N, near which
+the fornix tears (`teleop_core.notes.task.PUSH_BENCHMARK_N`)."""
 
 
 class NotesTask(Task):
     name = "notes"
     title = "NOTES endoscopy"
     has_dial = False
-    regions = ("canal", "fornix", "cavity", "target")
+    regions = ("canal", "fornix", "cavity", "target", "fold")
     """`teleop_core.notes.task.REGIONS` (a test keeps them equal)."""
     sample_columns = (
         *pose_columns("scope depth from the introitus", "scope roll", "tip position"),
@@ -34,7 +34,8 @@ class NotesTask(Task):
                      "tissue resistance on the scope, positive resisting insertion"),
         SampleColumn("force_rendered_n", "proximal_force_est_n", "N",
                      "force the device renders (saturates at its continuous limit)"),
-        SampleColumn("tip_force_n", "distal_force_n", "N", "the fornix's push on the tip"),
+        SampleColumn("tip_force_n", "distal_force_n", "N",
+                     "the tissue's push on the tip (the fornix or the fold)"),
         SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "the hand's aim (rate input)"),
         SampleColumn("torque_rendered_n_m", "dial_torque_n_m", "N m", "torque rendered"),
         SampleColumn("torque_demanded_n_m", None, "N m",
@@ -44,13 +45,22 @@ class NotesTask(Task):
         Measure("peak_force_demanded_n", "N", "peak demanded force",
                 "largest |force| the tissue demanded of the scope", max_value=MAX_FORCE_N),
         Measure("peak_tip_force_n", "N", "peak tip force",
-                "largest force of the fornix on the tip", max_value=MAX_FORCE_N),
+                "largest force of the fornix or the fold on the tip", max_value=MAX_FORCE_N),
         Measure("peak_force_rendered_n", "N", "peak rendered force",
                 "largest |force| the device rendered", analysed=False, max_value=MAX_FORCE_N),
         Measure("peak_torque_demanded_n_m", "N m", "peak demanded torque",
                 "largest |torque| the tissue demanded", analysed=False),
         Measure("peak_torque_rendered_n_m", "N m", "peak rendered torque",
                 "largest |torque| the device rendered", analysed=False),
+        Measure("peak_push_n", "N", "peak push", "largest demanded push (force resisting "
+                "insertion), as the surgeons' max push of seed 001", analysed=False,
+                max_value=MAX_FORCE_N),
+        Measure("peak_pull_n", "N", "peak pull", "largest demanded pull (force resisting "
+                "withdrawal), a magnitude", analysed=False, max_value=MAX_FORCE_N),
+        Measure("peak_torque_cw_n_m", "N m", "peak CW torque",
+                "largest demanded torque resisting a clockwise roll", analysed=False),
+        Measure("peak_torque_ccw_n_m", "N m", "peak CCW torque", "largest demanded torque "
+                "resisting a counter-clockwise roll, a magnitude", analysed=False),
         Measure("push_over_capacity_fraction", "", "push over capacity",
                 "share of samples with the demanded push above the device's continuous "
                 "force (5.62 N)", analysed=False, max_value=1.0),
