@@ -121,7 +121,7 @@ def min_distance(
     fixed_cov: np.ndarray,
 ) -> float:
     """Smallest D^2 of one person's moments `y` over the free traits' settings."""
-    inv = np.linalg.inv(emulator.noise_cov_ / k + fixed_cov)
+    inv = np.linalg.inv(emulator.person_noise_cov() / k + fixed_cov)
     low, high = emulator.box_
 
     def d2(x: np.ndarray) -> float:

@@ -113,6 +113,15 @@ class MomentEmulator:
         self.box_ = (settings.min(axis=0), settings.max(axis=0))
         return self
 
+    def person_noise_cov(self) -> np.ndarray:
+        """One trial's noise covariance as a real session has it: the design's seeds are
+        shared by VO and HV (common random numbers), a session's are not, so the
+        covariance between the conditions' moments is dropped."""
+        same = np.array(
+            [[a.split(":")[0] == b.split(":")[0] for b in self.moments_] for a in self.moments_]
+        )
+        return np.where(same, self.noise_cov_, 0.0)
+
     def log_moments(self, traits: np.ndarray) -> np.ndarray:
         """Expected log-moments of people with `traits` (n, len(TRAITS)) -> (n, moments)."""
         return self.log_surface_.predict(np.atleast_2d(traits))

@@ -34,9 +34,11 @@ from study.protocol.participants import ParticipantTraits
 from study.protocol.tasks import get_task
 
 
-def trial_seed(setting: int, repeat: int, salt: str = "fit") -> int:
-    """The seed of a setting's repeat `repeat` (the same in both conditions)."""
-    return zlib.crc32(f"{salt}/{setting}/{repeat}".encode())
+def trial_seed(setting: int, repeat: int, salt: str = "fit", condition: str = "") -> int:
+    """The seed of a setting's repeat `repeat`: the same in both conditions unless
+    `condition` is given (a simulated study's people, whose VO and HV trials are
+    independent as a real session's are)."""
+    return zlib.crc32(f"{salt}/{setting}/{repeat}{'/' + condition if condition else ''}".encode())
 
 
 @lru_cache(maxsize=1)
@@ -60,7 +62,8 @@ def simulate_setting(
     salt: str = "fit",
 ) -> list[dict[str, Any]]:
     """Every trial of one trait setting (`group` plus the traits): each condition x
-    repeat, with the task's analysed measures and `success`."""
+    repeat, with the task's analysed measures and `success`. With the salt `fit` both
+    conditions share a repeat's seed; with any other, each trial has its own."""
     the_task = get_task(task)
     traits = ParticipantTraits(**setting)
     estimator = _estimator() if the_task.has_dial else None
@@ -70,7 +73,7 @@ def simulate_setting(
             s = the_task.simulate(
                 traits,
                 condition,
-                trial_seed(index, r, salt),
+                trial_seed(index, r, salt, "" if salt == "fit" else condition),
                 max_s,
                 estimator=estimator,
                 context=_context(task),
