@@ -68,7 +68,7 @@ class ParticipantModel:
     def label(self) -> str:
         """One phrase for printed lines: which model, fitted to what."""
         return (
-            f"participants from {self.source} (fitted to {self.data_source} trials, {self.digest})"
+            f"participant model {self.source} (fitted to {self.data_source} trials, {self.digest})"
         )
 
 
