@@ -103,6 +103,7 @@ def simulate_people(
     block = np.where(frame["condition"] == first, 0, 1)
     frame["position"] = block * k + frame["repeat"]
     frame["trial"] = frame["repeat"] + 1
+    frame["driver"] = "simulated"
     return frame
 
 
@@ -178,6 +179,16 @@ def power_effects(simulated: pd.DataFrame, measures: list[str]) -> dict[str, Any
     return out
 
 
+def build_emulator(task: str, settings: FitSettings,
+                   progress: Progress = _no_progress) -> MomentEmulator:  # fmt: skip
+    """Simulate the design's trait settings and fit the emulator of the task's moments."""
+    x = design_settings(settings.design, settings.seed, design_box())
+    people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
+    design = simulate_settings(task, people, settings.repeats, settings.jobs, settings.max_s,
+                               lambda a, b: progress("emulator", a, b))  # fmt: skip
+    return MomentEmulator().fit(x, design, list(get_task(task).analysed_measures))
+
+
 def fit_participants(
     engine: Engine,
     task: str,
@@ -186,22 +197,25 @@ def fit_participants(
     progress: Progress = _no_progress,
 ) -> tuple[dict[str, Any], pd.DataFrame]:
     """MODEL.json's content, and the summaries' frame (for the figure)."""
-    the_task = get_task(task)
-    measures = list(the_task.analysed_measures)
     trials = observed_trials(engine, task)
+    check_fittable(trials, task, db_label)
+    return fit_trials(trials, task, settings, build_emulator(task, settings, progress),
+                      db_label, progress)  # fmt: skip
+
+
+def fit_trials(
+    trials: pd.DataFrame,
+    task: str,
+    settings: FitSettings,
+    emulator: MomentEmulator,
+    db_label: str,
+    progress: Progress = _no_progress,
+) -> tuple[dict[str, Any], pd.DataFrame]:
+    """The fit to `trials` (`observed_trials`' columns) with a built `emulator`."""
+    measures = list(get_task(task).analysed_measures)
     groups = check_fittable(trials, task, db_label)
     people = person_moments(trials, measures)
     source, counts = data_source(trials)
-    x = design_settings(settings.design, settings.seed, design_box())
-    design = simulate_settings(
-        task,
-        [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x],
-        settings.repeats,
-        settings.jobs,
-        settings.max_s,
-        lambda a, b: progress("emulator", a, b),
-    )
-    emulator = MomentEmulator().fit(x, design, measures)
     names = emulator.moments_
     noise_sd = np.sqrt(np.diag(emulator.noise_cov_))
     by_group = {g: people[people["group"] == g] for g in groups}
