@@ -20,9 +20,10 @@ is found is reported rather than absorbed into the traits:
   between the person's moments and the emulator's over the free traits (the others at
   the group's fitted means; L-BFGS-B within the emulator's range), with the covariance
   of the trial noise over the person's k trials plus what the group's spread of the
-  fixed traits adds (over draws from the fitted model). D^2 is calibrated on the
-  simulated people (c = their median D^2 over the chi-square median, so the emulator's
-  own misfit does not flag anyone) and a person is an outlier when D^2 / c exceeds the
+  fixed traits adds (over draws from the fitted model). D^2 is calibrated per group on
+  the people simulated from that group's fit (c = their median D^2 over the chi-square
+  median, so the emulator's own misfit, worse near the edge of its design, flags no
+  one) and a person is an outlier when D^2 / c exceeds the
   chi-square quantile at 1 - OUTLIER_ALPHA / n (Bonferroni over the participants), with
   df = moments - free traits.
 """
@@ -173,17 +174,18 @@ def outliers(
 
     df = len(names) - len(free)
     sim = distances(simulated)
-    c = max(float(sim.median()) / stats.chi2.median(df), 1e-9) if len(sim) else 1.0
+    groups = simulated.loc[sim.index, "group"]
+    c = {g: max(float(d.median()) / stats.chi2.median(df), 1e-9) for g, d in sim.groupby(groups)}
     obs = distances(people)
+    scaled = {p: float(d / c.get(people.loc[p, "group"], 1.0)) for p, d in obs.items()}
     limit = float(stats.chi2.ppf(1 - OUTLIER_ALPHA / max(len(obs), 1), df))
-    flagged = sorted(p for p, d in obs.items() if d / c > limit)
     return {
-        "rule": f"D^2 / c > chi2({df}) quantile at 1 - {OUTLIER_ALPHA}/n",
-        "calibration_c": round(c, 4),
+        "rule": f"D^2 / c_group > chi2({df}) quantile at 1 - {OUTLIER_ALPHA}/n",
+        "calibration_c": {g: round(v, 4) for g, v in c.items()},
         "limit": round(limit, 3),
         "df": df,
-        "distance": {p: round(float(d / c), 3) for p, d in obs.items()},
-        "flagged": flagged,
+        "distance": {p: round(d, 3) for p, d in scaled.items()},
+        "flagged": sorted(p for p, d in scaled.items() if d > limit),
     }
 
 
