@@ -35,7 +35,7 @@ estimate is off by more than its uncertainty."""
 
 
 def _truth() -> dict:
-    return {g: dataclasses.replace(p, preferred_speed_m_s=(TRUE_SPEED_M_S[g], 0.0015))
+    return {g: [dataclasses.replace(p, preferred_speed_m_s=(TRUE_SPEED_M_S[g], 0.0015))]
             for g, p in PROFILES.items()}  # fmt: skip
 
 

@@ -3,8 +3,9 @@
 One row per measure, one column per VO, HV and VO - HV; in each panel the groups along
 x, and for each group three marks with 95 % intervals: the observed participants'
 mean (bootstrap over participants), the people simulated from the fitted model (the
-same), and the fitted model's prediction (the fit's bootstrap). The caption says what
-the data were and that the simulated marks are simulated.
+same; each person from one of the fit's bootstrap replicates, so the interval holds the
+fit's uncertainty too), and the emulator's prediction (the fit's bootstrap). The
+caption says what the data were and that the simulated marks are simulated.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from study.protocol.tasks import measure_named
 SOURCES = {
     "observed": ("observed", "#000000", "o"),
     "simulated": ("simulated from the fit", "#0072B2", "s"),
-    "model": ("fitted model (emulator)", "#D55E00", "^"),
+    "model": ("the emulator's prediction", "#D55E00", "^"),
 }
 COLUMNS = ("VO", "HV", "VO-HV")
 

@@ -10,9 +10,11 @@ Steps (each reported through `progress(step, k, n)`):
    moments, with a bootstrap over participants (resampled within group, refitted on
    the emulator) for their uncertainty and that of the model's predicted means;
 4. people drawn from the fitted model and simulated with the study's design (`check`
-   per group, the observed trials per condition, both orders): the observed vs
-   simulated summaries, the effects `study power` takes, and the checks of what the
-   model lacks (`checks.py`).
+   per group, each from one of the fit's bootstrap replicates, the observed trials per
+   condition, both orders): the observed vs simulated summaries (the simulated ones are
+   the fitted model's prediction: their intervals hold the fit's uncertainty and the
+   people's), the effects `study power` takes, and the checks of what the model lacks
+   (`checks.py`). The emulator's own prediction is reported beside them (`model`).
 """
 
 from __future__ import annotations
@@ -77,16 +79,19 @@ def _profile(mean: np.ndarray, sd: np.ndarray) -> GroupProfile:
 
 def simulate_people(
     task: str,
-    profiles: dict[str, GroupProfile],
+    profiles: dict[str, list[GroupProfile]],
     per_group: int,
     k: int,
     settings: FitSettings,
     progress: Progress,
 ) -> pd.DataFrame:
-    """Trials of `per_group` people per group drawn from `profiles`, `k` per condition,
-    with `participant`, `group`, `order` (alternating) and `position` as observed."""
+    """Trials of `per_group` people per group, `k` per condition, with `participant`,
+    `group`, `order` (alternating) and `position` as observed. Person i of a group is
+    drawn from `profiles[group][i % len]`: one profile (the truth), or the fit's
+    bootstrap replicates, so that the people carry the fit's uncertainty too."""
     rng = np.random.default_rng([settings.seed, 0xC4EC])
-    people = [(g, draw_traits(g, rng, profiles)) for g in profiles for _ in range(per_group)]
+    people = [(g, draw_traits(g, rng, {g: ps[i % len(ps)]}))
+              for g, ps in profiles.items() for i in range(per_group)]  # fmt: skip
     frame = simulate_settings(
         task,
         [t.to_dict() for _, t in people],
@@ -227,7 +232,7 @@ def fit_trials(
         emulator, {g: PROFILES[g] for g in groups}, spreads, {g: len(by_group[g]) for g in groups}
     )
     rng = np.random.default_rng([settings.seed, 0xB007])
-    fitted, group_out, predicted, fixed_cov = {}, {}, {}, {}
+    fitted, group_out, predicted, fixed_cov, replicates = {}, {}, {}, {}, {}
     for k, g in enumerate(groups):
         progress("fitting", k, len(groups))
         est = GroupEstimator(emulator, PROFILES[g], free, ks[g], seed=settings.seed)
@@ -241,6 +246,7 @@ def fit_trials(
             preds.append(_predict(est, b.mean, b.sd))
         boots_arr = np.array(boots)
         fitted[g] = _profile(best.mean, best.sd)
+        replicates[g] = [_profile(b[: len(TRAITS)], b[len(TRAITS) :]) for b in boots_arr]
         # the moments' spread that the traits held at their priors add to a person's
         fixed_only = best.sd.copy()
         fixed_only[free] = 0.0
@@ -285,7 +291,7 @@ def fit_trials(
         }
     progress("fitting", len(groups), len(groups))
     k_sim = round(float(np.median(people["k"])))
-    simulated = simulate_people(task, fitted, settings.check, k_sim, settings, progress)
+    simulated = simulate_people(task, replicates, settings.check, k_sim, settings, progress)
     rows = checks.trend_and_order(trials, simulated, measures)
     means = {g: np.array([getattr(fitted[g], t)[0] for t in TRAITS]) for g in groups}
     outlier = checks.outliers(
@@ -327,8 +333,9 @@ def fit_trials(
         "emulator": emulator.to_dict(),
         "summaries": table.round(6).to_dict(orient="records"),
         "simulated_summaries_note": f"'simulated' rows: {settings.check} people per group "
-        "SIMULATED from the fitted model; 'model': the emulator's "
-        "prediction with the fit's bootstrap interval",
+        "SIMULATED from the fitted model (each from one of the fit's bootstrap replicates, so "
+        "the interval holds the fit's uncertainty and the people's); 'model': the "
+        "emulator's prediction with the fit's bootstrap interval",
         "lacks": {"line": checks.lacks_line(rows, outlier), "tests": rows, "outliers": outlier},
         "effects": power_effects(simulated, measures),
         "settings": settings.__dict__,
