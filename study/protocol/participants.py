@@ -20,7 +20,9 @@ After an obstacle (felt or seen) it backs off and tries again. It gives up at
 
 Group distributions (mean, sd; truncated to plausible ranges) are assumptions shaped
 by seed 000, IV-D (experts faster and steadier; the paper reports comparable times and
-lower peak forces with haptics in every group), not measured values.
+lower peak forces with haptics in every group), not measured values. A model fitted to
+a study's trials (`study participants fit`, `study.protocol.participant_model`) replaces
+them wherever `--participants MODEL.json` is given.
 """
 
 from __future__ import annotations
