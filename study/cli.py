@@ -35,6 +35,7 @@ COMMANDS = {
     "import": "study.commands.exchange:import_cmd",
     "init": "study.commands.plan:init",
     "participant": "study.commands.plan:participant",
+    "participants": "study.commands.participants:participants",
     "power": "study.commands.power:power",
     "run": "study.commands.run:run",
     "schedule": "study.commands.plan:schedule_cmd",

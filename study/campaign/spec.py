@@ -10,20 +10,28 @@ and the replicate only, not on the cell, so replicate r of every cell has the sa
 simulated people (drawn as `study run` draws them from the study seed and their codes)
 and the cells differ by their factors alone. It is also what makes the results the
 same whatever order, or on whichever worker, the units run.
+
+`participants = "MODEL.json"` (a path relative to the campaign file) draws the simulated
+people from a fitted participant model (`study participants fit`) instead of the
+hand-set profiles; the spec carries the model's text, so workers need no file, and a
+campaign folder keeps a copy (`CampaignDir`).
 """
 
 from __future__ import annotations
 
 import itertools
+import json
 import math
 import tomllib
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from study.errors import StudyInputError
 from study.protocol.design import DEFAULT_GROUPS
+from study.protocol.participant_model import ParticipantModel, load_model, model_from_dict
 from study.protocol.tasks import get_task, is_task, task_names
 
 FACTORS = ("haptic_gain", "link_delay_ms", "link_jitter_ms", "link_loss", "group_scale")
@@ -53,6 +61,7 @@ seed = 1                       # the same seed gives the same results, on any wo
 replicates = 50                # simulated studies per cell
 task = "lcca"                  # "lcca" (guidewire into the LCCA) or "notes" (endoscopy)
 trials_per_condition = 1       # measured trials per participant in each condition
+# participants = "model.json"  # people from a fitted model (`study participants fit`)
 
 [groups]                       # group sizes, as in a design file (outsider, novice, expert)
 outsider = 20
@@ -75,6 +84,7 @@ _KEYS: dict[str, type | tuple[type, ...]] = {
     "trials_per_condition": int,
     "groups": dict,
     "factors": dict,
+    "participants": str,
 }
 
 
@@ -104,6 +114,16 @@ class CampaignSpec:
     """Design group sizes, before `group_scale`."""
     factors: dict[str, tuple[float, ...]] = field(default_factory=dict)
     """The named factors' values, in `FACTORS` order."""
+    participants_json: str = ""
+    """The fitted participant model's file text ('' for the hand-set profiles)."""
+    participants_digest: str = ""
+
+    def participant_model(self) -> ParticipantModel | None:
+        """The fitted model the people are drawn from, or None (the hand-set profiles)."""
+        if not self.participants_json:
+            return None
+        data = json.loads(self.participants_json)
+        return model_from_dict(data, f"campaign {self.name!r}", self.participants_digest)
 
     def cells(self) -> list[Cell]:
         names = list(self.factors)
@@ -127,6 +147,7 @@ class CampaignSpec:
             "name": self.name, "seed": self.seed, "replicates": self.replicates,
             "task": self.task, "trials_per_condition": self.trials_per_condition,
             "groups": dict(self.groups), "factors": {k: list(v) for k, v in self.factors.items()},
+            "participants": self.participants_digest or None,
         }  # fmt: skip
 
 
@@ -177,6 +198,15 @@ def _factor(source: str, name: str, values: Any) -> tuple[float, ...]:
         if bad[0](v):
             raise StudyInputError(f"{source}: factors.{name} value {v:g}; expected {bad[1]}")
     return out
+
+
+def _participants(path: str | None, source: str, task: str) -> dict[str, str]:
+    """The spec's fields for `participants = PATH` (relative to the campaign file)."""
+    if path is None:
+        return {}
+    full = Path(source).parent / path
+    model = load_model(full, task)  # one line if it is bad or fitted to another task
+    return {"participants_json": full.read_text(), "participants_digest": model.digest}
 
 
 def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
@@ -235,6 +265,7 @@ def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
         ),
         groups=dict(groups),
         factors=factors,
+        **_participants(data.get("participants"), source, task),
     )
     for scale in factors.get("group_scale", (1.0,)):
         for g, n in groups.items():

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,8 @@ from study.campaign.unit import UNIT_COLUMNS
 from study.errors import StudyInputError
 
 DATA_SOURCE = "simulated"
+PARTICIPANTS = "participants.json"
+"""A campaign folder's copy of the fitted participant model its campaign file names."""
 SUMMARY_COLUMNS = (
     "group", "measure", "n", "replicates", "power", "power_ci_low", "power_ci_high",
     "power_hv_lower", "effect_mean", "effect_ci_low", "effect_ci_high", "data_source",
@@ -80,11 +83,18 @@ class CampaignDir:
         return cls(root, spec, text)
 
     def create(self) -> None:
-        """Make DIR and keep the campaign file in it (once)."""
+        """Make DIR and keep the campaign file in it (once), with a copy of its fitted
+        participant model (`participants.json`, which the kept file then names)."""
         self.units_dir.mkdir(parents=True, exist_ok=True)
         kept = self.root / "campaign.toml"
         if not kept.is_file():
-            _atomic_write(kept, lambda p: p.write_text(self.text))
+            text = self.text
+            if self.spec.participants_json:
+                model = self.root / PARTICIPANTS
+                _atomic_write(model, lambda p: p.write_text(self.spec.participants_json))
+                text = re.sub(r"^participants\s*=.*$", f'participants = "{PARTICIPANTS}"', text,
+                              count=1, flags=re.M)  # fmt: skip
+            _atomic_write(kept, lambda p: p.write_text(text))
 
     @classmethod
     def existing(cls, root: Path) -> CampaignDir:

@@ -102,9 +102,10 @@ def simulate_study(spec: CampaignSpec, cell: Cell, replicate: int) -> pd.DataFra
         groups=spec.sizes(cell),
     )  # fmt: skip
     context = get_task(spec.task).session_context()
+    model = spec.participant_model()
     rows = []
     for code, group, order in enrol(design):
-        traits = participant_traits(seed, code, group)
+        traits = participant_traits(seed, code, group, model)
         for block in plan_blocks(design, order):
             for i in range(block["n_trials"]):
                 s = trial_seed(seed, code, block["block_index"], i)

@@ -19,6 +19,8 @@ if TYPE_CHECKING:
     from rich.progress import Progress
     from sqlalchemy import Engine
 
+    from study.protocol.participant_model import ParticipantModel
+
 USER_ERRORS = (DbInputError, DatabaseGoneError, StudyInputError, TeleopInputError)
 
 
@@ -98,6 +100,25 @@ db_option = click.option(
     "another program's lock; default 30), or postgresql+psycopg://... "
     "[default: ./study.db; env STUDY_DB]",
 )
+
+
+participants_option = click.option(
+    "--participants",
+    "participants_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="A fitted participant model (MODEL.json from `study participants fit`): simulated "
+    "people are drawn from its trait distributions [default: the hand-set profiles].",
+)
+
+
+def load_participants(path: Path | None, task: str | None = None) -> ParticipantModel | None:
+    """The model at `path` (one line and exit 2 if it is bad), or None."""
+    if path is None:
+        return None
+    from study.protocol.participant_model import load_model
+
+    return load_model(path, task)
 
 
 actor_option = click.option(

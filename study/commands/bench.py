@@ -201,3 +201,32 @@ def bench_startup(db_url: str | None, runs: int, rows: int, json_path: Path | No
     load = ", ".join(f"{x:.2f}" for x in result.load_average)
     click.echo(f"load average {load}")
     write_json(json_path, result.to_dict())
+
+
+@bench.command("participants")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Write participants_bench.md and the fit's figure here.")  # fmt: skip
+@click.option("--trials", type=click.IntRange(min=1), default=3, show_default=True,
+              help="Measured trials per condition in the simulated study.")  # fmt: skip
+@click.option("--truth-people", type=click.IntRange(min=4), default=60, show_default=True,
+              help="People per group simulated for the truth's VO - HV differences.")  # fmt: skip
+@click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
+@click.option("--seed", type=int, default=11, show_default=True)
+@_json_option
+def bench_participants(out_dir: Path | None, trials: int, truth_people: int, jobs: int,
+                       seed: int, json_path: Path | None) -> None:  # fmt: skip
+    """Recovery of known trait distributions from a simulated 20/8/8 study, and the fit's time."""
+    from study.analysis.participant_fit.fit import FitSettings
+    from study.bench.participants import markdown, run_participants_bench
+
+    if json_path is not None:
+        check_parent_folder(json_path)
+    with Console(stderr=True).status("participants bench") as status:
+        report = run_participants_bench({"outsider": 20, "novice": 8, "expert": 8}, trials,
+                                        FitSettings(jobs=jobs), truth_people, seed, out_dir,
+                                        status.update)  # fmt: skip
+    text = markdown(report)
+    if out_dir is not None:
+        (out_dir / "participants_bench.md").write_text(text)
+    click.echo(text)
+    write_json(json_path, report)

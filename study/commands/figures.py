@@ -10,7 +10,7 @@ from rich.console import Console
 
 from db.migrate import open_database
 from study.analysis.source import DRIVERS
-from study.commands.base import StudyCommand, db_option
+from study.commands.base import StudyCommand, db_option, load_participants, participants_option
 from study.errors import StudyInputError
 
 FORMATS = ("pdf", "svg", "png")
@@ -67,7 +67,11 @@ def figures(
 @click.option("--seed", type=int, default=1, show_default=True)
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--quick", is_flag=True, help="2 participants per group, one trial per block.")
-def demo(out_dir: Path, db_url: str | None, seed: int, jobs: int, quick: bool) -> None:
+@participants_option
+def demo(
+    out_dir: Path, db_url: str | None, seed: int, jobs: int, quick: bool,
+    participants_path: Path | None,
+) -> None:  # fmt: skip
     """Simulate the paper's whole study (20/8/8, VO and HV, NASA-TLX) and analyse it."""
     from study.analysis.frames import participant_means, tlx_frame, trial_frame
     from study.analysis.paper import write_figures
@@ -76,6 +80,7 @@ def demo(out_dir: Path, db_url: str | None, seed: int, jobs: int, quick: bool) -
     from study.protocol.demo import run_demo
 
     start = time.monotonic()
+    model = load_participants(participants_path)
     if db_url is None:
         out_dir.mkdir(parents=True, exist_ok=True)
         db_path = out_dir / "demo.db"
@@ -83,7 +88,8 @@ def demo(out_dir: Path, db_url: str | None, seed: int, jobs: int, quick: bool) -
             raise StudyInputError(f"{db_path} already exists; expected a new --out folder or --db")
         db_url = str(db_path)
     with Console(stderr=True).status("demo study") as status:
-        run_demo(db_url, seed, jobs, progress=status.update, quick=quick)
+        run_demo(db_url, seed, jobs, progress=status.update, quick=quick,
+                 participants=str(participants_path) if model is not None else None)  # fmt: skip
         status.update("analysis and figures")
         engine = open_database(db_url, create=False)
         try:
@@ -93,6 +99,8 @@ def demo(out_dir: Path, db_url: str | None, seed: int, jobs: int, quick: bool) -
             write_figures(engine, out_dir / "figures")
         finally:
             engine.dispose()
+    if model is not None:
+        click.echo(f"simulated participants drawn from the {model.label()}")
     click.echo(f"SIMULATED demo study (every participant, trial and questionnaire simulated) "
                f"in {db_url}; analysis in {out_dir / 'analysis'}; figures in "
                f"{out_dir / 'figures'} ({time.monotonic() - start:.0f} s)")  # fmt: skip

@@ -4,12 +4,22 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
-from study.commands.base import StudyCommand, out_dir_option, progress_bar
+from study.commands.base import (
+    StudyCommand,
+    load_participants,
+    out_dir_option,
+    participants_option,
+    progress_bar,
+)
 from study.errors import StudyInputError
 from study.protocol.design import parse_design
+
+if TYPE_CHECKING:
+    from study.protocol.participant_model import ParticipantModel
 
 
 def _effects(text: str, groups: list[str]) -> dict[str, float]:
@@ -33,6 +43,34 @@ def _effects(text: str, groups: list[str]) -> dict[str, float]:
     return effects
 
 
+def model_measure(model: ParticipantModel) -> str:
+    """The measure whose effect `study power` takes from a model by default."""
+    from study.protocol.tasks import get_task
+
+    return get_task(model.task).trace_measure
+
+
+def _model_effects(
+    ctx: click.Context, model: ParticipantModel, groups: list[str], measure: str | None
+) -> tuple[dict[str, float], float]:
+    """The fitted model's standardised effect per group and its mean VO-HV correlation."""
+    from click.core import ParameterSource
+
+    for name, option in (("effect", "--effect"), ("rho", "--correlation")):
+        if ctx.get_parameter_source(name) is not ParameterSource.DEFAULT:
+            raise StudyInputError(f"{option} with --participants; expected one of them (the "
+                                  "model gives the effects and the correlation)")  # fmt: skip
+    measure = measure or model_measure(model)
+    missing = [g for g in groups if measure not in model.effects.get(g, {})]
+    if missing:
+        raise StudyInputError(f"participant model {model.source} has no effect of {measure!r} "
+                              f"for group {missing[0]}; expected a model fitted to every "
+                              "design group and a measure of its task")  # fmt: skip
+    effects = {g: float(model.effects[g][measure]["effect"]) for g in groups}
+    rhos = [float(model.effects[g][measure]["correlation"]) for g in groups]
+    return effects, min(max(sum(rhos) / len(rhos), 0.0), 0.99)
+
+
 @click.command("power", cls=StudyCommand)
 @click.option(
     "--design", "design_path", required=True, type=click.Path(dir_okay=False, path_type=Path)
@@ -54,16 +92,29 @@ def _effects(text: str, groups: list[str]) -> dict[str, float]:
 @click.option("--n-sim", type=click.IntRange(min=10), default=500, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 @out_dir_option("Write power.json and the power curve (PDF, PNG) here.", required=False)
+@participants_option
+@click.option("--measure", default=None,
+              help="With --participants: the measure whose fitted effect is used "
+                   "[default: the task's last analysed one].")  # fmt: skip
+@click.pass_context
 def power(
-    design_path: Path, effect: str, rho: float, n_sim: int, seed: int, out_dir: Path | None
-) -> None:
-    """Power of VO vs HV in each group and of the group x condition interaction."""
+    ctx: click.Context, design_path: Path, effect: str, rho: float, n_sim: int, seed: int,
+    out_dir: Path | None, participants_path: Path | None, measure: str | None,
+) -> None:  # fmt: skip
+    """Power of VO vs HV in each group and of the group x condition interaction.
+
+    With --participants MODEL.json the effects and the correlation are those the fitted
+    participant model simulates (its `effects`), instead of --effect and --correlation."""
     from study.analysis.power import SCALES, power_curve
 
     if not design_path.is_file():
         raise StudyInputError(f"design file {design_path} does not exist")
     design = parse_design(design_path.read_text(), str(design_path))
-    effects = _effects(effect, list(design.groups))
+    model = load_participants(participants_path)
+    if model is None:
+        effects = _effects(effect, list(design.groups))
+    else:
+        effects, rho = _model_effects(ctx, model, list(design.groups), measure)
     with progress_bar() as bar:
         task = bar.add_task("simulated studies", total=n_sim * len(SCALES))
         curve = power_curve(design.groups, effects, rho, n_sim, seed, lambda: bar.advance(task))
@@ -80,6 +131,9 @@ def power(
         out_dir.mkdir(parents=True, exist_ok=True)
         report = {
             "design": design.groups, "effects": effects, "correlation": rho, "n_sim": n_sim,
+            **({"participant_model": {"path": str(participants_path), "digest": model.digest,
+                                      "fitted_to": model.data_source, "measure": measure
+                                      or model_measure(model)}} if model else {}),
             "seed": seed, "groups": at_design.groups, "interaction": at_design.interaction,
             "interaction_is_power": at_design.interaction_is_power,
             "curve": [{"scale": s, "sizes": r.sizes, "groups": r.groups,

@@ -4,12 +4,20 @@ from __future__ import annotations
 
 import math
 import time
+from pathlib import Path
 
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, actor_option, db_option, progress_bar
+from study.commands.base import (
+    StudyCommand,
+    actor_option,
+    db_option,
+    load_participants,
+    participants_option,
+    progress_bar,
+)
 from study.errors import StudyInputError
 from study.protocol.roster import schedule
 
@@ -38,6 +46,7 @@ from study.protocol.roster import schedule
     type=click.FloatRange(min=0, min_open=True),
     help="Run a simulated session at this many times real time [default: as fast as it goes].",
 )
+@participants_option
 @actor_option
 @db_option
 def run(
@@ -47,6 +56,7 @@ def run(
     driver: str,
     port: str | None,
     pace: float | None,
+    participants_path: Path | None,
     actor: str | None,
     db_url: str | None,
 ) -> None:
@@ -64,10 +74,14 @@ def run(
     if pace is not None and not math.isfinite(pace):
         raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
     who = current_actor(actor)
+    model = load_participants(participants_path)
+    if model is not None and driver != "simulated":
+        raise StudyInputError(f"--participants with --driver {driver}; expected --driver "
+                              "simulated (a fitted model draws simulated people)")  # fmt: skip
     if run_all:
         if driver != "simulated":
             raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
-        _run_all(db_url, jobs, pace, who)
+        _run_all(db_url, jobs, pace, who, participants_path)
         return
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")
@@ -103,8 +117,9 @@ def run(
                 )
 
             done = run_session(
-                engine, code, driver, estimator, make_driver, pace, report, actor=who
-            )
+                engine, code, driver, estimator, make_driver, pace, report, actor=who,
+                participants=model,
+            )  # fmt: skip
     finally:
         engine.dispose()
     click.echo(f"{code}: {len(done)} trials completed and stored")
@@ -115,7 +130,9 @@ def _progress() -> Progress:
     return progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
 
 
-def _run_all(db_url: str | None, jobs: int, pace: float | None, actor: str) -> None:
+def _run_all(
+    db_url: str | None, jobs: int, pace: float | None, actor: str, participants: Path | None
+) -> None:
     from study.protocol.parallel import run_participants
 
     engine = open_database(db_url, create=False)
@@ -133,7 +150,8 @@ def _run_all(db_url: str | None, jobs: int, pace: float | None, actor: str) -> N
             busy.append(code)
             progress.console.print(f"study run: skipped: {message}", markup=False)
 
-        for code, n in run_participants(db_url, codes, jobs, pace, actor, skipped):
+        model = str(participants) if participants is not None else None
+        for code, n in run_participants(db_url, codes, jobs, pace, actor, skipped, model):
             total += n
             progress.update(bar, advance=1, description=f"participants ({code} done)")
     if busy:

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from study.commands.base import StudyCommand
+from study.commands.base import StudyCommand, load_participants, participants_option
 from study.errors import StudyInputError
 from study.protocol.design import DEFAULT_GROUPS, KNOWN_CONDITIONS
 from study.protocol.tasks import get_task, task_names
@@ -37,6 +37,7 @@ from study.protocol.tasks import get_task, task_names
     help="Force estimator folder [default: the model shipped with haptic-study].",
 )
 @click.option("--max-seconds", type=click.FloatRange(min=1), default=180.0, show_default=True)
+@participants_option
 def simulate(
     task: str,
     group: str,
@@ -47,6 +48,7 @@ def simulate(
     plot_path: Path | None,
     model_dir: Path | None,
     max_seconds: float,
+    participants_path: Path | None,
 ) -> None:
     """Run one simulated trial headless and write TRIAL.csv, TRIAL.json and a figure."""
     from study.protocol.default_estimator import load_estimator
@@ -57,6 +59,7 @@ def simulate(
         if path is not None and not path.parent.is_dir():
             raise StudyInputError(f"folder {path.parent} for {path.name} does not exist")
     the_task = get_task(task)
+    model = load_participants(participants_path)
     # refuse a bad gain, or a gain for a task without a dial, before any work
     gain = the_task.haptic_gain(haptic_gain)
     if gain is not None:
@@ -65,7 +68,7 @@ def simulate(
 
     kernel.COMPILE_NOTICE = lambda message: click.echo(f"study simulate: {message}", err=True)
     estimator = load_estimator(model_dir) if the_task.has_dial else None
-    traits = simulated_participant(group, seed)
+    traits = simulated_participant(group, seed, model)
     with Console(stderr=True).status(f"simulating a {group} participant, {task}, {condition}"):
         result = the_task.simulate(
             traits,
@@ -77,6 +80,10 @@ def simulate(
         )
     write_csv_atomically(result.frame, out_csv)
     summary_path = out_csv.with_suffix(".json")
+    if model is not None:
+        result.summary["participant_model"] = {"path": str(participants_path),
+                                               "digest": model.digest,
+                                               "fitted_to": model.data_source}  # fmt: skip
     summary_path.write_text(json.dumps(result.summary, indent=2) + "\n")
     if plot_path is not None:
         from study.analysis.trial_plot import trial_plot
@@ -89,4 +96,6 @@ def simulate(
         f"{'success' if s['success'] else 'no success'} in {s['completion_time_s']:.1f} s, "
         + the_task.summary_line(s)
     )
+    if model is not None:
+        click.echo(f"simulated participant drawn from the {model.label()}")
     click.echo(f"samples: {out_csv}; summary: {summary_path}")

@@ -8,6 +8,7 @@ analysis and the figures.
 
 from __future__ import annotations
 
+import re
 import zlib
 from collections.abc import Callable
 
@@ -75,11 +76,28 @@ def run_demo(
     jobs: int = 2,
     progress: Callable[[str], None] = lambda _: None,
     quick: bool = False,
+    participants: str | None = None,
+    sizes: dict[str, int] | None = None,
+    trials_per_condition: int | None = None,
 ) -> None:
-    """Create, enrol, run and fill in the questionnaires of the default study."""
+    """Create, enrol, run and fill in the questionnaires of the default study.
+
+    `participants`: a fitted participant model (MODEL.json) the people are drawn from;
+    `sizes` and `trials_per_condition` replace the default design's (a study of another
+    size, e.g. for the participant fit's benchmark), with no practice trials."""
     text = TEMPLATE.replace("seed = 1 ", f"seed = {seed} ")
     for old, new in QUICK.items() if quick else ():
         text = text.replace(old, new)
+    for group, n in (sizes or {}).items():
+        text = re.sub(rf"^{group} = \d+", f"{group} = {n}", text, flags=re.M)
+    if trials_per_condition is not None:
+        text = re.sub(
+            r"^trials_per_condition = \d+",
+            f"trials_per_condition = {trials_per_condition}",
+            text,
+            flags=re.M,
+        )
+        text = re.sub(r"^practice_trials = \d+", "practice_trials = 0", text, flags=re.M)
     design = parse_design(text)
     engine = open_database(db_url, create=True)
     try:
@@ -91,7 +109,8 @@ def run_demo(
         ]
     finally:
         engine.dispose()
-    for k, (code, _) in enumerate(run_participants(db_url, codes, jobs), 1):
+    runs = run_participants(db_url, codes, jobs, participants=participants)
+    for k, (code, _) in enumerate(runs, 1):
         progress(f"sessions: {k}/{len(codes)} participants ({code})")
     progress("NASA-TLX")
     fill_tlx(db_url, design.seed)

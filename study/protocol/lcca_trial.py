@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 
 from study.errors import StudyInputError
+from study.protocol.participant_model import ParticipantModel
 from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
 from study.protocol.tasks import TrialResult
 from teleop_core.estimation.estimator import ForceEstimator
@@ -135,6 +136,10 @@ def trial_frame(raw: pd.DataFrame) -> pd.DataFrame:
     return raw[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
 
 
-def simulated_participant(group: str, seed: int) -> ParticipantTraits:
-    """The traits of the participant a seed draws from `group` (same seed, same person)."""
-    return draw_traits(group, np.random.default_rng([seed, 0x5EED]))
+def simulated_participant(
+    group: str, seed: int, model: ParticipantModel | None = None
+) -> ParticipantTraits:
+    """The traits of the participant a seed draws from `group` (same seed, same person),
+    from the fitted `model`'s distributions when one is given."""
+    rng = np.random.default_rng([seed, 0x5EED])
+    return draw_traits(group, rng) if model is None else model.draw(group, rng)

@@ -37,14 +37,19 @@ def _watch_parent(parent_pid: int, stop: threading.Event, idle: threading.Event)
 
 
 def _worker_init(
-    db_url: str | None, parent_pid: int | None = None, actor: str | None = None
+    db_url: str | None,
+    parent_pid: int | None = None,
+    actor: str | None = None,
+    participants: str | None = None,
 ) -> None:
     from db.migrate import open_database
     from study.protocol.default_estimator import load_estimator
+    from study.protocol.participant_model import load_model
 
     _WORKER["engine"] = open_database(db_url, create=False)
     _WORKER["estimator"] = load_estimator()
     _WORKER["actor"] = actor
+    _WORKER["participants"] = load_model(participants) if participants is not None else None
     stop, idle = threading.Event(), threading.Event()
     idle.set()
     _WORKER["stop"], _WORKER["idle"] = stop, idle
@@ -66,6 +71,7 @@ def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
             pace=pace,
             actor=_WORKER["actor"],  # type: ignore[arg-type]
             stop=_WORKER["stop"],  # type: ignore[arg-type]
+            participants=_WORKER["participants"],  # type: ignore[arg-type]
         )
     finally:
         idle.set()
@@ -79,6 +85,7 @@ def run_participants(
     pace: float | None = None,
     actor: str | None = None,
     on_busy: Callable[[str, str], None] | None = None,
+    participants: str | None = None,
 ) -> Iterator[tuple[str, int]]:
     """Run simulated sessions for `codes` in `jobs` processes; yield (code, trials) as each
     finishes. Each process opens its own connection and loads the estimator once, and
@@ -86,6 +93,7 @@ def run_participants(
 
     A participant whose session runs elsewhere (`SessionBusyError`) is skipped and
     reported through `on_busy(code, message)` (raised when `on_busy` is None).
+    `participants`: the path of a fitted participant model (MODEL.json) to draw from.
     """
     from study.protocol.lease import SessionBusyError
 
@@ -96,7 +104,7 @@ def run_participants(
         return code, 0
 
     if jobs == 1:
-        _worker_init(db_url, actor=actor)
+        _worker_init(db_url, actor=actor, participants=participants)
         for code in codes:
             try:
                 yield _worker_run(code, pace)
@@ -105,7 +113,10 @@ def run_participants(
         return
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(
-        jobs, mp_context=context, initializer=_worker_init, initargs=(db_url, os.getpid(), actor)
+        jobs,
+        mp_context=context,
+        initializer=_worker_init,
+        initargs=(db_url, os.getpid(), actor, participants),
     ) as pool:
         futures = {pool.submit(_worker_run, code, pace): code for code in codes}
         for future in as_completed(futures):

@@ -20,7 +20,9 @@ After an obstacle (felt or seen) it backs off and tries again. It gives up at
 
 Group distributions (mean, sd; truncated to plausible ranges) are assumptions shaped
 by seed 000, IV-D (experts faster and steadier; the paper reports comparable times and
-lower peak forces with haptics in every group), not measured values.
+lower peak forces with haptics in every group), not measured values. A model fitted to
+a study's trials (`study participants fit`, `study.protocol.participant_model`) replaces
+them wherever `--participants MODEL.json` is given.
 """
 
 from __future__ import annotations
@@ -111,25 +113,33 @@ class ParticipantTraits:
         return asdict(self)
 
 
-def draw_traits(group: str, rng: np.random.Generator) -> ParticipantTraits:
-    """One participant's traits from the group's distributions."""
-    if group not in PROFILES:
-        raise StudyInputError(f"unknown group {group!r}; expected one of {', '.join(GROUPS)}")
-    p = PROFILES[group]
+TRAIT_BOUNDS: dict[str, tuple[float, float]] = {
+    "preferred_speed_m_s": (0.005, 0.03),
+    "reaction_s": (0.12, 0.6),
+    "steering_error_rad": (0.05, 0.8),
+    "caution": (0.0, 1.0),
+    "haptic_threshold_n_m": (0.002, 0.02),
+    "visual_stall_s": (0.2, 1.5),
+    "comfort_torque_n_m": (0.003, 0.02),
+}
+"""Plausible range of each trait: a drawn value is clipped into it."""
+TRAITS = tuple(TRAIT_BOUNDS)
 
-    def draw(ms: tuple[float, float], lo: float, hi: float) -> float:
-        return float(np.clip(rng.normal(*ms), lo, hi))
 
-    return ParticipantTraits(
-        group=group,
-        preferred_speed_m_s=draw(p.preferred_speed_m_s, 0.005, 0.03),
-        reaction_s=draw(p.reaction_s, 0.12, 0.6),
-        steering_error_rad=draw(p.steering_error_rad, 0.05, 0.8),
-        caution=draw(p.caution, 0.0, 1.0),
-        haptic_threshold_n_m=draw(p.haptic_threshold_n_m, 0.002, 0.02),
-        visual_stall_s=draw(p.visual_stall_s, 0.2, 1.5),
-        comfort_torque_n_m=draw(p.comfort_torque_n_m, 0.003, 0.02),
-    )
+def draw_traits(
+    group: str, rng: np.random.Generator, profiles: dict[str, GroupProfile] | None = None
+) -> ParticipantTraits:
+    """One participant's traits from the group's distributions: `profiles` (a fitted
+    `study.protocol.participant_model.ParticipantModel`'s), else `PROFILES`."""
+    profiles = PROFILES if profiles is None else profiles
+    if group not in profiles:
+        raise StudyInputError(f"unknown group {group!r}; expected one of {', '.join(profiles)}")
+    p = profiles[group]
+    values = {
+        name: float(np.clip(rng.normal(*getattr(p, name)), lo, hi))
+        for name, (lo, hi) in TRAIT_BOUNDS.items()
+    }
+    return ParticipantTraits(group=group, **values)
 
 
 class SimulatedParticipant(Driver):

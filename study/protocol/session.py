@@ -18,6 +18,8 @@ at its next step with the running trial marked interrupted.
 Drivers: `simulated` (the participant's simulated person: the same traits in every
 trial, drawn from the group's distributions with the study's seed and the code),
 `hardware` (the dial's ESP32 on a serial port). The keyboard drives from the TUI.
+With a fitted participant model (`participants`, MODEL.json) the simulated person is
+drawn from its distributions instead, and each trial's summary names the model.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from study.errors import StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.lease import LeaseHandle, hold_lease
+from study.protocol.participant_model import ParticipantModel
 from study.protocol.participants import ParticipantTraits, draw_traits
 from study.protocol.roster import find_participant, load_study
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
@@ -71,9 +74,13 @@ class PendingTrial:
     trial_index: int
 
 
-def participant_traits(study_seed: int, code: str, group: str) -> ParticipantTraits:
-    """The simulated person behind a code: the same in every trial and every run."""
-    return draw_traits(group, np.random.default_rng([study_seed, zlib.crc32(code.encode())]))
+def participant_traits(
+    study_seed: int, code: str, group: str, model: ParticipantModel | None = None
+) -> ParticipantTraits:
+    """The simulated person behind a code: the same in every trial and every run, drawn
+    from the fitted `model`'s distributions when one is given."""
+    rng = np.random.default_rng([study_seed, zlib.crc32(code.encode())])
+    return draw_traits(group, rng) if model is None else model.draw(group, rng)
 
 
 def recover_interrupted(
@@ -137,6 +144,7 @@ def run_session(
     on_samples: Callable[[np.ndarray], None] | None = None,
     actor: str | None = None,
     stop: threading.Event | None = None,
+    participants: ParticipantModel | None = None,
 ) -> list[int]:
     """Run the participant's remaining trials; return the ids of the trials completed.
 
@@ -148,6 +156,7 @@ def run_session(
     samples stay and the trial stays `running` until `recover_interrupted`.
     `actor` is recorded with the lease; a set `stop` ends the session at its next step,
     the running trial marked interrupted (`STOPPED_WITH_PARENT`), and returns.
+    `participants`: the fitted model simulated people are drawn from (else PROFILES).
     """
     if pace is not None and not (math.isfinite(pace) and pace > 0):
         raise StudyInputError(f"pace {pace!r}; expected a finite number > 0 (times real time)")
@@ -173,7 +182,7 @@ def run_session(
         recover_interrupted(engine, participant_id, reason, actor)
         tasks = {name: get_task(name) for name in sorted({p.block.task for p in todo})}
         contexts: dict[str, Any] = {}
-        traits = participant_traits(study.seed, code, participant.group)
+        traits = participant_traits(study.seed, code, participant.group, participants)
         completed: list[int] = []
         todo = todo[:max_trials] if max_trials is not None else todo
         for k, item in enumerate(todo):
@@ -196,6 +205,7 @@ def run_session(
                 study_seed=study.seed,
                 on_samples=on_samples,
                 check=lambda: _check_stop(lease, stop),
+                model=participants.digest if participants is not None else None,
             )
             try:
                 trial_id = _run_trial(engine, participant, item, run)
@@ -261,6 +271,8 @@ class TrialSetup:
     study_seed: int
     on_samples: Callable[[np.ndarray], None] | None = None
     check: Callable[[], None] = lambda: None
+    model: str | None = None
+    """The digest of the fitted participant model the traits came from, if any."""
 
 
 def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
@@ -338,6 +350,7 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
         "seed": seed,
         "samples": writer.rows_committed,
         **task.driver_counts(driver),
+        **({"participant_model": run.model} if run.model and run.make_driver is None else {}),
     }
     completion_s = task.completion_time_s(samples)
     with write_transaction(engine) as conn:

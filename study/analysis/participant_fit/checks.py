@@ -1,0 +1,225 @@
+"""What the participant model cannot explain: the data's structure the traits lack.
+
+A simulated participant is the same person in every trial: it neither learns nor tires,
+and it does not remember which condition came first. Real people do. So after the fit,
+the data are checked against people simulated from the fitted model with the same
+design (`simulated`: same trials per condition, both orders), on three counts, and what
+is found is reported rather than absorbed into the traits:
+
+- **trend over trials** (learning or fatigue): each participant's slope of the log
+  measure over their trial position, within condition (the condition means removed, so
+  the VO-HV difference does not pass for a trend); the observed participants' slopes
+  against the simulated ones, Welch's t-test (`scipy.stats.ttest_ind`). Needs >= 2
+  trials per condition.
+- **condition order**: each participant's HV - VO difference of the log measure; its
+  mean in VO-first minus HV-first participants (a period effect shows here), observed
+  against simulated: z = (d_obs - d_sim) / sqrt(se_obs^2 + se_sim^2), normal p.
+- The trend and order tests of every measure are one family, Holm-corrected at
+  `ALPHA` (`statsmodels.stats.multitest.multipletests`).
+- **a participant no trait setting reproduces**: the smallest Mahalanobis distance D^2
+  between the person's moments and the emulator's over the free traits (the others at
+  the group's fitted means; L-BFGS-B within the emulator's range), with the covariance
+  of the trial noise over the person's k trials plus what the group's spread of the
+  fixed traits adds (over draws from the fitted model). D^2 is calibrated on the people
+  simulated from the fit: c = their D^2's `CALIBRATION_Q` quantile over the chi-square's,
+  matched in the upper tail rather than at the median because the trial noise has long
+  tails (a peak force's spikes, a time capped at the give-up) and the emulator fits
+  worse near the edge of its design; neither must flag a person. A person is an outlier
+  when D^2 / c exceeds the
+  chi-square quantile at 1 - OUTLIER_ALPHA / n (Bonferroni over the participants), with
+  df = moments - free traits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+from scipy.optimize import minimize
+from statsmodels.stats.multitest import multipletests
+
+from study.analysis.participant_fit.emulator import MomentEmulator, log_moment
+
+ALPHA = 0.05
+"""Family-wise error rate of the trend and order tests."""
+OUTLIER_ALPHA = 0.01
+"""Family-wise error rate of the outlier rule (Bonferroni over participants)."""
+CALIBRATION_Q = 0.9
+"""The quantile at which the simulated people's D^2 calibrates the chi-square scale."""
+
+
+def slopes(trials: pd.DataFrame, measure: str) -> pd.Series:
+    """Per participant: the slope of the log measure over trial position, within
+    condition (log units per trial); NaN with fewer than 2 trials in every condition."""
+    frame = trials.assign(y=log_moment(trials[measure]), x=trials["position"].astype(float))
+    keys = ["participant", "condition"]
+    frame["dx"] = frame["x"] - frame.groupby(keys)["x"].transform("mean")
+    frame["dy"] = frame["y"] - frame.groupby(keys)["y"].transform("mean")
+    sums = (
+        frame.assign(xy=frame["dx"] * frame["dy"], xx=frame["dx"] ** 2)
+        .groupby("participant")[["xy", "xx"]]
+        .sum()
+    )
+    return (sums["xy"] / sums["xx"].where(sums["xx"] > 0)).rename(measure)
+
+
+def order_contrast(trials: pd.DataFrame, measure: str) -> tuple[float, float, int]:
+    """(mean HV - VO of the log measure in VO-first minus HV-first people, its SE, people)."""
+    y = trials.assign(y=log_moment(trials[measure]))
+    wide = y.groupby(["participant", "order", "condition"])["y"].mean().unstack()
+    d = (wide["HV"] - wide["VO"]).dropna().reset_index()
+    a, b = d.loc[d["order"] == "VO-first", 0], d.loc[d["order"] == "HV-first", 0]
+    if len(a) < 2 or len(b) < 2:
+        return float("nan"), float("nan"), len(d)
+    return float(a.mean() - b.mean()), float(np.sqrt(a.var() / len(a) + b.var() / len(b))), len(d)
+
+
+def trend_and_order(
+    observed: pd.DataFrame, simulated: pd.DataFrame, measures: Sequence[str]
+) -> list[dict[str, Any]]:
+    """One row per (check, measure): observed and simulated statistic, p, p_holm, flagged."""
+    rows: list[dict[str, Any]] = []
+    for m in measures:
+        so, ss = slopes(observed, m).dropna(), slopes(simulated, m).dropna()
+        if len(so) >= 2 and len(ss) >= 2:
+            p = float(stats.ttest_ind(so, ss, equal_var=False).pvalue)
+            rows.append(
+                {
+                    "check": "trend",
+                    "measure": m,
+                    "observed_pct_per_trial": 100 * float(np.expm1(so.mean())),
+                    "simulated_pct_per_trial": 100 * float(np.expm1(ss.mean())),
+                    "participants": len(so),
+                    "p": p,
+                }
+            )
+        do, se_o, n = order_contrast(observed, m)
+        ds, se_s, _ = order_contrast(simulated, m)
+        if np.isfinite(do) and np.isfinite(ds):
+            z = (do - ds) / np.hypot(se_o, se_s)
+            rows.append(
+                {
+                    "check": "order",
+                    "measure": m,
+                    "observed_vo_first_minus_hv_first_pct": 100 * float(np.expm1(do)),
+                    "simulated_vo_first_minus_hv_first_pct": 100 * float(np.expm1(ds)),
+                    "participants": n,
+                    "p": float(2 * stats.norm.sf(abs(z))),
+                }
+            )
+    if rows:
+        reject, p_holm, _, _ = multipletests([r["p"] for r in rows], ALPHA, method="holm")
+        for r, flag, ph in zip(rows, reject, p_holm, strict=True):
+            r["p_holm"], r["flagged"] = float(ph), bool(flag)
+    return rows
+
+
+def min_distance(
+    emulator: MomentEmulator,
+    y: np.ndarray,
+    k: int,
+    mean: np.ndarray,
+    free: list[int],
+    fixed_cov: np.ndarray,
+) -> float:
+    """Smallest D^2 of one person's moments `y` over the free traits' settings."""
+    inv = np.linalg.inv(emulator.person_noise_cov() / k + fixed_cov)
+    low, high = emulator.box_
+
+    def d2(x: np.ndarray) -> float:
+        theta = mean.copy()
+        theta[free] = x
+        r = y - emulator.log_moments(theta)[0]
+        return float(r @ inv @ r)
+
+    if not free:
+        return d2(np.array([]))
+    scale = high[free] - low[free]
+    out = minimize(
+        lambda u: d2(low[free] + u * scale),
+        (mean[free] - low[free]) / scale,
+        method="L-BFGS-B",
+        bounds=[(0.0, 1.0)] * len(free),
+    )
+    return float(out.fun)
+
+
+def outliers(
+    emulator: MomentEmulator,
+    people: pd.DataFrame,
+    simulated: pd.DataFrame,
+    means: dict[str, np.ndarray],
+    fixed_cov: dict[str, np.ndarray],
+    free: list[int],
+) -> dict[str, Any]:
+    """The outlier rule over the observed `people` (person_moments frames), calibrated on
+    the `simulated` people; `fixed_cov[group]`: the moments' covariance from the spread of
+    the traits not fitted."""
+    names = emulator.moments_
+
+    def distances(frame: pd.DataFrame) -> pd.Series:
+        return pd.Series(
+            {
+                p: min_distance(
+                    emulator,
+                    row[names].to_numpy(float),
+                    int(row["k"]),
+                    means[row["group"]],
+                    free,
+                    fixed_cov[row["group"]],
+                )
+                for p, row in frame.iterrows()
+            },
+            dtype=float,
+        )
+
+    df = len(names) - len(free)
+    sim = distances(simulated)
+    c = max(float(np.percentile(sim, 100 * CALIBRATION_Q)) / stats.chi2.ppf(CALIBRATION_Q, df),
+            1e-9)  # fmt: skip
+    obs = distances(people)
+    scaled = {p: float(d / c) for p, d in obs.items()}
+    limit = float(stats.chi2.ppf(1 - OUTLIER_ALPHA / max(len(obs), 1), df))
+    return {
+        "rule": f"D^2 / c > chi2({df}) quantile at 1 - {OUTLIER_ALPHA}/n",
+        "calibration_c": round(c, 4),
+        "simulated_max": round(float(sim.max() / c), 3),
+        "limit": round(limit, 3),
+        "df": df,
+        "distance": {p: round(d, 3) for p, d in scaled.items()},
+        "flagged": sorted(p for p, d in scaled.items() if d > limit),
+    }
+
+
+def lacks_line(rows: list[dict[str, Any]], outlier: dict[str, Any]) -> str:
+    """The one printed line: what the participant model lacks, or that nothing was found."""
+    parts = []
+    for r in rows:
+        if not r["flagged"]:
+            continue
+        if r["check"] == "trend":
+            parts.append(
+                f"a trend over trials in {r['measure']} "
+                f"({r['observed_pct_per_trial']:+.1f} %/trial observed vs "
+                f"{r['simulated_pct_per_trial']:+.1f} % simulated, "
+                f"p_holm = {r['p_holm']:.2g})"
+            )
+        else:
+            parts.append(
+                f"an effect of condition order on {r['measure']} (VO-first minus "
+                f"HV-first {r['observed_vo_first_minus_hv_first_pct']:+.1f} % "
+                f"observed vs {r['simulated_vo_first_minus_hv_first_pct']:+.1f} % "
+                f"simulated, p_holm = {r['p_holm']:.2g})"
+            )
+    if outlier["flagged"]:
+        parts.append(
+            f"participant(s) {', '.join(outlier['flagged'])} that no trait setting "
+            f"reproduces (D^2 above {outlier['limit']:.1f})"
+        )
+    tested = [*sorted({r["check"] for r in rows}), "outliers"]
+    if not parts:
+        return f"what the participants lack: nothing the checks found ({', '.join(tested)})"
+    return "what the participants lack: " + "; ".join(parts)

@@ -1,0 +1,352 @@
+"""The whole fit of simulated participants to a study's trials, and MODEL.json's content.
+
+Steps (each reported through `progress(step, k, n)`):
+1. the task's trials and each person's moments (`observed.py`); refused with one line
+   when a group has too few people;
+2. the emulator: `design` trait settings over the priors' range, `repeats` trials per
+   condition each, simulated once (`simulate.py`), the response surface fitted
+   (`emulator.py`);
+3. which traits the moments identify, and each group's trait means and SDs by simulated
+   moments, with a bootstrap over participants (resampled within group, refitted on
+   the emulator) for their uncertainty and that of the model's predicted means;
+4. people drawn from the fitted model and simulated with the study's design (`check`
+   per group, each from one of the fit's bootstrap replicates, the observed trials per
+   condition, both orders): the observed vs simulated summaries (the simulated ones are
+   the fitted model's prediction: their intervals hold the fit's uncertainty and the
+   people's), the effects `study power` takes, and the checks of what the model lacks
+   (`checks.py`). The emulator's own prediction is reported beside them (`model`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from sqlalchemy import Engine
+
+from study.analysis.participant_fit import checks
+from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
+from study.analysis.participant_fit.estimate import (
+    IDENTIFIED_RATIO,
+    PRIOR_LOG_SD,
+    GroupEstimator,
+    identifiable,
+    observed_moments,
+)
+from study.analysis.participant_fit.observed import (
+    bootstrap_means,
+    check_fittable,
+    data_source,
+    observed_trials,
+    person_moments,
+)
+from study.analysis.participant_fit.simulate import simulate_settings
+from study.protocol.design import MAX_TRIAL_S
+from study.protocol.participant_model import FORMAT
+from study.protocol.participants import PROFILES, TRAITS, GroupProfile, draw_traits
+from study.protocol.tasks import get_task
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    design: int = 160
+    """Trait settings the emulator is built from."""
+    repeats: int = 2
+    """Trials per condition at each setting."""
+    check: int = 24
+    """People per group simulated from the fitted model (summaries and checks)."""
+    bootstrap: int = 100
+    jobs: int = 2
+    seed: int = 0
+    max_s: float = MAX_TRIAL_S
+
+
+Progress = Callable[[str, int, int], None]
+
+
+def _no_progress(step: str, k: int, n: int) -> None:
+    return None
+
+
+def _profile(mean: np.ndarray, sd: np.ndarray) -> GroupProfile:
+    return GroupProfile(
+        **{t: (float(m), float(s)) for t, m, s in zip(TRAITS, mean, sd, strict=True)}
+    )
+
+
+def simulate_people(
+    task: str,
+    profiles: dict[str, list[GroupProfile]],
+    per_group: int,
+    k: int,
+    settings: FitSettings,
+    progress: Progress,
+) -> pd.DataFrame:
+    """Trials of `per_group` people per group, `k` per condition, with `participant`,
+    `group`, `order` (alternating) and `position` as observed. Person i of a group is
+    drawn from `profiles[group][i % len]`: one profile (the truth), or the fit's
+    bootstrap replicates, so that the people carry the fit's uncertainty too."""
+    rng = np.random.default_rng([settings.seed, 0xC4EC])
+    people = [(g, draw_traits(g, rng, {g: ps[i % len(ps)]}))
+              for g, ps in profiles.items() for i in range(per_group)]  # fmt: skip
+    frame = simulate_settings(
+        task,
+        [t.to_dict() for _, t in people],
+        k,
+        settings.jobs,
+        settings.max_s,
+        lambda a, b: progress("checking", a, b),
+        salt="check",
+    )
+    frame["participant"] = [f"S{i + 1:03d}" for i in frame["setting"]]
+    frame["group"] = [people[i][0] for i in frame["setting"]]
+    first = np.where(frame["setting"] % 2 == 0, "VO", "HV")
+    frame["order"] = [f"{f}-first" for f in first]
+    block = np.where(frame["condition"] == first, 0, 1)
+    frame["position"] = block * k + frame["repeat"]
+    frame["trial"] = frame["repeat"] + 1
+    frame["driver"] = "simulated"
+    return frame
+
+
+def summaries(
+    observed: pd.DataFrame,
+    simulated: pd.DataFrame,
+    measures: list[str],
+    groups: list[str],
+    predicted: dict[str, dict[str, list[float]]],
+    rng: np.random.Generator,
+    n_boot: int,
+) -> list[dict[str, Any]]:
+    """Per group, measure and condition (and VO - HV): the observed and simulated mean of
+    participant means with bootstrap 95 % intervals, and the fitted model's predicted
+    mean with its interval from the fit's bootstrap."""
+    rows = []
+    for source, frame in (("observed", observed), ("simulated", simulated)):
+        means = frame.groupby(["group", "participant", "condition"])[measures].mean()
+        for group in groups:
+            g = means.xs(group, level="group")
+            for m in measures:
+                wide = g[m].unstack().dropna()
+                for label, values in (
+                    ("VO", wide["VO"]),
+                    ("HV", wide["HV"]),
+                    ("VO-HV", wide["VO"] - wide["HV"]),
+                ):
+                    low, high = bootstrap_means(values.to_numpy(float), rng, n_boot)
+                    rows.append(
+                        {
+                            "group": group,
+                            "measure": m,
+                            "condition": label,
+                            "source": source,
+                            "n": len(values),
+                            "mean": float(values.mean()),
+                            "ci_low": low,
+                            "ci_high": high,
+                        }
+                    )
+    for group in groups:
+        for m in measures:
+            for label in ("VO", "HV", "VO-HV"):
+                draws = np.asarray(predicted[group][f"{label}:{m}"])
+                rows.append(
+                    {
+                        "group": group,
+                        "measure": m,
+                        "condition": label,
+                        "source": "model",
+                        "n": len(draws) - 1,
+                        "mean": float(draws[0]),
+                        "ci_low": float(np.percentile(draws[1:], 2.5)),
+                        "ci_high": float(np.percentile(draws[1:], 97.5)),
+                    }
+                )
+    return rows
+
+
+def power_effects(simulated: pd.DataFrame, measures: list[str]) -> dict[str, Any]:
+    """group -> measure -> standardised HV - VO effect and VO-HV correlation of the
+    simulated people's means (what `study power --participants` takes)."""
+    out: dict[str, Any] = {}
+    means = simulated.groupby(["group", "participant", "condition"])[measures].mean()
+    for group, g in means.groupby(level="group"):
+        out[group] = {}
+        for m in measures:
+            wide = g[m].unstack()
+            sd = np.sqrt((wide["VO"].var() + wide["HV"].var()) / 2)
+            effect = float((wide["HV"] - wide["VO"]).mean() / sd) if sd > 0 else 0.0
+            rho = float(np.corrcoef(wide["VO"], wide["HV"])[0, 1]) if sd > 0 else 0.0
+            out[group][m] = {"effect": round(effect, 4), "correlation": round(rho, 4)}
+    return out
+
+
+def build_emulator(task: str, settings: FitSettings,
+                   progress: Progress = _no_progress) -> MomentEmulator:  # fmt: skip
+    """Simulate the design's trait settings and fit the emulator of the task's moments."""
+    x = design_settings(settings.design, settings.seed, design_box())
+    people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
+    design = simulate_settings(task, people, settings.repeats, settings.jobs, settings.max_s,
+                               lambda a, b: progress("emulator", a, b))  # fmt: skip
+    return MomentEmulator().fit(x, design, list(get_task(task).analysed_measures))
+
+
+def fit_participants(
+    engine: Engine,
+    task: str,
+    settings: FitSettings,
+    db_label: str,
+    progress: Progress = _no_progress,
+) -> tuple[dict[str, Any], pd.DataFrame]:
+    """MODEL.json's content, and the summaries' frame (for the figure)."""
+    trials = observed_trials(engine, task)
+    check_fittable(trials, task, db_label)
+    return fit_trials(trials, task, settings, build_emulator(task, settings, progress),
+                      db_label, progress)  # fmt: skip
+
+
+def fit_trials(
+    trials: pd.DataFrame,
+    task: str,
+    settings: FitSettings,
+    emulator: MomentEmulator,
+    db_label: str,
+    progress: Progress = _no_progress,
+) -> tuple[dict[str, Any], pd.DataFrame]:
+    """The fit to `trials` (`observed_trials`' columns) with a built `emulator`."""
+    measures = list(get_task(task).analysed_measures)
+    groups = check_fittable(trials, task, db_label)
+    people = person_moments(trials, measures)
+    source, counts = data_source(trials)
+    names = emulator.moments_
+    noise_sd = np.sqrt(np.diag(emulator.noise_cov_))
+    by_group = {g: people[people["group"] == g] for g in groups}
+    ks = {g: float(by_group[g]["k"].mean()) for g in groups}
+    spreads = {
+        g: np.maximum(by_group[g][names].std(ddof=1).to_numpy(), 0.5 * noise_sd) for g in groups
+    }
+    free, ratios = identifiable(
+        emulator, {g: PROFILES[g] for g in groups}, spreads, {g: len(by_group[g]) for g in groups}
+    )
+    rng = np.random.default_rng([settings.seed, 0xB007])
+    fitted, group_out, predicted, fixed_cov, replicates = {}, {}, {}, {}, {}
+    for k, g in enumerate(groups):
+        progress("fitting", k, len(groups))
+        est = GroupEstimator(emulator, PROFILES[g], free, ks[g], seed=settings.seed)
+        y = by_group[g][names].to_numpy(float)
+        best = est.fit(y)
+        start = getattr(est, "x_", None)
+        boots, preds = [], [_predict(est, best.mean, best.sd)]
+        for _ in range(settings.bootstrap):
+            b = est.fit(y[rng.integers(0, len(y), len(y))], start)
+            boots.append(np.concatenate([b.mean, b.sd]))
+            preds.append(_predict(est, b.mean, b.sd))
+        boots_arr = np.array(boots)
+        fitted[g] = _profile(best.mean, best.sd)
+        replicates[g] = [_profile(b[: len(TRAITS)], b[len(TRAITS) :]) for b in boots_arr]
+        # the moments' spread that the traits held at their priors add to a person's
+        fixed_only = best.sd.copy()
+        fixed_only[free] = 0.0
+        fixed_cov[g] = np.atleast_2d(
+            np.cov(emulator.log_moments(est.draws(best.mean, fixed_only)), rowvar=False)
+        )
+        predicted[g] = {key: [p[key] for p in preds] for key in preds[0]}
+        mean_obs, sd_obs, _, _ = observed_moments(y, noise_sd, ks[g])
+        m_fit, s_fit = est.expected(best.mean, best.sd)
+        group_out[g] = {
+            "participants": len(y),
+            "trials_per_condition": ks[g],
+            "traits": {
+                t: {
+                    "mean": float(best.mean[j]),
+                    "sd": float(best.sd[j]),
+                    "fitted": j in free,
+                    **(
+                        {
+                            "mean_ci95": np.percentile(boots_arr[:, j], [2.5, 97.5]).tolist(),
+                            "sd_ci95": np.percentile(
+                                boots_arr[:, len(TRAITS) + j], [2.5, 97.5]
+                            ).tolist(),
+                        }
+                        if j in free
+                        else {"prior": list(getattr(PROFILES[g], t))}
+                    ),
+                }
+                for j, t in enumerate(TRAITS)
+            },
+            "moments": {
+                n: {
+                    "observed_mean": float(mean_obs[i]),
+                    "simulated_mean": float(m_fit[i]),
+                    "observed_sd": float(sd_obs[i]),
+                    "simulated_sd": float(s_fit[i]),
+                }
+                for i, n in enumerate(names)
+            },
+            "cost": best.cost,
+            "converged": best.success,
+        }
+    progress("fitting", len(groups), len(groups))
+    k_sim = round(float(np.median(people["k"])))
+    simulated = simulate_people(task, replicates, settings.check, k_sim, settings, progress)
+    rows = checks.trend_and_order(trials, simulated, measures)
+    means = {g: np.array([getattr(fitted[g], t)[0] for t in TRAITS]) for g in groups}
+    outlier = checks.outliers(
+        emulator,
+        people,
+        person_moments(simulated, measures),
+        means,
+        {g: fixed_cov[g] for g in groups},
+        free,
+    )
+    table = pd.DataFrame(
+        summaries(trials, simulated, measures, groups, predicted, rng, max(settings.bootstrap, 200))
+    )
+    model = {
+        "format": FORMAT,
+        "task": task,
+        "data_source": source,
+        "fitted_from": {
+            "database": db_label,
+            "trials": len(trials),
+            "participants": len(people),
+            "trials_by_driver": counts["trials_by_driver"],
+            "note": counts["note"],
+        },
+        "method": "method of simulated moments on an emulator (quadratic response surface "
+        "of log measures on traits); means free, SDs with a log-normal prior "
+        f"(sd {PRIOR_LOG_SD}) on the profile's; bootstrap over participants",
+        "moments": names,
+        "identifiable": [TRAITS[j] for j in free],
+        "fixed_at_prior": [t for j, t in enumerate(TRAITS) if j not in free],
+        "identification_ratio": {t: round(r, 3) for t, r in ratios.items()},
+        "identification_rule": f"posterior / prior SD of a group mean < {IDENTIFIED_RATIO} "
+        "(linearised at the priors, worst group)",
+        "groups": {
+            g: {t: {"mean": v["mean"], "sd": v["sd"]} for t, v in group_out[g]["traits"].items()}
+            for g in groups
+        },
+        "fit": group_out,
+        "emulator": emulator.to_dict(),
+        "summaries": table.round(6).to_dict(orient="records"),
+        "simulated_summaries_note": f"'simulated' rows: {settings.check} people per group "
+        "SIMULATED from the fitted model (each from one of the fit's bootstrap replicates, so "
+        "the interval holds the fit's uncertainty and the people's); 'model': the "
+        "emulator's prediction with the fit's bootstrap interval",
+        "lacks": {"line": checks.lacks_line(rows, outlier), "tests": rows, "outliers": outlier},
+        "effects": power_effects(simulated, measures),
+        "settings": settings.__dict__,
+    }
+    return model, table
+
+
+def _predict(est: GroupEstimator, mean: np.ndarray, sd: np.ndarray) -> dict[str, float]:
+    """The model's group means on the measures' own scale (and VO - HV), by the emulator."""
+    draws = est.emulator.means(est.draws(mean, sd)).mean(axis=0)
+    out = dict(zip(est.emulator.moments_, draws.tolist(), strict=True))
+    for m in est.emulator.measures_:
+        out[f"VO-HV:{m}"] = out[f"VO:{m}"] - out[f"HV:{m}"]
+    return out

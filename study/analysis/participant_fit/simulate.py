@@ -1,0 +1,134 @@
+"""Simulating trait settings through a task's own trials, in parallel processes.
+
+The fit's only contact with the simulation: a list of trait settings goes in, one row
+per (setting, condition, repeat) with the task's analysed measures comes out. Each
+trial is `Task.simulate` (the registry's task, its loop, its simulated driver and, for a
+task with a dial, the shipped force estimator), as `study simulate` and campaigns run
+it, so a task added to the registry is fitted through the same path.
+
+Common random numbers across conditions: VO and HV of one (setting, repeat) run with the
+same trial seed, so their difference is the condition's alone. Across settings the
+seeds differ: with one set of seeds shared by every setting, the emulator's surface
+would carry those few seeds' luck into every prediction (a bias of the order of the
+trial noise over the square root of the repeats), while independent seeds let the
+regression average the trial noise over hundreds of trials.
+
+The processes are `concurrent.futures` workers (spawn, as `study run --jobs`), each
+warming up once (numba's kernel from its on-disk cache, the estimator); one job is one
+setting with all its trials, so the work is coarse enough that the pool costs nothing.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import zlib
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from functools import lru_cache
+from typing import Any
+
+import pandas as pd
+
+from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
+from study.protocol.participants import ParticipantTraits
+from study.protocol.tasks import get_task
+
+
+def trial_seed(setting: int, repeat: int, salt: str = "fit", condition: str = "") -> int:
+    """The seed of a setting's repeat `repeat`: the same in both conditions unless
+    `condition` is given (a simulated study's people, whose VO and HV trials are
+    independent as a real session's are)."""
+    return zlib.crc32(f"{salt}/{setting}/{repeat}{'/' + condition if condition else ''}".encode())
+
+
+@lru_cache(maxsize=1)
+def _estimator() -> Any:
+    from study.protocol.default_estimator import load_estimator
+
+    return load_estimator()
+
+
+@lru_cache(maxsize=4)
+def _context(task: str) -> Any:
+    return get_task(task).session_context()
+
+
+def simulate_setting(
+    task: str,
+    index: int,
+    setting: dict[str, Any],
+    repeats: int,
+    max_s: float,
+    salt: str = "fit",
+) -> list[dict[str, Any]]:
+    """Every trial of one trait setting (`group` plus the traits): each condition x
+    repeat, with the task's analysed measures and `success`. With the salt `fit` both
+    conditions share a repeat's seed; with any other, each trial has its own."""
+    the_task = get_task(task)
+    traits = ParticipantTraits(**setting)
+    estimator = _estimator() if the_task.has_dial else None
+    rows = []
+    for r in range(repeats):
+        for condition in KNOWN_CONDITIONS:
+            s = the_task.simulate(
+                traits,
+                condition,
+                trial_seed(index, r, salt, "" if salt == "fit" else condition),
+                max_s,
+                estimator=estimator,
+                context=_context(task),
+            ).summary
+            rows.append(
+                {
+                    "condition": condition,
+                    "repeat": r,
+                    "success": bool(s["success"]),
+                    **{m: float(s[m]) for m in the_task.analysed_measures},
+                }
+            )
+    return rows
+
+
+def _warm(task: str) -> None:
+    the_task = get_task(task)
+    _context(task)
+    if the_task.has_dial:
+        _estimator()
+
+
+def simulate_settings(
+    task: str,
+    settings: Sequence[dict[str, Any]],
+    repeats: int,
+    jobs: int = 1,
+    max_s: float = MAX_TRIAL_S,
+    progress: Callable[[int, int], None] = lambda k, n: None,
+    salt: str = "fit",
+) -> pd.DataFrame:
+    """One row per trial of every setting: `setting` (its index), condition, repeat,
+    success, the task's analysed measures; `progress(k, n)` after each setting."""
+    rows: list[dict[str, Any]] = []
+    n = len(settings)
+    if jobs <= 1 or n <= 1:
+        for k, setting in enumerate(settings):
+            rows += [
+                {"setting": k, **row}
+                for row in simulate_setting(task, k, setting, repeats, max_s, salt)
+            ]
+            progress(k + 1, n)
+    else:
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(
+            jobs, mp_context=context, initializer=_warm, initargs=(task,)
+        ) as pool:
+            futures = {
+                pool.submit(simulate_setting, task, k, s, repeats, max_s, salt): k
+                for k, s in enumerate(settings)
+            }
+            for done, future in enumerate(as_completed(futures), 1):
+                rows += [{"setting": futures[future], **row} for row in future.result()]
+                progress(done, n)
+    frame = pd.DataFrame(rows)
+    return frame.sort_values(["setting", "repeat", "condition"], kind="stable").reset_index(
+        drop=True
+    )

@@ -1,0 +1,203 @@
+"""`study bench participants`: recovery of known trait distributions by the participant fit.
+
+1. A study with known trait distributions (the hand-set `PROFILES`, the truth) is
+   simulated through the real session runner into SQLite: `groups` (20/8/8) people,
+   `trials` measured trials per condition, counterbalanced, as `study demo` runs it.
+2. `study participants fit`'s whole fit runs on it (`fit_participants`), timed: the
+   target is <= 10 minutes for a 36-participant study on this 2-core machine.
+3. The truth's VO - HV differences of the peak forces: `truth_people` more people per
+   group drawn from PROFILES and simulated (1 trial per condition, independent seeds),
+   their mean difference per group with its standard error.
+4. Targets: each group's fitted mean of each identifiable trait within 15 % of the
+   truth; the truth's VO - HV peak-force difference inside the fitted model's reported
+   95 % interval (the `simulated` rows of the summaries: people simulated from the fit's
+   bootstrap replicates). The fit's CPU time is reported beside its wall time: on a
+   machine shared with other jobs, CPU seconds / 2 is what the fit takes on 2 idle cores.
+
+Everything here is SIMULATED, and the JSON says so (`data_source`).
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from db.migrate import open_database
+from study.analysis.participant_fit.fit import FitSettings, fit_participants, simulate_people
+from study.protocol.demo import run_demo
+from study.protocol.participants import PROFILES, TRAITS
+
+TOLERANCE = 0.15
+"""Largest relative error of a recovered group mean (identifiable traits)."""
+FORCES = ("peak_proximal_force_n", "peak_distal_force_n")
+
+
+def run_participants_bench(
+    groups: dict[str, int],
+    trials: int,
+    settings: FitSettings,
+    truth_people: int,
+    seed: int,
+    out_dir: Path | None,
+    status: Callable[[str], None] = lambda _: None,
+) -> dict[str, Any]:
+    """The bench's report (see the module docstring)."""
+    load_before = os.getloadavg()
+    with tempfile.TemporaryDirectory() as tmp:
+        db = str(Path(tmp) / "truth.db")
+        start = time.monotonic()
+        run_demo(db, seed, settings.jobs, status, sizes=groups, trials_per_condition=trials)
+        study_s = time.monotonic() - start
+        engine = open_database(db, create=False)
+        try:
+            start, cpu0 = time.monotonic(), _cpu_s()
+            model, table = fit_participants(
+                engine,
+                "lcca",
+                settings,
+                "simulated 20/8/8 study",
+                lambda step, k, n: status(f"fit: {step} {k}/{n}"),
+            )
+            fit_s, fit_cpu_s = time.monotonic() - start, _cpu_s() - cpu0
+        finally:
+            engine.dispose()
+    status("the truth's VO - HV differences")
+    truth = simulate_people(
+        "lcca",
+        {g: [PROFILES[g]] for g in groups},
+        truth_people,
+        1,
+        FitSettings(jobs=settings.jobs, seed=seed + 1000),
+        lambda *_: None,
+    )
+    means = truth.groupby(["group", "participant", "condition"])[list(FORCES)].mean()
+    recovery, differences = [], []
+    for group in groups:
+        fitted = model["fit"][group]["traits"]
+        for trait in TRAITS:
+            if not fitted[trait]["fitted"]:
+                continue
+            true = getattr(PROFILES[group], trait)[0]
+            got = fitted[trait]["mean"]
+            recovery.append(
+                {
+                    "group": group,
+                    "trait": trait,
+                    "true": true,
+                    "fitted": got,
+                    "ci95": fitted[trait]["mean_ci95"],
+                    "relative_error": (got - true) / true,
+                    "within": abs(got - true) <= TOLERANCE * abs(true),
+                }
+            )
+        wide = means.xs(group, level="group")
+        for m in FORCES:
+            d = (wide[m].unstack()["VO"] - wide[m].unstack()["HV"]).to_numpy(float)
+            row = table[
+                (table["group"] == group)
+                & (table["measure"] == m)
+                & (table["condition"] == "VO-HV")
+                & (table["source"] == "simulated")
+            ].iloc[0]
+            true_d = float(d.mean())
+            differences.append(
+                {
+                    "group": group,
+                    "measure": m,
+                    "truth": true_d,
+                    "truth_se": float(d.std(ddof=1) / np.sqrt(len(d))),
+                    "model": float(row["mean"]),
+                    "model_ci95": [float(row["ci_low"]), float(row["ci_high"])],
+                    "within": bool(row["ci_low"] <= true_d <= row["ci_high"]),
+                }
+            )
+    if out_dir is not None:
+        from study.analysis.participant_fit.figure import fit_figure
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        note = (
+            "SIMULATED: a 20/8/8 study simulated with the hand-set profiles, fitted by "
+            "`study participants fit`"
+        )
+        fit_figure(table, note).savefig(out_dir / "participants_fit.png", dpi=200)
+    return {
+        "data_source": "simulated",
+        "groups": groups,
+        "trials_per_condition": trials,
+        "settings": settings.__dict__,
+        "truth_people_per_group": truth_people,
+        "identifiable": model["identifiable"],
+        "fixed_at_prior": model["fixed_at_prior"],
+        "identification_ratio": model["identification_ratio"],
+        "recovery": recovery,
+        "recovery_target": f"within {TOLERANCE:.0%} of the true mean",
+        "recovery_met": all(r["within"] for r in recovery),
+        "differences": differences,
+        "differences_met": all(d["within"] for d in differences),
+        "study_seconds": round(study_s, 1),
+        "fit_seconds": round(fit_s, 1),
+        "fit_cpu_seconds": round(fit_cpu_s, 1),
+        "fit_target_seconds": 600,
+        "lacks": model["lacks"]["line"],
+        "load_average_before": [round(x, 2) for x in load_before],
+        "load_average_after": [round(x, 2) for x in os.getloadavg()],
+        "cpus": os.cpu_count(),
+    }
+
+
+def _cpu_s() -> float:
+    """CPU seconds of this process and its finished children (the fit's workers)."""
+    own, kids = (
+        resource.getrusage(resource.RUSAGE_SELF),
+        resource.getrusage(resource.RUSAGE_CHILDREN),
+    )
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def markdown(report: dict[str, Any]) -> str:
+    """The bench's tables for benchmarks/results/participants_bench.md."""
+    lines = [
+        "# Participant fit: recovery from a simulated 20/8/8 study (SIMULATED)",
+        "",
+        f"Identifiable: {', '.join(report['identifiable'])}; fixed at their priors: "
+        f"{', '.join(report['fixed_at_prior'])}.",
+        "",
+        "| group | trait | true mean | fitted (95 % CI) | error | within 15 % |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in report["recovery"]:
+        lines.append(
+            f"| {r['group']} | {r['trait']} | {r['true']:.4g} | {r['fitted']:.4g} "
+            f"({r['ci95'][0]:.4g}-{r['ci95'][1]:.4g}) | {100 * r['relative_error']:+.1f} % "
+            f"| {'yes' if r['within'] else 'NO'} |"
+        )
+    lines += [
+        "",
+        "| group | measure | truth VO - HV (SE) | fitted model (95 % CI) | inside |",
+        "|---|---|---|---|---|",
+    ]
+    for d in report["differences"]:
+        lines.append(
+            f"| {d['group']} | {d['measure']} | {d['truth']:.3f} ({d['truth_se']:.3f}) "
+            f"| {d['model']:.3f} ({d['model_ci95'][0]:.3f}, {d['model_ci95'][1]:.3f}) "
+            f"| {'yes' if d['within'] else 'NO'} |"
+        )
+    lines += [
+        "",
+        f"Fit: {report['fit_seconds']:.0f} s wall, {report['fit_cpu_seconds']:.0f} CPU s "
+        f"(target <= 600 s); the study's "
+        f"simulation: {report['study_seconds']:.0f} s; load average "
+        f"{report['load_average_before']} -> {report['load_average_after']}, "
+        f"{report['cpus']} CPUs.",
+        "",
+        report["lacks"],
+        "",
+    ]
+    return "\n".join(lines)

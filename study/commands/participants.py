@@ -1,0 +1,165 @@
+"""`study participants fit`: simulated participants fitted to a study's trials (issue 24).
+
+`study participant` (singular) enrols people; this group is about the simulated ones.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import click
+
+from study.commands.base import StudyGroup, check_parent_folder, db_option, progress_bar
+from study.errors import StudyInputError
+
+
+@click.group("participants", cls=StudyGroup)
+def participants() -> None:
+    """Simulated participants: fit their trait distributions to a study's trials."""
+
+
+@participants.command("fit")
+@db_option
+@click.option(
+    "--task",
+    default="lcca",
+    show_default=True,
+    help="The task whose trials are fitted (lcca, notes, or a registered one).",
+)
+@click.option(
+    "--out",
+    "out_path",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="MODEL.json to write; the figure goes beside it (MODEL.png).",
+)
+@click.option(
+    "--design",
+    "n_design",
+    type=click.IntRange(min=16),
+    default=160,
+    show_default=True,
+    help="Trait settings the emulator is built from.",
+)
+@click.option(
+    "--repeats",
+    type=click.IntRange(min=1),
+    default=2,
+    show_default=True,
+    help="Trials per condition at each setting.",
+)
+@click.option(
+    "--check",
+    "n_check",
+    type=click.IntRange(min=4),
+    default=24,
+    show_default=True,
+    help="People per group simulated from the fit for the summaries and checks.",
+)
+@click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True)
+@click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+def fit(
+    db_url: str | None,
+    task: str,
+    out_path: Path,
+    n_design: int,
+    repeats: int,
+    n_check: int,
+    bootstrap: int,
+    jobs: int,
+    seed: int,
+) -> None:
+    """Fit each experience group's trait distributions to the database's completed trials
+    (simulated moments on an emulator); write MODEL.json and MODEL.png, print the
+    observed vs simulated summaries and one line on what the participants lack."""
+    from db.engine import describe, resolve_url
+    from study.analysis.participant_fit.fit import FitSettings, fit_participants
+    from study.commands.base import opened_database
+    from study.protocol.tasks import get_task
+
+    get_task(task)  # an unknown task: one line before anything runs
+    check_parent_folder(out_path)
+    if out_path.suffix != ".json":
+        raise StudyInputError(f"--out {out_path}; expected a file name ending in .json")
+    settings = FitSettings(
+        design=n_design, repeats=repeats, check=n_check, bootstrap=bootstrap, jobs=jobs, seed=seed
+    )
+    start = time.monotonic()
+    with opened_database(db_url) as engine, progress_bar() as bar:
+        bars: dict[str, object] = {}
+
+        def progress(step: str, k: int, n: int) -> None:
+            if step not in bars:
+                bars[step] = bar.add_task(
+                    {
+                        "emulator": "simulating the emulator's design",
+                        "fitting": "fitting the groups",
+                        "checking": "simulating people from the fit",
+                    }[step],
+                    total=n,
+                )
+            bar.update(bars[step], completed=k, total=n)
+
+        model, table = fit_participants(
+            engine, task, settings, describe(resolve_url(db_url)), progress
+        )
+    model["seconds"] = round(time.monotonic() - start, 1)
+    _write(out_path, model, table)
+    _print(model, table)
+    click.echo(model["lacks"]["line"])
+    click.echo(
+        f"model: {out_path}; figure: {out_path.with_suffix('.png')} ({model['seconds']:.0f} s)"
+    )
+
+
+def _write(out_path: Path, model: dict, table: object) -> None:
+    """MODEL.json and MODEL.png, each written whole or not at all."""
+    from study.analysis.participant_fit.figure import fit_figure
+
+    note = (
+        f"Fitted to {model['data_source'].upper()} trials "
+        f"({model['fitted_from']['note'] or 'measured'}); "
+        "simulated marks are SIMULATED people drawn from the fitted model"
+    )
+    png = out_path.with_suffix(".png")
+    tmp_png = png.with_name(f".{png.name}.{os.getpid()}.tmp.png")
+    fit_figure(table, note).savefig(tmp_png, dpi=200)
+    tmp = out_path.with_name(f".{out_path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(model, indent=2, default=float) + "\n")
+    os.replace(tmp_png, png)
+    os.replace(tmp, out_path)
+
+
+def _print(model: dict, table: object) -> None:
+    fits = model["fit"]
+    click.echo(
+        f"{model['task']}: fitted to {model['fitted_from']['participants']} participants' "
+        f"{model['fitted_from']['trials']} trials ({model['data_source']})"
+    )
+    click.echo(
+        f"identifiable from the moments: {', '.join(model['identifiable']) or 'none'}; "
+        f"fixed at their priors: {', '.join(model['fixed_at_prior'])}"
+    )
+    for group, out in fits.items():
+        traits = ", ".join(
+            f"{t} {v['mean']:.4g} (95 % {v['mean_ci95'][0]:.4g}-{v['mean_ci95'][1]:.4g})"
+            for t, v in out["traits"].items()
+            if v["fitted"]
+        )
+        click.echo(f"{group:<9} n = {out['participants']:>2}: {traits or 'no trait fitted'}")
+    rows = table[table["source"] != "model"]  # type: ignore[index]
+    click.echo(
+        "group     measure                 cond   observed (95 % CI)       simulated (95 % CI)"
+    )
+    for (group, measure, condition), g in rows.groupby(
+        ["group", "measure", "condition"], sort=False
+    ):
+        cells = []
+        for source in ("observed", "simulated"):
+            r = g[g["source"] == source].iloc[0]
+            cells.append(f"{r['mean']:8.3f} ({r['ci_low']:.3f}, {r['ci_high']:.3f})")
+        click.echo(f"{group:<9} {measure:<23} {condition:<6} {cells[0]:<24} {cells[1]}")

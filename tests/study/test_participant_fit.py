@@ -1,0 +1,169 @@
+"""`study participants fit` (issue 24): recovery of known trait distributions, an effect
+the participants lack reported instead of absorbed, and bad input refused in one line.
+
+The data are simulated through the real engine (`Task.simulate`: the LCCA loop, the
+shipped estimator, the simulated participant), small and capped at 60 s a trial so that
+the module takes about a minute: 6 people per group, 2 trials per condition, an emulator
+of 40 settings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+from scipy import stats
+
+from study.analysis.participant_fit.fit import (
+    FitSettings,
+    build_emulator,
+    fit_trials,
+    simulate_people,
+)
+from study.protocol.participants import PROFILES
+from tests.study.conftest import one_error_line
+
+SETTINGS = FitSettings(design=40, repeats=1, check=4, bootstrap=10, jobs=1, seed=3, max_s=60.0)
+pytestmark = pytest.mark.timeout(900)
+"""About a minute of CPU in all (about 250 trials); the shared 2-core machine, loaded by
+other jobs, has stretched that to 5 minutes of wall time, past the suite's 300 s default."""
+TRUE_SPEED_M_S = {"outsider": 0.010, "novice": 0.015, "expert": 0.020}
+"""The known group means of the preferred speed (the profiles' are 0.012/0.014/0.017),
+set apart so that recovering them is a test of the fit, not of the priors."""
+TOLERANCE = 0.20
+"""Recovered group mean within 20 % of the truth: with 6 people per group and 2 trials
+per condition the fit's own 95 % interval is about +/- 15 %, so 20 % fails only when the
+estimate is off by more than its uncertainty."""
+
+
+def _truth() -> dict:
+    return {g: [dataclasses.replace(p, preferred_speed_m_s=(TRUE_SPEED_M_S[g], 0.0015))]
+            for g, p in PROFILES.items()}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def emulator():
+    return build_emulator("lcca", SETTINGS)
+
+
+@pytest.fixture(scope="module")
+def trials():
+    """6 people per group from the known profiles, 2 trials per condition."""
+    data = dataclasses.replace(SETTINGS, seed=21)
+    return simulate_people("lcca", _truth(), 6, 2, data, lambda *_: None)
+
+
+@pytest.fixture(scope="module")
+def fitted(emulator, trials):
+    return fit_trials(trials, "lcca", SETTINGS, emulator, "test data")
+
+
+def test_the_known_group_means_are_recovered(fitted) -> None:
+    model, _ = fitted
+    assert "preferred_speed_m_s" in model["identifiable"]
+    for group, true in TRUE_SPEED_M_S.items():
+        got = model["groups"][group]["preferred_speed_m_s"]["mean"]
+        assert abs(got - true) <= TOLERANCE * true, (group, got, true)
+    # what the data cannot identify stays at its prior, and says so
+    for trait in model["fixed_at_prior"]:
+        assert model["groups"]["novice"][trait]["mean"] == getattr(PROFILES["novice"], trait)[0]
+    assert model["data_source"] == "simulated"
+
+
+def test_data_from_the_model_itself_show_no_trend_and_no_order_effect(fitted) -> None:
+    model, _ = fitted
+    tests = model["lacks"]["tests"]
+    assert {(r["check"], r["measure"]) for r in tests} == {
+        (c, m) for c in ("trend", "order")
+        for m in ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")}  # fmt: skip
+    assert not any(row["flagged"] for row in tests)
+    line = model["lacks"]["line"]
+    assert "trend over trials" not in line and "condition order" not in line
+    # the outlier rule: every person's calibrated distance against the chi-square quantile
+    # at 1 - 0.01/18 with df = 6 moments - free traits. With only 4 simulated people per
+    # group to calibrate it (24 by default) it does raise false alarms here, so only its
+    # rule is checked, not its verdict
+    outliers = model["lacks"]["outliers"]
+    df = 6 - len(model["identifiable"])
+    assert len(outliers["distance"]) == 18 and outliers["df"] == df
+    assert outliers["limit"] == pytest.approx(stats.chi2.ppf(1 - 0.01 / 18, df), abs=1e-3)
+    assert outliers["flagged"] == sorted(p for p, d in outliers["distance"].items()
+                                         if d > outliers["limit"])  # fmt: skip
+
+
+def test_times_shrinking_over_trials_are_reported_not_absorbed(emulator, trials) -> None:
+    # learning: each trial 25 % faster than the one before, in whichever condition
+    learning = trials.assign(completion_time_s=trials["completion_time_s"]
+                             * 0.75 ** trials["position"])  # fmt: skip
+    model, _ = fit_trials(learning, "lcca", SETTINGS, emulator, "test data")
+    trend = next(r for r in model["lacks"]["tests"]
+                 if r["check"] == "trend" and r["measure"] == "completion_time_s")  # fmt: skip
+    assert trend["flagged"]
+    # 0.75 per trial is -25 %; the fitted model's own people do not learn
+    assert trend["observed_pct_per_trial"] == pytest.approx(-25.0, abs=8.0)
+    assert abs(trend["simulated_pct_per_trial"]) < 8.0
+    assert "a trend over trials in completion_time_s" in model["lacks"]["line"]
+    # a trend shows as a period effect too, which the order check reports
+    order = next(r for r in model["lacks"]["tests"]
+                 if r["check"] == "order" and r["measure"] == "completion_time_s")  # fmt: skip
+    assert order["flagged"] and order["observed_vo_first_minus_hv_first_pct"] < 0
+
+
+def test_a_study_with_too_few_participants_per_group_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from study.protocol.demo import run_demo
+
+    db = str(tmp_path / "s.db")
+    run_demo(db, 1, jobs=1, quick=True)  # 2 people per group, one trial per block
+    out = tmp_path / "model.json"
+    line = one_error_line(capsys, ["participants", "fit", "--db", db, "--out", str(out)])
+    assert line == ("study participants fit: error: group outsider has 2 participant(s) with "
+                    "lcca trials in both VO and HV; expected at least 4 per group to fit its "
+                    "trait distribution")  # fmt: skip
+    assert not out.exists() and not out.with_suffix(".png").exists()
+
+
+def test_an_unknown_task_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["participants", "fit", "--db", str(tmp_path / "none.db"), "--task", "suturing",
+            "--out", str(tmp_path / "m.json")]  # fmt: skip
+    line = one_error_line(capsys, argv)
+    assert line.startswith("study participants fit: error: task 'suturing'; expected one of lcca")
+
+
+@pytest.mark.parametrize("content", ["{not json", json.dumps({"format": "other"}),
+                                     "MEAN"])  # fmt: skip
+def test_a_bad_model_is_one_line_for_every_command(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str
+) -> None:
+    model = tmp_path / "model.json"
+    if content == "MEAN":  # a valid file but for one trait's mean outside its range
+        expert = dataclasses.asdict(PROFILES["expert"])
+        good = {"format": "haptic-study participant model", "task": "lcca",
+                "data_source": "measured",
+                "groups": {"expert": {t: {"mean": m, "sd": sd}
+                                      for t, (m, sd) in expert.items()}}}  # fmt: skip
+        good["groups"]["expert"]["caution"]["mean"] = 1.7
+        content = json.dumps(good)
+    model.write_text(content)
+    from study.protocol.design import TEMPLATE
+
+    (tmp_path / "d.toml").write_text(TEMPLATE)
+    (tmp_path / "c.toml").write_text('seed = 1\nreplicates = 1\nparticipants = "model.json"\n'
+                                     "[groups]\nexpert = 3\n")  # fmt: skip
+    commands = [
+        ["simulate", "--group", "expert", "--condition", "VO", "--out", str(tmp_path / "t.csv")],
+        ["run", "--all", "--db", str(tmp_path / "none.db")],
+        ["demo", "--out", str(tmp_path / "demo")],
+        ["power", "--design", str(tmp_path / "d.toml")],
+    ]
+    for argv in commands:
+        line = one_error_line(capsys, [*argv, "--participants", str(model)])
+        assert f"participant model {model}" in line and "expected" in line, line
+    line = one_error_line(capsys, ["campaign", "run", str(tmp_path / "c.toml"),
+                                   "--out", str(tmp_path / "camp")])  # fmt: skip
+    assert f"participant model {model}" in line and "expected" in line, line
+    assert not (tmp_path / "demo").exists() and not (tmp_path / "camp").exists()
+    assert not (tmp_path / "t.csv").exists()
