@@ -67,6 +67,11 @@ _KEY_FIELDS = [
 SAMPLE_EXPORT_SCHEMA = pa.schema([*_KEY_FIELDS, *SAMPLE_SCHEMA])
 MAX_WORKERS = 4
 """Most reader threads by default (one per CPU up to this)."""
+CSV_SPAN_ROWS = 16_384
+"""Samples per span for CSV: its text (about 230 bytes a sample) is built in the reader
+threads and waits its turn, so CSV spans are smaller than Parquet's (`SPAN_ROWS`, one
+row group each). Measured on 2 million samples with two threads: 65,536-sample CSV
+spans raised the peak memory by 125 MB, 16,384-sample ones by 69 MB."""
 
 Progress = Callable[[int, int], None]
 """Called as `progress(trials_done, trials_total)` after each trial."""
@@ -276,6 +281,11 @@ def _encoder(trials: list[ExportTrial], fmt: str) -> Callable[[SampleSpan, pa.Ta
     return encode
 
 
+def _span(fmt: str, span_rows: int | None) -> int:
+    default = SPAN_ROWS if fmt == "parquet" else CSV_SPAN_ROWS
+    return default if span_rows is None else span_rows
+
+
 def default_workers() -> int:
     """Reader threads: one per CPU this process may use, at most `MAX_WORKERS`."""
     return max(1, min(len(os.sched_getaffinity(0)), MAX_WORKERS))
@@ -307,18 +317,19 @@ def write_samples(
     selection: SampleSelection = SampleSelection(),
     *,
     progress: Progress | None = None,
-    span_rows: int = SPAN_ROWS,
+    span_rows: int | None = None,
     workers: int | None = None,
 ) -> int:
     """Write the samples of `trials` into one file at `path`; returns the number of rows.
 
-    `span_rows` bounds the samples read at once, `workers` the reader threads (default
+    `span_rows` bounds the samples read at once (default `SPAN_ROWS` for Parquet,
+    `CSV_SPAN_ROWS` for CSV), `workers` the reader threads (default
     `default_workers()`). The file appears only when complete (written as
     `.NAME.partial`, then renamed).
     """
     out = _StagedFile(path, fmt)
     try:
-        plan = plan_spans(engine, [t.trial_id for t in trials], max_rows=span_rows)
+        plan = plan_spans(engine, [t.trial_id for t in trials], max_rows=_span(fmt, span_rows))
         with closing(_read(engine, trials, plan, fmt, selection, workers)) as parts:
             for done, spans in enumerate(plan, 1):
                 for _ in spans:
@@ -350,7 +361,7 @@ def write_samples_per_trial(
     selection: SampleSelection = SampleSelection(),
     *,
     progress: Progress | None = None,
-    span_rows: int = SPAN_ROWS,
+    span_rows: int | None = None,
     workers: int | None = None,
 ) -> PerTrialResult:
     """One file per trial in `folder` (`P001_lcca_HV_trial1.parquet`, ...).
@@ -360,12 +371,14 @@ def write_samples_per_trial(
     its samples).
     """
     folder.mkdir(parents=True, exist_ok=True)
-    for trial in trials:  # a link anywhere refuses the export before a file is written
-        refuse_symlink(folder / f"{trial.file_stem}.{fmt}")
     paths = [folder / f"{trial.file_stem}.{fmt}" for trial in trials]
+    for path in paths:  # a link anywhere refuses the export before a file is written
+        refuse_symlink(path)
     missing = [not path.exists() for path in paths]
     todo = [t for t, m in zip(trials, missing, strict=True) if m]
-    plan = plan_spans(engine, [t.trial_id for t in todo], max_rows=span_rows, join_trials=False)
+    plan = plan_spans(
+        engine, [t.trial_id for t in todo], max_rows=_span(fmt, span_rows), join_trials=False
+    )
     spans_of = {t.trial_id: spans for t, spans in zip(todo, plan, strict=True)}
     written, skipped, rows = [], [], 0
     with closing(_read(engine, todo, plan, fmt, selection, workers)) as parts:
