@@ -174,28 +174,13 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
 
 
 @bench.command("startup")
-@click.option(
-    "--runs",
-    type=click.IntRange(min=1),
-    default=5,
-    show_default=True,
-    help="Fresh processes per figure (after one warm-up each); the median counts.",
-)
-@click.option(
-    "--db",
-    "db_url",
-    metavar="URL",
-    default=None,
-    help="Study database for `study analyze` and the run screen, e.g. made by "
-    "`study demo` [default: a quick 6-participant demo study built first].",
-)
-@click.option(
-    "--rows",
-    type=click.IntRange(min=1),
-    default=1_000_000,
-    show_default=True,
-    help="Samples written by the writer and by plain sqlite3, each run.",
-)
+@click.option("--runs", type=click.IntRange(min=1), default=5, show_default=True,
+              help="Fresh processes per figure (after one warm-up each); the median counts.")
+@click.option("--db", "db_url", metavar="URL", default=None,
+              help="Study database for `study analyze` and the run screen, e.g. made by "
+              "`study demo` [default: a quick 6-participant demo study built first].")
+@click.option("--rows", type=click.IntRange(min=1), default=1_000_000, show_default=True,
+              help="Samples written by the writer and by plain sqlite3, each run.")
 @_json_option
 def bench_startup(db_url: str | None, runs: int, rows: int, json_path: Path | None) -> None:
     """From a cold process: simulate, the run screen, analyze, the writer."""

@@ -94,54 +94,42 @@ def test_spans_read_every_sample_once_in_order(engine: Engine, workers: int) -> 
         np.testing.assert_array_equal(got.column(name).to_numpy(), [row[k] for row in want])
 
 
-def test_at_most_workers_plus_one_spans_are_read_ahead(sqlite_url: str) -> None:
+def test_at_most_workers_plus_one_spans_are_read_ahead(engine: Engine) -> None:
     """A slow consumer never has more than workers + 1 spans read and waiting."""
-    from db.migrate import open_database
+    ids = _trials(engine, [50] * 12)
+    spans = [s for p in plan_spans(engine, ids, max_rows=50) for s in p]
+    started: list[int] = []
+    lock = threading.Lock()
 
-    engine = open_database(sqlite_url)
-    try:
-        ids = _trials(engine, [50] * 12)
-        spans = [s for p in plan_spans(engine, ids, max_rows=50) for s in p]
-        started: list[int] = []
-        lock = threading.Lock()
+    def work(span: SampleSpan, table: pa.Table) -> int:
+        with lock:
+            started.append(span.trial_ids[0])
+        time.sleep(0.01 * (span.trial_ids[0] % 3))  # finish out of order
+        return span.trial_ids[0]
 
-        def work(span: SampleSpan, table: pa.Table) -> int:
-            with lock:
-                started.append(span.trial_ids[0])
-            time.sleep(0.01 * (span.trial_ids[0] % 3))  # finish out of order
-            return span.trial_ids[0]
-
-        seen = []
-        for trial_id in read_spans(engine, spans, work, workers=2):
-            time.sleep(0.02)  # a slow writer
-            with lock:
-                ahead = len(started) - len(seen)
-            assert ahead <= 3, (started, seen)
-            seen.append(trial_id)
-        assert seen == ids
-    finally:
-        engine.dispose()
+    seen = []
+    for trial_id in read_spans(engine, spans, work, workers=2):
+        time.sleep(0.02)  # a slow writer
+        with lock:
+            ahead = len(started) - len(seen)
+        assert ahead <= 3, (started, seen)
+        seen.append(trial_id)
+    assert seen == ids
 
 
-def test_an_error_in_a_span_reaches_the_caller_and_stops_the_rest(sqlite_url: str) -> None:
-    from db.migrate import open_database
+def test_an_error_in_a_span_reaches_the_caller_and_stops_the_rest(engine: Engine) -> None:
+    ids = _trials(engine, [20] * 8)
+    spans = [s for p in plan_spans(engine, ids, max_rows=20) for s in p]
+    done: list[int] = []
 
-    engine = open_database(sqlite_url)
-    try:
-        ids = _trials(engine, [20] * 8)
-        spans = [s for p in plan_spans(engine, ids, max_rows=20) for s in p]
-        done: list[int] = []
+    def work(span: SampleSpan, table: pa.Table) -> int:
+        if span.trial_ids[0] == ids[2]:
+            raise ValueError("bad span")
+        done.append(span.trial_ids[0])
+        return table.num_rows
 
-        def work(span: SampleSpan, table: pa.Table) -> int:
-            if span.trial_ids[0] == ids[2]:
-                raise ValueError("bad span")
-            done.append(span.trial_ids[0])
-            return table.num_rows
-
-        with pytest.raises(ValueError, match="bad span"):
-            list(read_spans(engine, spans, work, workers=2))
-        assert len(done) <= 2 + 3  # the spans before it, and at most the read-ahead
-        with pytest.raises(DbInputError, match="workers 0"):
-            next(read_spans(engine, spans, work, workers=0))
-    finally:
-        engine.dispose()
+    with pytest.raises(ValueError, match="bad span"):
+        list(read_spans(engine, spans, work, workers=2))
+    assert len(done) <= 2 + 3  # the spans before it, and at most the read-ahead
+    with pytest.raises(DbInputError, match="workers 0"):
+        next(read_spans(engine, spans, work, workers=0))
