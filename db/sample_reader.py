@@ -47,7 +47,7 @@ import pyarrow as pa
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 
-from db.engine import is_sqlite
+from db.engine import busy_timeout_ms, is_sqlite
 from db.errors import DbInputError
 from db.models.trial import SAMPLE_COLUMNS, Sample, Trial
 
@@ -116,6 +116,16 @@ class SampleReader:
                     "expected an SQLite file"
                 )
             self._conn = adbc_driver_sqlite.dbapi.connect(url.database)
+            # Wait for a lock as the study's own connections do (`?timeout=S`, 30 s): a
+            # connection opening while another recovers the WAL index got "database is
+            # locked" at once (the driver's default is not to wait), seen with two reader
+            # threads opening together.
+            cursor = self._conn.cursor()
+            try:
+                cursor.execute(f"PRAGMA busy_timeout = {busy_timeout_ms(url)}")
+                cursor.fetchall()
+            finally:
+                cursor.close()
         else:
             import adbc_driver_postgresql.dbapi
 

@@ -133,3 +133,20 @@ def test_an_error_in_a_span_reaches_the_caller_and_stops_the_rest(engine: Engine
     assert len(done) <= 2 + 3  # the spans before it, and at most the read-ahead
     with pytest.raises(DbInputError, match="workers 0"):
         next(read_spans(engine, spans, work, workers=0))
+
+
+def test_the_reader_waits_for_a_lock_as_the_study_connections_do(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Its SQLite connection has the URL's busy timeout (`?timeout=7`: 7,000 ms), not
+    the driver's 0 (two reader threads opening together got "database is locked")."""
+    from db.migrate import open_database
+    from db.sample_reader import SampleReader
+
+    engine = open_database(f"sqlite:///{tmp_path / 's.db'}?timeout=7")
+    try:
+        with SampleReader(engine) as reader:
+            cursor = reader._conn.cursor()
+            cursor.execute("PRAGMA busy_timeout")
+            assert cursor.fetchall() == [(7000,)]
+            cursor.close()
+    finally:
+        engine.dispose()
