@@ -77,7 +77,7 @@ def make_engine(url: str | URL) -> Engine:
     url = make_url(url) if isinstance(url, str) else url
     try:
         if url.get_backend_name() == "sqlite":
-            timeout_ms = _busy_timeout_ms(url)
+            timeout_ms = busy_timeout_ms(url)
             engine = create_engine(url, connect_args={"timeout": timeout_ms / 1000})
             # An in-memory or read-only (?mode=ro) database cannot switch to WAL.
             wal = url.database not in (None, "", ":memory:") and url.query.get("mode") != "ro"
@@ -94,7 +94,7 @@ def make_engine(url: str | URL) -> Engine:
     return engine
 
 
-def _busy_timeout_ms(url: URL) -> int:
+def busy_timeout_ms(url: URL) -> int:
     """How long a writer waits for another's lock: `?timeout=SECONDS` in the URL (as
     pysqlite spells it), else `SQLITE_BUSY_TIMEOUT_MS`."""
     raw = url.query.get("timeout")

@@ -1,5 +1,5 @@
 """Trial sample streams: the write path (buffered, committed in chunks of at most a
-second) and the read path (Arrow record batches of bounded size).
+second).
 
 A crash mid-trial must lose at most `chunk_s` seconds of samples (one second by
 default). What a crash loses is what the writer holds plus what the caller is computing
@@ -16,34 +16,26 @@ list of dicts: a dict per row is what holds SQLAlchemy's executemany well below 
 SQLite steps one statement instead of re-binding one per row; PostgreSQL takes
 `COPY ... FROM STDIN`, psycopg's bulk path.
 
-Reading goes through ADBC (Apache Arrow's database connectivity: `adbc-driver-sqlite`,
-`adbc-driver-postgresql`), which hands over Arrow record batches of a bounded number of
-rows. A DBAPI cursor builds a Python tuple and a float object per value: on the demo
-study that is 2.8 s of CPU per million samples against 1.2 s for ADBC, and the
-export target is a million samples per second. `SampleReader` reads one trial at a
-time, in `seq` order, through the primary key's index, so memory stays at one batch
-whatever the size of the study. On PostgreSQL the driver streams each query with
-`COPY ... TO STDOUT (FORMAT binary)`. The SQLite driver infers a column's Arrow type
-from the values of the first batch and refuses a later batch that disagrees (a
-column that starts NULL would become int64); every query therefore starts with one
-typed row (`seq = -1`) that the reader drops.
+Reading (Arrow record batches of bounded size, one trial or many in parallel) is
+`db.sample_reader`; `SampleReader` and `SAMPLE_SCHEMA` are re-exported here.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from itertools import chain
 from types import TracebackType
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 from sqlalchemy import Connection, Engine
 
 from db.engine import is_sqlite
 from db.errors import DbInputError
 from db.models.trial import SAMPLE_COLUMNS
+from db.sample_reader import SAMPLE_SCHEMA, SampleReader
+
+__all__ = ["SAMPLE_SCHEMA", "SampleReader", "SampleWriter"]
 
 _ALL_COLUMNS = ("trial_id", "seq", *SAMPLE_COLUMNS)
 _ROWS_PER_STATEMENT = 500
@@ -211,7 +203,7 @@ class SampleWriter:
             return
         try:
             self.flush()
-        except Exception:  # noqa: BLE001 - the original exception propagates
+        except Exception:  # the original exception propagates
             self._buffer.clear()
 
 
@@ -238,134 +230,12 @@ def _write_rows(conn: Connection, columns: list[Sequence[Any]], n: int) -> None:
             for lo in range(0, n, _ROWS_PER_STATEMENT):
                 hi = min(lo + _ROWS_PER_STATEMENT, n)
                 # row-major parameters straight from the columns: zip pairs them in C
-                params = list(chain.from_iterable(zip(*(c[lo:hi] for c in columns))))
+                params = list(chain.from_iterable(zip(*(c[lo:hi] for c in columns), strict=True)))
                 full = hi - lo == _ROWS_PER_STATEMENT
                 cursor.execute(_FULL_INSERT_SQL if full else _insert_sql(hi - lo), params)
         else:
             with cursor.copy(_COPY_SQL) as copy:
-                for row in zip(*columns):
+                for row in zip(*columns, strict=True):
                     copy.write_row(row)
     finally:
         cursor.close()
-
-
-SAMPLE_SCHEMA = pa.schema(
-    [
-        ("seq", pa.int64()),
-        *((name, pa.string() if name == "branch" else pa.float64()) for name in SAMPLE_COLUMNS),
-    ]
-)
-"""Arrow schema of the batches `SampleReader` yields: `seq`, then `SAMPLE_COLUMNS`."""
-
-_BATCH_ROWS = 65_536
-
-
-class SampleReader:
-    """Read trials' sample streams as Arrow record batches of at most `batch_rows` rows.
-
-    Parameters
-    ----------
-    engine
-        Engine of the study database (an SQLite file or PostgreSQL; the reader opens
-        its own ADBC connection to the same database).
-    batch_rows
-        Most rows in one batch, > 0. Memory held by the reader is about
-        `batch_rows` x 100 bytes.
-
-    Use as a context manager; one reader serves any number of `trial` calls.
-    """
-
-    def __init__(self, engine: Engine, *, batch_rows: int = _BATCH_ROWS) -> None:
-        if batch_rows < 1:
-            raise DbInputError(f"batch_rows {batch_rows!r} is not a positive number of rows")
-        self.batch_rows = batch_rows
-        self._sqlite = is_sqlite(engine)
-        url = engine.url
-        if self._sqlite:
-            import adbc_driver_sqlite.dbapi
-
-            if url.database in (None, "", ":memory:"):
-                raise DbInputError(
-                    "an in-memory SQLite database cannot be read by a second connection; "
-                    "expected an SQLite file"
-                )
-            self._conn = adbc_driver_sqlite.dbapi.connect(url.database)
-        else:
-            import adbc_driver_postgresql.dbapi
-
-            libpq = url.set(drivername="postgresql").render_as_string(hide_password=False)
-            self._conn = adbc_driver_postgresql.dbapi.connect(libpq)
-
-    def trial(
-        self, trial_id: int, *, from_s: float | None = None, to_s: float | None = None
-    ) -> Iterator[pa.RecordBatch]:
-        """The samples of one trial in `seq` order, with `from_s <= t_s < to_s` when given."""
-        sql = self._query(int(trial_id), from_s, to_s)
-        cursor = self._conn.cursor()
-        try:
-            if self._sqlite:
-                cursor.adbc_statement.set_options(
-                    **{"adbc.sqlite.query.batch_rows": str(self.batch_rows)}
-                )
-            else:
-                # The driver's hint is in bytes; about 100 bytes a sample.
-                cursor.adbc_statement.set_options(
-                    **{"adbc.postgresql.batch_size_hint_bytes": str(self.batch_rows * 100)}
-                )
-            cursor.execute(sql)
-            first = True
-            for batch in cursor.fetch_record_batch():
-                if first and self._sqlite:
-                    if batch.num_rows == 0 or batch.column(0)[0].as_py() != -1:
-                        raise RuntimeError("the SQLite sample query lost its typed first row")
-                    batch = batch.slice(1)
-                first = False
-                # The PostgreSQL driver's bound is in bytes: slice to the row bound too.
-                for lo in range(0, batch.num_rows, self.batch_rows):
-                    yield _conform(batch.slice(lo, self.batch_rows))
-        finally:
-            cursor.close()
-
-    def _query(self, trial_id: int, from_s: float | None, to_s: float | None) -> str:
-        where = [f"trial_id = {trial_id}"]
-        for name, op, value in (("from_s", ">=", from_s), ("to_s", "<", to_s)):
-            if value is None:
-                continue
-            if not math.isfinite(value):
-                raise DbInputError(f"{name}={value!r} is not a finite time in s")
-            where.append(f"t_s {op} {float(value)!r}")
-        columns = ", ".join(SAMPLE_SCHEMA.names)
-        body = (
-            f"SELECT {columns} FROM samples WHERE {' AND '.join(where)} ORDER BY seq"
-        )
-        if not self._sqlite:
-            return body
-        typed = ", ".join(
-            f"{'-1' if f.name == 'seq' else repr('') if f.name == 'branch' else '0.5'} AS {f.name}"
-            for f in SAMPLE_SCHEMA
-        )
-        return f"SELECT {typed} UNION ALL SELECT * FROM ({body})"
-
-    def close(self) -> None:
-        self._conn.close()
-
-    def __enter__(self) -> SampleReader:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
-
-
-def _conform(batch: pa.RecordBatch) -> pa.RecordBatch:
-    """`batch` with exactly `SAMPLE_SCHEMA`'s types (the drivers may give null-typed columns)."""
-    if batch.schema.equals(SAMPLE_SCHEMA):
-        return batch
-    return pa.RecordBatch.from_arrays(
-        [batch.column(i).cast(f.type) for i, f in enumerate(SAMPLE_SCHEMA)],
-        schema=SAMPLE_SCHEMA,
-    )

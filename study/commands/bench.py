@@ -67,11 +67,14 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
 @_db_option
 @click.option("--samples", type=click.IntRange(min=1), default=10_000_000, show_default=True)
 @click.option("--participants", type=click.IntRange(min=1), default=360, show_default=True)
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="Reader threads of the export [default: the export's own].")  # fmt: skip
 @_json_option
 def bench_export(
-    db_url: str | None, samples: int, participants: int, json_path: Path | None
+    db_url: str | None, samples: int, participants: int, jobs: int | None, json_path: Path | None
 ) -> None:
-    """Build a study of SAMPLES samples, export them to Parquet and CSV: time, memory, size."""
+    """Build a study of SAMPLES samples, export them to Parquet and CSV (time, memory,
+    size), then draw its figures with `study figures` and the app's analysis screen."""
     from study.bench.export import bench_export as run_bench
 
     if json_path is not None:
@@ -82,6 +85,7 @@ def bench_export(
             db_url,
             samples=samples,
             participants=participants,
+            workers=jobs,
             progress=lambda n: progress.advance(task, n),
         )
     click.echo(
@@ -93,8 +97,14 @@ def bench_export(
         click.echo(
             f"  export --samples --format {run.fmt}: {run.seconds:.1f} s, "
             f"{run.samples_per_s:,.0f} samples/s, peak memory {run.peak_rss_mb:.0f} MB, "
-            f"{run.file_bytes_per_sample:.1f} bytes/sample"
+            f"{run.file_bytes_per_sample:.1f} bytes/sample, {run.cpu_seconds:.1f} CPU-s, "
+            f"load average {run.load_average[0]:.1f}"
         )
+    click.echo(
+        f"  study figures: {result.figures_seconds:.1f} s, peak memory "
+        f"{result.figures_peak_mb:.0f} MB; analysis screen (analysis, figures): "
+        f"{result.tui_seconds:.1f} s, peak memory {result.tui_peak_mb:.0f} MB"
+    )
     write_json(json_path, result.to_dict())
 
 

@@ -75,6 +75,12 @@ def import_cmd(trials_csv: Path, tlx_csv: Path | None, db_url: str | None) -> No
     help="One samples file per trial in OUT/samples/; a rerun skips the files already "
     "complete (resumes an interrupted export).",
 )
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Threads reading samples [default: one per CPU, at most 4].",
+)
 @db_option
 def export_cmd(
     out_dir: Path,
@@ -87,6 +93,7 @@ def export_cmd(
     from_s: float | None,
     to_s: float | None,
     per_trial: bool,
+    jobs: int | None,
     db_url: str | None,
 ) -> None:
     """Export trials, TLX (and samples) with a codebook, for other tools.
@@ -110,6 +117,7 @@ def export_cmd(
                 samples,
                 selection,
                 per_trial=per_trial,
+                workers=jobs,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
             )
     except BaseException as exc:

@@ -84,7 +84,6 @@ def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
     return out
 
 
-
 def export_data(
     engine: Engine,
     out_dir: Path,
@@ -93,13 +92,15 @@ def export_data(
     selection: SampleSelection | None = None,
     *,
     per_trial: bool = False,
+    workers: int | None = None,
     progress: Progress | None = None,
 ) -> list[Path]:
     """Write trials, tlx (and samples) with the contract's columns, plus the codebook.
 
     Samples stream in bounded memory (`study.protocol.sample_export`); `selection`
     restricts them, `per_trial` writes one file per trial under `samples/` and skips
-    the files an earlier run left complete. Every file is written under a temporary
+    the files an earlier run left complete; `workers` reader threads read them
+    (default: one per CPU, at most 4). Every file is written under a temporary
     name and renamed only once all of them are complete.
     """
     from study.protocol.sample_export import (
@@ -170,12 +171,15 @@ def export_data(
         sample_paths: list[Path] = []
         if samples and per_trial:
             result = write_samples_per_trial(
-                engine, export_trials, out_dir / "samples", fmt, selection, progress=progress
-            )
+                engine, export_trials, out_dir / "samples", fmt, selection,
+                progress=progress, workers=workers,
+            )  # fmt: skip
             sample_paths = result.written + result.skipped
         elif samples:
             path = out_dir / f"samples.{fmt}"
-            write_samples(engine, export_trials, path, fmt, selection, progress=progress)
+            write_samples(
+                engine, export_trials, path, fmt, selection, progress=progress, workers=workers
+            )
             sample_paths = [path]
         for out in staged:
             out.commit()

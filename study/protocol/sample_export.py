@@ -1,13 +1,21 @@
 """Export of trial samples in bounded memory: one file, or one file per trial.
 
 `study export --samples` used to hold the whole samples table in a DataFrame (1.97 GB
-for the million samples of the demo study). Here the samples go from
-`db.samples.SampleReader` (Arrow batches of at most 65,536 rows, one trial at a time)
-straight into pyarrow's incremental writers (`parquet.ParquetWriter`,
-`csv.CSVWriter`), so memory stays at a batch plus one Parquet row group whatever the
-size of the study. pyarrow does the writing because it already is the Parquet
-dependency and its CSV writer formats a batch in C++; pandas' `to_csv` per chunk would
-take most of the time.
+for the million samples of the demo study). Here the samples are read in spans of at
+most `SPAN_ROWS` samples (`db.sample_reader.plan_spans`: consecutive trials together, a
+long trial in windows) by a few threads (`read_spans`, one ADBC connection each), and
+written span by span with pyarrow's incremental Parquet writer, one row group per
+span, or as CSV text. Memory stays at a few spans whatever the size of the study.
+
+Where the time goes (issue 26, the 10,000,000 samples of `study bench export`, in CPU
+seconds): reading from SQLite through ADBC about 11 s, Parquet encoding with snappy
+about 3 s (lz4 would save 0.3 s, no codec 0.4 s: not worth a file fewer tools read),
+the key columns 0.2 s. Reading is what threads share out: the reader threads also
+build the key columns (a `take` of each trial's values by the row's `trial_id`) and,
+for CSV, format the text (pyarrow's CSV writer, in C++), so the calling thread only
+encodes Parquet or copies bytes to the file. pyarrow does the writing because it
+already is the Parquet dependency; pandas' `to_csv` per chunk would take most of the
+time.
 
 The column contract (other tools rely on it; keep it exactly):
 
@@ -27,11 +35,15 @@ export).
 from __future__ import annotations
 
 import math
+import os
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import closing
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
@@ -40,7 +52,7 @@ from sqlalchemy.orm import Session
 
 from db.models.study import Participant
 from db.models.trial import SAMPLE_COLUMNS, Trial
-from db.samples import SAMPLE_SCHEMA, SampleReader
+from db.sample_reader import SAMPLE_SCHEMA, SPAN_ROWS, SampleSpan, plan_spans, read_spans
 from study.errors import StudyInputError
 from study.protocol.design import StudyDesign
 from study.protocol.export_files import AtomicFile, escape_array, refuse_symlink
@@ -53,8 +65,13 @@ _KEY_FIELDS = [
     pa.field("trial", pa.int64()),
 ]
 SAMPLE_EXPORT_SCHEMA = pa.schema([*_KEY_FIELDS, *SAMPLE_SCHEMA])
-ROW_GROUP_ROWS = 131_072
-"""Samples per Parquet row group (about 15 MB in memory while it is encoded)."""
+MAX_WORKERS = 4
+"""Most reader threads by default (one per CPU up to this)."""
+CSV_SPAN_ROWS = 16_384
+"""Samples per span for CSV: its text (about 230 bytes a sample) is built in the reader
+threads and waits its turn, so CSV spans are smaller than Parquet's (`SPAN_ROWS`, one
+row group each). Measured on 2 million samples with two threads: 65,536-sample CSV
+spans raised the peak memory by 125 MB, 16,384-sample ones by 69 MB."""
 
 Progress = Callable[[int, int], None]
 """Called as `progress(trials_done, trials_total)` after each trial."""
@@ -170,7 +187,8 @@ def _check_names(what: str, given: Iterable[str], known: tuple[str, ...]) -> Non
 
 
 class _StagedFile:
-    """An incremental CSV or Parquet writer into an `AtomicFile`, renamed to NAME on commit."""
+    """A Parquet or CSV file written span by span into an `AtomicFile`, renamed to its
+    name on commit."""
 
     def __init__(self, path: Path, fmt: str) -> None:
         self.path = path
@@ -178,13 +196,11 @@ class _StagedFile:
         self.tmp = self._out.tmp
         self.fmt = fmt
         self.rows = 0
-        self._row_group_rows = ROW_GROUP_ROWS
-        self._pending: list[pa.RecordBatch] = []
-        self._pending_rows = 0
+        self._parquet: pq.ParquetWriter | None = None
         if fmt == "parquet":
             # Dictionary encoding only for the text columns: tried on every float column
             # (pyarrow's default) it took 80 % of the writing time and gave a larger file.
-            self._writer: pq.ParquetWriter | pa_csv.CSVWriter = pq.ParquetWriter(
+            self._parquet = pq.ParquetWriter(
                 self._out.file,
                 SAMPLE_EXPORT_SCHEMA,
                 compression="snappy",
@@ -193,42 +209,23 @@ class _StagedFile:
         else:
             # The header as pandas wrote it (unquoted); values quoted where pyarrow needs.
             self._out.file.write((",".join(SAMPLE_EXPORT_SCHEMA.names) + "\n").encode())
-            self._writer = pa_csv.CSVWriter(
-                self._out.file,
-                SAMPLE_EXPORT_SCHEMA,
-                write_options=pa_csv.WriteOptions(include_header=False),
-            )
         self._closed = False
 
-    def write(self, batch: pa.RecordBatch) -> None:
-        self.rows += batch.num_rows
-        if self.fmt == "csv":
-            # text a spreadsheet would run gets a leading quote (export_files)
-            self._writer.write_batch(
-                pa.RecordBatch.from_arrays(
-                    [escape_array(c) for c in batch.columns], schema=batch.schema
-                )
-            )
-            return
-        # Parquet: one row group per ROW_GROUP_ROWS samples, not one per (small) batch.
-        self._pending.append(batch)
-        self._pending_rows += batch.num_rows
-        if self._pending_rows >= self._row_group_rows:
-            self._flush()
-
-    def _flush(self) -> None:
-        if self._pending:
-            table = pa.Table.from_batches(self._pending, schema=SAMPLE_EXPORT_SCHEMA)
-            self._writer.write_table(table, row_group_size=max(len(table), 1))
-            self._pending, self._pending_rows = [], 0
+    def write(self, part: _Encoded) -> None:
+        """One span: a keyed table (Parquet: one row group) or its CSV text."""
+        rows, data = part
+        self.rows += rows
+        if isinstance(data, pa.Table):
+            if self._parquet is not None and rows:
+                self._parquet.write_table(data, row_group_size=rows)
+        else:
+            self._out.file.write(data)
 
     def commit(self) -> Path:
-        self._flush()
         self._close()
         return self._out.commit()
 
     def abort(self) -> None:
-        self._pending = []
         try:
             self._close()
         finally:
@@ -237,25 +234,79 @@ class _StagedFile:
     def _close(self) -> None:
         if not self._closed:
             self._closed = True
-            self._writer.close()
+            if self._parquet is not None:
+                self._parquet.close()
 
 
-def _keyed(trial: ExportTrial, batch: pa.RecordBatch) -> pa.RecordBatch:
-    n = batch.num_rows
-    keys = [
-        pa.repeat(pa.scalar(trial.participant, pa.string()), n),
-        pa.repeat(pa.scalar(trial.task, pa.string()), n),
-        pa.repeat(pa.scalar(trial.condition, pa.string()), n),
-        pa.repeat(pa.scalar(trial.trial, pa.int64()), n),
-    ]
-    return pa.RecordBatch.from_arrays([*keys, *batch.columns], schema=SAMPLE_EXPORT_SCHEMA)
+_Encoded = tuple[int, "pa.Table | pa.Buffer"]
+"""A span ready to write: (rows, keyed table for Parquet or CSV text)."""
 
 
-def _stream(
-    reader: SampleReader, trial: ExportTrial, selection: SampleSelection, out: _StagedFile
-) -> None:
-    for batch in reader.trial(trial.trial_id, from_s=selection.from_s, to_s=selection.to_s):
-        out.write(_keyed(trial, batch))
+class _Keys:
+    """The key columns of the exported trials, looked up by `trial_id` row by row."""
+
+    def __init__(self, trials: list[ExportTrial]) -> None:
+        ids = np.array([t.trial_id for t in trials], dtype=np.int64)
+        self._order = np.argsort(ids, kind="stable")
+        self._ids = ids[self._order]
+        self._values = [
+            pa.array([getattr(trials[k], f.name) for k in self._order], f.type) for f in _KEY_FIELDS
+        ]
+
+    def keyed(self, span: pa.Table) -> pa.Table:
+        """`span` (`SPAN_SCHEMA`) with the key columns in place of `trial_id`."""
+        rows = np.searchsorted(self._ids, span.column("trial_id").to_numpy())
+        index = pa.array(rows.astype(np.int32))
+        keys = [values.take(index) for values in self._values]
+        return pa.Table.from_arrays([*keys, *span.columns[1:]], schema=SAMPLE_EXPORT_SCHEMA)
+
+
+def _encoder(trials: list[ExportTrial], fmt: str) -> Callable[[SampleSpan, pa.Table], _Encoded]:
+    """The work done on a span in its reader thread."""
+    keys = _Keys(trials)
+    options = pa_csv.WriteOptions(include_header=False)
+
+    def encode(span: SampleSpan, table: pa.Table) -> _Encoded:
+        keyed = keys.keyed(table)
+        if fmt == "parquet":
+            return keyed.num_rows, keyed
+        # text a spreadsheet would run gets a leading quote (export_files)
+        escaped = pa.Table.from_arrays(
+            [escape_array(c) for c in keyed.columns], schema=SAMPLE_EXPORT_SCHEMA
+        )
+        sink = pa.BufferOutputStream()
+        pa_csv.write_csv(escaped, sink, write_options=options)
+        return keyed.num_rows, sink.getvalue()
+
+    return encode
+
+
+def _span(fmt: str, span_rows: int | None) -> int:
+    default = SPAN_ROWS if fmt == "parquet" else CSV_SPAN_ROWS
+    return default if span_rows is None else span_rows
+
+
+def default_workers() -> int:
+    """Reader threads: one per CPU this process may use, at most `MAX_WORKERS`."""
+    return max(1, min(len(os.sched_getaffinity(0)), MAX_WORKERS))
+
+
+def _read(
+    engine: Engine,
+    trials: list[ExportTrial],
+    plan: list[list[SampleSpan]],
+    fmt: str,
+    selection: SampleSelection,
+    workers: int | None,
+) -> Iterator[_Encoded]:
+    return read_spans(
+        engine,
+        chain.from_iterable(plan),
+        _encoder(trials, fmt),
+        workers=workers or default_workers(),
+        from_s=selection.from_s,
+        to_s=selection.to_s,
+    )
 
 
 def write_samples(
@@ -266,17 +317,23 @@ def write_samples(
     selection: SampleSelection = SampleSelection(),
     *,
     progress: Progress | None = None,
-    batch_rows: int = 65_536,
+    span_rows: int | None = None,
+    workers: int | None = None,
 ) -> int:
     """Write the samples of `trials` into one file at `path`; returns the number of rows.
 
-    The file appears only when complete (written as `.NAME.partial`, then renamed).
+    `span_rows` bounds the samples read at once (default `SPAN_ROWS` for Parquet,
+    `CSV_SPAN_ROWS` for CSV), `workers` the reader threads (default
+    `default_workers()`). The file appears only when complete (written as
+    `.NAME.partial`, then renamed).
     """
     out = _StagedFile(path, fmt)
     try:
-        with SampleReader(engine, batch_rows=batch_rows) as reader:
-            for done, trial in enumerate(trials, 1):
-                _stream(reader, trial, selection, out)
+        plan = plan_spans(engine, [t.trial_id for t in trials], max_rows=_span(fmt, span_rows))
+        with closing(_read(engine, trials, plan, fmt, selection, workers)) as parts:
+            for done, spans in enumerate(plan, 1):
+                for _ in spans:
+                    out.write(next(parts))
                 if progress is not None:
                     progress(done, len(trials))
         out.commit()
@@ -304,26 +361,35 @@ def write_samples_per_trial(
     selection: SampleSelection = SampleSelection(),
     *,
     progress: Progress | None = None,
-    batch_rows: int = 65_536,
+    span_rows: int | None = None,
+    workers: int | None = None,
 ) -> PerTrialResult:
     """One file per trial in `folder` (`P001_lcca_HV_trial1.parquet`, ...).
 
     A trial's file is renamed into place only when complete, so a file that exists is
-    whole: a rerun after an interruption skips it and writes the rest.
+    whole: a rerun after an interruption skips it and writes the rest (without reading
+    its samples).
     """
     folder.mkdir(parents=True, exist_ok=True)
-    for trial in trials:  # a link anywhere refuses the export before a file is written
-        refuse_symlink(folder / f"{trial.file_stem}.{fmt}")
+    paths = [folder / f"{trial.file_stem}.{fmt}" for trial in trials]
+    for path in paths:  # a link anywhere refuses the export before a file is written
+        refuse_symlink(path)
+    missing = [not path.exists() for path in paths]
+    todo = [t for t, m in zip(trials, missing, strict=True) if m]
+    plan = plan_spans(
+        engine, [t.trial_id for t in todo], max_rows=_span(fmt, span_rows), join_trials=False
+    )
+    spans_of = {t.trial_id: spans for t, spans in zip(todo, plan, strict=True)}
     written, skipped, rows = [], [], 0
-    with SampleReader(engine, batch_rows=batch_rows) as reader:
-        for done, trial in enumerate(trials, 1):
-            path = folder / f"{trial.file_stem}.{fmt}"
-            if path.exists():
+    with closing(_read(engine, todo, plan, fmt, selection, workers)) as parts:
+        for done, (trial, path, m) in enumerate(zip(trials, paths, missing, strict=True), 1):
+            if not m:
                 skipped.append(path)
             else:
                 out = _StagedFile(path, fmt)
                 try:
-                    _stream(reader, trial, selection, out)
+                    for _ in spans_of[trial.trial_id]:
+                        out.write(next(parts))
                     written.append(out.commit())
                 except BaseException:
                     out.abort()

@@ -41,9 +41,11 @@ def overview_seconds(db_url: str) -> float:
         engine.dispose()
 
 
-def _give_up_after(started_at: float, limit_s: float = 120.0) -> None:
+def _give_up_after(
+    started_at: float, limit_s: float = 120.0, what: str = "the run screen was not ready"
+) -> None:
     if time.monotonic() - started_at > limit_s:
-        raise StudyInputError(f"the run screen was not ready {limit_s:.0f} s after the start")
+        raise StudyInputError(f"{what} {limit_s:.0f} s after the start")
 
 
 def print_run_screen_seconds(db_url: str) -> None:
@@ -70,3 +72,41 @@ def print_run_screen_seconds(db_url: str) -> None:
     finally:
         engine.dispose()
     print(json.dumps({"seconds": seconds}))
+
+
+def print_analysis_figures_peak(db_url: str, folder: str) -> None:
+    """In a fresh process: the analysis screen's two jobs on the study, headless (120 x
+    40): the overview, then F5, `r` (the analysis) and ctrl+e (the paper's figures, as
+    PNG, into `folder`); prints JSON with the seconds, the figure files and the peak
+    resident memory of this process in MB (`study bench export`, issue 26)."""
+    import resource
+    from pathlib import Path
+
+    engine = open_database(db_url, create=False)
+    settings = TuiSettings(figures_dir=Path(folder), figure_formats=("png",))
+
+    async def run() -> list[str]:
+        app = make_app(StudyServices(engine, lambda: None), settings)
+        async with app.run_test(size=(120, 40)) as pilot:
+            while not app.ready:
+                _give_up_after(app.started_at)
+                await pilot.pause(POLL_S)
+            app.action_tab("analysis")
+            pane: Any = app.query_one("AnalysisPane")
+            pane.action_analyze()
+            while pane.result is None:
+                _give_up_after(app.started_at, 600.0, "the analysis had no result")
+                await pilot.pause(POLL_S)
+            pane.action_export()
+            while not pane.exported:
+                _give_up_after(app.started_at, 600.0, "no figure was written")
+                await pilot.pause(POLL_S)
+            return [str(p) for p in pane.exported]
+
+    start = time.monotonic()
+    try:
+        files = asyncio.run(run())
+    finally:
+        engine.dispose()
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps({"seconds": time.monotonic() - start, "files": files, "peak_mb": peak_mb}))

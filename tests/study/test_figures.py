@@ -220,6 +220,24 @@ def test_fig9_one_figure_shared_axis_reference_above_estimate(engine: Engine) ->
     assert "positive resists insertion" in caption and "negative resists withdrawal" in caption
 
 
+def test_fig9_draws_every_stored_sample_of_the_two_trials(engine: Engine) -> None:
+    """The traces are the samples `_give_samples` wrote (read batch by batch now, issue
+    26): t from 0 to 10 s, the reference 2.5 N x gain x sin, VO gain 1, HV gain 0.4."""
+    fig = next(d.figure for d in draw_figures(engine, "double", task="lcca")
+               if d.name == "fig9_forces_lcca")  # fmt: skip
+    t = np.linspace(0, 10, 200)
+    push = np.sin(t / 10 * 2 * np.pi)
+    for ax, gain in zip([ax for ax in fig.axes if ax.get_title()], (1.0, 0.4), strict=True):
+        lines = {line.get_label(): line for line in ax.get_lines()}
+        np.testing.assert_array_equal(lines["proximal, reference"].get_xdata(), t)
+        np.testing.assert_allclose(
+            lines["proximal, reference"].get_ydata(), 2.5 * gain * push, rtol=0, atol=1e-15
+        )
+        np.testing.assert_allclose(
+            lines["distal (tip on wall)"].get_ydata(), np.maximum(gain * push, 0), atol=1e-15
+        )
+
+
 def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> None:
     sizes = {"outsider": 20, "novice": 8, "expert": 8}
     equal = power_curve(sizes, dict.fromkeys(sizes, 0.8), 0.5, 20, 0, scales=(0.5, 1.0))

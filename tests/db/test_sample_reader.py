@@ -1,0 +1,152 @@
+"""Reading many trials in spans (`db.sample_reader`): bounded spans, every sample once,
+in trial and `seq` order, whatever the number of threads.
+
+Expected spans are worked out by hand from the trials' sizes; the expected rows come
+from a plain SQLAlchemy query written here.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from sqlalchemy import Engine, select
+
+from db.engine import make_session_factory
+from db.errors import DbInputError
+from db.models import Participant, Sample, Study, Trial
+from db.sample_reader import SPAN_SCHEMA, SampleSpan, plan_spans, read_spans
+from db.samples import SampleWriter
+
+
+def _trials(engine: Engine, sizes: list[int], start_seq: int = 0) -> list[int]:
+    """One trial per size, `size` samples each (seq from `start_seq`); their ids."""
+    with make_session_factory(engine).begin() as session:
+        study = Study(name="s", design_toml="", design={}, seed=1)
+        p = Participant(study=study, code="P001", group="expert", condition_order=["HV", "VO"])
+        trials = [
+            Trial(participant=p, task="lcca", condition="HV", block_index=0, trial_index=k)
+            for k in range(len(sizes))
+        ]
+        session.add_all(trials)
+        session.flush()
+        ids = [t.id for t in trials]
+    for trial_id, n in zip(ids, sizes, strict=True):
+        with SampleWriter(engine, trial_id, start_seq=start_seq) as writer:
+            t = np.arange(n) / 1000.0
+            writer.extend({"t_s": t, "distal_force_n": trial_id + t})
+    return ids
+
+
+def test_spans_join_small_trials_and_cut_long_ones(engine: Engine) -> None:
+    a, b, c, d, e, f = _trials(engine, [2500, 300, 400, 200, 0, 1000], start_seq=10)
+    plan = plan_spans(engine, [a, b, c, d, e, f], max_rows=1000)
+    # a: seq 10..2509 in windows of 1000; b, c, d: 900 samples together, listed under b;
+    # e has none; f (1000) would make b+c+d 1900, so it starts its own span.
+    assert plan == [
+        [
+            SampleSpan((a,), 10, 1010, 1000),
+            SampleSpan((a,), 1010, 2010, 1000),
+            SampleSpan((a,), 2010, 3010, 1000),
+        ],
+        [SampleSpan((b, c, d), rows=900)],
+        [],
+        [],
+        [],
+        [SampleSpan((f,), rows=1000)],
+    ]
+    # one file per trial: nothing joined
+    assert plan_spans(engine, [b, c], max_rows=1000, join_trials=False) == [
+        [SampleSpan((b,), rows=300)],
+        [SampleSpan((c,), rows=400)],
+    ]
+    # trials out of id order are never joined (a span reads in id order)
+    assert plan_spans(engine, [c, b], max_rows=1000) == [
+        [SampleSpan((c,), rows=400)],
+        [SampleSpan((b,), rows=300)],
+    ]
+    with pytest.raises(DbInputError, match="max_rows 0"):
+        plan_spans(engine, [a], max_rows=0)
+
+
+@pytest.mark.parametrize("workers", [1, 3])
+def test_spans_read_every_sample_once_in_order(engine: Engine, workers: int) -> None:
+    sizes = [2500, 300, 400, 200, 0, 1000, 1]
+    ids = _trials(engine, sizes)
+    with engine.connect() as conn:
+        want = conn.execute(
+            select(Sample.trial_id, Sample.seq, Sample.t_s, Sample.distal_force_n)
+            .where(Sample.t_s >= 0.1, Sample.t_s < 2.2)
+            .order_by(Sample.trial_id, Sample.seq)
+        ).all()
+    spans = [s for per_trial in plan_spans(engine, ids, max_rows=700) for s in per_trial]
+    tables = list(
+        read_spans(engine, spans, lambda span, table: table, workers=workers, from_s=0.1, to_s=2.2)
+    )
+    assert all(t.schema.equals(SPAN_SCHEMA) for t in tables)
+    assert max(t.num_rows for t in tables) <= 700
+    got = pa.concat_tables(tables)
+    assert len(got) == len(want) == sum(min(n, 2200) - min(n, 100) for n in sizes)
+    for k, name in enumerate(["trial_id", "seq", "t_s", "distal_force_n"]):
+        np.testing.assert_array_equal(got.column(name).to_numpy(), [row[k] for row in want])
+
+
+def test_at_most_workers_plus_one_spans_are_read_ahead(engine: Engine) -> None:
+    """A slow consumer never has more than workers + 1 spans read and waiting."""
+    ids = _trials(engine, [50] * 12)
+    spans = [s for p in plan_spans(engine, ids, max_rows=50) for s in p]
+    started: list[int] = []
+    lock = threading.Lock()
+
+    def work(span: SampleSpan, table: pa.Table) -> int:
+        with lock:
+            started.append(span.trial_ids[0])
+        time.sleep(0.01 * (span.trial_ids[0] % 3))  # finish out of order
+        return span.trial_ids[0]
+
+    seen = []
+    for trial_id in read_spans(engine, spans, work, workers=2):
+        time.sleep(0.02)  # a slow writer
+        with lock:
+            ahead = len(started) - len(seen)
+        assert ahead <= 3, (started, seen)
+        seen.append(trial_id)
+    assert seen == ids
+
+
+def test_an_error_in_a_span_reaches_the_caller_and_stops_the_rest(engine: Engine) -> None:
+    ids = _trials(engine, [20] * 8)
+    spans = [s for p in plan_spans(engine, ids, max_rows=20) for s in p]
+    done: list[int] = []
+
+    def work(span: SampleSpan, table: pa.Table) -> int:
+        if span.trial_ids[0] == ids[2]:
+            raise ValueError("bad span")
+        done.append(span.trial_ids[0])
+        return table.num_rows
+
+    with pytest.raises(ValueError, match="bad span"):
+        list(read_spans(engine, spans, work, workers=2))
+    assert len(done) <= 2 + 3  # the spans before it, and at most the read-ahead
+    with pytest.raises(DbInputError, match="workers 0"):
+        next(read_spans(engine, spans, work, workers=0))
+
+
+def test_the_reader_waits_for_a_lock_as_the_study_connections_do(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Its SQLite connection has the URL's busy timeout (`?timeout=7`: 7,000 ms), not
+    the driver's 0 (two reader threads opening together got "database is locked")."""
+    from db.migrate import open_database
+    from db.sample_reader import SampleReader
+
+    engine = open_database(f"sqlite:///{tmp_path / 's.db'}?timeout=7")
+    try:
+        with SampleReader(engine) as reader:
+            cursor = reader._conn.cursor()
+            cursor.execute("PRAGMA busy_timeout")
+            assert cursor.fetchall() == [(7000,)]
+            cursor.close()
+    finally:
+        engine.dispose()
