@@ -138,6 +138,23 @@ def json_option(help: str | None = None) -> Callable[[Callable[..., Any]], Calla
     )  # fmt: skip
 
 
+def count_option(
+    flag: str, default: int, help: str | None = None, *, minimum: int = 1, dest: str | None = None
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """An option taking a whole number of at least `minimum`, its default shown."""
+    names = (flag, dest) if dest else (flag,)
+    kind = click.IntRange(min=minimum)
+    return click.option(*names, type=kind, default=default, show_default=True, help=help)
+
+
+def file_option(
+    flag: str, dest: str, help: str | None = None, *, required: bool = True
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """An option naming one file (not a folder), as a Path."""
+    kind = click.Path(dir_okay=False, path_type=Path)
+    return click.option(flag, dest, required=required, type=kind, help=help)
+
+
 def out_dir_option(
     help: str, required: bool = True
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:

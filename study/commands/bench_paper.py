@@ -14,7 +14,13 @@ from typing import Any
 
 import click
 
-from study.commands.base import StudyCommand, check_parent_folder, json_option, out_dir_option
+from study.commands.base import (
+    StudyCommand,
+    check_parent_folder,
+    count_option,
+    json_option,
+    out_dir_option,
+)
 from study.errors import StudyInputError
 
 _json_option = json_option("Write every table as JSON here.")
@@ -177,8 +183,11 @@ def bench_lcca(
 @_seed_option
 @click.option("--epochs", type=click.IntRange(min=1), default=None, help="GRU epochs [30].")
 @click.option("--quick", is_flag=True, help="One-minute recordings at 100 Hz, 2 epochs.")
-@click.option("--only-open", is_flag=True,
-              help="Only measured data (EMPS), effects outside the families, clean seeds.")
+@click.option(
+    "--only-open",
+    is_flag=True,
+    help="Only measured data (EMPS), effects outside the families, clean seeds.",
+)
 def bench_calibrate(
     json_path: Path, out_dir: Path | None, seed: int, epochs: int | None, quick: bool,
     only_open: bool,
@@ -200,22 +209,11 @@ def bench_calibrate(
 @click.command("notes", cls=StudyCommand)
 @_json_option
 @_out_option
-@click.option(
-    "--draws",
-    type=click.IntRange(min=1),
-    default=10,
-    show_default=True,
-    help="Seeded parameter draws per axis for the identification round trip.",
+@count_option("--draws", 10, "Seeded parameter draws per axis for the identification round trip.")
+@count_option("--trials", 4, "Simulated NOTES trials per group and condition.")
+@count_option(
+    "--surgeons", 10, "Simulated experts for the surgeons' benchmark (seed 001 had 10).", minimum=2
 )
-@click.option(
-    "--trials",
-    type=click.IntRange(min=1),
-    default=4,
-    show_default=True,
-    help="Simulated NOTES trials per group and condition.",
-)
-@click.option("--surgeons", type=click.IntRange(min=2), default=10, show_default=True,
-              help="Simulated experts for the surgeons' benchmark (seed 001 had 10).")
 @_seed_option
 def bench_notes(
     json_path: Path, out_dir: Path, draws: int, trials: int, surgeons: int, seed: int

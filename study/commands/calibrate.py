@@ -20,6 +20,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeElapsed
 from study.commands.base import (
     StudyCommand,
     check_parent_folder,
+    file_option,
     json_option,
     out_dir_option,
     progress_bar,
@@ -97,13 +98,7 @@ def run_calibration(
     help="Base model and recording contract.",
 )
 @json_option("Report: RMSE before/after, effects added, candidates rejected, residual tests.")
-@click.option(
-    "--predictions",
-    "pred_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Held-out predictions CSV: t, f_ref, f_base, f_final.",
-)
+@file_option("--predictions", "pred_path", "Held-out predictions CSV: t, f_ref, f_base, f_final.")
 @out_dir_option("Folder for the residual figures (created if its parent exists).")
 @click.option(
     "--held-out",

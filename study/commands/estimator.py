@@ -9,7 +9,7 @@ import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
-from study.commands.base import StudyGroup, out_dir_option, progress_bar
+from study.commands.base import StudyGroup, count_option, file_option, out_dir_option, progress_bar
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
@@ -27,32 +27,14 @@ def estimator() -> None:
 @estimator.command("train")
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
 @out_dir_option("Model folder to write (weights, standardisation, physics, EKF, summary.json).")
-@click.option(
-    "--window",
-    type=click.IntRange(min=1),
-    default=20,
-    show_default=True,
-    help="GRU input window T, samples.",
-)
-@click.option(
-    "--epochs",
-    type=click.IntRange(min=1),
-    default=100,
-    show_default=True,
-    help="Most training epochs (the best validation epoch is kept).",
-)
+@count_option("--window", 20, "GRU input window T, samples.")
+@count_option("--epochs", 100, "Most training epochs (the best validation epoch is kept).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--hidden-size", type=click.IntRange(min=1), default=32, show_default=True)
 @click.option(
     "--learning-rate", type=click.FloatRange(min=0, min_open=True), default=1e-4, show_default=True
 )
-@click.option(
-    "--patience",
-    type=click.IntRange(min=1),
-    default=10,
-    show_default=True,
-    help="Stop after this many epochs without a better validation RMSE.",
-)
+@count_option("--patience", 10, "Stop after this many epochs without a better validation RMSE.")
 @click.option(
     "--weight-decay",
     type=click.FloatRange(min=0),
@@ -189,12 +171,8 @@ def _echo_regimes(title: str, table: dict[str, dict[str, float]]) -> None:
 @estimator.command("run")
 @click.argument("model_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "--out",
-    "out_csv",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Predictions CSV: t, f_ref, f_physics, f_hybrid, f_final, in_range.",
+@file_option(
+    "--out", "out_csv", "Predictions CSV: t, f_ref, f_physics, f_hybrid, f_final, in_range."
 )
 def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
     """Estimate the proximal force over RECORDING with the model in MODEL_DIR.

@@ -7,14 +7,12 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, db_option, opened_database, progress_bar
+from study.commands.base import StudyCommand, db_option, file_option, opened_database, progress_bar
 from study.errors import StudyInputError
 
 
 @click.command("import", cls=StudyCommand)
-@click.option(
-    "--trials", "trials_csv", required=True, type=click.Path(dir_okay=False, path_type=Path)
-)
+@file_option("--trials", "trials_csv")
 @click.option("--tlx", "tlx_csv", type=click.Path(dir_okay=False, path_type=Path))
 @db_option
 def import_cmd(trials_csv: Path, tlx_csv: Path | None, db_url: str | None) -> None:

@@ -12,7 +12,14 @@ from pathlib import Path
 
 import click
 
-from study.commands.base import StudyGroup, check_parent_folder, db_option, progress_bar
+from study.commands.base import (
+    StudyGroup,
+    check_parent_folder,
+    count_option,
+    db_option,
+    file_option,
+    progress_bar,
+)
 from study.errors import StudyInputError
 
 
@@ -29,35 +36,17 @@ def participants() -> None:
     show_default=True,
     help="The task whose trials are fitted (lcca, notes, or a registered one).",
 )
-@click.option(
-    "--out",
-    "out_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="MODEL.json to write; the figure goes beside it (MODEL.png).",
+@file_option("--out", "out_path", "MODEL.json to write; the figure goes beside it (MODEL.png).")
+@count_option(
+    "--design", 160, "Trait settings the emulator is built from.", minimum=16, dest="n_design"
 )
-@click.option(
-    "--design",
-    "n_design",
-    type=click.IntRange(min=16),
-    default=160,
-    show_default=True,
-    help="Trait settings the emulator is built from.",
-)
-@click.option(
-    "--repeats",
-    type=click.IntRange(min=1),
-    default=2,
-    show_default=True,
-    help="Trials per condition at each setting.",
-)
-@click.option(
+@count_option("--repeats", 2, "Trials per condition at each setting.")
+@count_option(
     "--check",
-    "n_check",
-    type=click.IntRange(min=4),
-    default=24,
-    show_default=True,
-    help="People per group simulated from the fit for the summaries and checks.",
+    24,
+    "People per group simulated from the fit for the summaries and checks.",
+    minimum=4,
+    dest="n_check",
 )
 @click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True)
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)

@@ -8,19 +8,15 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, StudyGroup, db_option, opened_database
+from study.commands.base import StudyCommand, StudyGroup, db_option, file_option, opened_database
 from study.errors import StudyInputError
 from study.protocol.design import TEMPLATE, parse_design
 from study.protocol.roster import add_participant, create_study, schedule
 
 
 @click.command("init", cls=StudyCommand)
-@click.option(
-    "--design",
-    "design_path",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="The study design (TOML; `study design template` prints one).",
+@file_option(
+    "--design", "design_path", "The study design (TOML; `study design template` prints one)."
 )
 @db_option
 def init(design_path: Path, db_url: str | None) -> None:

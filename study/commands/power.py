@@ -10,6 +10,7 @@ import click
 
 from study.commands.base import (
     StudyCommand,
+    file_option,
     load_participants,
     out_dir_option,
     participants_option,
@@ -72,9 +73,7 @@ def _model_effects(
 
 
 @click.command("power", cls=StudyCommand)
-@click.option(
-    "--design", "design_path", required=True, type=click.Path(dir_okay=False, path_type=Path)
-)
+@file_option("--design", "design_path")
 @click.option(
     "--effect",
     default="0.8",

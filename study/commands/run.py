@@ -13,6 +13,7 @@ from db.migrate import open_database
 from study.commands.base import (
     StudyCommand,
     actor_option,
+    count_option,
     db_option,
     load_participants,
     participants_option,
@@ -27,13 +28,7 @@ from study.protocol.roster import schedule
 @click.option(
     "--all", "run_all", is_flag=True, help="Every enrolled participant's remaining trials."
 )
-@click.option(
-    "--jobs",
-    type=click.IntRange(min=1),
-    default=1,
-    show_default=True,
-    help="Processes running participants side by side (with --all).",
-)
+@count_option("--jobs", 1, "Processes running participants side by side (with --all).")
 @click.option(
     "--driver",
     type=click.Choice(["simulated", "keyboard", "hardware"]),
