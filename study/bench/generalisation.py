@@ -105,15 +105,29 @@ def baseline_estimate(
     return f_physics + baseline.predict(features_of(test))
 
 
-def run_one(effect: str, seed: int, config: GeneralisationConfig) -> dict[str, Any]:
-    """Train on the first part of one recording, run on the rest; errors in N."""
+def run_one(
+    effect: str,
+    seed: int,
+    config: GeneralisationConfig,
+    progress: Callable[[str], None] = lambda _: None,
+) -> dict[str, Any]:
+    """Train on the first part of one recording, run on the rest; errors in N.
+
+    `progress` gets a line per epoch (the run's longest part)."""
     rec, truth = follower_recording(
         config.seconds, [effect], rate_hz=config.rate_hz, seed=seed, size_n=JND_N
     )
     cut = int(config.train_fraction * len(rec))
     train, test = rec.slice(0, cut), rec.slice(cut, len(rec))
     start = time.perf_counter()
-    estimator, summary = train_estimator(train, config.gru, seed=seed)
+
+    def epoch_done(epoch: int, train_rmse: float, val_rmse: float) -> None:
+        progress(
+            f"epoch {epoch}/{config.gru.max_epochs}: train {train_rmse:.4f} N, "
+            f"validation {val_rmse:.4f} N"
+        )
+
+    estimator, summary = train_estimator(train, config.gru, seed=seed, progress=epoch_done)
     seconds = time.perf_counter() - start
     result = estimator.predict(test)
     start = time.perf_counter()
@@ -159,10 +173,14 @@ def run_generalisation(
     runs: list[dict[str, Any]] = []
     partial = out_dir / "generalisation_runs.json"
     # Seeds outer: a run cut short still holds every effect.
+    total = len(config.seeds) * len(config.effects)
     for seed in config.seeds:
         for effect in config.effects:
-            progress(f"generalisation: {effect}, seed {seed}")
-            runs.append(run_one(effect, seed, config))
+            label = f"generalisation {len(runs) + 1}/{total}: {effect}, seed {seed}"
+            progress(label)
+            runs.append(
+                run_one(effect, seed, config, lambda line, at=label: progress(f"{at}, {line}"))
+            )
             partial.write_text(json.dumps(runs, indent=2) + "\n")
     return {"runs": runs, "by_effect": spread(runs, config.effects)}
 
