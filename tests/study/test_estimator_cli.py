@@ -71,6 +71,28 @@ def test_run_writes_one_estimate_per_full_window(
     assert "RMSE against f_ref" in capsys.readouterr().out
 
 
+def test_run_flags_the_estimates_whose_inputs_leave_the_training_range(
+    model_dir: Path, recording_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 17, point 4: the same drive three times as fast. Every sample faster than
+    anything in the whole training recording must be flagged, and the summary line gives
+    the share the column holds."""
+    fast = pd.read_csv(recording_csv)
+    for column in ("theta", "omega", "alpha"):
+        fast[column] *= 3.0
+    fast.to_csv(tmp_path / "fast.csv", index=False)
+    out = tmp_path / "pred.csv"
+    argv = ["estimator", "run", str(model_dir), str(tmp_path / "fast.csv"), "--out", str(out)]
+    assert main(argv) == 0
+    pred = pd.read_csv(out)
+    trained_on = pd.read_csv(recording_csv)
+    beyond = (fast["omega"].abs() > trained_on["omega"].abs().max()).to_numpy()[6 - 1 :]
+    assert beyond.mean() > 0.2
+    assert (pred["in_range"][beyond] == 0).all()
+    share = 100 * (1 - pred["in_range"].mean())
+    assert f"outside the training range: {share:.1f} % of the estimates" in capsys.readouterr().out
+
+
 def test_bad_recording_is_one_line_and_writes_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], recording_csv: Path
 ) -> None:
