@@ -37,6 +37,11 @@ from teleop_core.estimation.training import train_estimator
 
 EFFECTS = ("stribeck", "hysteresis", "direction_asymmetry", "drift")
 """The unmodelled effects of issue 17's tests and targets."""
+DATA_NOTE = (
+    "simulated follower recordings (teleop_core.calibration.synthetic.follower_recording), "
+    "not measured data"
+)
+"""What every run and report of this part says it was drawn from."""
 HYBRID_TARGET = 0.7
 """physics+GRU RMSE at most this times the physics RMSE."""
 FINAL_TARGET = 1.02
@@ -142,6 +147,7 @@ def run_one(
     final_ratio = out["final"] / out["hybrid"]
     in_range = result.in_range if result.in_range is not None else np.ones(len(result.t), bool)
     return {
+        "data": DATA_NOTE,
         "effect": effect,
         "seed": seed,
         "truth": truth[effect],
@@ -182,7 +188,7 @@ def run_generalisation(
                 run_one(effect, seed, config, lambda line, at=label: progress(f"{at}, {line}"))
             )
             partial.write_text(json.dumps(runs, indent=2) + "\n")
-    return {"runs": runs, "by_effect": spread(runs, config.effects)}
+    return {"data": DATA_NOTE, "runs": runs, "by_effect": spread(runs, config.effects)}
 
 
 def spread(runs: Sequence[dict[str, Any]], effects: Sequence[str]) -> dict[str, Any]:
@@ -211,6 +217,8 @@ def markdown(report: dict[str, Any]) -> list[str]:
     """The generalisation section of follower_bench.md."""
     lines = [
         "## Generalisation: trained on the first 60 %, run on the last 40 %",
+        "",
+        f"Data: {DATA_NOTE}.",
         "",
         f"Targets: physics+GRU <= {HYBRID_TARGET} x physics; final <= {FINAL_TARGET} x "
         "physics+GRU. Baseline: gradient-boosted trees (scikit-learn) on the same windows.",

@@ -149,6 +149,15 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
     }
     assert set(report["window_sweep"]) == {"2", "5"}
     assert report["timing"]["median_ms"] > 0
+    gen = report["generalisation"]
+    assert "simulated" in gen["data"] and all("simulated" in r["data"] for r in gen["runs"])
+    assert {(r["effect"], r["seed"]) for r in gen["runs"]} == {("stribeck", 0), ("drift", 0)}
+    runs = json.loads((tmp_path / "fig" / "generalisation_runs.json").read_text())
+    assert [r["effect"] for r in runs] == ["stribeck", "drift"]
+    for r in gen["runs"]:
+        e = r["test_rmse_n"]
+        assert r["hybrid_over_physics"] == pytest.approx(e["hybrid"] / e["physics"])
+    assert "simulated" in (tmp_path / "fig" / "follower_bench.md").read_text()
     assert_figures(
         tmp_path / "fig",
         "table_i_velocity.png",
