@@ -37,6 +37,11 @@ from teleop_core.estimation.training import train_estimator
 
 EFFECTS = ("stribeck", "hysteresis", "direction_asymmetry", "drift")
 """The unmodelled effects of issue 17's tests and targets."""
+DATA_NOTE = (
+    "simulated follower recordings (teleop_core.calibration.synthetic.follower_recording), "
+    "not measured data"
+)
+"""What every run and report of this part says it was drawn from."""
 HYBRID_TARGET = 0.7
 """physics+GRU RMSE at most this times the physics RMSE."""
 FINAL_TARGET = 1.02
@@ -105,15 +110,29 @@ def baseline_estimate(
     return f_physics + baseline.predict(features_of(test))
 
 
-def run_one(effect: str, seed: int, config: GeneralisationConfig) -> dict[str, Any]:
-    """Train on the first part of one recording, run on the rest; errors in N."""
+def run_one(
+    effect: str,
+    seed: int,
+    config: GeneralisationConfig,
+    progress: Callable[[str], None] = lambda _: None,
+) -> dict[str, Any]:
+    """Train on the first part of one recording, run on the rest; errors in N.
+
+    `progress` gets a line per epoch (the run's longest part)."""
     rec, truth = follower_recording(
         config.seconds, [effect], rate_hz=config.rate_hz, seed=seed, size_n=JND_N
     )
     cut = int(config.train_fraction * len(rec))
     train, test = rec.slice(0, cut), rec.slice(cut, len(rec))
     start = time.perf_counter()
-    estimator, summary = train_estimator(train, config.gru, seed=seed)
+
+    def epoch_done(epoch: int, train_rmse: float, val_rmse: float) -> None:
+        progress(
+            f"epoch {epoch}/{config.gru.max_epochs}: train {train_rmse:.4f} N, "
+            f"validation {val_rmse:.4f} N"
+        )
+
+    estimator, summary = train_estimator(train, config.gru, seed=seed, progress=epoch_done)
     seconds = time.perf_counter() - start
     result = estimator.predict(test)
     start = time.perf_counter()
@@ -128,6 +147,7 @@ def run_one(effect: str, seed: int, config: GeneralisationConfig) -> dict[str, A
     final_ratio = out["final"] / out["hybrid"]
     in_range = result.in_range if result.in_range is not None else np.ones(len(result.t), bool)
     return {
+        "data": DATA_NOTE,
         "effect": effect,
         "seed": seed,
         "truth": truth[effect],
@@ -159,12 +179,16 @@ def run_generalisation(
     runs: list[dict[str, Any]] = []
     partial = out_dir / "generalisation_runs.json"
     # Seeds outer: a run cut short still holds every effect.
+    total = len(config.seeds) * len(config.effects)
     for seed in config.seeds:
         for effect in config.effects:
-            progress(f"generalisation: {effect}, seed {seed}")
-            runs.append(run_one(effect, seed, config))
+            label = f"generalisation {len(runs) + 1}/{total}: {effect}, seed {seed}"
+            progress(label)
+            runs.append(
+                run_one(effect, seed, config, lambda line, at=label: progress(f"{at}, {line}"))
+            )
             partial.write_text(json.dumps(runs, indent=2) + "\n")
-    return {"runs": runs, "by_effect": spread(runs, config.effects)}
+    return {"data": DATA_NOTE, "runs": runs, "by_effect": spread(runs, config.effects)}
 
 
 def spread(runs: Sequence[dict[str, Any]], effects: Sequence[str]) -> dict[str, Any]:
@@ -193,6 +217,8 @@ def markdown(report: dict[str, Any]) -> list[str]:
     """The generalisation section of follower_bench.md."""
     lines = [
         "## Generalisation: trained on the first 60 %, run on the last 40 %",
+        "",
+        f"Data: {DATA_NOTE}.",
         "",
         f"Targets: physics+GRU <= {HYBRID_TARGET} x physics; final <= {FINAL_TARGET} x "
         "physics+GRU. Baseline: gradient-boosted trees (scikit-learn) on the same windows.",

@@ -71,6 +71,28 @@ def test_run_writes_one_estimate_per_full_window(
     assert "RMSE against f_ref" in capsys.readouterr().out
 
 
+def test_run_flags_the_estimates_whose_inputs_leave_the_training_range(
+    model_dir: Path, recording_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 17, point 4: the same drive three times as fast. Every sample faster than
+    anything in the whole training recording must be flagged, and the summary line gives
+    the share the column holds."""
+    fast = pd.read_csv(recording_csv)
+    for column in ("theta", "omega", "alpha"):
+        fast[column] *= 3.0
+    fast.to_csv(tmp_path / "fast.csv", index=False)
+    out = tmp_path / "pred.csv"
+    argv = ["estimator", "run", str(model_dir), str(tmp_path / "fast.csv"), "--out", str(out)]
+    assert main(argv) == 0
+    pred = pd.read_csv(out)
+    trained_on = pd.read_csv(recording_csv)
+    beyond = (fast["omega"].abs() > trained_on["omega"].abs().max()).to_numpy()[6 - 1 :]
+    assert beyond.mean() > 0.2
+    assert (pred["in_range"][beyond] == 0).all()
+    share = 100 * (1 - pred["in_range"].mean())
+    assert f"outside the training range: {share:.1f} % of the estimates" in capsys.readouterr().out
+
+
 def test_bad_recording_is_one_line_and_writes_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], recording_csv: Path
 ) -> None:
@@ -127,6 +149,15 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
     }
     assert set(report["window_sweep"]) == {"2", "5"}
     assert report["timing"]["median_ms"] > 0
+    gen = report["generalisation"]
+    assert "simulated" in gen["data"] and all("simulated" in r["data"] for r in gen["runs"])
+    assert {(r["effect"], r["seed"]) for r in gen["runs"]} == {("stribeck", 0), ("drift", 0)}
+    runs = json.loads((tmp_path / "fig" / "generalisation_runs.json").read_text())
+    assert [r["effect"] for r in runs] == ["stribeck", "drift"]
+    for r in gen["runs"]:
+        e = r["test_rmse_n"]
+        assert r["hybrid_over_physics"] == pytest.approx(e["hybrid"] / e["physics"])
+    assert "simulated" in (tmp_path / "fig" / "follower_bench.md").read_text()
     assert_figures(
         tmp_path / "fig",
         "table_i_velocity.png",

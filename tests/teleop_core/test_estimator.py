@@ -99,3 +99,34 @@ def test_a_recording_at_another_rate_is_resampled_to_the_models(trained, short_r
     fast = rec.resampled(200.0)
     assert estimator.conform(fast).sample_rate_hz == pytest.approx(100.0, rel=1e-6)
     assert estimator.conform(rec) is rec
+
+
+def test_a_filter_that_hurts_on_validation_passes_the_hybrid_estimate_through(
+    tmp_path: Path, short_recording: FollowerRecording
+) -> None:
+    """Issue 17, point 3: a process noise far too small freezes the filter on its first
+    state, which the validation blocks see as a large error; the model then passes the
+    hybrid estimate through, in the batch path, the causal path and once saved."""
+    rec = short_recording.slice(0, 3000)
+    estimator, summary = train_estimator(rec, SMALL, seed=1, ekf_q_n2=1e-12)
+    check = summary.ekf_check
+    assert check["validation_rmse_filtered_n"] > check["validation_rmse_hybrid_n"]
+    assert check["passthrough"] and estimator.ekf.passthrough
+    assert any("passes the hybrid" in note for note in summary.notes)
+    v = summary.validation_rmse_n
+    assert v["final"] == v["hybrid"]
+    batch = estimator.predict(rec)
+    np.testing.assert_array_equal(batch.f_final, batch.f_hybrid)
+    stream = estimator.stream()
+    causal = [stream.update(t, i, w) for t, i, w in zip(rec.t, rec.iq, rec.omega, strict=True)]
+    got = np.array(causal[SMALL.window - 1 :])
+    np.testing.assert_array_equal(got[:, 2], got[:, 1])
+    estimator.save(tmp_path / "model", summary.to_dict())
+    assert ForceEstimator.load(tmp_path / "model").ekf.passthrough
+
+
+def test_a_filter_that_helps_on_validation_is_kept(trained) -> None:
+    estimator, summary = trained
+    check = summary["ekf_check"]
+    assert check["validation_rmse_filtered_n"] < check["validation_rmse_hybrid_n"]
+    assert not check["passthrough"] and not estimator.ekf.passthrough
