@@ -147,6 +147,15 @@ def count_option(
     return click.option(*names, type=kind, default=default, show_default=True, help=help)
 
 
+def positive_option(
+    flag: str, default: float, help: str | None = None, *, dest: str | None = None
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """An option taking a number above 0, its default shown."""
+    names = (flag, dest) if dest else (flag,)
+    kind = click.FloatRange(min=0, min_open=True)
+    return click.option(*names, type=kind, default=default, show_default=True, help=help)
+
+
 def file_option(
     flag: str, dest: str, help: str | None = None, *, required: bool = True
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:

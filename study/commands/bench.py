@@ -13,7 +13,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from study.commands.base import StudyGroup, check_parent_folder, progress_bar
+from study.commands.base import StudyGroup, check_parent_folder, positive_option, progress_bar
 from study.commands.bench_paper import PAPER_BENCHES, write_json
 
 _db_option = click.option(
@@ -39,12 +39,8 @@ for _command in PAPER_BENCHES:
 @bench.command("db")
 @_db_option
 @click.option("--rows", type=click.IntRange(min=1), default=1_000_000, show_default=True)
-@click.option(
-    "--rate-hz",
-    type=click.FloatRange(min=0, min_open=True),
-    default=1000.0,
-    show_default=True,
-    help="Sample rate of the synthetic trial; one chunk is committed per second of it.",
+@positive_option(
+    "--rate-hz", 1000.0, "Sample rate of the synthetic trial; one chunk committed per second of it."
 )
 @_json_option
 def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | None) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from study.commands.base import StudyCommand, db_option
+from study.commands.base import StudyCommand, db_option, positive_option
 
 
 @click.command("tui", cls=StudyCommand)
@@ -17,12 +17,8 @@ from study.commands.base import StudyCommand, db_option
     show_default=True,
     help="Default folder for the analysis screen's figure export.",
 )
-@click.option(
-    "--pace",
-    type=click.FloatRange(min=0, min_open=True),
-    default=1.0,
-    show_default=True,
-    help="Times real time for a simulated participant (the screen's p key cycles it).",
+@positive_option(
+    "--pace", 1.0, "Times real time for a simulated participant (the screen's p key cycles it)."
 )
 @click.option("--light", is_flag=True, help="Start in the light theme (ctrl+t toggles).")
 @db_option

@@ -52,8 +52,8 @@ def _trial_rows(rng: np.random.Generator) -> list[list[object]]:
                             force = 0.112  # tied values, as the demo's expert distal force
                         distal = 0.4 + shift / 2 + rng.normal(0, 0.03)
                         # each task's two analysed peaks in its own columns
-                        peaks = [force, distal, "", ""] if task == "lcca" else ["", "", force,
-                                                                                 distal]  # fmt: skip
+                        pair, empty = [force, distal], ["", ""]
+                        peaks = pair + empty if task == "lcca" else empty + pair
                         rows.append([code, group, task, cond, trial, 30 + rng.normal(0, 3),
                                      *peaks, "true"])  # fmt: skip
     return rows

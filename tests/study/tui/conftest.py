@@ -161,7 +161,6 @@ def store_trials(engine: Engine) -> None:
                         "proximal_force_est_n": force, "distal_force_n": [0.0, 0.1]})  # fmt: skip
 
 
-
 def complete_block(engine: Engine, code: str, task: str, condition: str) -> None:
     """One completed (simulated) trial in `code`'s `task`/`condition` block, so that the
     block has run and its questionnaire can be stored without a reason."""

@@ -210,7 +210,6 @@ def test_a_task_registered_here_runs_through_session_export_and_analysis(
     assert main(["analyze", "--out", str(tmp_path / "res2"), "--task", "probe", "--db", db]) == 0
 
 
-@pytest.mark.asyncio
 async def test_the_run_screen_shows_a_registered_task(probe: ProbeTask, tmp_path: Path) -> None:
     from study.protocol.default_estimator import load_estimator
     from study.tui import StudyServices, TuiSettings, make_app

@@ -50,6 +50,13 @@ async def participants_pane(app) -> AsyncIterator[tuple]:
         yield pilot, app.query_one("#participants-pane")
 
 
+async def _enrol_refused(pilot, pane) -> None:
+    """Press F2 then `a` (enrol one) and wait for the pane to say it was not enrolled."""
+    await pilot.press("f2")
+    await pilot.press("a")
+    await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 30)
+
+
 def _participants(engine: Engine) -> int:
     with Session(engine) as session:
         return session.scalar(select(func.count()).select_from(Participant)) or 0
@@ -65,16 +72,13 @@ def test_a_real_read_only_error_reads_as_one_plain_line(study_engine: Engine) ->
     assert "INSERT" in str(caught.value)  # what SQLAlchemy itself would have shown
 
 
-@pytest.mark.asyncio
 async def test_enrolling_on_a_read_only_database_says_so_and_the_app_stays(
     make_test_app, study_engine: Engine
 ) -> None:
     app = make_test_app()
     async with participants_pane(app) as (pilot, pane):
         with pragma(study_engine, "PRAGMA query_only = 1"):
-            await pilot.press("f2")
-            await pilot.press("a")
-            await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 30)
+            await _enrol_refused(pilot, pane)
             assert pane.last_message.startswith("not enrolled: the database is read-only")
             assert app.is_running
         # writable again: the same key enrols, the app never left
@@ -83,7 +87,6 @@ async def test_enrolling_on_a_read_only_database_says_so_and_the_app_stays(
     assert _participants(study_engine) == 3
 
 
-@pytest.mark.asyncio
 async def test_enrolling_while_another_program_holds_the_lock_says_so(
     make_test_app, study_engine: Engine, tmp_path
 ) -> None:
@@ -93,9 +96,7 @@ async def test_enrolling_while_another_program_holds_the_lock_says_so(
         other.execute("BEGIN EXCLUSIVE")
         try:
             with pragma(study_engine, "PRAGMA busy_timeout = 300"):
-                await pilot.press("f2")
-                await pilot.press("a")
-                await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 30)
+                await _enrol_refused(pilot, pane)
                 assert "locked by another program" in pane.last_message
                 assert app.is_running
         finally:
@@ -104,7 +105,6 @@ async def test_enrolling_while_another_program_holds_the_lock_says_so(
     assert _participants(study_engine) == 2
 
 
-@pytest.mark.asyncio
 async def test_a_questionnaire_refused_by_a_read_only_database_keeps_what_was_typed(
     make_test_app, study_engine: Engine
 ) -> None:
@@ -130,7 +130,6 @@ async def test_a_questionnaire_refused_by_a_read_only_database_keeps_what_was_ty
     assert stored is not None and stored.mental == int(RATINGS["mental"])
 
 
-@pytest.mark.asyncio
 async def test_a_database_file_removed_mid_session_is_named_and_the_app_stays(
     make_test_app, study_engine: Engine, tmp_path
 ) -> None:
@@ -140,9 +139,7 @@ async def test_a_database_file_removed_mid_session_is_named_and_the_app_stays(
     async with participants_pane(app) as (pilot, pane):
         for name in ("study.db", "study.db-wal", "study.db-shm"):
             (tmp_path / name).unlink(missing_ok=True)
-        await pilot.press("f2")
-        await pilot.press("a")
-        await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 30)
+        await _enrol_refused(pilot, pane)
         db = tmp_path / "study.db"
         assert pane.last_message == (
             f"not enrolled: the study database file {db} is gone (deleted or moved?): "

@@ -3,7 +3,6 @@ where it is shown, `?` lists the keys, and what cannot be undone is asked first.
 
 from __future__ import annotations
 
-import pytest
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 from textual.widgets import DataTable, Input, Select, Static
@@ -12,8 +11,6 @@ from db.models.study import Participant
 from study.protocol.roster import add_participant
 from study.tui.confirm import Confirm, ReasonScreen
 from tests.study.tui.conftest import analysed, on_screen, store_trials, wait_for
-
-pytestmark = pytest.mark.asyncio
 
 
 def _count(engine: Engine, group: str) -> int:
@@ -259,20 +256,30 @@ async def test_notes_on_a_participant_and_on_their_session_from_the_list(
     app = make_test_app()
     async with on_screen(app, "f2") as pilot:
         _people_at_row(app, 1)  # P002
-        notes = (("n", "left-handed grip"), ("o", "dial recalibrated"),
-                 ("o", "fire alarm, 5 min pause"), ("n", "prefers the left hand"))
+        notes = (
+            ("n", "left-handed grip"),
+            ("o", "dial recalibrated"),
+            ("o", "fire alarm, 5 min pause"),
+            ("n", "prefers the left hand"),
+        )
         for key, text in notes:
             await pilot.press(key)
             await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
             assert "no names or contact details" in str(app.screen.query_one("#question").render())
             await pilot.press(*text, "enter")
             kind = "session note" if key == "o" else "note"
-            await wait_for(pilot, lambda kind=kind: any(
-                f"P002: {kind} kept" in str(w.render()) for w in app.query("#add-status")), 30)
+            await wait_for(
+                pilot,
+                lambda kind=kind: any(
+                    f"P002: {kind} kept" in str(w.render()) for w in app.query("#add-status")
+                ),
+                30,
+            )
     with Session(study_engine) as session:
         p = session.scalars(select(Participant).where(Participant.code == "P002")).one()
         sessions = session.scalars(
-            select(AuditEntry.new_value).where(AuditEntry.field == "session_note")
+            select(AuditEntry.new_value)
+            .where(AuditEntry.field == "session_note")
             .order_by(AuditEntry.id)
         ).all()
     # the participant's note is replaced; the session notes are kept, each its own row

@@ -29,8 +29,6 @@ from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON
 from tests.study.tui.conftest import run_screen, wait_for
 
-pytestmark = pytest.mark.asyncio
-
 
 def _trials(engine) -> list[tuple[str, str, int]]:
     """(status, driver, samples) of every trial."""

@@ -6,7 +6,6 @@ import hashlib
 import json
 from pathlib import Path
 
-import pytest
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 from textual.widgets import DataTable, Input, Select, Static
@@ -26,8 +25,6 @@ from tests.study.tui.conftest import (
     store_trials,
     wait_for,
 )
-
-pytestmark = pytest.mark.asyncio
 
 
 def _text(app, selector: str) -> str:
@@ -246,7 +243,10 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
     with Session(study_engine) as session:
         row = session.scalars(select(Calibration)).one()
     assert (row.model, row.recording_name, row.rmse_before, row.rmse_after) == (
-        "follower", "rec.csv", 0.3, 0.1
+        "follower",
+        "rec.csv",
+        0.3,
+        0.1,
     )
     assert row.recording_sha256 == hashlib.sha256(b"t\n0\n").hexdigest()
     assert row.report["effects_added"][0]["family"] == "stribeck"
