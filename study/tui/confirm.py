@@ -21,6 +21,7 @@ class Confirm(ModalScreen[bool]):
     Confirm { align: center middle; }
     Confirm #confirm { width: 60; height: auto; border: thick $warning; padding: 1 2;
                        background: $surface; }
+    Confirm #question { width: 100%; }
     Confirm #keys { padding-top: 1; color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
@@ -77,6 +78,7 @@ class ReasonScreen(ModalScreen[str | None]):
     ReasonScreen { align: center middle; }
     ReasonScreen #reason-box { width: 64; height: auto; border: thick $warning; padding: 1 2;
                                background: $surface; }
+    ReasonScreen #question { width: 100%; }
     ReasonScreen #reason-keys { color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]

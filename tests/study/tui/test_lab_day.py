@@ -3,6 +3,8 @@ where it is shown, `?` lists the keys, and what cannot be undone is asked first.
 
 from __future__ import annotations
 
+import textwrap
+
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
 from textual.widgets import DataTable, Input, Select, Static
@@ -285,3 +287,21 @@ async def test_notes_on_a_participant_and_on_their_session_from_the_list(
     # the participant's note is replaced; the session notes are kept, each its own row
     assert p.note == "prefers the left hand"
     assert sessions == ["dial recalibrated", "fire alarm, 5 min pause"]
+
+
+async def test_a_long_question_wraps_inside_its_box(make_test_app) -> None:
+    # the session checklist is longer than the 60-column box: it wraps, nothing is cut
+    question = (
+        "Session checklist for P001: consent confirmed and the device checked? "
+        "(recorded with the session)"
+    )
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        app.push_screen(Confirm(question))
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        await pilot.pause()
+        label = app.screen.query_one("#question")
+        box = app.screen.query_one("#confirm")
+        assert label.region.right <= box.region.right
+        # as many rows as the question takes, wrapped at words to the label's width
+        assert label.size.height == len(textwrap.wrap(question, label.size.width)) >= 2
