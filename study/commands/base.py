@@ -191,6 +191,16 @@ def progress_bar(*columns: Any, transient: bool = True, console: Console | None 
     return Progress(*columns, transient=transient, console=console or Console(stderr=True))
 
 
+def write_json_atomically(data: dict[str, Any], path: Path) -> None:
+    """JSON to `path` through a temporary sibling, so a failure leaves no partial file
+    (numpy numbers are written as plain numbers)."""
+    import json
+
+    tmp = path.with_name(f".{path.name}.partial")
+    tmp.write_text(json.dumps(data, indent=2, default=float) + "\n")
+    tmp.replace(path)
+
+
 def check_parent_folder(path: Path) -> None:
     """StudyInputError unless the folder a file is to be written in exists."""
     if not path.parent.is_dir():

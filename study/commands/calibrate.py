@@ -9,7 +9,6 @@ run leaves no half-written output.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +23,7 @@ from study.commands.base import (
     json_option,
     out_dir_option,
     progress_bar,
+    write_json_atomically,
 )
 from study.errors import StudyInputError
 
@@ -46,13 +46,6 @@ def _mat_columns(text: str) -> tuple[str, str, str]:
             f"--mat-columns {text!r}; expected t=NAME,q=NAME,u=NAME (products allowed: u=gtau*vir)"
         )
     return pairs["t"].strip(), pairs["q"].strip(), pairs["u"].strip()
-
-
-def write_json_atomically(data: dict[str, Any], path: Path) -> None:
-    """JSON to `path` through a temporary sibling, so a failure leaves no partial file."""
-    tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(json.dumps(data, indent=2) + "\n")
-    tmp.replace(path)
 
 
 def run_calibration(

@@ -5,7 +5,6 @@
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from pathlib import Path
@@ -19,6 +18,7 @@ from study.commands.base import (
     db_option,
     file_option,
     progress_bar,
+    write_json_atomically,
 )
 from study.errors import StudyInputError
 
@@ -117,10 +117,8 @@ def _write(out_path: Path, model: dict, table: object) -> None:
     png = out_path.with_suffix(".png")
     tmp_png = png.with_name(f".{png.name}.{os.getpid()}.tmp.png")
     fit_figure(table, note).savefig(tmp_png, dpi=200)
-    tmp = out_path.with_name(f".{out_path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(model, indent=2, default=float) + "\n")
     os.replace(tmp_png, png)
-    os.replace(tmp, out_path)
+    write_json_atomically(model, out_path)
 
 
 def _print(model: dict, table: object) -> None:
