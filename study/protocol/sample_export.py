@@ -221,6 +221,13 @@ class _StagedFile:
         else:
             self._out.file.write(data)
 
+    def __enter__(self) -> _StagedFile:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
+        if exc_type is not None:  # whatever stopped it, no partial file is left
+            self.abort()
+
     def commit(self) -> Path:
         self._close()
         return self._out.commit()
@@ -327,8 +334,7 @@ def write_samples(
     `default_workers()`). The file appears only when complete (written as
     `.NAME.partial`, then renamed).
     """
-    out = _StagedFile(path, fmt)
-    try:
+    with _StagedFile(path, fmt) as out:
         plan = plan_spans(engine, [t.trial_id for t in trials], max_rows=_span(fmt, span_rows))
         with closing(_read(engine, trials, plan, fmt, selection, workers)) as parts:
             for done, spans in enumerate(plan, 1):
@@ -337,9 +343,6 @@ def write_samples(
                 if progress is not None:
                     progress(done, len(trials))
         out.commit()
-    except BaseException:
-        out.abort()
-        raise
     return out.rows
 
 
@@ -386,14 +389,10 @@ def write_samples_per_trial(
             if not m:
                 skipped.append(path)
             else:
-                out = _StagedFile(path, fmt)
-                try:
+                with _StagedFile(path, fmt) as out:
                     for _ in spans_of[trial.trial_id]:
                         out.write(next(parts))
                     written.append(out.commit())
-                except BaseException:
-                    out.abort()
-                    raise
                 rows += out.rows
             if progress is not None:
                 progress(done, len(trials))
