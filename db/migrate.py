@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from alembic.script import ScriptDirectory
 
 MIGRATIONS_DIR = Path(__file__).parent / "migrations"
-HEAD_REVISION = "0004_trial_measures"
+HEAD_REVISION = "0005_sample_chunks"
 """The newest revision in `db/migrations/versions` (kept equal to it by a test)."""
 VERSION_TABLE = "alembic_version"
 
@@ -236,7 +236,8 @@ def open_database(
 
 @dataclass(frozen=True)
 class DatabaseInfo:
-    """What `inspect_database` found; `row_counts` maps table name to rows."""
+    """What `inspect_database` found; `row_counts` maps table name to rows; `samples` is
+    the number of stored samples (a chunk row holds up to a second of them)."""
 
     url: str
     backend: str
@@ -244,6 +245,7 @@ class DatabaseInfo:
     revision: str | None
     head: str
     row_counts: dict[str, int]
+    samples: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return {**asdict(self), "state": self.state.value}
@@ -263,6 +265,10 @@ def inspect_database(db: str | URL | None = None) -> DatabaseInfo:
             t: int(conn.execute(select(func.count()).select_from(table(t))).scalar_one())
             for t in tables
         }
+        samples = counts.get("samples", 0)  # a database from before revision 0005
+        if "sample_chunks" in tables:
+            stored = select(func.sum(column("n_samples"))).select_from(table("sample_chunks"))
+            samples += int(conn.execute(stored).scalar_one() or 0)
     return DatabaseInfo(
         url=describe(url),
         backend=url.get_backend_name(),
@@ -270,6 +276,7 @@ def inspect_database(db: str | URL | None = None) -> DatabaseInfo:
         revision=revision,
         head=head_revision(),
         row_counts=counts,
+        samples=samples,
     )
 
 

@@ -1,33 +1,26 @@
 """Reading trials' sample streams as Arrow record batches in bounded memory: one trial,
 or many trials in spans read by a pool of threads and handed back in order.
 
-Reading goes through ADBC (Apache Arrow's database connectivity: `adbc-driver-sqlite`,
-`adbc-driver-postgresql`), which hands over Arrow record batches of a bounded number of
-rows. A DBAPI cursor builds a Python tuple and a float object per value: on the demo
-study that is 2.8 s of CPU per million samples against 1.2 s for ADBC. On PostgreSQL
-the driver streams each query with `COPY ... TO STDOUT (FORMAT binary)`. The SQLite
-driver infers a column's Arrow type from the values of the first batch and refuses a
-later batch that disagrees (a column that starts NULL would become int64); every query
-therefore starts with one typed row (`seq = -1`) that the reader drops.
+Samples are stored per committed chunk, each a compressed Arrow record batch
+(`db.sample_codec`). A reader selects the chunks it needs (by trial, sequence number
+and time, from the key and two stored times, without decoding the others), decodes
+them and cuts the rows outside the request: memory is a few chunks plus the batch
+being built. Reading a row per sample through a database driver had cost about 1.1 us
+of CPU per sample (half in SQLite decoding records, half in the driver's call per
+value), which held `study export --samples` below a million samples a second (issue
+26); a chunk is one row and one decompression for up to a second of samples.
 
-Reading many trials (`study export --samples`, issue 26). Measured on the 10,000,000
-samples of `study bench export` (SQLite), the ADBC driver spends about 1.1 us of CPU
-per sample of 14 columns: about half in SQLite itself (decoding the record, the
-primary key's index), half in the driver's per-value calls (`sqlite3_column_*`, a
-nanoarrow append, a mutex). One thread therefore reads at most about 0.9 million
-samples per CPU-second whatever is done around it, below the export target of a
-million a second. Both drivers and pyarrow release the GIL while they read, so
-`read_spans` reads with several threads, each with its own connection, and hands the
-results back in order:
+Reading many trials (`study export --samples`):
 
 - `plan_spans` cuts the trials into spans of at most `max_rows` samples: consecutive
-  small trials together (one query for many of them, `ORDER BY trial_id, seq` through
-  the primary key's index), a long trial in windows of `seq`. A span's size is known
-  before it is read (from each trial's first and last `seq`, two index look-ups), so
+  small trials together, a long trial in windows of `seq`. A span's size is known
+  before it is read (each trial's first and last `seq`, from the chunks' key), so
   memory is bounded by construction, however the samples are spread over the trials.
-- `read_spans` keeps at most `workers + 1` spans in flight and runs the caller's
-  function on each span in the worker thread (building key columns, formatting CSV),
-  so that the calling thread only writes.
+- `read_spans` reads spans with several threads, each with its own connection (zstd
+  and pyarrow release the GIL while they decompress and copy), keeps at most
+  `workers + 1` spans in flight and runs the caller's function on each span in the
+  worker thread (building key columns, formatting CSV), so that the calling thread
+  only writes.
 
 Python's concurrent.futures does the pool; what is written here is the bounded,
 ordered hand-back, which it does not offer (`Executor.map` submits every item at once).
@@ -43,13 +36,15 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TypeVar
 
+import numpy as np
 import pyarrow as pa
-from sqlalchemy import Engine, func, select
+import pyarrow.compute as pc
+from sqlalchemy import ColumnElement, Connection, Engine, func, select
 from sqlalchemy.orm import Session
 
-from db.engine import busy_timeout_ms, is_sqlite
 from db.errors import DbInputError
-from db.models.trial import SAMPLE_COLUMNS, Sample, Trial
+from db.models.trial import SAMPLE_COLUMNS, SampleChunk, Trial
+from db.sample_codec import decode
 
 SAMPLE_SCHEMA = pa.schema(
     [
@@ -64,9 +59,6 @@ SPAN_SCHEMA = pa.schema([("trial_id", pa.int64()), *SAMPLE_SCHEMA])
 _BATCH_ROWS = 65_536
 SPAN_ROWS = 65_536
 """Default most samples in one span (about 7 MB as Arrow columns)."""
-
-_TYPED = {"trial_id": "-1", "seq": "-1", "branch": "''"}
-"""Values of the typed first row of an SQLite query (0.5 for the float columns)."""
 
 T = TypeVar("T")
 
@@ -91,11 +83,10 @@ class SampleReader:
     Parameters
     ----------
     engine
-        Engine of the study database (an SQLite file or PostgreSQL; the reader opens
-        its own ADBC connection to the same database).
+        Engine of the study database (the reader holds one connection of its own).
     batch_rows
         Most rows in one batch, > 0. Memory held by the reader is about
-        `batch_rows` x 100 bytes.
+        `batch_rows` x 100 bytes plus a few stored chunks.
 
     Use as a context manager; one reader serves any number of `trial` or `span` calls
     from one thread at a time.
@@ -105,88 +96,73 @@ class SampleReader:
         if batch_rows < 1:
             raise DbInputError(f"batch_rows {batch_rows!r} is not a positive number of rows")
         self.batch_rows = batch_rows
-        self._sqlite = is_sqlite(engine)
-        url = engine.url
-        if self._sqlite:
-            import adbc_driver_sqlite.dbapi
-
-            if url.database in (None, "", ":memory:"):
-                raise DbInputError(
-                    "an in-memory SQLite database cannot be read by a second connection; "
-                    "expected an SQLite file"
-                )
-            self._conn = adbc_driver_sqlite.dbapi.connect(url.database)
-            # Wait for a lock as the study's own connections do (`?timeout=S`, 30 s): a
-            # connection opening while another recovers the WAL index got "database is
-            # locked" at once (the driver's default is not to wait), seen with two reader
-            # threads opening together.
-            cursor = self._conn.cursor()
-            try:
-                cursor.execute(f"PRAGMA busy_timeout = {busy_timeout_ms(url)}")
-                cursor.fetchall()
-            finally:
-                cursor.close()
-        else:
-            import adbc_driver_postgresql.dbapi
-
-            libpq = url.set(drivername="postgresql").render_as_string(hide_password=False)
-            self._conn = adbc_driver_postgresql.dbapi.connect(libpq)
+        self._conn: Connection = engine.connect()
 
     def trial(
         self, trial_id: int, *, from_s: float | None = None, to_s: float | None = None
     ) -> Iterator[pa.RecordBatch]:
         """The samples of one trial in `seq` order, with `from_s <= t_s < to_s` when given."""
-        where = [f"trial_id = {int(trial_id)}", *_time_range(from_s, to_s)]
-        yield from self._batches(SAMPLE_SCHEMA, where, "seq")
+        pending: list[pa.RecordBatch] = []
+        held = 0
+        for _, batch in self._chunks([int(trial_id)], None, None, from_s, to_s):
+            pending.append(batch)
+            held += batch.num_rows
+            if held >= self.batch_rows:
+                table = pa.Table.from_batches(pending, schema=SAMPLE_SCHEMA).combine_chunks()
+                full = held - held % self.batch_rows
+                yield from table.slice(0, full).to_batches(max_chunksize=self.batch_rows)
+                pending = table.slice(full).to_batches()
+                held -= full
+        if held:
+            table = pa.Table.from_batches(pending, schema=SAMPLE_SCHEMA)
+            yield from table.combine_chunks().to_batches(max_chunksize=self.batch_rows)
 
     def span(
         self, span: SampleSpan, *, from_s: float | None = None, to_s: float | None = None
     ) -> pa.Table:
         """A span's samples (`SPAN_SCHEMA`) in trial and `seq` order, `from_s <= t_s < to_s`."""
-        where = [f"trial_id IN ({', '.join(str(int(i)) for i in span.trial_ids)})"]
-        if span.seq_from is not None:
-            where.append(f"seq >= {int(span.seq_from)}")
-        if span.seq_to is not None:
-            where.append(f"seq < {int(span.seq_to)}")
-        where += _time_range(from_s, to_s)
-        batches = list(self._batches(SPAN_SCHEMA, where, "trial_id, seq"))
+        batches = []
+        for trial_id, batch in self._chunks(
+            list(span.trial_ids), span.seq_from, span.seq_to, from_s, to_s
+        ):
+            key = pa.array(np.full(batch.num_rows, trial_id, dtype=np.int64))
+            batches.append(pa.RecordBatch.from_arrays([key, *batch.columns], schema=SPAN_SCHEMA))
         return pa.Table.from_batches(batches, schema=SPAN_SCHEMA)
 
-    def _batches(self, schema: pa.Schema, where: list[str], order: str) -> Iterator[pa.RecordBatch]:
-        sql = self._query(schema, where, order)
-        cursor = self._conn.cursor()
+    def _chunks(
+        self,
+        trial_ids: list[int],
+        seq_from: int | None,
+        seq_to: int | None,
+        from_s: float | None,
+        to_s: float | None,
+    ) -> Iterator[tuple[int, pa.RecordBatch]]:
+        """(trial id, `SAMPLE_SCHEMA` batch) per stored chunk the request touches, in
+        trial and `seq` order, each cut to the request."""
+        c = SampleChunk
+        query = select(c.trial_id, c.first_seq, c.raw_bytes, c.data).where(
+            c.trial_id.in_(trial_ids)
+        )
+        if seq_from is not None:
+            query = query.where(c.first_seq + c.n_samples > seq_from)
+        if seq_to is not None:
+            query = query.where(c.first_seq < seq_to)
+        query = query.where(*_time_range(from_s, to_s)).order_by(c.trial_id, c.first_seq)
+        # a few chunks at a time from the driver: memory stays a few chunks
+        rows = self._conn.execution_options(yield_per=16).execute(query)
         try:
-            if self._sqlite:
-                cursor.adbc_statement.set_options(
-                    **{"adbc.sqlite.query.batch_rows": str(self.batch_rows)}
-                )
-            else:
-                # The driver's hint is in bytes; about 100 bytes a sample.
-                cursor.adbc_statement.set_options(
-                    **{"adbc.postgresql.batch_size_hint_bytes": str(self.batch_rows * 100)}
-                )
-            cursor.execute(sql)
-            first = True
-            for batch in cursor.fetch_record_batch():
-                if first and self._sqlite:
-                    seq = batch.column(schema.get_field_index("seq"))
-                    if batch.num_rows == 0 or seq[0].as_py() != -1:
-                        raise RuntimeError("the SQLite sample query lost its typed first row")
-                    batch = batch.slice(1)
-                first = False
-                # The PostgreSQL driver's bound is in bytes: slice to the row bound too.
-                for lo in range(0, batch.num_rows, self.batch_rows):
-                    yield _conform(batch.slice(lo, self.batch_rows), schema)
+            for trial_id, first_seq, raw_bytes, data in rows:
+                stored = decode(data, raw_bytes)
+                seq = pa.array(np.arange(first_seq, first_seq + stored.num_rows, dtype=np.int64))
+                batch = pa.RecordBatch.from_arrays([seq, *stored.columns], schema=SAMPLE_SCHEMA)
+                keep = _inside(batch, seq_from, seq_to, from_s, to_s)
+                if keep is not None:
+                    batch = batch.filter(keep)
+                if batch.num_rows:
+                    yield int(trial_id), batch
         finally:
-            cursor.close()
-
-    def _query(self, schema: pa.Schema, where: list[str], order: str) -> str:
-        columns = ", ".join(schema.names)
-        body = f"SELECT {columns} FROM samples WHERE {' AND '.join(where)} ORDER BY {order}"
-        if not self._sqlite:
-            return body
-        typed = ", ".join(f"{_TYPED.get(f.name, '0.5')} AS {f.name}" for f in schema)
-        return f"SELECT {typed} UNION ALL SELECT * FROM ({body})"
+            rows.close()
+            self._conn.rollback()
 
     def close(self) -> None:
         self._conn.close()
@@ -198,35 +174,65 @@ class SampleReader:
         self.close()
 
 
-def _time_range(from_s: float | None, to_s: float | None) -> list[str]:
+def _time_range(from_s: float | None, to_s: float | None) -> list[ColumnElement[bool]]:
+    """Conditions on the chunks that may hold samples with `from_s <= t_s < to_s`."""
     where = []
-    for name, op, value in (("from_s", ">=", from_s), ("to_s", "<", to_s)):
+    for name, value in (("from_s", from_s), ("to_s", to_s)):
         if value is None:
             continue
         if not math.isfinite(value):
             raise DbInputError(f"{name}={value!r} is not a finite time in s")
-        where.append(f"t_s {op} {float(value)!r}")
+        bound = float(value)
+        where.append(
+            SampleChunk.t_last_s >= bound if name == "from_s" else SampleChunk.t_first_s < bound
+        )
     return where
 
 
-def _conform(batch: pa.RecordBatch, schema: pa.Schema) -> pa.RecordBatch:
-    """`batch` with exactly `schema`'s types (the drivers may give null-typed columns)."""
-    if batch.schema.equals(schema):
-        return batch
-    return pa.RecordBatch.from_arrays(
-        [batch.column(i).cast(f.type) for i, f in enumerate(schema)], schema=schema
-    )
+def _inside(
+    batch: pa.RecordBatch,
+    seq_from: int | None,
+    seq_to: int | None,
+    from_s: float | None,
+    to_s: float | None,
+) -> pa.Array | None:
+    """Mask of a decoded chunk's rows inside the request; None when all of them are."""
+    seq, t_s = batch.column(0), batch.column(1)
+    masks = []
+    for column, op, bound in (
+        (seq, pc.greater_equal, seq_from),
+        (seq, pc.less, seq_to),
+        (t_s, pc.greater_equal, from_s),
+        (t_s, pc.less, to_s),
+    ):
+        if bound is None:
+            continue
+        mask = op(column, bound)
+        if not pc.all(mask).as_py():
+            masks.append(mask)
+    if not masks:
+        return None
+    keep = masks[0]
+    for mask in masks[1:]:
+        keep = pc.and_(keep, mask)
+    return keep
 
 
 def seq_ranges(engine: Engine, trial_ids: Iterable[int]) -> dict[int, tuple[int, int]]:
     """`{trial_id: (first seq, last seq)}` of the trials that have samples.
 
-    Two index look-ups per trial (`min`/`max` of `seq` for one `trial_id`, which both
-    databases answer from the primary key's index), not a scan of the samples.
+    Index look-ups on the chunks' key (`trial_id, first_seq`); no chunk is decoded.
     """
     ids = list(dict.fromkeys(int(i) for i in trial_ids))
-    first = select(func.min(Sample.seq)).where(Sample.trial_id == Trial.id).scalar_subquery()
-    last = select(func.max(Sample.seq)).where(Sample.trial_id == Trial.id).scalar_subquery()
+    c = SampleChunk
+    first = select(func.min(c.first_seq)).where(c.trial_id == Trial.id).scalar_subquery()
+    last = (
+        select(c.first_seq + c.n_samples - 1)
+        .where(c.trial_id == Trial.id)
+        .order_by(c.first_seq.desc())
+        .limit(1)
+        .scalar_subquery()
+    )
     out: dict[int, tuple[int, int]] = {}
     with Session(engine) as session:
         for lo in range(0, len(ids), 500):

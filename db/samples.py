@@ -9,12 +9,12 @@ at once when waiting for one more step of the same length would put more than `c
 at risk (issue 18: unpaced sessions hand 0.5 s steps, and committing only when the next
 step arrived lost 1.5 s). Each chunk is one transaction; `flush`/`close` commit the rest.
 
-The rows go to the DBAPI cursor rather than through ORM objects or an `Insert` with a
-list of dicts: a dict per row is what holds SQLAlchemy's executemany well below the
-200,000 rows/s target (`study bench db`). On SQLite one multi-row `INSERT ... VALUES
-(...), (...)` per few hundred rows beats `executemany` by about half again, because
-SQLite steps one statement instead of re-binding one per row; PostgreSQL takes
-`COPY ... FROM STDIN`, psycopg's bulk path.
+A chunk is stored as one row of `sample_chunks`: its columns as one compressed Arrow
+record batch (`db.sample_codec`), not a row per sample (issue 21: binding a Python
+value per sample held the writer at 0.55-0.6x of a plain multi-row INSERT; a chunk is
+one row whatever its length, so the writer's cost is the encoding, about 0.3 us a
+sample). The columns handed in are kept as arrays until the chunk is encoded; no
+Python object is built per sample.
 
 Reading (Arrow record batches of bounded size, one trial or many in parallel) is
 `db.sample_reader`; `SampleReader` and `SAMPLE_SCHEMA` are re-exported here.
@@ -23,36 +23,23 @@ Reading (Arrow record batches of bounded size, one trial or many in parallel) is
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from itertools import chain
 from types import TracebackType
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Connection, Engine
+import pyarrow as pa
+from sqlalchemy import Connection, Engine, insert
 
-from db.engine import is_sqlite
 from db.errors import DbInputError
-from db.models.trial import SAMPLE_COLUMNS
+from db.models.trial import SAMPLE_COLUMNS, SampleChunk
+from db.sample_codec import CHUNK_SCHEMA, column_array, encode
 from db.sample_reader import SAMPLE_SCHEMA, SampleReader
 
 __all__ = ["SAMPLE_SCHEMA", "SampleReader", "SampleWriter"]
 
-_ALL_COLUMNS = ("trial_id", "seq", *SAMPLE_COLUMNS)
-_ROWS_PER_STATEMENT = 500
-"""Rows per multi-row INSERT on SQLite (7,000 parameters; SQLite allows 32,766 or more)."""
-_COPY_SQL = f"COPY samples ({', '.join(_ALL_COLUMNS)}) FROM STDIN"
-
-
-def _insert_sql(rows: int) -> str:
-    one = "(" + ", ".join("?" for _ in _ALL_COLUMNS) + ")"
-    return f"INSERT INTO samples ({', '.join(_ALL_COLUMNS)}) VALUES " + ", ".join([one] * rows)
-
-
-_FULL_INSERT_SQL = _insert_sql(_ROWS_PER_STATEMENT)
-
 
 class SampleWriter:
-    """Stream one trial's samples into `samples`, committing every `chunk_s` of trial time.
+    """Stream one trial's samples into `sample_chunks`, committing every `chunk_s` of trial time.
 
     Parameters
     ----------
@@ -107,16 +94,13 @@ class SampleWriter:
         if n == 0:
             return
         self._check_times(t)
-        given: list[list[Any] | None] = []
+        given: list[pa.Array] = []
         for name in SAMPLE_COLUMNS:
-            col = columns.get(name)
+            col = t if name == "t_s" else columns.get(name)
             if col is not None and len(col) != n:
                 raise DbInputError(f"sample column {name!r} has {len(col)} values; expected {n}")
-            # .tolist() gives Python floats/ints/str, which every driver binds, in one C
-            # call per column instead of one object per value
-            given.append(None if col is None else np.asarray(col).tolist())
-        block = _Block(n, given)
-        self._add_block(t, block)
+            given.append(column_array(name, col, n))
+        self._add_block(t, _Block(n, given))
 
     def _check_times(self, t: np.ndarray) -> None:
         bad = np.flatnonzero(~np.isfinite(t))
@@ -167,18 +151,26 @@ class SampleWriter:
         if n == 0:
             self._buffer.clear()
             return
-        columns: list[Sequence[Any]] = [
-            [self.trial_id] * n,
-            range(self.next_seq, self.next_seq + n),
-        ]
-        for k in range(len(SAMPLE_COLUMNS)):
-            values: list[Any] = []
-            for b in self._buffer:
-                given = b.columns[k]
-                values += [None] * b.n if given is None else given
-            columns.append(values)
+        batch = pa.RecordBatch.from_arrays(
+            [
+                pa.concat_arrays([b.columns[k] for b in self._buffer])
+                for k in range(len(SAMPLE_COLUMNS))
+            ],
+            schema=CHUNK_SCHEMA,
+        )
+        data, raw_bytes = encode(batch)
+        t_s = batch.column(0)
+        row = {
+            "trial_id": self.trial_id,
+            "first_seq": self.next_seq,
+            "n_samples": n,
+            "t_first_s": t_s[0].as_py(),
+            "t_last_s": t_s[n - 1].as_py(),
+            "raw_bytes": raw_bytes,
+            "data": data,
+        }
         with self.engine.begin() as conn:
-            _write_rows(conn, columns, n)
+            _write_chunk(conn, row)
         self.next_seq += n
         self.rows_committed += n
         self.chunks_committed += 1
@@ -208,34 +200,21 @@ class SampleWriter:
 
 
 class _Block:
-    """Samples handed in one call, held as columns (a Python list per column, None for a
-    column not given) so that no object is built per row."""
+    """Samples handed in one call, held as Arrow columns in `SAMPLE_COLUMNS` order (all
+    NULL for a column not given) so that no object is built per sample."""
 
     __slots__ = ("columns", "n")
 
-    def __init__(self, n: int, columns: list[list[Any] | None]) -> None:
+    def __init__(self, n: int, columns: list[pa.Array]) -> None:
         self.n = n
         self.columns = columns
 
     def __getitem__(self, rows: slice) -> _Block:
         lo, hi, _ = rows.indices(self.n)
-        return _Block(max(hi - lo, 0), [None if c is None else c[rows] for c in self.columns])
+        return _Block(max(hi - lo, 0), [c.slice(lo, max(hi - lo, 0)) for c in self.columns])
 
 
-def _write_rows(conn: Connection, columns: list[Sequence[Any]], n: int) -> None:
-    """Insert `n` rows given as columns in `_ALL_COLUMNS` order."""
-    cursor = conn.connection.cursor()
-    try:
-        if is_sqlite(conn):
-            for lo in range(0, n, _ROWS_PER_STATEMENT):
-                hi = min(lo + _ROWS_PER_STATEMENT, n)
-                # row-major parameters straight from the columns: zip pairs them in C
-                params = list(chain.from_iterable(zip(*(c[lo:hi] for c in columns), strict=True)))
-                full = hi - lo == _ROWS_PER_STATEMENT
-                cursor.execute(_FULL_INSERT_SQL if full else _insert_sql(hi - lo), params)
-        else:
-            with cursor.copy(_COPY_SQL) as copy:
-                for row in zip(*columns, strict=True):
-                    copy.write_row(row)
-    finally:
-        cursor.close()
+def _write_chunk(conn: Connection, row: dict[str, Any]) -> None:
+    """Insert one chunk's row of `sample_chunks` (its own function: the write that a full
+    disk makes fail)."""
+    conn.execute(insert(SampleChunk), row)

@@ -10,15 +10,18 @@ cases ran, so CI's log shows they were not skipped.
 from __future__ import annotations
 
 import os
+import sqlite3
 import uuid
 from collections.abc import Iterator
 
+import pyarrow as pa
 import pytest
 from sqlalchemy import Engine, text
 from sqlalchemy.engine import make_url
 
 from db.engine import make_engine
 from db.migrate import open_database
+from db.models.trial import SAMPLE_COLUMNS
 
 PG_ENV = "STUDY_TEST_PG_URL"
 
@@ -28,6 +31,34 @@ PG_ENV = "STUDY_TEST_PG_URL"
 # slowed by a factor of tens (a quick bench hit the 300 s timeout). Read by the OpenMP
 # runtimes when they start, so it is set before any test imports them.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+STORED_CHUNK_SCHEMA = pa.schema(
+    [("t_s", pa.float64()), *((c, pa.float64()) for c in SAMPLE_COLUMNS[1:6]),
+     ("branch", pa.string()), *((c, pa.float64()) for c in SAMPLE_COLUMNS[7:])]
+)  # fmt: skip
+"""A stored chunk's columns as the format's description (`db.sample_codec`) gives them."""
+
+
+def decode_stored_chunk(data: bytes, raw_bytes: int) -> pa.RecordBatch:
+    """A `sample_chunks.data` value decoded with plain pyarrow, as the format's
+    description says (independently of `db.sample_reader`)."""
+    message = pa.decompress(bytes(data), decompressed_size=raw_bytes, codec="zstd")
+    return pa.ipc.read_record_batch(message, STORED_CHUNK_SCHEMA)
+
+
+def expose_samples(conn: sqlite3.Connection) -> None:
+    """Every stored sample of the SQLite study database behind `conn`, decoded from its
+    chunks, as a temporary table `samples` (trial_id, seq, the sample columns), so that
+    a check can be written as one SQL query."""
+    names = ("trial_id", "seq", *STORED_CHUNK_SCHEMA.names)
+    conn.execute(f"CREATE TEMP TABLE samples ({', '.join(names)})")
+    chunks = conn.execute("SELECT trial_id, first_seq, raw_bytes, data FROM sample_chunks")
+    for trial_id, first_seq, raw_bytes, data in chunks.fetchall():
+        columns = decode_stored_chunk(data, raw_bytes).to_pydict()
+        n = len(columns["t_s"])
+        rows = zip([trial_id] * n, range(first_seq, first_seq + n), *columns.values(), strict=True)
+        conn.executemany(f"INSERT INTO samples VALUES ({', '.join('?' * len(names))})", rows)
 
 
 def pg_schema_url(base: str, schema: str) -> str:

@@ -9,7 +9,7 @@ from db.models.calibration import Calibration
 from db.models.lease import SessionLease
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, Sample, Trial, TrialMeasure
+from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, SampleChunk, Trial, TrialMeasure
 
 __all__ = [
     "SAMPLE_COLUMNS",
@@ -18,7 +18,7 @@ __all__ = [
     "AuditEntry",
     "Calibration",
     "Participant",
-    "Sample",
+    "SampleChunk",
     "ScheduleBlock",
     "SessionLease",
     "Study",

@@ -11,9 +11,10 @@ task declares, `study.protocol.tasks`); `completion_time_s` and `success`, which
 task has, are columns of the trial. `Trial.measure_values` reads and writes them as a
 dict.
 
-Samples are one row per sample, keyed by (trial, sequence number), with SI columns.
-They are written by `db.samples.SampleWriter` in committed chunks; the ORM class here
-is for reading and for the schema, not for the write path.
+Samples are stored per committed chunk (at most a second of trial time), one row of
+`sample_chunks` holding the chunk's columns compressed (`db.sample_codec`); each sample
+has a sequence number within its trial and SI columns (`SAMPLE_COLUMNS`). Written by
+`db.samples.SampleWriter`, read by `db.sample_reader`.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from sqlalchemy import (
     CheckConstraint,
     ForeignKey,
     Index,
+    LargeBinary,
     String,
     UniqueConstraint,
 )
@@ -105,33 +107,36 @@ class TrialMeasure(Base):
 
 
 SAMPLE_COLUMNS = LOOP_SAMPLE_COLUMNS
-"""Value columns of `samples`, in table order (the key `trial_id, seq` comes first): one
-row per acquisition of the loop, so the loop's layout is the one list of them."""
+"""Value columns of a sample, in stored order (the key `trial_id, seq` comes first): one
+sample per acquisition of the loop, so the loop's layout is the one list of them."""
 
 
-class Sample(Base):
-    """One sample of a trial's stream. Columns a task does not produce stay NULL."""
+class SampleChunk(Base):
+    """One committed chunk of a trial's sample stream (at most a second of trial time).
 
-    __tablename__ = "samples"
+    The samples are `data`, a compressed Arrow record batch of `SAMPLE_COLUMNS` (the
+    format is described in `db.sample_codec`); sample `k` of the chunk has sequence
+    number `first_seq + k`. `t_first_s`/`t_last_s` let a reader skip chunks outside a
+    time range without decoding them. Written by `db.samples.SampleWriter`, read by
+    `db.sample_reader`.
+    """
+
+    __tablename__ = "sample_chunks"
 
     trial_id: Mapped[int] = mapped_column(
         ForeignKey("trials.id", ondelete="CASCADE"),
         primary_key=True,
         autoincrement=False,
     )
-    seq: Mapped[int] = mapped_column(BigInteger, primary_key=True, autoincrement=False)
-    t_s: Mapped[float]
-    """Time since the trial started, s."""
-    insertion_m: Mapped[float | None]
-    rotation_rad: Mapped[float | None]
-    tip_x_m: Mapped[float | None]
-    tip_y_m: Mapped[float | None]
-    tip_z_m: Mapped[float | None]
-    branch: Mapped[str | None] = mapped_column(String(16))
-    proximal_force_n: Mapped[float | None]
-    """True proximal insertion force (simulation) or reference sensor, N."""
-    proximal_force_est_n: Mapped[float | None]
-    """Proximal force estimated from the motor current, N."""
-    distal_force_n: Mapped[float | None]
-    dial_angle_rad: Mapped[float | None]
-    dial_torque_n_m: Mapped[float | None]
+    first_seq: Mapped[int] = mapped_column(BigInteger, primary_key=True, autoincrement=False)
+    """Sequence number of the chunk's first sample (0 for a trial's first)."""
+    n_samples: Mapped[int]
+    t_first_s: Mapped[float]
+    """Time of the chunk's first sample since the trial started, s."""
+    t_last_s: Mapped[float]
+    """Time of its last sample, s."""
+    raw_bytes: Mapped[int]
+    """Size of `data` before compression, bytes."""
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+
+    __table_args__ = (CheckConstraint("n_samples > 0", name="chunk_not_empty"),)

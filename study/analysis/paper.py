@@ -21,7 +21,7 @@ from sqlalchemy import Engine, exists, select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
-from db.models.trial import SAMPLE_COLUMNS, Sample, Trial, TrialMeasure
+from db.models.trial import SAMPLE_COLUMNS, SampleChunk, Trial, TrialMeasure
 from db.sample_reader import SampleReader
 from study.analysis.figcheck import FigureCheckError, check_figure
 from study.analysis.figures import fig12, fig12_labels, label_source, save
@@ -52,7 +52,7 @@ def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[
     """The task's VO trial with the highest `trace_measure` (LCCA: peak distal force),
     and the same participant's HV trial with the same number: a collision felt and not
     felt. Only trials with samples (imported ones have none)."""
-    recorded = exists().where(Sample.trial_id == Trial.id)
+    recorded = exists().where(SampleChunk.trial_id == Trial.id)
     measured = (Trial.status == "completed", Trial.practice.is_(False), Trial.task == task)
     traced = get_task(task).trace_measure
     pick = (

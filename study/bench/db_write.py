@@ -22,7 +22,7 @@ from sqlalchemy import URL, Engine, func, select, text
 from db.engine import describe, make_engine, make_session_factory, resolve_url
 from db.errors import DbInputError
 from db.migrate import open_database
-from db.models import Participant, Sample, Study, Trial
+from db.models import Participant, SampleChunk, Study, Trial
 from db.samples import SampleWriter
 
 
@@ -128,7 +128,7 @@ def bench_sample_write(
                     progress(min(per_second, rows - lo))
         seconds = time.perf_counter() - start
         with engine.connect() as conn:
-            stored = conn.scalar(select(func.count()).select_from(Sample))
+            stored = conn.scalar(select(func.sum(SampleChunk.n_samples)))
         if stored != rows:
             raise RuntimeError(f"benchmark stored {stored} rows, expected {rows}")
         return WriteBenchResult(

@@ -173,7 +173,7 @@ def _db_bytes(engine: Engine) -> int:
         if is_sqlite(conn):
             conn.exec_driver_sql("PRAGMA wal_checkpoint(TRUNCATE)")
             return Path(engine.url.database).stat().st_size
-        return int(conn.scalar(text("SELECT pg_total_relation_size('samples')")))
+        return int(conn.scalar(text("SELECT pg_total_relation_size('sample_chunks')")))
 
 
 @dataclass(frozen=True)

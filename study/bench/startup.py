@@ -12,8 +12,10 @@ the first run after install does):
   screen being opened as soon as the app lets it;
 - `study analyze` of a study database, start to exit, wall seconds;
 - the sample writer (`db.samples.SampleWriter`, through `study bench db`'s path)
-  against a plain `sqlite3` multi-row INSERT of the same rows into the same schema
-  with the same settings (WAL, synchronous=FULL, a commit per 1,000 rows), measured in
+  against a plain `sqlite3` multi-row INSERT of the same rows, a row per sample, into
+  a table of the row-per-sample layout the study database had up to revision 0004
+  (`samples`: trial_id, seq and 12 columns, created in the same scratch file), with
+  the same settings (WAL, synchronous=FULL, a commit per 1,000 rows), measured in
   the same run, alternately, as rows/s and their ratio; and against the same INSERT
   with `PRAGMA foreign_keys=ON`, which every connection to a study database has (the
   writer's rows pay a lookup of their trial each; the plain reference does not).
@@ -160,7 +162,8 @@ def _reference_insert(
     path: Path, trial_id: int, columns: dict, names: tuple[str, ...], foreign_keys: bool = False
 ) -> float:
     """Seconds for a plain sqlite3 multi-row INSERT of `columns` (numpy arrays, as the
-    writer is handed them) into `samples` of the SQLite file `path`: WAL,
+    writer is handed them) into a row-per-sample `samples` table created in the SQLite
+    file `path` (the layout up to revision 0004; the writer now stores chunks): WAL,
     synchronous=FULL, one statement and one commit per 1,000 rows, 14 columns; foreign
     keys checked if `foreign_keys`."""
     import itertools
@@ -171,6 +174,12 @@ def _reference_insert(
         conn.execute("PRAGMA journal_mode=WAL")
         conn.execute("PRAGMA synchronous=FULL")
         conn.execute(f"PRAGMA foreign_keys={'ON' if foreign_keys else 'OFF'}")
+        kinds = {"trial_id": "INTEGER", "seq": "INTEGER", "branch": "TEXT"}
+        typed = ", ".join(f"{name} {kinds.get(name, 'REAL')}" for name in names)
+        conn.execute(
+            f"CREATE TABLE samples ({typed}, PRIMARY KEY (trial_id, seq), "
+            "FOREIGN KEY (trial_id) REFERENCES trials (id) ON DELETE CASCADE)"
+        )
         head = f"INSERT INTO samples ({', '.join(names)}) VALUES "
         one = "(" + ", ".join("?" * len(names)) + ")"
         full = head + ", ".join([one] * _REFERENCE_ROWS_PER_COMMIT)

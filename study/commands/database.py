@@ -49,3 +49,4 @@ def info_cmd(db_url: str | None, as_json: bool) -> None:
     click.echo(f"schema:   revision {info.revision} ({info.state.value}; newest is {info.head})")
     for name, rows in info.row_counts.items():
         click.echo(f"  {name:<16} {rows:>10,} rows")
+    click.echo(f"samples:  {info.samples:,}")

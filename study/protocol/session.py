@@ -41,7 +41,7 @@ from db.base import utcnow
 from db.engine import write_transaction
 from db.models.audit import AuditEntry
 from db.models.study import Participant, ScheduleBlock
-from db.models.trial import Sample, Trial, TrialMeasure
+from db.models.trial import SampleChunk, Trial, TrialMeasure
 from db.samples import SampleWriter
 from study.errors import StudyInputError
 from study.protocol.actor import current_actor
@@ -235,8 +235,8 @@ def _storage_failure(
     try:
         with Session(engine) as session:
             kept_s = session.scalar(
-                select(func.max(Sample.t_s))
-                .join(Trial, Sample.trial_id == Trial.id)
+                select(func.max(SampleChunk.t_last_s))
+                .join(Trial, SampleChunk.trial_id == Trial.id)
                 .where(Trial.participant_id == participant_id, Trial.status == "running")
             )
         upto = "no samples" if kept_s is None else f"its samples up to t = {kept_s:.2f} s"

@@ -1,8 +1,8 @@
 """Reading many trials in spans (`db.sample_reader`): bounded spans, every sample once,
 in trial and `seq` order, whatever the number of threads.
 
-Expected spans are worked out by hand from the trials' sizes; the expected rows come
-from a plain SQLAlchemy query written here.
+Expected spans are worked out by hand from the trials' sizes; the expected rows from
+the values written (sample k of trial i: seq k, t_s = k / 1000, distal = i + t_s).
 """
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ import time
 import numpy as np
 import pyarrow as pa
 import pytest
-from sqlalchemy import Engine, select
+from sqlalchemy import Engine
 
 from db.engine import make_session_factory
 from db.errors import DbInputError
-from db.models import Participant, Sample, Study, Trial
+from db.models import Participant, Study, Trial
 from db.sample_reader import SPAN_SCHEMA, SampleSpan, plan_spans, read_spans
 from db.samples import SampleWriter
 
@@ -76,12 +76,12 @@ def test_spans_join_small_trials_and_cut_long_ones(engine: Engine) -> None:
 def test_spans_read_every_sample_once_in_order(engine: Engine, workers: int) -> None:
     sizes = [2500, 300, 400, 200, 0, 1000, 1]
     ids = _trials(engine, sizes)
-    with engine.connect() as conn:
-        want = conn.execute(
-            select(Sample.trial_id, Sample.seq, Sample.t_s, Sample.distal_force_n)
-            .where(Sample.t_s >= 0.1, Sample.t_s < 2.2)
-            .order_by(Sample.trial_id, Sample.seq)
-        ).all()
+    want = [
+        (i, k, k / 1000.0, i + k / 1000.0)
+        for i, n in zip(ids, sizes, strict=True)
+        for k in range(n)
+        if 0.1 <= k / 1000.0 < 2.2
+    ]
     spans = [s for per_trial in plan_spans(engine, ids, max_rows=700) for s in per_trial]
     tables = list(
         read_spans(engine, spans, lambda span, table: table, workers=workers, from_s=0.1, to_s=2.2)
@@ -136,17 +136,15 @@ def test_an_error_in_a_span_reaches_the_caller_and_stops_the_rest(engine: Engine
 
 
 def test_the_reader_waits_for_a_lock_as_the_study_connections_do(tmp_path) -> None:  # type: ignore[no-untyped-def]
-    """Its SQLite connection has the URL's busy timeout (`?timeout=7`: 7,000 ms), not
-    the driver's 0 (two reader threads opening together got "database is locked")."""
+    """Its SQLite connection has the URL's busy timeout (`?timeout=7`: 7,000 ms), as
+    every study connection (two reader threads opening together had got "database is
+    locked" when the reader had its own driver's default of 0)."""
     from db.migrate import open_database
     from db.sample_reader import SampleReader
 
     engine = open_database(f"sqlite:///{tmp_path / 's.db'}?timeout=7")
     try:
         with SampleReader(engine) as reader:
-            cursor = reader._conn.cursor()
-            cursor.execute("PRAGMA busy_timeout")
-            assert cursor.fetchall() == [(7000,)]
-            cursor.close()
+            assert reader._conn.exec_driver_sql("PRAGMA busy_timeout").all() == [(7000,)]
     finally:
         engine.dispose()

@@ -6,6 +6,7 @@ import math
 import signal
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,8 +14,8 @@ from sqlalchemy import Engine, func, select
 
 from db.engine import make_session_factory
 from db.errors import DbInputError
-from db.models import Participant, Sample, Study, Trial
-from db.samples import SampleWriter
+from db.models import Participant, SampleChunk, Study, Trial
+from db.samples import SampleReader, SampleWriter
 
 
 def _trial(engine: Engine) -> int:
@@ -29,7 +30,8 @@ def _trial(engine: Engine) -> int:
 
 def _stored(engine: Engine, trial_id: int) -> int:
     with engine.connect() as conn:
-        return conn.scalar(select(func.count()).where(Sample.trial_id == trial_id)) or 0
+        n = select(func.sum(SampleChunk.n_samples)).where(SampleChunk.trial_id == trial_id)
+        return conn.scalar(n) or 0
 
 
 def test_commits_one_chunk_per_second_of_trial_time(engine: Engine) -> None:
@@ -89,18 +91,12 @@ def test_values_round_trip_exactly_with_nulls_for_missing_columns(engine: Engine
                 "branch": ["arch"] * 10 + ["lcca"] * 10,
             }
         )
-    with engine.connect() as conn:
-        rows = conn.execute(
-            select(
-                Sample.seq,
-                Sample.t_s,
-                Sample.proximal_force_n,
-                Sample.branch,
-                Sample.distal_force_n,
-            )
-            .where(Sample.trial_id == trial_id)
-            .order_by(Sample.seq)
-        ).all()
+    with SampleReader(engine) as reader:
+        rows = [
+            SimpleNamespace(**row)
+            for batch in reader.trial(trial_id)
+            for row in batch.to_pylist()
+        ]
     assert [r.seq for r in rows] == list(range(100, 120))
     assert [r.proximal_force_n for r in rows] == force.tolist()  # bit-exact doubles
     assert [r.branch for r in rows] == ["arch"] * 10 + ["lcca"] * 10
@@ -118,6 +114,14 @@ def test_values_round_trip_exactly_with_nulls_for_missing_columns(engine: Engine
         (
             {"t_s": [0.0, 0.1], "distal_force_n": [1.0]},
             r"'distal_force_n' has 1 values; expected 2",
+        ),
+        (
+            {"t_s": [0.0, 0.1], "distal_force_n": [1.0, "heavy"]},
+            r"column 'distal_force_n' has a value that is not a number \(.*'heavy'",
+        ),
+        (
+            {"t_s": [0.0, 0.1], "branch": ["arch", 3]},
+            r"column 'branch' has a value that is not text \(a branch name\) or None",
         ),
     ],
 )
@@ -145,7 +149,7 @@ _WRITE_THEN_DIE = """
 import os, signal, sys
 import numpy as np
 from db.migrate import open_database
-from db.samples import SampleWriter
+from db.samples import SampleReader, SampleWriter
 engine = open_database(sys.argv[1])
 writer = SampleWriter(engine, int(sys.argv[2]), chunk_s=1.0)
 for k in range(2600):  # 2.6 s at 1 kHz, one sample at a time as a live session does
@@ -168,5 +172,7 @@ def test_kill_9_loses_at_most_the_last_chunk(engine: Engine, db_url: str) -> Non
     assert committed == 2000  # chunks [0, 1) and [1, 2) s
     assert _stored(engine, trial_id) == committed
     with engine.connect() as conn:
-        last_t = conn.scalar(select(func.max(Sample.t_s)).where(Sample.trial_id == trial_id))
+        last_t = conn.scalar(
+            select(func.max(SampleChunk.t_last_s)).where(SampleChunk.trial_id == trial_id)
+        )
     assert 2.599 - last_t <= 1.0  # lost: under one second of samples

@@ -34,15 +34,30 @@ def init_study(folder: Path, design: str | None = None, groups: tuple[str, ...] 
     return db
 
 
-def samples_of_trial() -> Any:
-    """A scalar subquery for a query over Trial rows: how many samples the trial has."""
+def stored_samples(trial_id: Any) -> Any:
+    """A query of how many samples trial `trial_id` (a value or a column) has stored."""
     from sqlalchemy import func, select
 
-    from db.models.trial import Sample, Trial
+    from db.models.trial import SampleChunk
 
-    return (
-        select(func.count()).select_from(Sample).where(Sample.trial_id == Trial.id)
-    ).scalar_subquery()
+    chunk = SampleChunk
+    return select(func.coalesce(func.sum(chunk.n_samples), 0)).where(chunk.trial_id == trial_id)
+
+
+def last_sample_s(trial_id: Any) -> Any:
+    """A query of the time of trial `trial_id`'s last stored sample, s (None if none)."""
+    from sqlalchemy import func, select
+
+    from db.models.trial import SampleChunk
+
+    return select(func.max(SampleChunk.t_last_s)).where(SampleChunk.trial_id == trial_id)
+
+
+def samples_of_trial() -> Any:
+    """A scalar subquery for a query over Trial rows: how many samples the trial has."""
+    from db.models.trial import Trial
+
+    return stored_samples(Trial.id).scalar_subquery()
 
 
 def one_error_line(capsys: Any, argv: list[str]) -> str:

@@ -21,7 +21,8 @@ from sqlalchemy import Engine, select, update
 from sqlalchemy.orm import Session
 
 from db.migrate import open_database
-from db.models.trial import Sample, Trial
+from db.models.trial import Trial
+from db.samples import SampleWriter
 from study.analysis.figcheck import FigureCheckError, check_figure, require_legible, stars
 from study.analysis.frames import participant_means, tlx_frame, trial_frame
 from study.analysis.paper import draw_figures
@@ -75,19 +76,21 @@ def _give_samples(engine: Engine) -> None:
     push = np.sin(t / 10 * 2 * np.pi)  # positive while inserting, negative withdrawing
     with Session(engine) as session:
         trials = session.scalars(select(Trial).where(Trial.trial_index == 0)).all()
-        for trial in trials:
-            if trial.participant.code != "P001":
-                continue
-            gain = 1.0 if trial.condition == "VO" else 0.4
-            for seq, ti in enumerate(t):
-                session.add(Sample(
-                    trial_id=trial.id, seq=seq, t_s=float(ti),
-                    proximal_force_n=float(2.5 * gain * push[seq]),
-                    proximal_force_est_n=float(2.5 * gain * push[seq] + 0.05),
-                    distal_force_n=float(max(gain * push[seq], 0.0)),
-                ))  # fmt: skip
+        gains = {
+            trial.id: 1.0 if trial.condition == "VO" else 0.4
+            for trial in trials
+            if trial.participant.code == "P001"
+        }
         session.execute(update(Trial).values(driver="simulated"))
         session.commit()
+    for trial_id, gain in gains.items():
+        with SampleWriter(engine, trial_id) as writer:
+            writer.extend({
+                "t_s": t,
+                "proximal_force_n": 2.5 * gain * push,
+                "proximal_force_est_n": 2.5 * gain * push + 0.05,
+                "distal_force_n": np.maximum(gain * push, 0.0),
+            })  # fmt: skip
 
 
 @pytest.fixture(scope="module")

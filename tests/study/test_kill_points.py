@@ -29,15 +29,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sqlalchemy import func, select
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.engine import make_engine
 from db.models.study import Participant
-from db.models.trial import Sample, Trial
+from db.models.trial import Trial
 from study.cli import main
 from tests.study import kill_children
-from tests.study.conftest import assert_workers_end, samples_of_trial
+from tests.study.conftest import assert_workers_end, last_sample_s, samples_of_trial
 
 DESIGN = """\
 name = "kill points"
@@ -78,7 +78,7 @@ def _trials(url: str) -> dict[int, dict]:
                 Trial.status,
                 Trial.summary,
                 samples_of_trial(),
-                select(func.max(Sample.t_s)).where(Sample.trial_id == Trial.id).scalar_subquery(),
+                last_sample_s(Trial.id).scalar_subquery(),
             )
             .join(Participant, Trial.participant_id == Participant.id)
             .order_by(Trial.id)

@@ -6,13 +6,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sqlalchemy import func, select
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.engine import make_engine
 from db.models.study import Participant
-from db.models.trial import Sample, Trial
+from db.models.trial import Trial
 from study.cli import main
+from tests.study.conftest import stored_samples
 
 DESIGN = """\
 name = "two sites"
@@ -58,7 +59,7 @@ def test_two_sites_enrol_and_run_at_once(db_url: str, tmp_path: Path) -> None:
             )
             for t in trials:
                 n = s.scalar(
-                    select(func.count()).select_from(Sample).where(Sample.trial_id == t.id)
+                    stored_samples(t.id)
                 )
                 assert n == round(t.completion_time_s * 100)
     finally:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sqlite3
 from pathlib import Path
 
 import pandas as pd
@@ -14,6 +15,7 @@ from study.cli import main
 from teleop_core.notes.params import RotationParams, TranslationParams
 from teleop_core.notes.simulate import simulate_recording
 from teleop_core.notes.tissue import TissueParams
+from tests.conftest import expose_samples
 
 
 def test_characterize_writes_json_figures_and_compensation(tmp_path: Path) -> None:
@@ -116,10 +118,12 @@ def test_a_study_with_lcca_and_notes_runs_notes_blocks(tmp_path: Path) -> None:
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     engine = create_engine(f"sqlite:///{db}")
     frame = trial_frame(engine)
-    with engine.connect() as conn:
-        demanded = dict(conn.execute(text(
+    with sqlite3.connect(db) as raw:
+        expose_samples(raw)
+        demanded = dict(raw.execute(
             "SELECT trial_id, MAX(ABS(proximal_force_n)) FROM samples GROUP BY trial_id"
-        )).all())  # fmt: skip
+        ).fetchall())  # fmt: skip
+    with engine.connect() as conn:
         stored = dict(conn.execute(text(
             "SELECT trial_id, value FROM trial_measures WHERE name = 'peak_force_demanded_n'"
         )).all())  # fmt: skip

@@ -1,7 +1,9 @@
 """`study export --samples`: streamed in bounded memory, same rows as the database holds.
 
 The reference for every comparison is read independently of the code under test: a
-plain DBAPI connection (sqlite3 or psycopg), one SQL join written here, and pandas.
+plain DBAPI connection (sqlite3 or psycopg), one SQL join written here, each stored
+chunk decoded with pyarrow as `db.sample_codec`'s description of the format says (the
+schema written out here), and pandas.
 """
 
 from __future__ import annotations
@@ -28,13 +30,16 @@ from study.cli import main
 from study.protocol.design import TEMPLATE
 from study.protocol.export import export_data
 from study.protocol.sample_export import SAMPLE_EXPORT_COLUMNS
+from tests.conftest import decode_stored_chunk
 
 _REFERENCE_SQL = """
-SELECT p.code AS participant, t.task, t.condition, t.trial_index + 1 AS trial, s.*
-FROM samples s JOIN trials t ON s.trial_id = t.id JOIN participants p ON t.participant_id = p.id
+SELECT p.code, t.task, t.condition, t.trial_index + 1, c.first_seq, c.raw_bytes, c.data
+FROM sample_chunks c JOIN trials t ON c.trial_id = t.id
+JOIN participants p ON t.participant_id = p.id
 WHERE t.status = 'completed' AND NOT t.practice
-ORDER BY t.id, s.seq
+ORDER BY t.id, c.first_seq
 """
+
 
 
 def _columns(rng: np.random.Generator, n: int, start_null: bool) -> dict[str, object]:
@@ -123,9 +128,14 @@ def _reference(db: str) -> pd.DataFrame:
             host=url.host, port=url.port, user=url.username, dbname=url.database, options=options
         )
         cursor = conn.execute(_REFERENCE_SQL)
-    names = [d[0] for d in cursor.description]
-    frame = pd.DataFrame(cursor.fetchall(), columns=names)
+    frames = []
+    for code, task, condition, trial, first_seq, raw_bytes, data in cursor.fetchall():
+        chunk = decode_stored_chunk(data, raw_bytes).to_pandas()
+        key = {"participant": code, "task": task, "condition": condition, "trial": trial}
+        key["seq"] = first_seq + np.arange(len(chunk))
+        frames.append(pd.concat([pd.DataFrame(key), chunk], axis=1))
     conn.close()
+    frame = pd.concat(frames, ignore_index=True)
     return _norm(frame[list(SAMPLE_EXPORT_COLUMNS)])
 
 
@@ -261,10 +271,10 @@ def test_a_failed_export_leaves_no_file(tmp_path: Path) -> None:
     db = str(tmp_path / "s.db")
     _build_study(db, tmp_path, {("P001", "VO", 1): 10})
     out = tmp_path / "gone"
-    sqlite3.connect(db).execute("DROP TABLE samples").connection.close()
+    sqlite3.connect(db).execute("DROP TABLE sample_chunks").connection.close()
     engine = open_database(db, create=False)
     try:
-        with pytest.raises(Exception, match="no such table: samples"):
+        with pytest.raises(Exception, match="no such table: sample_chunks"):
             export_data(engine, out, "parquet", samples=True)
     finally:
         engine.dispose()

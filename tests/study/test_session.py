@@ -10,12 +10,13 @@ import time
 from pathlib import Path
 
 import pytest
-from sqlalchemy import create_engine, func, select
+from sqlalchemy import create_engine, select
 from sqlalchemy.orm import Session
 
 from db.models.audit import AuditEntry
-from db.models.trial import Sample, Trial
+from db.models.trial import Trial
 from study.cli import main
+from tests.study.conftest import last_sample_s, stored_samples
 
 DESIGN = """\
 name = "session test"
@@ -45,7 +46,7 @@ def _trials(db: str) -> list[tuple[int, int, str, int, int]]:
             ).order_by(Trial.id)
         ).all()
         out = [
-            (*r, s.scalar(select(func.count()).select_from(Sample).where(Sample.trial_id == r[0])))
+            (*r, s.scalar(stored_samples(r[0])))
             for r in rows
         ]
     engine.dispose()
@@ -62,7 +63,7 @@ def test_a_session_stores_every_trial_with_its_samples(tmp_path: Path) -> None:
         for trial in s.scalars(select(Trial)):
             # one row per 100 Hz sample over the trial
             n = s.scalar(
-                select(func.count()).select_from(Sample).where(Sample.trial_id == trial.id)
+                stored_samples(trial.id)
             )
             assert n == round(trial.completion_time_s * 100)
             assert trial.summary["samples"] == n
@@ -178,7 +179,7 @@ def test_an_unpaced_session_killed_at_any_time_loses_at_most_one_second(tmp_path
         engine = create_engine(f"sqlite:///{db}")
         with Session(engine) as s:
             trial = s.scalars(select(Trial).where(Trial.status == "running")).one()
-            kept_s = s.scalar(select(func.max(Sample.t_s)).where(Sample.trial_id == trial.id))
+            kept_s = s.scalar(last_sample_s(trial.id))
         engine.dispose()
         # samples up to die_at_s were made; the last kept one is at most 1 s before it
         assert die_at_s - 1.0 <= kept_s + 0.01 <= die_at_s + 0.01
@@ -231,16 +232,16 @@ def test_a_full_disk_after_a_completed_trial_is_one_line_and_keeps_that_trial(
     from db import samples as sample_store
 
     db = _study(tmp_path)
-    real = sample_store._write_rows
-    commits: list[int] = []  # rows of each commit that went through
+    real = sample_store._write_chunk
+    commits: list[int] = []  # samples of each commit that went through
 
-    def fills_up(conn, columns, n):  # type: ignore[no-untyped-def]
+    def fills_up(conn, row):  # type: ignore[no-untyped-def]
         if len(commits) >= 69:
             raise sqlite3.OperationalError("database or disk is full")
-        real(conn, columns, n)
-        commits.append(n)
+        real(conn, row)
+        commits.append(row["n_samples"])
 
-    monkeypatch.setattr(sample_store, "_write_rows", fills_up)
+    monkeypatch.setattr(sample_store, "_write_chunk", fills_up)
     capsys.readouterr()
     assert main(["run", "--participant", "P001", "--db", db]) == 2
     err = capsys.readouterr().err.strip().splitlines()
