@@ -3,19 +3,21 @@
 `study export --samples` used to hold the whole samples table in a DataFrame (1.97 GB
 for the million samples of the demo study). Here the samples are read in spans of at
 most `SPAN_ROWS` samples (`db.sample_reader.plan_spans`: consecutive trials together, a
-long trial in windows) by a few threads (`read_spans`, one ADBC connection each), and
+long trial in windows) by a few threads (`read_spans`, one connection each), and
 written span by span with pyarrow's incremental Parquet writer, one row group per
 span, or as CSV text. Memory stays at a few spans whatever the size of the study.
 
 Where the time goes (issue 26, the 10,000,000 samples of `study bench export`, in CPU
-seconds): reading from SQLite through ADBC about 11 s, Parquet encoding with snappy
-about 3 s (lz4 would save 0.3 s, no codec 0.4 s: not worth a file fewer tools read),
-the key columns 0.2 s. Reading is what threads share out: the reader threads also
-build the key columns (a `take` of each trial's values by the row's `trial_id`) and,
-for CSV, format the text (pyarrow's CSV writer, in C++), so the calling thread only
-encodes Parquet or copies bytes to the file. pyarrow does the writing because it
-already is the Parquet dependency; pandas' `to_csv` per chunk would take most of the
-time.
+seconds): decoding the stored chunks about 3 s (`db.sample_reader`), Parquet encoding
+with snappy about 4 s (lz4 would save 0.3 s, no codec 0.4 s: not worth a file fewer
+tools read), the key columns 0.2 s. The reader threads read and decode, build the key
+columns (a `take` of each trial's values by the row's `trial_id`) and, for CSV, format
+the text (pyarrow's CSV writer, in C++), so the calling thread only encodes Parquet or
+copies bytes to the file. The Parquet encoder writes to a pyarrow file, not a Python
+one, so that it never waits for the GIL the readers hold: through a Python file object
+the export ran on one core (15 s; now 6.6 s on two). pyarrow does the writing because
+it already is the Parquet dependency; pandas' `to_csv` per chunk would take most of
+the time.
 
 The column contract (other tools rely on it; keep it exactly):
 
@@ -46,7 +48,6 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pa_csv
-import pyarrow.parquet as pq
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
@@ -55,7 +56,7 @@ from db.models.trial import SAMPLE_COLUMNS, Trial
 from db.sample_reader import SAMPLE_SCHEMA, SPAN_ROWS, SampleSpan, plan_spans, read_spans
 from study.errors import StudyInputError
 from study.protocol.design import StudyDesign
-from study.protocol.export_files import AtomicFile, escape_array, refuse_symlink
+from study.protocol.export_files import StagedTableFile, escape_array, refuse_symlink
 
 SAMPLE_EXPORT_COLUMNS = ("participant", "task", "condition", "trial", "seq", *SAMPLE_COLUMNS)
 _KEY_FIELDS = [
@@ -65,6 +66,9 @@ _KEY_FIELDS = [
     pa.field("trial", pa.int64()),
 ]
 SAMPLE_EXPORT_SCHEMA = pa.schema([*_KEY_FIELDS, *SAMPLE_SCHEMA])
+_TEXT_COLUMNS = ("participant", "task", "condition", "branch")
+"""Dictionary-encoded in Parquet (tried on every float column, pyarrow's default, it took
+80 % of the writing time and gave a larger file)."""
 MAX_WORKERS = 4
 """Most reader threads by default (one per CPU up to this)."""
 CSV_SPAN_ROWS = 16_384
@@ -186,67 +190,8 @@ def _check_names(what: str, given: Iterable[str], known: tuple[str, ...]) -> Non
             raise StudyInputError(f"{what} {name!r}; expected one of {', '.join(known)}")
 
 
-class _StagedFile:
-    """A Parquet or CSV file written span by span into an `AtomicFile`, renamed to its
-    name on commit."""
-
-    def __init__(self, path: Path, fmt: str) -> None:
-        self.path = path
-        self._out = AtomicFile(path)
-        self.tmp = self._out.tmp
-        self.fmt = fmt
-        self.rows = 0
-        self._parquet: pq.ParquetWriter | None = None
-        if fmt == "parquet":
-            # Dictionary encoding only for the text columns: tried on every float column
-            # (pyarrow's default) it took 80 % of the writing time and gave a larger file.
-            self._parquet = pq.ParquetWriter(
-                self._out.file,
-                SAMPLE_EXPORT_SCHEMA,
-                compression="snappy",
-                use_dictionary=["participant", "task", "condition", "branch"],
-            )
-        else:
-            # The header as pandas wrote it (unquoted); values quoted where pyarrow needs.
-            self._out.file.write((",".join(SAMPLE_EXPORT_SCHEMA.names) + "\n").encode())
-        self._closed = False
-
-    def write(self, part: _Encoded) -> None:
-        """One span: a keyed table (Parquet: one row group) or its CSV text."""
-        rows, data = part
-        self.rows += rows
-        if isinstance(data, pa.Table):
-            if self._parquet is not None and rows:
-                self._parquet.write_table(data, row_group_size=rows)
-        else:
-            self._out.file.write(data)
-
-    def __enter__(self) -> _StagedFile:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
-        if exc_type is not None:  # whatever stopped it, no partial file is left
-            self.abort()
-
-    def commit(self) -> Path:
-        self._close()
-        return self._out.commit()
-
-    def abort(self) -> None:
-        try:
-            self._close()
-        finally:
-            self._out.abort()
-
-    def _close(self) -> None:
-        if not self._closed:
-            self._closed = True
-            if self._parquet is not None:
-                self._parquet.close()
-
-
 _Encoded = tuple[int, "pa.Table | pa.Buffer"]
-"""A span ready to write: (rows, keyed table for Parquet or CSV text)."""
+"""A span ready to write (`StagedTableFile.write`): rows, keyed table or CSV text."""
 
 
 class _Keys:
@@ -334,7 +279,7 @@ def write_samples(
     `default_workers()`). The file appears only when complete (written as
     `.NAME.partial`, then renamed).
     """
-    with _StagedFile(path, fmt) as out:
+    with StagedTableFile(path, fmt, SAMPLE_EXPORT_SCHEMA, _TEXT_COLUMNS) as out:
         plan = plan_spans(engine, [t.trial_id for t in trials], max_rows=_span(fmt, span_rows))
         with closing(_read(engine, trials, plan, fmt, selection, workers)) as parts:
             for done, spans in enumerate(plan, 1):
@@ -389,7 +334,7 @@ def write_samples_per_trial(
             if not m:
                 skipped.append(path)
             else:
-                with _StagedFile(path, fmt) as out:
+                with StagedTableFile(path, fmt, SAMPLE_EXPORT_SCHEMA, _TEXT_COLUMNS) as out:
                     for _ in spans_of[trial.trial_id]:
                         out.write(next(parts))
                     written.append(out.commit())

@@ -298,21 +298,23 @@ print(json.dumps(peaks))
 
 
 def test_export_memory_does_not_grow_with_the_samples(tmp_path: Path) -> None:
-    """400,000 samples, about 40 MB as Arrow columns (and some 800 MB the way the export
+    """1,600,000 samples, about 160 MB as Arrow columns (and some 3 GB the way the export
     held them before): exporting them to CSV, then Parquet, raises the process's peak
-    memory by less than a quarter of that."""
+    memory by less than half of that. What it may hold is a few spans in flight (the
+    reader threads' tables, CSV text, the Parquet row group being encoded and the
+    allocator's cache: 30-50 MB measured, the same for 400,000 and 1,200,000 samples)."""
     db = str(tmp_path / "big.db")
     _build_study(db, tmp_path, {("P001", "VO", k): 100_000 for k in (1, 2, 3)}
-                 | {("P002", "HV", 1): 100_000})  # fmt: skip
+                 | {(f"P{p:03d}", "HV", 1): 100_000 for p in range(2, 15)})  # fmt: skip
     probe = subprocess.run(
         [sys.executable, "-c", _MEMORY_PROBE, db, str(tmp_path / "mem")],
         capture_output=True, text=True, check=True,
     )  # fmt: skip
     peaks_kib = json.loads(probe.stdout)
     grown_mb = (peaks_kib[-1] - peaks_kib[0]) / 1024
-    assert grown_mb < 12, peaks_kib
+    assert grown_mb < 80, peaks_kib
     assert pq.ParquetFile(tmp_path / "mem" / "parquet" / "samples.parquet").metadata.num_rows == (
-        400_000
+        1_600_000
     )
     with (tmp_path / "mem" / "csv" / "samples.csv").open("rb") as f:
-        assert sum(1 for _ in f) == 400_001
+        assert sum(1 for _ in f) == 1_600_001
