@@ -43,7 +43,7 @@ import numpy as np
 from study.bench import generalisation
 from study.bench.follower_markdown import markdown
 from study.bench.generalisation import GeneralisationConfig, WindowBaseline
-from teleop_core.estimation.estimator import ForceEstimator, features_of
+from teleop_core.estimation.estimator import ForceEstimator, inputs_of
 from teleop_core.estimation.gru import GruConfig
 from teleop_core.estimation.gru_torch import train_gru
 from teleop_core.estimation.metrics import error_summary, tracking_score
@@ -207,11 +207,12 @@ def table_iii(
     estimator, _ = train_estimator(recording, gru_config, seed=config.seed)
     progress("Table III: training the direct-prediction GRU")
     direct, history, _, _ = train_gru(
-        features_of(recording), recording.f_ref, gru_config, seed=config.seed, target_kind="direct"
+        inputs_of(recording, estimator.gru), recording.f_ref, gru_config, seed=config.seed,
+        target_kind="direct",
     )
     progress("Table III: fitting the gradient-boosted baseline")
     baseline = WindowBaseline(gru_config.window, config.seed).fit(
-        features_of(recording), recording.f_ref - estimator.physics.force(
+        inputs_of(recording, estimator.gru), recording.f_ref - estimator.physics.force(
             recording.iq, recording.omega, recording.alpha
         )
     )
@@ -223,8 +224,8 @@ def table_iii(
     for k, (ax, (name, phantom)) in enumerate(zip(axes.ravel(), CASES.items(), strict=True)):
         rec = navigation_recording(config.case_seconds, config.seed + 100 + k, name, **phantom)
         result = estimator.predict(rec)
-        f_direct = direct.predict(features_of(rec))
-        f_baseline = result.f_physics + baseline.predict(features_of(rec))
+        f_direct = direct.predict(inputs_of(rec, direct))
+        f_baseline = result.f_physics + baseline.predict(inputs_of(rec, estimator.gru))
         pooled["baseline"].append(f_baseline)
         pooled["hybrid"].append(result.f_hybrid)
         pooled["final"].append(result.f_final)

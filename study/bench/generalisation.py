@@ -8,10 +8,10 @@ physics+GRU RMSE <= 0.7 x physics, and the final estimate (after the EKF) no wor
 than physics+GRU by more than 2 %, for every effect and seed.
 
 Beside the GRU, the regressor a user would try first: scikit-learn's
-`HistGradientBoostingRegressor` on the same standardised windows [I_q, theta_d,
-theta_dd] x T (flattened), learning the same residual of the same fitted eq. 1 on the
-same training recording (its own early stopping on a random tenth). The report says
-per run whether the GRU beats it.
+`HistGradientBoostingRegressor` on the same standardised windows of the GRU's inputs
+([I_q, theta_d, theta_dd] and the memory features, `memory.py`) x T (flattened),
+learning the same residual of the same fitted eq. 1 on the same training recording (its
+own early stopping on a random tenth). The report says per run whether the GRU beats it.
 
 Each run is appended to DIR/generalisation_runs.json as it finishes, so a long run
 that is cut off keeps what it measured.
@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from teleop_core.calibration.synthetic import JND_N, follower_recording
-from teleop_core.estimation.estimator import ForceEstimator, features_of
+from teleop_core.estimation.estimator import ForceEstimator, inputs_of
 from teleop_core.estimation.gru import GruConfig, make_windows
 from teleop_core.estimation.metrics import rmse
 from teleop_core.estimation.recording import FollowerRecording
@@ -105,9 +105,9 @@ def baseline_estimate(
 
     T = estimator.window
     residual = train.f_ref - physics_force(estimator.physics, estimator.extension, train)
-    baseline = WindowBaseline(T, seed).fit(features_of(train), residual)
+    baseline = WindowBaseline(T, seed).fit(inputs_of(train, estimator.gru), residual)
     f_physics = physics_force(estimator.physics, estimator.extension, test)[T - 1 :]
-    return f_physics + baseline.predict(features_of(test))
+    return f_physics + baseline.predict(inputs_of(test, estimator.gru))
 
 
 def run_one(

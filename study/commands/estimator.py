@@ -54,6 +54,14 @@ def estimator() -> None:
     help="SD of noise added to the standardised training inputs [default: GruConfig's].",
 )
 @click.option(
+    "--memory",
+    default="ema",
+    show_default=True,
+    help="Memory features beside the window: 'ema' (I_q and theta_d minus their moving "
+    "averages at 0.1, 0.3, 1 and 3 s), time constants in s such as 0.3,3, or 'none' (the "
+    "plain window). Kept in the model folder.",
+)
+@click.option(
     "--ekf-q",
     "ekf_q",
     type=click.FloatRange(min=0, min_open=True),
@@ -82,6 +90,7 @@ def train_cmd(
     weight_decay: float | None,
     dropout: float | None,
     input_noise: float | None,
+    memory: str,
     ekf_q: float | None,
     calibration: Path | None,
     force: bool,
@@ -94,6 +103,7 @@ def train_cmd(
     from teleop_core.estimation.estimator import train_estimator
     from teleop_core.estimation.extended import ExtendedPhysics
     from teleop_core.estimation.gru import GruConfig
+    from teleop_core.estimation.memory import MemorySpec
     from teleop_core.estimation.recording import FollowerRecording
     from teleop_core.recording_checks import check_varies
 
@@ -124,6 +134,7 @@ def train_cmd(
         learning_rate=learning_rate,
         max_epochs=epochs,
         patience=patience,
+        memory=MemorySpec.parse(memory),
         **regularisation,
     )
     with progress_bar(

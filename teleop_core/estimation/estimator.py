@@ -18,6 +18,7 @@ from teleop_core.estimation.model import (
     EstimateResult,
     ForceEstimator,
     features_of,
+    inputs_of,
 )
 from teleop_core.estimation.stream import (
     EST_FINAL,
@@ -41,6 +42,7 @@ __all__ = [
     "EstimateResult",
     "ForceEstimator",
     "features_of",
+    "inputs_of",
     "stream_estimate",
     "stream_push",
 ]

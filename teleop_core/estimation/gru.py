@@ -1,4 +1,6 @@
-"""The GRU stage: a sequence-to-one GRU over the last T samples of [I_q, theta_d, theta_dd].
+"""The GRU stage: a sequence-to-one GRU over the last T samples of [I_q, theta_d, theta_dd]
+and, by default, their memory features (`memory.py`: each input minus its moving
+averages, which carry what happened before the window).
 
 Training (PyTorch) follows seed 000, eqs. 3-4 and 12-13: the residual compensator
 learns r_t = F_ref,t - F_physics,t (eq. 13) by minimising the mean squared error of
@@ -34,9 +36,10 @@ from numpy.lib.stride_tricks import sliding_window_view
 from teleop_core._typing import Float1D, Float2D, Float3D
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.blocks import sample_blocks, windows_by_block
+from teleop_core.estimation.memory import MemorySpec, memory_inputs
 
 N_FEATURES = 3
-"""[I_q, theta_d, theta_dd] per time step."""
+"""[I_q, theta_d, theta_dd] per time step (the memory features come after them)."""
 
 
 PATIENCE = 10
@@ -72,6 +75,15 @@ class GruConfig:
     """Dropout on the last hidden state during training (0: none)."""
     input_noise: float = INPUT_NOISE
     """SD of Gaussian noise added to the standardised training inputs (0: none)."""
+    memory: MemorySpec = field(default_factory=MemorySpec)
+    """Memory features appended to each time step's inputs (`MemorySpec.none()`: the
+    paper's plain window). On by default: without them the GRU learned nothing that
+    transfers for hysteresis (issue 17)."""
+
+    @property
+    def n_inputs(self) -> int:
+        """GRU inputs per time step."""
+        return N_FEATURES + self.memory.n_features
 
     def __post_init__(self) -> None:
         for name in ("window", "hidden_size", "batch_size", "max_epochs", "blocks"):
@@ -124,7 +136,7 @@ class Standardisation:
 class GruWeights:
     """A trained network in float64 numpy arrays for the inference kernel."""
 
-    w_ih: Float2D  # (3H, 3), gates in torch's order r, z, n
+    w_ih: Float2D  # (3H, inputs), gates in torch's order r, z, n
     w_hh: Float2D  # (3H, H)
     b_ih: Float1D
     b_hh: Float1D
@@ -149,6 +161,11 @@ class GruWeights:
         with open(path, "wb") as f:
             np.savez(f, **{name: np.asarray(getattr(self, name)) for name in _WEIGHT_NAMES})
 
+    @property
+    def n_inputs(self) -> int:
+        """Inputs per time step the network takes."""
+        return int(self.w_ih.shape[1])
+
     @classmethod
     def load_npz(cls, path: Path) -> GruWeights:
         try:
@@ -164,7 +181,8 @@ class GruWeights:
             ) from None
         weights = cls(**arrays)
         hidden = weights.w_hh.shape[1] if weights.w_hh.ndim == 2 else -1
-        shapes = {"w_ih": (3 * hidden, N_FEATURES), "w_hh": (3 * hidden, hidden),
+        inputs = weights.w_ih.shape[1] if weights.w_ih.ndim == 2 else -1
+        shapes = {"w_ih": (3 * hidden, inputs), "w_hh": (3 * hidden, hidden),
                   "b_ih": (3 * hidden,), "b_hh": (3 * hidden,), "w_out": (hidden,)}
         for name, shape in shapes.items():
             if getattr(weights, name).shape != shape:
@@ -185,6 +203,7 @@ def _window_forward(x, w_ih, w_hh, b_ih, b_hh, w_out, b_out):  # type: ignore[no
     # allowed (not the no-NaN/no-inf assumptions), so LLVM vectorises the sums:
     # 25 us instead of 54 us per window of 20 at H = 32 on this machine.
     n_hidden = w_hh.shape[1]
+    n_in = w_ih.shape[1]
     h = np.zeros(n_hidden)
     gh = np.empty(3 * n_hidden)
     gi = np.empty(3 * n_hidden)
@@ -198,7 +217,13 @@ def _window_forward(x, w_ih, w_hh, b_ih, b_hh, w_out, b_out):  # type: ignore[no
             for k in range(n_hidden):
                 acc += w_hh[j, k] * h[k]
             gh[j] = acc
-            gi[j] = b_ih[j] + w_ih[j, 0] * x[t, 0] + w_ih[j, 1] * x[t, 1] + w_ih[j, 2] * x[t, 2]
+            if n_in == 3:  # the plain window, summed as models before memory features were
+                gi[j] = b_ih[j] + w_ih[j, 0] * x[t, 0] + w_ih[j, 1] * x[t, 1] + w_ih[j, 2] * x[t, 2]
+            else:
+                acc = b_ih[j]
+                for k in range(n_in):
+                    acc += w_ih[j, k] * x[t, k]
+                gi[j] = acc
         for j in range(n_hidden):
             r[j] = 1.0 / (1.0 + np.exp(-(gi[j] + gh[j])))
             z[j] = 1.0 / (1.0 + np.exp(-(gi[n_hidden + j] + gh[n_hidden + j])))
@@ -229,16 +254,36 @@ class GruModel:
     window: int
     target: str = "residual"
     """`residual` (eq. 3: learns F_ref - F_physics) or `direct` (learns F_ref)."""
+    memory: MemorySpec = field(default_factory=MemorySpec.none)
+    """The memory features the network was trained with (`inputs` builds them)."""
+
+    def __post_init__(self) -> None:
+        expected = N_FEATURES + self.memory.n_features
+        if self.weights.n_inputs != expected or len(self.standardisation.feature_mean) != expected:
+            raise TeleopInputError(
+                f"GRU weights take {self.weights.n_inputs} inputs per step and the "
+                f"standardisation {len(self.standardisation.feature_mean)}; the memory "
+                f"features ({self.memory.to_dict()['kind']}) give {expected}"
+            )
+
+    def inputs(self, t: Float1D, base: Float2D) -> Float2D:
+        """Per-sample network inputs from times `t` (n,) and [I_q, theta_d, theta_dd] (n, 3)."""
+        return memory_inputs(t, base, self.memory)
 
     def predict_window(self, window_std: Float2D) -> float:
-        """Output (N) for one standardised window of shape (T, 3)."""
+        """Output (N) for one standardised window of shape (T, inputs)."""
         w = self.weights
         y = _window_forward(window_std, w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out)
         s = self.standardisation
         return y * s.target_std + s.target_mean
 
     def predict(self, features: Float2D) -> Float1D:
-        """Outputs (N) for every full window of `features` (n, 3): shape (n - T + 1,)."""
+        """Outputs (N) for every full window of `features` (n, inputs), as `inputs` builds
+        them: shape (n - T + 1,)."""
+        if features.ndim != 2 or features.shape[1] != self.weights.n_inputs:
+            raise TeleopInputError(
+                f"inputs of shape {features.shape}; expected (n, {self.weights.n_inputs})"
+            )
         windows = np.ascontiguousarray(
             make_windows(self.standardisation.features(features), self.window)
         )
@@ -249,7 +294,7 @@ class GruModel:
 
 
 def make_windows(features: Float2D, window: int) -> Float3D:
-    """All windows of `window` consecutive rows: shape (n - window + 1, window, 3)."""
+    """All windows of `window` consecutive rows: shape (n - window + 1, window, columns)."""
     if len(features) < window:
         raise TeleopInputError(f"{len(features)} samples; expected at least the window of {window}")
     return sliding_window_view(features, (window, features.shape[1]))[:, 0]

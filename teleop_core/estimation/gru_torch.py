@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from teleop_core._typing import Float1D, Float2D
+from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.gru import (
     N_FEATURES,
     GruConfig,
@@ -29,11 +30,12 @@ from teleop_core.estimation.gru import (
 
 
 class GruNet(torch.nn.Module):
-    """GRU(3 -> H), last hidden state -> Linear(H -> 1): sequence to one (eq. 3)."""
+    """GRU(inputs -> H), last hidden state -> Linear(H -> 1): sequence to one (eq. 3).
+    `n_inputs` is 3 for the plain window, more with memory features (`memory.py`)."""
 
-    def __init__(self, hidden_size: int, dropout: float = 0.0) -> None:
+    def __init__(self, hidden_size: int, dropout: float = 0.0, n_inputs: int = N_FEATURES) -> None:
         super().__init__()
-        self.gru = torch.nn.GRU(N_FEATURES, hidden_size, batch_first=True)
+        self.gru = torch.nn.GRU(n_inputs, hidden_size, batch_first=True)
         # Dropout has no weights, so the state dict (and the numba kernel) is unchanged.
         self.dropout = torch.nn.Dropout(dropout)
         self.head = torch.nn.Linear(hidden_size, 1)
@@ -86,13 +88,20 @@ def train_gru(
     split: tuple[np.ndarray, np.ndarray] | None = None,
     progress: Callable[[int, float, float], None] | None = None,
 ) -> tuple[GruModel, TrainingHistory, np.ndarray, np.ndarray]:
-    """Train the compensator on per-sample `features` (n, 3) and `target` (n,), N.
+    """Train the compensator on per-sample `features` (n, config.n_inputs): [I_q,
+    theta_d, theta_dd] and the memory features of `config.memory` (`GruModel.inputs`
+    builds them), and `target` (n,), N.
 
     The target of window i is the value at its last sample. `split` gives the training
     and validation window indices (default: `block_split` with `seed`). Returns the
     model at the best validation epoch, the history (RMSE in N per epoch), and the
     indices of the training and validation windows.
     """
+    if features.ndim != 2 or features.shape[1] != config.n_inputs:
+        raise TeleopInputError(
+            f"training inputs of shape {features.shape}; expected (n, {config.n_inputs}) "
+            f"for memory features {config.memory.to_dict()['kind']}"
+        )
     torch.manual_seed(seed)
     generator = torch.Generator().manual_seed(seed)
     T = config.window
@@ -108,7 +117,7 @@ def train_gru(
     x_val = torch.tensor(windows[val_idx], dtype=torch.float32)
     y_val = torch.tensor(y[val_idx], dtype=torch.float32)
 
-    net = GruNet(config.hidden_size, config.dropout)
+    net = GruNet(config.hidden_size, config.dropout, config.n_inputs)
     # Fused Adam(W) and one thread: each step is a few small kernels, where thread
     # hand-offs cost more than they save (3.6 against 5.4 ms a step on two cores here)
     # and the fused update halves the optimiser's share. AdamW with weight_decay 0 is Adam.
@@ -124,7 +133,7 @@ def train_gru(
     finally:
         torch.set_num_threads(threads)
     net.load_state_dict(best_state)
-    model = GruModel(weights_from_net(net), std, T, target_kind)
+    model = GruModel(weights_from_net(net), std, T, target_kind, config.memory)
     return model, history, train_idx, val_idx
 
 

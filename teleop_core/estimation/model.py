@@ -12,8 +12,9 @@ fits all three stages to one bench recording; `save`/`load` keep them in a model
 | `gru.npz` | GRU weights as plain float64 arrays: what inference reads (no PyTorch) |
 | `gru.pt` | the same weights as a PyTorch state dict for `GruNet` (for further training;
   read only where a folder older than `gru.npz` has no `gru.npz`) |
-| `standardisation.json` | window, hidden size, input means/SDs, target scale, the
-  inputs' training range (`input_range`, `ranges.py`) |
+| `standardisation.json` | window, hidden size, input names, means/SDs, target scale,
+  the memory features (`memory`, `memory.py`; absent: none), the inputs' training range
+  (`input_range`, `ranges.py`) |
 | `ekf.json` | EKF noise covariances, and whether it passes the hybrid estimate through |
 | `summary.json` | train/validation RMSE of each stage and per regime, epochs, sample
   rate, data digest |
@@ -38,6 +39,7 @@ from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.ekf import EKF_STATE_SIZE, EkfSettings, filter_forces, settings_vector
 from teleop_core.estimation.extended import ExtendedPhysics, physics_force
 from teleop_core.estimation.gru import GruModel, GruWeights, Standardisation
+from teleop_core.estimation.memory import MemorySpec
 from teleop_core.estimation.ranges import InputRange
 from teleop_core.estimation.stream import (
     EST_FINAL,
@@ -62,6 +64,11 @@ RATE_TOLERANCE = 0.02
 def features_of(recording: FollowerRecording) -> Float2D:
     """Per-sample GRU inputs [I_q, theta_d, theta_dd], shape (n, 3)."""
     return np.column_stack([recording.iq, recording.omega, recording.alpha])
+
+
+def inputs_of(recording: FollowerRecording, gru: GruModel) -> Float2D:
+    """Per-sample inputs of `gru`: [I_q, theta_d, theta_dd] and its memory features."""
+    return gru.inputs(recording.t, features_of(recording))
 
 
 @dataclass
@@ -120,7 +127,7 @@ class ForceEstimator:
                 f"the estimator's window of {T}"
             )
         f_phys_all = physics_force(self.physics, self.extension, recording)
-        delta = self.gru.predict(features_of(recording))
+        delta = self.gru.predict(inputs_of(recording, self.gru))
         f_physics = f_phys_all[T - 1 :]
         f_hybrid = f_physics + delta  # F*_GRU = F_physics + dF_resistance   (eq. 4)
         f_final = filter_forces(
@@ -162,7 +169,8 @@ class ForceEstimator:
                     "target": self.gru.target,
                     "sample_rate_hz": self.sample_rate_hz,
                     "pipeline_rate_hz": self.pipeline_rate_hz,
-                    "features": ["iq", "omega", "alpha"],
+                    "features": list(self.gru.memory.feature_names),
+                    "memory": self.gru.memory.to_dict(),
                     **self.gru.standardisation.to_dict(),
                     **(
                         {"input_range": self.input_range.to_dict()}
@@ -207,7 +215,21 @@ class ForceEstimator:
                 float(meta["target_mean"]),
                 float(meta["target_std"]),
             )
-            gru = GruModel(_load_gru_weights(folder), std, int(meta["window"]), meta["target"])
+            # A folder saved before memory features has no `memory`: the plain window.
+            memory = MemorySpec.from_dict(meta.get("memory"))
+            weights = _load_gru_weights(folder)
+            names = list(meta.get("features", memory.feature_names))
+            if names != list(memory.feature_names) or weights.n_inputs != len(names) or len(
+                std.feature_mean
+            ) != len(names):
+                raise TeleopInputError(
+                    f"model folder {folder}: its network takes {weights.n_inputs} inputs per "
+                    f"step, its standardisation {len(std.feature_mean)} ({', '.join(names)}), "
+                    f"its memory features ({memory.to_dict()['kind']}) give "
+                    f"{len(memory.feature_names)}; expected them to agree, as "
+                    "`study estimator train` writes them"
+                )
+            gru = GruModel(weights, std, int(meta["window"]), meta["target"], memory)
             ekf = EkfSettings(**_read_json(folder / "ekf.json"))
             extension = None
             if (folder / "calibration.json").is_file():
@@ -253,8 +275,9 @@ class CausalEstimator:
         self.est = estimator
         std = estimator.gru.standardisation
         w = estimator.gru.weights
-        self.buffer = np.zeros((estimator.window, N_FEATURES))
-        self.state = np.zeros(STREAM_STATE_SIZE)
+        self.mem = estimator.gru.memory.kernel_table()
+        self.buffer = np.zeros((estimator.window, N_FEATURES + len(self.mem)))
+        self.state = np.zeros(STREAM_STATE_SIZE + len(self.mem))
         self.ekf_state = np.zeros(EKF_STATE_SIZE)
         self.mean = np.asarray(std.feature_mean, dtype=np.float64)
         self.std = np.asarray(std.feature_std, dtype=np.float64)
@@ -268,7 +291,7 @@ class CausalEstimator:
     def kernel_arrays(self) -> tuple:
         """The arrays in the order the loop's kernel unpacks them (`stream.NO_STREAM_ARRAYS`
         has dummies of the same types)."""
-        return (self.buffer, self.state, self.mean, self.std, self.physics, *self.weights,
+        return (self.buffer, self.state, self.mean, self.std, self.mem, self.physics, *self.weights,
                 self.target, self.ekf_state, self.ekf_settings)  # fmt: skip
 
     def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
@@ -276,7 +299,7 @@ class CausalEstimator:
         the 50 Hz pipeline sees every 100 Hz sample but estimates on every other one."""
         given = alpha is not None
         stream_push(
-            self.state, self.buffer, self.mean, self.std, t, iq, omega,
+            self.state, self.buffer, self.mean, self.std, self.mem, t, iq, omega,
             alpha if given else 0.0, given,
         )  # fmt: skip
 

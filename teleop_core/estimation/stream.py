@@ -1,6 +1,11 @@
 """The causal estimator's steps as numba functions over flat arrays (`CausalEstimator`
 in `model.py` holds the arrays): the closed loop's compiled kernel calls them too, so
-this module imports only the numeric stages, not the model folder's reader."""
+this module imports only the numeric stages, not the model folder's reader.
+
+The memory features (`memory.py`) are computed here too, before the GRU: their moving
+averages live in the stream state after its fixed fields, one per row of the memory
+table `mem` ([input column, 1 / tau]; no rows for a model without them), and each
+pushed sample's features fill the window's columns after [I_q, theta_d, theta_dd]."""
 
 from __future__ import annotations
 
@@ -9,11 +14,13 @@ import numpy as np
 
 from teleop_core.estimation.ekf import ekf_update
 from teleop_core.estimation.gru import _window_forward
+from teleop_core.estimation.memory import ema_step
 from teleop_core.follower.physics import force_at
 
 # stream state: samples pushed, last (t, omega) and whether there is one, latest sample
 S_COUNT, S_LAST_T, S_LAST_OMEGA, S_HAS_LAST, S_IQ, S_OMEGA, S_ALPHA = range(7)
 STREAM_STATE_SIZE = 7
+"""Fixed fields; the memory features' averages follow (`CausalEstimator` sizes `st`)."""
 # window columns (standardised features) and the target's de-standardisation
 X_IQ, X_OMEGA, X_ALPHA = range(3)
 N_FEATURES = 3
@@ -24,8 +31,8 @@ ESTIMATE_OUT = 3
 
 
 _Z1, _Z2 = np.zeros(1), np.zeros((1, 1))
-NO_STREAM_ARRAYS = (np.zeros((1, N_FEATURES)), _Z1, _Z1, _Z1, _Z1, _Z2, _Z2, _Z1, _Z1, _Z1, 0.0,
-                    _Z1, _Z1, _Z1)  # fmt: skip
+NO_STREAM_ARRAYS = (np.zeros((1, N_FEATURES)), _Z1, _Z1, _Z1, np.zeros((0, 2)), _Z1, _Z2, _Z2, _Z1,
+                    _Z1, _Z1, 0.0, _Z1, _Z1, _Z1)  # fmt: skip
 """`CausalEstimator.kernel_arrays()` without an estimator: dummies of the same types, so
 one compiled loop kernel serves both."""
 
@@ -36,15 +43,18 @@ def stream_push(
     buf: np.ndarray,
     mean: np.ndarray,
     std: np.ndarray,
+    mem: np.ndarray,
     t: float,
     iq: float,
     omega: float,
     alpha: float,
     alpha_given: bool,
 ) -> None:  # pragma: no cover - compiled; exercised through CausalEstimator
+    first = st[S_HAS_LAST] == 0.0
+    dt = 0.0 if first else t - st[S_LAST_T]
     if not alpha_given:
         # Backward difference, as FollowerRecording derives alpha.
-        alpha = 0.0 if st[S_HAS_LAST] == 0.0 else (omega - st[S_LAST_OMEGA]) / (t - st[S_LAST_T])
+        alpha = 0.0 if first else (omega - st[S_LAST_OMEGA]) / dt
     st[S_LAST_T], st[S_LAST_OMEGA], st[S_HAS_LAST] = t, omega, 1.0
     st[S_IQ], st[S_OMEGA], st[S_ALPHA] = iq, omega, alpha
     n = buf.shape[0]
@@ -52,9 +62,18 @@ def stream_push(
         buf[i, X_IQ], buf[i, X_OMEGA], buf[i, X_ALPHA] = (
             buf[i + 1, X_IQ], buf[i + 1, X_OMEGA], buf[i + 1, X_ALPHA],
         )  # fmt: skip
+        for j in range(mem.shape[0]):
+            buf[i, N_FEATURES + j] = buf[i + 1, N_FEATURES + j]
     buf[n - 1, X_IQ] = (iq - mean[X_IQ]) / std[X_IQ]
     buf[n - 1, X_OMEGA] = (omega - mean[X_OMEGA]) / std[X_OMEGA]
     buf[n - 1, X_ALPHA] = (alpha - mean[X_ALPHA]) / std[X_ALPHA]
+    for j in range(mem.shape[0]):
+        # x - EMA_tau(x), the average's first value the sample itself (memory.ema_residuals)
+        x = st[S_IQ + int(mem[j, 0])]
+        e = x if first else ema_step(st[STREAM_STATE_SIZE + j], x, dt, mem[j, 1])
+        st[STREAM_STATE_SIZE + j] = e
+        c = N_FEATURES + j
+        buf[n - 1, c] = (x - e - mean[c]) / std[c]
     st[S_COUNT] += 1.0
 
 

@@ -9,7 +9,9 @@ estimator that learned nothing; the rules here are the ones that answer it:
 - validation blocks represent the recording's speed bands (with reversals and rest),
   directions and load levels, and the summary gives the validation error per regime;
 - the GRU trains with the paper's settings plus the regularisation of `GruConfig`,
-  stopped early on that validation;
+  stopped early on that validation, on the window and, by default, the memory
+  features of `memory.py` (without them it learned nothing of hysteresis that carried
+  over to other blocks);
 - the EKF's Q and R are tuned on the training blocks and checked on the validation
   blocks; where the filter does not improve the hybrid estimate there, it is set to
   pass the hybrid estimate through (`EkfSettings.passthrough`, which the causal path
@@ -30,6 +32,7 @@ from teleop_core.estimation.ekf import EkfSettings, filter_forces, rest_variance
 from teleop_core.estimation.extended import ExtendedPhysics, physics_force
 from teleop_core.estimation.gru import GruConfig
 from teleop_core.estimation.gru_torch import train_gru
+from teleop_core.estimation.memory import memory_inputs
 from teleop_core.estimation.metrics import lag_samples, rmse
 from teleop_core.estimation.model import ForceEstimator, features_of
 from teleop_core.estimation.ranges import InputRange
@@ -200,8 +203,10 @@ def train_estimator(
     f_phys_all = physics_force(physics, extension, recording)
     residual = recording.f_ref - f_phys_all  # r_t = F_ref - F_physics   (eq. 13)
     features = features_of(recording)
+    # [I_q, theta_d, theta_dd] and the memory features of config.memory (memory.py)
+    inputs = memory_inputs(recording.t, features, config.memory)
     gru, history, _, _ = train_gru(
-        features, residual, config, seed=seed, split=(train_idx, val_idx), progress=progress
+        inputs, residual, config, seed=seed, split=(train_idx, val_idx), progress=progress
     )
     train_samples = np.unique((train_idx[:, None] + np.arange(T)).ravel())
     input_range = InputRange.fit(features[train_samples])

@@ -184,7 +184,9 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         packet = np.zeros(DELIVERED_WIDTH)
         q_m, ls_m, lp_m, q_f, ls_f, lp_f, pool, pos = links
         # the estimator's arrays, in `CausalEstimator.kernel_arrays` order
-        buf, st, mean, std, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v = est
+        buf, st, mean, std, mem, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v = (
+            est
+        )
         for k in range(n_ticks):
             # 0'. fast path: packets arriving over the in-kernel link for this tick
             if fast:
@@ -287,7 +289,7 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
                 if mp[M_HAS_EST] != 0.0:
                     iq = row[LOG_IQ_FILT] + noise[int(loop[L_NOISE_POS])]
                     loop[L_NOISE_POS] += 1.0
-                    stream_push(st, buf, mean, std, t, iq, row[LOG_OMEGA_EST], 0.0, False)
+                    stream_push(st, buf, mean, std, mem, t, iq, row[LOG_OMEGA_EST], 0.0, False)
                     if estimating:
                         ok = stream_estimate(
                             st, buf, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target,

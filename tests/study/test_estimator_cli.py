@@ -56,7 +56,10 @@ def test_train_writes_the_model_folder_with_a_summary(model_dir: Path) -> None:
         == {"physics", "hybrid", "final"}
     )
     std = json.loads((model_dir / "standardisation.json").read_text())
-    assert len(std["feature_mean"]) == len(std["feature_std"]) == 3
+    # [I_q, theta_d, theta_dd] and the default memory features: 2 inputs x 4 time constants
+    assert len(std["feature_mean"]) == len(std["feature_std"]) == 3 + 8
+    assert std["memory"]["kind"] == "ema_residual"
+    assert std["features"][:4] == ["iq", "omega", "alpha", "iq-ema0.1s"]
 
 
 def test_run_writes_one_estimate_per_full_window(
@@ -91,6 +94,43 @@ def test_run_flags_the_estimates_whose_inputs_leave_the_training_range(
     assert (pred["in_range"][beyond] == 0).all()
     share = 100 * (1 - pred["in_range"].mean())
     assert f"outside the training range: {share:.1f} % of the estimates" in capsys.readouterr().out
+
+
+def test_memory_none_trains_the_plain_window_and_runs(
+    recording_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "plain"
+    argv = ["estimator", "train", str(recording_csv), "--out", str(out), "--window", "6",
+            "--epochs", "1", "--hidden-size", "4", "--memory", "none"]  # fmt: skip
+    assert main(argv) == 0
+    std = json.loads((out / "standardisation.json").read_text())
+    assert std["memory"]["kind"] == "none"
+    assert std["features"] == ["iq", "omega", "alpha"] and len(std["feature_mean"]) == 3
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["config"]["memory"]["time_constants_s"] == []
+    pred = tmp_path / "pred.csv"
+    assert main(["estimator", "run", str(out), str(recording_csv), "--out", str(pred)]) == 0
+    assert len(pd.read_csv(pred)) == len(pd.read_csv(recording_csv)) - 6 + 1
+    line = one_error_line(capsys, [*argv[:-1], "fast", "--force"])
+    assert "--memory 'fast'" in line
+
+
+def test_a_model_whose_memory_and_weights_disagree_is_one_line(
+    model_dir: Path, recording_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import shutil
+
+    broken = tmp_path / "m"
+    shutil.copytree(model_dir, broken)
+    std = json.loads((broken / "standardisation.json").read_text())
+    std["memory"] = {"kind": "none", "columns": [], "time_constants_s": []}
+    (broken / "standardisation.json").write_text(json.dumps(std))
+    pred = tmp_path / "pred.csv"
+    line = one_error_line(
+        capsys, ["estimator", "run", str(broken), str(recording_csv), "--out", str(pred)]
+    )
+    assert "its network takes 11 inputs per step" in line
+    assert not pred.exists()
 
 
 def test_bad_recording_is_one_line_and_writes_nothing(

@@ -13,10 +13,11 @@ from teleop_core.estimation.physics import PhysicsParams
 from teleop_core.estimation.recording import FollowerRecording
 
 
-def test_inference_kernel_matches_torch_gru() -> None:
+@pytest.mark.parametrize("n_inputs", [3, 11])  # the plain window; with memory features
+def test_inference_kernel_matches_torch_gru(n_inputs: int) -> None:
     torch.manual_seed(3)
-    net = GruNet(hidden_size=12).double()
-    x = torch.randn(50, 20, 3, dtype=torch.float64)
+    net = GruNet(hidden_size=12, n_inputs=n_inputs).double()
+    x = torch.randn(50, 20, n_inputs, dtype=torch.float64)
     with torch.no_grad():
         expected = net(x).numpy()
     w = weights_from_net(net)
