@@ -161,7 +161,6 @@ class StagedTableFile:
         self.path = path
         self._out = AtomicFile(path)
         self.tmp = self._out.tmp
-        self.fmt = fmt
         self.rows = 0
         self._parquet: pq.ParquetWriter | None = None
         self._sink: pa.NativeFile | None = None
