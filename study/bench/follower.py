@@ -225,7 +225,7 @@ def table_iii(
         rec = navigation_recording(config.case_seconds, config.seed + 100 + k, name, **phantom)
         result = estimator.predict(rec)
         f_direct = direct.predict(inputs_of(rec, direct))
-        f_baseline = result.f_physics + baseline.predict(inputs_of(rec, estimator.gru))
+        f_baseline = result.f_model + baseline.predict(inputs_of(rec, estimator.gru))
         pooled["baseline"].append(f_baseline)
         pooled["hybrid"].append(result.f_hybrid)
         pooled["final"].append(result.f_final)

@@ -77,6 +77,16 @@ def estimator() -> None:
     "the effects found) replaces eq. 1 as the physics stage, and the GRU learns what it "
     "still misses.",
 )
+@click.option(
+    "--effects",
+    type=click.Choice(["auto", "none"]),
+    default="auto",
+    show_default=True,
+    help="auto: first look for the physical effects eq. 1 lacks (the calibration loop of "
+    "`study calibrate`, on this recording); those it adds precede the GRU, which learns the "
+    "rest. A model with effects runs over recordings (`study estimator run`), not in the "
+    "loop: none gives eq. 1 + GRU, which the loop can run.",
+)
 @click.option("--force", is_flag=True, help="Replace an existing model folder.")
 def train_cmd(
     recording: Path,
@@ -93,6 +103,7 @@ def train_cmd(
     memory: str,
     ekf_q: float | None,
     calibration: Path | None,
+    effects: str,
     force: bool,
 ) -> None:
     """Fit eq. 1 to RECORDING, train the GRU on its residual, set up the EKF.
@@ -155,13 +166,20 @@ def train_cmd(
             )
 
         model, summary = train_estimator(
-            data, config, seed=seed, ekf_q_n2=ekf_q, progress=report, extension=extension
+            data,
+            config,
+            seed=seed,
+            ekf_q_n2=ekf_q,
+            progress=report,
+            extension=extension,
+            effects=effects == "auto",
         )
     model.save(out_dir, summary.to_dict())
     v = summary.validation_rmse_n
+    with_effects = f"eq. 1 + effects {v['effects']:.4f} N, " if "effects" in v else ""
     click.echo(
         f"{out_dir}: best epoch {summary.best_epoch} of {summary.epochs_run}; validation RMSE "
-        f"physics {v['physics']:.4f} N, physics+GRU {v['hybrid']:.4f} N, "
+        f"physics {v['physics']:.4f} N, {with_effects}physics+GRU {v['hybrid']:.4f} N, "
         f"after EKF {v['final']:.4f} N"
     )
     _echo_regimes("validation RMSE per regime", summary.validation_rmse_by_regime_n)
@@ -183,7 +201,10 @@ def _echo_regimes(title: str, table: dict[str, dict[str, float]]) -> None:
 @click.argument("model_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
 @file_option(
-    "--out", "out_csv", "Predictions CSV: t, f_ref, f_physics, f_hybrid, f_final, in_range."
+    "--out",
+    "out_csv",
+    "Predictions CSV: t, f_ref, f_physics, f_hybrid, f_final, in_range (and f_effects, eq. 1 "
+    "with the effects training found, for a model with effects).",
 )
 def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
     """Estimate the proximal force over RECORDING with the model in MODEL_DIR.
@@ -206,9 +227,14 @@ def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
             f"note: {recording.name} was sampled at {data.sample_rate_hz:.6g} Hz; resampled to the "
             f"model's {model.sample_rate_hz:.6g} Hz"
         )
+    with_effects = (
+        ""
+        if result.f_effects is None
+        else f"eq. 1 + effects {rmse(result.f_effects, result.f_ref):.4f} N, "
+    )
     click.echo(
         f"{out_csv}: {len(result.t)} estimates; RMSE against f_ref: physics "
-        f"{rmse(result.f_physics, result.f_ref):.4f} N, physics+GRU "
+        f"{rmse(result.f_physics, result.f_ref):.4f} N, {with_effects}physics+GRU "
         f"{rmse(result.f_hybrid, result.f_ref):.4f} N, "
         f"after EKF {rmse(result.f_final, result.f_ref):.4f} N"
     )

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
 from teleop_core.follower.physics import REGRESSORS, PhysicsParams, from_coefficients
@@ -30,6 +32,9 @@ if TYPE_CHECKING:
 # calibrated model is read or run, not by every process that loads the estimator.
 
 
+STAGES = ("physics", "hybrid")
+
+
 @dataclass
 class ExtendedPhysics:
     """A calibrated follower model as the estimator's physics stage."""
@@ -39,6 +44,15 @@ class ExtendedPhysics:
     """Eq. 1's parameters as refitted together with the effects."""
     source: str = ""
     """Where the calibration came from (the report's file name)."""
+    stage: str = "physics"
+    """Where the effects stand: `physics` (a `study calibrate` report given to training:
+    they replace eq. 1, and F_physics is the calibrated model) or `hybrid` (found by
+    training itself, `find_effects`: F_physics stays eq. 1 fitted alone, and the effects
+    are the first, physical part of the correction that the GRU completes)."""
+    t_origin_s: float | None = None
+    """The training recording's first time stamp, when known: an effect of the time
+    since the start (drift) counts from it on a later recording of the same clock (the
+    rest of a recording), and from that recording's own start otherwise."""
 
     @property
     def families(self) -> list[str]:
@@ -51,10 +65,28 @@ class ExtendedPhysics:
         model = self.calibrated.model
         if not isinstance(model, FollowerBase):  # pragma: no cover - from_dict checks it
             raise TeleopInputError("the calibration is not of the follower model")
-        return self.calibrated.predict(model.data(recording))
+        origin = self.t_origin_s
+        if origin is None or not recording.t[0] > origin:
+            return self.calibrated.predict(model.data(recording))
+        # a later part of the training's clock: one sample (a copy of the first) at the
+        # origin, so that time since the start counts from there; its estimate is dropped
+        first = recording.slice(0, 1)
+        joined = FollowerRecording(
+            *(
+                np.concatenate([[origin] if k == "t" else getattr(first, k), getattr(recording, k)])
+                for k in ("t", "iq", "theta", "omega", "f_ref", "alpha")
+            ),
+            name=recording.name,
+        )
+        return self.calibrated.predict(model.data(joined))[1:]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"source": self.source, "calibrated_model": self.calibrated.to_dict()}
+        return {
+            "source": self.source,
+            "stage": self.stage,
+            "t_origin_s": self.t_origin_s,
+            "calibrated_model": self.calibrated.to_dict(),
+        }
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "") -> ExtendedPhysics:
@@ -81,7 +113,20 @@ class ExtendedPhysics:
             calibrated.model.wheel_radius_m,
             calibrated.model.sign_width_rad_s,
         )
-        return cls(calibrated, base, d.get("source", source))
+        stage = d.get("stage", "physics")
+        if stage not in STAGES:
+            raise TeleopInputError(
+                f"calibration {source or 'report'} has stage {stage!r}; expected one of "
+                + ", ".join(STAGES)
+            )
+        origin = d.get("t_origin_s")
+        return cls(
+            calibrated,
+            base,
+            d.get("source", source),
+            stage,
+            None if origin is None else float(origin),
+        )
 
     @classmethod
     def read(cls, path: str | Path) -> ExtendedPhysics:
@@ -102,3 +147,33 @@ def physics_force(
     if extension is not None:
         return extension.force(recording)
     return physics.force(recording.iq, recording.omega, recording.alpha)
+
+
+def find_effects(
+    recording: FollowerRecording,
+    *,
+    wheel_radius_m: float,
+    held_out_fraction: float = 0.25,
+) -> tuple[ExtendedPhysics | None, dict[str, Any]]:
+    """Look for the effects eq. 1 lacks in a training recording (issue 17): the
+    calibration loop of `study calibrate --model follower` (its library of physical
+    effects and the undeclared terms it discovers, each kept only when it cuts the error
+    of a chronologically held-out end of the recording), run by training itself.
+
+    A window of [I_q, theta_d, theta_dd] cannot see an effect that depends on time since
+    the start (a winding heating up) or on a long history, so a GRU cannot learn it, and
+    what it learns of a slow effect does not carry past the end of its training data;
+    a physical term with its parameter fitted does. Returns the effects as the hybrid
+    stage's first part (None when the loop adds none) and the loop's report.
+    """
+    from teleop_core.calibration.loop import Calibrator
+    from teleop_core.calibration.models import FollowerBase
+
+    model = FollowerBase(wheel_radius_m=wheel_radius_m)
+    calibrator = Calibrator(model, held_out_fraction=held_out_fraction)
+    report = calibrator.fit(model.data(recording)).report()
+    if not report["effects_added"] and not report["discovered_terms"]:
+        return None, report
+    found = ExtendedPhysics.from_dict(report, "found in training")
+    found.stage, found.t_origin_s = "hybrid", float(recording.t[0])
+    return found, report

@@ -19,7 +19,8 @@ fits all three stages to one bench recording; `save`/`load` keep them in a model
 | `summary.json` | train/validation RMSE of each stage and per regime, epochs, sample
   rate, data digest |
 | `calibration.json` | only for a calibrated model: eq. 1 plus the effects of a
-  `study calibrate` report, the physics stage in place of eq. 1 (`extended.py`) |
+  `study calibrate` report, the physics stage in place of eq. 1, or the effects
+  training found itself, before the GRU (`stage`, `extended.py`) |
 """
 
 from __future__ import annotations
@@ -82,12 +83,23 @@ class EstimateResult:
     f_final: Float1D
     in_range: np.ndarray | None = None
     """Whether each sample's inputs lie inside the training range (None: range unknown)."""
+    f_effects: Float1D | None = None
+    """Eq. 1 with the effects training found, before the GRU (None: none were found)."""
+
+    @property
+    def f_model(self) -> Float1D:
+        """What the GRU corrects and the EKF fuses: eq. 1, with any effects."""
+        return self.f_physics if self.f_effects is None else self.f_effects
 
     def to_frame(self) -> pd.DataFrame:
-        """Columns t, f_ref, f_physics, f_hybrid, f_final and, when known, in_range (0/1)."""
-        frame = pd.DataFrame({k: v for k, v in asdict(self).items() if k != "in_range"})
+        """Columns t, f_ref, f_physics, f_hybrid, f_final and, when known, in_range (0/1)
+        and f_effects (eq. 1 with the effects training found)."""
+        optional = ("in_range", "f_effects")
+        frame = pd.DataFrame({k: v for k, v in asdict(self).items() if k not in optional})
         if self.in_range is not None:
             frame["in_range"] = self.in_range.astype(int)
+        if self.f_effects is not None:
+            frame["f_effects"] = self.f_effects
         return frame
 
 
@@ -126,18 +138,28 @@ class ForceEstimator:
                 f"recording {recording.name} has {len(recording)} samples; expected at least "
                 f"the estimator's window of {T}"
             )
-        f_phys_all = physics_force(self.physics, self.extension, recording)
+        # what the GRU corrects: eq. 1, or eq. 1 with the effects of a calibration
+        f_model = physics_force(self.physics, self.extension, recording)[T - 1 :]
         delta = self.gru.predict(inputs_of(recording, self.gru))
-        f_physics = f_phys_all[T - 1 :]
-        f_hybrid = f_physics + delta  # F*_GRU = F_physics + dF_resistance   (eq. 4)
+        f_physics, f_effects = f_model, None
+        if self.extension is not None and self.extension.stage == "hybrid":
+            # effects found in training are part of the correction: F_physics is eq. 1
+            f_physics, f_effects = physics_force(self.physics, None, recording)[T - 1 :], f_model
+        f_hybrid = f_model + delta  # F*_GRU = F_physics + dF_resistance   (eq. 4)
         f_final = filter_forces(
-            self.ekf, self.physics, self.dt_s, f_physics, f_hybrid, recording.omega[T - 1 :]
+            self.ekf, self.physics, self.dt_s, f_model, f_hybrid, recording.omega[T - 1 :]
         )
         in_range = None
         if self.input_range is not None:
             in_range = self.input_range.contains(features_of(recording)[T - 1 :])
         return EstimateResult(
-            recording.t[T - 1 :], recording.f_ref[T - 1 :], f_physics, f_hybrid, f_final, in_range
+            recording.t[T - 1 :],
+            recording.f_ref[T - 1 :],
+            f_physics,
+            f_hybrid,
+            f_final,
+            in_range,
+            f_effects,
         )
 
     def stream(self) -> CausalEstimator:
@@ -145,7 +167,8 @@ class ForceEstimator:
             effects = ", ".join(self.extension.families)
             raise TeleopInputError(
                 f"this estimator's physics stage is calibrated ({effects}): its effects "
-                "need the whole recording, so it runs with predict(), not one sample at a time"
+                "need the whole recording, so it runs with predict(), not one sample at a "
+                "time; for the loop, train with `--effects none`"
             )
         return CausalEstimator(self)
 
@@ -219,9 +242,11 @@ class ForceEstimator:
             memory = MemorySpec.from_dict(meta.get("memory"))
             weights = _load_gru_weights(folder)
             names = list(meta.get("features", memory.feature_names))
-            if names != list(memory.feature_names) or weights.n_inputs != len(names) or len(
-                std.feature_mean
-            ) != len(names):
+            if (
+                names != list(memory.feature_names)
+                or weights.n_inputs != len(names)
+                or len(std.feature_mean) != len(names)
+            ):
                 raise TeleopInputError(
                     f"model folder {folder}: its network takes {weights.n_inputs} inputs per "
                     f"step, its standardisation {len(std.feature_mean)} ({', '.join(names)}), "

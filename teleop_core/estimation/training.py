@@ -29,7 +29,7 @@ import numpy as np
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.ekf import EkfSettings, filter_forces, rest_variances
-from teleop_core.estimation.extended import ExtendedPhysics, physics_force
+from teleop_core.estimation.extended import ExtendedPhysics, find_effects, physics_force
 from teleop_core.estimation.gru import GruConfig
 from teleop_core.estimation.gru_torch import train_gru
 from teleop_core.estimation.memory import memory_inputs
@@ -120,6 +120,21 @@ def tune_process_noise(
     return best[1], best[2]
 
 
+def _effects_note(found: ExtendedPhysics | None, report: dict[str, Any]) -> str:
+    """What the effect search (`find_effects`) did, for the summary's notes."""
+    held = report["held_out"]
+    where = (
+        f"on the held-out end of the training recording ({held['start_s']:.1f}-"
+        f"{held['end_s']:.1f} s): RMSE {report['rmse_before']:.4f} N with eq. 1"
+    )
+    if found is None:
+        return f"effects: none added to eq. 1 {where}; the GRU learns the whole residual"
+    return (
+        f"effects found and added to eq. 1 before the GRU: {', '.join(found.families)} "
+        f"{where}, {report['rmse_after']:.4f} N with them (verdict {report['verdict']})"
+    )
+
+
 def _ekf_base(
     recording: FollowerRecording, train_mask: np.ndarray, residual: Float1D, gru_val_rmse: float
 ) -> tuple[EkfSettings, bool]:
@@ -150,6 +165,7 @@ def train_estimator(
     ekf_q_n2: float | None = None,
     progress: Callable[[int, float, float], None] | None = None,
     extension: ExtendedPhysics | None = None,
+    effects: bool = False,
 ) -> tuple[ForceEstimator, TrainingSummary]:
     """Fit eq. 1, train the GRU on its residual, and set up the EKF, on one recording.
 
@@ -159,7 +175,10 @@ def train_estimator(
     only; the validation blocks choose the GRU's epoch and whether the EKF is used.
     `extension` (a `study calibrate` report, `extended.py`) replaces eq. 1 by the
     calibrated model, whose eq. 1 part also serves the EKF, and the GRU learns what
-    that model still misses.
+    that model still misses. `effects` (without `extension` or `physics`) runs the
+    calibration loop on the recording first (`extended.find_effects`): the effects it
+    adds to eq. 1 are the first part of the correction, the GRU learns the rest, and
+    F_physics stays eq. 1 fitted alone.
     """
     config = config or GruConfig()
     notes: list[str] = []
@@ -187,7 +206,10 @@ def train_estimator(
         )
     train_mask = np.zeros(len(recording), bool)
     train_mask[train_idx + T - 1] = True
-    if extension is not None:
+    if extension is None and physics is None and effects:
+        extension, report = find_effects(recording, wheel_radius_m=wheel_radius_m)
+        notes.append(_effects_note(extension, report))
+    if extension is not None and extension.stage == "physics":
         physics = extension.base
         notes.append(
             f"physics stage calibrated by {extension.source or 'a report'}: eq. 1 + "
@@ -218,16 +240,14 @@ def train_estimator(
     omega = recording.omega[T - 1 :]
 
     def filtered(settings: EkfSettings) -> Float1D:
-        return filter_forces(
-            settings, physics, 1.0 / rate, result.f_physics, result.f_hybrid, omega
-        )
+        return filter_forces(settings, physics, 1.0 / rate, result.f_model, result.f_hybrid, omega)
 
     if ekf_q_n2 is None:
         settings, lag = tune_process_noise(
             physics,
             base,
             1.0 / rate,
-            result.f_physics[train_idx],
+            result.f_model[train_idx],
             result.f_hybrid[train_idx],
             omega[train_idx],
             result.f_ref[train_idx],
@@ -262,7 +282,11 @@ def train_estimator(
             "physics": rmse(result.f_physics[rows], result.f_ref[rows]),
             "hybrid": rmse(result.f_hybrid[rows], result.f_ref[rows]),
             "final": rmse(result.f_final[rows], result.f_ref[rows]),
-        }
+        } | (
+            {}
+            if result.f_effects is None
+            else {"effects": rmse(result.f_effects[rows], result.f_ref[rows])}
+        )
 
     val_masks = {label: m[T - 1 :][val_idx] for label, m in masks.items()}
     summary = TrainingSummary(

@@ -39,6 +39,8 @@ def model_dir(recording_csv: Path, tmp_path_factory: pytest.TempPathFactory) -> 
             "8",
             "--seed",
             "1",
+            "--effects",
+            "none",
         ]
     )
     assert status == 0
