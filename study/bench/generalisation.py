@@ -59,7 +59,7 @@ class GeneralisationConfig:
     seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
     gru: GruConfig = field(default_factory=GruConfig)
     """The estimator's settings: the defaults, as a user would train."""
-    effects: bool = True
+    find_effects: bool = True
     """Look for effects eq. 1 lacks before the GRU (`study estimator train`'s default,
     `--effects auto`); False: the GRU alone corrects eq. 1 (`--effects none`)."""
 
@@ -138,7 +138,7 @@ def run_one(
         )
 
     estimator, summary = train_estimator(
-        train, config.gru, seed=seed, progress=epoch_done, effects=config.effects
+        train, config.gru, seed=seed, progress=epoch_done, effects=config.find_effects
     )
     seconds = time.perf_counter() - start
     result = estimator.predict(test)
