@@ -17,7 +17,8 @@ DEFAULT_MODEL_DIR = Path(__file__).resolve().parent.parent / "models" / "followe
 
 
 def load_estimator(model_dir: Path | None = None) -> ForceEstimator:
-    """The estimator in `model_dir`, or the shipped one."""
+    """The estimator in `model_dir`, or the shipped one, checked to run in the loop
+    (one sample at a time) before any simulation is prepared."""
     folder = model_dir or DEFAULT_MODEL_DIR
     missing = [name for name in MODEL_FILES if not (folder / name).is_file()]
     if missing:
@@ -25,4 +26,6 @@ def load_estimator(model_dir: Path | None = None) -> ForceEstimator:
             f"estimator folder {folder} lacks {', '.join(missing)}; expected a folder "
             "written by `study estimator train`"
         )
-    return ForceEstimator.load(folder)
+    estimator = ForceEstimator.load(folder)
+    estimator.check_streams()
+    return estimator

@@ -163,6 +163,12 @@ class ForceEstimator:
         )
 
     def stream(self) -> CausalEstimator:
+        self.check_streams()
+        return CausalEstimator(self)
+
+    def check_streams(self) -> None:
+        """Raise (one line) unless the model can run one sample at a time, as the loop
+        does: a model whose physics stage or correction holds calibrated effects cannot."""
         if self.extension is not None:
             effects = ", ".join(self.extension.families)
             raise TeleopInputError(
@@ -170,7 +176,6 @@ class ForceEstimator:
                 "need the whole recording, so it runs with predict(), not one sample at a "
                 "time; for the loop, train with `--effects none`"
             )
-        return CausalEstimator(self)
 
     def save(self, folder: Path, summary: dict[str, Any]) -> None:
         """Write the model folder, all or nothing (through a temporary sibling folder)."""
