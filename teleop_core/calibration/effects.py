@@ -32,9 +32,9 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core._typing import Float1D, Float2D
 from teleop_core.follower.physics import PhysicsParams
 
@@ -52,7 +52,7 @@ def smooth_sign(speed: Float1D, width_rad_s: float = SIGN_SPEED_RAD_S) -> Float1
     return np.tanh(speed / width_rad_s)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def play_operator(x: np.ndarray, half_width: float) -> np.ndarray:  # pragma: no cover
     """Direction state h in [-1, 1] of a play (backlash) operator on x.
 

@@ -22,9 +22,9 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
 from teleop_core.follower.physics import PhysicsParams, gradient_at
@@ -99,7 +99,7 @@ def settings_vector(s: EkfSettings) -> np.ndarray:
     return sv
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def ekf_update(
     state: np.ndarray,
     sv: np.ndarray,

@@ -29,10 +29,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numba
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from teleop_core._jit import njit
 from teleop_core._typing import Float1D, Float2D, Float3D
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.blocks import sample_blocks, windows_by_block
@@ -195,7 +195,7 @@ class GruWeights:
 _WEIGHT_NAMES = ("w_ih", "w_hh", "b_ih", "b_hh", "w_out", "b_out")
 
 
-@numba.njit(cache=True, fastmath={"reassoc", "contract", "arcp", "nsz", "afn"})
+@njit(cache=True, fastmath={"reassoc", "contract", "arcp", "nsz", "afn"})
 def _window_forward(x, w_ih, w_hh, b_ih, b_hh, w_out, b_out):  # type: ignore[no-untyped-def]  # pragma: no cover
     # h' = (1 - z) n + z h, with r, z = sigma(W_i x + b_i + W_h h + b_h) and
     # n = tanh(W_in x + b_in + r (W_hn h + b_hn))   (torch.nn.GRU's equations)
@@ -237,7 +237,7 @@ def _window_forward(x, w_ih, w_hh, b_ih, b_hh, w_out, b_out):  # type: ignore[no
     return y
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _batch_forward(windows, w_ih, w_hh, b_ih, b_hh, w_out, b_out):  # type: ignore[no-untyped-def]  # pragma: no cover
     out = np.empty(windows.shape[0])
     for i in range(windows.shape[0]):

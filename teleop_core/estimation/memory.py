@@ -29,9 +29,9 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core._typing import Float1D, Float2D
 from teleop_core.errors import TeleopInputError
 
@@ -133,13 +133,13 @@ class MemorySpec:
         return cls(taus)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def ema_step(e: float, x: float, dt: float, inv_tau: float) -> float:  # pragma: no cover
     # e_k = e_{k-1} + (1 - exp(-dt_k / tau)) (x_k - e_{k-1})
     return e + (1.0 - math.exp(-dt * inv_tau)) * (x - e)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _ema_residuals(t, base, table, out):  # type: ignore[no-untyped-def]  # pragma: no cover
     for j in range(table.shape[0]):
         col, inv_tau = int(table[j, 0]), table[j, 1]

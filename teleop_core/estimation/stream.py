@@ -9,9 +9,9 @@ pushed sample's features fill the window's columns after [I_q, theta_d, theta_dd
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core.estimation.ekf import ekf_update
 from teleop_core.estimation.gru import _window_forward
 from teleop_core.estimation.memory import ema_step
@@ -37,7 +37,7 @@ NO_STREAM_ARRAYS = (np.zeros((1, N_FEATURES)), _Z1, _Z1, _Z1, np.zeros((0, 2)), 
 one compiled loop kernel serves both."""
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def stream_push(
     st: np.ndarray,
     buf: np.ndarray,
@@ -77,7 +77,7 @@ def stream_push(
     st[S_COUNT] += 1.0
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def stream_estimate(
     st: np.ndarray,
     buf: np.ndarray,

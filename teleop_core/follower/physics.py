@@ -20,9 +20,9 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core._typing import Float1D, Float2D
 from teleop_core.errors import TeleopInputError
 from teleop_core.follower.params import FollowerPlantParams
@@ -154,7 +154,7 @@ def from_coefficients(
     )
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def force_at(pv: np.ndarray, iq: float, omega: float, alpha: float) -> float:  # pragma: no cover
     """Eq. 1 for one sample, `pv` = `PhysicsParams.vector()` (the streaming path)."""
     # F = (K_t I_q - J theta_dd - b theta_d - tau_c tanh(theta_d / w)) / r + F_0   (eq. 1)
@@ -167,7 +167,7 @@ def force_at(pv: np.ndarray, iq: float, omega: float, alpha: float) -> float:  #
     return torque / pv[PV_R] + pv[PV_F0]
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def gradient_at(pv: np.ndarray, omega: float, dt_s: float) -> tuple[float, float]:
     """dF/dI_q and dF/dtheta_d (`PhysicsParams.force_gradient`)."""
     # dF/dtheta_d = -(b + tau_c sech^2(theta_d / w) / w + J / dt) / r, since

@@ -26,9 +26,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
 from teleop_core.follower.params import FollowerControlParams, FollowerPlantParams
@@ -106,7 +106,7 @@ def _param_vector(plant: FollowerPlantParams, control: FollowerControlParams) ->
     return p
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def follower_tick(
     state: np.ndarray,
     p: np.ndarray,
@@ -183,7 +183,7 @@ def follower_tick(
     out[F_IQ_CMD] = iq_cmd
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _advance(
     state: np.ndarray,
     p: np.ndarray,

@@ -277,10 +277,13 @@ class TeleopLoop:
                     loop = self.loop
                     r = self.config.plant.wheel_radius_m
                     kv = self.config.haptics.speed_gain_m_s_per_rad
-                    speed = rate_command(loop[K.L_THETA_Q_PREV], kv) / r
+                    # the Python forms (plain arithmetic, the same float64 results): a
+                    # call from here needs no numba (the kernel may be compiled ahead of
+                    # time, `aot.py`), and a scalar Python call is cheaper than a dispatch
+                    speed = rate_command.py_func(loop[K.L_THETA_Q_PREV], kv) / r
                     q_f, ls_f, lp_f = self._links[K.LK_Q_F : K.LK_LP_F + 1]
-                    kernel_send(q_f, ls_f, lp_f, self._pool, self._pool_pos, self.t_s, speed,
-                                loop[K.L_ROT_ACTION])  # fmt: skip
+                    kernel_send.py_func(q_f, ls_f, lp_f, self._pool, self._pool_pos, self.t_s,
+                                        speed, loop[K.L_ROT_ACTION])  # fmt: skip
                     c.commands_sent += 1
             return
         if c.ticks % self._drv_every == 0:

@@ -11,9 +11,9 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core.errors import TeleopInputError
 from teleop_core.loop.layout import E_DISTAL, E_PROXIMAL, E_SUCCESS, E_TIP_X
 
@@ -33,7 +33,7 @@ class Environment:
         self.state[:] = 0.0
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _free_space(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out):
     out[:] = 0.0
     out[E_TIP_X] = insertion_m
@@ -43,7 +43,7 @@ def _free_space(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out):
 TW_FRICTION, TW_WALL_DEPTH, TW_WALL_K, TW_V_SCALE, TW_TARGET = range(5)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _tube_with_wall(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out):
     friction_per_m, wall_depth, wall_k = (
         params[TW_FRICTION],

@@ -4,14 +4,17 @@ The environment is any numba function `env(state, params, insertion_m, speed_m_s
 rotation_rad, dt_s, out)` that writes ENV_OUT values to `out`. `kernel_for(env)`
 compiles the tick with the environment bound in, so a phantom plugs in without touching
 this kernel; passing the function as an argument instead costs ~20 us of numba type
-dispatch per call. Compiling takes 3.5-5 s, so a module-level environment's kernel goes
-through numba's on-disk cache: a second process compiles nothing (`kernel_for`).
+dispatch per call. Compiling takes 3.5-5 s, so a module-level environment's kernel is
+kept on disk: compiled ahead of time into an extension module (`aot.py`), which a later
+process imports without numba, or, where that cannot be built, through numba's on-disk
+cache. Either way a second process compiles nothing (`kernel_for`).
 """
 
 from __future__ import annotations
 
 import hashlib
 import importlib
+import importlib.metadata
 import importlib.util
 import inspect
 import os
@@ -21,9 +24,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numba
-
 from teleop_core.loop import layout
+from teleop_core.loop.aot import build_ahead_of_time, can_build, load_ahead_of_time
 from teleop_core.loop.tick import _make
 
 _KERNELS: dict[object, Callable[..., None]] = {}
@@ -37,10 +39,10 @@ def kernel_for(env_fn: Callable[..., None]) -> Callable[..., None]:
     """The compiled tick with `env_fn` bound in (compiled on first use, then reused).
 
     An environment importable by name (a module-level numba function) gets the tick from
-    numba's on-disk cache: the kernel's source is written once into a module of its own
-    that imports the environment as a global, which numba caches like any module-level
-    function (a closure it cannot cache). Anything else, or an unwritable cache folder,
-    is compiled in the process as before.
+    the kernel cache folder: the extension compiled ahead of time (`aot.py`), or numba's
+    on-disk cache of the kernel's source written once into a module of its own that
+    imports the environment as a global (numba caches a module-level function, not a
+    closure). Anything else, or an unwritable cache folder, is compiled in the process.
     """
     if env_fn not in _KERNELS:
         _KERNELS[env_fn] = _cached_kernel(env_fn) or _make(env_fn)
@@ -57,7 +59,7 @@ def _source_digest() -> str:
     """Digest of every teleop_core source file and numba's version: numba's cache does not
     see a change in a function the kernel calls from another file, so the kernel's module
     name changes with the sources instead."""
-    digest = hashlib.sha256(numba.__version__.encode())
+    digest = hashlib.sha256(importlib.metadata.version("numba").encode())
     package = Path(__file__).resolve().parents[1]
     for path in sorted(package.rglob("*.py")):
         digest.update(path.relative_to(package).as_posix().encode())
@@ -74,8 +76,9 @@ def _kernel_source(module: str, name: str) -> str:
     return (
         f'"""The loop kernel for {module}.{name}, written by teleop_core.loop.kernel so that\n'
         'numba can cache it on disk (see kernel_for)."""\n\n'
-        "import numba\n"
         "import numpy as np\n\n"
+        "from teleop_core._jit import numba_module\n\n"
+        "numba = numba_module()\n\n"
         "import teleop_core.loop.tick as _tick\n\n"
         "globals().update({k: v for k, v in vars(_tick).items() if not k.startswith('__')})\n"
         f"from {module} import {name} as env_fn  # noqa: E402\n\n\n"
@@ -83,38 +86,63 @@ def _kernel_source(module: str, name: str) -> str:
     )
 
 
-def _cached_kernel(env_fn: Callable[..., None]) -> Callable[..., None] | None:
+def _kernel_module(env_fn: Callable[..., None]) -> tuple[str, str, str] | None:
+    """The environment's module and name, and the key of its kernel's source (None for
+    an environment not importable by name)."""
     py_func = getattr(env_fn, "py_func", None)
     module, name = getattr(env_fn, "__module__", None), getattr(py_func, "__qualname__", "")
     if py_func is None or not module or module == "__main__" or not name.isidentifier():
         return None
+    if getattr(importlib.import_module(module), name, None) is not env_fn:
+        return None
+    global _DIGEST
+    _DIGEST = _DIGEST or _source_digest()
+    source = _kernel_source(module, name)
+    return module, name, hashlib.sha256(f"{_DIGEST}{source}".encode()).hexdigest()[:16]
+
+
+def _cached_kernel(env_fn: Callable[..., None]) -> Callable[..., None] | None:
+    """The kernel compiled ahead of time (`aot.py`), else through numba's on-disk cache;
+    None where neither can be kept (an environment not importable by name, an
+    unwritable cache folder)."""
     try:
-        if getattr(importlib.import_module(module), name) is not env_fn:
+        found = _kernel_module(env_fn)
+        if found is None:
             return None
-        global _DIGEST
-        _DIGEST = _DIGEST or _source_digest()
-        source = _kernel_source(module, name)
-        key = hashlib.sha256(f"{_DIGEST}{source}".encode()).hexdigest()[:16]
+        module, name, key = found
         folder = _cache_dir()
-        path = folder / f"loop_kernel_{key}.py"
-        first = not path.is_file()
-        if first:
-            folder.mkdir(parents=True, exist_ok=True)
-            tmp = folder / f".{path.name}.{os.getpid()}"
-            tmp.write_text(source)
-            os.replace(tmp, path)
-        spec = importlib.util.spec_from_file_location(f"_haptic_study_{path.stem}", path)
-        if spec is None or spec.loader is None:  # pragma: no cover - a file path always has one
-            return None
-        generated = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = generated  # numba's cache finds the module by name
-        spec.loader.exec_module(generated)
+        ahead = load_ahead_of_time(folder, key, lambda: _jit_kernel(folder, module, name, key)[0])
+        if ahead is not None:
+            return ahead
+        jit, first = _jit_kernel(folder, module, name, key)
     except (OSError, ImportError, AttributeError, SyntaxError):
         return None
-    if first and COMPILE_NOTICE is not None:
+    if (first or can_build(folder, key)) and COMPILE_NOTICE is not None:
         COMPILE_NOTICE(f"compiling the simulation loop for {name} (once; later runs load it)")
+    return build_ahead_of_time(folder, key, jit.py_func, jit) or jit
+
+
+def _jit_kernel(
+    folder: Path, module: str, name: str, key: str
+) -> tuple[Callable[..., None], bool]:
+    """The kernel through numba's on-disk cache: its source written once into a module
+    of its own that imports the environment as a global (numba caches a module-level
+    function, not a closure); and whether the source was written just now."""
+    path = folder / f"loop_kernel_{key}.py"
+    first = not path.is_file()
+    if first:
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / f".{path.name}.{os.getpid()}"
+        tmp.write_text(_kernel_source(module, name))
+        os.replace(tmp, path)
+    spec = importlib.util.spec_from_file_location(f"_haptic_study_{path.stem}", path)
+    if spec is None or spec.loader is None:  # pragma: no cover - a file path always has one
+        raise ImportError(str(path))
+    generated = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = generated  # numba's cache finds the module by name
+    spec.loader.exec_module(generated)
     kernel: Callable[..., None] = generated.run_ticks
-    return kernel
+    return kernel, first
 
 
 _DIGEST = ""

@@ -15,9 +15,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core.errors import TeleopInputError
 from teleop_core.loop.layout import PACKET_COMMAND, PACKET_FORCE, SCH_TICK, SCHEDULE_WIDTH
 
@@ -119,7 +119,7 @@ def link_vector(params: LinkParams) -> np.ndarray:
     return lp
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def kernel_send(
     queue: np.ndarray,
     ls: np.ndarray,
@@ -152,7 +152,7 @@ def kernel_send(
     ls[LS_COUNT] = n + 1
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def kernel_deliver(
     queue: np.ndarray, ls: np.ndarray, tick: float, dt: float, out: np.ndarray
 ) -> bool:  # pragma: no cover - compiled; exercised through TeleopLoop

@@ -29,9 +29,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 
-import numba
 import numpy as np
 
+from teleop_core._jit import numba_module
 from teleop_core.estimation.stream import (
     EST_FINAL,
     ESTIMATE_OUT,
@@ -150,6 +150,8 @@ from teleop_core.master.haptics import haptic_torque, psi, rate_command, return_
 
 
 def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
+    numba = numba_module()
+
     @numba.njit
     def run_ticks(
         n_ticks: int,

@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core._typing import Float1D
 from teleop_core.follower.sensors import lowpass
 from teleop_core.master.params import DialParams
@@ -68,7 +68,7 @@ def dial_param_vector(params: DialParams) -> Float1D:
     )
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def actuator_torque(state: np.ndarray, p: np.ndarray, i_cmd_ma: float, gain: float) -> float:
     """Advance the current and the hysteresis by one step of dt; return the motor torque,
     N m. `gain` = 1 - exp(-dt / tau_i) (`current_gain`)."""
@@ -91,12 +91,12 @@ def actuator_torque(state: np.ndarray, p: np.ndarray, i_cmd_ma: float, gain: flo
     return tau if state[D_I_MA] >= 0.0 else -tau
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def current_gain(p: np.ndarray, dt: float) -> float:
     return 1.0 - math.exp(-dt / p[P_TAU_I])
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def dial_tick(
     state: np.ndarray,
     p: np.ndarray,
@@ -137,7 +137,7 @@ def dial_tick(
     return tau_sum / SUBSTEPS
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _clamped_run(state: np.ndarray, p: np.ndarray, i_cmd_ma: np.ndarray, dt: float) -> np.ndarray:
     out = np.empty(i_cmd_ma.shape[0])
     gain = current_gain(p, dt / SUBSTEPS)

@@ -18,23 +18,27 @@ branch is kept. The quadratic is inverted in closed form on its rising side.
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-import numba
-
+from teleop_core._jit import njit
 from teleop_core.master.params import CalibrationPolynomials
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
 
 LOADING = 1.0
 UNLOADING = -1.0
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def rate_command(theta_m_rad: float, speed_gain_m_s_per_rad: float) -> float:
     """Guidewire speed command, m/s."""
     # v_gw = k_v theta_m   (eq. 5)
     return speed_gain_m_s_per_rad * theta_m_rad
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def haptic_torque(
     force_n: float, gain_n_m_per_n: float, deadband_n: float, saturation_n_m: float
 ) -> float:
@@ -50,7 +54,7 @@ def haptic_torque(
     return -tau if force_n > 0.0 else tau
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def return_torque(
     theta_rad: float,
     omega_rad_s: float,
@@ -63,7 +67,7 @@ def return_torque(
     return -spring_n_m_per_rad * (theta_rad - reference_rad) - damper_n_m_s_per_rad * omega_rad_s
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _invert_rising(a: float, b: float, c: float, force_n: float) -> float:
     """The current (mA) on the rising side of a i^2 + b i + c = F."""
     if a == 0.0:
@@ -75,12 +79,12 @@ def _invert_rising(a: float, b: float, c: float, force_n: float) -> float:
     return (-b + math.sqrt(disc)) / (2.0 * a)
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def psi(
     tau_n_m: float,
     tau_prev_n_m: float,
     branch_prev: float,
-    poly: numba.float64[:],
+    poly: NDArray[np.float64],
     lever_arm_m: float,
     max_current_ma: float,
 ) -> tuple[float, float]:

@@ -1,8 +1,9 @@
 """The compensation law of `compensation.py` as a numba function with no package imports,
 so the simulated device's kernel (`simulate.py`) can call it without an import cycle."""
 
-import numba
 import numpy as np
+
+from teleop_core._jit import njit
 
 # the kernel's compensation vector (`KarnoppCompensator.as_array`): on flag, Coulomb
 # level and the gains by direction
@@ -10,7 +11,7 @@ COMP_ON, COMP_COULOMB, COMP_GAIN_POS, COMP_GAIN_NEG = range(4)
 COMPENSATION_SIZE = 4
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def compensated_command(
     f: float,
     df: float,

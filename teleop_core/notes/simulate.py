@@ -17,11 +17,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-import numba
 import numpy as np
 import pandas as pd
 from scipy import signal
 
+from teleop_core._jit import njit
 from teleop_core._typing import Float1D
 from teleop_core.notes.karnopp import (
     COMP_COULOMB,
@@ -92,7 +92,7 @@ def chirp_command(
     return t, np.concatenate([u[:n] * taper, np.zeros(len(t) - n)])
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _simulate_axis(
     f_des: np.ndarray,
     dt: float,

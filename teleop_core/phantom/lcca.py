@@ -33,9 +33,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
+from teleop_core._jit import njit
 from teleop_core.errors import TeleopInputError
 from teleop_core.follower.params import _require_positive
 from teleop_core.loop.environments import Environment
@@ -134,12 +134,12 @@ PM_END, PM_OSTIUM, PM_PHI, PM_HALF = range(4)
 PATH_META = 4
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@numba.njit(cache=True)
+@njit(cache=True)
 def lcca_phantom(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out):
     n_paths, n_pts, step = int(params[H_NPATHS]), int(params[H_NPTS]), params[H_STEP]
     meta = params[HEADER : HEADER + n_paths * PATH_META].reshape((n_paths, PATH_META))

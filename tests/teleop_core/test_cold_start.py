@@ -1,6 +1,6 @@
 """A fresh process: no PyTorch to run a trained estimator, no compilation of the loop
-kernel after the first process (issue 21). Each check runs in its own interpreter,
-since what is imported or compiled is a property of a process."""
+kernel and no numba after the first process (issue 21). Each check runs in its own
+interpreter, since what is imported or compiled is a property of a process."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from teleop_core.loop import kernel
+from teleop_core.loop.aot import SUFFIX
 from teleop_core.loop.core import TeleopLoop
 from teleop_core.loop.drivers import SimulatedOperator
 from teleop_core.loop.environments import tube_with_wall
@@ -34,9 +36,8 @@ k = kernel.kernel_for(env.fn)
 np.save(sys.argv[1], run.samples)
 print(json.dumps({
     "torch": "torch" in sys.modules,
-    "hits": sum(k.stats.cache_hits.values()),
-    "misses": sum(k.stats.cache_misses.values()),
-    "cached_module": k.__module__,
+    "numba": "numba" in sys.modules,
+    "ahead_of_time": getattr(k, "ahead_of_time", False),
 }))
 """
 
@@ -52,24 +53,61 @@ def _trial_process(tmp_path: Path, name: str) -> dict[str, object]:
     return result
 
 
-def test_a_second_process_loads_the_loop_kernel_and_never_imports_torch(tmp_path: Path) -> None:
+def test_a_second_process_loads_the_loop_kernel_and_never_imports_numba_or_torch(
+    tmp_path: Path,
+) -> None:
     first = _trial_process(tmp_path, "first.npy")
     second = _trial_process(tmp_path, "second.npy")
-    # the first process compiles the kernel into the cache, the second only loads it
-    assert first["misses"] == 1 and first["hits"] == 0
-    assert second["hits"] == 1 and second["misses"] == 0
-    assert str(second["cached_module"]).startswith("_haptic_study_loop_kernel_")
-    assert list((tmp_path / "cache" / "kernels").glob("loop_kernel_*.py"))
-    # the trained GRU runs from gru.npz in the numba kernel: PyTorch is never loaded
+    # the first process compiles the kernel ahead of time into the cache (numba runs
+    # there), the second imports the extension module and never numba
+    folder = tmp_path / "cache" / "kernels"
+    assert list(folder.glob(f"_haptic_study_loop_aot_*{SUFFIX}")), list(folder.iterdir())
+    assert first["numba"] is True and second["numba"] is False
+    assert first["ahead_of_time"] is True and second["ahead_of_time"] is True
+    # the trained GRU runs from gru.npz in the compiled kernel: PyTorch is never loaded
     assert first["torch"] is False and second["torch"] is False
-    # the cached kernel computes what the in-process closure computes, bit for bit
     np.testing.assert_array_equal(np.load(tmp_path / "first.npy"), np.load(tmp_path / "second.npy"))
+    # the extension (compiled for this CPU) and numba's JIT kernel of the same source,
+    # on the same trial: equal samples, not close ones
+    env = tube_with_wall(friction_n_per_m=8.0)
+    from study.protocol.default_estimator import load_estimator
+
+    kernel._KERNELS[env.fn] = kernel._make(env.fn)
+    try:
+        run = TeleopLoop(environment=env, estimator=load_estimator(), seed=5).run(
+            3.0, SimulatedOperator()
+        )
+    finally:
+        kernel._KERNELS.pop(env.fn)
+    np.testing.assert_array_equal(np.load(tmp_path / "second.npy"), run.samples)
+
+
+def test_without_a_compiler_the_kernel_runs_through_numbas_cache(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A machine where the extension cannot be built (here: no C compiler on PATH)
+    says so once in a marker file and runs the JIT kernel from numba's cache."""
+    monkeypatch.setenv("HAPTIC_STUDY_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    monkeypatch.setenv("CC", str(tmp_path / "empty" / "cc"))
+    env = tube_with_wall(friction_n_per_m=8.0)
+    k = kernel._cached_kernel(env.fn)
+    assert k is not None and not getattr(k, "ahead_of_time", False)
+    folder = tmp_path / "cache" / "kernels"
+    assert list(folder.glob("_haptic_study_loop_aot_*.failed"))
+    assert not list(folder.glob(f"_haptic_study_loop_aot_*{SUFFIX}"))
 
 
 def test_the_cached_kernel_equals_the_closure_compiled_in_process(tmp_path: Path) -> None:
     env = tube_with_wall(friction_n_per_m=8.0)
-    cached = TeleopLoop(environment=env, seed=5).run(4.0, SimulatedOperator()).samples
-    assert kernel.kernel_for(env.fn).__module__.startswith("_haptic_study_loop_kernel_")
+    module, name, key = kernel._kernel_module(env.fn)  # type: ignore[misc]
+    cached_jit, _ = kernel._jit_kernel(kernel._cache_dir(), module, name, key)
+    assert cached_jit.__module__.startswith("_haptic_study_loop_kernel_")
+    kernel._KERNELS[env.fn] = cached_jit
+    try:
+        cached = TeleopLoop(environment=env, seed=5).run(4.0, SimulatedOperator()).samples
+    finally:
+        kernel._KERNELS.pop(env.fn)
     closure = kernel._make(env.fn)
     kernel._KERNELS[env.fn] = closure
     try:
