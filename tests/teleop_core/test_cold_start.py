@@ -134,3 +134,41 @@ def test_an_environment_defined_in_a_function_still_runs(tmp_path: Path) -> None
         2.0, SimulatedOperator()
     )
     assert run.samples.shape[0] > 0
+
+
+def test_importing_the_loop_and_estimator_modules_imports_no_numba() -> None:
+    """Every module with kernel functions decorates them with `teleop_core._jit.njit`,
+    which imports numba on first use only."""
+    code = (
+        "import sys\n"
+        "import teleop_core.loop.core, teleop_core.estimation.estimator\n"
+        "import teleop_core.phantom.lcca, teleop_core.notes.simulate\n"
+        "import teleop_core.calibration.effects\n"
+        "print('numba' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, check=True)  # fmt: skip
+    assert done.stdout.strip() == "False", done.stderr
+
+
+def test_a_lazy_function_is_compiled_when_called_and_from_compiled_code() -> None:
+    """Called from Python it runs numba's dispatcher; called from another numba
+    function it is typed as that dispatcher (the typeof hook); it pickles by name."""
+    import pickle
+
+    import numba
+
+    from teleop_core._jit import LazyJit
+    from teleop_core.master.haptics import haptic_torque, rate_command
+
+    assert isinstance(rate_command, LazyJit)
+    # eq. 5: v = k_v theta
+    assert rate_command(0.5, 0.004) == 0.5 * 0.004
+    assert rate_command.signatures  # compiled by numba, not run as Python
+
+    @numba.njit
+    def twice(force_n: float) -> float:
+        return 2.0 * haptic_torque(force_n, 0.01, 0.0, 1.0)
+
+    assert twice(3.0) == 2.0 * haptic_torque.py_func(3.0, 0.01, 0.0, 1.0)
+    assert pickle.loads(pickle.dumps(rate_command)) is rate_command
