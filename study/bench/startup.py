@@ -1,8 +1,8 @@
 """`study bench startup`: what a user waits for from a cold process (issue 21).
 
 Each figure but the writer's is the median of `runs` fresh subprocesses, after one
-warm-up run that is not counted (it leaves numba's on-disk kernel cache in place, as
-the first run after install does):
+warm-up run that is not counted (it leaves the loop kernel compiled ahead of time in
+the kernel cache, `teleop_core/loop/aot.py`, as the first run after install does):
 
 - `study simulate` of a 30 s LCCA trial (a novice, HV, seed 3, who does not reach the
   target within `--max-seconds 30`), start to exit, wall seconds;
