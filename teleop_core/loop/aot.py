@@ -122,6 +122,5 @@ def _with_fallback(
             current[0] = jit()
             return current[0](*args)
 
-    run_ticks.__module__ = _name("").rstrip("_")
     run_ticks.ahead_of_time = True  # type: ignore[attr-defined]
     return run_ticks
