@@ -14,7 +14,7 @@ estimator runs over whole recordings (`ForceEstimator.predict`); `stream()` refu
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -175,5 +175,4 @@ def find_effects(
     if not report["effects_added"] and not report["discovered_terms"]:
         return None, report
     found = ExtendedPhysics.from_dict(report, "found in training")
-    found.stage, found.t_origin_s = "hybrid", float(recording.t[0])
-    return found, report
+    return replace(found, stage="hybrid", t_origin_s=float(recording.t[0])), report

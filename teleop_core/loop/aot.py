@@ -22,7 +22,6 @@ from __future__ import annotations
 import importlib.machinery
 import importlib.util
 import os
-import shutil
 import sys
 import tempfile
 import warnings
@@ -78,7 +77,6 @@ def build_ahead_of_time(
 ) -> Callable[..., int] | None:
     """Compile `py_func` (the kernel's Python source) into `folder` and load it; None
     (and a marker, so no later process tries again) where that fails."""
-    failed = folder / f"{_name(key)}.failed"
     if not can_build(folder, key):
         return None
     try:
@@ -95,12 +93,11 @@ def build_ahead_of_time(
             cc.verbose = False
             cc.export("run_ticks", signature(nt))(py_func)
             cc.compile()
-            built = Path(tmp) / f"{_name(key)}{SUFFIX}"
-            shutil.copy2(built, Path(tmp) / "ready")
-            os.replace(Path(tmp) / "ready", folder / built.name)
+            # tmp is inside folder: one atomic rename, never a half-written extension
+            os.replace(Path(tmp) / f"{_name(key)}{SUFFIX}", folder / f"{_name(key)}{SUFFIX}")
     except Exception as exc:  # any failure: the JIT kernel runs instead
         try:
-            failed.write_text(f"{type(exc).__name__}: {exc}\n")
+            (folder / f"{_name(key)}.failed").write_text(f"{type(exc).__name__}: {exc}\n")
         except OSError:
             pass
         return None
