@@ -172,9 +172,9 @@ class ForceEstimator:
         if self.extension is not None:
             effects = ", ".join(self.extension.families)
             raise TeleopInputError(
-                f"this estimator's physics stage is calibrated ({effects}): its effects "
-                "need the whole recording, so it runs with predict(), not one sample at a "
-                "time; for the loop, train with `--effects none`"
+                f"this estimator is calibrated ({effects}): eq. 1 with effects that need the "
+                "whole recording, so it runs with predict(), not one sample at a time; for "
+                "the loop, train with `--effects none`"
             )
 
     def save(self, folder: Path, summary: dict[str, Any]) -> None:
