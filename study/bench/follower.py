@@ -40,7 +40,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from study.bench import generalisation
+from study.bench import generalisation, training_time
 from study.bench.follower_markdown import markdown
 from study.bench.generalisation import GeneralisationConfig, WindowBaseline
 from teleop_core.estimation.estimator import ForceEstimator, inputs_of
@@ -54,7 +54,7 @@ from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.plant import FollowerDrive
 from teleop_core.follower.sensors import acquire, decimation, reference_velocity
 
-PARTS = ("tables", "generalisation")
+PARTS = ("tables", "generalisation", "training")
 TABLE_II_FREQUENCIES_HZ = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 TRAINING_PHANTOM = {"max_load_n": 1.2, "max_speed_rad_s": 8.0}
 """Loads and speeds of the bench phantom the estimator is trained on."""
@@ -72,7 +72,8 @@ vessel, an operator pushing into the wall (as VO participants do), faster motion
 @dataclass(frozen=True)
 class FollowerBenchConfig:
     parts: tuple[str, ...] = PARTS
-    """Which parts to run: `tables` (Tables I-III, Fig. 8, cost), `generalisation`."""
+    """Which parts to run: `tables` (Tables I-III, Fig. 8, cost), `generalisation`,
+    `training` (the time of `study estimator train`'s defaults, `training_time.py`)."""
     generalisation: GeneralisationConfig = field(default_factory=GeneralisationConfig)
     train_seconds: float = 600.0
     case_seconds: float = 60.0
@@ -207,14 +208,16 @@ def table_iii(
     estimator, _ = train_estimator(recording, gru_config, seed=config.seed)
     progress("Table III: training the direct-prediction GRU")
     direct, history, _, _ = train_gru(
-        inputs_of(recording, estimator.gru), recording.f_ref, gru_config, seed=config.seed,
+        inputs_of(recording, estimator.gru),
+        recording.f_ref,
+        gru_config,
+        seed=config.seed,
         target_kind="direct",
     )
     progress("Table III: fitting the gradient-boosted baseline")
     baseline = WindowBaseline(gru_config.window, config.seed).fit(
-        inputs_of(recording, estimator.gru), recording.f_ref - estimator.physics.force(
-            recording.iq, recording.omega, recording.alpha
-        )
+        inputs_of(recording, estimator.gru),
+        recording.f_ref - estimator.physics.force(recording.iq, recording.omega, recording.alpha),
     )
     per_case: dict[str, Any] = {}
     pooled: dict[str, list[np.ndarray]] = {
@@ -323,6 +326,8 @@ def run_follower_bench(
         )
     if "tables" in config.parts:
         run_tables(config, out_dir, report, progress)
+    if "training" in config.parts:
+        report["training_time"] = training_time.run_training_time(config, progress)
     (out_dir / "follower_bench.md").write_text(markdown(report))
     (out_dir / "follower_bench.json").write_text(json.dumps(report, indent=2) + "\n")
     return report

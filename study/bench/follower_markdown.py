@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from study.bench import generalisation
+from study.bench import generalisation, training_time
 
 
 def _row(label: object, *values: float) -> str:
@@ -18,6 +18,8 @@ def markdown(report: dict[str, Any]) -> str:
         lines += generalisation.markdown(report["generalisation"])
     if "table_i" in report:
         lines += _tables_markdown(report)
+    if "training_time" in report:
+        lines += training_time.markdown(report["training_time"])
     return "\n".join(lines)
 
 
@@ -74,9 +76,7 @@ def _tables_markdown(report: dict[str, Any]) -> list[str]:
     ]
     for case, row in report["table_iii"]["cases"].items():
         lines.append(
-            _row(
-                case, row["physics"], row["hybrid"], row["final"], row["direct"], row["baseline"]
-            )
+            _row(case, row["physics"], row["hybrid"], row["final"], row["direct"], row["baseline"])
         )
     lines += [
         "",

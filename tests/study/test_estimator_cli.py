@@ -187,10 +187,21 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
     assert set(report["table_i"]) == {"ramp", "step"}
     assert set(report["table_ii"]) == {"0.5", "1", "1.5", "2", "2.5", "3"}
     assert set(report["table_iii"]["pooled"]) == {
-        "hybrid", "final", "direct", "physics", "baseline"
+        "hybrid",
+        "final",
+        "direct",
+        "physics",
+        "baseline",
     }
     assert set(report["window_sweep"]) == {"2", "5"}
     assert report["timing"]["median_ms"] > 0
+    # the training time: the command's defaults, with early stopping and with every epoch
+    runs = report["training_time"]["runs"]
+    assert runs["all_epochs"]["epochs_run"] == 2 and runs["all_epochs"]["patience"] is None
+    assert runs["default"]["patience"] == 10
+    assert runs["default"]["samples"] == report["training"]["samples"]
+    for run in runs.values():
+        assert 0 < run["seconds_to_first_epoch_end"] < run["seconds"]
     gen = report["generalisation"]
     assert "simulated" in gen["data"] and all("simulated" in r["data"] for r in gen["runs"])
     assert {(r["effect"], r["seed"]) for r in gen["runs"]} == {("stribeck", 0), ("drift", 0)}
