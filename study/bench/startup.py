@@ -18,7 +18,10 @@ the kernel cache, `teleop_core/loop/aot.py`, as the first run after install does
   the same settings (WAL, synchronous=FULL, a commit per 1,000 rows), measured in
   the same run, alternately, as rows/s and their ratio; and against the same INSERT
   with `PRAGMA foreign_keys=ON`, which every connection to a study database has (the
-  writer's rows pay a lookup of their trial each; the plain reference does not).
+  writer's rows pay a lookup of their trial each; the plain reference does not);
+- `study demo` (the whole 36-participant study, figures included, two worker processes),
+  start to exit, wall seconds, `demo_runs` times after its own warm-up (which compiles
+  the NOTES kernels into numba's cache, as the first run after install does).
 
 This module imports only the standard library at its top: the run-screen probe
 imports it in the subprocess it times.
@@ -46,7 +49,7 @@ SIMULATE_ARGS = (
     "--seed", "3", "--max-seconds", "30",
 )  # fmt: skip
 """A trial that runs its full 30 s (seed 3 does not reach the target in time)."""
-TARGETS_S = {"simulate": 1.0, "run_screen": 1.0, "analyze": 2.0}
+TARGETS_S = {"simulate": 1.0, "run_screen": 1.0, "analyze": 2.0, "demo": 30.0}
 """The issue's targets, s; the writer's is `WRITER_TARGET_RATIO`."""
 WRITER_TARGET_RATIO = 0.9
 _REFERENCE_ROWS_PER_COMMIT = 1000
@@ -93,6 +96,8 @@ class StartupBenchResult:
     analyze: Timing
     analyze_db: str
     writer: WriterRatio
+    demo: Timing | None = None
+    """`study demo` start to exit (None: not run, `demo_runs` 0)."""
     load_average: list[float] = field(default_factory=lambda: list(os.getloadavg()))
     """1, 5 and 15 min load averages at the end of the run."""
 
@@ -156,6 +161,15 @@ def bench_run_screen(db_url: str, runs: int) -> Timing:
 
     once()
     return Timing.of([once() for _ in range(runs)], TARGETS_S["run_screen"])
+
+
+def bench_demo(tmp: Path, runs: int, extra: tuple[str, ...] = ()) -> Timing:
+    """`study demo [extra]` into a new folder under `tmp` each time."""
+
+    def args(k: int) -> list[str]:
+        return [*study_command(), "demo", "--out", str(tmp / f"demo{k}"), *extra]
+
+    return _timed(args, runs, TARGETS_S["demo"])
 
 
 def _reference_insert(
@@ -239,9 +253,11 @@ def bench_startup(
     db_url: str | None = None,
     rows: int = 1_000_000,
     progress: Callable[[str], None] = lambda _: None,
+    demo_runs: int = 1,
 ) -> StartupBenchResult:
     """Every figure of the module's docstring. Without `db_url`, `study analyze` and the
-    run screen work on a quick demo study (6 participants) built first."""
+    run screen work on a quick demo study (6 participants) built first. `demo_runs` 0
+    leaves `study demo` out."""
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
         analyze_db = db_url or "a quick demo study (study demo --quick --seed 1)"
@@ -259,4 +275,10 @@ def bench_startup(
         analyze = bench_analyze(db_url, tmp, runs)
         progress(f"the sample writer and plain sqlite3, {rows:,} rows, {runs} runs each")
         writer = bench_writer(rows, runs)
-    return StartupBenchResult(runs, simulate, trial_s, run_screen, analyze, analyze_db, writer)
+        demo = None
+        if demo_runs:
+            progress(f"study demo, {demo_runs} + 1 fresh processes")
+            demo = bench_demo(tmp, demo_runs)
+    return StartupBenchResult(
+        runs, simulate, trial_s, run_screen, analyze, analyze_db, writer, demo
+    )

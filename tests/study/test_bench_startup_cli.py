@@ -10,7 +10,7 @@ import pytest
 
 from db.models.trial import SAMPLE_COLUMNS
 from study.bench.db_write import scratch_database, scratch_trial, synthetic_columns
-from study.bench.startup import _reference_insert
+from study.bench.startup import _reference_insert, bench_demo
 from study.cli import main
 
 
@@ -36,12 +36,14 @@ def test_bench_startup_reports_every_figure_as_json(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "startup.json"
-    assert main(["bench", "startup", "--runs", "1", "--rows", "2000", "--json", str(out)]) == 0
+    argv = ["bench", "startup", "--runs", "1", "--rows", "2000", "--demo-runs", "0"]
+    assert main([*argv, "--json", str(out)]) == 0
     result = json.loads(out.read_text())
     assert set(result) == {
         "runs", "simulate", "simulate_trial_s", "run_screen", "analyze", "analyze_db",
-        "writer", "load_average",
+        "writer", "demo", "load_average",
     }  # fmt: skip
+    assert result["demo"] is None  # --demo-runs 0
     for figure in ("simulate", "run_screen", "analyze"):
         assert set(result[figure]) == {"seconds", "median_s", "target_s"}
         assert len(result[figure]["seconds"]) == 1
@@ -55,3 +57,12 @@ def test_bench_startup_reports_every_figure_as_json(
         writer["writer_rows_per_s"][0] / writer["sqlite3_foreign_keys_rows_per_s"][0]
     )
     assert "load average" in capsys.readouterr().out
+
+
+def test_bench_demo_times_whole_demo_runs_in_fresh_processes(tmp_path: Path) -> None:
+    timing = bench_demo(tmp_path, 1, ("--quick",))
+    assert len(timing.seconds) == 1 and timing.target_s == 30.0
+    # the warm-up and the counted run each built a whole study: database, analysis, figures
+    for k in (0, 1):
+        assert (tmp_path / f"demo{k}" / "demo.db").is_file()
+        assert (tmp_path / f"demo{k}" / "analysis" / "analysis.json").is_file()
