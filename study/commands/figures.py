@@ -88,8 +88,13 @@ def demo(
             raise StudyInputError(f"{db_path} already exists; expected a new --out folder or --db")
         db_url = str(db_path)
     with Console(stderr=True).status("demo study") as status:
+
+        def notice(message: str) -> None:
+            status.console.print(f"study demo: {message}", markup=False)
+
         run_demo(db_url, seed, jobs, progress=status.update, quick=quick,
-                 participants=str(participants_path) if model is not None else None)  # fmt: skip
+                 participants=str(participants_path) if model is not None else None,
+                 notice=notice)  # fmt: skip
         status.update("analysis and figures")
         engine = open_database(db_url, create=False)
         try:

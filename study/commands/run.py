@@ -100,6 +100,11 @@ def run(
     try:
         with _progress() as progress:
             bar = progress.add_task(f"session {code}", total=None)
+            from teleop_core.loop import kernel
+
+            kernel.COMPILE_NOTICE = lambda m: progress.console.print(
+                f"study run: {m}", markup=False
+            )
 
             def report(item, k, n) -> None:
                 kind = "practice" if item.practice else "trial"
@@ -146,7 +151,11 @@ def _run_all(
             progress.console.print(f"study run: skipped: {message}", markup=False)
 
         model = str(participants) if participants is not None else None
-        for code, n in run_participants(db_url, codes, jobs, pace, actor, skipped, model):
+        def notice(message: str) -> None:
+            progress.console.print(f"study run: {message}", markup=False)
+
+        runs = run_participants(db_url, codes, jobs, pace, actor, skipped, model, notice)
+        for code, n in runs:
             total += n
             progress.update(bar, advance=1, description=f"participants ({code} done)")
     if busy:

@@ -79,12 +79,14 @@ def run_demo(
     participants: str | None = None,
     sizes: dict[str, int] | None = None,
     trials_per_condition: int | None = None,
+    notice: Callable[[str], None] | None = None,
 ) -> None:
     """Create, enrol, run and fill in the questionnaires of the default study.
 
     `participants`: a fitted participant model (MODEL.json) the people are drawn from;
     `sizes` and `trials_per_condition` replace the default design's (a study of another
-    size, e.g. for the participant fit's benchmark), with no practice trials."""
+    size, e.g. for the participant fit's benchmark), with no practice trials. `notice`
+    is told when the simulation loop is compiled (the first run after install)."""
     text = TEMPLATE.replace("seed = 1 ", f"seed = {seed} ")
     for old, new in QUICK.items() if quick else ():
         text = text.replace(old, new)
@@ -109,7 +111,7 @@ def run_demo(
         ]
     finally:
         engine.dispose()
-    runs = run_participants(db_url, codes, jobs, participants=participants)
+    runs = run_participants(db_url, codes, jobs, participants=participants, notice=notice)
     for k, (code, _) in enumerate(runs, 1):
         progress(f"sessions: {k}/{len(codes)} participants ({code})")
     progress("NASA-TLX")

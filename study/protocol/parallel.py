@@ -78,6 +78,22 @@ def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
     return code, len(done)
 
 
+def compile_loop_once(notice: Callable[[str], None] | None = None) -> bool:
+    """Where the loop's kernel is not compiled on this machine yet (the first run after
+    install, or after an upgrade), say so through `notice` and compile it here, once,
+    before any worker starts: the workers then load it instead of each compiling it at
+    the same time. Returns whether it compiled."""
+    from teleop_core.loop import kernel
+    from teleop_core.phantom.lcca import lcca_phantom
+
+    if kernel.is_compiled(lcca_phantom):
+        return False
+    if notice is not None:
+        notice("compiling the simulation loop (once after install; later runs load it)")
+    kernel.kernel_for(lcca_phantom)
+    return True
+
+
 def run_participants(
     db_url: str | None,
     codes: list[str],
@@ -86,6 +102,7 @@ def run_participants(
     actor: str | None = None,
     on_busy: Callable[[str, str], None] | None = None,
     participants: str | None = None,
+    notice: Callable[[str], None] | None = None,
 ) -> Iterator[tuple[str, int]]:
     """Run simulated sessions for `codes` in `jobs` processes; yield (code, trials) as each
     finishes. Each process opens its own connection and loads the estimator once, and
@@ -94,8 +111,11 @@ def run_participants(
     A participant whose session runs elsewhere (`SessionBusyError`) is skipped and
     reported through `on_busy(code, message)` (raised when `on_busy` is None).
     `participants`: the path of a fitted participant model (MODEL.json) to draw from.
+    `notice` is told when the loop's kernel is compiled first (`compile_loop_once`).
     """
     from study.protocol.lease import SessionBusyError
+
+    compile_loop_once(notice)
 
     def busy(code: str, exc: SessionBusyError) -> tuple[str, int]:
         if on_busy is None:

@@ -52,10 +52,9 @@ def load_ahead_of_time(
 ) -> Callable[..., int] | None:
     """The compiled kernel of `key` from `folder`, if it was built (else None); `jit`
     gives the JIT kernel for a call whose argument types it refuses."""
-    path = folder / f"{_name(key)}{SUFFIX}"
-    if not path.is_file():
+    if not is_built(folder, key):
         return None
-    name = _name(key)
+    path, name = folder / f"{_name(key)}{SUFFIX}", _name(key)
     module = sys.modules.get(name)
     if module is None:
         spec = importlib.util.spec_from_file_location(name, path)
@@ -65,6 +64,11 @@ def load_ahead_of_time(
         spec.loader.exec_module(module)
         sys.modules[name] = module
     return _with_fallback(module.run_ticks, jit)
+
+
+def is_built(folder: Path, key: str) -> bool:
+    """Whether the kernel of `key` was compiled into `folder`."""
+    return (folder / f"{_name(key)}{SUFFIX}").is_file()
 
 
 def can_build(folder: Path, key: str) -> bool:

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from teleop_core.loop import layout
-from teleop_core.loop.aot import build_ahead_of_time, can_build, load_ahead_of_time
+from teleop_core.loop.aot import build_ahead_of_time, can_build, is_built, load_ahead_of_time
 from teleop_core.loop.tick import _make
 
 _KERNELS: dict[object, Callable[..., None]] = {}
@@ -47,6 +47,17 @@ def kernel_for(env_fn: Callable[..., None]) -> Callable[..., None]:
     if env_fn not in _KERNELS:
         _KERNELS[env_fn] = _cached_kernel(env_fn) or _make(env_fn)
     return _KERNELS[env_fn]
+
+
+def is_compiled(env_fn: Callable[..., None]) -> bool:
+    """Whether `env_fn`'s kernel is already compiled ahead of time in the kernel cache
+    folder, so that a process only loads it (False for an environment not importable by
+    name, whose kernel every process compiles)."""
+    try:
+        found = _kernel_module(env_fn)
+    except (OSError, ImportError, AttributeError, SyntaxError):
+        return False
+    return found is not None and is_built(_cache_dir(), found[2])
 
 
 def _cache_dir() -> Path:

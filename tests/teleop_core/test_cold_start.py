@@ -172,3 +172,31 @@ def test_a_lazy_function_is_compiled_when_called_and_from_compiled_code() -> Non
 
     assert twice(3.0) == 2.0 * haptic_torque.py_func(3.0, 0.01, 0.0, 1.0)
     assert pickle.loads(pickle.dumps(rate_command)) is rate_command
+
+
+def test_the_first_demo_after_install_says_it_compiles_the_loop_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`study demo` (and `study run --all`) compile the loop's kernel in the parent before
+    the workers start, saying so, where it is not compiled yet; a second run loads it."""
+    env = {**os.environ, "HAPTIC_STUDY_CACHE": str(tmp_path / "cache")}
+
+    def demo(out: str) -> subprocess.CompletedProcess[str]:
+        done = subprocess.run(
+            [sys.executable, "-m", "study.cli", "demo", "--quick", "--out", str(tmp_path / out)],
+            env=env, capture_output=True, text=True, timeout=600, check=False,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        return done
+
+    first, second = demo("first"), demo("second")
+    notice = "study demo: compiling the simulation loop (once after install"
+    assert notice in first.stderr and notice not in second.stderr
+    folder = tmp_path / "cache" / "kernels"
+    assert len(list(folder.glob(f"_haptic_study_loop_aot_*{SUFFIX}"))) == 1
+    from teleop_core.phantom.lcca import lcca_phantom
+
+    monkeypatch.setenv("HAPTIC_STUDY_CACHE", str(tmp_path / "cache"))
+    assert kernel.is_compiled(lcca_phantom)
+    monkeypatch.setenv("HAPTIC_STUDY_CACHE", str(tmp_path / "empty"))
+    assert not kernel.is_compiled(lcca_phantom)
