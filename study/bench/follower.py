@@ -40,6 +40,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from study.analysis.figures import label_source
 from study.bench import generalisation, training_time
 from study.bench.follower_markdown import markdown
 from study.bench.generalisation import GeneralisationConfig, WindowBaseline
@@ -55,6 +56,11 @@ from teleop_core.follower.plant import FollowerDrive
 from teleop_core.follower.sensors import acquire, decimation, reference_velocity
 
 PARTS = ("tables", "generalisation", "training")
+SIMULATED_NOTE = (
+    "SIMULATED: the follower drive model with simulated sensors (encoders, load cell); "
+    "no measured data"
+)
+"""Written above every figure of this bench (`figures.label_source`)."""
 TABLE_II_FREQUENCIES_HZ = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 TRAINING_PHANTOM = {"max_load_n": 1.2, "max_speed_rad_s": 8.0}
 """Loads and speeds of the bench phantom the estimator is trained on."""
@@ -182,7 +188,7 @@ def table_ii(
             "physics_rmse_n": error_summary(result.f_physics[keep], result.f_ref[keep])["rmse"],
         }
         t = result.t[keep]
-        ax.plot(t, result.f_ref[keep], color="C0", lw=1, label="sensor")
+        ax.plot(t, result.f_ref[keep], color="C0", lw=1, label="load cell (simulated)")
         ax.plot(t, result.f_final[keep], color="C1", lw=1, label="PMSM estimate")
         ax.plot(t, result.f_final[keep] - result.f_ref[keep], color="C3", lw=0.8, label="error")
         ax.set_title(f"{f:g} Hz", fontsize=9)
@@ -246,7 +252,9 @@ def table_iii(
             )
         }
         span = slice(0, min(len(result.t), 2000))
-        ax.plot(result.t[span], result.f_ref[span], color="0.3", lw=1, label="measured")
+        ax.plot(
+            result.t[span], result.f_ref[span], color="0.3", lw=1, label="load cell (simulated)"
+        )
         ax.plot(
             result.t[span],
             result.f_final[span],
@@ -319,7 +327,7 @@ def run_follower_bench(
 ) -> dict[str, Any]:
     """Run every experiment, write DIR/follower_bench.md and the figures; return the report."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    report: dict[str, Any] = {"config": asdict(config)}
+    report: dict[str, Any] = {"data": SIMULATED_NOTE, "config": asdict(config)}
     if "generalisation" in config.parts:
         report["generalisation"] = generalisation.run_generalisation(
             config.generalisation, out_dir, progress
@@ -342,7 +350,7 @@ def run_tables(
     """Tables I-III, Fig. 8 and the costs, into `report` and DIR's figures."""
     progress("Table I: velocity sensing")
     report["table_i"], fig = table_i()
-    fig.savefig(out_dir / "table_i_velocity.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "table_i_velocity.png", dpi=200)
     plt.close(fig)
 
     progress("simulating the training recording")
@@ -368,16 +376,16 @@ def run_tables(
 
     progress("Table II: sinusoidal loads at zero speed")
     report["table_ii"], fig = table_ii(estimator, config.table_ii_seconds, config.seed + 50)
-    fig.savefig(out_dir / "table_ii_fig6.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "table_ii_fig6.png", dpi=200)
     plt.close(fig)
 
     report["table_iii"], fig, residuals = table_iii(config, gru_config, progress)
-    fig.savefig(out_dir / "table_iii_fig9.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "table_iii_fig9.png", dpi=200)
     plt.close(fig)
 
     report["window_sweep"] = window_sweep(recording, config, progress)
     fig = fig8(report["window_sweep"], residuals)
-    fig.savefig(out_dir / "fig8_window.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "fig8_window.png", dpi=200)
     plt.close(fig)
 
     progress("timing the causal update")

@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import wilcoxon
 
+from study.analysis.figures import label_source
 from study.analysis.phantom_figures import CONDITION_COLORS, plot_tip_paths
 from study.protocol.lcca_trial import run_lcca_trial, simulated_participant
 from study.protocol.participants import GROUPS
@@ -39,6 +40,12 @@ LABELS = {
     "peak_proximal_force_n": "peak proximal force (N)",
     "peak_distal_force_n": "peak distal force (N)",
 }
+
+SIMULATED_NOTE = (
+    "SIMULATED: simulated participants in the simulated LCCA phantom and teleoperation "
+    "loop; no measured data"
+)
+"""Written above every figure of this bench (`figures.label_source`) and in its JSON."""
 
 
 @dataclass(frozen=True)
@@ -175,11 +182,12 @@ def run_lcca_bench(
     for ax, condition in zip(axes, ("VO", "HV"), strict=True):
         plot_tip_paths(phantom, [p for p in paths if p[1] == condition], ax)
         ax.set_title(f"all outsiders, {condition}: tip paths, wall contacts", fontsize=8)
-    fig.savefig(out_dir / "lcca_tip_paths.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "lcca_tip_paths.png", dpi=200)
     plt.close(fig)
     fig = plot_groups(frame)
-    fig.savefig(out_dir / "lcca_groups.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "lcca_groups.png", dpi=200)
     plt.close(fig)
+    report["data"] = SIMULATED_NOTE
     (out_dir / "lcca_bench.json").write_text(json.dumps(report, indent=2) + "\n")
     (out_dir / "lcca_bench.md").write_text(markdown(report))
     return report

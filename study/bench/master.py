@@ -33,6 +33,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from study.analysis.figures import label_source
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.core import LoopConfig, TeleopLoop
 from teleop_core.loop.drivers import (
@@ -49,6 +50,11 @@ from teleop_core.master.params import DialParams
 
 FREQUENCIES_HZ = tuple(float(f) for f in range(1, 13))
 FIG11_FREQUENCIES_HZ = (1.0, 4.0, 8.0, 12.0)
+SIMULATED_NOTE = (
+    "SIMULATED: the dial model on its simulated lever and gauge, and the simulated "
+    "teleoperation loop; no measured data"
+)
+"""Written above every figure of this bench (`figures.label_source`) and in its JSON."""
 
 
 @dataclass(frozen=True)
@@ -370,20 +376,20 @@ def run_master_bench(
 ) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(config.seed)
-    report: dict[str, Any] = {"config": asdict(config)}
+    report: dict[str, Any] = {"data": SIMULATED_NOTE, "config": asdict(config)}
     progress("calibration")
     report["calibration"], fig = calibration(config, rng)
-    fig.savefig(out_dir / "fig10b_calibration.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "fig10b_calibration.png", dpi=200)
     plt.close(fig)
     progress("frequency response")
     report["frequency_response"], fig, fig11 = frequency_response(config, rng)
-    fig.savefig(out_dir / "fig10c_frequency_response.png", dpi=200)
-    fig11.savefig(out_dir / "fig11_time_responses.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "fig10c_frequency_response.png", dpi=200)
+    label_source(fig11, SIMULATED_NOTE).savefig(out_dir / "fig11_time_responses.png", dpi=200)
     plt.close(fig)
     plt.close(fig11)
     progress("latency")
     report["latency"], fig = latency(config, rng)
-    fig.savefig(out_dir / "latency.png", dpi=200)
+    label_source(fig, SIMULATED_NOTE).savefig(out_dir / "latency.png", dpi=200)
     plt.close(fig)
     report["closed_loop"] = closed_loop_speed(config, estimator, progress)
     (out_dir / "master_bench.md").write_text(markdown(report))

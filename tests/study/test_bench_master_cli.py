@@ -28,6 +28,7 @@ def test_bench_master_quick_reproduces_the_dial_figures(tmp_path: Path) -> None:
     argv = ["bench", "master", "--quick", "--json", str(out_json), "--out", str(tmp_path / "f")]
     assert main(argv) == 0
     report = json.loads(out_json.read_text())
+    assert report["data"].startswith("SIMULATED")  # every figure and the JSON say so
     # the refitted polynomials stay within the JND of eqs. 14-15 over the calibrated range
     for branch in ("loading", "unloading"):
         assert report["calibration"][branch]["max_abs_difference_n"] < 0.192

@@ -184,6 +184,7 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
         == 0
     )
     report = json.loads(out_json.read_text())
+    assert report["data"].startswith("SIMULATED")  # no measured data in this bench
     assert set(report["table_i"]) == {"ramp", "step"}
     assert set(report["table_ii"]) == {"0.5", "1", "1.5", "2", "2.5", "3"}
     assert set(report["table_iii"]["pooled"]) == {

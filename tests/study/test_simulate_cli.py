@@ -68,6 +68,7 @@ def test_bench_lcca_quick_runs_the_design(model_dir: Path, tmp_path: Path) -> No
     argv = ["bench", "lcca", "--quick", "--json", str(out_json), "--out", str(tmp_path / "f")]
     assert main([*argv, "--estimator", str(model_dir)]) == 0
     report = json.loads(out_json.read_text())
+    assert report["data"].startswith("SIMULATED")  # every figure and the JSON say so
     assert set(report["groups"]) == {"outsider", "novice", "expert"}
     assert {t["measure"] for t in report["tests"]} == {
         "completion_time_s",
