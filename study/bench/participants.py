@@ -7,7 +7,9 @@
    target is <= 10 minutes for a 36-participant study on this 2-core machine.
 3. The truth's VO - HV differences of the peak forces: `truth_people` more people per
    group drawn from PROFILES and simulated (1 trial per condition, independent seeds),
-   their mean difference per group with its standard error.
+   their mean difference per group with its standard error. 300 by default: with 60 the
+   truth's own standard error (0.02-0.04 N) was half the fitted model's interval, so a
+   truth estimate off by chance could fall outside it (one of six did, 2026-11-23).
 4. Targets: each group's fitted mean of each identifiable trait within 15 % of the
    truth; the truth's VO - HV peak-force difference inside the fitted model's reported
    95 % interval (the `simulated` rows of the summaries: people simulated from the fit's

@@ -221,7 +221,7 @@ def bench_startup(
               help="Write participants_bench.md and the fit's figure here.")  # fmt: skip
 @click.option("--trials", type=click.IntRange(min=1), default=3, show_default=True,
               help="Measured trials per condition in the simulated study.")  # fmt: skip
-@click.option("--truth-people", type=click.IntRange(min=4), default=60, show_default=True,
+@click.option("--truth-people", type=click.IntRange(min=4), default=300, show_default=True,
               help="People per group simulated for the truth's VO - HV differences.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=int, default=11, show_default=True)
