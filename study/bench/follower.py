@@ -335,7 +335,10 @@ def run_follower_bench(
     if "tables" in config.parts:
         run_tables(config, out_dir, report, progress)
     if "training" in config.parts:
-        report["training_time"] = training_time.run_training_time(config, progress)
+        recording = training_recording(config.train_seconds, config.seed)
+        report["training_time"] = training_time.run_training_time(
+            recording, config.epochs, config.seed, progress
+        )
     (out_dir / "follower_bench.md").write_text(markdown(report))
     (out_dir / "follower_bench.json").write_text(json.dumps(report, indent=2) + "\n")
     return report

@@ -51,16 +51,23 @@ def session_killed_at(url: str, code: str, after_trials: int, die_at_s: float, l
     run_session(engine, code, "simulated", load_estimator(), make_driver=make_driver)
 
 
+PACE = 20.0
+"""Times real time the sessions of `run_all_jobs_2` run at: a session then outlasts the
+workers' check of their parent (`parallel.PARENT_POLL_S`, 0.5 s). Unpaced, a fast host
+(about 500x real time, 2026-11-26) ran a participant's six trials in under 0.5 s, and
+the kill met sessions already finished instead of a trial to interrupt."""
+
+
 def run_all_jobs_2(url: str, codes: list[str]) -> None:
-    """`study run --all --jobs 2` as its parent process runs it (`run_participants`),
-    with the workers forked from this process instead of spawned (the same parent and
-    parent-watch, without two interpreter starts per case)."""
+    """`study run --all --jobs 2 --pace 20` as its parent process runs it
+    (`run_participants`), with the workers forked from this process instead of spawned
+    (the same parent and parent-watch, without two interpreter starts per case)."""
     import study.protocol.parallel as session
 
     fork = multiprocessing.get_context("fork")
     shim = types.SimpleNamespace(get_context=lambda _method: fork)
     session.multiprocessing = shim  # type: ignore[assignment]
-    for _ in session.run_participants(url, codes, jobs=2):
+    for _ in session.run_participants(url, codes, jobs=2, pace=PACE):
         pass
 
 
