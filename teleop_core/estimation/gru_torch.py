@@ -1,8 +1,10 @@
 """Training the GRU stage with PyTorch (seed 000, eqs. 3-4 and 12-13): see `gru.py`.
 
 Only training imports this module, so that running a trained estimator never loads
-PyTorch; `gru.pt` (a state dict for `GruNet`) is written here beside the plain
-`gru.npz` that inference reads, and read only for model folders older than `gru.npz`.
+PyTorch, an optional dependency (the `train` extra; without it, importing this module
+raises one line saying how to install it). `gru.pt` (a state dict for `GruNet`) is
+written here beside the plain `gru.npz` that inference reads, and read only for model
+folders older than `gru.npz`.
 """
 
 from __future__ import annotations
@@ -13,10 +15,18 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from teleop_core._typing import Float1D, Float2D
 from teleop_core.errors import TeleopInputError
+
+try:
+    import torch
+except ImportError as exc:  # the `train` extra is not installed
+    raise TeleopInputError(
+        "training the force estimator's GRU needs PyTorch, which is not installed; expected "
+        "`pip install 'haptic-study[train]'` (on a CPU-only machine `pip install "
+        "torch==2.13.0` first)"
+    ) from exc
 from teleop_core.estimation.gru import (
     N_FEATURES,
     GruConfig,

@@ -186,9 +186,12 @@ class ForceEstimator:
         try:
             _write_json(tmp / "physics.json", self.physics.to_dict())
             self.gru.weights.save_npz(tmp / "gru.npz")
-            from teleop_core.estimation.gru_torch import save_torch_weights
-
-            save_torch_weights(self.gru.weights, tmp / "gru.pt")
+            try:  # gru.pt, for training on from these weights, where PyTorch is installed
+                from teleop_core.estimation.gru_torch import save_torch_weights
+            except TeleopInputError:
+                pass
+            else:
+                save_torch_weights(self.gru.weights, tmp / "gru.pt")
             _write_json(
                 tmp / "standardisation.json",
                 {

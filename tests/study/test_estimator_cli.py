@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -219,3 +220,45 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
         "table_iii_fig9.png",
         "fig8_window.png",
     )
+
+
+def _without_torch(monkeypatch: pytest.MonkeyPatch) -> None:
+    """PyTorch as not installed (the `train` extra left out): `import torch` fails, and the
+    modules that imported it are imported again."""
+    import sys
+
+    import teleop_core.estimation as package
+
+    monkeypatch.setitem(sys.modules, "torch", None)
+    for name in ("gru_torch", "training"):
+        monkeypatch.delitem(sys.modules, f"teleop_core.estimation.{name}", raising=False)
+        monkeypatch.delattr(package, name, raising=False)
+
+
+def test_training_without_pytorch_is_one_line_naming_the_extra(
+    recording_csv: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    _without_torch(monkeypatch)
+    out = tmp_path / "m"
+    line = one_error_line(capsys, ["estimator", "train", str(recording_csv), "--out", str(out)])
+    assert "needs PyTorch" in line and "pip install 'haptic-study[train]'" in line, line
+    assert not out.exists()
+
+
+def test_without_pytorch_a_trained_model_runs_and_saves_without_gru_pt(
+    model_dir: Path, recording_csv: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from teleop_core.estimation.estimator import ForceEstimator
+    from teleop_core.estimation.recording import FollowerRecording
+
+    _without_torch(monkeypatch)
+    estimator = ForceEstimator.load(model_dir)  # reads gru.npz
+    recording = FollowerRecording.from_csv(recording_csv)
+    before = estimator.predict(recording).f_final
+    estimator.save(tmp_path / "copy", {"note": "saved without PyTorch"})
+    assert not (tmp_path / "copy" / "gru.pt").exists()
+    again = ForceEstimator.load(tmp_path / "copy").predict(recording).f_final
+    np.testing.assert_array_equal(again, before)
