@@ -86,7 +86,7 @@ def compile_loop_once(notice: Callable[[str], None] | None = None) -> bool:
     from teleop_core.loop import kernel
     from teleop_core.phantom.lcca import lcca_phantom
 
-    if kernel.is_compiled(lcca_phantom):
+    if not kernel.needs_compiling(lcca_phantom):
         return False
     if notice is not None:
         notice("compiling the simulation loop (once after install; later runs load it)")

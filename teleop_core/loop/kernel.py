@@ -60,6 +60,20 @@ def is_compiled(env_fn: Callable[..., None]) -> bool:
     return found is not None and is_built(_cache_dir(), found[2])
 
 
+def needs_compiling(env_fn: Callable[..., None]) -> bool:
+    """Whether the next process to run `env_fn` would compile its kernel ahead of time:
+    importable by name, not built yet, and no earlier attempt failed on this machine
+    (without a C compiler the JIT kernel from numba's cache runs instead, every time)."""
+    try:
+        found = _kernel_module(env_fn)
+    except (OSError, ImportError, AttributeError, SyntaxError):
+        return False
+    if found is None:
+        return False
+    folder, key = _cache_dir(), found[2]
+    return not is_built(folder, key) and can_build(folder, key)
+
+
 def _cache_dir() -> Path:
     root = os.environ.get("HAPTIC_STUDY_CACHE") or os.environ.get("XDG_CACHE_HOME")
     base = Path(root) if root else Path.home() / ".cache"

@@ -197,6 +197,12 @@ def test_the_first_demo_after_install_says_it_compiles_the_loop_once(
     from teleop_core.phantom.lcca import lcca_phantom
 
     monkeypatch.setenv("HAPTIC_STUDY_CACHE", str(tmp_path / "cache"))
-    assert kernel.is_compiled(lcca_phantom)
+    assert kernel.is_compiled(lcca_phantom) and not kernel.needs_compiling(lcca_phantom)
     monkeypatch.setenv("HAPTIC_STUDY_CACHE", str(tmp_path / "empty"))
-    assert not kernel.is_compiled(lcca_phantom)
+    assert not kernel.is_compiled(lcca_phantom) and kernel.needs_compiling(lcca_phantom)
+    # a machine where building failed once (no C compiler) is not told it compiles
+    # every run: the JIT kernel from numba's cache runs there
+    key = kernel._kernel_module(lcca_phantom)[2]  # type: ignore[index]
+    (tmp_path / "empty" / "kernels").mkdir(parents=True)
+    (tmp_path / "empty" / "kernels" / f"_haptic_study_loop_aot_{key}.failed").write_text("x")
+    assert not kernel.needs_compiling(lcca_phantom)
