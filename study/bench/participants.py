@@ -148,6 +148,7 @@ def run_participants_bench(
         "fit_cpu_seconds": round(fit_cpu_s, 1),
         "fit_target_seconds": 600,
         "lacks": model["lacks"]["line"],
+        "emulator_check": model["emulator_check"]["line"],
         "load_average_before": [round(x, 2) for x in load_before],
         "load_average_after": [round(x, 2) for x in os.getloadavg()],
         "cpus": os.cpu_count(),
@@ -200,6 +201,8 @@ def markdown(report: dict[str, Any]) -> str:
         f"{report['cpus']} CPUs.",
         "",
         report["lacks"],
+        "",
+        report["emulator_check"],
         "",
     ]
     return "\n".join(lines)

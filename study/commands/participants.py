@@ -100,6 +100,7 @@ def fit(
     _write(out_path, model, table)
     _print(model, table)
     click.echo(model["lacks"]["line"])
+    click.echo(model["emulator_check"]["line"])
     click.echo(
         f"model: {out_path}; figure: {out_path.with_suffix('.png')} ({model['seconds']:.0f} s)"
     )

@@ -167,3 +167,27 @@ def test_a_bad_model_is_one_line_for_every_command(
     assert f"participant model {model}" in line and "expected" in line, line
     assert not (tmp_path / "demo").exists() and not (tmp_path / "camp").exists()
     assert not (tmp_path / "t.csv").exists()
+
+
+def test_the_emulator_is_checked_against_the_people_simulated_from_the_fit(fitted) -> None:
+    import pandas as pd
+
+    from study.analysis.participant_fit.checks import emulator_check
+
+    model, _ = fitted
+    check = model["emulator_check"]
+    assert len(check["rows"]) == 3 * 3 * 3  # groups x measures x (VO, HV, VO-HV)
+    assert check["outside"] == sum(not r["inside"] for r in check["rows"])
+    # a hand-made table: one prediction inside its interval, one 0.3 above it
+    rows = [
+        ("novice", "t", "VO", "simulated", 10.0, 9.0, 11.0),
+        ("novice", "t", "VO", "model", 10.5, 0, 0),
+        ("expert", "t", "VO", "simulated", 8.0, 7.5, 8.5),
+        ("expert", "t", "VO", "model", 8.8, 0, 0),
+    ]
+    made = pd.DataFrame(rows, columns=["group", "measure", "condition", "source", "mean",
+                                       "ci_low", "ci_high"])  # fmt: skip
+    check = emulator_check(made)
+    assert [r["inside"] for r in check["rows"]] == [True, False]
+    assert check["outside"] == 1
+    assert "in 1 of 2 summaries (largest gap: expert VO t 8.8 vs 8)" in check["line"]

@@ -223,3 +223,38 @@ def lacks_line(rows: list[dict[str, Any]], outlier: dict[str, Any]) -> str:
     if not parts:
         return f"what the participants lack: nothing the checks found ({', '.join(tested)})"
     return "what the participants lack: " + "; ".join(parts)
+
+
+def emulator_check(table: pd.DataFrame) -> dict[str, Any]:
+    """The emulator against the people simulated from the fit: the estimates rest on the
+    emulator's surface, the `simulated` summaries on the simulator itself. Per group,
+    measure and condition (VO, HV, VO-HV): the emulator's predicted mean (`model` rows)
+    and whether it lies inside the simulated people's 95 % interval; the printed line
+    says how many lie outside, and the largest relative gap."""
+    keys = ["group", "measure", "condition"]
+    model = table[table["source"] == "model"].set_index(keys)
+    simulated = table[table["source"] == "simulated"].set_index(keys)
+    rows = []
+    for key, sim in simulated.iterrows():
+        predicted = float(model.loc[key, "mean"])
+        rows.append({
+            **dict(zip(keys, key, strict=True)),
+            "emulator": predicted, "simulated": float(sim["mean"]),
+            "simulated_ci95": [float(sim["ci_low"]), float(sim["ci_high"])],
+            "inside": bool(sim["ci_low"] <= predicted <= sim["ci_high"]),
+        })  # fmt: skip
+    outside = [r for r in rows if not r["inside"]]
+    if not outside:
+        line = (
+            f"the emulator's predictions lie inside the intervals of people simulated from "
+            f"the fit ({len(rows)} summaries)"
+        )
+    else:
+        worst = max(outside, key=lambda r: abs(r["emulator"] - r["simulated"]))
+        line = (
+            f"the emulator's prediction lies outside the interval of people simulated from "
+            f"the fit in {len(outside)} of {len(rows)} summaries (largest gap: "
+            f"{worst['group']} {worst['condition']} {worst['measure']} {worst['emulator']:.3g} "
+            f"vs {worst['simulated']:.3g}): the trait estimates rest on the emulator"
+        )
+    return {"rows": rows, "outside": len(outside), "line": line}

@@ -337,6 +337,7 @@ def fit_trials(
         "the interval holds the fit's uncertainty and the people's); 'model': the "
         "emulator's prediction with the fit's bootstrap interval",
         "lacks": {"line": checks.lacks_line(rows, outlier), "tests": rows, "outliers": outlier},
+        "emulator_check": checks.emulator_check(table),
         "effects": power_effects(simulated, measures),
         "settings": settings.__dict__,
     }
