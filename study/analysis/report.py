@@ -35,9 +35,9 @@ def _records(frame: pd.DataFrame, keys: tuple[str, ...]) -> list[dict[str, Any]]
         return []
     out = []
     for row in frame[list(keys)].to_dict("records"):
-        out.append(
-            {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
-        )
+        # NaN, and the infinite F of a residual that is exactly zero: null (strict JSON)
+        finite = {k: not (isinstance(v, float) and not math.isfinite(v)) for k, v in row.items()}
+        out.append({k: (v if finite[k] else None) for k, v in row.items()})
     return out
 
 

@@ -14,8 +14,8 @@
   every call, 0.2 s each).
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
-  pingouin's `mixed_anova` has Type II only, so both come from two statsmodels OLS fits
-  (`_anova_rows` says how); unequal group sizes are stated.
+  pingouin's `mixed_anova` has Type II only, so both come from two one-way models in
+  closed form (`anova.py` says how); unequal group sizes are stated.
 - `mixed_model`: a linear mixed model over all trials, value ~ condition * group with a
   random intercept per participant (statsmodels `mixedlm`, REML); its p-values are Wald
   z tests (statsmodels has no Satterthwaite df; lmerTest's are a little larger on small
@@ -36,10 +36,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from scipy import stats
-from statsmodels.regression.linear_model import OLS
 from statsmodels.regression.mixed_linear_model import MixedLM
-from statsmodels.stats.anova import anova_lm
 
+from study.analysis.anova import anova_rows
 from study.analysis.source import DRIVERS, DataSource
 from study.errors import StudyInputError
 
@@ -251,45 +250,6 @@ participant-weighted mean (pingouin's `mixed_anova`, R `afex::aov_ez(type = 2)`)
 means. The group and interaction terms are the same under both."""
 
 
-def _anova_rows(wide: pd.DataFrame, a: str, b: str, ss_type: int) -> list[dict[str, Any]]:
-    """Group (between) x condition (two levels, within) on one participant per row.
-
-    With two conditions the mixed ANOVA splits into two between-subject models (the
-    multivariate approach car::Anova and afex use): the participant sums
-    s = (a + b) / sqrt 2 carry the group effect; the differences d = (b - a) / sqrt 2
-    carry the condition effect (the intercept of d ~ group) and the interaction (the
-    group term of d ~ group). statsmodels fits both with sum-to-zero group contrasts;
-    its Type III table gives the intercept's SS (Type III condition), and the Type II
-    condition SS is that of the intercept alone, N mean(d)^2.
-    """
-    data = pd.DataFrame({
-        "group": wide["group"].to_numpy(),
-        "s": (wide[a] + wide[b]).to_numpy(float) / math.sqrt(2),
-        "d": (wide[b] - wide[a]).to_numpy(float) / math.sqrt(2),
-    })  # fmt: skip
-    between = anova_lm(OLS.from_formula("s ~ C(group, Sum)", data).fit(), typ=3)
-    within = anova_lm(OLS.from_formula("d ~ C(group, Sum)", data).fit(), typ=3)
-    n = len(data)
-    # Type II: SS(condition) = N dbar^2; Type III: the sum-coded intercept's SS
-    ss_condition = n * data["d"].mean() ** 2 if ss_type == 2 else within.loc["Intercept", "sum_sq"]
-    terms = (
-        ("group", between.loc["C(group, Sum)"], between.loc["Residual"]),
-        ("condition", pd.Series({"sum_sq": ss_condition, "df": 1.0}), within.loc["Residual"]),
-        ("interaction", within.loc["C(group, Sum)"], within.loc["Residual"]),
-    )
-    rows = []
-    for source, effect, error in terms:
-        # F = (SS_effect / df_effect) / (SS_error / df_error); partial eta^2 = SS / (SS + SS_err)
-        f = (effect["sum_sq"] / effect["df"]) / (error["sum_sq"] / error["df"])
-        rows.append({
-            "source": source, "F": float(f), "df1": float(effect["df"]),
-            "df2": float(error["df"]), "p": float(stats.f.sf(f, effect["df"], error["df"])),
-            "np2": float(effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])),
-            "ss_type": ss_type,
-        })  # fmt: skip
-    return rows
-
-
 def mixed_anova(
     long: pd.DataFrame, a: str = "VO", b: str = "HV", ss_type: int = DEFAULT_SS_TYPE
 ) -> tuple[pd.DataFrame, list[str]]:
@@ -318,7 +278,7 @@ def mixed_anova(
         if (wide.groupby("group")[[a, b]].var() == 0).all().all():
             notes.append(f"{task}/{measure}: mixed ANOVA skipped (no variance within groups)")
             continue
-        for row in _anova_rows(wide, a, b, ss_type):
+        for row in anova_rows(wide, a, b, ss_type):
             rows.append({"task": task, "measure": measure, **row})
     return pd.DataFrame(rows, columns=ANOVA_COLUMNS), notes
 

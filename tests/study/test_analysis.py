@@ -321,3 +321,29 @@ def test_wilcoxon_rule_is_r_wilcox_test(diff: list[float], p: float, w: float, m
     got = wilcoxon_signed_rank(np.array(diff))
     assert got[0] == w and got[2] == method
     assert got[1] == pytest.approx(p, abs=1e-12)
+
+
+def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -> None:
+    """HV = VO + a constant per group: the differences have no within-group variance, so
+    the condition and interaction F divide by zero (statsmodels' fit gave 1e31-1e32 from
+    rounding noise); p is 0, partial eta squared 1, and analysis.json holds null."""
+    import json
+    import math
+
+    from study.analysis.report import ANOVA_KEYS, _records
+
+    rows = []
+    for group, shift in (("novice", 1.0), ("expert", 2.0)):
+        for i in range(4):
+            for condition, value in (("VO", 10.0 + i * i), ("HV", 10.0 + i * i + shift)):
+                rows.append({"participant": f"{group}{i}", "group": group, "task": "lcca",
+                             "measure": "m", "condition": condition, "value": value})  # fmt: skip
+    table, _ = mixed_anova(pd.DataFrame(rows))
+    rows_by = table.set_index("source")
+    for source in ("condition", "interaction"):
+        assert math.isinf(rows_by.loc[source, "F"]) and rows_by.loc[source, "p"] == 0.0
+        assert rows_by.loc[source, "np2"] == 1.0
+    assert math.isfinite(rows_by.loc["group", "F"])
+    records = _records(table, ANOVA_KEYS)
+    json.dumps(records, allow_nan=False)  # strict JSON: no Infinity
+    assert [r["F"] is None for r in records] == [False, True, True]
