@@ -36,8 +36,8 @@ def _records(frame: pd.DataFrame, keys: tuple[str, ...]) -> list[dict[str, Any]]
     out = []
     for row in frame[list(keys)].to_dict("records"):
         # NaN, and the infinite F of a residual that is exactly zero: null (strict JSON)
-        finite = {k: not (isinstance(v, float) and not math.isfinite(v)) for k, v in row.items()}
-        out.append({k: (v if finite[k] else None) for k, v in row.items()})
+        out.append({k: None if isinstance(v, float) and not math.isfinite(v) else v
+                    for k, v in row.items()})  # fmt: skip
     return out
 
 

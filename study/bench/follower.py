@@ -332,10 +332,13 @@ def run_follower_bench(
         report["generalisation"] = generalisation.run_generalisation(
             config.generalisation, out_dir, progress
         )
-    if "tables" in config.parts:
-        run_tables(config, out_dir, report, progress)
-    if "training" in config.parts:
+    recording = None  # the training recording, simulated once for the parts that use it
+    if {"tables", "training"} & set(config.parts):
+        progress("simulating the training recording")
         recording = training_recording(config.train_seconds, config.seed)
+    if "tables" in config.parts:
+        run_tables(config, recording, out_dir, report, progress)
+    if "training" in config.parts:
         report["training_time"] = training_time.run_training_time(
             recording, config.epochs, config.seed, progress
         )
@@ -346,6 +349,7 @@ def run_follower_bench(
 
 def run_tables(
     config: FollowerBenchConfig,
+    recording: FollowerRecording,
     out_dir: Path,
     report: dict[str, Any],
     progress: Callable[[str], None],
@@ -356,8 +360,6 @@ def run_tables(
     label_source(fig, SIMULATED_NOTE).savefig(out_dir / "table_i_velocity.png", dpi=200)
     plt.close(fig)
 
-    progress("simulating the training recording")
-    recording = training_recording(config.train_seconds, config.seed)
     gru_config = GruConfig(max_epochs=config.epochs)
     start = time.perf_counter()
 

@@ -20,8 +20,8 @@ the kernel cache, `teleop_core/loop/aot.py`, as the first run after install does
   with `PRAGMA foreign_keys=ON`, which every connection to a study database has (the
   writer's rows pay a lookup of their trial each; the plain reference does not);
 - `study demo` (the whole 36-participant study, figures included, two worker processes),
-  start to exit, wall seconds, `demo_runs` times after its own warm-up (which compiles
-  the NOTES kernels into numba's cache, as the first run after install does).
+  start to exit, wall seconds, `demo_runs` times after its own warm-up (the OS's file
+  cache; the loop kernel is compiled by then, as after the first run after install).
 
 This module imports only the standard library at its top: the run-screen probe
 imports it in the subprocess it times.

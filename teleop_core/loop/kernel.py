@@ -49,29 +49,29 @@ def kernel_for(env_fn: Callable[..., None]) -> Callable[..., None]:
     return _KERNELS[env_fn]
 
 
-def is_compiled(env_fn: Callable[..., None]) -> bool:
-    """Whether `env_fn`'s kernel is already compiled ahead of time in the kernel cache
-    folder, so that a process only loads it (False for an environment not importable by
-    name, whose kernel every process compiles)."""
+def _cache_key(env_fn: Callable[..., None]) -> str | None:
+    """The key of `env_fn`'s kernel in the cache folder (None for an environment not
+    importable by name, whose kernel every process compiles)."""
     try:
         found = _kernel_module(env_fn)
     except (OSError, ImportError, AttributeError, SyntaxError):
-        return False
-    return found is not None and is_built(_cache_dir(), found[2])
+        return None
+    return None if found is None else found[2]
+
+
+def is_compiled(env_fn: Callable[..., None]) -> bool:
+    """Whether `env_fn`'s kernel is already compiled ahead of time in the kernel cache
+    folder, so that a process only loads it."""
+    key = _cache_key(env_fn)
+    return key is not None and is_built(_cache_dir(), key)
 
 
 def needs_compiling(env_fn: Callable[..., None]) -> bool:
     """Whether the next process to run `env_fn` would compile its kernel ahead of time:
     importable by name, not built yet, and no earlier attempt failed on this machine
     (without a C compiler the JIT kernel from numba's cache runs instead, every time)."""
-    try:
-        found = _kernel_module(env_fn)
-    except (OSError, ImportError, AttributeError, SyntaxError):
-        return False
-    if found is None:
-        return False
-    folder, key = _cache_dir(), found[2]
-    return not is_built(folder, key) and can_build(folder, key)
+    key = _cache_key(env_fn)
+    return key is not None and not is_built(_cache_dir(), key) and can_build(_cache_dir(), key)
 
 
 def _cache_dir() -> Path:
