@@ -223,11 +223,14 @@ def bench_startup(
               help="Measured trials per condition in the simulated study.")  # fmt: skip
 @click.option("--truth-people", type=click.IntRange(min=4), default=300, show_default=True,
               help="People per group simulated for the truth's VO - HV differences.")  # fmt: skip
+@click.option("--truth-shift", type=click.FloatRange(min=0.0, max=2.0), default=0.7,
+              show_default=True, help="How far the truth's trait means lie from the priors', "
+              "in prior SDs (0: the priors).")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=int, default=11, show_default=True)
 @_json_option
-def bench_participants(out_dir: Path | None, trials: int, truth_people: int, jobs: int,
-                       seed: int, json_path: Path | None) -> None:  # fmt: skip
+def bench_participants(out_dir: Path | None, trials: int, truth_people: int, truth_shift: float,
+                       jobs: int, seed: int, json_path: Path | None) -> None:  # fmt: skip
     """Recovery of known trait distributions from a simulated 20/8/8 study, and the fit's time."""
     from study.analysis.participant_fit.fit import FitSettings
     from study.bench.participants import markdown, run_participants_bench
@@ -237,7 +240,7 @@ def bench_participants(out_dir: Path | None, trials: int, truth_people: int, job
     with Console(stderr=True).status("participants bench") as status:
         report = run_participants_bench({"outsider": 20, "novice": 8, "expert": 8}, trials,
                                         FitSettings(jobs=jobs), truth_people, seed, out_dir,
-                                        status.update)  # fmt: skip
+                                        status.update, truth_shift)  # fmt: skip
     text = markdown(report)
     if out_dir is not None:
         (out_dir / "participants_bench.md").write_text(text)

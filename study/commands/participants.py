@@ -38,7 +38,7 @@ def participants() -> None:
 )
 @file_option("--out", "out_path", "MODEL.json to write; the figure goes beside it (MODEL.png).")
 @count_option(
-    "--design", 160, "Trait settings the emulator is built from.", minimum=16, dest="n_design"
+    "--design", 320, "Trait settings the emulator is built from.", minimum=16, dest="n_design"
 )
 @count_option("--repeats", 2, "Trials per condition at each setting.")
 @count_option(
@@ -63,7 +63,8 @@ def fit(
     seed: int,
 ) -> None:
     """Fit each experience group's trait distributions to the database's completed trials
-    (simulated moments on an emulator); write MODEL.json and MODEL.png, print the
+    (a hierarchical model on an emulator of the measures and the samples' behavioural
+    features); write MODEL.json and MODEL.png, print the
     observed vs simulated summaries and one line on what the participants lack."""
     from db.engine import describe, resolve_url
     from study.analysis.participant_fit.fit import FitSettings, fit_participants
@@ -85,7 +86,9 @@ def fit(
             if step not in bars:
                 bars[step] = bar.add_task(
                     {
+                        "samples": "reading the trials' samples",
                         "emulator": "simulating the emulator's design",
+                        "validating": "checking the emulator on held-out settings",
                         "fitting": "fitting the groups",
                         "checking": "simulating people from the fit",
                     }[step],
@@ -128,9 +131,17 @@ def _print(model: dict, table: object) -> None:
         f"{model['task']}: fitted to {model['fitted_from']['participants']} participants' "
         f"{model['fitted_from']['trials']} trials ({model['data_source']})"
     )
+    features = model["features"]
+    click.echo(
+        f"moments: the measures and {len(features['names'])} sample features "
+        f"({features['trials_with_samples']} of {model['fitted_from']['trials']} trials "
+        "with samples)"
+        if features["names"]
+        else "moments: the measures (the task has no sample features)"
+    )
     click.echo(
         f"identifiable from the moments: {', '.join(model['identifiable']) or 'none'}; "
-        f"fixed at their priors: {', '.join(model['fixed_at_prior'])}"
+        f"fixed at their priors: {', '.join(model['fixed_at_prior']) or 'none'}"
     )
     for group, out in fits.items():
         traits = ", ".join(

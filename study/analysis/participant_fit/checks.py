@@ -189,6 +189,7 @@ def outliers(
         "simulated_max": round(float(sim.max() / c), 3),
         "limit": round(limit, 3),
         "df": df,
+        "moments": list(names),
         "distance": {p: round(d, 3) for p, d in scaled.items()},
         "flagged": sorted(p for p, d in scaled.items() if d > limit),
     }

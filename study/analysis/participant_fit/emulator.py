@@ -4,7 +4,9 @@ Running the physics for every candidate trait distribution is what makes
 simulation-based inference slow (0.1-0.7 s per LCCA trial). Instead, a designed set of
 trait settings (a Latin hypercube over the priors' range, `scipy.stats.qmc`) is
 simulated once with common random numbers (`simulate.py`), and each moment, the log of
-a measure in a condition, is regressed on the traits: a quadratic response surface
+a measure or of a behavioural feature of the samples (`Task.fit_features`: the advance
+speed, how early the approach slows, the aim, the time before backing off, ...) in a
+condition, is regressed on the traits: a quadratic response surface
 (scikit-learn's `PolynomialFeatures` + `Ridge` on standardised traits). What the
 regression leaves is the trial-to-trial noise (plus the surface's misfit, so the noise
 is not understated); its covariance across moments is kept, since one trial's time and
@@ -13,19 +15,25 @@ group's mean peak force is a mean of forces, not of logs): exp(surface) times th
 of exp(residual), Duan's smearing estimate, which needs no assumption on the noise's
 distribution (peak forces have long right tails).
 
+The measures alone (a trial's time and peak forces) identify little more than the
+preferred speed: every trait slows a trial or raises its peaks a little, and with a
+handful of people per group their effects cannot be told apart. The features separate
+them, as a rater watching the recordings would.
+
 `fit` returns self and the fitted values end in `_`, as in scikit-learn. The moment
-names are `CONDITION:measure` (`VO:completion_time_s`).
+names are `CONDITION:measure` (`VO:completion_time_s`), `CONDITION:feature` after them.
 """
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
 from scipy.stats import qmc
 from sklearn.linear_model import Ridge
-from sklearn.pipeline import Pipeline, make_pipeline
+from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 
 from study.protocol.design import KNOWN_CONDITIONS
@@ -33,6 +41,8 @@ from study.protocol.participants import PROFILES, TRAIT_BOUNDS, TRAITS, GroupPro
 
 LOG_FLOOR = 1e-3
 """Smallest value taken before a log (a peak force of 0 N reads as 1 mN)."""
+FEATURE_FLOOR = 1e-12
+"""The same for a fit feature (positive by definition, some of the order of 1e-4)."""
 DESIGN_SDS = 2.5
 """The design spans every prior group mean +/- this many prior SDs (within the bounds)."""
 
@@ -41,8 +51,14 @@ def moment_names(measures: Sequence[str]) -> list[str]:
     return [f"{c}:{m}" for c in KNOWN_CONDITIONS for m in measures]
 
 
-def log_moment(values: np.ndarray | pd.Series) -> np.ndarray:
-    return np.log(np.maximum(np.asarray(values, dtype=float), LOG_FLOOR))
+def log_moment(values: np.ndarray | pd.Series, floor: float = LOG_FLOOR) -> np.ndarray:
+    return np.log(np.maximum(np.asarray(values, dtype=float), floor))
+
+
+def floor(column: str, measures: Sequence[str]) -> float:
+    """The floor before the log of a measure (`LOG_FLOOR`) or a feature (`FEATURE_FLOOR`)
+    column, or of a moment named `CONDITION:column`."""
+    return LOG_FLOOR if column.split(":", 1)[-1] in measures else FEATURE_FLOOR
 
 
 def design_box(profiles: dict[str, GroupProfile] = PROFILES) -> tuple[np.ndarray, np.ndarray]:
@@ -62,21 +78,32 @@ def design_settings(n: int, seed: int, box: tuple[np.ndarray, np.ndarray]) -> np
     return qmc.scale(unit, box[0], box[1])
 
 
-def trial_matrix(trials: pd.DataFrame, measures: Sequence[str]) -> pd.DataFrame:
-    """One row per (setting, repeat): every condition's measures side by side, with the
-    columns `moment_names(measures)`."""
+def trial_matrix(trials: pd.DataFrame, columns: Sequence[str]) -> pd.DataFrame:
+    """One row per (setting, repeat): every condition's `columns` (measures, features)
+    side by side, named `moment_names(columns)`."""
     wide = trials.pivot_table(
-        index=["setting", "repeat"], columns="condition", values=list(measures), aggfunc="first"
+        index=["setting", "repeat"],
+        columns="condition",
+        values=list(columns),
+        aggfunc="first",
+        dropna=False,
     )
-    return pd.DataFrame({f"{c}:{m}": wide[(m, c)] for c in KNOWN_CONDITIONS for m in measures})
+    return pd.DataFrame({n: wide[tuple(reversed(n.split(":", 1)))] for n in moment_names(columns)})
 
 
-def _surface(degree: int, alpha: float) -> Pipeline:
-    return make_pipeline(StandardScaler(), PolynomialFeatures(degree), Ridge(alpha=alpha))
+MIN_DEFINED = 20
+"""Fewest design trials a feature must be defined in to be emulated (else it is dropped)."""
 
 
 class MomentEmulator:
     """Log-moments and measure means of one person as functions of the traits.
+
+    The moments are the task's measures and, where the trials have samples, its fit
+    features (`Task.fit_features`) in each condition. A feature may be undefined in a
+    trial (a backing-off that did not happen): each moment's surface is fitted on the
+    design trials where it is defined, over one shared set of polynomial terms (so the
+    prediction stays one matrix product), and `defined_` keeps the share of trials that
+    define it (a person's mean of it rests on that share of their trials).
 
     Parameters
     ----------
@@ -92,26 +119,71 @@ class MomentEmulator:
         self.alpha = alpha
 
     def fit(
-        self, settings: np.ndarray, trials: pd.DataFrame, measures: Sequence[str]
+        self,
+        settings: np.ndarray,
+        trials: pd.DataFrame,
+        measures: Sequence[str],
+        features: Sequence[str] = (),
     ) -> MomentEmulator:
         """`settings` (n, len(TRAITS)); `trials` from `simulate_settings` over them."""
         self.measures_ = list(measures)
-        self.moments_ = moment_names(measures)
-        wide = trial_matrix(trials, measures)
+        features = [f for f in features if f in trials and trials[f].notna().any()]
+        names = [*moment_names(measures), *moment_names(features)]
+        wide = trial_matrix(trials, [*measures, *features])[names]
         x = settings[wide.index.get_level_values("setting")]
-        y = log_moment(wide[self.moments_].to_numpy(float))
-        self.log_surface_ = _surface(self.degree, self.alpha).fit(x, y)
-        resid = y - self.log_surface_.predict(x)
-        self.smearing_ = np.exp(resid).mean(axis=0)
-        # noise of one trial's log-moments (and the surface's misfit), across moments
-        self.noise_cov_ = np.atleast_2d(np.cov(resid, rowvar=False))
-        total = y.var(axis=0)
-        self.r2_ = dict(
-            zip(self.moments_, 1 - resid.var(axis=0) / np.where(total > 0, total, 1), strict=True)
-        )
+        y = np.column_stack([log_moment(wide[n], floor(n, measures)) for n in wide.columns])
+        keep = np.isfinite(y).sum(axis=0) >= MIN_DEFINED
+        keep[: len(self.measures_) * len(KNOWN_CONDITIONS)] = True
+        self.moments_ = [n for n, k in zip(wide.columns, keep, strict=True) if k]
+        self.features_ = [f for f in features if any(n.endswith(f":{f}") for n in self.moments_)]
+        y = y[:, keep]
+        self.terms_ = make_pipeline(StandardScaler(), PolynomialFeatures(self.degree)).fit(x)
+        phi = self.terms_.transform(x)
+        self.coef_ = np.zeros((phi.shape[1], y.shape[1]))
+        self.intercept_ = np.zeros(y.shape[1])
+        resid = np.full_like(y, np.nan)
+        for j in range(y.shape[1]):
+            ok = np.isfinite(y[:, j])
+            ridge = Ridge(alpha=self.alpha).fit(phi[ok], y[ok, j])
+            self.coef_[:, j], self.intercept_[j] = ridge.coef_, ridge.intercept_
+            resid[ok, j] = y[ok, j] - ridge.predict(phi[ok])
+        self.defined_ = np.isfinite(y).mean(axis=0)
+        # the surface's own error at a setting does not average away over a person's
+        # trials: split the residual into the trials' scatter about their setting's mean
+        # (pooled within settings) and the spread of those means beyond what the scatter
+        # explains (the misfit)
+        # (with one trial per setting the two cannot be told apart: all is scatter)
+        by_setting = pd.DataFrame(resid).groupby(wide.index.get_level_values("setting"))
+        within = by_setting.var(ddof=1).mean().to_numpy()
+        total_var = np.nan_to_num(np.nanvar(resid, axis=0))
+        self.within_var_ = np.maximum(np.where(np.isfinite(within), within, total_var), 1e-10)
+        per = by_setting.count().mean().to_numpy()
+        between = by_setting.mean().var(ddof=1).to_numpy() - self.within_var_ / per
+        between = np.clip(np.nan_to_num(between), 0.0, None)
+        self.misfit_var_ = np.where(np.isfinite(within), between, 0.0)
+        self.smearing_ = np.nanmean(np.exp(resid), axis=0)
+        # noise of one trial's log-moments (and the surface's misfit), across moments:
+        # pairwise where features are undefined, then made positive definite
+        cov = pd.DataFrame(resid).cov(min_periods=MIN_DEFINED // 2).fillna(0.0).to_numpy()
+        w, v = np.linalg.eigh(cov)
+        self.noise_cov_ = np.atleast_2d((v * np.maximum(w, 1e-6 * w.max())) @ v.T)
+        total = np.nanvar(y, axis=0)
+        r2 = 1 - np.nanvar(resid, axis=0) / np.where(total > 0, total, 1)
+        self.r2_ = dict(zip(self.moments_, r2, strict=True))
         self.n_settings_, self.n_trials_ = len(settings), len(trials)
         self.box_ = (settings.min(axis=0), settings.max(axis=0))
         return self
+
+    def subset(self, names: Sequence[str]) -> MomentEmulator:
+        """The same emulator over the moments `names` only."""
+        idx = [self.moments_.index(n) for n in names]
+        out = copy.copy(self)
+        out.moments_ = list(names)
+        out.coef_, out.intercept_ = self.coef_[:, idx], self.intercept_[idx]
+        out.defined_, out.smearing_ = self.defined_[idx], self.smearing_[idx]
+        out.noise_cov_ = self.noise_cov_[np.ix_(idx, idx)]
+        out.within_var_, out.misfit_var_ = self.within_var_[idx], self.misfit_var_[idx]
+        return out
 
     def person_noise_cov(self) -> np.ndarray:
         """One trial's noise covariance as a real session has it: the design's seeds are
@@ -124,7 +196,7 @@ class MomentEmulator:
 
     def log_moments(self, traits: np.ndarray) -> np.ndarray:
         """Expected log-moments of people with `traits` (n, len(TRAITS)) -> (n, moments)."""
-        return self.log_surface_.predict(np.atleast_2d(traits))
+        return self.terms_.transform(np.atleast_2d(traits)) @ self.coef_ + self.intercept_
 
     def means(self, traits: np.ndarray) -> np.ndarray:
         """Expected measures (own units) of people with `traits` -> (n, moments)."""
@@ -147,6 +219,19 @@ class MomentEmulator:
             "settings": self.n_settings_,
             "trials": self.n_trials_,
             "r2": {k: round(float(v), 4) for k, v in self.r2_.items()},
+            "features": self.features_,
+            **(
+                {
+                    "held_out_trait_error": dict(
+                        zip(TRAITS, np.round(self.held_out_error_, 6).tolist(), strict=True)
+                    ),
+                    "held_out_note": "RMS error of the traits of design settings the "
+                    "emulator was not fitted to, estimated from their own trials "
+                    "(4 folds; see study.analysis.participant_fit.validate)",
+                }
+                if hasattr(self, "held_out_error_")
+                else {}
+            ),
             "trial_noise_sd_log": dict(
                 zip(self.moments_, np.sqrt(np.diag(self.noise_cov_)).round(4).tolist(), strict=True)
             ),

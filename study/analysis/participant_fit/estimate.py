@@ -1,25 +1,37 @@
-"""The method of simulated moments on the emulator: each group's trait distribution.
+"""Each group's trait distribution from its people's moments: a hierarchical model fitted
+by EM, on the emulator.
 
-A person's moments y (the mean over their trials of each log measure in each condition)
-are, by the emulator, f(theta) plus trial noise of covariance Sigma_e / k (k trials per
-condition). A group's traits are theta = clip(mu + sd * z): normal, clipped into the
-traits' ranges as `draw_traits` draws them. For given (mu, sd), the group's expected
-mean and standard deviation of each moment are computed over a fixed set of standard
-normal draws z (common random numbers, so the objective is smooth in the parameters):
+A person's moments y (the mean over their trials of each log measure and log feature in
+each condition) are, by the emulator, f(theta) plus noise of variance
+Sigma_e / (k * defined) per moment (k trials per condition, `defined` the share of
+trials that define a feature). A group's people have traits theta ~ N(mu, diag(sd^2)).
+The fit estimates (mu, sd) of the free traits by expectation-maximisation:
 
-    m(mu, sd) = mean_z f(theta),   s(mu, sd)^2 = var_z f(theta) + diag(Sigma_e) / k
+- E-step: each person's posterior mode of their traits under the current (mu, sd), by
+  Levenberg-Marquardt on [(y - f(theta)) / noise; (theta - mu) / sd] within the
+  emulator's range, and its covariance from the Laplace approximation (J'J)^-1;
+- M-step: mu = the mean of the modes; sd^2 = the mean of (mode - mu)^2 plus the
+  posterior variances, pooled with `NU0` pseudo-people at the hand-set profile's sd (a
+  weak prior: with 4-20 people a group's spread is poorly told by the data, and EM
+  would otherwise let it collapse to zero for a trait the data tell little about).
 
-and (mu, sd) of the free traits minimise, by `scipy.optimize.least_squares` within the
-traits' bounds, the standardised distances to the observed group mean and SD of each
-moment (their standard errors from the data: sd / sqrt(n) and sd / sqrt(2 (n - 1))),
-plus a weak prior on log(sd) (centred on the hand-set profile's sd, `PRIOR_LOG_SD`):
-with 4-20 people a group's spread is poorly told by the data, and the penalty keeps it
-from collapsing to zero or running away (a MAP estimate for the spreads, plain MSM for
-the means). The traits the data cannot identify (`identifiable`) stay at their priors.
+Why people one at a time, not the group's mean and SD of each moment (the method of
+simulated moments, which this replaced): a feature that follows two traits (the speed
+inside the target branch follows caution and, in HV, the comfort torque) tells the two
+apart only within a person, beside another feature that follows one of them (the same
+speed in VO). Across a group, the people's spread in the first trait swamps the second.
+With the person-level model the comfort torque, the steering error and the haptic
+threshold became identifiable from the same trials.
 
-ABC packages (pyabc, elfi) were looked at and not taken: they run the simulator
-thousands of times per population (hours at 0.1-0.7 s a trial), and on the emulator the
-moment objective is smooth, so a least-squares solver finds its minimum in milliseconds.
+The traits the data cannot identify (`identifiable`) stay at their priors: their spread
+in the group is added to each person's moment noise (linearised at the prior means).
+
+The EM, the batched Levenberg-Marquardt and the Laplace covariances are written here
+(about 80 lines of numpy) because the likelihood is on the emulator, where every step
+is one matrix product for all people at once; a general package (PyMC, Stan) would
+need the emulator re-expressed in its own language and minutes of sampling per
+bootstrap replicate. ABC packages (pyabc, elfi) were looked at and not taken: they run
+the simulator thousands of times per population (hours at 0.1-0.7 s a trial).
 """
 
 from __future__ import annotations
@@ -27,18 +39,23 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from study.analysis.participant_fit.emulator import MomentEmulator
 from study.protocol.participants import TRAIT_BOUNDS, TRAITS, GroupProfile
 
+NU0 = 2.0
+"""Pseudo-people at the profile's sd in the M-step's sd (the spread's prior weight)."""
 PRIOR_LOG_SD = 0.5
-"""SD of the prior on log(trait sd / profile sd): a factor of 1.65 either way is 1 SD."""
+"""How far a group's sd may go from the profile's: within exp(+/- 4 * this) of it."""
 IDENTIFIED_RATIO = 0.5
-"""A trait is identifiable when the data would shrink its mean's uncertainty to at most
-this share of the prior SD (linearised, with the others at their priors)."""
+"""A trait is identifiable when the data would shrink its group mean's uncertainty to at
+most this share of the prior SD (linearised at the priors, the other free traits free
+too, in the group where it is worst)."""
 DRAWS = 1000
 """Standard normal draws per group for the expected moments."""
+EM_STEPS = 300
+EM_TOLERANCE = 1e-4
+"""Largest change of (mu, log sd), in prior SDs, at which the EM stops."""
 LOW = np.array([TRAIT_BOUNDS[t][0] for t in TRAITS])
 HIGH = np.array([TRAIT_BOUNDS[t][1] for t in TRAITS])
 
@@ -51,57 +68,86 @@ def prior_arrays(profile: GroupProfile) -> tuple[np.ndarray, np.ndarray]:
 
 
 def observed_moments(y: np.ndarray, noise_sd: np.ndarray, k: float) -> tuple[np.ndarray, ...]:
-    """(mean, sd, se of the mean, se of the sd) of each moment over a group's people."""
-    n = len(y)
-    mean, sd = y.mean(axis=0), y.std(axis=0, ddof=1)
-    floor = 0.5 * noise_sd / np.sqrt(k)
-    spread = np.maximum(sd, floor)
-    return mean, sd, spread / np.sqrt(n), spread / np.sqrt(2 * (n - 1))
+    """(mean, sd, n) of each moment over a group's people (a feature's over the people it
+    is defined for); n < 2 gives a mean of 0 and an sd of the noise floor."""
+    n = np.isfinite(y).sum(axis=0)
+    usable = n >= 2
+    mean = np.where(usable, np.nanmean(np.where(usable, y, 0.0), axis=0), 0.0)
+    centred = np.where(np.isfinite(y), y - mean, 0.0)
+    sd = np.sqrt((centred**2).sum(axis=0) / np.maximum(n - 1, 1))
+    return mean, np.where(usable, sd, 0.5 * noise_sd / np.sqrt(k)), n
+
+
+def person_noise_var(emulator: MomentEmulator, k: float) -> np.ndarray:
+    """Variance of one person's mean of each log-moment about the emulator's prediction:
+    the trials' scatter over the k * defined trials that define it, plus the emulator's
+    misfit, which does not average away."""
+    return emulator.within_var_ / (k * np.maximum(emulator.defined_, 0.1)) + emulator.misfit_var_
+
+
+def _information(jac: np.ndarray, var: np.ndarray, free: list[int]) -> np.ndarray:
+    """One person's Fisher information on the free traits (in prior SDs)."""
+    jw = jac[:, free] / np.sqrt(var)[:, None]
+    return jw.T @ jw
 
 
 def identifiable(
     emulator: MomentEmulator,
     profiles: dict[str, GroupProfile],
-    spreads: dict[str, np.ndarray],
-    sizes: dict[str, int],
+    sizes: dict[str, np.ndarray],
+    ks: dict[str, float],
 ) -> tuple[list[int], dict[str, float]]:
-    """The traits whose group means the moments identify (indices into TRAITS), chosen
-    greedily, and each trait's ratio (posterior / prior SD of its mean, linearised at
-    the priors, in the group where it is worst) when the others chosen are free too.
+    """The traits whose group means the data identify (indices into TRAITS) and each
+    trait's ratio: posterior / prior SD of the group mean, linearised at the priors, in
+    the group where it is worst, with the other identifiable traits free too.
 
-    J[m, j] = d E[moment m] / d mu_j * prior sd_j / se_m, with se_m the sampling error of
-    the group mean of moment m; the posterior covariance in prior-SD units is
-    (J_S' J_S + I)^-1 over the free set S."""
-    jacobians = {}
+    Per person, the information I on the free traits (in prior SDs) has the moments' noise
+    plus the spread of the traits held at their priors; a person's traits are N(mu, 1),
+    so a group of n has the information n * I (I + 1)^-1 on mu, and the posterior
+    covariance of mu is (1 + n * I (I + 1)^-1)^-1. Where the emulator carries the error
+    of held-out people's estimates (`validate.py`), each trait's ratio is also computed
+    from it (I = (prior SD / error)^2) and the larger of the two counts: the slopes can
+    promise more than the trials hold. Starting from all traits, the worst
+    is fixed at its prior until every ratio is below `IDENTIFIED_RATIO` (`sizes`: the
+    people defining each moment; a moment fewer than two people define tells nothing)."""
+    setup = {}
+    held_out = getattr(emulator, "held_out_error_", None)
     for group, profile in profiles.items():
         mu, sd = prior_arrays(profile)
-        se = spreads[group] / np.sqrt(sizes[group])
-        jacobians[group] = emulator.jacobian(mu, 0.1 * sd) * sd / se[:, None]
+        jac = emulator.jacobian(mu, 0.1 * sd) * sd
+        told = np.asarray(sizes[group]) >= 2
+        jac = np.where(told[:, None], np.nan_to_num(jac), 0.0)
+        n = int(np.max(sizes[group]))
+        # the same rule on the error of held-out people (`validate.py`), trait by trait
+        if held_out is None:
+            empirical = np.zeros(len(TRAITS))
+        else:
+            info = (sd / np.maximum(held_out, 1e-12)) ** 2
+            empirical = 1.0 / np.sqrt(1.0 + n * info / (1.0 + info))
+        setup[group] = (jac, person_noise_var(emulator, ks[group]), n, empirical)
 
     def ratios(free: list[int]) -> np.ndarray:
         worst = np.zeros(len(free))
-        for jac in jacobians.values():
-            js = jac[:, free]
-            cov = np.linalg.inv(js.T @ js + np.eye(len(free)))
-            worst = np.maximum(worst, np.sqrt(np.diag(cov)))
+        for jac, noise, n, empirical in setup.values():
+            fixed = [j for j in range(len(TRAITS)) if j not in free]
+            var = noise + (jac[:, fixed] ** 2).sum(axis=1)
+            info = _information(jac, var, free)
+            eye = np.eye(len(free))
+            post = np.linalg.inv(eye + n * info @ np.linalg.inv(info + eye))
+            linear = np.sqrt(np.clip(np.diag(post), 0.0, None))
+            worst = np.maximum(worst, np.maximum(linear, empirical[free]))
         return worst
 
-    free: list[int] = []
-    while True:
-        best, best_ratio = None, IDENTIFIED_RATIO
-        for j in range(len(TRAITS)):
-            if j in free:
-                continue
-            r = ratios([*free, j])
-            if r.max() < best_ratio:
-                best, best_ratio = j, r.max()
-        if best is None:
+    free = list(range(len(TRAITS)))
+    final: dict[str, float] = {}
+    while free:
+        r = ratios(free)
+        if r.max() < IDENTIFIED_RATIO:
             break
-        free.append(best)
-    final = {TRAITS[j]: float(r) for j, r in zip(free, ratios(free), strict=True)} if free else {}
-    for j, trait in enumerate(TRAITS):
-        if j not in free:
-            final[trait] = float(ratios([*free, j])[-1])
+        drop = free[int(np.argmax(r))]
+        final[TRAITS[drop]] = float(r.max())
+        free.remove(drop)
+    final.update({TRAITS[j]: float(r) for j, r in zip(free, ratios(free), strict=True)})
     return sorted(free), final
 
 
@@ -113,9 +159,11 @@ class GroupFit:
     """(len(TRAITS),) trait means: fitted for the free traits, the prior's for the others."""
     sd: np.ndarray
     cost: float
-    """Half the sum of squared standardised residuals at the optimum."""
-    residuals: np.ndarray
+    """Half the sum of squared standardised residuals of the people's modes."""
+    people: np.ndarray
+    """(people, len(TRAITS)) each person's posterior mode (the prior's mean where fixed)."""
     success: bool
+    """The EM converged within `EM_STEPS`."""
 
 
 class GroupEstimator:
@@ -132,7 +180,7 @@ class GroupEstimator:
     k
         Trials per person and condition (the noise of a person's mean).
     seed
-        Of the standard normal draws.
+        Of the standard normal draws for the expected moments.
     """
 
     def __init__(
@@ -146,15 +194,12 @@ class GroupEstimator:
         self.emulator, self.free, self.k = emulator, free, k
         self.mu0, self.sd0 = prior_arrays(prior)
         self.z = np.random.default_rng(seed).standard_normal((DRAWS, len(TRAITS)))
-        self.noise_var = np.diag(emulator.noise_cov_) / k
-
-    def params(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(mean, sd) over all traits from the free parameters p = [mu/sd0, log sd]."""
-        nf = len(self.free)
-        mean, sd = self.mu0.copy(), self.sd0.copy()
-        mean[self.free] = p[:nf] * self.sd0[self.free]
-        sd[self.free] = np.exp(p[nf:])
-        return mean, sd
+        self.noise_var = person_noise_var(emulator, k)
+        fixed = [j for j in range(len(TRAITS)) if j not in free]
+        jac = np.nan_to_num(emulator.jacobian(self.mu0, 0.1 * self.sd0))
+        self.person_var = self.noise_var + ((jac[:, fixed] * self.sd0[fixed]) ** 2).sum(axis=1)
+        low, high = emulator.box_
+        self.low, self.high = low[free], high[free]
 
     def draws(self, mean: np.ndarray, sd: np.ndarray) -> np.ndarray:
         return np.clip(mean + sd * self.z, LOW, HIGH)
@@ -164,34 +209,81 @@ class GroupEstimator:
         f = self.emulator.log_moments(self.draws(mean, sd))
         return f.mean(axis=0), np.sqrt(f.var(axis=0) + self.noise_var)
 
-    def residuals(self, p: np.ndarray, target: tuple[np.ndarray, ...]) -> np.ndarray:
-        mean_obs, sd_obs, se_mean, se_sd = target
-        mean, sd = self.params(p)
-        m, s = self.expected(mean, sd)
-        prior = (np.log(sd[self.free]) - np.log(self.sd0[self.free])) / PRIOR_LOG_SD
-        return np.concatenate([(mean_obs - m) / se_mean, (sd_obs - s) / se_sd, prior])
+    def _moments(self, theta: np.ndarray) -> np.ndarray:
+        full = np.tile(self.mu0, (len(theta), 1))
+        full[:, self.free] = theta
+        return self.emulator.log_moments(full)
+
+    def posteriors(
+        self, y: np.ndarray, mu: np.ndarray, sd: np.ndarray, theta: np.ndarray, steps: int
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each person's posterior mode of the free traits (people, free), its Laplace
+        covariance (people, free, free) and half its squared residuals, after `steps`
+        Levenberg-Marquardt steps from `theta` (all people at once)."""
+        n, nf = theta.shape
+        told = np.isfinite(y)
+        yy, w = np.where(told, y, 0.0), np.where(told, 1.0 / np.sqrt(self.person_var), 0.0)
+        h = 1e-3 * self.sd0[self.free]
+        lam = np.full(n, 1e-2)
+
+        def residuals(t: np.ndarray) -> np.ndarray:
+            return np.concatenate([(yy - self._moments(t)) * w, (t - mu) / sd], axis=1)
+
+        def jacobian(t: np.ndarray) -> np.ndarray:
+            shifted = np.concatenate([t + h[j] * np.eye(nf)[j] for j in range(nf)])
+            f0 = self._moments(t)
+            f1 = self._moments(shifted).reshape(nf, n, -1)
+            jy = -((f1 - f0) / h[:, None, None]).transpose(1, 2, 0) * w[:, :, None]
+            return np.concatenate([jy, np.broadcast_to(np.diag(1.0 / sd), (n, nf, nf))], axis=1)
+
+        r = residuals(theta)
+        cost = 0.5 * (r**2).sum(axis=1)
+        for _ in range(steps):
+            jac = jacobian(theta)
+            jtj = jac.transpose(0, 2, 1) @ jac
+            g = (jac.transpose(0, 2, 1) @ r[:, :, None])[:, :, 0]
+            damp = lam[:, None, None] * np.eye(nf) * np.diagonal(jtj, axis1=1, axis2=2)[:, None]
+            step = -np.linalg.solve(jtj + damp, g[:, :, None])[:, :, 0]
+            trial = np.clip(theta + step, self.low, self.high)
+            r_new = residuals(trial)
+            cost_new = 0.5 * (r_new**2).sum(axis=1)
+            better = cost_new < cost
+            theta = np.where(better[:, None], trial, theta)
+            r = np.where(better[:, None], r_new, r)
+            cost = np.where(better, cost_new, cost)
+            lam = np.where(better, lam / 3, lam * 4)
+        jac = jacobian(theta)
+        cov = np.linalg.inv(jac.transpose(0, 2, 1) @ jac)
+        return theta, cov, cost
 
     def start(self) -> np.ndarray:
-        return np.concatenate(
-            [self.mu0[self.free] / self.sd0[self.free], np.log(self.sd0[self.free])]
-        )
+        return np.concatenate([self.mu0[self.free], np.log(self.sd0[self.free])])
 
     def fit(self, y: np.ndarray, start: np.ndarray | None = None) -> GroupFit:
-        """Fit to `y` (people x moments, log scale)."""
-        target = observed_moments(y, np.sqrt(np.diag(self.emulator.noise_cov_)), self.k)
-        nf = len(self.free)
-        s0 = self.sd0[self.free]
-        box_low, box_high = self.emulator.box_
-        low = np.concatenate([box_low[self.free] / s0, np.log(s0) - 4 * PRIOR_LOG_SD])
-        high = np.concatenate([box_high[self.free] / s0, np.log(s0) + 4 * PRIOR_LOG_SD])
-        x0 = np.clip(self.start() if start is None else start, low + 1e-9, high - 1e-9)
+        """Fit to `y` (people x moments, log scale; NaN where a feature is undefined)."""
+        nf, n = len(self.free), len(y)
+        mean, sd = self.mu0.copy(), self.sd0.copy()
         if nf == 0:
-            mean, sd = self.params(x0)
-            r = self.residuals(x0, target)
-            return GroupFit(mean, sd, 0.5 * float(r @ r), r, True)
-        out = least_squares(
-            self.residuals, x0, bounds=(low, high), args=(target,), x_scale=1.0, diff_step=1e-4
-        )
-        mean, sd = self.params(out.x)
-        self.x_ = out.x
-        return GroupFit(mean, sd, float(out.cost), out.fun, bool(out.success))
+            return GroupFit(mean, sd, 0.0, np.tile(self.mu0, (n, 1)), True)
+        x = self.start() if start is None else start.copy()
+        mu, s = np.clip(x[:nf], self.low, self.high), np.exp(x[nf:])
+        s0 = self.sd0[self.free]
+        theta = np.tile(mu, (n, 1))
+        converged = False
+        for _ in range(EM_STEPS):
+            theta, cov, cost = self.posteriors(y, mu, s, theta, steps=3)
+            mu_new = theta.mean(axis=0)
+            var = ((theta - mu_new) ** 2 + np.diagonal(cov, axis1=1, axis2=2)).mean(axis=0)
+            s_new = np.sqrt((n * var + NU0 * s0**2) / (n + NU0))
+            s_new = np.clip(s_new, s0 * np.exp(-4 * PRIOR_LOG_SD), s0 * np.exp(4 * PRIOR_LOG_SD))
+            change = max(np.max(np.abs(mu_new - mu) / s0), np.max(np.abs(np.log(s_new / s))))
+            mu, s = mu_new, s_new
+            if change < EM_TOLERANCE:
+                converged = True
+                break
+        theta, cov, cost = self.posteriors(y, mu, s, theta, steps=10)
+        mean[self.free], sd[self.free] = mu, s
+        self.x_ = np.concatenate([mu, np.log(s)])
+        people = np.tile(self.mu0, (n, 1))
+        people[:, self.free] = theta
+        return GroupFit(mean, sd, float(cost.sum()), people, converged)

@@ -2,33 +2,40 @@
 
 The trials are `frames.trial_frame`'s (completed, not practice, the latest attempt of
 each slot), so the fit sees what the analysis sees, withdrawn participants left out as
-the analysis leaves them. Only trial measures are used (an imported study may have no
-samples). Beside them: each participant's condition order (which condition's block came
+the analysis leaves them. The trial measures are used (an imported study may have no
+samples; `with_features` adds the task's behavioural features where the samples are
+stored, read in bounded memory by `db.sample_reader.SampleReader`). Beside them: each
+participant's condition order (which condition's block came
 first, from the trials' block index) and each trial's position in the participant's
 session (0, 1, ... over the measured trials of the task in the order they were run),
 for the checks of what the participant model lacks (`checks.py`).
 
-A person's moments are the mean over their trials of each log measure per condition.
+A person's moments are the mean over their trials of each log measure (and feature) per
+condition.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import pandas as pd
-from sqlalchemy import Engine, func, select
+import pyarrow as pa
+from sqlalchemy import Engine, exists, func, select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
-from db.models.trial import Trial
+from db.models.trial import SampleChunk, Trial
+from db.sample_reader import SampleReader
 from study.analysis.frames import trial_frame, without_withdrawn
-from study.analysis.participant_fit.emulator import log_moment, moment_names
+from study.analysis.participant_fit.emulator import floor, log_moment, moment_names
 from study.analysis.source import DataSource
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS
 from study.protocol.participants import PROFILES
+from study.protocol.tasks import get_task
 
+Progress = Callable[[int, int], None]
 MIN_PER_GROUP = 4
 """The fewest participants (with trials in both conditions) a group needs to be fitted:
 a mean and an SD of each moment, with one degree of freedom left over."""
@@ -82,15 +89,56 @@ def check_fittable(trials: pd.DataFrame, task: str, db_label: str) -> list[str]:
     return [g for g in PROFILES if g in groups]
 
 
-def person_moments(trials: pd.DataFrame, measures: Sequence[str]) -> pd.DataFrame:
+def with_features(
+    engine: Engine, trials: pd.DataFrame, task: str, progress: Progress = lambda k, n: None
+) -> tuple[pd.DataFrame, dict[str, int]]:
+    """`trials` with the task's fit features read off each trial's stored samples (NaN
+    for a trial without samples: an imported one), and the counts of trials with and
+    without samples."""
+    the_task = get_task(task)
+    names = list(the_task.fit_features)
+    out = trials.assign(**{f: np.nan for f in names})
+    if not names or not len(trials):
+        return out, {"with_samples": 0, "without_samples": len(trials)}
+    recorded = exists().where(SampleChunk.trial_id == Trial.id).label("recorded")
+    with Session(engine) as session:
+        rows = session.execute(
+            select(Participant.code, Trial.condition, Trial.trial_index, Trial.id, recorded)
+            .join(Trial, Trial.participant_id == Participant.id)
+            .where(Trial.task == task, Trial.status == "completed", Trial.practice.is_(False))
+            .order_by(Trial.attempt)
+        ).all()
+    # the latest attempt of each slot, as `trial_frame` keeps it
+    ids = {(code, cond, index + 1): (tid, has) for code, cond, index, tid, has in rows}
+    keys = list(zip(trials["participant"], trials["condition"], trials["trial"], strict=True))
+    todo = [(i, ids[key][0]) for i, key in enumerate(keys) if key in ids and ids[key][1]]
+    context = the_task.session_context()
+    rename = {c.stored_as: c.name for c in the_task.sample_columns if c.stored_as}
+    values = np.full((len(trials), len(names)), np.nan)
+    with SampleReader(engine) as reader:
+        for done, (i, tid) in enumerate(todo):
+            frame = pa.Table.from_batches(list(reader.trial(tid))).to_pandas()
+            features = the_task.trial_features(frame.rename(columns=rename), context)
+            values[i] = [features.get(f, np.nan) for f in names]
+            progress(done + 1, len(todo))
+    out[names] = values
+    return out, {"with_samples": len(todo), "without_samples": len(trials) - len(todo)}
+
+
+def person_moments(
+    trials: pd.DataFrame, measures: Sequence[str], features: Sequence[str] = ()
+) -> pd.DataFrame:
     """One row per participant with both conditions: group, order, k (trials per
-    condition, the smaller count) and each moment (`CONDITION:measure`, log scale)."""
-    logged = trials.assign(**{m: log_moment(trials[m]) for m in measures})
-    means = logged.groupby(["participant", "condition"])[list(measures)].mean().unstack()
+    condition, the smaller count) and each moment (`CONDITION:measure`, then
+    `CONDITION:feature`; log scale; a feature's mean over the trials that define it,
+    NaN where none does)."""
+    columns = [*measures, *features]
+    logged = trials.assign(**{c: log_moment(trials[c], floor(c, measures)) for c in columns})
+    means = logged.groupby(["participant", "condition"])[columns].mean().unstack()
     counts = trials.groupby(["participant", "condition"]).size().unstack()
     keep = counts.dropna().index
     out = pd.DataFrame(index=keep)
-    for name in moment_names(measures):
+    for name in [*moment_names(measures), *moment_names(features)]:
         condition, measure = name.split(":", 1)
         out[name] = means.loc[keep, (measure, condition)]
     people = trials.drop_duplicates("participant").set_index("participant")

@@ -16,6 +16,8 @@ regression average the trial noise over hundreds of trials.
 The processes are `concurrent.futures` workers (spawn, as `study run --jobs`), each
 warming up once (numba's kernel from its on-disk cache, the estimator); one job is one
 setting with all its trials, so the work is coarse enough that the pool costs nothing.
+Each row also holds the task's `fit_features` of the trial's samples, read off the
+simulated frame as `observed.py` reads them off the stored samples.
 """
 
 from __future__ import annotations
@@ -70,20 +72,22 @@ def simulate_setting(
     rows = []
     for r in range(repeats):
         for condition in KNOWN_CONDITIONS:
-            s = the_task.simulate(
+            result = the_task.simulate(
                 traits,
                 condition,
                 trial_seed(index, r, salt, "" if salt == "fit" else condition),
                 max_s,
                 estimator=estimator,
                 context=_context(task),
-            ).summary
+            )
+            s = result.summary
             rows.append(
                 {
                     "condition": condition,
                     "repeat": r,
                     "success": bool(s["success"]),
                     **{m: float(s[m]) for m in the_task.analysed_measures},
+                    **the_task.trial_features(result.frame, _context(task)),
                 }
             )
     return rows
@@ -106,7 +110,8 @@ def simulate_settings(
     salt: str = "fit",
 ) -> pd.DataFrame:
     """One row per trial of every setting: `setting` (its index), condition, repeat,
-    success, the task's analysed measures; `progress(k, n)` after each setting."""
+    success, the task's analysed measures and fit features; `progress(k, n)` after each
+    setting."""
     rows: list[dict[str, Any]] = []
     n = len(settings)
     if jobs <= 1 or n <= 1:

@@ -233,6 +233,12 @@ class Task:
         }  # fmt: skip
         return TrialResult(self.trial_frame(samples), summary)
 
+    fit_features: ClassVar[tuple[str, ...]] = ()
+    """`trial_features`' keys: a trial frame's features for the participant fit (> 0, SI)."""
+
+    def trial_features(self, frame: pd.DataFrame, context: Any) -> dict[str, float]:
+        return {}
+
     def completion_time_s(self, samples: np.ndarray) -> float:
         """The time of the trial's last sample (0 without samples), s."""
         if not len(samples):
@@ -269,8 +275,6 @@ class Task:
             f"in {region}, inserted {values[self.stored_name('insertion_m')] * 1000:5.0f} mm",
             f"rotation {values[self.stored_name('rotation_rad')]:+5.2f} rad",
         ]
-
-    # -- derived ----------------------------------------------------------------------
 
     @property
     def all_measures(self) -> tuple[Measure, ...]:
@@ -314,8 +318,7 @@ class Task:
         return out
 
     def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
-        """The dial's gain a trial uses: `gain_n_m_per_n`, else the task's default;
-        refused with one line for a task without a dial."""
+        """`gain_n_m_per_n`, else the task's default; refused for a task without a dial."""
         if gain_n_m_per_n is None:
             return self.default_haptic_gain_n_m_per_n
         if not self.has_dial:
@@ -327,8 +330,7 @@ class Task:
 
 
 _REGISTRY: dict[str, Task] = {}
-_LOADED = False
-_ENTRY_POINTS_LOADED = False
+_LOADED = _ENTRY_POINTS_LOADED = False
 
 
 def register(task: Task) -> Task:
@@ -349,9 +351,8 @@ def unregister(name: str) -> None:
 
 
 def _load(entry_points_too: bool = False) -> None:
-    """The built-in tasks on first use; the installed packages' (entry points, a scan of
-    every installed distribution's metadata) only when a name is not built in or the
-    whole list is asked for, so that reading a design of built-in tasks does not pay it."""
+    """The built-in tasks on first use; the installed packages' (entry points: a scan of
+    every distribution's metadata) only when a name is not built in or all are asked for."""
     global _LOADED, _ENTRY_POINTS_LOADED
     if not _LOADED:
         _LOADED = True
@@ -366,7 +367,6 @@ def _load(entry_points_too: bool = False) -> None:
 
 
 def is_task(name: str) -> bool:
-    """Whether a task called `name` is registered (or installed)."""
     _load()
     if name not in _REGISTRY:
         _load(entry_points_too=True)

@@ -104,6 +104,24 @@ class LccaTask(Task):
             "peak_proximal_reference_force_n": result["peak_proximal_reference_force_n"]
         }
 
+    fit_features = (
+        "advance_speed_m_s", "approach_m", "approaches", "target_speed_ratio", "aim_error_rad",
+        "turn_peak_s", "stall_s", "peak_felt_rise_n_m",
+    )  # fmt: skip
+    """`study.protocol.lcca_features.FEATURES` (a test keeps them equal)."""
+
+    def trial_features(self, frame, context):
+        from study.protocol.lcca_features import lcca_features
+        from teleop_core.master.params import HapticParams
+        from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS, REGIONS
+
+        target = context.anatomy.target
+        phi = next(b.phi_rad for b in context.anatomy.branches if b.name == target)
+        # TRIAL.csv names regions in full, the samples table by their abbreviation
+        names = {target, REGION_ABBREVIATIONS[REGIONS.index(target)]}
+        spring = HapticParams().spring_n_m_per_rad
+        return lcca_features(frame, context.ostium_m(target), phi, names, spring)
+
     def driver_counts(self, driver):
         from study.protocol.participants import SimulatedParticipant
 

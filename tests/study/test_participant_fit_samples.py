@@ -1,0 +1,95 @@
+"""The participant fit reads each trial's behavioural features off the samples the session
+runner stored (issue 24): checked against the simulated people's own traits, which the
+study's seed and the participants' codes give back (`session.participant_traits`)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sqlalchemy import delete, select
+from sqlalchemy.orm import Session
+
+from db.migrate import open_database
+from db.models.study import Study
+from db.models.trial import SampleChunk, Trial
+from study.analysis.participant_fit.observed import observed_trials, with_features
+from study.protocol.demo import run_demo
+from study.protocol.session import participant_traits
+from study.protocol.tasks import get_task
+
+
+@pytest.fixture(scope="module")
+def study_db(tmp_path_factory: pytest.TempPathFactory) -> str:
+    db = str(Path(tmp_path_factory.mktemp("samples")) / "s.db")
+    run_demo(db, 4, jobs=1, quick=True)  # 2 people per group, one trial per block
+    return db
+
+
+def test_the_features_of_stored_trials_follow_the_peoples_traits(study_db: str) -> None:
+    engine = open_database(study_db, create=False)
+    try:
+        trials = observed_trials(engine, "lcca")
+        with Session(engine) as session:
+            seed = session.scalars(select(Study.seed)).one()
+        features, counts = with_features(engine, trials, "lcca")
+    finally:
+        engine.dispose()
+    assert counts == {"with_samples": len(trials), "without_samples": 0}
+    assert len(trials) == 3 * 2 * 2
+    for row in features.itertuples():
+        traits = participant_traits(seed, row.participant, row.group)
+        # the advance: the preferred speed (the hand's grip against the return spring and,
+        # in HV, the felt force take a few per cent off the aim)
+        assert row.advance_speed_m_s == pytest.approx(traits.preferred_speed_m_s, rel=0.15)
+        if row.condition == "VO" and np.isfinite(row.target_speed_ratio):
+            # inside the target the participant goes on at 1 - 0.4 caution of its speed
+            # (`SimulatedParticipant._plan`)
+            assert row.target_speed_ratio == pytest.approx(1 - 0.4 * traits.caution, abs=0.03)
+    vo = features[features["condition"] == "VO"]
+    assert np.isfinite(vo["target_speed_ratio"]).sum() >= 4
+    assert np.isfinite(features["turn_peak_s"]).any()
+
+
+def test_a_trial_without_samples_gives_the_measures_only(study_db: str, tmp_path: Path) -> None:
+    import shutil
+
+    db = str(tmp_path / "copy.db")
+    shutil.copy(study_db, db)
+    engine = open_database(db, create=False)
+    try:
+        with Session(engine) as session, session.begin():
+            first = session.scalars(
+                select(Trial.id).where(Trial.task == "lcca", Trial.status == "completed")
+                .order_by(Trial.id)
+            ).first()  # fmt: skip
+            session.execute(delete(SampleChunk).where(SampleChunk.trial_id == first))
+        trials = observed_trials(engine, "lcca")
+        features, counts = with_features(engine, trials, "lcca")
+    finally:
+        engine.dispose()
+    assert counts == {"with_samples": len(trials) - 1, "without_samples": 1}
+    names = list(get_task("lcca").fit_features)
+    empty = features[names].isna().all(axis=1)
+    assert empty.sum() == 1
+    # the measures are all there
+    assert features.loc[empty, "completion_time_s"].notna().all()
+
+
+def test_the_bench_truth_lies_off_the_priors_by_the_shift() -> None:
+    from study.bench.participants import truth_profiles
+    from study.protocol.participants import PROFILES, TRAIT_BOUNDS, TRAITS
+
+    truth = truth_profiles(0.7)
+    for group, profile in PROFILES.items():
+        for trait in TRAITS:
+            (mean, sd), (moved, moved_sd) = getattr(profile, trait), getattr(truth[group], trait)
+            assert moved_sd == sd
+            assert abs(moved - mean) == pytest.approx(0.7 * sd, rel=1e-9), (group, trait)
+            low, high = TRAIT_BOUNDS[trait]
+            assert moved <= high - sd
+            assert moved > mean or moved >= low + sd  # down only with an SD left to the bound
+    # the experts' haptic threshold sits on its bound (0.002 N m): it can only move up
+    assert truth["expert"].haptic_threshold_n_m[0] == pytest.approx(0.002 + 0.7 * 0.0005)
+    assert truth_profiles(0.0) == PROFILES
