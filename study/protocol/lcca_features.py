@@ -23,7 +23,8 @@ in `study.protocol.participants.SimulatedParticipant`, and in a person):
   reaction time); only trials whose first turn exceeds `MIN_TURN_RAD`;
 - `stall_s`: at each backing-off (the dial's aim turning from forward to backward),
   the time since the tip last moved a millimetre (on the screen: the wire behind it
-  may still go in, buckling), averaged over the trial (seen
+  may still go in, buckling), averaged over the trial's backings-off on the way to the
+  target after its first `START_S` (seen
   obstacles take the visual stall time, felt ones less); only trials that back off;
 - `peak_felt_rise_n_m`: the largest rise, while the hand pushes forward, of the
   resistance felt on the dial (its torque beyond the return spring's,
@@ -53,6 +54,7 @@ OSTIUM_BAND_M = 0.008
 AIM_FLOOR_RAD = 0.05
 MIN_TURN_RAD = 0.03
 RISE_FLOOR_N_M = 1e-4
+START_S = 2.0
 FEATURES = (
     "advance_speed_m_s",
     "approach_m",
@@ -84,9 +86,12 @@ def lcca_features(
     target_phi_rad: float,
     target: set[str],
     spring_n_m_per_rad: float,
+    route: set[str] | None = None,
 ) -> dict[str, float]:
     """The features (`FEATURES`) of one trial's TRIAL.csv frame; `target`: the names the
-    frame's `branch` column may give the target branch."""
+    frame's `branch` column may give the target branch, `route` the vessels on the way
+    to it, the target included (default: the target only)."""
+    route = set(target) if route is None else route
     out = dict.fromkeys(FEATURES, math.nan)
     if len(frame) < 20:
         return out
@@ -145,7 +150,12 @@ def lcca_features(
                 out["turn_peak_s"] = t[peak] - t[0]
     # backing off: the dial's aim from forward to backward
     stalls = []
+    # only on the way to the target (a retreat from a side branch is no stall) and after
+    # the first `START_S` (the screen lags the hand by the reaction time at the start)
+    on_route = frame["branch"].isin(list(route)).to_numpy()[index]
     for k in np.flatnonzero((aim[:-1] > 0.02) & (aim[1:] <= 0.0)):
+        if not on_route[k] or t[k] - t[0] < START_S:
+            continue
         moving = np.flatnonzero(np.linalg.norm(tip[: k + 1] - tip[k], axis=1) >= 0.001)
         stalls.append(t[k] - t[moving[-1]] if len(moving) else t[k] - t[0])
     if stalls:

@@ -119,8 +119,9 @@ class LccaTask(Task):
         phi = next(b.phi_rad for b in context.anatomy.branches if b.name == target)
         # TRIAL.csv names regions in full, the samples table by their abbreviation
         names = {target, REGION_ABBREVIATIONS[REGIONS.index(target)]}
+        route = {*names, *REGIONS[:3], *REGION_ABBREVIATIONS[:3]}  # the aorta, then the target
         spring = HapticParams().spring_n_m_per_rad
-        return lcca_features(frame, context.ostium_m(target), phi, names, spring)
+        return lcca_features(frame, context.ostium_m(target), phi, names, spring, route)
 
     def driver_counts(self, driver):
         from study.protocol.participants import SimulatedParticipant
