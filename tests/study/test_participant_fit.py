@@ -116,9 +116,10 @@ def test_times_shrinking_over_trials_are_reported_not_absorbed(emulator, trials)
     trend = next(r for r in model["lacks"]["tests"]
                  if r["check"] == "trend" and r["measure"] == "completion_time_s")  # fmt: skip
     assert trend["flagged"]
-    # 0.75 per trial is -25 %; the fitted model's own people do not learn
+    # 0.75 per trial is -25 %; the fitted model's own people do not learn: their slope is
+    # the noise of 12 people's 4 trials (8 % seen), far from the observed
     assert trend["observed_pct_per_trial"] == pytest.approx(-25.0, abs=8.0)
-    assert abs(trend["simulated_pct_per_trial"]) < 8.0
+    assert abs(trend["simulated_pct_per_trial"]) < 12.0
     assert "a trend over trials in completion_time_s" in model["lacks"]["line"]
     # a trend shows as a period effect too, which the order check reports
     order = next(r for r in model["lacks"]["tests"]
@@ -206,3 +207,17 @@ def test_the_emulator_is_checked_against_the_people_simulated_from_the_fit(fitte
     assert [r["inside"] for r in check["rows"]] == [True, False]
     assert check["outside"] == 1
     assert "in 1 of 2 summaries (largest gap: expert VO t 8.8 vs 8)" in check["line"]
+
+
+def test_without_samples_only_what_the_measures_tell_is_fitted(emulator, trials) -> None:
+    """An imported study has no samples: the features are not there, and the identification
+    (held-out people estimated from the measures alone) says what the measures tell."""
+    features = list(get_task("lcca").fit_features)
+    model, _ = fit_trials(trials.drop(columns=features), "lcca", SETTINGS, emulator, "test data")
+    assert model["features"]["trials_with_samples"] == 0
+    assert "caution" not in model["identifiable"]
+    assert model["groups"]["novice"]["caution"]["mean"] == PROFILES["novice"].caution[0]
+    with_features, _ = fit_trials(trials, "lcca", SETTINGS, emulator, "test data")
+    # caution is read off the samples: its held-out error is far larger without them
+    measured = model["held_out_trait_error"]["caution"]
+    assert measured > 2 * with_features["held_out_trait_error"]["caution"]

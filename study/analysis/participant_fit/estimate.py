@@ -96,6 +96,7 @@ def identifiable(
     profiles: dict[str, GroupProfile],
     sizes: dict[str, np.ndarray],
     ks: dict[str, float],
+    held_out: np.ndarray | None = None,
 ) -> tuple[list[int], dict[str, float]]:
     """The traits whose group means the data identify (indices into TRAITS) and each
     trait's ratio: posterior / prior SD of the group mean, linearised at the priors, in
@@ -104,14 +105,14 @@ def identifiable(
     Per person, the information I on the free traits (in prior SDs) has the moments' noise
     plus the spread of the traits held at their priors; a person's traits are N(mu, 1),
     so a group of n has the information n * I (I + 1)^-1 on mu, and the posterior
-    covariance of mu is (1 + n * I (I + 1)^-1)^-1. Where the emulator carries the error
-    of held-out people's estimates (`validate.py`), each trait's ratio is also computed
+    covariance of mu is (1 + n * I (I + 1)^-1)^-1. Given the error of held-out people's
+    estimates from the moments the data have (`held_out`, `validate.py`), each trait's
+    ratio is also computed
     from it (I = (prior SD / error)^2) and the larger of the two counts: the slopes can
     promise more than the trials hold. Starting from all traits, the worst
     is fixed at its prior until every ratio is below `IDENTIFIED_RATIO` (`sizes`: the
     people defining each moment; a moment fewer than two people define tells nothing)."""
     setup = {}
-    held_out = getattr(emulator, "held_out_error_", None)
     for group, profile in profiles.items():
         mu, sd = prior_arrays(profile)
         jac = emulator.jacobian(mu, 0.1 * sd) * sd

@@ -240,7 +240,14 @@ def fit_trials(
     by_group = {g: people[people["group"] == g] for g in groups}
     ks = {g: float(by_group[g]["k"].mean()) for g in groups}
     sizes = {g: by_group[g][names].notna().sum().to_numpy() for g in groups}
-    free, ratios = identifiable(emulator, {g: PROFILES[g] for g in groups}, sizes, ks)
+    # the features every group's data hold (an imported study without samples: none)
+    held = [
+        f
+        for f in features
+        if all(sizes[g][names.index(f"{c}:{f}")] >= 2 for g in groups for c in KNOWN_CONDITIONS)
+    ]
+    held_out = validate.held_out_for(emulator, held)
+    free, ratios = identifiable(emulator, {g: PROFILES[g] for g in groups}, sizes, ks, held_out)
     rng = np.random.default_rng([settings.seed, 0xB007])
     fitted, group_out, predicted, fixed_cov, replicates = {}, {}, {}, {}, {}
     for k, g in enumerate(groups):
@@ -352,6 +359,9 @@ def fit_trials(
             else "the task has no sample features: the measures only",
         },
         "identifiable": [TRAITS[j] for j in free],
+        "held_out_trait_error": None
+        if held_out is None
+        else dict(zip(TRAITS, np.round(held_out, 6).tolist(), strict=True)),
         "fixed_at_prior": [t for j, t in enumerate(TRAITS) if j not in free],
         "identification_ratio": {t: round(r, 3) for t, r in ratios.items()},
         "identification_rule": f"posterior / prior SD of a group mean < {IDENTIFIED_RATIO} "

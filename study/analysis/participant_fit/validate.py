@@ -62,7 +62,20 @@ def held_out_errors(
 
 
 def attach(emulator: MomentEmulator, x: np.ndarray, design: pd.DataFrame, repeats: int) -> None:
-    """Set `emulator.held_out_error_` from its own design."""
+    """Set `emulator.held_out_error_` from its own design (every feature), and keep the
+    design for `held_out_for`."""
+    emulator.design_ = (x, design, repeats)
     emulator.held_out_error_ = held_out_errors(
         x, design, emulator.measures_, emulator.features_, repeats
     )
+
+
+def held_out_for(emulator: MomentEmulator, features: Sequence[str]) -> np.ndarray | None:
+    """The held-out error with only `features` beside the measures (the ones a study's
+    data have: an imported study without samples has none), or None without a design."""
+    if not hasattr(emulator, "design_"):
+        return None
+    if list(features) == emulator.features_:
+        return np.asarray(emulator.held_out_error_)
+    x, design, repeats = emulator.design_
+    return held_out_errors(x, design, emulator.measures_, features, repeats)
