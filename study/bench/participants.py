@@ -181,6 +181,7 @@ def run_participants_bench(
         "identifiable": model["identifiable"],
         "fixed_at_prior": model["fixed_at_prior"],
         "identification_ratio": model["identification_ratio"],
+        "held_out_trait_error": model["held_out_trait_error"],
         "truth_shift_prior_sds": shift_sd,
         "recovery": recovery,
         "recovery_target": f"within {TOLERANCE:.0%} of the true mean",
