@@ -21,11 +21,19 @@ in `study.protocol.participants.SimulatedParticipant`, and in a person):
 - `turn_peak_s`: the time from the start to the first turning point of the first
   rotation (the overshoot of a correction made with the view's delay scales with the
   reaction time); only trials whose first turn exceeds `MIN_TURN_RAD`;
+- `turn_swing_s`: from that turning point to the next (the overshoot's swing back: a
+  correction made on a view `reaction_s` old swings for a time in proportion to it; on
+  simulated people the log of it follows the log reaction time with a residual SD of
+  0.04, against 0.22 for `turn_peak_s`, whose start the rate limit of a large turn
+  stretches); only trials that swing back;
 - `stall_s`: at each backing-off (the dial's aim turning from forward to backward),
   the time since the tip last moved a millimetre (on the screen: the wire behind it
   may still go in, buckling), averaged over the trial's backings-off on the way to the
   target after its first `START_S` (seen
   obstacles take the visual stall time, felt ones less); only trials that back off;
+- `stall_backoffs`: 1 + how many of those backings-off came after at least
+  `MIN_STALL_S` of stillness (whether a person waits long enough for a creeping tip to
+  pass for stuck: with a long visual stall time none does); defined in every trial;
 - `peak_felt_rise_n_m`: the largest rise, while the hand pushes forward, of the
   resistance felt on the dial (its torque beyond the return spring's,
   `spring_n_m_per_rad` times the angle: the rendered force, over the last 0.1 s) over
@@ -54,6 +62,8 @@ OSTIUM_BAND_M = 0.008
 AIM_FLOOR_RAD = 0.05
 MIN_TURN_RAD = 0.03
 RISE_FLOOR_N_M = 1e-4
+MIN_STALL_S = 0.15
+"""A backing-off counts in `stall_backoffs` when the tip stood still at least this long."""
 START_S = 2.0
 FEATURES = (
     "advance_speed_m_s",
@@ -62,7 +72,9 @@ FEATURES = (
     "target_speed_ratio",
     "aim_error_rad",
     "turn_peak_s",
+    "turn_swing_s",
     "stall_s",
+    "stall_backoffs",
     "peak_felt_rise_n_m",
 )
 
@@ -78,6 +90,18 @@ def _speed(x: np.ndarray, window: int = 10) -> np.ndarray:
     if len(x) > window:
         v[h : len(x) - h] = (x[window:] - x[:-window]) / (window * GRID_S)
     return v
+
+
+def _turning_point(rot: np.ndarray, start: int, sign: float) -> int | None:
+    """The first turning point of `rot` from `start` moving in `sign`'s direction: the
+    furthest point before it has come back by a tenth of its excursion (and 3 mrad), so
+    that a wobble of the roll on the way does not pass for it; None if it never does."""
+    excursion = (rot[start:] - rot[start]) * sign
+    reach = np.maximum.accumulate(excursion)
+    back = np.flatnonzero(reach - excursion >= np.maximum(0.1 * reach, 0.003))
+    if not len(back) or reach[back[0]] < 0.003:
+        return None
+    return start + int(np.argmax(excursion[: back[0] + 1]))
 
 
 def lcca_features(
@@ -136,18 +160,16 @@ def lcca_features(
     forward = in_target & (v > 0.001)
     if np.count_nonzero(forward) >= 10:
         out["target_speed_ratio"] = float(np.median(v[forward])) / speed
-    # the first turn: from its start to its first turning point
-    # (a turning point: the turn has come back by a tenth of its excursion, so that a
-    # wobble of the roll on the way does not pass for it)
+    # the first turn: from its start to its first turning point, and on to the next
     moved = np.flatnonzero(np.abs(rot - rot[0]) > 0.005)
     if len(moved):
-        excursion = (rot - rot[0]) * np.sign(rot[moved[0]] - rot[0])
-        reach = np.maximum.accumulate(excursion)
-        back = np.flatnonzero(reach - excursion >= np.maximum(0.1 * reach, 0.003))
-        if len(back):
-            peak = int(np.argmax(excursion[: back[0] + 1]))
-            if excursion[peak] >= MIN_TURN_RAD:
-                out["turn_peak_s"] = t[peak] - t[0]
+        sign = float(np.sign(rot[moved[0]] - rot[0]))
+        peak = _turning_point(rot, 0, sign)
+        if peak is not None and (rot[peak] - rot[0]) * sign >= MIN_TURN_RAD:
+            out["turn_peak_s"] = t[peak] - t[0]
+            swing = _turning_point(rot, peak, -sign)
+            if swing is not None:
+                out["turn_swing_s"] = t[swing] - t[peak]
     # backing off: the dial's aim from forward to backward
     stalls = []
     # only on the way to the target (a retreat from a side branch is no stall) and after
@@ -160,6 +182,7 @@ def lcca_features(
         stalls.append(t[k] - t[moving[-1]] if len(moving) else t[k] - t[0])
     if stalls:
         out["stall_s"] = float(np.mean(stalls)) + GRID_S
+    out["stall_backoffs"] = 1.0 + sum(d >= MIN_STALL_S for d in stalls)
     # the felt resistance against its mean 1-3 s before, while pushing forward
     sums = np.concatenate([[0.0], np.cumsum(felt)])
     i = np.arange(300, len(felt))

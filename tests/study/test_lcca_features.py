@@ -19,7 +19,8 @@ SPRING = 0.03
 
 def _trace(stall_s: float = 0.6, rise_n_m: float = 0.003) -> pd.DataFrame:
     """Advance at 15 mm/s, slow to 8 mm/s 30 mm before the ostium, on into the target at
-    12 mm/s; the first turn peaks at 0.8 s and settles at 0.3 rad; once in the target the
+    12 mm/s; the first turn peaks at 0.8 s, swings back to 0.28 rad at 1.3 s and settles at
+    0.3 rad; once in the target the
     tip sticks for `stall_s` s while the torque resisting the push grows by `rise_n_m`
     over the last second, then the hand backs off."""
     t = np.arange(0.0, 40.0, DT)
@@ -34,7 +35,7 @@ def _trace(stall_s: float = 0.6, rise_n_m: float = 0.003) -> pd.DataFrame:
             x[i] = slow_at + 0.008 * (ti - t_slow)
         else:
             x[i] = OSTIUM_M + 0.012 * (ti - t_in)
-    rot = np.interp(t, [0.0, 0.5, 0.8, 1.2, 40.0], [0.0, 0.3, 0.35, 0.3, 0.3])
+    rot = np.interp(t, [0.0, 0.5, 0.8, 1.3, 1.7, 40.0], [0.0, 0.3, 0.35, 0.28, 0.3, 0.3])
     aim = np.full_like(t, 0.2)
     torque = np.full_like(t, -0.005)
     tip = x.copy()
@@ -75,9 +76,12 @@ def test_every_feature_of_a_hand_built_trace() -> None:
     assert f["target_speed_ratio"] == pytest.approx(0.012 / 0.015, rel=1e-6)
     assert f["aim_error_rad"] == pytest.approx(0.3 + AIM_FLOOR_RAD, abs=1e-9)
     assert f["turn_peak_s"] == pytest.approx(0.8, abs=DT)
+    # it swings back to its next turning point at 1.3 s
+    assert f["turn_swing_s"] == pytest.approx(0.5, abs=DT)
     # the stall: the tip stood still 0.6 s before the hand backed off, after covering its
     # last millimetre at 12 mm/s (plus one grid step)
     assert f["stall_s"] == pytest.approx(0.6 + 0.001 / 0.012 + DT, abs=2 * DT)
+    assert f["stall_backoffs"] == 2
     # the torque beyond the spring rose 3 mN m over the second before backing off, felt
     # over the last 0.1 s (a mean 45 ms old), against its level 1-3 s before; plus 0.1 mN m
     assert f["peak_felt_rise_n_m"] == pytest.approx(0.003 * 0.945 + 1e-4, rel=0.01)
@@ -97,6 +101,7 @@ def test_a_trial_without_backing_off_or_target_has_those_features_undefined() ->
     frame = frame[frame["insertion_m"] < OSTIUM_M - 0.01]
     f = lcca_features(frame, OSTIUM_M, 0.0, TARGET, SPRING)
     assert np.isnan(f["target_speed_ratio"]) and np.isnan(f["stall_s"])
+    assert f["stall_backoffs"] == 1  # none, plus one
     # no rise of the felt resistance: the floor alone
     assert f["peak_felt_rise_n_m"] == pytest.approx(1e-4, abs=1e-12)
     assert f["advance_speed_m_s"] == pytest.approx(0.015, rel=1e-6)

@@ -106,7 +106,7 @@ class LccaTask(Task):
 
     fit_features = (
         "advance_speed_m_s", "approach_m", "approaches", "target_speed_ratio", "aim_error_rad",
-        "turn_peak_s", "stall_s", "peak_felt_rise_n_m",
+        "turn_peak_s", "turn_swing_s", "stall_s", "stall_backoffs", "peak_felt_rise_n_m",
     )  # fmt: skip
     """`study.protocol.lcca_features.FEATURES` (a test keeps them equal)."""
 
