@@ -1,6 +1,7 @@
 """The participant fit reads each trial's behavioural features off the samples the session
 runner stored (issue 24): checked against the simulated people's own traits, which the
-study's seed and the participants' codes give back (`session.participant_traits`)."""
+study's seed and the participants' codes give back (`session.participant_traits`), on
+SQLite and on the PostgreSQL server."""
 
 from __future__ import annotations
 
@@ -20,15 +21,9 @@ from study.protocol.session import participant_traits
 from study.protocol.tasks import get_task
 
 
-@pytest.fixture(scope="module")
-def study_db(tmp_path_factory: pytest.TempPathFactory) -> str:
-    db = str(Path(tmp_path_factory.mktemp("samples")) / "s.db")
-    run_demo(db, 4, jobs=1, quick=True)  # 2 people per group, one trial per block
-    return db
-
-
-def test_the_features_of_stored_trials_follow_the_peoples_traits(study_db: str) -> None:
-    engine = open_database(study_db, create=False)
+def test_the_features_of_stored_trials_follow_the_peoples_traits(db_url: str) -> None:
+    run_demo(db_url, 4, jobs=1, quick=True)  # 2 people per group, one trial per block
+    engine = open_database(db_url, create=False)
     try:
         trials = observed_trials(engine, "lcca")
         with Session(engine) as session:
@@ -52,11 +47,9 @@ def test_the_features_of_stored_trials_follow_the_peoples_traits(study_db: str) 
     assert np.isfinite(features["turn_peak_s"]).any()
 
 
-def test_a_trial_without_samples_gives_the_measures_only(study_db: str, tmp_path: Path) -> None:
-    import shutil
-
-    db = str(tmp_path / "copy.db")
-    shutil.copy(study_db, db)
+def test_a_trial_without_samples_gives_the_measures_only(tmp_path: Path) -> None:
+    db = str(tmp_path / "s.db")
+    run_demo(db, 4, jobs=1, quick=True)
     engine = open_database(db, create=False)
     try:
         with Session(engine) as session, session.begin():
