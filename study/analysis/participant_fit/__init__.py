@@ -1,10 +1,12 @@
 """Simulated participants fitted to a study's trials (issue 24): `study participants fit`.
 
-- `observed.py`: the task's trials from the database, each person's moments.
+- `observed.py`: the task's trials from the database, their sample features (the task's
+  `fit_features`, e.g. `study.protocol.lcca_features`), each person's moments.
 - `simulate.py`: trait settings through the task's own trials, in parallel.
 - `emulator.py`: the moments as a response surface of the traits.
 - `estimate.py`: which traits the moments identify; each group's trait distribution by
-  the method of simulated moments on the emulator.
+  a hierarchical model (each person's traits, then the group's) fitted by EM.
+- `validate.py`: how well one person's trials tell their traits, on held-out settings.
 - `checks.py`: what the model cannot explain (trends, condition order, outliers).
 - `fit.py`: the whole fit, MODEL.json's content; `figure.py`: observed vs simulated.
 """

@@ -3,8 +3,8 @@ by EM, on the emulator.
 
 A person's moments y (the mean over their trials of each log measure and log feature in
 each condition) are, by the emulator, f(theta) plus noise of variance
-Sigma_e / (k * defined) per moment (k trials per condition, `defined` the share of
-trials that define a feature). A group's people have traits theta ~ N(mu, diag(sd^2)).
+within / (k * defined) + misfit per moment (k trials per condition, `defined` the share
+of trials that define a feature, `misfit` the surface's own error, `person_noise_var`). A group's people have traits theta ~ N(mu, diag(sd^2)).
 The fit estimates (mu, sd) of the free traits by expectation-maximisation:
 
 - E-step: each person's posterior mode of their traits under the current (mu, sd), by
@@ -20,8 +20,10 @@ simulated moments, which this replaced): a feature that follows two traits (the 
 inside the target branch follows caution and, in HV, the comfort torque) tells the two
 apart only within a person, beside another feature that follows one of them (the same
 speed in VO). Across a group, the people's spread in the first trait swamps the second.
-With the person-level model the comfort torque, the steering error and the haptic
-threshold became identifiable from the same trials.
+On a 20/8/8 study with the person-level model, the reaction time and the caution joined
+the preferred speed (held-out people, `validate.py`); the steering error, the haptic
+threshold, the visual stall time and the comfort torque act in too few of 3 trials per
+condition to be told per person, and stay at their priors.
 
 The traits the data cannot identify (`identifiable`) stay at their priors: their spread
 in the group is added to each person's moment noise (linearised at the prior means).
