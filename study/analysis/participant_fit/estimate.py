@@ -4,7 +4,8 @@ by EM, on the emulator.
 A person's moments y (the mean over their trials of each log measure and log feature in
 each condition) are, by the emulator, f(theta) plus noise of variance
 within / (k * defined) + misfit per moment (k trials per condition, `defined` the share
-of trials that define a feature, `misfit` the surface's own error, `person_noise_var`). A group's people have traits theta ~ N(mu, diag(sd^2)).
+of trials that define a feature, `misfit` the surface's own error, `person_noise_var`).
+A group's people have traits theta ~ N(mu, diag(sd^2)).
 The fit estimates (mu, sd) of the free traits by expectation-maximisation:
 
 - E-step: each person's posterior mode of their traits under the current (mu, sd), by
