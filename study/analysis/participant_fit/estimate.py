@@ -70,15 +70,14 @@ def prior_arrays(profile: GroupProfile) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
-def observed_moments(y: np.ndarray, noise_sd: np.ndarray, k: float) -> tuple[np.ndarray, ...]:
+def observed_moments(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(mean, sd, n) of each moment over a group's people (a feature's over the people it
-    is defined for); n < 2 gives a mean of 0 and an sd of the noise floor."""
+    is defined for); NaN where fewer than two define it."""
     n = np.isfinite(y).sum(axis=0)
     usable = n >= 2
-    mean = np.where(usable, np.nanmean(np.where(usable, y, 0.0), axis=0), 0.0)
-    centred = np.where(np.isfinite(y), y - mean, 0.0)
-    sd = np.sqrt((centred**2).sum(axis=0) / np.maximum(n - 1, 1))
-    return mean, np.where(usable, sd, 0.5 * noise_sd / np.sqrt(k)), n
+    mean = np.where(usable, np.nanmean(np.where(usable[None], y, 0.0), axis=0), np.nan)
+    sd = np.where(usable, np.nanstd(np.where(usable[None], y, 0.0), axis=0, ddof=1), np.nan)
+    return mean, sd, n
 
 
 def person_noise_var(emulator: MomentEmulator, k: float) -> np.ndarray:
@@ -86,6 +85,13 @@ def person_noise_var(emulator: MomentEmulator, k: float) -> np.ndarray:
     the trials' scatter over the k * defined trials that define it, plus the emulator's
     misfit, which does not average away."""
     return emulator.within_var_ / (k * np.maximum(emulator.defined_, 0.1)) + emulator.misfit_var_
+
+
+def with_fixed_spread(noise_var: np.ndarray, jac_sd: np.ndarray, free: list[int]) -> np.ndarray:
+    """A person's moment variance once the traits not in `free` vary at their prior SDs
+    too (`jac_sd`: d moment / d trait times the trait's prior SD, linearised)."""
+    fixed = [j for j in range(len(TRAITS)) if j not in free]
+    return noise_var + (jac_sd[:, fixed] ** 2).sum(axis=1)
 
 
 def _information(jac: np.ndarray, var: np.ndarray, free: list[int]) -> np.ndarray:
@@ -133,9 +139,7 @@ def identifiable(
     def ratios(free: list[int]) -> np.ndarray:
         worst = np.zeros(len(free))
         for jac, noise, n, empirical in setup.values():
-            fixed = [j for j in range(len(TRAITS)) if j not in free]
-            var = noise + (jac[:, fixed] ** 2).sum(axis=1)
-            info = _information(jac, var, free)
+            info = _information(jac, with_fixed_spread(noise, jac, free), free)
             eye = np.eye(len(free))
             post = np.linalg.inv(eye + n * info @ np.linalg.inv(info + eye))
             linear = np.sqrt(np.clip(np.diag(post), 0.0, None))
@@ -199,9 +203,8 @@ class GroupEstimator:
         self.mu0, self.sd0 = prior_arrays(prior)
         self.z = np.random.default_rng(seed).standard_normal((DRAWS, len(TRAITS)))
         self.noise_var = person_noise_var(emulator, k)
-        fixed = [j for j in range(len(TRAITS)) if j not in free]
-        jac = np.nan_to_num(emulator.jacobian(self.mu0, 0.1 * self.sd0))
-        self.person_var = self.noise_var + ((jac[:, fixed] * self.sd0[fixed]) ** 2).sum(axis=1)
+        jac_sd = np.nan_to_num(emulator.jacobian(self.mu0, 0.1 * self.sd0)) * self.sd0
+        self.person_var = with_fixed_spread(self.noise_var, jac_sd, free)
         low, high = emulator.box_
         self.low, self.high = low[free], high[free]
 

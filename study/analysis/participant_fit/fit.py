@@ -236,7 +236,6 @@ def fit_trials(
     sampled = int(trials[features].notna().any(axis=1).sum()) if features else 0
     source, counts = data_source(trials)
     names = emulator.moments_
-    noise_sd = np.sqrt(np.diag(emulator.noise_cov_))
     by_group = {g: people[people["group"] == g] for g in groups}
     ks = {g: float(by_group[g]["k"].mean()) for g in groups}
     sizes = {g: by_group[g][names].notna().sum().to_numpy() for g in groups}
@@ -271,7 +270,7 @@ def fit_trials(
             np.cov(emulator.log_moments(est.draws(best.mean, fixed_only)), rowvar=False)
         )
         predicted[g] = {key: [p[key] for p in preds] for key in preds[0]}
-        mean_obs, sd_obs, n_obs = observed_moments(y, noise_sd, ks[g])
+        mean_obs, sd_obs, n_obs = observed_moments(y)
         m_fit, s_fit = est.expected(best.mean, best.sd)
         group_out[g] = {
             "participants": len(y),
@@ -319,14 +318,13 @@ def fit_trials(
     sim_people = person_moments(simulated, measures, features)
     # the outlier rule over the measures' moments: the features' long tails (a single
     # backing-off in a trial) raised false alarms on data simulated from the model itself
-    complete = names[: len(measures) * len(KNOWN_CONDITIONS)]
-    idx = [names.index(n) for n in complete]
+    m = len(measures) * len(KNOWN_CONDITIONS)
     outlier = checks.outliers(
-        emulator.subset(complete),
+        emulator.subset(names[:m]),
         people,
         sim_people,
         means,
-        {g: fixed_cov[g][np.ix_(idx, idx)] for g in groups},
+        {g: fixed_cov[g][:m, :m] for g in groups},
         free,
     )
     table = pd.DataFrame(

@@ -37,8 +37,11 @@ def held_out_errors(
     measures: Sequence[str],
     features: Sequence[str],
     repeats: int,
+    surface: MomentEmulator | None = None,
 ) -> np.ndarray:
-    """(len(TRAITS),) RMS error of a held-out person's estimated traits (trait units)."""
+    """(len(TRAITS),) RMS error of a held-out person's estimated traits (trait units), by
+    emulators of `surface`'s degree and ridge (default `MomentEmulator()`'s)."""
+    surface = MomentEmulator() if surface is None else surface
     fold = np.arange(len(x)) % FOLDS
     low, high = x.min(axis=0), x.max(axis=0)
     centre, half = (low + high) / 2, (high - low) / 2
@@ -46,7 +49,9 @@ def held_out_errors(
     errors, truth = [], []
     for f in range(FOLDS):
         held = fold[design["setting"].to_numpy()] == f
-        emulator = MomentEmulator().fit(x, design[~held], measures, features)
+        emulator = MomentEmulator(surface.degree, surface.alpha).fit(
+            x, design[~held], measures, features
+        )
         test = design[held].assign(
             participant=design.loc[held, "setting"].astype(str), group="design", order=""
         )
@@ -66,7 +71,7 @@ def attach(emulator: MomentEmulator, x: np.ndarray, design: pd.DataFrame, repeat
     design for `held_out_for`."""
     emulator.design_ = (x, design, repeats)
     emulator.held_out_error_ = held_out_errors(
-        x, design, emulator.measures_, emulator.features_, repeats
+        x, design, emulator.measures_, emulator.features_, repeats, emulator
     )
 
 
@@ -78,4 +83,4 @@ def held_out_for(emulator: MomentEmulator, features: Sequence[str]) -> np.ndarra
     if list(features) == emulator.features_:
         return np.asarray(emulator.held_out_error_)
     x, design, repeats = emulator.design_
-    return held_out_errors(x, design, emulator.measures_, features, repeats)
+    return held_out_errors(x, design, emulator.measures_, features, repeats, emulator)
