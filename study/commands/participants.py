@@ -141,11 +141,13 @@ def _print(model: dict, table: object) -> None:
     )
     click.echo(
         f"identifiable from the moments: {', '.join(model['identifiable']) or 'none'}; "
-        f"fixed at their priors: {', '.join(model['fixed_at_prior']) or 'none'}"
+        f"told weakly, shrunk towards their priors: "
+        f"{', '.join(model['shrunk_to_prior']) or 'none'}"
     )
     for group, out in fits.items():
         traits = ", ".join(
-            f"{t} {v['mean']:.4g} (95 % {v['mean_ci95'][0]:.4g}-{v['mean_ci95'][1]:.4g})"
+            f"{t} {v['mean']:.4g} (95 % {v['mean_ci95'][0]:.4g}-{v['mean_ci95'][1]:.4g}"
+            f"{'' if v['identifiable'] else ', shrunk'})"
             for t, v in out["traits"].items()
             if v["fitted"]
         )

@@ -23,7 +23,7 @@ from study.analysis.participant_fit.fit import (
     fit_trials,
     simulate_people,
 )
-from study.protocol.participants import PROFILES
+from study.protocol.participants import PROFILES, TRAITS
 from study.protocol.tasks import get_task
 from tests.study.conftest import one_error_line
 
@@ -79,9 +79,13 @@ def test_the_known_group_means_are_recovered(fitted) -> None:
     # the features were read and used
     assert model["features"]["names"] == list(get_task("lcca").fit_features)
     assert model["features"]["trials_with_samples"] == 3 * 6 * 2 * 2
-    # what the data cannot identify stays at its prior, and says so
-    for trait in model["fixed_at_prior"]:
-        assert model["groups"]["novice"][trait]["mean"] == getattr(PROFILES["novice"], trait)[0]
+    # what the data tell weakly is fitted under its profile's prior, and says so: the
+    # 6 novices' trials move such a mean less than 1.5 profile SDs from the profile
+    assert set(model["shrunk_to_prior"]) == set(TRAITS) - set(model["identifiable"])
+    for trait in model["shrunk_to_prior"]:
+        m0, s0 = getattr(PROFILES["novice"], trait)
+        assert abs(model["groups"]["novice"][trait]["mean"] - m0) < 1.5 * s0, trait
+        assert not model["fit"]["novice"]["traits"][trait]["identifiable"]
     assert model["data_source"] == "simulated"
 
 
@@ -215,9 +219,35 @@ def test_without_samples_only_what_the_measures_tell_is_fitted(emulator, trials)
     features = list(get_task("lcca").fit_features)
     model, _ = fit_trials(trials.drop(columns=features), "lcca", SETTINGS, emulator, "test data")
     assert model["features"]["trials_with_samples"] == 0
-    assert "caution" not in model["identifiable"]
-    assert model["groups"]["novice"]["caution"]["mean"] == PROFILES["novice"].caution[0]
+    assert "caution" not in model["identifiable"] and "caution" in model["shrunk_to_prior"]
+    m0, s0 = PROFILES["novice"].caution
+    assert abs(model["groups"]["novice"]["caution"]["mean"] - m0) < 1.5 * s0
     with_features, _ = fit_trials(trials, "lcca", SETTINGS, emulator, "test data")
     # caution is read off the samples: its held-out error is far larger without them
     measured = model["held_out_trait_error"]["caution"]
     assert measured > 2 * with_features["held_out_trait_error"]["caution"]
+
+
+def test_the_figure_draws_an_estimate_outside_its_bootstrap_interval() -> None:
+    """The model's prediction at the best fit may lie outside its replicates' percentile
+    interval (it did in a NOTES fit): the figure draws the interval as it is and the
+    estimate beside it, instead of refusing a negative error bar."""
+    import pandas as pd
+
+    from study.analysis.participant_fit.figure import fit_figure
+
+    rows = [
+        (g, "completion_time_s", c, s, 10.0, 9.0, 11.0)
+        for g in ("novice", "expert") for c in ("VO", "HV", "VO-HV")
+        for s in ("observed", "simulated")]  # fmt: skip
+    rows += [(g, "completion_time_s", c, "model", 12.0, 9.5, 11.5)
+             for g in ("novice", "expert") for c in ("VO", "HV", "VO-HV")]  # fmt: skip
+    table = pd.DataFrame(rows, columns=["group", "measure", "condition", "source", "mean",
+                                        "ci_low", "ci_high"])  # fmt: skip
+    fig = fit_figure(table, "SIMULATED test")
+    ax = fig.axes[0]
+    segments = [seg for c in ax.collections for seg in c.get_segments()]
+    # the model's interval 9.5-11.5 at each group, its estimate 12 above it
+    assert sum(1 for seg in segments if tuple(seg[:, 1]) == (9.5, 11.5)) == 2
+    marks = [line.get_ydata() for line in ax.lines if line.get_marker() == "^"]
+    assert [list(m) for m in marks] == [[12.0, 12.0]]

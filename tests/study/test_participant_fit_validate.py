@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
-from study.analysis.participant_fit.estimate import GroupEstimator
+from study.analysis.participant_fit.estimate import HYPER_SD, GroupEstimator
 from study.analysis.participant_fit.validate import held_out_errors
 from study.protocol.participants import PROFILES, TRAITS
 
@@ -51,9 +51,10 @@ def test_held_out_people_tell_the_traits_their_moments_follow() -> None:
             # of the design's spread
             assert errors[j] < 0.15 * spread[j], trait
         else:
-            # nothing follows it: the estimate stays at the wide prior's centre, and its
-            # error is the design's own spread about it
-            assert errors[j] == pytest.approx(spread[j], rel=0.2), trait
+            # nothing follows it: the estimate is no better than the wide prior's centre,
+            # whose error is the design's own spread about it (the surface's spurious small
+            # slopes on the noise can only add to it)
+            assert errors[j] > 0.8 * spread[j], trait
 
 
 def test_the_em_recovers_a_groups_mean_of_a_told_trait() -> None:
@@ -72,3 +73,35 @@ def test_the_em_recovers_a_groups_mean_of_a_told_trait() -> None:
     np.testing.assert_allclose(fit.people[:, speed], people[:, speed], rtol=0.05)
     # a trait not fitted stays at its prior
     assert fit.mean[TRAITS.index("caution")] == PROFILES["novice"].caution[0]
+
+
+def test_a_weakly_told_traits_group_mean_is_the_data_and_the_profile_weighted() -> None:
+    """A weak trait's group mean has the prior N(profile mean, HYPER_SD profile SDs): the
+    EM's fixed point is the normal-normal posterior mean of the people's (conjugate:
+    n / sd^2 and 1 / (HYPER_SD sd0)^2 the two weights); a trait no moment follows stays at
+    the profile."""
+    rng = np.random.default_rng(3)
+    x = design_settings(200, 1, design_box())
+    emulator = MomentEmulator().fit(x, _trials(x, 2, rng), MEASURES)
+    speed, reaction = TRAITS.index("preferred_speed_m_s"), TRAITS.index("reaction_s")
+    people = np.tile([getattr(PROFILES["novice"], t)[0] for t in TRAITS], (12, 1))
+    people[:, speed] = rng.normal(0.010, 0.002, 12)
+    y = np.column_stack([_law(people)] * 2) + rng.normal(0.0, NOISE / np.sqrt(3), (12, 4))
+    free = [speed, reaction]
+    weak = GroupEstimator(emulator, PROFILES["novice"], free, 3.0, weak=free).fit(y)
+    alone = GroupEstimator(emulator, PROFILES["novice"], free, 3.0).fit(y)
+    assert weak.success and alone.success
+    m0, s0 = PROFILES["novice"].preferred_speed_m_s
+    s, n = weak.sd[speed], len(y)
+    expected = (n / s**2 * weak.people[:, speed].mean() + m0 / (HYPER_SD * s0) ** 2) / (
+        n / s**2 + 1 / (HYPER_SD * s0) ** 2
+    )
+    assert weak.mean[speed] == pytest.approx(expected, rel=2e-3)
+    # between the people's mean and the profile's, much nearer the people's (12 of them)
+    assert alone.mean[speed] < weak.mean[speed] < m0
+    assert weak.mean[speed] - alone.mean[speed] < 0.2 * (m0 - alone.mean[speed])
+    # nothing but the surface's small spurious slopes tells the reaction time: under its
+    # prior it keeps nearer the profile than fitted freely, within one profile SD
+    r0, r_sd = PROFILES["novice"].reaction_s
+    assert abs(weak.mean[reaction] - r0) < abs(alone.mean[reaction] - r0), alone.mean[reaction]
+    assert abs(weak.mean[reaction] - r0) < r_sd

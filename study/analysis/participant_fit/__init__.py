@@ -5,7 +5,8 @@
 - `simulate.py`: trait settings through the task's own trials, in parallel.
 - `emulator.py`: the moments as a response surface of the traits.
 - `estimate.py`: which traits the moments identify; each group's trait distribution by
-  a hierarchical model (each person's traits, then the group's) fitted by EM.
+  a hierarchical model (each person's traits, then the group's) fitted by EM, the
+  weakly told traits' group means under their profile's prior.
 - `validate.py`: how well one person's trials tell their traits, on held-out settings.
 - `checks.py`: what the model cannot explain (trends, condition order, outliers).
 - `fit.py`: the whole fit, MODEL.json's content; `figure.py`: observed vs simulated.

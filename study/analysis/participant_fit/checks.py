@@ -157,7 +157,7 @@ def outliers(
 ) -> dict[str, Any]:
     """The outlier rule over the observed `people` (person_moments frames), calibrated on
     the `simulated` people; `fixed_cov[group]`: the moments' covariance from the spread of
-    the traits not fitted."""
+    the traits not in `free` (the ones searched over)."""
     names = emulator.moments_
 
     def distances(frame: pd.DataFrame) -> pd.Series:

@@ -45,9 +45,13 @@ def fit_figure(table: pd.DataFrame, note: str) -> plt.Figure:
                                  & (table["source"] == source)].set_index("group")  # fmt: skip
                     rows = rows.reindex(groups)
                     x = [g + (k - 1) * 0.22 for g in range(len(groups))]
-                    err = [rows["mean"] - rows["ci_low"], rows["ci_high"] - rows["mean"]]
-                    ax.errorbar(x, rows["mean"], yerr=err, fmt=marker, color=colour, ms=3.5,
-                                capsize=2, lw=0.8)  # fmt: skip
+                    # the interval as drawn, the estimate as a marker: a bootstrap
+                    # percentile interval need not hold the point estimate (the model's
+                    # prediction at the best fit may lie outside its replicates')
+                    ax.vlines(x, rows["ci_low"], rows["ci_high"], color=colour, lw=0.8)
+                    for edge in ("ci_low", "ci_high"):
+                        ax.plot(x, rows[edge], "_", color=colour, ms=4, mew=0.8)
+                    ax.plot(x, rows["mean"], marker, color=colour, ms=3.5, ls="")
                 if column == "VO-HV":
                     ax.axhline(0.0, color="#999999", lw=0.5)
                 ax.set_xticks(range(len(groups)), groups)

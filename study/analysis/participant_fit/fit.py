@@ -32,6 +32,7 @@ from sqlalchemy import Engine
 from study.analysis.participant_fit import checks, validate
 from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
 from study.analysis.participant_fit.estimate import (
+    HYPER_SD,
     IDENTIFIED_RATIO,
     NU0,
     GroupEstimator,
@@ -246,12 +247,15 @@ def fit_trials(
         if all(sizes[g][names.index(f"{c}:{f}")] >= 2 for g in groups for c in KNOWN_CONDITIONS)
     ]
     held_out = validate.held_out_for(emulator, held)
-    free, ratios = identifiable(emulator, {g: PROFILES[g] for g in groups}, sizes, ks, held_out)
+    told, ratios = identifiable(emulator, {g: PROFILES[g] for g in groups}, sizes, ks, held_out)
+    # every trait is fitted; those the data tell weakly under their profile's prior
+    free = list(range(len(TRAITS)))
+    weak = [j for j in free if j not in told]
     rng = np.random.default_rng([settings.seed, 0xB007])
     fitted, group_out, predicted, fixed_cov, replicates = {}, {}, {}, {}, {}
     for k, g in enumerate(groups):
         progress("fitting", k, len(groups))
-        est = GroupEstimator(emulator, PROFILES[g], free, ks[g], seed=settings.seed)
+        est = GroupEstimator(emulator, PROFILES[g], free, ks[g], settings.seed, weak)
         y = by_group[g][names].to_numpy(float)
         best = est.fit(y)
         start = getattr(est, "x_", None)
@@ -263,9 +267,10 @@ def fit_trials(
         boots_arr = np.array(boots)
         fitted[g] = _profile(best.mean, best.sd)
         replicates[g] = [_profile(b[: len(TRAITS)], b[len(TRAITS) :]) for b in boots_arr]
-        # the moments' spread that the traits held at their priors add to a person's
+        # the moments' spread that the weakly told traits add to a person's (the outlier
+        # rule searches the identifiable traits only: the measures alone are 6 moments)
         fixed_only = best.sd.copy()
-        fixed_only[free] = 0.0
+        fixed_only[told] = 0.0
         fixed_cov[g] = np.atleast_2d(
             np.cov(emulator.log_moments(est.draws(best.mean, fixed_only)), rowvar=False)
         )
@@ -280,16 +285,10 @@ def fit_trials(
                     "mean": float(best.mean[j]),
                     "sd": float(best.sd[j]),
                     "fitted": j in free,
-                    **(
-                        {
-                            "mean_ci95": np.percentile(boots_arr[:, j], [2.5, 97.5]).tolist(),
-                            "sd_ci95": np.percentile(
-                                boots_arr[:, len(TRAITS) + j], [2.5, 97.5]
-                            ).tolist(),
-                        }
-                        if j in free
-                        else {"prior": list(getattr(PROFILES[g], t))}
-                    ),
+                    "identifiable": j in told,
+                    "mean_ci95": np.percentile(boots_arr[:, j], [2.5, 97.5]).tolist(),
+                    "sd_ci95": np.percentile(boots_arr[:, len(TRAITS) + j], [2.5, 97.5]).tolist(),
+                    **({} if j in told else {"prior": list(getattr(PROFILES[g], t))}),
                 }
                 for j, t in enumerate(TRAITS)
             },
@@ -325,7 +324,7 @@ def fit_trials(
         sim_people,
         means,
         {g: fixed_cov[g][:m, :m] for g in groups},
-        free,
+        told,
     )
     table = pd.DataFrame(
         summaries(trials, simulated, measures, groups, predicted, rng, max(settings.bootstrap, 200))
@@ -342,9 +341,10 @@ def fit_trials(
             "note": counts["note"],
         },
         "method": "hierarchical model fitted by EM on an emulator (quadratic response "
-        "surface of log measures and log sample features on traits): each person's traits "
-        "N(group mean, group sd), their posterior modes by Levenberg-Marquardt (Laplace "
-        f"covariances); group sds pooled with {NU0:g} pseudo-people at the profile's; "
+        "surface of log measures and log sample features on log traits): each person's "
+        "traits N(group mean, group sd), their posterior modes by Levenberg-Marquardt "
+        f"(Laplace covariances); group sds pooled with {NU0:g} pseudo-people at the "
+        "profile's; the weakly told traits' group means under the profile's prior; "
         "bootstrap over participants",
         "moments": names,
         "features": {
@@ -356,11 +356,14 @@ def fit_trials(
             if features
             else "the task has no sample features: the measures only",
         },
-        "identifiable": [TRAITS[j] for j in free],
+        "identifiable": [TRAITS[j] for j in told],
         "held_out_trait_error": None
         if held_out is None
         else dict(zip(TRAITS, np.round(held_out, 6).tolist(), strict=True)),
-        "fixed_at_prior": [t for j, t in enumerate(TRAITS) if j not in free],
+        "shrunk_to_prior": [TRAITS[j] for j in weak],
+        "shrunk_to_prior_note": "traits the data tell weakly: fitted with their group mean "
+        f"under the prior N(the hand-set profile's mean, {HYPER_SD:g} of its SD), so the data "
+        "move it only as far as their information allows",
         "identification_ratio": {t: round(r, 3) for t, r in ratios.items()},
         "identification_rule": f"posterior / prior SD of a group mean < {IDENTIFIED_RATIO} "
         "(linearised at the priors, the people's own information on their traits, worst "

@@ -40,7 +40,7 @@ def held_out_errors(
     surface: MomentEmulator | None = None,
 ) -> np.ndarray:
     """(len(TRAITS),) RMS error of a held-out person's estimated traits (trait units), by
-    emulators of `surface`'s degree and ridge (default `MomentEmulator()`'s)."""
+    emulators of `surface`'s degree and ridge penalties (default `MomentEmulator()`'s)."""
     surface = MomentEmulator() if surface is None else surface
     fold = np.arange(len(x)) % FOLDS
     low, high = x.min(axis=0), x.max(axis=0)
@@ -49,7 +49,7 @@ def held_out_errors(
     errors, truth = [], []
     for f in range(FOLDS):
         held = fold[design["setting"].to_numpy()] == f
-        emulator = MomentEmulator(surface.degree, surface.alpha).fit(
+        emulator = MomentEmulator(surface.degree, surface.alphas).fit(
             x, design[~held], measures, features
         )
         test = design[held].assign(
