@@ -105,3 +105,26 @@ def test_a_weakly_told_traits_group_mean_is_the_data_and_the_profile_weighted() 
     r0, r_sd = PROFILES["novice"].reaction_s
     assert abs(weak.mean[reaction] - r0) < abs(alone.mean[reaction] - r0), alone.mean[reaction]
     assert abs(weak.mean[reaction] - r0) < r_sd
+
+
+def test_a_weak_traits_bootstrap_holds_its_priors_uncertainty() -> None:
+    """Nothing tells the reaction time here: its posterior is its prior, N(profile mean,
+    HYPER_SD profile SDs). Replicates that resample the people and draw the prior's
+    centre (`prior_centre`) spread by about that SD; resampling the people alone would
+    leave a shrunk mean's interval near zero width."""
+    rng = np.random.default_rng(4)
+    x = design_settings(200, 1, design_box())
+    emulator = MomentEmulator().fit(x, _trials(x, 2, rng), MEASURES)
+    speed, reaction = TRAITS.index("preferred_speed_m_s"), TRAITS.index("reaction_s")
+    people = np.tile([getattr(PROFILES["novice"], t)[0] for t in TRAITS], (12, 1))
+    y = np.column_stack([_law(people)] * 2) + rng.normal(0.0, NOISE / np.sqrt(3), (12, 4))
+    est = GroupEstimator(emulator, PROFILES["novice"], [speed, reaction], 3.0, weak=[reaction])
+    drawn, resampled = [], []
+    for _ in range(16):
+        rows = y[rng.integers(0, 12, 12)]
+        drawn.append(est.fit(rows, None, est.prior_centre(rng)).mean[reaction])
+        resampled.append(est.fit(rows).mean[reaction])
+    s0 = PROFILES["novice"].reaction_s[1]
+    # 16 draws: the SD of their SD is about 18 %
+    assert np.std(drawn, ddof=1) == pytest.approx(HYPER_SD * s0, rel=0.45)
+    assert np.std(resampled, ddof=1) < 0.3 * s0

@@ -171,7 +171,7 @@ class MomentEmulator:
         resid = np.full_like(y, np.nan)
         for j in range(y.shape[1]):
             ok = np.isfinite(y[:, j])
-            ridge = RidgeCV(alphas=self.alphas).fit(phi[ok], y[ok, j])
+            ridge = RidgeCV(alphas=list(self.alphas)).fit(phi[ok], y[ok, j])
             self.coef_[:, j], self.intercept_[j] = ridge.coef_, ridge.intercept_
             self.alpha_[j] = ridge.alpha_
             resid[ok, j] = y[ok, j] - ridge.predict(phi[ok])

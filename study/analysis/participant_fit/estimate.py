@@ -278,11 +278,23 @@ class GroupEstimator:
         cov = np.linalg.inv(jac.transpose(0, 2, 1) @ jac)
         return theta, cov, cost
 
+    def prior_centre(self, rng: np.random.Generator) -> np.ndarray:
+        """The weak traits' prior means drawn from their prior, for one bootstrap
+        replicate: resampling the people and drawing the prior's centre, then fitting, is
+        randomised maximum likelihood, whose fits are draws from the posterior in a
+        linear-Gaussian model. Resampling the people alone would leave out the prior's
+        own uncertainty, and a shrunk mean's interval would be too narrow."""
+        return self.mu0 + HYPER_SD * self.sd0 * rng.standard_normal(len(self.mu0))
+
     def start(self) -> np.ndarray:
         return np.concatenate([self.mu0[self.free], np.log(self.sd0[self.free])])
 
-    def fit(self, y: np.ndarray, start: np.ndarray | None = None) -> GroupFit:
-        """Fit to `y` (people x moments, log scale; NaN where a feature is undefined)."""
+    def fit(
+        self, y: np.ndarray, start: np.ndarray | None = None, centre: np.ndarray | None = None
+    ) -> GroupFit:
+        """Fit to `y` (people x moments, log scale; NaN where a feature is undefined);
+        `centre` (len(TRAITS)): the weak traits' prior means, default the profile's (a
+        bootstrap replicate draws them, `prior_centre`)."""
         nf, n = len(self.free), len(y)
         mean, sd = self.mu0.copy(), self.sd0.copy()
         if nf == 0:
@@ -292,7 +304,7 @@ class GroupEstimator:
         s0 = self.sd0[self.free]
         theta = np.tile(mu, (n, 1))
         converged = False
-        m0 = self.mu0[self.free]
+        m0 = (self.mu0 if centre is None else centre)[self.free]
         for _ in range(EM_STEPS):
             theta, cov, cost = self.posteriors(y, mu, s, theta, steps=3)
             # the group mean: the people's, and for a weak trait with its prior's weight

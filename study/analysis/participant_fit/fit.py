@@ -9,7 +9,8 @@ Steps (each reported through `progress(step, k, n)`):
    (`emulator.py`);
 3. which traits the moments identify, and each group's trait means and SDs by the
    hierarchical model (`estimate.py`: each person's traits, then the group's), with a
-   bootstrap over participants (resampled within group, refitted on
+   bootstrap over participants (resampled within group, the weak traits' prior centre
+   drawn from their prior, refitted on
    the emulator) for their uncertainty and that of the model's predicted means;
 4. people drawn from the fitted model and simulated with the study's design (`check`
    per group, each from one of the fit's bootstrap replicates, the observed trials per
@@ -261,7 +262,7 @@ def fit_trials(
         start = getattr(est, "x_", None)
         boots, preds = [], [_predict(est, best.mean, best.sd)]
         for _ in range(settings.bootstrap):
-            b = est.fit(y[rng.integers(0, len(y), len(y))], start)
+            b = est.fit(y[rng.integers(0, len(y), len(y))], start, est.prior_centre(rng))
             boots.append(np.concatenate([b.mean, b.sd]))
             preds.append(_predict(est, b.mean, b.sd))
         boots_arr = np.array(boots)
@@ -345,7 +346,8 @@ def fit_trials(
         "traits N(group mean, group sd), their posterior modes by Levenberg-Marquardt "
         f"(Laplace covariances); group sds pooled with {NU0:g} pseudo-people at the "
         "profile's; the weakly told traits' group means under the profile's prior; "
-        "bootstrap over participants",
+        "bootstrap over participants, each replicate with the prior's centre drawn from "
+        "the prior (randomised maximum likelihood)",
         "moments": names,
         "features": {
             "names": features,
