@@ -179,6 +179,8 @@ def run_participants_bench(
         "settings": settings.__dict__,
         "truth_people_per_group": truth_people,
         "identifiable": model["identifiable"],
+        "weak_traits": model["weak_traits"],
+        "fixed_at_prior": model["fixed_at_prior"],
         "shrunk_to_prior": model["shrunk_to_prior"],
         "identification_ratio": model["identification_ratio"],
         "held_out_trait_error": model["held_out_trait_error"],
@@ -234,9 +236,14 @@ def markdown(report: dict[str, Any]) -> str:
     lines = [
         "# Participant fit: recovery from a simulated 20/8/8 study (SIMULATED)",
         "",
-        f"Identifiable: {', '.join(report['identifiable'])}; told weakly, fitted with "
-        "their group means shrunk towards the priors: "
-        f"{', '.join(report['shrunk_to_prior']) or 'none'}. The truth's means lie "
+        f"Identifiable: {', '.join(report['identifiable'])}; "
+        + (
+            "told weakly, fitted with their group means shrunk towards the priors: "
+            f"{', '.join(report['shrunk_to_prior'])}"
+            if report["shrunk_to_prior"]
+            else f"fixed at their priors: {', '.join(report['fixed_at_prior']) or 'none'}"
+        )
+        + ". The truth's means lie "
         f"{report['truth_shift_prior_sds']} prior SDs from the priors'; "
         f"{report['recovery_within']} group means within 15 %.",
         "",
@@ -245,8 +252,11 @@ def markdown(report: dict[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in report["recovery"]:
-        fitted = f"{r['fitted']:.4g} ({r['ci95'][0]:.4g}-{r['ci95'][1]:.4g})" + (
-            "" if r["identifiable"] else ", shrunk"
+        fitted = (
+            f"{r['fitted']:.4g} (at its prior: not identifiable)"
+            if r["ci95"] is None
+            else f"{r['fitted']:.4g} ({r['ci95'][0]:.4g}-{r['ci95'][1]:.4g})"
+            + ("" if r["identifiable"] else ", shrunk")
         )
         lines.append(
             f"| {r['group']} | {r['trait']} | {r['prior']:.4g} | {r['true']:.4g} "

@@ -226,11 +226,14 @@ def bench_startup(
 @click.option("--truth-shift", type=click.FloatRange(min=0.0, max=2.0), default=0.7,
               show_default=True, help="How far the truth's trait means lie from the priors', "
               "in prior SDs (0: the priors).")  # fmt: skip
+@click.option("--weak-traits", type=click.Choice(["prior", "shrink"]), default="prior",
+              show_default=True, help="As `study participants fit --weak-traits`.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=int, default=11, show_default=True)
 @_json_option
 def bench_participants(out_dir: Path | None, trials: int, truth_people: int, truth_shift: float,
-                       jobs: int, seed: int, json_path: Path | None) -> None:  # fmt: skip
+                       weak_traits: str, jobs: int, seed: int,
+                       json_path: Path | None) -> None:  # fmt: skip
     """Recovery of known trait distributions from a simulated 20/8/8 study, and the fit's time."""
     from study.analysis.participant_fit.fit import FitSettings
     from study.bench.participants import markdown, run_participants_bench
@@ -239,7 +242,8 @@ def bench_participants(out_dir: Path | None, trials: int, truth_people: int, tru
         check_parent_folder(json_path)
     with Console(stderr=True).status("participants bench") as status:
         report = run_participants_bench({"outsider": 20, "novice": 8, "expert": 8}, trials,
-                                        FitSettings(jobs=jobs), truth_people, seed, out_dir,
+                                        FitSettings(jobs=jobs, weak_traits=weak_traits),
+                                        truth_people, seed, out_dir,
                                         status.update, truth_shift)  # fmt: skip
     text = markdown(report)
     if out_dir is not None:

@@ -49,6 +49,9 @@ def participants() -> None:
     dest="n_check",
 )
 @click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True)
+@click.option("--weak-traits", type=click.Choice(["prior", "shrink"]), default="prior",
+              show_default=True, help="The traits the data tell weakly: held at the hand-set "
+              "profile, or fitted with their group mean under the profile's prior.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 def fit(
@@ -59,6 +62,7 @@ def fit(
     repeats: int,
     n_check: int,
     bootstrap: int,
+    weak_traits: str,
     jobs: int,
     seed: int,
 ) -> None:
@@ -76,8 +80,9 @@ def fit(
     if out_path.suffix != ".json":
         raise StudyInputError(f"--out {out_path}; expected a file name ending in .json")
     settings = FitSettings(
-        design=n_design, repeats=repeats, check=n_check, bootstrap=bootstrap, jobs=jobs, seed=seed
-    )
+        design=n_design, repeats=repeats, check=n_check, bootstrap=bootstrap, jobs=jobs,
+        seed=seed, weak_traits=weak_traits,
+    )  # fmt: skip
     start = time.monotonic()
     with opened_database(db_url) as engine, progress_bar() as bar:
         bars: dict[str, object] = {}
@@ -141,8 +146,11 @@ def _print(model: dict, table: object) -> None:
     )
     click.echo(
         f"identifiable from the moments: {', '.join(model['identifiable']) or 'none'}; "
-        f"told weakly, shrunk towards their priors: "
-        f"{', '.join(model['shrunk_to_prior']) or 'none'}"
+        + (
+            f"told weakly, shrunk towards their priors: {', '.join(model['shrunk_to_prior'])}"
+            if model["shrunk_to_prior"]
+            else f"fixed at their priors: {', '.join(model['fixed_at_prior']) or 'none'}"
+        )
     )
     for group, out in fits.items():
         traits = ", ".join(

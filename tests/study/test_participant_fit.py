@@ -23,6 +23,7 @@ from study.analysis.participant_fit.fit import (
     fit_trials,
     simulate_people,
 )
+from study.errors import StudyInputError
 from study.protocol.participants import PROFILES, TRAITS
 from study.protocol.tasks import get_task
 from tests.study.conftest import one_error_line
@@ -79,13 +80,11 @@ def test_the_known_group_means_are_recovered(fitted) -> None:
     # the features were read and used
     assert model["features"]["names"] == list(get_task("lcca").fit_features)
     assert model["features"]["trials_with_samples"] == 3 * 6 * 2 * 2
-    # what the data tell weakly is fitted under its profile's prior, and says so: the
-    # 6 novices' trials move such a mean less than 1.5 profile SDs from the profile
-    assert set(model["shrunk_to_prior"]) == set(TRAITS) - set(model["identifiable"])
-    for trait in model["shrunk_to_prior"]:
-        m0, s0 = getattr(PROFILES["novice"], trait)
-        assert abs(model["groups"]["novice"][trait]["mean"] - m0) < 1.5 * s0, trait
-        assert not model["fit"]["novice"]["traits"][trait]["identifiable"]
+    # what the data cannot identify stays at its prior (the default), and says so
+    assert model["weak_traits"] == "prior" and model["shrunk_to_prior"] == []
+    assert set(model["fixed_at_prior"]) == set(TRAITS) - set(model["identifiable"])
+    for trait in model["fixed_at_prior"]:
+        assert model["groups"]["novice"][trait]["mean"] == getattr(PROFILES["novice"], trait)[0]
     assert model["data_source"] == "simulated"
 
 
@@ -219,9 +218,8 @@ def test_without_samples_only_what_the_measures_tell_is_fitted(emulator, trials)
     features = list(get_task("lcca").fit_features)
     model, _ = fit_trials(trials.drop(columns=features), "lcca", SETTINGS, emulator, "test data")
     assert model["features"]["trials_with_samples"] == 0
-    assert "caution" not in model["identifiable"] and "caution" in model["shrunk_to_prior"]
-    m0, s0 = PROFILES["novice"].caution
-    assert abs(model["groups"]["novice"]["caution"]["mean"] - m0) < 1.5 * s0
+    assert "caution" not in model["identifiable"]
+    assert model["groups"]["novice"]["caution"]["mean"] == PROFILES["novice"].caution[0]
     with_features, _ = fit_trials(trials, "lcca", SETTINGS, emulator, "test data")
     # caution is read off the samples: its held-out error is far larger without them
     measured = model["held_out_trait_error"]["caution"]
@@ -251,3 +249,24 @@ def test_the_figure_draws_an_estimate_outside_its_bootstrap_interval() -> None:
     assert sum(1 for seg in segments if tuple(seg[:, 1]) == (9.5, 11.5)) == 2
     marks = [line.get_ydata() for line in ax.lines if line.get_marker() == "^"]
     assert [list(m) for m in marks] == [[12.0, 12.0]]
+
+
+def test_weak_traits_shrink_fits_them_under_their_profiles_prior(emulator, trials) -> None:
+    """`--weak-traits shrink`: every trait is fitted, the weakly told ones with their group
+    mean under N(profile mean, profile SD); the 6 novices' trials (drawn at the profile
+    for those traits) move such a mean less than 1.5 profile SDs, and each has an
+    interval."""
+    shrink = dataclasses.replace(SETTINGS, weak_traits="shrink")
+    model, _ = fit_trials(trials, "lcca", shrink, emulator, "test data")
+    assert model["weak_traits"] == "shrink" and model["fixed_at_prior"] == []
+    assert set(model["shrunk_to_prior"]) == set(TRAITS) - set(model["identifiable"])
+    assert model["shrunk_to_prior"], "some trait is told weakly by 6 people's 2 trials"
+    for trait in model["shrunk_to_prior"]:
+        m0, s0 = getattr(PROFILES["novice"], trait)
+        fitted = model["fit"]["novice"]["traits"][trait]
+        assert abs(fitted["mean"] - m0) < 1.5 * s0, trait
+        assert fitted["fitted"] and not fitted["identifiable"]
+        low, high = fitted["mean_ci95"]
+        assert low < high
+    with pytest.raises(StudyInputError, match="weak traits 'both'; expected one of prior, shrink"):
+        fit_trials(trials, "lcca", dataclasses.replace(SETTINGS, weak_traits="both"), emulator, "x")

@@ -128,3 +128,14 @@ def test_a_weak_traits_bootstrap_holds_its_priors_uncertainty() -> None:
     # 16 draws: the SD of their SD is about 18 %
     assert np.std(drawn, ddof=1) == pytest.approx(HYPER_SD * s0, rel=0.45)
     assert np.std(resampled, ddof=1) < 0.3 * s0
+
+
+def test_the_surfaces_terms_in_numpy_equal_scikit_learns() -> None:
+    """`MomentEmulator.terms` (plain numpy, for speed) against the fitted pipeline's own
+    transform (log traits but the caution, standardised, quadratic terms)."""
+    rng = np.random.default_rng(5)
+    x = design_settings(60, 2, design_box())
+    emulator = MomentEmulator().fit(x, _trials(x, 2, rng), MEASURES)
+    probe = design_settings(15, 3, design_box())
+    np.testing.assert_allclose(emulator.terms(probe), emulator.terms_.transform(probe), atol=1e-12)
+    assert emulator.terms(probe).shape == (15, 36)  # 1 + 7 + 28 terms of degree <= 2

@@ -9,5 +9,6 @@
   weakly told traits' group means under their profile's prior.
 - `validate.py`: how well one person's trials tell their traits, on held-out settings.
 - `checks.py`: what the model cannot explain (trends, condition order, outliers).
-- `fit.py`: the whole fit, MODEL.json's content; `figure.py`: observed vs simulated.
+- `fit.py`: the whole fit, MODEL.json's content; `summaries.py`: its observed vs simulated
+  summaries and the effects `study power` takes; `figure.py`: observed vs simulated.
 """
