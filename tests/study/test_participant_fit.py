@@ -269,4 +269,4 @@ def test_weak_traits_shrink_fits_them_under_their_profiles_prior(emulator, trial
         low, high = fitted["mean_ci95"]
         assert low < high
     with pytest.raises(StudyInputError, match="weak traits 'both'; expected one of prior, shrink"):
-        fit_trials(trials, "lcca", dataclasses.replace(SETTINGS, weak_traits="both"), emulator, "x")
+        dataclasses.replace(SETTINGS, weak_traits="both")

@@ -131,11 +131,19 @@ def test_a_weak_traits_bootstrap_holds_its_priors_uncertainty() -> None:
 
 
 def test_the_surfaces_terms_in_numpy_equal_scikit_learns() -> None:
-    """`MomentEmulator.terms` (plain numpy, for speed) against the fitted pipeline's own
-    transform (log traits but the caution, standardised, quadratic terms)."""
+    """`MomentEmulator.terms` (plain numpy, for speed) against scikit-learn's pipeline of
+    the same steps (log traits but the caution, standardised, quadratic terms)."""
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import FunctionTransformer, PolynomialFeatures, StandardScaler
+
+    from study.analysis.participant_fit.emulator import surface_traits
+
     rng = np.random.default_rng(5)
     x = design_settings(60, 2, design_box())
     emulator = MomentEmulator().fit(x, _trials(x, 2, rng), MEASURES)
+    reference = make_pipeline(
+        FunctionTransformer(surface_traits), StandardScaler(), PolynomialFeatures(2)
+    ).fit(x)  # the design rows repeat each setting equally often: the same scaling
     probe = design_settings(15, 3, design_box())
-    np.testing.assert_allclose(emulator.terms(probe), emulator.terms_.transform(probe), atol=1e-12)
+    np.testing.assert_allclose(emulator.terms(probe), reference.transform(probe), atol=1e-12)
     assert emulator.terms(probe).shape == (15, 36)  # 1 + 7 + 28 terms of degree <= 2

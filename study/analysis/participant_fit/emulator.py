@@ -44,8 +44,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import qmc
 from sklearn.linear_model import RidgeCV
-from sklearn.pipeline import make_pipeline
-from sklearn.preprocessing import FunctionTransformer, PolynomialFeatures, StandardScaler
+from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 
 from study.protocol.design import KNOWN_CONDITIONS
 from study.protocol.participants import PROFILES, TRAIT_BOUNDS, TRAITS, GroupProfile
@@ -58,6 +57,7 @@ DESIGN_SDS = 2.5
 """The design spans every prior group mean +/- this many prior SDs (within the bounds)."""
 LINEAR_TRAITS = ("caution",)
 """Traits the surface takes as they are (a share that may be 0); the others by their log."""
+_LOGGED = np.array([t not in LINEAR_TRAITS for t in TRAITS])
 ALPHAS = tuple(np.logspace(-1, 4, 21))
 """The ridge penalties each moment's cross-validation chooses from."""
 
@@ -65,8 +65,7 @@ ALPHAS = tuple(np.logspace(-1, 4, 21))
 def surface_traits(traits: np.ndarray) -> np.ndarray:
     """The traits as the surface takes them: the log of each, but `LINEAR_TRAITS`."""
     out = np.array(traits, dtype=float, copy=True)
-    logged = np.array([t not in LINEAR_TRAITS for t in TRAITS])
-    out[:, logged] = np.log(out[:, logged])
+    out[:, _LOGGED] = np.log(out[:, _LOGGED])
     return out
 
 
@@ -161,11 +160,9 @@ class MomentEmulator:
         self.moments_ = [n for n, k in zip(wide.columns, keep, strict=True) if k]
         self.features_ = [f for f in features if any(n.endswith(f":{f}") for n in self.moments_)]
         y = y[:, keep]
-        self.terms_ = make_pipeline(
-            FunctionTransformer(surface_traits), StandardScaler(), PolynomialFeatures(self.degree)
-        ).fit(x)
-        _, scaler, poly = (step for _, step in self.terms_.steps)
-        self.centre_, self.scale_, self.powers_ = scaler.mean_, scaler.scale_, poly.powers_
+        scaler = StandardScaler().fit(surface_traits(x))
+        self.centre_, self.scale_ = scaler.mean_, scaler.scale_
+        self.powers_ = PolynomialFeatures(self.degree).fit(x).powers_
         phi = self.terms(x)
         self.coef_ = np.zeros((phi.shape[1], y.shape[1]))
         self.intercept_ = np.zeros(y.shape[1])
@@ -230,9 +227,10 @@ class MomentEmulator:
         return self.terms(traits) @ self.coef_ + self.intercept_
 
     def terms(self, traits: np.ndarray) -> np.ndarray:
-        """The surface's polynomial terms of `traits` (n, len(TRAITS)): `terms_`'s
-        transform in plain numpy, as the estimator calls it thousands of times per fit
-        and the pipeline's input checks took half of each call."""
+        """The surface's polynomial terms of `traits` (n, len(TRAITS)): scikit-learn's
+        `StandardScaler` (fitted on the design's `surface_traits`) then
+        `PolynomialFeatures(degree)`, in plain numpy, as the estimator calls it thousands
+        of times per fit and a pipeline's input checks took half of each call."""
         z = (surface_traits(np.atleast_2d(traits)) - self.centre_) / self.scale_
         return np.prod(z[:, None, :] ** self.powers_[None], axis=2)
 

@@ -27,15 +27,14 @@ threshold, the visual stall time and the comfort torque act in too few of 3 tria
 condition to be told per person, and stay at their priors.
 
 The traits the data tell only weakly (`identifiable`: a group mean's posterior SD above
-`IDENTIFIED_RATIO` of the prior SD) are fitted too, under a prior on their group mean:
-N(the hand-set profile's mean, `HYPER_SD` of its SD). The data move such a mean as far
-as their information allows and no further, instead of either leaving it at the profile
-(a trait 0.7 SD off the profile stayed 13-21 % off) or letting the emulator's small
-biases carry it (fitted freely, the outsiders' comfort torque went 20 % off). On four
-simulated 20/8/8 studies with 3 trials per condition, 92 % of the group means were
-within 15 % of the truth this way, 86 % fitted freely, 81 % at the priors
-(2026-11-26). A trait can still be held at its prior (`free` without it): its spread in
-the group is then added to each person's moment noise (linearised at the prior means).
+`IDENTIFIED_RATIO` of the prior SD) are held at their priors by default (`free` without
+them): their spread in the group is then added to each person's moment noise
+(linearised at the prior means). With `weak` (`study participants fit --weak-traits
+shrink`) they are fitted too, under a prior on their group mean: N(the hand-set
+profile's mean, `HYPER_SD` of its SD), so the data move such a mean as far as their
+information allows. On four simulated 20/8/8 studies with 3 trials per condition, 92 %
+of the group means were within 15 % of the truth this way, 86 % fitted freely, 81 % at
+the priors (2026-11-26); why it is not the default: `fit.FitSettings.weak_traits`.
 
 The EM, the batched Levenberg-Marquardt and the Laplace covariances are written here
 (about 80 lines of numpy) because the likelihood is on the emulator, where every step
@@ -135,8 +134,8 @@ def identifiable(
     for group, profile in profiles.items():
         mu, sd = prior_arrays(profile)
         jac = emulator.jacobian(mu, 0.1 * sd) * sd
-        told = np.asarray(sizes[group]) >= 2
-        jac = np.where(told[:, None], np.nan_to_num(jac), 0.0)
+        defined = np.asarray(sizes[group]) >= 2
+        jac = np.where(defined[:, None], np.nan_to_num(jac), 0.0)
         n = int(np.max(sizes[group]))
         # the same rule on the error of held-out people (`validate.py`), trait by trait
         if held_out is None:

@@ -55,6 +55,8 @@ from study.protocol.participant_model import FORMAT
 from study.protocol.participants import PROFILES, TRAITS, GroupProfile, draw_traits
 from study.protocol.tasks import get_task
 
+WEAK_TRAITS = ("prior", "shrink")
+
 
 @dataclass(frozen=True)
 class FitSettings:
@@ -78,8 +80,13 @@ class FitSettings:
     bias (the outsiders' comfort torque came out 25 % low with a narrow interval), and
     the predicted forces follow it. So the default holds them."""
 
+    def __post_init__(self) -> None:
+        if self.weak_traits not in WEAK_TRAITS:
+            raise StudyInputError(
+                f"weak traits {self.weak_traits!r}; expected one of {', '.join(WEAK_TRAITS)}"
+            )
 
-WEAK_TRAITS = ("prior", "shrink")
+
 Progress = Callable[[str, int, int], None]
 
 
@@ -168,10 +175,6 @@ def fit_trials(
 ) -> tuple[dict[str, Any], pd.DataFrame]:
     """The fit to `trials` (`observed_trials`' columns, and the features `with_features`
     adds where samples are stored) with a built `emulator`."""
-    if settings.weak_traits not in WEAK_TRAITS:
-        raise StudyInputError(
-            f"weak traits {settings.weak_traits!r}; expected one of {', '.join(WEAK_TRAITS)}"
-        )
     measures = list(get_task(task).analysed_measures)
     groups = check_fittable(trials, task, db_label)
     features = emulator.features_
