@@ -86,3 +86,41 @@ def test_the_bench_truth_lies_off_the_priors_by_the_shift() -> None:
     # the experts' haptic threshold sits on its bound (0.002 N m): it can only move up
     assert truth["expert"].haptic_threshold_n_m[0] == pytest.approx(0.002 + 0.7 * 0.0005)
     assert truth_profiles(0.0) == PROFILES
+
+
+def test_the_oracle_bound_is_the_normal_mean_s_chance_of_lying_within_the_tolerance() -> None:
+    from scipy.stats import norm
+
+    from study.bench.participants import oracle_within
+    from study.protocol.participants import TRAIT_BOUNDS, TRAITS, GroupProfile
+
+    # every trait mid-way between its bounds, with an SD (a quarter of the mean) that
+    # leaves the clipping 4 SDs away: the people's mean of n is then N(mu, sd^2 / n), and
+    # |mean - mu| <= 0.15 mu has the chance 2 Phi(0.15 mu sqrt(n) / sd) - 1
+    mid = {t: (lo + hi) / 2 for t, (lo, hi) in TRAIT_BOUNDS.items()}
+    sd = {t: min(0.25 * m, (TRAIT_BOUNDS[t][1] - m) / 4) for t, m in mid.items()}
+    profile = GroupProfile(**{t: (mid[t], sd[t]) for t in TRAITS})
+    out = oracle_within({"a": profile, "b": profile}, {"a": 8, "b": 3}, studies=20000)
+    expected = {
+        (g, t): 2 * norm.cdf(0.15 * mid[t] * np.sqrt(n) / sd[t]) - 1
+        for g, n in (("a", 8), ("b", 3))
+        for t in TRAITS
+    }
+    for row in out["per_trait"]:
+        # 20000 studies: a binomial SE of at most 0.0035
+        assert row["probability"] == pytest.approx(expected[(row["group"], row["trait"])], abs=0.015)
+    assert out["expected_within"] == pytest.approx(sum(expected.values()), abs=0.1)
+    # the traits are drawn independently: all at once is the product of the chances
+    assert out["all_within_share"] == pytest.approx(np.prod(list(expected.values())), abs=0.015)
+    # people are clipped into the bounds as a session clips them: a mean on its bound
+    # (c = 0.002 N m, s = 0.0005) gives max(X, c), of mean c + s / sqrt(2 pi) and SD
+    # s sqrt(1/2 - 1/(2 pi)); 8 people's mean is within 15 % when below 1.15 c, by the
+    # normal approximation Phi((0.15 c - s / sqrt(2 pi)) / (s sqrt(1/2 - 1/(2 pi)) / sqrt(8)))
+    c, s = 0.002, 0.0005
+    on_bound = GroupProfile(**{**{t: (mid[t], sd[t]) for t in TRAITS},
+                               "haptic_threshold_n_m": (c, s)})  # fmt: skip
+    clipped = oracle_within({"e": on_bound}, {"e": 8}, studies=20000)
+    haptic = next(r for r in clipped["per_trait"] if r["trait"] == "haptic_threshold_n_m")
+    z = (0.15 * c - s / np.sqrt(2 * np.pi)) / (s * np.sqrt(0.5 - 0.5 / np.pi) / np.sqrt(8))
+    assert norm.cdf(z) == pytest.approx(0.835, abs=0.001)
+    assert haptic["probability"] == pytest.approx(norm.cdf(z), abs=0.03)

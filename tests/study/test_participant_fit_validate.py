@@ -147,3 +147,58 @@ def test_the_surfaces_terms_in_numpy_equal_scikit_learns() -> None:
     probe = design_settings(15, 3, design_box())
     np.testing.assert_allclose(emulator.terms(probe), reference.transform(probe), atol=1e-12)
     assert emulator.terms(probe).shape == (15, 36)  # 1 + 7 + 28 terms of degree <= 2
+
+
+def _linear_emulator(slope: float, within: float, misfit: float) -> MomentEmulator:
+    """One moment (per condition) = `slope` x log(preferred speed), nothing else: a
+    surface of degree 1 on the log traits, unscaled, with the given trial scatter and
+    misfit (variances, log scale)."""
+    from sklearn.preprocessing import PolynomialFeatures
+
+    em = MomentEmulator(degree=1)
+    em.moments_ = ["VO:completion_time_s", "HV:completion_time_s"]
+    em.measures_, em.features_ = ["completion_time_s"], []
+    em.centre_, em.scale_ = np.zeros(len(TRAITS)), np.ones(len(TRAITS))
+    em.powers_ = PolynomialFeatures(1).fit(np.zeros((1, len(TRAITS)))).powers_
+    em.coef_ = np.zeros((len(TRAITS) + 1, 2))
+    em.coef_[1 + TRAITS.index("preferred_speed_m_s")] = slope
+    em.intercept_ = np.zeros(2)
+    em.within_var_, em.misfit_var_ = np.full(2, within), np.full(2, misfit)
+    em.defined_ = np.ones(2)
+    return em
+
+
+def test_a_traits_held_out_information_grows_with_the_studys_trials_per_condition() -> None:
+    from study.analysis.participant_fit.estimate import identifiable
+
+    # the speed moves both moments by -1 in log per log (a trial's time ~ 1 / speed);
+    # per person with k trials: noise var w / k + m on each of the two moments
+    w, m, n = 0.04, 0.001, 8
+    em = _linear_emulator(-1.0, w, m)
+    profile = PROFILES["novice"]
+    mu, sd = profile.preferred_speed_m_s
+    sizes = {"novice": np.full(2, n)}
+    held_error = 2.0 * sd  # a held-out person with 2 trials: twice the prior SD off
+    speed = "preferred_speed_m_s"
+
+    def ratio(k: float, held_k: float | None) -> float:
+        return identifiable(em, {"novice": profile}, sizes, {"novice": k},
+                            np.full(len(TRAITS), held_error), held_k)[1][speed]  # fmt: skip
+
+    def by_hand(info: float) -> float:
+        # a group of n people N(mu, 1) (prior SDs), each with information `info`
+        return 1.0 / np.sqrt(1.0 + n * info / (1.0 + info))
+
+    # d moment / d (speed in prior SDs) = -sd / mu at the prior mean, on two moments
+    linear = lambda k: 2 * (sd / mu) ** 2 / (w / k + m)  # noqa: E731
+    held_info = (sd / held_error) ** 2
+    # the held-out people had 2 trials: at k = 2 their information counts as it is, and
+    # it is the larger ratio (the slopes promise more)
+    assert by_hand(held_info) > by_hand(linear(2))
+    assert ratio(2, 2.0) == pytest.approx(by_hand(held_info), rel=1e-6)
+    # at k = 8 it grows as the linearised information does from 2 to 8 trials
+    grown = held_info * linear(8) / linear(2)
+    assert ratio(8, 2.0) == pytest.approx(max(by_hand(grown), by_hand(linear(8))), rel=1e-6)
+    assert ratio(8, 2.0) < ratio(2, 2.0)
+    # without a held-out k, the held-out error is taken as the study's own (as before)
+    assert ratio(8, None) == pytest.approx(by_hand(held_info), rel=1e-6)

@@ -115,6 +115,7 @@ def identifiable(
     sizes: dict[str, np.ndarray],
     ks: dict[str, float],
     held_out: np.ndarray | None = None,
+    held_out_k: float | None = None,
 ) -> tuple[list[int], dict[str, float]]:
     """The traits whose group means the data identify (indices into TRAITS) and each
     trait's ratio: posterior / prior SD of the group mean, linearised at the priors, in
@@ -127,7 +128,11 @@ def identifiable(
     estimates from the moments the data have (`held_out`, `validate.py`), each trait's
     ratio is also computed
     from it (I = (prior SD / error)^2) and the larger of the two counts: the slopes can
-    promise more than the trials hold. Starting from all traits, the worst
+    promise more than the trials hold. That error is of people with `held_out_k` trials
+    per condition (the design's repeats; default: the study's own k): a group's k trials
+    tell a trait by the linearised information's ratio at k to that at `held_out_k`
+    (the trials' scatter averages away over more trials, the surface's misfit does not),
+    so a study with 8 trials per condition is not judged by 2. Starting from all traits, the worst
     is fixed at its prior until every ratio is below `IDENTIFIED_RATIO` (`sizes`: the
     people defining each moment; a moment fewer than two people define tells nothing)."""
     setup = {}
@@ -138,21 +143,24 @@ def identifiable(
         jac = np.where(defined[:, None], np.nan_to_num(jac), 0.0)
         n = int(np.max(sizes[group]))
         # the same rule on the error of held-out people (`validate.py`), trait by trait
-        if held_out is None:
-            empirical = np.zeros(len(TRAITS))
-        else:
-            info = (sd / np.maximum(held_out, 1e-12)) ** 2
-            empirical = 1.0 / np.sqrt(1.0 + n * info / (1.0 + info))
-        setup[group] = (jac, person_noise_var(emulator, ks[group]), n, empirical)
+        held = None if held_out is None else (sd / np.maximum(held_out, 1e-12)) ** 2
+        noise_held = person_noise_var(emulator, held_out_k or ks[group])
+        setup[group] = (jac, person_noise_var(emulator, ks[group]), n, held, noise_held)
 
     def ratios(free: list[int]) -> np.ndarray:
         worst = np.zeros(len(free))
-        for jac, noise, n, empirical in setup.values():
+        eye = np.eye(len(free))
+        for jac, noise, n, held, noise_held in setup.values():
             info = _information(jac, with_fixed_spread(noise, jac, free), free)
-            eye = np.eye(len(free))
             post = np.linalg.inv(eye + n * info @ np.linalg.inv(info + eye))
             linear = np.sqrt(np.clip(np.diag(post), 0.0, None))
-            worst = np.maximum(worst, np.maximum(linear, empirical[free]))
+            empirical = np.zeros(len(free))
+            if held is not None:
+                at_held = _information(jac, with_fixed_spread(noise_held, jac, free), free)
+                more = np.diag(info) / np.maximum(np.diag(at_held), 1e-300)
+                per = held[free] * np.where(np.diag(at_held) > 0, more, 1.0)
+                empirical = 1.0 / np.sqrt(1.0 + n * per / (1.0 + per))
+            worst = np.maximum(worst, np.maximum(linear, empirical))
         return worst
 
     free = list(range(len(TRAITS)))

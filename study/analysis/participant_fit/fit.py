@@ -193,7 +193,8 @@ def fit_trials(
         if all(sizes[g][names.index(f"{c}:{f}")] >= 2 for g in groups for c in KNOWN_CONDITIONS)
     ]
     held_out = validate.held_out_for(emulator, held)
-    told, ratios = identifiable(emulator, {g: PROFILES[g] for g in groups}, sizes, ks, held_out)
+    told, ratios = identifiable(emulator, {g: PROFILES[g] for g in groups}, sizes, ks, held_out,
+                                validate.held_out_trials(emulator))  # fmt: skip
     # the traits the data tell weakly: held at the profile, or fitted under its prior
     shrink = settings.weak_traits == "shrink"
     free = list(range(len(TRAITS))) if shrink else told

@@ -75,6 +75,11 @@ def attach(emulator: MomentEmulator, x: np.ndarray, design: pd.DataFrame, repeat
     )
 
 
+def held_out_trials(emulator: MomentEmulator) -> float | None:
+    """Trials per condition of a held-out person (the design's repeats), or None."""
+    return float(emulator.design_[2]) if hasattr(emulator, "design_") else None
+
+
 def held_out_for(emulator: MomentEmulator, features: Sequence[str]) -> np.ndarray | None:
     """The held-out error with only `features` beside the measures (the ones a study's
     data have: an imported study without samples has none), or None without a design."""
