@@ -108,7 +108,8 @@ def test_the_oracle_bound_is_the_normal_mean_s_chance_of_lying_within_the_tolera
     }
     for row in out["per_trait"]:
         # 20000 studies: a binomial SE of at most 0.0035
-        assert row["probability"] == pytest.approx(expected[(row["group"], row["trait"])], abs=0.015)
+        chance = expected[(row["group"], row["trait"])]
+        assert row["probability"] == pytest.approx(chance, abs=0.015)
     assert out["expected_within"] == pytest.approx(sum(expected.values()), abs=0.1)
     # the traits are drawn independently: all at once is the product of the chances
     assert out["all_within_share"] == pytest.approx(np.prod(list(expected.values())), abs=0.015)
