@@ -109,6 +109,33 @@ def test_data_from_the_model_itself_show_no_trend_and_no_order_effect(fitted) ->
     assert outliers["limit"] == pytest.approx(stats.chi2.ppf(1 - 0.01 / 18, df), abs=1e-3)
     assert outliers["flagged"] == sorted(p for p, d in outliers["distance"].items()
                                          if d > outliers["limit"])  # fmt: skip
+    # every group mean (3 groups x 3 measures x VO, HV, VO - HV) is reproduced
+    means = model["lacks"]["group_means"]
+    assert len(means["rows"]) == 27 and means["flagged"] == []
+    assert "does not reproduce" not in line and "group means" in line
+
+
+def test_a_group_mean_no_trait_setting_reproduces_is_reported(emulator, trials) -> None:
+    # the experts' HV trials read 0.5 N more distal force (an offset of the force sensor in
+    # their sessions): nothing in a simulated participant makes it
+    expert_hv = (trials["group"] == "expert") & (trials["condition"] == "HV")
+    offset = trials.assign(peak_distal_force_n=trials["peak_distal_force_n"] + 0.5 * expert_hv)
+    model, _ = fit_trials(offset, "lcca", SETTINGS, emulator, "test data")
+    flagged = {(r["group"], r["condition"], r["measure"])
+               for r in model["lacks"]["group_means"]["flagged"]}  # fmt: skip
+    assert ("expert", "HV", "peak_distal_force_n") in flagged
+    # the rest of the study is reproduced
+    assert not any(g != "expert" for g, _, _ in flagged)
+    row = next(r for r in model["lacks"]["group_means"]["rows"]
+               if (r["group"], r["condition"], r["measure"])
+               == ("expert", "HV", "peak_distal_force_n"))  # fmt: skip
+    observed = offset[expert_hv].groupby("participant")["peak_distal_force_n"].mean().mean()
+    assert row["observed"] == pytest.approx(observed)
+    assert row["observed"] - row["simulated"] == pytest.approx(0.5, abs=0.1)
+    line = model["lacks"]["line"]
+    assert "does not reproduce: expert HV peak_distal_force_n" in line
+    # with traits held at their priors, the line names them as a possible cause
+    assert "held at their priors" in line and "haptic_threshold_n_m" in line
 
 
 def test_times_shrinking_over_trials_are_reported_not_absorbed(emulator, trials) -> None:

@@ -16,6 +16,12 @@ is found is reported rather than absorbed into the traits:
   against simulated: z = (d_obs - d_sim) / sqrt(se_obs^2 + se_sim^2), normal p.
 - The trend and order tests of every measure are one family, Holm-corrected at
   `ALPHA` (`statsmodels.stats.multitest.multipletests`).
+- **group means the fitted model does not reproduce** (`summary_misfit`, a posterior
+  predictive check): per group, measure and condition (VO, HV and each person's VO - HV),
+  the observed people's means against the simulated people's, Welch's t-test, Holm over
+  all of them at `ALPHA` as a family of its own. The simulated people are fitted to the
+  observed, so the check is conservative; what it flags, no trait setting the fit chose
+  reproduces (a trait held at its prior may be why, and the line says so).
 - **a participant no trait setting reproduces**: the smallest Mahalanobis distance D^2
   between the person's moments and the emulator's over the free traits (the others at
   the group's fitted means; L-BFGS-B within the emulator's range), with the covariance
@@ -195,7 +201,41 @@ def outliers(
     }
 
 
-def lacks_line(rows: list[dict[str, Any]], outlier: dict[str, Any]) -> str:
+def summary_misfit(
+    observed: pd.DataFrame,
+    simulated: pd.DataFrame,
+    measures: Sequence[str],
+    groups: Sequence[str],
+    held: Sequence[str] = (),
+) -> dict[str, Any]:
+    """Rows per (group, measure, condition): observed and simulated mean of the people's
+    means, Welch's p, p_holm and flagged; `held`: the traits held at their priors (named
+    in the line as a possible cause)."""
+    rows: list[dict[str, Any]] = []
+    obs = observed.groupby(["group", "participant", "condition"])[list(measures)].mean()
+    sim = simulated.groupby(["group", "participant", "condition"])[list(measures)].mean()
+    for group in groups:
+        for m in measures:
+            o = obs.xs(group, level="group")[m].unstack().dropna()
+            s = sim.xs(group, level="group")[m].unstack().dropna()
+            for label, a, b in (("VO", o["VO"], s["VO"]), ("HV", o["HV"], s["HV"]),
+                                ("VO-HV", o["VO"] - o["HV"], s["VO"] - s["HV"])):  # fmt: skip
+                if len(a) < 2 or len(b) < 2:
+                    continue
+                p = float(stats.ttest_ind(a, b, equal_var=False).pvalue)
+                rows.append({"group": group, "measure": m, "condition": label,
+                             "observed": float(a.mean()), "simulated": float(b.mean()),
+                             "p": p if np.isfinite(p) else 1.0})  # fmt: skip
+    if rows:
+        reject, p_holm, _, _ = multipletests([r["p"] for r in rows], ALPHA, method="holm")
+        for r, flag, ph in zip(rows, reject, p_holm, strict=True):
+            r["p_holm"], r["flagged"] = float(ph), bool(flag)
+    return {"rows": rows, "flagged": [r for r in rows if r["flagged"]], "held": list(held)}
+
+
+def lacks_line(
+    rows: list[dict[str, Any]], outlier: dict[str, Any], misfit: dict[str, Any] | None = None
+) -> str:
     """The one printed line: what the participant model lacks, or that nothing was found."""
     parts = []
     for r in rows:
@@ -220,7 +260,26 @@ def lacks_line(rows: list[dict[str, Any]], outlier: dict[str, Any]) -> str:
             f"participant(s) {', '.join(outlier['flagged'])} that no trait setting "
             f"reproduces (D^2 above {outlier['limit']:.1f})"
         )
-    tested = [*sorted({r["check"] for r in rows}), "outliers"]
+    if misfit is not None and misfit["flagged"]:
+        parts.append(
+            "group means the fitted model does not reproduce: "
+            + ", ".join(
+                f"{r['group']} {r['condition']} {r['measure']} ({r['observed']:.3g} observed vs "
+                f"{r['simulated']:.3g} simulated, p_holm = {r['p_holm']:.2g})"
+                for r in misfit["flagged"]
+            )
+            + (
+                f" (held at their priors, and perhaps why: {', '.join(misfit['held'])}; "
+                "--weak-traits shrink fits them)"
+                if misfit["held"]
+                else ""
+            )
+        )
+    tested = [
+        *sorted({r["check"] for r in rows}),
+        "outliers",
+        *(["group means"] if misfit is not None else []),
+    ]
     if not parts:
         return f"what the participants lack: nothing the checks found ({', '.join(tested)})"
     return "what the participants lack: " + "; ".join(parts)

@@ -285,6 +285,8 @@ def fit_trials(
     table = pd.DataFrame(
         summaries(trials, simulated, measures, groups, predicted, rng, max(settings.bootstrap, 200))
     )
+    held = [t for j, t in enumerate(TRAITS) if j not in free]
+    misfit = checks.summary_misfit(trials, simulated, measures, groups, held)
     model = {
         "format": FORMAT,
         "task": task,
@@ -339,7 +341,12 @@ def fit_trials(
         "SIMULATED from the fitted model (each from one of the fit's bootstrap replicates, so "
         "the interval holds the fit's uncertainty and the people's); 'model': the "
         "emulator's prediction with the fit's bootstrap interval",
-        "lacks": {"line": checks.lacks_line(rows, outlier), "tests": rows, "outliers": outlier},
+        "lacks": {
+            "line": checks.lacks_line(rows, outlier, misfit),
+            "tests": rows,
+            "outliers": outlier,
+            "group_means": misfit,
+        },
         "emulator_check": checks.emulator_check(table),
         "effects": power_effects(simulated, measures),
         "settings": settings.__dict__,
