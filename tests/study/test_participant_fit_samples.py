@@ -113,6 +113,13 @@ def test_the_oracle_bound_is_the_normal_mean_s_chance_of_lying_within_the_tolera
     assert out["expected_within"] == pytest.approx(sum(expected.values()), abs=0.1)
     # the traits are drawn independently: all at once is the product of the chances
     assert out["all_within_share"] == pytest.approx(np.prod(list(expected.values())), abs=0.015)
+    shares = out["at_least_share"]
+    assert shares[2 * len(TRAITS)] == out["all_within_share"] and shares[0] == 1.0
+    assert all(shares[k] >= shares[k + 1] for k in range(2 * len(TRAITS)))
+    # the mean count is the sum over k >= 1 of P(count >= k)
+    assert sum(shares[k] for k in range(1, 2 * len(TRAITS) + 1)) == pytest.approx(
+        out["expected_within"], abs=1e-9
+    )
     # people are clipped into the bounds as a session clips them: a mean on its bound
     # (c = 0.002 N m, s = 0.0005) gives max(X, c), of mean c + s / sqrt(2 pi) and SD
     # s sqrt(1/2 - 1/(2 pi)); 8 people's mean is within 15 % when below 1.15 c, by the
