@@ -48,6 +48,7 @@ from scipy.optimize import minimize
 from statsmodels.stats.multitest import multipletests
 
 from study.analysis.participant_fit.emulator import MomentEmulator, log_moment
+from study.analysis.participant_fit.summaries import condition_values
 
 ALPHA = 0.05
 """Family-wise error rate of the trend and order tests."""
@@ -212,20 +213,15 @@ def summary_misfit(
     means, Welch's p, p_holm and flagged; `held`: the traits held at their priors (named
     in the line as a possible cause)."""
     rows: list[dict[str, Any]] = []
-    obs = observed.groupby(["group", "participant", "condition"])[list(measures)].mean()
-    sim = simulated.groupby(["group", "participant", "condition"])[list(measures)].mean()
-    for group in groups:
-        for m in measures:
-            o = obs.xs(group, level="group")[m].unstack().dropna()
-            s = sim.xs(group, level="group")[m].unstack().dropna()
-            for label, a, b in (("VO", o["VO"], s["VO"]), ("HV", o["HV"], s["HV"]),
-                                ("VO-HV", o["VO"] - o["HV"], s["VO"] - s["HV"])):  # fmt: skip
-                if len(a) < 2 or len(b) < 2:
-                    continue
-                p = float(stats.ttest_ind(a, b, equal_var=False).pvalue)
-                rows.append({"group": group, "measure": m, "condition": label,
-                             "observed": float(a.mean()), "simulated": float(b.mean()),
-                             "p": p if np.isfinite(p) else 1.0})  # fmt: skip
+    pairs = zip(condition_values(observed, measures, groups),
+                condition_values(simulated, measures, groups), strict=True)  # fmt: skip
+    for (group, m, label, a), (*_, b) in pairs:
+        if len(a) < 2 or len(b) < 2:
+            continue
+        p = float(stats.ttest_ind(a, b, equal_var=False).pvalue)
+        rows.append({"group": group, "measure": m, "condition": label,
+                     "observed": float(a.mean()), "simulated": float(b.mean()),
+                     "p": p if np.isfinite(p) else 1.0})  # fmt: skip
     if rows:
         reject, p_holm, _, _ = multipletests([r["p"] for r in rows], ALPHA, method="holm")
         for r, flag, ph in zip(rows, reject, p_holm, strict=True):

@@ -3,12 +3,29 @@ effects `study power --participants` takes from the people simulated from the fi
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from study.analysis.participant_fit.observed import bootstrap_means
+
+
+def condition_values(
+    frame: pd.DataFrame, measures: Sequence[str], groups: Sequence[str]
+) -> Iterator[tuple[str, str, str, pd.Series]]:
+    """(group, measure, condition, values) per group, measure and condition (VO, HV and
+    each person's VO - HV): the people's means of the measure, people with both
+    conditions only."""
+    means = frame.groupby(["group", "participant", "condition"])[list(measures)].mean()
+    for group in groups:
+        g = means.xs(group, level="group")
+        for m in measures:
+            wide = g[m].unstack().dropna()
+            yield group, m, "VO", wide["VO"]
+            yield group, m, "HV", wide["HV"]
+            yield group, m, "VO-HV", wide["VO"] - wide["HV"]
 
 
 def summaries(
@@ -25,29 +42,20 @@ def summaries(
     mean with its interval from the fit's bootstrap."""
     rows = []
     for source, frame in (("observed", observed), ("simulated", simulated)):
-        means = frame.groupby(["group", "participant", "condition"])[measures].mean()
-        for group in groups:
-            g = means.xs(group, level="group")
-            for m in measures:
-                wide = g[m].unstack().dropna()
-                for label, values in (
-                    ("VO", wide["VO"]),
-                    ("HV", wide["HV"]),
-                    ("VO-HV", wide["VO"] - wide["HV"]),
-                ):
-                    low, high = bootstrap_means(values.to_numpy(float), rng, n_boot)
-                    rows.append(
-                        {
-                            "group": group,
-                            "measure": m,
-                            "condition": label,
-                            "source": source,
-                            "n": len(values),
-                            "mean": float(values.mean()),
-                            "ci_low": low,
-                            "ci_high": high,
-                        }
-                    )
+        for group, m, label, values in condition_values(frame, measures, groups):
+            low, high = bootstrap_means(values.to_numpy(float), rng, n_boot)
+            rows.append(
+                {
+                    "group": group,
+                    "measure": m,
+                    "condition": label,
+                    "source": source,
+                    "n": len(values),
+                    "mean": float(values.mean()),
+                    "ci_low": low,
+                    "ci_high": high,
+                }
+            )
     for group in groups:
         for m in measures:
             for label in ("VO", "HV", "VO-HV"):
