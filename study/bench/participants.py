@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from db.migrate import open_database
+from study.analysis.participant_fit.estimate import HIGH, LOW, prior_arrays
 from study.analysis.participant_fit.fit import FitSettings, fit_participants, simulate_people
 from study.protocol.demo import run_demo
 from study.protocol.participant_model import FORMAT, load_model
@@ -84,13 +85,10 @@ def oracle_within(
     them at once. What no fit can beat: with 8 people a group's own mean strays from its
     distribution's by chance."""
     rng = np.random.default_rng(seed)
-    low = np.array([TRAIT_BOUNDS[t][0] for t in TRAITS])
-    high = np.array([TRAIT_BOUNDS[t][1] for t in TRAITS])
     rows, hits = [], []
     for group, n in groups.items():
-        mean = np.array([getattr(truth[group], t)[0] for t in TRAITS])
-        sd = np.array([getattr(truth[group], t)[1] for t in TRAITS])
-        people = np.clip(mean + sd * rng.standard_normal((studies, n, len(TRAITS))), low, high)
+        mean, sd = prior_arrays(truth[group])
+        people = np.clip(mean + sd * rng.standard_normal((studies, n, len(TRAITS))), LOW, HIGH)
         within = np.abs(people.mean(axis=1) - mean) <= tolerance * np.abs(mean)
         hits.append(within)
         rows += [{"group": group, "trait": t, "probability": float(within[:, j].mean())}

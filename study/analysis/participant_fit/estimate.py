@@ -156,9 +156,10 @@ def identifiable(
             linear = np.sqrt(np.clip(np.diag(post), 0.0, None))
             empirical = np.zeros(len(free))
             if held is not None:
-                at_held = _information(jac, with_fixed_spread(noise_held, jac, free), free)
-                more = np.diag(info) / np.maximum(np.diag(at_held), 1e-300)
-                per = held[free] * np.where(np.diag(at_held) > 0, more, 1.0)
+                at_held = np.diag(_information(jac, with_fixed_spread(noise_held, jac, free), free))
+                # a trait no slope tells keeps the held-out people's information as it is
+                more = np.divide(np.diag(info), at_held, out=np.ones(len(free)), where=at_held > 0)
+                per = held[free] * more
                 empirical = 1.0 / np.sqrt(1.0 + n * per / (1.0 + per))
             worst = np.maximum(worst, np.maximum(linear, empirical))
         return worst
