@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
+from study.analysis.participant_fit import WEAK_TRAITS
 from study.commands.base import StudyGroup, check_parent_folder, positive_option, progress_bar
 from study.commands.bench_paper import PAPER_BENCHES, write_json
 
@@ -226,7 +227,7 @@ def bench_startup(
 @click.option("--truth-shift", type=click.FloatRange(min=0.0, max=2.0), default=0.7,
               show_default=True, help="How far the truth's trait means lie from the priors', "
               "in prior SDs (0: the priors).")  # fmt: skip
-@click.option("--weak-traits", type=click.Choice(["prior", "shrink"]), default="prior",
+@click.option("--weak-traits", type=click.Choice(WEAK_TRAITS), default="prior",
               show_default=True, help="As `study participants fit --weak-traits`.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=int, default=11, show_default=True)

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from study.analysis.participant_fit import WEAK_TRAITS
 from study.commands.base import (
     StudyGroup,
     check_parent_folder,
@@ -49,7 +50,7 @@ def participants() -> None:
     dest="n_check",
 )
 @click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True)
-@click.option("--weak-traits", type=click.Choice(["prior", "shrink"]), default="prior",
+@click.option("--weak-traits", type=click.Choice(WEAK_TRAITS), default="prior",
               show_default=True, help="The traits the data tell weakly: held at the hand-set "
               "profile, or fitted with their group mean under the profile's prior.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)

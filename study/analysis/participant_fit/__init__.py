@@ -8,7 +8,12 @@
   a hierarchical model (each person's traits, then the group's) fitted by EM, the
   weakly told traits' group means under their profile's prior.
 - `validate.py`: how well one person's trials tell their traits, on held-out settings.
-- `checks.py`: what the model cannot explain (trends, condition order, outliers).
+- `checks.py`: what the model cannot explain (trends, condition order, outliers,
+  group means).
 - `fit.py`: the whole fit, MODEL.json's content; `summaries.py`: its observed vs simulated
   summaries and the effects `study power` takes; `figure.py`: observed vs simulated.
 """
+
+WEAK_TRAITS = ("prior", "shrink")
+"""What `--weak-traits` may be (`fit.FitSettings.weak_traits`); here, so that the commands
+offer the choices without importing the fit."""

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 from sqlalchemy import Engine
 
-from study.analysis.participant_fit import checks, validate
+from study.analysis.participant_fit import WEAK_TRAITS, checks, validate
 from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
 from study.analysis.participant_fit.estimate import (
     HYPER_SD,
@@ -54,8 +54,6 @@ from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
 from study.protocol.participant_model import FORMAT
 from study.protocol.participants import PROFILES, TRAITS, GroupProfile, draw_traits
 from study.protocol.tasks import get_task
-
-WEAK_TRAITS = ("prior", "shrink")
 
 
 @dataclass(frozen=True)
