@@ -7,6 +7,7 @@
 from db.models.audit import AuditEntry
 from db.models.calibration import Calibration
 from db.models.lease import SessionLease
+from db.models.lsl import LslChunk, LslStream
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, SampleChunk, Trial, TrialMeasure
@@ -17,6 +18,8 @@ __all__ = [
     "TRIAL_STATUSES",
     "AuditEntry",
     "Calibration",
+    "LslChunk",
+    "LslStream",
     "Participant",
     "SampleChunk",
     "ScheduleBlock",
