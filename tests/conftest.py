@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import os
 import sqlite3
+import tempfile
 import uuid
 from collections.abc import Iterator
+from pathlib import Path
 
 import pyarrow as pa
 import pytest
@@ -22,6 +24,8 @@ from sqlalchemy.engine import make_url
 from db.engine import make_engine
 from db.migrate import open_database
 from db.models.trial import SAMPLE_COLUMNS
+from study.lsl.config import ENV as LSL_ENV
+from study.lsl.config import write_loopback_config
 
 PG_ENV = "STUDY_TEST_PG_URL"
 
@@ -31,6 +35,15 @@ PG_ENV = "STUDY_TEST_PG_URL"
 # slowed by a factor of tens (a quick bench hit the 300 s timeout). Read by the OpenMP
 # runtimes when they start, so it is set before any test imports them.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+# The Lab Streaming Layer only ever on loopback here: liblsl reads its configuration once,
+# when pylsl first loads, from the file LSLAPICFG names; it is set before any test can
+# import pylsl (and is inherited by the commands the tests start). Its own session id
+# keeps one test process's streams apart from another's. tests/study/lsl checks it.
+LSL_CONFIG = write_loopback_config(
+    Path(tempfile.mkdtemp(prefix="lsl-loopback-")) / "lsl_api.cfg", f"tests-{uuid.uuid4().hex}"
+)
+os.environ[LSL_ENV] = str(LSL_CONFIG)
 
 
 STORED_CHUNK_SCHEMA = pa.schema(

@@ -46,9 +46,13 @@ alone, no IPv6 group since IPv6 is off); `KnownPeers` adds unicast queries to lo
 log level -2 prints liblsl's errors only."""
 
 
-def write_loopback_config(path: Path) -> Path:
-    """Write the loopback-only configuration to `path`; returns it."""
-    path.write_text(LOOPBACK_CONFIG, encoding="utf-8")
+def write_loopback_config(path: Path, session_id: str | None = None) -> Path:
+    """Write the loopback-only configuration to `path`; returns it. `session_id` (liblsl's
+    `[lab] SessionID`) hides its streams from processes with another one (parallel tests)."""
+    text = LOOPBACK_CONFIG
+    if session_id is not None:
+        text = text.replace("[lab]\n", f"[lab]\nSessionID = {session_id}\n")
+    path.write_text(text, encoding="utf-8")
     return path
 
 

@@ -28,8 +28,9 @@ import math
 import threading
 import time
 import zlib
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -47,6 +48,7 @@ from study.errors import StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.lease import LeaseHandle, hold_lease
+from study.protocol.observer import SessionInfo, SessionObserver, TrialInfo
 from study.protocol.participant_model import ParticipantModel
 from study.protocol.participants import ParticipantTraits, draw_traits
 from study.protocol.roster import find_participant, load_study
@@ -145,6 +147,7 @@ def run_session(
     actor: str | None = None,
     stop: threading.Event | None = None,
     participants: ParticipantModel | None = None,
+    observer: SessionObserver | None = None,
 ) -> list[int]:
     """Run the participant's remaining trials; return the ids of the trials completed.
 
@@ -157,6 +160,8 @@ def run_session(
     `actor` is recorded with the lease; a set `stop` ends the session at its next step,
     the running trial marked interrupted (`STOPPED_WITH_PARENT`), and returns.
     `participants`: the fitted model simulated people are drawn from (else PROFILES).
+    `observer` is told the session's events (`study.protocol.observer`): publishing them,
+    recording other instruments beside the trials.
     """
     if pace is not None and not (math.isfinite(pace) and pace > 0):
         raise StudyInputError(f"pace {pace!r}; expected a finite number > 0 (times real time)")
@@ -169,7 +174,8 @@ def run_session(
                 f"participant {code} withdrew ({participant.withdrawal_reason}); "
                 "expected a participant still in the study"
             )
-    with hold_lease(engine, participant_id, code, actor) as lease:
+    observer = observer or SessionObserver()
+    with hold_lease(engine, participant_id, code, actor) as lease, _ending(observer):
         # read the schedule and what is done only once no other session can change it
         with Session(engine) as session:
             participant = session.get_one(Participant, participant_id)
@@ -180,6 +186,9 @@ def run_session(
         if lease.taken_over is not None:
             reason = f"found running when a new session took the lease over ({lease.taken_over})"
         recover_interrupted(engine, participant_id, reason, actor)
+        observer.session_started(
+            SessionInfo(study.name, code, participant.group, driver_kind, pace)
+        )
         tasks = {name: get_task(name) for name in sorted({p.block.task for p in todo})}
         contexts: dict[str, Any] = {}
         traits = participant_traits(study.seed, code, participant.group, participants)
@@ -206,6 +215,7 @@ def run_session(
                 on_samples=on_samples,
                 check=lambda: _check_stop(lease, stop),
                 model=participants.digest if participants is not None else None,
+                observer=observer,
             )
             try:
                 trial_id = _run_trial(engine, participant, item, run)
@@ -220,6 +230,28 @@ def run_session(
             if trial_id is not None:
                 completed.append(trial_id)
     return completed
+
+
+@contextmanager
+def _ending(observer: SessionObserver) -> Iterator[None]:
+    """Tell `observer` the session ended, however it ends."""
+    try:
+        yield
+    finally:
+        observer.session_ended()
+
+
+@contextmanager
+def _telling(observer: SessionObserver, info: TrialInfo, loop: Any) -> Iterator[None]:
+    """Tell `observer` a trial that ends on an exception: `stopped` or `interrupted`."""
+    try:
+        yield
+    except SessionStopped:
+        observer.trial_ended(info, "stopped", {"t_s": loop.t_s})
+        raise
+    except BaseException as exc:
+        observer.trial_ended(info, "interrupted", {"t_s": loop.t_s, "reason": repr(exc)})
+        raise
 
 
 class SessionStorageError(StudyInputError):
@@ -273,6 +305,7 @@ class TrialSetup:
     check: Callable[[], None] = lambda: None
     model: str | None = None
     """The digest of the fitted participant model the traits came from, if any."""
+    observer: SessionObserver = field(default_factory=SessionObserver)
 
 
 def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
@@ -329,7 +362,14 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     chunks = []
     step_s = STEP_S if run.pace is None else PACED_STEP_S
     wall0 = time.monotonic()
-    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer:
+    info = TrialInfo(
+        trial_id, task, block.condition, block.block_index, item.trial_index, item.practice,
+        attempt, clock_origin_s=wall0, clock_rate=run.pace or 1.0,
+        realtime=run.pace is not None or bool(getattr(driver, "realtime", False)),
+    )  # fmt: skip
+    observer = run.observer
+    observer.trial_started(info)
+    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer, _telling(observer, info, loop):
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
@@ -338,6 +378,7 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
                 chunks.append(samples)
                 if run.on_samples is not None:
                     run.on_samples(samples)
+            observer.samples(info, samples)
             if run.pace:
                 lag = wall0 + loop.t_s / run.pace - time.monotonic()
                 if lag > 0:
@@ -366,4 +407,9 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
                 insert(TrialMeasure),
                 [{"trial_id": trial_id, "name": k, "value": float(v)} for k, v in values.items()],
             )
-    return trial_id if done.rowcount == 1 else None
+    if done.rowcount == 1:
+        observer.trial_ended(info, "completed", {
+            "success": bool(loop.success), COMPLETION_TIME: completion_s, **values})  # fmt: skip
+        return trial_id
+    observer.trial_ended(info, "interrupted", {"reason": "taken over by another session"})
+    return None
