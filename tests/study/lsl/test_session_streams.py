@@ -1,0 +1,204 @@
+"""A paced simulated session with the Lab Streaming Layer: markers and samples out, an
+outside instrument recorded in (the suite's loopback-only liblsl config, tests/conftest.py).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from db.lsl_streams import read_stream
+from db.migrate import open_database
+from db.models.lsl import LslStream
+from db.models.trial import Trial
+from study.lsl.config import load_pylsl
+from study.lsl.markers import MARKER_STREAM, parse
+from study.lsl.publish import Publisher
+from study.lsl.record import Recorder
+from study.protocol.observer import Observers, SessionObserver, TrialInfo
+from tests.study.conftest import init_study
+
+DEVICE = Path(__file__).with_name("device.py")
+DESIGN = """\
+name = "lsl {tag}"
+tasks = ["lcca"]
+trials_per_condition = 1
+practice_trials = 0
+[groups]
+novice = 1
+[lsl]
+publish = true
+record = ["name='{device}'"]
+"""
+TRIAL_S = 1.5
+"""Each trial's length: the simulated person gives up then (the session stays short)."""
+
+
+@dataclass
+class Origins(SessionObserver):
+    """The trials' clocks as the runner hands them out (the reference for alignment)."""
+
+    trials: dict[int, TrialInfo] = field(default_factory=dict)
+
+    def trial_started(self, trial: TrialInfo) -> None:
+        self.trials[trial.trial_id] = trial
+
+
+def _device(name: str, seconds: float, log: Path) -> subprocess.Popen[str]:
+    proc = subprocess.Popen(
+        [sys.executable, str(DEVICE), name, "EMG", "1000", str(seconds), str(log)],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    return proc
+
+
+def _session(db: str, observers: list[SessionObserver], notices: list[str]) -> list[int]:
+    from study.protocol.default_estimator import load_estimator
+    from study.protocol.participants import SimulatedParticipant
+    from study.protocol.session import participant_traits, run_session
+    from teleop_core.phantom.lcca import LccaPhantom
+
+    engine = open_database(db, create=False)
+    phantom = LccaPhantom()
+    traits = participant_traits(1, "P001", "novice")
+    try:
+        return run_session(
+            engine, "P001", "simulated", load_estimator(),
+            make_driver=lambda: SimulatedParticipant(traits, phantom, give_up_s=TRIAL_S),
+            pace=1.0, observer=Observers(observers),
+        )  # fmt: skip
+    finally:
+        engine.dispose()
+
+
+class MarkerInlet(threading.Thread):
+    """A marker inlet as a lab's recorder would open it: every marker, with its stamp."""
+
+    def __init__(self, source_id: str) -> None:
+        super().__init__(daemon=True)
+        self.source_id = source_id
+        self.markers: list[tuple[float, str]] = []
+        self.connected = threading.Event()
+
+    def run(self) -> None:
+        pylsl = load_pylsl()
+        pred = f"name='{MARKER_STREAM}' and source_id='{self.source_id}'"
+        found = []
+        while not found:
+            found = pylsl.resolve_bypred(pred, 1, 1.0)
+        inlet = pylsl.StreamInlet(found[0])
+        inlet.open_stream(10.0)
+        self.connected.set()
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            sample, stamp = inlet.pull_sample(0.5)
+            if sample is not None:
+                self.markers.append((stamp, sample[0]))
+                if '"session_end"' in sample[0]:
+                    return
+
+
+@pytest.fixture(scope="module")
+def paced(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """One paced session of two 1.5 s trials: an instrument at 1 kHz streaming throughout,
+    the session publishing, a marker inlet listening."""
+    tmp = tmp_path_factory.mktemp("lsl")
+    tag = uuid.uuid4().hex[:8]
+    device = f"emg-{tag}"
+    db = init_study(tmp, DESIGN.format(tag=tag, device=device), ("novice",))
+    log = tmp / "device.log"
+    proc = _device(device, 30.0, log)
+    listener = MarkerInlet(f"haptic-study/lsl {tag}/P001")
+    listener.start()
+    origins, notices = Origins(), []
+    engine = open_database(db, create=False)
+    try:
+        observers = [
+            origins,
+            Publisher(wait_for_consumers_s=20.0),
+            Recorder(engine, (f"name='{device}'",), notices.append),
+        ]
+        completed = _session(db, observers, notices)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    listener.join(timeout=20)
+    return {"db": db, "engine": engine, "completed": completed, "origins": origins,
+            "markers": listener.markers, "notices": notices}  # fmt: skip
+
+
+def test_an_outside_instrument_is_stored_sample_for_sample_on_the_trials_clock(
+    paced: dict[str, Any],
+) -> None:
+    engine, origins = paced["engine"], paced["origins"]
+    assert len(paced["completed"]) == 2
+    assert paced["notices"] == []
+    with Session(engine) as s:
+        streams = s.scalars(select(LslStream).order_by(LslStream.trial_id)).all()
+        ends = dict(s.execute(select(Trial.id, Trial.completion_time_s)).all())
+    assert [st.trial_id for st in streams] == paced["completed"]
+    previous_last = -1
+    for stream in streams:
+        assert stream.type == "EMG" and stream.nominal_srate_hz == 1000.0
+        assert [c["name"] for c in stream.channels] == ["index", "made_s"]
+        assert [c["unit"] for c in stream.channels] == ["count", "s"]
+        assert stream.gaps == []
+        table = read_stream(engine, stream.id)
+        index = table["index"].to_numpy()
+        # sample for sample: every sample the device made during the trial, once, in order
+        assert np.array_equal(index, np.arange(index[0], index[0] + len(index)))
+        assert index[0] > previous_last
+        previous_last = index[-1]
+        trial = origins.trials[stream.trial_id]
+        # where each sample belongs on the trial's clock, from when the device made it
+        expected = (table["made_s"].to_numpy() - trial.clock_origin_s) * trial.clock_rate
+        error_s = table["t_s"].to_numpy() - expected
+        assert np.median(np.abs(error_s)) <= 0.002
+        assert np.percentile(np.abs(error_s), 95) <= 0.005
+        # the whole trial is covered: from its start to its end, at 1 kHz
+        t = table["t_s"].to_numpy()
+        assert 0 <= t[0] <= 0.01 and ends[stream.trial_id] - 0.01 <= t[-1] <= ends[stream.trial_id]
+        assert len(t) == pytest.approx(ends[stream.trial_id] * 1000, rel=0.02)
+
+
+def test_a_marker_inlet_receives_every_marker_in_order_with_the_databases_trials(
+    paced: dict[str, Any],
+) -> None:
+    markers = [(stamp, parse(text)) for stamp, text in paced["markers"]]
+    assert all(m is not None for _, m in markers)
+    events = [m["event"] for _, m in markers]
+    assert events == ["session_start", "trial_start", "trial_end", "trial_start", "trial_end",
+                      "session_end"]  # fmt: skip
+    stamps = [stamp for stamp, _ in markers]
+    assert stamps == sorted(stamps)
+    with Session(paced["engine"]) as s:
+        trials = s.scalars(select(Trial).order_by(Trial.id)).all()
+        rows = [(t.id, t.participant.code, t.participant.group, t.task, t.condition,
+                 t.block_index, t.trial_index, t.practice, t.success) for t in trials]  # fmt: skip
+    starts = [m for _, m in markers if m["event"] == "trial_start"]
+    ends = [m for _, m in markers if m["event"] == "trial_end"]
+    for start, end, row in zip(starts, ends, rows, strict=True):
+        for m in (start, end):
+            got = (m["trial_id"], m["participant"], m["group"], m["task"], m["condition"],
+                   m["block"], m["trial"], m["practice"])  # fmt: skip
+            assert got == row[:8]
+        assert end["status"] == "completed" and end["success"] == row[8]
+    # a trial's start marker is stamped at its t = 0, its end at its last sample
+    origins = paced["origins"].trials
+    pylsl = load_pylsl()
+    offset = pylsl.local_clock() - time.monotonic()
+    for (stamp, m) in markers:
+        if m["event"] == "trial_start":
+            assert stamp - offset == pytest.approx(origins[m["trial_id"]].clock_origin_s, abs=0.002)
