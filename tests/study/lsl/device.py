@@ -17,7 +17,7 @@ import time
 if not os.environ.get("LSLAPICFG"):
     sys.exit("LSLAPICFG is not set; the test device never runs on liblsl's defaults")
 
-import pylsl  # noqa: E402  (after the check above)
+import pylsl  # after the check above
 
 
 def main(name: str, kind: str, rate_hz: float, seconds: float, log: str) -> None:

@@ -199,6 +199,6 @@ def test_a_marker_inlet_receives_every_marker_in_order_with_the_databases_trials
     origins = paced["origins"].trials
     pylsl = load_pylsl()
     offset = pylsl.local_clock() - time.monotonic()
-    for (stamp, m) in markers:
+    for stamp, m in markers:
         if m["event"] == "trial_start":
             assert stamp - offset == pytest.approx(origins[m["trial_id"]].clock_origin_s, abs=0.002)
