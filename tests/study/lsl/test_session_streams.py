@@ -64,7 +64,8 @@ def _device(name: str, seconds: float, log: Path) -> subprocess.Popen[str]:
     return proc
 
 
-def _session(db: str, observers: list[SessionObserver], notices: list[str]) -> list[int]:
+def _session(db: str, observers: list[SessionObserver], max_trials: int | None = None,
+             trial_s: float = TRIAL_S) -> list[int]:  # fmt: skip
     from study.protocol.default_estimator import load_estimator
     from study.protocol.participants import SimulatedParticipant
     from study.protocol.session import participant_traits, run_session
@@ -76,8 +77,8 @@ def _session(db: str, observers: list[SessionObserver], notices: list[str]) -> l
     try:
         return run_session(
             engine, "P001", "simulated", load_estimator(),
-            make_driver=lambda: SimulatedParticipant(traits, phantom, give_up_s=TRIAL_S),
-            pace=1.0, observer=Observers(observers),
+            make_driver=lambda: SimulatedParticipant(traits, phantom, give_up_s=trial_s),
+            pace=1.0, observer=Observers(observers), max_trials=max_trials,
         )  # fmt: skip
     finally:
         engine.dispose()
@@ -130,7 +131,7 @@ def paced(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
             Publisher(wait_for_consumers_s=20.0),
             Recorder(engine, (f"name='{device}'",), notices.append),
         ]
-        completed = _session(db, observers, notices)
+        completed = _session(db, observers)
     finally:
         proc.terminate()
         proc.wait(timeout=10)
@@ -202,3 +203,46 @@ def test_a_marker_inlet_receives_every_marker_in_order_with_the_databases_trials
     for stamp, m in markers:
         if m["event"] == "trial_start":
             assert stamp - offset == pytest.approx(origins[m["trial_id"]].clock_origin_s, abs=0.002)
+
+
+@dataclass
+class Unplug(SessionObserver):
+    """Kills the instrument's process once the trial's clock reaches `at_s`."""
+
+    proc: subprocess.Popen[str]
+    at_s: float
+
+    def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
+        if len(rows) and rows[-1, 0] >= self.at_s and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+
+def test_a_stream_lost_mid_trial_is_a_recorded_gap_and_the_trial_completes(
+    tmp_path: Path,
+) -> None:
+    tag = uuid.uuid4().hex[:8]
+    device = f"emg-{tag}"
+    design = DESIGN.format(tag=tag, device=device).replace("publish = true", "publish = false")
+    db = init_study(tmp_path, design, ("novice",))
+    proc = _device(device, 30.0, tmp_path / "device.log")
+    notices: list[str] = []
+    engine = open_database(db, create=False)
+    try:
+        recorder = Recorder(engine, (f"name='{device}'",), notices.append)
+        completed = _session(db, [recorder, Unplug(proc, 1.0)], max_trials=1, trial_s=2.5)
+    finally:
+        proc.kill()
+        proc.wait(timeout=10)
+    with Session(engine) as s:
+        trial = s.get_one(Trial, completed[0])
+        stream = s.scalars(select(LslStream)).one()
+        assert trial.status == "completed" and trial.completion_time_s >= 2.5
+        gaps, end_s = stream.gaps, trial.completion_time_s
+    t = read_stream(engine, stream.id)["t_s"].to_numpy()
+    engine.dispose()
+    # one gap, from the last sample before the instrument died to the trial's end
+    assert len(gaps) == 1
+    assert gaps[0][0] == pytest.approx(t[-1]) and 0.95 <= gaps[0][0] <= 1.1
+    assert gaps[0][1] == pytest.approx(end_s)
+    assert len(notices) == 1 and f"LSL stream {device} (EMG) lost at t = " in notices[0]
