@@ -82,7 +82,7 @@ class StreamWriter:
         with engine.begin() as conn:
             stream_id = conn.execute(
                 insert(LslStream).returning(LslStream.id),
-                {"trial_id": trial_id, "gaps": [], "n_samples": 0, **_row(meta)},
+                {"trial_id": trial_id, "gaps": [], "n_samples": 0, **stream_row(meta)},
             ).scalar_one()
         return cls(engine, stream_id, meta)
 
@@ -95,40 +95,20 @@ class StreamWriter:
         """Commit `values` (n x channels) stamped `lsl_time_s` (the source's clock) as
         one chunk; `t_s` overrides their trial times (default `trial_time`)."""
         lsl_time_s = np.asarray(lsl_time_s, dtype=np.float64)
-        n = len(lsl_time_s)
-        if n == 0:
+        if len(lsl_time_s) == 0:
             return
-        t = self.trial_time(lsl_time_s) if t_s is None else np.asarray(t_s, dtype=np.float64)
-        schema = self.meta.schema()
-        if self.meta.is_string:
-            cols = [pa.array([str(row[k]) for row in values]) for k in range(len(schema) - 2)]
-        else:
-            arr = np.asarray(values, dtype=np.float64).reshape(n, len(schema) - 2)
-            cols = [pa.array(arr[:, k]) for k in range(arr.shape[1])]
-        batch = pa.RecordBatch.from_arrays(
-            [pa.array(t), pa.array(lsl_time_s), *cols], schema=schema
-        )
-        sink = pa.BufferOutputStream()
-        with pa.ipc.new_stream(sink, schema) as out:
-            out.write_batch(batch)
-        raw = sink.getvalue()
-        row = {
-            "stream_id": self.stream_id,
-            "first_seq": self.next_seq,
-            "n_samples": n,
-            "t_first_s": float(t[0]),
-            "t_last_s": float(t[-1]),
-            "raw_bytes": raw.size,
-            "data": pa.compress(raw, codec=CODEC, asbytes=True),
-        }
+        t = self.trial_time(lsl_time_s) if t_s is None else t_s
+        row = encode_chunk(self.meta, lsl_time_s, values, t)
         with self.engine.begin() as conn:
-            conn.execute(insert(LslChunk), row)
+            conn.execute(
+                insert(LslChunk), {"stream_id": self.stream_id, "first_seq": self.next_seq, **row}
+            )
             conn.execute(
                 update(LslStream)
                 .where(LslStream.id == self.stream_id)
-                .values(n_samples=LslStream.n_samples + n)
+                .values(n_samples=LslStream.n_samples + row["n_samples"])
             )
-        self.next_seq += n
+        self.next_seq += row["n_samples"]
 
     def close(self, gaps: Sequence[Sequence[float]] = ()) -> None:
         """Record the stream's gaps (trial times, s) and its final time correction."""
@@ -141,7 +121,36 @@ class StreamWriter:
             )
 
 
-def _row(meta: StreamMeta) -> dict[str, Any]:
+def encode_chunk(
+    meta: StreamMeta, lsl_time_s: np.ndarray, values: Any, t_s: np.ndarray
+) -> dict[str, Any]:
+    """The `lsl_chunks` columns (all but the key) of samples `values` (n x channels)."""
+    n = len(lsl_time_s)
+    t = np.asarray(t_s, dtype=np.float64)
+    schema = meta.schema()
+    if meta.is_string:
+        cols = [pa.array([str(row[k]) for row in values]) for k in range(len(schema) - 2)]
+    else:
+        arr = np.asarray(values, dtype=np.float64).reshape(n, len(schema) - 2)
+        cols = [pa.array(arr[:, k]) for k in range(arr.shape[1])]
+    batch = pa.RecordBatch.from_arrays(
+        [pa.array(t), pa.array(np.asarray(lsl_time_s, dtype=np.float64)), *cols], schema=schema
+    )
+    sink = pa.BufferOutputStream()
+    with pa.ipc.new_stream(sink, schema) as out:
+        out.write_batch(batch)
+    raw = sink.getvalue()
+    return {
+        "n_samples": n,
+        "t_first_s": float(t[0]),
+        "t_last_s": float(t[-1]),
+        "raw_bytes": raw.size,
+        "data": pa.compress(raw, codec=CODEC, asbytes=True),
+    }
+
+
+def stream_row(meta: StreamMeta) -> dict[str, Any]:
+    """The `lsl_streams` columns a stream's `meta` gives."""
     return {
         "name": meta.name,
         "type": meta.type,

@@ -41,6 +41,12 @@ from study.protocol.roster import schedule
     type=click.FloatRange(min=0, min_open=True),
     help="Run a simulated session at this many times real time [default: as fast as it goes].",
 )
+@click.option(
+    "--lsl",
+    is_flag=True,
+    help="Publish the session's markers and samples as Lab Streaming Layer streams (as "
+    "`[lsl] publish = true` in the design does); needs LSLAPICFG (see `study lsl-config`).",
+)
 @participants_option
 @actor_option
 @db_option
@@ -54,6 +60,7 @@ def run(
     participants_path: Path | None,
     actor: str | None,
     db_url: str | None,
+    lsl: bool = False,
 ) -> None:
     """Run the participant's remaining scheduled trials and store every sample.
 
@@ -74,6 +81,9 @@ def run(
         raise StudyInputError(f"--participants with --driver {driver}; expected --driver "
                               "simulated (a fitted model draws simulated people)")  # fmt: skip
     if run_all:
+        if lsl:
+            raise StudyInputError("--lsl with --all; expected --participant CODE (one "
+                                  "session at a time publishes its streams)")  # fmt: skip
         if driver != "simulated":
             raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
         _run_all(db_url, jobs, pace, who, participants_path)
@@ -116,13 +126,30 @@ def run(
                     f"{kind} {item.trial_index + 1}",
                 )
 
+            observer = _lsl_observers(engine, lsl, progress)
             done = run_session(
                 engine, code, driver, estimator, make_driver, pace, report, actor=who,
-                participants=model,
+                participants=model, observer=observer,
             )  # fmt: skip
     finally:
         engine.dispose()
     click.echo(f"{code}: {len(done)} trials completed and stored")
+
+
+def _lsl_observers(engine, publish: bool, progress: Progress):  # type: ignore[no-untyped-def]
+    """The design's `[lsl]` streams (and --lsl's), their notices printed above the bar."""
+    from sqlalchemy.orm import Session
+
+    from study.lsl.observers import session_observers
+    from study.protocol.roster import load_study
+
+    with Session(engine) as session:
+        _, design = load_study(session)
+
+    def notice(message: str) -> None:
+        progress.console.print(f"study run: {message}", markup=False)
+
+    return session_observers(engine, design, publish, notice)
 
 
 def _progress() -> Progress:
