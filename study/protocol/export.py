@@ -24,6 +24,12 @@ from study.errors import StudyInputError
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_KEYS
 from study.protocol.export_files import AtomicFile, escape_frame, refuse_symlink
 from study.protocol.roster import load_study
+from study.protocol.stream_export import (
+    STREAM_CODEBOOK,
+    StreamExport,
+    collect_streams,
+    write_streams,
+)
 from study.protocol.tasks import COMPLETION_TIME, get_task
 
 if TYPE_CHECKING:
@@ -141,6 +147,11 @@ def export_data(
     if samples:
         columns += SAMPLE_EXPORT_COLUMNS
     book = codebook(dict.fromkeys([*design.tasks, *trials["task"]]))
+    streams = collect_streams(engine, export_trials, selection) if samples else StreamExport()
+    if streams.tables:  # every recorded instrument's channel, as `stream/channel`
+        book.update({c: e for c, e in STREAM_CODEBOOK.items() if c not in book})
+        book.update(streams.codebook)
+        columns += [*STREAM_CODEBOOK, *streams.codebook]
     book_frame = pd.DataFrame(
         [
             {"column": c, "unit": book[c][0], "meaning": book[c][1]}
@@ -168,6 +179,7 @@ def export_data(
             else:
                 frame.to_parquet(out.file, index=False)
         escape_frame(book_frame).to_csv(stage("codebook.csv").file, index=False, encoding="utf-8")
+        staged += write_streams(streams, out_dir / "streams", fmt)
         sample_paths: list[Path] = []
         if samples and per_trial:
             result = write_samples_per_trial(

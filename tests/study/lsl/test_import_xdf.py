@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session
@@ -160,3 +161,16 @@ def test_a_recording_imports_each_streams_samples_to_its_trial(
     before = _stored(db)
     line = _one_line_exit_2(capsys, "import-xdf", str(path), "--db", db)
     assert "is stored already" in line and _stored(db) == before
+    # exported beside the trials' samples: one file per stream, every channel in the codebook
+    out = tmp_path / "export"
+    assert main(["export", "--out", str(out), "--samples", "--db", db]) == 0
+    emg = pd.read_csv(out / "streams" / "EMG-amp.csv")
+    assert list(emg.columns) == ["participant", "task", "condition", "trial", "seq", "t_s",
+                                 "lsl_time_s", "index", "flexor"]  # fmt: skip
+    assert len(emg) == 2 * (3 * RATE_HZ + 1)
+    assert set(emg["condition"]) == {t.condition for t in trials}
+    assert pd.read_csv(out / "streams" / "PsychoPy.csv")["m"].tolist() == ["go"]
+    book = pd.read_csv(out / "codebook.csv").set_index("column")
+    assert book.loc["EMG-amp/index", "unit"] == "count"
+    assert book.loc["EMG-amp/flexor", "unit"] == "uV"
+    assert "PsychoPy/m" in book.index and book.loc["lsl_time_s", "unit"] == "s"
