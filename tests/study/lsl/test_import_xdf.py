@@ -27,6 +27,8 @@ trials_per_condition = 1
 practice_trials = 0
 [groups]
 novice = 1
+[lsl]
+plot = ["EMG"]
 """
 OFFSET_S = 0.25
 """The EMG amplifier's clock offset to the recorder's (pyxdf adds it to its stamps)."""
@@ -174,3 +176,7 @@ def test_a_recording_imports_each_streams_samples_to_its_trial(
     assert book.loc["EMG-amp/index", "unit"] == "count"
     assert book.loc["EMG-amp/flexor", "unit"] == "uV"
     assert "PsychoPy/m" in book.index and book.loc["lsl_time_s", "unit"] == "s"
+    # drawn in the trial figure, as the design asks ([lsl] plot = ["EMG"])
+    figures = tmp_path / "figures"
+    assert main(["figures", "--out", str(figures), "--format", "png", "--db", db]) == 0
+    assert (figures / "fig9_streams_lcca.png").is_file()
