@@ -1,18 +1,24 @@
 """Streams out: the session's markers and each running trial's samples, as LSL streams.
 
 A `Publisher` is a session observer (`study.protocol.observer`). At the session's start
-it opens the marker outlet (`study.lsl.markers`); each trial gets a sample outlet named
-`haptic-study <task>` (type `SAMPLE_STREAM_TYPE`) with the task's own sample columns as
-channels (label, unit, description in the stream's XML `desc`; the region column is
-the index into the `<regions>` listed there), at the loop's acquisition rate, its
-samples stamped at `t0 + t_s / clock_rate` on the LSL clock, where `t0` is the trial's
-start; it closes when the trial ends. An unpaced simulated session runs faster than
-real time, so its stamps run ahead of the wall clock (the trial's own clock).
+it opens the marker outlet (`study.lsl.markers`). A running trial's samples go out on
+the sample outlet of its task, `haptic-study <task>` (type `SAMPLE_STREAM_TYPE`), with
+the task's own sample columns as channels (label, unit, description in the stream's XML
+`desc`; the region column is the index into the `<regions>` listed there), at the
+loop's acquisition rate, each sample stamped at `t0 + t_s / clock_rate` on the LSL
+clock, where `t0` is the trial's start (its `trial_start` marker's stamp). The outlet
+opens with the task's first trial and stays open for the session, carrying each trial
+in turn (the markers say which): LabRecorder records the streams chosen when its
+recording starts, so an outlet opened per trial would go unrecorded after the first,
+and opening and closing one costs tens of ms of the loop's time. An unpaced simulated
+session runs faster than real time, so its stamps run ahead of the wall clock (the
+trial's own clock).
 """
 
 from __future__ import annotations
 
 import platform
+import threading
 from types import ModuleType
 from typing import Any
 
@@ -22,6 +28,14 @@ from study.lsl.clock import monotonic_to_lsl
 from study.lsl.config import load_pylsl
 from study.lsl.markers import MARKER_STREAM, MARKER_TYPE, SAMPLE_STREAM_TYPE, encode
 from study.protocol.observer import SessionInfo, SessionObserver, TrialInfo
+
+
+def _close_later(outlets: list[Any]) -> None:
+    """Drop `outlets` (the only references to them) in a thread of its own: liblsl's
+    destructor waits for an outlet's network threads to end (tens of ms)."""
+    outlets[:] = [o for o in outlets if o is not None]
+    if outlets:
+        threading.Thread(target=outlets.clear, daemon=True).start()
 
 
 class Publisher(SessionObserver):
@@ -42,7 +56,8 @@ class Publisher(SessionObserver):
         self.offset_s = monotonic_to_lsl(self.lsl)
         self.markers: Any = None
         self.session: SessionInfo | None = None
-        self.outlet: Any = None
+        self.outlets: dict[str, Any] = {}
+        """The sample outlet of each task, by name."""
         self._t0_lsl = 0.0
         self.pushed = 0
 
@@ -75,12 +90,14 @@ class Publisher(SessionObserver):
     def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
         if not len(rows):
             return
-        if self.outlet is None:
-            self.outlet = self._sample_outlet(trial, rows)
-            if self.outlet is None:
+        outlet = self.outlets.get(trial.task.name)
+        if outlet is None:
+            outlet = self._sample_outlet(trial, rows)
+            if outlet is None:
                 return
+            self.outlets[trial.task.name] = outlet
         t_last = float(rows[-1, 0])
-        self.outlet.push_chunk(
+        outlet.push_chunk(
             np.ascontiguousarray(rows, dtype=np.float64),
             self._t0_lsl + t_last / trial.clock_rate,
         )
@@ -90,15 +107,15 @@ class Publisher(SessionObserver):
         t_end = outcome.get("t_s", outcome.get("completion_time_s", 0.0))
         stamp = self._t0_lsl + float(t_end or 0.0) / trial.clock_rate
         self._mark("trial_end", stamp, **trial.marker_fields(), status=status, **outcome)
-        self.outlet = None  # the trial's stream ends with it
 
     def event(self, kind: str, **fields: Any) -> None:
         self._mark(kind, self.lsl.local_clock(), **fields)
 
     def session_ended(self) -> None:
         self._mark("session_end", self.lsl.local_clock())
-        self.markers = None
-        self.outlet = None
+        outlets = [self.markers, *self.outlets.values()]
+        self.markers, self.outlets = None, {}
+        _close_later(outlets)
 
     # -- the trial's sample stream ------------------------------------------------------
 
@@ -112,14 +129,11 @@ class Publisher(SessionObserver):
         info = self.lsl.StreamInfo(
             f"haptic-study {task.name}", SAMPLE_STREAM_TYPE, len(task.sample_columns),
             round(rate_hz, 6), "double64",
-            f"haptic-study/{s.study if s else ''}/{s.participant if s else ''}/{trial.trial_id}",
+            f"haptic-study/{s.study if s else ''}/{s.participant if s else ''}/{task.name}",
         )  # fmt: skip
         desc = info.desc()
         desc.append_child_value("manufacturer", "haptic-study")
         desc.append_child_value("hostname", platform.node())
-        keys = desc.append_child("trial")
-        for key, value in trial.marker_fields().items():
-            keys.append_child_value(key, str(value))
         channels = desc.append_child("channels")
         for column in task.sample_columns:
             ch = channels.append_child("channel")
