@@ -6,11 +6,13 @@ the sample outlet of its task, `haptic-study <task>` (type `SAMPLE_STREAM_TYPE`)
 the task's own sample columns as channels (label, unit, description in the stream's XML
 `desc`; the region column is the index into the `<regions>` listed there), at the
 loop's acquisition rate, each sample stamped at `t0 + t_s / clock_rate` on the LSL
-clock, where `t0` is the trial's start (its `trial_start` marker's stamp). The outlet
-opens with the task's first trial and stays open for the session, carrying each trial
-in turn (the markers say which): LabRecorder records the streams chosen when its
-recording starts, so an outlet opened per trial would go unrecorded after the first,
-and opening and closing one costs tens of ms of the loop's time. An unpaced simulated
+clock, where `t0` is the trial's start (its `trial_start` marker's stamp). The outlets
+of the session's tasks open with the session and stay open, carrying each trial in turn
+(the markers say which): LabRecorder records the streams chosen when its recording
+starts, so an outlet opened per trial would go unrecorded, and opening and closing one
+costs tens of ms of the loop's time. Their declared rate is the loop's acquisition
+rate (`teleop_core.loop.config.LoopConfig`); a task whose rows come at another rate
+gets its outlet opened again at that rate with its first trial. An unpaced simulated
 session runs faster than real time, so its stamps run ahead of the wall clock (the
 trial's own clock).
 """
@@ -28,6 +30,11 @@ from study.lsl.clock import monotonic_to_lsl
 from study.lsl.config import load_pylsl
 from study.lsl.markers import MARKER_STREAM, MARKER_TYPE, SAMPLE_STREAM_TYPE, encode
 from study.protocol.observer import SessionInfo, SessionObserver, TrialInfo
+from study.protocol.tasks import Task
+from teleop_core.loop.config import LoopConfig
+
+ACQUISITION_RATE_HZ = LoopConfig().acquisition_rate_hz
+"""The rate the sample outlets are declared at until a trial's rows say otherwise."""
 
 
 def _close_later(outlets: list[Any]) -> None:
@@ -44,8 +51,8 @@ class Publisher(SessionObserver):
     Parameters
     ----------
     wait_for_consumers_s
-        At the session's start, wait up to this long for a recorder to subscribe to the
-        marker stream (markers pushed before anyone listens reach no one), s.
+        At the session's start, wait up to this long for a recorder to subscribe to each
+        of its streams (what is pushed before anyone listens reaches no one), s.
     pylsl
         The pylsl module (default: `study.lsl.config.load_pylsl()`).
     """
@@ -58,6 +65,7 @@ class Publisher(SessionObserver):
         self.session: SessionInfo | None = None
         self.outlets: dict[str, Any] = {}
         """The sample outlet of each task, by name."""
+        self._checked: dict[str, bool] = {}
         self._t0_lsl = 0.0
         self.pushed = 0
 
@@ -78,8 +86,11 @@ class Publisher(SessionObserver):
         )  # fmt: skip
         info.desc().append_child_value("manufacturer", "haptic-study")
         self.markers = self.lsl.StreamOutlet(info)
+        for task in session.tasks:
+            self.outlets[task.name] = self._sample_outlet(task, ACQUISITION_RATE_HZ)
         if self.wait_for_consumers_s > 0:
-            self.markers.wait_for_consumers(self.wait_for_consumers_s)
+            for outlet in (self.markers, *self.outlets.values()):
+                outlet.wait_for_consumers(self.wait_for_consumers_s)
         self._mark("session_start", self.lsl.local_clock(), driver=session.driver,
                    pace=session.pace)  # fmt: skip
 
@@ -91,11 +102,14 @@ class Publisher(SessionObserver):
         if not len(rows):
             return
         outlet = self.outlets.get(trial.task.name)
-        if outlet is None:
-            outlet = self._sample_outlet(trial, rows)
-            if outlet is None:
-                return
-            self.outlets[trial.task.name] = outlet
+        if outlet is None or (len(rows) > 1 and not self._checked.get(trial.task.name)):
+            if len(rows) < 2:
+                return  # two rows tell the rate
+            rate_hz = round(1.0 / float(np.median(np.diff(rows[:, 0]))), 6)
+            self._checked[trial.task.name] = True
+            if outlet is None or outlet.get_info().nominal_srate() != rate_hz:
+                _close_later([self.outlets.pop(trial.task.name, None)])
+                outlet = self.outlets[trial.task.name] = self._sample_outlet(trial.task, rate_hz)
         t_last = float(rows[-1, 0])
         outlet.push_chunk(
             np.ascontiguousarray(rows, dtype=np.float64),
@@ -119,16 +133,12 @@ class Publisher(SessionObserver):
 
     # -- the trial's sample stream ------------------------------------------------------
 
-    def _sample_outlet(self, trial: TrialInfo, rows: np.ndarray) -> Any:
-        """The trial's outlet, once two rows tell the acquisition rate (None before)."""
-        if len(rows) < 2:
-            return None
-        rate_hz = 1.0 / float(np.median(np.diff(rows[:, 0])))
-        task = trial.task
+    def _sample_outlet(self, task: Task, rate_hz: float) -> Any:
+        """The sample outlet of `task` (see the module docstring)."""
         s = self.session
         info = self.lsl.StreamInfo(
             f"haptic-study {task.name}", SAMPLE_STREAM_TYPE, len(task.sample_columns),
-            round(rate_hz, 6), "double64",
+            rate_hz, "double64",
             f"haptic-study/{s.study if s else ''}/{s.participant if s else ''}/{task.name}",
         )  # fmt: skip
         desc = info.desc()

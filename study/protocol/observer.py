@@ -33,6 +33,8 @@ class SessionInfo:
     pace: float | None
     """Times real time of a paced simulated session; None: as fast as it goes (simulated)
     or real time (a person at the hardware or keyboard)."""
+    tasks: tuple[Task, ...] = ()
+    """The tasks of the session's trials, in the order they first come."""
 
 
 @dataclass(frozen=True)

@@ -186,10 +186,11 @@ def run_session(
         if lease.taken_over is not None:
             reason = f"found running when a new session took the lease over ({lease.taken_over})"
         recover_interrupted(engine, participant_id, reason, actor)
-        observer.session_started(
-            SessionInfo(study.name, code, participant.group, driver_kind, pace)
-        )
         tasks = {name: get_task(name) for name in sorted({p.block.task for p in todo})}
+        first = tuple(tasks[name] for name in dict.fromkeys(p.block.task for p in todo))
+        observer.session_started(
+            SessionInfo(study.name, code, participant.group, driver_kind, pace, first)
+        )
         contexts: dict[str, Any] = {}
         traits = participant_traits(study.seed, code, participant.group, participants)
         completed: list[int] = []

@@ -111,6 +111,44 @@ class MarkerInlet(threading.Thread):
                     return
 
 
+class SampleInlet(threading.Thread):
+    """An inlet on the session's sample stream of a task: its description and samples."""
+
+    def __init__(self, source_id: str, done: threading.Event) -> None:
+        super().__init__(daemon=True)
+        self.source_id, self.done = source_id, done
+        self.channels: list[tuple[str, str]] = []
+        self.rate_hz = 0.0
+        self.rows: list[np.ndarray] = []
+        self.stamps: list[float] = []
+
+    def run(self) -> None:
+        pylsl = load_pylsl()
+        found = []
+        while not found and not self.done.is_set():
+            found = pylsl.resolve_bypred(f"source_id='{self.source_id}'", 1, 0.5)
+        if not found:
+            return
+        inlet = pylsl.StreamInlet(found[0])
+        info = inlet.info(5.0)
+        self.rate_hz = info.nominal_srate()
+        ch = info.desc().child("channels").child("channel")
+        while not ch.empty():
+            self.channels.append((ch.child_value("label"), ch.child_value("unit")))
+            ch = ch.next_sibling()
+        idle_since = None
+        while True:
+            rows, stamps = inlet.pull_chunk(timeout=0.2)
+            if stamps:
+                self.rows.append(np.asarray(rows))
+                self.stamps += stamps
+                idle_since = None
+            elif self.done.is_set():
+                idle_since = idle_since or time.monotonic()
+                if time.monotonic() - idle_since > 1.0:
+                    return
+
+
 @pytest.fixture(scope="module")
 def paced(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """One paced session of two 1.5 s trials: an instrument at 1 kHz streaming throughout,
@@ -123,6 +161,9 @@ def paced(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     proc = _device(device, 30.0, log)
     listener = MarkerInlet(f"haptic-study/lsl {tag}/P001")
     listener.start()
+    ended = threading.Event()
+    samples = SampleInlet(f"haptic-study/lsl {tag}/P001/lcca", ended)
+    samples.start()
     origins, notices = Origins(), []
     engine = open_database(db, create=False)
     try:
@@ -136,8 +177,10 @@ def paced(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         proc.terminate()
         proc.wait(timeout=10)
     listener.join(timeout=20)
+    ended.set()
+    samples.join(timeout=20)
     return {"db": db, "engine": engine, "completed": completed, "origins": origins,
-            "markers": listener.markers, "notices": notices}  # fmt: skip
+            "markers": listener.markers, "notices": notices, "samples": samples}  # fmt: skip
 
 
 def test_an_outside_instrument_is_stored_sample_for_sample_on_the_trials_clock(
@@ -246,3 +289,29 @@ def test_a_stream_lost_mid_trial_is_a_recorded_gap_and_the_trial_completes(
     assert gaps[0][0] == pytest.approx(t[-1]) and 0.95 <= gaps[0][0] <= 1.1
     assert gaps[0][1] == pytest.approx(end_s)
     assert len(notices) == 1 and f"LSL stream {device} (EMG) lost at t = " in notices[0]
+
+
+def test_the_trials_samples_go_out_with_the_tasks_channels_units_and_clock(
+    paced: dict[str, Any],
+) -> None:
+    from db.sample_reader import SampleReader
+    from study.protocol.tasks import get_task
+
+    task = get_task("lcca")
+    inlet = paced["samples"]
+    assert inlet.channels == [(c.name, c.unit) for c in task.sample_columns]
+    assert inlet.rate_hz == 100.0  # the loop's acquisition rate (seed 000, IV-A)
+    rows, stamps = np.concatenate(inlet.rows), np.asarray(inlet.stamps)
+    # every stored sample of both trials, in order, as stored
+    engine = paced["engine"]
+    stored = []
+    with SampleReader(engine) as reader:
+        for trial_id in paced["completed"]:
+            stored += [b.column("t_s").to_numpy() for b in reader.trial(trial_id)]
+    t_stored = np.concatenate(stored)
+    np.testing.assert_array_equal(rows[:, 0], t_stored)
+    # each stamped at its trial's start (the trial_start marker) plus its time
+    starts = [(stamp, parse(text)) for stamp, text in paced["markers"]]
+    starts = [stamp for stamp, m in starts if m["event"] == "trial_start"]
+    trial_of = np.cumsum(np.r_[0, np.diff(rows[:, 0]) < 0])
+    np.testing.assert_allclose(stamps, np.asarray(starts)[trial_of] + rows[:, 0], atol=1e-6)
