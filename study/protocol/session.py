@@ -247,11 +247,13 @@ def _telling(observer: SessionObserver, info: TrialInfo, loop: Any) -> Iterator[
     """Tell `observer` a trial that ends on an exception: `stopped` or `interrupted`."""
     try:
         yield
-    except SessionStopped:
-        observer.trial_ended(info, "stopped", {"t_s": loop.t_s})
-        raise
     except BaseException as exc:
-        observer.trial_ended(info, "interrupted", {"t_s": loop.t_s, "reason": repr(exc)})
+        status = "stopped" if isinstance(exc, SessionStopped) else "interrupted"
+        outcome = {"t_s": loop.t_s, **({} if status == "stopped" else {"reason": repr(exc)})}
+        try:
+            observer.trial_ended(info, status, outcome)
+        except Exception:  # the first error is the one to report (a full disk, say)
+            pass
         raise
 
 
