@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from study.protocol.observer import Observers, SessionObserver, TrialInfo
+
 SIMULATED_NOTE = (
     "SIMULATED: a simulated participant in the simulated LCCA loop, and a simulated "
     "1 kHz instrument on this machine's loopback; no measured data"
@@ -42,50 +44,34 @@ class LslBenchConfig:
         return cls(trials=2, trial_s=2.0)
 
 
+class Origins(SessionObserver):
+    """The trials' clocks, and where the loop's newest sample stood against the wall
+    clock after each step (the runner paces to within a step)."""
+
+    def __init__(self) -> None:
+        self.trials: dict[int, TrialInfo] = {}
+        self.lead_s: list[float] = []
+
+    def trial_started(self, trial: TrialInfo) -> None:
+        self.trials[trial.trial_id] = trial
+
+    def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
+        if len(rows):
+            due = trial.clock_origin_s + rows[-1, 0] / trial.clock_rate
+            self.lead_s.append(due - time.monotonic())
+
+
 def run_lsl_bench(
     config: LslBenchConfig, out_dir: Path, progress: Callable[[str], None] = lambda _: None
 ) -> dict[str, Any]:
-    from sqlalchemy import select
-    from sqlalchemy.orm import Session
-
-    from db.lsl_streams import read_stream
-    from db.migrate import open_database
-    from db.models.lsl import LslStream
+    """Run the bench (module docstring); writes lsl_bench.json and .md to `out_dir`."""
     from study.lsl.publish import Publisher
     from study.lsl.record import Recorder
-    from study.protocol.default_estimator import load_estimator
-    from study.protocol.design import parse_design
-    from study.protocol.observer import Observers, SessionObserver, TrialInfo
-    from study.protocol.participants import SimulatedParticipant
-    from study.protocol.roster import add_participant, create_study
-    from study.protocol.session import participant_traits, run_session
-    from teleop_core.phantom.lcca import LccaPhantom
-
-    class Origins(SessionObserver):
-        """The trials' clocks, and where the loop's newest sample stood against the wall
-        clock after each step (the runner paces to within a step)."""
-
-        def __init__(self) -> None:
-            self.trials: dict[int, TrialInfo] = {}
-            self.lead_s: list[float] = []
-
-        def trial_started(self, trial: TrialInfo) -> None:
-            self.trials[trial.trial_id] = trial
-
-        def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
-            if len(rows):
-                due = trial.clock_origin_s + rows[-1, 0] / trial.clock_rate
-                self.lead_s.append(due - time.monotonic())
 
     out_dir.mkdir(parents=True, exist_ok=True)
     name = f"sim-emg-{uuid.uuid4().hex[:8]}"
-    per_block = -(-config.trials // 2)
-    text = (f'name = "lsl bench"\ntasks = ["lcca"]\ntrials_per_condition = {per_block}\n'
-            "practice_trials = 0\n[groups]\nnovice = 1\n")  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
-        engine = open_database(f"sqlite:///{tmp}/bench.db", create=True)
-        create_study(engine, parse_design(text), text)
-        code = add_participant(engine, "novice").code
+        engine, code = _scratch_study(Path(tmp), config.trials)
         seconds = config.trials * (config.trial_s + 2.0) + 20.0
         device = subprocess.Popen(
             [sys.executable, "-m", "study.lsl.sim_device", name, "EMG", str(config.rate_hz),
@@ -96,44 +82,17 @@ def run_lsl_bench(
             if device.stdout is None or device.stdout.readline().strip() != "ready":
                 raise RuntimeError("the simulated instrument did not start")
             origins, notices = Origins(), []
-            observers = [
-                origins,
-                Publisher(),
-                Recorder(engine, (f"name='{name}'",), notices.append),
-            ]
-            phantom = LccaPhantom()
-            traits = participant_traits(1, code, "novice")
+            recorder = Recorder(engine, (f"name='{name}'",), notices.append)
             progress(f"paced session: {config.trials} trials of {config.trial_s:g} s")
             start = time.monotonic()
-            completed = run_session(
-                engine, code, "simulated", load_estimator(),
-                make_driver=lambda: SimulatedParticipant(traits, phantom,
-                                                         give_up_s=config.trial_s),
-                pace=1.0, observer=Observers(observers), max_trials=config.trials,
-            )  # fmt: skip
+            completed = _paced_session(engine, code, config, [origins, Publisher(), recorder])
             wall_s = time.monotonic() - start
         finally:
             device.terminate()
             device.wait(timeout=10)
-        errors, per_trial = [], []
-        with Session(engine) as s:
-            streams = s.scalars(select(LslStream).order_by(LslStream.trial_id)).all()
-            s.expunge_all()
-        for stream in streams:
-            table = read_stream(engine, stream.id)
-            trial = origins.trials[stream.trial_id]
-            expected = (table["made_s"].to_numpy() - trial.clock_origin_s) * trial.clock_rate
-            err = table["t_s"].to_numpy() - expected
-            index = table["index"].to_numpy()
-            errors.append(err)
-            consecutive = np.array_equal(index, np.arange(index[0], index[0] + len(index)))
-            per_trial.append({
-                "trial_id": stream.trial_id, "samples": len(err),
-                "consecutive": bool(consecutive),
-                "median_abs_error_ms": float(np.median(np.abs(err)) * 1e3),
-            })  # fmt: skip
+        errors, per_trial = _alignment(engine, origins)
         engine.dispose()
-    err = np.abs(np.concatenate(errors)) if errors else np.zeros(0)
+    err = np.abs(np.concatenate(errors))
     report = {
         "config": asdict(config),
         "data": SIMULATED_NOTE,
@@ -158,6 +117,64 @@ def run_lsl_bench(
     (out_dir / "lsl_bench.json").write_text(json.dumps(report, indent=2) + "\n")
     (out_dir / "lsl_bench.md").write_text(markdown(report))
     return report
+
+
+def _scratch_study(folder: Path, trials: int) -> tuple[Any, str]:
+    """A study of one novice with `trials` LCCA trials in a SQLite file in `folder`."""
+    from db.migrate import open_database
+    from study.protocol.design import parse_design
+    from study.protocol.roster import add_participant, create_study
+
+    text = (f'name = "lsl bench"\ntasks = ["lcca"]\ntrials_per_condition = {-(-trials // 2)}\n'
+            "practice_trials = 0\n[groups]\nnovice = 1\n")  # fmt: skip
+    engine = open_database(f"sqlite:///{folder}/bench.db", create=True)
+    create_study(engine, parse_design(text), text)
+    return engine, add_participant(engine, "novice").code
+
+
+def _paced_session(
+    engine: Any, code: str, config: LslBenchConfig, observers: list[SessionObserver]
+) -> list[int]:
+    """The participant's trials at real time, each ended after `config.trial_s`."""
+    from study.protocol.default_estimator import load_estimator
+    from study.protocol.participants import SimulatedParticipant
+    from study.protocol.session import participant_traits, run_session
+    from teleop_core.phantom.lcca import LccaPhantom
+
+    phantom = LccaPhantom()
+    traits = participant_traits(1, code, "novice")
+    return run_session(
+        engine, code, "simulated", load_estimator(),
+        make_driver=lambda: SimulatedParticipant(traits, phantom, give_up_s=config.trial_s),
+        pace=1.0, observer=Observers(observers), max_trials=config.trials,
+    )  # fmt: skip
+
+
+def _alignment(engine: Any, origins: Origins) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+    """Per stored stream: each sample's stored trial time minus where it belongs."""
+    from sqlalchemy import select
+    from sqlalchemy.orm import Session
+
+    from db.lsl_streams import read_stream
+    from db.models.lsl import LslStream
+
+    with Session(engine) as s:
+        streams = s.scalars(select(LslStream).order_by(LslStream.trial_id)).all()
+        s.expunge_all()
+    errors, per_trial = [], []
+    for stream in streams:
+        table = read_stream(engine, stream.id)
+        trial = origins.trials[stream.trial_id]
+        expected = (table["made_s"].to_numpy() - trial.clock_origin_s) * trial.clock_rate
+        err = table["t_s"].to_numpy() - expected
+        index = table["index"].to_numpy()
+        errors.append(err)
+        consecutive = np.array_equal(index, np.arange(index[0], index[0] + len(index)))
+        per_trial.append({
+            "trial_id": stream.trial_id, "samples": len(err), "consecutive": bool(consecutive),
+            "median_abs_error_ms": float(np.median(np.abs(err)) * 1e3),
+        })  # fmt: skip
+    return errors, per_trial
 
 
 def markdown(report: dict[str, Any]) -> str:
