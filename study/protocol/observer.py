@@ -14,7 +14,8 @@ time, `realtime` False).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -120,3 +121,31 @@ class Observers(SessionObserver):
     def event(self, kind: str, **fields: Any) -> None:
         for o in self.observers:
             o.event(kind, **fields)
+
+
+@contextmanager
+def session_ending(observer: SessionObserver) -> Iterator[None]:
+    """Tell `observer` the session ended, however it ends."""
+    try:
+        yield
+    finally:
+        observer.session_ended()
+
+
+@contextmanager
+def trial_ending(
+    observer: SessionObserver, info: TrialInfo, loop: Any, stopped: type[BaseException]
+) -> Iterator[None]:
+    """Tell `observer` of a trial that ends on an exception: `stopped` (an exception of
+    type `stopped`: the session was stopped) or `interrupted`. The trial's own error is
+    the one raised, even if the observer fails as well (a full disk, say)."""
+    try:
+        yield
+    except BaseException as exc:
+        status = "stopped" if isinstance(exc, stopped) else "interrupted"
+        outcome = {"t_s": loop.t_s, **({} if status == "stopped" else {"reason": repr(exc)})}
+        try:
+            observer.trial_ended(info, status, outcome)
+        except Exception:
+            pass
+        raise

@@ -28,8 +28,7 @@ import math
 import threading
 import time
 import zlib
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,7 +47,13 @@ from study.errors import StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.lease import LeaseHandle, hold_lease
-from study.protocol.observer import SessionInfo, SessionObserver, TrialInfo
+from study.protocol.observer import (
+    SessionInfo,
+    SessionObserver,
+    TrialInfo,
+    session_ending,
+    trial_ending,
+)
 from study.protocol.participant_model import ParticipantModel
 from study.protocol.participants import ParticipantTraits, draw_traits
 from study.protocol.roster import find_participant, load_study
@@ -175,7 +180,7 @@ def run_session(
                 "expected a participant still in the study"
             )
     observer = observer or SessionObserver()
-    with hold_lease(engine, participant_id, code, actor) as lease, _ending(observer):
+    with hold_lease(engine, participant_id, code, actor) as lease, session_ending(observer):
         # read the schedule and what is done only once no other session can change it
         with Session(engine) as session:
             participant = session.get_one(Participant, participant_id)
@@ -231,30 +236,6 @@ def run_session(
             if trial_id is not None:
                 completed.append(trial_id)
     return completed
-
-
-@contextmanager
-def _ending(observer: SessionObserver) -> Iterator[None]:
-    """Tell `observer` the session ended, however it ends."""
-    try:
-        yield
-    finally:
-        observer.session_ended()
-
-
-@contextmanager
-def _telling(observer: SessionObserver, info: TrialInfo, loop: Any) -> Iterator[None]:
-    """Tell `observer` a trial that ends on an exception: `stopped` or `interrupted`."""
-    try:
-        yield
-    except BaseException as exc:
-        status = "stopped" if isinstance(exc, SessionStopped) else "interrupted"
-        outcome = {"t_s": loop.t_s, **({} if status == "stopped" else {"reason": repr(exc)})}
-        try:
-            observer.trial_ended(info, status, outcome)
-        except Exception:  # the first error is the one to report (a full disk, say)
-            pass
-        raise
 
 
 class SessionStorageError(StudyInputError):
@@ -372,7 +353,8 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     )  # fmt: skip
     observer = run.observer
     observer.trial_started(info)
-    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer, _telling(observer, info, loop):
+    ending = trial_ending(observer, info, loop, SessionStopped)
+    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer, ending:
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
