@@ -92,7 +92,7 @@ class Recorder(SessionObserver):
         predicates: tuple[str, ...],
         notice: Callable[[str], None] = lambda _: None,
         resolve_s: float = 2.0,
-        gap_after_s: float = 0.25,
+        gap_after_s: float = 0.5,
         pylsl: ModuleType | None = None,
     ) -> None:
         self.lsl = pylsl or load_pylsl()

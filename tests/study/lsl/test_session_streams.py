@@ -213,8 +213,10 @@ def test_an_outside_instrument_is_stored_sample_for_sample_on_the_trials_clock(
         assert np.percentile(np.abs(error_s), 95) <= 0.005
         # the whole trial is covered: from its start to its end, at 1 kHz
         t = table["t_s"].to_numpy()
-        assert 0 <= t[0] <= 0.01 and ends[stream.trial_id] - 0.01 <= t[-1] <= ends[stream.trial_id]
-        assert len(t) == pytest.approx(ends[stream.trial_id] * 1000, rel=0.02)
+        # (within a few periods: the device's process may wait for a core at either end)
+        end = ends[stream.trial_id]
+        assert 0 <= t[0] <= 0.05 and end - 0.05 <= t[-1] <= end
+        assert len(t) == pytest.approx(end * 1000, rel=0.05)
 
 
 def test_a_marker_inlet_receives_every_marker_in_order_with_the_databases_trials(
@@ -286,7 +288,8 @@ def test_a_stream_lost_mid_trial_is_a_recorded_gap_and_the_trial_completes(
     engine.dispose()
     # one gap, from the last sample before the instrument died to the trial's end
     assert len(gaps) == 1
-    assert gaps[0][0] == pytest.approx(t[-1]) and 0.95 <= gaps[0][0] <= 1.1
+    # (the paced loop makes a step's samples up to a step, 50 ms, before their time)
+    assert gaps[0][0] == pytest.approx(t[-1]) and 0.85 <= gaps[0][0] <= 1.2
     assert gaps[0][1] == pytest.approx(end_s)
     assert len(notices) == 1 and f"LSL stream {device} (EMG) lost at t = " in notices[0]
 
