@@ -12,7 +12,9 @@ On the trial's clock, sample `k` is at
 `t_s = (lsl_time_s + time_correction_s - lsl_t0_s) * clock_rate`: `time_correction_s`
 brings the source's clock to the recording machine's LSL clock, `lsl_t0_s` is the
 trial's start on that clock, and `clock_rate` the trial seconds per second of wall time
-(1 unless the session was paced slower or faster than real time).
+(1 unless the session was paced slower or faster than real time), as long as the loop
+kept pace with the wall clock; where it fell behind, `t_s` is the loop's own progress
+at the sample's moment (`study.lsl.record`).
 """
 
 from __future__ import annotations

@@ -7,9 +7,13 @@ nothing run if one finds none). During a trial it pulls what arrived at every st
 the loop (without waiting) and commits it at most a second at a time (`db.lsl_streams`),
 each sample on the trial's clock:
 `t_s = (lsl_time_s + time_correction_s - t0) * clock_rate`, `t0` the trial's start on
-the LSL clock. A stream that sends nothing for `gap_after_s` (or ten of its sample
-periods, whichever is longer) is reported once (`notice`) and recorded as a gap, from
-its last sample before to its first after (or the trial's end); the trial goes on.
+the LSL clock, while the loop keeps pace; where it falls behind the wall clock (a busy
+machine), a sample's time is the loop's own progress at that moment instead,
+interpolated between its steps (the runner reports each step as it is made), so that
+an instrument's sample lines up with the trial's samples the loop was making then.
+A stream that sends nothing for `gap_after_s` (or ten of its sample periods, whichever
+is longer) is reported once (`notice`) and recorded as a gap, from its last sample
+before to its first after (or the trial's end); the trial goes on.
 Samples stamped before the trial's start or after its end are not kept.
 """
 
@@ -62,6 +66,7 @@ class _Stream:
     period_s: float
     writer: StreamWriter | None = None
     held_t: list[np.ndarray] = field(default_factory=list)
+    held_trial_t: list[np.ndarray] = field(default_factory=list)
     held_v: list[Any] = field(default_factory=list)
     last_arrival: float = 0.0
     last_t: float | None = None
@@ -105,6 +110,9 @@ class Recorder(SessionObserver):
         self.streams: list[_Stream] = []
         self._t0 = 0.0
         self._rate = 1.0
+        self._step_lsl: list[float] = []
+        self._step_t: list[float] = []
+        """When (LSL clock) the loop had made its samples up to which trial time."""
 
     def session_started(self, session: SessionInfo) -> None:
         if session.driver == "simulated" and session.pace is None:
@@ -151,24 +159,37 @@ class Recorder(SessionObserver):
     def trial_started(self, trial: TrialInfo) -> None:
         self._t0 = trial.clock_origin_s + self.offset_s
         self._rate = trial.clock_rate
+        self._step_lsl, self._step_t = [], []
         for s in self.streams:
             s.meta.time_correction_s = self._correction(s.inlet, s.meta.time_correction_s)
             s.meta.lsl_t0_s, s.meta.clock_rate = self._t0, self._rate
             s.writer = StreamWriter.create(self.engine, trial.trial_id, s.meta)
-            s.held_t, s.held_v, s.gaps = [], [], []
+            s.held_t, s.held_trial_t, s.held_v, s.gaps = [], [], [], []
             s.last_t, s.gap_from = None, None
             s.last_arrival = time.monotonic()
 
     def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
         now = time.monotonic()
+        if len(rows):
+            self._step_lsl.append(now + self.offset_s)
+            self._step_t.append(float(rows[-1, 0]))
         for s in self.streams:
             self._pull(s, now, t_end=None)
+
+    def trial_time(self, local_s: np.ndarray) -> np.ndarray:
+        """Trial times of LSL times on this machine's clock (see the module docstring):
+        the trial's clock, or the loop's progress where that is behind it."""
+        ideal = (local_s - self._t0) * self._rate
+        if not self._step_t:
+            return ideal
+        made = np.interp(local_s, self._step_lsl, self._step_t, left=np.inf, right=np.inf)
+        return np.minimum(ideal, made)
 
     def _pull(self, s: _Stream, now: float, t_end: float | None) -> None:
         values, stamps = s.inlet.pull_chunk(timeout=0.0, max_samples=100_000)
         if stamps:
             t = np.asarray(stamps, dtype=np.float64)
-            trial_t = (t + s.meta.time_correction_s - self._t0) * self._rate
+            trial_t = self.trial_time(t + s.meta.time_correction_s)
             keep = trial_t >= 0
             if t_end is not None:
                 keep &= trial_t <= t_end
@@ -180,6 +201,7 @@ class Recorder(SessionObserver):
                     self.notice(f"LSL stream {s.meta.name} ({s.meta.type}) is back at "
                                 f"t = {first:.2f} s")  # fmt: skip
                 s.held_t.append(t[keep])
+                s.held_trial_t.append(trial_t[keep])
                 s.held_v.append([values[k] for k in np.flatnonzero(keep)])
                 s.last_t = float(trial_t[keep][-1])
             s.last_arrival = now
@@ -198,15 +220,15 @@ class Recorder(SessionObserver):
             self._commit(s)
 
     def _held_s(self, s: _Stream) -> float:
-        return float(s.held_t[-1][-1] - s.held_t[0][0]) * self._rate
+        return float(s.held_trial_t[-1][-1] - s.held_trial_t[0][0])
 
     def _commit(self, s: _Stream) -> None:
         if s.writer is None:
             return
         t = np.concatenate(s.held_t)
         values = [v for block in s.held_v for v in block]
-        s.writer.write(t, values)
-        s.held_t, s.held_v = [], []
+        s.writer.write(t, values, np.concatenate(s.held_trial_t))
+        s.held_t, s.held_trial_t, s.held_v = [], [], []
 
     def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
         t_end = float(outcome.get("t_s", outcome.get("completion_time_s", 0.0)) or 0.0)

@@ -318,3 +318,57 @@ def test_the_trials_samples_go_out_with_the_tasks_channels_units_and_clock(
     starts = [stamp for stamp, m in starts if m["event"] == "trial_start"]
     trial_of = np.cumsum(np.r_[0, np.diff(rows[:, 0]) < 0])
     np.testing.assert_allclose(stamps, np.asarray(starts)[trial_of] + rows[:, 0], atol=1e-6)
+
+
+@dataclass
+class Stall(SessionObserver):
+    """Holds the session's thread once, when the trial reaches `at_s`: the loop falls
+    behind the wall clock by `for_s` (a busy machine)."""
+
+    at_s: float
+    for_s: float
+    held: list[float] = field(default_factory=list)
+
+    def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
+        if len(rows) and rows[-1, 0] >= self.at_s and not self.held:
+            self.held += [time.monotonic(), float(rows[-1, 0])]
+            time.sleep(self.for_s)
+            self.held.append(time.monotonic())
+
+
+def test_an_instrument_lines_up_with_the_loop_that_fell_behind(tmp_path: Path) -> None:
+    """While the loop stands still, the instrument's samples stay within a step of the
+    time the loop has reached (the trial's clock until then), not on the wall clock's
+    trial time, 0.4 s further on; nothing lands after the trial's last sample."""
+    tag = uuid.uuid4().hex[:8]
+    device = f"emg-{tag}"
+    design = DESIGN.format(tag=tag, device=device).replace("publish = true", "publish = false")
+    db = init_study(tmp_path, design, ("novice",))
+    proc = _device(device, 30.0, tmp_path / "device.log")
+    engine = open_database(db, create=False)
+    stall, origins = Stall(at_s=0.5, for_s=0.4), Origins()
+    try:
+        recorder = Recorder(engine, (f"name='{device}'",))
+        completed = _session(db, [origins, recorder, stall], max_trials=1, trial_s=1.5)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    with Session(engine) as s:
+        end_s = s.get_one(Trial, completed[0]).completion_time_s
+        stream = s.scalars(select(LslStream)).one()
+    table = read_stream(engine, stream.id)
+    engine.dispose()
+    t, made = table["t_s"].to_numpy(), table["made_s"].to_numpy()
+    assert t[-1] <= end_s
+    # the loop had made its samples up to `loop_t` and stood still from `held_from` to
+    # `held_to` (wall clock), then made its next step (0.05 s): a sample made meanwhile is
+    # on the trial's clock until that reaches `loop_t`, then between `loop_t` and the next
+    # step's end (the recorder knows when each step was done, not how it went)
+    held_from, loop_t, held_to = stall.held
+    during = (made > held_from + 0.01) & (made < held_to - 0.01)
+    assert during.sum() > 300  # about 0.38 s at 1 kHz
+    trial = origins.trials[completed[0]]
+    clock = (made[during] - trial.clock_origin_s) * trial.clock_rate
+    low = np.minimum(clock, loop_t) - 0.002
+    assert np.all((low <= t[during]) & (t[during] <= loop_t + 0.05 + 0.002))
+    assert clock[-1] > loop_t + 0.3  # the trial's clock ran on: not what was stored
