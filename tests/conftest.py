@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import sqlite3
+import sys
 import tempfile
 import uuid
 from collections.abc import Iterator
@@ -44,6 +45,8 @@ LSL_CONFIG = write_loopback_config(
     Path(tempfile.mkdtemp(prefix="lsl-loopback-")) / "lsl_api.cfg", f"tests-{uuid.uuid4().hex}"
 )
 os.environ[LSL_ENV] = str(LSL_CONFIG)
+PYLSL_LOADED_BEFORE_CONFIG = "pylsl" in sys.modules
+"""Whether pylsl was already loaded when the config was set (it must not be)."""
 
 
 STORED_CHUNK_SCHEMA = pa.schema(

@@ -14,7 +14,11 @@ from study.lsl.config import ENV, is_loopback_only, read_config, write_loopback_
 
 
 def test_the_suite_points_liblsl_at_a_loopback_only_config() -> None:
+    from tests.conftest import LSL_CONFIG, PYLSL_LOADED_BEFORE_CONFIG
+
+    assert not PYLSL_LOADED_BEFORE_CONFIG  # liblsl reads its config once, when it loads
     path = Path(os.environ[ENV])
+    assert path == LSL_CONFIG
     cfg = read_config(path)
     # the keys as liblsl's api_config.cpp reads them ("ports.IPv6", "multicast.ResolveScope"...)
     assert cfg["ports"]["IPv6"] == "disable"
