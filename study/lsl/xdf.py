@@ -12,9 +12,10 @@ database). Each sample's time on the trial's clock is its synchronised stamp min
 
 Refused with one line, nothing stored: a file that is not XDF; a truncated one (a chunk
 running past the end of the file, or a stream without the footer LabRecorder writes
-when it stops); one without the project's markers; markers naming a trial the database
-does not have; a trial whose streams were imported already. pyxdf reads damaged files
-as far as it can; the structural check is done here, before, for that reason.
+when it stops); one without the project's markers; markers of another study, or naming
+a trial the database does not have; a trial whose streams were imported already.
+pyxdf reads damaged files as far as it can; the structural check is done here, before,
+for that reason.
 """
 
 from __future__ import annotations
@@ -187,6 +188,14 @@ def import_xdf(
               and _info(streams[i], "type") != SAMPLE_STREAM_TYPE]  # fmt: skip
     with Session(engine) as session:
         study, _ = load_study(session)
+        other = next(
+            (t.start.get("study") for t in trials if t.start.get("study") != study.name), None
+        )
+        if other is not None:
+            raise XdfInputError(
+                f"{path}: the markers are of study {other!r}; expected this database's "
+                f"study {study.name!r}"
+            )
         ids = [_trial_id(session, study.id, path, t) for t in trials]
         for trial_id in ids:
             taken = session.scalars(select(LslStream.name).where(LslStream.trial_id == trial_id))

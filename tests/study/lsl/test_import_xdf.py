@@ -121,6 +121,11 @@ def test_bad_recordings_are_one_line_and_exit_2_with_nothing_stored(
     nofooter.write_bytes(good[: good.rfind(b"\x06\x00", 0, footer_at) - 2])
     line = _one_line_exit_2(capsys, "import-xdf", str(nofooter), "--db", db)
     assert "nofooter.xdf is truncated" in line
+    other = tmp_path / "other.xdf"
+    # (a name of the same length: the chunks' lengths stay right)
+    other.write_bytes(good.replace(b'"study":"xdf import"', b'"study":"xdf pilots"'))
+    line = _one_line_exit_2(capsys, "import-xdf", str(other), "--db", db)
+    assert "markers are of study 'xdf pilots'; expected this database's study" in line
     notxdf = tmp_path / "notes.xdf"
     notxdf.write_text("hello")
     assert "is not an XDF file" in _one_line_exit_2(capsys, "import-xdf", str(notxdf), "--db", db)
