@@ -149,11 +149,11 @@ class Recorder(SessionObserver):
         )  # fmt: skip
         return _Stream(inlet, meta, 1.0 / rate if rate > 0 else 0.0)
 
-    @staticmethod
-    def _correction(inlet: Any, last: float, timeout_s: float = 0.2) -> float:
+    def _correction(self, inlet: Any, last: float, timeout_s: float = 0.2) -> float:
+        """The inlet's time correction, s; the `last` estimate if the stream is lost."""
         try:
             return float(inlet.time_correction(timeout_s))
-        except Exception:  # a lost stream: keep the last estimate
+        except (self.lsl.util.TimeoutError, self.lsl.util.LostError):
             return last
 
     def trial_started(self, trial: TrialInfo) -> None:
