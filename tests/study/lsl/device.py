@@ -5,7 +5,8 @@ Streams two channels at RATE_HZ for SECONDS: `index` (the sample's number from 0
 `made_s` (`time.monotonic()` when the sample was made); each sample is pushed without a
 time stamp, so liblsl stamps it with its own clock at the push, as most vendors do.
 Writes `index made_s` per sample to LOG when it ends. Run with the test suite's
-LSLAPICFG in its environment (inherited), never without.
+LSLAPICFG in its environment (inherited), never without. Written with pylsl alone, as a
+vendor would, not with `study.lsl` (whose `sim_device` serves the bench).
 """
 
 from __future__ import annotations

@@ -5,8 +5,9 @@ little-endian][Tag: uint16][Content]`. Tag 1 FileHeader (XML), 2 StreamHeader
 (StreamID uint32 + XML `<info>`), 3 Samples (StreamID, `[NumSampleBytes][NumSamples]`,
 then per sample `[TimeStampBytes: 0 or 8][TimeStamp: double][values]`, a string value
 as `[NumLengthBytes][Length][bytes]`), 4 ClockOffset (StreamID, CollectionTime and
-OffsetValue as doubles), 6 StreamFooter (StreamID + XML). Written independently of the
-reader (pyxdf), so a test that reads these files back checks both sides.
+OffsetValue as doubles), 6 StreamFooter (StreamID + XML). Written here because pyxdf
+only reads XDF and LabRecorder (which writes it) is a desktop application; written
+independently of the reader, so a test that reads these files back checks both sides.
 """
 
 from __future__ import annotations
