@@ -38,12 +38,13 @@ Interfaces = {{{LOOPBACK}}}
 KnownPeers = {{{LOOPBACK}}}
 
 [log]
-level = -2
+level = -3
 """
 """ResolveScope `machine` sends discovery only to `MachineAddresses` (here loopback
 alone, no IPv6 group since IPv6 is off); `KnownPeers` adds unicast queries to loopback;
 `ListenAddress` and `Interfaces` keep the responders and any multicast on loopback;
-log level -2 prints liblsl's errors only."""
+log level -3 prints liblsl's fatal errors only (a lost stream is `study`'s one line, not
+liblsl's too)."""
 
 
 def write_loopback_config(path: Path, session_id: str | None = None) -> Path:

@@ -41,7 +41,7 @@ def test_liblsl_reads_the_config_the_suite_set(tmp_path: Path) -> None:
     )
     # log level 0 (INFO) so liblsl prints which file it loaded
     cfg = write_loopback_config(tmp_path / "cfg")
-    cfg.write_text(cfg.read_text().replace("level = -2", "level = 0"))
+    cfg.write_text(cfg.read_text().replace("level = -3", "level = 0"))
     env = {**os.environ, ENV: str(cfg)}
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
                          env=env, timeout=60, check=True)  # fmt: skip

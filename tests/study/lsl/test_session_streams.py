@@ -264,7 +264,7 @@ class Unplug(SessionObserver):
 
 
 def test_a_stream_lost_mid_trial_is_a_recorded_gap_and_the_trial_completes(
-    tmp_path: Path,
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
     tag = uuid.uuid4().hex[:8]
     device = f"emg-{tag}"
@@ -292,6 +292,7 @@ def test_a_stream_lost_mid_trial_is_a_recorded_gap_and_the_trial_completes(
     assert gaps[0][0] == pytest.approx(t[-1]) and 0.85 <= gaps[0][0] <= 1.2
     assert gaps[0][1] == pytest.approx(end_s)
     assert len(notices) == 1 and f"LSL stream {device} (EMG) lost at t = " in notices[0]
+    assert "broke off" not in capfd.readouterr().err  # that line is the one on screen
 
 
 def test_the_trials_samples_go_out_with_the_tasks_channels_units_and_clock(
