@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
@@ -21,6 +22,12 @@ from study.commands.base import (
 )
 from study.errors import StudyInputError
 from study.protocol.roster import schedule
+
+if TYPE_CHECKING:
+    from sqlalchemy import Engine
+
+    from study.protocol.design import StudyDesign
+    from study.protocol.observer import SessionObserver
 
 
 @click.command("run", cls=StudyCommand)
@@ -86,6 +93,7 @@ def run(
                                   "session at a time publishes its streams)")  # fmt: skip
         if driver != "simulated":
             raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
+        _lsl_notice(db_url)
         _run_all(db_url, jobs, pace, who, participants_path)
         return
     if driver == "keyboard":
@@ -136,15 +144,11 @@ def run(
     click.echo(f"{code}: {len(done)} trials completed and stored")
 
 
-def _lsl_observers(engine, publish: bool, progress: Progress):  # type: ignore[no-untyped-def]
+def _lsl_observers(engine: Engine, publish: bool, progress: Progress) -> SessionObserver | None:
     """The design's `[lsl]` streams (and --lsl's), their notices printed above the bar."""
-    from sqlalchemy.orm import Session
-
     from study.lsl.observers import session_observers
-    from study.protocol.roster import load_study
 
-    with Session(engine) as session:
-        _, design = load_study(session)
+    design = _design(engine)
 
     def notice(message: str) -> None:
         progress.console.print(f"study run: {message}", markup=False)
@@ -152,9 +156,33 @@ def _lsl_observers(engine, publish: bool, progress: Progress):  # type: ignore[n
     return session_observers(engine, design, publish, notice)
 
 
+def _design(engine: Engine) -> StudyDesign:
+    from sqlalchemy.orm import Session
+
+    from study.protocol.roster import load_study
+
+    with Session(engine) as session:
+        return load_study(session)[1]
+
+
 def _progress() -> Progress:
     """The bar both run modes show on stderr: what runs now, and k of n done."""
     return progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
+
+
+def _lsl_notice(db_url: str | None) -> None:
+    """Say that --all leaves the design's `[lsl]` table aside."""
+    engine = open_database(db_url, create=False)
+    try:
+        lsl = _design(engine).lsl
+    finally:
+        engine.dispose()
+    if lsl.publish or lsl.record:
+        click.echo(
+            "study run: the design's [lsl] streams are published and recorded by one "
+            "participant's session (--participant CODE), not by --all",
+            err=True,
+        )
 
 
 def _run_all(

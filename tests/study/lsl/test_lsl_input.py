@@ -80,3 +80,13 @@ def test_lsl_config_writes_a_loopback_only_file_once(
     assert main(["lsl-config", str(path)]) == 0
     assert is_loopback_only(path)
     assert "exists" in _one_line(capsys, "lsl-config", str(path))
+
+
+def test_run_all_says_it_leaves_the_lsl_table_aside(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    design = "trials_per_condition = 1\npractice_trials = 0\n[groups]\nnovice = 1\n"
+    db = init_study(tmp_path, design + "[lsl]\npublish = true\n", ("novice",))
+    assert main(["run", "--all", "--db", db]) == 0
+    err = capsys.readouterr().err
+    assert "[lsl] streams are published and recorded by one participant's session" in err
