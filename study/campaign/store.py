@@ -147,7 +147,7 @@ class CampaignDir:
             "factor_defaults": {k: v for k, v in DEFAULTS.items() if k not in self.spec.factors},
             "cells": len(self.spec.cells()), "units": total, "units_done": done,
             "complete": done == total, "data_source": DATA_SOURCE,
-            "note": "simulated participants (study.protocol.participants), not a measured study",
+            "note": "simulated participants (study.tasks.lcca.simulated_participant), not a measured study",
         }  # fmt: skip
         text = json.dumps(meta, indent=2) + "\n"
         _atomic_write(self.root / "campaign.json", lambda p: p.write_text(text))

@@ -52,7 +52,7 @@ def simulate(
 ) -> None:
     """Run one simulated trial headless and write TRIAL.csv, TRIAL.json and a figure."""
     from study.protocol.default_estimator import load_estimator
-    from study.protocol.lcca_trial import condition_haptics, simulated_participant
+    from study.tasks.lcca.trial import condition_haptics, simulated_participant
     from teleop_core.estimation.recording import write_csv_atomically
 
     for path in (out_csv, plot_path):

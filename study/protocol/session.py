@@ -48,9 +48,9 @@ from study.protocol.actor import current_actor
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.lease import LeaseHandle, hold_lease
 from study.protocol.participant_model import ParticipantModel
-from study.protocol.participants import ParticipantTraits, draw_traits
 from study.protocol.roster import find_participant, load_study
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
+from study.tasks.lcca.simulated_participant import ParticipantTraits, draw_traits
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.drivers import Driver
 

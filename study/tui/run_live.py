@@ -13,8 +13,8 @@ from typing import TYPE_CHECKING
 
 from rich.text import Text
 
+from study.tasks.notes.scene import NotesView, TrackView
 from study.tui.live_view import LiveReadout, PhantomView, gauge, sparkline
-from study.tui.scenes import NotesView, TrackView
 
 if TYPE_CHECKING:
     from study.protocol.tasks import Task

@@ -26,10 +26,10 @@ from textual.message import Message
 from textual.widgets import Label, Select
 
 from study.protocol.tasks import Task, get_task, tasks
+from study.tasks.notes.scene import NotesView, TrackView
 from study.tui.db_errors import SafeWorkers, plain_line
 from study.tui.live_view import LiveReadout, PhantomView
 from study.tui.run_live import KeyboardMixin, LiveViewMixin
-from study.tui.scenes import NotesView, TrackView
 from study.tui.services import NextTrial, Roster, StudyServices
 from study.tui.trial_runner import (
     Simulation,

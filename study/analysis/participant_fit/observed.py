@@ -32,8 +32,8 @@ from study.analysis.participant_fit.emulator import floor, log_moment, moment_na
 from study.analysis.source import DataSource
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS
-from study.protocol.participants import PROFILES
 from study.protocol.tasks import get_task
+from study.tasks.lcca.simulated_participant import PROFILES
 
 Progress = Callable[[int, int], None]
 MIN_PER_GROUP = 4

@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 
     from teleop_core.loop.drivers import Driver
 
-BUILTIN = ("study.protocol.tasks.lcca", "study.protocol.tasks.notes")
+BUILTIN = ("study.tasks.lcca.task", "study.tasks.notes.task")
 """The modules of the tasks that come with the tool, each registering its `TASK`."""
 ENTRY_POINT_GROUP = "haptic_study.tasks"
 COMPLETION_TIME = "completion_time_s"
@@ -115,7 +115,7 @@ class TrialResult:
 
 
 class Traits(Protocol):
-    """A simulated person (`study.protocol.participants.ParticipantTraits`; named here by
+    """A simulated person (`study.tasks.lcca.simulated_participant.ParticipantTraits`; named here by
     what a task uses of it, so that the registry does not import the participants)."""
 
     group: str

@@ -16,8 +16,12 @@ import pandas as pd
 
 from study.errors import StudyInputError
 from study.protocol.participant_model import ParticipantModel
-from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
 from study.protocol.tasks import TrialResult
+from study.tasks.lcca.simulated_participant import (
+    ParticipantTraits,
+    SimulatedParticipant,
+    draw_traits,
+)
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.core import LoopConfig, TeleopLoop
 from teleop_core.loop.link import LinkParams
