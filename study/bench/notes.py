@@ -92,8 +92,8 @@ def notes_trials(
     config: NotesBenchConfig, progress: Callable[[str], None]
 ) -> tuple[pd.DataFrame, float]:
     """`trials` simulated NOTES trials per group and condition; (measures, wall seconds)."""
-    from study.tasks.lcca.simulated_participant import GROUPS
-    from study.tasks.lcca.trial import CONDITIONS, simulated_participant
+    from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
+    from study.protocol.traits import GROUPS, simulated_participant
     from study.tasks.notes.trial import run_notes_trial
 
     rows = []

@@ -73,7 +73,7 @@ def surgeons_trials(
 ) -> pd.DataFrame:
     """One NOTES trial per simulated expert in VO and in HV (the same person, seed for
     seed); one row per trial with the measures of `PAPER`, completion and success."""
-    from study.tasks.lcca.trial import simulated_participant
+    from study.protocol.traits import simulated_participant
     from study.tasks.notes.trial import run_notes_trial
 
     rows = []

@@ -43,7 +43,7 @@ from study.analysis.participant_fit.fit import FitSettings, fit_participants, si
 from study.protocol.demo import run_demo
 from study.protocol.participant_model import FORMAT, load_model
 from study.protocol.session import participant_traits
-from study.tasks.lcca.simulated_participant import PROFILES, TRAIT_BOUNDS, TRAITS, GroupProfile
+from study.protocol.traits import PROFILES, TRAIT_BOUNDS, TRAITS, GroupProfile
 
 TOLERANCE = 0.15
 """Largest relative error of a recovered group mean."""

@@ -30,7 +30,7 @@ from study.protocol.design import KNOWN_CONDITIONS, StudyDesign, next_order
 from study.protocol.roster import CODE_DIGITS, plan_blocks
 from study.protocol.session import MAX_TRIAL_S, participant_traits
 from study.protocol.tasks import get_task
-from study.tasks.lcca.simulated_participant import ParticipantTraits
+from study.protocol.traits import ParticipantTraits
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.link import LinkParams
 

@@ -50,7 +50,7 @@ from study.protocol.lease import LeaseHandle, hold_lease
 from study.protocol.participant_model import ParticipantModel
 from study.protocol.roster import find_participant, load_study
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
-from study.tasks.lcca.simulated_participant import ParticipantTraits, draw_traits
+from study.protocol.traits import ParticipantTraits, draw_traits
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.drivers import Driver
 

@@ -53,7 +53,7 @@ from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
 from study.protocol.participant_model import FORMAT
 from study.protocol.tasks import get_task
-from study.tasks.lcca.simulated_participant import PROFILES, TRAITS, GroupProfile, draw_traits
+from study.protocol.traits import PROFILES, TRAITS, GroupProfile, draw_traits
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,7 @@ from study.analysis.source import DataSource
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS
 from study.protocol.tasks import get_task
-from study.tasks.lcca.simulated_participant import PROFILES
+from study.protocol.traits import PROFILES
 
 Progress = Callable[[int, int], None]
 MIN_PER_GROUP = 4

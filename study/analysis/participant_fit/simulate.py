@@ -33,7 +33,7 @@ import pandas as pd
 
 from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
 from study.protocol.tasks import get_task
-from study.tasks.lcca.simulated_participant import ParticipantTraits
+from study.protocol.traits import ParticipantTraits
 
 
 def trial_seed(setting: int, repeat: int, salt: str = "fit", condition: str = "") -> int:

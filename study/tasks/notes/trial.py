@@ -31,9 +31,9 @@ import numpy as np
 import pandas as pd
 
 from study.errors import StudyInputError
+from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
 from study.protocol.tasks import TrialResult
-from study.tasks.lcca.simulated_participant import ParticipantTraits
-from study.tasks.lcca.trial import CONDITIONS
+from study.protocol.traits import ParticipantTraits
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
     GRIP_STIFFNESS_N_M_PER_RAD,
