@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 
 def trial_plot(task: Task, frame: pd.DataFrame, title: str) -> plt.Figure:
     if task.trial_figure == "lcca":
-        from study.analysis.phantom_figures import plot_trial
+        from study.tasks.lcca.figures import plot_trial
         from teleop_core.phantom.lcca import LccaPhantom
 
         return plot_trial(frame, LccaPhantom(), title)
