@@ -154,9 +154,12 @@ class Task:
     live_traces: ClassVar[tuple[LiveTrace, LiveTrace]]
     live_peaks: ClassVar[tuple[LiveTrace, LiveTrace]]
     """The two peaks reported when a trial ends (as stored measures)."""
-    live_scene: ClassVar[str] = "track"
-    """What the TUI draws beside the readout: `lcca` (the phantom), `notes` (the scope's
-    depth and roll) or `track` (the insertion along a bar, for any task)."""
+    live_scene: ClassVar[str | None] = None
+    """The widget the run screen draws beside the readout, as `module:Class` (a Textual
+    widget of the task's package with `update_frame(frame)`, imported by the TUI when it
+    shows the task); None: the insertion along a bar (`study.tui.scenes.TrackView`)."""
+    live_scene_title: ClassVar[str] = "{title}: insertion"
+    """The live view's title (`{title}`: the task's `title`)."""
     key_hints: ClassVar[str] = "↑↓ dial ←→ rotate space let go e end"
     track_length_m: ClassVar[float] = 0.5
     """The `track` scene's full length of insertion, m."""
@@ -166,9 +169,6 @@ class Task:
     """The sign convention of the traced forces, under the figure."""
     trace_measure: ClassVar[str] = ""
     """The measure whose highest VO trial Fig. 9 draws (default: the last analysed one)."""
-    trial_figure: ClassVar[str] = "traces"
-    """How `study simulate --plot` draws one trial: `lcca` (the path in the phantom),
-    `notes` (depth, roll and forces) or `traces` (the live traces over time, any task)."""
 
     # -- the trial --------------------------------------------------------------------
 
@@ -232,6 +232,12 @@ class Task:
             **values, **extras, **self.driver_counts(driver), "participant": traits.to_dict(),
         }  # fmt: skip
         return TrialResult(self.trial_frame(samples), summary)
+
+    def trial_figure(self, frame: pd.DataFrame, title: str) -> Any:
+        """The matplotlib figure `study simulate --plot` draws of one trial (its TRIAL.csv
+        frame), drawn by the task's package; None (the default): the insertion and the
+        live traces over time (`study.analysis.trial_plot.traces_plot`)."""
+        return None
 
     fit_features: ClassVar[tuple[str, ...]] = ()
     """`trial_features`' keys: a trial frame's features for the participant fit (> 0, SI)."""

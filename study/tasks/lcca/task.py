@@ -51,7 +51,8 @@ class LccaTask(Task):
         LiveTrace("distal_force_n", "distal", 1.0),
     )
     live_peaks = live_traces
-    live_scene = "lcca"
+    live_scene = "study.tui.live_view:PhantomView"
+    live_scene_title = "LCCA phantom (frontal)"
     key_hints = "↑↓ dial ←→ rotate space let go e end"
     trace_names: ClassVar[dict[str, str]] = {
         "proximal_force_n": "proximal, reference",
@@ -77,7 +78,11 @@ class LccaTask(Task):
 
         return LccaPhantom()
 
-    trial_figure = "lcca"
+    def trial_figure(self, frame, title):
+        from study.tasks.lcca.figures import plot_trial
+        from teleop_core.phantom.lcca import LccaPhantom
+
+        return plot_trial(frame, LccaPhantom(), title)
 
     def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
                   context=None, link=None):  # fmt: skip

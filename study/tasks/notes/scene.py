@@ -1,6 +1,6 @@
-"""The scenes drawn beside the run screen's readout for tasks without the LCCA phantom:
-the NOTES scope's depth and roll (`notes_scene`), and any task's insertion along a track
-(`track_scene`). Each is a widget redrawn whole at each frame of the live view.
+"""The NOTES task's live scene, drawn beside the run screen's readout: the scope's depth
+along the canal (introitus, posterior fornix, peritoneal cavity, target) and its roll
+against the target roll (`notes_scene`), a widget redrawn whole at each frame.
 """
 
 from __future__ import annotations
@@ -8,20 +8,15 @@ from __future__ import annotations
 import math
 
 from rich.text import Text
-from textual.widget import Widget
 
 from study.tui.live_view import TARGET_STYLE, TIP_STYLE
+from study.tui.scenes import SceneView, axis_column
 from study.tui.trial_runner import LiveFrame
 
 NOTES_DEPTH_PAST_TARGET_M = 0.02
 """How far past the NOTES target the depth axis runs."""
 NOTES_ROLL_SPAN_RAD = math.pi / 2
 """The roll axis runs from -90 to +90 degrees."""
-
-
-def _axis_column(value: float, lo: float, hi: float, cols: int) -> int:
-    """The column of `value` on an axis from lo (column 0) to hi (column cols - 1)."""
-    return min(max(round((cols - 1) * (value - lo) / (hi - lo)), 0), cols - 1)
 
 
 def notes_region(code: int) -> str:
@@ -48,10 +43,10 @@ def notes_scene(frame: LiveFrame | None, cols: int) -> Text:
     breached = frame is not None and notes_region(frame.branch) in ("cavity", "target", "fold")
 
     def column(depth_m: float) -> int:
-        return _axis_column(depth_m, 0.0, end_m, cols)
+        return axis_column(depth_m, 0.0, end_m, cols)
 
     def roll_column(roll_rad: float) -> int:
-        return _axis_column(roll_rad, -NOTES_ROLL_SPAN_RAD, NOTES_ROLL_SPAN_RAD, cols)
+        return axis_column(roll_rad, -NOTES_ROLL_SPAN_RAD, NOTES_ROLL_SPAN_RAD, cols)
 
     def axis(marks: dict[int, tuple[str, str]], zone: range) -> None:
         """One axis line: `marks` (column -> character, style) over the target zone."""
@@ -96,24 +91,6 @@ def notes_scene(frame: LiveFrame | None, cols: int) -> Text:
     return text
 
 
-class SceneView(Widget):
-    """A scene (`scene(frame, columns) -> Text`) redrawn whole at each frame."""
-
-    def __init__(self, **kwargs: object) -> None:
-        super().__init__(**kwargs)  # type: ignore[arg-type]
-        self._frame: LiveFrame | None = None
-
-    def update_frame(self, frame: LiveFrame | None) -> None:
-        self._frame = frame
-        self.refresh()
-
-    def scene(self, frame: LiveFrame | None, cols: int) -> Text:
-        raise NotImplementedError
-
-    def render(self) -> Text:
-        return self.scene(self._frame, self.size.width)
-
-
 class NotesView(SceneView):
     """The NOTES scope's depth and roll (`notes_scene`)."""
 
@@ -123,33 +100,3 @@ class NotesView(SceneView):
 
     def scene(self, frame: LiveFrame | None, cols: int) -> Text:
         return notes_scene(frame, cols)
-
-
-def track_scene(frame: LiveFrame | None, cols: int) -> Text:
-    """Any task's tip as text: its insertion along a bar of the task's `track_length_m`,
-    the region it is in, and its roll."""
-    cols = max(cols, 20)
-    text = Text(no_wrap=True, overflow="crop")
-    if frame is None:
-        text.append("(no sample yet)")
-        return text
-    task = frame.task
-    region = task.regions[frame.branch] if 0 <= frame.branch < len(task.regions) else "?"
-    text.append(f"inserted {frame.insertion_m * 1000:5.0f} mm   in {region}\n")
-    at = _axis_column(frame.insertion_m, 0.0, task.track_length_m, cols)
-    text.append("━" * at, "bold")
-    text.append("●", TIP_STYLE)
-    text.append("─" * max(cols - at - 1, 0) + "\n", "dim")
-    text.append(f"\nroll {math.degrees(frame.rotation_rad):+5.0f} deg")
-    return text
-
-
-class TrackView(SceneView):
-    """`track_scene`: the view of a task without its own."""
-
-    DEFAULT_CSS = """
-    TrackView { width: 1fr; height: 1fr; min-height: 4; background: $surface; }
-    """
-
-    def scene(self, frame: LiveFrame | None, cols: int) -> Text:
-        return track_scene(frame, cols)

@@ -73,7 +73,8 @@ class NotesTask(Task):
         LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
         LiveTrace("tip_force_n", "on the fornix", FULL_SCALE_N, magnitude=True),
     )
-    live_scene = "notes"
+    live_scene = "study.tasks.notes.scene:NotesView"
+    live_scene_title = "NOTES: scope depth and roll"
     key_hints = "↑↓ push/pull ←→ roll space let go e end"
     trace_names: ClassVar[dict[str, str]] = {
         "proximal_force_n": "demanded (tissue)",
@@ -85,7 +86,10 @@ class NotesTask(Task):
         "resists withdrawal. Tip force: the fornix on the tip, ≥\u00a00."
     )
 
-    trial_figure = "notes"
+    def trial_figure(self, frame, title):
+        from study.tasks.notes.figures import notes_trial_plot
+
+        return notes_trial_plot(frame, title)
 
     def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
                   context=None, link=None):  # fmt: skip

@@ -212,10 +212,11 @@ def test_a_task_registered_here_runs_through_session_export_and_analysis(
 
 async def test_the_run_screen_shows_a_registered_task(probe: ProbeTask, tmp_path: Path) -> None:
     from study.protocol.default_estimator import load_estimator
-    from study.tasks.notes.scene import NotesView, TrackView
+    from study.tasks.notes.scene import NotesView
     from study.tui import StudyServices, TuiSettings, make_app
     from study.tui.confirm import Confirm
     from study.tui.live_view import PhantomView
+    from study.tui.scenes import TrackView
     from tests.study.tui.conftest import run_screen, wait_for
 
     db = _study(tmp_path, 1)

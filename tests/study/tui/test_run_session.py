@@ -63,7 +63,7 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
         await wait_for(pilot, lambda: pane.status == "completed", 120)
         assert pane.last_outcome.startswith("P001: trial stored (id 1, peaks")
         # the live view was fed while the trial ran
-        assert app.query_one("#phantom")._frame is not None
+        assert app.query_one(PhantomView)._frame is not None
         # one trial per block in DESIGN: the block is done, the form opens for it
         await wait_for(pilot, lambda: app.query_one("#tabs").active == "tlx")
         await wait_for(pilot, lambda: app.query_one(TlxPane).status == "new")
