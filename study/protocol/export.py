@@ -19,12 +19,12 @@ from sqlalchemy.orm import Session
 
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from study.analysis.frames import measure_columns, trial_frame
 from study.errors import StudyInputError
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_KEYS
 from study.protocol.export_files import AtomicFile, escape_frame, refuse_symlink
 from study.protocol.roster import load_study
 from study.protocol.tasks import COMPLETION_TIME, get_task
+from study.protocol.trial_table import measure_columns, trial_frame
 
 if TYPE_CHECKING:
     from study.protocol.sample_export import Progress, SampleSelection
