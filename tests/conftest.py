@@ -37,28 +37,49 @@ STORED_CHUNK_SCHEMA = pa.schema(
     [("t_s", pa.float64()), *((c, pa.float64()) for c in SAMPLE_COLUMNS[1:6]),
      ("branch", pa.string()), *((c, pa.float64()) for c in SAMPLE_COLUMNS[7:])]
 )  # fmt: skip
-"""A stored chunk's columns as the format's description (`db.sample_codec`) gives them."""
+"""The legacy chunk layout (the schema of a writer given none), as the format's
+description (`db.sample_codec`) gives it."""
 
 
-def decode_stored_chunk(data: bytes, raw_bytes: int) -> pa.RecordBatch:
+def decode_stored_chunk(
+    data: bytes, raw_bytes: int, schema_data: bytes | None = None
+) -> pa.RecordBatch:
     """A `sample_chunks.data` value decoded with plain pyarrow, as the format's
-    description says (independently of `db.sample_reader`)."""
+    description says (independently of `db.sample_reader`): in the schema stored as
+    `schema_data` (`sample_schemas.data`), else the legacy layout."""
     message = pa.decompress(bytes(data), decompressed_size=raw_bytes, codec="zstd")
-    return pa.ipc.read_record_batch(message, STORED_CHUNK_SCHEMA)
+    schema = (
+        STORED_CHUNK_SCHEMA
+        if schema_data is None
+        else pa.ipc.read_schema(pa.py_buffer(bytes(schema_data)))
+    )
+    return pa.ipc.read_record_batch(message, schema)
+
+
+CHUNKS_SQL = (
+    "SELECT c.trial_id, c.first_seq, c.raw_bytes, c.data, s.data FROM sample_chunks c "
+    "JOIN sample_schemas s ON s.id = c.schema_id"
+)
 
 
 def expose_samples(conn: sqlite3.Connection) -> None:
     """Every stored sample of the SQLite study database behind `conn`, decoded from its
-    chunks, as a temporary table `samples` (trial_id, seq, the sample columns), so that
-    a check can be written as one SQL query."""
-    names = ("trial_id", "seq", *STORED_CHUNK_SCHEMA.names)
-    conn.execute(f"CREATE TEMP TABLE samples ({', '.join(names)})")
-    chunks = conn.execute("SELECT trial_id, first_seq, raw_bytes, data FROM sample_chunks")
-    for trial_id, first_seq, raw_bytes, data in chunks.fetchall():
-        columns = decode_stored_chunk(data, raw_bytes).to_pydict()
-        n = len(columns["t_s"])
+    chunks (each in its stored schema), as a temporary table `samples` (trial_id, seq,
+    every column of every stored schema), so that a check can be written as one SQL
+    query."""
+    chunks = conn.execute(CHUNKS_SQL).fetchall()
+    decoded = [(t, first, decode_stored_chunk(d, raw, s)) for t, first, raw, d, s in chunks]
+    names = list(dict.fromkeys(n for *_, batch in decoded for n in batch.schema.names))
+    conn.execute(f"CREATE TEMP TABLE samples (trial_id, seq, {', '.join(names)})")
+    for trial_id, first_seq, batch in decoded:
+        columns = batch.to_pydict()
+        n = batch.num_rows
         rows = zip([trial_id] * n, range(first_seq, first_seq + n), *columns.values(), strict=True)
-        conn.executemany(f"INSERT INTO samples VALUES ({', '.join('?' * len(names))})", rows)
+        conn.executemany(
+            f"INSERT INTO samples (trial_id, seq, {', '.join(columns)}) "
+            f"VALUES ({', '.join('?' * (len(columns) + 2))})",
+            rows,
+        )
 
 
 def pg_schema_url(base: str, schema: str) -> str:

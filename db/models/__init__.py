@@ -9,7 +9,14 @@ from db.models.calibration import Calibration
 from db.models.lease import SessionLease
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, SampleChunk, Trial, TrialMeasure
+from db.models.trial import (
+    SAMPLE_COLUMNS,
+    TRIAL_STATUSES,
+    SampleChunk,
+    SampleSchema,
+    Trial,
+    TrialMeasure,
+)
 
 __all__ = [
     "SAMPLE_COLUMNS",
@@ -19,6 +26,7 @@ __all__ = [
     "Calibration",
     "Participant",
     "SampleChunk",
+    "SampleSchema",
     "ScheduleBlock",
     "SessionLease",
     "Study",

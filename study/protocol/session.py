@@ -329,7 +329,7 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     chunks = []
     step_s = STEP_S if run.pace is None else PACED_STEP_S
     wall0 = time.monotonic()
-    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer:
+    with SampleWriter(engine, trial_id, chunk_s=1.0, schema=task.sample_schema()) as writer:
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))

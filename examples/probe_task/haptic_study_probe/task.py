@@ -39,7 +39,7 @@ class ProbeTask(Task):
     )
     live_traces = (LiveTrace("push_force_n", "push", 2.0), LiveTrace("aim_rad", "aim", 1.0))
     live_peaks = live_traces
-    trace_names: ClassVar[dict[str, str]] = {"proximal_force_n": "push (medium)"}
+    trace_names: ClassVar[dict[str, str]] = {"push_force_n": "push (medium)"}
     sign_note = "Push force: positive resists insertion."
     track_length_m = 0.1
 

@@ -30,6 +30,7 @@ from study.errors import StudyInputError
 if TYPE_CHECKING:
     import numpy as np
     import pandas as pd
+    import pyarrow as pa
 
     from teleop_core.loop.drivers import Driver
 
@@ -64,12 +65,17 @@ class Measure:
 
 @dataclass(frozen=True)
 class SampleColumn:
-    """One column of the task's sample rows, in the loop's order."""
+    """One column of the task's sample rows, in the loop's order; stored, exported and
+    drawn under `name` (the task's chunks' schema is its columns, `Task.sample_schema`)."""
 
     name: str
-    """The task's own name for it (TRIAL.csv, live view, figures)."""
+    """The task's own name for it (TRIAL.csv, the stored samples, the export, figures)."""
     stored_as: str | None
-    """The `samples` table column that stores it; None: not stored."""
+    """Its role in the loop's layout, and the column of the one layout every task's
+    samples had before each chunk carried its task's schema (`db.models.trial.
+    SAMPLE_COLUMNS`; `t_s`, `insertion_m`, `rotation_rad` and `branch` are required):
+    how a database of that time is read under the task's names. None: a column that
+    layout had no place for."""
     unit: str
     description: str
 
@@ -164,7 +170,8 @@ class Task:
     track_length_m: ClassVar[float] = 0.5
     """The `track` scene's full length of insertion, m."""
     trace_names: ClassVar[dict[str, str]]
-    """TRIAL.csv force columns -> legend label, for the force-trace figure."""
+    """Force columns (the task's sample column names) -> legend label, for the
+    force-trace figure, in the order of `study.analysis.trace_figure.STYLES`."""
     sign_note: ClassVar[str] = ""
     """The sign convention of the traced forces, under the figure."""
     trace_measure: ClassVar[str] = ""
@@ -311,17 +318,53 @@ class Task:
     def column_index(self) -> dict[str, int]:
         return {c.name: k for k, c in enumerate(self.sample_columns)}
 
-    def stored_columns(self, samples: np.ndarray) -> dict[str, list[object]]:
-        """The `samples` table's columns of a batch of loop rows (regions by name)."""
-        out: dict[str, list[object]] = {}
+    def sample_schema(self) -> pa.Schema:
+        """The Arrow schema the task's samples are stored in: its columns in order under
+        its own names, each with its unit and description; the region column is text."""
+        import pyarrow as pa
+
+        from db.sample_codec import sample_field
+
+        region = self.region_column
+        return pa.schema(
+            [
+                sample_field(c.name, c.unit, c.description, text=c.name == region)
+                for c in self.sample_columns
+            ]
+        )
+
+    def stored_columns(self, samples: np.ndarray) -> dict[str, Any]:
+        """A batch of loop rows as the stored columns, by the task's names (regions by
+        name)."""
+        out: dict[str, Any] = {}
+        region = self.region_column
         for k, column in enumerate(self.sample_columns):
-            if column.stored_as is None:
-                continue
-            values = samples[:, k].tolist()
-            if column.stored_as == "branch":
-                values = [self.regions[int(v)] for v in values]
-            out[column.stored_as] = values
+            values = samples[:, k]
+            if column.name == region:
+                values = [self.regions[int(v)] for v in values.tolist()]
+            out[column.name] = values
         return out
+
+    def stored_table(self, table: pa.Table) -> pa.Table:
+        """Samples read from the database (`db.sample_reader`) under the task's own
+        columns: key columns (`trial_id`, `seq`) kept in front, then every sample column
+        in the task's order. Chunks stored in the layout of before the tasks' own schemas
+        (`SampleColumn.stored_as`) are renamed; a column they lack is NULL."""
+        import pyarrow as pa
+
+        keys = [k for k in ("trial_id", "seq") if k in table.column_names]
+        values = [n for n in table.column_names if n not in keys]
+        own = values == [c.name for c in self.sample_columns]
+        arrays = [table[k] for k in keys]
+        fields = [table.schema.field(k) for k in keys]
+        for column, own_field in zip(self.sample_columns, self.sample_schema(), strict=True):
+            source = column.name if own else column.stored_as
+            if source is not None and source in values:
+                arrays.append(table[source].cast(own_field.type))
+            else:
+                arrays.append(pa.nulls(table.num_rows, own_field.type))
+            fields.append(own_field)
+        return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 
     def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
         """`gain_n_m_per_n`, else the task's default; refused for a task without a dial."""

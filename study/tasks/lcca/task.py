@@ -55,8 +55,8 @@ class LccaTask(Task):
     live_scene_title = "LCCA phantom (frontal)"
     key_hints = "↑↓ dial ←→ rotate space let go e end"
     trace_names: ClassVar[dict[str, str]] = {
-        "proximal_force_n": "proximal, reference",
-        "proximal_force_est_n": "proximal, estimated",
+        "reference_force_n": "proximal, reference",
+        "proximal_force_n": "proximal, estimated",
         "distal_force_n": "distal (tip on wall)",
     }
     sign_note = (

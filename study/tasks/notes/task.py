@@ -77,9 +77,9 @@ class NotesTask(Task):
     live_scene_title = "NOTES: scope depth and roll"
     key_hints = "↑↓ push/pull ←→ roll space let go e end"
     trace_names: ClassVar[dict[str, str]] = {
-        "proximal_force_n": "demanded (tissue)",
-        "proximal_force_est_n": "rendered (device)",
-        "distal_force_n": "tip (fornix)",
+        "force_demanded_n": "demanded (tissue)",
+        "force_rendered_n": "rendered (device)",
+        "tip_force_n": "tip (fornix)",
     }
     sign_note = (
         "Force on the scope: positive resists insertion (pushing in), negative "
