@@ -13,6 +13,7 @@ import os
 import sqlite3
 import uuid
 from collections.abc import Iterator
+from pathlib import Path
 
 import pyarrow as pa
 import pytest
@@ -141,3 +142,64 @@ def pytest_terminal_summary(terminalreporter) -> None:  # type: ignore[no-untype
         parts = ", ".join(f"{n} {outcome}" for outcome, n in sorted(_pg_outcomes.items()))
         where = os.environ.get(PG_ENV) or f"{PG_ENV} unset"
         terminalreporter.write_line(f"PostgreSQL cases ({where}): {parts}")
+
+
+SLOW_MODULES = frozenset(
+    {
+        # train a GRU, calibrate, or compile the loop
+        "tests/teleop_core/test_gru.py",
+        "tests/teleop_core/test_estimator.py",
+        "tests/teleop_core/test_calibration.py",
+        "tests/teleop_core/test_generalisation.py",
+        "tests/teleop_core/test_cold_start.py",
+        "tests/teleop_core/test_memory.py",
+        "tests/teleop_core/test_regimes.py",
+        "tests/teleop_core/test_scenarios.py",
+        "tests/teleop_core/notes/test_identify.py",
+        "tests/study/test_estimator_cli.py",
+        "tests/study/test_estimator_effects_cli.py",
+        "tests/study/test_estimator_calibration_cli.py",
+        "tests/study/test_calibrate_cli.py",
+        "tests/study/test_calibration_figures.py",
+        # whole simulated studies, sessions, campaigns, benches and the participant fit
+        "tests/study/test_campaign.py",
+        "tests/study/test_kill_points.py",
+        "tests/study/test_participants.py",
+        "tests/study/test_participant_fit.py",
+        "tests/study/test_participant_fit_notes.py",
+        "tests/study/test_participant_fit_samples.py",
+        "tests/study/test_participant_fit_validate.py",
+        "tests/study/test_figures_demo.py",
+        "tests/study/test_figures.py",
+        "tests/study/test_notes_surgeons.py",
+        "tests/study/test_haptic_gain.py",
+        "tests/study/test_session.py",
+        "tests/study/test_multisite.py",
+        "tests/study/test_bench_export.py",
+        "tests/study/test_bench_master_cli.py",
+        "tests/study/test_bench_startup_cli.py",
+        "tests/study/test_sample_export_spans.py",
+        "tests/study/test_properties.py",
+        "tests/study/test_recording_properties.py",
+        # the terminal app driven by its pilot or in a real terminal, and import-linter
+        "tests/study/tui/test_lab_day.py",
+        "tests/study/tui/test_run_session.py",
+        "tests/study/tui/test_adding_a_task.py",
+        "tests/study/tui/test_snapshots.py",
+        "tests/study/tui/test_terminal.py",
+        "tests/study/tui/test_terminal_db_errors.py",
+        "tests/study/tui/test_db_errors.py",
+        "tests/test_layering.py",
+        "tests/study/test_layers.py",
+    }
+)
+"""Test modules marked `slow`: the fast lane, `pytest -m "not slow"`, leaves them out
+(README, "Tests"). A module belongs here when its tests train, calibrate, compile or
+simulate whole studies; the full suite runs everything."""
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    root = Path(__file__).resolve().parent.parent
+    for item in items:
+        if Path(item.path).resolve().relative_to(root).as_posix() in SLOW_MODULES:
+            item.add_marker(pytest.mark.slow)

@@ -87,9 +87,8 @@ def sample_export_columns(tasks: Iterable[str]) -> tuple[str, ...]:
 
 
 def _text_columns(schema: pa.Schema) -> tuple[str, ...]:
-    """Dictionary-encoded in Parquet: the keys and the tasks' region columns (tried on
-    every float column, pyarrow's default, it took 80 % of the writing time and gave a
-    larger file)."""
+    """Dictionary-encoded in Parquet: the text columns (on every float column, pyarrow's
+    default, it took 80 % of the writing time and gave a larger file)."""
     return tuple(f.name for f in schema if f.type == pa.string())
 MAX_WORKERS = 4
 """Most reader threads by default (one per CPU up to this)."""
@@ -228,10 +227,8 @@ class _Keys:
             pa.array([getattr(trials[k], f.name) for k in self._order], f.type) for f in _KEY_FIELDS
         ]
         self._tasks: list[Task] = [get_task(n) for n in dict.fromkeys(t.task for t in trials)]
-        task_index = {t.name: k for k, t in enumerate(self._tasks)}
-        self._task_of = np.array(
-            [task_index[trials[k].task] for k in self._order], dtype=np.int64
-        )
+        index = {t.name: k for k, t in enumerate(self._tasks)}
+        self._task_of = np.array([index[trials[k].task] for k in self._order], dtype=np.int64)
         self.schema = schema
 
     def keyed(self, span: pa.Table) -> pa.Table:
@@ -243,16 +240,15 @@ class _Keys:
         row_task = self._task_of[rows]
         present = np.unique(row_task)
         mapped = {k: self._tasks[k].stored_table(span) for k in present}
-        values = []
+        values = []  # each export column: its task's, NULL for a row of a task without it
         for field in list(self.schema)[len(_KEY_FIELDS) + 1 :]:
             column: pa.Array | pa.ChunkedArray = pa.nulls(span.num_rows, field.type)
             for k, table in mapped.items():
                 if field.name not in table.column_names:
                     continue
                 source = table[field.name].cast(field.type)
-                column = source if len(present) == 1 else pc.if_else(
-                    pa.array(row_task == k), source, column
-                )
+                mask = pa.array(row_task == k)
+                column = source if len(present) == 1 else pc.if_else(mask, source, column)
             values.append(column)
         return pa.Table.from_arrays([*keys, span["seq"], *values], schema=self.schema)
 
