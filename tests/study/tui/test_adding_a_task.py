@@ -126,6 +126,18 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
     book = pd.read_csv(tmp_path / "out" / "codebook.csv").set_index("column")
     assert book.loc["peak_push_force_n", "unit"] == "N"
     assert "largest push of the medium" in book.loc["peak_push_force_n", "meaning"]
+    # the samples under the task's own columns, its unstored-before speed column too:
+    # v = k_v * aim at every sample (hand-computed above)
+    assert main(["export", "--out", str(tmp_path / "s"), "--samples", "--db", db]) == 0
+    samples = pd.read_csv(tmp_path / "s" / "samples.csv")
+    assert list(samples.columns) == [
+        "participant", "task", "condition", "trial", "seq", "t_s", "depth_m", "roll_rad",
+        "tip_x_m", "tip_y_m", "tip_z_m", "where", "push_force_n", "aim_rad", "medium_speed_m_s",
+    ]  # fmt: skip
+    assert samples["medium_speed_m_s"].to_numpy() == pytest.approx(speed)
+    assert set(samples["where"]) == {"medium", "depth"}
+    book = pd.read_csv(tmp_path / "s" / "codebook.csv").set_index("column")
+    assert book.loc["medium_speed_m_s", "unit"] == "m/s"
     # the exported file imports back into a fresh study of the same design
     db2 = str(tmp_path / "again.db")
     assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db2]) == 0
