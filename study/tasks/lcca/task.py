@@ -51,7 +51,7 @@ class LccaTask(Task):
         LiveTrace("distal_force_n", "distal", 1.0),
     )
     live_peaks = live_traces
-    live_scene = "study.tui.live_view:PhantomView"
+    live_scene = "study.tasks.lcca.scene:PhantomView"
     live_scene_title = "LCCA phantom (frontal)"
     key_hints = "↑↓ dial ←→ rotate space let go e end"
     trace_names: ClassVar[dict[str, str]] = {
