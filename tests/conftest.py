@@ -156,6 +156,10 @@ SLOW_MODULES = frozenset(
         "tests/teleop_core/test_regimes.py",
         "tests/teleop_core/test_scenarios.py",
         "tests/teleop_core/notes/test_identify.py",
+        "tests/teleop_core/test_rigid_axis.py",
+        "tests/teleop_core/test_extended_physics.py",
+        "tests/teleop_core/test_loop.py",
+        "tests/teleop_core/test_hardware.py",
         "tests/study/test_estimator_cli.py",
         "tests/study/test_estimator_effects_cli.py",
         "tests/study/test_estimator_calibration_cli.py",
@@ -189,17 +193,31 @@ SLOW_MODULES = frozenset(
         "tests/study/tui/test_terminal.py",
         "tests/study/tui/test_terminal_db_errors.py",
         "tests/study/tui/test_db_errors.py",
+        "tests/study/tui/test_screens.py",
+        "tests/study/test_lease.py",
         "tests/test_layering.py",
         "tests/study/test_layers.py",
     }
 )
 """Test modules marked `slow`: the fast lane, `pytest -m "not slow"`, leaves them out
-(README, "Tests"). A module belongs here when its tests train, calibrate, compile or
-simulate whole studies; the full suite runs everything."""
+(README). A module belongs here when its tests train, calibrate, compile, drive the
+terminal app or simulate whole studies; the full suite runs everything."""
+SLOW_TESTS = (
+    "tests/study/test_sample_export.py::test_export_memory_does_not_grow_with_the_samples",
+    "tests/study/test_analysis.py::test_study_analyze_",
+    "tests/study/test_notes_cli.py::test_characterize_",
+    "tests/db/test_migrations.py::test_two_processes_",
+    "tests/db/test_samples.py::test_kill_9_",
+)
+"""Single tests (node id prefixes) marked `slow` in modules that are otherwise fast:
+subprocesses, kill -9, memory measured over a large export."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     root = Path(__file__).resolve().parent.parent
     for item in items:
-        if Path(item.path).resolve().relative_to(root).as_posix() in SLOW_MODULES:
+        if (
+            Path(item.path).resolve().relative_to(root).as_posix() in SLOW_MODULES
+            or item.nodeid.startswith(SLOW_TESTS)
+        ):
             item.add_marker(pytest.mark.slow)

@@ -11,15 +11,12 @@ ranges) are assumptions shaped by seed 000, IV-D, not measured values; a fitted 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from study.errors import StudyInputError
 from study.protocol.design import DEFAULT_GROUPS
-
-if TYPE_CHECKING:
-    from study.protocol.participant_model import ParticipantModel
 
 GROUPS = DEFAULT_GROUPS
 
@@ -117,8 +114,15 @@ def draw_traits(
     return ParticipantTraits(group=group, **values)
 
 
+class TraitModel(Protocol):
+    """What `simulated_participant` uses of a fitted model
+    (`study.protocol.participant_model.ParticipantModel`, which imports this module)."""
+
+    def draw(self, group: str, rng: np.random.Generator) -> ParticipantTraits: ...
+
+
 def simulated_participant(
-    group: str, seed: int, model: ParticipantModel | None = None
+    group: str, seed: int, model: TraitModel | None = None
 ) -> ParticipantTraits:
     """The traits of the participant a seed draws from `group` (same seed, same person),
     from the fitted `model`'s distributions when one is given."""
