@@ -71,7 +71,8 @@ def table(rows: list[dict[str, str]]) -> str:
     for row in rows:
         if row["area"] != area:
             area = row["area"]
-            lines += ["", f"### {area}", "", "| measure | value | target | command |", "|---|---|---|---|"]
+            header = ["| measure | value | target | command |", "|---|---|---|---|"]
+            lines += ["", f"### {area}", "", *header]
         lines.append(f"| {row['what']} | {row['value']} | {row['target']} | `{row['command']}` |")
     return "\n".join(lines) + "\n"
 

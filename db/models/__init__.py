@@ -10,7 +10,14 @@ from db.models.lease import SessionLease
 from db.models.lsl import LslChunk, LslStream
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, SampleChunk, Trial, TrialMeasure
+from db.models.trial import (
+    SAMPLE_COLUMNS,
+    TRIAL_STATUSES,
+    SampleChunk,
+    SampleSchema,
+    Trial,
+    TrialMeasure,
+)
 
 __all__ = [
     "SAMPLE_COLUMNS",
@@ -22,6 +29,7 @@ __all__ = [
     "LslStream",
     "Participant",
     "SampleChunk",
+    "SampleSchema",
     "ScheduleBlock",
     "SessionLease",
     "Study",

@@ -21,7 +21,7 @@ from sqlalchemy import Engine, exists, select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
-from db.models.trial import SAMPLE_COLUMNS, SampleChunk, Trial, TrialMeasure
+from db.models.trial import SampleChunk, Trial, TrialMeasure
 from db.sample_reader import SampleReader
 from study.analysis.figcheck import FigureCheckError, check_figure
 from study.analysis.figures import fig12, fig12_labels, label_source, save
@@ -35,18 +35,20 @@ from study.errors import StudyInputError
 from study.protocol.tasks import get_task
 
 
-def _samples(engine: Engine, trial_id: int, columns: Sequence[str]) -> pd.DataFrame:
-    """The `columns` of one trial's samples, in `seq` order.
+def _samples(engine: Engine, trial_id: int, task: str, columns: Sequence[str]) -> pd.DataFrame:
+    """The `columns` (the task's names) of one trial's samples, in `seq` order.
 
     Read in Arrow batches (`SampleReader`) keeping only the columns drawn. A trial of
     ten minutes at 1 kHz (600,000 samples) read as ORM objects raised the peak memory
     by 1.27 GB and took 39 s; read this way, by 0.1 GB in 2 s (issue 26).
     """
+    the_task = get_task(task)
     with SampleReader(engine) as reader:
-        batches = [b.select(list(columns)) for b in reader.trial(trial_id)]
+        batches = list(reader.trial(trial_id))
     if not batches:
         return pd.DataFrame({c: pd.Series(dtype=float) for c in columns})
-    return pa.Table.from_batches(batches).to_pandas()
+    table = the_task.stored_table(pa.Table.from_batches(batches))
+    return table.select(list(columns)).to_pandas()
 
 
 def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[tuple[int, str]]:
@@ -175,9 +177,9 @@ def draw_figures(
         if marks:  # else none of Fig. 12's measures was recorded in this task
             fig = label_source(fig12(t_long, t_comp, width, fig12_labels(name)), note)
             drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks))
-        drawn_columns = ["t_s", *(c for c in get_task(name).trace_names if c in SAMPLE_COLUMNS)]
+        drawn_columns = ["t_s", *get_task(name).trace_names]
         traced = _trace_trials(engine, name, driver)
-        panels = [(_samples(engine, i, drawn_columns), title) for i, title in traced]
+        panels = [(_samples(engine, i, name, drawn_columns), title) for i, title in traced]
         if panels:
             fig = label_source(force_traces(panels, name, width), note)
             drawn.append(DrawnFigure(f"fig9_forces_{name}", fig))

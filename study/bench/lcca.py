@@ -34,9 +34,9 @@ import pandas as pd
 from scipy.stats import wilcoxon
 
 from study.analysis.figures import label_source
-from study.analysis.phantom_figures import CONDITION_COLORS, plot_tip_paths
-from study.protocol.lcca_trial import run_lcca_trial, simulated_participant
-from study.protocol.participants import GROUPS
+from study.protocol.traits import GROUPS, simulated_participant
+from study.tasks.lcca.figures import CONDITION_COLORS, plot_tip_paths
+from study.tasks.lcca.trial import run_lcca_trial
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.phantom.lcca import LccaPhantom
 

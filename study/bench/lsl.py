@@ -137,8 +137,8 @@ def _paced_session(
 ) -> list[int]:
     """The participant's trials at real time, each ended after `config.trial_s`."""
     from study.protocol.default_estimator import load_estimator
-    from study.protocol.participants import SimulatedParticipant
     from study.protocol.session import participant_traits, run_session
+    from study.tasks.lcca.simulated_participant import SimulatedParticipant
     from teleop_core.phantom.lcca import LccaPhantom
 
     phantom = LccaPhantom()

@@ -2,8 +2,9 @@
 codebook of every column (`study export`).
 
 The trials' columns (`trial_columns`) are the common ones and the measures of the
-study's tasks under their own names; the codebook says what each measure and each
-`samples` column holds for each task (`study.protocol.tasks`). See
+study's tasks under their own names; the samples' columns are the tasks' own sample
+columns; the codebook says what each measure and each sample column holds for each
+task (`study.protocol.tasks`). See
 `study.protocol.exchange` for the contracts and their import.
 """
 
@@ -19,7 +20,6 @@ from sqlalchemy.orm import Session
 
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from study.analysis.frames import measure_columns, trial_frame
 from study.errors import StudyInputError
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_KEYS
 from study.protocol.export_files import AtomicFile, escape_frame, refuse_symlink
@@ -31,6 +31,7 @@ from study.protocol.stream_export import (
     write_streams,
 )
 from study.protocol.tasks import COMPLETION_TIME, get_task
+from study.protocol.trial_table import measure_columns, trial_frame
 
 if TYPE_CHECKING:
     from study.protocol.sample_export import Progress, SampleSelection
@@ -64,7 +65,7 @@ def trial_columns(tasks: Iterable[str]) -> tuple[str, ...]:
 
 def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
     """Column -> (unit, meaning) for a study of `tasks`: the common columns, each task's
-    measures, and the `samples` columns with what each task keeps in them."""
+    measures, and each task's sample columns (under their own names, as exported)."""
     tasks = [get_task(t) for t in tasks]
     measures: dict[str, tuple[str, str]] = {}
     for t in tasks:
@@ -76,16 +77,13 @@ def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
         if column == COMPLETION_TIME:
             out.update(measures)
     out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in tasks))
-    stored: dict[str, list[tuple[str, object]]] = {}
+    samples: dict[str, list[tuple[str, object]]] = {}
     for t in tasks:
         for c in t.sample_columns:
-            if c.stored_as is not None:
-                stored.setdefault(c.stored_as, []).append((t.name, c))
-    for column, uses in stored.items():
+            samples.setdefault(c.name, []).append((t.name, c))
+    for column, uses in samples.items():
         units = {c.unit for _, c in uses}
-        meaning = "; ".join(f"{name}: {c.description}"
-                            + (f" ({c.name})" if c.name != column else "")
-                            for name, c in uses)  # fmt: skip
+        meaning = "; ".join(f"{name}: {c.description}" for name, c in uses)
         out.setdefault(column, ("/".join(sorted(units)), meaning))
     return out
 
@@ -110,8 +108,8 @@ def export_data(
     name and renamed only once all of them are complete.
     """
     from study.protocol.sample_export import (
-        SAMPLE_EXPORT_COLUMNS,
         SampleSelection,
+        sample_export_columns,
         select_trials,
         write_samples,
         write_samples_per_trial,
@@ -144,9 +142,10 @@ def export_data(
     tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
     frames = {"trials": trials, "tlx": tlx}
     columns = [c for f in frames.values() for c in f.columns]
+    study_tasks = list(dict.fromkeys([*design.tasks, *trials["task"]]))
     if samples:
-        columns += SAMPLE_EXPORT_COLUMNS
-    book = codebook(dict.fromkeys([*design.tasks, *trials["task"]]))
+        columns += sample_export_columns(study_tasks)
+    book = codebook(study_tasks)
     streams = collect_streams(engine, export_trials, selection) if samples else StreamExport()
     if streams.tables:  # every recorded instrument's channel, as `stream/channel`
         book.update({c: e for c, e in STREAM_CODEBOOK.items() if c not in book})
@@ -190,8 +189,9 @@ def export_data(
         elif samples:
             path = out_dir / f"samples.{fmt}"
             write_samples(
-                engine, export_trials, path, fmt, selection, progress=progress, workers=workers
-            )
+                engine, export_trials, path, fmt, selection, progress=progress,
+                workers=workers, tasks=design.tasks,
+            )  # fmt: skip
             sample_paths = [path]
         for out in staged:
             out.commit()

@@ -55,9 +55,9 @@ from study.protocol.observer import (
     trial_ending,
 )
 from study.protocol.participant_model import ParticipantModel
-from study.protocol.participants import ParticipantTraits, draw_traits
 from study.protocol.roster import find_participant, load_study
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
+from study.protocol.traits import ParticipantTraits, draw_traits
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.drivers import Driver
 
@@ -354,7 +354,10 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     observer = run.observer
     observer.trial_started(info)
     ending = trial_ending(observer, info, loop, SessionStopped)
-    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer, ending:
+    with (
+        SampleWriter(engine, trial_id, chunk_s=1.0, schema=task.sample_schema()) as writer,
+        ending,
+    ):
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))

@@ -270,13 +270,6 @@ class GruModel:
         """Per-sample network inputs from times `t` (n,) and [I_q, theta_d, theta_dd] (n, 3)."""
         return memory_inputs(t, base, self.memory)
 
-    def predict_window(self, window_std: Float2D) -> float:
-        """Output (N) for one standardised window of shape (T, inputs)."""
-        w = self.weights
-        y = _window_forward(window_std, w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out)
-        s = self.standardisation
-        return y * s.target_std + s.target_mean
-
     def predict(self, features: Float2D) -> Float1D:
         """Outputs (N) for every full window of `features` (n, inputs), as `inputs` builds
         them: shape (n - T + 1,)."""

@@ -67,8 +67,8 @@ def _device(name: str, seconds: float, log: Path) -> subprocess.Popen[str]:
 def _session(db: str, observers: list[SessionObserver], max_trials: int | None = None,
              trial_s: float = TRIAL_S) -> list[int]:  # fmt: skip
     from study.protocol.default_estimator import load_estimator
-    from study.protocol.participants import SimulatedParticipant
     from study.protocol.session import participant_traits, run_session
+    from study.tasks.lcca.simulated_participant import SimulatedParticipant
     from teleop_core.phantom.lcca import LccaPhantom
 
     engine = open_database(db, create=False)

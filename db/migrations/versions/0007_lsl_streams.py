@@ -6,8 +6,8 @@ row per stream and trial (channels with units, the clocks that put its samples o
 trial's time, its gaps) and its samples in `lsl_chunks` (see `db.models.lsl`). New
 tables only; nothing existing changes.
 
-Revision ID: 0006_lsl_streams
-Revises: 0005_sample_chunks
+Revision ID: 0007_lsl_streams
+Revises: 0006_task_sample_schemas
 Create Date: 2026-11-27
 """
 
@@ -16,8 +16,8 @@ from collections.abc import Sequence
 import sqlalchemy as sa
 from alembic import op
 
-revision: str = "0006_lsl_streams"
-down_revision: str | None = "0005_sample_chunks"
+revision: str = "0007_lsl_streams"
+down_revision: str | None = "0006_task_sample_schemas"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
