@@ -7,6 +7,7 @@
 from db.models.audit import AuditEntry
 from db.models.calibration import Calibration
 from db.models.lease import SessionLease
+from db.models.probe import ProbeTrial
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, SampleChunk, Trial, TrialMeasure
@@ -18,6 +19,7 @@ __all__ = [
     "AuditEntry",
     "Calibration",
     "Participant",
+    "ProbeTrial",
     "SampleChunk",
     "ScheduleBlock",
     "SessionLease",
