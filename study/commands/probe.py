@@ -17,15 +17,25 @@ def probe() -> None:
 
 @probe.command("run")
 @click.option("--participant", "code", required=True, help="The participant's code.")
-@click.option("--probe", "only", multiple=True,
-              help="Only this probe (repeatable) [default: every probe of the design].")  # fmt: skip
-@click.option("--driver", type=click.Choice(DRIVERS), default="simulated", show_default=True,
-              help="Who answers: the participant's simulated person, the keyboard, or the "
-                   "dial unit on --port.")  # fmt: skip
+@click.option(
+    "--probe",
+    "only",
+    multiple=True,
+    help="Only this probe (repeatable) [default: every probe of the design].",
+)
+@click.option(
+    "--driver",
+    type=click.Choice(DRIVERS),
+    default="simulated",
+    show_default=True,
+    help="Who answers: the participant's simulated person, the keyboard, or the "
+    "dial unit on --port.",
+)
 @click.option("--port", default=None, help="The dial unit's serial port (--driver hardware).")
 @db_option
-def run(code: str, only: tuple[str, ...], driver: str, port: str | None,
-        db_url: str | None) -> None:  # fmt: skip
+def run(
+    code: str, only: tuple[str, ...], driver: str, port: str | None, db_url: str | None
+) -> None:
     """Run the design's probes for a participant (those not yet stored) and store each
     probe's trials; print each probe's estimate of the trait it tells."""
     from study.probes import get_probe
@@ -75,10 +85,17 @@ def _trials(frame):  # type: ignore[no-untyped-def]
     from study.probes.base import ProbeTrial
 
     return [
-        ProbeTrial(r.probe, int(r.trial_index), r.stimulus, r.response,
-                   None if r.correct is None else bool(r.correct), r.context, r.driver)
+        ProbeTrial(
+            r.probe,
+            int(r.trial_index),
+            r.stimulus,
+            r.response,
+            None if r.correct is None else bool(r.correct),
+            r.context,
+            r.driver,
+        )
         for r in frame.itertuples()
-    ]  # fmt: skip
+    ]
 
 
 @probe.command("list")

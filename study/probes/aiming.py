@@ -33,7 +33,6 @@ from study.probes.base import (
 )
 
 
-
 class Aiming:
     name = "aiming"
     trait = "steering_error_rad"
@@ -43,23 +42,34 @@ class Aiming:
     description = "turn the tip towards a target on the roadmap and confirm"
     forced_choice = False
 
-    def procedure(self, n_trials: int, context: Mapping[str, float],
-                  rng: np.random.Generator) -> FixedProcedure:  # fmt: skip
+    def procedure(
+        self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator
+    ) -> FixedProcedure:
         # the target's angle, rad
         return FixedProcedure(rng.uniform(-math.pi, math.pi, n_trials))
 
-    def answer(self, stimulus: float, traits: Any, context: Mapping[str, float],
-               rng: np.random.Generator, lapse_rate: float = LAPSE_RATE) -> ProbeResponse:  # fmt: skip
+    def answer(
+        self,
+        stimulus: float,
+        traits: Any,
+        context: Mapping[str, float],
+        rng: np.random.Generator,
+        lapse_rate: float = LAPSE_RATE,
+    ) -> ProbeResponse:
         if rng.random() < lapse_rate:
             return ProbeResponse(float(stimulus + rng.uniform(-math.pi / 2, math.pi / 2)))
         return ProbeResponse(float(stimulus + rng.normal(0.0, traits.steering_error_rad)))
 
-    def estimate(self, trials: Sequence[ProbeTrial],
-                 known: Mapping[str, TraitEstimate]) -> TraitEstimate | None:  # fmt: skip
+    def estimate(
+        self, trials: Sequence[ProbeTrial], known: Mapping[str, TraitEstimate]
+    ) -> TraitEstimate | None:
         errors = np.array(
-            [math.remainder(t.response - t.stimulus, 2 * math.pi) for t in trials
-             if t.response is not None and t.stimulus is not None]
-        )  # fmt: skip
+            [
+                math.remainder(t.response - t.stimulus, 2 * math.pi)
+                for t in trials
+                if t.response is not None and t.stimulus is not None
+            ]
+        )
         if len(errors) < 5:
             return None
         from scipy.optimize import minimize_scalar
@@ -79,18 +89,22 @@ class Aiming:
         return TraitEstimate(self.trait, sigma, se, len(errors))
 
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
-        return (f"Target at {math.degrees(stimulus):+.0f} deg: type the tip's angle in "
-                "degrees and press Enter")  # fmt: skip
+        return (
+            f"Target at {math.degrees(stimulus):+.0f} deg: type the tip's angle in "
+            "degrees and press Enter"
+        )
 
-    def from_key(self, stimulus: float, key: str, elapsed_s: float,
-                 context: Mapping[str, float]) -> ProbeResponse | None:  # fmt: skip
+    def from_key(
+        self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
+    ) -> ProbeResponse | None:
         try:
             return ProbeResponse(math.radians(float(key)))
         except ValueError:
             return None
 
-    def from_device(self, stimulus: float, samples: np.ndarray,
-                    context: Mapping[str, float]) -> ProbeResponse:  # fmt: skip
+    def from_device(
+        self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]
+    ) -> ProbeResponse:
         row = first_press(samples)
         return ProbeResponse(None if row is None else float(samples[row, 2]))
 

@@ -72,7 +72,9 @@ class TraitEstimate:
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.value) and np.isfinite(self.se) and self.se > 0):
-            raise ValueError(f"{self.trait}: estimate {self.value} +/- {self.se}; expected finite, se > 0")
+            raise ValueError(
+                f"{self.trait}: estimate {self.value} +/- {self.se}; expected finite, se > 0"
+            )
 
 
 class Procedure(Protocol):
@@ -99,22 +101,32 @@ class Probe(Protocol):
     """Two intervals, one holding the stimulus (`context["interval"]`, 1 or 2, drawn by
     the runner); the answer is the interval chosen."""
 
-    def procedure(self, n_trials: int, context: Mapping[str, float],
-                  rng: np.random.Generator) -> Procedure: ...  # fmt: skip
+    def procedure(
+        self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator
+    ) -> Procedure: ...
 
-    def answer(self, stimulus: float, traits: Any, context: Mapping[str, float],
-               rng: np.random.Generator, lapse_rate: float = LAPSE_RATE) -> ProbeResponse: ...  # fmt: skip
+    def answer(
+        self,
+        stimulus: float,
+        traits: Any,
+        context: Mapping[str, float],
+        rng: np.random.Generator,
+        lapse_rate: float = LAPSE_RATE,
+    ) -> ProbeResponse: ...
 
-    def estimate(self, trials: Sequence[ProbeTrial],
-                 known: Mapping[str, TraitEstimate]) -> TraitEstimate | None: ...  # fmt: skip
+    def estimate(
+        self, trials: Sequence[ProbeTrial], known: Mapping[str, TraitEstimate]
+    ) -> TraitEstimate | None: ...
 
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str: ...
 
-    def from_key(self, stimulus: float, key: str, elapsed_s: float,
-                 context: Mapping[str, float]) -> ProbeResponse | None: ...  # fmt: skip
+    def from_key(
+        self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
+    ) -> ProbeResponse | None: ...
 
-    def from_device(self, stimulus: float, samples: np.ndarray,
-                    context: Mapping[str, float]) -> ProbeResponse: ...  # fmt: skip
+    def from_device(
+        self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]
+    ) -> ProbeResponse: ...
 
 
 class FixedProcedure:

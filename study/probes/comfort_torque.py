@@ -49,20 +49,28 @@ class ComfortTorque:
     description = "resistance on the dial at which the participant would push more gently"
     forced_choice = False
 
-    def procedure(self, n_trials: int, context: Mapping[str, float],
-                  rng: np.random.Generator) -> FixedProcedure:  # fmt: skip
+    def procedure(
+        self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator
+    ) -> FixedProcedure:
         return FixedProcedure([context.get("ramp_n_m_s", RAMP_N_M_S)] * n_trials)
 
-    def answer(self, stimulus: float, traits: Any, context: Mapping[str, float],
-               rng: np.random.Generator, lapse_rate: float = LAPSE_RATE) -> ProbeResponse:  # fmt: skip
+    def answer(
+        self,
+        stimulus: float,
+        traits: Any,
+        context: Mapping[str, float],
+        rng: np.random.Generator,
+        lapse_rate: float = LAPSE_RATE,
+    ) -> ProbeResponse:
         comfort = traits.comfort_torque_n_m
         if rng.random() < lapse_rate:
             return ProbeResponse(float(rng.uniform(0.0, 2.5 * comfort)))
         react = traits.reaction_s * np.exp(rng.normal(0.0, reaction_time.LOG_SD))
         return ProbeResponse(float(comfort * np.exp(rng.normal(0.0, LOG_SD)) + stimulus * react))
 
-    def estimate(self, trials: Sequence[ProbeTrial],
-                 known: Mapping[str, TraitEstimate]) -> TraitEstimate | None:  # fmt: skip
+    def estimate(
+        self, trials: Sequence[ProbeTrial], known: Mapping[str, TraitEstimate]
+    ) -> TraitEstimate | None:
         used = [t for t in trials if t.response is not None and t.stimulus is not None]
         if len(used) < 4:
             return None
@@ -70,19 +78,22 @@ class ComfortTorque:
         ramp = float(np.median([t.stimulus for t in used]))
         react = known.get("reaction_s")
         r, r_se = (react.value, react.se) if react is not None else FALLBACK_REACTION_S
-        return TraitEstimate(self.trait, median - ramp * r, float(np.hypot(se, ramp * r_se)),
-                             len(used))  # fmt: skip
+        return TraitEstimate(
+            self.trait, median - ramp * r, float(np.hypot(se, ramp * r_se)), len(used)
+        )
 
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
         return "Push the dial; press SPACE when the resistance is more than you would push against"
 
-    def from_key(self, stimulus: float, key: str, elapsed_s: float,
-                 context: Mapping[str, float]) -> ProbeResponse | None:  # fmt: skip
+    def from_key(
+        self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
+    ) -> ProbeResponse | None:
         # the resistance when the key came: the ramp's rate times the time since it began
         return ProbeResponse(float(stimulus * elapsed_s)) if key == " " else None
 
-    def from_device(self, stimulus: float, samples: np.ndarray,
-                    context: Mapping[str, float]) -> ProbeResponse:  # fmt: skip
+    def from_device(
+        self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]
+    ) -> ProbeResponse:
         row = first_press(samples)
         return ProbeResponse(None if row is None else float(stimulus * samples[row, 0]))
 

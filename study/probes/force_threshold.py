@@ -90,12 +90,19 @@ class ForceThreshold:
     description = "force-discrimination threshold on the dial (2 intervals, QUEST+)"
     forced_choice = True
 
-    def procedure(self, n_trials: int, context: Mapping[str, float],
-                  rng: np.random.Generator) -> QuestProcedure:  # fmt: skip
+    def procedure(
+        self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator
+    ) -> QuestProcedure:
         return QuestProcedure()
 
-    def answer(self, stimulus: float, traits: Any, context: Mapping[str, float],
-               rng: np.random.Generator, lapse_rate: float = LAPSE_RATE) -> ProbeResponse:  # fmt: skip
+    def answer(
+        self,
+        stimulus: float,
+        traits: Any,
+        context: Mapping[str, float],
+        rng: np.random.Generator,
+        lapse_rate: float = LAPSE_RATE,
+    ) -> ProbeResponse:
         gain = context.get("gain_n_m_per_n", PAPER_GAIN_N_M_PER_N)
         theta = traits.haptic_threshold_n_m
         interval = int(context.get("interval", 1))
@@ -107,8 +114,9 @@ class ForceThreshold:
             chosen = interval
         return ProbeResponse(float(chosen), chosen == interval)
 
-    def estimate(self, trials: Sequence[ProbeTrial],
-                 known: Mapping[str, TraitEstimate]) -> TraitEstimate | None:  # fmt: skip
+    def estimate(
+        self, trials: Sequence[ProbeTrial], known: Mapping[str, TraitEstimate]
+    ) -> TraitEstimate | None:
         used = [t for t in trials if t.correct is not None and t.stimulus is not None]
         if len(used) < 10:
             return None
@@ -132,14 +140,16 @@ class ForceThreshold:
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
         return "Which interval was stronger? 1 or 2"
 
-    def from_key(self, stimulus: float, key: str, elapsed_s: float,
-                 context: Mapping[str, float]) -> ProbeResponse | None:  # fmt: skip
+    def from_key(
+        self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
+    ) -> ProbeResponse | None:
         if key not in ("1", "2"):
             return None
         return ProbeResponse(float(key), int(key) == int(context.get("interval", 1)))
 
-    def from_device(self, stimulus: float, samples: np.ndarray,
-                    context: Mapping[str, float]) -> ProbeResponse:  # fmt: skip
+    def from_device(
+        self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]
+    ) -> ProbeResponse:
         # the dial turned left (negative) at the press picks interval 1, right picks 2
         row = first_press(samples)
         if row is None:

@@ -46,19 +46,27 @@ class ReactionTime:
     description = "simple visual reaction time (press when the cue appears)"
     forced_choice = False
 
-    def procedure(self, n_trials: int, context: Mapping[str, float],
-                  rng: np.random.Generator) -> FixedProcedure:  # fmt: skip
+    def procedure(
+        self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator
+    ) -> FixedProcedure:
         # the foreperiod, s: uniform 1-3 s so that the cue cannot be anticipated
         return FixedProcedure(rng.uniform(1.0, 3.0, n_trials))
 
-    def answer(self, stimulus: float, traits: Any, context: Mapping[str, float],
-               rng: np.random.Generator, lapse_rate: float = LAPSE_RATE) -> ProbeResponse:  # fmt: skip
+    def answer(
+        self,
+        stimulus: float,
+        traits: Any,
+        context: Mapping[str, float],
+        rng: np.random.Generator,
+        lapse_rate: float = LAPSE_RATE,
+    ) -> ProbeResponse:
         if rng.random() < lapse_rate:
             return ProbeResponse(float(rng.uniform(0.1, 1.0)))
         return ProbeResponse(float(traits.reaction_s * np.exp(rng.normal(0.0, LOG_SD))))
 
-    def estimate(self, trials: Sequence[ProbeTrial],
-                 known: Mapping[str, TraitEstimate]) -> TraitEstimate | None:  # fmt: skip
+    def estimate(
+        self, trials: Sequence[ProbeTrial], known: Mapping[str, TraitEstimate]
+    ) -> TraitEstimate | None:
         times = valid_times(trials)
         if len(times) < 5:
             return None
@@ -68,12 +76,14 @@ class ReactionTime:
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
         return "Press SPACE as soon as GO appears"
 
-    def from_key(self, stimulus: float, key: str, elapsed_s: float,
-                 context: Mapping[str, float]) -> ProbeResponse | None:  # fmt: skip
+    def from_key(
+        self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
+    ) -> ProbeResponse | None:
         return ProbeResponse(float(elapsed_s)) if key == " " else None
 
-    def from_device(self, stimulus: float, samples: np.ndarray,
-                    context: Mapping[str, float]) -> ProbeResponse:  # fmt: skip
+    def from_device(
+        self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]
+    ) -> ProbeResponse:
         row = first_press(samples)
         return ProbeResponse(None if row is None else float(samples[row, 0]))
 

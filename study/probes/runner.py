@@ -36,8 +36,9 @@ DEVICE_RATE_HZ = 100.0
 class Responder(Protocol):
     driver: str
 
-    def respond(self, probe: Probe, stimulus: float,
-                context: Mapping[str, float]) -> ProbeResponse: ...  # fmt: skip
+    def respond(
+        self, probe: Probe, stimulus: float, context: Mapping[str, float]
+    ) -> ProbeResponse: ...
 
 
 @dataclass
@@ -48,8 +49,7 @@ class SimulatedResponder:
     lapse_rate: float = LAPSE_RATE
     driver: str = "simulated"
 
-    def respond(self, probe: Probe, stimulus: float,
-                context: Mapping[str, float]) -> ProbeResponse:  # fmt: skip
+    def respond(self, probe: Probe, stimulus: float, context: Mapping[str, float]) -> ProbeResponse:
         return probe.answer(stimulus, self.traits, context, self.rng, self.lapse_rate)
 
 
@@ -61,8 +61,7 @@ class KeyboardResponder:
     clock: Callable[[], float] = time.monotonic
     driver: str = "keyboard"
 
-    def respond(self, probe: Probe, stimulus: float,
-                context: Mapping[str, float]) -> ProbeResponse:  # fmt: skip
+    def respond(self, probe: Probe, stimulus: float, context: Mapping[str, float]) -> ProbeResponse:
         self.show(probe.keyboard_prompt(stimulus, context))
         start = self.clock()
         while True:
@@ -86,8 +85,9 @@ class DeviceResponder:
     max_rotation_rate_rad_s: float = math.pi / 2
     driver: str = "hardware"
 
-    def samples(self, probe: Probe, stimulus: float,
-                context: Mapping[str, float]) -> Iterator[list[float]]:  # fmt: skip
+    def samples(
+        self, probe: Probe, stimulus: float, context: Mapping[str, float]
+    ) -> Iterator[list[float]]:
         t0 = rotation = None
         last_t = 0.0
         for _ in range(int(DEVICE_TIMEOUT_S * DEVICE_RATE_HZ)):
@@ -104,8 +104,7 @@ class DeviceResponder:
             if pressed:
                 return
 
-    def respond(self, probe: Probe, stimulus: float,
-                context: Mapping[str, float]) -> ProbeResponse:  # fmt: skip
+    def respond(self, probe: Probe, stimulus: float, context: Mapping[str, float]) -> ProbeResponse:
         rows = np.array(list(self.samples(probe, stimulus, context)), float).reshape(-1, 4)
         return probe.from_device(stimulus, rows, context)
 
@@ -131,8 +130,9 @@ def run_probe(
         answer = responder.respond(probe, stimulus, trial_context)
         procedure.record(stimulus, answer)
         trials.append(
-            ProbeTrial(name, k, stimulus, answer.response, answer.correct, trial_context,
-                       responder.driver)  # fmt: skip
+            ProbeTrial(
+                name, k, stimulus, answer.response, answer.correct, trial_context, responder.driver
+            )
         )
         progress(k + 1, n_trials)
     return trials

@@ -48,21 +48,29 @@ class StallDetection:
     description = "time to notice that a moving tip on the screen has stopped"
     forced_choice = False
 
-    def procedure(self, n_trials: int, context: Mapping[str, float],
-                  rng: np.random.Generator) -> FixedProcedure:  # fmt: skip
+    def procedure(
+        self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator
+    ) -> FixedProcedure:
         # when the tip stops after it starts moving, s
         return FixedProcedure(rng.uniform(1.5, 4.0, n_trials))
 
-    def answer(self, stimulus: float, traits: Any, context: Mapping[str, float],
-               rng: np.random.Generator, lapse_rate: float = LAPSE_RATE) -> ProbeResponse:  # fmt: skip
+    def answer(
+        self,
+        stimulus: float,
+        traits: Any,
+        context: Mapping[str, float],
+        rng: np.random.Generator,
+        lapse_rate: float = LAPSE_RATE,
+    ) -> ProbeResponse:
         if rng.random() < lapse_rate:
             return ProbeResponse(float(rng.uniform(0.1, 2.5)))
         stall = traits.visual_stall_s * np.exp(rng.normal(0.0, LOG_SD))
         react = traits.reaction_s * np.exp(rng.normal(0.0, reaction_time.LOG_SD))
         return ProbeResponse(float(stall + react))
 
-    def estimate(self, trials: Sequence[ProbeTrial],
-                 known: Mapping[str, TraitEstimate]) -> TraitEstimate | None:  # fmt: skip
+    def estimate(
+        self, trials: Sequence[ProbeTrial], known: Mapping[str, TraitEstimate]
+    ) -> TraitEstimate | None:
         times = np.array([t.response for t in trials if t.response is not None], float)
         times = times[(times >= 0.1) & (times <= 3.0)]
         if len(times) < 5:
@@ -75,12 +83,14 @@ class StallDetection:
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
         return "Press SPACE as soon as the tip has stopped"
 
-    def from_key(self, stimulus: float, key: str, elapsed_s: float,
-                 context: Mapping[str, float]) -> ProbeResponse | None:  # fmt: skip
+    def from_key(
+        self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
+    ) -> ProbeResponse | None:
         return ProbeResponse(float(elapsed_s)) if key == " " else None
 
-    def from_device(self, stimulus: float, samples: np.ndarray,
-                    context: Mapping[str, float]) -> ProbeResponse:  # fmt: skip
+    def from_device(
+        self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]
+    ) -> ProbeResponse:
         row = first_press(samples)
         return ProbeResponse(None if row is None else float(samples[row, 0]))
 

@@ -24,8 +24,17 @@ from study.probes.runner import Responder, SimulatedResponder, run_probe
 from study.protocol.design import StudyDesign
 from study.protocol.roster import find_participant, load_study
 
-PROBE_COLUMNS = ("participant", "group", "probe", "trial_index", "stimulus", "response",
-                 "correct", "context", "driver")  # fmt: skip
+PROBE_COLUMNS = (
+    "participant",
+    "group",
+    "probe",
+    "trial_index",
+    "stimulus",
+    "response",
+    "correct",
+    "context",
+    "driver",
+)
 
 
 def probe_context(design: StudyDesign) -> dict[str, float]:
@@ -39,19 +48,28 @@ def probe_context(design: StudyDesign) -> dict[str, float]:
 
 def stored_probes(engine: Engine, participant_id: int) -> set[str]:
     with Session(engine) as session:
-        return set(session.scalars(
-            select(ProbeTrialRow.probe).where(ProbeTrialRow.participant_id == participant_id)
-        ))  # fmt: skip
+        return set(
+            session.scalars(
+                select(ProbeTrialRow.probe).where(ProbeTrialRow.participant_id == participant_id)
+            )
+        )
 
 
 def store_trials(engine: Engine, participant_id: int, trials: list[ProbeTrial]) -> None:
     with write_transaction(engine) as conn, Session(bind=conn) as session:
         for t in trials:
-            session.add(ProbeTrialRow(
-                participant_id=participant_id, probe=t.probe, trial_index=t.trial_index,
-                stimulus=t.stimulus, response=t.response, correct=t.correct,
-                context=dict(t.context), driver=t.driver,
-            ))  # fmt: skip
+            session.add(
+                ProbeTrialRow(
+                    participant_id=participant_id,
+                    probe=t.probe,
+                    trial_index=t.trial_index,
+                    stimulus=t.stimulus,
+                    response=t.response,
+                    correct=t.correct,
+                    context=dict(t.context),
+                    driver=t.driver,
+                )
+            )
         session.commit()
 
 
@@ -89,8 +107,14 @@ def run_participant_probes(
     for name, n in design.probes.items():
         if (only and name not in only) or name in done:
             continue
-        trials = run_probe(name, n, responder, rng, probe_context(design),
-                           lambda k, total, name=name: progress(name, k, total))  # fmt: skip
+        trials = run_probe(
+            name,
+            n,
+            responder,
+            rng,
+            probe_context(design),
+            lambda k, total, name=name: progress(name, k, total),
+        )
         store_trials(engine, pid, trials)
         stored[name] = len(trials)
     return stored
@@ -104,6 +128,18 @@ def probe_frame(engine: Engine) -> pd.DataFrame:
             .join(ProbeTrialRow, ProbeTrialRow.participant_id == Participant.id)
             .order_by(Participant.code, ProbeTrialRow.probe, ProbeTrialRow.trial_index)
         ).all()
-        data = [(code, group, r.probe, r.trial_index, r.stimulus, r.response, r.correct,
-                 dict(r.context or {}), r.driver) for code, group, r in rows]  # fmt: skip
+        data = [
+            (
+                code,
+                group,
+                r.probe,
+                r.trial_index,
+                r.stimulus,
+                r.response,
+                r.correct,
+                dict(r.context or {}),
+                r.driver,
+            )
+            for code, group, r in rows
+        ]
     return pd.DataFrame(data, columns=list(PROBE_COLUMNS))

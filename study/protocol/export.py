@@ -137,10 +137,18 @@ def export_data(
     trials = trials[list(trial_columns(dict.fromkeys([*design.tasks, *trials["task"]])))]
     tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
     frames = {"trials": trials, "tlx": tlx}
+    from study.probes.exchange import codebook as probe_codebook
+    from study.probes.exchange import export_frame
+    from study.probes.store import probe_frame
+
+    probe_trials = probe_frame(engine)
+    if len(probe_trials):  # a study that ran probes: their trials too
+        frames["probe_trials"] = export_frame(probe_trials)
     columns = [c for f in frames.values() for c in f.columns]
     if samples:
         columns += SAMPLE_EXPORT_COLUMNS
     book = codebook(dict.fromkeys([*design.tasks, *trials["task"]]))
+    book.update({c: e for c, e in probe_codebook().items() if c not in book})
     book_frame = pd.DataFrame(
         [
             {"column": c, "unit": book[c][0], "meaning": book[c][1]}

@@ -42,9 +42,11 @@ def upgrade() -> None:
         ),
         sa.PrimaryKeyConstraint("id", name=op.f("pk_probe_trials")),
         sa.UniqueConstraint(
-            "participant_id", "probe", "trial_index",
+            "participant_id",
+            "probe",
+            "trial_index",
             name=op.f("uq_probe_trials_participant_id_probe_trial_index"),
-        ),  # fmt: skip
+        ),
     )
     op.create_index(
         op.f("ix_probe_trials_participant_id"), "probe_trials", ["participant_id"], unique=False
