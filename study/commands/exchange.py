@@ -29,10 +29,16 @@ def import_cmd(
         if probes_csv is not None:
             # every probe row checked, and its participants known from the study or the
             # trials file, before anything is written
-            from study.probes.exchange import check_participants, known_codes, read_probe_file
+            from study.probes.exchange import (
+                check_not_stored,
+                check_participants,
+                known_codes,
+                read_probe_file,
+            )
 
             probes = read_probe_file(probes_csv)
             check_participants(probes, known_codes(engine, trials_csv), probes_csv)
+            check_not_stored(engine, probes, probes_csv)
         n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv)
         n_probes = 0
         if probes is not None:

@@ -163,26 +163,40 @@ def check_participants(rows: list[dict], known: set[str], path: Path) -> None:
             )
 
 
-def store_imported(session: Session, rows: list[dict], path: Path) -> int:
-    """Add `rows` to `session` (the caller's transaction); refuses a trial already stored."""
+def check_not_stored(engine: Engine, rows: list[dict], path: Path) -> None:
+    """Refuse, before anything is written, a probe trial the database already holds."""
+    with Session(engine) as session:
+        _duplicates(session, rows, path)
+
+
+def _duplicates(session: Session, rows: list[dict], path: Path) -> dict[str, int]:
     ids = dict(session.execute(select(Participant.code, Participant.id)).all())
     stored = set(
         session.execute(
-            select(ProbeTrialRow.participant_id, ProbeTrialRow.probe, ProbeTrialRow.trial_index)
+            select(Participant.code, ProbeTrialRow.probe, ProbeTrialRow.trial_index).join(
+                Participant, Participant.id == ProbeTrialRow.participant_id
+            )
         ).all()
     )
     seen = set()
     for r in rows:
-        key = (ids[r["code"]], r["probe"], r["trial_index"])
+        key = (r["code"], r["probe"], r["trial_index"])
         if key in stored or key in seen:
             raise StudyInputError(
                 f"{path} row {r['row']}: {r['code']} {r['probe']} trial {r['trial_index'] + 1} "
-                "is already stored; expected each probe trial once"
+                "is already stored or repeated; expected each probe trial once"
             )
         seen.add(key)
+    return ids
+
+
+def store_imported(session: Session, rows: list[dict], path: Path) -> int:
+    """Add `rows` to `session` (the caller's transaction); refuses a trial already stored."""
+    ids = _duplicates(session, rows, path)
+    for r in rows:
         session.add(
             ProbeTrialRow(
-                participant_id=key[0],
+                participant_id=ids[r["code"]],
                 probe=r["probe"],
                 trial_index=r["trial_index"],
                 stimulus=r["stimulus"],
