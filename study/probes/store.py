@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import zlib
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -79,10 +80,12 @@ def run_participant_probes(
     responder: Responder | None = None,
     only: tuple[str, ...] = (),
     progress: Callable[[str, int, int], None] = lambda probe, k, n: None,
+    model: Any = None,
 ) -> dict[str, int]:
     """Run the design's probes for participant `code` (those not yet stored; `only`: just
     these) and store them; returns probe -> trials stored. Without `responder`, the
-    participant's simulated person answers (the same traits as in its task trials)."""
+    participant's simulated person answers (the same traits as in its task trials: drawn
+    from `model`, a `ParticipantModel`, when the trials were)."""
     from study.protocol.session import participant_traits
 
     with Session(engine) as session:
@@ -101,7 +104,7 @@ def run_participant_probes(
             )
     rng = np.random.default_rng([seed, zlib.crc32(code.encode()), 0x9B0BE])
     if responder is None:
-        responder = SimulatedResponder(participant_traits(seed, code, group), rng)
+        responder = SimulatedResponder(participant_traits(seed, code, group, model), rng)
     done = stored_probes(engine, pid)
     stored = {}
     for name, n in design.probes.items():
@@ -117,6 +120,20 @@ def run_participant_probes(
         )
         store_trials(engine, pid, trials)
         stored[name] = len(trials)
+    return stored
+
+
+def run_all_probes(
+    engine: Engine, model: Any = None, progress: Callable[[str], None] = lambda code: None
+) -> int:
+    """Every participant's probes answered by its simulated person; returns the trials
+    stored."""
+    with Session(engine) as session:
+        codes = list(session.scalars(select(Participant.code).order_by(Participant.code)))
+    stored = 0
+    for code in codes:
+        progress(code)
+        stored += sum(run_participant_probes(engine, code, model=model).values())
     return stored
 
 
