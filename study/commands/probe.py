@@ -50,7 +50,9 @@ def run(
     if driver == "keyboard":
         from study.probes.runner import KeyboardResponder
 
-        responder = KeyboardResponder(read_key=lambda: input() or " ", show=click.echo)
+        responder = KeyboardResponder(
+            read_key=input, show=lambda text: click.echo(text, nl=text != ".")
+        )
     elif driver == "hardware":
         from study.probes.runner import DeviceResponder
         from teleop_core.loop.hardware import HardwareDriver

@@ -26,6 +26,7 @@ import numpy as np
 from study.probes.base import (
     LAPSE_RATE,
     FixedProcedure,
+    KeyboardCue,
     ProbeResponse,
     ProbeTrial,
     TraitEstimate,
@@ -93,6 +94,9 @@ class Aiming:
             f"Target at {math.degrees(stimulus):+.0f} deg: type the tip's angle in "
             "degrees and press Enter"
         )
+
+    def keyboard_cue(self, stimulus: float, context: Mapping[str, float]) -> KeyboardCue:
+        return KeyboardCue()
 
     def from_key(
         self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]

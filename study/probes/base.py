@@ -77,6 +77,17 @@ class TraitEstimate:
             )
 
 
+@dataclass(frozen=True)
+class KeyboardCue:
+    """How a terminal presents a stimulus: after the prompt, wait `delay_s` (showing a
+    moving marker meanwhile when `moving`), then show `text`; the response time counts
+    from the end of the wait."""
+
+    delay_s: float = 0.0
+    text: str = ""
+    moving: bool = False
+
+
 class Procedure(Protocol):
     """A probe's run: the next stimulus, given the answers so far."""
 
@@ -119,6 +130,8 @@ class Probe(Protocol):
     ) -> TraitEstimate | None: ...
 
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str: ...
+
+    def keyboard_cue(self, stimulus: float, context: Mapping[str, float]) -> KeyboardCue: ...
 
     def from_key(
         self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]

@@ -25,6 +25,7 @@ from study.probes import reaction_time
 from study.probes.base import (
     LAPSE_RATE,
     FixedProcedure,
+    KeyboardCue,
     ProbeResponse,
     ProbeTrial,
     TraitEstimate,
@@ -83,13 +84,16 @@ class ComfortTorque:
         )
 
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
-        return "Push the dial; press SPACE when the resistance is more than you would push against"
+        return "Push the dial; press Enter when the resistance is more than you would push against"
+
+    def keyboard_cue(self, stimulus: float, context: Mapping[str, float]) -> KeyboardCue:
+        return KeyboardCue()
 
     def from_key(
         self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
     ) -> ProbeResponse | None:
         # the resistance when the key came: the ramp's rate times the time since it began
-        return ProbeResponse(float(stimulus * elapsed_s)) if key == " " else None
+        return ProbeResponse(float(stimulus * elapsed_s)) if key in ("", " ") else None
 
     def from_device(
         self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]

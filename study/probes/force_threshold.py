@@ -30,6 +30,7 @@ from scipy.stats import norm
 
 from study.probes.base import (
     LAPSE_RATE,
+    KeyboardCue,
     ProbeResponse,
     ProbeTrial,
     TraitEstimate,
@@ -139,6 +140,9 @@ class ForceThreshold:
 
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
         return "Which interval was stronger? 1 or 2"
+
+    def keyboard_cue(self, stimulus: float, context: Mapping[str, float]) -> KeyboardCue:
+        return KeyboardCue()
 
     def from_key(
         self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]

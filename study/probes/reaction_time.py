@@ -20,6 +20,7 @@ import numpy as np
 from study.probes.base import (
     LAPSE_RATE,
     FixedProcedure,
+    KeyboardCue,
     ProbeResponse,
     ProbeTrial,
     TraitEstimate,
@@ -74,12 +75,15 @@ class ReactionTime:
         return TraitEstimate(self.trait, median, se, len(times))
 
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
-        return "Press SPACE as soon as GO appears"
+        return "Press Enter as soon as GO appears"
+
+    def keyboard_cue(self, stimulus: float, context: Mapping[str, float]) -> KeyboardCue:
+        return KeyboardCue(stimulus, "GO")
 
     def from_key(
         self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
     ) -> ProbeResponse | None:
-        return ProbeResponse(float(elapsed_s)) if key == " " else None
+        return ProbeResponse(float(elapsed_s)) if key in ("", " ") else None
 
     def from_device(
         self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]

@@ -59,10 +59,20 @@ class KeyboardResponder:
     """Blocks until the participant's key (or a typed value and Enter)."""
     show: Callable[[str], None]
     clock: Callable[[], float] = time.monotonic
+    sleep: Callable[[float], None] = time.sleep
     driver: str = "keyboard"
 
     def respond(self, probe: Probe, stimulus: float, context: Mapping[str, float]) -> ProbeResponse:
         self.show(probe.keyboard_prompt(stimulus, context))
+        cue = probe.keyboard_cue(stimulus, context)
+        if cue.moving:  # a marker moving at 10 Hz until the stimulus (it stops)
+            for _ in range(round(cue.delay_s * 10)):
+                self.show(".")
+                self.sleep(0.1)
+        elif cue.delay_s > 0:
+            self.sleep(cue.delay_s)
+        if cue.text:
+            self.show(cue.text)
         start = self.clock()
         while True:
             key = self.read_key()

@@ -25,6 +25,7 @@ from study.probes import reaction_time
 from study.probes.base import (
     LAPSE_RATE,
     FixedProcedure,
+    KeyboardCue,
     ProbeResponse,
     ProbeTrial,
     TraitEstimate,
@@ -81,12 +82,15 @@ class StallDetection:
         return TraitEstimate(self.trait, median - r, float(np.hypot(se, r_se)), len(times))
 
     def keyboard_prompt(self, stimulus: float, context: Mapping[str, float]) -> str:
-        return "Press SPACE as soon as the tip has stopped"
+        return "Press Enter as soon as the dots stop"
+
+    def keyboard_cue(self, stimulus: float, context: Mapping[str, float]) -> KeyboardCue:
+        return KeyboardCue(stimulus, "", moving=True)
 
     def from_key(
         self, stimulus: float, key: str, elapsed_s: float, context: Mapping[str, float]
     ) -> ProbeResponse | None:
-        return ProbeResponse(float(elapsed_s)) if key == " " else None
+        return ProbeResponse(float(elapsed_s)) if key in ("", " ") else None
 
     def from_device(
         self, stimulus: float, samples: np.ndarray, context: Mapping[str, float]

@@ -101,11 +101,17 @@ def test_the_keyboard_and_a_device_stream_answer_through_the_same_probes() -> No
     keys = iter(["x", " "])
     clock = iter([0.0, 0.2, 0.31])
     shown: list[str] = []
-    kb = KeyboardResponder(
-        read_key=lambda: next(keys), show=shown.append, clock=lambda: next(clock)
-    )
+    slept: list[float] = []
+    kb = KeyboardResponder(read_key=lambda: next(keys), show=shown.append,
+                           clock=lambda: next(clock), sleep=slept.append)  # fmt: skip
+    # the foreperiod (the stimulus, 2 s) passes, GO shows, the time counts from there
     answer = kb.respond(get_probe("reaction_time"), 2.0, {})
-    assert answer == ProbeResponse(0.31) and "'x' is not an answer" in shown[1]
+    assert slept == [2.0] and shown[1] == "GO"
+    assert answer == ProbeResponse(0.31) and "'x' is not an answer" in shown[2]
+    # the stall: dots at 10 Hz for the 1.5 s the tip moves, then none; Enter answers
+    keys, clock, shown[:], slept[:] = iter([""]), iter([0.0, 0.8]), [], []
+    assert kb.respond(get_probe("stall_detection"), 1.5, {}) == ProbeResponse(0.8)
+    assert shown[1:] == ["."] * 15 and slept == [0.1] * 15
     # a fake dial unit: the joystick turns the tip at 0.5 of full rate for 0.4 s, then
     # the hand pushes the dial past the confirm angle
     state = {"t_ms": 0.0}
@@ -221,11 +227,14 @@ def test_bad_probe_input_is_one_line(tmp_path, capsys) -> None:
 
     db = init_study(tmp_path, DESIGN, ("outsider",))
     assert "probe 'nope'; expected one of" in one_error_line(
-        capsys, ["probe", "run", "--participant", "P001", "--probe", "nope", "--db", db])
+        capsys, ["probe", "run", "--participant", "P001", "--probe", "nope", "--db", db]
+    )
     assert "unknown participant 'P404'" in one_error_line(
-        capsys, ["probe", "run", "--participant", "P404", "--db", db])
+        capsys, ["probe", "run", "--participant", "P404", "--db", db]
+    )
     assert "--covariate 'nope'; expected a probe or its trait" in one_error_line(
-        capsys, ["analyze", "--out", str(tmp_path / "a"), "--covariate", "nope", "--db", db])
+        capsys, ["analyze", "--out", str(tmp_path / "a"), "--covariate", "nope", "--db", db]
+    )
     bad = tmp_path / "p.csv"
     bad.write_text("participant,probe,probe_trial,stimulus,stimulus_unit,response,"
                    "response_unit,correct,context,driver\n"
