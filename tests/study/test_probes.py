@@ -291,3 +291,26 @@ def test_the_covariate_model_is_lme4s() -> None:
     assert row["se"] == pytest.approx(mean_effect[1], rel=1e-3)
     assert row["covariate_mean"] == pytest.approx(values.mean())
     assert notes == []
+
+
+def test_the_session_flow_runs_the_probes_due_before_the_block(tmp_path) -> None:
+    from study.tui.probe_step import due_probes, run_due_probes
+    from tests.study.conftest import init_study
+
+    # DESIGN runs its probes before block 2: nothing is due before the first block
+    db = init_study(tmp_path, DESIGN, ("outsider",))
+    engine = open_database(db, create=False)
+    try:
+        assert (
+            due_probes(engine, "P001") == [] and run_due_probes(engine, "P001", "simulated") is None
+        )
+        assert main(["run", "--participant", "P001", "--db", db]) == 0
+        # block 1 ran (both blocks here: `study run` runs every remaining trial)
+        assert due_probes(engine, "P001") == list(parse_design(DESIGN).probes)
+        line = run_due_probes(engine, "P001", "keyboard")
+        assert line is not None and "study probe run --participant P001 --driver keyboard" in line
+        line = run_due_probes(engine, "P001", "simulated")
+        assert line is not None and "force_threshold 20" in line
+        assert due_probes(engine, "P001") == []
+    finally:
+        engine.dispose()
