@@ -232,6 +232,12 @@ def test_bad_probe_input_is_one_line(tmp_path, capsys) -> None:
     assert "unknown participant 'P404'" in one_error_line(
         capsys, ["probe", "run", "--participant", "P404", "--db", db]
     )
+    bad_design = tmp_path / "bad.toml"
+    bad_design.write_text(DESIGN.replace("aiming = 10", "aiming = 'ten'"))
+    line = one_error_line(capsys, ["init", "--design", str(bad_design), "--db",
+                                   str(tmp_path / "other.db")])  # fmt: skip
+    assert "probes.aiming = 'ten'; expected a whole number of trials from 1 to 200" in line
+    assert not (tmp_path / "other.db").exists()
     assert "--covariate 'nope'; expected a probe or its trait" in one_error_line(
         capsys, ["analyze", "--out", str(tmp_path / "a"), "--covariate", "nope", "--db", db]
     )
