@@ -5,7 +5,6 @@ and keyboard responders, and `study analyze --covariate` against R's lme4."""
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -23,6 +22,7 @@ from study.probes.measure import trait_estimates
 from study.probes.runner import DeviceResponder, KeyboardResponder, SimulatedResponder, run_probe
 from study.protocol.design import TEMPLATE, parse_design
 from study.protocol.participants import PROFILES, TRAITS, ParticipantTraits, draw_traits
+from teleop_core.loop.hardware import UnitState
 from tests.study.conftest import one_error_line
 
 DATA = __import__("pathlib").Path(__file__).parent.parent / "data"
@@ -116,11 +116,12 @@ def test_the_keyboard_and_a_device_stream_answer_through_the_same_probes() -> No
     # the hand pushes the dial past the confirm angle
     state = {"t_ms": 0.0}
 
-    def exchange(current_a: float) -> SimpleNamespace:
+    def exchange(current_a: float) -> UnitState:
+        # what `HardwareDriver.exchange` returns: the dial unit's parsed state line
         state["t_ms"] += 10.0
         t = state["t_ms"] / 1000.0
-        return SimpleNamespace(t_ms=state["t_ms"], angle_rad=0.5 if t > 0.405 else 0.0,
-                               joystick=0.5 if t <= 0.405 else 0.0)  # fmt: skip
+        line = f"S {state['t_ms']:g} {0.5 if t > 0.405 else 0.0} 0 0 {0.5 if t <= 0.405 else 0.0}"
+        return UnitState.parse(line)
 
     device = DeviceResponder(exchange=exchange)
     aimed = device.respond(get_probe("aiming"), 0.0, {})
