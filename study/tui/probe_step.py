@@ -3,9 +3,10 @@ design names before this block, then the block.
 
 `due_probes` says which of the design's probes a participant still owes before a block;
 `run_due_probes` runs them when the session's driver is the simulated person (in the
-run screen's worker thread, like a trial) and otherwise returns the one line the
-screen shows: the keyboard and the dial answer probes through `study probe run`, whose
-responders (`study.probes.runner`) read a terminal line or the dial unit.
+run screen's worker thread, before the trial: `trial_runner.TrialRun.run`) and
+otherwise returns one line naming the command: the keyboard and the dial answer probes
+through `study probe run`, whose responders (`study.probes.runner`) read a terminal line
+or the dial unit. The line is kept on the run (`TrialRun.probe_line`).
 """
 
 from __future__ import annotations

@@ -346,11 +346,6 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         try:
             if checklist:
                 self.services.record_checklist(run.code)
-            from study.tui.probe_step import run_due_probes  # the probes before the block
-
-            probes = run_due_probes(self.services.engine, run.code, self.driver_kind)
-            if probes is not None:
-                self.app.call_from_thread(self.app.notify, probes)
             run.estimator = self.simulation.ready()
             self._run_loaded(run, block)
         finally:
