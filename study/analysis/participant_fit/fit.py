@@ -315,7 +315,8 @@ def fit_trials(
         f"(Laplace covariances); group sds pooled with {NU0:g} pseudo-people at the "
         "profile's; the weakly told traits' group means under the profile's prior; "
         "bootstrap over participants, each replicate with the prior's centre drawn from "
-        "the prior (randomised maximum likelihood)",
+        "the prior (randomised maximum likelihood); a person's probe estimate of a trait "
+        "(study.probes, with its SE) a measurement of that trait beside the moments",
         "moments": names,
         "features": {
             "names": features,
