@@ -110,7 +110,8 @@ class Probe(Protocol):
     description: str
     forced_choice: bool
     """Two intervals, one holding the stimulus (`context["interval"]`, 1 or 2, drawn by
-    the runner); the answer is the interval chosen."""
+    the runner); the answer is the interval chosen. A probe whose measurement model takes
+    another probe's trait names it in an optional `needs` tuple (estimated first)."""
 
     def procedure(
         self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator

@@ -49,6 +49,8 @@ class ComfortTorque:
     response_unit = "N m"
     description = "resistance on the dial at which the participant would push more gently"
     forced_choice = False
+    needs = ("reaction_s",)
+    """The traits its measurement model takes from other probes (estimated first)."""
 
     def procedure(
         self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator

@@ -3,10 +3,10 @@ trait, an estimate and its standard error. This is the one place the participant
 (`study.analysis.participant_fit`) reads the probes through (`trait_estimates`,
 `probe_table`).
 
-Two passes: a probe whose model needs another's trait (the stall detection and the
-comfort torque subtract the reaction time) gets, in the second, what the first pass
-estimated; a missing probe leaves its trait out, and the others fall back as their
-modules say.
+A probe whose model needs another probe's trait (`needs`: the stall detection and the
+comfort torque subtract the reaction time) is estimated after the probes that need
+none, and gets their estimates; a missing probe leaves its trait out, and the others
+fall back as their modules say.
 """
 
 from __future__ import annotations
@@ -28,13 +28,12 @@ def trait_estimates(trials: Iterable[ProbeTrial]) -> dict[str, TraitEstimate]:
     for trial in trials:
         by_probe.setdefault(trial.probe, []).append(trial)
     known: dict[str, TraitEstimate] = {}
-    for _ in range(2):
-        found = {}
-        for name, rows in by_probe.items():
-            estimate = get_probe(name).estimate(rows, known)
-            if estimate is not None:
-                found[estimate.trait] = estimate
-        known = found
+    # first the probes that need no other trait, then those that do (`needs`)
+    ordered = sorted(by_probe, key=lambda name: bool(getattr(get_probe(name), "needs", ())))
+    for name in ordered:
+        estimate = get_probe(name).estimate(by_probe[name], dict(known))
+        if estimate is not None:
+            known[estimate.trait] = estimate
     return known
 
 

@@ -48,6 +48,8 @@ class StallDetection:
     response_unit = "s"
     description = "time to notice that a moving tip on the screen has stopped"
     forced_choice = False
+    needs = ("reaction_s",)
+    """The traits its measurement model takes from other probes (estimated first)."""
 
     def procedure(
         self, n_trials: int, context: Mapping[str, float], rng: np.random.Generator

@@ -321,3 +321,24 @@ def test_the_session_flow_runs_the_probes_due_before_the_block(tmp_path) -> None
         assert due_probes(engine, "P001") == []
     finally:
         engine.dispose()
+
+
+def test_without_the_reaction_probe_the_stall_falls_back_with_a_wider_se() -> None:
+    from study.probes.base import robust_location
+    from study.probes.stall_detection import FALLBACK_REACTION_S
+
+    person = _person(visual_stall_s=0.8, reaction_s=0.27)
+    rng = np.random.default_rng(8)
+    responder = SimulatedResponder(person, rng)
+    stall = run_probe("stall_detection", 30, responder, rng)
+    react = run_probe("reaction_time", 30, responder, rng)
+    with_rt = trait_estimates(stall + react)["visual_stall_s"]
+    alone = trait_estimates(stall)
+    assert set(alone) == {"visual_stall_s"}
+    # the median response less the profiles' middle reaction time, the SEs combined
+    times = np.array([t.response for t in stall])
+    median, se = robust_location(times[(times >= 0.1) & (times <= 3.0)])
+    assert alone["visual_stall_s"].value == pytest.approx(median - FALLBACK_REACTION_S[0])
+    assert alone["visual_stall_s"].se == pytest.approx(np.hypot(se, FALLBACK_REACTION_S[1]))
+    assert alone["visual_stall_s"].se > with_rt.se
+    assert abs(with_rt.value - 0.8) < 3 * with_rt.se
