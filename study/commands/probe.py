@@ -55,9 +55,15 @@ def run(
         )
     elif driver == "hardware":
         from study.probes.runner import DeviceResponder
-        from teleop_core.loop.hardware import HardwareDriver
+        from teleop_core.loop.hardware import HardwareDriver, HardwareError
 
-        responder = DeviceResponder(exchange=HardwareDriver.open(port).exchange)
+        try:
+            responder = DeviceResponder(exchange=HardwareDriver.open(port).exchange)
+        except HardwareError as exc:  # before anything is stored
+            raise StudyInputError(
+                f"--port {port}: {exc}; expected the serial port of the dial's ESP32, "
+                "e.g. /dev/ttyUSB0"
+            ) from None
     with opened_database(db_url) as engine:
         if driver == "keyboard":
             stored = run_participant_probes(engine, code, responder, only)

@@ -233,6 +233,10 @@ def test_bad_probe_input_is_one_line(tmp_path, capsys) -> None:
     assert "unknown participant 'P404'" in one_error_line(
         capsys, ["probe", "run", "--participant", "P404", "--db", db]
     )
+    argv = ["probe", "run", "--participant", "P001", "--driver", "hardware", "--port",
+            str(tmp_path / "no-port"), "--db", db]  # fmt: skip
+    line = one_error_line(capsys, argv)
+    assert "no-port: cannot open serial port" in line and "expected the serial port" in line
     bad_design = tmp_path / "bad.toml"
     bad_design.write_text(DESIGN.replace("aiming = 10", "aiming = 'ten'"))
     line = one_error_line(capsys, ["init", "--design", str(bad_design), "--db",
