@@ -8,8 +8,8 @@
   correction 1 - 3 / (4 (2n) - 9)) or the Wilcoxon signed-rank test (effect size the
   matched-pairs rank-biserial correlation, Kerby 2014; exact or asymptotic p by R's
   `wilcox.test` rule on the differences at the data's resolution,
-  `wilcoxon_signed_rank`). Holm's correction runs across the groups of one task x measure (`holm`, pingouin's `multicomp(method="holm")` line for
-  line: importing pingouin for it cost 2.3 s of `study analyze`'s start, issue 21;
+  `wilcoxon_signed_rank`). Holm's correction runs across the groups of one task x
+  measure (`holm`, pingouin's `multicomp(method="holm")` line for line: importing pingouin for it cost 2.3 s of `study analyze`'s start, issue 21;
   statsmodels' `multipletests` gives the same values but runs a garbage collection on
   every call, 0.2 s each).
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
