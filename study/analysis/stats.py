@@ -9,8 +9,8 @@
   matched-pairs rank-biserial correlation, Kerby 2014; exact or asymptotic p by R's
   `wilcox.test` rule on the differences at the data's resolution,
   `wilcoxon_signed_rank`). Holm's correction runs across the groups of one task x
-  measure (`holm`, pingouin's `multicomp(method="holm")` line for line: importing pingouin for it cost 2.3 s of `study analyze`'s start, issue 21;
-  statsmodels' `multipletests` gives the same values but runs a garbage collection on
+  measure (`holm`, pingouin's `multicomp(method="holm")` line for line: importing
+  pingouin for it cost 2.3 s of `study analyze`'s start; statsmodels' `multipletests` gives the same values but runs a garbage collection on
   every call, 0.2 s each).
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
