@@ -10,8 +10,8 @@
   `wilcox.test` rule on the differences at the data's resolution,
   `wilcoxon_signed_rank`). Holm's correction runs across the groups of one task x
   measure (`holm`, pingouin's `multicomp(method="holm")` line for line: importing
-  pingouin for it cost 2.3 s of `study analyze`'s start; statsmodels' `multipletests` gives the same values but runs a garbage collection on
-  every call, 0.2 s each).
+  pingouin for it cost 2.3 s of `study analyze`'s start; statsmodels' `multipletests`
+  gives the same values but runs a garbage collection on every call, 0.2 s each).
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
   pingouin's `mixed_anova` has Type II only, so both come from two one-way models in
