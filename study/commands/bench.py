@@ -14,7 +14,7 @@ import click
 from rich.console import Console
 
 from study.analysis.participant_fit import WEAK_TRAITS
-from study.commands.base import StudyGroup, check_parent_folder, positive_option, progress_bar
+from study.commands.base import SEED, StudyGroup, check_parent_folder, positive_option, progress_bar
 from study.commands.bench_paper import PAPER_BENCHES, write_json
 
 _db_option = click.option(
@@ -230,7 +230,7 @@ def bench_startup(
 @click.option("--weak-traits", type=click.Choice(WEAK_TRAITS), default="prior",
               show_default=True, help="As `study participants fit --weak-traits`.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
-@click.option("--seed", type=int, default=11, show_default=True)
+@click.option("--seed", type=SEED, default=11, show_default=True)
 @_json_option
 def bench_participants(out_dir: Path | None, trials: int, truth_people: int, truth_shift: float,
                        weak_traits: str, jobs: int, seed: int,

@@ -7,20 +7,30 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, db_option, file_option, opened_database, progress_bar
+from study.commands.base import (
+    StudyCommand,
+    actor_option,
+    db_option,
+    file_option,
+    opened_database,
+    progress_bar,
+)
 from study.errors import StudyInputError
 
 
 @click.command("import", cls=StudyCommand)
 @file_option("--trials", "trials_csv")
 @click.option("--tlx", "tlx_csv", type=click.Path(dir_okay=False, path_type=Path))
+@actor_option
 @db_option
-def import_cmd(trials_csv: Path, tlx_csv: Path | None, db_url: str | None) -> None:
+def import_cmd(
+    trials_csv: Path, tlx_csv: Path | None, actor: str | None, db_url: str | None
+) -> None:
     """Import trial summaries (and NASA-TLX) collected elsewhere: all rows or none."""
     from study.protocol.exchange import import_data  # pandas: only when a command runs
 
     with opened_database(db_url) as engine:
-        n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv)
+        n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv, actor)
     click.echo(f"imported {n_trials} trials and {n_tlx} questionnaires")
 
 

@@ -10,7 +10,13 @@ from rich.console import Console
 
 from db.migrate import open_database
 from study.analysis.source import DRIVERS
-from study.commands.base import StudyCommand, db_option, load_participants, participants_option
+from study.commands.base import (
+    SEED,
+    StudyCommand,
+    db_option,
+    load_participants,
+    participants_option,
+)
 from study.errors import StudyInputError
 
 FORMATS = ("pdf", "svg", "png")
@@ -64,7 +70,7 @@ def figures(
               type=click.Path(file_okay=False, path_type=Path))  # fmt: skip
 @click.option("--db", "db_url", default=None, metavar="URL",
               help="Database for the demo study [default: OUT/demo.db].")  # fmt: skip
-@click.option("--seed", type=int, default=1, show_default=True)
+@click.option("--seed", type=SEED, default=1, show_default=True)
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--quick", is_flag=True, help="2 participants per group, one trial per block.")
 @participants_option
