@@ -65,7 +65,12 @@ def database_failure(exc: BaseException, db_url: str | None = None) -> str | Non
     text = str(orig).strip() if orig is not None else ""
     reason = text.splitlines()[0] if text else type(exc).__name__
     if "full" in reason.lower():
-        return f"database {shown} is full ({reason}); expected free space: nothing more was stored"
+        return (f"database {shown} is full ({reason}); expected free space: what was committed "
+                "before stays, the command's own change was not stored")  # fmt: skip
+    if "locked" in reason.lower():
+        return (f"database {shown} is locked by another program ({reason}); expected it free: "
+                "retry when that program is done, or wait longer with ?timeout=SECONDS in the "
+                "URL; nothing of this command was stored")  # fmt: skip
     return (
         f"database {shown} cannot be used: {reason}; expected an intact, reachable study "
         "database (restore a corrupted file from its backup)"
