@@ -107,11 +107,14 @@ def demo(
             trials, tlx = trial_frame(engine), tlx_frame(engine)
             result = analyze(trials, participant_means(trials, tlx))
             write(result, out_dir / "analysis", None)
+            # a paper needs both IEEE widths: double column here, single in single/
             write_figures(engine, out_dir / "figures")
+            write_figures(engine, out_dir / "figures" / "single", width="single")
         finally:
             engine.dispose()
     if model is not None:
         click.echo(f"simulated participants drawn from the {model.label()}")
     click.echo(f"SIMULATED demo study (every participant, trial and questionnaire simulated) "
                f"in {db_url}; analysis in {out_dir / 'analysis'}; figures in "
-               f"{out_dir / 'figures'} ({time.monotonic() - start:.0f} s)")  # fmt: skip
+               f"{out_dir / 'figures'} (double column) and {out_dir / 'figures' / 'single'} "
+               f"(single column) ({time.monotonic() - start:.0f} s)")  # fmt: skip

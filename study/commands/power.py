@@ -156,5 +156,6 @@ def power(
                        "interaction": r.interaction} for s, r in curve],
         }  # fmt: skip
         (out_dir / "power.json").write_text(json.dumps(report, indent=2) + "\n")
-        for path in save(plot_power_curve(curve), out_dir, "power_curve", ("pdf", "png")):
+        fig = plot_power_curve(curve, effects=effects, rho=rho, n_sim=n_sim)
+        for path in save(fig, out_dir, "power_curve", ("pdf", "png")):
             click.echo(str(path))

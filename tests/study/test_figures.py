@@ -244,8 +244,9 @@ def test_fig9_draws_every_stored_sample_of_the_two_trials(engine: Engine) -> Non
 def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> None:
     sizes = {"outsider": 20, "novice": 8, "expert": 8}
     equal = power_curve(sizes, dict.fromkeys(sizes, 0.8), 0.5, 20, 0, scales=(0.5, 1.0))
+    assumed = {"effects": dict.fromkeys(sizes, 0.8), "rho": 0.5, "n_sim": 20}
     for width in ("single", "double"):
-        fig = plot_power_curve(equal, width)
+        fig = plot_power_curve(equal, width, **assumed)
         assert check_figure(fig) == []
         ax_groups, ax_inter = fig.axes
         lines = {line.get_label(): line for line in ax_groups.get_lines()
@@ -258,8 +259,23 @@ def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> No
         plt.close(fig)
     unequal = power_curve(sizes, {"outsider": 0.2, "novice": 0.8, "expert": 1.2}, 0.5, 20, 0,
                           scales=(1.0,))  # fmt: skip
-    fig = plot_power_curve(unequal, "single")
+    effects = {"outsider": 0.2, "novice": 0.8, "expert": 1.2}
+    fig = plot_power_curve(unequal, "single", effects=effects, rho=0.5, n_sim=20)
     assert "power" in fig.axes[1].get_ylabel() and "type I" not in fig.axes[1].get_ylabel()
+    # the assumptions stated in the figure
+    key = fig.legends[0].get_title().get_text().replace("\n", " ")
+    for phrase in ("outsider 0.2, novice 0.8, expert 1.2", "correlation 0.5", "alpha 0.05",
+                   "20 simulated studies per size", "Monte-Carlo"):  # fmt: skip
+        assert phrase in key, key
+    # each estimate's 95 % Monte-Carlo (Wilson) band, drawn around it: novice's power p of
+    # 20 studies, by hand: (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
+    novice = unequal[0][1].groups["novice"]
+    z, n = 1.959963984540054, 20
+    centre = (novice + z**2 / (2 * n)) / (1 + z**2 / n)
+    half = z * np.sqrt(novice * (1 - novice) / n + z**2 / (4 * n**2)) / (1 + z**2 / n)
+    bands = [c for c in fig.axes[0].collections if len(c.get_paths())]
+    ys = [sorted({round(float(y), 12) for y in b.get_paths()[0].vertices[:, 1]}) for b in bands]
+    assert [round(centre - half, 12), round(centre + half, 12)] in ys
     plt.close(fig)
 
 
