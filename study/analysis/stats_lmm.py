@@ -80,9 +80,14 @@ def _gradient(lam: float, X, y, idx, n_i) -> float:
 
 def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fit:
     """REML fit of y = X beta + u[group] + e, u ~ N(0, sigma_b^2), e ~ N(0, sigma^2)."""
+    n, p = X.shape
+    if n <= p:
+        raise ValueError(f"{n} trials for {p} fixed effects: no residual degrees of freedom")
     _, idx = np.unique(groups, return_inverse=True)
     n_i = np.bincount(idx).astype(float)
     args = (X, y, idx, n_i)
+    if _parts(0.0, *args)[2] <= 0:
+        raise ValueError("the fixed effects fit every trial exactly: no residual variance")
     if _gradient(0.0, *args) >= 0:
         lam = 0.0  # the criterion rises from the boundary: the optimum is on it
     else:
@@ -94,7 +99,6 @@ def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fi
         lam = optimize.brentq(_gradient, 0.0, hi, args=args, xtol=1e-300, rtol=1e-15,
                               maxiter=500)  # fmt: skip
     A, beta, q, _, _ = _parts(lam, *args)
-    n, p = X.shape
     sigma2 = q / (n - p)
     se = np.sqrt(np.diag(np.linalg.inv(A)) * sigma2)
     crit = _criterion(lam, *args) + (n - p) * (1 + np.log(2 * np.pi / (n - p)))

@@ -511,3 +511,14 @@ def test_tables_give_t_df_v_and_human_labels() -> None:
     assert all(v.startswith(".") or v in ("1.000", "n/a") for v in anova["partial eta squared"])
     terms = lmm_table(analysis).display["term"].tolist()
     assert terms[:4] == ["intercept", "HV", "novice", "HV x novice"]
+
+
+def test_a_mixed_model_without_residual_df_is_a_note_not_an_error() -> None:
+    rows = [{"participant": f"P{i}", "group": g, "task": "lcca", "condition": c, "m": v}
+            for i, (g, c, v) in enumerate([("a", "VO", 1.0), ("a", "HV", 2.0), ("b", "VO", 3.0),
+                                           ("b", "HV", 5.0)])]  # fmt: skip
+    table, notes = mixed_model(pd.DataFrame(rows), ("m",))
+    assert table.empty and notes == [
+        "lcca/m: mixed model could not be fitted: 4 trials for 4 fixed effects: no residual "
+        "degrees of freedom"
+    ]
