@@ -7,6 +7,7 @@ import hashlib
 import json
 import os
 import sqlite3
+from contextlib import closing
 from pathlib import Path
 
 import pytest
@@ -152,3 +153,33 @@ def test_progress_bars_write_nothing_where_stderr_is_no_terminal(
         bar.advance(bar.add_task("x", total=2))
     assert capfd.readouterr().err == ""
     assert not os.isatty(2)
+
+
+def test_killing_the_parent_of_jobs_2_prints_no_leaked_semaphore_warning(tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    db = _init(tmp_path)
+    assert main(["participant", "add", "--group", "novice", "--count", "3", "--db", db]) == 0
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    shm = set(os.listdir("/dev/shm")) if os.path.isdir("/dev/shm") else set()
+    run = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from study.cli import main; sys.exit(main())",
+         "run", "--all", "--jobs", "2", "--pace", "1", "--db", db],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:  # kill once both workers run a trial
+        with closing(sqlite3.connect(db)) as conn:
+            running = "SELECT count(*) FROM trials WHERE status = 'running'"
+            if conn.execute(running).fetchone()[0] >= 2:
+                break
+        time.sleep(0.2)
+    run.send_signal(signal.SIGKILL)
+    _, err = run.communicate(timeout=60)  # the workers and the tracker end too
+    assert "leaked semaphore" not in err, err
+    assert "Traceback" not in err, err
+    if shm:  # the tracker still removed the pool's semaphores
+        assert not {n for n in set(os.listdir("/dev/shm")) - shm if n.startswith("sem.mp")}
