@@ -56,7 +56,8 @@ def test_a_participant_created_by_an_import_gets_its_schedule(
     assert main(["schedule", "--json", "--db", db]) == 0
     blocks = json.loads(capsys.readouterr().out)["participants"][0]["blocks"]
     assert [(b["condition"], b["completed"], b["planned"]) for b in blocks] == [
-        ("VO", 4, 4), ("HV", 4, 4)
+        ("VO", 4, 4),
+        ("HV", 4, 4),
     ]
 
 

@@ -90,7 +90,10 @@ def test_a_full_disk_names_the_participant_trial_and_time_kept(
     assert len(running) == 1
     r_task, r_condition, practice, index, last_s = running[0]
     assert (r_task, r_condition, bool(practice), index + 1) == (
-        task, condition, kind == "practice trial", int(number)
+        task,
+        condition,
+        kind == "practice trial",
+        int(number),
     )
     assert (last_s is None and kept_s is None) or float(kept_s) == pytest.approx(last_s, abs=0.005)
     # with space again, the next run marks it interrupted and finishes the schedule

@@ -88,9 +88,19 @@ def leaf_commands() -> list[tuple[list[str], click.Command]]:
     return out
 
 
-PLACEHOLDER = {"design": "d.toml", "design_path": "d.toml", "campaign_path": "d.toml",
-               "trials_csv": "t.csv", "group": "novice", "code": "P001", "text": "a note",
-               "reason": "a reason", "task": "lcca", "condition": "VO", "participant": "P001"}
+PLACEHOLDER = {
+    "design": "d.toml",
+    "design_path": "d.toml",
+    "campaign_path": "d.toml",
+    "trials_csv": "t.csv",
+    "group": "novice",
+    "code": "P001",
+    "text": "a note",
+    "reason": "a reason",
+    "task": "lcca",
+    "condition": "VO",
+    "participant": "P001",
+}
 """Values for required parameters (by name), so that a refusal is the bad option's."""
 
 
@@ -316,8 +326,19 @@ TOML_VALUE = st.one_of(
     st.integers(-5, 5000), st.sampled_from([float("nan"), float("inf"), -1.5, 0.0, 1e308]),
     st.sampled_from(['"x"', '""', "true", "[]", '["VO", "HV"]', '["lcca"]', '"P"', '"ÄB"']),
 )  # fmt: skip
-KEYS = ["name", "seed", "conditions", "tasks", "trials_per_condition", "practice_trials",
-        "counterbalancing", "break_s", "tlx_before_next_block", "code_prefix", "unknown"]
+KEYS = [
+    "name",
+    "seed",
+    "conditions",
+    "tasks",
+    "trials_per_condition",
+    "practice_trials",
+    "counterbalancing",
+    "break_s",
+    "tlx_before_next_block",
+    "code_prefix",
+    "unknown",
+]
 
 
 def _toml(value: object) -> str:
