@@ -58,7 +58,47 @@ def resolve_url(db: str | URL | None = None) -> URL:
             f"database URL {url.render_as_string(hide_password=True)!r} uses backend "
             f"{url.get_backend_name()!r}; expected sqlite or postgresql"
         )
+    if url.get_backend_name() == "sqlite":
+        _check_sqlite_query(url)
     return url
+
+
+SQLITE_QUERY = {
+    "timeout": "seconds from 0 to 86400", "mode": "ro, rw, rwc or memory", "uri": "true"
+}
+"""The SQLite URL parameters `study` understands (pysqlite's); any other is a typo."""
+MAX_TIMEOUT_S = 86400.0
+
+
+def _check_sqlite_query(url: URL) -> None:
+    for key, value in url.query.items():
+        if key not in SQLITE_QUERY:
+            raise DbInputError(
+                f"database URL {describe(url)!r} has parameter {key!r}; expected only "
+                f"{', '.join(SQLITE_QUERY)}"
+            )
+        text = value if isinstance(value, str) else value[-1]
+        ok = {
+            "timeout": lambda t: _seconds(t) is not None,
+            "mode": lambda t: t in ("ro", "rw", "rwc", "memory"),
+            "uri": lambda t: t == "true",
+        }[key](text)
+        if not ok:
+            raise DbInputError(
+                f"database URL {describe(url)!r} has {key}={text!r}; expected "
+                f"{SQLITE_QUERY[key]}" + (", e.g. ?timeout=30" if key == "timeout" else "")
+            )
+
+
+def _seconds(text: str) -> float | None:
+    """A timeout in seconds, 0 to a day, or None."""
+    import math
+
+    try:
+        seconds = float(text)
+    except ValueError:
+        return None
+    return seconds if math.isfinite(seconds) and 0 <= seconds <= MAX_TIMEOUT_S else None
 
 
 def describe(url: URL | Engine) -> str:
@@ -101,11 +141,8 @@ def busy_timeout_ms(url: URL) -> int:
     if raw is None:
         return SQLITE_BUSY_TIMEOUT_MS
     text = raw if isinstance(raw, str) else raw[-1]
-    try:
-        seconds = float(text)
-    except ValueError:
-        seconds = -1.0
-    if not seconds >= 0:
+    seconds = _seconds(text)
+    if seconds is None:
         raise DbInputError(
             f"database URL {describe(url)!r} has timeout={text!r}; expected a number of "
             "seconds, e.g. ?timeout=30"

@@ -117,15 +117,24 @@ def jitter(n: int, key: str, half_width: float = JITTER) -> np.ndarray:
     return rng.uniform(-half_width, half_width, n)
 
 
-def method_label(row: pd.Series | None) -> str:
+def method_label(row: pd.Series | None, short: bool = False) -> str:
     """What `compare_conditions` ran, as the figure says it under the group: 'paired t',
     or 'Wilcoxon' and '(exact)' or '(asymptotic)' on two lines (narrow enough that the
-    first group's label clears the y-axis)."""
+    first group's label clears the y-axis); `short` (single column): 't', 'W (ex.)' or
+    'W (as.)', spelled out in the caption (`SHORT_CAPTION`)."""
     if row is None:
         return "no test"
     if row["test"] == "paired_t":
-        return "paired t"
+        return "t" if short else "paired t"
+    if short:
+        return f"W ({row['p_method'][:2]}.)"
     return f"Wilcoxon\n({row['p_method']})"
+
+
+SHORT_CAPTION = (" Under each group: t, paired t-test; W, Wilcoxon signed-rank test, ex. exact "
+                 "or as. asymptotic p.")  # fmt: skip
+SINGLE_MAX_IN = 4.0
+"""The tallest a single-column figure may be."""
 
 
 def _legend_handles() -> list[Line2D]:
@@ -175,29 +184,35 @@ def fig12(
     labels = {**LABELS, **measures} if isinstance(measures, Mapping) else LABELS
     measures = [m for m in measures if m in set(long["measure"])]
     groups = list(dict.fromkeys(long["group"]))
+    single = width == "single"
     with plt.rc_context(STYLE):
-        ncol = 1 if width == "single" else 2
+        ncol = 2  # single column too: four stacked panels were 7.2 in tall
         nrow = int(np.ceil(len(measures) / ncol))
-        fig, axes = plt.subplots(nrow, ncol, figsize=(WIDTHS_IN[width], 1.2 + 1.5 * nrow),
+        height = min(1.6 + 1.2 * nrow, SINGLE_MAX_IN) if single else 1.2 + 1.5 * nrow
+        fig, axes = plt.subplots(nrow, ncol, figsize=(WIDTHS_IN[width], height),
                                  layout="constrained", squeeze=False)  # fmt: skip
         for ax, measure in zip(axes.ravel(), measures, strict=False):
-            _panel(ax, long[long["measure"] == measure], comparisons, measure, groups)
-            ax.set_ylabel(labels.get(measure, measure))
+            _panel(ax, long[long["measure"] == measure], comparisons, measure, groups, single)
+            label = labels.get(measure, measure)
+            if single:  # lines of at most 10 characters: no taller than the short panels
+                label = "\n".join(textwrap.wrap(label.replace("\n", " "), 10,
+                                                 break_on_hyphens=False))
+            ax.set_ylabel(label)
         for ax in axes.ravel()[len(measures) :]:
             ax.set_visible(False)
         untested = any(
             not len(comparisons[(comparisons["measure"] == m) & (comparisons["group"] == g)])
             for m in measures for g in groups
         )  # fmt: skip
-        caption = MARKS_CAPTION + (" n/a: no test (fewer than 3 complete pairs)." if untested
-                                   else "")  # fmt: skip
-        figure_key(fig, _legend_handles(), caption, ncols=2 if width == "single" else 4)
+        caption = MARKS_CAPTION + (SHORT_CAPTION if single else "") + (
+            " n/a: no test (fewer than 3 complete pairs)." if untested else "")  # fmt: skip
+        figure_key(fig, _legend_handles(), caption, ncols=2 if single else 4)
     return fig
 
 
 def _panel(
     ax: plt.Axes, data: pd.DataFrame, comparisons: pd.DataFrame, measure: str,
-    groups: list[str],
+    groups: list[str], short: bool = False,
 ) -> plt.Axes:  # fmt: skip
     ticks, top = [], 0.0
     for gi, group in enumerate(groups):
@@ -225,8 +240,10 @@ def _panel(
         top = max(top, high)
         ax.annotate(stars(p), (x0 + 0.5, high), xytext=(0, 3), textcoords="offset points",
                     ha="center", va="bottom", gid=f"{MARK_GID}{measure}/{group}")  # fmt: skip
-        ticks.append((x0 + 0.5, f"{group}\n{method_label(row)}"))
-    ax.set_xticks([t for t, _ in ticks], [label for _, label in ticks])
+        ticks.append((x0 + 0.5, f"{group}\n{method_label(row, short)}"))
+    # single column: the panels are too narrow for the labels side by side; upright
+    ax.set_xticks([t for t, _ in ticks], [label for _, label in ticks],
+                  rotation=90 if short else 0)  # fmt: skip
     ax.tick_params(axis="x", length=0)
     ax.set_xlim(-0.6, 3.0 * len(groups) - 1.4)
     ax.set_ylim(0, (top or 1.0) * 1.3)

@@ -12,14 +12,26 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
 
-from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE, EXACT_MAX_N
+from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE, EXACT_MAX_N, RESOLUTION_REL
 
 if TYPE_CHECKING:
     from study.analysis.stats import Analysis
 
-PACKAGES = ("haptic-study", "numpy", "scipy", "pandas", "statsmodels", "pingouin", "matplotlib")
+PACKAGES = ("haptic-study", "numpy", "scipy", "pandas", "matplotlib")
+"""The packages that compute or draw the results (`COMPUTED_BY` says which does what)."""
+
+COMPUTED_BY = (
+    "Shapiro-Wilk, paired t, Wilcoxon signed-rank p-values and the F, t and normal "
+    "distributions: scipy.stats; Hedges' g_av, the rank-biserial correlation, Holm's "
+    "correction, the mixed ANOVA's sums of squares (closed form, two conditions) and the "
+    "mixed model's REML fit (profiled criterion, exact optimum): haptic-study's own code "
+    "with numpy and scipy, checked in its tests against R (afex, lme4, stats) and pingouin"
+)
 
 WILCOXON_RULE = (
+    "differences equal to within "
+    f"{RESOLUTION_REL:g} of the data's magnitude are treated as equal (and as zero when that "
+    "close to zero), so ties come from the data's resolution and not from rounding noise; "
     f"exact p when there are fewer than {EXACT_MAX_N} differences, none zero and none tied "
     "in absolute value; otherwise zero differences are dropped and p is the normal "
     "approximation with tie-corrected variance and continuity correction (the rule of R's "
@@ -32,8 +44,10 @@ def comparison_method() -> str:
         "VO vs HV within each group on participant means. Shapiro-Wilk on the paired "
         f"differences (alpha = {ALPHA:g}) chooses the test: a two-sided paired t-test (effect "
         "size Hedges' g_av, Lakens 2013) when they look normal, otherwise a two-sided "
-        f"Wilcoxon signed-rank test ({WILCOXON_RULE}; effect size the matched-pairs "
-        "rank-biserial correlation, Kerby 2014). p (Holm): Holm-corrected across the groups "
+        f"Wilcoxon signed-rank test ({WILCOXON_RULE}; statistic V, the sum of the ranks of the "
+        "positive HV - VO differences, as R reports it; effect size the matched-pairs "
+        "rank-biserial correlation, Kerby 2014). Paired t-tests are reported with their df "
+        "(pairs - 1). p (Holm): Holm-corrected across the groups "
         "of each task and measure."
     )
 
@@ -57,9 +71,11 @@ def anova_method(ss_type: int) -> str:
 def lmm_method() -> str:
     return (
         "Linear mixed model over all measured trials, value ~ condition * group + "
-        "(1 | participant), fitted by REML (statsmodels MixedLM); treatment coding with "
-        "VO and the alphabetically first group as reference. p from Wald z tests "
-        "(no Satterthwaite or Kenward-Roger df)."
+        "(1 | participant), fitted by REML at the exact optimum of the profiled criterion "
+        "(lme4's estimates); treatment coding with VO and the alphabetically first group as "
+        "reference. p from Wald z tests (no Satterthwaite or Kenward-Roger df). A fit whose "
+        "participant-intercept SD is below 1e-4 of the residual SD is reported as singular "
+        "(lme4's isSingular)."
     )
 
 
@@ -78,9 +94,11 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
         "comparisons": {
             "unit": "participant means per task x condition",
             "normality": f"Shapiro-Wilk on the paired differences, alpha {ALPHA:g}",
-            "tests": {"paired_t": "two-sided paired t-test, effect size Hedges' g_av",
-                      "wilcoxon": "two-sided Wilcoxon signed-rank test, effect size "
-                                  "matched-pairs rank-biserial correlation"},
+            "tests": {"paired_t": "two-sided paired t-test (df = pairs - 1), effect size "
+                                  "Hedges' g_av",
+                      "wilcoxon": "two-sided Wilcoxon signed-rank test, statistic V (sum of "
+                                  "the ranks of the positive HV - VO differences, R's V), "
+                                  "effect size matched-pairs rank-biserial correlation"},
             "wilcoxon_p": WILCOXON_RULE,
             "correction": "Holm across the groups of each task x measure",
         },
@@ -92,7 +110,9 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
             "effect_size": "partial eta squared",
         },
         "lmm": {"estimation": "REML", "p": "Wald z", "df": "none (z tests)",
-                "formula": "value ~ condition * group + (1 | participant)"},
+                "formula": "value ~ condition * group + (1 | participant)",
+                "singular": "participant-intercept SD below 1e-4 of the residual SD"},
+        "computed_by": COMPUTED_BY,
         "software": software_versions(),
     }
 
@@ -127,5 +147,6 @@ def methods_markdown(analysis: Analysis) -> str:
         f"{comparison_method()}\n\n"
         f"{anova_method(analysis.ss_type)}\n\n"
         f"{lmm_method()}\n\n"
+        f"Computed by: {COMPUTED_BY}.\n\n"
         f"Software: {software}.\n"
     )

@@ -5,6 +5,11 @@ Two panels. Left: the power of each group's VO-HV test against that group's own 
 the lines stay apart where they overlap and in grey print. Right: the group x condition
 test against the total N, labelled as what it is: power when the simulated effects
 differ, a type I error rate (with alpha drawn) when they are equal.
+
+Each estimate is a share of `n_sim` simulated studies, drawn with its 95 % Monte-Carlo
+interval (Wilson score, statsmodels' `proportion_confint`), and the key under the
+panels states what was assumed: the effects, the VO-HV correlation, alpha and the
+number of simulated studies per size.
 """
 
 from __future__ import annotations
@@ -13,8 +18,9 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+import numpy as np
 
-from study.analysis.figures import STYLE, WIDTHS_IN
+from study.analysis.figures import STYLE, WIDTHS_IN, figure_key, wrap
 from study.analysis.power import PowerResult
 from study.analysis.stats import ALPHA
 
@@ -23,20 +29,46 @@ MARKERS = ("o", "s", "^", "D", "v", "P")
 LINESTYLES = ("-", "--", ":", "-.", (0, (5, 1)), (0, (1, 1)))
 
 
-def plot_power_curve(curve: list[tuple[float, PowerResult]], width: str = "single") -> plt.Figure:
-    """Per-group power against the group's n; the interaction against total N."""
+def monte_carlo_band(rates: list[float], n_sim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The 95 % Wilson interval of each rate, a share of `n_sim` simulated studies."""
+    from statsmodels.stats.proportion import proportion_confint
+
+    hits = np.round(np.asarray(rates, dtype=float) * n_sim)
+    low, high = proportion_confint(hits, n_sim, alpha=0.05, method="wilson")
+    return np.asarray(low), np.asarray(high)
+
+
+def assumptions(effects: dict[str, float], rho: float, n_sim: int) -> str:
+    """What the simulation assumed, as the figure states it."""
+    shown = ", ".join(f"{g} {d:g}" for g, d in effects.items())
+    return (f"Simulated studies. Assumed standardised HV-VO effects: {shown}; VO-HV "
+            f"correlation {rho:g}; alpha {ALPHA:g}; {n_sim} simulated studies per size. "
+            "Bands: 95 % Monte-Carlo intervals (Wilson). Dotted: power 0.8.")  # fmt: skip
+
+
+def plot_power_curve(
+    curve: list[tuple[float, PowerResult]], width: str = "single", *,
+    effects: dict[str, float], rho: float, n_sim: int,
+) -> plt.Figure:  # fmt: skip
+    """Per-group power against the group's n; the interaction against total N; each with
+    its Monte-Carlo interval, and the assumptions in the key."""
     first = curve[0][1]
     has_interaction = first.interaction is not None
     with plt.rc_context(STYLE):
         ncols = 2 if has_interaction else 1
         rows = 2 if (width == "single" and has_interaction) else 1
         cols = 1 if rows == 2 else ncols
-        fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], 2.2 * rows + 0.2),
+        note = assumptions(effects, rho, n_sim)
+        key_in = 0.14 * len(wrap(note, WIDTHS_IN[width]).splitlines()) + 0.1  # 8 pt lines
+        fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], 2.2 * rows + 0.2 + key_in),
                                  layout="constrained", squeeze=False)  # fmt: skip
         ax = axes.ravel()[0]
         for k, group in enumerate(first.groups):
-            ax.plot([r.sizes[group] for _, r in curve], [r.groups[group] for _, r in curve],
-                    marker=MARKERS[k % 6], ls=LINESTYLES[k % 6], ms=3.5,
+            sizes = [r.sizes[group] for _, r in curve]
+            rates = [r.groups[group] for _, r in curve]
+            low, high = monte_carlo_band(rates, n_sim)
+            ax.fill_between(sizes, low, high, color=COLORS[k % 6], alpha=0.2, lw=0)
+            ax.plot(sizes, rates, marker=MARKERS[k % 6], ls=LINESTYLES[k % 6], ms=3.5,
                     color=COLORS[k % 6], label=group)  # fmt: skip
         ax.axhline(0.8, color="#999999", lw=0.6, ls=":")
         ax.set_xlabel("participants in the group")
@@ -47,6 +79,8 @@ def plot_power_curve(curve: list[tuple[float, PowerResult]], width: str = "singl
             ax = axes.ravel()[1]
             totals = [sum(r.sizes.values()) for _, r in curve]
             rates = [r.interaction for _, r in curve]
+            low, high = monte_carlo_band(rates, n_sim)
+            ax.fill_between(totals, low, high, color="black", alpha=0.15, lw=0)
             if first.interaction_is_power:
                 ax.plot(totals, rates, "s--", ms=3.5, color="black")
                 ax.axhline(0.8, color="#999999", lw=0.6, ls=":")
@@ -59,4 +93,5 @@ def plot_power_curve(curve: list[tuple[float, PowerResult]], width: str = "singl
                 ax.set_ylim(0, max(0.2, *rates) * 1.1)
                 ax.legend(loc="upper right")
             ax.set_xlabel("participants in all groups")
+        figure_key(fig, [], note, ncols=1)
     return fig

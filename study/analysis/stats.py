@@ -7,19 +7,19 @@
   g_av, Lakens 2013: d_av = mean difference / mean of the two SDs, times Hedges'
   correction 1 - 3 / (4 (2n) - 9)) or the Wilcoxon signed-rank test (effect size the
   matched-pairs rank-biserial correlation, Kerby 2014; exact or asymptotic p by R's
-  `wilcox.test` rule, `wilcoxon_signed_rank`). Holm's correction runs across the
-  groups of one task x measure (`holm`, pingouin's `multicomp(method="holm")` line for
-  line: importing pingouin for it cost 2.3 s of `study analyze`'s start, issue 21;
-  statsmodels' `multipletests` gives the same values but runs a garbage collection on
-  every call, 0.2 s each).
+  `wilcox.test` rule on the differences at the data's resolution,
+  `wilcoxon_signed_rank`). Holm's correction runs across the groups of one task x
+  measure (`holm`, pingouin's `multicomp(method="holm")` line for line: importing
+  pingouin for it cost 2.3 s of `study analyze`'s start; statsmodels' `multipletests`
+  gives the same values but runs a garbage collection on every call, 0.2 s each).
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
   pingouin's `mixed_anova` has Type II only, so both come from two one-way models in
   closed form (`anova.py` says how); unequal group sizes are stated.
 - `mixed_model`: a linear mixed model over all trials, value ~ condition * group with a
-  random intercept per participant (statsmodels `mixedlm`, REML); its p-values are Wald
-  z tests (statsmodels has no Satterthwaite df; lmerTest's are a little larger on small
-  samples). Convergence warnings are returned with the table, never hidden.
+  random intercept per participant, REML at the exact optimum (`stats_lmm`, equal to
+  lme4); its p-values are Wald z tests (no Satterthwaite df; lmerTest's are a little
+  larger on small samples). A singular fit (lme4's `isSingular`) is noted with the table.
 
 Participants without both conditions of a comparison are excluded from it, and each
 exclusion is stated.
@@ -28,7 +28,6 @@ exclusion is stated.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,7 +35,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from scipy import stats
-from statsmodels.regression.mixed_linear_model import MixedLM
 
 from study.analysis.anova import anova_rows
 from study.analysis.source import DRIVERS, DataSource
@@ -150,34 +148,79 @@ def holm(p: np.ndarray) -> np.ndarray:
     return adjusted
 
 
+RESOLUTION_REL = 1e-9
+"""Two differences closer than this times the data's magnitude are equal (and a difference
+that small is zero): measures on a grid (0.01 s) differ by rounding noise (1.2 s comes out
+as 1.1999999999999957 and 1.1999999999999993), which must not decide zeros, ties, ranks
+and so whether the Wilcoxon p is exact."""
+
+
+def at_resolution(diff: np.ndarray, scale: float | None = None) -> np.ndarray:
+    """`diff` with rounding noise removed: values within `RESOLUTION_REL` x `scale` (the
+    magnitude of the data the differences came from; default the largest |diff|) of zero
+    become 0, and runs of |values| that close become one value (the run's first), so that
+    ties and zeros are those of the data's resolution.
+
+    >>> d = at_resolution(np.array([1.1999999999999993, -1.1999999999999957, 1e-15]), 30.0)
+    >>> bool(d[0] == -d[1]), float(d[2])
+    (True, 0.0)
+    """
+    d = np.asarray(diff, dtype=float)
+    if not d.size:
+        return d.copy()
+    size = np.abs(d)
+    tol = RESOLUTION_REL * (float(size.max()) if scale is None else float(scale))
+    order = np.argsort(size, kind="stable")
+    snapped = size[order].copy()
+    anchor = 0.0  # the run's value; zero first, so that tiny differences are zeros
+    for i, v in enumerate(snapped):
+        if v - anchor > tol:
+            anchor = v
+        snapped[i] = anchor
+    out = np.empty_like(d)
+    out[order] = snapped
+    return np.sign(d) * out
+
+
 def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Matched-pairs rank-biserial correlation of HV - VO (Kerby 2014): (R+ - R-) / total."""
-    d = hv - vo
+    """Matched-pairs rank-biserial correlation of HV - VO (Kerby 2014): (R+ - R-) / total,
+    on the differences at the data's resolution (`at_resolution`)."""
+    d = at_resolution(hv - vo, _magnitude(vo, hv))
     d = d[d != 0]
     ranks = stats.rankdata(np.abs(d))
     total = ranks.sum()
     return float((ranks[d > 0].sum() - ranks[d < 0].sum()) / total) if total else 0.0
 
 
-def wilcoxon_signed_rank(diff: np.ndarray) -> tuple[float, float, str]:
-    """Two-sided Wilcoxon signed-rank test of paired differences: (W, p, method).
+def _magnitude(vo: np.ndarray, hv: np.ndarray) -> float:
+    return float(max(np.abs(vo).max(initial=0.0), np.abs(hv).max(initial=0.0)))
 
-    The rule is R's `wilcox.test` default, written out so that it does not depend on the
-    scipy version (scipy's `method="auto"` changed between releases): the p-value is
-    exact when there are fewer than 50 differences, none zero and no two of equal size;
-    otherwise zero differences are dropped (Wilcoxon's convention) and p is the normal
-    approximation with the tie-corrected variance and a continuity correction
-    ("asymptotic"). W is the smaller of the signed-rank sums, as scipy reports it (R's V
-    is the positive one).
+
+def wilcoxon_signed_rank(
+    diff: np.ndarray, scale: float | None = None
+) -> tuple[float, float, str]:
+    """Two-sided Wilcoxon signed-rank test of paired differences: (V, p, method).
+
+    The differences are first taken at the data's resolution (`at_resolution`, `scale`
+    the magnitude of the measured values), so zeros and ties are those of the data, not
+    of floating-point noise. The rule is R's `wilcox.test` default, written out so that it
+    does not depend on the scipy version (scipy's `method="auto"` changed between
+    releases): the p-value is exact when there are fewer than 50 differences, none zero
+    and no two of equal size; otherwise zero differences are dropped (Wilcoxon's
+    convention) and p is the normal approximation with the tie-corrected variance and a
+    continuity correction ("asymptotic"). V is R's statistic: the sum of the ranks of the
+    positive differences (scipy reports min(R+, R-) instead).
     """
-    d = diff[diff != 0]
+    full = at_resolution(diff, scale)
+    d = full[full != 0]
     if not len(d):
         return 0.0, 1.0, "exact"
     ties = len(np.unique(np.abs(d))) < len(d)
-    exact = len(d) == len(diff) and len(d) < EXACT_MAX_N and not ties
+    exact = len(d) == len(full) and len(d) < EXACT_MAX_N and not ties
     method = "exact" if exact else "asymptotic"
     w = stats.wilcoxon(d, method=method, correction=method == "asymptotic")
-    return float(w.statistic), float(w.pvalue), method
+    v = float(stats.rankdata(np.abs(d))[d > 0].sum())
+    return v, float(w.pvalue), method
 
 
 def compare_conditions(
@@ -221,7 +264,7 @@ def compare_conditions(
                 p_method="t distribution",
             )
         else:
-            w_stat, w_p, method = wilcoxon_signed_rank(diff)
+            w_stat, w_p, method = wilcoxon_signed_rank(diff, _magnitude(vo, hv))
             row.update(
                 test="wilcoxon",
                 statistic=w_stat,
@@ -283,11 +326,36 @@ def mixed_anova(
     return pd.DataFrame(rows, columns=ANOVA_COLUMNS), notes
 
 
+CONDITION_TERM = "C(condition, Treatment('VO'))"
+
+
+def lmm_design(data: pd.DataFrame) -> tuple[np.ndarray, list[str]]:
+    """The fixed-effects design of value ~ condition * group, treatment coding with VO and
+    the alphabetically first group as reference, columns named as patsy names them."""
+    conditions = [c for c in sorted(data["condition"].unique()) if c != "VO"]
+    groups = sorted(data["group"].unique())[1:]
+    cond = {c: (data["condition"] == c).to_numpy(float) for c in conditions}
+    grp = {g: (data["group"] == g).to_numpy(float) for g in groups}
+    columns, names = [np.ones(len(data))], ["Intercept"]
+    for c in conditions:
+        columns.append(cond[c]); names.append(f"{CONDITION_TERM}[T.{c}]")  # noqa: E702
+    for g in groups:
+        columns.append(grp[g]); names.append(f"C(group)[T.{g}]")  # noqa: E702
+    for g in groups:
+        for c in conditions:
+            columns.append(cond[c] * grp[g])
+            names.append(f"{CONDITION_TERM}[T.{c}]:C(group)[T.{g}]")
+    return np.column_stack(columns), names
+
+
 def mixed_model(
     trials: pd.DataFrame, measures: tuple[str, ...] | None = None
 ) -> tuple[pd.DataFrame, list[str]]:
     """The linear mixed model of every trial measure (default: each task's analysed
-    measures, `study.protocol.tasks`), per task."""
+    measures, `study.protocol.tasks`), per task: REML with a random intercept per
+    participant (`stats_lmm`, lme4's optimum); p from Wald z tests. A fit on the boundary
+    (lme4's `isSingular`) is noted."""
+    from study.analysis.stats_lmm import SINGULAR_TOL, fit_random_intercept
     from study.protocol.tasks import get_task
 
     rows, notes = [], []
@@ -298,26 +366,29 @@ def mixed_model(
             if data["participant"].nunique() < 3:
                 notes.append(f"{task}/{measure}: mixed model skipped (fewer than 3 participants)")
                 continue
-            with warnings.catch_warnings(record=True) as caught:
-                warnings.simplefilter("always")
-                try:
-                    model = MixedLM.from_formula(
-                        "value ~ C(condition, Treatment('VO')) * C(group)",
-                        data,
-                        groups=data["participant"],
-                    )
-                    fit = model.fit(reml=True)
-                except (np.linalg.LinAlgError, ValueError) as exc:
-                    notes.append(f"{task}/{measure}: mixed model could not be fitted: {exc}")
-                    continue
-            for w in caught:
-                notes.append(f"{task}/{measure}: mixed model warning: {w.message}")
-            for term in fit.fe_params.index:
+            X, names = lmm_design(data)
+            try:
+                if np.linalg.matrix_rank(X) < X.shape[1]:
+                    raise ValueError("a condition x group cell has no trials")
+                fit = fit_random_intercept(X, data["value"].to_numpy(float),
+                                           data["participant"].to_numpy())  # fmt: skip
+            except (np.linalg.LinAlgError, ValueError) as exc:
+                notes.append(f"{task}/{measure}: mixed model could not be fitted: {exc}")
+                continue
+            if fit.singular:
+                notes.append(
+                    f"{task}/{measure}: mixed model warning: singular fit, the participant "
+                    f"intercept SD is {fit.theta:.2g} of the residual SD (below lme4's "
+                    f"isSingular tolerance {SINGULAR_TOL:g})"
+                )
+            z = fit.beta / fit.se
+            p_values = 2 * stats.norm.sf(np.abs(z))
+            for term, est, se, p_value in zip(names, fit.beta, fit.se, p_values, strict=True):
                 rows.append(
                     {
                         "task": task, "measure": measure, "term": term,
-                        "estimate": float(fit.fe_params[term]), "se": float(fit.bse[term]),
-                        "p": float(fit.pvalues[term]), "p_method": "Wald z",
+                        "estimate": float(est), "se": float(se),
+                        "p": float(p_value), "p_method": "Wald z",
                     }
                 )  # fmt: skip
     columns = ["task", "measure", "term", "estimate", "se", "p", "p_method"]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from study.analysis.apa import p_text
+from study.analysis.apa import bounded_text, p_text
 from study.analysis.methods import anova_method, comparison_method, lmm_method
 from study.analysis.stats import Analysis
 
@@ -82,17 +82,49 @@ def _preamble(analysis: Analysis) -> str:
     return f"{analysis.source.note}. " if analysis.source.note else ""
 
 
+TEST_LABELS = {"paired_t": "paired t", "wilcoxon": "Wilcoxon signed-rank"}
+EFFECT_LABELS = {"hedges_g_av": "Hedges' g_av", "rank_biserial": "rank-biserial r"}
+TERM_LABELS = {"Intercept": "intercept", "C(condition, Treatment('VO'))[T.HV]": "HV"}
+
+
+def _statistic(test: str, value: float, n: int) -> str:
+    """t with its df (n - 1 pairs); V, the Wilcoxon statistic as R reports it."""
+    if test == "paired_t":
+        return f"t({int(n) - 1}) = {_num(value, 2)}"
+    return f"V = {_num(value, 1)}" if test == "wilcoxon" else _num(value)
+
+
+def _effect(value: float, kind: str) -> str:
+    label = EFFECT_LABELS.get(kind, kind)
+    text = bounded_text(value) if kind == "rank_biserial" else _num(value, 2)
+    return f"{label} = {text}"
+
+
+def term_label(term: str) -> str:
+    """A mixed-model term as a reader names it: 'HV', 'novice', 'HV x novice'."""
+    parts = []
+    for part in term.split(":"):
+        if part in TERM_LABELS:
+            parts.append(TERM_LABELS[part])
+        elif "[T." in part:
+            parts.append(part.split("[T.", 1)[1].rstrip("]"))
+        else:
+            parts.append(part)
+    return " x ".join(parts)
+
+
 def comparisons_table(analysis: Analysis) -> Table:
     c = analysis.comparisons
     display = pd.DataFrame({
         "task": c["task"], "measure": c["measure"], "group": c["group"], "n": c["n"],
         "VO mean (SD)": _mean_sd(c["mean_vo"], c["sd_vo"]),
         "HV mean (SD)": _mean_sd(c["mean_hv"], c["sd_hv"]),
-        "test": c["test"].map({"paired_t": "paired t", "wilcoxon": "Wilcoxon"}),
-        "statistic": [_num(v) for v in c["statistic"]],
+        "test": c["test"].map(TEST_LABELS),
+        "statistic": [_statistic(t, v, n) for t, v, n in zip(c["test"], c["statistic"], c["n"],
+                                                             strict=True)],
         "p": [p_text(v) for v in c["p"]], "p from": c["p_method"],
         "p (Holm)": [p_text(v) for v in c["p_holm"]],
-        "effect size": [f"{_num(v, 2)} ({k})"
+        "effect size": [_effect(v, k)
                         for v, k in zip(c["effect_size"], c["effect_size_kind"], strict=True)],
     })  # fmt: skip
     exclusions = "; ".join(analysis.exclusions) or "none"
@@ -106,7 +138,8 @@ def anova_table(analysis: Analysis) -> Table:
         "task": a["task"], "measure": a["measure"], "source": a["source"],
         "F": [_num(v, 2) for v in a["F"]],
         "df": [f"{d1:g}, {d2:g}" for d1, d2 in zip(a["df1"], a["df2"], strict=True)],
-        "p": [p_text(v) for v in a["p"]], "partial eta squared": [_num(v) for v in a["np2"]],
+        "p": [p_text(v) for v in a["p"]],
+        "partial eta squared": [bounded_text(v, 3) for v in a["np2"]],
         "SS type": a["ss_type"].map(lambda t: "II" if t == 2 else "III"),
     })  # fmt: skip
     return _model_table(analysis, "mixed_anova", a, display, anova_method(analysis.ss_type),
@@ -116,7 +149,7 @@ def anova_table(analysis: Analysis) -> Table:
 def lmm_table(analysis: Analysis) -> Table:
     m = analysis.lmm
     display = pd.DataFrame({
-        "task": m["task"], "measure": m["measure"], "term": m["term"],
+        "task": m["task"], "measure": m["measure"], "term": [term_label(t) for t in m["term"]],
         "estimate": [_num(v, 4) for v in m["estimate"]], "SE": [_num(v, 4) for v in m["se"]],
         "p (Wald z)": [p_text(v) for v in m["p"]],
     })  # fmt: skip

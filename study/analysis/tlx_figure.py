@@ -21,6 +21,8 @@ from db.models.tlx import TLX_SUBSCALES
 from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_key
 
 CONDITIONS = ("VO", "HV")
+SINGLE_MAX_IN = 4.0
+"""The tallest a single-column figure may be (a column's upper part)."""
 NOTE = ("Bars: mean; whiskers: 95 % within-subject CI (Cousineau-Morey). Lower is better "
         "on every subscale: performance reads 0 = perfect.")  # fmt: skip
 
@@ -61,7 +63,8 @@ def tlx_profile(tlx: pd.DataFrame, width: str = "double") -> plt.Figure:
     groups = list(dict.fromkeys(tlx["group"]))
     with plt.rc_context(STYLE):
         rows, cols = (len(groups), 1) if width == "single" else (1, len(groups))
-        height = (1.5 * rows + 1.6) if width == "single" else 3.0
+        # single column: stacked panels sharing the subscale axis, at most SINGLE_MAX_IN
+        height = (min(0.75 * rows, 2.3) + 1.6) if width == "single" else 3.0
         fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], height), sharey=True,
                                  sharex=True, layout="constrained", squeeze=False)  # fmt: skip
         x = np.arange(len(TLX_SUBSCALES))
@@ -77,10 +80,15 @@ def tlx_profile(tlx: pd.DataFrame, width: str = "double") -> plt.Figure:
                     ax.bar(x[s_i] + (k - 0.5) * 0.4, cm.loc[cond, "mean"], 0.38,
                            yerr=cm.loc[cond, "half"], capsize=1.5, color=OKABE_ITO[cond],
                            label=cond if s_i == 0 else None, error_kw={"lw": 0.6})  # fmt: skip
-            ax.set_title(f"{group} (n = {n})")
+            ax.set_title(f"{group} (n = {n})", pad=2)
             ax.set_ylim(0, 100)
-        for ax in axes[:, 0]:
-            ax.set_ylabel("rating (0-100)")
+            if width == "single":
+                ax.set_yticks([0, 50, 100])
+        if width == "single":  # one label for the stacked panels (each too short for it)
+            fig.supylabel("rating (0-100)", fontsize=STYLE["axes.labelsize"])
+        else:
+            for ax in axes[:, 0]:
+                ax.set_ylabel("rating (0-100)")
         for ax in axes[-1, :]:
             ax.set_xticks(x, list(TLX_SUBSCALES), rotation=90)
             ax.set_xlabel("NASA-TLX subscale")

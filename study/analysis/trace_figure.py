@@ -1,6 +1,6 @@
 """Fig. 9: the forces of one participant's VO and HV trial, in one figure.
 
-VO and HV panels share the y-axis so that the forces compare at a glance; the
+VO and HV panels share the time axis and the y-axis so that the forces compare at a glance; the
 reference force is drawn above (zorder) the estimate it is compared with; the caption
 states the sign convention of the task's model:
 
@@ -56,16 +56,18 @@ def force_traces(
     with plt.rc_context(STYLE):
         rows, cols = (len(trials), 1) if width == "single" else (1, len(trials))
         height = 1.6 * rows + 1.1
+        # one time axis and one force axis for both trials: they compare at a glance
         fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], height), sharey=True,
-                                 layout="constrained", squeeze=False)  # fmt: skip
+                                 sharex=True, layout="constrained", squeeze=False)  # fmt: skip
         for ax, (samples, title) in zip(axes.ravel(), trials, strict=True):
             for k, (column, label) in enumerate(names.items()):
                 if column in samples and samples[column].notna().any():
                     style = STYLES[k] if k < len(STYLES) else {}
                     ax.plot(samples["t_s"], samples[column], label=label, **style)
             ax.axhline(0.0, color="#999999", lw=0.4, zorder=0)
-            ax.set_xlabel("time (s)")
             ax.set_title(title)
+        for ax in axes[-1, :]:
+            ax.set_xlabel("time (s)")
         for ax in axes[:, 0]:
             ax.set_ylabel("force (N)")
         handles, _ = axes.ravel()[0].get_legend_handles_labels()

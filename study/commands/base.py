@@ -65,16 +65,64 @@ def database_failure(exc: BaseException, db_url: str | None = None) -> str | Non
     text = str(orig).strip() if orig is not None else ""
     reason = text.splitlines()[0] if text else type(exc).__name__
     if "full" in reason.lower():
-        return f"database {shown} is full ({reason}); expected free space: nothing more was stored"
+        return (f"database {shown} is full ({reason}); expected free space: what was committed "
+                "before stays, the command's own change was not stored")  # fmt: skip
+    if "locked" in reason.lower():
+        return (f"database {shown} is locked by another program ({reason}); expected it free: "
+                "retry when that program is done, or wait longer with ?timeout=SECONDS in the "
+                "URL; nothing of this command was stored")  # fmt: skip
     return (
         f"database {shown} cannot be used: {reason}; expected an intact, reachable study "
         "database (restore a corrupted file from its backup)"
     )
 
 
+MAX_SEED = 2**32 - 1
+SEED = click.IntRange(0, MAX_SEED)
+"""A seed option's type: numpy's generators take 0 to 2^32 - 1 (a negative seed was a
+traceback)."""
+
+
+def refuse_non_finite(ctx: click.Context) -> None:
+    """StudyInputError for a number option given as nan or +-inf: click's FloatRange lets
+    them through (nan compares False with both bounds), and no option of `study` means
+    anything by them."""
+    import math
+
+    for param in ctx.command.params:
+        value = ctx.params.get(param.name or "")
+        values = value if isinstance(value, tuple | list) else (value,)
+        for v in values:
+            if isinstance(v, float) and not math.isfinite(v):
+                flag = param.opts[0] if param.opts else param.name
+                kind = param.type
+                bounds = f" {kind._describe_range()}" if isinstance(kind, click.FloatRange) else ""
+                raise StudyInputError(f"{flag} {v!r}; expected a finite number{bounds}")
+
+
+def refuse_linked_out(ctx: click.Context) -> None:
+    """StudyInputError for an `--out` that is, or (for a relative path) goes through, a
+    symbolic link: the files a command writes would land wherever the link points (the
+    exports never write through a link). The folders above an absolute path are the
+    system's (macOS's /tmp is a link) and not looked at."""
+    for param in ctx.command.params:
+        value = ctx.params.get(param.name or "")
+        if "--out" not in getattr(param, "opts", ()) or not isinstance(value, Path):
+            continue
+        steps = [value] if value.is_absolute() else [value, *value.parents[:-1]]
+        linked = next((s for s in steps if s.is_symlink()), None)
+        if linked is not None:
+            raise StudyInputError(
+                f"--out {value}: {linked} is a symbolic link; expected a real folder or file "
+                "path (nothing is written through a link)"
+            )
+
+
 class StudyCommand(click.Command):
     def invoke(self, ctx: click.Context) -> Any:
         try:
+            refuse_non_finite(ctx)
+            refuse_linked_out(ctx)
             return super().invoke(ctx)
         except USER_ERRORS as exc:
             raise InputError(str(exc), ctx) from exc
@@ -188,7 +236,10 @@ def progress_bar(*columns: Any, transient: bool = True, console: Console | None 
             MofNCompleteColumn(),
             TimeRemainingColumn(),
         )
-    return Progress(*columns, transient=transient, console=console or Console(stderr=True))
+    console = console or Console(stderr=True)
+    # off where stderr is no terminal: rich draws nothing there but a lone newline
+    return Progress(*columns, transient=transient, console=console,
+                    disable=not console.is_terminal)  # fmt: skip
 
 
 def write_json_atomically(data: dict[str, Any], path: Path) -> None:

@@ -15,6 +15,7 @@ from rich.console import Console
 
 from study.analysis.participant_fit import WEAK_TRAITS
 from study.commands.base import (
+    SEED,
     StudyCommand,
     StudyGroup,
     check_parent_folder,
@@ -238,7 +239,7 @@ def bench_startup(
 @click.option("--probes", is_flag=True,
               help="The simulated people answer the design's probes before the fit.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
-@click.option("--seed", type=int, default=11, show_default=True)
+@click.option("--seed", type=SEED, default=11, show_default=True)
 @_json_option
 def bench_participants(out_dir: Path | None, trials: int, truth_people: int, truth_shift: float,
                        weak_traits: str, probes: bool, jobs: int, seed: int,

@@ -15,6 +15,7 @@ from typing import Any
 import click
 
 from study.commands.base import (
+    SEED,
     StudyCommand,
     check_parent_folder,
     count_option,
@@ -25,7 +26,7 @@ from study.errors import StudyInputError
 
 _json_option = json_option("Write every table as JSON here.")
 _out_option = out_dir_option("Folder for the Markdown tables, the figures and any data files.")
-_seed_option = click.option("--seed", type=int, default=0, show_default=True)
+_seed_option = click.option("--seed", type=SEED, default=0, show_default=True)
 
 
 def write_json(json_path: Path | None, data: dict[str, Any]) -> None:

@@ -10,6 +10,7 @@ import click
 from rich.console import Console
 
 from study.commands.base import (
+    SEED,
     StudyCommand,
     StudyGroup,
     check_parent_folder,
@@ -34,7 +35,7 @@ def characterize() -> None:
     show_default=True,
     help="Sensor noise as a fraction of each signal's standard deviation.",
 )
-@click.option("--seed", type=int, default=0, show_default=True, help="Seeds the noise.")
+@click.option("--seed", type=SEED, default=0, show_default=True, help="Seeds the noise.")
 def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
     """Run the paper's ramps and 1-30 Hz chirps on the simulated NOTES device, fit Fig. 8's
     model, and compare the ramps with and without the friction/direction compensator."""

@@ -9,7 +9,14 @@ import click
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
-from study.commands.base import StudyGroup, count_option, file_option, out_dir_option, progress_bar
+from study.commands.base import (
+    SEED,
+    StudyGroup,
+    count_option,
+    file_option,
+    out_dir_option,
+    progress_bar,
+)
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
@@ -29,7 +36,7 @@ def estimator() -> None:
 @out_dir_option("Model folder to write (weights, standardisation, physics, EKF, summary.json).")
 @count_option("--window", 20, "GRU input window T, samples.")
 @count_option("--epochs", 100, "Most training epochs (the best validation epoch is kept).")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=SEED, default=0, show_default=True)
 @click.option("--hidden-size", type=click.IntRange(min=1), default=32, show_default=True)
 @click.option(
     "--learning-rate", type=click.FloatRange(min=0, min_open=True), default=1e-4, show_default=True

@@ -7,7 +7,14 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, db_option, file_option, opened_database, progress_bar
+from study.commands.base import (
+    StudyCommand,
+    actor_option,
+    db_option,
+    file_option,
+    opened_database,
+    progress_bar,
+)
 from study.errors import StudyInputError
 
 
@@ -16,9 +23,14 @@ from study.errors import StudyInputError
 @click.option("--tlx", "tlx_csv", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--probes", "probes_csv", type=click.Path(dir_okay=False, path_type=Path),
               help="Probe trials (probe_trials.csv of `study export`).")  # fmt: skip
+@actor_option
 @db_option
 def import_cmd(
-    trials_csv: Path, tlx_csv: Path | None, probes_csv: Path | None, db_url: str | None
+    trials_csv: Path,
+    tlx_csv: Path | None,
+    probes_csv: Path | None,
+    actor: str | None,
+    db_url: str | None,
 ) -> None:
     """Import trial summaries (and NASA-TLX, probe trials) collected elsewhere: all rows or
     none."""
@@ -39,7 +51,7 @@ def import_cmd(
             probes = read_probe_file(probes_csv)
             check_participants(probes, known_codes(engine, trials_csv), probes_csv)
             check_not_stored(engine, probes, probes_csv)
-        n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv)
+        n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv, actor)
         n_probes = 0
         if probes is not None:
             from study.probes.exchange import import_probes

@@ -10,7 +10,13 @@ from rich.console import Console
 
 from db.migrate import open_database
 from study.analysis.source import DRIVERS
-from study.commands.base import StudyCommand, db_option, load_participants, participants_option
+from study.commands.base import (
+    SEED,
+    StudyCommand,
+    db_option,
+    load_participants,
+    participants_option,
+)
 from study.errors import StudyInputError
 
 FORMATS = ("pdf", "svg", "png")
@@ -64,7 +70,7 @@ def figures(
               type=click.Path(file_okay=False, path_type=Path))  # fmt: skip
 @click.option("--db", "db_url", default=None, metavar="URL",
               help="Database for the demo study [default: OUT/demo.db].")  # fmt: skip
-@click.option("--seed", type=int, default=1, show_default=True)
+@click.option("--seed", type=SEED, default=1, show_default=True)
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--quick", is_flag=True, help="2 participants per group, one trial per block.")
 @participants_option
@@ -101,11 +107,14 @@ def demo(
             trials, tlx = trial_frame(engine), tlx_frame(engine)
             result = analyze(trials, participant_means(trials, tlx))
             write(result, out_dir / "analysis", None)
+            # a paper needs both IEEE widths: double column here, single in single/
             write_figures(engine, out_dir / "figures")
+            write_figures(engine, out_dir / "figures" / "single", width="single")
         finally:
             engine.dispose()
     if model is not None:
         click.echo(f"simulated participants drawn from the {model.label()}")
     click.echo(f"SIMULATED demo study (every participant, trial and questionnaire simulated) "
                f"in {db_url}; analysis in {out_dir / 'analysis'}; figures in "
-               f"{out_dir / 'figures'} ({time.monotonic() - start:.0f} s)")  # fmt: skip
+               f"{out_dir / 'figures'} (double column) and {out_dir / 'figures' / 'single'} "
+               f"(single column) ({time.monotonic() - start:.0f} s)")  # fmt: skip

@@ -12,6 +12,7 @@ import click
 
 from study.analysis.participant_fit import WEAK_TRAITS
 from study.commands.base import (
+    SEED,
     StudyGroup,
     check_parent_folder,
     count_option,
@@ -53,7 +54,7 @@ def participants() -> None:
               show_default=True, help="The traits the data tell weakly: held at the hand-set "
               "profile, or fitted with their group mean under the profile's prior.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=SEED, default=0, show_default=True)
 def fit(
     db_url: str | None,
     task: str,

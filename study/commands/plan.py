@@ -8,10 +8,17 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, StudyGroup, db_option, file_option, opened_database
+from study.commands.base import (
+    StudyCommand,
+    StudyGroup,
+    actor_option,
+    db_option,
+    file_option,
+    opened_database,
+)
 from study.errors import StudyInputError
 from study.protocol.design import TEMPLATE, parse_design
-from study.protocol.roster import add_participant, create_study, schedule
+from study.protocol.roster import create_study, enrol, schedule
 
 
 @click.command("init", cls=StudyCommand)
@@ -83,13 +90,20 @@ def participant() -> None:
 @click.option("--group", required=True, help="Experience group, by its name in the design.")
 @click.option("--site", default=None, help="Lab enrolling the participant (multi-site studies).")
 @click.option("--count", type=click.IntRange(min=1), default=1, show_default=True)
+@click.option("--beyond-target", is_flag=True,
+              help="Enrol past the group's target in the design (replacements); audited.")
+@actor_option
 @db_option
-def participant_add(group: str, site: str | None, count: int, db_url: str | None) -> None:
-    """Enrol the next participant(s) of a group: code, condition order and schedule."""
+def participant_add(
+    group: str, site: str | None, count: int, beyond_target: bool, actor: str | None,
+    db_url: str | None,
+) -> None:  # fmt: skip
+    """Enrol the next participant(s) of a group: code, condition order and schedule (all
+    of them or none; at most the group's target unless --beyond-target)."""
     with opened_database(db_url) as engine:
-        for _ in range(count):
-            p = add_participant(engine, group, site)
-            click.echo(f"{p.code} ({p.group}): conditions {' then '.join(p.condition_order)}")
+        added = enrol(engine, group, site, count, beyond_target=beyond_target, actor=actor)
+    for p in added:
+        click.echo(f"{p.code} ({p.group}): conditions {' then '.join(p.condition_order)}")
 
 
 @participant.command("withdraw")

@@ -14,7 +14,6 @@ from db.migrate import open_database
 from study.commands.base import (
     StudyCommand,
     actor_option,
-    count_option,
     db_option,
     load_participants,
     participants_option,
@@ -22,6 +21,11 @@ from study.commands.base import (
 )
 from study.errors import StudyInputError
 from study.protocol.roster import schedule
+
+MIN_PACE, MAX_PACE = 0.01, 1000.0
+"""--pace's range: a hundredth of real time (a 30 s trial in under an hour) to a thousand
+times (beyond it, as fast as it goes is the same)."""
+MAX_JOBS = 64
 
 if TYPE_CHECKING:
     from sqlalchemy import Engine
@@ -35,7 +39,8 @@ if TYPE_CHECKING:
 @click.option(
     "--all", "run_all", is_flag=True, help="Every enrolled participant's remaining trials."
 )
-@count_option("--jobs", 1, "Processes running participants side by side (with --all).")
+@click.option("--jobs", type=click.IntRange(1, MAX_JOBS), default=None,
+              help="Processes running participants side by side (with --all) [default: 1].")
 @click.option(
     "--driver",
     type=click.Choice(["simulated", "keyboard", "hardware"]),
@@ -45,7 +50,7 @@ if TYPE_CHECKING:
 @click.option("--port", help="Serial port of the dial's ESP32 (hardware driver).")
 @click.option(
     "--pace",
-    type=click.FloatRange(min=0, min_open=True),
+    type=click.FloatRange(min=MIN_PACE, max=MAX_PACE),
     help="Run a simulated session at this many times real time [default: as fast as it goes].",
 )
 @click.option(
@@ -60,7 +65,7 @@ if TYPE_CHECKING:
 def run(
     code: str | None,
     run_all: bool,
-    jobs: int,
+    jobs: int | None,
     driver: str,
     port: str | None,
     pace: float | None,
@@ -82,6 +87,9 @@ def run(
         raise StudyInputError("give --participant CODE or --all; expected exactly one")
     if pace is not None and not math.isfinite(pace):
         raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
+    if jobs is not None and not run_all:
+        raise StudyInputError(f"--jobs {jobs} with --participant; expected --all (one "
+                              "participant's session runs in one process)")  # fmt: skip
     who = current_actor(actor)
     model = load_participants(participants_path)
     if model is not None and driver != "simulated":
@@ -94,7 +102,7 @@ def run(
         if driver != "simulated":
             raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
         _lsl_notice(db_url)
-        _run_all(db_url, jobs, pace, who, participants_path)
+        _run_all(db_url, jobs or 1, pace, who, participants_path)
         return
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")

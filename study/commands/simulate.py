@@ -8,10 +8,13 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from study.commands.base import StudyCommand, load_participants, participants_option
+from study.commands.base import SEED, StudyCommand, load_participants, participants_option
 from study.errors import StudyInputError
-from study.protocol.design import DEFAULT_GROUPS, KNOWN_CONDITIONS
+from study.protocol.design import DEFAULT_GROUPS, KNOWN_CONDITIONS, MAX_HAPTIC_GAIN_N_M_PER_N
 from study.protocol.tasks import get_task, task_names
+
+MAX_TRIAL_S = 3600.0
+"""The longest simulated trial, s (an hour: far beyond any trial of the paper)."""
 
 
 @click.command("simulate", cls=StudyCommand)
@@ -26,7 +29,7 @@ from study.protocol.tasks import get_task, task_names
     "Only for tasks with a haptic dial (lcca).",
 )
 @click.option(
-    "--seed", type=int, default=0, show_default=True, help="Seeds the participant and the run."
+    "--seed", type=SEED, default=0, show_default=True, help="Seeds the participant and the run."
 )
 @click.option("--out", "out_csv", required=True, type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path))
@@ -36,7 +39,8 @@ from study.protocol.tasks import get_task, task_names
     type=click.Path(file_okay=False, path_type=Path),
     help="Force estimator folder [default: the model shipped with haptic-study].",
 )
-@click.option("--max-seconds", type=click.FloatRange(min=1), default=180.0, show_default=True)
+@click.option("--max-seconds", type=click.FloatRange(min=1, max=MAX_TRIAL_S), default=180.0,
+              show_default=True)  # fmt: skip
 @participants_option
 def simulate(
     task: str,
@@ -62,6 +66,11 @@ def simulate(
     model = load_participants(participants_path)
     # refuse a bad gain, or a gain for a task without a dial, before any work
     the_task.haptic_gain(haptic_gain)
+    if haptic_gain is not None and haptic_gain > MAX_HAPTIC_GAIN_N_M_PER_N:
+        raise StudyInputError(
+            f"--haptic-gain {haptic_gain!r}; expected 0 to {MAX_HAPTIC_GAIN_N_M_PER_N:g} N m/N, "
+            "as in a design file"
+        )
     from teleop_core.loop import kernel
 
     kernel.COMPILE_NOTICE = lambda message: click.echo(f"study simulate: {message}", err=True)

@@ -59,6 +59,7 @@ def read_csv(
         ) from None
     except (pd.errors.ParserError, OSError) as exc:
         raise StudyInputError(f"{path} is not a readable CSV: {first_line(exc)}") from None
+    _check_shape(path)
     missing = [c for c in required if c not in frame.columns]
     if missing:
         raise StudyInputError(f"{path} lacks column {missing[0]!r}; expected {', '.join(required)}")
@@ -74,6 +75,30 @@ def read_csv(
     return frame
 
 
+def _check_shape(path: Path) -> None:
+    """A header without repeated names, and every row with one field per header column:
+    pandas renames a repeated column ('success.1') and shifts a row with extra fields
+    into an index, so both are looked at in the file itself."""
+    import csv
+
+    with path.open(newline="", encoding="utf-8") as f:
+        reader = csv.reader(f)
+        header = next(reader, [])
+        seen: set[str] = set()
+        for name in header:
+            if name in seen:
+                raise StudyInputError(
+                    f"{path} has column {name!r} twice; expected each column once"
+                )
+            seen.add(name)
+        for number, row in enumerate(reader, start=2):
+            if row and len(row) != len(header):
+                raise StudyInputError(
+                    f"{path} row {number}: {len(row)} fields; expected {len(header)}, "
+                    "one per header column"
+                )
+
+
 def first_line(exc: BaseException) -> str:
     return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
 
@@ -87,6 +112,10 @@ def number(
         p.add(row, col, f"{text!r} is not a plain decimal number; expected {expected}")
         return None
     value = float(text)
+    mantissa = text.strip().lower().split("e")[0]
+    if value == 0 and any(c in "123456789" for c in mantissa):
+        p.add(row, col, f"{text!r} is too small to store (it would be 0); expected {expected}")
+        return None
     if not (math.isfinite(value) and minimum <= value <= maximum):
         p.add(row, col, f"{text!r} is out of range; expected {expected}")
         return None

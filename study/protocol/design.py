@@ -34,6 +34,9 @@ MAX_BREAK_S = 3600.0
 """Sane sizes (issue 18: 2**63 trials, a group of 1e12 and a break of inf were accepted):
 far above any lab study, far below what breaks storage or a schedule."""
 MAX_GROUP_CHARS = 32
+MAX_GROUPS = 12
+"""The most experience groups a design may have (the paper has three; every analysis
+compares them pairwise and draws one panel each)."""
 MAX_NAME_CHARS = 200
 """Column widths of `participants.group` and `studies.name` (PostgreSQL enforces them)."""
 DEFAULT_GROUPS = ("outsider", "novice", "expert")
@@ -174,6 +177,10 @@ def parse_design(text: str, source: str = "design") -> StudyDesign:
 
 
 def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
+    if not data:  # an empty file would silently be the default study
+        raise StudyInputError(
+            f"{source} is empty; expected a study design (`study design template` prints one)"
+        )
     unknown = sorted(set(data) - set(_KEYS))
     if unknown:
         raise StudyInputError(
@@ -209,6 +216,10 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
     if not groups:
         raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
+    if len(groups) > MAX_GROUPS:
+        raise StudyInputError(
+            f"{source}: [groups] has {len(groups)} groups; expected 1 to {MAX_GROUPS}"
+        )
     for g, n in groups.items():
         if not (0 < len(g) <= MAX_GROUP_CHARS and g.isprintable() and g.strip() == g):
             raise StudyInputError(

@@ -37,6 +37,7 @@ text is exported with a leading single quote, which an import removes again.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from collections.abc import Iterable
@@ -48,7 +49,8 @@ from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session, selectinload
 
 from db.engine import write_transaction
-from db.models.study import CODE_PATTERN, Participant
+from db.models.audit import AuditEntry
+from db.models.study import CODE_PATTERN, Participant, ScheduleBlock
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import Trial, TrialMeasure
 from study.errors import StudyInputError
@@ -280,8 +282,46 @@ def _check_tlx(
     return rows
 
 
-def import_data(engine: Engine, trials_csv: Path, tlx_csv: Path | None = None) -> tuple[int, int]:
-    """Check both files completely, then write them in one transaction."""
+def _code_number(code: str) -> tuple[str, int]:
+    """A code's prefix and number: P001 and P0001 are both ('P', 1)."""
+    head = code.rstrip("0123456789")
+    return head, int(code[len(head) :] or 0)
+
+
+def _check_codes(rows: list[dict[str, Any]], existing: Iterable[str], source: str) -> None:
+    """Refuse a code that is another code with other leading zeros (P0001 beside P001):
+    two spellings of one participant number would be two people in every analysis."""
+    p = Problems(source, [])
+    spelled: dict[tuple[str, int], str] = {_code_number(c): c for c in existing}
+    for r in rows:
+        key = _code_number(r["code"])
+        other = spelled.setdefault(key, r["code"])
+        if other != r["code"]:
+            p.add(r["row"], "participant", f"{r['code']!r} beside {other!r}, the same number "
+                  f"written with other zeros; expected {other}")  # fmt: skip
+    p.raise_if_any()
+
+
+def _file_hash(path: Path) -> str:
+    import hashlib
+
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def import_data(
+    engine: Engine, trials_csv: Path, tlx_csv: Path | None = None, actor: str | None = None
+) -> tuple[int, int]:
+    """Check both files completely, then write them in one transaction, with an audit row
+    per file (who, when, the file's name and SHA-256, its rows). A participant first seen
+    here is enrolled with the design's schedule (conditions in the design's order), so
+    `study run` runs the blocks and trials the file did not hold."""
+    from study.protocol.actor import current_actor
+
+    who = current_actor(actor)
     with Session(engine) as session:
         _, design = load_study(session)
     measures = tuple(m for m in measure_columns(design.tasks) if m != COMPLETION_TIME)
@@ -301,6 +341,7 @@ def import_data(engine: Engine, trials_csv: Path, tlx_csv: Path | None = None) -
         }
         known = {code: p.group for code, p in existing.items()}
         trials = _check_trials(trials_frame, design, str(trials_csv), known)
+        _check_codes(trials, existing, str(trials_csv))
         _file_trials(session, trials, design, existing, str(trials_csv))
         stored_tlx = {
             (code, task, condition)
@@ -334,6 +375,21 @@ def import_data(engine: Engine, trials_csv: Path, tlx_csv: Path | None = None) -
                 session.add(participant)
                 session.flush()
                 existing[t["code"]] = participant
+                session.add(AuditEntry(entity="participant", entity_id=participant.id,
+                                       field="enrolled", old_value=None,
+                                       new_value=json.dumps({"group": participant.group,
+                                                             "site": participant.site,
+                                                             "by": "import"}),
+                                       reason=f"first seen in {trials_csv.name}",
+                                       actor=who))  # fmt: skip
+            if not participant.blocks:  # new here, or imported before it got a schedule
+                order = tuple(participant.condition_order)
+                participant.blocks = [ScheduleBlock(**b) for b in plan_blocks(design, order)]
+                session.flush()
+            if t["block_id"] is None:  # a block planned above
+                t["block_id"] = next(
+                    b.id for b in participant.blocks if b.block_index == t["block_index"]
+                )
             trial = Trial(
                 participant_id=participant.id,
                 task=t["task"],
@@ -355,6 +411,13 @@ def import_data(engine: Engine, trials_csv: Path, tlx_csv: Path | None = None) -
             session.add(trial)
         for r in tlx:
             session.add(TlxResponse(participant_id=existing[r.pop("code")].id, **r))
+        for kind, path, n in (("trials_csv", trials_csv, len(trials)),
+                              ("tlx_csv", tlx_csv, len(tlx))):  # fmt: skip
+            if path is not None:
+                record = {"file": str(path.resolve()), "sha256": _file_hash(path), "rows": n}
+                session.add(AuditEntry(entity="import", entity_id=study.id, field=kind,
+                                       old_value=None, new_value=json.dumps(record),
+                                       reason=None, actor=who))  # fmt: skip
         session.flush()
         session.commit()
     return len(trials), len(tlx)

@@ -169,11 +169,18 @@ def acquire_lease(
             why = holder_is_dead(lease, now, timeout_s, host)
             if why is None:
                 age_s = (now - _aware(lease.heartbeat_at)).total_seconds()
+                when = (
+                    "its process is alive on this host; once it ends, a new session takes "
+                    "over at once"
+                    if lease.host == host
+                    else f"once its heartbeat is {timeout_s:.0f} s old, a new session takes "
+                    "over"
+                )
                 raise SessionBusyError(
                     f"participant {code} already has a session running on {lease.host} "
                     f"(process {lease.pid}, by {lease.actor or 'unknown'}, heartbeat "
                     f"{age_s:.0f} s ago); expected one session per participant: wait for "
-                    f"it to end (a dead one is taken over after {timeout_s:.0f} s)"
+                    f"it to end ({when})"
                 )
             session.delete(lease)
             session.flush()
@@ -207,9 +214,20 @@ def hold_lease(
         target=handle._heartbeat, args=(heartbeat_s,), name=f"lease-{code}", daemon=True
     )
     thread.start()
+    failed = False
     try:
         yield handle
+    except BaseException:
+        failed = True
+        raise
     finally:
         handle._stop.set()
         thread.join(timeout=heartbeat_s + 5)
-        handle.release()
+        try:
+            handle.release()
+        except Exception:
+            # after the session's own error (a full disk, a lost server) releasing can fail
+            # the same way: that error is the one to report; the row left behind names a
+            # process that has ended, so the next session takes it over at once
+            if not failed:
+                raise

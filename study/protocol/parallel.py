@@ -78,6 +78,21 @@ def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
     return code, len(done)
 
 
+TRACKER_WARNING = "ignore:resource_tracker:UserWarning"
+
+
+def quiet_resource_tracker() -> None:
+    """Keep multiprocessing's resource tracker from warning about "leaked semaphore
+    objects" when this process is killed: the tracker (started with this interpreter's
+    -W options) unlinks the pool's semaphores then, which is its job after a crash, but
+    its warning told the person who killed `study run` nothing they could act on. Set
+    before the pool starts the tracker; the cleanup itself is unchanged."""
+    import sys
+
+    if TRACKER_WARNING not in sys.warnoptions:
+        sys.warnoptions.append(TRACKER_WARNING)
+
+
 def compile_loop_once(notice: Callable[[str], None] | None = None) -> bool:
     """Where the loop's kernel is not compiled on this machine yet (the first run after
     install, or after an upgrade), say so through `notice` and compile it here, once,
@@ -131,6 +146,7 @@ def run_participants(
             except SessionBusyError as exc:
                 yield busy(code, exc)
         return
+    quiet_resource_tracker()
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(
         jobs,

@@ -8,6 +8,7 @@ so two lab machines enrolling at once still get distinct codes and balanced orde
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -15,6 +16,7 @@ from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session, selectinload
 
 from db.engine import write_transaction
+from db.models.audit import AuditEntry
 from db.models.study import CODE_PATTERN, Participant, ScheduleBlock, Study
 from db.models.trial import Trial
 from study.errors import StudyInputError
@@ -22,6 +24,8 @@ from study.protocol.design import StudyDesign, next_order
 
 CODE_DIGITS = 3
 MAX_SITE_CHARS = 64
+MAX_ENROL = 1000
+"""The most participants one `study participant add` enrols (a design's largest group)."""
 """`participants.site` holds 64 characters (PostgreSQL refuses more; SQLite would not)."""
 
 
@@ -105,8 +109,28 @@ def next_code(session: Session, study: Study, prefix: str) -> str:
     return code
 
 
-def add_participant(engine: Engine, group: str, site: str | None = None) -> Participant:
+def add_participant(
+    engine: Engine, group: str, site: str | None = None, actor: str | None = None
+) -> Participant:
     """Enrol the next participant of `group`: next code, balancing order, schedule."""
+    return enrol(engine, group, site, 1, beyond_target=True, actor=actor)[0]
+
+
+def enrol(
+    engine: Engine,
+    group: str,
+    site: str | None = None,
+    count: int = 1,
+    *,
+    beyond_target: bool = False,
+    actor: str | None = None,
+) -> list[Participant]:
+    """Enrol the next `count` participants of `group` in one transaction (all or none),
+    each with an audit row (group, site, condition order, who). Refused when it would take
+    the group past its target in the design, unless `beyond_target` (a replacement)."""
+    from study.protocol.actor import current_actor
+
+    who = current_actor(actor)
     with write_transaction(engine) as conn, Session(bind=conn) as session:
         study, design = load_study(session)
         if group not in design.groups:
@@ -117,22 +141,44 @@ def add_participant(engine: Engine, group: str, site: str | None = None) -> Part
             raise StudyInputError(
                 f"site {site!r}; expected 1-{MAX_SITE_CHARS} printable characters"
             )
-        used = session.scalars(
+        used = [tuple(u) for u in session.scalars(
             select(Participant.condition_order).where(
                 Participant.study_id == study.id, Participant.group == group
             )
-        ).all()
-        order = next_order(design, group, [tuple(u) for u in used])
-        code = next_code(session, study, design.code_prefix)
-        participant = Participant(
-            study_id=study.id, code=code, group=group, condition_order=list(order), site=site
-        )
-        participant.blocks = [ScheduleBlock(**b) for b in plan_blocks(design, order)]
-        session.add(participant)
-        session.flush()
+        ).all()]  # fmt: skip
+        target = design.groups[group]
+        room = max(target - len(used), 0)
+        if count > room and not beyond_target:
+            raise StudyInputError(
+                f"--count {count} for group {group}, which has {len(used)} of its {target} "
+                f"enrolled; expected at most {room} (--beyond-target enrols replacements "
+                "past the design's target)"
+            )
+        if count > MAX_ENROL:
+            raise StudyInputError(f"--count {count}; expected at most {MAX_ENROL} at once")
+        added = []
+        for _ in range(count):
+            order = next_order(design, group, used)
+            used.append(order)
+            code = next_code(session, study, design.code_prefix)
+            participant = Participant(
+                study_id=study.id, code=code, group=group, condition_order=list(order), site=site
+            )
+            participant.blocks = [ScheduleBlock(**b) for b in plan_blocks(design, order)]
+            session.add(participant)
+            session.flush()
+            session.add(AuditEntry(
+                entity="participant", entity_id=participant.id, field="enrolled",
+                old_value=None, actor=who,
+                new_value=json.dumps({"code": code, "group": group, "site": site,
+                                      "condition_order": list(order)}),
+                reason="past the group's target" if len(used) > target else None,
+            ))  # fmt: skip
+            session.flush()
+            added.append(participant)
         session.expunge_all()
         session.commit()
-    return participant
+    return added
 
 
 @dataclass(frozen=True)

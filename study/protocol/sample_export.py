@@ -167,6 +167,12 @@ def select_trials(
     """
     _check_names("task", selection.tasks, design.tasks)
     _check_names("condition", selection.conditions, design.conditions)
+    beyond = [t for t in selection.trials if t > design.trials_per_condition]
+    if beyond:  # a trial no block has: the export would be empty
+        raise StudyInputError(
+            f"--trial {beyond[0]}; expected 1 to {design.trials_per_condition}, the measured "
+            "trials of a block in the design"
+        )
     if selection.participants:
         known = set(
             session.scalars(

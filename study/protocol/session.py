@@ -231,7 +231,7 @@ def run_session(
             except (OperationalError, engine.dialect.dbapi.OperationalError) as exc:
                 # a full disk, the server gone (the sample writer uses the driver's cursor)
                 raise SessionStorageError(
-                    _storage_failure(engine, participant_id, item, len(completed), exc)
+                    _storage_failure(engine, code, participant_id, item, len(completed), exc)
                 ) from exc
             if trial_id is not None:
                 completed.append(trial_id)
@@ -243,8 +243,9 @@ class SessionStorageError(StudyInputError):
 
 
 def _storage_failure(
-    engine: Engine, participant_id: int, item: PendingTrial, n_completed: int, exc: Exception
-) -> str:
+    engine: Engine, code: str, participant_id: int, item: PendingTrial, n_completed: int,
+    exc: Exception,
+) -> str:  # fmt: skip
     reason = str(getattr(exc, "orig", exc)).strip().splitlines()[0]
     kind = "practice trial" if item.practice else "trial"
     slot = f"{item.block.task}/{item.block.condition} {kind} {item.trial_index + 1}"
@@ -259,10 +260,17 @@ def _storage_failure(
     except OperationalError:
         upto = "the samples committed before the failure"
     return (
-        f"storing {slot} failed ({reason}): kept {n_completed} trial(s) completed in this "
-        f"session and {upto} of {slot}, which the next `study run` marks interrupted and "
-        "repeats; expected a database with free space"
+        f"storing {code}'s {slot} failed ({reason}): kept {n_completed} trial(s) of {code} "
+        f"completed in this session and {upto} of {slot}, which the next `study run` marks "
+        f"interrupted and repeats; expected {_expected_storage(reason)}"
     )
+
+
+def _expected_storage(reason: str) -> str:
+    if "locked" in reason.lower() or "busy" in reason.lower():
+        return ("the database free of another program's lock (retry when it is done, or "
+                "wait longer with ?timeout=SECONDS in the URL)")  # fmt: skip
+    return "a database with free space"
 
 
 def _check_stop(lease: LeaseHandle, stop: threading.Event | None) -> None:

@@ -133,6 +133,8 @@ def scored_tlx(engine: Engine, code: str | None = None) -> list[dict[str, Any]]:
         query = query.where(Participant.code == code)
     rows = []
     with Session(engine) as session:
+        if code:  # an unknown code is a mistake, not a participant without questionnaires
+            find_participant(session, load_study(session)[0], code)
         for response, pcode, group in session.execute(query.order_by(TlxResponse.id)):
             ratings, raw, weighted = response_scores(response)
             rows.append(
@@ -213,6 +215,12 @@ def store_tlx(
             )
             session.add(response)
             session.flush()
+            session.add(AuditEntry(entity="tlx_response", entity_id=response.id,
+                                   field="entered", old_value=None,
+                                   new_value=_audit_text({"participant": code, "task": task,
+                                                          "condition": condition, **values,
+                                                          "pairwise": pairwise}),
+                                   reason=reason, actor=who))  # fmt: skip
             if not ran:  # stored before its block ran: why, and by whom
                 session.add(AuditEntry(entity="tlx_response", entity_id=response.id,
                                        field="stored_before_block_ran", old_value=None,

@@ -29,6 +29,11 @@ Change = tuple[Participant, Callable[[str, "str | None", str, str], None]]
 
 
 def _check_text(what: str, text: str) -> str:
+    if not text.isprintable():  # a newline, a tab, a terminal's escape sequence
+        raise StudyInputError(
+            f"{what} {text!r} holds control characters; expected 1-{MAX_TEXT_CHARS} "
+            "printable characters on one line"
+        )
     value = " ".join(text.split())
     if not value or len(value) > MAX_TEXT_CHARS:
         raise StudyInputError(

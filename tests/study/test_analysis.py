@@ -71,8 +71,9 @@ def test_non_normal_differences_go_to_wilcoxon_with_exact_p() -> None:
     hv = [1.1, 1.2, 1.15, 1.12, 1.18, 6.0, 1.11, 1.13]  # one huge difference: not normal
     row = compare_conditions(_long({"expert": (vo, hv)}))[0].iloc[0]
     assert row["shapiro_p"] < 0.05 and row["test"] == "wilcoxon"
-    # every difference positive: W = min(R+, R-) = 0, exact two-sided p = 2 / 2^8
-    assert row["statistic"] == 0.0
+    # every difference positive: V = R+ = 1 + ... + 8 = 36 (R's statistic), exact
+    # two-sided p = 2 / 2^8
+    assert row["statistic"] == 36.0
     assert row["p"] == pytest.approx(2 / 2**8)
     assert row["effect_size"] == pytest.approx(1.0)  # rank-biserial (R+ - R-) / sum = 1
 
@@ -308,13 +309,14 @@ def test_mixed_anova_refuses_an_unknown_ss_type() -> None:
 # R 4.2.2: wilcox.test(d)$p.value (exact = NULL, correct = TRUE: the defaults)
 #   d1 four zeros -> 0.100348246462291 ("cannot compute exact p-value with zeroes")
 #   d2 a tie      -> 0.0420627333567661 ("cannot compute exact p-value with ties")
-#   d3 distinct   -> 0.0546875, V = 32 (so W = min(32, 36 - 32) = 4)
+#   d3 distinct   -> 0.0546875, V = 32
+#   V: d1 10, d2 33, d3 32 (wilcox.test(d)$statistic, the sum of the positive ranks)
 @pytest.mark.parametrize(
     ("diff", "p", "w", "method"),
     [
-        ([0, 0, 0, 0, 0.05, 0.12, 0.03, 0.2], 0.100348246462291, 0.0, "asymptotic"),
-        ([0.1, 0.1, 0.3, -0.2, 0.5, 0.6, 0.7, 0.9], 0.0420627333567661, 3.0, "asymptotic"),
-        ([0.11, 0.32, -0.25, 0.54, 0.61, 0.73, 0.95, -0.05], 0.0546875, 4.0, "exact"),
+        ([0, 0, 0, 0, 0.05, 0.12, 0.03, 0.2], 0.100348246462291, 10.0, "asymptotic"),
+        ([0.1, 0.1, 0.3, -0.2, 0.5, 0.6, 0.7, 0.9], 0.0420627333567661, 33.0, "asymptotic"),
+        ([0.11, 0.32, -0.25, 0.54, 0.61, 0.73, 0.95, -0.05], 0.0546875, 32.0, "exact"),
     ],
 )
 def test_wilcoxon_rule_is_r_wilcox_test(diff: list[float], p: float, w: float, method: str) -> None:
@@ -347,3 +349,216 @@ def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -
     records = _records(table, ANOVA_KEYS)
     json.dumps(records, allow_nan=False)  # strict JSON: no Infinity
     assert [r["F"] is None for r in records] == [False, True, True]
+
+
+# A study on a 0.01 s grid whose HV - VO differences hold a tie (1.20 twice, computed as
+# 1.1999999999999993 and 1.1999999999999957), a near tie at the resolution (0.80, 0.81)
+# and a noise zero (10.1 + 0.2 - 10.3 = -1.8e-15). R 4.2.2 on the differences at their
+# resolution:
+#   vo <- c(20.00, 30.85, 25.13, 27.40, 22.75, 33.10, 29.95, 24.60, 31.20, 26.05, 28.33,
+#           23.47, 10.3)
+#   hv <- c(21.2, 32.05, 24.78, 29.5, 23.55, 31.55, 33.35, 25.41, 44.1, 27.8, 27.73,
+#           24.42, 10.3)
+#   wilcox.test(round(hv - vo, 2))  # V = 67, p-value = 0.0309194601975077, with the
+#                                   # warnings "cannot compute exact p-value with ties"
+#                                   # and "... with zeroes"
+#   wilcox.test(hv[1:12] - vo[1:12])  # unrounded: V = 67, exact p = 0.02685546875, the
+#                                     # floating-point noise deciding the method
+TIED_VO = [20.00, 30.85, 25.13, 27.40, 22.75, 33.10, 29.95, 24.60, 31.20, 26.05, 28.33, 23.47,
+           10.3]  # fmt: skip
+TIED_HV = [21.2, 32.05, 24.78, 29.5, 23.55, 31.55, 33.35, 25.41, 44.1, 27.8, 27.73, 24.42,
+           10.1 + 0.2]  # fmt: skip
+
+
+def test_wilcoxon_ties_and_zeros_at_the_data_resolution_equal_r() -> None:
+    vo, hv = np.array(TIED_VO), np.array(TIED_HV)
+    assert len(set(np.abs(hv - vo))) == 13  # the raw floats: no tie, no zero
+    v, p, method = wilcoxon_signed_rank(hv - vo, 44.1)
+    assert (v, method) == (67.0, "asymptotic")
+    assert p == pytest.approx(0.0309194601975077, abs=1e-12)
+    # through the analysis: non-normal differences (the 12.9 s outlier) go to Wilcoxon
+    result, _ = compare_conditions(_long({"novice": (list(vo), list(hv))}))
+    row = result.iloc[0]
+    assert (row["test"], row["statistic"], row["p_method"]) == ("wilcoxon", 67.0, "asymptotic")
+    assert row["p"] == pytest.approx(0.0309194601975077, abs=1e-12)
+    # rank-biserial on the same ranks: (R+ - R-) / total with R+ = 67 of 78 (12 non-zero)
+    assert row["effect_size"] == pytest.approx((67 - 11) / 78, abs=1e-12)
+
+
+def test_near_ties_stay_distinct() -> None:
+    from study.analysis.stats import at_resolution
+
+    d = at_resolution(np.array([0.8000000000000007, 0.8099999999999987, 1.2]), 40.0)
+    assert len(set(d)) == 3  # 0.80 and 0.81 differ by far more than the resolution
+
+
+DEMO_TRIALS = Path(__file__).parent.parent / "data" / "demo_seed1_trials.csv"
+"""`study export` of `study demo --seed 1` (216 LCCA trials of 36 simulated participants)."""
+
+# R 4.2.2, lme4 1.1-31, at the REML optimum: lme4's own optimiser stops within about 1e-8
+# of it (SEs differ from the values below by up to 1.3e-8 relative), so theta is polished
+# on lme4's deviance function and the model evaluated there:
+#   d <- read.csv("demo_seed1_trials.csv"); d$condition <- relevel(factor(d$condition), "VO")
+#   d$value <- d[[m]]
+#   f0 <- lmer(value ~ condition * group + (1 | participant), d, REML = TRUE)
+#   dev <- lmer(..., devFunOnly = TRUE); t0 <- getME(f0, "theta")
+#   h <- seq(-0.01, 0.01, length.out = 41) * t0; y <- sapply(t0 + h, dev)
+#   cf <- coef(lm(y ~ h + I(h^2) + I(h^3)))   # theta = t0 + the root of the cubic's slope
+#   f <- lmer(..., start = list(theta = th), control = lmerControl(optimizer = NULL))
+#   fixef(f); sqrt(diag(vcov(f))); isSingular(f0)  # FALSE for all three measures
+# rows: (estimate, SE) of Intercept, HV, novice, outsider, HV:novice, HV:outsider
+LME4 = {
+    "completion_time_s": (0.72731518581495413, [
+        (23.5566666666669953, 3.1935777713747311), (3.0149999999999659, 2.8080022939928941),
+        (9.1899999999996371, 4.5164009967713801), (11.9633333333331819, 3.7786921777972711),
+        (2.8283333333333864, 3.9711149273395145), (1.2249999999999819, 3.3224731204777402)]),
+    "peak_proximal_force_n": (0.23179884414988436, [
+        (0.654986757299080513, 0.063749683056112103),
+        (-0.088459671184823022, 0.083664455544403257),
+        (0.078670136328576820, 0.090155666374940019),
+        (0.374747173674815748, 0.075429642221454582),
+        (-0.080931714866508381, 0.118319407719455968),
+        (-0.337929661949778692, 0.098993118802056135)]),
+    "peak_distal_force_n": (0.13531450527827771, [
+        (0.216786258852353780, 0.055185227528665379),
+        (-0.061372116258316345, 0.075984673972566960),
+        (0.097012265457953495, 0.078043697213683663),
+        (0.340877044003124352, 0.065296041781617908),
+        (-0.084457702070322438, 0.107458556464502128),
+        (-0.286398036040933057, 0.089906278702903769)]),
+}  # fmt: skip
+
+
+def test_mixed_model_equals_lme4_reml_on_the_demo_study() -> None:
+    from study.analysis.stats import lmm_design
+    from study.analysis.stats_lmm import fit_random_intercept
+
+    trials = pd.read_csv(DEMO_TRIALS)
+    table, notes = mixed_model(trials)
+    assert notes == []  # lme4's isSingular is FALSE: no boundary warning
+    for measure, (theta, rows) in LME4.items():
+        got = table[table["measure"] == measure]
+        assert len(got) == 6
+        for (est, se), (_, row) in zip(rows, got.iterrows(), strict=True):
+            assert row["estimate"] == pytest.approx(est, rel=1e-8, abs=1e-12), measure
+            assert row["se"] == pytest.approx(se, rel=1e-8), measure
+            z = est / se
+            assert row["p"] == pytest.approx(2 * stats.norm.sf(abs(z)), rel=1e-6)
+        data = trials.rename(columns={measure: "value"})
+        fit = fit_random_intercept(lmm_design(data)[0], data["value"].to_numpy(float),
+                                   data["participant"].to_numpy())  # fmt: skip
+        assert fit.theta == pytest.approx(theta, rel=1e-8)
+
+
+# R 4.2.2, lme4 1.1-31, on the trials built below (each participant of a group has the
+# same values in another order, so no participant variance):
+#   f <- lmer(value ~ condition * group + (1 | participant), d)
+#   -> "boundary (singular) fit"; isSingular(f) TRUE; theta 0
+#   fixef: 11.1666666666667, -2.33333333333333, 2, 0
+#   SE:    0.300462606288666, 0.424918292799399, 0.424918292799399, 0.600925212577332
+def test_a_singular_fit_is_noted_and_equals_lme4() -> None:
+    base = [10, 11, 12.5, 9, 9.5, 8]
+    rows = []
+    for i in range(6):
+        group = "expert" if i < 3 else "novice"
+        k = i % 3
+        order = [k, (k + 1) % 3, (k + 2) % 3]
+        values = [base[j] for j in order] + [base[3 + j] for j in order]
+        for v, cond in zip(values, ["VO"] * 3 + ["HV"] * 3, strict=True):
+            rows.append({"participant": f"P{i + 1:02d}", "group": group, "task": "lcca",
+                         "condition": cond, "m": v + 2 * (group == "novice")})  # fmt: skip
+    table, notes = mixed_model(pd.DataFrame(rows), ("m",))
+    assert len(notes) == 1 and "singular fit" in notes[0] and "isSingular" in notes[0]
+    ref = [(11.1666666666667, 0.300462606288666), (-2.33333333333333, 0.424918292799399),
+           (2.0, 0.424918292799399), (0.0, 0.600925212577332)]  # fmt: skip
+    for (est, se), (_, row) in zip(ref, table.iterrows(), strict=True):
+        assert row["estimate"] == pytest.approx(est, rel=1e-12, abs=1e-12)
+        assert row["se"] == pytest.approx(se, rel=1e-12)
+
+
+def test_apa_text() -> None:
+    from study.analysis.apa import bounded_text, p_text
+    from study.analysis.figcheck import stars
+
+    assert p_text(1.0) == "> .999" and p_text(0.9995) == "> .999"
+    assert p_text(0.0456) == ".046" and p_text(0.00099) == "< .001"
+    # never rounded across a star threshold: the text and the figure's mark agree
+    for p in (0.04996, 0.0500001, 0.0099996, 0.010004, 0.0010004, 0.049, 0.051):
+        shown = float(p_text(p))
+        assert stars(shown) == stars(p), p
+    assert p_text(0.04996) == ".04996"
+    assert bounded_text(0.6532) == ".65" and bounded_text(-0.25) == "-.25"
+    assert bounded_text(0.6532, 3) == ".653" and bounded_text(float("nan")) == "n/a"
+
+
+def test_tables_give_t_df_v_and_human_labels() -> None:
+    from study.analysis.stats import analyze
+    from study.analysis.tables import anova_table, comparisons_table, lmm_table
+
+    normal = _long({"novice": (VO, HV), "expert": (list(TIED_VO), list(TIED_HV))})
+    trials = normal.rename(columns={"value": "completion_time_s"})
+    trials = trials[trials["measure"] == "m"].drop(columns="measure")
+    trials = trials.assign(peak_proximal_force_n=trials["completion_time_s"] / 10,
+                           peak_distal_force_n=trials["completion_time_s"] / 20)  # fmt: skip
+    analysis = analyze(trials, normal)
+    c = comparisons_table(analysis).display.set_index("group")
+    assert c.loc["novice", "statistic"].startswith("t(5) = ")  # 6 pairs, df 5
+    assert c.loc["expert", "statistic"] == "V = 67.0"
+    assert c.loc["expert", "effect size"] == "rank-biserial r = .72"  # 56 / 78
+    assert c.loc["novice", "effect size"].startswith("Hedges' g_av = -")
+    assert c.loc["expert", "test"] == "Wilcoxon signed-rank"
+    anova = anova_table(analysis).display
+    assert all(v.startswith(".") or v in ("1.000", "n/a") for v in anova["partial eta squared"])
+    terms = lmm_table(analysis).display["term"].tolist()
+    assert terms[:4] == ["intercept", "HV", "novice", "HV x novice"]
+
+
+def test_a_mixed_model_without_residual_df_is_a_note_not_an_error() -> None:
+    rows = [{"participant": f"P{i}", "group": g, "task": "lcca", "condition": c, "m": v}
+            for i, (g, c, v) in enumerate([("a", "VO", 1.0), ("a", "HV", 2.0), ("b", "VO", 3.0),
+                                           ("b", "HV", 5.0)])]  # fmt: skip
+    table, notes = mixed_model(pd.DataFrame(rows), ("m",))
+    assert table.empty and notes == [
+        "lcca/m: mixed model could not be fitted: 4 trials for 4 fixed effects: no residual "
+        "degrees of freedom"
+    ]
+
+
+# R 4.2.2 on tests/data/demo_seed1_means.csv, per measure m and group g:
+#   w <- reshape(s[, c("participant", "condition", "value")], idvar = "participant",
+#                timevar = "condition", direction = "wide"); d <- w$value.HV - w$value.VO
+#   t.test(w$value.HV, w$value.VO, paired = TRUE)   # t, p
+#   wilcox.test(signif(d, 12))                       # V, p: d at the data's resolution
+#   shapiro.test(d)$p.value
+# (t, p_t, V, p_W, shapiro p); the outsiders' completion time holds a tie that floating-
+# point noise had split (then "exact" p = .189; R on the tie: asymptotic .191)
+R_DEMO = {
+    ("completion_time_s", "outsider"): (1.98398848224652, 0.0618942430020153, 140.5,
+                                        0.191295160961024, 0.0151792852311702),
+    ("completion_time_s", "novice"): (2.35162813545057, 0.0509652280723797, 32, 0.0546875,
+                                      0.932873233060212),
+    ("peak_proximal_force_n", "outsider"): (-7.21836971644834, 7.45093920504869e-07, 0,
+                                            1.9073486328125e-06, 0.0430613214458504),
+    ("peak_proximal_force_n", "expert"): (-1.62522394325726, 0.148142318187824, 5, 0.078125,
+                                          0.00134195845507016),
+    ("peak_distal_force_n", "expert"): (-1.28628418260779, 0.239250924916312, 2,
+                                        0.361310428526179, 0.00635893776220218),
+    ("tlx_raw", "outsider"): (-5.17021276595745, 5.44354877219215e-05, 11,
+                              0.000479738755364896, 0.599337802674218),
+}  # fmt: skip
+
+
+def test_comparisons_equal_r_on_the_demo_study() -> None:
+    table, _ = compare_conditions(pd.read_csv(DEMO_MEANS))
+    rows = table.set_index(["measure", "group"])
+    for key, (t, p_t, v, p_w, shapiro_p) in R_DEMO.items():
+        row = rows.loc[key]
+        assert row["shapiro_p"] == pytest.approx(shapiro_p, rel=1e-8), key
+        if row["test"] == "paired_t":
+            assert row["statistic"] == pytest.approx(t, rel=1e-8), key
+            assert row["p"] == pytest.approx(p_t, rel=1e-8), key
+        else:
+            assert row["statistic"] == v, key
+            assert row["p"] == pytest.approx(p_w, rel=1e-8), key
+    outsider = rows.loc[("completion_time_s", "outsider")]
+    assert (outsider["test"], outsider["p_method"]) == ("wilcoxon", "asymptotic")

@@ -29,10 +29,11 @@ def _enter(db: str, *extra: str, **ratings: int) -> int:
     return main([*args, *extra, "--db", db])
 
 
-def _audit(db: str) -> list[AuditEntry]:
+def _audit(db: str, entity: str = "tlx_response") -> list[AuditEntry]:
     engine = make_engine(db)
     with Session(engine) as s:
-        rows = s.scalars(select(AuditEntry).order_by(AuditEntry.id)).all()
+        query = select(AuditEntry).order_by(AuditEntry.id)
+        rows = s.scalars(query.where(AuditEntry.entity == entity)).all()
         s.expunge_all()
     engine.dispose()
     return list(rows)
@@ -49,18 +50,22 @@ def test_edits_need_a_reason_name_the_actor_and_audit_the_pairwise_choices(
     first = [a for a, _ in pairs]
     assert _enter(db_url, "--choices", ",".join(first), "--reason", "paper form") == 0
     capsys.readouterr()
-    created = _audit(db_url)  # the block had not run: why, kept
-    assert [(r.field, r.reason) for r in created] == [("stored_before_block_ran", "paper form")]
+    created = _audit(db_url)  # the first entry, and why before its block ran
+    assert [(r.field, r.reason) for r in created] == [
+        ("entered", "paper form"), ("stored_before_block_ran", "paper form")
+    ]
+    entered = json.loads(created[0].new_value)
+    assert entered["participant"] == "P001" and entered["mental"] == RATINGS["mental"]
     # an edit without a reason: one line, exit 2, nothing changed
     assert _enter(db_url, effort=65) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "needs a reason" in err[0] and "P001 lcca/VO" in err[0]
-    assert len(_audit(db_url)) == 1
+    assert len(_audit(db_url)) == 2
     # the choices changed: the pairwise list is audited beside the weights it gives
     second = [b for _, b in pairs]
     assert _enter(db_url, "--choices", ",".join(second), "--reason", "form misread",
                   "--actor", "EXP02", effort=65) == 0  # fmt: skip
-    rows = _audit(db_url)[1:]
+    rows = _audit(db_url)[2:]
     fields = {r.field: r for r in rows}
     assert "effort" in fields and "pairwise" in fields
     assert [[a, b, c] for (a, b), c in zip(pairs, first, strict=True)] == json.loads(

@@ -82,6 +82,8 @@ ENTER = ["tlx", "enter", "--participant", "P001", "--task", "lcca", "--condition
          "--mental=70", "--physical=20", "--temporal=50", "--performance=30", "--effort=60",
          "--frustration=40"]  # fmt: skip
 ENTER_UNRUN = [*ENTER, "--reason", "paper form, block not run"]
+SIMULATE = ["simulate", "--group", "novice", "--condition", "HV", "--out", "sim.csv"]
+POWER = ["power", "--design", "d.toml", "--n-sim", "10"]
 """ENTER for a block with no trial yet: that needs a reason too (issue 19)."""
 
 CASES = [
@@ -138,8 +140,8 @@ CASES = [
     init(design(code_prefix='"ÄB"'), "code_prefix = 'ÄB'; expected 1-4 capital letters A-Z",
          "code prefix"),
     Case("pace nan", ["run", "--participant", "P001", "--pace", "nan"],
-         "--pace nan; expected a finite number > 0"),
-    Case("pace inf", ["run", "--all", "--pace", "inf"], "--pace inf; expected a finite number"),
+         "--pace nan; expected a finite number 0.01<=x<=1000"),
+    Case("pace inf", ["run", "--all", "--pace", "inf"], "inf is not in the range 0.01<=x<=1000"),
     imp_tlx(TLX_ROW.replace("lcca,VO", "banana,VO"),
             "column task: 'banana'; expected one of lcca", "tlx task banana"),
     imp_tlx(TLX_ROW.replace("lcca,VO", "lcca,XX"),
@@ -152,6 +154,58 @@ CASES = [
          before=[ENTER_UNRUN]),
     Case("tlx for a block not run, no reason", ENTER, "has no completed trial yet"),
     Case("actor too long", [*ENTER, "--actor", "a" * 65], "--actor 'aaaa"),
+    # what independent checks found: tracebacks
+    Case("max-seconds nan", [*SIMULATE, "--max-seconds", "nan"],
+         "--max-seconds nan; expected a finite number 1<=x<=3600"),
+    Case("seed -1", [*SIMULATE, "--seed", "-1"], "-1 is not in the range 0<=x<=4294967295"),
+    Case("pace 1e-300", ["run", "--participant", "P001", "--pace", "1e-300"],
+         "1e-300 is not in the range 0.01<=x<=1000"),
+    # unbounded
+    Case("count 1e9", ["participant", "add", "--group", "novice", "--count", "1000000000"],
+         "--count 1000000000 for group novice, which has 2 of its 8 enrolled; expected at most 6"),
+    Case("count past the target", ["participant", "add", "--group", "novice", "--count", "7"],
+         "--count 7 for group novice, which has 2 of its 8 enrolled; expected at most 6"),
+    Case("n-sim 1e12", [*POWER, "--n-sim", "1000000000000"],
+         "1000000000000 is not in the range 10<=x<=100000", {"d.toml": TEMPLATE.encode()}),
+    # accepted nonsense
+    *[Case(f"effect {v}", [*POWER, "--effect", v], f"--effect '{v}': outsider",
+           {"d.toml": TEMPLATE.encode()}) for v in ("nan", "inf", "-inf", "1e308")],
+    Case("effect per group nan", [*POWER, "--effect", "outsider=1,novice=nan,expert=1"],
+         "novice nan; expected a finite standardised effect from -10 to 10",
+         {"d.toml": TEMPLATE.encode()}),
+    Case("haptic gain 1e9", [*SIMULATE, "--haptic-gain", "1e9"],
+         "--haptic-gain 1000000000.0; expected 0 to 1 N m/N"),
+    Case("tlx show unknown", ["tlx", "show", "--participant", "P999"],
+         "unknown participant 'P999'"),
+    Case("note with control characters", ["participant", "note", "P001", "a\nb\x1b[2J"],
+         "holds control characters; expected 1-500 printable characters on one line"),
+    Case("session note with a tab", ["participant", "note", "P001", "a\tb", "--session"],
+         "holds control characters"),
+    Case("jobs with participant", ["run", "--participant", "P001", "--jobs", "2"],
+         "--jobs 2 with --participant; expected --all"),
+    Case("samples of trial 99", ["export", "--out", "o", "--samples", "--trial", "99"],
+         "--trial 99; expected 1 to 3"),
+    imp(trials(TRIAL_ROW.replace("0.81", "1e-400")),
+        "column peak_proximal_force_n: '1e-400' is too small to store", "force 1e-400"),
+    *[Case(f"db url {q}", ["db", "info", "--db", f"sqlite:///s.db?{q}"], want)
+      for q, want in (("timeout=abc", "timeout='abc'; expected seconds"),
+                      ("timeout=-1", "timeout='-1'; expected seconds"),
+                      ("timeout=nan", "timeout='nan'; expected seconds"),
+                      ("foo=bar", "has parameter 'foo'; expected only timeout, mode, uri"))],
+    init(b"", "d2.toml is empty; expected a study design", "empty design"),
+    init(b"# only a comment\n", "d2.toml is empty; expected a study design", "comment design"),
+    init(design(**{f"groups.g{i}": "1" for i in range(13)}),
+         "[groups] has 16 groups; expected 1 to 12", "16 groups"),
+    imp(trials(TRIAL_ROW.replace("P001", "P0001")),
+        "'P0001' beside 'P001', the same number written with other zeros; expected P001",
+        "P0001 beside P001"),
+    imp(trials(TRIAL_ROW.replace("P001", "P0003"),
+               TRIAL_ROW.replace("P001", "P003").replace(",1,31.5", ",2,31.5")),
+        "row 3, column participant: 'P003' beside 'P0003'", "P0003 and P003 in one file"),
+    # misleading messages
+    Case("duplicate column", ["import", "--trials", "t.csv"], "has column 'success' twice",
+         {"t.csv": (",".join(TRIAL_COLUMNS) + ",success\n" + TRIAL_ROW + ",true\n").encode()}),
+    imp(trials(TRIAL_ROW + ",VO,a,b"), "t.csv row 2: 12 fields; expected 9", "extra fields"),
 ]
 
 

@@ -135,6 +135,8 @@ def test_every_figure_passes_the_check_at_both_widths(engine: Engine, width: str
         texts = [t.get_text() for t in d.figure.findobj(plt.Text)]
         assert any("Simulated participants" in t for t in texts), d.name  # issue 25
         assert d.figure.get_figwidth() == {"single": 3.5, "double": 7.16}[width]
+        if width == "single" and not d.name.startswith("fig9"):  # Fig. 12, TLX profile
+            assert d.figure.get_figheight() <= 4.0, d.name
 
 
 def test_each_task_gets_its_own_fig12_with_its_own_marks(engine: Engine) -> None:
@@ -217,6 +219,8 @@ def test_fig9_one_figure_shared_axis_reference_above_estimate(engine: Engine) ->
     vo, hv = [ax for ax in fig.axes if ax.get_title()]
     assert vo.get_title().split(", ")[1] == "VO" and hv.get_title().split(", ")[1] == "HV"
     assert vo.get_ylim() == hv.get_ylim()
+    assert vo.get_xlim() == hv.get_xlim()  # one time axis: the trials' lengths compare
+    assert vo.get_shared_x_axes().joined(vo, hv)
     lines = {line.get_label(): line for line in vo.get_lines()}
     assert lines["proximal, reference"].get_zorder() > lines["proximal, estimated"].get_zorder()
     caption = fig.legends[0].get_title().get_text().replace("\n", " ")
@@ -244,8 +248,9 @@ def test_fig9_draws_every_stored_sample_of_the_two_trials(engine: Engine) -> Non
 def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> None:
     sizes = {"outsider": 20, "novice": 8, "expert": 8}
     equal = power_curve(sizes, dict.fromkeys(sizes, 0.8), 0.5, 20, 0, scales=(0.5, 1.0))
+    assumed = {"effects": dict.fromkeys(sizes, 0.8), "rho": 0.5, "n_sim": 20}
     for width in ("single", "double"):
-        fig = plot_power_curve(equal, width)
+        fig = plot_power_curve(equal, width, **assumed)
         assert check_figure(fig) == []
         ax_groups, ax_inter = fig.axes
         lines = {line.get_label(): line for line in ax_groups.get_lines()
@@ -258,8 +263,23 @@ def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> No
         plt.close(fig)
     unequal = power_curve(sizes, {"outsider": 0.2, "novice": 0.8, "expert": 1.2}, 0.5, 20, 0,
                           scales=(1.0,))  # fmt: skip
-    fig = plot_power_curve(unequal, "single")
+    effects = {"outsider": 0.2, "novice": 0.8, "expert": 1.2}
+    fig = plot_power_curve(unequal, "single", effects=effects, rho=0.5, n_sim=20)
     assert "power" in fig.axes[1].get_ylabel() and "type I" not in fig.axes[1].get_ylabel()
+    # the assumptions stated in the figure
+    key = fig.legends[0].get_title().get_text().replace("\n", " ")
+    for phrase in ("outsider 0.2, novice 0.8, expert 1.2", "correlation 0.5", "alpha 0.05",
+                   "20 simulated studies per size", "Monte-Carlo"):  # fmt: skip
+        assert phrase in key, key
+    # each estimate's 95 % Monte-Carlo (Wilson) band, drawn around it: novice's power p of
+    # 20 studies, by hand: (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
+    novice = unequal[0][1].groups["novice"]
+    z, n = 1.959963984540054, 20
+    centre = (novice + z**2 / (2 * n)) / (1 + z**2 / n)
+    half = z * np.sqrt(novice * (1 - novice) / n + z**2 / (4 * n**2)) / (1 + z**2 / n)
+    bands = [c for c in fig.axes[0].collections if len(c.get_paths())]
+    ys = [sorted({round(float(y), 12) for y in b.get_paths()[0].vertices[:, 1]}) for b in bands]
+    assert [round(centre - half, 12), round(centre + half, 12)] in ys
     plt.close(fig)
 
 
@@ -295,7 +315,12 @@ def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
     # the expert distal force: 4 of 8 zero differences, R's asymptotic p .361 -> n.s.
     assert marks["peak_distal_force_n/expert"] == pytest.approx(0.36131, abs=1e-5)
     ax = fig.axes[2]
-    assert "expert\nWilcoxon\n(asymptotic)" in [t.get_text() for t in ax.get_xticklabels()]
+    expected = "expert\nW (as.)" if width == "single" else "expert\nWilcoxon\n(asymptotic)"
+    assert expected in [t.get_text() for t in ax.get_xticklabels()]
+    if width == "single":  # a column's upper part at most, the abbreviations spelled out
+        assert fig.get_size_inches().tolist() == [3.5, 4.0]
+        key = fig.legends[0].get_title().get_text().replace("\n", " ")
+        assert "W, Wilcoxon signed-rank test, ex. exact or as. asymptotic p" in key
     # five expert VO values of 0.112 N: jittered apart, not one dot
     expert_vo = ax.collections[4].get_offsets()  # scatter order: group x (VO, HV)
     tied = expert_vo[np.isclose(expert_vo[:, 1], 0.112, atol=5e-4)]

@@ -41,6 +41,11 @@ def test_quick_demo_writes_analysis_and_figures(
     for name in ("fig12_groups_lcca", "fig9_forces_lcca", "tlx_profile_lcca"):
         for fmt in ("pdf", "svg", "png"):
             assert (demo / "figures" / f"{name}.{fmt}").stat().st_size > 5_000
+            # both IEEE widths: single column beside the double-column figures
+            assert (demo / "figures" / "single" / f"{name}.{fmt}").stat().st_size > 5_000
+    single = PdfReader(demo / "figures" / "single" / "fig12_groups_lcca.pdf").pages[0]
+    assert float(single.mediabox.width) == pytest.approx(3.5 * 72)
+    assert float(single.mediabox.height) <= 4.0 * 72
     pdf = (demo / "figures" / "fig12_groups_lcca.pdf").read_bytes()
     assert b"/FontFile2" in pdf  # TrueType fonts embedded (pdf.fonttype 42)
     # the figures command redraws them at single-column width, PNG only (checked again)

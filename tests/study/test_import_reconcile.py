@@ -48,10 +48,15 @@ def test_an_imported_code_does_not_collide_with_enrolment(
     _init(tmp_path, db_url)
     assert _import(tmp_path, db_url, "P004,novice,lcca,VO,1,31.5,0.81,0.42,,,true\n") == 0
     capsys.readouterr()
-    for _ in range(2):
-        assert main(["participant", "add", "--group", "novice", "--db", db_url]) == 0
-    # after P001, P002 and the imported P004: P005 and P006 (gaps are not reused)
+    # novice's target is 4: P001, P002 and the imported P004 leave room for one
+    add = ["participant", "add", "--group", "novice", "--db", db_url]
+    assert main(add) == 0
     out = capsys.readouterr().out.split()
+    assert main(add) == 2  # a fifth novice: past the target
+    assert "has 4 of its 4 enrolled; expected at most 0" in capsys.readouterr().err
+    assert main([*add, "--beyond-target"]) == 0
+    # after P001, P002 and the imported P004: P005 and P006 (gaps are not reused)
+    out += capsys.readouterr().out.split()
     assert [w for w in out if w.startswith("P0")] == ["P005", "P006"]
 
 

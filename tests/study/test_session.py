@@ -251,7 +251,7 @@ def test_a_full_disk_after_a_completed_trial_is_one_line_and_keeps_that_trial(
     assert trials[0][4] + trials[1][4] == sum(commits)  # every commit before the failure
     kept_s = float(err[0].split("samples up to t = ")[1].split(" s")[0])
     assert abs(kept_s * 100 + 1 - trials[1][4]) <= 1  # the line matches what is stored
-    assert "database or disk is full" in err[0] and "kept 1 trial(s) completed" in err[0]
+    assert "database or disk is full" in err[0] and "kept 1 trial(s) of P001 completed" in err[0]
     monkeypatch.undo()
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     after = _trials(db)

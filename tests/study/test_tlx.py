@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -98,7 +99,11 @@ def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
         assert not new and edited.effort == 65 and edited.w_mental == stored.w_mental
         with Session(engine) as s:
             audit = s.scalars(select(AuditEntry).where(AuditEntry.entity == "tlx_response")).all()
-        assert [(a.field, a.old_value, a.new_value, a.reason) for a in audit] == [
+        assert (audit[0].field, audit[0].old_value, audit[0].reason) == (
+            "entered", None, "paper form before the block"
+        )  # the first entry, with every value
+        assert json.loads(audit[0].new_value)["effort"] == 60
+        assert [(a.field, a.old_value, a.new_value, a.reason) for a in audit][1:] == [
             ("stored_before_block_ran", None, "0 completed trials", "paper form before the block"),
             ("effort", "60", "65", "typo"),
         ]

@@ -1,0 +1,378 @@
+"""Fuzzing `study` through its entry point, in-process (hypothesis).
+
+- Every command's number options given nan, inf, text, or a value just outside their
+  range: one line on stderr, exit status 2, within 10 s, never a traceback.
+- The study-data commands (init, enrol, notes, questionnaires, import, export, schedule,
+  db info) with random options on a small study: exit 0 or 2 within 10 s, never a
+  traceback; after a success the database holds no control character in its text and
+  no non-finite number (nonsense accepted would show there).
+- Trial CSVs and design TOML files built from valid and nonsense cells: an import or
+  init that succeeds stored only plausible values; nonsense is refused.
+
+The CI budget (at least 1,000 cases): 300 + 300 + 250 + 200; `@pytest.mark.slow` runs
+more of each.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import math
+import shutil
+import signal
+import sqlite3
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import click
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from study.cli import cli, main
+from study.protocol.design import TEMPLATE
+from study.protocol.exchange import TRIAL_COLUMNS
+
+HANG_S = 10
+FAST = settings(deadline=None, suppress_health_check=list(HealthCheck), derandomize=True,
+                database=None)  # fmt: skip
+"""Deterministic draws (the same cases on every CI run), no example database."""
+
+
+class Hang(Exception):
+    pass
+
+
+def _alarm(signum: int, frame: object) -> None:
+    raise Hang(f"no answer within {HANG_S} s")
+
+
+def run(argv: list[str], cwd: Path) -> tuple[int, str]:
+    """`study ARGV` in `cwd`: its exit status and stderr; a hang past HANG_S raises Hang."""
+    err, out = io.StringIO(), io.StringIO()
+    old = signal.signal(signal.SIGALRM, _alarm)
+    here = Path.cwd()
+    signal.alarm(HANG_S)
+    try:
+        import os
+
+        os.chdir(cwd)
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+            code = main(argv)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+        os.chdir(here)
+    return code, err.getvalue()
+
+
+def assert_one_line_refusal(code: int, err: str, argv: list[str]) -> None:
+    lines = err.strip().splitlines()
+    assert code == 2, (argv, code, err)
+    assert len(lines) == 1 and ": error: " in lines[0], (argv, err)
+
+
+def leaf_commands() -> list[tuple[list[str], click.Command]]:
+    ctx = click.Context(cli)
+    out = []
+
+    def walk(cmd: click.Command, path: list[str]) -> None:
+        if isinstance(cmd, click.Group):
+            for name in cmd.list_commands(ctx):
+                walk(cmd.get_command(ctx, name), [*path, name])
+        else:
+            out.append((path, cmd))
+
+    walk(cli, [])
+    return out
+
+
+PLACEHOLDER = {
+    "design": "d.toml",
+    "design_path": "d.toml",
+    "campaign_path": "d.toml",
+    "trials_csv": "t.csv",
+    "group": "novice",
+    "code": "P001",
+    "text": "a note",
+    "reason": "a reason",
+    "task": "lcca",
+    "condition": "VO",
+    "participant": "P001",
+}
+"""Values for required parameters (by name), so that a refusal is the bad option's."""
+
+
+def required_args(cmd: click.Command, skip: str) -> list[str]:
+    args: list[str] = []
+    for p in cmd.params:
+        if not p.required or p.name == skip:
+            continue
+        if isinstance(p.type, click.Choice):
+            value = str(p.type.choices[0])
+        elif isinstance(p.type, click.types.IntParamType):
+            value = "50"
+        else:
+            value = PLACEHOLDER.get(p.name or "", f"x_{p.name}")
+        args += [p.opts[0], value] if isinstance(p, click.Option) else [value]
+    return args
+
+
+def bad_values(p: click.Parameter) -> list[str]:
+    """Values of a number option that no command means anything by."""
+    t = p.type
+    values = ["abc", "1e400x"]
+    if isinstance(t, click.types.FloatParamType):
+        values += ["nan", "inf", "-inf"]
+    if isinstance(t, click.types._NumberRangeBase):
+        step = 1 if isinstance(t, click.types.IntParamType) else 1e-9
+        if t.min is not None:
+            values.append(str(t.min - step if not t.min_open else t.min))
+        if t.max is not None:
+            values.append(str(t.max + step if not t.max_open else t.max))
+    return values
+
+
+NUMBER_CASES = [
+    (path, cmd, p, v)
+    for path, cmd in leaf_commands()
+    for p in cmd.params
+    if isinstance(p, click.Option)
+    and isinstance(p.type, click.types.IntParamType | click.types.FloatParamType)
+    for v in bad_values(p)
+]
+
+
+@contextlib.contextmanager
+def workdir() -> Iterator[Path]:
+    with tempfile.TemporaryDirectory() as folder:
+        where = Path(folder)
+        (where / "d.toml").write_text(TEMPLATE)
+        (where / "t.csv").write_text(",".join(TRIAL_COLUMNS) + "\n"
+                                     "P001,novice,lcca,VO,1,31.5,0.81,0.42,true\n")  # fmt: skip
+        yield where
+
+
+def test_every_number_option_is_covered() -> None:
+    covered = {(" ".join(path), p.opts[0]) for path, _, p, _ in NUMBER_CASES}
+    assert len(covered) >= 40 and ("power", "--n-sim") in covered
+    assert ("simulate", "--max-seconds") in covered and ("run", "--pace") in covered
+
+
+@settings(FAST, max_examples=300)
+@given(case=st.sampled_from(NUMBER_CASES))
+def test_a_bad_number_is_refused_with_one_line(case: tuple) -> None:
+    _refused(case)
+
+
+def _refused(case: tuple) -> None:
+    path, cmd, p, value = case
+    with workdir() as where:
+        argv = [*path, *required_args(cmd, p.name or ""), f"{p.opts[0]}={value}"]
+        if "--db" in {o for q in cmd.params for o in q.opts}:
+            argv += ["--db", str(where / "s.db")]
+        code, err = run(argv, where)
+        assert_one_line_refusal(code, err, argv)
+
+
+# -- the study-data commands with random options ---------------------------------------
+
+TEXT = st.one_of(
+    st.sampled_from(["P001", "P002", "P999", "P0001", "novice", "expert", "lcca", "VO", "HV",
+                     "a note", "", " ", "x" * 600, "a\nb", "\x1b[2J", "caf\u00e9", "-1"]),
+    st.text(max_size=12),
+)  # fmt: skip
+NUMBER = st.one_of(
+    st.sampled_from(["0", "1", "3", "5", "50", "100", "101", "-1", "nan", "inf", "1e308",
+                     "1e-400", "2147483648", "99", "0.5"]),
+    st.integers(-10, 10_000).map(str),
+)  # fmt: skip
+
+CODE = st.sampled_from(["P001", "P002", "P999", "P0001", "p001", "", "P001\n"])
+BY_OPTION = {"CODE": CODE, "--participant": CODE,
+             "--group": st.sampled_from(["novice", "expert", "outsider", "surgeon", ""]),
+             "--task": st.sampled_from(["lcca", "notes", "x"]),
+             "--condition": st.sampled_from(["VO", "HV", "XX"])}  # fmt: skip
+
+LIGHT = {
+    "participant add": ["--group", "--site", "--count", "--actor"],
+    "participant note": ["CODE", "TEXT", "--actor"],
+    "participant withdraw": ["CODE", "--reason", "--actor"],
+    "tlx enter": ["--participant", "--task", "--condition", "--mental", "--physical",
+                  "--temporal", "--performance", "--effort", "--frustration", "--reason",
+                  "--actor"],
+    "tlx show": ["--participant"],
+    "tlx pairs": ["--participant"],
+    "schedule": [],
+    "db info": [],
+    "export": ["--out", "--trial", "--participant", "--from-s", "--to-s", "--format"],
+    "import": ["--trials", "--actor"],
+}  # fmt: skip
+NUMERIC = {"--count", "--mental", "--physical", "--temporal", "--performance", "--effort",
+           "--frustration", "--trial", "--from-s", "--to-s"}  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def small_study(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("fuzz")
+    (folder / "d.toml").write_text(TEMPLATE)
+    db = str(folder / "s.db")
+    assert main(["init", "--design", str(folder / "d.toml"), "--db", db]) == 0
+    assert main(["participant", "add", "--group", "novice", "--count", "2", "--db", db]) == 0
+    return folder / "s.db"
+
+
+def stored_nonsense(db: Path) -> list[str]:
+    """Text with control characters, and numbers that are not finite, in any table."""
+    found = []
+    with contextlib.closing(sqlite3.connect(db)) as conn:
+        tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")]
+        for table in tables:
+            if table in ("alembic_version", "sample_chunks"):
+                continue
+            for row in conn.execute(f'SELECT * FROM "{table}"'):
+                for v in row:
+                    # the design's TOML text (studies) is the only text with line breaks
+                    text = v.replace("\n", " ") if table == "studies" and isinstance(v, str) else v
+                    if isinstance(v, str) and not text.isprintable():
+                        found.append(f"{table}: {v!r}")
+                    if isinstance(v, float) and not math.isfinite(v):
+                        found.append(f"{table}: {v!r}")
+    return found
+
+
+@settings(FAST, max_examples=300)
+@given(data=st.data())
+def test_study_data_commands_with_random_options(small_study: Path, data: st.DataObject) -> None:
+    command = data.draw(st.sampled_from(sorted(LIGHT)))
+    argv = command.split()
+    for option in LIGHT[command]:
+        if not data.draw(st.booleans()) and not option.isupper():
+            continue
+        value = data.draw(NUMBER if option in NUMERIC else BY_OPTION.get(option, TEXT))
+        argv += [value] if option.isupper() else [f"{option}={value}"]
+    with workdir() as where:
+        shutil.copy(small_study, where / "s.db")
+        code, err = run([*argv, "--db", str(where / "s.db")], where)
+        assert code in (0, 2), (argv, code, err)
+        if code == 2:
+            assert_one_line_refusal(code, err, argv)
+        assert stored_nonsense(where / "s.db") == [], argv
+
+
+# -- CSV and TOML inputs ---------------------------------------------------------------
+
+CELL = {
+    "participant": st.sampled_from(["P001", "P003", "P0003", "p003", "P3", "", "P001 ", "=1+1"]),
+    "group": st.sampled_from(["novice", "expert", "outsider", "surgeon", ""]),
+    "task": st.sampled_from(["lcca", "notes", "LCCA", ""]),
+    "condition": st.sampled_from(["VO", "HV", "XX", ""]),
+    "trial": st.sampled_from(["1", "2", "3", "4", "0", "-1", "1.0", "99999999999999999999", "²"]),
+    "completion_time_s": NUMBER,
+    "peak_proximal_force_n": NUMBER,
+    "peak_distal_force_n": NUMBER,
+    "success": st.sampled_from(["true", "false", "yes", "maybe", ""]),
+}  # fmt: skip
+
+
+def _sane_trials(db: Path) -> list[str]:
+    bad = []
+    with contextlib.closing(sqlite3.connect(db)) as conn:
+        for (t,) in conn.execute("SELECT completion_time_s FROM trials WHERE driver='imported'"):
+            if t is None or not 0 <= t <= 180:
+                bad.append(f"completion time {t!r}")
+        for name, v in conn.execute("SELECT name, value FROM trial_measures"):
+            if v is None or not 0 <= v <= 20:
+                bad.append(f"{name} {v!r}")
+        codes = [c for (c,) in conn.execute("SELECT code FROM participants")]
+        numbers = [int(c.lstrip("ABCDEFGHIJKLMNOPQRSTUVWXYZ")) for c in codes]
+        if len(set(numbers)) != len(numbers):
+            bad.append(f"codes {codes}")
+        for (pid,) in conn.execute("SELECT id FROM participants"):
+            n = conn.execute("SELECT count(*) FROM schedule_blocks WHERE participant_id=?",
+                             (pid,)).fetchone()[0]  # fmt: skip
+            if n == 0:
+                bad.append(f"participant {pid} without a schedule")
+    return bad
+
+
+@settings(FAST, max_examples=250)
+@given(rows=st.lists(st.fixed_dictionaries(CELL), min_size=1, max_size=4),
+       extra=st.sampled_from(["", "", ",success", ",x", "fields"]))  # fmt: skip
+def test_trial_csvs(small_study: Path, rows: list[dict[str, str]], extra: str) -> None:
+    header = ",".join(CELL) + ("" if extra == "fields" else extra)
+    body = "\n".join(",".join(r.values()).replace("\n", " ") for r in rows)
+    if extra:  # every row as long as the header, or (fields) two longer
+        body = "\n".join(line + (",a,b" if extra == "fields" else ",1")
+                         for line in body.split("\n"))  # fmt: skip
+    with workdir() as where:
+        shutil.copy(small_study, where / "s.db")
+        (where / "f.csv").write_text(header + "\n" + body + "\n")
+        code, err = run(["import", "--trials", "f.csv", "--db", "s.db"], where)
+        assert code in (0, 2), (header, body, err)
+        if code == 2:
+            assert_one_line_refusal(code, err, [header, body])
+            want = {",success": "'success' twice", "fields": "11 fields; expected 9",
+                    ",x": "unknown column 'x'"}.get(extra)  # fmt: skip
+            assert want is None or want in err, (extra, err)
+        else:
+            assert extra == "", "a repeated or unknown column was accepted"
+            assert _sane_trials(where / "s.db") == [], body
+            assert stored_nonsense(where / "s.db") == [], body
+
+
+TOML_VALUE = st.one_of(
+    st.integers(-5, 5000), st.sampled_from([float("nan"), float("inf"), -1.5, 0.0, 1e308]),
+    st.sampled_from(['"x"', '""', "true", "[]", '["VO", "HV"]', '["lcca"]', '"P"', '"ÄB"']),
+)  # fmt: skip
+KEYS = [
+    "name",
+    "seed",
+    "conditions",
+    "tasks",
+    "trials_per_condition",
+    "practice_trials",
+    "counterbalancing",
+    "break_s",
+    "tlx_before_next_block",
+    "code_prefix",
+    "unknown",
+]
+
+
+def _toml(value: object) -> str:
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else ("inf" if value == math.inf else repr(value))
+    return str(value)
+
+
+@settings(FAST, max_examples=200)
+@given(top=st.dictionaries(st.sampled_from(KEYS), TOML_VALUE, max_size=4),
+       groups=st.dictionaries(st.sampled_from(["novice", "expert", "g", " a", "x" * 40]),
+                              TOML_VALUE, max_size=4))  # fmt: skip
+def test_design_tomls(top: dict[str, object], groups: dict[str, object]) -> None:
+    text = "".join(f"{k} = {_toml(v)}\n" for k, v in top.items())
+    if groups:
+        text += "[groups]\n" + "".join(f'"{k}" = {_toml(v)}\n' for k, v in groups.items())
+    with workdir() as where:
+        (where / "x.toml").write_text(text)
+        code, err = run(["init", "--design", "x.toml", "--db", "n.db"], where)
+        assert code in (0, 2), (text, err)
+        if code == 2:
+            assert_one_line_refusal(code, err, [text])
+            assert not (where / "n.db").exists() or stored_nonsense(where / "n.db") == []
+            return
+        from study.protocol.design import parse_design
+
+        design = parse_design(text)  # what was accepted, read back
+        assert text.strip(), "an empty design was accepted"
+        assert 1 <= len(design.groups) <= 12 and all(1 <= n <= 1000 for n in design.groups.values())
+        assert math.isfinite(design.break_s) and 0 <= design.seed
+        assert stored_nonsense(where / "n.db") == []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", NUMBER_CASES, ids=lambda c: " ".join(map(str, c[0])))
+def test_every_bad_number_of_every_command(case: tuple) -> None:
+    _refused(case)
