@@ -98,12 +98,14 @@ def main() -> None:
     n = len(t)
     cut = round(0.75 * n)
     last = slice(cut, n)
-    out: dict = {"data": "EMPS estimation file DATA_EMPS.mat, measured (Janot, Gautier, "
-                 "Brunot 2019)", "split": "first 75 % training, last 25 % held out"}
+    out: dict = {
+        "data": "EMPS estimation file DATA_EMPS.mat, measured (Janot, Gautier, Brunot 2019)",
+        "split": "first 75 % training, last 25 % held out",
+    }
     plain = {}
     for cutoff in (50.0, 75.0, 100.0, 150.0):
         r1, _ = plain_idim(t, q, u, cutoff, False, cut)
-        r2, c2 = plain_idim(t, q, u, cutoff, True, cut)
+        r2, _ = plain_idim(t, q, u, cutoff, True, cut)
         plain[f"{cutoff:g}"] = {"base_rmse_n": r1, "per_direction_rmse_n": r2}
     out["plain_idim_ls"] = plain
     # the loop
@@ -125,19 +127,33 @@ def main() -> None:
     _, c_ref = plain_idim(t, q, u, 100.0, False, cut)
     _, c_dir = plain_idim(t, q, u, 100.0, True, cut)
     models = {
-        "plain_idim_ls_100hz": (c_ref[0], lambda v: c_ref[1] * v + c_ref[2] * np.sign(v) + c_ref[3]),
+        "plain_idim_ls_100hz": (
+            c_ref[0],
+            lambda v: c_ref[1] * v + c_ref[2] * np.sign(v) + c_ref[3],
+        ),
         "plain_idim_ls_per_direction_100hz": (
             c_dir[0],
-            lambda v: (c_dir[1] * v * (v > 0) + c_dir[2] * v * (v < 0) + c_dir[3] * (v > 0)
-                       + c_dir[4] * (v < 0) + c_dir[5]),
+            lambda v: (
+                c_dir[1] * v * (v > 0)
+                + c_dir[2] * v * (v < 0)
+                + c_dir[3] * (v > 0)
+                + c_dir[4] * (v < 0)
+                + c_dir[5]
+            ),
         ),
     }
     coef = cal.model_.coef
     base = cal.base_
 
     def loop_friction(v):  # type: ignore[no-untyped-def]
-        s = {"t": np.zeros_like(v), "angle": np.zeros_like(v), "speed": v, "accel": 0 * v,
-             "direction": v, "direction_sign": np.sign(v)}
+        s = {
+            "t": np.zeros_like(v),
+            "angle": np.zeros_like(v),
+            "speed": v,
+            "accel": 0 * v,
+            "direction": v,
+            "direction_sign": np.sign(v),
+        }
         X, _ = design(base, s, cal.chain_)
         return X @ coef
 
@@ -146,8 +162,10 @@ def main() -> None:
         friction, breakaway = friction_table(f)
         qs = free_run(t, u, q[0], float(mass), friction, breakaway)
         err = (qs[last] - q[last]) * 1e3
-        sims[name] = {"rmse_mm_last_25_percent": float(np.sqrt(np.mean(err * err))),
-                      "rmse_mm_all": float(np.sqrt(np.mean(((qs - q) * 1e3) ** 2)))}
+        sims[name] = {
+            "rmse_mm_last_25_percent": float(np.sqrt(np.mean(err * err))),
+            "rmse_mm_all": float(np.sqrt(np.mean(((qs - q) * 1e3) ** 2))),
+        }
     out["simulation_free_run"] = sims
     text = json.dumps(out, indent=2)
     print(text)
