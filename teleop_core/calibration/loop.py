@@ -160,10 +160,10 @@ class Calibrator:
         significantly smaller than theirs (one-sided Diebold-Mariano at `alpha`), and
         on the training block their BIC is within `BIC_DECISIVE` of the winner's.
         An open term that is no look-alike (`OpenTerm.look_alike`: the gain step) is
-        no alternative. Empty when the winner is identified. Look-alikes this catches: a direction asymmetry and a velocity
-        nonlinearity on a recording with few speeds in one direction, pre-sliding
-        memory and a direction asymmetry or a Stribeck dip on one with few reversals,
-        a drift and a gain step."""
+        no alternative. Empty when the winner is identified. Look-alikes this
+        catches: a direction asymmetry and a velocity nonlinearity on a recording
+        with few speeds in one direction, pre-sliding memory and a direction
+        asymmetry or a Stribeck dip on one with few reversals."""
         out = []
         e_best = y_test - best[3][self.test_]
         for cand, effect, _, c_pred, _ in passing:
