@@ -196,14 +196,43 @@ def bench_lcca(
     is_flag=True,
     help="Only measured data (EMPS), effects outside the families, clean seeds.",
 )
+@click.option(
+    "--generalise",
+    is_flag=True,
+    help="The generalisation bench instead: every family and mixtures of two and three, "
+    "random parameters and strengths (0.5-3 JND), clean recordings; shares per family.",
+)
+@click.option(
+    "--count",
+    type=click.IntRange(min=1),
+    default=None,
+    help="With --generalise: recordings per family, per mixture size and clean "
+    "[20 per family and mixture size, 50 clean; 1 each with --quick].",
+)
 def bench_calibrate(
     json_path: Path, out_dir: Path | None, seed: int, epochs: int | None, quick: bool,
-    only_open: bool,
+    only_open: bool, generalise: bool, count: int | None,
 ) -> None:  # fmt: skip
     """Calibration loop: every family, the clean recording, speed, estimator."""
     from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
 
     check_parent_folder(json_path)
+    if count is not None and not generalise:
+        raise StudyInputError(f"--count {count}; expected it only with --generalise")
+    if generalise:
+        from study.bench.calibrate_general import GeneraliseConfig, run_generalise_bench
+
+        general = GeneraliseConfig.quick(count or 1) if quick else GeneraliseConfig()
+        if count is not None and not quick:
+            general = replace(general, per_family=count, mixtures_of_two=count,
+                              mixtures_of_three=count, clean=count)  # fmt: skip
+        general = replace(general, seed=seed)
+        folder = out_dir or json_path.parent
+        _run_report(
+            json_path, folder / "calibrate_general.md", "calibration generalisation bench",
+            lambda say: run_generalise_bench(general, folder, say),
+        )  # fmt: skip
+        return
     config = CalibrateBenchConfig.quick() if quick else CalibrateBenchConfig()
     config = replace(config, seed=seed, **({"epochs": epochs} if epochs else {}))
     folder = out_dir or json_path.parent

@@ -205,6 +205,12 @@ def calibrate(
             )
         )
         click.echo(f"  {effect['family']}: {params} -> {effect['rmse_after_step']:.4f} {unit}")
+    for effect in report["ambiguous_effects"]:
+        first, *others = effect["families"]
+        click.echo(
+            f"  ambiguous: {first} or {' or '.join(others)} (the held-out block does not tell "
+            f"them apart; modelled as {first}) -> {effect['rmse_after_step']:.4f} {unit}"
+        )
     for warning in report["warnings"]:
         click.echo(f"note: {warning}")
 

@@ -45,6 +45,8 @@ class OpenTerm(Effect):
 
     formula: ClassVar[str] = ""
     maps_to: ClassVar[str] = "no named family"
+    look_alike: ClassVar[bool] = True
+    """Whether a tie with a named winner makes the winner ambiguous (`loop.py`)."""
 
 
 class LoadFriction(OpenTerm):
@@ -65,6 +67,9 @@ class GainChange(OpenTerm):
     searched = "change_time_s"
     log_search = False
     formula = "drive [t >= change_time_s]"
+    # a step placed at the held-out block's one reversal or load change ties with any
+    # effect that acts there: such a tie says nothing about the winner
+    look_alike = False
 
     def grid(self, s: Signals) -> Float1D:
         t = s["t"]

@@ -16,6 +16,11 @@
        must pass all three, and on clean recordings the minimum gain is what rejects;
     5. repeat until no candidate passes or `max_effects` are in.
 
+A winner that another passing family explains as well on the held-out block (the
+winner's errors not significantly smaller, `_look_alikes`) is kept in the model, since
+it predicts as well either way, but the report lists it under `ambiguous_effects` with
+its alternatives instead of naming it.
+
 The residual tests (`residual.py`) are reported before and after; they describe the
 residual, while the decision rests on held-out prediction, which they cannot game.
 """
@@ -56,6 +61,11 @@ from teleop_core.calibration.plausibility import effect_coefficients, implausibl
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
 from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
+
+BIC_DECISIVE = 10.0
+"""Training-BIC difference that decides between two candidates (Kass and Raftery
+1995: above 10 is "very strong" evidence): a look-alike further behind is no
+alternative, whatever the held-out block says."""
 
 Progress = Callable[[int, int, str], None]
 """progress(done, total, what): called before each candidate of each round."""
@@ -144,6 +154,27 @@ class Calibrator:
             reason = f"not located: {edge[1]}"
         return reason
 
+    def _look_alikes(self, best, passing, y_test: Float1D) -> list[str]:  # type: ignore[no-untyped-def]
+        """The other passing candidates of the round that neither block tells apart
+        from its winner: on the held-out block the winner's errors are not
+        significantly smaller than theirs (one-sided Diebold-Mariano at `alpha`), and
+        on the training block their BIC is within `BIC_DECISIVE` of the winner's.
+        An open term that is no look-alike (`OpenTerm.look_alike`: the gain step) is
+        no alternative. Empty when the winner is identified. Look-alikes this
+        catches: a direction asymmetry and a velocity nonlinearity on a recording
+        with few speeds in one direction, pre-sliding memory and a direction
+        asymmetry or a Stribeck dip on one with few reversals."""
+        out = []
+        e_best = y_test - best[3][self.test_]
+        for cand, effect, _, c_pred, _ in passing:
+            if cand is best[0] or cand.bic_change - best[0].bic_change > BIC_DECISIVE:
+                continue
+            if not getattr(effect, "look_alike", True):
+                continue
+            if diebold_mariano(y_test - c_pred[self.test_], e_best) >= self.alpha:
+                out.append(cand.family)
+        return out
+
     def fit(self, data: CalibrationData, progress: Progress | None = None) -> Calibrator:
         """Run the loop on `data`; fitted attributes end in `_`."""
         if len(data) < 200:
@@ -167,6 +198,7 @@ class Calibrator:
         self.rmse_before_ = rmse
         self.step_rmse_: list[float] = []
         self.candidates_ = []
+        self.ambiguous_: list[list[str]] = []
         round_ = 0
         while len(chain) < self.max_effects:
             remaining = _remaining(families, chain, marker=bool(open_terms))
@@ -204,6 +236,7 @@ class Calibrator:
                 break
             best = _best(passing, self.min_gain)
             best[0].accepted = True
+            self.ambiguous_.append(self._look_alikes(best, passing, y_test))
             for other in passing:
                 if other is not best:
                     other[0].reason = f"passed, but {best[0].family} cut the error more"
@@ -237,14 +270,18 @@ class Calibrator:
 
     def report(self) -> dict[str, Any]:
         """The JSON report of issue 10: the contract keys first, then context."""
-        added, discovered = [], []
+        added, discovered, ambiguous = [], [], []
         mse = [self.rmse_before_**2] + [r**2 for r in self.step_rmse_]
         explained = mse[0] - mse[-1]
-        for i, ((e, _), p, r) in enumerate(
-            zip(self.chain_, self.effect_params_, self.step_rmse_, strict=True)
+        for i, ((e, _), p, r, alike) in enumerate(
+            zip(self.chain_, self.effect_params_, self.step_rmse_, self.ambiguous_, strict=True)
         ):
             share = (mse[i] - mse[i + 1]) / explained if explained > 0 else 0.0
-            if isinstance(e, OpenTerm):
+            if alike:
+                ambiguous.append({"families": [e.family, *alike], "params": p["params"],
+                                  "ci": p["ci"], "rmse_after_step": r,
+                                  "share_of_explained_variance": share})  # fmt: skip
+            elif isinstance(e, OpenTerm):
                 discovered.append({**term_report(e, p["params"], p["ci"], share),
                                    "rmse_after_step": r})  # fmt: skip
             else:
@@ -263,6 +300,7 @@ class Calibrator:
             "rmse_after": self.rmse_after_,
             "effects_added": added,
             "discovered_terms": discovered,
+            "ambiguous_effects": ambiguous,
             "candidates_rejected": rejected,
             "residual_tests_before": self.tests_before_,
             "residual_tests_after": self.tests_after_,

@@ -55,13 +55,39 @@ CUTOFF_FRACTION = 1.0 / 40.0
 """Low-pass cutoff as a fraction of the sampling rate where none is given or fitted."""
 
 
+EDGE_FIT = 20
+"""Samples at each end of the position to which `_extend` fits its quadratic."""
+EDGE_PERIODS = 4.0
+"""Length of the extension at each end, in periods of the cutoff (the filter's transient
+dies out well within it)."""
+
+
+def _extend(q: Float1D, pad: int) -> Float1D:
+    """`q` with `pad` samples added at each end: the quadratic fitted to its `EDGE_FIT`
+    end samples, carried on.
+
+    `filtfilt`'s own padding (an odd reflection) keeps the slope at an end but forces
+    the curvature to zero there, so a recording that ends mid-motion gets a false
+    acceleration in its last samples (on EMPS, tens of N of inertial force in the last
+    10 ms). scipy offers odd, even, constant and Gustafsson's start values, none of
+    which carries the acceleration on; a quadratic's extrapolation does, in three lines.
+    """
+    fit = min(EDGE_FIT, len(q))
+    k = np.arange(fit, dtype=float)
+    left = np.polyval(np.polyfit(k, q[:fit], 2), np.arange(-pad, 0, dtype=float))
+    right = np.polyval(np.polyfit(k, q[-fit:], 2), fit + np.arange(pad, dtype=float))
+    return np.concatenate([left, q, right])
+
+
 def derivatives(
     t: Float1D, q: Float1D, cutoff_hz: float | None = None
 ) -> tuple[Float1D, Float1D, Float1D, float]:
     """Zero-phase filtered position, velocity and acceleration, and the cutoff used.
 
     A 4th-order Butterworth low-pass run forwards and backwards (`filtfilt`, so the
-    filtered signal has no phase lag), then central differences over `t`.
+    filtered signal has no phase lag) over the position extended at both ends by its
+    local quadratic (`_extend`: no false acceleration at the ends), then central
+    differences over `t` (second-order one-sided ones at the two ends).
     """
     fs = 1.0 / float(np.median(np.diff(t)))
     cutoff = fs * CUTOFF_FRACTION if cutoff_hz is None else float(cutoff_hz)
@@ -70,9 +96,10 @@ def derivatives(
             f"cutoff {cutoff!r} Hz; expected between 0 and half the sampling rate {fs / 2:.4g} Hz"
         )
     b, a = signal.butter(4, cutoff / (fs / 2))
-    qf = signal.filtfilt(b, a, q)
-    qd = np.gradient(qf, t)
-    qdd = np.gradient(qd, t)
+    pad = int(np.ceil(EDGE_PERIODS * fs / cutoff))
+    qf = signal.filtfilt(b, a, _extend(q, pad), padtype=None)[pad:-pad]
+    qd = np.gradient(qf, t, edge_order=2)
+    qdd = np.gradient(qd, t, edge_order=2)
     return qf, qd, qdd, cutoff
 
 

@@ -92,6 +92,7 @@ def follower_recording(
     seed: int = 0,
     physics: PhysicsParams | None = None,
     sign_speed_rad_s: float = SIGN_SPEED_RAD_S,
+    noise_free: dict[str, Float1D] | None = None,
 ) -> tuple[FollowerRecording, dict[str, dict[str, Any]]]:
     """A follower recording whose true model is eq. 1 plus `effects`.
 
@@ -110,6 +111,9 @@ def follower_recording(
     sign_speed_rad_s
         Width w_s of the drive's Coulomb step tanh(w / w_s), rad/s: by default eq. 1's
         0.3; a real drive's is sharper.
+    noise_free
+        A dict that receives the signals before the sensor noise (`t`, `drive`,
+        `speed`, `angle`, `force`), for effects injected afterwards on the true motion.
 
     Returns
     -------
@@ -152,7 +156,10 @@ def follower_recording(
     omega_meas = omega + rng.normal(0.0, 0.01, n)
     f_ref = f_true + rng.normal(0.0, 0.008, n)
     name = "+".join(effects) or "clean"
-    return FollowerRecording.from_arrays(t, iq_meas, theta, omega_meas, f_ref, name=name), truth
+    rec = FollowerRecording.from_arrays(t, iq_meas, theta, omega_meas, f_ref, name=name)
+    if noise_free is not None:
+        noise_free.update(t=t, drive=iq, speed=omega, angle=theta, force=f_true)
+    return rec, truth
 
 
 def master_recording(

@@ -24,6 +24,7 @@ from teleop_core.calibration import (
     NotesBase,
 )
 from teleop_core.calibration.effects import play_operator
+from teleop_core.calibration.models import CalibrationData
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
 from teleop_core.calibration.synthetic import JND_N, follower_recording, master_recording
 from teleop_core.errors import TeleopInputError
@@ -239,3 +240,36 @@ def test_notes_rotation_chirp_names_the_papers_effects_on_blocked_hold_out() -> 
     cal = run(nonlinear=True)
     assert {e.family for e, _ in cal.chain_} == {"hysteresis", "direction_asymmetry"}
     assert cal.rmse_after_ < 0.85 * cal.rmse_before_
+
+
+def test_look_alike_families_are_reported_as_ambiguous_not_named() -> None:
+    # four speeds only (three forwards, one in reverse): eq. 1's w, sgn(w) and offset
+    # span three of the four dimensions of any function of speed, so every speed-only
+    # family (Stribeck, a velocity nonlinearity, a direction asymmetry) fills the fourth
+    # exactly and predicts the same: the recording cannot tell which one it is
+    rng = np.random.default_rng(0)
+    n, dt = 12000, 0.01
+    t = np.arange(n) * dt
+    w = np.array([0.5, 1.2, 2.0, -1.0])[rng.integers(0, 4, n // 200).repeat(200)]
+    i = 0.3 * np.sin(2 * np.pi * 0.05 * t) + rng.normal(size=n).cumsum() / 300
+    s = {"t": t, "drive": i, "speed": w, "accel": np.zeros(n), "angle": np.cumsum(w) * dt,
+         "direction": w}  # fmt: skip
+    model = FollowerBase()
+    X = model.columns(s)
+    base = X @ np.linalg.lstsq(X, 5 * i - 0.2 * w - 0.1 * np.sign(w), rcond=None)[0]
+    extra = w**2  # even in w: outside eq. 1's span
+    y = base + 0.3 * extra / np.sqrt(np.mean(extra**2)) + rng.normal(0, 0.01, n)
+    report = Calibrator(model).fit(CalibrationData(s, y, "four speeds")).report()
+    assert report["effects_added"] == []
+    (ambiguous,) = report["ambiguous_effects"]
+    assert {"stribeck", "viscous_nonlinear", "direction_asymmetry"} <= set(ambiguous["families"])
+    # the model keeps the effect: the held-out error falls to the noise (0.01 N)
+    assert report["rmse_after"] < 1.2 * 0.01 < report["rmse_before"]
+
+
+def test_an_identified_effect_is_named_not_ambiguous() -> None:
+    rec, _ = follower_recording(60.0, ["direction_asymmetry"], seed=3, size_n=2 * JND_N)
+    model = FollowerBase()
+    report = Calibrator(model).fit(model.data(rec)).report()
+    assert [e["family"] for e in report["effects_added"]][:1] == ["direction_asymmetry"]
+    assert report["ambiguous_effects"] == []
