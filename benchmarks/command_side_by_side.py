@@ -43,8 +43,8 @@ def _run(command: str, checkout: str, json_key: str | None) -> dict[str, float]:
         }
         if json_key:
             value: object = json.loads((Path(tmp) / "out.json").read_text())
-            for part in json_key.split("."):
-                value = value[part]  # type: ignore[index]
+            for part in json_key.split("."):  # a number indexes a list
+                value = value[int(part) if isinstance(value, list) else part]  # type: ignore[index]
             row[json_key] = float(value)  # type: ignore[arg-type]
         return row
 
