@@ -20,6 +20,6 @@ nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 2 \
   'study bench campaign --replicates 4 --group-size 3 --workers 2 --json {tmp}/out.json'
 nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 2 \
   --out $R/participant_fit_side_by_side.json -- \
-  "study participants fit --db $DB --out {tmp}/model.json --design 64 --repeats 1 --check 4 --bootstrap 20"
+  "study participants fit --db $DB --out {tmp}/model.json --design 32 --repeats 2 --check 4 --bootstrap 20"
 PYTHONPATH="$N" nice -n 10 python benchmarks/analyze_vs_r.py --db "$DB" --rounds 5 \
   --out $R/analyze_vs_r.json
