@@ -32,10 +32,24 @@ import time
 import numpy as np
 
 
+def _lcca_parts():  # type: ignore[no-untyped-def]
+    """lcca_loop, simulated_participant and SimulatedParticipant, from wherever this
+    checkout keeps them (the task package, or study.protocol before it): the bench
+    compares versions from both sides of that move."""
+    try:
+        from study.protocol.traits import simulated_participant
+        from study.tasks.lcca.simulated_participant import SimulatedParticipant
+        from study.tasks.lcca.trial import lcca_loop
+    except ModuleNotFoundError:  # a checkout from before the task package
+        from study.protocol.lcca_trial import lcca_loop, simulated_participant
+        from study.protocol.participants import SimulatedParticipant
+    return lcca_loop, simulated_participant, SimulatedParticipant
+
+
 def _trial_split(trials: int, max_s: float) -> dict[str, float]:
     from study.protocol.default_estimator import load_estimator
-    from study.protocol.lcca_trial import lcca_loop, simulated_participant
-    from study.protocol.participants import SimulatedParticipant
+
+    lcca_loop, simulated_participant, SimulatedParticipant = _lcca_parts()
     from teleop_core.phantom.lcca import LccaPhantom
 
     estimator = load_estimator(None)
@@ -79,8 +93,8 @@ def _trial_split(trials: int, max_s: float) -> dict[str, float]:
 
 def _stage_times(calls: int) -> dict[str, float]:
     from study.protocol.default_estimator import load_estimator
-    from study.protocol.lcca_trial import lcca_loop, simulated_participant
-    from study.protocol.participants import SimulatedParticipant
+
+    lcca_loop, simulated_participant, SimulatedParticipant = _lcca_parts()
     from teleop_core._jit import numba_module
     from teleop_core.estimation.ekf import ekf_update
     from teleop_core.estimation.stream import ESTIMATE_OUT, stream_estimate, stream_push

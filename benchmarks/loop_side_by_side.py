@@ -62,6 +62,19 @@ def main() -> None:
         for k in medians["new"]
         if k in medians["baseline"] and medians["new"][k] != 0
     }
+
+    def nest(flat: dict[str, float]) -> dict:  # "trials.cpu_s" -> {"trials": {"cpu_s"}}
+        out: dict = {}
+        for key, value in flat.items():
+            *parents, leaf = key.split(".")
+            node = out
+            for part in parents:
+                node = node.setdefault(part, {})
+            node[leaf] = value
+        return out
+
+    medians = {label: nest(m) for label, m in medians.items()}
+    ratios = nest(ratios)
     report = {
         "data": "simulated",
         "command": " ".join(["python", "benchmarks/loop_side_by_side.py", *sys.argv[1:]]),

@@ -21,6 +21,20 @@ import time
 import numpy as np
 
 
+def _lcca_parts():  # type: ignore[no-untyped-def]
+    """lcca_loop, simulated_participant and SimulatedParticipant, from wherever this
+    checkout keeps them (the task package, or study.protocol before it): the bench
+    compares versions from both sides of that move."""
+    try:
+        from study.protocol.traits import simulated_participant
+        from study.tasks.lcca.simulated_participant import SimulatedParticipant
+        from study.tasks.lcca.trial import lcca_loop
+    except ModuleNotFoundError:  # a checkout from before the task package
+        from study.protocol.lcca_trial import lcca_loop, simulated_participant
+        from study.protocol.participants import SimulatedParticipant
+    return lcca_loop, simulated_participant, SimulatedParticipant
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--trials", type=int, default=8)
@@ -28,8 +42,8 @@ def main() -> None:
     parser.add_argument("--samples", default=None)
     args = parser.parse_args()
     from study.protocol.default_estimator import load_estimator
-    from study.protocol.lcca_trial import lcca_loop, simulated_participant
-    from study.protocol.participants import SimulatedParticipant
+
+    lcca_loop, simulated_participant, SimulatedParticipant = _lcca_parts()
     from teleop_core.phantom.lcca import LccaPhantom
 
     estimator = load_estimator(None)

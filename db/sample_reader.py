@@ -33,7 +33,7 @@ import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TypeVar
 
 import numpy as np
@@ -42,18 +42,24 @@ from sqlalchemy import ColumnElement, Connection, Engine, func, select
 from sqlalchemy.orm import Session
 
 from db.errors import DbInputError
-from db.models.trial import SAMPLE_COLUMNS, SampleChunk, Trial
-from db.sample_codec import decode
+from db.models.trial import SampleChunk, SampleSchema, Trial
+from db.sample_codec import CHUNK_SCHEMA, decode, read_schema
 
-SAMPLE_SCHEMA = pa.schema(
-    [
-        ("seq", pa.int64()),
-        *((name, pa.string() if name == "branch" else pa.float64()) for name in SAMPLE_COLUMNS),
-    ]
-)
-"""Arrow schema of the batches `SampleReader.trial` yields: `seq`, then `SAMPLE_COLUMNS`."""
-SPAN_SCHEMA = pa.schema([("trial_id", pa.int64()), *SAMPLE_SCHEMA])
-"""Arrow schema of a span's table: `trial_id`, then `SAMPLE_SCHEMA`."""
+
+def sample_schema(chunk_schema: pa.Schema) -> pa.Schema:
+    """Arrow schema of the batches `SampleReader.trial` yields of chunks of
+    `chunk_schema` (the trial's task's columns): `seq`, then the chunk's columns."""
+    return pa.schema([pa.field("seq", pa.int64(), False), *chunk_schema])
+
+
+def span_schema(chunk_schema: pa.Schema) -> pa.Schema:
+    """Arrow schema of a span's table: `trial_id`, `seq`, then the chunk's columns."""
+    return pa.schema([pa.field("trial_id", pa.int64(), False), *sample_schema(chunk_schema)])
+
+
+SAMPLE_SCHEMA = sample_schema(CHUNK_SCHEMA)
+"""`sample_schema` of the legacy chunks (`db.sample_codec.CHUNK_SCHEMA`)."""
+SPAN_SCHEMA = span_schema(CHUNK_SCHEMA)
 
 _BATCH_ROWS = 65_536
 SPAN_ROWS = 65_536
@@ -67,13 +73,16 @@ class SampleSpan:
     """Samples read by one query: whole trials, or a window of `seq` of one trial."""
 
     trial_ids: tuple[int, ...]
-    """Trials in ascending id order (one when the span is a window)."""
+    """Trials in ascending id order (one when the span is a window), all of one schema."""
     seq_from: int | None = None
     """First `seq` of the window (inclusive); None for whole trials."""
     seq_to: int | None = None
     """End of the window (exclusive); None for whole trials."""
     rows: int = 0
     """Most samples the span can hold (from the trials' first and last `seq`)."""
+    schema_id: int | None = field(default=None, compare=False)
+    """The stored schema of the span's chunks (`sample_schemas.id`); not part of what
+    the span reads (trials and window), so not compared."""
 
 
 class SampleReader:
@@ -96,32 +105,58 @@ class SampleReader:
             raise DbInputError(f"batch_rows {batch_rows!r} is not a positive number of rows")
         self.batch_rows = batch_rows
         self._conn: Connection = engine.connect()
+        self._schemas: dict[int, pa.Schema] = {}
+
+    def schema(self, schema_id: int) -> pa.Schema:
+        """The chunk schema stored as `schema_id` (read once per reader)."""
+        if schema_id not in self._schemas:
+            data = self._conn.execute(
+                select(SampleSchema.data).where(SampleSchema.id == schema_id)
+            ).scalar_one()
+            self._conn.rollback()
+            self._schemas[schema_id] = read_schema(data)
+        return self._schemas[schema_id]
+
+    def trial_schema(self, trial_id: int) -> pa.Schema | None:
+        """The chunk schema of `trial_id`'s samples (its task's columns); None without any."""
+        schema_id = self._conn.execute(
+            select(SampleChunk.schema_id).where(SampleChunk.trial_id == int(trial_id)).limit(1)
+        ).scalar()
+        self._conn.rollback()
+        return None if schema_id is None else self.schema(int(schema_id))
 
     def trial(
         self, trial_id: int, *, from_s: float | None = None, to_s: float | None = None
     ) -> Iterator[pa.RecordBatch]:
-        """The samples of one trial in `seq` order, with `from_s <= t_s < to_s` when given."""
+        """The samples of one trial in `seq` order, with `from_s <= t_s < to_s` when given;
+        batches of `sample_schema` of the trial's chunk schema (`trial_schema`)."""
         pending: list[pa.RecordBatch] = []
         held = 0
+        schema = None
         for group in _batched(self._chunks([int(trial_id)], None, None, from_s, to_s), 64):
             table = _joined(group, None, None, from_s, to_s).drop_columns(["trial_id"])
+            schema = table.schema
             pending += table.to_batches()
             held += table.num_rows
             if held >= self.batch_rows:
-                table = pa.Table.from_batches(pending, schema=SAMPLE_SCHEMA).combine_chunks()
+                table = pa.Table.from_batches(pending, schema=schema).combine_chunks()
                 full = held - held % self.batch_rows
                 yield from table.slice(0, full).to_batches(max_chunksize=self.batch_rows)
                 pending = table.slice(full).to_batches()
                 held -= full
         if held:
-            table = pa.Table.from_batches(pending, schema=SAMPLE_SCHEMA)
+            table = pa.Table.from_batches(pending, schema=schema)
             yield from table.combine_chunks().to_batches(max_chunksize=self.batch_rows)
 
     def span(
         self, span: SampleSpan, *, from_s: float | None = None, to_s: float | None = None
     ) -> pa.Table:
-        """A span's samples (`SPAN_SCHEMA`) in trial and `seq` order, `from_s <= t_s < to_s`."""
+        """A span's samples (`span_schema` of its chunks' schema) in trial and `seq` order,
+        `from_s <= t_s < to_s`."""
         chunks = list(self._chunks(list(span.trial_ids), span.seq_from, span.seq_to, from_s, to_s))
+        if not chunks:
+            schema = CHUNK_SCHEMA if span.schema_id is None else self.schema(span.schema_id)
+            return span_schema(schema).empty_table()
         return _joined(chunks, span.seq_from, span.seq_to, from_s, to_s)
 
     def _chunks(
@@ -139,7 +174,7 @@ class SampleReader:
         Python step per chunk costs as much as decoding a 100-sample chunk.
         """
         c = SampleChunk
-        query = select(c.trial_id, c.first_seq, c.raw_bytes, c.data).where(
+        query = select(c.trial_id, c.first_seq, c.raw_bytes, c.schema_id, c.data).where(
             c.trial_id.in_(trial_ids)
         )
         if seq_from is not None:
@@ -148,13 +183,22 @@ class SampleReader:
             query = query.where(c.first_seq < seq_to)
         query = query.where(*_time_range(from_s, to_s)).order_by(c.trial_id, c.first_seq)
         # a few chunks at a time from the driver: memory stays a few chunks
+        schemas = self._stored_schemas(trial_ids)
         rows = self._conn.execution_options(yield_per=16).execute(query)
         try:
-            for trial_id, first_seq, raw_bytes, data in rows:
-                yield trial_id, first_seq, decode(data, raw_bytes)
+            for trial_id, first_seq, raw_bytes, schema_id, data in rows:
+                yield trial_id, first_seq, decode(data, raw_bytes, schemas[schema_id])
         finally:
             rows.close()
             self._conn.rollback()
+
+    def _stored_schemas(self, trial_ids: list[int]) -> dict[int, pa.Schema]:
+        """The schemas of the trials' chunks, by id (read before the chunks' cursor opens)."""
+        ids = self._conn.execute(
+            select(SampleChunk.schema_id).where(SampleChunk.trial_id.in_(trial_ids)).distinct()
+        ).scalars().all()
+        self._conn.rollback()
+        return {int(i): self.schema(int(i)) for i in ids}
 
     def close(self) -> None:
         self._conn.close()
@@ -182,7 +226,7 @@ def _time_range(from_s: float | None, to_s: float | None) -> list[ColumnElement[
 
 
 _Chunk = tuple[int, int, pa.RecordBatch]
-"""A decoded stored chunk: (trial id, first `seq`, `CHUNK_SCHEMA` batch)."""
+"""A decoded stored chunk: (trial id, first `seq`, batch of its stored schema)."""
 
 
 def _joined(
@@ -192,10 +236,14 @@ def _joined(
     from_s: float | None,
     to_s: float | None,
 ) -> pa.Table:
-    """Chunks as one `SPAN_SCHEMA` table, cut to `seq_from <= seq < seq_to` and
-    `from_s <= t_s < to_s` (each bound applied when given)."""
+    """Chunks (of one schema) as one `span_schema` table, cut to `seq_from <= seq < seq_to`
+    and `from_s <= t_s < to_s` (each bound applied when given)."""
     if not chunks:
         return SPAN_SCHEMA.empty_table()
+    first = chunks[0][2].schema
+    if any(batch.schema is not first and not batch.schema.equals(first) for *_, batch in chunks):
+        raise DbInputError("samples of trials stored under different schemas in one span")
+    schema = span_schema(first)
     counts = np.array([batch.num_rows for _, _, batch in chunks], dtype=np.int64)
     firsts = np.array([first for _, first, _ in chunks], dtype=np.int64)
     starts = np.cumsum(counts) - counts
@@ -203,7 +251,7 @@ def _joined(
     trial_id = np.repeat(np.array([t for t, _, _ in chunks], dtype=np.int64), counts)
     stored = pa.Table.from_batches([batch for _, _, batch in chunks])
     table = pa.Table.from_arrays(
-        [pa.array(trial_id), pa.array(seq), *stored.columns], schema=SPAN_SCHEMA
+        [pa.array(trial_id), pa.array(seq), *stored.columns], schema=schema
     )
     keep = np.ones(len(seq), dtype=bool)
     if seq_from is not None:
@@ -256,6 +304,23 @@ def seq_ranges(engine: Engine, trial_ids: Iterable[int]) -> dict[int, tuple[int,
     return out
 
 
+def schema_ids(engine: Engine, trial_ids: Iterable[int]) -> dict[int, int]:
+    """`{trial_id: sample_schemas.id}` of the trials that have samples (a trial's chunks
+    share the schema their writer was given)."""
+    ids = list(dict.fromkeys(int(i) for i in trial_ids))
+    c = SampleChunk
+    out: dict[int, int] = {}
+    with Session(engine) as session:
+        for lo in range(0, len(ids), 500):
+            rows = session.execute(
+                select(c.trial_id, func.min(c.schema_id))
+                .where(c.trial_id.in_(ids[lo : lo + 500]))
+                .group_by(c.trial_id)
+            )
+            out.update({int(t): int(s) for t, s in rows})
+    return out
+
+
 def plan_spans(
     engine: Engine,
     trial_ids: Sequence[int],
@@ -266,36 +331,44 @@ def plan_spans(
     """The spans that read `trial_ids`' samples, one list per trial in the given order.
 
     A span holds at most `max_rows` samples. With `join_trials`, consecutive trials
-    (ascending ids) whose samples fit share a span, listed under the first of them;
-    the others get []. A trial without samples gets [].
+    (ascending ids) of one stored schema whose samples fit share a span, listed under
+    the first of them; the others get []. A trial without samples gets [].
     """
     if max_rows < 1:
         raise DbInputError(f"max_rows {max_rows!r} is not a positive number of rows")
     ranges = seq_ranges(engine, trial_ids)
+    schemas = schema_ids(engine, trial_ids)
     plan: list[list[SampleSpan]] = [[] for _ in trial_ids]
     group: list[int] = []
-    group_rows, group_at = 0, 0
+    group_rows, group_at, group_schema = 0, 0, None
     for k, trial_id in enumerate(trial_ids):
         if trial_id not in ranges:
             continue
         first, last = ranges[trial_id]
         n = last - first + 1
-        fits = join_trials and group and trial_id > group[-1] and group_rows + n <= max_rows
+        schema = schemas.get(trial_id)
+        fits = (
+            join_trials
+            and group
+            and trial_id > group[-1]
+            and group_rows + n <= max_rows
+            and schema == group_schema
+        )
         if group and not fits:
-            plan[group_at].append(SampleSpan(tuple(group), rows=group_rows))
+            plan[group_at].append(SampleSpan(tuple(group), rows=group_rows, schema_id=group_schema))
             group = []
         if n > max_rows:
             plan[k] += [
-                SampleSpan((trial_id,), lo, lo + max_rows, max_rows)
+                SampleSpan((trial_id,), lo, lo + max_rows, max_rows, schema)
                 for lo in range(first, last + 1, max_rows)
             ]
             continue
         if not group:
-            group_rows, group_at = 0, k
+            group_rows, group_at, group_schema = 0, k, schema
         group.append(trial_id)
         group_rows += n
     if group:
-        plan[group_at].append(SampleSpan(tuple(group), rows=group_rows))
+        plan[group_at].append(SampleSpan(tuple(group), rows=group_rows, schema_id=group_schema))
     return plan
 
 

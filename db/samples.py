@@ -28,11 +28,19 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
-from sqlalchemy import Connection, Engine, insert
+from sqlalchemy import Connection, Engine, insert, select
+from sqlalchemy.exc import IntegrityError
 
 from db.errors import DbInputError
-from db.models.trial import SAMPLE_COLUMNS, SampleChunk
-from db.sample_codec import CHUNK_SCHEMA, column_array, encode
+from db.models.trial import SampleChunk, SampleSchema
+from db.sample_codec import (
+    CHUNK_SCHEMA,
+    check_schema,
+    column_array,
+    encode,
+    schema_bytes,
+    schema_fingerprint,
+)
 from db.sample_reader import SAMPLE_SCHEMA, SampleReader
 
 __all__ = ["SAMPLE_SCHEMA", "SampleReader", "SampleWriter"]
@@ -51,6 +59,9 @@ class SampleWriter:
         Longest span of trial time, in s, held in memory before a commit; > 0.
     start_seq
         Sequence number of the first sample (continue a stream after a restart).
+    schema
+        The chunks' Arrow schema: the trial's task's sample columns
+        (`db.sample_codec.sample_field`), `t_s` first; default `CHUNK_SCHEMA`.
 
     Sample times must not decrease. Columns not given are stored as NULL.
 
@@ -61,10 +72,18 @@ class SampleWriter:
     """
 
     def __init__(
-        self, engine: Engine, trial_id: int, *, chunk_s: float = 1.0, start_seq: int = 0
+        self,
+        engine: Engine,
+        trial_id: int,
+        *,
+        chunk_s: float = 1.0,
+        start_seq: int = 0,
+        schema: pa.Schema = CHUNK_SCHEMA,
     ) -> None:
         if not chunk_s > 0:
             raise DbInputError(f"chunk_s {chunk_s!r} is not a positive duration in s")
+        self.schema = check_schema(schema)
+        self._schema_id: int | None = None
         self.engine = engine
         self.trial_id = trial_id
         self.chunk_s = chunk_s
@@ -78,16 +97,17 @@ class SampleWriter:
         """Latest positive spacing of sample times: the span one held sample stands for."""
 
     def append(self, t_s: float, **values: Any) -> None:
-        """Add one sample; `values` are columns of `SAMPLE_COLUMNS` other than `t_s`."""
+        """Add one sample; `values` are columns of the schema other than `t_s`."""
         self.extend({"t_s": [t_s], **{k: [v] for k, v in values.items()}})
 
     def extend(self, columns: Mapping[str, Sequence[Any] | np.ndarray]) -> None:
-        """Add samples given as equal-length columns named as in `SAMPLE_COLUMNS`."""
-        unknown = set(columns) - set(SAMPLE_COLUMNS)
+        """Add samples given as equal-length columns named as in the schema."""
+        names = self.schema.names
+        unknown = set(columns) - set(names)
         if unknown or "t_s" not in columns:
             raise DbInputError(
                 f"sample columns {sorted(columns)} must include 't_s' and only names "
-                f"from {list(SAMPLE_COLUMNS)}"
+                f"from {names}"
             )
         t = np.asarray(columns["t_s"], dtype=float)
         n = len(t)
@@ -95,11 +115,11 @@ class SampleWriter:
             return
         self._check_times(t)
         given: list[pa.Array] = []
-        for name in SAMPLE_COLUMNS:
+        for name in names:
             col = t if name == "t_s" else columns.get(name)
             if col is not None and len(col) != n:
                 raise DbInputError(f"sample column {name!r} has {len(col)} values; expected {n}")
-            given.append(column_array(name, col, n))
+            given.append(column_array(name, col, n, self.schema))
         self._add_block(t, _Block(n, given))
 
     def _check_times(self, t: np.ndarray) -> None:
@@ -154,9 +174,9 @@ class SampleWriter:
         batch = pa.RecordBatch.from_arrays(
             [
                 pa.concat_arrays([b.columns[k] for b in self._buffer])
-                for k in range(len(SAMPLE_COLUMNS))
+                for k in range(len(self.schema))
             ],
-            schema=CHUNK_SCHEMA,
+            schema=self.schema,
         )
         data, raw_bytes = encode(batch)
         t_s = batch.column(0)
@@ -167,6 +187,7 @@ class SampleWriter:
             "t_first_s": t_s[0].as_py(),
             "t_last_s": t_s[n - 1].as_py(),
             "raw_bytes": raw_bytes,
+            "schema_id": self._stored_schema_id(),
             "data": data,
         }
         with self.engine.begin() as conn:
@@ -175,6 +196,12 @@ class SampleWriter:
         self.rows_committed += n
         self.chunks_committed += 1
         self._buffer.clear()
+
+    def _stored_schema_id(self) -> int:
+        """The id of the writer's schema in `sample_schemas`, stored on first use."""
+        if self._schema_id is None:
+            self._schema_id = stored_schema_id(self.engine, self.schema)
+        return self._schema_id
 
     def close(self) -> None:
         self.flush()
@@ -199,8 +226,26 @@ class SampleWriter:
             self._buffer.clear()
 
 
+def stored_schema_id(engine: Engine, schema: pa.Schema) -> int:
+    """The id of `schema` in `sample_schemas`, inserted if it is not there yet (another
+    writer inserting the same schema at once is found on the second look)."""
+    data = schema_bytes(schema)
+    key = schema_fingerprint(data)
+    query = select(SampleSchema.id).where(SampleSchema.fingerprint == key)
+    try:
+        with engine.begin() as conn:
+            found = conn.execute(query).scalar()
+            if found is not None:
+                return int(found)
+            conn.execute(insert(SampleSchema).values(fingerprint=key, data=data))
+            return int(conn.execute(query).scalar_one())
+    except IntegrityError:  # inserted by another writer since the look
+        with engine.connect() as conn:
+            return int(conn.execute(query).scalar_one())
+
+
 class _Block:
-    """Samples handed in one call, held as Arrow columns in `SAMPLE_COLUMNS` order (all
+    """Samples handed in one call, held as Arrow columns in the schema's order (all
     NULL for a column not given) so that no object is built per sample."""
 
     __slots__ = ("columns", "n")

@@ -11,8 +11,11 @@ from __future__ import annotations
 
 import os
 import sqlite3
+import sys
+import tempfile
 import uuid
 from collections.abc import Iterator
+from pathlib import Path
 
 import pyarrow as pa
 import pytest
@@ -22,6 +25,8 @@ from sqlalchemy.engine import make_url
 from db.engine import make_engine
 from db.migrate import open_database
 from db.models.trial import SAMPLE_COLUMNS
+from study.lsl.config import ENV as LSL_ENV
+from study.lsl.config import write_loopback_config
 
 PG_ENV = "STUDY_TEST_PG_URL"
 
@@ -32,33 +37,65 @@ PG_ENV = "STUDY_TEST_PG_URL"
 # runtimes when they start, so it is set before any test imports them.
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+# The Lab Streaming Layer only ever on loopback here: liblsl reads its configuration once,
+# when pylsl first loads, from the file LSLAPICFG names; it is set before any test can
+# import pylsl (and is inherited by the commands the tests start). Its own session id
+# keeps one test process's streams apart from another's. tests/study/lsl checks it.
+LSL_CONFIG = write_loopback_config(
+    Path(tempfile.mkdtemp(prefix="lsl-loopback-")) / "lsl_api.cfg", f"tests-{uuid.uuid4().hex}"
+)
+os.environ[LSL_ENV] = str(LSL_CONFIG)
+PYLSL_LOADED_BEFORE_CONFIG = "pylsl" in sys.modules
+"""Whether pylsl was already loaded when the config was set (it must not be)."""
+
 
 STORED_CHUNK_SCHEMA = pa.schema(
     [("t_s", pa.float64()), *((c, pa.float64()) for c in SAMPLE_COLUMNS[1:6]),
      ("branch", pa.string()), *((c, pa.float64()) for c in SAMPLE_COLUMNS[7:])]
 )  # fmt: skip
-"""A stored chunk's columns as the format's description (`db.sample_codec`) gives them."""
+"""The legacy chunk layout (the schema of a writer given none), as the format's
+description (`db.sample_codec`) gives it."""
 
 
-def decode_stored_chunk(data: bytes, raw_bytes: int) -> pa.RecordBatch:
+def decode_stored_chunk(
+    data: bytes, raw_bytes: int, schema_data: bytes | None = None
+) -> pa.RecordBatch:
     """A `sample_chunks.data` value decoded with plain pyarrow, as the format's
-    description says (independently of `db.sample_reader`)."""
+    description says (independently of `db.sample_reader`): in the schema stored as
+    `schema_data` (`sample_schemas.data`), else the legacy layout."""
     message = pa.decompress(bytes(data), decompressed_size=raw_bytes, codec="zstd")
-    return pa.ipc.read_record_batch(message, STORED_CHUNK_SCHEMA)
+    schema = (
+        STORED_CHUNK_SCHEMA
+        if schema_data is None
+        else pa.ipc.read_schema(pa.py_buffer(bytes(schema_data)))
+    )
+    return pa.ipc.read_record_batch(message, schema)
+
+
+CHUNKS_SQL = (
+    "SELECT c.trial_id, c.first_seq, c.raw_bytes, c.data, s.data FROM sample_chunks c "
+    "JOIN sample_schemas s ON s.id = c.schema_id"
+)
 
 
 def expose_samples(conn: sqlite3.Connection) -> None:
     """Every stored sample of the SQLite study database behind `conn`, decoded from its
-    chunks, as a temporary table `samples` (trial_id, seq, the sample columns), so that
-    a check can be written as one SQL query."""
-    names = ("trial_id", "seq", *STORED_CHUNK_SCHEMA.names)
-    conn.execute(f"CREATE TEMP TABLE samples ({', '.join(names)})")
-    chunks = conn.execute("SELECT trial_id, first_seq, raw_bytes, data FROM sample_chunks")
-    for trial_id, first_seq, raw_bytes, data in chunks.fetchall():
-        columns = decode_stored_chunk(data, raw_bytes).to_pydict()
-        n = len(columns["t_s"])
+    chunks (each in its stored schema), as a temporary table `samples` (trial_id, seq,
+    every column of every stored schema), so that a check can be written as one SQL
+    query."""
+    chunks = conn.execute(CHUNKS_SQL).fetchall()
+    decoded = [(t, first, decode_stored_chunk(d, raw, s)) for t, first, raw, d, s in chunks]
+    names = list(dict.fromkeys(n for *_, batch in decoded for n in batch.schema.names))
+    conn.execute(f"CREATE TEMP TABLE samples (trial_id, seq, {', '.join(names)})")
+    for trial_id, first_seq, batch in decoded:
+        columns = batch.to_pydict()
+        n = batch.num_rows
         rows = zip([trial_id] * n, range(first_seq, first_seq + n), *columns.values(), strict=True)
-        conn.executemany(f"INSERT INTO samples VALUES ({', '.join('?' * len(names))})", rows)
+        conn.executemany(
+            f"INSERT INTO samples (trial_id, seq, {', '.join(columns)}) "
+            f"VALUES ({', '.join('?' * (len(columns) + 2))})",
+            rows,
+        )
 
 
 def pg_schema_url(base: str, schema: str) -> str:
@@ -120,3 +157,82 @@ def pytest_terminal_summary(terminalreporter) -> None:  # type: ignore[no-untype
         parts = ", ".join(f"{n} {outcome}" for outcome, n in sorted(_pg_outcomes.items()))
         where = os.environ.get(PG_ENV) or f"{PG_ENV} unset"
         terminalreporter.write_line(f"PostgreSQL cases ({where}): {parts}")
+
+
+SLOW_MODULES = frozenset(
+    {
+        # train a GRU, calibrate, or compile the loop
+        "tests/teleop_core/test_gru.py",
+        "tests/teleop_core/test_estimator.py",
+        "tests/teleop_core/test_calibration.py",
+        "tests/teleop_core/test_generalisation.py",
+        "tests/teleop_core/test_cold_start.py",
+        "tests/teleop_core/test_memory.py",
+        "tests/teleop_core/test_regimes.py",
+        "tests/teleop_core/test_scenarios.py",
+        "tests/teleop_core/notes/test_identify.py",
+        "tests/teleop_core/test_rigid_axis.py",
+        "tests/teleop_core/test_extended_physics.py",
+        "tests/teleop_core/test_loop.py",
+        "tests/teleop_core/test_hardware.py",
+        "tests/study/test_estimator_cli.py",
+        "tests/study/test_estimator_effects_cli.py",
+        "tests/study/test_estimator_calibration_cli.py",
+        "tests/study/test_calibrate_cli.py",
+        "tests/study/test_calibration_figures.py",
+        # whole simulated studies, sessions, campaigns, benches and the participant fit
+        "tests/study/test_campaign.py",
+        "tests/study/test_kill_points.py",
+        "tests/study/test_participants.py",
+        "tests/study/test_participant_fit.py",
+        "tests/study/test_participant_fit_notes.py",
+        "tests/study/test_participant_fit_samples.py",
+        "tests/study/test_participant_fit_validate.py",
+        "tests/study/test_figures_demo.py",
+        "tests/study/test_figures.py",
+        "tests/study/test_notes_surgeons.py",
+        "tests/study/test_haptic_gain.py",
+        "tests/study/test_session.py",
+        "tests/study/test_multisite.py",
+        "tests/study/test_bench_export.py",
+        "tests/study/test_bench_master_cli.py",
+        "tests/study/test_bench_startup_cli.py",
+        "tests/study/test_sample_export_spans.py",
+        "tests/study/test_properties.py",
+        "tests/study/test_recording_properties.py",
+        # the terminal app driven by its pilot or in a real terminal, and import-linter
+        "tests/study/tui/test_lab_day.py",
+        "tests/study/tui/test_run_session.py",
+        "tests/study/tui/test_adding_a_task.py",
+        "tests/study/tui/test_snapshots.py",
+        "tests/study/tui/test_terminal.py",
+        "tests/study/tui/test_terminal_db_errors.py",
+        "tests/study/tui/test_db_errors.py",
+        "tests/study/tui/test_screens.py",
+        "tests/study/test_lease.py",
+        "tests/test_layering.py",
+        "tests/study/test_layers.py",
+    }
+)
+"""Test modules marked `slow`: the fast lane, `pytest -m "not slow"`, leaves them out
+(README). A module belongs here when its tests train, calibrate, compile, drive the
+terminal app or simulate whole studies; the full suite runs everything."""
+SLOW_TESTS = (
+    "tests/study/test_sample_export.py::test_export_memory_does_not_grow_with_the_samples",
+    "tests/study/test_analysis.py::test_study_analyze_",
+    "tests/study/test_notes_cli.py::test_characterize_",
+    "tests/db/test_migrations.py::test_two_processes_",
+    "tests/db/test_samples.py::test_kill_9_",
+)
+"""Single tests (node id prefixes) marked `slow` in modules that are otherwise fast:
+subprocesses, kill -9, memory measured over a large export."""
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    root = Path(__file__).resolve().parent.parent
+    for item in items:
+        if (
+            Path(item.path).resolve().relative_to(root).as_posix() in SLOW_MODULES
+            or item.nodeid.startswith(SLOW_TESTS)
+        ):
+            item.add_marker(pytest.mark.slow)

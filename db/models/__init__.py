@@ -7,9 +7,17 @@
 from db.models.audit import AuditEntry
 from db.models.calibration import Calibration
 from db.models.lease import SessionLease
+from db.models.lsl import LslChunk, LslStream
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from db.models.trial import SAMPLE_COLUMNS, TRIAL_STATUSES, SampleChunk, Trial, TrialMeasure
+from db.models.trial import (
+    SAMPLE_COLUMNS,
+    TRIAL_STATUSES,
+    SampleChunk,
+    SampleSchema,
+    Trial,
+    TrialMeasure,
+)
 
 __all__ = [
     "SAMPLE_COLUMNS",
@@ -17,8 +25,11 @@ __all__ = [
     "TRIAL_STATUSES",
     "AuditEntry",
     "Calibration",
+    "LslChunk",
+    "LslStream",
     "Participant",
     "SampleChunk",
+    "SampleSchema",
     "ScheduleBlock",
     "SessionLease",
     "Study",

@@ -12,9 +12,11 @@ task has, are columns of the trial. `Trial.measure_values` reads and writes them
 dict.
 
 Samples are stored per committed chunk (at most a second of trial time), one row of
-`sample_chunks` holding the chunk's columns compressed (`db.sample_codec`); each sample
-has a sequence number within its trial and SI columns (`SAMPLE_COLUMNS`). Written by
-`db.samples.SampleWriter`, read by `db.sample_reader`.
+`sample_chunks` holding the chunk's columns compressed (`db.sample_codec`) in the
+Arrow schema its writer was given (a row of `sample_schemas`: the trial's task's own
+columns, each with its unit and description); each sample has a sequence number within
+its trial. The database stores bytes and schemas: it knows no task and no loop. Written
+by `db.samples.SampleWriter`, read by `db.sample_reader`.
 """
 
 from __future__ import annotations
@@ -35,7 +37,6 @@ from sqlalchemy.ext.associationproxy import AssociationProxy, association_proxy
 from sqlalchemy.orm import Mapped, attribute_keyed_dict, mapped_column, relationship
 
 from db.base import Base, utcnow
-from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 
 if TYPE_CHECKING:
     from db.models.study import Participant, ScheduleBlock
@@ -106,16 +107,44 @@ class TrialMeasure(Base):
     value: Mapped[float]
 
 
-SAMPLE_COLUMNS = LOOP_SAMPLE_COLUMNS
-"""Value columns of a sample, in stored order (the key `trial_id, seq` comes first): one
-sample per acquisition of the loop, so the loop's layout is the one list of them."""
+SAMPLE_COLUMNS = (
+    "t_s",
+    "insertion_m",
+    "rotation_rad",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "branch",
+    "proximal_force_n",
+    "proximal_force_est_n",
+    "distal_force_n",
+    "dial_angle_rad",
+    "dial_torque_n_m",
+)
+"""The columns of the one layout every trial's samples had before each chunk carried its
+task's own schema (revisions 0001-0005; `branch` text, `t_s` not null, the rest float):
+the schema of the chunks revision 0006 could not name by a task it knew, and of a
+writer given no schema."""
+
+
+class SampleSchema(Base):
+    """The Arrow schema of stored chunks (each distinct schema once): its fields are a
+    task's sample columns, with their units and descriptions in the fields' metadata."""
+
+    __tablename__ = "sample_schemas"
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    fingerprint: Mapped[str] = mapped_column(String(64), unique=True)
+    """SHA-256 of `data`, hex: the same schema is stored once."""
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+    """The schema as an Arrow IPC schema message (`pyarrow.ipc.read_schema`)."""
 
 
 class SampleChunk(Base):
     """One committed chunk of a trial's sample stream (at most a second of trial time).
 
-    The samples are `data`, a compressed Arrow record batch of `SAMPLE_COLUMNS` (the
-    format is described in `db.sample_codec`); sample `k` of the chunk has sequence
+    The samples are `data`, a compressed Arrow record batch of the schema `schema_id`
+    names (the format is described in `db.sample_codec`); sample `k` of the chunk has sequence
     number `first_seq + k`. `t_first_s`/`t_last_s` let a reader skip chunks outside a
     time range without decoding them. Written by `db.samples.SampleWriter`, read by
     `db.sample_reader`.
@@ -137,6 +166,8 @@ class SampleChunk(Base):
     """Time of its last sample, s."""
     raw_bytes: Mapped[int]
     """Size of `data` before compression, bytes."""
+    schema_id: Mapped[int] = mapped_column(ForeignKey("sample_schemas.id"))
+    """The Arrow schema of `data` (`SampleSchema`)."""
     data: Mapped[bytes] = mapped_column(LargeBinary)
 
     __table_args__ = (CheckConstraint("n_samples > 0", name="chunk_not_empty"),)

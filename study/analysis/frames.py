@@ -15,57 +15,24 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-
 import pandas as pd
-from sqlalchemy import Engine, select
-from sqlalchemy.orm import Session
+from sqlalchemy import Engine
 
-from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES
-from db.models.trial import Trial
-from study.protocol.tasks import COMPLETION_TIME, get_task
+from study.protocol.trial_table import TRIAL_KEYS, measure_columns, trial_frame
+
+__all__ = [
+    "TLX_MEASURES",
+    "TRIAL_KEYS",
+    "measure_columns",
+    "participant_means",
+    "tlx_frame",
+    "trial_frame",
+    "trial_measures",
+    "without_withdrawn",
+]
 
 TLX_MEASURES = ("tlx_raw", "tlx_weighted", *(f"tlx_{s}" for s in TLX_SUBSCALES))
-TRIAL_KEYS = ("participant", "group", "task", "condition", "trial")
-
-
-def measure_columns(tasks: Iterable[str], analysed_only: bool = False) -> list[str]:
-    """The measure columns of `tasks`' trials, in the tasks' order, each once."""
-    out: list[str] = []
-    for name in tasks:
-        task = get_task(name)
-        for m in task.all_measures:
-            if m.name not in out and (m.analysed or not analysed_only):
-                out.append(m.name)
-    return out
-
-
-def trial_frame(engine: Engine, tasks: Iterable[str] = ()) -> pd.DataFrame:
-    """The measured trials; the measure columns of `tasks` and of every task with trials."""
-    with Session(engine) as session:
-        rows = session.execute(
-            select(Participant.code, Participant.group, Trial)
-            .join(Trial, Trial.participant_id == Participant.id)
-            .where(Trial.status == "completed", Trial.practice.is_(False))
-            .order_by(Participant.code, Trial.block_index, Trial.trial_index, Trial.attempt)
-        ).all()
-        latest = {}
-        for code, group, t in rows:
-            latest[(code, t.task, t.condition, t.trial_index)] = {
-                "participant": code,
-                "group": group,
-                "task": t.task,
-                "condition": t.condition,
-                "trial": t.trial_index + 1,
-                COMPLETION_TIME: t.completion_time_s,
-                **t.measure_values,
-                "success": bool(t.success),
-                "driver": t.driver,
-            }
-    names = list(dict.fromkeys([*tasks, *(r["task"] for r in latest.values())]))
-    columns = [*TRIAL_KEYS, *measure_columns(names), "success", "driver"]
-    return pd.DataFrame(list(latest.values()), columns=columns)
 
 
 def trial_measures(trials: pd.DataFrame) -> list[str]:

@@ -142,23 +142,3 @@ def compensation_table(axes: list[AxisCharacterisation]) -> pd.DataFrame:
             rows.append({"dof": ch.dof, "measure": key, "before": before[key], "after": after[key]})
     return pd.DataFrame(rows, columns=["dof", "measure", "before", "after"])
 
-
-def notes_trial_plot(frame: pd.DataFrame, title: str = "") -> plt.Figure:
-    """A NOTES trial: depth, demanded vs rendered force and torque over time."""
-    with plt.rc_context(STYLE):
-        fig, (a0, a1, a2) = plt.subplots(3, 1, figsize=(WIDTHS_IN["single"], 4.2), sharex=True)
-        t = frame["t_s"]
-        a0.plot(t, frame["insertion_m"] * 1e3, color=MEASURED)
-        a0.set_ylabel("depth (mm)")
-        a0.set_title(title)
-        a1.plot(t, frame["force_demanded_n"], color=BEFORE, label="demanded")
-        a1.plot(t, frame["force_rendered_n"], color=MODEL, label="rendered")
-        a1.axhline(5.62, color=MEASURED, lw=0.5, ls="--", label="device limit")
-        a1.set_ylabel("force (N)")
-        a1.legend(frameon=False, loc="upper left")
-        a2.plot(t, frame["torque_demanded_n_m"] * 1e3, color=BEFORE)
-        a2.plot(t, frame["torque_rendered_n_m"] * 1e3, color=MODEL)
-        a2.set_ylabel("torque (N mm)")
-        a2.set_xlabel("time (s)")
-        fig.tight_layout()
-    return fig

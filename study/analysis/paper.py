@@ -21,31 +21,34 @@ from sqlalchemy import Engine, exists, select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
-from db.models.trial import SAMPLE_COLUMNS, SampleChunk, Trial, TrialMeasure
+from db.models.trial import SampleChunk, Trial, TrialMeasure
 from db.sample_reader import SampleReader
 from study.analysis.figcheck import FigureCheckError, check_figure
 from study.analysis.figures import fig12, fig12_labels, label_source, save
 from study.analysis.frames import participant_means, tlx_frame, trial_frame, without_withdrawn
 from study.analysis.source import DataSource, restrict
 from study.analysis.stats import compare_conditions
+from study.analysis.stream_figure import DrawnStream, trial_streams_figure
 from study.analysis.tlx_figure import tlx_profile
 from study.analysis.trace_figure import force_traces
 from study.errors import StudyInputError
 from study.protocol.tasks import get_task
 
 
-def _samples(engine: Engine, trial_id: int, columns: Sequence[str]) -> pd.DataFrame:
-    """The `columns` of one trial's samples, in `seq` order.
+def _samples(engine: Engine, trial_id: int, task: str, columns: Sequence[str]) -> pd.DataFrame:
+    """The `columns` (the task's names) of one trial's samples, in `seq` order.
 
     Read in Arrow batches (`SampleReader`) keeping only the columns drawn. A trial of
     ten minutes at 1 kHz (600,000 samples) read as ORM objects raised the peak memory
     by 1.27 GB and took 39 s; read this way, by 0.1 GB in 2 s (issue 26).
     """
+    the_task = get_task(task)
     with SampleReader(engine) as reader:
-        batches = [b.select(list(columns)) for b in reader.trial(trial_id)]
+        batches = list(reader.trial(trial_id))
     if not batches:
         return pd.DataFrame({c: pd.Series(dtype=float) for c in columns})
-    return pa.Table.from_batches(batches).to_pandas()
+    table = the_task.stored_table(pa.Table.from_batches(batches))
+    return table.select(list(columns)).to_pandas()
 
 
 def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[tuple[int, str]]:
@@ -110,6 +113,37 @@ def _marks(long: pd.DataFrame, comparisons: pd.DataFrame, task: str) -> dict[str
     return out
 
 
+def _with_streams(
+    engine: Engine, trial_ids: list[int], panels: list[tuple[pd.DataFrame, str]]
+) -> list[tuple[pd.DataFrame, str, list[DrawnStream]]]:
+    """Fig. 9's trials with the recorded streams the design's `[lsl] plot` asks for
+    (by name or type); [] when it asks for none or none was recorded."""
+    from db.lsl_streams import read_stream, trial_streams
+    from study.protocol.roster import load_study
+
+    with Session(engine) as session:
+        _, design = load_study(session)
+    asked = set(design.lsl.plot)
+    if not asked or not trial_ids:
+        return []
+    streams = [s for s in trial_streams(engine, trial_ids) if s.name in asked or s.type in asked]
+    names = sorted({s.name for s in streams})
+    if not names:
+        return []
+    out = []
+    for trial_id, (samples, title) in zip(trial_ids, panels, strict=True):
+        drawn = []
+        for name in names:
+            stored = next((s for s in streams if s.trial_id == trial_id and s.name == name), None)
+            if stored is None:
+                continue
+            frame = read_stream(engine, stored.id).to_pandas()
+            drawn.append(DrawnStream(stored.name, stored.type, stored.channels, frame,
+                                     stored.gaps, stored.channel_format == "string"))  # fmt: skip
+        out.append((samples, title, drawn))
+    return out if any(d for _, _, d in out) else []
+
+
 def tasks_of(trials: pd.DataFrame, tlx: pd.DataFrame, task: str | None) -> list[str]:
     """The tasks to draw: `task` (checked against the stored ones) or all of them."""
     known = list(dict.fromkeys([*trials["task"], *tlx["task"]]))
@@ -143,14 +177,16 @@ def draw_figures(
         if marks:  # else none of Fig. 12's measures was recorded in this task
             fig = label_source(fig12(t_long, t_comp, width, fig12_labels(name)), note)
             drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks))
-        drawn_columns = ["t_s", *(c for c in get_task(name).trace_names if c in SAMPLE_COLUMNS)]
-        panels = [
-            (_samples(engine, i, drawn_columns), title)
-            for i, title in _trace_trials(engine, name, driver)
-        ]
+        drawn_columns = ["t_s", *get_task(name).trace_names]
+        traced = _trace_trials(engine, name, driver)
+        panels = [(_samples(engine, i, name, drawn_columns), title) for i, title in traced]
         if panels:
             fig = label_source(force_traces(panels, name, width), note)
             drawn.append(DrawnFigure(f"fig9_forces_{name}", fig))
+        with_streams = _with_streams(engine, [i for i, _ in traced], panels)
+        if with_streams:
+            fig = label_source(trial_streams_figure(name, with_streams, width), note)
+            drawn.append(DrawnFigure(f"fig9_streams_{name}", fig))
         if len(t_tlx):
             fig = label_source(tlx_profile(t_tlx, width), note)
             drawn.append(DrawnFigure(f"tlx_profile_{name}", fig))

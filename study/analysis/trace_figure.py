@@ -26,12 +26,14 @@ import pandas as pd
 from study.analysis.figures import STYLE, WIDTHS_IN, figure_key
 from study.protocol.tasks import get_task
 
-STYLES = {
+STYLES = (
     # the reference on top of the estimate, thin and dark over a wide light line
-    "proximal_force_n": {"color": "black", "lw": 0.7, "zorder": 3},
-    "proximal_force_est_n": {"color": "#56B4E9", "lw": 1.6, "zorder": 2},
-    "distal_force_n": {"color": "#D55E00", "lw": 0.9, "zorder": 1},
-}
+    {"color": "black", "lw": 0.7, "zorder": 3},
+    {"color": "#56B4E9", "lw": 1.6, "zorder": 2},
+    {"color": "#D55E00", "lw": 0.9, "zorder": 1},
+)
+"""The styles of a task's traces, in the order of its `trace_names` (LCCA: reference,
+estimate, distal)."""
 
 
 def force_traces(
@@ -57,9 +59,10 @@ def force_traces(
         fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], height), sharey=True,
                                  layout="constrained", squeeze=False)  # fmt: skip
         for ax, (samples, title) in zip(axes.ravel(), trials, strict=True):
-            for column, label in names.items():
+            for k, (column, label) in enumerate(names.items()):
                 if column in samples and samples[column].notna().any():
-                    ax.plot(samples["t_s"], samples[column], label=label, **STYLES.get(column, {}))
+                    style = STYLES[k] if k < len(STYLES) else {}
+                    ax.plot(samples["t_s"], samples[column], label=label, **style)
             ax.axhline(0.0, color="#999999", lw=0.4, zorder=0)
             ax.set_xlabel("time (s)")
             ax.set_title(title)

@@ -1,8 +1,6 @@
-"""The figure `study simulate --plot` draws of one trial, by the task's `trial_figure`.
-
-`lcca`: the tip's path in the phantom (`phantom_figures.plot_trial`); `notes`: depth,
-roll and forces (`notes_figures.notes_trial_plot`); `traces` (any task, e.g. one a lab
-adds): the insertion and the task's two live forces over time.
+"""The figure `study simulate --plot` draws of one trial: the task's own
+(`Task.trial_figure`, drawn by its package), or, for a task without one, the insertion
+and the task's two live forces over time (`traces_plot`).
 """
 
 from __future__ import annotations
@@ -20,16 +18,9 @@ if TYPE_CHECKING:
 
 
 def trial_plot(task: Task, frame: pd.DataFrame, title: str) -> plt.Figure:
-    if task.trial_figure == "lcca":
-        from study.analysis.phantom_figures import plot_trial
-        from teleop_core.phantom.lcca import LccaPhantom
-
-        return plot_trial(frame, LccaPhantom(), title)
-    if task.trial_figure == "notes":
-        from study.analysis.notes_figures import notes_trial_plot
-
-        return notes_trial_plot(frame, title)
-    return traces_plot(task, frame, title)
+    """The task's own figure of one trial (`Task.trial_figure`), else `traces_plot`."""
+    figure = task.trial_figure(frame, title)
+    return traces_plot(task, frame, title) if figure is None else figure
 
 
 def traces_plot(task: Task, frame: pd.DataFrame, title: str) -> plt.Figure:

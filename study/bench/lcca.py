@@ -8,6 +8,12 @@ force and success; HV against VO by the Wilcoxon signed-rank test (scipy), the p
 test the analysis issue uses when differences are not normal. Beside it: HV with a
 haptic gain of 0 against VO (the participants must not tell them apart), and each
 trial's speed against real time with the whole loop inside.
+
+With `publish_lsl` every trial's samples are also published as a Lab Streaming Layer
+stream (`study.lsl.publish`, as `study run --lsl` does), in the session's half-second
+steps, inside the timing: the speed then includes the cost of publishing. The session
+runner publishes a step as soon as the loop has made it; here the loop runs a trial
+whole and its steps are published after it, which costs the same calls.
 """
 
 from __future__ import annotations
@@ -28,9 +34,9 @@ import pandas as pd
 from scipy.stats import wilcoxon
 
 from study.analysis.figures import label_source
-from study.analysis.phantom_figures import CONDITION_COLORS, plot_tip_paths
-from study.protocol.lcca_trial import run_lcca_trial, simulated_participant
-from study.protocol.participants import GROUPS
+from study.protocol.traits import GROUPS, simulated_participant
+from study.tasks.lcca.figures import CONDITION_COLORS, plot_tip_paths
+from study.tasks.lcca.trial import run_lcca_trial
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.phantom.lcca import LccaPhantom
 
@@ -56,6 +62,8 @@ class LccaBenchConfig:
     gain_zero_group: str = "novice"
     max_s: float = 180.0
     seed: int = 0
+    publish_lsl: bool = False
+    """Publish each trial's samples as an LSL stream, timed with the trial."""
 
     @classmethod
     def quick(cls) -> LccaBenchConfig:
@@ -90,7 +98,9 @@ def run_lcca_bench(
     run_lcca_trial(
         simulated_participant("expert", 0), "HV", 0, estimator, max_s=1.0, phantom=phantom
     )  # numba compiles here, outside the timing
+    publisher = _publisher() if config.publish_lsl else None
     rows, factors, paths = [], [], []
+    loop_walls, publish_walls = [], []
     total = sum(config.group_sizes.values())
     k = 0
     for group, n in config.group_sizes.items():
@@ -107,6 +117,10 @@ def run_lcca_bench(
                     traits, condition, seed, estimator, max_s=config.max_s, phantom=phantom
                 )
                 wall = time.perf_counter() - start
+                loop_walls.append(wall)
+                if publisher is not None:
+                    publish_walls.append(_publish(publisher, result.frame, condition, len(factors)))
+                    wall += publish_walls[-1]
                 s = result.summary
                 factors.append(s["completion_time_s"] / wall)
                 rows.append(
@@ -177,6 +191,18 @@ def run_lcca_bench(
             "trials": len(factors),
         },
     }
+    if publisher is not None:
+        # paired, within this run: the same trials' loop time with and without publishing
+        loop_s, publish_s = float(np.sum(loop_walls)), float(np.sum(publish_walls))
+        report["speed"]["lsl_publish"] = {
+            "loop_s": loop_s,
+            "publish_s": publish_s,
+            "share_of_wall_time": publish_s / (loop_s + publish_s),
+            "realtime_factor_median_without_publishing": float(
+                np.median(np.asarray(factors) * (1 + np.asarray(publish_walls)
+                                                 / np.asarray(loop_walls)))
+            ),
+        }  # fmt: skip
     frame.to_csv(out_dir / "lcca_trials.csv", index=False)
     fig, axes = plt.subplots(1, 2, figsize=(7.16, 4.2), layout="constrained", sharey=True)
     for ax, condition in zip(axes, ("VO", "HV"), strict=True):
@@ -191,6 +217,39 @@ def run_lcca_bench(
     (out_dir / "lcca_bench.json").write_text(json.dumps(report, indent=2) + "\n")
     (out_dir / "lcca_bench.md").write_text(markdown(report))
     return report
+
+
+def _publisher() -> Any:
+    from study.lsl.publish import Publisher
+    from study.protocol.observer import SessionInfo
+
+    publisher = Publisher()
+    publisher.session_started(SessionInfo("lcca bench", "bench", "simulated", "simulated", None))
+    return publisher
+
+
+def _publish(publisher: Any, frame: pd.DataFrame, condition: str, k: int) -> float:
+    """Publish one trial's samples in the session runner's steps (`STEP_S`); the wall
+    time it took, s (the loop hands the session its rows as arrays: turning the trial's
+    frame back into them is not timed)."""
+    from study.protocol.observer import TrialInfo
+    from study.protocol.session import STEP_S
+    from study.protocol.tasks import get_task
+
+    task = get_task("lcca")
+    names = [c.name for c in task.sample_columns]
+    rows = frame[names].copy()
+    rows["branch"] = rows["branch"].map({r: i for i, r in enumerate(task.regions)})
+    rows = rows.to_numpy(dtype=np.float64)
+    steps = np.searchsorted(rows[:, 0], np.arange(STEP_S, rows[-1, 0] + STEP_S, STEP_S))
+    blocks = np.split(rows, steps)
+    start = time.perf_counter()
+    info = TrialInfo(k, task, condition, 0, k, False, 1, time.monotonic(), 1.0, False)
+    publisher.trial_started(info)
+    for block in blocks:
+        publisher.samples(info, block)
+    publisher.trial_ended(info, "completed", {"completion_time_s": float(rows[-1, 0])})
+    return time.perf_counter() - start
 
 
 def plot_groups(frame: pd.DataFrame) -> plt.Figure:
@@ -252,4 +311,13 @@ def markdown(report: dict[str, Any]) -> str:
         f"{sp['realtime_factor_min']:.0f}x, over {sp['trials']} trials.",
         "",
     ]
+    if "lsl_publish" in sp:
+        pub = sp["lsl_publish"]
+        lines += [
+            f"Publishing the samples as an LSL stream took {100 * pub['share_of_wall_time']:.2f} %"
+            f" of the trials' wall time ({pub['publish_s']:.3f} s of "
+            f"{pub['loop_s'] + pub['publish_s']:.1f} s); without it the same trials ran at a "
+            f"median {pub['realtime_factor_median_without_publishing']:.0f}x real time.",
+            "",
+        ]
     return "\n".join(lines)

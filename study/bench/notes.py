@@ -92,9 +92,9 @@ def notes_trials(
     config: NotesBenchConfig, progress: Callable[[str], None]
 ) -> tuple[pd.DataFrame, float]:
     """`trials` simulated NOTES trials per group and condition; (measures, wall seconds)."""
-    from study.protocol.lcca_trial import CONDITIONS, simulated_participant
-    from study.protocol.notes_trial import run_notes_trial
-    from study.protocol.participants import GROUPS
+    from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
+    from study.protocol.traits import GROUPS, simulated_participant
+    from study.tasks.notes.trial import run_notes_trial
 
     rows = []
     t0 = time.perf_counter()

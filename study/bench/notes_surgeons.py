@@ -7,7 +7,7 @@ torque, and the share of the procedure's time the push exceeded the device's 5.6
 Here `n` simulated experts (the paper's 10 by default) each do one NOTES trial in VO
 (nothing rendered: the tissue's demand is what a hand on a real scope would feel), and
 the same people in HV beside them; each trial's measures are the task's own
-(`study.protocol.notes_trial.measures`). The table puts the paper's figure, the target
+(`study.tasks.notes.trial.measures`). The table puts the paper's figure, the target
 band of issue 24, and the simulated people's mean, SD, min and max side by side; every
 table and key says the trials are simulated.
 """
@@ -21,7 +21,7 @@ import pandas as pd
 
 from teleop_core.notes import task
 
-SOURCE = "simulated participants (study.protocol.notes_trial), not measured people"
+SOURCE = "simulated participants (study.tasks.notes.trial), not measured people"
 PAPER = {
     "peak_push_n": (task.PUSH_BENCHMARK_N, 1.0, "N", 1.0),
     "peak_pull_n": (task.PULL_BENCHMARK_N, 0.7, "N", 1.0),
@@ -73,8 +73,8 @@ def surgeons_trials(
 ) -> pd.DataFrame:
     """One NOTES trial per simulated expert in VO and in HV (the same person, seed for
     seed); one row per trial with the measures of `PAPER`, completion and success."""
-    from study.protocol.lcca_trial import simulated_participant
-    from study.protocol.notes_trial import run_notes_trial
+    from study.protocol.traits import simulated_participant
+    from study.tasks.notes.trial import run_notes_trial
 
     rows = []
     for k in range(n):

@@ -42,8 +42,8 @@ from study.analysis.participant_fit.estimate import HIGH, LOW, prior_arrays
 from study.analysis.participant_fit.fit import FitSettings, fit_participants, simulate_people
 from study.protocol.demo import run_demo
 from study.protocol.participant_model import FORMAT, load_model
-from study.protocol.participants import PROFILES, TRAIT_BOUNDS, TRAITS, GroupProfile
 from study.protocol.session import participant_traits
+from study.protocol.traits import PROFILES, TRAIT_BOUNDS, TRAITS, GroupProfile
 
 TOLERANCE = 0.15
 """Largest relative error of a recovered group mean."""

@@ -50,8 +50,8 @@ class WarmUp(WorkerPlugin):
 def warm_up(task: str) -> None:
     """One second of a trial of `task` (LCCA: numba compiles the kernel)."""
     from study.campaign.unit import _estimator
-    from study.protocol.lcca_trial import simulated_participant
     from study.protocol.tasks import get_task
+    from study.protocol.traits import simulated_participant
 
     the_task = get_task(task)
     estimator = _estimator() if the_task.has_dial else None

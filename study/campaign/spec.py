@@ -45,8 +45,6 @@ DEFAULTS = {
 }
 """A factor not in `[factors]` takes this value: the device's G_h (N m per N, eq. 7), the
 paper's wired link (IV-A), the design's group sizes."""
-LOOP_FACTORS = ("haptic_gain", "link_delay_ms", "link_jitter_ms", "link_loss")
-"""Factors of the LCCA loop; the NOTES device is driven directly (no link, no G_h)."""
 MIN_GROUP = 3
 """The fewest pairs the analysis tests (`compare_conditions` skips smaller groups)."""
 

@@ -23,8 +23,8 @@ participants and must never pass for a measured study.
 from __future__ import annotations
 
 import json
-import os
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +35,7 @@ from statsmodels.stats.proportion import proportion_confint
 from study.campaign.spec import DEFAULTS, CampaignSpec, Cell, parse_campaign, unit_id
 from study.campaign.unit import UNIT_COLUMNS
 from study.errors import StudyInputError
+from teleop_core.files import atomic_path
 
 DATA_SOURCE = "simulated"
 PARTICIPANTS = "participants.json"
@@ -46,10 +47,10 @@ SUMMARY_COLUMNS = (
 """summary.csv after the factor columns."""
 
 
-def _atomic_write(path: Path, write: object) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    write(tmp)  # type: ignore[operator]
-    os.replace(tmp, path)
+def _atomic_write(path: Path, write: Callable[[Path], object]) -> None:
+    """`write(tmp)` then `tmp` renamed over `path` (`teleop_core.files.atomic_path`)."""
+    with atomic_path(path) as tmp:
+        write(tmp)
 
 
 class CampaignDir:
@@ -112,9 +113,12 @@ class CampaignDir:
         return [(c, r) for c, r in self.spec.units() if not self.unit_path(c, r).is_file()]
 
     def save_unit(self, cell: Cell, replicate: int, rows: pd.DataFrame, seconds: float) -> None:
-        _atomic_write(self.unit_path(cell, replicate), lambda p: rows.to_parquet(p, index=False))
-        with open(self.root / "unit_times.csv", "a") as f:
-            f.write(f"{unit_id(cell, replicate)},{seconds:.4f}\n")
+        # its time first, then the unit's file: a kill between the two leaves a time for a
+        # unit that runs again (the last time of a unit is kept), never a unit without one
+        with atomic_path(self.unit_path(cell, replicate)) as tmp:
+            rows.to_parquet(tmp, index=False)
+            with open(self.root / "unit_times.csv", "a") as f:
+                f.write(f"{unit_id(cell, replicate)},{seconds:.4f}\n")
 
     def results(self) -> pd.DataFrame:
         """Every finished unit's rows, factor columns first, in grid order."""
@@ -147,7 +151,7 @@ class CampaignDir:
             "factor_defaults": {k: v for k, v in DEFAULTS.items() if k not in self.spec.factors},
             "cells": len(self.spec.cells()), "units": total, "units_done": done,
             "complete": done == total, "data_source": DATA_SOURCE,
-            "note": "simulated participants (study.protocol.participants), not a measured study",
+            "note": "simulated participants (each task's, study.tasks), not a measured study",
         }  # fmt: skip
         text = json.dumps(meta, indent=2) + "\n"
         _atomic_write(self.root / "campaign.json", lambda p: p.write_text(text))

@@ -27,10 +27,10 @@ import pandas as pd
 from study.analysis.stats import ALPHA, compare_conditions, hedges_g_av
 from study.campaign.spec import CampaignSpec, Cell, study_seed
 from study.protocol.design import KNOWN_CONDITIONS, StudyDesign, next_order
-from study.protocol.participants import ParticipantTraits
 from study.protocol.roster import CODE_DIGITS, plan_blocks
 from study.protocol.session import MAX_TRIAL_S, participant_traits
 from study.protocol.tasks import get_task
+from study.protocol.traits import ParticipantTraits
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.link import LinkParams
 

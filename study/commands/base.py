@@ -196,9 +196,9 @@ def write_json_atomically(data: dict[str, Any], path: Path) -> None:
     (numpy numbers are written as plain numbers)."""
     import json
 
-    tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(json.dumps(data, indent=2, default=float) + "\n")
-    tmp.replace(path)
+    from teleop_core.files import write_atomically
+
+    write_atomically(path, json.dumps(data, indent=2, default=float) + "\n")
 
 
 def check_parent_folder(path: Path) -> None:

@@ -14,7 +14,13 @@ import click
 from rich.console import Console
 
 from study.analysis.participant_fit import WEAK_TRAITS
-from study.commands.base import StudyGroup, check_parent_folder, positive_option, progress_bar
+from study.commands.base import (
+    StudyCommand,
+    StudyGroup,
+    check_parent_folder,
+    positive_option,
+    progress_bar,
+)
 from study.commands.bench_paper import PAPER_BENCHES, write_json
 
 _db_option = click.option(
@@ -251,3 +257,22 @@ def bench_participants(out_dir: Path | None, trials: int, truth_people: int, tru
         (out_dir / "participants_bench.md").write_text(text)
     click.echo(text)
     write_json(json_path, report)
+
+
+@bench.command("lsl", cls=StudyCommand)
+@_json_option
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Folder for the Markdown table and the JSON.")  # fmt: skip
+@click.option("--quick", is_flag=True, help="Two trials of 2 s (a few seconds in all).")
+def bench_lsl(json_path: Path | None, out_dir: Path, quick: bool) -> None:
+    """Recorded LSL streams against the trial's clock: the alignment error of a simulated
+    1 kHz instrument during a paced session (needs LSLAPICFG, see `study lsl-config`)."""
+    from study.bench.lsl import LslBenchConfig, run_lsl_bench
+    from study.lsl.config import load_pylsl
+
+    load_pylsl()  # one line now, rather than from the instrument's process
+    config = LslBenchConfig.quick() if quick else LslBenchConfig()
+    with Console(stderr=True).status("LSL bench") as line:
+        report = run_lsl_bench(config, out_dir, line.update)
+    write_json(json_path, report)
+    click.echo((out_dir / "lsl_bench.md").read_text())

@@ -158,18 +158,23 @@ def bench_master(
     )  # fmt: skip
 
 
+@click.option("--lsl", is_flag=True,
+              help="Publish every trial's samples as an LSL stream, timed with the trial "
+              "(needs LSLAPICFG, see `study lsl-config`).")  # fmt: skip
 @_estimator_bench(
     "lcca",
     "Force estimator folder [default: the model shipped with haptic-study].",
     "Two participants per group, 60 s at most each.",
 )
 def bench_lcca(
-    json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
-) -> None:
+    json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool,
+    lsl: bool = False,
+) -> None:  # fmt: skip
     """The paper's 20/8/8 user study with simulated participants, and its speed."""
     from study.bench.lcca import LccaBenchConfig, run_lcca_bench
 
-    config = replace(LccaBenchConfig.quick() if quick else LccaBenchConfig(), seed=seed)
+    config = replace(LccaBenchConfig.quick() if quick else LccaBenchConfig(), seed=seed,
+                     publish_lsl=lsl)  # fmt: skip
     _run_with_estimator(
         json_path, model_dir, out_dir / "lcca_bench.md", "simulated study",
         lambda estimator, progress: run_lcca_bench(config, estimator, out_dir, progress=progress),

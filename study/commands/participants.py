@@ -5,7 +5,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -125,9 +124,10 @@ def _write(out_path: Path, model: dict, table: object) -> None:
         "simulated marks are SIMULATED people drawn from the fitted model"
     )
     png = out_path.with_suffix(".png")
-    tmp_png = png.with_name(f".{png.name}.{os.getpid()}.tmp.png")
-    fit_figure(table, note).savefig(tmp_png, dpi=200)
-    os.replace(tmp_png, png)
+    from teleop_core.files import atomic_path
+
+    with atomic_path(png, suffix=".png") as tmp_png:
+        fit_figure(table, note).savefig(tmp_png, dpi=200)
     write_json_atomically(model, out_path)
 
 

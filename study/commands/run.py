@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
@@ -21,6 +22,12 @@ from study.commands.base import (
 )
 from study.errors import StudyInputError
 from study.protocol.roster import schedule
+
+if TYPE_CHECKING:
+    from sqlalchemy import Engine
+
+    from study.protocol.design import StudyDesign
+    from study.protocol.observer import SessionObserver
 
 
 @click.command("run", cls=StudyCommand)
@@ -41,6 +48,12 @@ from study.protocol.roster import schedule
     type=click.FloatRange(min=0, min_open=True),
     help="Run a simulated session at this many times real time [default: as fast as it goes].",
 )
+@click.option(
+    "--lsl",
+    is_flag=True,
+    help="Publish the session's markers and samples as Lab Streaming Layer streams (as "
+    "`[lsl] publish = true` in the design does); needs LSLAPICFG (see `study lsl-config`).",
+)
 @participants_option
 @actor_option
 @db_option
@@ -54,6 +67,7 @@ def run(
     participants_path: Path | None,
     actor: str | None,
     db_url: str | None,
+    lsl: bool = False,
 ) -> None:
     """Run the participant's remaining scheduled trials and store every sample.
 
@@ -74,8 +88,12 @@ def run(
         raise StudyInputError(f"--participants with --driver {driver}; expected --driver "
                               "simulated (a fitted model draws simulated people)")  # fmt: skip
     if run_all:
+        if lsl:
+            raise StudyInputError("--lsl with --all; expected --participant CODE (one "
+                                  "session at a time publishes its streams)")  # fmt: skip
         if driver != "simulated":
             raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
+        _lsl_notice(db_url)
         _run_all(db_url, jobs, pace, who, participants_path)
         return
     if driver == "keyboard":
@@ -116,18 +134,55 @@ def run(
                     f"{kind} {item.trial_index + 1}",
                 )
 
+            observer = _lsl_observers(engine, lsl, progress)
             done = run_session(
                 engine, code, driver, estimator, make_driver, pace, report, actor=who,
-                participants=model,
+                participants=model, observer=observer,
             )  # fmt: skip
     finally:
         engine.dispose()
     click.echo(f"{code}: {len(done)} trials completed and stored")
 
 
+def _lsl_observers(engine: Engine, publish: bool, progress: Progress) -> SessionObserver | None:
+    """The design's `[lsl]` streams (and --lsl's), their notices printed above the bar."""
+    from study.lsl.observers import session_observers
+
+    design = _design(engine)
+
+    def notice(message: str) -> None:
+        progress.console.print(f"study run: {message}", markup=False)
+
+    return session_observers(engine, design, publish, notice)
+
+
+def _design(engine: Engine) -> StudyDesign:
+    from sqlalchemy.orm import Session
+
+    from study.protocol.roster import load_study
+
+    with Session(engine) as session:
+        return load_study(session)[1]
+
+
 def _progress() -> Progress:
     """The bar both run modes show on stderr: what runs now, and k of n done."""
     return progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
+
+
+def _lsl_notice(db_url: str | None) -> None:
+    """Say that --all leaves the design's `[lsl]` table aside."""
+    engine = open_database(db_url, create=False)
+    try:
+        lsl = _design(engine).lsl
+    finally:
+        engine.dispose()
+    if lsl.publish or lsl.record:
+        click.echo(
+            "study run: the design's [lsl] streams are published and recorded by one "
+            "participant's session (--participant CODE), not by --all",
+            err=True,
+        )
 
 
 def _run_all(

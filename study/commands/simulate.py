@@ -52,7 +52,7 @@ def simulate(
 ) -> None:
     """Run one simulated trial headless and write TRIAL.csv, TRIAL.json and a figure."""
     from study.protocol.default_estimator import load_estimator
-    from study.protocol.lcca_trial import condition_haptics, simulated_participant
+    from study.protocol.traits import simulated_participant
     from teleop_core.estimation.recording import write_csv_atomically
 
     for path in (out_csv, plot_path):
@@ -61,9 +61,7 @@ def simulate(
     the_task = get_task(task)
     model = load_participants(participants_path)
     # refuse a bad gain, or a gain for a task without a dial, before any work
-    gain = the_task.haptic_gain(haptic_gain)
-    if gain is not None:
-        condition_haptics(condition, gain)
+    the_task.haptic_gain(haptic_gain)
     from teleop_core.loop import kernel
 
     kernel.COMPILE_NOTICE = lambda message: click.echo(f"study simulate: {message}", err=True)

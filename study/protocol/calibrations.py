@@ -11,8 +11,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +19,7 @@ from sqlalchemy.orm import Session
 
 from db.models.calibration import Calibration
 from db.models.study import Study
+from teleop_core.files import write_atomically
 
 
 def _sha256(path: Path) -> str:
@@ -59,11 +58,7 @@ def store_calibration(
     path = out_dir / f"calibration-{calibration_id:04d}-{recording.stem}.json"
     record = {"id": calibration_id, "model": model, "recording": recording.name,
               "recording_sha256": sha256, **report}  # fmt: skip
-    fd, tmp = tempfile.mkstemp(dir=out_dir, prefix=f".{path.name}.")
-    with os.fdopen(fd, "w") as f:
-        json.dump(record, f, indent=2)
-        f.write("\n")
-    os.replace(tmp, path)
+    write_atomically(path, json.dumps(record, indent=2) + "\n")
     return calibration_id, path
 
 

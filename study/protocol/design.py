@@ -76,9 +76,28 @@ _KEYS = {
     "code_prefix": str,
     "groups": dict,
     "haptic_gain_n_m_per_n": dict,
+    "lsl": dict,
 }
+MAX_LSL_STREAMS = 16
+MAX_PREDICATE_CHARS = 500
 MAX_HAPTIC_GAIN_N_M_PER_N = 1.0
 """Far above any usable gain (the paper's is 0.02 N m/N; the dial saturates at 0.1 N m)."""
+
+
+@dataclass(frozen=True)
+class LslSettings:
+    """The design's `[lsl]` table: the lab's other instruments (`study.lsl`)."""
+
+    publish: bool = False
+    """Publish the session's markers and each trial's samples as LSL streams."""
+    record: tuple[str, ...] = ()
+    """LSL predicates (`type='EMG'`, `name='Tobii'`) of the streams to record during
+    trials, each stored with its trial."""
+    plot: tuple[str, ...] = ()
+    """Recorded streams (by name or type) drawn in the trial figure."""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"publish": self.publish, "record": list(self.record), "plot": list(self.plot)}
 
 
 @dataclass(frozen=True)
@@ -102,6 +121,9 @@ class StudyDesign:
     """Per condition, the haptic dial's gain (tasks with a dial); a condition not listed
     uses the paper's (`teleop_core.master.params.HapticParams`); VO renders none."""
 
+    lsl: LslSettings = field(default_factory=LslSettings)
+    """The `[lsl]` table (streams published and recorded); off by default."""
+
     def haptic_gain_for(self, condition: str) -> float | None:
         """The dial's gain in `condition`; None: the task's default (the paper's)."""
         return self.haptic_gain_n_m_per_n.get(condition)
@@ -111,6 +133,9 @@ class StudyDesign:
         data["conditions"] = list(self.conditions)
         data["tasks"] = list(self.tasks)
         data["haptic_gain_n_m_per_n"] = dict(self.haptic_gain_n_m_per_n)
+        data["lsl"] = self.lsl.to_dict()
+        if self.lsl == LslSettings():  # designs without the table read as before
+            del data["lsl"]
         return data
 
     @classmethod
@@ -215,6 +240,7 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         code_prefix=prefix,
         groups=groups,
         haptic_gain_n_m_per_n=gains,
+        lsl=_lsl_settings(data.get("lsl", {}), source),
     )
     condition_orders(conditions, scheme, source)  # refuses a scheme that does not fit
     return design
@@ -240,6 +266,35 @@ def _haptic_gains(
             )
         gains[condition] = float(gain)
     return gains
+
+
+def _lsl_settings(table: dict[str, Any], source: str) -> LslSettings:
+    known = ("publish", "record", "plot")
+    for key in table:
+        if key not in known:
+            raise StudyInputError(
+                f"{source}: unknown key lsl.{key}; expected one of {', '.join(known)}"
+            )
+    publish = table.get("publish", False)
+    if not isinstance(publish, bool):
+        raise StudyInputError(f"{source}: lsl.publish = {publish!r}; expected true or false")
+    lists = {}
+    for key, example in (("record", "[\"type='EMG'\"]"), ("plot", '["EMG"]')):
+        value = table.get(key, [])
+        if not (
+            isinstance(value, list)
+            and len(value) <= MAX_LSL_STREAMS
+            and all(
+                isinstance(v, str) and 0 < len(v.strip()) and len(v) <= MAX_PREDICATE_CHARS
+                and v.isprintable() for v in value
+            )
+        ):  # fmt: skip
+            raise StudyInputError(
+                f"{source}: lsl.{key} = {value!r}; expected a list of at most "
+                f"{MAX_LSL_STREAMS} non-empty strings, e.g. {example}"
+            )
+        lists[key] = tuple(value)
+    return LslSettings(publish, lists["record"], lists["plot"])
 
 
 def williams_square(n: int) -> list[list[int]]:

@@ -51,13 +51,13 @@ from db.engine import write_transaction
 from db.models.study import CODE_PATTERN, Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import Trial, TrialMeasure
-from study.analysis.frames import measure_columns
 from study.errors import StudyInputError
 from study.protocol.csv_input import BOOL, DECIMAL, Problems, number, read_csv
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.roster import load_study, plan_blocks
 from study.protocol.tasks import COMPLETION_TIME, get_task, is_task
 from study.protocol.tlx import check_rating, check_weights
+from study.protocol.trial_table import measure_columns
 
 _TRIAL_NUMBER = re.compile(r"^[0-9]{1,6}$")
 

@@ -2,8 +2,9 @@
 codebook of every column (`study export`).
 
 The trials' columns (`trial_columns`) are the common ones and the measures of the
-study's tasks under their own names; the codebook says what each measure and each
-`samples` column holds for each task (`study.protocol.tasks`). See
+study's tasks under their own names; the samples' columns are the tasks' own sample
+columns; the codebook says what each measure and each sample column holds for each
+task (`study.protocol.tasks`). See
 `study.protocol.exchange` for the contracts and their import.
 """
 
@@ -19,12 +20,18 @@ from sqlalchemy.orm import Session
 
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
-from study.analysis.frames import measure_columns, trial_frame
 from study.errors import StudyInputError
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_KEYS
 from study.protocol.export_files import AtomicFile, escape_frame, refuse_symlink
 from study.protocol.roster import load_study
+from study.protocol.stream_export import (
+    STREAM_CODEBOOK,
+    StreamExport,
+    collect_streams,
+    write_streams,
+)
 from study.protocol.tasks import COMPLETION_TIME, get_task
+from study.protocol.trial_table import measure_columns, trial_frame
 
 if TYPE_CHECKING:
     from study.protocol.sample_export import Progress, SampleSelection
@@ -58,7 +65,7 @@ def trial_columns(tasks: Iterable[str]) -> tuple[str, ...]:
 
 def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
     """Column -> (unit, meaning) for a study of `tasks`: the common columns, each task's
-    measures, and the `samples` columns with what each task keeps in them."""
+    measures, and each task's sample columns (under their own names, as exported)."""
     tasks = [get_task(t) for t in tasks]
     measures: dict[str, tuple[str, str]] = {}
     for t in tasks:
@@ -70,16 +77,13 @@ def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
         if column == COMPLETION_TIME:
             out.update(measures)
     out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in tasks))
-    stored: dict[str, list[tuple[str, object]]] = {}
+    samples: dict[str, list[tuple[str, object]]] = {}
     for t in tasks:
         for c in t.sample_columns:
-            if c.stored_as is not None:
-                stored.setdefault(c.stored_as, []).append((t.name, c))
-    for column, uses in stored.items():
+            samples.setdefault(c.name, []).append((t.name, c))
+    for column, uses in samples.items():
         units = {c.unit for _, c in uses}
-        meaning = "; ".join(f"{name}: {c.description}"
-                            + (f" ({c.name})" if c.name != column else "")
-                            for name, c in uses)  # fmt: skip
+        meaning = "; ".join(f"{name}: {c.description}" for name, c in uses)
         out.setdefault(column, ("/".join(sorted(units)), meaning))
     return out
 
@@ -104,8 +108,8 @@ def export_data(
     name and renamed only once all of them are complete.
     """
     from study.protocol.sample_export import (
-        SAMPLE_EXPORT_COLUMNS,
         SampleSelection,
+        sample_export_columns,
         select_trials,
         write_samples,
         write_samples_per_trial,
@@ -138,9 +142,15 @@ def export_data(
     tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
     frames = {"trials": trials, "tlx": tlx}
     columns = [c for f in frames.values() for c in f.columns]
+    study_tasks = list(dict.fromkeys([*design.tasks, *trials["task"]]))
     if samples:
-        columns += SAMPLE_EXPORT_COLUMNS
-    book = codebook(dict.fromkeys([*design.tasks, *trials["task"]]))
+        columns += sample_export_columns(study_tasks)
+    book = codebook(study_tasks)
+    streams = collect_streams(engine, export_trials, selection) if samples else StreamExport()
+    if streams.tables:  # every recorded instrument's channel, as `stream/channel`
+        book.update({c: e for c, e in STREAM_CODEBOOK.items() if c not in book})
+        book.update(streams.codebook)
+        columns += [*STREAM_CODEBOOK, *streams.codebook]
     book_frame = pd.DataFrame(
         [
             {"column": c, "unit": book[c][0], "meaning": book[c][1]}
@@ -168,6 +178,7 @@ def export_data(
             else:
                 frame.to_parquet(out.file, index=False)
         escape_frame(book_frame).to_csv(stage("codebook.csv").file, index=False, encoding="utf-8")
+        staged += write_streams(streams, out_dir / "streams", fmt)
         sample_paths: list[Path] = []
         if samples and per_trial:
             result = write_samples_per_trial(
@@ -178,8 +189,9 @@ def export_data(
         elif samples:
             path = out_dir / f"samples.{fmt}"
             write_samples(
-                engine, export_trials, path, fmt, selection, progress=progress, workers=workers
-            )
+                engine, export_trials, path, fmt, selection, progress=progress,
+                workers=workers, tasks=design.tasks,
+            )  # fmt: skip
             sample_paths = [path]
         for out in staged:
             out.commit()

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import os
 import re
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
@@ -36,6 +35,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from study.errors import StudyInputError
+from teleop_core.files import replace_durably, temp_sibling
 
 if TYPE_CHECKING:
     import pyarrow.parquet as pq
@@ -109,42 +109,23 @@ class AtomicFile:
     def __init__(self, path: Path) -> None:
         refuse_symlink(path)
         self.path = path
-        fd, name = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".partial")
-        self.tmp = Path(name)
+        fd, self.tmp = temp_sibling(path)
         self.file: IO[bytes] = os.fdopen(fd, "wb")
 
     def _finish(self) -> None:
         if not self.file.closed:
-            self.file.flush()
-            os.fsync(self.file.fileno())
             self.file.close()
 
     def commit(self) -> Path:
         self._finish()
         refuse_symlink(self.path)  # made a link while we wrote: still not through it
-        os.replace(self.tmp, self.path)
-        _fsync_dir(self.path.parent)
-        return self.path
+        return replace_durably(self.tmp, self.path)
 
     def abort(self) -> None:
         try:
             self.file.close()
         finally:
             self.tmp.unlink(missing_ok=True)
-
-
-def _fsync_dir(folder: Path) -> None:
-    """Make a rename durable (POSIX); a no-op where directories cannot be opened."""
-    try:
-        fd = os.open(folder, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass  # some file systems refuse fsync on a directory; the rename still happened
-    finally:
-        os.close(fd)
 
 
 class StagedTableFile:

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from study.errors import StudyInputError
-from study.protocol.participants import (
+from study.protocol.traits import (
     TRAIT_BOUNDS,
     TRAITS,
     GroupProfile,

@@ -21,7 +21,10 @@ the time.
 
 The column contract (other tools rely on it; keep it exactly):
 
-- samples: participant, task, condition, trial, seq, then `db.models.trial.SAMPLE_COLUMNS`
+- samples: participant, task, condition, trial, seq, then the tasks' own sample columns
+  (`study.protocol.tasks.SampleColumn`: each task's in its order, a name two tasks share
+  once; empty where a row's task has no such column); a file of one trial (`--per-trial`)
+  has its task's columns only. Units and meanings are in the codebook.
 
 Rows are the samples of the measured (non-practice), completed trials, ordered by trial
 (as stored) and `seq`. A selection (`SampleSelection`) restricts them to participants,
@@ -40,35 +43,53 @@ import math
 import os
 import re
 from collections.abc import Callable, Iterable, Iterator
-from contextlib import closing
+from contextlib import ExitStack, closing
 from dataclasses import dataclass
 from itertools import chain
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.csv as pa_csv
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
-from db.models.trial import SAMPLE_COLUMNS, Trial
-from db.sample_reader import SAMPLE_SCHEMA, SPAN_ROWS, SampleSpan, plan_spans, read_spans
+from db.models.trial import Trial
+from db.sample_reader import SPAN_ROWS, SampleSpan, plan_spans, read_spans
 from study.errors import StudyInputError
 from study.protocol.design import StudyDesign
 from study.protocol.export_files import StagedTableFile, escape_array, refuse_symlink
+from study.protocol.tasks import Task, get_task
 
-SAMPLE_EXPORT_COLUMNS = ("participant", "task", "condition", "trial", "seq", *SAMPLE_COLUMNS)
 _KEY_FIELDS = [
     pa.field("participant", pa.string()),
     pa.field("task", pa.string()),
     pa.field("condition", pa.string()),
     pa.field("trial", pa.int64()),
 ]
-SAMPLE_EXPORT_SCHEMA = pa.schema([*_KEY_FIELDS, *SAMPLE_SCHEMA])
-_TEXT_COLUMNS = ("participant", "task", "condition", "branch")
-"""Dictionary-encoded in Parquet (tried on every float column, pyarrow's default, it took
-80 % of the writing time and gave a larger file)."""
+
+
+def sample_export_schema(tasks: Iterable[str]) -> pa.Schema:
+    """The samples file's schema for trials of `tasks`: the keys, `seq`, then each task's
+    sample columns in its order (a name an earlier task has, once)."""
+    fields: dict[str, pa.Field] = {}
+    for name in tasks:
+        for field in get_task(name).sample_schema():
+            fields.setdefault(field.name, field)
+    return pa.schema([*_KEY_FIELDS, pa.field("seq", pa.int64(), False), *fields.values()])
+
+
+def sample_export_columns(tasks: Iterable[str]) -> tuple[str, ...]:
+    """The samples file's columns for trials of `tasks` (`sample_export_schema`)."""
+    return tuple(sample_export_schema(tasks).names)
+
+
+def _text_columns(schema: pa.Schema) -> tuple[str, ...]:
+    """Dictionary-encoded in Parquet: the text columns (on every float column, pyarrow's
+    default, it took 80 % of the writing time and gave a larger file)."""
+    return tuple(f.name for f in schema if f.type == pa.string())
 MAX_WORKERS = 4
 """Most reader threads by default (one per CPU up to this)."""
 CSV_SPAN_ROWS = 16_384
@@ -195,27 +216,48 @@ _Encoded = tuple[int, "pa.Table | pa.Buffer"]
 
 
 class _Keys:
-    """The key columns of the exported trials, looked up by `trial_id` row by row."""
+    """The key columns of the exported trials, looked up by `trial_id` row by row, and
+    each row's values under the export's columns (its task's, by `Task.stored_table`)."""
 
-    def __init__(self, trials: list[ExportTrial]) -> None:
+    def __init__(self, trials: list[ExportTrial], schema: pa.Schema) -> None:
         ids = np.array([t.trial_id for t in trials], dtype=np.int64)
         self._order = np.argsort(ids, kind="stable")
         self._ids = ids[self._order]
         self._values = [
             pa.array([getattr(trials[k], f.name) for k in self._order], f.type) for f in _KEY_FIELDS
         ]
+        self._tasks: list[Task] = [get_task(n) for n in dict.fromkeys(t.task for t in trials)]
+        index = {t.name: k for k, t in enumerate(self._tasks)}
+        self._task_of = np.array([index[trials[k].task] for k in self._order], dtype=np.int64)
+        self.schema = schema
 
     def keyed(self, span: pa.Table) -> pa.Table:
-        """`span` (`SPAN_SCHEMA`) with the key columns in place of `trial_id`."""
+        """`span` (`db.sample_reader.span_schema`) with the key columns in place of
+        `trial_id` and the export's sample columns after `seq`."""
         rows = np.searchsorted(self._ids, span.column("trial_id").to_numpy())
         index = pa.array(rows.astype(np.int32))
         keys = [values.take(index) for values in self._values]
-        return pa.Table.from_arrays([*keys, *span.columns[1:]], schema=SAMPLE_EXPORT_SCHEMA)
+        row_task = self._task_of[rows]
+        present = np.unique(row_task)
+        mapped = {k: self._tasks[k].stored_table(span) for k in present}
+        values = []  # each export column: its task's, NULL for a row of a task without it
+        for field in list(self.schema)[len(_KEY_FIELDS) + 1 :]:
+            column: pa.Array | pa.ChunkedArray = pa.nulls(span.num_rows, field.type)
+            for k, table in mapped.items():
+                if field.name not in table.column_names:
+                    continue
+                source = table[field.name].cast(field.type)
+                mask = pa.array(row_task == k)
+                column = source if len(present) == 1 else pc.if_else(mask, source, column)
+            values.append(column)
+        return pa.Table.from_arrays([*keys, span["seq"], *values], schema=self.schema)
 
 
-def _encoder(trials: list[ExportTrial], fmt: str) -> Callable[[SampleSpan, pa.Table], _Encoded]:
+def _encoder(
+    trials: list[ExportTrial], fmt: str, schema: pa.Schema
+) -> Callable[[SampleSpan, pa.Table], _Encoded]:
     """The work done on a span in its reader thread."""
-    keys = _Keys(trials)
+    keys = _Keys(trials, schema)
     options = pa_csv.WriteOptions(include_header=False)
 
     def encode(span: SampleSpan, table: pa.Table) -> _Encoded:
@@ -223,9 +265,7 @@ def _encoder(trials: list[ExportTrial], fmt: str) -> Callable[[SampleSpan, pa.Ta
         if fmt == "parquet":
             return keyed.num_rows, keyed
         # text a spreadsheet would run gets a leading quote (export_files)
-        escaped = pa.Table.from_arrays(
-            [escape_array(c) for c in keyed.columns], schema=SAMPLE_EXPORT_SCHEMA
-        )
+        escaped = pa.Table.from_arrays([escape_array(c) for c in keyed.columns], schema=schema)
         sink = pa.BufferOutputStream()
         pa_csv.write_csv(escaped, sink, write_options=options)
         return keyed.num_rows, sink.getvalue()
@@ -250,11 +290,12 @@ def _read(
     fmt: str,
     selection: SampleSelection,
     workers: int | None,
+    schema: pa.Schema,
 ) -> Iterator[_Encoded]:
     return read_spans(
         engine,
         chain.from_iterable(plan),
-        _encoder(trials, fmt),
+        _encoder(trials, fmt, schema),
         workers=workers or default_workers(),
         from_s=selection.from_s,
         to_s=selection.to_s,
@@ -271,17 +312,20 @@ def write_samples(
     progress: Progress | None = None,
     span_rows: int | None = None,
     workers: int | None = None,
+    tasks: Iterable[str] = (),
 ) -> int:
     """Write the samples of `trials` into one file at `path`; returns the number of rows.
 
+    The file's columns are `sample_export_schema` of `tasks` and the trials' tasks.
     `span_rows` bounds the samples read at once (default `SPAN_ROWS` for Parquet,
     `CSV_SPAN_ROWS` for CSV), `workers` the reader threads (default
     `default_workers()`). The file appears only when complete (written as
     `.NAME.partial`, then renamed).
     """
-    with StagedTableFile(path, fmt, SAMPLE_EXPORT_SCHEMA, _TEXT_COLUMNS) as out:
+    schema = sample_export_schema(dict.fromkeys([*tasks, *(t.task for t in trials)]))
+    with StagedTableFile(path, fmt, schema, _text_columns(schema)) as out:
         plan = plan_spans(engine, [t.trial_id for t in trials], max_rows=_span(fmt, span_rows))
-        with closing(_read(engine, trials, plan, fmt, selection, workers)) as parts:
+        with closing(_read(engine, trials, plan, fmt, selection, workers, schema)) as parts:
             for done, spans in enumerate(plan, 1):
                 for _ in spans:
                     out.write(next(parts))
@@ -329,14 +373,25 @@ def write_samples_per_trial(
     )
     spans_of = {t.trial_id: spans for t, spans in zip(todo, plan, strict=True)}
     written, skipped, rows = [], [], 0
-    with closing(_read(engine, todo, plan, fmt, selection, workers)) as parts:
+    schemas = {name: sample_export_schema([name]) for name in dict.fromkeys(t.task for t in todo)}
+    parts_of = {
+        name: closing(
+            _read(engine, [t for t in todo if t.task == name],
+                  [spans_of[t.trial_id] for t in todo if t.task == name],
+                  fmt, selection, workers, schema)
+        )
+        for name, schema in schemas.items()
+    }  # fmt: skip
+    with ExitStack() as stack:
+        parts = {name: stack.enter_context(p) for name, p in parts_of.items()}
         for done, (trial, path, m) in enumerate(zip(trials, paths, missing, strict=True), 1):
             if not m:
                 skipped.append(path)
             else:
-                with StagedTableFile(path, fmt, SAMPLE_EXPORT_SCHEMA, _TEXT_COLUMNS) as out:
+                schema = schemas[trial.task]
+                with StagedTableFile(path, fmt, schema, _text_columns(schema)) as out:
                     for _ in spans_of[trial.trial_id]:
-                        out.write(next(parts))
+                        out.write(next(parts[trial.task]))
                     written.append(out.commit())
                 rows += out.rows
             if progress is not None:

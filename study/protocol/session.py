@@ -29,7 +29,7 @@ import threading
 import time
 import zlib
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -47,10 +47,17 @@ from study.errors import StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.lease import LeaseHandle, hold_lease
+from study.protocol.observer import (
+    SessionInfo,
+    SessionObserver,
+    TrialInfo,
+    session_ending,
+    trial_ending,
+)
 from study.protocol.participant_model import ParticipantModel
-from study.protocol.participants import ParticipantTraits, draw_traits
 from study.protocol.roster import find_participant, load_study
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
+from study.protocol.traits import ParticipantTraits, draw_traits
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.drivers import Driver
 
@@ -145,6 +152,7 @@ def run_session(
     actor: str | None = None,
     stop: threading.Event | None = None,
     participants: ParticipantModel | None = None,
+    observer: SessionObserver | None = None,
 ) -> list[int]:
     """Run the participant's remaining trials; return the ids of the trials completed.
 
@@ -157,6 +165,8 @@ def run_session(
     `actor` is recorded with the lease; a set `stop` ends the session at its next step,
     the running trial marked interrupted (`STOPPED_WITH_PARENT`), and returns.
     `participants`: the fitted model simulated people are drawn from (else PROFILES).
+    `observer` is told the session's events (`study.protocol.observer`): publishing them,
+    recording other instruments beside the trials.
     """
     if pace is not None and not (math.isfinite(pace) and pace > 0):
         raise StudyInputError(f"pace {pace!r}; expected a finite number > 0 (times real time)")
@@ -169,7 +179,8 @@ def run_session(
                 f"participant {code} withdrew ({participant.withdrawal_reason}); "
                 "expected a participant still in the study"
             )
-    with hold_lease(engine, participant_id, code, actor) as lease:
+    observer = observer or SessionObserver()
+    with hold_lease(engine, participant_id, code, actor) as lease, session_ending(observer):
         # read the schedule and what is done only once no other session can change it
         with Session(engine) as session:
             participant = session.get_one(Participant, participant_id)
@@ -181,6 +192,10 @@ def run_session(
             reason = f"found running when a new session took the lease over ({lease.taken_over})"
         recover_interrupted(engine, participant_id, reason, actor)
         tasks = {name: get_task(name) for name in sorted({p.block.task for p in todo})}
+        first = tuple(tasks[name] for name in dict.fromkeys(p.block.task for p in todo))
+        observer.session_started(
+            SessionInfo(study.name, code, participant.group, driver_kind, pace, first)
+        )
         contexts: dict[str, Any] = {}
         traits = participant_traits(study.seed, code, participant.group, participants)
         completed: list[int] = []
@@ -206,6 +221,7 @@ def run_session(
                 on_samples=on_samples,
                 check=lambda: _check_stop(lease, stop),
                 model=participants.digest if participants is not None else None,
+                observer=observer,
             )
             try:
                 trial_id = _run_trial(engine, participant, item, run)
@@ -273,6 +289,7 @@ class TrialSetup:
     check: Callable[[], None] = lambda: None
     model: str | None = None
     """The digest of the fitted participant model the traits came from, if any."""
+    observer: SessionObserver = field(default_factory=SessionObserver)
 
 
 def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
@@ -329,7 +346,18 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     chunks = []
     step_s = STEP_S if run.pace is None else PACED_STEP_S
     wall0 = time.monotonic()
-    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer:
+    info = TrialInfo(
+        trial_id, task, block.condition, block.block_index, item.trial_index, item.practice,
+        attempt, clock_origin_s=wall0, clock_rate=run.pace or 1.0,
+        realtime=run.pace is not None or bool(getattr(driver, "realtime", False)),
+    )  # fmt: skip
+    observer = run.observer
+    observer.trial_started(info)
+    ending = trial_ending(observer, info, loop, SessionStopped)
+    with (
+        SampleWriter(engine, trial_id, chunk_s=1.0, schema=task.sample_schema()) as writer,
+        ending,
+    ):
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
@@ -338,6 +366,7 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
                 chunks.append(samples)
                 if run.on_samples is not None:
                     run.on_samples(samples)
+            observer.samples(info, samples)
             if run.pace:
                 lag = wall0 + loop.t_s / run.pace - time.monotonic()
                 if lag > 0:
@@ -366,4 +395,9 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
                 insert(TrialMeasure),
                 [{"trial_id": trial_id, "name": k, "value": float(v)} for k, v in values.items()],
             )
-    return trial_id if done.rowcount == 1 else None
+    if done.rowcount == 1:
+        observer.trial_ended(info, "completed", {
+            "success": bool(loop.success), COMPLETION_TIME: completion_s, **values})  # fmt: skip
+        return trial_id
+    observer.trial_ended(info, "interrupted", {"reason": "taken over by another session"})
+    return None

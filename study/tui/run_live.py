@@ -1,8 +1,8 @@
 """The run screen's live view and keyboard, as mixins of `RunPane`.
 
 `LiveViewMixin`: what the 30 Hz timer draws from `LiveState` (never from the worker):
-the scene the trial's task names (`Task.live_scene`: the LCCA phantom, the NOTES scope,
-or the insertion along a track) and the readout of the task's two live forces and its
+the scene the trial's task brings (`Task.live_scene`, or the insertion along a track)
+and the readout of the task's two live forces and its
 own lines. `KeyboardMixin`: the pane's key actions, handed to the keyboard driver.
 """
 
@@ -13,23 +13,13 @@ from typing import TYPE_CHECKING
 
 from rich.text import Text
 
-from study.tui.live_view import LiveReadout, PhantomView, gauge, sparkline
-from study.tui.scenes import NotesView, TrackView
+from study.tui.live_view import LiveReadout, gauge, sparkline
+from study.tui.scenes import scene_class, scene_title
 
 if TYPE_CHECKING:
     from study.protocol.tasks import Task
     from study.tui.trial_runner import LiveFrame, TrialRun
 
-SCENES = {
-    "lcca": (PhantomView, "LCCA phantom (frontal)"),
-    "notes": (NotesView, "NOTES: scope depth and roll"),
-    "track": (TrackView, "{title}: insertion"),
-}
-"""A task's `live_scene` -> the view drawn beside the readout, and its title."""
-
-
-def _scene(task: Task) -> tuple[type, str]:
-    return SCENES.get(task.live_scene, SCENES["track"])
 KEY_ACTIONS = {
     "dial_forward": "advance",
     "dial_back": "retract",
@@ -45,12 +35,15 @@ class LiveViewMixin:
     """The live view of `RunPane` (which provides run, status, last_outcome, _redraws)."""
 
     def _show_task(self, task: Task) -> None:
-        """The live view of `task`'s trials, by its `live_scene`: the LCCA phantom, the
-        NOTES scope, or the insertion along a track (any other task)."""
-        shown, title = _scene(task)
-        self.query_one("#phantom-box").border_title = title.format(title=task.title)
-        for view, _ in SCENES.values():
-            self.query_one(view).display = view is shown
+        """The live view of `task`'s trials: the scene its package brings
+        (`Task.live_scene`), mounted on first use, or the insertion along a track."""
+        shown = scene_class(task)
+        box = self.query_one("#phantom-box")
+        box.border_title = scene_title(task)
+        if not box.query(shown):
+            box.mount(shown())
+        for view in box.children:
+            view.display = type(view) is shown
 
     @property
     def redraw_hz(self) -> float:
@@ -73,7 +66,7 @@ class LiveViewMixin:
         width = max(readout.content_size.width, 10)
         text = Text(f"t {frame.t_s:6.1f} s   status: {self.status}\n", no_wrap=True)
         text.append(f"view {self.redraw_hz:4.1f} Hz\n", "dim")
-        self.query_one(_scene(frame.task)[0]).update_frame(frame)
+        self.query_one(scene_class(frame.task)).update_frame(frame)
         text.append_text(self._readout(frame, width, run))
         readout.show(text)
 

@@ -27,9 +27,9 @@ from textual.widgets import Label, Select
 
 from study.protocol.tasks import Task, get_task, tasks
 from study.tui.db_errors import SafeWorkers, plain_line
-from study.tui.live_view import LiveReadout, PhantomView
+from study.tui.live_view import LiveReadout
 from study.tui.run_live import KeyboardMixin, LiveViewMixin
-from study.tui.scenes import NotesView, TrackView
+from study.tui.scenes import TrackView, scene_class
 from study.tui.services import NextTrial, Roster, StudyServices
 from study.tui.trial_runner import (
     Simulation,
@@ -113,9 +113,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         yield Label("", id="next")
         with Horizontal(id="live"):
             with Vertical(id="phantom-box"):
-                yield PhantomView(id="phantom")
-                yield NotesView(id="notes-view")
-                yield TrackView(id="track-view")
+                for scene in dict.fromkeys([*map(scene_class, tasks()), TrackView]):
+                    yield scene()
             yield LiveReadout(id="readout")
 
     def on_mount(self) -> None:

@@ -406,12 +406,6 @@ class GruModel:
         """Per-sample network inputs from times `t` (n,) and [I_q, theta_d, theta_dd] (n, 3)."""
         return memory_inputs(t, base, self.memory)
 
-    def predict_window(self, window_std: Float2D) -> float:
-        """Output (N) for one standardised window of shape (T, inputs)."""
-        y = _window_forward(np.ascontiguousarray(window_std), *self.weights.kernel_weights())
-        s = self.standardisation
-        return y * s.target_std + s.target_mean
-
     def predict(self, features: Float2D) -> Float1D:
         """Outputs (N) for every full window of `features` (n, inputs), as `inputs` builds
         them: shape (n - T + 1,)."""

@@ -10,24 +10,10 @@ them off, which leaves exactly the eq. 1-2 system.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields, replace
 
 from teleop_core.errors import TeleopInputError
-
-
-def _require_positive(obj: object, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-            raise TeleopInputError(f"{type(obj).__name__}.{name} = {value!r}; expected > 0")
-
-
-def _require_nonnegative(obj: object, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-            raise TeleopInputError(f"{type(obj).__name__}.{name} = {value!r}; expected >= 0")
+from teleop_core.validation import require_nonnegative, require_positive
 
 
 @dataclass(frozen=True)
@@ -70,7 +56,7 @@ class FollowerPlantParams:
     """Largest q-axis voltage, 12 V supply under SVPWM (12/sqrt 3); assumption (DRV8313)."""
 
     def __post_init__(self) -> None:
-        _require_positive(
+        require_positive(
             self,
             "torque_constant_n_m_per_a",
             "pole_pairs",
@@ -82,7 +68,7 @@ class FollowerPlantParams:
             "voltage_limit_v",
             "cogging_periods_per_rev",
         )
-        _require_nonnegative(
+        require_nonnegative(
             self,
             "viscous_damping_n_m_s_per_rad",
             "coulomb_friction_n_m",
@@ -134,7 +120,7 @@ class FollowerControlParams:
     """Largest commanded q-axis current; assumption (what 6.9 V drives through 10 ohm)."""
 
     def __post_init__(self) -> None:
-        _require_positive(self, *(f.name for f in fields(self)))
+        require_positive(self, *(f.name for f in fields(self)))
 
 
 @dataclass(frozen=True)
@@ -157,11 +143,11 @@ class FollowerSensorParams:
     """E6B2-CWZ6C, 2000 P/R read in quadrature (seed 000, IV-B)."""
 
     def __post_init__(self) -> None:
-        _require_positive(
+        require_positive(
             self,
             "encoder_counts_per_rev",
             "acquisition_rate_hz",
             "estimation_rate_hz",
             "reference_encoder_counts_per_rev",
         )
-        _require_nonnegative(self, "current_noise_a", "force_sensor_noise_n", "current_filter_s")
+        require_nonnegative(self, "current_noise_a", "force_sensor_noise_n", "current_filter_s")

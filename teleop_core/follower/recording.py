@@ -32,6 +32,7 @@ import pandas as pd
 
 from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
+from teleop_core.files import atomic_path
 from teleop_core.recording_checks import check_time, numbers, read_cells
 
 REQUIRED_COLUMNS = ("t", "iq", "theta", "omega", "f_ref")
@@ -177,6 +178,5 @@ def write_csv_atomically(frame: pd.DataFrame, path: Path) -> None:
     """Write `frame` to `path` through a temporary file, so a failure leaves no partial file."""
     if not path.parent.is_dir():
         raise TeleopInputError(f"folder {path.parent} for {path.name} does not exist")
-    tmp = path.with_name(f".{path.name}.partial")
-    frame.to_csv(tmp, index=False, float_format="%.9g")
-    tmp.replace(path)
+    with atomic_path(path) as tmp:
+        frame.to_csv(tmp, index=False, float_format="%.9g")

@@ -21,13 +21,14 @@ from __future__ import annotations
 
 import importlib.machinery
 import importlib.util
-import os
 import sys
 import tempfile
 import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from teleop_core.files import replace_durably
 
 SUFFIX = importlib.machinery.EXTENSION_SUFFIXES[0]
 
@@ -98,7 +99,7 @@ def build_ahead_of_time(
             cc.export("run_ticks", signature(nt))(py_func)
             cc.compile()
             # tmp is inside folder: one atomic rename, never a half-written extension
-            os.replace(Path(tmp) / f"{_name(key)}{SUFFIX}", folder / f"{_name(key)}{SUFFIX}")
+            replace_durably(Path(tmp) / f"{_name(key)}{SUFFIX}", folder / f"{_name(key)}{SUFFIX}")
     except Exception as exc:  # any failure: the JIT kernel runs instead
         try:
             (folder / f"{_name(key)}.failed").write_text(f"{type(exc).__name__}: {exc}\n")

@@ -24,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from teleop_core.files import write_atomically
 from teleop_core.loop import layout
 from teleop_core.loop.aot import build_ahead_of_time, can_build, is_built, load_ahead_of_time
 from teleop_core.loop.tick import _make
@@ -157,9 +158,7 @@ def _jit_kernel(
     first = not path.is_file()
     if first:
         folder.mkdir(parents=True, exist_ok=True)
-        tmp = folder / f".{path.name}.{os.getpid()}"
-        tmp.write_text(_kernel_source(module, name))
-        os.replace(tmp, path)
+        write_atomically(path, _kernel_source(module, name))
     spec = importlib.util.spec_from_file_location(f"_haptic_study_{path.stem}", path)
     if spec is None or spec.loader is None:  # pragma: no cover - a file path always has one
         raise ImportError(str(path))

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.follower.params import _require_nonnegative, _require_positive
+from teleop_core.validation import require_nonnegative, require_positive
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,7 @@ class CalibrationPolynomials:
     """Lever from the dial axis to the force gauge (Fig. 10(a)); assumption."""
 
     def __post_init__(self) -> None:
-        _require_positive(self, "max_current_ma", "lever_arm_m")
+        require_positive(self, "max_current_ma", "lever_arm_m")
         for name in ("loading", "unloading"):
             a, b, _ = getattr(self, name)
             if b <= 0 or (a < 0 and -b / (2 * a) < self.max_current_ma):
@@ -80,14 +80,14 @@ class DialParams:
     polynomials: CalibrationPolynomials = field(default_factory=CalibrationPolynomials)
 
     def __post_init__(self) -> None:
-        _require_positive(
+        require_positive(
             self,
             "inertia_kg_m2",
             "current_time_constant_s",
             "hysteresis_width_ma",
             "gauge_time_constant_s",
         )
-        _require_nonnegative(
+        require_nonnegative(
             self,
             "viscous_damping_n_m_s_per_rad",
             "static_friction_n_m",
@@ -99,12 +99,6 @@ class DialParams:
                 f"coulomb_friction_n_m {self.coulomb_friction_n_m} exceeds static_friction_n_m "
                 f"{self.static_friction_n_m}; expected breakaway >= sliding friction"
             )
-
-    @property
-    def max_torque_n_m(self) -> float:
-        """The largest torque the calibrated range renders (loading branch), N m."""
-        p = self.polynomials
-        return p.lever_arm_m * p.force_n(p.max_current_ma, "loading")
 
 
 @dataclass(frozen=True)
@@ -134,8 +128,8 @@ class HapticParams:
     """HV (True) renders eq. 7; VO (False) renders only the return spring-damper."""
 
     def __post_init__(self) -> None:
-        _require_positive(self, "speed_gain_m_s_per_rad", "spring_n_m_per_rad")
-        _require_nonnegative(
+        require_positive(self, "speed_gain_m_s_per_rad", "spring_n_m_per_rad")
+        require_nonnegative(
             self, "haptic_gain_n_m_per_n", "deadband_n", "saturation_n_m", "damper_n_m_s_per_rad"
         )
         if not math.isfinite(self.reference_angle_rad):

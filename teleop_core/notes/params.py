@@ -17,11 +17,11 @@ the grey-box fit use; the two axis classes carry the SI units in their field nam
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from typing import ClassVar, Self
 
 from teleop_core.errors import TeleopInputError
+from teleop_core.validation import require_nonnegative, require_positive
 
 DOFS = ("translation", "rotation")
 CHIRP_BAND_HZ = (1.0, 30.0)
@@ -33,20 +33,6 @@ MSD_M_M, MSD_M_S, MSD_K_S, MSD_B_M, MSD_B_S = range(len(MSD_FIELDS))  # `as_tupl
 
 class NotesParamsError(TeleopInputError):
     """A NOTES device parameter out of its physical range."""
-
-
-def _require_positive(obj: object, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        if not (math.isfinite(value) and value > 0):
-            raise NotesParamsError(f"{name} = {value!r}; expected a finite value > 0")
-
-
-def _require_nonnegative(obj: object, *names: str) -> None:
-    for name in names:
-        value = getattr(obj, name)
-        if not (math.isfinite(value) and value >= 0):
-            raise NotesParamsError(f"{name} = {value!r}; expected a finite value >= 0")
 
 
 @dataclass(frozen=True)
@@ -66,7 +52,7 @@ class MsdParams:
     """Damper b_s in parallel with k_s (N s/m or N m s/rad)."""
 
     def __post_init__(self) -> None:
-        _require_positive(self, *MSD_FIELDS)
+        require_positive(self, *MSD_FIELDS, error=NotesParamsError)
 
     def as_tuple(self) -> tuple[float, float, float, float, float]:
         """(m_m, m_s, k_s, b_m, b_s), the order of MSD_FIELDS."""
@@ -88,9 +74,9 @@ class _AxisParams:
     _limit: ClassVar[str]
 
     def _check(self) -> None:
-        _require_positive(self, *self._linear, self._limit)
+        require_positive(self, *self._linear, self._limit, error=NotesParamsError)
         coulomb, static = self._friction
-        _require_nonnegative(self, coulomb, static)
+        require_nonnegative(self, coulomb, static, error=NotesParamsError)
         if getattr(self, static) < getattr(self, coulomb):
             raise NotesParamsError(f"{static} = {getattr(self, static)}; expected >= {coulomb}")
 
@@ -215,7 +201,7 @@ class RotationParams(_AxisParams):
 
     def __post_init__(self) -> None:
         self._check()
-        _require_positive(self, "ccw_transmission", "cw_transmission")
+        require_positive(self, "ccw_transmission", "cw_transmission", error=NotesParamsError)
 
     @property
     def gains(self) -> tuple[float, float]:

@@ -43,7 +43,7 @@ Where the numbers come from: the surgeons' benchmark of seed 001 (IV, [20]) give
 maxima and a share of time (pull 4.5 N, push 9.9 N, CW / CCW torque 76.7 / 85 N mm,
 push above 5.62 N for 23.57 % of the procedure). Every coefficient below is an
 assumption, chosen so that these figures follow from a plausible procedure
-(`study.protocol.notes_trial`), and each says which figure it was tuned against. The
+(`study.tasks.notes.trial`), and each says which figure it was tuned against. The
 closed forms the tests check: a steady pull at speed v in the cavity is
 -(W z_s + c_w d_f v) with W = f_w d_f + F_inc and z_s = (v / delta) / (v / delta +
 1 / tau); a steady push adds C (d - d_f) z_s; the torque of a steady roll is

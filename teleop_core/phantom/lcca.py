@@ -37,7 +37,6 @@ import numpy as np
 
 from teleop_core._jit import njit
 from teleop_core.errors import TeleopInputError
-from teleop_core.follower.params import _require_positive
 from teleop_core.loop.environments import Environment
 from teleop_core.loop.layout import (
     E_BRANCH,
@@ -62,6 +61,7 @@ from teleop_core.phantom.anatomy import (
     ArchAnatomy,
     build_paths,
 )
+from teleop_core.validation import require_positive
 
 
 @dataclass(frozen=True)
@@ -92,7 +92,7 @@ class GuidewireParams:
     assumption. Slower insertion, lower force."""
 
     def __post_init__(self) -> None:
-        _require_positive(
+        require_positive(
             self,
             "bending_stiffness_n_m2",
             "friction_coefficient",

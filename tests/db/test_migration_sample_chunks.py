@@ -21,6 +21,8 @@ from db.sample_reader import SampleReader
 
 OLD = "0004_trial_measures"
 COLUMNS = ("t_s", "insertion_m", "branch", "proximal_force_n", "distal_force_n")
+HEAD_COLUMNS = ("t_s", "insertion_m", "branch", "reference_force_n", "distal_force_n")
+"""The same columns at the head, under the LCCA task's own names (revision 0006)."""
 
 
 def _rows() -> dict[int, list[tuple[int, float, float | None, str | None, float, float | None]]]:
@@ -74,7 +76,7 @@ def _old_database(url: str) -> None:
 def _read_back(engine: Engine, trial_id: int) -> list[tuple]:
     with SampleReader(engine, batch_rows=700) as reader:
         return [
-            (row["seq"], *(row[c] for c in COLUMNS))
+            (row["seq"], *(row[c] for c in HEAD_COLUMNS))
             for batch in reader.trial(trial_id)
             for row in batch.to_pylist()
         ]

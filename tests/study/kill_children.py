@@ -12,8 +12,8 @@ import signal
 import types
 from pathlib import Path
 
-from study.protocol.participants import SimulatedParticipant
 from study.protocol.session import participant_traits, run_session
+from study.tasks.lcca.simulated_participant import SimulatedParticipant
 
 PRELOAD = [__name__, "tests.study.kill_warmup"]
 """What the fork server imports before it forks: this module and the compiled loop."""

@@ -6,9 +6,9 @@ OpenMP-parallel torch code can hang in its first parallel region.
 """
 
 from study.protocol.default_estimator import load_estimator
-from study.protocol.lcca_trial import lcca_loop
-from study.protocol.participants import SimulatedParticipant
 from study.protocol.session import participant_traits
+from study.tasks.lcca.simulated_participant import SimulatedParticipant
+from study.tasks.lcca.trial import lcca_loop
 from teleop_core.phantom.lcca import LccaPhantom
 
 _phantom = LccaPhantom()

@@ -1,4 +1,4 @@
-"""The LCCA trial's behavioural features (`study.protocol.lcca_features`), on a hand-built
+"""The LCCA trial's behavioural features (`study.tasks.lcca.features`), on a hand-built
 trace whose every feature is known by construction, and their wiring into the task."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.protocol.lcca_features import AIM_FLOOR_RAD, FEATURES, lcca_features
 from study.protocol.tasks import get_task
+from study.tasks.lcca.features import AIM_FLOOR_RAD, FEATURES, lcca_features
 
 OSTIUM_M = 0.25
 DT = 0.01
@@ -110,7 +110,7 @@ def test_a_trial_without_backing_off_or_target_has_those_features_undefined() ->
 def test_the_task_reads_its_features_off_a_simulated_trial() -> None:
     task = get_task("lcca")
     assert task.fit_features == FEATURES
-    from study.protocol.participants import PROFILES, ParticipantTraits
+    from study.protocol.traits import PROFILES, ParticipantTraits
 
     mean = {t: m for t, (m, _) in PROFILES["expert"].__dict__.items()}
     traits = ParticipantTraits(group="expert", **mean)

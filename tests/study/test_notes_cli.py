@@ -120,9 +120,18 @@ def test_a_study_with_lcca_and_notes_runs_notes_blocks(tmp_path: Path) -> None:
     frame = trial_frame(engine)
     with sqlite3.connect(db) as raw:
         expose_samples(raw)
+        # stored under the NOTES task's own columns, the demanded roll torque with them
         demanded = dict(raw.execute(
-            "SELECT trial_id, MAX(ABS(proximal_force_n)) FROM samples GROUP BY trial_id"
+            "SELECT trial_id, MAX(ABS(force_demanded_n)) FROM samples GROUP BY trial_id"
         ).fetchall())  # fmt: skip
+        torque = dict(raw.execute(
+            "SELECT trial_id, MAX(ABS(torque_demanded_n_m)) FROM samples GROUP BY trial_id"
+        ).fetchall())  # fmt: skip
+        stored_columns = [r[1] for r in raw.execute("PRAGMA table_info(samples)")]
+    with engine.connect() as conn:
+        torque_peaks = dict(conn.execute(text(
+            "SELECT trial_id, value FROM trial_measures WHERE name = 'peak_torque_demanded_n_m'"
+        )).all())  # fmt: skip
     with engine.connect() as conn:
         stored = dict(conn.execute(text(
             "SELECT trial_id, value FROM trial_measures WHERE name = 'peak_force_demanded_n'"
@@ -138,3 +147,7 @@ def test_a_study_with_lcca_and_notes_runs_notes_blocks(tmp_path: Path) -> None:
     assert stored.keys() == demanded.keys() and len(stored) == 2
     for trial_id, value in stored.items():
         assert value == pytest.approx(demanded[trial_id])
+        # the demanded torque's peak, once computed and dropped, is now in the samples
+        assert torque_peaks[trial_id] == pytest.approx(torque[trial_id])
+    assert "torque_demanded_n_m" in stored_columns
+    assert "proximal_force_est_n" not in stored_columns  # no LCCA name for a NOTES force

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from study.bench.notes_surgeons import PAPER, surgeons_summary
-from study.protocol.notes_trial import measures
+from study.tasks.notes.trial import measures
 
 
 def _trace(force: list[float], torque: list[float]) -> pd.DataFrame:

@@ -24,8 +24,8 @@ from study.analysis.participant_fit.fit import (
     simulate_people,
 )
 from study.errors import StudyInputError
-from study.protocol.participants import PROFILES, TRAITS
 from study.protocol.tasks import get_task
+from study.protocol.traits import PROFILES, TRAITS
 from tests.study.conftest import one_error_line
 
 SETTINGS = FitSettings(design=200, repeats=1, check=4, bootstrap=10, jobs=1, seed=3, max_s=60.0)

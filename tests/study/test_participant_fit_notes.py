@@ -20,7 +20,7 @@ from study.analysis.participant_fit.fit import (
 )
 from study.cli import main
 from study.protocol.design import TEMPLATE
-from study.protocol.participants import PROFILES
+from study.protocol.traits import PROFILES
 
 SETTINGS = FitSettings(design=120, repeats=1, check=4, bootstrap=10, jobs=1, seed=5, max_s=60.0)
 pytestmark = pytest.mark.timeout(900)

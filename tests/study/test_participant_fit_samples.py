@@ -72,7 +72,7 @@ def test_a_trial_without_samples_gives_the_measures_only(tmp_path: Path) -> None
 
 def test_the_bench_truth_lies_off_the_priors_by_the_shift() -> None:
     from study.bench.participants import truth_profiles
-    from study.protocol.participants import PROFILES, TRAIT_BOUNDS, TRAITS
+    from study.protocol.traits import PROFILES, TRAIT_BOUNDS, TRAITS
 
     truth = truth_profiles(0.7)
     for group, profile in PROFILES.items():
@@ -92,7 +92,7 @@ def test_the_oracle_bound_is_the_normal_mean_s_chance_of_lying_within_the_tolera
     from scipy.stats import norm
 
     from study.bench.participants import oracle_within
-    from study.protocol.participants import TRAIT_BOUNDS, TRAITS, GroupProfile
+    from study.protocol.traits import TRAIT_BOUNDS, TRAITS, GroupProfile
 
     # every trait mid-way between its bounds, with an SD (a quarter of the mean) that
     # leaves the clipping 4 SDs away: the people's mean of n is then N(mu, sd^2 / n), and

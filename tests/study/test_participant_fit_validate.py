@@ -12,7 +12,7 @@ import pytest
 from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
 from study.analysis.participant_fit.estimate import HYPER_SD, GroupEstimator
 from study.analysis.participant_fit.validate import held_out_errors
-from study.protocol.participants import PROFILES, TRAITS
+from study.protocol.traits import PROFILES, TRAITS
 
 MEASURES = ("completion_time_s", "peak_proximal_force_n")
 NOISE = 0.02

@@ -9,8 +9,8 @@ import pytest
 from scipy.stats import wilcoxon
 
 from study.errors import StudyInputError
-from study.protocol.lcca_trial import run_lcca_trial, simulated_participant, wall_contacts
-from study.protocol.participants import GROUPS, draw_traits
+from study.protocol.traits import GROUPS, draw_traits, simulated_participant
+from study.tasks.lcca.trial import run_lcca_trial, wall_contacts
 from teleop_core.loop.drivers import OperatorView
 from teleop_core.phantom.lcca import LccaPhantom
 

@@ -37,7 +37,7 @@ from study.protocol.design import (
     parse_design,
 )
 from study.protocol.exchange import TRIAL_COLUMNS
-from study.protocol.tasks.lcca import MAX_FORCE_N
+from study.tasks.lcca.task import MAX_FORCE_N
 
 JUNK = ["", " ", "inf", "-inf", "nan", "NaN", "-1", "1e400", "1e308", "3_0", "²", "0x10",
         "99999999999999999999999", "1e6", "=1+1", "+1", "P1", "lcca", "HV", "true", "yes",

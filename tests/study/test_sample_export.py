@@ -24,17 +24,28 @@ from sqlalchemy.engine import make_url
 from db.engine import make_session_factory
 from db.migrate import open_database
 from db.models import Participant, Trial
-from db.models.trial import SAMPLE_COLUMNS
 from db.samples import SampleReader, SampleWriter
 from study.cli import main
 from study.protocol.design import TEMPLATE
 from study.protocol.export import export_data
-from study.protocol.sample_export import SAMPLE_EXPORT_COLUMNS
 from tests.conftest import decode_stored_chunk
 
+LCCA_COLUMNS = (
+    "t_s", "insertion_m", "rotation_rad", "tip_x_m", "tip_y_m", "tip_z_m", "branch",
+    "reference_force_n", "proximal_force_n", "distal_force_n", "dial_angle_rad",
+    "dial_torque_n_m",
+)  # fmt: skip
+"""The LCCA task's own sample columns, written out here."""
+SAMPLE_EXPORT_COLUMNS = ("participant", "task", "condition", "trial", "seq", *LCCA_COLUMNS)
+OLD_TO_LCCA = {"proximal_force_n": "reference_force_n", "proximal_force_est_n": "proximal_force_n"}
+"""The trials here are written in the layout of before the tasks' own schemas (the
+writer's default): the export gives them under the LCCA's names."""
+
 _REFERENCE_SQL = """
-SELECT p.code, t.task, t.condition, t.trial_index + 1, c.first_seq, c.raw_bytes, c.data
+SELECT p.code, t.task, t.condition, t.trial_index + 1, c.first_seq, c.raw_bytes, c.data,
+       s.data
 FROM sample_chunks c JOIN trials t ON c.trial_id = t.id
+JOIN sample_schemas s ON s.id = c.schema_id
 JOIN participants p ON t.participant_id = p.id
 WHERE t.status = 'completed' AND NOT t.practice
 ORDER BY t.id, c.first_seq
@@ -129,8 +140,8 @@ def _reference(db: str) -> pd.DataFrame:
         )
         cursor = conn.execute(_REFERENCE_SQL)
     frames = []
-    for code, task, condition, trial, first_seq, raw_bytes, data in cursor.fetchall():
-        chunk = decode_stored_chunk(data, raw_bytes).to_pandas()
+    for code, task, condition, trial, first_seq, raw_bytes, data, schema in cursor.fetchall():
+        chunk = decode_stored_chunk(data, raw_bytes, schema).to_pandas().rename(columns=OLD_TO_LCCA)
         key = {"participant": code, "task": task, "condition": condition, "trial": trial}
         key["seq"] = first_seq + np.arange(len(chunk))
         frames.append(pd.concat([pd.DataFrame(key), chunk], axis=1))
@@ -155,7 +166,7 @@ def _norm(frame: pd.DataFrame) -> pd.DataFrame:
         frame[c] = pd.Series(
             [v if isinstance(v, str) else None for v in frame[c]], dtype=object
         )
-    for c in SAMPLE_COLUMNS:
+    for c in LCCA_COLUMNS:
         if c != "branch":
             frame[c] = frame[c].astype(float)
     return frame.astype({"trial": "int64", "seq": "int64"})

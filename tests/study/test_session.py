@@ -143,7 +143,7 @@ _DIE_AT = """
 import os, signal, sys
 from db.migrate import open_database
 from study.protocol.default_estimator import load_estimator
-from study.protocol.participants import SimulatedParticipant
+from study.tasks.lcca.simulated_participant import SimulatedParticipant
 from study.protocol.session import participant_traits, run_session
 from teleop_core.phantom.lcca import LccaPhantom
 

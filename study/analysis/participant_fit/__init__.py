@@ -1,7 +1,7 @@
 """Simulated participants fitted to a study's trials (issue 24): `study participants fit`.
 
 - `observed.py`: the task's trials from the database, their sample features (the task's
-  `fit_features`, e.g. `study.protocol.lcca_features`), each person's moments.
+  `fit_features`, e.g. `study.tasks.lcca.features`), each person's moments.
 - `simulate.py`: trait settings through the task's own trials, in parallel.
 - `emulator.py`: the moments as a response surface of the traits.
 - `estimate.py`: which traits the moments identify; each group's trait distribution by

@@ -47,7 +47,7 @@ from sklearn.linear_model import RidgeCV
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 
 from study.protocol.design import KNOWN_CONDITIONS
-from study.protocol.participants import PROFILES, TRAIT_BOUNDS, TRAITS, GroupProfile
+from study.protocol.traits import PROFILES, TRAIT_BOUNDS, TRAITS, GroupProfile
 
 LOG_FLOOR = 1e-3
 """Smallest value taken before a log (a peak force of 0 N reads as 1 mN)."""

@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from study.analysis.participant_fit.emulator import MomentEmulator
-from study.protocol.participants import TRAIT_BOUNDS, TRAITS, GroupProfile
+from study.protocol.traits import TRAIT_BOUNDS, TRAITS, GroupProfile
 
 NU0 = 2.0
 """Pseudo-people at the profile's sd in the M-step's sd (the spread's prior weight)."""

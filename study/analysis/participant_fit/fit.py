@@ -52,8 +52,8 @@ from study.analysis.participant_fit.summaries import power_effects, summaries
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
 from study.protocol.participant_model import FORMAT
-from study.protocol.participants import PROFILES, TRAITS, GroupProfile, draw_traits
 from study.protocol.tasks import get_task
+from study.protocol.traits import PROFILES, TRAITS, GroupProfile, draw_traits
 
 
 @dataclass(frozen=True)

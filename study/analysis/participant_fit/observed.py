@@ -32,8 +32,8 @@ from study.analysis.participant_fit.emulator import floor, log_moment, moment_na
 from study.analysis.source import DataSource
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS
-from study.protocol.participants import PROFILES
 from study.protocol.tasks import get_task
+from study.protocol.traits import PROFILES
 
 Progress = Callable[[int, int], None]
 MIN_PER_GROUP = 4
@@ -113,12 +113,11 @@ def with_features(
     keys = list(zip(trials["participant"], trials["condition"], trials["trial"], strict=True))
     todo = [(i, ids[key][0]) for i, key in enumerate(keys) if key in ids and ids[key][1]]
     context = the_task.session_context()
-    rename = {c.stored_as: c.name for c in the_task.sample_columns if c.stored_as}
     values = np.full((len(trials), len(names)), np.nan)
     with SampleReader(engine) as reader:
         for done, (i, tid) in enumerate(todo):
-            frame = pa.Table.from_batches(list(reader.trial(tid))).to_pandas()
-            features = the_task.trial_features(frame.rename(columns=rename), context)
+            table = the_task.stored_table(pa.Table.from_batches(list(reader.trial(tid))))
+            features = the_task.trial_features(table.to_pandas(), context)
             values[i] = [features.get(f, np.nan) for f in names]
             progress(done + 1, len(todo))
     out[names] = values

@@ -32,8 +32,8 @@ from typing import Any
 import pandas as pd
 
 from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
-from study.protocol.participants import ParticipantTraits
 from study.protocol.tasks import get_task
+from study.protocol.traits import ParticipantTraits
 
 
 def trial_seed(setting: int, repeat: int, salt: str = "fit", condition: str = "") -> int:

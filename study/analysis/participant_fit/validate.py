@@ -23,7 +23,7 @@ import pandas as pd
 from study.analysis.participant_fit.emulator import MomentEmulator
 from study.analysis.participant_fit.estimate import GroupEstimator
 from study.analysis.participant_fit.observed import person_moments
-from study.protocol.participants import TRAITS, GroupProfile
+from study.protocol.traits import TRAITS, GroupProfile
 
 FOLDS = 4
 """Each held-out quarter is estimated by an emulator fitted to the other three."""

@@ -26,83 +26,36 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from study.errors import StudyInputError
+from study.protocol.tasks.declarations import LiveTrace, Measure, SampleColumn, pose_columns
 
 if TYPE_CHECKING:
     import numpy as np
     import pandas as pd
+    import pyarrow as pa
 
     from teleop_core.loop.drivers import Driver
 
-BUILTIN = ("study.protocol.tasks.lcca", "study.protocol.tasks.notes")
+BUILTIN = ("study.tasks.lcca.task", "study.tasks.notes.task")
 """The modules of the tasks that come with the tool, each registering its `TASK`."""
+__all__ = [
+    "COMPLETION_TIME",
+    "LiveTrace",
+    "Measure",
+    "SampleColumn",
+    "Task",
+    "TrialResult",
+    "get_task",
+    "is_task",
+    "measure_named",
+    "pose_columns",
+    "register",
+    "task_names",
+    "tasks",
+    "unregister",
+]
 ENTRY_POINT_GROUP = "haptic_study.tasks"
 COMPLETION_TIME = "completion_time_s"
 """Every task's first measure: seconds from the first sample to the trial's end."""
-
-
-@dataclass(frozen=True)
-class Measure:
-    """One summary measure of a trial: stored, exported and analysed by `name`."""
-
-    name: str
-    """With its unit in the name (`peak_tip_force_n`)."""
-    unit: str
-    label: str
-    """Axis label, without the unit (`peak tip force`)."""
-    description: str
-    """What it is (the codebook's text)."""
-    analysed: bool = True
-    """In the statistics and figures (else stored and exported only)."""
-    max_value: float | None = None
-    """Largest value an import accepts (a device's bound); None: no bound."""
-    integer: bool = False
-
-    @property
-    def axis_label(self) -> str:
-        return f"{self.label} ({self.unit})" if self.unit else self.label
-
-
-@dataclass(frozen=True)
-class SampleColumn:
-    """One column of the task's sample rows, in the loop's order."""
-
-    name: str
-    """The task's own name for it (TRIAL.csv, live view, figures)."""
-    stored_as: str | None
-    """The `samples` table column that stores it; None: not stored."""
-    unit: str
-    description: str
-
-
-def pose_columns(
-    insertion: str,
-    rotation: str,
-    tip: str,
-    *,
-    insertion_name: str = "insertion_m",
-    rotation_name: str = "rotation_rad",
-) -> tuple[SampleColumn, ...]:
-    """The first six columns every task's rows start with (the loop's layout): time,
-    insertion depth, roll and the tip's position, each described in the task's words."""
-    return (
-        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
-        SampleColumn(insertion_name, "insertion_m", "m", insertion),
-        SampleColumn(rotation_name, "rotation_rad", "rad", rotation),
-        *(SampleColumn(f"tip_{axis}_m", f"tip_{axis}_m", "m", tip) for axis in "xyz"),
-    )
-
-
-@dataclass(frozen=True)
-class LiveTrace:
-    """A force the live view plots (and whose peak it shows when the trial ends)."""
-
-    column: str
-    """A `SampleColumn.name`."""
-    label: str
-    full_scale: float
-    """The gauge's full scale, in the column's unit."""
-    magnitude: bool = False
-    """Plot |value| (pushes and pulls alike)."""
 
 
 @dataclass
@@ -115,7 +68,7 @@ class TrialResult:
 
 
 class Traits(Protocol):
-    """A simulated person (`study.protocol.participants.ParticipantTraits`; named here by
+    """A simulated person (`study.tasks.lcca.simulated_participant.ParticipantTraits`; named here by
     what a task uses of it, so that the registry does not import the participants)."""
 
     group: str
@@ -154,21 +107,22 @@ class Task:
     live_traces: ClassVar[tuple[LiveTrace, LiveTrace]]
     live_peaks: ClassVar[tuple[LiveTrace, LiveTrace]]
     """The two peaks reported when a trial ends (as stored measures)."""
-    live_scene: ClassVar[str] = "track"
-    """What the TUI draws beside the readout: `lcca` (the phantom), `notes` (the scope's
-    depth and roll) or `track` (the insertion along a bar, for any task)."""
+    live_scene: ClassVar[str | None] = None
+    """The widget the run screen draws beside the readout, as `module:Class` (a Textual
+    widget of the task's package with `update_frame(frame)`, imported by the TUI when it
+    shows the task); None: the insertion along a bar (`study.tui.scenes.TrackView`)."""
+    live_scene_title: ClassVar[str] = "{title}: insertion"
+    """The live view's title (`{title}`: the task's `title`)."""
     key_hints: ClassVar[str] = "↑↓ dial ←→ rotate space let go e end"
     track_length_m: ClassVar[float] = 0.5
     """The `track` scene's full length of insertion, m."""
     trace_names: ClassVar[dict[str, str]]
-    """TRIAL.csv force columns -> legend label, for the force-trace figure."""
+    """Force columns (the task's sample column names) -> legend label, for the
+    force-trace figure, in the order of `study.analysis.trace_figure.STYLES`."""
     sign_note: ClassVar[str] = ""
     """The sign convention of the traced forces, under the figure."""
     trace_measure: ClassVar[str] = ""
     """The measure whose highest VO trial Fig. 9 draws (default: the last analysed one)."""
-    trial_figure: ClassVar[str] = "traces"
-    """How `study simulate --plot` draws one trial: `lcca` (the path in the phantom),
-    `notes` (depth, roll and forces) or `traces` (the live traces over time, any task)."""
 
     # -- the trial --------------------------------------------------------------------
 
@@ -232,6 +186,12 @@ class Task:
             **values, **extras, **self.driver_counts(driver), "participant": traits.to_dict(),
         }  # fmt: skip
         return TrialResult(self.trial_frame(samples), summary)
+
+    def trial_figure(self, frame: pd.DataFrame, title: str) -> Any:
+        """The matplotlib figure `study simulate --plot` draws of one trial (its TRIAL.csv
+        frame), drawn by the task's package; None (the default): the insertion and the
+        live traces over time (`study.analysis.trial_plot.traces_plot`)."""
+        return None
 
     fit_features: ClassVar[tuple[str, ...]] = ()
     """`trial_features`' keys: a trial frame's features for the participant fit (> 0, SI)."""
@@ -305,17 +265,53 @@ class Task:
     def column_index(self) -> dict[str, int]:
         return {c.name: k for k, c in enumerate(self.sample_columns)}
 
-    def stored_columns(self, samples: np.ndarray) -> dict[str, list[object]]:
-        """The `samples` table's columns of a batch of loop rows (regions by name)."""
-        out: dict[str, list[object]] = {}
+    def sample_schema(self) -> pa.Schema:
+        """The Arrow schema the task's samples are stored in: its columns in order under
+        its own names, each with its unit and description; the region column is text."""
+        import pyarrow as pa
+
+        from db.sample_codec import sample_field
+
+        region = self.region_column
+        return pa.schema(
+            [
+                sample_field(c.name, c.unit, c.description, text=c.name == region)
+                for c in self.sample_columns
+            ]
+        )
+
+    def stored_columns(self, samples: np.ndarray) -> dict[str, Any]:
+        """A batch of loop rows as the stored columns, by the task's names (regions by
+        name)."""
+        out: dict[str, Any] = {}
+        region = self.region_column
         for k, column in enumerate(self.sample_columns):
-            if column.stored_as is None:
-                continue
-            values = samples[:, k].tolist()
-            if column.stored_as == "branch":
-                values = [self.regions[int(v)] for v in values]
-            out[column.stored_as] = values
+            values = samples[:, k]
+            if column.name == region:
+                values = [self.regions[int(v)] for v in values.tolist()]
+            out[column.name] = values
         return out
+
+    def stored_table(self, table: pa.Table) -> pa.Table:
+        """Samples read from the database (`db.sample_reader`) under the task's own
+        columns: key columns (`trial_id`, `seq`) kept in front, then every sample column
+        in the task's order. Chunks stored in the layout of before the tasks' own schemas
+        (`SampleColumn.stored_as`) are renamed; a column they lack is NULL."""
+        import pyarrow as pa
+
+        keys = [k for k in ("trial_id", "seq") if k in table.column_names]
+        values = [n for n in table.column_names if n not in keys]
+        own = values == [c.name for c in self.sample_columns]
+        arrays = [table[k] for k in keys]
+        fields = [table.schema.field(k) for k in keys]
+        for column, own_field in zip(self.sample_columns, self.sample_schema(), strict=True):
+            source = column.name if own else column.stored_as
+            if source is not None and source in values:
+                arrays.append(table[source].cast(own_field.type))
+            else:
+                arrays.append(pa.nulls(table.num_rows, own_field.type))
+            fields.append(own_field)
+        return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 
     def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
         """`gain_n_m_per_n`, else the task's default; refused for a task without a dial."""

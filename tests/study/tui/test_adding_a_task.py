@@ -1,5 +1,6 @@
-"""Adding a task (README, "Adding a task"): a third task defined here, in its own module
-and nowhere else, registered, and run through a session, the export, the analysis and
+"""Adding a task (README, "Adding a task"): the worked example `examples/probe_task`, a
+package of its own that haptic-study does not name, installed here through its entry
+point and run through a session, the export, the import, the analysis, the figures and
 the TUI's run screen.
 
 The task: push a probe 80 mm into a homogeneous medium. The medium resists with a
@@ -14,136 +15,64 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
+import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import ClassVar
+from typing import Any
 
-import numpy as np
 import pandas as pd
 import pytest
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
+import study.protocol.tasks as registry
 from db.migrate import open_database
 from db.models.trial import Trial
 from study.cli import main
-from study.protocol.tasks import (
-    LiveTrace,
-    Measure,
-    SampleColumn,
-    Task,
-    get_task,
-    pose_columns,
-    register,
-    unregister,
-)
-from teleop_core.loop.drivers import Driver, HandAction, OperatorView
+from study.protocol.tasks import get_task, unregister
 
+EXAMPLE = Path(__file__).resolve().parents[3] / "examples" / "probe_task"
 DEPTH_M = 0.08
 DAMPING_N_S_PER_M = 40.0
 RATE_GAIN_M_S_PER_RAD = 0.05
 AIM_RAD = 0.8
-"""The simulated participant's aim, the same in every trial."""
-RATE_HZ = 100.0
+"""The example's values (`haptic_study_probe.loop`), written here again by hand."""
 
 
-class ProbeDriver(Driver):
-    """Aims the dial at a fixed angle until the probe is at depth."""
-
-    rate_hz = 25.0
-
-    def __init__(self, aim_rad: float) -> None:
-        self.aim_rad = aim_rad
-
-    def start(self, rng: np.random.Generator) -> None:
-        pass
-
-    def act(self, view: OperatorView) -> HandAction:
-        return HandAction(done=True) if view.success else HandAction(dial_target_rad=self.aim_rad)
-
-
-class ProbeLoop:
-    """The task's loop: the dial's aim sets the probe's speed; the medium pushes back."""
-
-    def __init__(self, condition: str) -> None:
-        self.condition = condition
-        self.t_s, self.depth_m, self.done, self.success = 0.0, 0.0, False, False
-
-    def start(self, driver: Driver) -> None:
-        self.driver = driver
-        driver.start(np.random.default_rng(0))
-
-    def advance(self, duration_s: float) -> np.ndarray:
-        rows = []
-        for _ in range(round(duration_s * RATE_HZ)):
-            if self.done:
-                break
-            view = OperatorView(self.t_s, 0.0, 0.0, self.depth_m, 0.0, (self.depth_m, 0.0, 0.0),
-                                "medium", self.success)  # fmt: skip
-            action = self.driver.act(view)
-            if action.done:
-                self.done = True
-                break
-            speed = RATE_GAIN_M_S_PER_RAD * action.dial_target_rad
-            self.t_s = round(self.t_s + 1 / RATE_HZ, 9)
-            self.depth_m = min(self.depth_m + speed / RATE_HZ, DEPTH_M)
-            self.success = self.depth_m >= DEPTH_M - 1e-12
-            region = 1.0 if self.success else 0.0
-            force = DAMPING_N_S_PER_M * speed
-            rows.append([self.t_s, self.depth_m, 0.0, self.depth_m, 0.0, 0.0, region, force,
-                         action.dial_target_rad])  # fmt: skip
-        return np.array(rows, dtype=float).reshape(-1, 9)
-
-
-class ProbeTask(Task):
-    name = "probe"
-    title = "Probe insertion"
-    regions = ("medium", "depth")
-    sample_columns = (
-        *pose_columns(
-            "probe depth",
-            "probe roll (none)",
-            "tip position",
-            insertion_name="depth_m",
-            rotation_name="roll_rad",
-        ),
-        SampleColumn("where", "branch", "", "medium or at depth"),
-        SampleColumn("push_force_n", "proximal_force_n", "N", "the medium's push back"),
-        SampleColumn("aim_rad", "dial_angle_rad", "rad", "the hand's aim"),
-    )
-    measures = (
-        Measure(
-            "peak_push_force_n",
-            "N",
-            "peak push force",
-            "largest push of the medium",
-            max_value=10.0,
-        ),
-    )
-    live_traces = (LiveTrace("push_force_n", "push", 2.0), LiveTrace("aim_rad", "aim", 1.0))
-    live_peaks = (LiveTrace("push_force_n", "push", 2.0), LiveTrace("aim_rad", "aim", 1.0))
-    trace_names: ClassVar[dict[str, str]] = {"proximal_force_n": "push (medium)"}
-    sign_note = "Push force: positive resists insertion."
-    track_length_m = 0.1
-
-    def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
-                  context=None, link=None):  # fmt: skip
-        return ProbeLoop(condition)
-
-    def simulated_driver(self, traits, max_s, context):
-        return ProbeDriver(AIM_RAD)
-
-    def trial_measures(self, samples, success):
-        return {"peak_push_force_n": float(samples[:, 7].max())}, {}
+@pytest.fixture(scope="module")
+def probe_site(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The example installed as a package (its wheel built from its pyproject) into a
+    folder of its own, from a copy so that the build leaves the checkout as it was."""
+    root = tmp_path_factory.mktemp("probe")
+    shutil.copytree(EXAMPLE, root / "src")
+    site = root / "site"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index",
+         "--no-build-isolation", "--target", str(site), str(root / "src")],
+        check=True,
+    )  # fmt: skip
+    return site
 
 
 @pytest.fixture
-def probe() -> Iterator[ProbeTask]:
-    task = register(ProbeTask())
+def probe(probe_site: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Any]:
+    """The installed example on the path; the registry finds it by its entry point."""
+    monkeypatch.syspath_prepend(str(probe_site))
+    monkeypatch.setattr(registry, "_ENTRY_POINTS_LOADED", False)
     try:
-        yield task
+        yield get_task("probe")
     finally:
-        unregister(task.name)
+        unregister("probe")
+        for name in [m for m in sys.modules if m.startswith("haptic_study_probe")]:
+            del sys.modules[name]
+
+
+def test_the_example_is_found_through_its_entry_point(probe: Any, probe_site: Path) -> None:
+    assert type(probe).__module__ == "haptic_study_probe.task"
+    assert Path(sys.modules["haptic_study_probe.task"].__file__).is_relative_to(probe_site)
+    assert "probe" in registry.task_names()
 
 
 DESIGN = """\
@@ -168,8 +97,8 @@ def _study(tmp_path: Path, n: int) -> str:
     return db
 
 
-def test_a_task_registered_here_runs_through_session_export_and_analysis(
-    probe: ProbeTask, tmp_path: Path
+def test_the_example_task_runs_through_session_export_import_analysis_and_figures(
+    probe: Any, tmp_path: Path
 ) -> None:
     assert get_task("probe") is probe
     db = _study(tmp_path, 6)
@@ -197,6 +126,18 @@ def test_a_task_registered_here_runs_through_session_export_and_analysis(
     book = pd.read_csv(tmp_path / "out" / "codebook.csv").set_index("column")
     assert book.loc["peak_push_force_n", "unit"] == "N"
     assert "largest push of the medium" in book.loc["peak_push_force_n", "meaning"]
+    # the samples under the task's own columns, its unstored-before speed column too:
+    # v = k_v * aim at every sample (hand-computed above)
+    assert main(["export", "--out", str(tmp_path / "s"), "--samples", "--db", db]) == 0
+    samples = pd.read_csv(tmp_path / "s" / "samples.csv")
+    assert list(samples.columns) == [
+        "participant", "task", "condition", "trial", "seq", "t_s", "depth_m", "roll_rad",
+        "tip_x_m", "tip_y_m", "tip_z_m", "where", "push_force_n", "aim_rad", "medium_speed_m_s",
+    ]  # fmt: skip
+    assert samples["medium_speed_m_s"].to_numpy() == pytest.approx(speed)
+    assert set(samples["where"]) == {"medium", "depth"}
+    book = pd.read_csv(tmp_path / "s" / "codebook.csv").set_index("column")
+    assert book.loc["medium_speed_m_s", "unit"] == "m/s"
     # the exported file imports back into a fresh study of the same design
     db2 = str(tmp_path / "again.db")
     assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db2]) == 0
@@ -208,14 +149,20 @@ def test_a_task_registered_here_runs_through_session_export_and_analysis(
     measures = {(d["task"], d["measure"]) for d in report["descriptives"]}
     assert {("probe", "completion_time_s"), ("probe", "peak_push_force_n")} <= measures
     assert main(["analyze", "--out", str(tmp_path / "res2"), "--task", "probe", "--db", db]) == 0
+    # figures: the task's own set, named after it
+    figures = tmp_path / "figs"
+    assert main(["figures", "--out", str(figures), "--format", "png", "--db", db]) == 0
+    drawn = sorted(p.name for p in figures.glob("*.png"))
+    assert drawn and all(name.endswith("_probe.png") for name in drawn), drawn
 
 
-async def test_the_run_screen_shows_a_registered_task(probe: ProbeTask, tmp_path: Path) -> None:
+async def test_the_run_screen_shows_the_example_task(probe: Any, tmp_path: Path) -> None:
     from study.protocol.default_estimator import load_estimator
+    from study.tasks.lcca.scene import PhantomView
+    from study.tasks.notes.scene import NotesView
     from study.tui import StudyServices, TuiSettings, make_app
     from study.tui.confirm import Confirm
-    from study.tui.live_view import PhantomView
-    from study.tui.scenes import NotesView, TrackView
+    from study.tui.scenes import TrackView
     from tests.study.tui.conftest import run_screen, wait_for
 
     db = _study(tmp_path, 1)

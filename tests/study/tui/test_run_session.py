@@ -20,11 +20,11 @@ from study.protocol.default_estimator import load_estimator
 from study.protocol.design import parse_design
 from study.protocol.roster import add_participant, create_study
 from study.protocol.tlx import store_tlx
+from study.tasks.lcca.scene import PhantomView
+from study.tasks.notes.scene import NotesView
 from study.tui import StudyServices, TuiSettings, make_app
 from study.tui.confirm import Confirm
-from study.tui.live_view import PhantomView
 from study.tui.run_pane import RunPane
-from study.tui.scenes import NotesView
 from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON
 from tests.study.conftest import stored_samples
@@ -63,7 +63,7 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
         await wait_for(pilot, lambda: pane.status == "completed", 120)
         assert pane.last_outcome.startswith("P001: trial stored (id 1, peaks")
         # the live view was fed while the trial ran
-        assert app.query_one("#phantom")._frame is not None
+        assert app.query_one(PhantomView)._frame is not None
         # one trial per block in DESIGN: the block is done, the form opens for it
         await wait_for(pilot, lambda: app.query_one("#tabs").active == "tlx")
         await wait_for(pilot, lambda: app.query_one(TlxPane).status == "new")

@@ -18,7 +18,7 @@ Summary (seed 001, IV): completion time, peak demanded and rendered force and to
 the largest push and pull and the largest clockwise and counter-clockwise torque
 demanded, and the fraction of the time the demanded push exceeds the device's
 continuous force (the paper's surgeons: 23.57 %). The study database stores them under these names
-(`study.protocol.tasks.notes`).
+(`study.tasks.notes.task`).
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ import numpy as np
 import pandas as pd
 
 from study.errors import StudyInputError
-from study.protocol.lcca_trial import CONDITIONS
-from study.protocol.participants import ParticipantTraits
+from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
 from study.protocol.tasks import TrialResult
+from study.protocol.traits import ParticipantTraits
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
     GRIP_STIFFNESS_N_M_PER_RAD,

@@ -1,7 +1,7 @@
 """The LCCA task: a guidewire from the descending aorta into the left common carotid
 (seed 000), driven by the friction-wheel robot through the haptic dial.
 
-Its trials are `study.protocol.lcca_trial` (loop, simulated participant, measures);
+Its trials are `study.tasks.lcca.trial` (loop, simulated participant, measures);
 this module says what they are to the rest of the tool (`study.protocol.tasks`).
 """
 
@@ -51,11 +51,12 @@ class LccaTask(Task):
         LiveTrace("distal_force_n", "distal", 1.0),
     )
     live_peaks = live_traces
-    live_scene = "lcca"
+    live_scene = "study.tasks.lcca.scene:PhantomView"
+    live_scene_title = "LCCA phantom (frontal)"
     key_hints = "↑↓ dial ←→ rotate space let go e end"
     trace_names: ClassVar[dict[str, str]] = {
-        "proximal_force_n": "proximal, reference",
-        "proximal_force_est_n": "proximal, estimated",
+        "reference_force_n": "proximal, reference",
+        "proximal_force_n": "proximal, estimated",
         "distal_force_n": "distal (tip on wall)",
     }
     sign_note = (
@@ -63,22 +64,35 @@ class LccaTask(Task):
         "resists withdrawal. Distal force: tip-wall contact, ≥\u00a00."
     )
 
+    def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
+        """`gain_n_m_per_n` (finite, >= 0 N m/N), else the paper's G_h."""
+        from study.tasks.lcca.trial import condition_haptics
+
+        gain = super().haptic_gain(gain_n_m_per_n)
+        if gain is not None:
+            condition_haptics("HV", gain)
+        return gain
+
     def session_context(self) -> Any:
         from teleop_core.phantom.lcca import LccaPhantom
 
         return LccaPhantom()
 
-    trial_figure = "lcca"
+    def trial_figure(self, frame, title):
+        from study.tasks.lcca.figures import plot_trial
+        from teleop_core.phantom.lcca import LccaPhantom
+
+        return plot_trial(frame, LccaPhantom(), title)
 
     def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
                   context=None, link=None):  # fmt: skip
-        from study.protocol.lcca_trial import lcca_loop
+        from study.tasks.lcca.trial import lcca_loop
 
         return lcca_loop(condition, seed, estimator, haptic_gain_n_m_per_n, context, link)
 
     def simulate(self, traits, condition, seed, max_s, *, haptic_gain_n_m_per_n=None,
                  estimator=None, link=None, context=None):  # fmt: skip
-        from study.protocol.lcca_trial import run_lcca_trial
+        from study.tasks.lcca.trial import run_lcca_trial
 
         return run_lcca_trial(traits, condition, seed, estimator, haptic_gain_n_m_per_n,
                               max_s, context, link)  # fmt: skip
@@ -91,12 +105,12 @@ class LccaTask(Task):
         )
 
     def simulated_driver(self, traits, max_s, context):
-        from study.protocol.participants import SimulatedParticipant
+        from study.tasks.lcca.simulated_participant import SimulatedParticipant
 
         return SimulatedParticipant(traits, context, max_s)
 
     def trial_measures(self, samples, success):
-        from study.protocol.lcca_trial import measures
+        from study.tasks.lcca.trial import measures
 
         result = measures(self.trial_frame(samples), success)
         stored = {m.name: result[m.name] for m in self.measures}
@@ -108,10 +122,10 @@ class LccaTask(Task):
         "advance_speed_m_s", "approach_m", "approaches", "target_speed_ratio", "aim_error_rad",
         "turn_peak_s", "turn_swing_s", "stall_s", "stall_backoffs", "peak_felt_rise_n_m",
     )  # fmt: skip
-    """`study.protocol.lcca_features.FEATURES` (a test keeps them equal)."""
+    """`study.tasks.lcca.features.FEATURES` (a test keeps them equal)."""
 
     def trial_features(self, frame, context):
-        from study.protocol.lcca_features import lcca_features
+        from study.tasks.lcca.features import lcca_features
         from teleop_core.master.params import HapticParams
         from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS, REGIONS
 
@@ -124,7 +138,7 @@ class LccaTask(Task):
         return lcca_features(frame, context.ostium_m(target), phi, names, spring, route)
 
     def driver_counts(self, driver):
-        from study.protocol.participants import SimulatedParticipant
+        from study.tasks.lcca.simulated_participant import SimulatedParticipant
 
         if isinstance(driver, SimulatedParticipant):
             return {"obstacles_felt": driver.obstacles_felt,
@@ -132,7 +146,7 @@ class LccaTask(Task):
         return {}
 
     def trial_frame(self, samples):
-        from study.protocol.lcca_trial import TRIAL_COLUMNS
+        from study.tasks.lcca.trial import TRIAL_COLUMNS
 
         frame = super().trial_frame(samples)
         return frame[list(TRIAL_COLUMNS.values())]

@@ -4,7 +4,7 @@ A trial's summary measures (time, peak forces) are what the study analyses, but 
 mix every trait of the person who made them: a slow trial may be a slow hand, a
 cautious approach, a wrong aim or a long wait before backing off. The sample stream
 tells these apart, as a rater watching the recording would (what each feature follows
-in `study.protocol.participants.SimulatedParticipant`, and in a person):
+in `study.tasks.lcca.simulated_participant.SimulatedParticipant`, and in a person):
 
 - `advance_speed_m_s`: the median insertion speed on the way up the aorta, more than
   `APPROACH_M` before the ostium (the preferred speed);

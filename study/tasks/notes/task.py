@@ -1,7 +1,7 @@
 """The NOTES task: the 2-DOF haptic device rolling and pushing an endoscope through the
 posterior fornix to a target in the abdomen (seed 001).
 
-Its trials are `study.protocol.notes_trial` (loop, simulated participant, measures);
+Its trials are `study.tasks.notes.trial` (loop, simulated participant, measures);
 this module says what they are to the rest of the tool (`study.protocol.tasks`). The
 device has no haptic dial gain: HV renders the tissue's resistance within the device's
 continuous limits, VO nothing.
@@ -73,30 +73,34 @@ class NotesTask(Task):
         LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
         LiveTrace("tip_force_n", "on the fornix", FULL_SCALE_N, magnitude=True),
     )
-    live_scene = "notes"
+    live_scene = "study.tasks.notes.scene:NotesView"
+    live_scene_title = "NOTES: scope depth and roll"
     key_hints = "↑↓ push/pull ←→ roll space let go e end"
     trace_names: ClassVar[dict[str, str]] = {
-        "proximal_force_n": "demanded (tissue)",
-        "proximal_force_est_n": "rendered (device)",
-        "distal_force_n": "tip (fornix)",
+        "force_demanded_n": "demanded (tissue)",
+        "force_rendered_n": "rendered (device)",
+        "tip_force_n": "tip (fornix)",
     }
     sign_note = (
         "Force on the scope: positive resists insertion (pushing in), negative "
         "resists withdrawal. Tip force: the fornix on the tip, ≥\u00a00."
     )
 
-    trial_figure = "notes"
+    def trial_figure(self, frame, title):
+        from study.tasks.notes.figures import notes_trial_plot
+
+        return notes_trial_plot(frame, title)
 
     def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
                   context=None, link=None):  # fmt: skip
-        from study.protocol.notes_trial import notes_loop
+        from study.tasks.notes.trial import notes_loop
 
         self.haptic_gain(haptic_gain_n_m_per_n)  # refuses a gain: the device has no dial
         return notes_loop(condition, seed)
 
     def simulate(self, traits, condition, seed, max_s, *, haptic_gain_n_m_per_n=None,
                  estimator=None, link=None, context=None):  # fmt: skip
-        from study.protocol.notes_trial import run_notes_trial
+        from study.tasks.notes.trial import run_notes_trial
 
         self.haptic_gain(haptic_gain_n_m_per_n)
         return run_notes_trial(traits, condition, seed, max_s)
@@ -111,12 +115,12 @@ class NotesTask(Task):
         )
 
     def simulated_driver(self, traits, max_s, context):
-        from study.protocol.notes_trial import NotesParticipant
+        from study.tasks.notes.trial import NotesParticipant
 
         return NotesParticipant(traits, max_s)
 
     def trial_measures(self, samples, success):
-        from study.protocol.notes_trial import measures
+        from study.tasks.notes.trial import measures
 
         result = measures(self.trial_frame(samples), success)
         stored = {m.name: result[m.name] for m in self.measures}
@@ -124,7 +128,7 @@ class NotesTask(Task):
         return stored, extras
 
     def driver_counts(self, driver):
-        from study.protocol.notes_trial import NotesParticipant
+        from study.tasks.notes.trial import NotesParticipant
 
         return {"stalls_seen": driver.stalls_seen} if isinstance(driver, NotesParticipant) else {}
 

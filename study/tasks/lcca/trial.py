@@ -15,16 +15,17 @@ import numpy as np
 import pandas as pd
 
 from study.errors import StudyInputError
-from study.protocol.participant_model import ParticipantModel
-from study.protocol.participants import ParticipantTraits, SimulatedParticipant, draw_traits
+from study.protocol.design import KNOWN_CONDITIONS
 from study.protocol.tasks import TrialResult
+from study.protocol.traits import ParticipantTraits
+from study.tasks.lcca.simulated_participant import SimulatedParticipant
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.core import LoopConfig, TeleopLoop
 from teleop_core.loop.link import LinkParams
 from teleop_core.master.params import HapticParams
 from teleop_core.phantom.lcca import LccaPhantom
 
-CONDITIONS = ("VO", "HV")
+CONDITIONS = KNOWN_CONDITIONS
 CONTACT_THRESHOLD_N = 0.2
 """Distal force above which the tip is taken to press a wall (above the ~0.1 N the
 angled tip exerts passing the LCCA's curve); assumption."""
@@ -135,11 +136,3 @@ def trial_frame(raw: pd.DataFrame) -> pd.DataFrame:
     """TRIAL.csv's columns from the loop's sample frame."""
     return raw[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
 
-
-def simulated_participant(
-    group: str, seed: int, model: ParticipantModel | None = None
-) -> ParticipantTraits:
-    """The traits of the participant a seed draws from `group` (same seed, same person),
-    from the fitted `model`'s distributions when one is given."""
-    rng = np.random.default_rng([seed, 0x5EED])
-    return draw_traits(group, rng) if model is None else model.draw(group, rng)

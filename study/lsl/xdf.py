@@ -1,0 +1,272 @@
+"""XDF in: a LabRecorder recording's streams stored with the trials its markers name.
+
+LabRecorder writes every stream it recorded into one XDF file (the format: a magic
+`XDF:`, then chunks of `[NumLengthBytes][Length][Tag][Content]`; tag 2 a stream's
+header, 3 its samples, 4 a clock offset, 6 its footer). `import_xdf` reads it with
+pyxdf (which also puts every stream on the recorder's clock from the clock offsets),
+finds the trials by the project's markers (`study.lsl.markers`: each trial's
+`trial_start` and `trial_end`), and stores, for each trial, every other stream's
+samples stamped between the two (the project's own sample streams are already in the
+database). Each sample's time on the trial's clock is its synchronised stamp minus the
+`trial_start` marker's, times the trial's clock rate.
+
+Refused with one line, nothing stored: a file that is not XDF; a truncated one (a chunk
+running past the end of the file, or a stream without the footer LabRecorder writes
+when it stops); one without the project's markers; markers of another study, or naming
+a trial the database does not have; a trial whose streams were imported already.
+pyxdf reads damaged files as far as it can; the structural check is done here, before,
+for that reason.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sqlalchemy import Engine, insert, select
+from sqlalchemy.orm import Session
+
+from db.lsl_streams import StreamMeta, channel_names, encode_chunk, stream_row
+from db.models.lsl import LslChunk, LslStream
+from db.models.study import Participant
+from db.models.trial import Trial
+from study.errors import StudyInputError
+from study.lsl.markers import SAMPLE_STREAM_TYPE, parse
+from study.protocol.roster import load_study
+
+MAGIC = b"XDF:"
+CHUNK_S = 1.0
+"""Longest span of trial time in one stored chunk, s."""
+
+
+class XdfInputError(StudyInputError):
+    """A recording that cannot be imported; the message says why."""
+
+
+def check_structure(path: Path) -> None:
+    """Refuse a file that is not XDF or that was cut short (see the module docstring)."""
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        if f.read(4) != MAGIC:
+            raise XdfInputError(f"{path} is not an XDF file (no 'XDF:' at its start); "
+                                "expected a LabRecorder recording")  # fmt: skip
+        headers: set[int] = set()
+        footers: set[int] = set()
+        k = 0
+        while True:
+            at = f.tell()
+            width = f.read(1)
+            if not width:
+                break
+            k += 1
+            nbytes = {1: 1, 4: 4, 8: 8}.get(width[0])
+            raw = f.read(nbytes or 0)
+            if nbytes is None or len(raw) < nbytes:
+                raise _truncated(path, k, at, size)
+            length = int.from_bytes(raw, "little")
+            body = f.tell()
+            if length < 2 or body + length > size:
+                raise _truncated(path, k, at, size)
+            tag = struct.unpack("<H", f.read(2))[0]
+            if tag in (2, 6):
+                stream_id = struct.unpack("<I", f.read(4))[0]
+                (headers if tag == 2 else footers).add(stream_id)
+            f.seek(body + length)
+    missing = sorted(headers - footers)
+    if missing:
+        raise XdfInputError(
+            f"{path} is truncated: stream {missing[0]} has no footer (the recording did not "
+            "end cleanly); expected a complete LabRecorder recording"
+        )
+
+
+def _truncated(path: Path, k: int, at: int, size: int) -> XdfInputError:
+    return XdfInputError(
+        f"{path} is truncated: chunk {k} at byte {at} runs past the end of the file "
+        f"({size} bytes); expected a complete LabRecorder recording"
+    )
+
+
+@dataclass(frozen=True)
+class MarkedTrial:
+    """A trial as the markers give it: its keys, and its start and end on the recording's clock."""
+
+    start: dict[str, Any]
+    start_s: float
+    end_s: float
+
+    @property
+    def key(self) -> tuple[str, int, bool, int, int]:
+        m = self.start
+        return (m["participant"], int(m["block"]), bool(m["practice"]), int(m["trial"]),
+                int(m["attempt"]))  # fmt: skip
+
+
+def marked_trials(streams: list[dict[str, Any]]) -> tuple[list[MarkedTrial], set[int]]:
+    """The trials the project's markers delimit, and the indices of the marker streams."""
+    found: list[tuple[float, dict[str, Any]]] = []
+    marker_streams: set[int] = set()
+    for i, stream in enumerate(streams):
+        if _info(stream, "channel_format") != "string":
+            continue
+        ours = [(float(t), parse(str(v[0]))) for t, v in
+                zip(stream["time_stamps"], stream["time_series"], strict=True)]  # fmt: skip
+        ours = [(t, m) for t, m in ours if m is not None]
+        if ours:
+            marker_streams.add(i)
+            found += ours
+    found.sort(key=lambda tm: tm[0])
+    trials, open_start = [], None
+    for t, m in found:
+        if m["event"] == "trial_start":
+            open_start = (t, m)
+        elif (
+            m["event"] == "trial_end"
+            and open_start
+            and m.get("trial_id") == open_start[1].get("trial_id")
+        ):
+            trials.append(MarkedTrial(open_start[1], open_start[0], t))
+            open_start = None
+    return trials, marker_streams
+
+
+def _info(stream: dict[str, Any], key: str, default: str = "") -> str:
+    value = stream["info"].get(key, [default])
+    return str(value[0] if isinstance(value, list) and value else value or default)
+
+
+def _channels(stream: dict[str, Any], n: int) -> list[dict[str, str]]:
+    labels: list[str | None] = []
+    units: list[str] = []
+    types: list[str] = []
+    try:
+        for ch in stream["info"]["desc"][0]["channels"][0]["channel"]:
+            labels.append((ch.get("label") or [None])[0])
+            units.append((ch.get("unit") or [""])[0] or "")
+            types.append((ch.get("type") or [""])[0] or "")
+    except (KeyError, IndexError, TypeError):
+        pass
+    units += [""] * (n - len(units))
+    types += [""] * (n - len(types))
+    names = channel_names(labels, n)
+    return [{"name": names[k], "unit": units[k], "type": types[k]} for k in range(n)]
+
+
+@dataclass
+class ImportResult:
+    trials: int
+    streams: int
+    samples: int
+
+
+def import_xdf(
+    engine: Engine, path: Path, progress: Callable[[str], None] = lambda _: None
+) -> ImportResult:
+    """Store the recording's streams with the trials its markers name (module docstring)."""
+    import pyxdf
+
+    check_structure(path)
+    progress(f"reading {path.name}")
+    logging.getLogger("pyxdf").setLevel(logging.ERROR)
+    try:
+        streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
+    except Exception as exc:  # pyxdf raises what its parsers raise
+        raise XdfInputError(f"{path} could not be read as XDF ({exc}); expected a LabRecorder "
+                            "recording") from None  # fmt: skip
+    trials, marker_streams = marked_trials(streams)
+    if not trials:
+        raise XdfInputError(
+            f"{path} has no haptic-study trial markers; expected a recording made while "
+            "`study run` published them ([lsl] publish = true, or --lsl)"
+        )
+    others = [i for i in range(len(streams)) if i not in marker_streams
+              and _info(streams[i], "type") != SAMPLE_STREAM_TYPE]  # fmt: skip
+    with Session(engine) as session:
+        study, _ = load_study(session)
+        other = next(
+            (t.start.get("study") for t in trials if t.start.get("study") != study.name), None
+        )
+        if other is not None:
+            raise XdfInputError(
+                f"{path}: the markers are of study {other!r}; expected this database's "
+                f"study {study.name!r}"
+            )
+        ids = [_trial_id(session, study.id, path, t) for t in trials]
+        for trial_id in ids:
+            taken = session.scalars(select(LslStream.name).where(LslStream.trial_id == trial_id))
+            names = {_info(streams[i], "name") for i in others}
+            again = sorted(names & set(taken))
+            if again:
+                raise XdfInputError(
+                    f"{path}: stream {again[0]!r} of trial {trial_id} is stored already; "
+                    "expected a recording not yet imported"
+                )
+    progress(f"storing {len(others)} streams of {len(trials)} trials")
+    n_streams = n_samples = 0
+    with engine.begin() as conn:  # all or nothing
+        for trial, trial_id in zip(trials, ids, strict=True):
+            for i in others:
+                stored = _store(conn, streams[i], trial, trial_id)
+                n_streams += stored > 0
+                n_samples += stored
+    return ImportResult(len(trials), n_streams, n_samples)
+
+
+def _trial_id(session: Session, study_id: int, path: Path, trial: MarkedTrial) -> int:
+    code, block, practice, index, attempt = trial.key
+    found = session.scalar(
+        select(Trial.id)
+        .join(Participant)
+        .where(Participant.study_id == study_id, Participant.code == code,
+               Trial.block_index == block, Trial.practice == practice,
+               Trial.trial_index == index, Trial.attempt == attempt)
+    )  # fmt: skip
+    if found is None:
+        kind = "practice trial" if practice else "trial"
+        raise XdfInputError(
+            f"{path}: the markers name {code} block {block} {kind} {index + 1} attempt "
+            f"{attempt}, which this database does not have; expected the study's database"
+        )
+    return found
+
+
+def _store(conn: Any, stream: dict[str, Any], trial: MarkedTrial, trial_id: int) -> int:
+    stamps = np.asarray(stream["time_stamps"], dtype=np.float64)
+    inside = np.flatnonzero((stamps >= trial.start_s) & (stamps <= trial.end_s))
+    fmt = _info(stream, "channel_format")
+    n_channels = int(_info(stream, "channel_count", "0"))
+    rate = float(trial.start.get("clock_rate") or 1.0)
+    offsets = np.asarray(stream.get("clock_values", []), dtype=np.float64)
+    correction = float(np.median(offsets)) if len(offsets) else 0.0
+    meta = StreamMeta(
+        name=_info(stream, "name"), type=_info(stream, "type"), channel_format=fmt,
+        nominal_srate_hz=float(_info(stream, "nominal_srate", "0")),
+        channels=_channels(stream, n_channels), lsl_t0_s=trial.start_s,
+        time_correction_s=correction, clock_rate=rate, source_id=_info(stream, "source_id"),
+        hostname=_info(stream, "hostname"), origin="xdf",
+    )  # fmt: skip
+    stream_id = conn.execute(
+        insert(LslStream).returning(LslStream.id),
+        {"trial_id": trial_id, "gaps": [], "n_samples": len(inside), **stream_row(meta)},
+    ).scalar_one()
+    if not len(inside):
+        return 0
+    series = stream["time_series"]
+    t_s = (stamps[inside] - trial.start_s) * rate
+    start = 0
+    while start < len(inside):
+        stop = start + int(np.searchsorted(t_s[start:], t_s[start] + CHUNK_S, side="left"))
+        stop = max(stop, start + 1)
+        rows = inside[start:stop]
+        values = [series[k] for k in rows] if meta.is_string else np.asarray(series)[rows]
+        conn.execute(insert(LslChunk), {
+            "stream_id": stream_id, "first_seq": start,
+            **encode_chunk(meta, stamps[rows] - correction, values, t_s[start:stop]),
+        })  # fmt: skip
+        start = stop
+    return len(inside)

@@ -1,0 +1,151 @@
+"""What a session tells the world outside its database while it runs.
+
+The session runner hands each event of a session (its start, each trial's start, every
+batch of samples, each trial's end with its outcome, the session's end) to an observer,
+so that publishing them (the Lab Streaming Layer, `study.lsl`) or recording other
+instruments beside the trials plugs in without the runner knowing how. Other parts of
+a session (probes, the questionnaire) report theirs through `event`.
+
+Each trial's clock: sample time `t_s` of the trial happens at wall time
+`clock_origin_s + t_s / clock_rate` on `time.monotonic()` (the runner keeps a paced or
+real-time session within one step of it; an unpaced simulated session is not at real
+time, `realtime` False).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from study.protocol.tasks import Task
+
+
+@dataclass(frozen=True)
+class SessionInfo:
+    study: str
+    participant: str
+    group: str
+    driver: str
+    pace: float | None
+    """Times real time of a paced simulated session; None: as fast as it goes (simulated)
+    or real time (a person at the hardware or keyboard)."""
+    tasks: tuple[Task, ...] = ()
+    """The tasks of the session's trials, in the order they first come."""
+
+
+@dataclass(frozen=True)
+class TrialInfo:
+    trial_id: int
+    task: Task
+    condition: str
+    block_index: int
+    trial_index: int
+    practice: bool
+    attempt: int
+    clock_origin_s: float
+    """`time.monotonic()` at the trial's t = 0, s."""
+    clock_rate: float
+    """Trial seconds per wall second (the pace; 1 at real time)."""
+    realtime: bool
+    """The trial's clock keeps step with the wall clock (paced, or a real-time driver)."""
+
+    def marker_fields(self) -> dict[str, Any]:
+        return {
+            "trial_id": self.trial_id,
+            "task": self.task.name,
+            "condition": self.condition,
+            "block": self.block_index,
+            "trial": self.trial_index,
+            "practice": self.practice,
+            "attempt": self.attempt,
+            "clock_rate": self.clock_rate,
+        }
+
+
+class SessionObserver:
+    """Receives a session's events; every method does nothing unless overridden."""
+
+    def session_started(self, session: SessionInfo) -> None:
+        """Before the first trial (the participant's lease is held)."""
+
+    def trial_started(self, trial: TrialInfo) -> None:
+        """The trial's row is `running`, its loop started, its clock at 0."""
+
+    def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
+        """After each step of the loop: the rows acquired (the task's `sample_columns`,
+        possibly none), already handed to the sample writer."""
+
+    def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
+        """`status`: `completed` (outcome: success and the measures), `stopped` (the
+        session was stopped), or `interrupted` (an error; outcome names it)."""
+
+    def session_ended(self) -> None:
+        """After the last trial, also when the session ended on an error."""
+
+    def event(self, kind: str, **fields: Any) -> None:
+        """Something else of the session: `probe` (a probe trial), `questionnaire`
+        (NASA-TLX stored), with their own fields."""
+
+
+class Observers(SessionObserver):
+    """Several observers, each told every event in order."""
+
+    def __init__(self, observers: Sequence[SessionObserver]) -> None:
+        self.observers = tuple(observers)
+
+    def session_started(self, session: SessionInfo) -> None:
+        for o in self.observers:
+            o.session_started(session)
+
+    def trial_started(self, trial: TrialInfo) -> None:
+        for o in self.observers:
+            o.trial_started(trial)
+
+    def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
+        for o in self.observers:
+            o.samples(trial, rows)
+
+    def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
+        for o in self.observers:
+            o.trial_ended(trial, status, outcome)
+
+    def session_ended(self) -> None:
+        for o in self.observers:
+            o.session_ended()
+
+    def event(self, kind: str, **fields: Any) -> None:
+        for o in self.observers:
+            o.event(kind, **fields)
+
+
+@contextmanager
+def session_ending(observer: SessionObserver) -> Iterator[None]:
+    """Tell `observer` the session ended, however it ends."""
+    try:
+        yield
+    finally:
+        observer.session_ended()
+
+
+@contextmanager
+def trial_ending(
+    observer: SessionObserver, info: TrialInfo, loop: Any, stopped: type[BaseException]
+) -> Iterator[None]:
+    """Tell `observer` of a trial that ends on an exception: `stopped` (an exception of
+    type `stopped`: the session was stopped) or `interrupted`. The trial's own error is
+    the one raised, even if the observer fails as well (a full disk, say)."""
+    try:
+        yield
+    except BaseException as exc:
+        status = "stopped" if isinstance(exc, stopped) else "interrupted"
+        outcome = {"t_s": loop.t_s, **({} if status == "stopped" else {"reason": repr(exc)})}
+        try:
+            observer.trial_ended(info, status, outcome)
+        except Exception:
+            pass
+        raise

@@ -1,0 +1,79 @@
+"""What a task declares about its data: its summary measures (`Measure`), the columns of
+its sample rows (`SampleColumn`, `pose_columns`) and the forces its live view traces
+(`LiveTrace`). Plain frozen records, importable without the registry or numpy; the
+registry (`study.protocol.tasks`) re-exports them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Measure:
+    """One summary measure of a trial: stored, exported and analysed by `name`."""
+
+    name: str
+    """With its unit in the name (`peak_tip_force_n`)."""
+    unit: str
+    label: str
+    """Axis label, without the unit (`peak tip force`)."""
+    description: str
+    """What it is (the codebook's text)."""
+    analysed: bool = True
+    """In the statistics and figures (else stored and exported only)."""
+    max_value: float | None = None
+    """Largest value an import accepts (a device's bound); None: no bound."""
+    integer: bool = False
+
+    @property
+    def axis_label(self) -> str:
+        return f"{self.label} ({self.unit})" if self.unit else self.label
+
+
+@dataclass(frozen=True)
+class SampleColumn:
+    """One column of the task's sample rows, in the loop's order; stored, exported and
+    drawn under `name` (the task's chunks' schema is its columns, `Task.sample_schema`)."""
+
+    name: str
+    """The task's own name for it (TRIAL.csv, the stored samples, the export, figures)."""
+    stored_as: str | None
+    """Its role in the loop's layout, and the column of the one layout every task's
+    samples had before each chunk carried its task's schema (`db.models.trial.
+    SAMPLE_COLUMNS`; `t_s`, `insertion_m`, `rotation_rad` and `branch` are required):
+    how a database of that time is read under the task's names. None: a column that
+    layout had no place for."""
+    unit: str
+    description: str
+
+
+def pose_columns(
+    insertion: str,
+    rotation: str,
+    tip: str,
+    *,
+    insertion_name: str = "insertion_m",
+    rotation_name: str = "rotation_rad",
+) -> tuple[SampleColumn, ...]:
+    """The first six columns every task's rows start with (the loop's layout): time,
+    insertion depth, roll and the tip's position, each described in the task's words."""
+    return (
+        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
+        SampleColumn(insertion_name, "insertion_m", "m", insertion),
+        SampleColumn(rotation_name, "rotation_rad", "rad", rotation),
+        *(SampleColumn(f"tip_{axis}_m", f"tip_{axis}_m", "m", tip) for axis in "xyz"),
+    )
+
+
+@dataclass(frozen=True)
+class LiveTrace:
+    """A force the live view plots (and whose peak it shows when the trial ends)."""
+
+    column: str
+    """A `SampleColumn.name`."""
+    label: str
+    full_scale: float
+    """The gauge's full scale, in the column's unit."""
+    magnitude: bool = False
+    """Plot |value| (pushes and pulls alike)."""

@@ -1,0 +1,130 @@
+"""The simulated people's traits and their distributions per experience group.
+
+Every task's simulated participant is the same person (speed, reaction, steering error,
+caution, what it notices and what it accepts) doing that task; the traits are therefore
+the study's, not a task's, and live here below the tasks (`study.tasks.*`), the session
+runner and the participant fit. Group distributions (mean, sd; truncated to plausible
+ranges) are assumptions shaped by seed 000, IV-D, not measured values; a fitted model
+(`study.protocol.participant_model`) replaces them where one is given.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Protocol
+
+import numpy as np
+
+from study.errors import StudyInputError
+from study.protocol.design import DEFAULT_GROUPS
+
+GROUPS = DEFAULT_GROUPS
+
+
+@dataclass(frozen=True)
+class GroupProfile:
+    """Group-level (mean, sd) of each trait."""
+
+    preferred_speed_m_s: tuple[float, float]
+    reaction_s: tuple[float, float]
+    steering_error_rad: tuple[float, float]
+    caution: tuple[float, float]
+    """0..1: how much it slows near the ostium and yields to felt resistance."""
+    haptic_threshold_n_m: tuple[float, float]
+    """Rise of the torque on the hand it notices; ~10-20 % of the ~0.013 N m the hand
+    holds against the spring (Weber fractions for force are 7-10 %)."""
+    visual_stall_s: tuple[float, float]
+    """How long the tip must stand still on screen before it is taken as an obstacle."""
+    comfort_torque_n_m: tuple[float, float]
+    """Resistance on the hand it accepts before pushing more gently (HV)."""
+
+
+PROFILES: dict[str, GroupProfile] = {
+    "outsider": GroupProfile(
+        preferred_speed_m_s=(0.012, 0.003),
+        reaction_s=(0.32, 0.06),
+        steering_error_rad=(0.45, 0.10),
+        caution=(0.35, 0.10),
+        haptic_threshold_n_m=(0.0030, 0.0008),
+        visual_stall_s=(0.70, 0.15),
+        comfort_torque_n_m=(0.010, 0.0015),
+    ),
+    "novice": GroupProfile(
+        preferred_speed_m_s=(0.014, 0.003),
+        reaction_s=(0.28, 0.05),
+        steering_error_rad=(0.32, 0.08),
+        caution=(0.50, 0.10),
+        haptic_threshold_n_m=(0.0025, 0.0006),
+        visual_stall_s=(0.55, 0.12),
+        comfort_torque_n_m=(0.009, 0.0012),
+    ),
+    "expert": GroupProfile(
+        preferred_speed_m_s=(0.017, 0.003),
+        reaction_s=(0.22, 0.04),
+        steering_error_rad=(0.25, 0.05),
+        caution=(0.65, 0.10),
+        haptic_threshold_n_m=(0.0020, 0.0005),
+        visual_stall_s=(0.40, 0.10),
+        comfort_torque_n_m=(0.008, 0.0010),
+    ),
+}
+
+
+@dataclass(frozen=True)
+class ParticipantTraits:
+    group: str
+    preferred_speed_m_s: float
+    reaction_s: float
+    steering_error_rad: float
+    caution: float
+    haptic_threshold_n_m: float
+    visual_stall_s: float
+    comfort_torque_n_m: float
+
+    def to_dict(self) -> dict[str, float | str]:
+        return asdict(self)
+
+
+TRAIT_BOUNDS: dict[str, tuple[float, float]] = {
+    "preferred_speed_m_s": (0.005, 0.03),
+    "reaction_s": (0.12, 0.6),
+    "steering_error_rad": (0.05, 0.8),
+    "caution": (0.0, 1.0),
+    "haptic_threshold_n_m": (0.002, 0.02),
+    "visual_stall_s": (0.2, 1.5),
+    "comfort_torque_n_m": (0.003, 0.02),
+}
+"""Plausible range of each trait: a drawn value is clipped into it."""
+TRAITS = tuple(TRAIT_BOUNDS)
+
+
+def draw_traits(
+    group: str, rng: np.random.Generator, profiles: dict[str, GroupProfile] | None = None
+) -> ParticipantTraits:
+    """One participant's traits from the group's distributions: `profiles` (a fitted
+    `study.protocol.participant_model.ParticipantModel`'s), else `PROFILES`."""
+    profiles = PROFILES if profiles is None else profiles
+    if group not in profiles:
+        raise StudyInputError(f"unknown group {group!r}; expected one of {', '.join(profiles)}")
+    p = profiles[group]
+    values = {
+        name: float(np.clip(rng.normal(*getattr(p, name)), lo, hi))
+        for name, (lo, hi) in TRAIT_BOUNDS.items()
+    }
+    return ParticipantTraits(group=group, **values)
+
+
+class TraitModel(Protocol):
+    """What `simulated_participant` uses of a fitted model
+    (`study.protocol.participant_model.ParticipantModel`, which imports this module)."""
+
+    def draw(self, group: str, rng: np.random.Generator) -> ParticipantTraits: ...
+
+
+def simulated_participant(
+    group: str, seed: int, model: TraitModel | None = None
+) -> ParticipantTraits:
+    """The traits of the participant a seed draws from `group` (same seed, same person),
+    from the fitted `model`'s distributions when one is given."""
+    rng = np.random.default_rng([seed, 0x5EED])
+    return draw_traits(group, rng) if model is None else model.draw(group, rng)
