@@ -39,6 +39,7 @@ COMMANDS = {
     "participant": "study.commands.plan:participant",
     "participants": "study.commands.participants:participants",
     "power": "study.commands.power:power",
+    "probe": "study.commands.probe:probe",
     "run": "study.commands.run:run",
     "schedule": "study.commands.plan:schedule_cmd",
     "simulate": "study.commands.simulate:simulate",

@@ -8,6 +8,7 @@ from db.models.audit import AuditEntry
 from db.models.calibration import Calibration
 from db.models.lease import SessionLease
 from db.models.lsl import LslChunk, LslStream
+from db.models.probe import ProbeTrial
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import (
@@ -28,6 +29,7 @@ __all__ = [
     "LslChunk",
     "LslStream",
     "Participant",
+    "ProbeTrial",
     "SampleChunk",
     "SampleSchema",
     "ScheduleBlock",

@@ -126,8 +126,10 @@ def run_participants_bench(
     out_dir: Path | None,
     status: Callable[[str], None] = lambda _: None,
     shift_sd: float = SHIFT_SD,
+    probes: bool = False,
 ) -> dict[str, Any]:
-    """The bench's report (see the module docstring)."""
+    """The bench's report (see the module docstring); `probes`: every simulated person
+    also answers the design's probes before the fit (`study.probes`)."""
     load_before = os.getloadavg()
     truth = truth_profiles(shift_sd)
     with tempfile.TemporaryDirectory() as tmp:
@@ -139,6 +141,11 @@ def run_participants_bench(
         study_s = time.monotonic() - start
         engine = open_database(db, create=False)
         realized = _realized(engine, Path(tmp) / "truth.json")
+        if probes:
+            from study.probes.store import run_all_probes
+
+            run_all_probes(engine, load_model(Path(tmp) / "truth.json"),
+                           lambda code: status(f"probes: {code}"))  # fmt: skip
         try:
             start, cpu0 = time.monotonic(), _cpu_s()
             model, table = fit_participants(
@@ -227,6 +234,7 @@ def run_participants_bench(
         "fixed_at_prior": model["fixed_at_prior"],
         "shrunk_to_prior": model["shrunk_to_prior"],
         "identification_ratio": model["identification_ratio"],
+        "probes": model["probes"]["line"],
         "held_out_trait_error": model["held_out_trait_error"],
         "truth_shift_prior_sds": shift_sd,
         "recovery": recovery,
@@ -299,7 +307,7 @@ def markdown(report: dict[str, Any]) -> str:
             if report["shrunk_to_prior"]
             else f"fixed at their priors: {', '.join(report['fixed_at_prior']) or 'none'}"
         )
-        + ". The truth's means lie "
+        + f". {report.get('probes', 'probes: not run')}. The truth's means lie "
         f"{report['truth_shift_prior_sds']} prior SDs from the priors'; "
         f"{report['recovery_within']} group means within 15 % "
         f"({report['recovery_within_study_people']} within 15 % of the study's own people's "

@@ -24,10 +24,14 @@ from study.errors import StudyInputError
 @click.option("--ss-type", type=click.Choice(["2", "3"]), default="2", show_default=True,
               help="Sums of squares of the mixed ANOVA: Type II (participant-weighted "
                    "condition effect) or Type III (afex's default).")  # fmt: skip
+@click.option("--covariate", default=None, metavar="NAME",
+              help="A probe (or the trait it tells, e.g. force_threshold) whose estimate per "
+                   "participant enters the mixed model as a covariate; adds "
+                   "covariate_NAME.csv and ancova_NAME.csv.")  # fmt: skip
 @db_option
 def analyze(
     out_dir: Path, task: str | None, json_path: Path | None, driver: str | None,
-    ss_type: str, db_url: str | None,
+    ss_type: str, covariate: str | None, db_url: str | None,
 ) -> None:  # fmt: skip
     """Per-group VO vs HV tests, the mixed ANOVA and the mixed model: methods.md, tables
     (CSV, Markdown, LaTeX; one set per task too when there are several) and JSON.
@@ -47,6 +51,12 @@ def analyze(
     try:
         trials, tlx = trial_frame(engine), tlx_frame(engine)
         trials, tlx, withdrawn = without_withdrawn(engine, trials, tlx)
+        if covariate is not None:
+            from study.analysis.covariate import covariate_values
+            from study.probes.store import probe_frame
+
+            probe_trials = probe_frame(engine)
+            trait, values = covariate_values(probe_trials, covariate)
     finally:
         engine.dispose()
     if task is not None:
@@ -67,6 +77,14 @@ def analyze(
     written = write(result, out_dir, json_path)
     for path in written:
         click.echo(str(path))
+    if covariate is not None:
+        drivers = probe_trials["driver"].value_counts().to_dict()
+        click.echo(
+            f"covariate {covariate}: probe trials by driver: "
+            + ", ".join(f"{d} {n}" for d, n in sorted(drivers.items()))
+            + (" (SIMULATED participants' answers)" if "simulated" in drivers else "")
+        )
+        _covariate(trials, values, trait, out_dir)
     n_ex = len(result.exclusions)
     if result.source.note:
         click.echo(result.source.note)
@@ -74,3 +92,24 @@ def analyze(
         f"{len(result.comparisons)} comparisons, {n_ex} exclusions, "
         f"{len(result.warnings)} notes, in {time.monotonic() - start:.1f} s"
     )
+
+
+def _covariate(trials, values, trait: str, out_dir: Path) -> None:  # type: ignore[no-untyped-def]
+    """The covariate's mixed model and ANCOVA-style table: written, and the table printed."""
+    from study.analysis.covariate import covariate_model
+    from study.protocol.tasks import get_task
+
+    measures = {t: get_task(t).analysed_measures for t in trials["task"].unique()}
+    lmm, ancova, notes = covariate_model(trials, values, measures, trait)
+    for name, frame in ((f"covariate_{trait}.csv", lmm), (f"ancova_{trait}.csv", ancova)):
+        tmp = out_dir / f".{name}.tmp"
+        frame.to_csv(tmp, index=False)
+        tmp.replace(out_dir / name)
+        click.echo(str(out_dir / name))
+    for note in notes:
+        click.echo(note)
+    for r in ancova.itertuples():
+        click.echo(
+            f"{r.task}/{r.measure}: {r.effect} {r.estimate:.4g} "
+            f"(95 % {r.ci_low:.4g} to {r.ci_high:.4g}, p = {r.p:.3g}, n = {r.participants})"
+        )

@@ -235,11 +235,13 @@ def bench_startup(
               "in prior SDs (0: the priors).")  # fmt: skip
 @click.option("--weak-traits", type=click.Choice(WEAK_TRAITS), default="prior",
               show_default=True, help="As `study participants fit --weak-traits`.")  # fmt: skip
+@click.option("--probes", is_flag=True,
+              help="The simulated people answer the design's probes before the fit.")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=int, default=11, show_default=True)
 @_json_option
 def bench_participants(out_dir: Path | None, trials: int, truth_people: int, truth_shift: float,
-                       weak_traits: str, jobs: int, seed: int,
+                       weak_traits: str, probes: bool, jobs: int, seed: int,
                        json_path: Path | None) -> None:  # fmt: skip
     """Recovery of known trait distributions from a simulated 20/8/8 study, and the fit's time."""
     from study.analysis.participant_fit.fit import FitSettings
@@ -251,7 +253,7 @@ def bench_participants(out_dir: Path | None, trials: int, truth_people: int, tru
         report = run_participants_bench({"outsider": 20, "novice": 8, "expert": 8}, trials,
                                         FitSettings(jobs=jobs, weak_traits=weak_traits),
                                         truth_people, seed, out_dir,
-                                        status.update, truth_shift)  # fmt: skip
+                                        status.update, truth_shift, probes)  # fmt: skip
     text = markdown(report)
     if out_dir is not None:
         (out_dir / "participants_bench.md").write_text(text)

@@ -14,14 +14,41 @@ from study.errors import StudyInputError
 @click.command("import", cls=StudyCommand)
 @file_option("--trials", "trials_csv")
 @click.option("--tlx", "tlx_csv", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--probes", "probes_csv", type=click.Path(dir_okay=False, path_type=Path),
+              help="Probe trials (probe_trials.csv of `study export`).")  # fmt: skip
 @db_option
-def import_cmd(trials_csv: Path, tlx_csv: Path | None, db_url: str | None) -> None:
-    """Import trial summaries (and NASA-TLX) collected elsewhere: all rows or none."""
+def import_cmd(
+    trials_csv: Path, tlx_csv: Path | None, probes_csv: Path | None, db_url: str | None
+) -> None:
+    """Import trial summaries (and NASA-TLX, probe trials) collected elsewhere: all rows or
+    none."""
     from study.protocol.exchange import import_data  # pandas: only when a command runs
 
     with opened_database(db_url) as engine:
+        probes = None
+        if probes_csv is not None:
+            # every probe row checked, and its participants known from the study or the
+            # trials file, before anything is written
+            from study.probes.exchange import (
+                check_not_stored,
+                check_participants,
+                known_codes,
+                read_probe_file,
+            )
+
+            probes = read_probe_file(probes_csv)
+            check_participants(probes, known_codes(engine, trials_csv), probes_csv)
+            check_not_stored(engine, probes, probes_csv)
         n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv)
-    click.echo(f"imported {n_trials} trials and {n_tlx} questionnaires")
+        n_probes = 0
+        if probes is not None:
+            from study.probes.exchange import import_probes
+
+            n_probes = import_probes(engine, probes_csv, probes)
+    click.echo(
+        f"imported {n_trials} trials and {n_tlx} questionnaires"
+        + (f" and {n_probes} probe trials" if probes_csv is not None else "")
+    )
 
 
 @click.command("export", cls=StudyCommand)

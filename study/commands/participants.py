@@ -107,6 +107,7 @@ def fit(
     model["seconds"] = round(time.monotonic() - start, 1)
     _write(out_path, model, table)
     _print(model, table)
+    click.echo(model["probes"]["line"])
     click.echo(model["lacks"]["line"])
     click.echo(model["emulator_check"]["line"])
     click.echo(

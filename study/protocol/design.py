@@ -57,6 +57,14 @@ code_prefix = "P"              # participant codes: P001, P002, ...
 [haptic_gain_n_m_per_n]        # the dial's torque per newton of estimated force (LCCA)
 HV = 0.02                      # the paper's gain (seed 000); VO renders nothing (0)
 
+[probes]                       # short measurements before a block: `study probe run`
+before_block = 1               # the block they run before (1: before the first)
+force_threshold = 60           # trials of each probe: force-discrimination threshold (QUEST+)
+reaction_time = 20             # simple reaction time
+stall_detection = 20           # time to see that the tip has stopped
+aiming = 30                    # turning the tip towards a target
+comfort_torque = 8             # resistance on the dial the participant accepts
+
 [groups]                       # experience groups and how many participants each
 outsider = 20                  # engineering outsiders
 novice = 8                     # novice doctors
@@ -77,9 +85,12 @@ _KEYS = {
     "groups": dict,
     "haptic_gain_n_m_per_n": dict,
     "lsl": dict,
+    "probes": dict,
 }
 MAX_LSL_STREAMS = 16
 MAX_PREDICATE_CHARS = 500
+MAX_PROBE_TRIALS = 200
+"""Far above any probe's need (an adaptive threshold settles in 40-80 trials)."""
 MAX_HAPTIC_GAIN_N_M_PER_N = 1.0
 """Far above any usable gain (the paper's is 0.02 N m/N; the dial saturates at 0.1 N m)."""
 
@@ -120,6 +131,10 @@ class StudyDesign:
     haptic_gain_n_m_per_n: dict[str, float] = field(default_factory=dict)
     """Per condition, the haptic dial's gain (tasks with a dial); a condition not listed
     uses the paper's (`teleop_core.master.params.HapticParams`); VO renders none."""
+    probes: dict[str, int] = field(default_factory=dict)
+    """Probe name (`study.probes`) -> its trials; empty: the study runs no probes."""
+    probes_before_block: int = 1
+    """The block (1-based) the probes run before."""
 
     lsl: LslSettings = field(default_factory=LslSettings)
     """The `[lsl]` table (streams published and recorded); off by default."""
@@ -136,6 +151,8 @@ class StudyDesign:
         data["lsl"] = self.lsl.to_dict()
         if self.lsl == LslSettings():  # designs without the table read as before
             del data["lsl"]
+        data["probes"] = {"before_block": self.probes_before_block, **self.probes}
+        del data["probes_before_block"]
         return data
 
     @classmethod
@@ -227,6 +244,7 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         )
     scheme = data.get("counterbalancing", d.counterbalancing)
     gains = _haptic_gains(data.get("haptic_gain_n_m_per_n", {}), conditions, source)
+    probes, before = _probes(data.get("probes", {}), len(tasks) * len(conditions), source)
     design = StudyDesign(
         name=data.get("name", d.name),
         seed=data.get("seed", d.seed),
@@ -241,6 +259,8 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         groups=groups,
         haptic_gain_n_m_per_n=gains,
         lsl=_lsl_settings(data.get("lsl", {}), source),
+        probes=probes,
+        probes_before_block=before,
     )
     condition_orders(conditions, scheme, source)  # refuses a scheme that does not fit
     return design
@@ -295,6 +315,35 @@ def _lsl_settings(table: dict[str, Any], source: str) -> LslSettings:
             )
         lists[key] = tuple(value)
     return LslSettings(publish, lists["record"], lists["plot"])
+
+
+def _probes(table: dict[str, Any], blocks: int, source: str) -> tuple[dict[str, int], int]:
+    """[probes]: each probe's trials and the block they run before, or one line."""
+    from study.probes import is_probe, probe_names
+
+    probes, before = {}, 1
+    for key, value in table.items():
+        where = f"{source}: probes.{key}"
+        whole = isinstance(value, int) and not isinstance(value, bool)
+        if key == "before_block":
+            if not (whole and 1 <= value <= blocks):
+                raise StudyInputError(
+                    f"{where} = {value!r}; expected a block number from 1 to {blocks}"
+                )
+            before = value
+            continue
+        if not is_probe(key):
+            raise StudyInputError(
+                f"{where} names no probe; expected before_block or one of "
+                f"{', '.join(probe_names())}"
+            )
+        if not (whole and 1 <= value <= MAX_PROBE_TRIALS):
+            raise StudyInputError(
+                f"{where} = {value!r}; expected a whole number of trials from 1 to "
+                f"{MAX_PROBE_TRIALS}"
+            )
+        probes[key] = value
+    return probes, before
 
 
 def williams_square(n: int) -> list[list[int]]:

@@ -141,11 +141,19 @@ def export_data(
     trials = trials[list(trial_columns(dict.fromkeys([*design.tasks, *trials["task"]])))]
     tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
     frames = {"trials": trials, "tlx": tlx}
+    from study.probes.exchange import codebook as probe_codebook
+    from study.probes.exchange import export_frame
+    from study.probes.store import probe_frame
+
+    probe_trials = probe_frame(engine)
+    if len(probe_trials):  # a study that ran probes: their trials too
+        frames["probe_trials"] = export_frame(probe_trials)
     columns = [c for f in frames.values() for c in f.columns]
     study_tasks = list(dict.fromkeys([*design.tasks, *trials["task"]]))
     if samples:
         columns += sample_export_columns(study_tasks)
     book = codebook(study_tasks)
+    book.update({c: e for c, e in probe_codebook().items() if c not in book})
     streams = collect_streams(engine, export_trials, selection) if samples else StreamExport()
     if streams.tables:  # every recorded instrument's channel, as `stream/channel`
         book.update({c: e for c, e in STREAM_CODEBOOK.items() if c not in book})

@@ -242,6 +242,8 @@ class TrialRun:
         self._stop = threading.Event()
         self.finished = threading.Event()
         self.participant_id: int | None = None
+        self.probe_line: str | None = None
+        """What the probe step did before the trial (`study.tui.probe_step`), if anything."""
 
     def stop(self) -> None:
         """Ask the trial to stop at its next batch of samples."""
@@ -268,6 +270,10 @@ class TrialRun:
             on_start(item)
 
         keyboard = self.keyboard
+        # the session flow: the probes the design names before this block, then the block
+        from study.tui.probe_step import run_due_probes
+
+        self.probe_line = run_due_probes(self.engine, self.code, self.driver_kind)
         try:
             ids = run_session(
                 self.engine,

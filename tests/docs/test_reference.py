@@ -74,7 +74,10 @@ def test_every_key_of_the_design_files_sub_tables_is_documented() -> None:
 
     text = (DOCS / "reference" / "design-file.md").read_text(encoding="utf-8")
     documented = set(re.findall(r"^\| `(\w+\.\w+)` \|", text, re.MULTILINE))
+    from study.probes import probe_names
+
     accepted = {f"lsl.{f.name}" for f in fields(design.LslSettings)}
+    accepted |= {"probes.before_block", *(f"probes.{name}" for name in probe_names())}
     assert accepted <= documented, f"undocumented: {sorted(accepted - documented)}"
 
 

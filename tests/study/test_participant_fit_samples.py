@@ -83,8 +83,10 @@ def test_the_bench_truth_lies_off_the_priors_by_the_shift() -> None:
             low, high = TRAIT_BOUNDS[trait]
             assert moved <= high - sd
             assert moved > mean or moved >= low + sd  # down only with an SD left to the bound
-    # the experts' haptic threshold sits on its bound (0.002 N m): it can only move up
-    assert truth["expert"].haptic_threshold_n_m[0] == pytest.approx(0.002 + 0.7 * 0.0005)
+    # up and down in turn: the experts' (group 2) haptic threshold (trait 4) moves up
+    assert truth["expert"].haptic_threshold_n_m[0] == pytest.approx(0.0033 + 0.7 * 0.0006)
+    # and the novices' (group 1) down
+    assert truth["novice"].haptic_threshold_n_m[0] == pytest.approx(0.0037 - 0.7 * 0.0007)
     assert truth_profiles(0.0) == PROFILES
 
 

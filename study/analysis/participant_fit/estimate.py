@@ -116,6 +116,7 @@ def identifiable(
     ks: dict[str, float],
     held_out: np.ndarray | None = None,
     held_out_k: float | None = None,
+    probe_info: dict[str, np.ndarray] | None = None,
 ) -> tuple[list[int], dict[str, float]]:
     """The traits whose group means the data identify (indices into TRAITS) and each
     trait's ratio: posterior / prior SD of the group mean, linearised at the priors, in
@@ -132,7 +133,9 @@ def identifiable(
     per condition (the design's repeats; default: the study's own k): a group's k trials
     tell a trait by the linearised information's ratio at k to that at `held_out_k`
     (the trials' scatter averages away over more trials, the surface's misfit does not),
-    so a study with 8 trials per condition is not judged by 2. Starting from all traits, the worst
+    so a study with 8 trials per condition is not judged by 2. `probe_info` (group -> per
+    trait, a person's mean information from the probes in prior SDs, (prior SD / SE)^2,
+    `study.probes.measure.probe_information`) adds to both. Starting from all traits, the worst
     is fixed at its prior until every ratio is below `IDENTIFIED_RATIO` (`sizes`: the
     people defining each moment; a moment fewer than two people define tells nothing)."""
     setup = {}
@@ -145,21 +148,25 @@ def identifiable(
         # the same rule on the error of held-out people (`validate.py`), trait by trait
         held = None if held_out is None else (sd / np.maximum(held_out, 1e-12)) ** 2
         noise_held = person_noise_var(emulator, held_out_k or ks[group])
-        setup[group] = (jac, person_noise_var(emulator, ks[group]), n, held, noise_held)
+        probe = np.zeros(len(TRAITS)) if probe_info is None else probe_info[group]
+        setup[group] = (jac, person_noise_var(emulator, ks[group]), n, held, noise_held, probe)
 
     def ratios(free: list[int]) -> np.ndarray:
         worst = np.zeros(len(free))
         eye = np.eye(len(free))
-        for jac, noise, n, held, noise_held in setup.values():
-            info = _information(jac, with_fixed_spread(noise, jac, free), free)
+        for jac, noise, n, held, noise_held, probe in setup.values():
+            task_info = _information(jac, with_fixed_spread(noise, jac, free), free)
+            info = task_info + np.diag(probe[free])
             post = np.linalg.inv(eye + n * info @ np.linalg.inv(info + eye))
             linear = np.sqrt(np.clip(np.diag(post), 0.0, None))
             empirical = np.zeros(len(free))
             if held is not None:
                 at_held = np.diag(_information(jac, with_fixed_spread(noise_held, jac, free), free))
                 # a trait no slope tells keeps the held-out people's information as it is
-                more = np.divide(np.diag(info), at_held, out=np.ones(len(free)), where=at_held > 0)
-                per = held[free] * more
+                more = np.divide(
+                    np.diag(task_info), at_held, out=np.ones(len(free)), where=at_held > 0
+                )
+                per = held[free] * more + probe[free]
                 empirical = 1.0 / np.sqrt(1.0 + n * per / (1.0 + per))
             worst = np.maximum(worst, np.maximum(linear, empirical))
         return worst
@@ -230,6 +237,18 @@ class GroupEstimator:
         self.person_var = with_fixed_spread(self.noise_var, jac_sd, free)
         low, high = emulator.box_
         self.low, self.high = low[free], high[free]
+        self.probes: np.ndarray | None = None
+        """(people, len(TRAITS), 2): each person's probe estimate and SE per trait (NaN
+        where none), set by `fit`."""
+
+    def _probe_rows(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Each person's probe estimates of the free traits and their weights 1 / SE
+        (0 where the person has none)."""
+        if self.probes is None:
+            return np.zeros((n, len(self.free))), np.zeros((n, len(self.free)))
+        value, se = self.probes[:, self.free, 0], self.probes[:, self.free, 1]
+        told = np.isfinite(value) & np.isfinite(se) & (se > 0)
+        return np.where(told, value, 0.0), np.where(told, 1.0 / np.where(told, se, 1.0), 0.0)
 
     def draws(self, mean: np.ndarray, sd: np.ndarray) -> np.ndarray:
         return np.clip(mean + sd * self.z, LOW, HIGH)
@@ -255,16 +274,23 @@ class GroupEstimator:
         yy, w = np.where(told, y, 0.0), np.where(told, 1.0 / np.sqrt(self.person_var), 0.0)
         h = 1e-3 * self.sd0[self.free]
         lam = np.full(n, 1e-2)
+        # a probe's estimate p of a trait, SE s: a residual (p - theta) / s (its
+        # measurement model, `study.probes`), beside the moments' and the prior's
+        pv, pw = self._probe_rows(n)
+        probe_jac = -pw[:, :, None] * np.eye(nf)[None]
 
         def residuals(t: np.ndarray) -> np.ndarray:
-            return np.concatenate([(yy - self._moments(t)) * w, (t - mu) / sd], axis=1)
+            return np.concatenate(
+                [(yy - self._moments(t)) * w, (t - mu) / sd, (pv - t) * pw], axis=1
+            )
 
         def jacobian(t: np.ndarray) -> np.ndarray:
             shifted = np.concatenate([t + h[j] * np.eye(nf)[j] for j in range(nf)])
             f0 = self._moments(t)
             f1 = self._moments(shifted).reshape(nf, n, -1)
             jy = -((f1 - f0) / h[:, None, None]).transpose(1, 2, 0) * w[:, :, None]
-            return np.concatenate([jy, np.broadcast_to(np.diag(1.0 / sd), (n, nf, nf))], axis=1)
+            prior = np.broadcast_to(np.diag(1.0 / sd), (n, nf, nf))
+            return np.concatenate([jy, prior, probe_jac], axis=1)
 
         r = residuals(theta)
         cost = 0.5 * (r**2).sum(axis=1)
@@ -298,11 +324,17 @@ class GroupEstimator:
         return np.concatenate([self.mu0[self.free], np.log(self.sd0[self.free])])
 
     def fit(
-        self, y: np.ndarray, start: np.ndarray | None = None, centre: np.ndarray | None = None
+        self,
+        y: np.ndarray,
+        start: np.ndarray | None = None,
+        centre: np.ndarray | None = None,
+        probes: np.ndarray | None = None,
     ) -> GroupFit:
         """Fit to `y` (people x moments, log scale; NaN where a feature is undefined);
         `centre` (len(TRAITS)): the weak traits' prior means, default the profile's (a
-        bootstrap replicate draws them, `prior_centre`)."""
+        bootstrap replicate draws them, `prior_centre`); `probes` (people, len(TRAITS),
+        2): the same people's probe estimates and SEs (NaN where none)."""
+        self.probes = probes
         nf, n = len(self.free), len(y)
         mean, sd = self.mu0.copy(), self.sd0.copy()
         if nf == 0:

@@ -39,6 +39,7 @@ from study.analysis.participant_fit.estimate import (
     GroupEstimator,
     identifiable,
     observed_moments,
+    prior_arrays,
 )
 from study.analysis.participant_fit.observed import (
     check_fittable,
@@ -50,6 +51,7 @@ from study.analysis.participant_fit.observed import (
 from study.analysis.participant_fit.simulate import simulate_settings
 from study.analysis.participant_fit.summaries import power_effects, summaries
 from study.errors import StudyInputError
+from study.probes.measure import probe_arrays, probe_information, probe_summary
 from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
 from study.protocol.participant_model import FORMAT
 from study.protocol.tasks import get_task
@@ -159,8 +161,13 @@ def fit_participants(
     trials = observed_trials(engine, task)
     check_fittable(trials, task, db_label)
     trials, _ = with_features(engine, trials, task, lambda a, b: progress("samples", a, b))
+    from study.probes.measure import probe_table
+    from study.probes.store import probe_frame
+
+    probe_trials = probe_frame(engine)
+    probes = probe_table(probe_trials) if len(probe_trials) else None
     return fit_trials(trials, task, settings, build_emulator(task, settings, progress),
-                      db_label, progress)  # fmt: skip
+                      db_label, progress, probes)  # fmt: skip
 
 
 def fit_trials(
@@ -170,9 +177,12 @@ def fit_trials(
     emulator: MomentEmulator,
     db_label: str,
     progress: Progress = _no_progress,
+    probes: pd.DataFrame | None = None,
 ) -> tuple[dict[str, Any], pd.DataFrame]:
     """The fit to `trials` (`observed_trials`' columns, and the features `with_features`
-    adds where samples are stored) with a built `emulator`."""
+    adds where samples are stored) with a built `emulator`; `probes`: the participants'
+    probe estimates (`study.probes.measure.probe_table`), each a measurement of a trait
+    beside the task's moments."""
     measures = list(get_task(task).analysed_measures)
     groups = check_fittable(trials, task, db_label)
     features = emulator.features_
@@ -191,8 +201,10 @@ def fit_trials(
         if all(sizes[g][names.index(f"{c}:{f}")] >= 2 for g in groups for c in KNOWN_CONDITIONS)
     ]
     held_out = validate.held_out_for(emulator, held)
+    probed = {g: probe_arrays(probes, list(by_group[g].index), TRAITS) for g in groups}
+    probe_info = {g: probe_information(probed[g], prior_arrays(PROFILES[g])[1]) for g in groups}
     told, ratios = identifiable(emulator, {g: PROFILES[g] for g in groups}, sizes, ks, held_out,
-                                validate.held_out_trials(emulator))  # fmt: skip
+                                validate.held_out_trials(emulator), probe_info)  # fmt: skip
     # the traits the data tell weakly: held at the profile, or fitted under its prior
     shrink = settings.weak_traits == "shrink"
     free = list(range(len(TRAITS))) if shrink else told
@@ -203,11 +215,12 @@ def fit_trials(
         progress("fitting", k, len(groups))
         est = GroupEstimator(emulator, PROFILES[g], free, ks[g], settings.seed, weak)
         y = by_group[g][names].to_numpy(float)
-        best = est.fit(y)
+        best = est.fit(y, probes=probed[g])
         start = getattr(est, "x_", None)
         boots, preds = [], [_predict(est, best.mean, best.sd)]
         for _ in range(settings.bootstrap):
-            b = est.fit(y[rng.integers(0, len(y), len(y))], start, est.prior_centre(rng))
+            pick = rng.integers(0, len(y), len(y))
+            b = est.fit(y[pick], start, est.prior_centre(rng), probed[g][pick])
             boots.append(np.concatenate([b.mean, b.sd]))
             preds.append(_predict(est, b.mean, b.sd))
         boots_arr = np.array(boots)
@@ -302,7 +315,8 @@ def fit_trials(
         f"(Laplace covariances); group sds pooled with {NU0:g} pseudo-people at the "
         "profile's; the weakly told traits' group means under the profile's prior; "
         "bootstrap over participants, each replicate with the prior's centre drawn from "
-        "the prior (randomised maximum likelihood)",
+        "the prior (randomised maximum likelihood); a person's probe estimate of a trait "
+        "(study.probes, with its SE) a measurement of that trait beside the moments",
         "moments": names,
         "features": {
             "names": features,
@@ -314,6 +328,7 @@ def fit_trials(
             else "the task has no sample features: the measures only",
         },
         "identifiable": [TRAITS[j] for j in told],
+        "probes": probe_summary(probed, {g: list(by_group[g].index) for g in groups}, TRAITS),
         "held_out_trait_error": None
         if held_out is None
         else dict(zip(TRAITS, np.round(held_out, 6).tolist(), strict=True)),
