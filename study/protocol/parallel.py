@@ -105,7 +105,10 @@ def compile_loop_once(notice: Callable[[str], None] | None = None) -> bool:
         return False
     if notice is not None:
         notice("compiling the simulation loop (once after install; later runs load it)")
+    start = time.monotonic()
     kernel.kernel_for(lcca_phantom)
+    if notice is not None:
+        notice(f"compiled the simulation loop in {time.monotonic() - start:.0f} s")
     return True
 
 

@@ -316,7 +316,7 @@ class CausalEstimator:
         self.std = np.asarray(std.feature_std, dtype=np.float64)
         self.physics = estimator.physics.vector()
         self.ekf_settings = settings_vector(estimator.ekf)
-        self.weights = (w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, float(w.b_out))
+        self.weights = w.kernel_weights()
         self.target = np.array([std.target_std, std.target_mean], dtype=np.float64)
         self.dt_s = estimator.dt_s
         self._out = np.zeros(ESTIMATE_OUT)

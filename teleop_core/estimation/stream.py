@@ -82,8 +82,8 @@ def stream_estimate(
     st: np.ndarray,
     buf: np.ndarray,
     pv: np.ndarray,
-    w_ih: np.ndarray,
-    w_hh: np.ndarray,
+    w_ih_t: np.ndarray,
+    w_hh_t: np.ndarray,
     b_ih: np.ndarray,
     b_hh: np.ndarray,
     w_out: np.ndarray,
@@ -94,13 +94,14 @@ def stream_estimate(
     dt_s: float,
     out: np.ndarray,
 ) -> bool:  # pragma: no cover - compiled; exercised through CausalEstimator
-    """Physics, GRU and EKF on the current window; False while it fills."""
+    """Physics, GRU and EKF on the current window; False while it fills. The GRU's
+    matrices come transposed (`GruWeights.kernel_weights`)."""
     if st[S_COUNT] < buf.shape[0]:
         return False
     iq, omega, alpha = st[S_IQ], st[S_OMEGA], st[S_ALPHA]
     f_physics = force_at(pv, iq, omega, alpha)
     # F*_GRU = F_physics + GRU residual (eq. 3), de-standardised
-    y = _window_forward(buf, w_ih, w_hh, b_ih, b_hh, w_out, b_out)
+    y = _window_forward(buf, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out)
     f_hybrid = f_physics + y * target[T_STD] + target[T_MEAN]
     out[EST_PHYSICS] = f_physics
     out[EST_HYBRID] = f_hybrid

@@ -36,10 +36,10 @@ from teleop_core.loop.kernel import kernel_for
 from teleop_core.loop.layout import SAMPLE_COLUMNS
 from teleop_core.loop.link import (
     NO_LINKS,
+    NO_PACKETS,
     POOL_NEXT,
     Link,
     kernel_links,
-    kernel_send,
     packet_schedule,
 )
 from teleop_core.master.dial import D_OMEGA, D_THETA, DIAL_STATE_SIZE, dial_param_vector
@@ -218,7 +218,8 @@ class TeleopLoop:
 
     def _advance_to(self, end_tick: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Run events and kernel calls until `end_tick` or the driver is done."""
-        rows: list[tuple[float, ...]] = []
+        rows: list[tuple[float, ...]] = []  # the event-by-event path's samples
+        blocks: list[np.ndarray] = []  # the kernel's samples, a block per call
         logs: list[np.ndarray] = []
         env = self.environment
         c = self.counters
@@ -246,13 +247,15 @@ class TeleopLoop:
                 links = self._links
             log = self._log
             loop[K.L_N_ACQ] = loop[K.L_N_EST] = loop[K.L_N_CMD] = 0.0
+            # on the fast path every packet crosses the kernel's own link
+            packets = NO_PACKETS if self._fast else self._packets(k, nxt)
             m = kernel(
-                n, *state, env.state, env.params, log, self._packets(k, nxt),
+                n, *state, env.state, env.params, log, packets,
                 self._est_arrays, self._noise, self._samples, links,
             )  # fmt: skip
             c.ticks = nxt
             if m:
-                rows.extend(map(tuple, self._samples[:m].tolist()))
+                blocks.append(self._samples[:m].copy())
                 n_acq, n_est = int(loop[K.L_N_ACQ]), int(loop[K.L_N_EST])
                 c.acquisitions += n_acq
                 c.commands_sent += int(loop[K.L_N_CMD])
@@ -263,7 +266,9 @@ class TeleopLoop:
             if self.keep_ticks:
                 logs.append(log[:n].copy())
             self._on_events(rows)
-        samples = np.array(rows) if rows else np.zeros((0, len(SAMPLE_COLUMNS)))
+        if rows:
+            blocks.append(np.array(rows))
+        samples = np.concatenate(blocks) if blocks else np.zeros((0, len(SAMPLE_COLUMNS)))
         return samples, (np.concatenate(logs) if logs else None)
 
     def _on_events(self, rows: list[tuple[float, ...]]) -> None:
@@ -274,16 +279,9 @@ class TeleopLoop:
             if c.ticks % self._drv_every == 0:
                 self._drive()
                 if c.ticks % self._acq_every == 0:
-                    loop = self.loop
-                    r = self.config.plant.wheel_radius_m
-                    kv = self.config.haptics.speed_gain_m_s_per_rad
-                    # the Python forms (plain arithmetic, the same float64 results): a
-                    # call from here needs no numba (the kernel may be compiled ahead of
-                    # time, `aot.py`), and a scalar Python call is cheaper than a dispatch
-                    speed = rate_command.py_func(loop[K.L_THETA_Q_PREV], kv) / r
-                    q_f, ls_f, lp_f = self._links[K.LK_Q_F : K.LK_LP_F + 1]
-                    kernel_send.py_func(q_f, ls_f, lp_f, self._pool, self._pool_pos, self.t_s,
-                                        speed, loop[K.L_ROT_ACTION])  # fmt: skip
+                    # the kernel sends it first thing in its next call, at this tick's
+                    # time and with the draws this send would have taken from here
+                    self.loop[K.L_SEND_PENDING] = 1.0
                     c.commands_sent += 1
             return
         if c.ticks % self._drv_every == 0:

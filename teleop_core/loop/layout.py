@@ -30,8 +30,9 @@ from __future__ import annotations
     L_N_ACQ,
     L_N_EST,
     L_N_CMD,
-) = range(24)
-LOOP_STATE_SIZE = 24
+    L_SEND_PENDING,
+) = range(25)
+LOOP_STATE_SIZE = 25
 # Master parameters
 (
     M_KS,

@@ -74,6 +74,7 @@ from teleop_core.loop.layout import (
     L_ROT_ACTION,
     L_ROT_RATE_RX,
     L_ROTATION,
+    L_SEND_PENDING,
     L_SPEED_CMD_RX,
     L_SUCCESS,
     L_TAU_H,
@@ -189,6 +190,12 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
         buf, st, mean, std, mem, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v = (
             est
         )
+        # the rate command deferred at the end of the last call (M_DEFER_LAST), now that
+        # the driver has acted: what TeleopLoop would otherwise send from Python
+        if fast and loop[L_SEND_PENDING] != 0.0:
+            loop[L_SEND_PENDING] = 0.0
+            speed = rate_command(loop[L_THETA_Q_PREV], mp[M_KV]) / r
+            kernel_send(q_f, ls_f, lp_f, pool, pos, loop[L_TICK] * dt, speed, loop[L_ROT_ACTION])
         for k in range(n_ticks):
             # 0'. fast path: packets arriving over the in-kernel link for this tick
             if fast:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -192,6 +193,9 @@ def test_the_first_demo_after_install_says_it_compiles_the_loop_once(
     first, second = demo("first"), demo("second")
     notice = "study demo: compiling the simulation loop (once after install"
     assert notice in first.stderr and notice not in second.stderr
+    # and how long it took (a whole number of seconds)
+    assert re.search(r"study demo: compiled the simulation loop in \d+ s", first.stderr)
+    assert "compiled the simulation loop" not in second.stderr
     folder = tmp_path / "cache" / "kernels"
     assert len(list(folder.glob(f"_haptic_study_loop_aot_*{SUFFIX}"))) == 1
     from teleop_core.phantom.lcca import lcca_phantom

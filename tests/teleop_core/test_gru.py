@@ -7,7 +7,14 @@ import pytest
 import torch
 
 from teleop_core.estimation.estimator import train_estimator
-from teleop_core.estimation.gru import GruConfig, _batch_forward, block_split
+from teleop_core.estimation.gru import (
+    GruConfig,
+    _batch_forward,
+    _exp_into,
+    _window_forward,
+    _window_forward_libm,
+    block_split,
+)
 from teleop_core.estimation.gru_torch import GruNet, weights_from_net
 from teleop_core.estimation.physics import PhysicsParams
 from teleop_core.estimation.recording import FollowerRecording
@@ -21,10 +28,39 @@ def test_inference_kernel_matches_torch_gru(n_inputs: int) -> None:
     with torch.no_grad():
         expected = net(x).numpy()
     w = weights_from_net(net)
-    got = _batch_forward(
-        np.ascontiguousarray(x.numpy()), w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out
-    )
+    got = _batch_forward(np.ascontiguousarray(x.numpy()), *w.kernel_weights())
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+
+
+def test_vector_exp_matches_libm_to_two_ulp() -> None:
+    v = np.concatenate([np.linspace(-700.0, 700.0, 20001), [0.0, -0.0, 1e-300, -1e-300]])
+    out, bits = np.empty_like(v), np.empty(len(v), dtype=np.int64)
+    _exp_into(v.copy(), out, bits)
+    np.testing.assert_allclose(out, np.exp(v), rtol=4.5e-16, atol=0)
+    # beyond +-700 the argument is clamped (the gates are saturated long before)
+    far = np.array([-1000.0, 1000.0])
+    _exp_into(far.copy(), out[:2], bits[:2])
+    np.testing.assert_array_equal(out[:2], np.exp([-700.0, 700.0]))
+
+
+@pytest.mark.parametrize(
+    ("n_inputs", "hidden", "scale"), [(3, 32, 1.0), (11, 12, 1.0), (3, 9, 30.0)]
+)
+def test_vectorised_window_within_1e_12_of_the_libm_form(
+    n_inputs: int, hidden: int, scale: float
+) -> None:
+    # The loop ran _window_forward_libm before; the vectorised form may differ from it
+    # by rounding only. scale 30 drives the gates into saturation (|pre-activation| ~ 100).
+    torch.manual_seed(hidden)
+    w = weights_from_net(GruNet(hidden_size=hidden, n_inputs=n_inputs).double())
+    rng = np.random.default_rng(hidden)
+    worst = 0.0
+    for _ in range(200):
+        x = rng.normal(size=(20, n_inputs)) * scale
+        fast = _window_forward(x, *w.kernel_weights())
+        ref = _window_forward_libm(x, w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out)
+        worst = max(worst, abs(fast - ref))
+    assert worst <= 1e-12
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -211,3 +211,54 @@ def test_in_kernel_acquisition_matches_the_event_by_event_loop(
         assert loop._fast is fast
     assert np.array_equal(runs[0].samples, runs[1].samples)
     assert runs[0].counters == runs[1].counters
+
+
+class _LibmStream:
+    """The estimator's stream with the GRU in its libm form (`_window_forward_libm`): the
+    path the loop ran before the vectorised GRU, rebuilt from the same stages."""
+
+    def __new__(cls, estimator):  # type: ignore[no-untyped-def]
+        from teleop_core.estimation.ekf import ekf_update
+        from teleop_core.estimation.gru import _window_forward_libm
+        from teleop_core.estimation.model import CausalEstimator
+        from teleop_core.estimation.stream import S_ALPHA, S_COUNT, S_IQ, S_OMEGA
+        from teleop_core.follower.physics import force_at
+
+        class Stream(CausalEstimator):
+            def estimate(self):  # type: ignore[no-untyped-def]
+                st = self.state
+                if st[S_COUNT] < self.buffer.shape[0]:
+                    return None
+                f_phys = force_at(self.physics, st[S_IQ], st[S_OMEGA], st[S_ALPHA])
+                w = self.est.gru.weights
+                y = _window_forward_libm(
+                    self.buffer, w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out
+                )
+                f_hybrid = f_phys + y * self.target[0] + self.target[1]
+                final = ekf_update(self.ekf_state, self.ekf_settings, self.physics, self.dt_s,
+                                   f_phys, f_hybrid, st[S_OMEGA])  # fmt: skip
+                return f_phys, f_hybrid, final
+
+        return Stream(estimator)
+
+
+def test_vectorised_gru_keeps_the_samples_of_the_libm_gru(small_estimator, monkeypatch) -> None:
+    """The in-kernel GRU is the vectorised form; against the loop with the libm form (the
+    event-by-event loop, whose estimator is swapped), every column is identical and the
+    estimate within 1e-12 N, as long as the estimate does not feed back (haptics off).
+    With haptic feedback the estimate moves the dial, and a difference of 1e-16 N can
+    move its encoder across a count: the loop's samples then part, as they do between
+    two CPUs whose compiled reductions round differently."""
+    cfg = LoopConfig(haptics=HapticParams(haptics_on=False))
+    new = TeleopLoop(cfg, tube_with_wall(), estimator=small_estimator, seed=3)
+    new_run = new.run(6.0, SimulatedOperator(target_depth_m=0.3))
+    monkeypatch.setattr(type(small_estimator), "stream", lambda self: _LibmStream(self))
+    old = TeleopLoop(cfg, tube_with_wall(), estimator=small_estimator, seed=3, fast=False)
+    old_run = old.run(6.0, SimulatedOperator(target_depth_m=0.3))
+    assert new._fast and not old._fast
+    est = SAMPLE_COLUMNS.index("proximal_force_est_n")
+    others = [i for i in range(len(SAMPLE_COLUMNS)) if i != est]
+    assert np.array_equal(new_run.samples[:, others], old_run.samples[:, others])
+    estimate_new, estimate_old = new_run.samples[:, est], old_run.samples[:, est]
+    assert np.count_nonzero(estimate_old) > 100  # the GRU ran
+    assert np.max(np.abs(estimate_new - estimate_old)) <= 1e-12

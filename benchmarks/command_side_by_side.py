@@ -1,0 +1,92 @@
+"""A shell command run for two checkouts alternately in one session: CPU seconds (user +
+system, of the command and its children) and wall seconds per run, medians and ratios.
+
+    python benchmarks/command_side_by_side.py BASELINE NEW --rounds 3 \\
+        --out benchmarks/results/demo_side_by_side.json -- \\
+        'study demo --quick --out {tmp}/demo'
+
+In the command, `{tmp}` is a fresh folder per run and `{checkout}` the checkout; each run
+has the checkout first on PYTHONPATH. `--json-key speed.realtime_factor_median` also
+reads that key from the JSON file the command writes to `{tmp}/out.json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def _run(command: str, checkout: str, json_key: str | None) -> dict[str, float]:
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {**os.environ, "PYTHONPATH": str(Path(checkout).resolve())}
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
+        done = subprocess.run(
+            command.format(tmp=tmp, checkout=checkout), shell=True, env=env,
+            capture_output=True, text=True,
+        )  # fmt: skip
+        wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        if done.returncode != 0:
+            raise SystemExit(f"{command!r} failed for {checkout}:\n{done.stderr[-2000:]}")
+        row = {
+            "wall_s": wall,
+            "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
+        }
+        if json_key:
+            value: object = json.loads((Path(tmp) / "out.json").read_text())
+            for part in json_key.split("."):  # a number indexes a list
+                value = value[int(part) if isinstance(value, list) else part]  # type: ignore[index]
+            row[json_key] = float(value)  # type: ignore[arg-type]
+        return row
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("baseline")
+    parser.add_argument("new")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--json-key", default=None)
+    parser.add_argument("--out", type=Path, default=None)
+    argv = sys.argv[1:]
+    cut = argv.index("--")
+    args, command = parser.parse_args(argv[:cut]), " ".join(argv[cut + 1 :])
+    runs: dict[str, list[dict[str, float]]] = {"baseline": [], "new": []}
+    for r in range(args.rounds):
+        order = [("baseline", args.baseline), ("new", args.new)]
+        for label, checkout in order if r % 2 == 0 else order[::-1]:
+            runs[label].append(_run(command, checkout, args.json_key))
+            print(f"round {r + 1}/{args.rounds} {label}: {runs[label][-1]}", file=sys.stderr)
+    medians = {
+        label: {k: statistics.median(run[k] for run in rs) for k in rs[0]}
+        for label, rs in runs.items()
+    }
+    report = {
+        "command": command,
+        "driver": " ".join(["python", "benchmarks/command_side_by_side.py", *argv]),
+        "baseline": args.baseline,
+        "new": args.new,
+        "rounds": args.rounds,
+        "nice": os.nice(0),
+        "median": medians,
+        "new_over_baseline": {
+            k: medians["new"][k] / medians["baseline"][k] for k in medians["new"]
+        },
+        "runs": runs,
+    }
+    text = json.dumps(report, indent=2) + "\n"
+    if args.out:
+        args.out.write_text(text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
