@@ -27,6 +27,7 @@ import pandas as pd
 from study.analysis.stats import ALPHA, compare_conditions, hedges_g_av
 from study.campaign.spec import CampaignSpec, Cell, study_seed
 from study.protocol.design import KNOWN_CONDITIONS, StudyDesign, next_order
+from study.protocol.participant_effects import apply_effects, session_place
 from study.protocol.participants import ParticipantTraits
 from study.protocol.roster import CODE_DIGITS, plan_blocks
 from study.protocol.session import MAX_TRIAL_S, participant_traits
@@ -103,13 +104,18 @@ def simulate_study(spec: CampaignSpec, cell: Cell, replicate: int) -> pd.DataFra
     )  # fmt: skip
     context = get_task(spec.task).session_context()
     model = spec.participant_model()
+    effects = model.participant_effects if model is not None else ()
     rows = []
     for code, group, order in enrol(design):
         traits = participant_traits(seed, code, group, model)
-        for block in plan_blocks(design, order):
+        blocks = plan_blocks(design, order)
+        conditions = [b["condition"] for b in blocks]
+        for b, block in enumerate(blocks):
             for i in range(block["n_trials"]):
                 s = trial_seed(seed, code, block["block_index"], i)
-                values = run_trial(spec.task, traits, block["condition"], s, cell, context)
+                place = session_place(conditions, b, i, block["n_trials"])
+                person = apply_effects(traits, effects, place)
+                values = run_trial(spec.task, person, block["condition"], s, cell, context)
                 rows.append({"participant": code, "group": group,
                              "condition": block["condition"], "trial": i + 1,
                              **values})  # fmt: skip
