@@ -63,3 +63,26 @@ def test_the_intervals_of_a_fit_whose_model_holds_cover_the_truth() -> None:
     # (binomial(60, 0.95)); the bootstrap's percentile intervals of 25 replicates run a
     # little narrow, so only the lower side is held
     assert out["coverage"] >= 0.80, out
+
+
+def test_the_trait_plan_decides_per_trait_fitted_prior_or_told_by_another_source() -> None:
+    """`plan_traits` is the one place a trait's source is decided: the made-up task tells
+    the preferred speed (both measures follow it), nothing tells the caution, and a trait
+    told by another source (a measurement before the task) is neither fitted from the
+    task's data nor held at its prior."""
+    from study.analysis.participant_fit.fit import FitData, FitSettings, plan_traits
+
+    emulator = _made_up_emulator()
+    groups = ["novice", "expert"]
+    data = FitData(trials=pd.DataFrame(), measures=list(MEASURES), groups=groups,
+                   people=pd.DataFrame(), by_group={}, ks={g: 3.0 for g in groups},
+                   sizes={g: np.full(len(emulator.moments_), 12) for g in groups},
+                   sampled=0, source="simulated", counts={})  # fmt: skip
+    plan = plan_traits(emulator, data, FitSettings())
+    assert plan.role("preferred_speed_m_s") == "fitted"
+    assert plan.role("caution") == "prior" and "caution" in plan.fixed
+    told = plan_traits(emulator, data, FitSettings(), {"preferred_speed_m_s": "probes"})
+    assert told.role("preferred_speed_m_s") == "probes"
+    j = TRAITS.index("preferred_speed_m_s")
+    assert j not in told.free and j not in told.told
+    assert "preferred_speed_m_s" not in told.fixed
