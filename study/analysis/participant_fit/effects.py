@@ -24,13 +24,14 @@ every simulation drawn from the model carries. Here:
 - **prediction error** (`prediction_error`): each quarter of the people (within group)
   held out in turn, the traits and the effects fitted to the other three quarters; in
   each cell of group x condition x condition order x trial position, the held-out
-  people's mean log measure minus the fitted model's mean there (the emulator's mean
+  people's mean log measure (every person is held out once, so all of the cell's
+  people) minus the fitted model's mean there (the emulator's mean
   log measure over `DRAWS` people drawn from the fitted group distribution, with the
   effects at the cell's place); the RMS over the cells and the measures.
 - **the loop** (`search`): while the structure tests flag something, each family not
   yet added is fitted, the one that lowers the trials' squared error most is taken if
-  it lowers the held-out prediction error by at least `MIN_GAIN`; then the tests run on
-  the residual again. The verdict is `white` when nothing is flagged at the end, else
+  that drop passes a likelihood-ratio test (`LR_ALPHA`) and it lowers the held-out
+  prediction error; then the tests run on the residual again. The verdict is `white` when nothing is flagged at the end, else
   `structure_remains` with what remains.
 
 A person no trait setting reproduces (`checks.outliers`) is reported as
@@ -65,8 +66,10 @@ from study.protocol.participants import PROFILES, TRAITS
 
 ALPHA = 0.05
 """Family-wise error rate of the structure tests (Holm)."""
-MIN_GAIN = 0.02
-"""Smallest relative drop of the held-out prediction error for an effect to be added."""
+LR_ALPHA = 0.01
+"""A family is added when its likelihood-ratio test (the drop of the trials' squared
+standardised error against chi-square) passes at this level and it lowers the held-out
+prediction error."""
 ROUNDS = 3
 """Alternations of the trait fit and the effects' least squares."""
 FOLDS = 4
@@ -397,23 +400,50 @@ def folds(trials: pd.DataFrame, seed: int, n: int = FOLDS) -> dict[str, int]:
     return out
 
 
+@dataclass
+class HeldOut:
+    """The held-out prediction error and the part of it the cells' own noise explains."""
+
+    error: float
+    """RMS over cells and measures of the held-out people's mean log measure minus the
+    model's (each person predicted by the fit without their quarter)."""
+    noise_floor: float
+    """RMS of the cells' standard errors: what a model that knew every cell's true
+    mean would still show, from the held-out people's own scatter."""
+
+    @property
+    def excess(self) -> float:
+        """The error beyond the noise floor: sqrt(error^2 - floor^2), 0 when below."""
+        return float(np.sqrt(max(self.error**2 - self.noise_floor**2, 0.0)))
+
+
 def prediction_error(trials: pd.DataFrame, emulator: MomentEmulator, families: Sequence[str],
-                     free: list[int], weak: list[int], seed: int) -> float:  # fmt: skip
-    """RMS of the held-out cells' mean log measure minus the model's (`DEFINITION`)."""
+                     free: list[int], weak: list[int], seed: int) -> HeldOut:  # fmt: skip
+    """The held-out prediction error (`DEFINITION`): every person is held out once (in
+    their quarter), their trials set against the model fitted to the other quarters in
+    their cell; a cell's error is the mean over its held-out trials."""
     fold = trials["participant"].map(folds(trials, seed))
-    errors = []
+    keys = ["group", "condition", "order", "position"]
+    parts = []
     for k in range(FOLDS):
         train, test = trials[fold != k], trials[fold == k]
         if test.empty:
             continue
         fit = fit_effects(train, emulator, families, free, weak, seed)
-        observed = cell_means(test, emulator.measures_)
-        keep = observed.index.get_level_values("group").isin(list(fit.groups))
-        observed = observed[keep]
-        errors.append((observed.to_numpy() - predicted_cells(observed.index, emulator, fit)).ravel())
-    e = np.concatenate(errors)
-    e = e[np.isfinite(e)]
-    return float(np.sqrt(np.mean(e**2)))
+        test = test[test["group"].isin(list(fit.groups))]
+        logged = test.assign(**{m: log_moment(test[m]) for m in emulator.measures_})
+        cells = pd.MultiIndex.from_frame(logged[keys].drop_duplicates())
+        pred = pd.DataFrame(predicted_cells(cells, emulator, fit), index=cells,
+                            columns=emulator.measures_)  # fmt: skip
+        at = pred.loc[pd.MultiIndex.from_frame(logged[keys])].to_numpy()
+        diff = logged[emulator.measures_].to_numpy(float) - at
+        parts.append(pd.concat([logged[keys].reset_index(drop=True),
+                                pd.DataFrame(diff, columns=emulator.measures_)], axis=1))  # fmt: skip
+    d = pd.concat(parts).groupby(keys)[emulator.measures_]
+    mean, se = d.mean().to_numpy(), (d.std(ddof=1) / np.sqrt(d.count())).to_numpy()
+    ok = np.isfinite(mean)
+    return HeldOut(float(np.sqrt(np.mean(mean[ok] ** 2))),
+                   float(np.sqrt(np.nanmean(se[np.isfinite(se)] ** 2))))  # fmt: skip
 
 
 # --- the loop -------------------------------------------------------------------------
@@ -429,8 +459,8 @@ class EffectSearch:
     """The structure tests on the trials as they are."""
     after: list[dict[str, Any]]
     """The same with the added effects taken out."""
-    error_before: float
-    error_after: float
+    error_before: HeldOut
+    error_after: HeldOut
     tried: list[dict[str, Any]]
     adjusted: pd.DataFrame
     """The trials with the added effects taken out (what the traits are fitted to)."""
@@ -448,8 +478,10 @@ class EffectSearch:
                 + ")"
                 for e in self.effects
             )
+            b, a = self.error_before, self.error_after
             return (f"participant effects: added {added}; held-out prediction error "
-                    f"{self.error_before:.4f} -> {self.error_after:.4f} (log units); "
+                    f"{b.error:.4f} -> {a.error:.4f} (log units, {self.reduction():.0%} lower; "
+                    f"beyond the cells' noise {b.excess:.4f} -> {a.excess:.4f}); "
                     f"verdict {self.verdict}")  # fmt: skip
         found = describe(self.before)
         if not found:
@@ -457,15 +489,26 @@ class EffectSearch:
         return ("participant effects: none added (no family lowered the held-out prediction "
                 f"error); structure remains: {'; '.join(found)}")  # fmt: skip
 
+    def reduction(self) -> float:
+        """The held-out error's relative drop from before to after."""
+        return 1.0 - self.error_after.error / self.error_before.error
+
     def to_dict(self, unexplained: Sequence[str] = ()) -> dict[str, Any]:
         remains = describe(self.after)
         return {
             "participant_effects": [e.to_dict() for e in self.effects],
             "prediction_error": {
-                "before": self.error_before,
-                "after": self.error_after,
+                "before": self.error_before.error,
+                "after": self.error_after.error,
                 "definition": DEFINITION,
-            },
+                "noise_floor": {"before": self.error_before.noise_floor,
+                                "after": self.error_after.noise_floor},
+                "beyond_noise": {"before": self.error_before.excess,
+                                 "after": self.error_after.excess},
+                "noise_note": "noise_floor: the RMS of the cells' standard errors (the held-out "
+                "people's own scatter, which no model removes); beyond_noise: "
+                "sqrt(error^2 - noise_floor^2)",
+            },  # fmt: skip
             "verdict": self.verdict,
             "remains": remains,
             "unexplained_people": {
@@ -478,8 +521,9 @@ class EffectSearch:
                 "structure_before": self.before,
                 "structure_after": self.after,
                 "tried": self.tried,
-                "rule": f"structure tests Holm at {ALPHA}; a family is added when it lowers "
-                f"the held-out prediction error by at least {MIN_GAIN:.0%}",
+                "rule": f"structure tests Holm at {ALPHA}; a family is added when its "
+                f"likelihood-ratio test passes at {LR_ALPHA} and it lowers the held-out "
+                "prediction error",
             },
             "effects_line": self.line(),
         }
@@ -494,6 +538,7 @@ def search(trials: pd.DataFrame, emulator: MomentEmulator, free: list[int], weak
     fit = fit_traits(trials, emulator, free, weak, seed)
     after, tried = before, []
     error_before = error_now = prediction_error(trials, emulator, [], free, weak, seed)
+    sse_now = _sse(trials, emulator, fit)
     steps = 0
     while any(r["flagged"] for r in after) and len(added) < len(FAMILIES):
         candidates = [f for f in FAMILIES if f not in added]
@@ -503,14 +548,19 @@ def search(trials: pd.DataFrame, emulator: MomentEmulator, free: list[int], weak
             steps += 1
             trial_fit = fit_effects(trials, emulator, [*added, family], free, weak, seed)
             scored.append((_sse(trials, emulator, trial_fit), family))
-        _, best = min(scored)
+        sse, best = min(scored)
         error = prediction_error(trials, emulator, [*added, best], free, weak, seed)
+        # the drop in squared standardised error, against chi-square with the new
+        # parameters' degrees of freedom (a likelihood-ratio test of the family)
+        lr = sse_now - sse
         tried.append({"family": best, "in_sample": {f: round(s, 3) for s, f in scored},
-                      "held_out_error": error, "held_out_error_without": error_now})  # fmt: skip
-        if error > error_now * (1 - MIN_GAIN):
+                      "likelihood_ratio": lr, "held_out_error": error.error,
+                      "held_out_error_without": error_now.error})  # fmt: skip
+        significant = lr >= stats.chi2.ppf(1 - LR_ALPHA, len(FAMILIES[best]))
+        if not significant or error.error >= error_now.error:
             break
         added.append(best)
-        error_now = error
+        error_now, sse_now = error, sse
         fit = fit_effects(trials, emulator, added, free, weak, seed, bootstrap)
         after = residual_structure(trials, emulator, fit)
     progress(len(FAMILIES) + 1, len(FAMILIES) + 1)
