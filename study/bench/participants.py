@@ -5,7 +5,7 @@
    left at its prior is not recovered by luck) is simulated through the real session
    runner into SQLite (`study demo --participants` with the truth as MODEL.json):
    `groups` (20/8/8) people, `trials` measured trials per condition, counterbalanced.
-2. `study participants fit`'s whole fit runs on it (`fit_participants`), timed: the
+2. `study participants fit`'s whole fit runs on it (`fit_study`), timed: the
    target is <= 10 minutes for a 36-participant study on this 2-core machine.
 3. The truth's VO - HV differences of the peak forces: `truth_people` more people per
    group drawn from the truth and simulated (1 trial per condition, independent seeds),

@@ -1,9 +1,16 @@
 """The whole fit of simulated participants to a study's trials, and MODEL.json's content.
 
+`run_fit` runs the steps, each a function with its own answer (`read_data` -> `FitData`,
+`plan_traits` -> `TraitPlan`, `effects.search` -> `EffectSearch`, `fit_group` ->
+`GroupResult`, `check_model` -> `ModelChecks`), gathered in a `FitResult` that writes
+MODEL.json (`to_dict`, `write`). `plan_traits` is the one place that decides, per trait,
+whether it is fitted from the task's data, held at its prior, or told by another source.
+
 Steps (each reported through `progress(step, k, n)`):
 1. the task's trials, their behavioural features read off the stored samples, and each
    person's moments (`observed.py`); refused with one line when a group has too few
-   people;
+   people; the participant effects the residual calls for (`effects.py`: practice,
+   fatigue, carry-over), the traits then fitted to the trials with them taken out;
 2. the emulator: `design` trait settings over the priors' range, `repeats` trials per
    condition each, simulated once (`simulate.py`), the response surface fitted
    (`emulator.py`);
@@ -171,18 +178,6 @@ def fit_study(
     trials, _ = with_features(engine, trials, task, lambda a, b: progress("samples", a, b))
     emulator = build_emulator(task, settings, progress)
     return run_fit(trials, task, settings, emulator, db_label, progress)
-
-
-def fit_participants(
-    engine: Engine,
-    task: str,
-    settings: FitSettings,
-    db_label: str,
-    progress: Progress = _no_progress,
-) -> tuple[dict[str, Any], pd.DataFrame]:
-    """MODEL.json's content, and the summaries' frame (for the figure)."""
-    result = fit_study(engine, task, settings, db_label, progress)
-    return result.to_dict(), result.table
 
 
 @dataclass
