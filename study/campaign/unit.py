@@ -5,9 +5,11 @@ the unit's design, without the database: participants enrolled group after group
 codes P001, P002, ..., each given the counterbalanced order `next_order` gives it, its
 blocks from `plan_blocks`, the simulated person `participant_traits` draws from the
 study seed and its code, and each measured trial run on the same loop, phantom and
-estimator with the seed `study run` gives that trial (first attempt). Practice trials
-are not run: a simulated participant does not learn between trials, and a trial's seed
-does not depend on the trials before it, so they change no measured value.
+estimator with the seed `study run` gives that trial (first attempt), and the
+participant model's effects (practice, fatigue, carry-over) at the trial's place among
+the measured trials. Practice trials are not run: a simulated person's state in a trial
+follows from its seed and that place, not from the trials run before it, so they
+change no measured value.
 
 The measures are the task's analysed measures as `study run` stores them
 (`study.protocol.tasks`: completion time and, for LCCA, peak proximal and distal force;
