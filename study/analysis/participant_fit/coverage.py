@@ -62,6 +62,7 @@ def coverage(
     free trait has a 95 % bootstrap interval (`bootstrap` replicates) holding the truth."""
     rng = np.random.default_rng([seed, 0xC0FE])
     hits: dict[tuple[str, str], list[bool]] = {}
+    errors: dict[tuple[str, str], list[float]] = {}
     for s in range(studies):
         progress(s, studies)
         for group, n in sizes.items():
@@ -77,14 +78,26 @@ def coverage(
             )
             low, high = np.percentile(boots, [2.5, 97.5], axis=0)
             true = prior_arrays(truth[group])[0]
+            spread = boots.std(axis=0, ddof=1)
             for j in free:
                 hits.setdefault((group, TRAITS[j]), []).append(
                     bool(low[j] <= true[j] <= high[j])
                 )
-            del best
+                # the estimate's error in bootstrap SDs: a bias shows as a mean away from
+                # 0, a too narrow bootstrap as a spread above 1
+                errors.setdefault((group, TRAITS[j]), []).append(
+                    float((best.mean[j] - true[j]) / max(spread[j], 1e-12))
+                )
     progress(studies, studies)
     per = [
-        {"group": g, "trait": t, "coverage": float(np.mean(v)), "studies": len(v)}
+        {
+            "group": g,
+            "trait": t,
+            "coverage": float(np.mean(v)),
+            "studies": len(v),
+            "error_mean_boot_sds": float(np.mean(errors[(g, t)])),
+            "error_sd_boot_sds": float(np.std(errors[(g, t)], ddof=1)) if len(v) > 1 else None,
+        }
         for (g, t), v in hits.items()
     ]
     every = [h for v in hits.values() for h in v]
