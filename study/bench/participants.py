@@ -18,10 +18,10 @@
    count, how often an oracle would meet it, `oracle_within`); the truth's
    VO - HV peak-force difference inside the fitted model's reported
    95 % interval (the `simulated` rows of the summaries: people simulated from the fit's
-   bootstrap replicates).
-5. With `--coverage N`: the share of the fitted group means' 95 % intervals that hold
-   the truth over N studies simulated on the fit's emulator (`participant_fit.coverage`). The fit's CPU time is reported beside its wall time: on a
+   bootstrap replicates). The fit's CPU time is reported beside its wall time: on a
    machine shared with other jobs, CPU seconds / 2 is what the fit takes on 2 idle cores.
+5. With `--coverage N`: the share of the fitted group means' 95 % intervals that hold
+   the truth over N studies simulated on the fit's emulator (`participant_fit.coverage`).
 
 Everything here is SIMULATED, and the JSON says so (`data_source`).
 """
@@ -40,8 +40,8 @@ from typing import Any
 import numpy as np
 
 from db.migrate import open_database
-from study.analysis.participant_fit.estimate import HIGH, LOW, prior_arrays
 from study.analysis.participant_fit.coverage import coverage
+from study.analysis.participant_fit.estimate import HIGH, LOW, prior_arrays
 from study.analysis.participant_fit.fit import FitSettings, fit_study, simulate_people
 from study.protocol.demo import run_demo
 from study.protocol.participant_model import FORMAT, load_model

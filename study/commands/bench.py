@@ -233,7 +233,7 @@ def bench_startup(
               show_default=True, help="Studies simulated on the fit's emulator to check the "
               "coverage of the fitted means' 95 % intervals (0: skip).")  # fmt: skip
 @click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True,
-              help="As `study participants fit --bootstrap` (the fit's and the coverage's).")  # fmt: skip
+              help="As `study participants fit --bootstrap` (also the coverage's).")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=int, default=11, show_default=True)
 @_json_option

@@ -89,8 +89,10 @@ class ParticipantEffect:
         for name in FAMILIES[self.family]:
             value = self.parameters.get(name)
             lo, hi = BOUNDS[name]
-            if isinstance(value, bool) or not isinstance(value, int | float) or not (
-                math.isfinite(value) and lo <= value <= hi
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | float)
+                or not (math.isfinite(value) and lo <= value <= hi)
             ):
                 raise StudyInputError(
                     f"participant effect {self.family}: {name} = {value!r}; expected a "

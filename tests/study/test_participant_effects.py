@@ -83,8 +83,9 @@ def test_carry_over_acts_only_in_a_second_block_after_the_other_condition() -> N
     for first_block in (TrialPlace(0, 0, "VO", "VO"), TrialPlace(1, 0, "HV", "HV")):
         assert apply_effects(person, [effect], first_block) == person
     # an effect of another group leaves the person as they are
-    experts = ParticipantEffect("carry_over", {"vo_after_hv": 0.25, "hv_after_vo": 0.0},
-                                ("expert",))  # fmt: skip
+    experts = ParticipantEffect(
+        "carry_over", {"vo_after_hv": 0.25, "hv_after_vo": 0.0}, ("expert",)
+    )
     assert apply_effects(person, [experts], TrialPlace(3, 1, "VO", "HV")) == person
 
 
@@ -112,12 +113,16 @@ def test_a_session_place_counts_measured_trials_and_practice_back() -> None:
     ("entry", "message"),
     [
         ({"family": "boredom", "parameters": {}}, "family = 'boredom'; expected one of practice"),
-        ({"family": "practice", "parameters": {"slowing": 0.5}},
-         "practice: decay_trials = None; expected a number in [0.3, 20]"),
-        ({"family": "fatigue", "parameters": {"rate": {"value": 2.0}}},
-         "fatigue: rate = 2.0; expected a number in [-0.1, 0.1]"),
+        (
+            {"family": "practice", "parameters": {"slowing": 0.5}},
+            "practice: decay_trials = None; expected a number in [0.3, 20]",
+        ),
+        (
+            {"family": "fatigue", "parameters": {"rate": {"value": 2.0}}},
+            "fatigue: rate = 2.0; expected a number in [-0.1, 0.1]",
+        ),
     ],
-)  # fmt: skip
+)
 def test_a_bad_effect_is_refused(entry: dict, message: str) -> None:
     with pytest.raises(StudyInputError, match=message.replace("[", r"\[").replace("]", r"\]")):
         effect_from_dict(entry, "participant_effects[0]")
@@ -132,18 +137,39 @@ def test_a_model_with_a_bad_effect_is_one_line_and_exit_2(
 ) -> None:
     import dataclasses
 
-    groups = {g: {t: {"mean": m, "sd": s} for t, (m, s) in dataclasses.asdict(p).items()}
-              for g, p in PROFILES.items()}  # fmt: skip
-    model = {"format": "haptic-study participant model", "task": "lcca",
-             "data_source": "simulated", "groups": groups,
-             "participant_effects": [{"family": "practice",
-                                      "parameters": {"slowing": {"value": 9.0},
-                                                     "decay_trials": {"value": 2.0}}}]}  # fmt: skip
+    groups = {
+        g: {t: {"mean": m, "sd": s} for t, (m, s) in dataclasses.asdict(p).items()}
+        for g, p in PROFILES.items()
+    }
+    model = {
+        "format": "haptic-study participant model",
+        "task": "lcca",
+        "data_source": "simulated",
+        "groups": groups,
+        "participant_effects": [
+            {
+                "family": "practice",
+                "parameters": {"slowing": {"value": 9.0}, "decay_trials": {"value": 2.0}},
+            }
+        ],
+    }
     path = tmp_path / "model.json"
     path.write_text(json.dumps(model))
     out = tmp_path / "t.csv"
-    line = one_error_line(capsys, ["simulate", "--group", "novice", "--condition", "VO",
-                                   "--out", str(out), "--participants", str(path)])  # fmt: skip
+    line = one_error_line(
+        capsys,
+        [
+            "simulate",
+            "--group",
+            "novice",
+            "--condition",
+            "VO",
+            "--out",
+            str(out),
+            "--participants",
+            str(path),
+        ],
+    )
     assert line.endswith(
         "participant_effects[0]: participant effect practice: slowing = 9.0; expected a "
         "number in [0, 3]"
@@ -154,17 +180,29 @@ def test_a_model_with_a_bad_effect_is_one_line_and_exit_2(
 def test_a_model_with_an_effect_simulates_it() -> None:
     from study.protocol.participant_model import model_from_dict
 
-    groups = {"novice": {t: {"mean": m, "sd": s}
-                         for t, (m, s) in PROFILES["novice"].__dict__.items()}}  # fmt: skip
+    groups = {
+        "novice": {t: {"mean": m, "sd": s} for t, (m, s) in PROFILES["novice"].__dict__.items()}
+    }
     model = model_from_dict(
-        {"format": "haptic-study participant model", "task": "lcca", "data_source": "simulated",
-         "groups": groups,
-         "participant_effects": [{"family": "practice", "groups": ["novice"],
-                                  "parameters": {"slowing": {"value": 0.5, "ci95": [0.4, 0.6]},
-                                                 "decay_trials": {"value": 2.0}}},
-                                 {"family": "unexplained_person", "participants": ["P002"]}]},
+        {
+            "format": "haptic-study participant model",
+            "task": "lcca",
+            "data_source": "simulated",
+            "groups": groups,
+            "participant_effects": [
+                {
+                    "family": "practice",
+                    "groups": ["novice"],
+                    "parameters": {
+                        "slowing": {"value": 0.5, "ci95": [0.4, 0.6]},
+                        "decay_trials": {"value": 2.0},
+                    },
+                },
+                {"family": "unexplained_person", "participants": ["P002"]},
+            ],
+        },
         "m.json",
-    )  # fmt: skip
+    )
     assert model.participant_effects == (
         ParticipantEffect("practice", {"slowing": 0.5, "decay_trials": 2.0}, ("novice",)),
     )

@@ -28,11 +28,19 @@ def _made_up_emulator() -> MomentEmulator:
         speed, reaction = np.log(row[0] / 0.014), np.log(row[1] / 0.28)
         for r in range(3):
             for c, (dt, df) in {"VO": (0.0, 0.0), "HV": (0.1, -0.3)}.items():
-                rows.append({"setting": s, "repeat": r, "condition": c,
-                             "completion_time_s": np.exp(1 - speed + 0.5 * reaction + dt
-                                                         + NOISE_SD * rng.standard_normal()),
-                             "peak_force_n": np.exp(-0.5 + 0.8 * speed + df
-                                                    + NOISE_SD * rng.standard_normal())})  # fmt: skip
+                rows.append(
+                    {
+                        "setting": s,
+                        "repeat": r,
+                        "condition": c,
+                        "completion_time_s": np.exp(
+                            1 - speed + 0.5 * reaction + dt + NOISE_SD * rng.standard_normal()
+                        ),
+                        "peak_force_n": np.exp(
+                            -0.5 + 0.8 * speed + df + NOISE_SD * rng.standard_normal()
+                        ),
+                    }
+                )
     return MomentEmulator().fit(x, pd.DataFrame(rows), MEASURES)
 
 
@@ -53,8 +61,16 @@ def test_people_drawn_on_the_emulator_have_the_noise_of_their_k_trials() -> None
 def test_the_intervals_of_a_fit_whose_model_holds_cover_the_truth() -> None:
     emulator = _made_up_emulator()
     free = [TRAITS.index("preferred_speed_m_s"), TRAITS.index("reaction_s")]
-    out = coverage(emulator, {g: PROFILES[g] for g in ("novice", "expert")},
-                   {"novice": 8, "expert": 8}, 3.0, free, studies=15, bootstrap=25, seed=2)  # fmt: skip
+    out = coverage(
+        emulator,
+        {g: PROFILES[g] for g in ("novice", "expert")},
+        {"novice": 8, "expert": 8},
+        3.0,
+        free,
+        studies=15,
+        bootstrap=25,
+        seed=2,
+    )
     assert out["intervals"] == 15 * 2 * 2
     assert {(r["group"], r["trait"]) for r in out["per_trait"]} == {
         (g, t) for g in ("novice", "expert") for t in ("preferred_speed_m_s", "reaction_s")
@@ -74,10 +90,18 @@ def test_the_trait_plan_decides_per_trait_fitted_prior_or_told_by_another_source
 
     emulator = _made_up_emulator()
     groups = ["novice", "expert"]
-    data = FitData(trials=pd.DataFrame(), measures=list(MEASURES), groups=groups,
-                   people=pd.DataFrame(), by_group={}, ks={g: 3.0 for g in groups},
-                   sizes={g: np.full(len(emulator.moments_), 12) for g in groups},
-                   sampled=0, source="simulated", counts={})  # fmt: skip
+    data = FitData(
+        trials=pd.DataFrame(),
+        measures=list(MEASURES),
+        groups=groups,
+        people=pd.DataFrame(),
+        by_group={},
+        ks={g: 3.0 for g in groups},
+        sizes={g: np.full(len(emulator.moments_), 12) for g in groups},
+        sampled=0,
+        source="simulated",
+        counts={},
+    )
     plan = plan_traits(emulator, data, FitSettings())
     assert plan.role("preferred_speed_m_s") == "fitted"
     assert plan.role("caution") == "prior" and "caution" in plan.fixed

@@ -50,8 +50,14 @@ def _study(injected: tuple[ParticipantEffect, ...]):
 
 @pytest.fixture(scope="module")
 def studies():
-    return {name: _study(injected) for name, injected in
-            (("clean", ()), ("practice", (PRACTICE,)), ("carry_over", (CARRY_OVER,)))}  # fmt: skip
+    return {
+        name: _study(injected)
+        for name, injected in (
+            ("clean", ()),
+            ("practice", (PRACTICE,)),
+            ("carry_over", (CARRY_OVER,)),
+        )
+    }
 
 
 def _search(trials, emulator) -> effects.EffectSearch:

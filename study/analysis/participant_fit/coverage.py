@@ -80,9 +80,7 @@ def coverage(
             true = prior_arrays(truth[group])[0]
             spread = boots.std(axis=0, ddof=1)
             for j in free:
-                hits.setdefault((group, TRAITS[j]), []).append(
-                    bool(low[j] <= true[j] <= high[j])
-                )
+                hits.setdefault((group, TRAITS[j]), []).append(bool(low[j] <= true[j] <= high[j]))
                 # the estimate's error in bootstrap SDs: a bias shows as a mean away from
                 # 0, a too narrow bootstrap as a spread above 1
                 errors.setdefault((group, TRAITS[j]), []).append(

@@ -31,8 +31,8 @@ every simulation drawn from the model carries. Here:
 - **the loop** (`search`): while the structure tests flag something, each family not
   yet added is fitted, the one that lowers the trials' squared error most is taken if
   that drop passes a likelihood-ratio test (`LR_ALPHA`) and it lowers the held-out
-  prediction error; then the tests run on the residual again. The verdict is `white` when nothing is flagged at the end, else
-  `structure_remains` with what remains.
+  prediction error; then the tests run on the residual again. The verdict is `white`
+  when nothing is flagged at the end, else `structure_remains` with what remains.
 
 A person no trait setting reproduces (`checks.outliers`) is reported as
 `unexplained_person`, never absorbed: no effect is fitted to one person.
@@ -55,7 +55,6 @@ from statsmodels.stats.multitest import multipletests
 
 from study.analysis.participant_fit.emulator import MomentEmulator, floor, log_moment
 from study.analysis.participant_fit.estimate import HIGH, LOW, GroupEstimator, GroupFit
-from study.protocol.design import KNOWN_CONDITIONS
 from study.protocol.participant_effects import (
     BOUNDS,
     FAMILIES,
@@ -75,8 +74,7 @@ ROUNDS = 3
 FOLDS = 4
 BOOTSTRAP = 200
 """People resamplings for the effects' parameter intervals."""
-START = {"slowing": 0.3, "decay_trials": 2.0, "rate": 0.0, "vo_after_hv": 0.0,
-         "hv_after_vo": 0.0}  # fmt: skip
+START = {"slowing": 0.3, "decay_trials": 2.0, "rate": 0.0, "vo_after_hv": 0.0, "hv_after_vo": 0.0}
 DEFINITION = (
     "each quarter of the people (within group) held out in turn and the model (traits "
     "and participant effects) fitted to the other three; per cell of group x condition x "
@@ -115,8 +113,9 @@ def trial_arrays(trials: pd.DataFrame, emulator: MomentEmulator) -> TrialArrays:
         TrialPlace(int(p), 0 if c == f else 1, c, f)
         for p, c, f in zip(frame["position"], frame["condition"], first, strict=True)
     ]
-    return TrialArrays(frame, y, columns, places, frame["group"].to_numpy(),
-                       frame["participant"].to_numpy())  # fmt: skip
+    return TrialArrays(
+        frame, y, columns, places, frame["group"].to_numpy(), frame["participant"].to_numpy()
+    )
 
 
 def factor_matrix(
@@ -140,8 +139,9 @@ def factor_matrix(
     return out
 
 
-def _predicted(emulator: MomentEmulator, theta: np.ndarray, factors: np.ndarray,
-               columns: np.ndarray) -> np.ndarray:  # fmt: skip
+def _predicted(
+    emulator: MomentEmulator, theta: np.ndarray, factors: np.ndarray, columns: np.ndarray
+) -> np.ndarray:
     """(trials, columns) the emulator's log moments of each trial's traits times the
     effects' factors, at each trial's `columns`."""
     f = emulator.log_moments(np.clip(theta * factors, LOW, HIGH))
@@ -161,9 +161,7 @@ def without_effects(
         return trials
     arrays = trial_arrays(trials, emulator)
     factors = factor_matrix(effects, arrays.places, arrays.groups)
-    shift = emulator.log_moments(np.clip(theta * factors, LOW, HIGH)) - emulator.log_moments(
-        theta
-    )
+    shift = emulator.log_moments(np.clip(theta * factors, LOW, HIGH)) - emulator.log_moments(theta)
     out = arrays.frame.copy()
     names = emulator.moments_
     for column in [*emulator.measures_, *emulator.features_]:
@@ -196,26 +194,41 @@ def _order_differences(frame: pd.DataFrame, y: np.ndarray) -> tuple[np.ndarray, 
     """Each person's HV - VO mean of `y`: VO-first people's, HV-first people's."""
     wide = frame.assign(y=y).groupby(["participant", "order", "condition"])["y"].mean().unstack()
     d = (wide["HV"] - wide["VO"]).dropna().reset_index()
-    return (d.loc[d["order"] == "VO-first", 0].to_numpy(),
-            d.loc[d["order"] == "HV-first", 0].to_numpy())  # fmt: skip
+    return (
+        d.loc[d["order"] == "VO-first", 0].to_numpy(),
+        d.loc[d["order"] == "HV-first", 0].to_numpy(),
+    )
 
 
-def structure_tests(frame: pd.DataFrame, y: np.ndarray,
-                    measures: Sequence[str]) -> list[dict[str, Any]]:  # fmt: skip
+def structure_tests(
+    frame: pd.DataFrame, y: np.ndarray, measures: Sequence[str]
+) -> list[dict[str, Any]]:
     """The trend and order tests of each measure (columns of `y`, log scale), Holm."""
     rows: list[dict[str, Any]] = []
     for j, m in enumerate(measures):
         s = _slopes(frame, y[:, j])
         if len(s) >= 3 and np.ptp(s) > 0:
-            rows.append({"check": "trend", "measure": m, "pct_per_trial": 100 * float(
-                np.expm1(s.mean())), "participants": len(s),
-                "p": float(stats.ttest_1samp(s, 0.0).pvalue)})  # fmt: skip
+            rows.append(
+                {
+                    "check": "trend",
+                    "measure": m,
+                    "pct_per_trial": 100 * float(np.expm1(s.mean())),
+                    "participants": len(s),
+                    "p": float(stats.ttest_1samp(s, 0.0).pvalue),
+                }
+            )
         a, b = _order_differences(frame, y[:, j])
         if len(a) >= 2 and len(b) >= 2:
             p = float(stats.ttest_ind(a, b, equal_var=False).pvalue)
-            rows.append({"check": "order", "measure": m,
-                         "vo_first_minus_hv_first_pct": 100 * float(np.expm1(a.mean() - b.mean())),
-                         "participants": len(a) + len(b), "p": p if np.isfinite(p) else 1.0})  # fmt: skip
+            rows.append(
+                {
+                    "check": "order",
+                    "measure": m,
+                    "vo_first_minus_hv_first_pct": 100 * float(np.expm1(a.mean() - b.mean())),
+                    "participants": len(a) + len(b),
+                    "p": p if np.isfinite(p) else 1.0,
+                }
+            )
     if rows:
         reject, p_holm, _, _ = multipletests([r["p"] for r in rows], ALPHA, method="holm")
         for r, flag, ph in zip(rows, reject, p_holm, strict=True):
@@ -228,12 +241,16 @@ def describe(rows: Sequence[dict[str, Any]]) -> list[str]:
     out = []
     for r in rows:
         if r["flagged"] and r["check"] == "trend":
-            out.append(f"a trend over trials in {r['measure']} ({r['pct_per_trial']:+.1f} %/trial, "
-                       f"p_holm = {r['p_holm']:.2g})")  # fmt: skip
+            out.append(
+                f"a trend over trials in {r['measure']} ({r['pct_per_trial']:+.1f} %/trial, "
+                f"p_holm = {r['p_holm']:.2g})"
+            )
         elif r["flagged"]:
-            out.append(f"an effect of condition order on {r['measure']} (VO-first minus "
-                       f"HV-first {r['vo_first_minus_hv_first_pct']:+.1f} %, "
-                       f"p_holm = {r['p_holm']:.2g})")  # fmt: skip
+            out.append(
+                f"an effect of condition order on {r['measure']} (VO-first minus "
+                f"HV-first {r['vo_first_minus_hv_first_pct']:+.1f} %, "
+                f"p_holm = {r['p_holm']:.2g})"
+            )
     return out
 
 
@@ -251,8 +268,9 @@ class PeopleFit:
     estimators: dict[str, GroupEstimator] = field(default_factory=dict)
 
 
-def fit_traits(trials: pd.DataFrame, emulator: MomentEmulator, free: list[int],
-               weak: list[int], seed: int) -> PeopleFit:  # fmt: skip
+def fit_traits(
+    trials: pd.DataFrame, emulator: MomentEmulator, free: list[int], weak: list[int], seed: int
+) -> PeopleFit:
     """Each group's trait distribution and each person's traits (no bootstrap)."""
     from study.analysis.participant_fit.observed import person_moments
 
@@ -266,8 +284,12 @@ def fit_traits(trials: pd.DataFrame, emulator: MomentEmulator, free: list[int],
     return out
 
 
-def _effects(families: Sequence[str], x: np.ndarray, groups: tuple[str, ...],
-             intervals: dict[str, tuple[float, float]] | None = None) -> list[ParticipantEffect]:  # fmt: skip
+def _effects(
+    families: Sequence[str],
+    x: np.ndarray,
+    groups: tuple[str, ...],
+    intervals: dict[str, tuple[float, float]] | None = None,
+) -> list[ParticipantEffect]:
     out, k = [], 0
     for family in families:
         names = FAMILIES[family]
@@ -278,9 +300,15 @@ def _effects(families: Sequence[str], x: np.ndarray, groups: tuple[str, ...],
     return out
 
 
-def _least_squares(arrays: TrialArrays, emulator: MomentEmulator, theta: np.ndarray,
-                   families: Sequence[str], groups: tuple[str, ...],
-                   start: np.ndarray, weights: np.ndarray) -> np.ndarray:  # fmt: skip
+def _least_squares(
+    arrays: TrialArrays,
+    emulator: MomentEmulator,
+    theta: np.ndarray,
+    families: Sequence[str],
+    groups: tuple[str, ...],
+    start: np.ndarray,
+    weights: np.ndarray,
+) -> np.ndarray:
     names = [n for f in families for n in FAMILIES[f]]
     low = np.array([BOUNDS[n][0] for n in names])
     high = np.array([BOUNDS[n][1] for n in names])
@@ -291,8 +319,7 @@ def _least_squares(arrays: TrialArrays, emulator: MomentEmulator, theta: np.ndar
         r = (arrays.y - _predicted(emulator, theta, factors, arrays.columns)) / noise
         return (r * weights[:, None]).ravel()
 
-    return least_squares(residuals, np.clip(start, low, high), bounds=(low, high),
-                         x_scale="jac").x  # fmt: skip
+    return least_squares(residuals, np.clip(start, low, high), bounds=(low, high), x_scale="jac").x
 
 
 def fit_effects(
@@ -336,22 +363,27 @@ def fit_effects(
             draws.append(_least_squares(arrays, emulator, theta, families, groups, x, w))
         draws_arr = np.array(draws)
         names = [n for f in families for n in FAMILIES[f]]
-        intervals = {n: tuple(np.percentile(draws_arr[:, i], [2.5, 97.5]).tolist())
-                     for i, n in enumerate(names)}  # fmt: skip
+        intervals = {
+            n: tuple(np.percentile(draws_arr[:, i], [2.5, 97.5]).tolist())
+            for i, n in enumerate(names)
+        }
     fit.effects = _effects(families, x, groups, intervals)
     return fit
 
 
-def residual_structure(trials: pd.DataFrame, emulator: MomentEmulator,
-                       fit: PeopleFit) -> list[dict[str, Any]]:  # fmt: skip
+def residual_structure(
+    trials: pd.DataFrame, emulator: MomentEmulator, fit: PeopleFit
+) -> list[dict[str, Any]]:
     """The structure tests on the trials with the fit's effects taken out."""
     arrays = trial_arrays(trials, emulator)
     y = arrays.y
     if fit.effects:
         theta = np.array([fit.theta[p] for p in arrays.people])
         factors = factor_matrix(fit.effects, arrays.places, arrays.groups)
-        y = y - (_predicted(emulator, theta, factors, arrays.columns)
-                 - _predicted(emulator, theta, np.ones_like(factors), arrays.columns))  # fmt: skip
+        y = y - (
+            _predicted(emulator, theta, factors, arrays.columns)
+            - _predicted(emulator, theta, np.ones_like(factors), arrays.columns)
+        )
     return structure_tests(arrays.frame, y, emulator.measures_)
 
 
@@ -417,8 +449,14 @@ class HeldOut:
         return float(np.sqrt(max(self.error**2 - self.noise_floor**2, 0.0)))
 
 
-def prediction_error(trials: pd.DataFrame, emulator: MomentEmulator, families: Sequence[str],
-                     free: list[int], weak: list[int], seed: int) -> HeldOut:  # fmt: skip
+def prediction_error(
+    trials: pd.DataFrame,
+    emulator: MomentEmulator,
+    families: Sequence[str],
+    free: list[int],
+    weak: list[int],
+    seed: int,
+) -> HeldOut:
     """The held-out prediction error (`DEFINITION`): every person is held out once (in
     their quarter), their trials set against the model fitted to the other quarters in
     their cell; a cell's error is the mean over its held-out trials."""
@@ -433,17 +471,26 @@ def prediction_error(trials: pd.DataFrame, emulator: MomentEmulator, families: S
         test = test[test["group"].isin(list(fit.groups))]
         logged = test.assign(**{m: log_moment(test[m]) for m in emulator.measures_})
         cells = pd.MultiIndex.from_frame(logged[keys].drop_duplicates())
-        pred = pd.DataFrame(predicted_cells(cells, emulator, fit), index=cells,
-                            columns=emulator.measures_)  # fmt: skip
+        pred = pd.DataFrame(
+            predicted_cells(cells, emulator, fit), index=cells, columns=emulator.measures_
+        )
         at = pred.loc[pd.MultiIndex.from_frame(logged[keys])].to_numpy()
         diff = logged[emulator.measures_].to_numpy(float) - at
-        parts.append(pd.concat([logged[keys].reset_index(drop=True),
-                                pd.DataFrame(diff, columns=emulator.measures_)], axis=1))  # fmt: skip
+        parts.append(
+            pd.concat(
+                [
+                    logged[keys].reset_index(drop=True),
+                    pd.DataFrame(diff, columns=emulator.measures_),
+                ],
+                axis=1,
+            )
+        )
     d = pd.concat(parts).groupby(keys)[emulator.measures_]
     mean, se = d.mean().to_numpy(), (d.std(ddof=1) / np.sqrt(d.count())).to_numpy()
     ok = np.isfinite(mean)
-    return HeldOut(float(np.sqrt(np.mean(mean[ok] ** 2))),
-                   float(np.sqrt(np.nanmean(se[np.isfinite(se)] ** 2))))  # fmt: skip
+    return HeldOut(
+        float(np.sqrt(np.mean(mean[ok] ** 2))), float(np.sqrt(np.nanmean(se[np.isfinite(se)] ** 2)))
+    )
 
 
 # --- the loop -------------------------------------------------------------------------
@@ -473,21 +520,25 @@ class EffectSearch:
         """The one printed line: the effect(s) added and the error before and after."""
         if self.effects:
             added = "; ".join(
-                f"{e.family} ("
-                + ", ".join(f"{n} {v:.3g}" for n, v in e.parameters.items())
-                + ")"
+                f"{e.family} (" + ", ".join(f"{n} {v:.3g}" for n, v in e.parameters.items()) + ")"
                 for e in self.effects
             )
             b, a = self.error_before, self.error_after
-            return (f"participant effects: added {added}; held-out prediction error "
-                    f"{b.error:.4f} -> {a.error:.4f} (log units, {self.reduction():.0%} lower; "
-                    f"beyond the cells' noise {b.excess:.4f} -> {a.excess:.4f}); "
-                    f"verdict {self.verdict}")  # fmt: skip
+            return (
+                f"participant effects: added {added}; held-out prediction error "
+                f"{b.error:.4f} -> {a.error:.4f} (log units, {self.reduction():.0%} lower; "
+                f"beyond the cells' noise {b.excess:.4f} -> {a.excess:.4f}); "
+                f"verdict {self.verdict}"
+            )
         found = describe(self.before)
         if not found:
-            return "participant effects: none added, the residual shows no structure (verdict white)"
-        return ("participant effects: none added (no family lowered the held-out prediction "
-                f"error); structure remains: {'; '.join(found)}")  # fmt: skip
+            return (
+                "participant effects: none added, the residual shows no structure (verdict white)"
+            )
+        return (
+            "participant effects: none added (no family lowered the held-out prediction "
+            f"error); structure remains: {'; '.join(found)}"
+        )
 
     def reduction(self) -> float:
         """The held-out error's relative drop from before to after."""
@@ -501,14 +552,18 @@ class EffectSearch:
                 "before": self.error_before.error,
                 "after": self.error_after.error,
                 "definition": DEFINITION,
-                "noise_floor": {"before": self.error_before.noise_floor,
-                                "after": self.error_after.noise_floor},
-                "beyond_noise": {"before": self.error_before.excess,
-                                 "after": self.error_after.excess},
+                "noise_floor": {
+                    "before": self.error_before.noise_floor,
+                    "after": self.error_after.noise_floor,
+                },
+                "beyond_noise": {
+                    "before": self.error_before.excess,
+                    "after": self.error_after.excess,
+                },
                 "noise_note": "noise_floor: the RMS of the cells' standard errors (the held-out "
                 "people's own scatter, which no model removes); beyond_noise: "
                 "sqrt(error^2 - noise_floor^2)",
-            },  # fmt: skip
+            },
             "verdict": self.verdict,
             "remains": remains,
             "unexplained_people": {
@@ -529,8 +584,15 @@ class EffectSearch:
         }
 
 
-def search(trials: pd.DataFrame, emulator: MomentEmulator, free: list[int], weak: list[int],
-           seed: int, bootstrap: int = BOOTSTRAP, progress=lambda k, n: None) -> EffectSearch:  # fmt: skip
+def search(
+    trials: pd.DataFrame,
+    emulator: MomentEmulator,
+    free: list[int],
+    weak: list[int],
+    seed: int,
+    bootstrap: int = BOOTSTRAP,
+    progress=lambda k, n: None,
+) -> EffectSearch:
     """The loop: test, add the family that explains the structure, refit, test again."""
     arrays = trial_arrays(trials, emulator)
     before = structure_tests(arrays.frame, arrays.y, emulator.measures_)
@@ -553,9 +615,15 @@ def search(trials: pd.DataFrame, emulator: MomentEmulator, free: list[int], weak
         # the drop in squared standardised error, against chi-square with the new
         # parameters' degrees of freedom (a likelihood-ratio test of the family)
         lr = sse_now - sse
-        tried.append({"family": best, "in_sample": {f: round(s, 3) for s, f in scored},
-                      "likelihood_ratio": lr, "held_out_error": error.error,
-                      "held_out_error_without": error_now.error})  # fmt: skip
+        tried.append(
+            {
+                "family": best,
+                "in_sample": {f: round(s, 3) for s, f in scored},
+                "likelihood_ratio": lr,
+                "held_out_error": error.error,
+                "held_out_error_without": error_now.error,
+            }
+        )
         significant = lr >= stats.chi2.ppf(1 - LR_ALPHA, len(FAMILIES[best]))
         if not significant or error.error >= error_now.error:
             break
@@ -569,5 +637,13 @@ def search(trials: pd.DataFrame, emulator: MomentEmulator, free: list[int], weak
         people = trial_arrays(trials, emulator).people
         theta = np.array([fit.theta[p] for p in people])
         adjusted = without_effects(trials, emulator, fit.effects, theta)
-    return EffectSearch(fit.effects, fit, before, after, error_before,
-                        error_now if fit.effects else error_before, tried, adjusted)  # fmt: skip
+    return EffectSearch(
+        fit.effects,
+        fit,
+        before,
+        after,
+        error_before,
+        error_now if fit.effects else error_before,
+        tried,
+        adjusted,
+    )
