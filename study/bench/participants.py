@@ -5,7 +5,7 @@
    left at its prior is not recovered by luck) is simulated through the real session
    runner into SQLite (`study demo --participants` with the truth as MODEL.json):
    `groups` (20/8/8) people, `trials` measured trials per condition, counterbalanced.
-2. `study participants fit`'s whole fit runs on it (`fit_participants`), timed: the
+2. `study participants fit`'s whole fit runs on it (`fit_study`), timed: the
    target is <= 10 minutes for a 36-participant study on this 2-core machine.
 3. The truth's VO - HV differences of the peak forces: `truth_people` more people per
    group drawn from the truth and simulated (1 trial per condition, independent seeds),
@@ -20,6 +20,8 @@
    95 % interval (the `simulated` rows of the summaries: people simulated from the fit's
    bootstrap replicates). The fit's CPU time is reported beside its wall time: on a
    machine shared with other jobs, CPU seconds / 2 is what the fit takes on 2 idle cores.
+5. With `--coverage N`: the share of the fitted group means' 95 % intervals that hold
+   the truth over N studies simulated on the fit's emulator (`participant_fit.coverage`).
 
 Everything here is SIMULATED, and the JSON says so (`data_source`).
 """
@@ -38,8 +40,9 @@ from typing import Any
 import numpy as np
 
 from db.migrate import open_database
+from study.analysis.participant_fit.coverage import coverage
 from study.analysis.participant_fit.estimate import HIGH, LOW, prior_arrays
-from study.analysis.participant_fit.fit import FitSettings, fit_participants, simulate_people
+from study.analysis.participant_fit.fit import FitSettings, fit_study, simulate_people
 from study.protocol.demo import run_demo
 from study.protocol.participant_model import FORMAT, load_model
 from study.protocol.session import participant_traits
@@ -127,9 +130,12 @@ def run_participants_bench(
     status: Callable[[str], None] = lambda _: None,
     shift_sd: float = SHIFT_SD,
     probes: bool = False,
+    coverage_studies: int = 0,
 ) -> dict[str, Any]:
     """The bench's report (see the module docstring); `probes`: every simulated person
-    also answers the design's probes before the fit (`study.probes`)."""
+    also answers the design's probes before the fit (`study.probes`); with
+    `coverage_studies`, the coverage of the fitted means' 95 % intervals over that many
+    studies simulated on the fit's emulator (`participant_fit.coverage`)."""
     load_before = os.getloadavg()
     truth = truth_profiles(shift_sd)
     with tempfile.TemporaryDirectory() as tmp:
@@ -148,7 +154,7 @@ def run_participants_bench(
                            lambda code: status(f"probes: {code}"))  # fmt: skip
         try:
             start, cpu0 = time.monotonic(), _cpu_s()
-            model, table = fit_participants(
+            result = fit_study(
                 engine,
                 "lcca",
                 settings,
@@ -158,6 +164,21 @@ def run_participants_bench(
             fit_s, fit_cpu_s = time.monotonic() - start, _cpu_s() - cpu0
         finally:
             engine.dispose()
+    model, table = result.to_dict(), result.table
+    covered = None
+    if coverage_studies:
+        covered = coverage(
+            result.emulator,
+            {g: truth[g] for g in groups},
+            groups,
+            float(trials),
+            result.plan.free,
+            coverage_studies,
+            settings.bootstrap,
+            seed,
+            result.plan.weak,
+            lambda k, n: status(f"coverage: study {k}/{n}"),
+        )
     status("the truth's VO - HV differences")
     truth_trials = simulate_people(
         "lcca",
@@ -261,6 +282,10 @@ def run_participants_bench(
         "fit_cpu_seconds": round(fit_cpu_s, 1),
         "fit_target_seconds": 600,
         "lacks": model["lacks"]["line"],
+        "participant_effects": model["effects_line"],
+        "prediction_error": model["prediction_error"],
+        "verdict": model["verdict"],
+        "coverage": covered,
         "emulator_check": model["emulator_check"]["line"],
         "load_average_before": [round(x, 2) for x in load_before],
         "load_average_after": [round(x, 2) for x in os.getloadavg()],
@@ -364,7 +389,23 @@ def markdown(report: dict[str, Any]) -> str:
         "",
         report["lacks"],
         "",
+        report["participant_effects"],
+        "",
         report["emulator_check"],
         "",
     ]
+    c = report.get("coverage")
+    if c:
+        lines += [
+            f"Coverage of the fitted group means' 95 % intervals: {100 * c['coverage']:.1f} % "
+            f"of {c['intervals']} intervals over {c['studies']} studies simulated on the "
+            f"fit's emulator ({c['bootstrap']} bootstrap replicates each; target "
+            f"{100 * c['target'][0]:.0f}-{100 * c['target'][1]:.0f} %).",
+            "",
+            "| group | trait | coverage |",
+            "|---|---|---|",
+            *(f"| {r['group']} | {r['trait']} | {100 * r['coverage']:.0f} % |"
+              for r in c["per_trait"]),
+            "",
+        ]  # fmt: skip
     return "\n".join(lines)

@@ -5,9 +5,11 @@ the unit's design, without the database: participants enrolled group after group
 codes P001, P002, ..., each given the counterbalanced order `next_order` gives it, its
 blocks from `plan_blocks`, the simulated person `participant_traits` draws from the
 study seed and its code, and each measured trial run on the same loop, phantom and
-estimator with the seed `study run` gives that trial (first attempt). Practice trials
-are not run: a simulated participant does not learn between trials, and a trial's seed
-does not depend on the trials before it, so they change no measured value.
+estimator with the seed `study run` gives that trial (first attempt), and the
+participant model's effects (practice, fatigue, carry-over) at the trial's place among
+the measured trials. Practice trials are not run: a simulated person's state in a trial
+follows from its seed and that place, not from the trials run before it, so they
+change no measured value.
 
 The measures are the task's analysed measures as `study run` stores them
 (`study.protocol.tasks`: completion time and, for LCCA, peak proximal and distal force;
@@ -27,6 +29,7 @@ import pandas as pd
 from study.analysis.stats import ALPHA, compare_conditions, hedges_g_av
 from study.campaign.spec import CampaignSpec, Cell, study_seed
 from study.protocol.design import KNOWN_CONDITIONS, StudyDesign, next_order
+from study.protocol.participant_effects import apply_effects, session_place
 from study.protocol.roster import CODE_DIGITS, plan_blocks
 from study.protocol.session import MAX_TRIAL_S, participant_traits
 from study.protocol.tasks import get_task
@@ -103,13 +106,18 @@ def simulate_study(spec: CampaignSpec, cell: Cell, replicate: int) -> pd.DataFra
     )  # fmt: skip
     context = get_task(spec.task).session_context()
     model = spec.participant_model()
+    effects = model.participant_effects if model is not None else ()
     rows = []
     for code, group, order in enrol(design):
         traits = participant_traits(seed, code, group, model)
-        for block in plan_blocks(design, order):
+        blocks = plan_blocks(design, order)
+        conditions = [b["condition"] for b in blocks]
+        for b, block in enumerate(blocks):
             for i in range(block["n_trials"]):
                 s = trial_seed(seed, code, block["block_index"], i)
-                values = run_trial(spec.task, traits, block["condition"], s, cell, context)
+                place = session_place(conditions, b, i, block["n_trials"])
+                person = apply_effects(traits, effects, place)
+                values = run_trial(spec.task, person, block["condition"], s, cell, context)
                 rows.append({"participant": code, "group": group,
                              "condition": block["condition"], "trial": i + 1,
                              **values})  # fmt: skip

@@ -238,12 +238,17 @@ def bench_startup(
               show_default=True, help="As `study participants fit --weak-traits`.")  # fmt: skip
 @click.option("--probes", is_flag=True,
               help="The simulated people answer the design's probes before the fit.")  # fmt: skip
+@click.option("--coverage", "coverage_studies", type=click.IntRange(min=0), default=50,
+              show_default=True, help="Studies simulated on the fit's emulator to check the "
+              "coverage of the fitted means' 95 % intervals (0: skip).")  # fmt: skip
+@click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True,
+              help="As `study participants fit --bootstrap` (also the coverage's).")  # fmt: skip
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=SEED, default=11, show_default=True)
 @_json_option
 def bench_participants(out_dir: Path | None, trials: int, truth_people: int, truth_shift: float,
-                       weak_traits: str, probes: bool, jobs: int, seed: int,
-                       json_path: Path | None) -> None:  # fmt: skip
+                       weak_traits: str, probes: bool, coverage_studies: int, bootstrap: int,
+                       jobs: int, seed: int, json_path: Path | None) -> None:  # fmt: skip
     """Recovery of known trait distributions from a simulated 20/8/8 study, and the fit's time."""
     from study.analysis.participant_fit.fit import FitSettings
     from study.bench.participants import markdown, run_participants_bench
@@ -252,9 +257,11 @@ def bench_participants(out_dir: Path | None, trials: int, truth_people: int, tru
         check_parent_folder(json_path)
     with Console(stderr=True).status("participants bench") as status:
         report = run_participants_bench({"outsider": 20, "novice": 8, "expert": 8}, trials,
-                                        FitSettings(jobs=jobs, weak_traits=weak_traits),
+                                        FitSettings(jobs=jobs, weak_traits=weak_traits,
+                                                    bootstrap=bootstrap),
                                         truth_people, seed, out_dir,
-                                        status.update, truth_shift, probes)  # fmt: skip
+                                        status.update, truth_shift, probes,
+                                        coverage_studies)  # fmt: skip
     text = markdown(report)
     if out_dir is not None:
         (out_dir / "participants_bench.md").write_text(text)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
@@ -19,9 +20,11 @@ from study.commands.base import (
     db_option,
     file_option,
     progress_bar,
-    write_json_atomically,
 )
 from study.errors import StudyInputError
+
+if TYPE_CHECKING:
+    from study.analysis.participant_fit.fit import FitResult
 
 
 @click.group("participants", cls=StudyGroup)
@@ -72,7 +75,7 @@ def fit(
     features); write MODEL.json and MODEL.png, print the
     observed vs simulated summaries and one line on what the participants lack."""
     from db.engine import describe, resolve_url
-    from study.analysis.participant_fit.fit import FitSettings, fit_participants
+    from study.analysis.participant_fit.fit import FitSettings, fit_study
     from study.commands.base import opened_database
     from study.protocol.tasks import get_task
 
@@ -95,6 +98,7 @@ def fit(
                         "samples": "reading the trials' samples",
                         "emulator": "simulating the emulator's design",
                         "validating": "checking the emulator on held-out settings",
+                        "effects": "looking for participant effects",
                         "fitting": "fitting the groups",
                         "checking": "simulating people from the fit",
                     }[step],
@@ -102,35 +106,35 @@ def fit(
                 )
             bar.update(bars[step], completed=k, total=n)
 
-        model, table = fit_participants(
-            engine, task, settings, describe(resolve_url(db_url)), progress
-        )
-    model["seconds"] = round(time.monotonic() - start, 1)
-    _write(out_path, model, table)
+        result = fit_study(engine, task, settings, describe(resolve_url(db_url)), progress)
+    table = result.table
+    model = _write(out_path, result, round(time.monotonic() - start, 1))
     _print(model, table)
     click.echo(model["probes"]["line"])
     click.echo(model["lacks"]["line"])
+    click.echo(model["effects_line"])
     click.echo(model["emulator_check"]["line"])
     click.echo(
         f"model: {out_path}; figure: {out_path.with_suffix('.png')} ({model['seconds']:.0f} s)"
     )
 
 
-def _write(out_path: Path, model: dict, table: object) -> None:
-    """MODEL.json and MODEL.png, each written whole or not at all."""
+def _write(out_path: Path, result: FitResult, seconds: float) -> dict:
+    """MODEL.png, then MODEL.json (by the fit's result), each written whole or not at all."""
     from study.analysis.participant_fit.figure import fit_figure
 
+    source = result.data.source
     note = (
-        f"Fitted to {model['data_source'].upper()} trials "
-        f"({model['fitted_from']['note'] or 'measured'}); "
+        f"Fitted to {source.upper()} trials "
+        f"({result.data.counts['note'] or 'measured'}); "
         "simulated marks are SIMULATED people drawn from the fitted model"
     )
     png = out_path.with_suffix(".png")
     from teleop_core.files import atomic_path
 
     with atomic_path(png, suffix=".png") as tmp_png:
-        fit_figure(table, note).savefig(tmp_png, dpi=200)
-    write_json_atomically(model, out_path)
+        fit_figure(result.table, note).savefig(tmp_png, dpi=200)
+    return result.write(out_path, {"seconds": seconds})
 
 
 def _print(model: dict, table: object) -> None:

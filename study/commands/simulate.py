@@ -76,6 +76,12 @@ def simulate(
     kernel.COMPILE_NOTICE = lambda message: click.echo(f"study simulate: {message}", err=True)
     estimator = load_estimator(model_dir) if the_task.has_dial else None
     traits = simulated_participant(group, seed, model)
+    if model is not None:
+        # one trial is the first of a session: the model's effects at its start
+        from study.protocol.participant_effects import apply_effects, session_place
+
+        first = session_place([condition], 0, 0, 1)
+        traits = apply_effects(traits, model.participant_effects, first)
     with Console(stderr=True).status(f"simulating a {group} participant, {task}, {condition}"):
         result = the_task.simulate(
             traits,

@@ -23,7 +23,13 @@ from db.models.trial import Trial
 from study.protocol.design import TEMPLATE, parse_design
 from study.protocol.parallel import run_participants
 from study.protocol.roster import add_participant, create_study
-from study.protocol.simulated_tlx import block_ratings, pairwise_choices, person_offsets
+from study.protocol.simulated_tlx import (
+    block_preference,
+    block_ratings,
+    pairwise_choices,
+    person_offsets,
+    person_preference,
+)
 from study.protocol.tlx import store_tlx
 
 
@@ -49,8 +55,9 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
         for pid, code, blocks in plan:
             rng = np.random.default_rng([study_seed, zlib.crc32(code.encode()), 0x7A])
             offsets = person_offsets(rng)
-            chosen = pairwise_choices(study_seed, code, rng)
+            preference = person_preference(rng)
             for task, condition in blocks:
+                chosen = pairwise_choices(study_seed, code, rng, block_preference(preference, rng))
                 block = trials[(trials["pid"] == pid) & (trials["task"] == task)
                                & (trials["condition"] == condition)]  # fmt: skip
                 ratings = block_ratings(

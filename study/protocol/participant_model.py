@@ -9,6 +9,8 @@ owns the validation, so that every command refuses a bad file with the same one 
 The file's `groups` hold, per experience group and trait, `mean` and `sd` (SI units, the
 trait names of `ParticipantTraits`); a draw is the group's normal clipped into the
 trait's range (`participants.TRAIT_BOUNDS`), as for the hand-set profiles. Its
+`participant_effects` (practice, fatigue, carry-over, `participant_effects`) change the
+drawn person over the session, in every simulation drawn from the model. Its
 `data_source` (`measured`, `simulated` or `mixed`) says what the model was fitted to:
 a model fitted to simulated trials is an assumption checked against itself, not a
 description of people, and every output drawn with it says which it was.
@@ -26,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from study.errors import StudyInputError
+from study.protocol.participant_effects import ParticipantEffect, effect_from_dict
 from study.protocol.traits import (
     TRAIT_BOUNDS,
     TRAITS,
@@ -56,6 +59,9 @@ class ParticipantModel:
     """group -> measure -> {effect, correlation}: the standardised HV - VO effect and the
     VO-HV correlation of participant means that the fitted model simulates (for
     `study power`)."""
+    participant_effects: tuple[ParticipantEffect, ...] = ()
+    """The effects the fit added (practice, fatigue, carry-over): every trial drawn from
+    the model carries them (`participant_effects.apply_effects`)."""
 
     def draw(self, group: str, rng: np.random.Generator) -> ParticipantTraits:
         if group not in self.profiles:
@@ -110,7 +116,21 @@ def model_from_dict(data: Any, source: str, digest: str = "") -> ParticipantMode
     effects = data.get("effects", {})
     if not isinstance(effects, dict):
         raise StudyInputError(f"{where}: effects = {effects!r}; expected an object")
-    return ParticipantModel(task, profiles, data["data_source"], source, digest, effects)
+    listed = data.get("participant_effects", [])
+    if not isinstance(listed, list):
+        raise StudyInputError(f"{where}: participant_effects = {listed!r}; expected a list")
+    added = [
+        effect_from_dict(e, f"{where}: participant_effects[{i}]") for i, e in enumerate(listed)
+    ]
+    return ParticipantModel(
+        task,
+        profiles,
+        data["data_source"],
+        source,
+        digest,
+        effects,
+        tuple(e for e in added if e is not None),
+    )
 
 
 def _mean_sd(where: str, key: str, value: Any, trait: str) -> tuple[float, float]:

@@ -54,6 +54,12 @@ from study.protocol.observer import (
     session_ending,
     trial_ending,
 )
+from study.protocol.participant_effects import (
+    ParticipantEffect,
+    TrialPlace,
+    apply_effects,
+    session_place,
+)
 from study.protocol.participant_model import ParticipantModel
 from study.protocol.roster import find_participant, load_study
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
@@ -222,6 +228,7 @@ def run_session(
                 check=lambda: _check_stop(lease, stop),
                 model=participants.digest if participants is not None else None,
                 observer=observer,
+                effects=participants.participant_effects if participants is not None else (),
             )
             try:
                 trial_id = _run_trial(engine, participant, item, run)
@@ -298,6 +305,8 @@ class TrialSetup:
     model: str | None = None
     """The digest of the fitted participant model the traits came from, if any."""
     observer: SessionObserver = field(default_factory=SessionObserver)
+    effects: tuple[ParticipantEffect, ...] = ()
+    """The model's participant effects, applied to the simulated person per trial."""
 
 
 def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
@@ -306,6 +315,15 @@ def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
     if gain is None:
         return {}
     return {"haptic_gain_n_m_per_n": 0.0 if condition == "VO" else gain}
+
+
+def _place(participant: Participant, item: PendingTrial) -> TrialPlace:
+    """Where the trial lies in the participant's session of its task."""
+    blocks = sorted((b for b in participant.blocks if b.task == item.block.task),
+                    key=lambda b: b.block_index)  # fmt: skip
+    index = [b.block_index for b in blocks].index(item.block.block_index)
+    return session_place([b.condition for b in blocks], index, item.trial_index,
+                         item.block.n_trials, item.practice, item.block.n_practice)  # fmt: skip
 
 
 def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
@@ -349,7 +367,8 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     loop = task.make_loop(block.condition, seed, haptic_gain_n_m_per_n=gain,
                           estimator=run.estimator, context=run.context)  # fmt: skip
     if driver is None:
-        driver = task.simulated_driver(run.traits, MAX_TRIAL_S, run.context)
+        traits = apply_effects(run.traits, run.effects, _place(participant, item))
+        driver = task.simulated_driver(traits, MAX_TRIAL_S, run.context)
     loop.start(driver)
     chunks = []
     step_s = STEP_S if run.pace is None else PACED_STEP_S

@@ -7,7 +7,8 @@ the self-rated performance; a participant who felt the force (HV) had that cue i
 hand and reports less mental demand for the same block only because it met fewer
 obstacles. Each subscale adds the person's own offset (drawn from the seed) and
 rating noise, rounded to the form's steps of 5. The 15 pairwise choices follow a
-per-person ranking of the subscales with some inconsistency.
+per-person ranking of the subscales, moved a little in each block (so a person's
+weights differ between VO and HV), with some inconsistency.
 """
 
 from __future__ import annotations
@@ -60,11 +61,32 @@ def person_offsets(rng: np.random.Generator) -> dict[str, float]:
     return {s: general + rng.normal(0.0, 5.0) for s in TLX_SUBSCALES}
 
 
-def pairwise_choices(study_seed: int, code: str, rng: np.random.Generator) -> list[str]:
-    """The subscale picked from each of the 15 pairs, in the order the person saw them."""
+def person_preference(rng: np.random.Generator) -> dict[str, float]:
+    """How much this person weighs each subscale (the ranking their pairwise choices
+    follow)."""
     preference = {s: rng.normal() for s in TLX_SUBSCALES}
     preference["mental"] += 1.0  # navigating by the screen is mentally demanding
     preference["effort"] += 0.5
+    return preference
+
+
+BLOCK_PREFERENCE_SD = 0.5
+"""How far a block's weighing of the subscales moves from the person's (in units of the
+spread between people): what a condition made salient, e.g. the force felt in HV, weighs
+more after that block (assumption; the weights are asked after each block because they
+differ between conditions, Hart and Staveland 1988)."""
+
+
+def block_preference(preference: dict[str, float], rng: np.random.Generator) -> dict[str, float]:
+    """The person's weighing of the subscales after one block."""
+    return {s: v + rng.normal(0.0, BLOCK_PREFERENCE_SD) for s, v in preference.items()}
+
+
+def pairwise_choices(
+    study_seed: int, code: str, rng: np.random.Generator, preference: dict[str, float]
+) -> list[str]:
+    """The subscale picked from each of the 15 pairs, in the order the person saw them,
+    following `preference` (`block_preference`) with some inconsistency."""
     chosen = []
     for left, right in pair_order(study_seed, code):
         diff = preference[left] - preference[right] + rng.normal(0.0, 0.5)

@@ -10,6 +10,7 @@ ranges) are assumptions shaped by seed 000, IV-D, not measured values; a fitted 
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Protocol
 
@@ -100,6 +101,33 @@ TRAIT_BOUNDS: dict[str, tuple[float, float]] = {
 }
 """Plausible range of each trait: a drawn value is clipped into it."""
 TRAITS = tuple(TRAIT_BOUNDS)
+
+TRIAL_CV: dict[str, float] = {
+    "preferred_speed_m_s": 0.10,
+    "reaction_s": 0.15,
+    "haptic_threshold_n_m": 0.15,
+    "visual_stall_s": 0.20,
+    "comfort_torque_n_m": 0.10,
+}
+"""A person's trial-to-trial coefficient of variation of each trait that varies from
+one trial to the next (assumption, shaped by the motor-control literature: the
+within-person CV of a repeated movement's speed and time is 5-15 %, of a simple
+reaction time 10-20 %, of a force detection threshold 10-20 %; the README states the
+measures' CV this gives). Each trial draws the person's state as the trait times a
+lognormal factor of mean 1 from the trial's own generator; the steering error and the
+caution stay the person's (the aim is drawn per attempt already)."""
+
+
+def trial_state(traits: ParticipantTraits, rng: np.random.Generator) -> ParticipantTraits:
+    """The person as they are in one trial: each trait in `TRIAL_CV` times a lognormal
+    factor of mean 1 and that CV, clipped into `TRAIT_BOUNDS`."""
+    values = traits.to_dict()
+    for name, cv in TRIAL_CV.items():
+        # log factor ~ N(-s^2 / 2, s^2), s^2 = log(1 + cv^2): E[factor] = 1, CV = cv
+        s = math.sqrt(math.log1p(cv * cv))
+        lo, hi = TRAIT_BOUNDS[name]
+        values[name] = float(np.clip(values[name] * math.exp(rng.normal(-s * s / 2, s)), lo, hi))
+    return ParticipantTraits(**values)  # type: ignore[arg-type]
 
 
 def draw_traits(

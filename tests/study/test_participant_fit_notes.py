@@ -77,7 +77,12 @@ def test_a_notes_study_is_fitted_from_the_command_and_the_model_drives_simulate(
     assert main(argv) == 0
     printed = capsys.readouterr().out
     assert "what the participants lack" in printed
+    # the loop on the people says what it added (or that it added nothing) in one line
+    assert sum(line.startswith("participant effects: ") for line in printed.splitlines()) == 1
     model = json.loads(out.read_text())
+    assert model["verdict"] in ("white", "structure_remains")
+    assert set(model["prediction_error"]) >= {"before", "after", "definition"}
+    assert isinstance(model["participant_effects"], list)
     assert model["task"] == "notes" and model["fitted_from"]["participants"] == 12
     assert model["data_source"] == "simulated"  # run --all's people: simulated, and said so
     assert out.with_suffix(".png").stat().st_size > 10_000

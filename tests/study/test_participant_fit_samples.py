@@ -13,7 +13,7 @@ from sqlalchemy import delete, select
 from sqlalchemy.orm import Session
 
 from db.migrate import open_database
-from db.models.study import Study
+from db.models.study import Participant, Study
 from db.models.trial import SampleChunk, Trial
 from study.analysis.participant_fit.observed import observed_trials, with_features
 from study.protocol.demo import run_demo
@@ -29,15 +29,28 @@ def test_the_features_of_stored_trials_follow_the_peoples_traits(db_url: str) ->
         with Session(engine) as session:
             seed = session.scalars(select(Study.seed)).one()
         features, counts = with_features(engine, trials, "lcca")
+        with Session(engine) as session:
+            # each trial's state of its person (the traits varied from trial to trial)
+            states = {
+                (code, condition): summary["trial_state"]
+                for code, condition, summary in session.execute(
+                    select(Participant.code, Trial.condition, Trial.summary)
+                    .join(Trial, Trial.participant_id == Participant.id)
+                    .where(Trial.practice.is_(False), Trial.status == "completed")
+                )
+            }
     finally:
         engine.dispose()
     assert counts == {"with_samples": len(trials), "without_samples": 0}
     assert len(trials) == 3 * 2 * 2
     for row in features.itertuples():
         traits = participant_traits(seed, row.participant, row.group)
-        # the advance: the preferred speed (the hand's grip against the return spring and,
-        # in HV, the felt force take a few per cent off the aim)
-        assert row.advance_speed_m_s == pytest.approx(traits.preferred_speed_m_s, rel=0.15)
+        state = states[(row.participant, row.condition)]
+        # the trial's state: the person's traits varied, the caution the person's own
+        assert state["caution"] == traits.caution
+        # the advance: the trial's preferred speed (the hand's grip against the return
+        # spring and, in HV, the felt force take a few per cent off the aim)
+        assert row.advance_speed_m_s == pytest.approx(state["preferred_speed_m_s"], rel=0.15)
         if row.condition == "VO" and np.isfinite(row.target_speed_ratio):
             # inside the target the participant goes on at 1 - 0.4 caution of its speed
             # (`SimulatedParticipant._plan`)

@@ -224,8 +224,8 @@ def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) 
 def test_a_full_disk_after_a_completed_trial_is_one_line_and_keeps_that_trial(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """`study run` as the lab runs it: the database fills up in the second trial (the
-    sample writer's 70th commit raises what SQLite raises then). One line, exit 2, saying
+    """`study run` as the lab runs it: the database fills up in the second trial (its
+    sample writer's 6th commit raises what SQLite raises then). One line, exit 2, saying
     what was kept up to which trial time; the completed trial is intact."""
     import sqlite3
 
@@ -234,11 +234,14 @@ def test_a_full_disk_after_a_completed_trial_is_one_line_and_keeps_that_trial(
     db = _study(tmp_path)
     real = sample_store._write_chunk
     commits: list[int] = []  # samples of each commit that went through
+    per_trial: dict[int, int] = {}  # commits per trial, in the order the trials ran
 
     def fills_up(conn, row):  # type: ignore[no-untyped-def]
-        if len(commits) >= 69:
+        n = per_trial.setdefault(row["trial_id"], 0)
+        if len(per_trial) == 2 and n >= 5:
             raise sqlite3.OperationalError("database or disk is full")
         real(conn, row)
+        per_trial[row["trial_id"]] = n + 1
         commits.append(row["n_samples"])
 
     monkeypatch.setattr(sample_store, "_write_chunk", fills_up)

@@ -1,9 +1,16 @@
 """The whole fit of simulated participants to a study's trials, and MODEL.json's content.
 
+`run_fit` runs the steps, each a function with its own answer (`read_data` -> `FitData`,
+`plan_traits` -> `TraitPlan`, `effects.search` -> `EffectSearch`, `fit_group` ->
+`GroupResult`, `check_model` -> `ModelChecks`), gathered in a `FitResult` that writes
+MODEL.json (`to_dict`, `write`). `plan_traits` is the one place that decides, per trait,
+whether it is fitted from the task's data, held at its prior, or told by another source.
+
 Steps (each reported through `progress(step, k, n)`):
 1. the task's trials, their behavioural features read off the stored samples, and each
    person's moments (`observed.py`); refused with one line when a group has too few
-   people;
+   people; the participant effects the residual calls for (`effects.py`: practice,
+   fatigue, carry-over), the traits then fitted to the trials with them taken out;
 2. the emulator: `design` trait settings over the priors' range, `repeats` trials per
    condition each, simulated once (`simulate.py`), the response surface fitted
    (`emulator.py`);
@@ -22,21 +29,25 @@ Steps (each reported through `progress(step, k, n)`):
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 from sqlalchemy import Engine
 
-from study.analysis.participant_fit import WEAK_TRAITS, checks, validate
+from study.analysis.participant_fit import WEAK_TRAITS, checks, effects, validate
+from study.analysis.participant_fit.effects import EffectSearch
 from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
 from study.analysis.participant_fit.estimate import (
     HYPER_SD,
     IDENTIFIED_RATIO,
     NU0,
     GroupEstimator,
+    GroupFit,
     identifiable,
     observed_moments,
     prior_arrays,
@@ -53,6 +64,7 @@ from study.analysis.participant_fit.summaries import power_effects, summaries
 from study.errors import StudyInputError
 from study.probes.measure import probe_arrays, probe_information, probe_summary
 from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
+from study.protocol.participant_effects import ParticipantEffect
 from study.protocol.participant_model import FORMAT
 from study.protocol.tasks import get_task
 from study.protocol.traits import PROFILES, TRAITS, GroupProfile, draw_traits
@@ -107,26 +119,30 @@ def simulate_people(
     k: int,
     settings: FitSettings,
     progress: Progress,
+    effects: Sequence[ParticipantEffect] = (),
 ) -> pd.DataFrame:
     """Trials of `per_group` people per group, `k` per condition, with `participant`,
     `group`, `order` (alternating) and `position` as observed. Person i of a group is
     drawn from `profiles[group][i % len]`: one profile (the truth), or the fit's
-    bootstrap replicates, so that the people carry the fit's uncertainty too."""
+    bootstrap replicates, so that the people carry the fit's uncertainty too; every
+    trial carries the participant `effects` at its place in the person's session."""
     rng = np.random.default_rng([settings.seed, 0xC4EC])
     people = [(g, draw_traits(g, rng, {g: ps[i % len(ps)]}))
               for g, ps in profiles.items() for i in range(per_group)]  # fmt: skip
+    firsts = [KNOWN_CONDITIONS[i % 2] for i in range(len(people))]
     frame = simulate_settings(
         task,
-        [t.to_dict() for _, t in people],
+        [{**t.to_dict(), "first": f} for (_, t), f in zip(people, firsts, strict=True)],
         k,
         settings.jobs,
         settings.max_s,
         lambda a, b: progress("checking", a, b),
         salt="check",
+        effects=effects,
     )
     frame["participant"] = [f"S{i + 1:03d}" for i in frame["setting"]]
     frame["group"] = [people[i][0] for i in frame["setting"]]
-    first = np.where(frame["setting"] % 2 == 0, "VO", "HV")
+    first = np.array(firsts)[frame["setting"].to_numpy()]
     frame["order"] = [f"{f}-first" for f in first]
     block = np.where(frame["condition"] == first, 0, 1)
     frame["position"] = block * k + frame["repeat"]
@@ -150,14 +166,14 @@ def build_emulator(task: str, settings: FitSettings,
     return emulator
 
 
-def fit_participants(
+def fit_study(
     engine: Engine,
     task: str,
     settings: FitSettings,
     db_label: str,
     progress: Progress = _no_progress,
-) -> tuple[dict[str, Any], pd.DataFrame]:
-    """MODEL.json's content, and the summaries' frame (for the figure)."""
+) -> FitResult:
+    """The fit to the database's completed trials of `task`."""
     trials = observed_trials(engine, task)
     check_fittable(trials, task, db_label)
     trials, _ = with_features(engine, trials, task, lambda a, b: progress("samples", a, b))
@@ -166,8 +182,448 @@ def fit_participants(
 
     probe_trials = probe_frame(engine)
     probes = probe_table(probe_trials) if len(probe_trials) else None
-    return fit_trials(trials, task, settings, build_emulator(task, settings, progress),
-                      db_label, progress, probes)  # fmt: skip
+    emulator = build_emulator(task, settings, progress)
+    return run_fit(trials, task, settings, emulator, db_label, progress, probes=probes)
+
+
+@dataclass
+class FitData:
+    """What the fit reads off the trials: each person's moments and the study's shape."""
+
+    trials: pd.DataFrame
+    """`observed_trials`' columns, with every emulated feature (NaN where not stored)."""
+    measures: list[str]
+    groups: list[str]
+    people: pd.DataFrame
+    """`person_moments`: one row per participant with both conditions."""
+    by_group: dict[str, pd.DataFrame]
+    ks: dict[str, float]
+    """Mean trials per condition of a group's people."""
+    sizes: dict[str, np.ndarray]
+    """People defining each moment, per group."""
+    sampled: int
+    """Trials with samples (their features read)."""
+    source: str
+    counts: dict[str, Any]
+    probed: dict[str, np.ndarray] = field(default_factory=dict)
+    """Per group, (people, len(TRAITS), 2): each person's probe estimate and SE of each
+    trait (NaN where none; `study.probes.measure.probe_arrays`)."""
+
+    def moments(self, group: str, names: list[str]) -> np.ndarray:
+        """(people, moments) of a group, log scale; NaN where a feature is undefined."""
+        return self.by_group[group][names].to_numpy(float)
+
+
+def read_data(trials: pd.DataFrame, task: str, emulator: MomentEmulator,
+              db_label: str, probes: pd.DataFrame | None = None) -> FitData:  # fmt: skip
+    """Step 1: the people's moments (and their probe estimates, `probes`:
+    `study.probes.measure.probe_table`); one line when a group has too few people."""
+    measures = list(get_task(task).analysed_measures)
+    groups = check_fittable(trials, task, db_label)
+    features = emulator.features_
+    trials = trials.assign(**{f: np.nan for f in features if f not in trials})
+    people = person_moments(trials, measures, features)
+    sampled = int(trials[features].notna().any(axis=1).sum()) if features else 0
+    source, counts = data_source(trials)
+    names = emulator.moments_
+    by_group = {g: people[people["group"] == g] for g in groups}
+    return FitData(
+        trials=trials,
+        measures=measures,
+        groups=list(groups),
+        people=people,
+        by_group=by_group,
+        ks={g: float(by_group[g]["k"].mean()) for g in groups},
+        sizes={g: by_group[g][names].notna().sum().to_numpy() for g in groups},
+        sampled=sampled,
+        source=source,
+        counts=counts,
+        probed={g: probe_arrays(probes, list(by_group[g].index), TRAITS) for g in groups},
+    )
+
+
+TRAIT_ROLES = ("fitted", "prior")
+"""How the fit takes a trait: `fitted` from the task's data (with the group mean under
+its profile's prior when the data tell it weakly, --weak-traits shrink), `prior` held at
+the hand-set profile; any other role names the source that tells the trait's value."""
+
+
+@dataclass
+class TraitPlan:
+    """Step 2: per trait, where its value comes from; the one place that decides it."""
+
+    told: list[int]
+    """Indices into TRAITS of the traits the task's data identify."""
+    free: list[int]
+    """Those the fit estimates from the task's data."""
+    weak: list[int]
+    """Those of `free` the data tell weakly (fitted under their profile's prior)."""
+    ratios: dict[str, float]
+    held_out: np.ndarray | None
+    sources: dict[str, str]
+    """trait -> the source that tells its value instead (e.g. a measurement before the
+    task); such a trait is neither fitted from the task's data nor held at its prior."""
+
+    def role(self, trait: str) -> str:
+        """`fitted`, `prior`, or the name of the source that tells the trait."""
+        if trait in self.sources:
+            return self.sources[trait]
+        return "fitted" if TRAITS.index(trait) in self.free else "prior"
+
+    @property
+    def fixed(self) -> list[str]:
+        """Traits held at their hand-set profile."""
+        return [t for t in TRAITS if self.role(t) == "prior"]
+
+
+def plan_traits(
+    emulator: MomentEmulator,
+    data: FitData,
+    settings: FitSettings,
+    sources: dict[str, str] | None = None,
+) -> TraitPlan:
+    """Which traits the data identify (`identifiable`), and so per trait: fitted from the
+    task's data, held at the prior (the weakly told ones by default), or told by another
+    source (`sources`: trait -> its name)."""
+    names = emulator.moments_
+    # the features every group's data hold (an imported study without samples: none)
+    held = [
+        f
+        for f in emulator.features_
+        if all(
+            data.sizes[g][names.index(f"{c}:{f}")] >= 2
+            for g in data.groups
+            for c in KNOWN_CONDITIONS
+        )
+    ]
+    held_out = validate.held_out_for(emulator, held)
+    # a probe's estimate of a trait adds its information (prior SD / SE)^2 to the task's
+    probe_info = {
+        g: probe_information(data.probed[g], prior_arrays(PROFILES[g])[1])
+        for g in data.groups
+        if g in data.probed
+    } or None
+    told, ratios = identifiable(emulator, {g: PROFILES[g] for g in data.groups}, data.sizes,
+                                data.ks, held_out, validate.held_out_trials(emulator),
+                                probe_info)  # fmt: skip
+    sources = dict(sources or {})
+    told = [j for j in told if TRAITS[j] not in sources]
+    # the traits the data tell weakly: held at the profile, or fitted under its prior
+    candidates = [j for j in range(len(TRAITS)) if TRAITS[j] not in sources]
+    free = candidates if settings.weak_traits == "shrink" else told
+    weak = [j for j in free if j not in told]
+    return TraitPlan(told, free, weak, ratios, held_out, sources)
+
+
+@dataclass
+class GroupResult:
+    """Step 3's answer for one group: its fit, the bootstrap and the model's predictions."""
+
+    fit: GroupFit
+    estimator: GroupEstimator
+    boots: np.ndarray
+    """(bootstrap, 2 * len(TRAITS)) each replicate's trait means then SDs."""
+    predicted: dict[str, list[float]]
+    """moment (and `VO-HV:measure`) -> the model's group mean at the fit, then per
+    replicate, on the measures' own scale."""
+    fixed_cov: np.ndarray
+    """The moments' covariance that the traits not told add to a person's."""
+    y: np.ndarray
+    codes: list[str]
+    k: float
+
+    @property
+    def profile(self) -> GroupProfile:
+        return _profile(self.fit.mean, self.fit.sd)
+
+    @property
+    def replicates(self) -> list[GroupProfile]:
+        n = len(TRAITS)
+        return [_profile(b[:n], b[n:]) for b in self.boots]
+
+    def to_dict(self, plan: TraitPlan, group: str, names: list[str]) -> dict[str, Any]:
+        best, n = self.fit, len(TRAITS)
+        mean_obs, sd_obs, n_obs = observed_moments(self.y)
+        m_fit, s_fit = self.estimator.expected(best.mean, best.sd)
+
+        def trait(j: int, t: str) -> dict[str, Any]:
+            out: dict[str, Any] = {
+                "mean": float(best.mean[j]),
+                "sd": float(best.sd[j]),
+                "fitted": j in plan.free,
+                "identifiable": j in plan.told,
+            }
+            if j in plan.free:
+                out["mean_ci95"] = np.percentile(self.boots[:, j], [2.5, 97.5]).tolist()
+                out["sd_ci95"] = np.percentile(self.boots[:, n + j], [2.5, 97.5]).tolist()
+            if j not in plan.told:
+                out["prior"] = list(getattr(PROFILES[group], t))
+            return out
+
+        return {
+            "participants": len(self.y),
+            "trials_per_condition": self.k,
+            "traits": {t: trait(j, t) for j, t in enumerate(TRAITS)},
+            "moments": {
+                m: {
+                    "observed_mean": float(mean_obs[i]) if n_obs[i] >= 2 else None,
+                    "simulated_mean": float(m_fit[i]),
+                    "observed_sd": float(sd_obs[i]) if n_obs[i] >= 2 else None,
+                    "simulated_sd": float(s_fit[i]),
+                    "participants": int(n_obs[i]),
+                }
+                for i, m in enumerate(names)
+            },
+            "people": {
+                code: {t: float(best.people[i, j]) for j, t in enumerate(TRAITS) if j in plan.free}
+                for i, code in enumerate(self.codes)
+            },
+            "cost": best.cost,
+            "converged": best.success,
+        }
+
+
+def fit_group(
+    emulator: MomentEmulator,
+    data: FitData,
+    group: str,
+    plan: TraitPlan,
+    settings: FitSettings,
+    rng: np.random.Generator,
+) -> GroupResult:
+    """One group's trait distribution, its bootstrap over participants (resampled, the
+    weak traits' prior centre drawn) and the model's predicted means per replicate."""
+    names = emulator.moments_
+    est = GroupEstimator(emulator, PROFILES[group], plan.free, data.ks[group], settings.seed,
+                         plan.weak)  # fmt: skip
+    y = data.moments(group, names)
+    probed = data.probed.get(group)
+    best = est.fit(y, probes=probed)
+    start = getattr(est, "x_", None)
+    boots, preds = [], [_predict(est, best.mean, best.sd)]
+    for _ in range(settings.bootstrap):
+        pick = rng.integers(0, len(y), len(y))
+        b = est.fit(y[pick], start, est.prior_centre(rng), None if probed is None else probed[pick])
+        boots.append(np.concatenate([b.mean, b.sd]))
+        preds.append(_predict(est, b.mean, b.sd))
+    # the moments' spread that the weakly told traits add to a person's (the outlier
+    # rule searches the identifiable traits only: the measures alone are 6 moments)
+    fixed_only = best.sd.copy()
+    fixed_only[plan.told] = 0.0
+    fixed_cov = np.atleast_2d(
+        np.cov(emulator.log_moments(est.draws(best.mean, fixed_only)), rowvar=False)
+    )
+    return GroupResult(
+        fit=best,
+        estimator=est,
+        boots=np.array(boots).reshape(len(boots), 2 * len(TRAITS)),
+        predicted={key: [p[key] for p in preds] for key in preds[0]},
+        fixed_cov=fixed_cov,
+        y=y,
+        codes=list(data.by_group[group].index),
+        k=data.ks[group],
+    )
+
+
+@dataclass
+class ModelChecks:
+    """Step 4: people simulated from the fit, the summaries and what the model lacks."""
+
+    simulated: pd.DataFrame
+    table: pd.DataFrame
+    rows: list[dict[str, Any]]
+    outliers: dict[str, Any]
+    misfit: dict[str, Any]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "line": checks.lacks_line(self.rows, self.outliers, self.misfit),
+            "tests": self.rows,
+            "outliers": self.outliers,
+            "group_means": self.misfit,
+        }
+
+
+def check_model(
+    task: str,
+    emulator: MomentEmulator,
+    data: FitData,
+    plan: TraitPlan,
+    fits: dict[str, GroupResult],
+    settings: FitSettings,
+    rng: np.random.Generator,
+    progress: Progress,
+    added: Sequence[ParticipantEffect] = (),
+) -> ModelChecks:
+    """People drawn from the fit's replicates and simulated with the study's design (and
+    the `added` participant effects), the observed vs simulated summaries (`data`: the
+    trials as observed), and the checks of what the model lacks."""
+    measures, groups = data.measures, data.groups
+    k_sim = round(float(np.median(data.people["k"])))
+    replicates = {g: fits[g].replicates for g in groups}
+    simulated = simulate_people(task, replicates, settings.check, k_sim, settings, progress,
+                                added)  # fmt: skip
+    rows = checks.trend_and_order(data.trials, simulated, measures)
+    means = {g: fits[g].fit.mean for g in groups}
+    sim_people = person_moments(simulated, measures, emulator.features_)
+    # the outlier rule over the measures' moments: the features' long tails (a single
+    # backing-off in a trial) raised false alarms on data simulated from the model itself
+    m = len(measures) * len(KNOWN_CONDITIONS)
+    outlier = checks.outliers(
+        emulator.subset(emulator.moments_[:m]),
+        data.people,
+        sim_people,
+        means,
+        {g: fits[g].fixed_cov[:m, :m] for g in groups},
+        plan.told,
+    )
+    predicted = {g: fits[g].predicted for g in groups}
+    table = pd.DataFrame(summaries(data.trials, simulated, measures, groups, predicted, rng,
+                                   max(settings.bootstrap, 200)))  # fmt: skip
+    misfit = checks.summary_misfit(data.trials, simulated, measures, groups, plan.fixed)
+    return ModelChecks(simulated, table, rows, outlier, misfit)
+
+
+@dataclass
+class FitResult:
+    """The whole fit: its steps' answers, and MODEL.json (`to_dict`, `write`)."""
+
+    task: str
+    db_label: str
+    settings: FitSettings
+    emulator: MomentEmulator
+    data: FitData
+    plan: TraitPlan
+    groups: dict[str, GroupResult]
+    checks: ModelChecks
+    search: EffectSearch | None = None
+    """The loop on the people (`effects.search`): the participant effects added."""
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """The observed vs simulated summaries (the figure's)."""
+        return self.checks.table
+
+    def to_dict(self) -> dict[str, Any]:
+        """MODEL.json's content."""
+        data, plan, settings = self.data, self.plan, self.settings
+        names = self.emulator.moments_
+        features = self.emulator.features_
+        group_out = {g: r.to_dict(plan, g, names) for g, r in self.groups.items()}
+        return {
+            "format": FORMAT,
+            "task": self.task,
+            "data_source": data.source,
+            "fitted_from": {
+                "database": self.db_label,
+                "trials": len(data.trials),
+                "participants": len(data.people),
+                "trials_by_driver": data.counts["trials_by_driver"],
+                "note": data.counts["note"],
+            },
+            "method": "hierarchical model fitted by EM on an emulator (quadratic response "
+            "surface of log measures and log sample features on log traits): each person's "
+            "traits N(group mean, group sd), their posterior modes by Levenberg-Marquardt "
+            f"(Laplace covariances); group sds pooled with {NU0:g} pseudo-people at the "
+            "profile's; the weakly told traits' group means under the profile's prior; "
+            "bootstrap over participants, each replicate with the prior's centre drawn from "
+            "the prior (randomised maximum likelihood); a person's probe estimate of a trait "
+            "(study.probes, with its SE) a measurement of that trait beside the moments",
+            "moments": names,
+            "features": {
+                "names": features,
+                "trials_with_samples": data.sampled,
+                "note": "behavioural features read off each trial's samples (the task's "
+                "`fit_features`), beside the measures; a trial without samples (imported) "
+                "gives the measures only"
+                if features
+                else "the task has no sample features: the measures only",
+            },
+            "identifiable": [TRAITS[j] for j in plan.told],
+            "probes": probe_summary(
+                data.probed, {g: list(data.by_group[g].index) for g in data.groups}, TRAITS
+            ),
+            "held_out_trait_error": None
+            if plan.held_out is None
+            else dict(zip(TRAITS, np.round(plan.held_out, 6).tolist(), strict=True)),
+            "weak_traits": settings.weak_traits,
+            "fixed_at_prior": plan.fixed,
+            "shrunk_to_prior": [TRAITS[j] for j in plan.weak],
+            "trait_roles": {t: plan.role(t) for t in TRAITS},
+            "weak_traits_note": "traits the data tell weakly: held at the hand-set profile "
+            "(`fixed_at_prior`, --weak-traits prior) or fitted with their group mean under the "
+            f"prior N(the profile's mean, {HYPER_SD:g} of its SD) (`shrunk_to_prior`, "
+            "--weak-traits shrink)",
+            "identification_ratio": {t: round(r, 3) for t, r in plan.ratios.items()},
+            "identification_rule": f"posterior / prior SD of a group mean < {IDENTIFIED_RATIO} "
+            "(linearised at the priors, the people's own information on their traits, worst "
+            "group)",
+            "groups": {
+                g: {t: {"mean": v["mean"], "sd": v["sd"]} for t, v in out["traits"].items()}
+                for g, out in group_out.items()
+            },
+            "fit": group_out,
+            "emulator": self.emulator.to_dict(),
+            "summaries": self.table.round(6).to_dict(orient="records"),
+            "simulated_summaries_note": f"'simulated' rows: {settings.check} people per group "
+            "SIMULATED from the fitted model (each from one of the fit's bootstrap replicates, "
+            "so the interval holds the fit's uncertainty and the people's); 'model': the "
+            "emulator's prediction with the fit's bootstrap interval",
+            "lacks": self.checks.to_dict(),
+            "emulator_check": checks.emulator_check(self.table),
+            "effects": power_effects(self.checks.simulated, data.measures),
+            **(
+                self.search.to_dict(self.checks.outliers["flagged"])
+                if self.search is not None
+                else {}
+            ),
+            "settings": settings.__dict__,
+        }
+
+    def write(self, path: Path, extra: dict[str, Any] | None = None) -> dict[str, Any]:
+        """MODEL.json at `path`, written whole or not at all; its content."""
+        from teleop_core.files import write_atomically
+
+        model = {**self.to_dict(), **(extra or {})}
+        write_atomically(path, json.dumps(model, indent=2, default=float) + "\n")
+        return model
+
+
+def run_fit(
+    trials: pd.DataFrame,
+    task: str,
+    settings: FitSettings,
+    emulator: MomentEmulator,
+    db_label: str,
+    progress: Progress = _no_progress,
+    sources: dict[str, str] | None = None,
+    loop: bool = True,
+    probes: pd.DataFrame | None = None,
+) -> FitResult:
+    """The fit to `trials` (`observed_trials`' columns, and the features `with_features`
+    adds where samples are stored) with a built `emulator`, step by step; `sources`:
+    traits told by another source than the task's data (`plan_traits`); `loop`: the
+    participant effects the residual calls for are added (`effects.search`), the traits
+    then fitted to the trials with those effects taken out; `probes`: the participants'
+    probe estimates (`study.probes.measure.probe_table`), each a measurement of a trait
+    beside the task's moments."""
+    observed = read_data(trials, task, emulator, db_label, probes)
+    plan = plan_traits(emulator, observed, settings, sources)
+    found, data = None, observed
+    if loop:
+        found = effects.search(observed.trials, emulator, plan.free, plan.weak, settings.seed,
+                               progress=lambda a, b: progress("effects", a, b))  # fmt: skip
+        if found.effects:
+            data = read_data(found.adjusted, task, emulator, db_label, probes)
+    rng = np.random.default_rng([settings.seed, 0xB007])
+    fits = {}
+    for k, g in enumerate(data.groups):
+        progress("fitting", k, len(data.groups))
+        fits[g] = fit_group(emulator, data, g, plan, settings, rng)
+    progress("fitting", len(data.groups), len(data.groups))
+    added = found.effects if found is not None else []
+    checked = check_model(task, emulator, observed, plan, fits, settings, rng, progress, added)
+    return FitResult(task, db_label, settings, emulator, observed, plan, fits, checked, found)
 
 
 def fit_trials(
@@ -179,192 +635,12 @@ def fit_trials(
     progress: Progress = _no_progress,
     probes: pd.DataFrame | None = None,
 ) -> tuple[dict[str, Any], pd.DataFrame]:
-    """The fit to `trials` (`observed_trials`' columns, and the features `with_features`
-    adds where samples are stored) with a built `emulator`; `probes`: the participants'
-    probe estimates (`study.probes.measure.probe_table`), each a measurement of a trait
-    beside the task's moments."""
-    measures = list(get_task(task).analysed_measures)
-    groups = check_fittable(trials, task, db_label)
-    features = emulator.features_
-    trials = trials.assign(**{f: np.nan for f in features if f not in trials})
-    people = person_moments(trials, measures, features)
-    sampled = int(trials[features].notna().any(axis=1).sum()) if features else 0
-    source, counts = data_source(trials)
-    names = emulator.moments_
-    by_group = {g: people[people["group"] == g] for g in groups}
-    ks = {g: float(by_group[g]["k"].mean()) for g in groups}
-    sizes = {g: by_group[g][names].notna().sum().to_numpy() for g in groups}
-    # the features every group's data hold (an imported study without samples: none)
-    held = [
-        f
-        for f in features
-        if all(sizes[g][names.index(f"{c}:{f}")] >= 2 for g in groups for c in KNOWN_CONDITIONS)
-    ]
-    held_out = validate.held_out_for(emulator, held)
-    probed = {g: probe_arrays(probes, list(by_group[g].index), TRAITS) for g in groups}
-    probe_info = {g: probe_information(probed[g], prior_arrays(PROFILES[g])[1]) for g in groups}
-    told, ratios = identifiable(emulator, {g: PROFILES[g] for g in groups}, sizes, ks, held_out,
-                                validate.held_out_trials(emulator), probe_info)  # fmt: skip
-    # the traits the data tell weakly: held at the profile, or fitted under its prior
-    shrink = settings.weak_traits == "shrink"
-    free = list(range(len(TRAITS))) if shrink else told
-    weak = [j for j in free if j not in told]
-    rng = np.random.default_rng([settings.seed, 0xB007])
-    fitted, group_out, predicted, fixed_cov, replicates = {}, {}, {}, {}, {}
-    for k, g in enumerate(groups):
-        progress("fitting", k, len(groups))
-        est = GroupEstimator(emulator, PROFILES[g], free, ks[g], settings.seed, weak)
-        y = by_group[g][names].to_numpy(float)
-        best = est.fit(y, probes=probed[g])
-        start = getattr(est, "x_", None)
-        boots, preds = [], [_predict(est, best.mean, best.sd)]
-        for _ in range(settings.bootstrap):
-            pick = rng.integers(0, len(y), len(y))
-            b = est.fit(y[pick], start, est.prior_centre(rng), probed[g][pick])
-            boots.append(np.concatenate([b.mean, b.sd]))
-            preds.append(_predict(est, b.mean, b.sd))
-        boots_arr = np.array(boots)
-        fitted[g] = _profile(best.mean, best.sd)
-        replicates[g] = [_profile(b[: len(TRAITS)], b[len(TRAITS) :]) for b in boots_arr]
-        # the moments' spread that the weakly told traits add to a person's (the outlier
-        # rule searches the identifiable traits only: the measures alone are 6 moments)
-        fixed_only = best.sd.copy()
-        fixed_only[told] = 0.0
-        fixed_cov[g] = np.atleast_2d(
-            np.cov(emulator.log_moments(est.draws(best.mean, fixed_only)), rowvar=False)
-        )
-        predicted[g] = {key: [p[key] for p in preds] for key in preds[0]}
-        mean_obs, sd_obs, n_obs = observed_moments(y)
-        m_fit, s_fit = est.expected(best.mean, best.sd)
-        group_out[g] = {
-            "participants": len(y),
-            "trials_per_condition": ks[g],
-            "traits": {
-                t: {
-                    "mean": float(best.mean[j]),
-                    "sd": float(best.sd[j]),
-                    "fitted": j in free,
-                    "identifiable": j in told,
-                    **(
-                        {
-                            "mean_ci95": np.percentile(boots_arr[:, j], [2.5, 97.5]).tolist(),
-                            "sd_ci95": np.percentile(
-                                boots_arr[:, len(TRAITS) + j], [2.5, 97.5]
-                            ).tolist(),
-                        }
-                        if j in free
-                        else {}
-                    ),
-                    **({} if j in told else {"prior": list(getattr(PROFILES[g], t))}),
-                }
-                for j, t in enumerate(TRAITS)
-            },
-            "moments": {
-                n: {
-                    "observed_mean": float(mean_obs[i]) if n_obs[i] >= 2 else None,
-                    "simulated_mean": float(m_fit[i]),
-                    "observed_sd": float(sd_obs[i]) if n_obs[i] >= 2 else None,
-                    "simulated_sd": float(s_fit[i]),
-                    "participants": int(n_obs[i]),
-                }
-                for i, n in enumerate(names)
-            },
-            "people": {
-                code: {t: float(best.people[i, j]) for j, t in enumerate(TRAITS) if j in free}
-                for i, code in enumerate(by_group[g].index)
-            },
-            "cost": best.cost,
-            "converged": best.success,
-        }
-    progress("fitting", len(groups), len(groups))
-    k_sim = round(float(np.median(people["k"])))
-    simulated = simulate_people(task, replicates, settings.check, k_sim, settings, progress)
-    rows = checks.trend_and_order(trials, simulated, measures)
-    means = {g: np.array([getattr(fitted[g], t)[0] for t in TRAITS]) for g in groups}
-    sim_people = person_moments(simulated, measures, features)
-    # the outlier rule over the measures' moments: the features' long tails (a single
-    # backing-off in a trial) raised false alarms on data simulated from the model itself
-    m = len(measures) * len(KNOWN_CONDITIONS)
-    outlier = checks.outliers(
-        emulator.subset(names[:m]),
-        people,
-        sim_people,
-        means,
-        {g: fixed_cov[g][:m, :m] for g in groups},
-        told,
-    )
-    table = pd.DataFrame(
-        summaries(trials, simulated, measures, groups, predicted, rng, max(settings.bootstrap, 200))
-    )
-    held = [t for j, t in enumerate(TRAITS) if j not in free]
-    misfit = checks.summary_misfit(trials, simulated, measures, groups, held)
-    model = {
-        "format": FORMAT,
-        "task": task,
-        "data_source": source,
-        "fitted_from": {
-            "database": db_label,
-            "trials": len(trials),
-            "participants": len(people),
-            "trials_by_driver": counts["trials_by_driver"],
-            "note": counts["note"],
-        },
-        "method": "hierarchical model fitted by EM on an emulator (quadratic response "
-        "surface of log measures and log sample features on log traits): each person's "
-        "traits N(group mean, group sd), their posterior modes by Levenberg-Marquardt "
-        f"(Laplace covariances); group sds pooled with {NU0:g} pseudo-people at the "
-        "profile's; the weakly told traits' group means under the profile's prior; "
-        "bootstrap over participants, each replicate with the prior's centre drawn from "
-        "the prior (randomised maximum likelihood); a person's probe estimate of a trait "
-        "(study.probes, with its SE) a measurement of that trait beside the moments",
-        "moments": names,
-        "features": {
-            "names": features,
-            "trials_with_samples": sampled,
-            "note": "behavioural features read off each trial's samples (the task's "
-            "`fit_features`), beside the measures; a trial without samples (imported) "
-            "gives the measures only"
-            if features
-            else "the task has no sample features: the measures only",
-        },
-        "identifiable": [TRAITS[j] for j in told],
-        "probes": probe_summary(probed, {g: list(by_group[g].index) for g in groups}, TRAITS),
-        "held_out_trait_error": None
-        if held_out is None
-        else dict(zip(TRAITS, np.round(held_out, 6).tolist(), strict=True)),
-        "weak_traits": settings.weak_traits,
-        "fixed_at_prior": [t for j, t in enumerate(TRAITS) if j not in free],
-        "shrunk_to_prior": [TRAITS[j] for j in weak],
-        "weak_traits_note": "traits the data tell weakly: held at the hand-set profile "
-        "(`fixed_at_prior`, --weak-traits prior) or fitted with their group mean under the "
-        f"prior N(the profile's mean, {HYPER_SD:g} of its SD) (`shrunk_to_prior`, "
-        "--weak-traits shrink)",
-        "identification_ratio": {t: round(r, 3) for t, r in ratios.items()},
-        "identification_rule": f"posterior / prior SD of a group mean < {IDENTIFIED_RATIO} "
-        "(linearised at the priors, the people's own information on their traits, worst "
-        "group)",
-        "groups": {
-            g: {t: {"mean": v["mean"], "sd": v["sd"]} for t, v in group_out[g]["traits"].items()}
-            for g in groups
-        },
-        "fit": group_out,
-        "emulator": emulator.to_dict(),
-        "summaries": table.round(6).to_dict(orient="records"),
-        "simulated_summaries_note": f"'simulated' rows: {settings.check} people per group "
-        "SIMULATED from the fitted model (each from one of the fit's bootstrap replicates, so "
-        "the interval holds the fit's uncertainty and the people's); 'model': the "
-        "emulator's prediction with the fit's bootstrap interval",
-        "lacks": {
-            "line": checks.lacks_line(rows, outlier, misfit),
-            "tests": rows,
-            "outliers": outlier,
-            "group_means": misfit,
-        },
-        "emulator_check": checks.emulator_check(table),
-        "effects": power_effects(simulated, measures),
-        "settings": settings.__dict__,
-    }
-    return model, table
+    """MODEL.json's content and the summaries' frame of `run_fit` without the loop on
+    the people (what the traits alone explain, and what the checks find they lack);
+    `probes` as `run_fit`'s."""
+    result = run_fit(trials, task, settings, emulator, db_label, progress, loop=False,
+                     probes=probes)  # fmt: skip
+    return result.to_dict(), result.table
 
 
 def _predict(est: GroupEstimator, mean: np.ndarray, sd: np.ndarray) -> dict[str, float]:

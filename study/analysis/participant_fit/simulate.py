@@ -32,6 +32,7 @@ from typing import Any
 import pandas as pd
 
 from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
+from study.protocol.participant_effects import ParticipantEffect, apply_effects, session_place
 from study.protocol.tasks import get_task
 from study.protocol.traits import ParticipantTraits
 
@@ -62,16 +63,23 @@ def simulate_setting(
     repeats: int,
     max_s: float,
     salt: str = "fit",
+    effects: Sequence[ParticipantEffect] = (),
 ) -> list[dict[str, Any]]:
-    """Every trial of one trait setting (`group` plus the traits): each condition x
+    """Every trial of one trait setting (`group` plus the traits, and `first`: the
+    condition of the person's first block where `effects` apply): each condition x
     repeat, with the task's analysed measures and `success`. With the salt `fit` both
     conditions share a repeat's seed; with any other, each trial has its own."""
     the_task = get_task(task)
-    traits = ParticipantTraits(**setting)
+    setting = dict(setting)
+    first = setting.pop("first", KNOWN_CONDITIONS[0])
+    person = ParticipantTraits(**setting)
+    order = [first, *(c for c in KNOWN_CONDITIONS if c != first)]
     estimator = _estimator() if the_task.has_dial else None
     rows = []
     for r in range(repeats):
         for condition in KNOWN_CONDITIONS:
+            place = session_place(order, order.index(condition), r, repeats)
+            traits = apply_effects(person, effects, place)
             result = the_task.simulate(
                 traits,
                 condition,
@@ -108,6 +116,7 @@ def simulate_settings(
     max_s: float = MAX_TRIAL_S,
     progress: Callable[[int, int], None] = lambda k, n: None,
     salt: str = "fit",
+    effects: Sequence[ParticipantEffect] = (),
 ) -> pd.DataFrame:
     """One row per trial of every setting: `setting` (its index), condition, repeat,
     success, the task's analysed measures and fit features; `progress(k, n)` after each
@@ -118,7 +127,7 @@ def simulate_settings(
         for k, setting in enumerate(settings):
             rows += [
                 {"setting": k, **row}
-                for row in simulate_setting(task, k, setting, repeats, max_s, salt)
+                for row in simulate_setting(task, k, setting, repeats, max_s, salt, effects)
             ]
             progress(k + 1, n)
     else:
@@ -127,7 +136,7 @@ def simulate_settings(
             jobs, mp_context=context, initializer=_warm, initargs=(task,)
         ) as pool:
             futures = {
-                pool.submit(simulate_setting, task, k, s, repeats, max_s, salt): k
+                pool.submit(simulate_setting, task, k, s, repeats, max_s, salt, effects): k
                 for k, s in enumerate(settings)
             }
             for done, future in enumerate(as_completed(futures), 1):

@@ -34,7 +34,7 @@ from collections import deque
 
 import numpy as np
 
-from study.protocol.traits import ParticipantTraits
+from study.protocol.traits import ParticipantTraits, trial_state
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
     GRIP_STIFFNESS_N_M_PER_RAD,
@@ -64,6 +64,8 @@ class SimulatedParticipant(Driver):
         spring_n_m_per_rad: float = HapticParams().spring_n_m_per_rad,
         speed_gain_m_s_per_rad: float = HapticParams().speed_gain_m_s_per_rad,
     ) -> None:
+        self.person = traits
+        """The person's own traits; `traits` is their state in the current trial."""
         self.traits = traits
         self.give_up_s = give_up_s
         self.target = phantom.anatomy.target
@@ -82,6 +84,7 @@ class SimulatedParticipant(Driver):
 
     def start(self, rng: np.random.Generator) -> None:
         self.rng = rng
+        self.traits = trial_state(self.person, rng)
         self._road_index = 0
         self.phase = "advance"
         self.attempt = 0

@@ -141,8 +141,10 @@ class LccaTask(Task):
         from study.tasks.lcca.simulated_participant import SimulatedParticipant
 
         if isinstance(driver, SimulatedParticipant):
+            # the person's state in this trial (their traits varied from trial to trial)
+            state = {k: v for k, v in driver.traits.to_dict().items() if k != "group"}
             return {"obstacles_felt": driver.obstacles_felt,
-                    "obstacles_seen": driver.obstacles_seen}  # fmt: skip
+                    "obstacles_seen": driver.obstacles_seen, "trial_state": state}  # fmt: skip
         return {}
 
     def trial_frame(self, samples):
