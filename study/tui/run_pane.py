@@ -227,7 +227,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             from study.tui.confirm import Confirm
 
             def answered(yes: bool | None) -> None:
-                if yes and self._next is nxt:
+                if yes and self._next == nxt and self.run is None:
                     self._breaks.pop(code, None)
                     self._start(code, nxt)
 
@@ -241,7 +241,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             from study.tui.confirm import Confirm
 
             def confirmed(yes: bool | None) -> None:
-                if yes and self._next is nxt and self.run is None:
+                if yes and self._next == nxt and self.run is None:
                     self._checked.add(code)
                     self._start(code, nxt, checklist=True)
 
