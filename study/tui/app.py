@@ -209,6 +209,9 @@ class StudyApp(SafeWorkers, App[None]):
     def on_participants_pane_added(self, _event: ParticipantsPane.Added) -> None:
         self.reload()
 
+    def on_participants_pane_note_kept(self, _event: ParticipantsPane.NoteKept) -> None:
+        self.reload()
+
     def on_participants_pane_withdrawn(self, _event: ParticipantsPane.Withdrawn) -> None:
         self.reload()
 
