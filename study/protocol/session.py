@@ -59,6 +59,9 @@ STEP_S = 0.5
 PACED_STEP_S = 0.05
 """The same when paced: short enough that a watcher (the TUI's live view, 20 Hz and up)
 and a keyboard driver see and act at real time rather than in half-second bursts."""
+HOLD_S = 300.0
+"""Trial time, in s, of samples a watched session keeps in memory while another program
+holds the database's lock (about 30 000 samples at 100 Hz: a few MB)."""
 INTERRUPTED_BY_CRASH = "found running when a new session started (the process had died)"
 STOPPED_WITH_PARENT = "the session stopped because its parent `study run` process ended"
 
@@ -145,6 +148,7 @@ def run_session(
     actor: str | None = None,
     stop: threading.Event | None = None,
     participants: ParticipantModel | None = None,
+    on_storage_wait: Callable[[float | None, int], None] | None = None,
 ) -> list[int]:
     """Run the participant's remaining trials; return the ids of the trials completed.
 
@@ -157,6 +161,9 @@ def run_session(
     `actor` is recorded with the lease; a set `stop` ends the session at its next step,
     the running trial marked interrupted (`STOPPED_WITH_PARENT`), and returns.
     `participants`: the fitted model simulated people are drawn from (else PROFILES).
+    `on_storage_wait(waited_s, held)`: given, a lock held by another program does not
+    stop the trial: up to `HOLD_S` of its samples wait in memory (`SampleWriter`'s
+    `hold_s`) and this is called while they do (None, 0 when they are committed).
     """
     if pace is not None and not (math.isfinite(pace) and pace > 0):
         raise StudyInputError(f"pace {pace!r}; expected a finite number > 0 (times real time)")
@@ -204,6 +211,7 @@ def run_session(
                 design=design,
                 study_seed=study.seed,
                 on_samples=on_samples,
+                on_storage_wait=on_storage_wait,
                 check=lambda: _check_stop(lease, stop),
                 model=participants.digest if participants is not None else None,
             )
@@ -245,8 +253,15 @@ def _storage_failure(
     return (
         f"storing {slot} failed ({reason}): kept {n_completed} trial(s) completed in this "
         f"session and {upto} of {slot}, which the next `study run` marks interrupted and "
-        "repeats; expected a database with free space"
+        f"repeats; expected {_storage_expected(reason)}"
     )
+
+
+def _storage_expected(reason: str) -> str:
+    """What the database should have been, by the driver's reason (a lock is no full disk)."""
+    if "locked" in reason.lower():
+        return "the database free of another program's lock"
+    return "a database with free space"
 
 
 def _check_stop(lease: LeaseHandle, stop: threading.Event | None) -> None:
@@ -270,6 +285,7 @@ class TrialSetup:
     design: StudyDesign
     study_seed: int
     on_samples: Callable[[np.ndarray], None] | None = None
+    on_storage_wait: Callable[[float | None, int], None] | None = None
     check: Callable[[], None] = lambda: None
     model: str | None = None
     """The digest of the fitted participant model the traits came from, if any."""
@@ -329,7 +345,9 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     chunks = []
     step_s = STEP_S if run.pace is None else PACED_STEP_S
     wall0 = time.monotonic()
-    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer:
+    hold_s = HOLD_S if run.on_storage_wait is not None else 0.0
+    with SampleWriter(engine, trial_id, chunk_s=1.0, hold_s=hold_s,
+                      on_wait=run.on_storage_wait) as writer:  # fmt: skip
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))

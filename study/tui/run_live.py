@@ -87,6 +87,10 @@ class LiveViewMixin:
                                    magnitude=trace.magnitude))  # fmt: skip
             text.append("\n" + sparkline(histories[k], width, trace.full_scale) + "\n\n")
         lines = frame.task.live_lines(frame.values)
+        wait = run.live.storage_wait
+        if wait is not None:  # the trial goes on; its samples wait in memory
+            lines.insert(0, f"waiting for the database (locked by another program) "
+                            f"{wait[0]:.0f} s: {wait[1]} samples held, none lost")  # fmt: skip
         if run.keyboard is not None:
             lines.append(f"dial aim {run.keyboard.aim_rad:+4.2f} rad")
         text.append("\n".join(lines))

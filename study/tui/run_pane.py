@@ -401,8 +401,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         try:
             outcome = run.run(started)
         except Exception as exc:  # shown, not swallowed: the trial row says what is stored
-            outcome = TrialOutcome(run.code, [], 0, 0.0)
             line = f"trial failed: {plain_line(exc)}"
+            outcome = TrialOutcome(run.code, [], 0, 0.0, line)
             self.app.call_from_thread(self.app.notify, line, severity="error", timeout=15)
         self.post_message(self.TrialEnded(outcome, block))
 
@@ -432,6 +432,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                     f" {run.live.peaks[1]:.2f} N {second.label}"
                 )
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
+        elif outcome.error:
+            self.status = "failed"
+            text = (f"{outcome.code}: {outcome.error}; the next start marks the trial "
+                    "interrupted and repeats it")  # fmt: skip
         elif outcome.interrupted:
             self.status = "interrupted"
             text = f"{outcome.code}: trial stopped; kept as interrupted, to be repeated"
