@@ -86,6 +86,10 @@ class ParticipantsPane(SafeWorkers, Vertical):
         yield table
         yield Static("", id="detail")
 
+    def focus_first(self) -> None:
+        """F2: the list, so that its keys (a, w, n, o) and the arrows act at once."""
+        self.query_one("#people", DataTable).focus()
+
     def show(self, roster: Roster) -> None:
         self._roster = roster
         self._fill = roster.groups

@@ -55,6 +55,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
     RunPane #next { height: auto; max-height: 2; }
     RunPane #live { height: 1fr; }
     RunPane #phantom-box { width: 1fr; height: 1fr; border: round $primary-muted; }
+    RunPane:focus #phantom-box { border: round $accent; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("s", "start", "Start"),

@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from textual import on, work
+from textual import events, on, work
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, VerticalScroll
@@ -57,6 +57,8 @@ class PairChoice(Widget, can_focus=True):
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("left", "pick(0)", "Left", show=False),
         Binding("right", "pick(1)", "Right", show=False),
+        Binding("down", "app.focus_next", "Next pair", show=False),
+        Binding("up", "app.focus_previous", "Previous pair", show=False),
     ]
 
     def __init__(self, number: int, pair: tuple[str, str], **kwargs: object) -> None:
@@ -127,7 +129,13 @@ class TlxPane(SafeWorkers, VerticalScroll):
     TlxPane #audit { height: auto; color: $text-muted; }
     TlxPane #reason { width: 1fr; }
     """
-    BINDINGS: ClassVar[list[BindingType]] = [Binding("ctrl+s", "save", "Save TLX")]
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("ctrl+s", "save", "Save TLX"),
+        # up/down move between the fields (the page scrolls to the focused one) instead
+        # of scrolling the page under the cursor
+        Binding("down", "app.focus_next", "Next field", show=False),
+        Binding("up", "app.focus_previous", "Previous field", show=False),
+    ]
 
     @dataclass
     class Saved(Message):
@@ -255,6 +263,25 @@ class TlxPane(SafeWorkers, VerticalScroll):
         else:
             self._set_status("loading")
             self._load_worker(block, "")
+
+    def focus_first(self) -> None:
+        """F4: the first rating of the block shown, else the participant list."""
+        if self._shown is not None:
+            self.query_one(f"#rating-{TLX_SUBSCALES[0]}", Input).focus()
+        else:
+            self.query_one("#tlx-participant", Select).focus()
+
+    def on_descendant_focus(self, event: events.DescendantFocus) -> None:
+        """The question of the focused rating above the form, and the focused field in
+        view (shift+tab onto Save scrolled nothing)."""
+        widget = event.widget
+        text = ""
+        if widget.id and widget.id.startswith("rating-"):
+            text = TLX_SCALES[widget.id.removeprefix("rating-")][1]
+        elif isinstance(widget, PairChoice):
+            text = "Which of the two contributed more to your workload? left / right"
+        self.query_one("#question", Label).update(text)
+        widget.scroll_visible(animate=False)
 
     @on(Input.Changed)
     def _rating_typed(self, event: Input.Changed) -> None:
