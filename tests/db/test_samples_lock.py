@@ -68,7 +68,7 @@ def test_a_lock_during_the_trial_holds_the_samples_and_commits_them_after(
     locker = Locker(sqlite_engine.url.database)
     try:
         for k in range(150, 800, 50):  # 6.5 s more while locked: no error, held
-            writer.extend(_columns(t[k:k + 50]))
+            writer.extend(_columns(t[k : k + 50]))
         assert _stored(sqlite_engine, trial_id) == before  # nothing could be written
         assert writer.waiting_since is not None
         held = [n for s, n in waits if s is not None]
@@ -99,7 +99,7 @@ def test_past_its_hold_the_writer_waits_then_raises_and_keeps_what_it_had(
     try:
         with pytest.raises(OperationalError, match="locked"):
             for k in range(0, 600, 50):
-                writer.extend(_columns(t[k:k + 50]))
+                writer.extend(_columns(t[k : k + 50]))
     finally:
         locker.release()
     assert writer.held_samples() > 200  # held, not dropped: a later flush commits them
