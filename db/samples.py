@@ -16,20 +16,28 @@ one row whatever its length, so the writer's cost is the encoding, about 0.3 us 
 sample). The columns handed in are kept as arrays until the chunk is encoded; no
 Python object is built per sample.
 
+Another program's lock (SQLite allows one writer at a time) need not stop a trial: with
+`hold_s` > 0 a chunk that meets a lock is kept in memory and committed with the next one,
+each attempt waiting only `LOCK_POLL_MS`, so the caller's loop goes on (and can show the
+wait, `on_wait`) while up to `hold_s` of trial time is held; past that, or at `close`, the
+writer waits for the lock (up to `hold_s` of wall time at `close`). No sample is dropped:
+chunks are committed in order, or the error is raised.
+
 Reading (Arrow record batches of bounded size, one trial or many in parallel) is
 `db.sample_reader`; `SampleReader` and `SAMPLE_SCHEMA` are re-exported here.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import time
+from collections.abc import Callable, Mapping, Sequence
 from types import TracebackType
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
 from sqlalchemy import Connection, Engine, insert, select
-from sqlalchemy.exc import IntegrityError
+from sqlalchemy.exc import IntegrityError, OperationalError
 
 from db.errors import DbInputError
 from db.models.trial import SampleChunk, SampleSchema
@@ -44,6 +52,9 @@ from db.sample_codec import (
 from db.sample_reader import SAMPLE_SCHEMA, SampleReader
 
 __all__ = ["SAMPLE_SCHEMA", "SampleReader", "SampleWriter"]
+
+LOCK_POLL_MS = 50
+"""How long one commit attempt waits for another program's lock while samples are held."""
 
 
 class SampleWriter:
@@ -62,6 +73,12 @@ class SampleWriter:
     schema
         The chunks' Arrow schema: the trial's task's sample columns
         (`db.sample_codec.sample_field`), `t_s` first; default `CHUNK_SCHEMA`.
+    hold_s
+        Trial time, in s, of samples held in memory while another program holds the
+        database's lock (0: each commit waits for the lock, up to the busy timeout).
+    on_wait
+        Called after each commit attempt while samples are held, with the seconds since
+        the first attempt that met the lock and the samples held (None, 0 when it ends).
 
     Sample times must not decrease. Columns not given are stored as NULL.
 
@@ -79,11 +96,21 @@ class SampleWriter:
         chunk_s: float = 1.0,
         start_seq: int = 0,
         schema: pa.Schema = CHUNK_SCHEMA,
+        hold_s: float = 0.0,
+        on_wait: Callable[[float | None, int], None] | None = None,
     ) -> None:
         if not chunk_s > 0:
             raise DbInputError(f"chunk_s {chunk_s!r} is not a positive duration in s")
+        if not hold_s >= 0:
+            raise DbInputError(f"hold_s {hold_s!r} is not a duration in s >= 0")
         self.schema = check_schema(schema)
         self._schema_id: int | None = None
+        self.hold_s = hold_s
+        self.on_wait = on_wait
+        self._pending: list[dict[str, Any]] = []
+        """Encoded chunks not yet committed (another program held the lock), in order."""
+        self.waiting_since: float | None = None
+        """time.monotonic() of the first commit attempt that met a lock, while one lasts."""
         self.engine = engine
         self.trial_id = trial_id
         self.chunk_s = chunk_s
@@ -165,12 +192,19 @@ class SampleWriter:
                 self.flush()
 
     def flush(self) -> None:
-        """Commit the buffered samples as one transaction."""
+        """Commit the buffered samples as one transaction (held if another program has
+        the lock and `hold_s` allows)."""
         self._chunk_start_t = None
         n = self._buffered()
         if n == 0:
             self._buffer.clear()
-            return
+        else:
+            self._pending.append(self._encode(n))
+            self._buffer.clear()
+        if self._pending:
+            self._commit(wait=self.hold_s <= 0 or self._held_s() > self.hold_s)
+
+    def _encode(self, n: int) -> dict[str, Any]:
         batch = pa.RecordBatch.from_arrays(
             [
                 pa.concat_arrays([b.columns[k] for b in self._buffer])
@@ -190,12 +224,50 @@ class SampleWriter:
             "schema_id": self._stored_schema_id(),
             "data": data,
         }
-        with self.engine.begin() as conn:
-            _write_chunk(conn, row)
         self.next_seq += n
-        self.rows_committed += n
-        self.chunks_committed += 1
-        self._buffer.clear()
+        return row
+
+    def _held_s(self) -> float:
+        """Trial time of the chunks held uncommitted."""
+        if not self._pending:
+            return 0.0
+        return self._pending[-1]["t_last_s"] - self._pending[0]["t_first_s"] + self._period_s
+
+    def held_samples(self) -> int:
+        return sum(r["n_samples"] for r in self._pending)
+
+    def _commit(self, wait: bool) -> None:
+        """Write the held chunks in one transaction. Not `wait`ing (SQLite), an attempt
+        waits `LOCK_POLL_MS` for a lock and keeps the chunks if it is still held."""
+        poll = not wait and self.engine.dialect.name == "sqlite"
+        try:
+            with self.engine.begin() as conn:
+                if poll:
+                    conn.exec_driver_sql(f"PRAGMA busy_timeout={LOCK_POLL_MS}")
+                try:
+                    for row in self._pending:
+                        _write_chunk(conn, row)
+                finally:
+                    if poll:
+                        from db.engine import busy_timeout_ms
+
+                        ms = busy_timeout_ms(self.engine.url)
+                        conn.exec_driver_sql(f"PRAGMA busy_timeout={ms}")
+        except OperationalError as exc:
+            if wait or not _is_lock(exc):
+                raise
+            if self.waiting_since is None:
+                self.waiting_since = time.monotonic()
+            if self.on_wait is not None:
+                self.on_wait(time.monotonic() - self.waiting_since, self.held_samples())
+            return
+        self.rows_committed += self.held_samples()
+        self.chunks_committed += len(self._pending)
+        self._pending.clear()
+        if self.waiting_since is not None:
+            self.waiting_since = None
+            if self.on_wait is not None:
+                self.on_wait(None, 0)
 
     def _stored_schema_id(self) -> int:
         """The id of the writer's schema in `sample_schemas`, stored on first use."""
@@ -204,9 +276,19 @@ class SampleWriter:
         return self._schema_id
 
     def close(self) -> None:
+        """Commit everything: held chunks wait for the lock up to `hold_s` of wall time."""
         self.flush()
+        end = time.monotonic() + self.hold_s
+        while self._pending:
+            last = time.monotonic() >= end
+            self._commit(wait=last)
+            if self._pending:
+                time.sleep(LOCK_POLL_MS / 1000)
 
     def __enter__(self) -> SampleWriter:
+        # the schema's row before the first sample: a chunk encoded while another program
+        # holds the lock must not need a write of its own
+        self._stored_schema_id()
         return self
 
     def __exit__(
@@ -218,12 +300,13 @@ class SampleWriter:
         # Whatever ended the trial, keep what was measured; if the database is what
         # failed (a full disk), the first error is the one to report, not a second.
         if exc_type is None:
-            self.flush()
+            self.close()
             return
         try:
-            self.flush()
+            self.close()
         except Exception:  # the original exception propagates
             self._buffer.clear()
+            self._pending.clear()
 
 
 def stored_schema_id(engine: Engine, schema: pa.Schema) -> int:
@@ -257,6 +340,11 @@ class _Block:
     def __getitem__(self, rows: slice) -> _Block:
         lo, hi, _ = rows.indices(self.n)
         return _Block(max(hi - lo, 0), [c.slice(lo, max(hi - lo, 0)) for c in self.columns])
+
+
+def _is_lock(exc: OperationalError) -> bool:
+    """Another program holds the database's lock (not a full disk, not a lost file)."""
+    return "locked" in str(exc.orig if exc.orig is not None else exc).lower()
 
 
 def _write_chunk(conn: Connection, row: dict[str, Any]) -> None:

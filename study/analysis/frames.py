@@ -62,7 +62,8 @@ def without_withdrawn(
     engine: Engine, trials: pd.DataFrame, tlx: pd.DataFrame
 ) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
     """The frames without withdrawn participants, and one exclusion note per task and
-    withdrawn participant who had data in it (their data stay in the database)."""
+    withdrawn participant who had data in it (their data stay in the database); one
+    withdrawn before any data is listed too, so every withdrawal is accounted for."""
     from study.protocol.withdrawal import withdrawn_participants
 
     withdrawn = withdrawn_participants(engine)
@@ -75,6 +76,10 @@ def without_withdrawn(
             note = f"{task}/all measures: excluded {code} (withdrawn: {withdrawn[code]})"
             if note not in notes:
                 notes.append(note)
+    with_data = set(trials["participant"]) | set(tlx["participant"])
+    for code, reason in withdrawn.items():
+        if code not in with_data:
+            notes.append(f"all tasks: excluded {code} (withdrawn: {reason}; no data stored)")
     keep_trials = trials[~trials["participant"].isin(list(withdrawn))]
     keep_tlx = tlx[~tlx["participant"].isin(list(withdrawn))]
     return keep_trials.reset_index(drop=True), keep_tlx.reset_index(drop=True), notes

@@ -36,6 +36,9 @@ def tui(figures_dir: Path, pace: float, light: bool, db_url: str | None) -> None
             figures_dir=figures_dir,
             theme="textual-light" if light else "textual-dark",
         )
-        make_app(services, settings).run()
+        app = make_app(services, settings)
+        app.run()
+        if app.return_code:  # the app ended on an error (shown above): not a clean exit
+            raise SystemExit(app.return_code)
     finally:
         engine.dispose()

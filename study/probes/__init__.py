@@ -17,9 +17,12 @@ the entry point group `haptic_study.probes` (its object satisfies `base.Probe`).
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING
 
 from study.errors import StudyInputError
-from study.probes.base import Probe
+
+if TYPE_CHECKING:
+    from study.probes.base import Probe
 
 ENTRY_POINT_GROUP = "haptic_study.probes"
 BUILTIN = (
@@ -29,12 +32,17 @@ BUILTIN = (
     "study.probes.aiming",
     "study.probes.comfort_torque",
 )
+BUILTIN_NAMES = tuple(module.rsplit(".", 1)[1] for module in BUILTIN)
+"""A built-in probe's name is its module's: a design naming one is checked without
+importing the probes' numerics (`study tui` reads the design before numpy loads)."""
 _REGISTRY: dict[str, Probe] = {}
 _LOADED = _ENTRY_POINTS_LOADED = False
 
 
 def register(probe: Probe) -> Probe:
     """Add `probe` to the registry (replacing one of the same name); returns it."""
+    from study.probes.base import Probe
+
     name = getattr(probe, "name", "")
     if not name or not name.isidentifier() or len(name) > 32:
         raise ValueError(f"probe name {name!r}; expected an identifier of at most 32 characters")
@@ -52,8 +60,11 @@ def _load(entry_points_too: bool = False) -> None:
     global _LOADED, _ENTRY_POINTS_LOADED
     if not _LOADED:
         _LOADED = True
-        for module in BUILTIN:
-            register(importlib.import_module(module).PROBE)
+        for module, name in zip(BUILTIN, BUILTIN_NAMES, strict=True):
+            probe = importlib.import_module(module).PROBE
+            if probe.name != name:  # pragma: no cover - a built-in named apart from its module
+                raise RuntimeError(f"{module}.PROBE is named {probe.name!r}, not {name!r}")
+            register(probe)
     if entry_points_too and not _ENTRY_POINTS_LOADED:
         _ENTRY_POINTS_LOADED = True
         from importlib.metadata import entry_points
@@ -69,6 +80,8 @@ def probe_names() -> tuple[str, ...]:
 
 
 def is_probe(name: str) -> bool:
+    if name in BUILTIN_NAMES:
+        return True
     _load()
     if name not in _REGISTRY:
         _load(entry_points_too=True)

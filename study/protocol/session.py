@@ -72,6 +72,9 @@ STEP_S = 0.5
 PACED_STEP_S = 0.05
 """The same when paced: short enough that a watcher (the TUI's live view, 20 Hz and up)
 and a keyboard driver see and act at real time rather than in half-second bursts."""
+HOLD_S = 300.0
+"""Trial time, in s, of samples a watched session keeps in memory while another program
+holds the database's lock (about 30 000 samples at 100 Hz: a few MB)."""
 INTERRUPTED_BY_CRASH = "found running when a new session started (the process had died)"
 STOPPED_WITH_PARENT = "the session stopped because its parent `study run` process ended"
 
@@ -159,6 +162,7 @@ def run_session(
     stop: threading.Event | None = None,
     participants: ParticipantModel | None = None,
     observer: SessionObserver | None = None,
+    on_storage_wait: Callable[[float | None, int], None] | None = None,
 ) -> list[int]:
     """Run the participant's remaining trials; return the ids of the trials completed.
 
@@ -173,6 +177,9 @@ def run_session(
     `participants`: the fitted model simulated people are drawn from (else PROFILES).
     `observer` is told the session's events (`study.protocol.observer`): publishing them,
     recording other instruments beside the trials.
+    `on_storage_wait(waited_s, held)`: given, a lock held by another program does not
+    stop the trial: up to `HOLD_S` of its samples wait in memory (`SampleWriter`'s
+    `hold_s`) and this is called while they do (None, 0 when they are committed).
     """
     if pace is not None and not (math.isfinite(pace) and pace > 0):
         raise StudyInputError(f"pace {pace!r}; expected a finite number > 0 (times real time)")
@@ -225,6 +232,7 @@ def run_session(
                 design=design,
                 study_seed=study.seed,
                 on_samples=on_samples,
+                on_storage_wait=on_storage_wait,
                 check=lambda: _check_stop(lease, stop),
                 model=participants.digest if participants is not None else None,
                 observer=observer,
@@ -301,6 +309,7 @@ class TrialSetup:
     design: StudyDesign
     study_seed: int
     on_samples: Callable[[np.ndarray], None] | None = None
+    on_storage_wait: Callable[[float | None, int], None] | None = None
     check: Callable[[], None] = lambda: None
     model: str | None = None
     """The digest of the fitted participant model the traits came from, if any."""
@@ -381,10 +390,10 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     observer = run.observer
     observer.trial_started(info)
     ending = trial_ending(observer, info, loop, SessionStopped)
-    with (
-        SampleWriter(engine, trial_id, chunk_s=1.0, schema=task.sample_schema()) as writer,
-        ending,
-    ):
+    hold_s = HOLD_S if run.on_storage_wait is not None else 0.0
+    writer_at = SampleWriter(engine, trial_id, chunk_s=1.0, schema=task.sample_schema(),
+                             hold_s=hold_s, on_wait=run.on_storage_wait)  # fmt: skip
+    with writer_at as writer, ending:
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
-from textual import on, work
+from textual import events, on, work
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.css.query import NoMatches
@@ -41,6 +41,9 @@ __all__ = ["TABS", "StudyApp", "TuiSettings", "make_app"]
 
 TABS = ("overview", "participants", "run", "tlx", "analysis", "calibration")
 TITLES = ("Overview", "Participants", "Run", "NASA-TLX", "Analysis", "Calibration")
+SHORT_TITLES = ("Home", "People", "Run", "TLX", "Stats", "Calib")
+"""The tab labels below `WIDE_COLUMNS` columns, so that all six stay on the bar."""
+WIDE_COLUMNS = 80
 
 
 @dataclass(frozen=True)
@@ -78,7 +81,7 @@ class StudyApp(SafeWorkers, App[None]):
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("ctrl+q", "quit", "Quit", priority=True),
-        Binding("ctrl+t", "toggle_theme", "Theme"),
+        Binding("ctrl+t", "toggle_theme", "Theme", show=False),  # in ? and ctrl+p
         *(Binding(f"f{k + 1}", f"tab('{t}')", TITLES[k], show=False) for k, t in enumerate(TABS)),
         *(
             Binding(str(k + 1), f"digit_tab('{t}')", TITLES[k], show=False)
@@ -112,7 +115,14 @@ class StudyApp(SafeWorkers, App[None]):
                 with TabPane(f"F{k + 1} {TITLES[k]}", id=tab):
                     if tab == "overview":
                         yield OverviewPane(id="overview-pane")
-        yield Footer()
+        yield Footer(compact=True)
+
+    def on_resize(self, event: events.Resize) -> None:
+        """Short tab labels on a narrow terminal: every tab stays on the bar."""
+        titles = TITLES if event.size.width >= WIDE_COLUMNS else SHORT_TITLES
+        tabs = self.query_one("#tabs", TabbedContent)
+        for k, tab in enumerate(TABS):
+            tabs.get_tab(tab).label = f"F{k + 1} {titles[k]}"
 
     def _later_panes(self) -> dict[str, Widget]:
         # imported here, not at the top: the run screen alone pulls in the teleoperation
@@ -209,6 +219,9 @@ class StudyApp(SafeWorkers, App[None]):
     def on_participants_pane_added(self, _event: ParticipantsPane.Added) -> None:
         self.reload()
 
+    def on_participants_pane_note_kept(self, _event: ParticipantsPane.NoteKept) -> None:
+        self.reload()
+
     def on_participants_pane_withdrawn(self, _event: ParticipantsPane.Withdrawn) -> None:
         self.reload()
 
@@ -243,6 +256,9 @@ class StudyApp(SafeWorkers, App[None]):
         self.query_one("#tabs", TabbedContent).active = tab
         # focus inside the screen, so its key bindings work at once
         pane = self.query_one(f"#{tab}").children[0]
+        if hasattr(pane, "focus_first"):  # the screen knows which field comes first
+            pane.focus_first()
+            return
         target = pane if pane.focusable else next(
             (w for w in pane.query("*") if w.focusable), None
         )  # fmt: skip

@@ -83,15 +83,19 @@ class ReasonScreen(ModalScreen[str | None]):
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, question: str, placeholder: str = "reason") -> None:
+    def __init__(self, question: str, placeholder: str = "reason", value: str = "") -> None:
         super().__init__()
         self.question = question
         self.placeholder = placeholder
+        self.value = value
+        """The text the field opens with (a note to read and add to, or one not kept)."""
 
     def compose(self) -> ComposeResult:
         with Vertical(id="reason-box"):
             yield Label(self.question, id="question")
-            yield Input(id="reason-text", placeholder=self.placeholder)
+            # the cursor after the text, none of it selected: typing adds to it
+            yield Input(self.value, id="reason-text", placeholder=self.placeholder,
+                        select_on_focus=False)  # fmt: skip
             yield Label("Enter: record it    Esc: cancel", id="reason-keys")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:

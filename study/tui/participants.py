@@ -15,7 +15,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
-from textual.widgets import Button, DataTable, Input, Label, Select
+from textual.widgets import Button, DataTable, Input, Label, Select, Static
 
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import Roster, StudyServices
@@ -35,6 +35,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
     ParticipantsPane #add-status { width: 1fr; }
     ParticipantsPane #group { width: 24; }
     ParticipantsPane #people { height: 1fr; }
+    ParticipantsPane #detail { height: auto; max-height: 4; color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("a", "add", "Add participant"),
@@ -51,6 +52,10 @@ class ParticipantsPane(SafeWorkers, Vertical):
         group: str
 
     @dataclass
+    class NoteKept(Message):
+        code: str
+
+    @dataclass
     class Withdrawn(Message):
         """A participant was withdrawn."""
 
@@ -63,6 +68,8 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self._groups: list[str] = []
         self._fill: dict[str, dict[str, int]] = {}
         self._roster: Roster | None = None
+        self._unsent: dict[tuple[str, bool], str] = {}
+        """(code, session note?) -> a note the database refused, offered again."""
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="add-row"):
@@ -77,6 +84,11 @@ class ParticipantsPane(SafeWorkers, Vertical):
         table = DataTable(id="people", cursor_type="row", zebra_stripes=True)
         table.add_columns("code", "group", "order", "progress", "next")
         yield table
+        yield Static("", id="detail")
+
+    def focus_first(self) -> None:
+        """F2: the list, so that its keys (a, w, n, o) and the arrows act at once."""
+        self.query_one("#people", DataTable).focus()
 
     def show(self, roster: Roster) -> None:
         self._roster = roster
@@ -97,6 +109,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
             return
         wanted = self.query_one("#filter", Input).value.strip().lower()
         table = self.query_one("#people", DataTable)
+        kept = self._under_cursor()  # the cursor stays on its participant over a reload
         table.clear()
         for r in roster.participants:
             nxt = roster.next_trial(r["code"])
@@ -111,6 +124,35 @@ class ParticipantsPane(SafeWorkers, Vertical):
             if wanted and not any(wanted in str(cell).lower() for cell in row):
                 continue
             table.add_row(*row, key=r["code"])
+        if kept is not None and kept in table.rows:
+            table.move_cursor(row=table.get_row_index(kept))
+        self._show_detail()
+
+    @on(DataTable.RowHighlighted, "#people")
+    def _highlighted(self, event: DataTable.RowHighlighted) -> None:
+        event.stop()
+        self._show_detail()
+
+    def _show_detail(self) -> None:
+        """The participant under the cursor: their note, blocks and questionnaires."""
+        code = self._under_cursor()
+        row = self._row(code) if code is not None else None
+        detail = self.query_one("#detail", Static)
+        if row is None or self._roster is None:
+            detail.update("")
+            return
+        answered = self._roster.answered
+        blocks = []
+        for b in row["blocks"]:
+            tlx = "TLX stored" if (code, b["task"], b["condition"]) in answered else (
+                "TLX due" if b["completed"] >= b["planned"] else "")  # fmt: skip
+            blocks.append(f"{b['task']}/{b['condition']} {b['completed']}/{b['planned']}"
+                          + (f" {tlx}" if tlx else ""))  # fmt: skip
+        lines = [f"{code} ({row['group']}): " + ", ".join(blocks),
+                 f"note: {row.get('note') or '(none)'}"]  # fmt: skip
+        if row.get("withdrawn"):
+            lines.append(f"withdrawn: {row['withdrawn']}")
+        detail.update("\n".join(lines))
 
     @on(Input.Changed, "#filter")
     def _filter_changed(self, event: Input.Changed) -> None:
@@ -155,14 +197,26 @@ class ParticipantsPane(SafeWorkers, Vertical):
             return
         from study.tui.confirm import ReasonScreen
 
-        what = f"a note on {code}'s session" if session else f"{code}'s note (it replaces theirs)"
+        if session:
+            what = f"A note on {code}'s session (added beside the others)"
+            value = self._unsent.get((code, True), "")
+        else:
+            what = f"{code}'s note (as it stands: edit it or add to it)"
+            row = self._row(code)
+            value = self._unsent.get((code, False), (row or {}).get("note") or "")
 
         def answered(text: str | None) -> None:
             if text:
+                self._unsent[(code, session)] = text  # until the database has it
                 self._note(code, text, session)
 
-        self.app.push_screen(ReasonScreen(f"{what[0].upper()}{what[1:]}; no names or contact "
-                                          "details:", "note"), answered)  # fmt: skip
+        self.app.push_screen(
+            ReasonScreen(f"{what}; no names or contact details:", "note", value), answered
+        )
+
+    def _row(self, code: str) -> dict | None:
+        rows = self._roster.participants if self._roster is not None else []
+        return next((r for r in rows if r["code"] == code), None)
 
     def action_session_note(self) -> None:
         self.action_note(session=True)
@@ -175,7 +229,9 @@ class ParticipantsPane(SafeWorkers, Vertical):
             self.app.call_from_thread(self._status, f"refused: {exc}")
             return
         kind = "session note" if session else "note"
+        self._unsent.pop((code, session), None)
         self.app.call_from_thread(self._status, f"{code}: {kind} kept")
+        self.post_message(self.NoteKept(code))  # the app reloads the roster
 
     def action_withdraw(self) -> None:
         """Withdraw the participant under the list's cursor, with a reason (audited)."""
@@ -206,7 +262,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.post_message(self.Withdrawn(code))  # the app reloads the roster
 
     def _start_enrolment(self, group: str) -> None:
-        self.query_one("#add-status", Label).update(f"enrolling a {group}...")
+        self.query_one("#add-status", Label).update(f"enrolling one more {group}...")
         self._enrol(group)
 
     @work(thread=True, exclusive=True, group="enrol", exit_on_error=False)
@@ -219,7 +275,12 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.post_message(self.Added(code, group))
 
     def worker_failed(self, group: str, line: str) -> None:
-        self._status(f"not enrolled: {line}" if group == "enrol" else f"not withdrawn: {line}")
+        failed = {"enrol": "not enrolled", "withdraw": "not withdrawn"}
+        if group == "note":  # what was typed is offered again by the same key
+            line = f"note not kept: {line}; n or o opens it again as typed"
+        else:
+            line = f"{failed.get(group, 'failed')}: {line}"
+        self._status(line)
         super().worker_failed(group, line)
 
     def _status(self, text: str) -> None:

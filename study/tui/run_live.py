@@ -80,8 +80,14 @@ class LiveViewMixin:
                                    magnitude=trace.magnitude))  # fmt: skip
             text.append("\n" + sparkline(histories[k], width, trace.full_scale) + "\n\n")
         lines = frame.task.live_lines(frame.values)
+        wait = run.live.storage_wait
+        if wait is not None:  # the trial goes on; its samples wait in memory
+            lines.insert(0, f"waiting for the database (locked by another program) "
+                            f"{wait[0]:.0f} s: {wait[1]} samples held, none lost")  # fmt: skip
         if run.keyboard is not None:
-            lines.append(f"dial aim {run.keyboard.aim_rad:+4.2f} rad")
+            # in NOTES the dial's aim sets the scope's insertion speed, not an angle to hold
+            aim = "insertion-speed aim" if frame.task.live_scene == "notes" else "dial aim"
+            lines.append(f"{aim} {run.keyboard.aim_rad:+4.2f} rad")
         text.append("\n".join(lines))
         return text
 

@@ -52,9 +52,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
     RunPane #run-top { height: 1; }
     RunPane #run-top Label { padding: 0 1 0 0; }
     RunPane #participant { width: 14; }
-    RunPane #next { height: 1; }
+    RunPane #next { height: auto; max-height: 2; }
     RunPane #live { height: 1fr; }
     RunPane #phantom-box { width: 1fr; height: 1fr; border: round $primary-muted; }
+    RunPane:focus #phantom-box { border: round $accent; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("s", "start", "Start"),
@@ -74,6 +75,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
     class TrialStarted(Message):
         code: str
         description: str
+        practice: bool = False
 
     @dataclass
     class TrialEnded(Message):
@@ -89,6 +91,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self.roster: Roster | None = None
         self.driver_kind = "simulated"
         self.pace: float | None = simulated_pace
+        self.paces: tuple[float | None, ...] = tuple(dict.fromkeys((simulated_pace, *PACES)))
+        """What p cycles through: the pace the app was started with, then 1x, 4x, fastest."""
+        self._practice = False
+        """Whether the running trial is a practice trial (e ends it without asking)."""
         self.run: TrialRun | None = None
         self.status = "idle"
         self.simulation = Simulation(services.load_estimator)
@@ -204,11 +210,45 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         if self.run is None:
             self.driver_kind = "keyboard" if self.driver_kind == "simulated" else "simulated"
             self._show_mode()
+            self.refresh_bindings()
 
     def action_pace(self) -> None:
-        if self.run is None:
-            self.pace = PACES[(PACES.index(self.pace) + 1) % len(PACES)]
+        if self.run is None and self.driver_kind == "simulated":
+            k = self.paces.index(self.pace) if self.pace in self.paces else -1
+            self.pace = self.paces[(k + 1) % len(self.paces)]
             self._show_mode()
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        """Offer only the keys that act now: no driver or pace change during a trial (and
+        no pace for the keyboard, which runs at real time), no stop without a trial."""
+        if action == "driver":
+            return self.run is None
+        if action == "pace":
+            return self.run is None and self.driver_kind == "simulated"
+        if action == "stop":
+            return self.run is not None
+        return True
+
+    def action_end_trial(self) -> None:
+        """`e` (keyboard driver): a practice trial ends at once; a measured one is asked
+        first, as it is stored as completed and unsuccessful."""
+        run = self.run
+        if run is None or run.keyboard is None:
+            return
+        if self._practice:
+            self._press("end_trial")
+            return
+        from study.tui.confirm import Confirm
+
+        def answered(yes: bool | None) -> None:
+            if yes and self.run is run:
+                self._press("end_trial")
+
+        self.app.push_screen(
+            Confirm(f"End {run.code}'s measured trial now? It is stored as completed and "
+                    "not successful (x stops it instead: kept as interrupted, repeated "
+                    "later)."), answered,
+        )  # fmt: skip
 
     def action_start(self) -> None:
         code, nxt = self.code, self._next
@@ -226,7 +266,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             from study.tui.confirm import Confirm
 
             def answered(yes: bool | None) -> None:
-                if yes and self._next is nxt:
+                if yes and self._next == nxt and self.run is None:
                     self._breaks.pop(code, None)
                     self._start(code, nxt)
 
@@ -240,7 +280,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             from study.tui.confirm import Confirm
 
             def confirmed(yes: bool | None) -> None:
-                if yes and self._next is nxt and self.run is None:
+                if yes and self._next == nxt and self.run is None:
                     self._checked.add(code)
                     self._start(code, nxt, checklist=True)
 
@@ -292,6 +332,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             self.services.engine, None, code, self.driver_kind, pace, keyboard=keyboard
         )
         self.status = "starting"
+        self.refresh_bindings()
         self._trial_task = get_task(nxt.task)
         self._show_task(self._trial_task)
         self.query_one("#next", Label).update(f"{code} {nxt.describe()}: loading...")
@@ -355,28 +396,30 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         def started(item) -> None:
             kind = "practice" if item.practice else "trial"
             desc = f"{item.block.task}/{item.block.condition} {kind} {item.trial_index + 1}"
-            self.post_message(self.TrialStarted(run.code, desc))
+            self.post_message(self.TrialStarted(run.code, desc, item.practice))
 
         try:
             outcome = run.run(started)
         except Exception as exc:  # shown, not swallowed: the trial row says what is stored
-            outcome = TrialOutcome(run.code, [], 0, 0.0)
             line = f"trial failed: {plain_line(exc)}"
+            outcome = TrialOutcome(run.code, [], 0, 0.0, line)
             self.app.call_from_thread(self.app.notify, line, severity="error", timeout=15)
         self.post_message(self.TrialEnded(outcome, block))
 
     @on(TrialStarted)
     def _started(self, event: TrialStarted) -> None:
         self.status = "running"
+        self._practice = event.practice
         text = f"running: {event.code} {event.description}  x: stop"
         if self.run is not None and self.run.keyboard is not None:
-            text += "  " + self._trial_task.key_hints
+            text += "\n" + self._trial_task.key_hints  # a line of its own: none is cut
         self.query_one("#next", Label).update(text)
 
     @on(TrialEnded)
     def _ended(self, event: TrialEnded) -> None:
         outcome, run = event.outcome, self.run
         self.run = None
+        self.refresh_bindings()
         if outcome.trial_ids:  # the break starts if this trial finished its block
             self._ended_at = (event.block, time.monotonic())
         if outcome.trial_ids:
@@ -389,6 +432,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                     f" {run.live.peaks[1]:.2f} N {second.label}"
                 )
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
+        elif outcome.error:
+            self.status = "failed"
+            text = (f"{outcome.code}: {outcome.error}; the next start marks the trial "
+                    "interrupted and repeats it")  # fmt: skip
         elif outcome.interrupted:
             self.status = "interrupted"
             text = f"{outcome.code}: trial stopped; kept as interrupted, to be repeated"

@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from textual import on, work
+from textual import events, on, work
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, VerticalScroll
@@ -57,6 +57,8 @@ class PairChoice(Widget, can_focus=True):
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("left", "pick(0)", "Left", show=False),
         Binding("right", "pick(1)", "Right", show=False),
+        Binding("down", "app.focus_next", "Next pair", show=False),
+        Binding("up", "app.focus_previous", "Previous pair", show=False),
     ]
 
     def __init__(self, number: int, pair: tuple[str, str], **kwargs: object) -> None:
@@ -85,6 +87,10 @@ def _rating_value(text: str) -> object:
         return text
 
 
+Block = tuple[str, str, str]
+"""(participant code, task, condition): the key of a questionnaire and of its draft."""
+
+
 @dataclass(frozen=True)
 class FormState:
     """What the form holds: the six ratings as typed, the 15 choices, the edit reason."""
@@ -92,6 +98,19 @@ class FormState:
     ratings: tuple[str, ...]
     choices: tuple[str | None, ...]
     reason: str
+
+
+EMPTY = FormState(("",) * len(TLX_SUBSCALES), (None,) * 15, "")
+"""The form with nothing in it."""
+
+
+@dataclass(frozen=True)
+class Draft:
+    """Answers typed for a block and not saved, and the stored answers they were typed over
+    (a draft over answers that have changed since is not restored)."""
+
+    state: FormState
+    over: FormState
 
 
 class TlxPane(SafeWorkers, VerticalScroll):
@@ -110,7 +129,13 @@ class TlxPane(SafeWorkers, VerticalScroll):
     TlxPane #audit { height: auto; color: $text-muted; }
     TlxPane #reason { width: 1fr; }
     """
-    BINDINGS: ClassVar[list[BindingType]] = [Binding("ctrl+s", "save", "Save TLX")]
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("ctrl+s", "save", "Save TLX"),
+        # up/down move between the fields (the page scrolls to the focused one) instead
+        # of scrolling the page under the cursor
+        Binding("down", "app.focus_next", "Next field", show=False),
+        Binding("up", "app.focus_previous", "Previous field", show=False),
+    ]
 
     @dataclass
     class Saved(Message):
@@ -127,11 +152,14 @@ class TlxPane(SafeWorkers, VerticalScroll):
         self.editing_id: int | None = None
         self._codes: list[str] = []
         self._blocks_code: str | None = None
-        self._shown: tuple[str, str, str] | None = None
-        """The block the form shows (participant, task, condition)."""
+        """The participant whose blocks the block list offers."""
+        self._shown: Block | None = None
+        """The block the form is for (participant, task, condition), loading or loaded."""
+        self.loaded_block: Block | None = None
+        """The block whose answers the form holds, once loaded (None while loading)."""
         self._baseline: FormState | None = None
         """The form as filled from the database (what counts as nothing typed)."""
-        self.drafts: dict[tuple[str, str, str], FormState] = {}
+        self.drafts: dict[Block, Draft] = {}
         """What was typed for a block and not saved, kept when another block is shown."""
 
     def compose(self) -> ComposeResult:
@@ -160,25 +188,33 @@ class TlxPane(SafeWorkers, VerticalScroll):
         yield Static("", id="audit")
 
     # -- choosing the block ---------------------------------------------------------------
+    #
+    # One rule keeps what is typed with its own participant and block: the form changes
+    # block only in `_switch`, which first keeps what was typed on the block it leaves
+    # (compared with that block's own stored answers), then clears the form before the
+    # next block's answers load. Nothing else writes a draft.
 
     def show(self, roster: Roster) -> None:
         self.roster = roster
         codes = [r["code"] for r in roster.participants]
         if codes != self._codes:
             self._codes = codes
-            self.query_one("#tlx-participant", Select).set_options([(c, c) for c in codes])
+            select = self.query_one("#tlx-participant", Select)
+            select.set_options([(c, c) for c in codes])
+            if self._blocks_code in codes:  # set_options cleared the shown participant
+                select.value = self._blocks_code
 
     def open_block(self, code: str, task: str, condition: str) -> None:
         """Show the form for one block (from the run screen when a block ends)."""
-        self._keep_draft()
-        self.query_one("#tlx-participant", Select).value = code
+        self._switch((code, task, condition))
         self._set_blocks(code)
+        self.query_one("#tlx-participant", Select).value = code
         self.query_one("#tlx-block", Select).value = f"{task}/{condition}"
-        self._load(code, task, condition)
         # the first rating takes the keys at once (it took three Tabs to reach)
         self.query_one(f"#rating-{TLX_SUBSCALES[0]}", Input).focus()
 
     def _set_blocks(self, code: str) -> None:
+        """Offer `code`'s blocks and label the pairs in `code`'s own order."""
         if code == self._blocks_code:  # already shown (open_block, then Select.Changed)
             return
         self._blocks_code = code
@@ -189,69 +225,109 @@ class TlxPane(SafeWorkers, VerticalScroll):
         seed = self.roster.seed if self.roster else 0
         for k, pair in enumerate(pair_order(seed, code)):
             widget = self.query_one(f"#pair-{k}", PairChoice)
-            widget.pair, widget.choice = pair, None
+            widget.pair = pair
             widget.refresh()
 
     @on(Select.Changed, "#tlx-participant")
     def _participant_changed(self, event: Select.Changed) -> None:
         event.stop()
-        if event.value is not Select.NULL:
-            self._keep_draft()  # before the pairs are reset for the new participant
-            self._set_blocks(str(event.value))
+        # a Changed that arrives after another pick (or open_block) is stale
+        if event.value is Select.NULL or event.value != event.select.value:
+            return
+        code = str(event.value)
+        if code != self._blocks_code:
+            self._switch(None)  # no block of the new participant picked yet
+            self._set_blocks(code)
 
     @on(Select.Changed, "#tlx-block")
     def _block_changed(self, event: Select.Changed) -> None:
         event.stop()
-        code = self.query_one("#tlx-participant", Select).value
-        if event.value is not Select.NULL and code is not Select.NULL:
-            task, condition = str(event.value).split("/")
-            # open_block already loads the block it selects: a second load arriving
-            # after the user started typing would overwrite the ratings
-            if (str(code), task, condition) != self._shown:
-                self._load(str(code), task, condition)
+        if event.value is Select.NULL or event.value != event.select.value:
+            return
+        if self._blocks_code is None:
+            return
+        task, condition = str(event.value).split("/")
+        block = (self._blocks_code, task, condition)
+        if block != self._shown:  # open_block has already switched to the block it picks
+            self._switch(block)
+
+    def _switch(self, block: Block | None) -> None:
+        """Show `block` (None: no block): keep the draft of the one left, clear, load."""
+        self._keep_draft()
+        self._shown, self.loaded_block, self._baseline = block, None, None
+        self.editing_id = None
+        self._apply(EMPTY)
+        self.query_one("#audit", Static).update("")
+        if block is None:
+            self._set_status("pick a block")
+        else:
+            self._set_status("loading")
+            self._load_worker(block, "")
+
+    def focus_first(self) -> None:
+        """F4: the first rating of the block shown, else the participant list."""
+        if self._shown is not None:
+            self.query_one(f"#rating-{TLX_SUBSCALES[0]}", Input).focus()
+        else:
+            self.query_one("#tlx-participant", Select).focus()
+
+    def on_descendant_focus(self, event: events.DescendantFocus) -> None:
+        """The question of the focused rating above the form, and the focused field in
+        view (shift+tab onto Save scrolled nothing)."""
+        widget = event.widget
+        text = ""
+        if widget.id and widget.id.startswith("rating-"):
+            text = TLX_SCALES[widget.id.removeprefix("rating-")][1]
+        elif isinstance(widget, PairChoice):
+            text = "Which of the two contributed more to your workload? left / right"
+        self.query_one("#question", Label).update(text)
+        widget.scroll_visible(animate=False)
 
     @on(Input.Changed)
     def _rating_typed(self, event: Input.Changed) -> None:
         if event.input.id and event.input.id.startswith("rating-"):
             s = event.input.id.removeprefix("rating-")
-            self.query_one("#question", Label).update(TLX_SCALES[s][1])
             try:
                 check_rating(s, _rating_value(event.value))
                 event.input.remove_class("-invalid")
             except StudyInputError:
                 event.input.set_class(bool(event.value), "-invalid")
 
-    def _load(self, code: str, task: str, condition: str, note: str = "") -> None:
-        """Fill the form with the stored answers of one block (in a worker)."""
-        self._keep_draft()
-        self._shown = (code, task, condition)
-        self._load_worker(code, task, condition, note)
-
-    @work(thread=True, exclusive=True, group="tlx", exit_on_error=False)
-    def _load_worker(self, code: str, task: str, condition: str, note: str) -> None:
+    @work(thread=True, exclusive=True, group="tlx-load", exit_on_error=False)
+    def _load_worker(self, block: Block, note: str) -> None:
         from study.protocol.tlx import load_tlx, tlx_audit
 
-        response = load_tlx(self.services.engine, code, task, condition)
+        response = load_tlx(self.services.engine, *block)
         audit = tlx_audit(self.services.engine, response.id) if response is not None else []
-        self.app.call_from_thread(self._fill, response, audit, note)
+        self.app.call_from_thread(self._fill, block, response, audit, note)
 
-    def _fill(self, response, audit, note: str) -> None:
+    def _fill(self, block: Block, response, audit, note: str) -> None:
+        if block != self._shown:  # another block was picked while this one loaded
+            return
+        typed_meanwhile = self.form_state()
         self.editing_id = None if response is None else response.id
-        for s in TLX_SUBSCALES:
-            value = "" if response is None else str(getattr(response, s))
-            self.query_one(f"#rating-{s}", Input).value = value
-        chosen = [c for _, _, c in (response.pairwise or [])] if response is not None else []
-        for k in range(15):
-            widget = self.query_one(f"#pair-{k}", PairChoice)
-            widget.choice = chosen[k] if k < len(chosen) else None
-            widget.refresh()
-        self.query_one("#reason", Input).value = ""
+        stored = EMPTY if response is None else FormState(
+            tuple(str(getattr(response, s)) for s in TLX_SUBSCALES),
+            tuple([c for _, _, c in (response.pairwise or [])] + [None] * 15)[:15],
+            "",
+        )  # fmt: skip
+        self._apply(stored)
+        self._baseline, self.loaded_block = stored, block
         state = "stored: editing it needs a reason" if response is not None else "new"
-        self._baseline = self.form_state()
-        draft = self.drafts.get(self._shown) if self._shown is not None else None
-        if draft is not None and not note:
-            self._apply(draft)
+        draft = self.drafts.get(block)
+        if draft is not None and draft.over != stored:
+            # typed over answers that have changed since (stored elsewhere): the stored
+            # ones stand, and the operator is told rather than shown a stale draft
+            del self.drafts[block]
+            state += "; answers typed here earlier were not restored: stored meanwhile"
+        elif draft is not None and response is None:
+            self._apply(draft.state)
             state = "draft restored (typed earlier, not saved yet): ctrl+s saves it"
+        elif draft is not None:
+            self._apply(draft.state)
+            state = "edit restored (typed earlier, not saved yet): ctrl+s with a reason saves it"
+        elif response is None and typed_meanwhile != EMPTY:
+            self._apply(typed_meanwhile)  # keys pressed while it loaded stay
         self._set_status(note or state, notify=bool(note))
         lines = [
             f"{a.at:%Y-%m-%d %H:%M} {a.field}: {a.old_value} -> {a.new_value} ({a.reason})"
@@ -277,20 +353,23 @@ class TlxPane(SafeWorkers, VerticalScroll):
 
     def is_dirty(self) -> bool:
         """Something typed on the shown block and not saved."""
-        return self._baseline is not None and self.form_state() != self._baseline
+        return self.loaded_block is not None and self.form_state() != self._baseline
 
-    def unsaved(self) -> list[tuple[str, str, str]]:
+    def unsaved(self) -> list[Block]:
         """The blocks with answers typed and not saved (the shown one and the drafts)."""
         self._keep_draft()
         return list(self.drafts)
 
     def _keep_draft(self) -> None:
-        if self._shown is None:
+        """Keep (or drop) the draft of the loaded block, while the form still holds it."""
+        block, baseline = self.loaded_block, self._baseline
+        if block is None or baseline is None:
             return
-        if self.is_dirty():
-            self.drafts[self._shown] = self.form_state()
+        state = self.form_state()
+        if state != baseline:
+            self.drafts[block] = Draft(state, baseline)
         else:
-            self.drafts.pop(self._shown, None)
+            self.drafts.pop(block, None)
 
     def worker_failed(self, group: str, line: str) -> None:
         # the form is left as it is: what was typed stays for the next ctrl+s
@@ -311,50 +390,61 @@ class TlxPane(SafeWorkers, VerticalScroll):
         self.action_save()
 
     def action_save(self) -> None:
-        code = self.query_one("#tlx-participant", Select).value
-        block = self.query_one("#tlx-block", Select).value
-        if code is Select.NULL or block is Select.NULL:
-            self._set_status("refused: pick a participant and a block first", notify=True)
+        block = self.loaded_block
+        if block is None:
+            why = "pick a participant and a block first" if self._shown is None else (
+                "the block's answers are still loading")  # fmt: skip
+            self._set_status(f"refused: {why}", notify=True)
             return
-        ratings = {
-            s: _rating_value(self.query_one(f"#rating-{s}", Input).value) for s in TLX_SUBSCALES
-        }
-        pairs = [self.query_one(f"#pair-{k}", PairChoice) for k in range(15)]
-        chosen = [p.choice for p in pairs]
-        reason = self.query_one("#reason", Input).value.strip() or None
-        try:
-            for s, v in ratings.items():
-                check_rating(s, v)
-            missing = [p.number for p in pairs if p.choice is None]
-            if missing and len(missing) < 15:
-                raise StudyInputError(
-                    f"pairwise choices {', '.join(map(str, missing))} are missing; expected "
-                    "all 15 (or none, for a raw TLX only)"
-                )
-            if self.editing_id is not None and reason is None:
-                raise StudyInputError("this block's TLX is stored; an edit needs a reason")
-        except StudyInputError as exc:
-            self._set_status(f"refused: {exc}", notify=True)
+        state = self.form_state()
+        ratings = {s: _rating_value(v) for s, v in zip(TLX_SUBSCALES, state.ratings, strict=True)}
+        reason = state.reason.strip() or None
+        errors = self._errors(ratings, state.choices, reason)
+        if errors:  # every error at once, not only the first
+            self._set_status("refused: " + "; ".join(errors), notify=True)
             return
-        task, condition = str(block).split("/")
-        picks = None if chosen[0] is None else [str(c) for c in chosen]
-        self._store(str(code), task, condition, ratings, picks, reason)
+        picks = None if state.choices[0] is None else [str(c) for c in state.choices]
+        self._store(block, ratings, picks, reason)
 
-    @work(thread=True, exclusive=True, group="tlx", exit_on_error=False)
-    def _store(self, code, task, condition, ratings, chosen, reason) -> None:
+    def _errors(
+        self, ratings: dict[str, object], choices: tuple[str | None, ...], reason: str | None
+    ) -> list[str]:
+        """What is wrong with the form, one line each (the checks of `study tlx enter`)."""
+        errors = []
+        for s, v in ratings.items():
+            try:
+                check_rating(s, v)
+            except StudyInputError as exc:
+                errors.append(str(exc))
+        missing = [k + 1 for k, c in enumerate(choices) if c is None]
+        if missing and len(missing) < 15:
+            errors.append(
+                f"pairwise choices {', '.join(map(str, missing))} are missing; expected "
+                "all 15 (or none, for a raw TLX only)"
+            )
+        if self.editing_id is not None and reason is None:
+            errors.append("this block's TLX is stored; an edit needs a reason")
+        return errors
+
+    @work(thread=True, exclusive=True, group="tlx-store", exit_on_error=False)
+    def _store(self, block: Block, ratings, chosen, reason) -> None:
         from study.protocol.tlx import store_tlx
 
         try:
-            _, new = store_tlx(self.services.engine, code, task, condition, ratings, chosen, reason)
+            _, new = store_tlx(self.services.engine, *block, ratings, chosen, reason)
         except ValueError as exc:
             self.app.call_from_thread(self._set_status, f"refused: {exc}", True)
             return
-        self.post_message(self.Saved(code, task, condition, new))
+        self.post_message(self.Saved(*block, new))
 
     @on(Saved)
     def _saved(self, event: Saved) -> None:
-        self.drafts.pop((event.code, event.task, event.condition), None)
-        self._baseline = None  # the reload below sets it from what is now stored
+        block = (event.code, event.task, event.condition)
+        self.drafts.pop(block, None)  # stored: no longer a draft, wherever the form is
         verb = "stored" if event.new else "updated (changes in the audit log)"
-        self._load(event.code, event.task, event.condition, f"{event.code} {event.task}/"
-                   f"{event.condition}: {verb}")  # fmt: skip
+        note = f"{event.code} {event.task}/{event.condition}: {verb}"
+        if block == self._shown:  # reload what is now stored (the form stays meanwhile)
+            self.loaded_block, self._baseline = None, None
+            self._load_worker(block, note)
+        else:
+            self.app.notify(note)

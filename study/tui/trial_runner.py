@@ -170,6 +170,8 @@ class LiveState:
         self._first: deque[float] = deque(maxlen=n)
         self._second: deque[float] = deque(maxlen=n)
         self.batches = 0
+        self.storage_wait: tuple[float, int] | None = None
+        """(seconds waited, samples held) while another program holds the database's lock."""
         self.peaks = [0.0, 0.0]
         """The largest values of the task's two `live_peaks` so far."""
 
@@ -221,6 +223,9 @@ class TrialOutcome:
     interrupted: int
     """Trials marked interrupted because the run was stopped."""
     wall_s: float
+    error: str = ""
+    """Why the trial failed (its row stays `running` until the next start marks it
+    interrupted), or empty."""
 
 
 class TrialRun:
@@ -254,6 +259,9 @@ class TrialRun:
         if self._stop.is_set():
             raise TrialStopped
 
+    def _on_storage_wait(self, waited_s: float | None, held: int) -> None:
+        self.live.storage_wait = None if waited_s is None else (waited_s, held)
+
     def run(self, on_start: Callable[[object], None] = lambda _: None) -> TrialOutcome:
         """Run the participant's next trial; returns when it ends or is stopped."""
         from study.protocol.session import recover_interrupted, run_session
@@ -285,6 +293,7 @@ class TrialRun:
                 on_trial=started,
                 max_trials=1,
                 on_samples=self._on_samples,
+                on_storage_wait=self._on_storage_wait,
             )
             return TrialOutcome(self.code, ids, 0, time.monotonic() - start)
         except TrialStopped:

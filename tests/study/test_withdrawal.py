@@ -125,3 +125,20 @@ def test_session_notes_are_added_beside_the_participants_note(db: str) -> None:
         (p.id, None, "dial recalibrated after trial 2"), (p.id, None, "fire alarm: 5 min pause")
     ]  # fmt: skip
     assert all(n.reason.startswith("note on the session of 20") for n in notes)
+
+
+def test_a_participant_withdrawn_before_any_trial_is_listed_in_the_exclusions(
+    db: str, tmp_path: Path
+) -> None:
+    from study.protocol.roster import add_participant
+
+    engine = open_database(db)
+    code = add_participant(engine, "expert").code  # enrolled, never run
+    engine.dispose()
+    assert main(["participant", "withdraw", code, "--reason", "changed their mind",
+                 "--db", db]) == 0  # fmt: skip
+    out = tmp_path / "res.json"
+    assert main(["analyze", "--out", str(tmp_path / "res"), "--json", str(out), "--db", db]) == 0
+    report = json.loads(out.read_text())
+    assert (f"all tasks: excluded {code} (withdrawn: changed their mind; no data stored)"
+            in report["exclusions"])  # fmt: skip

@@ -18,7 +18,7 @@ def test_the_lsl_table_reads_and_round_trips() -> None:
     assert design.lsl == LslSettings(True, ("type='EMG'",), ("EMG",))
     assert type(design).from_dict(design.to_dict()).lsl == design.lsl
     # a design without the table stores as before (no `lsl` key) and has LSL off
-    plain = parse_design("")
+    plain = parse_design('name = "no instruments"\n')
     assert "lsl" not in plain.to_dict() and plain.lsl == LslSettings()
 
 

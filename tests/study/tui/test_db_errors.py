@@ -18,6 +18,7 @@ from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session
 from textual.widgets import Input
 
+from db.models.audit import AuditEntry
 from db.models.study import Participant
 from study.protocol.tlx import load_tlx
 from study.tui.db_errors import plain_line
@@ -191,3 +192,34 @@ def test_a_real_lost_server_connection_reads_as_one_plain_line(pg_url: str) -> N
     line = plain_line(caught.value)
     assert line.startswith("the database server cannot be reached: nothing was written"), line
     assert "\n" not in line
+
+
+async def test_a_note_refused_by_a_read_only_database_is_kept_for_the_next_try(
+    make_test_app, study_engine: Engine
+) -> None:
+    from study.tui.confirm import ReasonScreen
+
+    app = make_test_app()
+    async with participants_pane(app) as (pilot, pane):
+        await pilot.press("f2")
+        table = app.query_one("#people")
+        table.focus()
+        with pragma(study_engine, "PRAGMA query_only = 1"):
+            await pilot.press("o")
+            await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+            await pilot.press(*"dial recalibrated", "enter")
+            await wait_for(pilot, lambda: pane.last_message.startswith("note not kept"), 30)
+            # it names the note, not a withdrawal, and the read-only cause
+            assert "withdrawn" not in pane.last_message
+            assert "the database is read-only" in pane.last_message
+        # writable again: the same key opens the note as it was typed
+        await pilot.press("o")
+        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+        assert app.screen.query_one("#reason-text", Input).value == "dial recalibrated"
+        await pilot.press("enter")
+        await wait_for(pilot, lambda: pane.last_message == "P001: session note kept", 30)
+    with Session(study_engine) as session:
+        notes = session.scalars(
+            select(AuditEntry.new_value).where(AuditEntry.field == "session_note")
+        ).all()
+    assert notes == ["dial recalibrated"]

@@ -262,12 +262,17 @@ async def test_notes_on_a_participant_and_on_their_session_from_the_list(
             ("n", "left-handed grip"),
             ("o", "dial recalibrated"),
             ("o", "fire alarm, 5 min pause"),
-            ("n", "prefers the left hand"),
+            ("n", "; prefers the left hand"),  # added to the note, shown as it stands
         )
         for key, text in notes:
             await pilot.press(key)
             await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
             assert "no names or contact details" in str(app.screen.query_one("#question").render())
+            if text.startswith(";"):
+                field = app.screen.query_one("#reason-text", Input)
+                assert field.value == "left-handed grip"
+                await wait_for(pilot, lambda: "note: left-handed grip" in str(
+                    app.query_one("#detail").render()), 10)  # fmt: skip
             await pilot.press(*text, "enter")
             kind = "session note" if key == "o" else "note"
             await wait_for(
@@ -285,7 +290,7 @@ async def test_notes_on_a_participant_and_on_their_session_from_the_list(
             .order_by(AuditEntry.id)
         ).all()
     # the participant's note is replaced; the session notes are kept, each its own row
-    assert p.note == "prefers the left hand"
+    assert p.note == "left-handed grip; prefers the left hand"
     assert sessions == ["dial recalibrated", "fire alarm, 5 min pause"]
 
 

@@ -183,6 +183,8 @@ async def test_the_keyboard_drives_a_notes_trial(notes_engine: Engine, tmp_path:
         # the aim of 3 steps sets an insertion speed, so the scope goes in and rolls
         await wait_for(pilot, lambda: pane.run.live.frame().insertion_m > 0.01, 30)
         await wait_for(pilot, lambda: pane.run.live.frame().rotation_rad > 0.01, 30)
+        readout = str(app.query_one("#readout").render())
+        assert "insertion-speed aim +" in readout and "dial aim" not in readout
         await pilot.press("x")
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         await pilot.press("y")

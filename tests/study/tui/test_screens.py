@@ -69,7 +69,7 @@ async def _open_form(pilot, code: str = "P001", block: str = "lcca/VO") -> TlxPa
     await pilot.press("f4")
     pane = pilot.app.query_one(TlxPane)
     pane.open_block(code, *block.split("/"))
-    await wait_for(pilot, lambda: pane.status != "")
+    await wait_for(pilot, lambda: pane.loaded_block == (code, *block.split("/")))
     return pane
 
 
