@@ -92,6 +92,7 @@ def get_probe(name: str) -> Probe:
     """The probe called `name`; an unknown name gets one line listing the known ones."""
     if not is_probe(name):
         raise StudyInputError(f"probe {name!r}; expected one of {', '.join(probe_names())}")
+    _load()  # a built-in name is known before its module is imported
     return _REGISTRY[name]
 
 

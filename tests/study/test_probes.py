@@ -346,3 +346,18 @@ def test_without_the_reaction_probe_the_stall_falls_back_with_a_wider_se() -> No
     assert alone["visual_stall_s"].se == pytest.approx(np.hypot(se, FALLBACK_REACTION_S[1]))
     assert alone["visual_stall_s"].se > with_rt.se
     assert abs(with_rt.value - 0.8) < 3 * with_rt.se
+
+
+def test_a_built_in_probe_is_found_in_a_fresh_process() -> None:
+    """A design naming a built-in probe is checked without importing the probes'
+    numerics, and `get_probe` then loads them (a fresh process: nothing registered yet)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from study.probes import get_probe, is_probe; "
+        "assert is_probe('aiming') and 'numpy' not in sys.modules; "
+        "print(get_probe('aiming').name)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "aiming"
