@@ -85,9 +85,7 @@ class LiveViewMixin:
             lines.insert(0, f"waiting for the database (locked by another program) "
                             f"{wait[0]:.0f} s: {wait[1]} samples held, none lost")  # fmt: skip
         if run.keyboard is not None:
-            # in NOTES the dial's aim sets the scope's insertion speed, not an angle to hold
-            aim = "insertion-speed aim" if frame.task.live_scene == "notes" else "dial aim"
-            lines.append(f"{aim} {run.keyboard.aim_rad:+4.2f} rad")
+            lines.append(f"{frame.task.keyboard_aim_label} {run.keyboard.aim_rad:+4.2f} rad")
         text.append("\n".join(lines))
         return text
 

@@ -113,6 +113,9 @@ class Task:
     shows the task); None: the insertion along a bar (`study.tui.scenes.TrackView`)."""
     live_scene_title: ClassVar[str] = "{title}: insertion"
     """The live view's title (`{title}`: the task's `title`)."""
+    keyboard_aim_label: ClassVar[str] = "dial aim"
+    """What the keyboard driver's aim sets, as the run screen names it (the dial's angle;
+    a task whose dial sets a speed says so)."""
     key_hints: ClassVar[str] = "↑↓ dial ←→ rotate space let go e end"
     track_length_m: ClassVar[float] = 0.5
     """The `track` scene's full length of insertion, m."""

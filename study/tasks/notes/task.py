@@ -75,6 +75,7 @@ class NotesTask(Task):
     )
     live_scene = "study.tasks.notes.scene:NotesView"
     live_scene_title = "NOTES: scope depth and roll"
+    keyboard_aim_label = "insertion-speed aim"
     key_hints = "↑↓ push/pull ←→ roll space let go e end"
     trace_names: ClassVar[dict[str, str]] = {
         "force_demanded_n": "demanded (tissue)",
