@@ -2,10 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import TYPE_CHECKING
+
 import click
 
 from study.commands.base import StudyGroup, db_option, opened_database, progress_bar
 from study.errors import StudyInputError
+
+if TYPE_CHECKING:
+    from sqlalchemy import Engine
+
+    from study.protocol.observer import SessionObserver
 
 DRIVERS = ("simulated", "keyboard", "hardware")
 
@@ -32,9 +41,20 @@ def probe() -> None:
     "dial unit on --port.",
 )
 @click.option("--port", default=None, help="The dial unit's serial port (--driver hardware).")
+@click.option(
+    "--lsl",
+    is_flag=True,
+    help="Publish a Lab Streaming Layer marker for each probe trial (as `[lsl] publish = "
+    "true` in the design does); needs LSLAPICFG (see `study lsl-config`).",
+)
 @db_option
 def run(
-    code: str, only: tuple[str, ...], driver: str, port: str | None, db_url: str | None
+    code: str,
+    only: tuple[str, ...],
+    driver: str,
+    port: str | None,
+    lsl: bool,
+    db_url: str | None,
 ) -> None:
     """Run the design's probes for a participant (those not yet stored) and store each
     probe's trials; print each probe's estimate of the trait it tells."""
@@ -64,9 +84,9 @@ def run(
                 f"--port {port}: {exc}; expected the serial port of the dial's ESP32, "
                 "e.g. /dev/ttyUSB0"
             ) from None
-    with opened_database(db_url) as engine:
+    with opened_database(db_url) as engine, _markers(engine, lsl) as observer:
         if driver == "keyboard":
-            stored = run_participant_probes(engine, code, responder, only)
+            stored = run_participant_probes(engine, code, responder, only, observer=observer)
         else:
             with progress_bar() as bar:
                 tasks: dict[str, object] = {}
@@ -76,7 +96,8 @@ def run(
                         tasks[name] = bar.add_task(f"{code} {name}", total=n)
                     bar.update(tasks[name], completed=k)
 
-                stored = run_participant_probes(engine, code, responder, only, progress)
+                stored = run_participant_probes(engine, code, responder, only, progress,
+                                                observer=observer)  # fmt: skip
         frame = probe_frame(engine)
     mine = frame[frame["participant"] == code]
     if not stored:
@@ -87,6 +108,24 @@ def run(
         estimates = trait_estimates(_trials(mine))
         for trait, e in estimates.items():
             click.echo(f"{code}: {trait} {e.value:.4g} (SE {e.se:.2g}, {e.trials} trials)")
+
+
+@contextmanager
+def _markers(engine: Engine, publish: bool) -> Iterator[SessionObserver | None]:
+    """The probe trials' marker stream, when --lsl or the design's `[lsl]` says so."""
+    from sqlalchemy.orm import Session
+
+    from study.lsl.observers import event_publisher
+    from study.protocol.roster import load_study
+
+    with Session(engine) as session:
+        design = load_study(session)[1]
+    observer = event_publisher(design, publish)
+    try:
+        yield observer
+    finally:
+        if observer is not None:
+            observer.close()
 
 
 def _trials(frame):  # type: ignore[no-untyped-def]

@@ -1,4 +1,5 @@
-"""The observers a session gets from its design's `[lsl]` table and the `--lsl` flag."""
+"""The observers a session (or a probe run, or the terminal app) gets from its design's
+`[lsl]` table and the `--lsl` flag."""
 
 from __future__ import annotations
 
@@ -7,7 +8,11 @@ from collections.abc import Callable
 from sqlalchemy import Engine
 
 from study.protocol.design import StudyDesign
-from study.protocol.observer import Observers, SessionObserver
+from study.protocol.observer import LastingObserver, Observers, SessionObserver
+
+SUBSCRIBE_S = 5.0
+"""How long a short command (a probe run) waits for a recorder to subscribe to its
+marker stream before its first marker, s (what is pushed before reaches no one)."""
 
 
 def session_observers(
@@ -28,3 +33,29 @@ def session_observers(
 
         observers.append(Recorder(engine, design.lsl.record, notice))
     return Observers(observers) if observers else None
+
+
+def event_publisher(
+    design: StudyDesign, publish: bool = False, wait_for_consumers_s: float = SUBSCRIBE_S
+) -> LastingObserver | None:
+    """The markers of what happens outside a session's trials (probe trials, a stored
+    questionnaire), when `publish` or the design says so; None otherwise. The caller
+    closes it (`LastingObserver.close`) when done."""
+    if not (publish or design.lsl.publish):
+        return None
+    from study.lsl.publish import Publisher
+
+    return LastingObserver(Publisher(wait_for_consumers_s=wait_for_consumers_s))
+
+
+def lasting_observers(
+    engine: Engine,
+    design: StudyDesign,
+    publish: bool = False,
+    notice: Callable[[str], None] = lambda _: None,
+) -> LastingObserver | None:
+    """`session_observers` for a program that runs many sessions (the terminal app, one
+    per trial), kept open across them until `close()`; None when the design has no
+    streams and `publish` is off."""
+    observer = session_observers(engine, design, publish, notice)
+    return None if observer is None else LastingObserver(observer)

@@ -75,7 +75,8 @@ class Publisher(SessionObserver):
         if self.markers is None or self.session is None:
             return
         s = self.session
-        text = encode(event, study=s.study, participant=s.participant, group=s.group, **fields)
+        keys = {"study": s.study, "participant": s.participant, "group": s.group}
+        text = encode(event, **{**keys, **fields})
         self.markers.push_sample([text], stamp)
 
     def session_started(self, session: SessionInfo) -> None:

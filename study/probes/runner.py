@@ -126,8 +126,10 @@ def run_probe(
     rng: np.random.Generator,
     context: Mapping[str, float] | None = None,
     progress: Callable[[int, int], None] = lambda k, n: None,
+    on_trial: Callable[[ProbeTrial], None] = lambda trial: None,
 ) -> list[ProbeTrial]:
-    """`n_trials` trials of probe `name` answered by `responder`."""
+    """`n_trials` trials of probe `name` answered by `responder`; `on_trial` sees each
+    trial as soon as it is answered."""
     probe = get_probe(name)
     base = dict(context or {})
     procedure = probe.procedure(n_trials, base, rng)
@@ -144,5 +146,6 @@ def run_probe(
                 name, k, stimulus, answer.response, answer.correct, trial_context, responder.driver
             )
         )
+        on_trial(trials[-1])
         progress(k + 1, n_trials)
     return trials

@@ -23,6 +23,7 @@ from study.errors import StudyInputError
 from study.probes.base import ProbeTrial
 from study.probes.runner import Responder, SimulatedResponder, run_probe
 from study.protocol.design import StudyDesign
+from study.protocol.observer import SessionObserver
 from study.protocol.roster import find_participant, load_study
 
 PROBE_COLUMNS = (
@@ -81,17 +82,20 @@ def run_participant_probes(
     only: tuple[str, ...] = (),
     progress: Callable[[str, int, int], None] = lambda probe, k, n: None,
     model: Any = None,
+    observer: SessionObserver | None = None,
 ) -> dict[str, int]:
     """Run the design's probes for participant `code` (those not yet stored; `only`: just
     these) and store them; returns probe -> trials stored. Without `responder`, the
     participant's simulated person answers (the same traits as in its task trials: drawn
-    from `model`, a `ParticipantModel`, when the trials were)."""
+    from `model`, a `ParticipantModel`, when the trials were). `observer` is told each
+    probe trial as it is answered (a `probe` event: the participant's keys, the probe, the
+    trial's index, stimulus, response and whether it was correct)."""
     from study.protocol.session import participant_traits
 
     with Session(engine) as session:
         study, design = load_study(session)
         participant = find_participant(session, study, code)
-        pid, group, seed = participant.id, participant.group, study.seed
+        pid, group, seed, study_name = participant.id, participant.group, study.seed, study.name
         if participant.withdrawn_at is not None:
             raise StudyInputError(f"participant {code} withdrew; expected one still in the study")
     if not design.probes:
@@ -105,6 +109,13 @@ def run_participant_probes(
     rng = np.random.default_rng([seed, zlib.crc32(code.encode()), 0x9B0BE])
     if responder is None:
         responder = SimulatedResponder(participant_traits(seed, code, group, model), rng)
+    observer = observer or SessionObserver()
+
+    def told(t: ProbeTrial) -> None:
+        observer.event("probe", study=study_name, participant=code, group=group,
+                       driver=t.driver, probe=t.probe, trial_index=t.trial_index,
+                       stimulus=t.stimulus, response=t.response, correct=t.correct)  # fmt: skip
+
     done = stored_probes(engine, pid)
     stored = {}
     for name, n in design.probes.items():
@@ -117,6 +128,7 @@ def run_participant_probes(
             rng,
             probe_context(design),
             lambda k, total, name=name: progress(name, k, total),
+            told,
         )
         store_trials(engine, pid, trials)
         stored[name] = len(trials)

@@ -88,8 +88,9 @@ class SessionObserver:
         """After the last trial, also when the session ended on an error."""
 
     def event(self, kind: str, **fields: Any) -> None:
-        """Something else of the session: `probe` (a probe trial), `questionnaire`
-        (NASA-TLX stored), with their own fields."""
+        """Something else of the participant's: `probe` (a probe trial), `questionnaire`
+        (NASA-TLX stored), with their own fields; these carry `study`, `participant` and
+        `group` themselves (a probe or a questionnaire may come outside a session)."""
 
 
 class Observers(SessionObserver):
@@ -121,6 +122,61 @@ class Observers(SessionObserver):
     def event(self, kind: str, **fields: Any) -> None:
         for o in self.observers:
             o.event(kind, **fields)
+
+
+class LastingObserver(SessionObserver):
+    """One observer across many sessions (a terminal app's trials, each its own
+    session; a probe run): a session's start is passed on only when the participant, the
+    driver or the pace changes (the one before then ended), its end only by `close()`.
+    An event of a participant with no session open opens one for them (driver: the
+    event's, else `keyboard`; no pace), so that it goes out with their keys."""
+
+    def __init__(self, observer: SessionObserver) -> None:
+        self.observer = observer
+        self.session: SessionInfo | None = None
+
+    @staticmethod
+    def _key(s: SessionInfo) -> tuple[Any, ...]:
+        return (s.study, s.participant, s.group, s.driver, s.pace)
+
+    def session_started(self, session: SessionInfo) -> None:
+        if self.session is not None and self._key(self.session) == self._key(session):
+            return
+        self.close()
+        try:
+            self.observer.session_started(session)
+        except BaseException:
+            self.observer.session_ended()
+            raise
+        self.session = session
+
+    def trial_started(self, trial: TrialInfo) -> None:
+        self.observer.trial_started(trial)
+
+    def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
+        self.observer.samples(trial, rows)
+
+    def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
+        self.observer.trial_ended(trial, status, outcome)
+
+    def session_ended(self) -> None:
+        """Kept open for the next session (`close()` ends it)."""
+
+    def event(self, kind: str, **fields: Any) -> None:
+        s = self.session
+        keys = tuple(fields.get(k) for k in ("study", "participant", "group"))
+        if s is None or (s.study, s.participant, s.group) != keys:
+            self.session_started(SessionInfo(
+                str(fields.get("study")), str(fields.get("participant")),
+                str(fields.get("group")), str(fields.get("driver", "keyboard")), None,
+            ))  # fmt: skip
+        self.observer.event(kind, **fields)
+
+    def close(self) -> None:
+        """End the session open, if any."""
+        if self.session is not None:
+            self.session = None
+            self.observer.session_ended()
 
 
 @contextmanager

@@ -31,6 +31,7 @@ from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import Trial
 from study.errors import StudyInputError
 from study.protocol.actor import current_actor
+from study.protocol.observer import SessionObserver
 from study.protocol.roster import find_participant, load_study
 
 PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
@@ -160,13 +161,38 @@ def store_tlx(
     chosen: Sequence[str] | None = None,
     reason: str | None = None,
     actor: str | None = None,
+    observer: SessionObserver | None = None,
 ) -> tuple[TlxResponse, bool]:
     """Store (or edit) the questionnaire of one block; return it and whether it was new.
 
     An edit needs a `reason`, and so does a questionnaire for a block with no completed
     trial yet (issue 19: the lab confirms why; the reason goes to the audit log);
-    `actor` defaults to `current_actor()`.
+    `actor` defaults to `current_actor()`. Once it is committed, `observer` is told (a
+    `questionnaire` event: the participant's keys, the block's task and condition,
+    whether it was new, the raw and weighted TLX).
     """
+    response, new = _store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
+    if observer is not None:
+        with Session(engine) as session:
+            study, _ = load_study(session)
+            group = find_participant(session, study, code).group
+        _, raw, weighted = response_scores(response)
+        observer.event("questionnaire", study=study.name, participant=code, group=group,
+                       task=task, condition=condition, new=new, raw_tlx=raw,
+                       weighted_tlx=weighted)  # fmt: skip
+    return response, new
+
+
+def _store_tlx(
+    engine: Engine,
+    code: str,
+    task: str,
+    condition: str,
+    ratings: Mapping[str, object],
+    chosen: Sequence[str] | None,
+    reason: str | None,
+    actor: str | None,
+) -> tuple[TlxResponse, bool]:
     ratings = check_ratings(ratings)
     who = current_actor(actor)
     reason = reason.strip() if reason is not None else None
