@@ -21,16 +21,28 @@ from study.commands.base import StudyCommand, db_option, positive_option
     "--pace", 1.0, "Times real time for a simulated participant (the screen's p key cycles it)."
 )
 @click.option("--light", is_flag=True, help="Start in the light theme (ctrl+t toggles).")
+@click.option(
+    "--lsl",
+    is_flag=True,
+    help="Publish the trials' markers and samples as Lab Streaming Layer streams (as "
+    "`[lsl] publish = true` in the design does); needs LSLAPICFG (see `study lsl-config`).",
+)
 @db_option
-def tui(figures_dir: Path, pace: float, light: bool, db_url: str | None) -> None:
+def tui(figures_dir: Path, pace: float, light: bool, lsl: bool, db_url: str | None) -> None:
     """The terminal app: overview, participants, sessions, NASA-TLX, analysis, calibration."""
     from db.migrate import open_database
     from study.tui import StudyServices, TuiSettings, make_app
     from study.tui.services import calibrate_recording, load_shipped_estimator
 
+    if lsl:
+        from study.lsl.config import load_pylsl
+
+        load_pylsl()  # no LSLAPICFG: one line now, not on the run screen
     engine = open_database(db_url, create=False)
+    services = StudyServices(
+        engine, load_shipped_estimator, calibrate=calibrate_recording, lsl_publish=lsl
+    )
     try:
-        services = StudyServices(engine, load_shipped_estimator, calibrate=calibrate_recording)
         settings = TuiSettings(
             simulated_pace=pace,
             figures_dir=figures_dir,
@@ -41,4 +53,5 @@ def tui(figures_dir: Path, pace: float, light: bool, db_url: str | None) -> None
         if app.return_code:  # the app ended on an error (shown above): not a clean exit
             raise SystemExit(app.return_code)
     finally:
+        services.close_lsl()
         engine.dispose()

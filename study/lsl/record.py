@@ -115,7 +115,9 @@ class Recorder(SessionObserver):
         """When (LSL clock) the loop had made its samples up to which trial time."""
 
     def session_started(self, session: SessionInfo) -> None:
-        if session.driver == "simulated" and session.pace is None and session.tasks:
+        if not session.tasks:  # no trial to record with (probes, a questionnaire)
+            return
+        if session.driver == "simulated" and session.pace is None:
             raise StudyInputError(
                 "[lsl] record with an unpaced simulated session, whose clock runs ahead of "
                 "the instruments'; expected --pace (e.g. --pace 1) or a person at the dial"

@@ -127,7 +127,8 @@ class Observers(SessionObserver):
 class LastingObserver(SessionObserver):
     """One observer across many sessions (a terminal app's trials, each its own
     session; a probe run): a session's start is passed on only when the participant, the
-    driver or the pace changes (the one before then ended), its end only by `close()`.
+    driver or the pace changes, or trials follow a session without any (the one before
+    then ended), its end only by `close()`.
     An event of a participant with no session open opens one for them (driver: the
     event's, else `keyboard`; no pace), so that it goes out with their keys."""
 
@@ -137,7 +138,7 @@ class LastingObserver(SessionObserver):
 
     @staticmethod
     def _key(s: SessionInfo) -> tuple[Any, ...]:
-        return (s.study, s.participant, s.group, s.driver, s.pace)
+        return (s.study, s.participant, s.group, s.driver, s.pace, bool(s.tasks))
 
     def session_started(self, session: SessionInfo) -> None:
         if self.session is not None and self._key(self.session) == self._key(session):

@@ -283,6 +283,9 @@ class StudyApp(SafeWorkers, App[None]):
     def action_toggle_theme(self) -> None:
         self.theme = "textual-light" if self.theme == "textual-dark" else "textual-dark"
 
+    def on_unmount(self) -> None:
+        self.services.close_lsl()  # the design's LSL streams end with the app
+
     async def action_quit(self) -> None:
         """Stop a running trial (marked interrupted, its samples kept), then exit.
 

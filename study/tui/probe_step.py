@@ -15,6 +15,7 @@ from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
 from db.models.trial import Trial
+from study.protocol.observer import SessionObserver
 from study.protocol.roster import find_participant, load_study
 
 
@@ -39,9 +40,11 @@ def due_probes(engine: Engine, code: str) -> list[str]:
     return [name for name in design.probes if name not in done]
 
 
-def run_due_probes(engine: Engine, code: str, driver_kind: str) -> str | None:
+def run_due_probes(
+    engine: Engine, code: str, driver_kind: str, observer: SessionObserver | None = None
+) -> str | None:
     """Run `code`'s due probes with the simulated person; a line for the screen (None
-    when none were due)."""
+    when none were due). `observer` is told each probe trial."""
     due = due_probes(engine, code)
     if not due:
         return None
@@ -50,5 +53,5 @@ def run_due_probes(engine: Engine, code: str, driver_kind: str) -> str | None:
                 f"`study probe run --participant {code} --driver {driver_kind}`")  # fmt: skip
     from study.probes.store import run_participant_probes
 
-    stored = run_participant_probes(engine, code, only=tuple(due))
+    stored = run_participant_probes(engine, code, only=tuple(due), observer=observer)
     return f"{code}: probes stored ({', '.join(f'{k} {n}' for k, n in stored.items())})"

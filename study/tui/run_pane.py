@@ -25,6 +25,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Label, Select
 
+from study.protocol.observer import SessionObserver
 from study.protocol.tasks import Task, get_task, tasks
 from study.tui.db_errors import SafeWorkers, plain_line
 from study.tui.live_view import LiveReadout
@@ -36,6 +37,7 @@ from study.tui.trial_runner import (
     TrialOutcome,
     TrialRun,
     TuiKeyboardDriver,
+    _if_app_alive,
 )
 
 __all__ = ["RunPane"]
@@ -326,11 +328,15 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         return max(0.0, self.roster.break_s - (time.monotonic() - ended))
 
     def _start(self, code: str, nxt: NextTrial, checklist: bool = False) -> None:
+        opened, observer = self._lsl_observer()
+        if not opened:  # the design's streams are part of the trial: not run without
+            return
         keyboard = TuiKeyboardDriver() if self.driver_kind == "keyboard" else None
         pace = 1.0 if keyboard is not None else self.pace
         self.run = TrialRun(
-            self.services.engine, None, code, self.driver_kind, pace, keyboard=keyboard
-        )
+            self.services.engine, None, code, self.driver_kind, pace, keyboard=keyboard,
+            observer=observer,
+        )  # fmt: skip
         self.status = "starting"
         self.refresh_bindings()
         self._trial_task = get_task(nxt.task)
@@ -360,7 +366,9 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
     # -- the workers ----------------------------------------------------------------------
 
     def prepare(self) -> None:
-        """Load the estimator and compile the loop when the screen is first shown."""
+        """Load the estimator and compile the loop when the screen is first shown; open
+        the design's `[lsl]` streams."""
+        self._lsl_observer()
         if self.simulation.estimator is None:
             self.status = "preparing the simulation"
             self._prepare()
@@ -370,6 +378,18 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             lambda: self.app.call_from_thread(self._prepared),
             lambda exc: self.app.call_from_thread(self.worker_failed, "prepare", plain_line(exc)),
         )
+
+    def _lsl_observer(self) -> tuple[bool, SessionObserver | None]:
+        """Whether the app's LSL observer (`StudyServices.lsl_observer`) could be
+        opened, and it (None when the design has no `[lsl]` streams); the reason shown
+        when it could not (no LSLAPICFG, say)."""
+        try:
+            return True, self.services.lsl_observer(
+                lambda line: _if_app_alive(self.app.call_from_thread, self.notify, line)
+            )
+        except Exception as exc:
+            self.notify(f"LSL streams not opened: {plain_line(exc)}", severity="error")
+            return False, None
 
     def worker_failed(self, group: str, line: str) -> None:
         if group == "prepare":

@@ -21,6 +21,7 @@ from sqlalchemy.orm import Session
 from study.protocol.roster import load_study, schedule
 
 if TYPE_CHECKING:
+    from study.protocol.observer import LastingObserver
     from teleop_core.estimation.estimator import ForceEstimator
 
 CalibrateFn = Callable[[Path, str, Callable[[str], None]], dict[str, Any]]
@@ -127,6 +128,36 @@ class StudyServices:
     """Called once, in a worker, before the first trial (loading it imports torch)."""
     calibrate: CalibrateFn | None = None
     """The calibration loop (issue 10); None leaves the calibration screen waiting."""
+    lsl_publish: bool = False
+    """Publish the trials' markers and samples as LSL streams even when the design's
+    `[lsl]` table does not say so (`study tui --lsl`)."""
+    _lsl: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+    """The app's LSL observer and where its notices go, once made (`lsl_observer`)."""
+
+    def lsl_observer(self, notice: Callable[[str], None] | None = None) -> LastingObserver | None:
+        """The design's `[lsl]` streams (and `lsl_publish`'s) for everything the app runs:
+        one observer for the app's life (each trial is a session of its own; the streams
+        stay open across them), made on the first call, ended by `close_lsl`. None when
+        the design names no streams and publishing is off (pylsl is then never loaded).
+        `notice`, when given, is told from then on of a stream lost (from a worker)."""
+        if notice is not None:
+            self._lsl["notice"] = notice
+        if "observer" not in self._lsl:
+            from study.lsl.observers import lasting_observers
+
+            with Session(self.engine) as session:
+                design = load_study(session)[1]
+            self._lsl["observer"] = lasting_observers(
+                self.engine, design, self.lsl_publish,
+                lambda line: self._lsl.get("notice", lambda _: None)(line),
+            )  # fmt: skip
+        return self._lsl["observer"]
+
+    def close_lsl(self) -> None:
+        """End the LSL streams of `lsl_observer`, if it made any (the app quits)."""
+        observer = self._lsl.pop("observer", None)
+        if observer is not None:
+            observer.close()
 
     def roster(self) -> Roster:
         from study.protocol.tlx import answered_blocks

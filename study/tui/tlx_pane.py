@@ -431,7 +431,12 @@ class TlxPane(SafeWorkers, VerticalScroll):
         from study.protocol.tlx import store_tlx
 
         try:
-            _, new = store_tlx(self.services.engine, *block, ratings, chosen, reason)
+            observer = self.services.lsl_observer()
+        except Exception:  # the run screen says why; the answers are stored regardless
+            observer = None
+        try:
+            _, new = store_tlx(self.services.engine, *block, ratings, chosen, reason,
+                               observer=observer)  # fmt: skip
         except ValueError as exc:
             self.app.call_from_thread(self._set_status, f"refused: {exc}", True)
             return

@@ -239,8 +239,11 @@ class TrialRun:
         driver_kind: str,
         pace: float | None,
         keyboard: TuiKeyboardDriver | None = None,
+        observer=None,
     ) -> None:
         self.engine, self.estimator = engine, estimator
+        self.observer = observer
+        """The app's session observer (`StudyServices.lsl_observer`), if any."""
         self.code, self.driver_kind, self.pace = code, driver_kind, pace
         self.keyboard = keyboard
         self.live = LiveState()
@@ -281,7 +284,7 @@ class TrialRun:
         # the session flow: the probes the design names before this block, then the block
         from study.tui.probe_step import run_due_probes
 
-        self.probe_line = run_due_probes(self.engine, self.code, self.driver_kind)
+        self.probe_line = run_due_probes(self.engine, self.code, self.driver_kind, self.observer)
         try:
             ids = run_session(
                 self.engine,
@@ -294,6 +297,7 @@ class TrialRun:
                 max_trials=1,
                 on_samples=self._on_samples,
                 on_storage_wait=self._on_storage_wait,
+                observer=self.observer,
             )
             return TrialOutcome(self.code, ids, 0, time.monotonic() - start)
         except TrialStopped:
