@@ -36,16 +36,18 @@ def session_observers(
 
 
 def event_publisher(
-    design: StudyDesign, publish: bool = False, wait_for_consumers_s: float = SUBSCRIBE_S
+    design: StudyDesign, publish: bool = False, wait_for_consumers_s: float | None = None
 ) -> LastingObserver | None:
     """The markers of what happens outside a session's trials (probe trials, a stored
     questionnaire), when `publish` or the design says so; None otherwise. The caller
-    closes it (`LastingObserver.close`) when done."""
+    closes it (`LastingObserver.close`) when done. `wait_for_consumers_s`: the
+    publisher's (`SUBSCRIBE_S` by default)."""
     if not (publish or design.lsl.publish):
         return None
     from study.lsl.publish import Publisher
 
-    return LastingObserver(Publisher(wait_for_consumers_s=wait_for_consumers_s))
+    wait_s = SUBSCRIBE_S if wait_for_consumers_s is None else wait_for_consumers_s
+    return LastingObserver(Publisher(wait_for_consumers_s=wait_s))
 
 
 def lasting_observers(

@@ -39,7 +39,11 @@ def _markers(listener: MarkerInlet) -> list[dict]:
     return [parse(text) for _, text in listener.markers]
 
 
-def test_probe_run_with_lsl_sends_a_marker_per_probe_trial(tmp_path: Path) -> None:
+def test_probe_run_with_lsl_sends_a_marker_per_probe_trial(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the inlet below subscribes as soon as it finds the stream (a busy machine: slowly)
+    monkeypatch.setattr("study.lsl.observers.SUBSCRIBE_S", 30.0)
     tag = uuid.uuid4().hex[:8]
     db = init_study(tmp_path, DESIGN.format(tag=tag, lsl=""), ("novice",))
     listener = MarkerInlet(f"haptic-study/markers {tag}/P001")
@@ -76,7 +80,7 @@ def test_a_stored_questionnaire_sends_one_marker_with_its_block(tmp_path: Path) 
     db = init_study(tmp_path, design, ("novice",))
     engine = open_database(db, create=False)
     with Session(engine) as s:
-        observer = event_publisher(load_study(s)[1])
+        observer = event_publisher(load_study(s)[1], wait_for_consumers_s=30.0)
     assert observer is not None
     listener = MarkerInlet(f"haptic-study/markers {tag}/P001")
     listener.start()
