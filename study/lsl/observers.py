@@ -47,7 +47,9 @@ def event_publisher(
     from study.lsl.publish import Publisher
 
     wait_s = SUBSCRIBE_S if wait_for_consumers_s is None else wait_for_consumers_s
-    return LastingObserver(Publisher(wait_for_consumers_s=wait_s))
+    # markers only: no trial runs here, and a sample stream no recorder subscribes to
+    # would hold the start for the whole wait
+    return LastingObserver(Publisher(wait_for_consumers_s=wait_s, sample_streams=False))
 
 
 def lasting_observers(

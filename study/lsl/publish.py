@@ -55,11 +55,20 @@ class Publisher(SessionObserver):
         of its streams (what is pushed before anyone listens reaches no one), s.
     pylsl
         The pylsl module (default: `study.lsl.config.load_pylsl()`).
+    sample_streams
+        Open each task's sample stream with the session (False: markers only, for what
+        happens outside trials: probes, a stored questionnaire).
     """
 
-    def __init__(self, wait_for_consumers_s: float = 0.0, pylsl: ModuleType | None = None):
+    def __init__(
+        self,
+        wait_for_consumers_s: float = 0.0,
+        pylsl: ModuleType | None = None,
+        sample_streams: bool = True,
+    ):
         self.lsl = pylsl or load_pylsl()
         self.wait_for_consumers_s = wait_for_consumers_s
+        self.sample_streams = sample_streams
         self.offset_s = monotonic_to_lsl(self.lsl)
         self.markers: Any = None
         self.session: SessionInfo | None = None
@@ -87,7 +96,7 @@ class Publisher(SessionObserver):
         )  # fmt: skip
         info.desc().append_child_value("manufacturer", "haptic-study")
         self.markers = self.lsl.StreamOutlet(info)
-        for task in session.tasks:
+        for task in session.tasks if self.sample_streams else ():
             self.outlets[task.name] = self._sample_outlet(task, ACQUISITION_RATE_HZ)
         if self.wait_for_consumers_s > 0:
             for outlet in (self.markers, *self.outlets.values()):
