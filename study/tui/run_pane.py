@@ -163,6 +163,14 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self.query_one("#participant", Select).value = code
         self._show_next()
 
+    def focus_first(self) -> None:
+        """F3: the participant list while none is picked (Enter opens it), else the
+        screen itself, whose keys (s, d, p) then act at once."""
+        if self.code is None or not self.focusable:
+            self.query_one("#participant", Select).focus()
+        else:
+            self.focus()
+
     @property
     def code(self) -> str | None:
         value = self.query_one("#participant", Select).value

@@ -59,3 +59,29 @@ async def test_e_asks_before_ending_a_measured_trial(make_test_app, study_engine
     with Session(study_engine) as session:
         trial = session.scalars(select(Trial)).one()
     assert (trial.status, trial.success, trial.driver) == ("completed", False, "keyboard")
+
+
+async def test_f3_focuses_the_participant_list_until_one_is_picked(make_test_app) -> None:
+    """F3 with nobody picked: Enter opens the participant list at once (it used to do
+    nothing until Tab); with a participant picked, the screen's own keys act."""
+    from textual.widgets import Select
+
+    from study.tui.run_pane import RunPane
+    from tests.study.tui.conftest import loaded
+
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        await loaded(pilot)
+        await pilot.press("f3")
+        await pilot.pause()
+        picker = app.query_one("#participant", Select)
+        assert app.focused is picker
+        await pilot.press("enter")
+        await pilot.pause()
+        assert picker.expanded
+        await pilot.press("down", "enter")
+        await pilot.pause()
+        assert app.query_one(RunPane).code is not None
+        await pilot.press("f1", "f3")
+        await pilot.pause()
+        assert app.focused is app.query_one(RunPane)
