@@ -94,8 +94,7 @@ def test_closing_the_terminal_mid_trial_marks_the_trial_interrupted(
         child.expect("Sessions done")
         child.send("\x1bOR")  # F3: the run screen
         child.expect("pick a participant")
-        child.send("\t")  # to the participant list
-        child.send("\r")  # open it: its options are drawn
+        child.send("\r")  # F3 focused the participant list: open it, its options drawn
         child.expect("P002")
         child.send("\x1b[B")  # down to P001
         child.send("\r")  # choose it

@@ -23,16 +23,14 @@ study_file = terminal.study_file
 read_only_study = terminal.read_only_study
 
 F3, F4 = "\x1bOR", "\x1bOS"
-DOWN, TAB = "\x1b[B", "\t"
+DOWN = "\x1b[B"
 
 
 def _pick_first(app: App) -> None:
-    """F3, then the participant list by keys: Tab, Enter, down, Enter (P001)."""
+    """F3, then the participant list by keys: Enter (F3 focuses it), down, Enter (P001)."""
     app.child.send(F3)
     app.child.expect("driver:")
     time.sleep(1.0)  # the screen takes the focus
-    app.child.send(TAB)
-    time.sleep(0.5)
     app.child.send("\r")
     app.child.expect("P001")  # the list is open
     app.child.send(DOWN)
