@@ -14,27 +14,19 @@ and its children) and wall seconds, medians, and Python's over R's.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import resource
-import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
+
+import alternate  # the sibling module: these scripts run as python benchmarks/NAME.py
+from alternate import timed
 
 HERE = Path(__file__).resolve().parent
 
 
 def _timed(command: list[str]) -> dict[str, float]:
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
-    start = time.perf_counter()
-    subprocess.run(command, check=True, capture_output=True)
-    wall = time.perf_counter() - start
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {"wall_s": wall, "cpu_s": cpu}
+    return timed(command, check=True, capture_output=True)[1]
 
 
 def main() -> None:
@@ -64,10 +56,7 @@ def main() -> None:
             for label, command in jobs if i % 2 == 0 else jobs[::-1]:
                 runs[label].append(_timed(command))
                 print(f"round {i + 1}/{args.rounds} {label}: {runs[label][-1]}", file=sys.stderr)
-    medians = {
-        label: {k: statistics.median(run[k] for run in rs) for k in rs[0]}
-        for label, rs in runs.items()
-    }
+    medians = alternate.medians(runs)
     report = {
         "command": " ".join(["python", "benchmarks/analyze_vs_r.py", *sys.argv[1:]]),
         "rounds": args.rounds,
@@ -77,10 +66,7 @@ def main() -> None:
         "python_over_r": {k: medians["python"][k] / medians["r"][k] for k in medians["r"]},
         "runs": runs,
     }
-    text = json.dumps(report, indent=2) + "\n"
-    if args.out:
-        args.out.write_text(text)
-    print(text)
+    alternate.write_report(report, args.out)
 
 
 if __name__ == "__main__":

@@ -15,32 +15,23 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
-import statistics
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
+
+import alternate  # the sibling module: these scripts run as python benchmarks/NAME.py
+from alternate import timed
 
 
 def _run(command: str, checkout: str, json_key: str | None) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "PYTHONPATH": str(Path(checkout).resolve())}
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        start = time.perf_counter()
-        done = subprocess.run(
+        done, row = timed(
             command.format(tmp=tmp, checkout=checkout), shell=True, env=env,
             capture_output=True, text=True,
         )  # fmt: skip
-        wall = time.perf_counter() - start
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if done.returncode != 0:
             raise SystemExit(f"{command!r} failed for {checkout}:\n{done.stderr[-2000:]}")
-        row = {
-            "wall_s": wall,
-            "cpu_s": (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime),
-        }
         if json_key:
             value: object = json.loads((Path(tmp) / "out.json").read_text())
             for part in json_key.split("."):  # a number indexes a list
@@ -65,10 +56,7 @@ def main() -> None:
         for label, checkout in order if r % 2 == 0 else order[::-1]:
             runs[label].append(_run(command, checkout, args.json_key))
             print(f"round {r + 1}/{args.rounds} {label}: {runs[label][-1]}", file=sys.stderr)
-    medians = {
-        label: {k: statistics.median(run[k] for run in rs) for k in rs[0]}
-        for label, rs in runs.items()
-    }
+    medians = alternate.medians(runs)
     report = {
         "command": command,
         "driver": " ".join(["python", "benchmarks/command_side_by_side.py", *argv]),
@@ -82,10 +70,7 @@ def main() -> None:
         },
         "runs": runs,
     }
-    text = json.dumps(report, indent=2) + "\n"
-    if args.out:
-        args.out.write_text(text)
-    print(text)
+    alternate.write_report(report, args.out)
 
 
 if __name__ == "__main__":

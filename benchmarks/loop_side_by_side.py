@@ -14,10 +14,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 from pathlib import Path
+
+import alternate  # the sibling module: these scripts run as python benchmarks/NAME.py
 
 HERE = Path(__file__).resolve().parent
 
@@ -53,10 +54,7 @@ def main() -> None:
             )  # fmt: skip
             runs[label].append(_flatten(json.loads(done.stdout.strip().splitlines()[-1])))
             print(f"round {r + 1}/{args.rounds} {label} done", file=sys.stderr)
-    medians = {
-        label: {k: statistics.median(run[k] for run in rs) for k in rs[0]}
-        for label, rs in runs.items()
-    }
+    medians = alternate.medians(runs)
     ratios = {
         k: medians["baseline"][k] / medians["new"][k]
         for k in medians["new"]
@@ -87,10 +85,7 @@ def main() -> None:
         "baseline_over_new": ratios,
         "runs": runs,
     }
-    text = json.dumps(report, indent=2) + "\n"
-    if args.out:
-        args.out.write_text(text)
-    print(text)
+    alternate.write_report(report, args.out)
 
 
 if __name__ == "__main__":
