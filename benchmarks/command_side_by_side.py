@@ -27,9 +27,12 @@ def _run(command: str, checkout: str, json_key: str | None) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmp:
         env = {**os.environ, "PYTHONPATH": str(Path(checkout).resolve())}
         done, row = timed(
-            command.format(tmp=tmp, checkout=checkout), shell=True, env=env,
-            capture_output=True, text=True,
-        )  # fmt: skip
+            command.format(tmp=tmp, checkout=checkout),
+            shell=True,
+            env=env,
+            capture_output=True,
+            text=True,
+        )
         if done.returncode != 0:
             raise SystemExit(f"{command!r} failed for {checkout}:\n{done.stderr[-2000:]}")
         if json_key:

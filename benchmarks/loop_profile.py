@@ -114,8 +114,7 @@ def _stage_times(calls: int) -> dict[str, float]:
     mp, lp, dt = loop.mp, loop.loop, loop.dt_s
     poly = np.ascontiguousarray(mp[K.M_POLY : K.M_POLY_END])
     est = loop._stream.kernel_arrays()
-    (buf, st, mean, std, mem, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target,
-     ekf_s, ekf_v) = est  # fmt: skip
+    (buf, st, mean, std, mem, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v) = est
     links = loop._links
 
     @numba.njit
@@ -170,8 +169,18 @@ def _stage_times(calls: int) -> dict[str, float]:
     def push(n, st, buf, mean, std, mem):  # pragma: no cover - compiled
         t0 = st[1]  # the last sample's time: time moves on from call to call
         for k in range(n):
-            stream_push(st, buf, mean, std, mem, t0 + 0.01 * (k + 1), 0.1 + 1e-3 * (k % 9),
-                        2.0 + 1e-2 * (k % 13), 0.0, False)  # fmt: skip
+            stream_push(
+                st,
+                buf,
+                mean,
+                std,
+                mem,
+                t0 + 0.01 * (k + 1),
+                0.1 + 1e-3 * (k % 9),
+                2.0 + 1e-2 * (k % 13),
+                0.0,
+                False,
+            )
         return st[0]
 
     @numba.njit
@@ -183,14 +192,16 @@ def _stage_times(calls: int) -> dict[str, float]:
         return acc
 
     @numba.njit
-    def estimate(n, st, buf, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v,
-                 dt):  # pragma: no cover - compiled  # fmt: skip
+    def estimate(
+        n, st, buf, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v, dt
+    ):  # pragma: no cover - compiled
         out = np.zeros(ESTIMATE_OUT)
         acc = 0.0
         for k in range(n):
             buf[k % buf.shape[0], 0] += 1e-6
-            stream_estimate(st, buf, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target,
-                            ekf_s, ekf_v, dt, out)  # fmt: skip
+            stream_estimate(
+                st, buf, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target, ekf_s, ekf_v, dt, out
+            )
             acc += out[2]
         return acc
 

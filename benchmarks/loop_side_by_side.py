@@ -50,8 +50,11 @@ def main() -> None:
             env = {**os.environ, "PYTHONPATH": str(Path(checkout).resolve())}
             done = subprocess.run(
                 [sys.executable, str(HERE / args.bench), *rest],
-                env=env, capture_output=True, text=True, check=True,
-            )  # fmt: skip
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
             runs[label].append(_flatten(json.loads(done.stdout.strip().splitlines()[-1])))
             print(f"round {r + 1}/{args.rounds} {label} done", file=sys.stderr)
     medians = alternate.medians(runs)

@@ -63,8 +63,9 @@ def main() -> None:
         result = trial(seed, condition)
         cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
         sim_s = float(result.samples[-1, 0]) if len(result.samples) else 0.0
-        rows.append({"seed": seed, "condition": condition, "sim_s": sim_s,
-                     "cpu_s": cpu, "wall_s": wall})  # fmt: skip
+        rows.append(
+            {"seed": seed, "condition": condition, "sim_s": sim_s, "cpu_s": cpu, "wall_s": wall}
+        )
         saved[f"{condition}_{seed}"] = result.samples
     if args.samples:
         np.savez(args.samples, **saved)

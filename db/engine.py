@@ -64,7 +64,9 @@ def resolve_url(db: str | URL | None = None) -> URL:
 
 
 SQLITE_QUERY = {
-    "timeout": "seconds from 0 to 86400", "mode": "ro, rw, rwc or memory", "uri": "true"
+    "timeout": "seconds from 0 to 86400",
+    "mode": "ro, rw, rwc or memory",
+    "uri": "true",
 }
 """The SQLite URL parameters `study` understands (pysqlite's); any other is a typo."""
 MAX_TIMEOUT_S = 86400.0

@@ -177,9 +177,14 @@ def read_stream(engine: Engine, stream_id: int) -> pa.Table:
     with Session(engine) as session:
         stream = session.get_one(LslStream, stream_id)
         meta = StreamMeta(
-            stream.name, stream.type, stream.channel_format, stream.nominal_srate_hz,
-            stream.channels, stream.lsl_t0_s, stream.time_correction_s,
-        )  # fmt: skip
+            stream.name,
+            stream.type,
+            stream.channel_format,
+            stream.nominal_srate_hz,
+            stream.channels,
+            stream.lsl_t0_s,
+            stream.time_correction_s,
+        )
         chunks = session.execute(
             select(LslChunk.data, LslChunk.raw_bytes)
             .where(LslChunk.stream_id == stream_id)

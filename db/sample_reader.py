@@ -194,9 +194,13 @@ class SampleReader:
 
     def _stored_schemas(self, trial_ids: list[int]) -> dict[int, pa.Schema]:
         """The schemas of the trials' chunks, by id (read before the chunks' cursor opens)."""
-        ids = self._conn.execute(
-            select(SampleChunk.schema_id).where(SampleChunk.trial_id.in_(trial_ids)).distinct()
-        ).scalars().all()
+        ids = (
+            self._conn.execute(
+                select(SampleChunk.schema_id).where(SampleChunk.trial_id.in_(trial_ids)).distinct()
+            )
+            .scalars()
+            .all()
+        )
         self._conn.rollback()
         return {int(i): self.schema(int(i)) for i in ids}
 

@@ -133,8 +133,7 @@ class SampleWriter:
         unknown = set(columns) - set(names)
         if unknown or "t_s" not in columns:
             raise DbInputError(
-                f"sample columns {sorted(columns)} must include 't_s' and only names "
-                f"from {names}"
+                f"sample columns {sorted(columns)} must include 't_s' and only names from {names}"
             )
         t = np.asarray(columns["t_s"], dtype=float)
         n = len(t)

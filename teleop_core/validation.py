@@ -21,9 +21,7 @@ def _finite_number(value: object) -> bool:
     return isinstance(value, Real) and math.isfinite(value)
 
 
-def require_positive(
-    obj: object, *names: str, error: type[ValueError] = TeleopInputError
-) -> None:
+def require_positive(obj: object, *names: str, error: type[ValueError] = TeleopInputError) -> None:
     """Raise `error` unless each field `names` of `obj` is a finite number > 0."""
     for name in names:
         value = getattr(obj, name)

@@ -50,9 +50,13 @@ PYLSL_LOADED_BEFORE_CONFIG = "pylsl" in sys.modules
 
 
 STORED_CHUNK_SCHEMA = pa.schema(
-    [("t_s", pa.float64()), *((c, pa.float64()) for c in SAMPLE_COLUMNS[1:6]),
-     ("branch", pa.string()), *((c, pa.float64()) for c in SAMPLE_COLUMNS[7:])]
-)  # fmt: skip
+    [
+        ("t_s", pa.float64()),
+        *((c, pa.float64()) for c in SAMPLE_COLUMNS[1:6]),
+        ("branch", pa.string()),
+        *((c, pa.float64()) for c in SAMPLE_COLUMNS[7:]),
+    ]
+)
 """The legacy chunk layout (the schema of a writer given none), as the format's
 description (`db.sample_codec`) gives it."""
 
@@ -231,8 +235,7 @@ subprocesses, kill -9, memory measured over a large export."""
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     root = Path(__file__).resolve().parent.parent
     for item in items:
-        if (
-            Path(item.path).resolve().relative_to(root).as_posix() in SLOW_MODULES
-            or item.nodeid.startswith(SLOW_TESTS)
-        ):
+        if Path(item.path).resolve().relative_to(
+            root
+        ).as_posix() in SLOW_MODULES or item.nodeid.startswith(SLOW_TESTS):
             item.add_marker(pytest.mark.slow)

@@ -68,10 +68,15 @@ def anova_rows(wide: pd.DataFrame, a: str, b: str, ss_type: int) -> list[dict[st
     for source, effect, error in terms:
         # F = (SS_effect / df_effect) / (SS_error / df_error); partial eta^2 = SS / (SS + SS_err)
         f = (effect["sum_sq"] / effect["df"]) / (error["sum_sq"] / error["df"])
-        rows.append({
-            "source": source, "F": float(f), "df1": float(effect["df"]),
-            "df2": float(error["df"]), "p": float(stats.f.sf(f, effect["df"], error["df"])),
-            "np2": float(effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])),
-            "ss_type": ss_type,
-        })  # fmt: skip
+        rows.append(
+            {
+                "source": source,
+                "F": float(f),
+                "df1": float(effect["df"]),
+                "df2": float(error["df"]),
+                "p": float(stats.f.sf(f, effect["df"], error["df"])),
+                "np2": float(effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])),
+                "ss_type": ss_type,
+            }
+        )
     return rows

@@ -83,8 +83,11 @@ def quantity_label(name: str, model: str, unit: str = "N") -> str:
         return f"|{word}| ({rest}" if rest else f"|{word}|"
     if name == "distance since reversal":
         rest = signals.get("angle", "position").partition(" (")[2]
-        return f"distance since the last reversal ({rest}" if rest else (
-            "distance since the last reversal")  # fmt: skip
+        return (
+            f"distance since the last reversal ({rest}"
+            if rest
+            else ("distance since the last reversal")
+        )
     return signals.get(name, f"{name} (recorded units)")
 
 
@@ -200,8 +203,9 @@ def residual_blocks(
     The two Axes.
     """
     if axes is None:
-        _, axes = plt.subplots(2, 1, figsize=(WIDTHS_IN["double"], 3.6), sharex=True,
-                               sharey=True, layout="constrained")  # fmt: skip
+        _, axes = plt.subplots(
+            2, 1, figsize=(WIDTHS_IN["double"], 3.6), sharex=True, sharey=True, layout="constrained"
+        )
     runs = _runs(np.asarray(held_out, bool))
     rmse = {}
     for ax, name, e in zip(axes, ("before", "after"), (before, after), strict=True):
@@ -211,11 +215,16 @@ def residual_blocks(
                 ax.axvspan(x0, x1, color=OKABE_ITO["VO"], alpha=0.12, lw=0)
         ax.plot(t, e, color=COLOURS[name], lw=0.4)
         ax.axhline(0.0, color="black", lw=0.4)
-        rmse[name] = (float(np.sqrt(np.mean(e[~held_out] ** 2))),
-                      float(np.sqrt(np.mean(e[held_out] ** 2))))  # fmt: skip
+        rmse[name] = (
+            float(np.sqrt(np.mean(e[~held_out] ** 2))),
+            float(np.sqrt(np.mean(e[held_out] ** 2))),
+        )
         what = "base model" if name == "before" else "calibrated model"
-        ax.set_title(f"{name}: {what}; RMSE training {rmse[name][0]:.4g} {unit}, "
-                     f"held out {rmse[name][1]:.4g} {unit}", loc="left")  # fmt: skip
+        ax.set_title(
+            f"{name}: {what}; RMSE training {rmse[name][0]:.4g} {unit}, "
+            f"held out {rmse[name][1]:.4g} {unit}",
+            loc="left",
+        )
         ax.set_ylabel(f"residual ({unit})")
     axes[-1].set_xlabel("time (s)")
     top = axes[0]
@@ -225,17 +234,30 @@ def residual_blocks(
     # a few blocks are named in place; many (a NOTES chirp's 8) by a legend above
     for start, stop, is_held in labelled if len(labelled) <= 4 else []:
         middle = 0.5 * (t[start] + t[stop - 1])
-        top.text(middle, 0.97, "held out" if is_held else "training", transform=trans,
-                 ha="center", va="top", color=OKABE_ITO["VO"] if is_held else "black",
-                 bbox={"facecolor": "white", "alpha": 0.8, "lw": 0, "pad": 1.0})  # fmt: skip
+        top.text(
+            middle,
+            0.97,
+            "held out" if is_held else "training",
+            transform=trans,
+            ha="center",
+            va="top",
+            color=OKABE_ITO["VO"] if is_held else "black",
+            bbox={"facecolor": "white", "alpha": 0.8, "lw": 0, "pad": 1.0},
+        )
     if len(labelled) > 4:
         from matplotlib.patches import Patch
 
-        top.legend(handles=[Patch(color=OKABE_ITO["VO"], alpha=0.12, label="held out"),
-                            Patch(facecolor="white", edgecolor="black", lw=0.4,
-                                  label="training")],
-                   loc="lower right", bbox_to_anchor=(1.0, 1.0), frameon=False,
-                   ncols=2, borderaxespad=0.2)  # fmt: skip
+        top.legend(
+            handles=[
+                Patch(color=OKABE_ITO["VO"], alpha=0.12, label="held out"),
+                Patch(facecolor="white", edgecolor="black", lw=0.4, label="training"),
+            ],
+            loc="lower right",
+            bbox_to_anchor=(1.0, 1.0),
+            frameon=False,
+            ncols=2,
+            borderaxespad=0.2,
+        )
     return np.asarray(axes)
 
 
@@ -264,8 +286,16 @@ def residual_against_unexplained(
     """
     if ax is None:
         _, ax = plt.subplots(figsize=(WIDTHS_IN["single"] + 0.5, 2.8), layout="constrained")
-    ax.scatter(x, residual, s=1.5, color=COLOURS["after"], alpha=0.35, lw=0,
-               label="held-out residual", rasterized=True)  # fmt: skip
+    ax.scatter(
+        x,
+        residual,
+        s=1.5,
+        color=COLOURS["after"],
+        alpha=0.35,
+        lw=0,
+        label="held-out residual",
+        rasterized=True,
+    )
     bins = where.get("bins") or []
     if bins:
         low = np.array([b["low"] for b in bins])
@@ -284,15 +314,25 @@ def residual_against_unexplained(
     beyond = int(np.sum((e < low - pad) | (e > high + pad)))
     ax.set_ylim(low - pad, high + pad)
     if beyond:
-        ax.text(0.01, 0.02, f"{beyond} points beyond the axis", transform=ax.transAxes,
-                ha="left", va="bottom", color=OKABE_ITO["grey"])  # fmt: skip
+        ax.text(
+            0.01,
+            0.02,
+            f"{beyond} points beyond the axis",
+            transform=ax.transAxes,
+            ha="left",
+            va="bottom",
+            color=OKABE_ITO["grey"],
+        )
     share, excess = 100 * where["share_of_variance"], 100 * where["share_beyond_chance"]
     title = f"bin means explain {share:.1f} % ({excess:.1f} % beyond chance)"
     if where["share_beyond_chance"] < SHARE_STRUCTURE:
         # the verdict rests on the residual's smoothness in time, not on this quantity
         dw = where.get("durbin_watson")
-        why = f"structure in time (Durbin-Watson {dw:.2f})" if dw is not None else (
-            "no quantity explains it")  # fmt: skip
+        why = (
+            f"structure in time (Durbin-Watson {dw:.2f})"
+            if dw is not None
+            else ("no quantity explains it")
+        )
         title += f"\nbelow {100 * SHARE_STRUCTURE:.0f} %: {why}"
     ax.set_title(title, loc="left")
     ax.legend(loc="upper right", markerscale=4, frameon=False)

@@ -28,8 +28,19 @@ from statsmodels.regression.mixed_linear_model import MixedLM
 from study.errors import StudyInputError
 
 LMM_COLUMNS = ("task", "measure", "term", "estimate", "se", "p", "p_method")
-ANCOVA_COLUMNS = ("task", "measure", "effect", "estimate", "se", "ci_low", "ci_high", "p",
-                  "participants", "covariate", "covariate_mean")  # fmt: skip
+ANCOVA_COLUMNS = (
+    "task",
+    "measure",
+    "effect",
+    "estimate",
+    "se",
+    "ci_low",
+    "ci_high",
+    "p",
+    "participants",
+    "covariate",
+    "covariate_mean",
+)
 FORMULA = (
     "value ~ C(condition, Treatment('VO')) * C(group) + cov + C(condition, Treatment('VO')):cov"
 )
@@ -102,9 +113,17 @@ def covariate_model(
                     continue
             notes += [f"{task}/{measure}: covariate model warning: {w.message}" for w in caught]
             for term in fit.fe_params.index:
-                lmm_rows.append({"task": task, "measure": measure, "term": term,
-                                 "estimate": float(fit.fe_params[term]), "se": float(fit.bse[term]),
-                                 "p": float(fit.pvalues[term]), "p_method": "Wald z"})  # fmt: skip
+                lmm_rows.append(
+                    {
+                        "task": task,
+                        "measure": measure,
+                        "term": term,
+                        "estimate": float(fit.fe_params[term]),
+                        "se": float(fit.bse[term]),
+                        "p": float(fit.pvalues[term]),
+                        "p_method": "Wald z",
+                    }
+                )
             names = list(fit.fe_params.index)
             for effect, weights in (
                 ("HV - VO at the mean covariate (mean over groups)", _condition_effect(names)),
@@ -116,12 +135,23 @@ def covariate_model(
                 test = fit.t_test(contrast)
                 est, se = float(np.ravel(test.effect)[0]), float(np.ravel(test.sd)[0])
                 z = stats.norm.ppf(0.975)
-                ancova_rows.append({
-                    "task": task, "measure": measure, "effect": effect, "estimate": est,
-                    "se": se, "ci_low": est - z * se, "ci_high": est + z * se,
-                    "p": float(2 * stats.norm.sf(abs(est / se))),
-                    "participants": int(data["participant"].nunique()),
-                    "covariate": name, "covariate_mean": mean,
-                })  # fmt: skip
-    return (pd.DataFrame(lmm_rows, columns=list(LMM_COLUMNS)),
-            pd.DataFrame(ancova_rows, columns=list(ANCOVA_COLUMNS)), notes)  # fmt: skip
+                ancova_rows.append(
+                    {
+                        "task": task,
+                        "measure": measure,
+                        "effect": effect,
+                        "estimate": est,
+                        "se": se,
+                        "ci_low": est - z * se,
+                        "ci_high": est + z * se,
+                        "p": float(2 * stats.norm.sf(abs(est / se))),
+                        "participants": int(data["participant"].nunique()),
+                        "covariate": name,
+                        "covariate_mean": mean,
+                    }
+                )
+    return (
+        pd.DataFrame(lmm_rows, columns=list(LMM_COLUMNS)),
+        pd.DataFrame(ancova_rows, columns=list(ANCOVA_COLUMNS)),
+        notes,
+    )

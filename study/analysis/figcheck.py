@@ -81,9 +81,10 @@ def _overlap(a: Bbox, b: Bbox) -> bool:
 
 
 def check_figure(
-    fig: Figure, expected_marks: Mapping[str, float | None] | None = None,
+    fig: Figure,
+    expected_marks: Mapping[str, float | None] | None = None,
     min_font_pt: float = MIN_FONT_PT,
-) -> list[str]:  # fmt: skip
+) -> list[str]:
     """Problems of a drawn figure, one sentence each; [] when it passes.
 
     Parameters
@@ -105,8 +106,12 @@ def check_figure(
     boxes = [(t, t.get_window_extent(renderer)) for t in texts]
     page = fig.bbox
     for t, box in boxes:
-        if (box.x0 < page.x0 - 1 or box.y0 < page.y0 - 1 or box.x1 > page.x1 + 1
-                or box.y1 > page.y1 + 1):  # fmt: skip
+        if (
+            box.x0 < page.x0 - 1
+            or box.y0 < page.y0 - 1
+            or box.x1 > page.x1 + 1
+            or box.y1 > page.y1 + 1
+        ):
             problems.append(f"text {_describe(t)} reaches outside the figure")
     for i, (a, box_a) in enumerate(boxes):
         for b, box_b in boxes[i + 1 :]:

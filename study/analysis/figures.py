@@ -78,6 +78,8 @@ def fig12_labels(task: str) -> dict[str, str]:
             unit = f" ({m.unit})" if m.unit else ""
             out[m.name] = LABELS.get(m.name, f"{first}\n{second}{unit}".strip())
     return {**out, "tlx_raw": LABELS["tlx_raw"]}
+
+
 CHARS_PER_IN = 13.0
 """Characters of 8 pt text per inch of width, with room to spare (DejaVu Sans averages
 about 15)."""
@@ -94,20 +96,30 @@ def label_source(fig: plt.Figure, note: str) -> plt.Figure:
     """Write the data-source note (`DataSource.note`) into the figure, above the panels;
     nothing when the note is empty (measured data)."""
     if note:
-        fig.suptitle(wrap(note, fig.get_figwidth()), x=0.02, ha="left", fontsize=FONT_PT,
-                     fontstyle="italic", color="#444444")  # fmt: skip
+        fig.suptitle(
+            wrap(note, fig.get_figwidth()),
+            x=0.02,
+            ha="left",
+            fontsize=FONT_PT,
+            fontstyle="italic",
+            color="#444444",
+        )
     return fig
 
 
-def figure_key(
-    fig: plt.Figure, handles: Sequence[Artist], caption: str, ncols: int
-) -> plt.Figure:
+def figure_key(fig: plt.Figure, handles: Sequence[Artist], caption: str, ncols: int) -> plt.Figure:
     """The figure's legend under the panels, with `caption` (sign convention, what the
     marks and bars are) as its title, wrapped to fit: one artist, so the layout keeps it
     clear of the data-source note above the panels."""
-    fig.legend(handles=list(handles), loc="outside lower center", ncols=ncols,
-               title=wrap(caption, fig.get_figwidth()), title_fontsize=FONT_PT,
-               handlelength=1.5, columnspacing=1.0)  # fmt: skip
+    fig.legend(
+        handles=list(handles),
+        loc="outside lower center",
+        ncols=ncols,
+        title=wrap(caption, fig.get_figwidth()),
+        title_fontsize=FONT_PT,
+        handlelength=1.5,
+        columnspacing=1.0,
+    )
     return fig
 
 
@@ -131,8 +143,10 @@ def method_label(row: pd.Series | None, short: bool = False) -> str:
     return f"Wilcoxon\n({row['p_method']})"
 
 
-SHORT_CAPTION = (" Under each group: t, paired t-test; W, Wilcoxon signed-rank test, ex. exact "
-                 "or as. asymptotic p.")  # fmt: skip
+SHORT_CAPTION = (
+    " Under each group: t, paired t-test; W, Wilcoxon signed-rank test, ex. exact "
+    "or as. asymptotic p."
+)
 SINGLE_MAX_IN = 4.0
 """The tallest a single-column figure may be."""
 
@@ -189,31 +203,41 @@ def fig12(
         ncol = 2  # single column too: four stacked panels were 7.2 in tall
         nrow = int(np.ceil(len(measures) / ncol))
         height = min(1.6 + 1.2 * nrow, SINGLE_MAX_IN) if single else 1.2 + 1.5 * nrow
-        fig, axes = plt.subplots(nrow, ncol, figsize=(WIDTHS_IN[width], height),
-                                 layout="constrained", squeeze=False)  # fmt: skip
+        fig, axes = plt.subplots(
+            nrow, ncol, figsize=(WIDTHS_IN[width], height), layout="constrained", squeeze=False
+        )
         for ax, measure in zip(axes.ravel(), measures, strict=False):
             _panel(ax, long[long["measure"] == measure], comparisons, measure, groups, single)
             label = labels.get(measure, measure)
             if single:  # lines of at most 10 characters: no taller than the short panels
-                label = "\n".join(textwrap.wrap(label.replace("\n", " "), 10,
-                                                 break_on_hyphens=False))
+                label = "\n".join(
+                    textwrap.wrap(label.replace("\n", " "), 10, break_on_hyphens=False)
+                )
             ax.set_ylabel(label)
         for ax in axes.ravel()[len(measures) :]:
             ax.set_visible(False)
         untested = any(
             not len(comparisons[(comparisons["measure"] == m) & (comparisons["group"] == g)])
-            for m in measures for g in groups
-        )  # fmt: skip
-        caption = MARKS_CAPTION + (SHORT_CAPTION if single else "") + (
-            " n/a: no test (fewer than 3 complete pairs)." if untested else "")  # fmt: skip
+            for m in measures
+            for g in groups
+        )
+        caption = (
+            MARKS_CAPTION
+            + (SHORT_CAPTION if single else "")
+            + (" n/a: no test (fewer than 3 complete pairs)." if untested else "")
+        )
         figure_key(fig, _legend_handles(), caption, ncols=2 if single else 4)
     return fig
 
 
 def _panel(
-    ax: plt.Axes, data: pd.DataFrame, comparisons: pd.DataFrame, measure: str,
-    groups: list[str], short: bool = False,
-) -> plt.Axes:  # fmt: skip
+    ax: plt.Axes,
+    data: pd.DataFrame,
+    comparisons: pd.DataFrame,
+    measure: str,
+    groups: list[str],
+    short: bool = False,
+) -> plt.Axes:
     ticks, top = [], 0.0
     for gi, group in enumerate(groups):
         wide = (
@@ -225,25 +249,43 @@ def _panel(
         x0 = gi * 3.0
         dx = {c: jitter(len(wide), f"{measure}/{group}/{c}") for c in ("VO", "HV")}
         for i, (_, r) in enumerate(wide.iterrows()):
-            ax.plot([x0 + dx["VO"][i], x0 + 1 + dx["HV"][i]], [r["VO"], r["HV"]],
-                    color=OKABE_ITO["grey"], lw=0.4, alpha=0.7, zorder=1)  # fmt: skip
+            ax.plot(
+                [x0 + dx["VO"][i], x0 + 1 + dx["HV"][i]],
+                [r["VO"], r["HV"]],
+                color=OKABE_ITO["grey"],
+                lw=0.4,
+                alpha=0.7,
+                zorder=1,
+            )
         for k, cond in enumerate(("VO", "HV")):
-            ax.scatter(x0 + k + dx[cond], wide[cond], s=9, color=OKABE_ITO[cond], zorder=2,
-                       linewidths=0)  # fmt: skip
+            ax.scatter(
+                x0 + k + dx[cond], wide[cond], s=9, color=OKABE_ITO[cond], zorder=2, linewidths=0
+            )
             if len(wide):
-                ax.plot([x0 + k - 0.3, x0 + k + 0.3], [wide[cond].mean()] * 2,
-                        color="black", lw=1.4, zorder=3)  # fmt: skip
+                ax.plot(
+                    [x0 + k - 0.3, x0 + k + 0.3],
+                    [wide[cond].mean()] * 2,
+                    color="black",
+                    lw=1.4,
+                    zorder=3,
+                )
         rows = comparisons[(comparisons["measure"] == measure) & (comparisons["group"] == group)]
         row = rows.iloc[0] if len(rows) else None
         p = float(row["p_holm"]) if row is not None else None
         high = float(np.nanmax(wide.to_numpy())) if len(wide) else 0.0
         top = max(top, high)
-        ax.annotate(stars(p), (x0 + 0.5, high), xytext=(0, 3), textcoords="offset points",
-                    ha="center", va="bottom", gid=f"{MARK_GID}{measure}/{group}")  # fmt: skip
+        ax.annotate(
+            stars(p),
+            (x0 + 0.5, high),
+            xytext=(0, 3),
+            textcoords="offset points",
+            ha="center",
+            va="bottom",
+            gid=f"{MARK_GID}{measure}/{group}",
+        )
         ticks.append((x0 + 0.5, f"{group}\n{method_label(row, short)}"))
     # single column: the panels are too narrow for the labels side by side; upright
-    ax.set_xticks([t for t, _ in ticks], [label for _, label in ticks],
-                  rotation=90 if short else 0)  # fmt: skip
+    ax.set_xticks([t for t, _ in ticks], [label for _, label in ticks], rotation=90 if short else 0)
     ax.tick_params(axis="x", length=0)
     ax.set_xlim(-0.6, 3.0 * len(groups) - 1.4)
     ax.set_ylim(0, (top or 1.0) * 1.3)

@@ -94,11 +94,12 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
         "comparisons": {
             "unit": "participant means per task x condition",
             "normality": f"Shapiro-Wilk on the paired differences, alpha {ALPHA:g}",
-            "tests": {"paired_t": "two-sided paired t-test (df = pairs - 1), effect size "
-                                  "Hedges' g_av",
-                      "wilcoxon": "two-sided Wilcoxon signed-rank test, statistic V (sum of "
-                                  "the ranks of the positive HV - VO differences, R's V), "
-                                  "effect size matched-pairs rank-biserial correlation"},
+            "tests": {
+                "paired_t": "two-sided paired t-test (df = pairs - 1), effect size Hedges' g_av",
+                "wilcoxon": "two-sided Wilcoxon signed-rank test, statistic V (sum of "
+                "the ranks of the positive HV - VO differences, R's V), "
+                "effect size matched-pairs rank-biserial correlation",
+            },
             "wilcoxon_p": WILCOXON_RULE,
             "correction": "Holm across the groups of each task x measure",
         },
@@ -109,9 +110,13 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
             "df": "exact (two conditions: no sphericity correction)",
             "effect_size": "partial eta squared",
         },
-        "lmm": {"estimation": "REML", "p": "Wald z", "df": "none (z tests)",
-                "formula": "value ~ condition * group + (1 | participant)",
-                "singular": "participant-intercept SD below 1e-4 of the residual SD"},
+        "lmm": {
+            "estimation": "REML",
+            "p": "Wald z",
+            "df": "none (z tests)",
+            "formula": "value ~ condition * group + (1 | participant)",
+            "singular": "participant-intercept SD below 1e-4 of the residual SD",
+        },
         "computed_by": COMPUTED_BY,
         "software": software_versions(),
     }

@@ -141,4 +141,3 @@ def compensation_table(axes: list[AxisCharacterisation]) -> pd.DataFrame:
         ):
             rows.append({"dof": ch.dof, "measure": key, "before": before[key], "after": after[key]})
     return pd.DataFrame(rows, columns=["dof", "measure", "before", "after"])
-

@@ -77,11 +77,16 @@ def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[
             return []
         trial, code = vo
         hv = session.scalars(
-            select(Trial).where(
-                *measured, Trial.participant_id == trial.participant_id, Trial.condition == "HV",
-                Trial.trial_index == trial.trial_index, recorded,
-            ).order_by(Trial.attempt.desc())
-        ).first()  # fmt: skip
+            select(Trial)
+            .where(
+                *measured,
+                Trial.participant_id == trial.participant_id,
+                Trial.condition == "HV",
+                Trial.trial_index == trial.trial_index,
+                recorded,
+            )
+            .order_by(Trial.attempt.desc())
+        ).first()
     out = [(trial.id, f"{code}, VO, trial {trial.trial_index + 1}")]
     if hv is not None:
         out.append((hv.id, f"{code}, HV, trial {hv.trial_index + 1}"))
@@ -107,8 +112,9 @@ def _marks(long: pd.DataFrame, comparisons: pd.DataFrame, task: str) -> dict[str
     measures = [m for m in fig12_labels(task) if m in set(long["measure"])]
     for measure in measures:
         for group in dict.fromkeys(long["group"]):
-            rows = comparisons[(comparisons["measure"] == measure)
-                               & (comparisons["group"] == group)]  # fmt: skip
+            rows = comparisons[
+                (comparisons["measure"] == measure) & (comparisons["group"] == group)
+            ]
             out[f"{measure}/{group}"] = float(rows["p_holm"].iloc[0]) if len(rows) else None
     return out
 
@@ -138,8 +144,16 @@ def _with_streams(
             if stored is None:
                 continue
             frame = read_stream(engine, stored.id).to_pandas()
-            drawn.append(DrawnStream(stored.name, stored.type, stored.channels, frame,
-                                     stored.gaps, stored.channel_format == "string"))  # fmt: skip
+            drawn.append(
+                DrawnStream(
+                    stored.name,
+                    stored.type,
+                    stored.channels,
+                    frame,
+                    stored.gaps,
+                    stored.channel_format == "string",
+                )
+            )
         out.append((samples, title, drawn))
     return out if any(d for _, _, d in out) else []
 
@@ -194,9 +208,13 @@ def draw_figures(
 
 
 def write_figures(
-    engine: Engine, out_dir: Path, formats: Sequence[str] = ("pdf", "svg", "png"),
-    width: str = "double", driver: str | None = None, task: str | None = None,
-) -> list[Path]:  # fmt: skip
+    engine: Engine,
+    out_dir: Path,
+    formats: Sequence[str] = ("pdf", "svg", "png"),
+    width: str = "double",
+    driver: str | None = None,
+    task: str | None = None,
+) -> list[Path]:
     """Draw, check and write every figure; nothing is written when one fails the check."""
     drawn = draw_figures(engine, width, driver, task)
     problems = [f"{d.name}: {p}" for d in drawn for p in d.problems()]

@@ -41,15 +41,21 @@ def monte_carlo_band(rates: list[float], n_sim: int) -> tuple[np.ndarray, np.nda
 def assumptions(effects: dict[str, float], rho: float, n_sim: int) -> str:
     """What the simulation assumed, as the figure states it."""
     shown = ", ".join(f"{g} {d:g}" for g, d in effects.items())
-    return (f"Simulated studies. Assumed standardised HV-VO effects: {shown}; VO-HV "
-            f"correlation {rho:g}; alpha {ALPHA:g}; {n_sim} simulated studies per size. "
-            "Bands: 95 % Monte-Carlo intervals (Wilson). Dotted: power 0.8.")  # fmt: skip
+    return (
+        f"Simulated studies. Assumed standardised HV-VO effects: {shown}; VO-HV "
+        f"correlation {rho:g}; alpha {ALPHA:g}; {n_sim} simulated studies per size. "
+        "Bands: 95 % Monte-Carlo intervals (Wilson). Dotted: power 0.8."
+    )
 
 
 def plot_power_curve(
-    curve: list[tuple[float, PowerResult]], width: str = "single", *,
-    effects: dict[str, float], rho: float, n_sim: int,
-) -> plt.Figure:  # fmt: skip
+    curve: list[tuple[float, PowerResult]],
+    width: str = "single",
+    *,
+    effects: dict[str, float],
+    rho: float,
+    n_sim: int,
+) -> plt.Figure:
     """Per-group power against the group's n; the interaction against total N; each with
     its Monte-Carlo interval, and the assumptions in the key."""
     first = curve[0][1]
@@ -60,16 +66,28 @@ def plot_power_curve(
         cols = 1 if rows == 2 else ncols
         note = assumptions(effects, rho, n_sim)
         key_in = 0.14 * len(wrap(note, WIDTHS_IN[width]).splitlines()) + 0.1  # 8 pt lines
-        fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], 2.2 * rows + 0.2 + key_in),
-                                 layout="constrained", squeeze=False)  # fmt: skip
+        fig, axes = plt.subplots(
+            rows,
+            cols,
+            figsize=(WIDTHS_IN[width], 2.2 * rows + 0.2 + key_in),
+            layout="constrained",
+            squeeze=False,
+        )
         ax = axes.ravel()[0]
         for k, group in enumerate(first.groups):
             sizes = [r.sizes[group] for _, r in curve]
             rates = [r.groups[group] for _, r in curve]
             low, high = monte_carlo_band(rates, n_sim)
             ax.fill_between(sizes, low, high, color=COLORS[k % 6], alpha=0.2, lw=0)
-            ax.plot(sizes, rates, marker=MARKERS[k % 6], ls=LINESTYLES[k % 6], ms=3.5,
-                    color=COLORS[k % 6], label=group)  # fmt: skip
+            ax.plot(
+                sizes,
+                rates,
+                marker=MARKERS[k % 6],
+                ls=LINESTYLES[k % 6],
+                ms=3.5,
+                color=COLORS[k % 6],
+                label=group,
+            )
         ax.axhline(0.8, color="#999999", lw=0.6, ls=":")
         ax.set_xlabel("participants in the group")
         ax.set_ylabel("power, VO vs HV in the group")

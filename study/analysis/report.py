@@ -21,13 +21,37 @@ from study.analysis.stats import Analysis
 from study.analysis.tables import all_tables
 
 COMPARISON_KEYS = (
-    "task", "measure", "group", "n", "mean_vo", "mean_hv", "sd_vo", "sd_hv", "test",
-    "statistic", "p", "p_holm", "effect_size", "effect_size_kind", "p_method",
-)  # fmt: skip
+    "task",
+    "measure",
+    "group",
+    "n",
+    "mean_vo",
+    "mean_hv",
+    "sd_vo",
+    "sd_hv",
+    "test",
+    "statistic",
+    "p",
+    "p_holm",
+    "effect_size",
+    "effect_size_kind",
+    "p_method",
+)
 ANOVA_KEYS = ("task", "measure", "source", "F", "df1", "df2", "p", "np2", "ss_type")
 LMM_KEYS = ("task", "measure", "term", "estimate", "se", "p", "p_method")
-DESCRIPTIVE_KEYS = ("task", "measure", "group", "condition", "n", "mean", "sd", "median",
-                    "iqr", "ci_low", "ci_high")  # fmt: skip
+DESCRIPTIVE_KEYS = (
+    "task",
+    "measure",
+    "group",
+    "condition",
+    "n",
+    "mean",
+    "sd",
+    "median",
+    "iqr",
+    "ci_low",
+    "ci_high",
+)
 
 
 def _records(frame: pd.DataFrame, keys: tuple[str, ...]) -> list[dict[str, Any]]:
@@ -36,8 +60,12 @@ def _records(frame: pd.DataFrame, keys: tuple[str, ...]) -> list[dict[str, Any]]
     out = []
     for row in frame[list(keys)].to_dict("records"):
         # NaN, and the infinite F of a residual that is exactly zero: null (strict JSON)
-        out.append({k: None if isinstance(v, float) and not math.isfinite(v) else v
-                    for k, v in row.items()})  # fmt: skip
+        out.append(
+            {
+                k: None if isinstance(v, float) and not math.isfinite(v) else v
+                for k, v in row.items()
+            }
+        )
     return out
 
 

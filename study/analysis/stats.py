@@ -42,9 +42,23 @@ from study.errors import StudyInputError
 
 ALPHA = 0.05
 COMPARISON_COLUMNS = (
-    "task", "measure", "group", "n", "mean_vo", "mean_hv", "sd_vo", "sd_hv", "shapiro_p",
-    "test", "statistic", "p", "effect_size", "effect_size_kind", "p_holm", "p_method",
-)  # fmt: skip
+    "task",
+    "measure",
+    "group",
+    "n",
+    "mean_vo",
+    "mean_hv",
+    "sd_vo",
+    "sd_hv",
+    "shapiro_p",
+    "test",
+    "statistic",
+    "p",
+    "effect_size",
+    "effect_size_kind",
+    "p_holm",
+    "p_method",
+)
 EXACT_MAX_N = 50
 """The Wilcoxon p is exact below this many non-zero differences (R's `wilcox.test`)."""
 ANOVA_COLUMNS = ("task", "measure", "source", "F", "df1", "df2", "p", "np2", "ss_type")
@@ -79,12 +93,15 @@ class Analysis:
             return frame[frame["task"] == task].reset_index(drop=True) if len(frame) else frame
 
         return Analysis(
-            descriptives=keep(self.descriptives), comparisons=keep(self.comparisons),
-            mixed_anova=keep(self.mixed_anova), lmm=keep(self.lmm),
+            descriptives=keep(self.descriptives),
+            comparisons=keep(self.comparisons),
+            mixed_anova=keep(self.mixed_anova),
+            lmm=keep(self.lmm),
             exclusions=[e for e in self.exclusions if e.startswith(f"{task}/")],
             warnings=[w for w in self.warnings if w.startswith(f"{task}/")],
-            source=self.source, ss_type=self.ss_type,
-        )  # fmt: skip
+            source=self.source,
+            ss_type=self.ss_type,
+        )
 
 
 def descriptives(long: pd.DataFrame) -> pd.DataFrame:
@@ -101,11 +118,19 @@ def descriptives(long: pd.DataFrame) -> pd.DataFrame:
         q1, q3 = np.percentile(x, [25, 75])
         rows.append(
             {
-                "task": task, "measure": measure, "group": group, "condition": condition,
-                "n": n, "mean": mean, "sd": sd, "median": float(np.median(x)),
-                "iqr": float(q3 - q1), "ci_low": mean - half, "ci_high": mean + half,
+                "task": task,
+                "measure": measure,
+                "group": group,
+                "condition": condition,
+                "n": n,
+                "mean": mean,
+                "sd": sd,
+                "median": float(np.median(x)),
+                "iqr": float(q3 - q1),
+                "ci_low": mean - half,
+                "ci_high": mean + half,
             }
-        )  # fmt: skip
+        )
     return pd.DataFrame(rows)
 
 
@@ -196,9 +221,7 @@ def _magnitude(vo: np.ndarray, hv: np.ndarray) -> float:
     return float(max(np.abs(vo).max(initial=0.0), np.abs(hv).max(initial=0.0)))
 
 
-def wilcoxon_signed_rank(
-    diff: np.ndarray, scale: float | None = None
-) -> tuple[float, float, str]:
+def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[float, float, str]:
     """Two-sided Wilcoxon signed-rank test of paired differences: (V, p, method).
 
     The differences are first taken at the data's resolution (`at_resolution`, `scale`
@@ -250,9 +273,12 @@ def compare_conditions(
         diff = hv - vo
         normal_p = float(stats.shapiro(diff).pvalue) if np.ptp(diff) > 0 else 1.0
         row.update(
-            mean_vo=float(vo.mean()), mean_hv=float(hv.mean()),
-            sd_vo=float(vo.std(ddof=1)), sd_hv=float(hv.std(ddof=1)), shapiro_p=normal_p,
-        )  # fmt: skip
+            mean_vo=float(vo.mean()),
+            mean_hv=float(hv.mean()),
+            sd_vo=float(vo.std(ddof=1)),
+            sd_hv=float(hv.std(ddof=1)),
+            shapiro_p=normal_p,
+        )
         if normal_p >= ALPHA:
             t = stats.ttest_rel(hv, vo)
             row.update(
@@ -306,8 +332,9 @@ def mixed_anova(
     rows, notes = [], []
     pairs = long[long["condition"].isin((a, b))]
     for (task, measure), g in pairs.groupby(["task", "measure"], sort=False):
-        wide = g.pivot_table(index=["participant", "group"], columns="condition",
-                             values="value").reset_index()  # fmt: skip
+        wide = g.pivot_table(
+            index=["participant", "group"], columns="condition", values="value"
+        ).reset_index()
         wide = wide.dropna(subset=[c for c in (a, b) if c in wide])
         sizes = wide["group"].value_counts(sort=False) if {a, b} <= set(wide) else pd.Series()
         if len(sizes) < 2 or (sizes < 2).any():
@@ -338,9 +365,11 @@ def lmm_design(data: pd.DataFrame) -> tuple[np.ndarray, list[str]]:
     grp = {g: (data["group"] == g).to_numpy(float) for g in groups}
     columns, names = [np.ones(len(data))], ["Intercept"]
     for c in conditions:
-        columns.append(cond[c]); names.append(f"{CONDITION_TERM}[T.{c}]")  # noqa: E702
+        columns.append(cond[c])
+        names.append(f"{CONDITION_TERM}[T.{c}]")
     for g in groups:
-        columns.append(grp[g]); names.append(f"C(group)[T.{g}]")  # noqa: E702
+        columns.append(grp[g])
+        names.append(f"C(group)[T.{g}]")
     for g in groups:
         for c in conditions:
             columns.append(cond[c] * grp[g])
@@ -370,8 +399,9 @@ def mixed_model(
             try:
                 if np.linalg.matrix_rank(X) < X.shape[1]:
                     raise ValueError("a condition x group cell has no trials")
-                fit = fit_random_intercept(X, data["value"].to_numpy(float),
-                                           data["participant"].to_numpy())  # fmt: skip
+                fit = fit_random_intercept(
+                    X, data["value"].to_numpy(float), data["participant"].to_numpy()
+                )
             except (np.linalg.LinAlgError, ValueError) as exc:
                 notes.append(f"{task}/{measure}: mixed model could not be fitted: {exc}")
                 continue
@@ -386,11 +416,15 @@ def mixed_model(
             for term, est, se, p_value in zip(names, fit.beta, fit.se, p_values, strict=True):
                 rows.append(
                     {
-                        "task": task, "measure": measure, "term": term,
-                        "estimate": float(est), "se": float(se),
-                        "p": float(p_value), "p_method": "Wald z",
+                        "task": task,
+                        "measure": measure,
+                        "term": term,
+                        "estimate": float(est),
+                        "se": float(se),
+                        "p": float(p_value),
+                        "p_method": "Wald z",
                     }
-                )  # fmt: skip
+                )
     columns = ["task", "measure", "term", "estimate", "se", "p", "p_method"]
     return pd.DataFrame(rows, columns=columns), notes
 

@@ -96,11 +96,15 @@ def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fi
             hi *= 4
             if hi > 1e12:
                 raise ValueError("the random-intercept variance does not converge")
-        lam = optimize.brentq(_gradient, 0.0, hi, args=args, xtol=1e-300, rtol=1e-15,
-                              maxiter=500)  # fmt: skip
+        lam = optimize.brentq(_gradient, 0.0, hi, args=args, xtol=1e-300, rtol=1e-15, maxiter=500)
     A, beta, q, _, _ = _parts(lam, *args)
     sigma2 = q / (n - p)
     se = np.sqrt(np.diag(np.linalg.inv(A)) * sigma2)
     crit = _criterion(lam, *args) + (n - p) * (1 + np.log(2 * np.pi / (n - p)))
-    return Fit(beta=beta, se=se, theta=float(np.sqrt(lam)), sigma=float(np.sqrt(sigma2)),
-               reml_crit=float(crit))  # fmt: skip
+    return Fit(
+        beta=beta,
+        se=se,
+        theta=float(np.sqrt(lam)),
+        sigma=float(np.sqrt(sigma2)),
+        reml_crit=float(crit),
+    )

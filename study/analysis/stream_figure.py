@@ -47,20 +47,31 @@ def trial_streams_figure(
         column; every column has the same streams, by name, in the same order.
     """
     the_task = get_task(task)
-    trials = [(samples, title, [part for s in streams for part in _by_unit(s)])
-              for samples, title, streams in trials]  # fmt: skip
+    trials = [
+        (samples, title, [part for s in streams for part in _by_unit(s)])
+        for samples, title, streams in trials
+    ]
     n_rows = 1 + max(len(s) for _, _, s in trials)
     with plt.rc_context(STYLE):
         fig, axes = plt.subplots(
-            n_rows, len(trials), figsize=(WIDTHS_IN[width], 1.3 * n_rows + 0.6),
-            sharex="col", squeeze=False, layout="constrained",
-        )  # fmt: skip
+            n_rows,
+            len(trials),
+            figsize=(WIDTHS_IN[width], 1.3 * n_rows + 0.6),
+            sharex="col",
+            squeeze=False,
+            layout="constrained",
+        )
         for col, (samples, title, streams) in enumerate(trials):
             top = axes[0, col]
             for k, (column, label) in enumerate(the_task.trace_names.items()):
                 if column in samples:
-                    top.plot(samples["t_s"], samples[column], lw=0.8,
-                             color=COLORS[k % len(COLORS)], label=label)  # fmt: skip
+                    top.plot(
+                        samples["t_s"],
+                        samples[column],
+                        lw=0.8,
+                        color=COLORS[k % len(COLORS)],
+                        label=label,
+                    )
             top.set_title(title)
             top.set_ylabel("force (N)")
             if col == 0:
@@ -77,10 +88,15 @@ def _by_unit(stream: DrawnStream) -> list[DrawnStream]:
         return [stream]
     units = list(dict.fromkeys(c["unit"] for c in stream.channels))
     return [
-        DrawnStream(stream.name, stream.type, [c for c in stream.channels if c["unit"] == u],
-                    stream.frame, stream.gaps)
+        DrawnStream(
+            stream.name,
+            stream.type,
+            [c for c in stream.channels if c["unit"] == u],
+            stream.frame,
+            stream.gaps,
+        )
         for u in units
-    ]  # fmt: skip
+    ]
 
 
 def _draw_stream(ax: plt.Axes, stream: DrawnStream, legend: bool) -> None:
@@ -89,15 +105,27 @@ def _draw_stream(ax: plt.Axes, stream: DrawnStream, legend: bool) -> None:
         column = stream.channels[0]["name"]
         for when, text in zip(t, stream.frame[column], strict=True):
             ax.axvline(when, color="black", lw=0.6)
-            ax.text(when, 0.9, str(text)[:24], rotation=90, va="top", ha="right",
-                    transform=ax.get_xaxis_transform())  # fmt: skip
+            ax.text(
+                when,
+                0.9,
+                str(text)[:24],
+                rotation=90,
+                va="top",
+                ha="right",
+                transform=ax.get_xaxis_transform(),
+            )
         ax.set_yticks([])
     else:
         units = {c["unit"] for c in stream.channels}
         for k, ch in enumerate(stream.channels):
             label = f"{ch['name']} ({ch['unit']})" if ch["unit"] else ch["name"]
-            ax.plot(t, stream.frame[ch["name"]].to_numpy(dtype=float), lw=0.7,
-                    color=COLORS[k % len(COLORS)], label=label)  # fmt: skip
+            ax.plot(
+                t,
+                stream.frame[ch["name"]].to_numpy(dtype=float),
+                lw=0.7,
+                color=COLORS[k % len(COLORS)],
+                label=label,
+            )
         unit = units.pop() if len(units) == 1 else ""
         ax.set_ylabel(f"{stream.type} ({unit})" if unit else stream.type)
         if legend:
@@ -105,6 +133,11 @@ def _draw_stream(ax: plt.Axes, stream: DrawnStream, legend: bool) -> None:
     for start, end in stream.gaps:
         ax.axvspan(start, end, color="#999999", alpha=0.3, lw=0)
     if stream.gaps:
-        ax.text(float(np.mean(stream.gaps[0])), 0.5, "lost", ha="center",
-                transform=ax.get_xaxis_transform())  # fmt: skip
+        ax.text(
+            float(np.mean(stream.gaps[0])),
+            0.5,
+            "lost",
+            ha="center",
+            transform=ax.get_xaxis_transform(),
+        )
     ax.set_title(f"{stream.name}", loc="left", fontsize=STYLE["font.size"])

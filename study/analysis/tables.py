@@ -44,9 +44,11 @@ class Table:
             .format_index(escape="latex", axis=1)
         )
         text = styler.to_latex(
-            hrules=True, caption=tex_escape(self.caption), label=f"tab:{self.name}",
+            hrules=True,
+            caption=tex_escape(self.caption),
+            label=f"tab:{self.name}",
             position_float="centering",
-        )  # fmt: skip
+        )
         return text.replace("< .001", "$<$ .001")  # '<' is a text-mode glyph only in T1
 
     def write(self, folder: Path, data_source: str) -> list[Path]:
@@ -61,9 +63,18 @@ class Table:
         return paths
 
 
-TEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#",
-               "_": r"\_", "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}",
-               "^": r"\textasciicircum{}"}  # fmt: skip
+TEX_SPECIAL = {
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\textasciicircum{}",
+}
 
 
 def tex_escape(text: str) -> str:
@@ -115,18 +126,27 @@ def term_label(term: str) -> str:
 
 def comparisons_table(analysis: Analysis) -> Table:
     c = analysis.comparisons
-    display = pd.DataFrame({
-        "task": c["task"], "measure": c["measure"], "group": c["group"], "n": c["n"],
-        "VO mean (SD)": _mean_sd(c["mean_vo"], c["sd_vo"]),
-        "HV mean (SD)": _mean_sd(c["mean_hv"], c["sd_hv"]),
-        "test": c["test"].map(TEST_LABELS),
-        "statistic": [_statistic(t, v, n) for t, v, n in zip(c["test"], c["statistic"], c["n"],
-                                                             strict=True)],
-        "p": [p_text(v) for v in c["p"]], "p from": c["p_method"],
-        "p (Holm)": [p_text(v) for v in c["p_holm"]],
-        "effect size": [_effect(v, k)
-                        for v, k in zip(c["effect_size"], c["effect_size_kind"], strict=True)],
-    })  # fmt: skip
+    display = pd.DataFrame(
+        {
+            "task": c["task"],
+            "measure": c["measure"],
+            "group": c["group"],
+            "n": c["n"],
+            "VO mean (SD)": _mean_sd(c["mean_vo"], c["sd_vo"]),
+            "HV mean (SD)": _mean_sd(c["mean_hv"], c["sd_hv"]),
+            "test": c["test"].map(TEST_LABELS),
+            "statistic": [
+                _statistic(t, v, n)
+                for t, v, n in zip(c["test"], c["statistic"], c["n"], strict=True)
+            ],
+            "p": [p_text(v) for v in c["p"]],
+            "p from": c["p_method"],
+            "p (Holm)": [p_text(v) for v in c["p_holm"]],
+            "effect size": [
+                _effect(v, k) for v, k in zip(c["effect_size"], c["effect_size_kind"], strict=True)
+            ],
+        }
+    )
     exclusions = "; ".join(analysis.exclusions) or "none"
     caption = f"{_preamble(analysis)}{comparison_method()} Exclusions: {exclusions}."
     return Table("comparisons", c, display, caption)
@@ -134,32 +154,46 @@ def comparisons_table(analysis: Analysis) -> Table:
 
 def anova_table(analysis: Analysis) -> Table:
     a = analysis.mixed_anova
-    display = pd.DataFrame({
-        "task": a["task"], "measure": a["measure"], "source": a["source"],
-        "F": [_num(v, 2) for v in a["F"]],
-        "df": [f"{d1:g}, {d2:g}" for d1, d2 in zip(a["df1"], a["df2"], strict=True)],
-        "p": [p_text(v) for v in a["p"]],
-        "partial eta squared": [bounded_text(v, 3) for v in a["np2"]],
-        "SS type": a["ss_type"].map(lambda t: "II" if t == 2 else "III"),
-    })  # fmt: skip
-    return _model_table(analysis, "mixed_anova", a, display, anova_method(analysis.ss_type),
-                        "mixed ANOVA")  # fmt: skip
+    display = pd.DataFrame(
+        {
+            "task": a["task"],
+            "measure": a["measure"],
+            "source": a["source"],
+            "F": [_num(v, 2) for v in a["F"]],
+            "df": [f"{d1:g}, {d2:g}" for d1, d2 in zip(a["df1"], a["df2"], strict=True)],
+            "p": [p_text(v) for v in a["p"]],
+            "partial eta squared": [bounded_text(v, 3) for v in a["np2"]],
+            "SS type": a["ss_type"].map(lambda t: "II" if t == 2 else "III"),
+        }
+    )
+    return _model_table(
+        analysis, "mixed_anova", a, display, anova_method(analysis.ss_type), "mixed ANOVA"
+    )
 
 
 def lmm_table(analysis: Analysis) -> Table:
     m = analysis.lmm
-    display = pd.DataFrame({
-        "task": m["task"], "measure": m["measure"], "term": [term_label(t) for t in m["term"]],
-        "estimate": [_num(v, 4) for v in m["estimate"]], "SE": [_num(v, 4) for v in m["se"]],
-        "p (Wald z)": [p_text(v) for v in m["p"]],
-    })  # fmt: skip
+    display = pd.DataFrame(
+        {
+            "task": m["task"],
+            "measure": m["measure"],
+            "term": [term_label(t) for t in m["term"]],
+            "estimate": [_num(v, 4) for v in m["estimate"]],
+            "SE": [_num(v, 4) for v in m["se"]],
+            "p (Wald z)": [p_text(v) for v in m["p"]],
+        }
+    )
     return _model_table(analysis, "lmm", m, display, lmm_method(), "mixed model")
 
 
 def _model_table(
-    analysis: Analysis, name: str, frame: pd.DataFrame, display: pd.DataFrame, method: str,
+    analysis: Analysis,
+    name: str,
+    frame: pd.DataFrame,
+    display: pd.DataFrame,
+    method: str,
     model: str,
-) -> Table:  # fmt: skip
+) -> Table:
     """A model's table, its caption noting the warnings the fit of `model` raised."""
     notes = "; ".join(analysis.warnings_about(model)) or "none"
     return Table(name, frame, display, f"{_preamble(analysis)}{method} Notes: {notes}.")
@@ -167,16 +201,23 @@ def _model_table(
 
 def descriptives_table(analysis: Analysis) -> Table:
     d = analysis.descriptives
-    display = pd.DataFrame({
-        "task": d.get("task", []), "measure": d.get("measure", []),
-        "group": d.get("group", []), "condition": d.get("condition", []), "n": d.get("n", []),
-        "mean": [_num(v) for v in d.get("mean", [])], "SD": [_num(v) for v in d.get("sd", [])],
-        "median": [_num(v) for v in d.get("median", [])],
-        "IQR": [_num(v) for v in d.get("iqr", [])],
-        "95 % CI": [f"[{_num(lo)}, {_num(hi)}]"
-                    for lo, hi in zip(d.get("ci_low", []), d.get("ci_high", []),
-                                      strict=True)],
-    })  # fmt: skip
+    display = pd.DataFrame(
+        {
+            "task": d.get("task", []),
+            "measure": d.get("measure", []),
+            "group": d.get("group", []),
+            "condition": d.get("condition", []),
+            "n": d.get("n", []),
+            "mean": [_num(v) for v in d.get("mean", [])],
+            "SD": [_num(v) for v in d.get("sd", [])],
+            "median": [_num(v) for v in d.get("median", [])],
+            "IQR": [_num(v) for v in d.get("iqr", [])],
+            "95 % CI": [
+                f"[{_num(lo)}, {_num(hi)}]"
+                for lo, hi in zip(d.get("ci_low", []), d.get("ci_high", []), strict=True)
+            ],
+        }
+    )
     caption = (
         f"{_preamble(analysis)}Participant means (the mean of each block's measured trials; "
         "NASA-TLX as rated): n, mean, SD, median, interquartile range and the t-based 95 % "

@@ -23,8 +23,10 @@ from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_key
 CONDITIONS = ("VO", "HV")
 SINGLE_MAX_IN = 4.0
 """The tallest a single-column figure may be (a column's upper part)."""
-NOTE = ("Bars: mean; whiskers: 95 % within-subject CI (Cousineau-Morey). Lower is better "
-        "on every subscale: performance reads 0 = perfect.")  # fmt: skip
+NOTE = (
+    "Bars: mean; whiskers: 95 % within-subject CI (Cousineau-Morey). Lower is better "
+    "on every subscale: performance reads 0 = perfect."
+)
 
 
 def cousineau_morey(wide: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
@@ -65,21 +67,36 @@ def tlx_profile(tlx: pd.DataFrame, width: str = "double") -> plt.Figure:
         rows, cols = (len(groups), 1) if width == "single" else (1, len(groups))
         # single column: stacked panels sharing the subscale axis, at most SINGLE_MAX_IN
         height = (min(0.75 * rows, 2.3) + 1.6) if width == "single" else 3.0
-        fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], height), sharey=True,
-                                 sharex=True, layout="constrained", squeeze=False)  # fmt: skip
+        fig, axes = plt.subplots(
+            rows,
+            cols,
+            figsize=(WIDTHS_IN[width], height),
+            sharey=True,
+            sharex=True,
+            layout="constrained",
+            squeeze=False,
+        )
         x = np.arange(len(TLX_SUBSCALES))
         for ax, group in zip(axes.ravel(), groups, strict=True):
             data = tlx[tlx["group"] == group]
             n = 0
             for s_i, sub in enumerate(TLX_SUBSCALES):
-                wide = data.pivot_table(index="participant", columns="condition",
-                                        values=f"tlx_{sub}")  # fmt: skip
+                wide = data.pivot_table(
+                    index="participant", columns="condition", values=f"tlx_{sub}"
+                )
                 cm = cousineau_morey(wide.reindex(columns=list(CONDITIONS)))
                 n = max(n, int(cm["n"].iloc[0]))
                 for k, cond in enumerate(CONDITIONS):
-                    ax.bar(x[s_i] + (k - 0.5) * 0.4, cm.loc[cond, "mean"], 0.38,
-                           yerr=cm.loc[cond, "half"], capsize=1.5, color=OKABE_ITO[cond],
-                           label=cond if s_i == 0 else None, error_kw={"lw": 0.6})  # fmt: skip
+                    ax.bar(
+                        x[s_i] + (k - 0.5) * 0.4,
+                        cm.loc[cond, "mean"],
+                        0.38,
+                        yerr=cm.loc[cond, "half"],
+                        capsize=1.5,
+                        color=OKABE_ITO[cond],
+                        label=cond if s_i == 0 else None,
+                        error_kw={"lw": 0.6},
+                    )
             ax.set_title(f"{group} (n = {n})", pad=2)
             ax.set_ylim(0, 100)
             if width == "single":

@@ -57,8 +57,15 @@ def force_traces(
         rows, cols = (len(trials), 1) if width == "single" else (1, len(trials))
         height = 1.6 * rows + 1.1
         # one time axis and one force axis for both trials: they compare at a glance
-        fig, axes = plt.subplots(rows, cols, figsize=(WIDTHS_IN[width], height), sharey=True,
-                                 sharex=True, layout="constrained", squeeze=False)  # fmt: skip
+        fig, axes = plt.subplots(
+            rows,
+            cols,
+            figsize=(WIDTHS_IN[width], height),
+            sharey=True,
+            sharex=True,
+            layout="constrained",
+            squeeze=False,
+        )
         for ax, (samples, title) in zip(axes.ravel(), trials, strict=True):
             for k, (column, label) in enumerate(names.items()):
                 if column in samples and samples[column].notna().any():

@@ -34,8 +34,9 @@ def traces_plot(task: Task, frame: pd.DataFrame, title: str) -> plt.Figure:
         top.set_ylabel("inserted (mm)")
         for trace, color in zip(task.live_traces, ("#0072B2", "#D55E00"), strict=True):
             unit = next(c.unit for c in task.sample_columns if c.name == trace.column)
-            bottom.plot(t, frame[trace.column], color=color, lw=0.8,
-                        label=f"{trace.label} ({unit})")  # fmt: skip
+            bottom.plot(
+                t, frame[trace.column], color=color, lw=0.8, label=f"{trace.label} ({unit})"
+            )
         bottom.set_xlabel("time (s)")
         bottom.legend(loc="upper left", frameon=False)
         top.set_title(title)

@@ -129,9 +129,11 @@ def notes_runs(config: CalibrateBenchConfig) -> dict[str, Any]:
 
 
 def run_calibrate_bench(
-    config: CalibrateBenchConfig, out_dir: Path, progress: Callable[[str], None] | None = None,
+    config: CalibrateBenchConfig,
+    out_dir: Path,
+    progress: Callable[[str], None] | None = None,
     only_open: bool = False,
-) -> dict[str, Any]:  # fmt: skip
+) -> dict[str, Any]:
     """Run every part, write `calibrate_bench.md` and `calibrate.json` to `out_dir`."""
     from study.bench.calibrate_open import markdown as open_markdown
     from study.bench.calibrate_open import open_part
@@ -185,8 +187,12 @@ def run_calibrate_bench(
         },
     }
     (out_dir / "calibrate.json").write_text(json.dumps(report, indent=2) + "\n")
-    text = markdown(report) + "\n" + "\n".join(
-        open_markdown(measured, config.duration_s, config.rate_hz)) + "\n"  # fmt: skip
+    text = (
+        markdown(report)
+        + "\n"
+        + "\n".join(open_markdown(measured, config.duration_s, config.rate_hz))
+        + "\n"
+    )
     (out_dir / "calibrate_bench.md").write_text(text)
     return report
 

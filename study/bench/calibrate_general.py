@@ -59,8 +59,14 @@ class GeneraliseConfig:
 
     @classmethod
     def quick(cls, count: int = 1) -> GeneraliseConfig:
-        return cls(per_family=count, mixtures_of_two=count, mixtures_of_three=count,
-                   clean=count, duration_s=60.0, rate_hz=100.0)  # fmt: skip
+        return cls(
+            per_family=count,
+            mixtures_of_two=count,
+            mixtures_of_three=count,
+            clean=count,
+            duration_s=60.0,
+            rate_hz=100.0,
+        )
 
 
 def plan(config: GeneraliseConfig) -> list[tuple[str, tuple[str, ...], int]]:
@@ -89,8 +95,9 @@ def plan(config: GeneraliseConfig) -> list[tuple[str, tuple[str, ...], int]]:
     return out
 
 
-def run_one(group: str, families: tuple[str, ...], seed: int,
-            config: GeneraliseConfig) -> dict[str, Any]:  # fmt: skip
+def run_one(
+    group: str, families: tuple[str, ...], seed: int, config: GeneraliseConfig
+) -> dict[str, Any]:
     drawn = general_recording(families, seed, config.duration_s, config.rate_hz)
     start = time.perf_counter()
     report = Calibrator(FollowerBase()).fit(drawn.data).report()

@@ -63,19 +63,22 @@ def emps_run(path: Path = EMPS_FILE) -> dict[str, Any]:
         "fit_percent_after": report["fit_percent_after"],
         "reference_rmse_n": float(np.sqrt(np.mean((y[test] - pred) ** 2))),
         "reference_fit_percent": fit_percent(y[test], pred),
-        "reference_params": dict(zip(["M", "Fv+", "Fv-", "Fc+", "Fc-", "offset"],
-                                     map(float, coef), strict=True)),
+        "reference_params": dict(
+            zip(["M", "Fv+", "Fv-", "Fc+", "Fc-", "offset"], map(float, coef), strict=True)
+        ),
         "verdict": report["verdict"],
-        "unexplained": report["unexplained"] and {
-            k: report["unexplained"][k] for k in ("quantity", "share_of_variance",
-                                                  "share_beyond_chance")
+        "unexplained": report["unexplained"]
+        and {
+            k: report["unexplained"][k]
+            for k in ("quantity", "share_of_variance", "share_beyond_chance")
         },
         "seconds": seconds,
     }
 
 
-def undeclared_runs(duration_s: float, rate_hz: float, seed: int,
-                    say: Callable[[str], None]) -> dict[str, Any]:  # fmt: skip
+def undeclared_runs(
+    duration_s: float, rate_hz: float, seed: int, say: Callable[[str], None]
+) -> dict[str, Any]:
     runs = {}
     for i, kind in enumerate(UNDECLARED):
         say(f"undeclared: {kind} ({i + 1}/{len(UNDECLARED)})")
@@ -102,22 +105,29 @@ def undeclared_runs(duration_s: float, rate_hz: float, seed: int,
     return runs
 
 
-def clean_seeds(duration_s: float, rate_hz: float, seeds: int,
-                say: Callable[[str], None]) -> list[dict[str, Any]]:  # fmt: skip
+def clean_seeds(
+    duration_s: float, rate_hz: float, seeds: int, say: Callable[[str], None]
+) -> list[dict[str, Any]]:
     out = []
     for seed in range(seeds):
         say(f"clean recording, seed {seed + 1}/{seeds}")
         rec, _ = follower_recording(duration_s, (), rate_hz=rate_hz, seed=500 + seed)
         model = FollowerBase()
         report = Calibrator(model).fit(model.data(rec)).report()
-        out.append({"seed": 500 + seed, "added": [e["family"] for e in report["effects_added"]]
-                    + [t["term"] for t in report["discovered_terms"]],
-                    "verdict": report["verdict"]})  # fmt: skip
+        out.append(
+            {
+                "seed": 500 + seed,
+                "added": [e["family"] for e in report["effects_added"]]
+                + [t["term"] for t in report["discovered_terms"]],
+                "verdict": report["verdict"],
+            }
+        )
     return out
 
 
-def open_part(duration_s: float, rate_hz: float, seed: int,
-              say: Callable[[str], None]) -> dict[str, Any]:  # fmt: skip
+def open_part(
+    duration_s: float, rate_hz: float, seed: int, say: Callable[[str], None]
+) -> dict[str, Any]:
     say("EMPS (measured)")
     emps = emps_run()
     undeclared = undeclared_runs(duration_s, rate_hz, seed, say)
@@ -129,14 +139,17 @@ def open_part(duration_s: float, rate_hz: float, seed: int,
         "targets_met": {
             "emps_at_or_below_reference": emps["rmse_after_n"] <= emps["reference_rmse_n"] * 1.0001,
             "emps_direction_named": "direction_asymmetry" in emps["added"],
-            "visible_within_2x_oracle": all(r["ratio_to_oracle"] <= 2.0
-                                            for r in undeclared.values()
-                                            if r["visible_in_channels"]),
-            "invisible_structure_remains": all(r["verdict"] == "structure_remains"
-                                               for r in undeclared.values()
-                                               if not r["visible_in_channels"]),
-            "clean_white_nothing_added": sum(not r["added"] and r["verdict"] == "white"
-                                             for r in clean),
+            "visible_within_2x_oracle": all(
+                r["ratio_to_oracle"] <= 2.0 for r in undeclared.values() if r["visible_in_channels"]
+            ),
+            "invisible_structure_remains": all(
+                r["verdict"] == "structure_remains"
+                for r in undeclared.values()
+                if not r["visible_in_channels"]
+            ),
+            "clean_white_nothing_added": sum(
+                not r["added"] and r["verdict"] == "white" for r in clean
+            ),
             "slowest_open_calibration_s": max(r["seconds"] for r in undeclared.values()),
             "slowest_open_calibration_cpu_s": max(r["cpu_seconds"] for r in undeclared.values()),
         },
@@ -149,11 +162,14 @@ def markdown(part: dict[str, Any], duration_s: float, rate_hz: float) -> list[st
         "## Measured data: EMPS (1 kHz, 24.8 s; last 25 % held out)",
         "",
         f"Derivative cutoff fitted on training: {e['derivative_cutoff_hz']:.1f} Hz. Base "
-        "parameters (95 % CI): " + ", ".join(
+        "parameters (95 % CI): "
+        + ", ".join(
             f"{k} = {v:.4g} [{lo:.4g}, {hi:.4g}]"
-            for (k, v), (lo, hi) in zip(e["base_params"]["params"].items(),
-                                         e["base_params"]["ci"].values(), strict=True)
-        ) + ".",
+            for (k, v), (lo, hi) in zip(
+                e["base_params"]["params"].items(), e["base_params"]["ci"].values(), strict=True
+            )
+        )
+        + ".",
         "",
         "| model | held-out RMSE (N) | fit (%) |",
         "|---|---|---|",
@@ -163,13 +179,16 @@ def markdown(part: dict[str, Any], duration_s: float, rate_hz: float) -> list[st
         f"| benchmark's direction-dependent model | {e['reference_rmse_n']:.3f} "
         f"| {e['reference_fit_percent']:.2f} |",
         "",
-        f"Verdict: {e['verdict']}" + (
+        f"Verdict: {e['verdict']}"
+        + (
             f" (largest share: {e['unexplained']['quantity']}, "
             f"{100 * e['unexplained']['share_beyond_chance']:.1f} % beyond chance)"
-            if e["unexplained"] else "") + f"; {e['seconds']:.1f} s.",
+            if e["unexplained"]
+            else ""
+        )
+        + f"; {e['seconds']:.1f} s.",
         "",
-        f"## Effects outside the named families ({duration_s:.0f} s at {rate_hz:.0f} Hz, "
-        "JND size)",
+        f"## Effects outside the named families ({duration_s:.0f} s at {rate_hz:.0f} Hz, JND size)",
         "",
         "| effect | named / discovered | held-out RMSE before -> after (N) | oracle (N) "
         "| after / oracle | verdict | time (s) | CPU (s) |",
@@ -184,10 +203,20 @@ def markdown(part: dict[str, Any], duration_s: float, rate_hz: float) -> list[st
         )
     clean = part["clean_seeds"]
     ok = part["targets_met"]["clean_white_nothing_added"]
-    lines += ["", f"Clean recordings: nothing added and verdict white in {ok} of {len(clean)} "
-              "seeds" + (": " + "; ".join(f"seed {r['seed']}: {r['verdict']}, "
-                                          f"{', '.join(r['added']) or 'nothing'}"
-                                          for r in clean
-                                          if r["added"] or r["verdict"] != "white")
-                         if ok < len(clean) else "") + "."]  # fmt: skip
+    lines += [
+        "",
+        f"Clean recordings: nothing added and verdict white in {ok} of {len(clean)} "
+        "seeds"
+        + (
+            ": "
+            + "; ".join(
+                f"seed {r['seed']}: {r['verdict']}, {', '.join(r['added']) or 'nothing'}"
+                for r in clean
+                if r["added"] or r["verdict"] != "white"
+            )
+            if ok < len(clean)
+            else ""
+        )
+        + ".",
+    ]
     return lines

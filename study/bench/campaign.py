@@ -61,9 +61,12 @@ class WorkerRun:
         return self.wall_s * self.workers / sum(self.unit_seconds) - 1.0
 
     def to_dict(self) -> dict[str, Any]:
-        return {**asdict(self), "units_per_hour": self.units_per_hour,
-                "mean_unit_s": sum(self.unit_seconds) / len(self.unit_seconds),
-                "overhead": self.overhead}  # fmt: skip
+        return {
+            **asdict(self),
+            "units_per_hour": self.units_per_hour,
+            "mean_unit_s": sum(self.unit_seconds) / len(self.unit_seconds),
+            "overhead": self.overhead,
+        }
 
 
 @dataclass
@@ -84,12 +87,16 @@ class CampaignBench:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "replicates": self.replicates, "group_size": self.group_size,
-            "runs": [r.to_dict() for r in self.runs], "speedup": self.speedup,
-            "identical_results": self.identical, "load_average": list(self.load_average),
-            "cpus": self.cpus, "targets": {"speedup_2_workers": 1.8, "overhead": 0.05},
+            "replicates": self.replicates,
+            "group_size": self.group_size,
+            "runs": [r.to_dict() for r in self.runs],
+            "speedup": self.speedup,
+            "identical_results": self.identical,
+            "load_average": list(self.load_average),
+            "cpus": self.cpus,
+            "targets": {"speedup_2_workers": 1.8, "overhead": 0.05},
             "note": "simulated participants; the campaign's own figures are not measured data",
-        }  # fmt: skip
+        }
 
 
 def run_campaign_bench(

@@ -115,18 +115,24 @@ def build_study(
         trials = []
         for p in range(participants):
             person = Participant(
-                study_id=study.id, code=f"P{p + 1:03d}", group="novice",
+                study_id=study.id,
+                code=f"P{p + 1:03d}",
+                group="novice",
                 condition_order=list(design.conditions),
-            )  # fmt: skip
+            )
             for k in range(TRIALS_PER_PARTICIPANT):
                 block, index = divmod(k, TRIALS_PER_PARTICIPANT // 2)
                 trials.append(
                     Trial(
-                        participant=person, task="lcca", condition=design.conditions[block],
-                        block_index=block, trial_index=index, status="completed",
+                        participant=person,
+                        task="lcca",
+                        condition=design.conditions[block],
+                        block_index=block,
+                        trial_index=index,
+                        status="completed",
                         driver="simulated",
                     )
-                )  # fmt: skip
+                )
         session.add_all(trials)
         session.flush()
         ids = [t.id for t in trials]
@@ -205,22 +211,48 @@ def run_export(
     url: str, fmt: str, out_dir: Path, samples: int, workers: int | None = None
 ) -> ExportRun:
     """`study export --samples` in a child process: wall and CPU time, peak memory."""
-    cmd = [sys.executable, "-m", "study.cli", "export", "--samples", "--format", fmt,
-           "--out", str(out_dir), "--db", url]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "study.cli",
+        "export",
+        "--samples",
+        "--format",
+        fmt,
+        "--out",
+        str(out_dir),
+        "--db",
+        url,
+    ]
     if workers is not None:
         cmd += ["--jobs", str(workers)]
     run = _run_child(cmd, "study export")
     size = (out_dir / f"samples.{fmt}").stat().st_size
     return ExportRun(
-        fmt, run.seconds, samples / run.seconds, run.peak_mb, size / samples,
-        run.cpu_seconds, os.getloadavg(),
-    )  # fmt: skip
+        fmt,
+        run.seconds,
+        samples / run.seconds,
+        run.peak_mb,
+        size / samples,
+        run.cpu_seconds,
+        os.getloadavg(),
+    )
 
 
 def run_figures(url: str, out_dir: Path) -> _Child:
     """`study figures --format png` in a child process."""
-    cmd = [sys.executable, "-m", "study.cli", "figures", "--format", "png",
-           "--out", str(out_dir), "--db", url]  # fmt: skip
+    cmd = [
+        sys.executable,
+        "-m",
+        "study.cli",
+        "figures",
+        "--format",
+        "png",
+        "--out",
+        str(out_dir),
+        "--db",
+        url,
+    ]
     return _run_child(cmd, "study figures")
 
 

@@ -227,8 +227,13 @@ def table_iii(
     )
     per_case: dict[str, Any] = {}
     pooled: dict[str, list[np.ndarray]] = {
-        "hybrid": [], "final": [], "direct": [], "physics": [], "baseline": [], "ref": []
-    }  # fmt: skip
+        "hybrid": [],
+        "final": [],
+        "direct": [],
+        "physics": [],
+        "baseline": [],
+        "ref": [],
+    }
     fig, axes = plt.subplots(2, 2, figsize=(7.16, 4.2), layout="constrained")
     for k, (ax, (name, phantom)) in enumerate(zip(axes.ravel(), CASES.items(), strict=True)):
         rec = navigation_recording(config.case_seconds, config.seed + 100 + k, name, **phantom)

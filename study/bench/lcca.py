@@ -199,10 +199,11 @@ def run_lcca_bench(
             "publish_s": publish_s,
             "share_of_wall_time": publish_s / (loop_s + publish_s),
             "realtime_factor_median_without_publishing": float(
-                np.median(np.asarray(factors) * (1 + np.asarray(publish_walls)
-                                                 / np.asarray(loop_walls)))
+                np.median(
+                    np.asarray(factors) * (1 + np.asarray(publish_walls) / np.asarray(loop_walls))
+                )
             ),
-        }  # fmt: skip
+        }
     frame.to_csv(out_dir / "lcca_trials.csv", index=False)
     fig, axes = plt.subplots(1, 2, figsize=(7.16, 4.2), layout="constrained", sharey=True)
     for ax, condition in zip(axes, ("VO", "HV"), strict=True):

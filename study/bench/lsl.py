@@ -74,10 +74,19 @@ def run_lsl_bench(
         engine, code = _scratch_study(Path(tmp), config.trials)
         seconds = config.trials * (config.trial_s + 2.0) + 20.0
         device = subprocess.Popen(
-            [sys.executable, "-m", "study.lsl.sim_device", name, "EMG", str(config.rate_hz),
-             str(seconds), f"{tmp}/device.log"],
-            stdout=subprocess.PIPE, text=True,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "study.lsl.sim_device",
+                name,
+                "EMG",
+                str(config.rate_hz),
+                str(seconds),
+                f"{tmp}/device.log",
+            ],
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         try:
             if device.stdout is None or device.stdout.readline().strip() != "ready":
                 raise RuntimeError("the simulated instrument did not start")
@@ -125,8 +134,10 @@ def _scratch_study(folder: Path, trials: int) -> tuple[Any, str]:
     from study.protocol.design import parse_design
     from study.protocol.roster import add_participant, create_study
 
-    text = (f'name = "lsl bench"\ntasks = ["lcca"]\ntrials_per_condition = {-(-trials // 2)}\n'
-            "practice_trials = 0\n[groups]\nnovice = 1\n")  # fmt: skip
+    text = (
+        f'name = "lsl bench"\ntasks = ["lcca"]\ntrials_per_condition = {-(-trials // 2)}\n'
+        "practice_trials = 0\n[groups]\nnovice = 1\n"
+    )
     engine = open_database(f"sqlite:///{folder}/bench.db", create=True)
     create_study(engine, parse_design(text), text)
     return engine, add_participant(engine, "novice").code
@@ -144,10 +155,15 @@ def _paced_session(
     phantom = LccaPhantom()
     traits = participant_traits(1, code, "novice")
     return run_session(
-        engine, code, "simulated", load_estimator(),
+        engine,
+        code,
+        "simulated",
+        load_estimator(),
         make_driver=lambda: SimulatedParticipant(traits, phantom, give_up_s=config.trial_s),
-        pace=1.0, observer=Observers(observers), max_trials=config.trials,
-    )  # fmt: skip
+        pace=1.0,
+        observer=Observers(observers),
+        max_trials=config.trials,
+    )
 
 
 def _alignment(engine: Any, origins: Origins) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
@@ -170,37 +186,43 @@ def _alignment(engine: Any, origins: Origins) -> tuple[list[np.ndarray], list[di
         index = table["index"].to_numpy()
         errors.append(err)
         consecutive = np.array_equal(index, np.arange(index[0], index[0] + len(index)))
-        per_trial.append({
-            "trial_id": stream.trial_id, "samples": len(err), "consecutive": bool(consecutive),
-            "median_abs_error_ms": float(np.median(np.abs(err)) * 1e3),
-        })  # fmt: skip
+        per_trial.append(
+            {
+                "trial_id": stream.trial_id,
+                "samples": len(err),
+                "consecutive": bool(consecutive),
+                "median_abs_error_ms": float(np.median(np.abs(err)) * 1e3),
+            }
+        )
     return errors, per_trial
 
 
 def markdown(report: dict[str, Any]) -> str:
     a = report["alignment"]
     c = report["config"]
-    return "\n".join([
-        "# Recorded LSL streams against the trial's clock",
-        "",
-        f"{report['data']}.",
-        "",
-        f"{report['trials_completed']} paced trials of {c['trial_s']:g} s, a "
-        f"{c['rate_hz']:g} Hz instrument: {a['samples']} samples stored.",
-        "",
-        "| alignment error | ms |",
-        "|---|---|",
-        f"| median abs | {a['median_abs_error_ms']:.3f} |",
-        f"| 95th percentile abs | {a['p95_abs_error_ms']:.3f} |",
-        f"| max abs | {a['max_abs_error_ms']:.3f} |",
-        f"| median signed | {a['signed_median_error_ms']:+.3f} |",
-        "",
-        "Every trial's samples consecutive (none lost or repeated): "
-        f"{all(t['consecutive'] for t in report['per_trial'])}.",
-        "",
-        "The trial's own samples: after each step the loop's newest sample was due "
-        f"{report['pacing']['median_lead_ms']:.1f} ms ahead of the wall clock (median; "
-        f"from {report['pacing']['min_lead_ms']:.1f} to {report['pacing']['max_lead_ms']:.1f}"
-        " ms): a paced simulated loop computes a step before the runner waits for it.",
-        "",
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            "# Recorded LSL streams against the trial's clock",
+            "",
+            f"{report['data']}.",
+            "",
+            f"{report['trials_completed']} paced trials of {c['trial_s']:g} s, a "
+            f"{c['rate_hz']:g} Hz instrument: {a['samples']} samples stored.",
+            "",
+            "| alignment error | ms |",
+            "|---|---|",
+            f"| median abs | {a['median_abs_error_ms']:.3f} |",
+            f"| 95th percentile abs | {a['p95_abs_error_ms']:.3f} |",
+            f"| max abs | {a['max_abs_error_ms']:.3f} |",
+            f"| median signed | {a['signed_median_error_ms']:+.3f} |",
+            "",
+            "Every trial's samples consecutive (none lost or repeated): "
+            f"{all(t['consecutive'] for t in report['per_trial'])}.",
+            "",
+            "The trial's own samples: after each step the loop's newest sample was due "
+            f"{report['pacing']['median_lead_ms']:.1f} ms ahead of the wall clock (median; "
+            f"from {report['pacing']['min_lead_ms']:.1f} to {report['pacing']['max_lead_ms']:.1f}"
+            " ms): a paced simulated loop computes a step before the runner waits for it.",
+            "",
+        ]
+    )

@@ -94,8 +94,10 @@ def oracle_within(
         people = np.clip(mean + sd * rng.standard_normal((studies, n, len(TRAITS))), LOW, HIGH)
         within = np.abs(people.mean(axis=1) - mean) <= tolerance * np.abs(mean)
         hits.append(within)
-        rows += [{"group": group, "trait": t, "probability": float(within[:, j].mean())}
-                 for j, t in enumerate(TRAITS)]  # fmt: skip
+        rows += [
+            {"group": group, "trait": t, "probability": float(within[:, j].mean())}
+            for j, t in enumerate(TRAITS)
+        ]
     every = np.concatenate(hits, axis=1)
     counts = every.sum(axis=1)
     return {
@@ -111,8 +113,10 @@ def oracle_within(
 
 def _truth_model(path: Path, truth: dict[str, GroupProfile]) -> None:
     """The truth as a MODEL.json `study demo --participants` takes."""
-    groups = {g: {t: {"mean": getattr(p, t)[0], "sd": getattr(p, t)[1]} for t in TRAITS}
-              for g, p in truth.items()}  # fmt: skip
+    groups = {
+        g: {t: {"mean": getattr(p, t)[0], "sd": getattr(p, t)[1]} for t in TRAITS}
+        for g, p in truth.items()
+    }
     model = {"format": FORMAT, "task": "lcca", "data_source": "simulated", "groups": groups}
     path.write_text(json.dumps(model))
 
@@ -142,16 +146,24 @@ def run_participants_bench(
         db = str(Path(tmp) / "truth.db")
         _truth_model(Path(tmp) / "truth.json", truth)
         start = time.monotonic()
-        run_demo(db, seed, settings.jobs, status, participants=str(Path(tmp) / "truth.json"),
-                 sizes=groups, trials_per_condition=trials)  # fmt: skip
+        run_demo(
+            db,
+            seed,
+            settings.jobs,
+            status,
+            participants=str(Path(tmp) / "truth.json"),
+            sizes=groups,
+            trials_per_condition=trials,
+        )
         study_s = time.monotonic() - start
         engine = open_database(db, create=False)
         realized = _realized(engine, Path(tmp) / "truth.json")
         if probes:
             from study.probes.store import run_all_probes
 
-            run_all_probes(engine, load_model(Path(tmp) / "truth.json"),
-                           lambda code: status(f"probes: {code}"))  # fmt: skip
+            run_all_probes(
+                engine, load_model(Path(tmp) / "truth.json"), lambda code: status(f"probes: {code}")
+            )
         try:
             start, cpu0 = time.monotonic(), _cpu_s()
             result = fit_study(
@@ -307,8 +319,10 @@ def _realized(engine: Any, model_path: Path) -> dict[str, dict[str, float]]:
     drawn: dict[str, list[Any]] = {}
     for code, group in people:
         drawn.setdefault(group, []).append(participant_traits(seed, code, group, model))
-    return {g: {t: float(np.mean([getattr(p, t) for p in ps])) for t in TRAITS}
-            for g, ps in drawn.items()}  # fmt: skip
+    return {
+        g: {t: float(np.mean([getattr(p, t) for p in ps])) for t in TRAITS}
+        for g, ps in drawn.items()
+    }
 
 
 def _cpu_s() -> float:
@@ -404,8 +418,10 @@ def markdown(report: dict[str, Any]) -> str:
             "",
             "| group | trait | coverage |",
             "|---|---|---|",
-            *(f"| {r['group']} | {r['trait']} | {100 * r['coverage']:.0f} % |"
-              for r in c["per_trait"]),
+            *(
+                f"| {r['group']} | {r['trait']} | {100 * r['coverage']:.0f} % |"
+                for r in c["per_trait"]
+            ),
             "",
-        ]  # fmt: skip
+        ]
     return "\n".join(lines)

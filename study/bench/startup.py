@@ -45,9 +45,18 @@ from pathlib import Path
 from study.errors import StudyInputError
 
 SIMULATE_ARGS = (
-    "simulate", "--task", "lcca", "--group", "novice", "--condition", "HV",
-    "--seed", "3", "--max-seconds", "30",
-)  # fmt: skip
+    "simulate",
+    "--task",
+    "lcca",
+    "--group",
+    "novice",
+    "--condition",
+    "HV",
+    "--seed",
+    "3",
+    "--max-seconds",
+    "30",
+)
 """A trial that runs its full 30 s (seed 3 does not reach the target in time)."""
 TARGETS_S = {"simulate": 1.0, "run_screen": 1.0, "analyze": 2.0, "demo": 30.0}
 """The issue's targets, s; the writer's is `WRITER_TARGET_RATIO`."""
@@ -243,9 +252,13 @@ def bench_writer(rows: int, runs: int, rate_hz: float = 1000.0) -> WriterRatio:
                 rates.append(rows / seconds)
     w = statistics.median(writer)
     return WriterRatio(
-        rows, writer, reference[False], reference[True],
-        w / statistics.median(reference[False]), w / statistics.median(reference[True]),
-    )  # fmt: skip
+        rows,
+        writer,
+        reference[False],
+        reference[True],
+        w / statistics.median(reference[False]),
+        w / statistics.median(reference[True]),
+    )
 
 
 def bench_startup(

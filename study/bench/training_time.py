@@ -77,10 +77,11 @@ def run_training_time(
     """Both runs on `recording` (module docstring); the report's `training_time` entry."""
     every = GruConfig(max_epochs=epochs, patience=None)
     runs = {
-        "default": _timed_training(recording, GruConfig(max_epochs=epochs), seed, "default",
-                                   progress),
+        "default": _timed_training(
+            recording, GruConfig(max_epochs=epochs), seed, "default", progress
+        ),
         "all_epochs": _timed_training(recording, every, seed, "all epochs", progress),
-    }  # fmt: skip
+    }
     return {
         "target_s": TARGET_S,
         "data": "simulated recording (bench phantom + calibration platform)",

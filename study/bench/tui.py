@@ -72,8 +72,12 @@ class _Terminal:
         self.start = time.monotonic()
         self.proc = subprocess.Popen(
             [*study_command(), "tui", "--db", db_url],
-            stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True,
-        )  # fmt: skip
+            stdin=slave,
+            stdout=slave,
+            stderr=slave,
+            env=env,
+            close_fds=True,
+        )
         os.close(slave)
         self.seen = b""
 
@@ -92,8 +96,7 @@ class _Terminal:
                     self.seen = self.seen[-64:] + os.read(self.master, 65536)
                 except OSError:  # the app ended (its terminal closed)
                     raise StudyInputError(
-                        f"`study tui --db {self.db_url}` ended before drawing "
-                        f"{marker.decode()!r}"
+                        f"`study tui --db {self.db_url}` ended before drawing {marker.decode()!r}"
                     ) from None
         return time.monotonic() - self.start
 
@@ -164,9 +167,7 @@ def _drain_until_exit(proc: subprocess.Popen, master: int, timeout_s: float = 20
     proc.wait(timeout=max(end - time.monotonic(), 1.0))
 
 
-def bench_tui(
-    db_url: str, app_seconds: Callable[[str], float], runs: int = 5
-) -> TuiBenchResult:
+def bench_tui(db_url: str, app_seconds: Callable[[str], float], runs: int = 5) -> TuiBenchResult:
     """`runs` starts of `study tui` on a terminal, and `runs` of the app's own part
     (`app_seconds(db_url)`: make_app to the overview, `study.tui.probes`)."""
     from db.migrate import open_database
@@ -180,9 +181,12 @@ def bench_tui(
     runs_s = [time_to_overview(db_url) for _ in range(runs)]
     seconds = [wall for wall, _, _ in runs_s]
     return TuiBenchResult(
-        seconds, statistics.median(seconds), participants, [cpu for _, _, cpu in runs_s],
+        seconds,
+        statistics.median(seconds),
+        participants,
+        [cpu for _, _, cpu in runs_s],
         [app_seconds(db_url) for _ in range(runs)],
         quit_seconds=[q for _, q, _ in runs_s],
         run_ready_seconds=[time_run_screen(db_url, False) for _ in range(runs)],
         quit_preparing_seconds=[time_run_screen(db_url, True) for _ in range(runs)],
-    )  # fmt: skip
+    )

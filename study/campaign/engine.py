@@ -95,9 +95,13 @@ def open_client(workers: int | None, scheduler: str | None) -> Client:
                 "expected the address `dask scheduler` printed"
             ) from None
     cluster = LocalCluster(
-        n_workers=workers or 1, threads_per_worker=1, processes=True,
-        dashboard_address="127.0.0.1:0", host="127.0.0.1", silence_logs=logging.ERROR,
-    )  # fmt: skip
+        n_workers=workers or 1,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address="127.0.0.1:0",
+        host="127.0.0.1",
+        silence_logs=logging.ERROR,
+    )
     client = Client(cluster)
     return client
 
@@ -131,10 +135,14 @@ def run_pending(
     futures = {}
     for k, (cell, replicate) in enumerate(pending):
         future = client.submit(
-            compute_unit, folder.spec, cell, replicate,
-            key=f"campaign-{prefix}-{unit_id(cell, replicate)}", pure=False,
+            compute_unit,
+            folder.spec,
+            cell,
+            replicate,
+            key=f"campaign-{prefix}-{unit_id(cell, replicate)}",
+            pure=False,
             priority=-k,  # grid order first, so a stopped run leaves a prefix done
-        )  # fmt: skip
+        )
         futures[future.key] = (future, cell, replicate)
     done = 0
     for future in as_completed([f for f, _, _ in futures.values()]):

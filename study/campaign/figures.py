@@ -39,6 +39,7 @@ def _measure_label(name: str) -> str:
     measure = measure_named(name)
     return measure.label if measure is not None else name
 
+
 SIMULATED_NOTE = "simulated participants: a simulation campaign, not measured data"
 
 
@@ -51,8 +52,9 @@ def _rows(summary: pd.DataFrame, factors: list[str], x: str) -> list[tuple[str, 
         mask = pd.Series(True, index=summary.index)
         for f, v in zip(others, values, strict=True):
             mask &= summary[f] == v
-        out.append((", ".join(f"{f} {v:g}" for f, v in zip(others, values, strict=True)),
-                    summary[mask]))  # fmt: skip
+        out.append(
+            (", ".join(f"{f} {v:g}" for f, v in zip(others, values, strict=True)), summary[mask])
+        )
     return out
 
 
@@ -63,15 +65,31 @@ def plot_factor(
     rows = _rows(summary, factors, x) if x else [("", summary)]
     groups = list(dict.fromkeys(summary["group"]))
     measures = list(dict.fromkeys(summary["measure"]))
-    y, low, high = (("power", "power_ci_low", "power_ci_high") if kind == "power"
-                    else ("effect_mean", "effect_ci_low", "effect_ci_high"))  # fmt: skip
-    with plt.rc_context({**STYLE, "font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8,
-                         "xtick.labelsize": 8, "ytick.labelsize": 8,
-                         "legend.fontsize": 8}):  # fmt: skip
+    y, low, high = (
+        ("power", "power_ci_low", "power_ci_high")
+        if kind == "power"
+        else ("effect_mean", "effect_ci_low", "effect_ci_high")
+    )
+    with plt.rc_context(
+        {
+            **STYLE,
+            "font.size": 8,
+            "axes.titlesize": 8,
+            "axes.labelsize": 8,
+            "xtick.labelsize": 8,
+            "ytick.labelsize": 8,
+            "legend.fontsize": 8,
+        }
+    ):
         fig, axes = plt.subplots(
-            len(rows), len(measures), figsize=(WIDTHS_IN["double"], 0.6 + 1.9 * len(rows)),
-            squeeze=False, sharex=True, sharey=kind == "power", layout="constrained",
-        )  # fmt: skip
+            len(rows),
+            len(measures),
+            figsize=(WIDTHS_IN["double"], 0.6 + 1.9 * len(rows)),
+            squeeze=False,
+            sharex=True,
+            sharey=kind == "power",
+            layout="constrained",
+        )
         for r, (label, part) in enumerate(rows):
             for c, measure in enumerate(measures):
                 ax = axes[r][c]
@@ -80,8 +98,14 @@ def plot_factor(
                     xs = d[x].to_numpy() if x else [k] * len(d)
                     color = GROUP_COLORS[k % len(GROUP_COLORS)]
                     sizes = "/".join(map(str, dict.fromkeys(d["n"])))
-                    ax.plot(xs, d[y], marker=MARKERS[k % len(MARKERS)], ms=3, color=color,
-                            label=f"{group} (n = {sizes})")  # fmt: skip
+                    ax.plot(
+                        xs,
+                        d[y],
+                        marker=MARKERS[k % len(MARKERS)],
+                        ms=3,
+                        color=color,
+                        label=f"{group} (n = {sizes})",
+                    )
                     ax.fill_between(xs, d[low], d[high], color=color, alpha=0.15, lw=0)
                     if not x:
                         ax.vlines(xs, d[low], d[high], color=color)
@@ -92,8 +116,9 @@ def plot_factor(
                     ax.axhline(0.0, color="#999999", lw=0.6)
                 ax.set_title(_measure_label(measure) + (f"\n{label}" if label else ""))
                 if c == 0:
-                    ax.set_ylabel("power (p < .05)" if kind == "power"
-                                  else "effect, Hedges' g_av (HV - VO)")  # fmt: skip
+                    ax.set_ylabel(
+                        "power (p < .05)" if kind == "power" else "effect, Hedges' g_av (HV - VO)"
+                    )
                 if r == len(rows) - 1:
                     if x:
                         ax.set_xlabel(FACTOR_LABELS[x])

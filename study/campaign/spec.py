@@ -142,11 +142,15 @@ class CampaignSpec:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "name": self.name, "seed": self.seed, "replicates": self.replicates,
-            "task": self.task, "trials_per_condition": self.trials_per_condition,
-            "groups": dict(self.groups), "factors": {k: list(v) for k, v in self.factors.items()},
+            "name": self.name,
+            "seed": self.seed,
+            "replicates": self.replicates,
+            "task": self.task,
+            "trials_per_condition": self.trials_per_condition,
+            "groups": dict(self.groups),
+            "factors": {k: list(v) for k, v in self.factors.items()},
             "participants": self.participants_digest or None,
-        }  # fmt: skip
+        }
 
 
 def unit_id(cell: Cell, replicate: int) -> str:
@@ -244,9 +248,13 @@ def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
             raise StudyInputError(
                 f"{source}: unknown factor {name!r}; expected any of {', '.join(FACTORS)}"
             )
-        lacks = ("haptic dial" if name == "haptic_gain" and not the_task.has_dial
-                 else "master-follower link" if name.startswith("link_") and not the_task.has_link
-                 else None)  # fmt: skip
+        lacks = (
+            "haptic dial"
+            if name == "haptic_gain" and not the_task.has_dial
+            else "master-follower link"
+            if name.startswith("link_") and not the_task.has_link
+            else None
+        )
         if lacks:
             raise StudyInputError(
                 f"{source}: factors.{name} with task = {task!r}, which has no {lacks}; "

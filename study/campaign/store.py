@@ -41,9 +41,19 @@ DATA_SOURCE = "simulated"
 PARTICIPANTS = "participants.json"
 """A campaign folder's copy of the fitted participant model its campaign file names."""
 SUMMARY_COLUMNS = (
-    "group", "measure", "n", "replicates", "power", "power_ci_low", "power_ci_high",
-    "power_hv_lower", "effect_mean", "effect_ci_low", "effect_ci_high", "data_source",
-)  # fmt: skip
+    "group",
+    "measure",
+    "n",
+    "replicates",
+    "power",
+    "power_ci_low",
+    "power_ci_high",
+    "power_hv_lower",
+    "effect_mean",
+    "effect_ci_low",
+    "effect_ci_high",
+    "data_source",
+)
 """summary.csv after the factor columns."""
 
 
@@ -79,8 +89,10 @@ class CampaignDir:
                     "campaign file to resume it, or a new folder"
                 )
         elif root.is_dir() and any(root.iterdir()):
-            raise StudyInputError(f"--out {root} is not empty and holds no campaign.toml; "
-                                  "expected a new or empty folder")  # fmt: skip
+            raise StudyInputError(
+                f"--out {root} is not empty and holds no campaign.toml; "
+                "expected a new or empty folder"
+            )
         return cls(root, spec, text)
 
     def create(self) -> None:
@@ -93,16 +105,22 @@ class CampaignDir:
             if self.spec.participants_json:
                 model = self.root / PARTICIPANTS
                 _atomic_write(model, lambda p: p.write_text(self.spec.participants_json))
-                text = re.sub(r"^participants\s*=.*$", f'participants = "{PARTICIPANTS}"', text,
-                              count=1, flags=re.M)  # fmt: skip
+                text = re.sub(
+                    r"^participants\s*=.*$",
+                    f'participants = "{PARTICIPANTS}"',
+                    text,
+                    count=1,
+                    flags=re.M,
+                )
             _atomic_write(kept, lambda p: p.write_text(text))
 
     @classmethod
     def existing(cls, root: Path) -> CampaignDir:
         kept = root / "campaign.toml"
         if not kept.is_file():
-            raise StudyInputError(f"{root} holds no campaign.toml; expected a folder written by "
-                                  "`study campaign run`")  # fmt: skip
+            raise StudyInputError(
+                f"{root} holds no campaign.toml; expected a folder written by `study campaign run`"
+            )
         return cls(root, parse_campaign(kept.read_text(), str(kept)))
 
     def unit_path(self, cell: Cell, replicate: int) -> Path:
@@ -149,10 +167,13 @@ class CampaignDir:
         meta = {
             "campaign": self.spec.to_dict(),
             "factor_defaults": {k: v for k, v in DEFAULTS.items() if k not in self.spec.factors},
-            "cells": len(self.spec.cells()), "units": total, "units_done": done,
-            "complete": done == total, "data_source": DATA_SOURCE,
+            "cells": len(self.spec.cells()),
+            "units": total,
+            "units_done": done,
+            "complete": done == total,
+            "data_source": DATA_SOURCE,
             "note": "simulated participants (each task's, study.tasks), not a measured study",
-        }  # fmt: skip
+        }
         text = json.dumps(meta, indent=2) + "\n"
         _atomic_write(self.root / "campaign.json", lambda p: p.write_text(text))
         return results, summary
@@ -187,13 +208,21 @@ def summarise(results: pd.DataFrame, factors: list[str], groups: list[str]) -> p
             if len(effect) > 1
             else float("nan")
         )
-        rows.append({
-            **dict(zip(keys, key, strict=True)), "n": int(g["n"].iloc[0]), "replicates": reps,
-            "power": hits / reps, "power_ci_low": float(low), "power_ci_high": float(high),
-            "power_hv_lower": lower / reps, "effect_mean": mean,
-            "effect_ci_low": mean - half, "effect_ci_high": mean + half,
-            "data_source": DATA_SOURCE,
-        })  # fmt: skip
+        rows.append(
+            {
+                **dict(zip(keys, key, strict=True)),
+                "n": int(g["n"].iloc[0]),
+                "replicates": reps,
+                "power": hits / reps,
+                "power_ci_low": float(low),
+                "power_ci_high": float(high),
+                "power_hv_lower": lower / reps,
+                "effect_mean": mean,
+                "effect_ci_low": mean - half,
+                "effect_ci_high": mean + half,
+                "data_source": DATA_SOURCE,
+            }
+        )
     out = pd.DataFrame(rows)
     order = {m: k for k, m in enumerate(dict.fromkeys(results["measure"]))}
     rank = {g: k for k, g in enumerate(groups)}

@@ -44,9 +44,19 @@ def measures(task: str) -> tuple[str, ...]:
 
 
 UNIT_COLUMNS = (
-    "replicate", "group", "measure", "n", "mean_vo", "mean_hv", "effect", "p",
-    "significant", "test", "p_holm", "seed",
-)  # fmt: skip
+    "replicate",
+    "group",
+    "measure",
+    "n",
+    "mean_vo",
+    "mean_hv",
+    "effect",
+    "p",
+    "significant",
+    "test",
+    "p_holm",
+    "seed",
+)
 """A unit's rows (the factor columns go in front of them in results.csv)."""
 
 
@@ -89,10 +99,15 @@ def run_trial(
         delay_s=v["link_delay_ms"] / 1e3, jitter_s=v["link_jitter_ms"] / 1e3, loss=v["link_loss"]
     )
     s = the_task.simulate(
-        traits, condition, seed, MAX_TRIAL_S,
+        traits,
+        condition,
+        seed,
+        MAX_TRIAL_S,
         haptic_gain_n_m_per_n=v["haptic_gain"] if the_task.has_dial else None,
-        estimator=_estimator() if the_task.has_dial else None, link=link, context=context,
-    ).summary  # fmt: skip
+        estimator=_estimator() if the_task.has_dial else None,
+        link=link,
+        context=context,
+    ).summary
     return {m: float(s[m]) for m in the_task.analysed_measures}
 
 
@@ -100,10 +115,14 @@ def simulate_study(spec: CampaignSpec, cell: Cell, replicate: int) -> pd.DataFra
     """Every measured trial of the unit: participant, group, condition, trial, MEASURES."""
     seed = study_seed(spec.seed, replicate)
     design = StudyDesign(
-        name=spec.name, seed=seed, conditions=KNOWN_CONDITIONS, tasks=(spec.task,),
-        trials_per_condition=spec.trials_per_condition, practice_trials=0,
+        name=spec.name,
+        seed=seed,
+        conditions=KNOWN_CONDITIONS,
+        tasks=(spec.task,),
+        trials_per_condition=spec.trials_per_condition,
+        practice_trials=0,
         groups=spec.sizes(cell),
-    )  # fmt: skip
+    )
     context = get_task(spec.task).session_context()
     model = spec.participant_model()
     effects = model.participant_effects if model is not None else ()
@@ -118,9 +137,15 @@ def simulate_study(spec: CampaignSpec, cell: Cell, replicate: int) -> pd.DataFra
                 place = session_place(conditions, b, i, block["n_trials"])
                 person = apply_effects(traits, effects, place)
                 values = run_trial(spec.task, person, block["condition"], s, cell, context)
-                rows.append({"participant": code, "group": group,
-                             "condition": block["condition"], "trial": i + 1,
-                             **values})  # fmt: skip
+                rows.append(
+                    {
+                        "participant": code,
+                        "group": group,
+                        "condition": block["condition"],
+                        "trial": i + 1,
+                        **values,
+                    }
+                )
     return pd.DataFrame(rows)
 
 

@@ -16,23 +16,45 @@ from study.errors import StudyInputError
 @click.command("analyze", cls=StudyCommand)
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option("--task", default=None, help="Only this task (e.g. lcca) [default: all].")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
-              help="Write the JSON here [default: OUT/analysis.json].")  # fmt: skip
-@click.option("--driver", type=click.Choice(DRIVERS), default=None,
-              help="Only trials of this driver (and their blocks' questionnaires) "
-                   "[default: all, their mix stated in every output].")  # fmt: skip
-@click.option("--ss-type", type=click.Choice(["2", "3"]), default="2", show_default=True,
-              help="Sums of squares of the mixed ANOVA: Type II (participant-weighted "
-                   "condition effect) or Type III (afex's default).")  # fmt: skip
-@click.option("--covariate", default=None, metavar="NAME",
-              help="A probe (or the trait it tells, e.g. force_threshold) whose estimate per "
-                   "participant enters the mixed model as a covariate; adds "
-                   "covariate_NAME.csv and ancova_NAME.csv.")  # fmt: skip
+@click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Write the JSON here [default: OUT/analysis.json].",
+)
+@click.option(
+    "--driver",
+    type=click.Choice(DRIVERS),
+    default=None,
+    help="Only trials of this driver (and their blocks' questionnaires) "
+    "[default: all, their mix stated in every output].",
+)
+@click.option(
+    "--ss-type",
+    type=click.Choice(["2", "3"]),
+    default="2",
+    show_default=True,
+    help="Sums of squares of the mixed ANOVA: Type II (participant-weighted "
+    "condition effect) or Type III (afex's default).",
+)
+@click.option(
+    "--covariate",
+    default=None,
+    metavar="NAME",
+    help="A probe (or the trait it tells, e.g. force_threshold) whose estimate per "
+    "participant enters the mixed model as a covariate; adds "
+    "covariate_NAME.csv and ancova_NAME.csv.",
+)
 @db_option
 def analyze(
-    out_dir: Path, task: str | None, json_path: Path | None, driver: str | None,
-    ss_type: str, covariate: str | None, db_url: str | None,
-) -> None:  # fmt: skip
+    out_dir: Path,
+    task: str | None,
+    json_path: Path | None,
+    driver: str | None,
+    ss_type: str,
+    covariate: str | None,
+    db_url: str | None,
+) -> None:
     """Per-group VO vs HV tests, the mixed ANOVA and the mixed model: methods.md, tables
     (CSV, Markdown, LaTeX; one set per task too when there are several) and JSON.
 

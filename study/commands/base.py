@@ -65,12 +65,16 @@ def database_failure(exc: BaseException, db_url: str | None = None) -> str | Non
     text = str(orig).strip() if orig is not None else ""
     reason = text.splitlines()[0] if text else type(exc).__name__
     if "full" in reason.lower():
-        return (f"database {shown} is full ({reason}); expected free space: what was committed "
-                "before stays, the command's own change was not stored")  # fmt: skip
+        return (
+            f"database {shown} is full ({reason}); expected free space: what was committed "
+            "before stays, the command's own change was not stored"
+        )
     if "locked" in reason.lower():
-        return (f"database {shown} is locked by another program ({reason}); expected it free: "
-                "retry when that program is done, or wait longer with ?timeout=SECONDS in the "
-                "URL; nothing of this command was stored")  # fmt: skip
+        return (
+            f"database {shown} is locked by another program ({reason}); expected it free: "
+            "retry when that program is done, or wait longer with ?timeout=SECONDS in the "
+            "URL; nothing of this command was stored"
+        )
     return (
         f"database {shown} cannot be used: {reason}; expected an intact, reachable study "
         "database (restore a corrupted file from its backup)"
@@ -181,9 +185,12 @@ actor_option = click.option(
 def json_option(help: str | None = None) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """`--json FILE` (required, as `json_path`): where a command writes its numbers."""
     return click.option(
-        "--json", "json_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
+        "--json",
+        "json_path",
+        required=True,
+        type=click.Path(dir_okay=False, path_type=Path),
         help=help,
-    )  # fmt: skip
+    )
 
 
 def count_option(
@@ -217,9 +224,12 @@ def out_dir_option(
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """`--out DIR` (as `out_dir`): the folder a command writes its files in."""
     return click.option(
-        "--out", "out_dir", required=required, type=click.Path(file_okay=False, path_type=Path),
+        "--out",
+        "out_dir",
+        required=required,
+        type=click.Path(file_okay=False, path_type=Path),
         help=help,
-    )  # fmt: skip
+    )
 
 
 def progress_bar(*columns: Any, transient: bool = True, console: Console | None = None) -> Progress:
@@ -238,8 +248,7 @@ def progress_bar(*columns: Any, transient: bool = True, console: Console | None 
         )
     console = console or Console(stderr=True)
     # off where stderr is no terminal: rich draws nothing there but a lone newline
-    return Progress(*columns, transient=transient, console=console,
-                    disable=not console.is_terminal)  # fmt: skip
+    return Progress(*columns, transient=transient, console=console, disable=not console.is_terminal)
 
 
 def write_json_atomically(data: dict[str, Any], path: Path) -> None:

@@ -71,8 +71,12 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
 @_db_option
 @click.option("--samples", type=click.IntRange(min=1), default=10_000_000, show_default=True)
 @click.option("--participants", type=click.IntRange(min=1), default=360, show_default=True)
-@click.option("--jobs", type=click.IntRange(min=1), default=None,
-              help="Reader threads of the export [default: the export's own].")  # fmt: skip
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Reader threads of the export [default: the export's own].",
+)
 @_json_option
 def bench_export(
     db_url: str | None, samples: int, participants: int, jobs: int | None, json_path: Path | None
@@ -113,10 +117,20 @@ def bench_export(
 
 
 @bench.command("campaign")
-@click.option("--replicates", type=click.IntRange(min=1), default=8, show_default=True,
-              help="Simulated studies in the campaign (units).")  # fmt: skip
-@click.option("--group-size", type=click.IntRange(min=3), default=3, show_default=True,
-              help="Participants per group in each simulated study.")  # fmt: skip
+@click.option(
+    "--replicates",
+    type=click.IntRange(min=1),
+    default=8,
+    show_default=True,
+    help="Simulated studies in the campaign (units).",
+)
+@click.option(
+    "--group-size",
+    type=click.IntRange(min=3),
+    default=3,
+    show_default=True,
+    help="Participants per group in each simulated study.",
+)
 @click.option("--workers", type=click.IntRange(min=2), default=2, show_default=True)
 @_json_option
 def bench_campaign(replicates: int, group_size: int, workers: int, json_path: Path | None) -> None:
@@ -129,20 +143,29 @@ def bench_campaign(replicates: int, group_size: int, workers: int, json_path: Pa
         result = run_campaign_bench(replicates, group_size, workers, status.update)
     for run in result.runs:
         mean = sum(run.unit_seconds) / len(run.unit_seconds)
-        click.echo(f"{run.workers} worker(s): {run.units} units in {run.wall_s:.1f} s, "
-                   f"{run.units_per_hour:.0f} units/h, {mean:.2f} s per unit inside the "
-                   f"worker, Dask overhead {100 * run.overhead:.1f} %")  # fmt: skip
+        click.echo(
+            f"{run.workers} worker(s): {run.units} units in {run.wall_s:.1f} s, "
+            f"{run.units_per_hour:.0f} units/h, {mean:.2f} s per unit inside the "
+            f"worker, Dask overhead {100 * run.overhead:.1f} %"
+        )
     load = ", ".join(f"{x:.1f}" for x in result.load_average)
-    click.echo(f"speed-up {workers} workers / 1: {result.speedup:.2f}x (target 1.8x for 2); "
-               f"results identical: {'yes' if result.identical else 'NO'}; "
-               f"{result.cpus} CPUs, load average {load} (simulated participants)")  # fmt: skip
+    click.echo(
+        f"speed-up {workers} workers / 1: {result.speedup:.2f}x (target 1.8x for 2); "
+        f"results identical: {'yes' if result.identical else 'NO'}; "
+        f"{result.cpus} CPUs, load average {load} (simulated participants)"
+    )
     write_json(json_path, result.to_dict())
 
 
 @bench.command("tui")
-@click.option("--db", "db_url", metavar="URL", default=None,
-              help="A study database, e.g. made by `study demo` [default: build the "
-              "full 36-participant demo study in a temporary folder first, minutes].")  # fmt: skip
+@click.option(
+    "--db",
+    "db_url",
+    metavar="URL",
+    default=None,
+    help="A study database, e.g. made by `study demo` [default: build the "
+    "full 36-participant demo study in a temporary folder first, minutes].",
+)
 @click.option("--runs", type=click.IntRange(min=1), default=5, show_default=True)
 @_json_option
 def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
@@ -178,15 +201,35 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
 
 
 @bench.command("startup")
-@click.option("--runs", type=click.IntRange(min=1), default=5, show_default=True,
-              help="Fresh processes per figure (after one warm-up each); the median counts.")
-@click.option("--db", "db_url", metavar="URL", default=None,
-              help="Study database for `study analyze` and the run screen, e.g. made by "
-              "`study demo` [default: a quick 6-participant demo study built first].")
-@click.option("--rows", type=click.IntRange(min=1), default=1_000_000, show_default=True,
-              help="Samples written by the writer and by plain sqlite3, each run.")
-@click.option("--demo-runs", type=click.IntRange(min=0), default=1, show_default=True,
-              help="Timed runs of the whole `study demo` (after a warm-up); 0 leaves it out.")
+@click.option(
+    "--runs",
+    type=click.IntRange(min=1),
+    default=5,
+    show_default=True,
+    help="Fresh processes per figure (after one warm-up each); the median counts.",
+)
+@click.option(
+    "--db",
+    "db_url",
+    metavar="URL",
+    default=None,
+    help="Study database for `study analyze` and the run screen, e.g. made by "
+    "`study demo` [default: a quick 6-participant demo study built first].",
+)
+@click.option(
+    "--rows",
+    type=click.IntRange(min=1),
+    default=1_000_000,
+    show_default=True,
+    help="Samples written by the writer and by plain sqlite3, each run.",
+)
+@click.option(
+    "--demo-runs",
+    type=click.IntRange(min=0),
+    default=1,
+    show_default=True,
+    help="Timed runs of the whole `study demo` (after a warm-up); 0 leaves it out.",
+)
 @_json_option
 def bench_startup(
     db_url: str | None, runs: int, rows: int, demo_runs: int, json_path: Path | None
@@ -225,30 +268,76 @@ def bench_startup(
 
 
 @bench.command("participants")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Write participants_bench.md and the fit's figure here.")  # fmt: skip
-@click.option("--trials", type=click.IntRange(min=1), default=3, show_default=True,
-              help="Measured trials per condition in the simulated study.")  # fmt: skip
-@click.option("--truth-people", type=click.IntRange(min=4), default=300, show_default=True,
-              help="People per group simulated for the truth's VO - HV differences.")  # fmt: skip
-@click.option("--truth-shift", type=click.FloatRange(min=0.0, max=2.0), default=0.7,
-              show_default=True, help="How far the truth's trait means lie from the priors', "
-              "in prior SDs (0: the priors).")  # fmt: skip
-@click.option("--weak-traits", type=click.Choice(WEAK_TRAITS), default="prior",
-              show_default=True, help="As `study participants fit --weak-traits`.")  # fmt: skip
-@click.option("--probes", is_flag=True,
-              help="The simulated people answer the design's probes before the fit.")  # fmt: skip
-@click.option("--coverage", "coverage_studies", type=click.IntRange(min=0), default=50,
-              show_default=True, help="Studies simulated on the fit's emulator to check the "
-              "coverage of the fitted means' 95 % intervals (0: skip).")  # fmt: skip
-@click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True,
-              help="As `study participants fit --bootstrap` (also the coverage's).")  # fmt: skip
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Write participants_bench.md and the fit's figure here.",
+)
+@click.option(
+    "--trials",
+    type=click.IntRange(min=1),
+    default=3,
+    show_default=True,
+    help="Measured trials per condition in the simulated study.",
+)
+@click.option(
+    "--truth-people",
+    type=click.IntRange(min=4),
+    default=300,
+    show_default=True,
+    help="People per group simulated for the truth's VO - HV differences.",
+)
+@click.option(
+    "--truth-shift",
+    type=click.FloatRange(min=0.0, max=2.0),
+    default=0.7,
+    show_default=True,
+    help="How far the truth's trait means lie from the priors', in prior SDs (0: the priors).",
+)
+@click.option(
+    "--weak-traits",
+    type=click.Choice(WEAK_TRAITS),
+    default="prior",
+    show_default=True,
+    help="As `study participants fit --weak-traits`.",
+)
+@click.option(
+    "--probes", is_flag=True, help="The simulated people answer the design's probes before the fit."
+)
+@click.option(
+    "--coverage",
+    "coverage_studies",
+    type=click.IntRange(min=0),
+    default=50,
+    show_default=True,
+    help="Studies simulated on the fit's emulator to check the "
+    "coverage of the fitted means' 95 % intervals (0: skip).",
+)
+@click.option(
+    "--bootstrap",
+    type=click.IntRange(min=20),
+    default=100,
+    show_default=True,
+    help="As `study participants fit --bootstrap` (also the coverage's).",
+)
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=SEED, default=11, show_default=True)
 @_json_option
-def bench_participants(out_dir: Path | None, trials: int, truth_people: int, truth_shift: float,
-                       weak_traits: str, probes: bool, coverage_studies: int, bootstrap: int,
-                       jobs: int, seed: int, json_path: Path | None) -> None:  # fmt: skip
+def bench_participants(
+    out_dir: Path | None,
+    trials: int,
+    truth_people: int,
+    truth_shift: float,
+    weak_traits: str,
+    probes: bool,
+    coverage_studies: int,
+    bootstrap: int,
+    jobs: int,
+    seed: int,
+    json_path: Path | None,
+) -> None:
     """Recovery of known trait distributions from a simulated 20/8/8 study, and the fit's time."""
     from study.analysis.participant_fit.fit import FitSettings
     from study.bench.participants import markdown, run_participants_bench
@@ -256,12 +345,18 @@ def bench_participants(out_dir: Path | None, trials: int, truth_people: int, tru
     if json_path is not None:
         check_parent_folder(json_path)
     with Console(stderr=True).status("participants bench") as status:
-        report = run_participants_bench({"outsider": 20, "novice": 8, "expert": 8}, trials,
-                                        FitSettings(jobs=jobs, weak_traits=weak_traits,
-                                                    bootstrap=bootstrap),
-                                        truth_people, seed, out_dir,
-                                        status.update, truth_shift, probes,
-                                        coverage_studies)  # fmt: skip
+        report = run_participants_bench(
+            {"outsider": 20, "novice": 8, "expert": 8},
+            trials,
+            FitSettings(jobs=jobs, weak_traits=weak_traits, bootstrap=bootstrap),
+            truth_people,
+            seed,
+            out_dir,
+            status.update,
+            truth_shift,
+            probes,
+            coverage_studies,
+        )
     text = markdown(report)
     if out_dir is not None:
         (out_dir / "participants_bench.md").write_text(text)
@@ -271,8 +366,13 @@ def bench_participants(out_dir: Path | None, trials: int, truth_people: int, tru
 
 @bench.command("lsl", cls=StudyCommand)
 @_json_option
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Folder for the Markdown table and the JSON.")  # fmt: skip
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the Markdown table and the JSON.",
+)
 @click.option("--quick", is_flag=True, help="Two trials of 2 s (a few seconds in all).")
 def bench_lsl(json_path: Path | None, out_dir: Path, quick: bool) -> None:
     """Recorded LSL streams against the trial's clock: the alignment error of a simulated

@@ -74,12 +74,20 @@ def _estimator_bench(
     force estimator (the options in that order, as --help lists them)."""
 
     def command(f: Callable[..., Any]) -> click.Command:
-        for option in reversed((
-            _json_option, _out_option,
-            click.option("--estimator", "model_dir",
-                         type=click.Path(file_okay=False, path_type=Path), help=estimator_help),
-            _seed_option, click.option("--quick", is_flag=True, help=quick_help),
-        )):  # fmt: skip
+        for option in reversed(
+            (
+                _json_option,
+                _out_option,
+                click.option(
+                    "--estimator",
+                    "model_dir",
+                    type=click.Path(file_okay=False, path_type=Path),
+                    help=estimator_help,
+                ),
+                _seed_option,
+                click.option("--quick", is_flag=True, help=quick_help),
+            )
+        ):
             f = option(f)
         return click.command(name, cls=StudyCommand)(f)
 
@@ -135,9 +143,11 @@ def bench_follower(
             ) from None
         config = replace(config, generalisation=replace(config.generalisation, seeds=seeds))
     _run_report(
-        json_path, out_dir / "follower_bench.md", "follower bench",
+        json_path,
+        out_dir / "follower_bench.md",
+        "follower bench",
         lambda progress: run_follower_bench(config, out_dir, progress=progress),
-    )  # fmt: skip
+    )
 
 
 @_estimator_bench(
@@ -153,33 +163,48 @@ def bench_master(
 
     config = replace(MasterBenchConfig.quick() if quick else MasterBenchConfig(), seed=seed)
     _run_with_estimator(
-        json_path, model_dir, out_dir / "master_bench.md", "master bench",
-        lambda estimator, progress: run_master_bench(config, out_dir, estimator=estimator,
-                                                     progress=progress),
-    )  # fmt: skip
+        json_path,
+        model_dir,
+        out_dir / "master_bench.md",
+        "master bench",
+        lambda estimator, progress: run_master_bench(
+            config, out_dir, estimator=estimator, progress=progress
+        ),
+    )
 
 
-@click.option("--lsl", is_flag=True,
-              help="Publish every trial's samples as an LSL stream, timed with the trial "
-              "(needs LSLAPICFG, see `study lsl-config`).")  # fmt: skip
+@click.option(
+    "--lsl",
+    is_flag=True,
+    help="Publish every trial's samples as an LSL stream, timed with the trial "
+    "(needs LSLAPICFG, see `study lsl-config`).",
+)
 @_estimator_bench(
     "lcca",
     "Force estimator folder [default: the model shipped with haptic-study].",
     "Two participants per group, 60 s at most each.",
 )
 def bench_lcca(
-    json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool,
+    json_path: Path,
+    out_dir: Path,
+    model_dir: Path | None,
+    seed: int,
+    quick: bool,
     lsl: bool = False,
-) -> None:  # fmt: skip
+) -> None:
     """The paper's 20/8/8 user study with simulated participants, and its speed."""
     from study.bench.lcca import LccaBenchConfig, run_lcca_bench
 
-    config = replace(LccaBenchConfig.quick() if quick else LccaBenchConfig(), seed=seed,
-                     publish_lsl=lsl)  # fmt: skip
+    config = replace(
+        LccaBenchConfig.quick() if quick else LccaBenchConfig(), seed=seed, publish_lsl=lsl
+    )
     _run_with_estimator(
-        json_path, model_dir, out_dir / "lcca_bench.md", "simulated study",
+        json_path,
+        model_dir,
+        out_dir / "lcca_bench.md",
+        "simulated study",
         lambda estimator, progress: run_lcca_bench(config, estimator, out_dir, progress=progress),
-    )  # fmt: skip
+    )
 
 
 @click.command("calibrate", cls=StudyCommand)
@@ -210,9 +235,15 @@ def bench_lcca(
     "[20 per family and mixture size, 50 clean; 1 each with --quick].",
 )
 def bench_calibrate(
-    json_path: Path, out_dir: Path | None, seed: int, epochs: int | None, quick: bool,
-    only_open: bool, generalise: bool, count: int | None,
-) -> None:  # fmt: skip
+    json_path: Path,
+    out_dir: Path | None,
+    seed: int,
+    epochs: int | None,
+    quick: bool,
+    only_open: bool,
+    generalise: bool,
+    count: int | None,
+) -> None:
     """Calibration loop: every family, the clean recording, speed, estimator."""
     from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
 
@@ -224,23 +255,33 @@ def bench_calibrate(
 
         general = GeneraliseConfig.quick(count or 1) if quick else GeneraliseConfig()
         if count is not None and not quick:
-            general = replace(general, per_family=count, mixtures_of_two=count,
-                              mixtures_of_three=count, clean=count)  # fmt: skip
+            general = replace(
+                general,
+                per_family=count,
+                mixtures_of_two=count,
+                mixtures_of_three=count,
+                clean=count,
+            )
         general = replace(general, seed=seed)
         folder = out_dir or json_path.parent
         _run_report(
-            json_path, folder / "calibrate_general.md", "calibration generalisation bench",
+            json_path,
+            folder / "calibrate_general.md",
+            "calibration generalisation bench",
             lambda say: run_generalise_bench(general, folder, say),
-        )  # fmt: skip
+        )
         return
     config = CalibrateBenchConfig.quick() if quick else CalibrateBenchConfig()
     config = replace(config, seed=seed, **({"epochs": epochs} if epochs else {}))
     folder = out_dir or json_path.parent
     _run_report(
-        json_path, folder / "calibrate_bench.md", "calibration bench",
-        lambda progress: run_calibrate_bench(config, folder, progress=progress,
-                                             only_open=only_open),
-    )  # fmt: skip
+        json_path,
+        folder / "calibrate_bench.md",
+        "calibration bench",
+        lambda progress: run_calibrate_bench(
+            config, folder, progress=progress, only_open=only_open
+        ),
+    )
 
 
 @click.command("notes", cls=StudyCommand)
@@ -262,9 +303,11 @@ def bench_notes(
     check_parent_folder(json_path)
     config = NotesBenchConfig(draws=draws, seed=seed, trials=trials, surgeons=surgeons)
     _run_report(
-        json_path, out_dir / "notes_bench.md", "NOTES bench",
+        json_path,
+        out_dir / "notes_bench.md",
+        "NOTES bench",
         lambda progress: run_notes_bench(config, out_dir, progress=progress),
-    )  # fmt: skip
+    )
 
 
 PAPER_BENCHES = (bench_follower, bench_master, bench_lcca, bench_calibrate, bench_notes)

@@ -49,9 +49,13 @@ def _mat_columns(text: str) -> tuple[str, str, str]:
 
 
 def run_calibration(
-    recording: Path, model_name: str, held_out: float, max_effects: int, families: str | None,
+    recording: Path,
+    model_name: str,
+    held_out: float,
+    max_effects: int,
+    families: str | None,
     mat_columns: str = "t=t,q=qm,u=gtau*vir",
-) -> Any:  # fmt: skip
+) -> Any:
     """Read RECORDING for `model_name` and run the loop with a progress display."""
     from teleop_core.calibration import BASE_MODELS, Calibrator
     from teleop_core.calibration.rigid_axis import RigidAxisBase
@@ -162,9 +166,13 @@ def calibrate(
     held = held_out_mask(len(data), test)
     named = report["unexplained"]["quantity"] if report["unexplained"] else None
     # the quantity as the verdict binned it (smoothed channels), over the held-out rows
-    x_named = quantities(
-        {k: v[test] for k, v in data.signals.items()}, calibrator.prediction_[test]
-    ).get(named) if named else None  # fmt: skip
+    x_named = (
+        quantities({k: v[test] for k, v in data.signals.items()}, calibrator.prediction_[test]).get(
+            named
+        )
+        if named
+        else None
+    )
     out_dir.mkdir(exist_ok=True)
     overview_figures(
         out_dir,
@@ -221,8 +229,10 @@ def _verdict_line(report: dict[str, Any]) -> str:
         return "verdict: white (the held-out residual shows no structure left)"
     where = report["unexplained"]
     if where["share_beyond_chance"] >= 0.02:
-        place = (f"{where['quantity']} explains {100 * where['share_of_variance']:.0f} % of "
-                 f"the held-out residual's variance")  # fmt: skip
+        place = (
+            f"{where['quantity']} explains {100 * where['share_of_variance']:.0f} % of "
+            f"the held-out residual's variance"
+        )
     else:
         place = "no recorded channel or derived quantity explains it beyond chance"
     return f"verdict: structure remains, unexplained; {place}"

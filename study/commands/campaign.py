@@ -29,14 +29,28 @@ def template() -> None:
 
 
 @campaign.command("run")
-@click.argument("campaign_path", metavar="CAMPAIGN.toml",
-                type=click.Path(dir_okay=False, path_type=Path))  # fmt: skip
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
-              help="Results folder; a folder holding this campaign is resumed.")  # fmt: skip
-@click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Worker processes of the embedded Dask LocalCluster [default: 1].")  # fmt: skip
-@click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
-              help="Run on this Dask scheduler's workers instead of a LocalCluster.")  # fmt: skip
+@click.argument(
+    "campaign_path", metavar="CAMPAIGN.toml", type=click.Path(dir_okay=False, path_type=Path)
+)
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Results folder; a folder holding this campaign is resumed.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Worker processes of the embedded Dask LocalCluster [default: 1].",
+)
+@click.option(
+    "--scheduler",
+    metavar="tcp://HOST:PORT",
+    default=None,
+    help="Run on this Dask scheduler's workers instead of a LocalCluster.",
+)
 def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str | None) -> None:
     """Run CAMPAIGN.toml's units (skipping those already in --out) and write the results."""
     from study.campaign.engine import close_client, open_client, run_pending
@@ -55,8 +69,10 @@ def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str 
     folder = CampaignDir.open(out_dir, spec, text)
     total = len(spec.units())
     todo = len(folder.pending())
-    click.echo(f"{spec.name}: {len(spec.cells())} cells x {spec.replicates} replicates = "
-               f"{total} simulated studies; {total - todo} already in {out_dir}")  # fmt: skip
+    click.echo(
+        f"{spec.name}: {len(spec.cells())} cells x {spec.replicates} replicates = "
+        f"{total} simulated studies; {total - todo} already in {out_dir}"
+    )
     if todo:
         err = Console(stderr=True)
         with err.status("starting Dask" if scheduler is None else f"connecting to {scheduler}"):
@@ -66,11 +82,13 @@ def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str 
             with progress_bar(transient=False, console=err) as bar:
                 task = bar.add_task("units", total=total, completed=total - todo)
                 run_pending(
-                    folder, client,
+                    folder,
+                    client,
                     on_start=lambda i: bar.console.print(
-                        f"Dask: {i.workers} workers, dashboard {i.dashboard}"),
+                        f"Dask: {i.workers} workers, dashboard {i.dashboard}"
+                    ),
                     on_unit=lambda _: bar.advance(task),
-                )  # fmt: skip
+                )
         finally:
             close_client(client)
     folder.create()
@@ -96,8 +114,10 @@ def _write_outputs(folder: CampaignDir) -> None:
     done = results[["replicate", *spec.factors]].drop_duplicates().shape[0] if len(results) else 0
     total = len(spec.units())
     state = "complete" if done == total else f"INCOMPLETE: {done} of {total} units"
-    click.echo(f"results ({state}, simulated): {folder.root / 'results.csv'}, "
-               f"{folder.root / 'summary.csv'}")  # fmt: skip
+    click.echo(
+        f"results ({state}, simulated): {folder.root / 'results.csv'}, "
+        f"{folder.root / 'summary.csv'}"
+    )
     if len(summary):
         for path in draw_figures(summary, list(spec.factors), spec.name, folder.root / "figures"):
             if path.suffix == ".png":

@@ -21,8 +21,12 @@ from study.errors import StudyInputError
 @click.command("import", cls=StudyCommand)
 @file_option("--trials", "trials_csv")
 @click.option("--tlx", "tlx_csv", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--probes", "probes_csv", type=click.Path(dir_okay=False, path_type=Path),
-              help="Probe trials (probe_trials.csv of `study export`).")  # fmt: skip
+@click.option(
+    "--probes",
+    "probes_csv",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Probe trials (probe_trials.csv of `study export`).",
+)
 @actor_option
 @db_option
 def import_cmd(

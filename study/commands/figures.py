@@ -32,20 +32,38 @@ def _formats(text: str) -> list[str]:
 
 @click.command("figures", cls=StudyCommand)
 @click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path))
-@click.option("--format", "formats", default="pdf,svg,png", show_default=True,
-              help="Comma-separated: pdf, svg, png (300 dpi).")  # fmt: skip
-@click.option("--width", type=click.Choice(["single", "double"]), default="double",
-              show_default=True, help="IEEE column width: 3.5 in or 7.16 in.")  # fmt: skip
-@click.option("--driver", type=click.Choice(DRIVERS), default=None,
-              help="Only trials of this driver [default: all; a simulated share is "
-                   "written on every figure].")  # fmt: skip
-@click.option("--task", default=None,
-              help="Only this task's figures (e.g. lcca) [default: one set per task].")  # fmt: skip
+@click.option(
+    "--format",
+    "formats",
+    default="pdf,svg,png",
+    show_default=True,
+    help="Comma-separated: pdf, svg, png (300 dpi).",
+)
+@click.option(
+    "--width",
+    type=click.Choice(["single", "double"]),
+    default="double",
+    show_default=True,
+    help="IEEE column width: 3.5 in or 7.16 in.",
+)
+@click.option(
+    "--driver",
+    type=click.Choice(DRIVERS),
+    default=None,
+    help="Only trials of this driver [default: all; a simulated share is written on every figure].",
+)
+@click.option(
+    "--task", default=None, help="Only this task's figures (e.g. lcca) [default: one set per task]."
+)
 @db_option
 def figures(
-    out_dir: Path, formats: str, width: str, driver: str | None, task: str | None,
+    out_dir: Path,
+    formats: str,
+    width: str,
+    driver: str | None,
+    task: str | None,
     db_url: str | None,
-) -> None:  # fmt: skip
+) -> None:
     """Draw the paper's figures, one set per task: group comparison, force traces,
     NASA-TLX profile (FIGURE_TASK.pdf, e.g. fig12_groups_lcca.pdf).
 
@@ -66,18 +84,32 @@ def figures(
 
 
 @click.command("demo", cls=StudyCommand)
-@click.option("--out", "out_dir", default=Path("demo"), show_default=True,
-              type=click.Path(file_okay=False, path_type=Path))  # fmt: skip
-@click.option("--db", "db_url", default=None, metavar="URL",
-              help="Database for the demo study [default: OUT/demo.db].")  # fmt: skip
+@click.option(
+    "--out",
+    "out_dir",
+    default=Path("demo"),
+    show_default=True,
+    type=click.Path(file_okay=False, path_type=Path),
+)
+@click.option(
+    "--db",
+    "db_url",
+    default=None,
+    metavar="URL",
+    help="Database for the demo study [default: OUT/demo.db].",
+)
 @click.option("--seed", type=SEED, default=1, show_default=True)
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--quick", is_flag=True, help="2 participants per group, one trial per block.")
 @participants_option
 def demo(
-    out_dir: Path, db_url: str | None, seed: int, jobs: int, quick: bool,
+    out_dir: Path,
+    db_url: str | None,
+    seed: int,
+    jobs: int,
+    quick: bool,
     participants_path: Path | None,
-) -> None:  # fmt: skip
+) -> None:
     """Simulate the paper's whole study (20/8/8, VO and HV, NASA-TLX) and analyse it."""
     from study.analysis.frames import participant_means, tlx_frame, trial_frame
     from study.analysis.paper import write_figures
@@ -98,9 +130,15 @@ def demo(
         def notice(message: str) -> None:
             status.console.print(f"study demo: {message}", markup=False)
 
-        run_demo(db_url, seed, jobs, progress=status.update, quick=quick,
-                 participants=str(participants_path) if model is not None else None,
-                 notice=notice)  # fmt: skip
+        run_demo(
+            db_url,
+            seed,
+            jobs,
+            progress=status.update,
+            quick=quick,
+            participants=str(participants_path) if model is not None else None,
+            notice=notice,
+        )
         status.update("analysis and figures")
         engine = open_database(db_url, create=False)
         try:
@@ -114,7 +152,9 @@ def demo(
             engine.dispose()
     if model is not None:
         click.echo(f"simulated participants drawn from the {model.label()}")
-    click.echo(f"SIMULATED demo study (every participant, trial and questionnaire simulated) "
-               f"in {db_url}; analysis in {out_dir / 'analysis'}; figures in "
-               f"{out_dir / 'figures'} (double column) and {out_dir / 'figures' / 'single'} "
-               f"(single column) ({time.monotonic() - start:.0f} s)")  # fmt: skip
+    click.echo(
+        f"SIMULATED demo study (every participant, trial and questionnaire simulated) "
+        f"in {db_url}; analysis in {out_dir / 'analysis'}; figures in "
+        f"{out_dir / 'figures'} (double column) and {out_dir / 'figures' / 'single'} "
+        f"(single column) ({time.monotonic() - start:.0f} s)"
+    )

@@ -26,9 +26,7 @@ def identify() -> None:
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--dof", type=click.Choice(["translation", "rotation"]), required=True)
 @json_option()
-@out_dir_option(
-    "Also draw the fit: a chirp's Bode plot (notes_identify_bode.png).", required=False
-)
+@out_dir_option("Also draw the fit: a chirp's Bode plot (notes_identify_bode.png).", required=False)
 def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> None:
     """Fit Fig. 8's model to a chirp, or measure a clamped ramp, from RECORDING.csv.
 
@@ -44,8 +42,12 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
         raise StudyInputError(f"--out {out_dir} is a file; expected a folder")
     rec = NotesRecording.from_csv(recording)
     measured = "x" if rec.boundary == "open" else "f_ee"
-    check_varies({"f_des": rec.f_des, measured: rec.y}, ("f_des", measured),
-                 f"recording {recording}", NotesRecordingError)  # fmt: skip
+    check_varies(
+        {"f_des": rec.f_des, measured: rec.y},
+        ("f_des", measured),
+        f"recording {recording}",
+        NotesRecordingError,
+    )
     found, chirp = identify_recording(rec, default_params(dof).linear, dof)
     result = {"dof": dof, "recording": str(recording), **found}
     tmp = json_path.with_name(json_path.name + ".tmp")

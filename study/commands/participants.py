@@ -53,9 +53,14 @@ def participants() -> None:
     dest="n_check",
 )
 @click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True)
-@click.option("--weak-traits", type=click.Choice(WEAK_TRAITS), default="prior",
-              show_default=True, help="The traits the data tell weakly: held at the hand-set "
-              "profile, or fitted with their group mean under the profile's prior.")  # fmt: skip
+@click.option(
+    "--weak-traits",
+    type=click.Choice(WEAK_TRAITS),
+    default="prior",
+    show_default=True,
+    help="The traits the data tell weakly: held at the hand-set "
+    "profile, or fitted with their group mean under the profile's prior.",
+)
 @click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
 @click.option("--seed", type=SEED, default=0, show_default=True)
 def fit(
@@ -84,9 +89,14 @@ def fit(
     if out_path.suffix != ".json":
         raise StudyInputError(f"--out {out_path}; expected a file name ending in .json")
     settings = FitSettings(
-        design=n_design, repeats=repeats, check=n_check, bootstrap=bootstrap, jobs=jobs,
-        seed=seed, weak_traits=weak_traits,
-    )  # fmt: skip
+        design=n_design,
+        repeats=repeats,
+        check=n_check,
+        bootstrap=bootstrap,
+        jobs=jobs,
+        seed=seed,
+        weak_traits=weak_traits,
+    )
     start = time.monotonic()
     with opened_database(db_url) as engine, progress_bar() as bar:
         bars: dict[str, object] = {}

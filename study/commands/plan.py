@@ -90,14 +90,21 @@ def participant() -> None:
 @click.option("--group", required=True, help="Experience group, by its name in the design.")
 @click.option("--site", default=None, help="Lab enrolling the participant (multi-site studies).")
 @click.option("--count", type=click.IntRange(min=1), default=1, show_default=True)
-@click.option("--beyond-target", is_flag=True,
-              help="Enrol past the group's target in the design (replacements); audited.")
+@click.option(
+    "--beyond-target",
+    is_flag=True,
+    help="Enrol past the group's target in the design (replacements); audited.",
+)
 @actor_option
 @db_option
 def participant_add(
-    group: str, site: str | None, count: int, beyond_target: bool, actor: str | None,
+    group: str,
+    site: str | None,
+    count: int,
+    beyond_target: bool,
+    actor: str | None,
     db_url: str | None,
-) -> None:  # fmt: skip
+) -> None:
     """Enrol the next participant(s) of a group: code, condition order and schedule (all
     of them or none; at most the group's target unless --beyond-target)."""
     with opened_database(db_url) as engine:
@@ -123,8 +130,12 @@ def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str 
 @participant.command("note")
 @click.argument("code")
 @click.argument("text")
-@click.option("--session", "on_session", is_flag=True,
-              help="A note on today's session, kept beside the others (audit log).")  # fmt: skip
+@click.option(
+    "--session",
+    "on_session",
+    is_flag=True,
+    help="A note on today's session, kept beside the others (audit log).",
+)
 @click.option("--actor", default=None, help="Who records it [default: $STUDY_ACTOR or user@host].")
 @db_option
 def participant_note(

@@ -75,14 +75,18 @@ def _model_effects(
 
     for name, option in (("effect", "--effect"), ("rho", "--correlation")):
         if ctx.get_parameter_source(name) is not ParameterSource.DEFAULT:
-            raise StudyInputError(f"{option} with --participants; expected one of them (the "
-                                  "model gives the effects and the correlation)")  # fmt: skip
+            raise StudyInputError(
+                f"{option} with --participants; expected one of them (the "
+                "model gives the effects and the correlation)"
+            )
     measure = measure or model_measure(model)
     missing = [g for g in groups if measure not in model.effects.get(g, {})]
     if missing:
-        raise StudyInputError(f"participant model {model.source} has no effect of {measure!r} "
-                              f"for group {missing[0]}; expected a model fitted to every "
-                              "design group and a measure of its task")  # fmt: skip
+        raise StudyInputError(
+            f"participant model {model.source} has no effect of {measure!r} "
+            f"for group {missing[0]}; expected a model fitted to every "
+            "design group and a measure of its task"
+        )
     effects = {g: float(model.effects[g][measure]["effect"]) for g in groups}
     rhos = [float(model.effects[g][measure]["correlation"]) for g in groups]
     return effects, min(max(sum(rhos) / len(rhos), 0.0), 0.99)
@@ -104,19 +108,28 @@ def _model_effects(
     show_default=True,
     help="Correlation of a participant's VO and HV outcomes.",
 )
-@click.option("--n-sim", type=click.IntRange(min=10, max=MAX_N_SIM), default=500,
-              show_default=True)  # fmt: skip
+@click.option("--n-sim", type=click.IntRange(min=10, max=MAX_N_SIM), default=500, show_default=True)
 @click.option("--seed", type=SEED, default=0, show_default=True)
 @out_dir_option("Write power.json and the power curve (PDF, PNG) here.", required=False)
 @participants_option
-@click.option("--measure", default=None,
-              help="With --participants: the measure whose fitted effect is used "
-                   "[default: the task's last analysed one].")  # fmt: skip
+@click.option(
+    "--measure",
+    default=None,
+    help="With --participants: the measure whose fitted effect is used "
+    "[default: the task's last analysed one].",
+)
 @click.pass_context
 def power(
-    ctx: click.Context, design_path: Path, effect: str, rho: float, n_sim: int, seed: int,
-    out_dir: Path | None, participants_path: Path | None, measure: str | None,
-) -> None:  # fmt: skip
+    ctx: click.Context,
+    design_path: Path,
+    effect: str,
+    rho: float,
+    n_sim: int,
+    seed: int,
+    out_dir: Path | None,
+    participants_path: Path | None,
+    measure: str | None,
+) -> None:
     """Power of VO vs HV in each group and of the group x condition interaction.
 
     With --participants MODEL.json the effects and the correlation are those the fitted
@@ -146,15 +159,31 @@ def power(
 
         out_dir.mkdir(parents=True, exist_ok=True)
         report = {
-            "design": design.groups, "effects": effects, "correlation": rho, "n_sim": n_sim,
-            **({"participant_model": {"path": str(participants_path), "digest": model.digest,
-                                      "fitted_to": model.data_source, "measure": measure
-                                      or model_measure(model)}} if model else {}),
-            "seed": seed, "groups": at_design.groups, "interaction": at_design.interaction,
+            "design": design.groups,
+            "effects": effects,
+            "correlation": rho,
+            "n_sim": n_sim,
+            **(
+                {
+                    "participant_model": {
+                        "path": str(participants_path),
+                        "digest": model.digest,
+                        "fitted_to": model.data_source,
+                        "measure": measure or model_measure(model),
+                    }
+                }
+                if model
+                else {}
+            ),
+            "seed": seed,
+            "groups": at_design.groups,
+            "interaction": at_design.interaction,
             "interaction_is_power": at_design.interaction_is_power,
-            "curve": [{"scale": s, "sizes": r.sizes, "groups": r.groups,
-                       "interaction": r.interaction} for s, r in curve],
-        }  # fmt: skip
+            "curve": [
+                {"scale": s, "sizes": r.sizes, "groups": r.groups, "interaction": r.interaction}
+                for s, r in curve
+            ],
+        }
         (out_dir / "power.json").write_text(json.dumps(report, indent=2) + "\n")
         fig = plot_power_curve(curve, effects=effects, rho=rho, n_sim=n_sim)
         for path in save(fig, out_dir, "power_curve", ("pdf", "png")):

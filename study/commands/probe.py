@@ -96,8 +96,9 @@ def run(
                         tasks[name] = bar.add_task(f"{code} {name}", total=n)
                     bar.update(tasks[name], completed=k)
 
-                stored = run_participant_probes(engine, code, responder, only, progress,
-                                                observer=observer)  # fmt: skip
+                stored = run_participant_probes(
+                    engine, code, responder, only, progress, observer=observer
+                )
         frame = probe_frame(engine)
     mine = frame[frame["participant"] == code]
     if not stored:

@@ -39,8 +39,12 @@ if TYPE_CHECKING:
 @click.option(
     "--all", "run_all", is_flag=True, help="Every enrolled participant's remaining trials."
 )
-@click.option("--jobs", type=click.IntRange(1, MAX_JOBS), default=None,
-              help="Processes running participants side by side (with --all) [default: 1].")
+@click.option(
+    "--jobs",
+    type=click.IntRange(1, MAX_JOBS),
+    default=None,
+    help="Processes running participants side by side (with --all) [default: 1].",
+)
 @click.option(
     "--driver",
     type=click.Choice(["simulated", "keyboard", "hardware"]),
@@ -88,17 +92,23 @@ def run(
     if pace is not None and not math.isfinite(pace):
         raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
     if jobs is not None and not run_all:
-        raise StudyInputError(f"--jobs {jobs} with --participant; expected --all (one "
-                              "participant's session runs in one process)")  # fmt: skip
+        raise StudyInputError(
+            f"--jobs {jobs} with --participant; expected --all (one "
+            "participant's session runs in one process)"
+        )
     who = current_actor(actor)
     model = load_participants(participants_path)
     if model is not None and driver != "simulated":
-        raise StudyInputError(f"--participants with --driver {driver}; expected --driver "
-                              "simulated (a fitted model draws simulated people)")  # fmt: skip
+        raise StudyInputError(
+            f"--participants with --driver {driver}; expected --driver "
+            "simulated (a fitted model draws simulated people)"
+        )
     if run_all:
         if lsl:
-            raise StudyInputError("--lsl with --all; expected --participant CODE (one "
-                                  "session at a time publishes its streams)")  # fmt: skip
+            raise StudyInputError(
+                "--lsl with --all; expected --participant CODE (one "
+                "session at a time publishes its streams)"
+            )
         if driver != "simulated":
             raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
         _lsl_notice(db_url)
@@ -144,9 +154,17 @@ def run(
 
             observer = _lsl_observers(engine, lsl, progress)
             done = run_session(
-                engine, code, driver, estimator, make_driver, pace, report, actor=who,
-                participants=model, observer=observer,
-            )  # fmt: skip
+                engine,
+                code,
+                driver,
+                estimator,
+                make_driver,
+                pace,
+                report,
+                actor=who,
+                participants=model,
+                observer=observer,
+            )
     finally:
         engine.dispose()
     click.echo(f"{code}: {len(done)} trials completed and stored")
@@ -214,6 +232,7 @@ def _run_all(
             progress.console.print(f"study run: skipped: {message}", markup=False)
 
         model = str(participants) if participants is not None else None
+
         def notice(message: str) -> None:
             progress.console.print(f"study run: {message}", markup=False)
 

@@ -39,8 +39,9 @@ MAX_TRIAL_S = 3600.0
     type=click.Path(file_okay=False, path_type=Path),
     help="Force estimator folder [default: the model shipped with haptic-study].",
 )
-@click.option("--max-seconds", type=click.FloatRange(min=1, max=MAX_TRIAL_S), default=180.0,
-              show_default=True)  # fmt: skip
+@click.option(
+    "--max-seconds", type=click.FloatRange(min=1, max=MAX_TRIAL_S), default=180.0, show_default=True
+)
 @participants_option
 def simulate(
     task: str,
@@ -94,9 +95,11 @@ def simulate(
     write_csv_atomically(result.frame, out_csv)
     summary_path = out_csv.with_suffix(".json")
     if model is not None:
-        result.summary["participant_model"] = {"path": str(participants_path),
-                                               "digest": model.digest,
-                                               "fitted_to": model.data_source}  # fmt: skip
+        result.summary["participant_model"] = {
+            "path": str(participants_path),
+            "digest": model.digest,
+            "fitted_to": model.data_source,
+        }
     summary_path.write_text(json.dumps(result.summary, indent=2) + "\n")
     if plot_path is not None:
         from study.analysis.trial_plot import trial_plot

@@ -91,9 +91,13 @@ class Publisher(SessionObserver):
     def session_started(self, session: SessionInfo) -> None:
         self.session = session
         info = self.lsl.StreamInfo(
-            MARKER_STREAM, MARKER_TYPE, 1, self.lsl.IRREGULAR_RATE, "string",
+            MARKER_STREAM,
+            MARKER_TYPE,
+            1,
+            self.lsl.IRREGULAR_RATE,
+            "string",
             f"haptic-study/{session.study}/{session.participant}",
-        )  # fmt: skip
+        )
         info.desc().append_child_value("manufacturer", "haptic-study")
         self.markers = self.lsl.StreamOutlet(info)
         for task in session.tasks if self.sample_streams else ():
@@ -101,8 +105,9 @@ class Publisher(SessionObserver):
         if self.wait_for_consumers_s > 0:
             for outlet in (self.markers, *self.outlets.values()):
                 outlet.wait_for_consumers(self.wait_for_consumers_s)
-        self._mark("session_start", self.lsl.local_clock(), driver=session.driver,
-                   pace=session.pace)  # fmt: skip
+        self._mark(
+            "session_start", self.lsl.local_clock(), driver=session.driver, pace=session.pace
+        )
 
     def trial_started(self, trial: TrialInfo) -> None:
         self._t0_lsl = trial.clock_origin_s + self.offset_s
@@ -147,10 +152,13 @@ class Publisher(SessionObserver):
         """The sample outlet of `task` (see the module docstring)."""
         s = self.session
         info = self.lsl.StreamInfo(
-            f"haptic-study {task.name}", SAMPLE_STREAM_TYPE, len(task.sample_columns),
-            rate_hz, "double64",
+            f"haptic-study {task.name}",
+            SAMPLE_STREAM_TYPE,
+            len(task.sample_columns),
+            rate_hz,
+            "double64",
             f"haptic-study/{s.study if s else ''}/{s.participant if s else ''}/{task.name}",
-        )  # fmt: skip
+        )
         desc = info.desc()
         desc.append_child_value("manufacturer", "haptic-study")
         desc.append_child_value("hostname", platform.node())

@@ -36,8 +36,7 @@ from study.protocol.observer import SessionInfo, SessionObserver, TrialInfo
 
 CHUNK_S = 1.0
 """Longest span of a stream's samples held before a commit, s (as the trial's own)."""
-FORMATS = {1: "float32", 2: "double64", 3: "string", 4: "int32", 5: "int16", 6: "int8",
-           7: "int64"}  # fmt: skip
+FORMATS = {1: "float32", 2: "double64", 3: "string", 4: "int32", 5: "int16", 6: "int8", 7: "int64"}
 """liblsl's channel format codes (`lsl_channel_format_t`)."""
 
 
@@ -143,12 +142,16 @@ class Recorder(SessionObserver):
         correction = self._correction(inlet, 0.0, timeout_s=max(self.resolve_s, 1.0))
         rate = info.nominal_srate()
         meta = StreamMeta(
-            name=info.name(), type=info.type(),
+            name=info.name(),
+            type=info.type(),
             channel_format=FORMATS.get(info.channel_format(), str(info.channel_format())),
-            nominal_srate_hz=rate, channels=stream_channels(info), lsl_t0_s=0.0,
-            time_correction_s=correction, source_id=info.source_id(),
+            nominal_srate_hz=rate,
+            channels=stream_channels(info),
+            lsl_t0_s=0.0,
+            time_correction_s=correction,
+            source_id=info.source_id(),
             hostname=info.hostname(),
-        )  # fmt: skip
+        )
         return _Stream(inlet, meta, 1.0 / rate if rate > 0 else 0.0)
 
     def _correction(self, inlet: Any, last: float, timeout_s: float = 0.2) -> float:
@@ -200,8 +203,9 @@ class Recorder(SessionObserver):
                 if s.gap_from is not None:
                     s.gaps.append([s.gap_from, first])
                     s.gap_from = None
-                    self.notice(f"LSL stream {s.meta.name} ({s.meta.type}) is back at "
-                                f"t = {first:.2f} s")  # fmt: skip
+                    self.notice(
+                        f"LSL stream {s.meta.name} ({s.meta.type}) is back at t = {first:.2f} s"
+                    )
                 s.held_t.append(t[keep])
                 s.held_trial_t.append(trial_t[keep])
                 s.held_v.append([values[k] for k in np.flatnonzero(keep)])

@@ -53,8 +53,10 @@ def check_structure(path: Path) -> None:
     size = path.stat().st_size
     with path.open("rb") as f:
         if f.read(4) != MAGIC:
-            raise XdfInputError(f"{path} is not an XDF file (no 'XDF:' at its start); "
-                                "expected a LabRecorder recording")  # fmt: skip
+            raise XdfInputError(
+                f"{path} is not an XDF file (no 'XDF:' at its start); "
+                "expected a LabRecorder recording"
+            )
         headers: set[int] = set()
         footers: set[int] = set()
         k = 0
@@ -103,8 +105,13 @@ class MarkedTrial:
     @property
     def key(self) -> tuple[str, int, bool, int, int]:
         m = self.start
-        return (m["participant"], int(m["block"]), bool(m["practice"]), int(m["trial"]),
-                int(m["attempt"]))  # fmt: skip
+        return (
+            m["participant"],
+            int(m["block"]),
+            bool(m["practice"]),
+            int(m["trial"]),
+            int(m["attempt"]),
+        )
 
 
 def marked_trials(streams: list[dict[str, Any]]) -> tuple[list[MarkedTrial], set[int]]:
@@ -114,8 +121,10 @@ def marked_trials(streams: list[dict[str, Any]]) -> tuple[list[MarkedTrial], set
     for i, stream in enumerate(streams):
         if _info(stream, "channel_format") != "string":
             continue
-        ours = [(float(t), parse(str(v[0]))) for t, v in
-                zip(stream["time_stamps"], stream["time_series"], strict=True)]  # fmt: skip
+        ours = [
+            (float(t), parse(str(v[0])))
+            for t, v in zip(stream["time_stamps"], stream["time_series"], strict=True)
+        ]
         ours = [(t, m) for t, m in ours if m is not None]
         if ours:
             marker_streams.add(i)
@@ -176,16 +185,20 @@ def import_xdf(
     try:
         streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
     except Exception as exc:  # pyxdf raises what its parsers raise
-        raise XdfInputError(f"{path} could not be read as XDF ({exc}); expected a LabRecorder "
-                            "recording") from None  # fmt: skip
+        raise XdfInputError(
+            f"{path} could not be read as XDF ({exc}); expected a LabRecorder recording"
+        ) from None
     trials, marker_streams = marked_trials(streams)
     if not trials:
         raise XdfInputError(
             f"{path} has no haptic-study trial markers; expected a recording made while "
             "`study run` published them ([lsl] publish = true, or --lsl)"
         )
-    others = [i for i in range(len(streams)) if i not in marker_streams
-              and _info(streams[i], "type") != SAMPLE_STREAM_TYPE]  # fmt: skip
+    others = [
+        i
+        for i in range(len(streams))
+        if i not in marker_streams and _info(streams[i], "type") != SAMPLE_STREAM_TYPE
+    ]
     with Session(engine) as session:
         study, _ = load_study(session)
         other = next(
@@ -222,10 +235,15 @@ def _trial_id(session: Session, study_id: int, path: Path, trial: MarkedTrial) -
     found = session.scalar(
         select(Trial.id)
         .join(Participant)
-        .where(Participant.study_id == study_id, Participant.code == code,
-               Trial.block_index == block, Trial.practice == practice,
-               Trial.trial_index == index, Trial.attempt == attempt)
-    )  # fmt: skip
+        .where(
+            Participant.study_id == study_id,
+            Participant.code == code,
+            Trial.block_index == block,
+            Trial.practice == practice,
+            Trial.trial_index == index,
+            Trial.attempt == attempt,
+        )
+    )
     if found is None:
         kind = "practice trial" if practice else "trial"
         raise XdfInputError(
@@ -244,12 +262,18 @@ def _store(conn: Any, stream: dict[str, Any], trial: MarkedTrial, trial_id: int)
     offsets = np.asarray(stream.get("clock_values", []), dtype=np.float64)
     correction = float(np.median(offsets)) if len(offsets) else 0.0
     meta = StreamMeta(
-        name=_info(stream, "name"), type=_info(stream, "type"), channel_format=fmt,
+        name=_info(stream, "name"),
+        type=_info(stream, "type"),
+        channel_format=fmt,
         nominal_srate_hz=float(_info(stream, "nominal_srate", "0")),
-        channels=_channels(stream, n_channels), lsl_t0_s=trial.start_s,
-        time_correction_s=correction, clock_rate=rate, source_id=_info(stream, "source_id"),
-        hostname=_info(stream, "hostname"), origin="xdf",
-    )  # fmt: skip
+        channels=_channels(stream, n_channels),
+        lsl_t0_s=trial.start_s,
+        time_correction_s=correction,
+        clock_rate=rate,
+        source_id=_info(stream, "source_id"),
+        hostname=_info(stream, "hostname"),
+        origin="xdf",
+    )
     stream_id = conn.execute(
         insert(LslStream).returning(LslStream.id),
         {"trial_id": trial_id, "gaps": [], "n_samples": len(inside), **stream_row(meta)},
@@ -264,9 +288,13 @@ def _store(conn: Any, stream: dict[str, Any], trial: MarkedTrial, trial_id: int)
         stop = max(stop, start + 1)
         rows = inside[start:stop]
         values = [series[k] for k in rows] if meta.is_string else np.asarray(series)[rows]
-        conn.execute(insert(LslChunk), {
-            "stream_id": stream_id, "first_seq": start,
-            **encode_chunk(meta, stamps[rows] - correction, values, t_s[start:stop]),
-        })  # fmt: skip
+        conn.execute(
+            insert(LslChunk),
+            {
+                "stream_id": stream_id,
+                "first_seq": start,
+                **encode_chunk(meta, stamps[rows] - correction, values, t_s[start:stop]),
+            },
+        )
         start = stop
     return len(inside)

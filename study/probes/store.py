@@ -112,9 +112,18 @@ def run_participant_probes(
     observer = observer or SessionObserver()
 
     def told(t: ProbeTrial) -> None:
-        observer.event("probe", study=study_name, participant=code, group=group,
-                       driver=t.driver, probe=t.probe, trial_index=t.trial_index,
-                       stimulus=t.stimulus, response=t.response, correct=t.correct)  # fmt: skip
+        observer.event(
+            "probe",
+            study=study_name,
+            participant=code,
+            group=group,
+            driver=t.driver,
+            probe=t.probe,
+            trial_index=t.trial_index,
+            stimulus=t.stimulus,
+            response=t.response,
+            correct=t.correct,
+        )
 
     done = stored_probes(engine, pid)
     stored = {}

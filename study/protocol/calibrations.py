@@ -56,8 +56,13 @@ def store_calibration(
         calibration_id = row.id
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"calibration-{calibration_id:04d}-{recording.stem}.json"
-    record = {"id": calibration_id, "model": model, "recording": recording.name,
-              "recording_sha256": sha256, **report}  # fmt: skip
+    record = {
+        "id": calibration_id,
+        "model": model,
+        "recording": recording.name,
+        "recording_sha256": sha256,
+        **report,
+    }
     write_atomically(path, json.dumps(record, indent=2) + "\n")
     return calibration_id, path
 
@@ -69,8 +74,14 @@ def list_calibrations(engine: Engine, limit: int = 50) -> list[dict[str, Any]]:
             select(Calibration).order_by(Calibration.id.desc()).limit(limit)
         ).all()
         return [
-            {"id": r.id, "at": r.created_at, "model": r.model, "recording": r.recording_name,
-             "rmse_before": r.rmse_before, "rmse_after": r.rmse_after,
-             "verdict": (r.report or {}).get("verdict", "")}
+            {
+                "id": r.id,
+                "at": r.created_at,
+                "model": r.model,
+                "recording": r.recording_name,
+                "rmse_before": r.rmse_before,
+                "rmse_after": r.rmse_after,
+                "verdict": (r.report or {}).get("verdict", ""),
+            }
             for r in rows
-        ]  # fmt: skip
+        ]

@@ -42,15 +42,21 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
             people = session.scalars(select(Participant).order_by(Participant.code)).all()
             trials = pd.DataFrame(
                 [
-                    (t.participant_id, t.task, t.condition, t.completion_time_s,
-                     t.measure_values.get("wall_contacts", 0), t.success,
-                     (t.summary or {}).get("obstacles_seen", 0))
+                    (
+                        t.participant_id,
+                        t.task,
+                        t.condition,
+                        t.completion_time_s,
+                        t.measure_values.get("wall_contacts", 0),
+                        t.success,
+                        (t.summary or {}).get("obstacles_seen", 0),
+                    )
                     for t in session.scalars(
                         select(Trial).where(Trial.status == "completed", Trial.practice.is_(False))
                     )
                 ],
                 columns=["pid", "task", "condition", "time", "contacts", "success", "seen"],
-            )  # fmt: skip
+            )
             plan = [(p.id, p.code, [(b.task, b.condition) for b in p.blocks]) for p in people]
         for pid, code, blocks in plan:
             rng = np.random.default_rng([study_seed, zlib.crc32(code.encode()), 0x7A])
@@ -58,12 +64,19 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
             preference = person_preference(rng)
             for task, condition in blocks:
                 chosen = pairwise_choices(study_seed, code, rng, block_preference(preference, rng))
-                block = trials[(trials["pid"] == pid) & (trials["task"] == task)
-                               & (trials["condition"] == condition)]  # fmt: skip
+                block = trials[
+                    (trials["pid"] == pid)
+                    & (trials["task"] == task)
+                    & (trials["condition"] == condition)
+                ]
                 ratings = block_ratings(
-                    block["time"].tolist(), block["contacts"].tolist(),
-                    block["success"].tolist(), rng, offsets, int(block["seen"].sum()),
-                )  # fmt: skip
+                    block["time"].tolist(),
+                    block["contacts"].tolist(),
+                    block["success"].tolist(),
+                    rng,
+                    offsets,
+                    int(block["seen"].sum()),
+                )
                 store_tlx(engine, code, task, condition, ratings, chosen)
                 stored += 1
     finally:
@@ -71,9 +84,13 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
     return stored
 
 
-QUICK = {"outsider = 20": "outsider = 2", "novice = 8": "novice = 2", "expert = 8": "expert = 2",
-         "trials_per_condition = 3": "trials_per_condition = 1",
-         "practice_trials = 1": "practice_trials = 0"}  # fmt: skip
+QUICK = {
+    "outsider = 20": "outsider = 2",
+    "novice = 8": "novice = 2",
+    "expert = 8": "expert = 2",
+    "trials_per_condition = 3": "trials_per_condition = 1",
+    "practice_trials = 1": "practice_trials = 0",
+}
 """The default design shrunk to 2/2/2 participants and one trial per block."""
 
 

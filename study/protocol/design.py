@@ -240,9 +240,7 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
             raise StudyInputError(f"{source}: {key} = {value!r}; expected {low} to {high}")
     break_s = data.get("break_s", d.break_s)
     if not (math.isfinite(break_s) and 0 <= break_s <= MAX_BREAK_S):
-        raise StudyInputError(
-            f"{source}: break_s = {break_s!r}; expected 0 to {MAX_BREAK_S:g} s"
-        )
+        raise StudyInputError(f"{source}: break_s = {break_s!r}; expected 0 to {MAX_BREAK_S:g} s")
     name = data.get("name", d.name)
     if not (0 < len(name.strip()) and len(name) <= MAX_NAME_CHARS and name.isprintable()):
         raise StudyInputError(
@@ -316,10 +314,13 @@ def _lsl_settings(table: dict[str, Any], source: str) -> LslSettings:
             isinstance(value, list)
             and len(value) <= MAX_LSL_STREAMS
             and all(
-                isinstance(v, str) and 0 < len(v.strip()) and len(v) <= MAX_PREDICATE_CHARS
-                and v.isprintable() for v in value
+                isinstance(v, str)
+                and 0 < len(v.strip())
+                and len(v) <= MAX_PREDICATE_CHARS
+                and v.isprintable()
+                for v in value
             )
-        ):  # fmt: skip
+        ):
             raise StudyInputError(
                 f"{source}: lsl.{key} = {value!r}; expected a list of at most "
                 f"{MAX_LSL_STREAMS} non-empty strings, e.g. {example}"

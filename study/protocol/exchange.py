@@ -124,8 +124,9 @@ def _check_trials(
     return rows
 
 
-def _measures(p: Problems, row: int, r: dict[str, str], columns: Iterable[str]
-              ) -> dict[str, float | None]:  # fmt: skip
+def _measures(
+    p: Problems, row: int, r: dict[str, str], columns: Iterable[str]
+) -> dict[str, float | None]:
     """The row's task's measures: an analysed one must be given, another may be empty;
     a measure of another task must be empty."""
     if not is_task(r["task"]):
@@ -137,8 +138,12 @@ def _measures(p: Problems, row: int, r: dict[str, str], columns: Iterable[str]
         if column in TRIAL_KEYS or column == "success" or column in own:
             continue
         if r[column].strip():
-            p.add(row, column, f"{r[column]!r} for a {task.name} trial; expected it empty "
-                  f"(a measure of another task)")  # fmt: skip
+            p.add(
+                row,
+                column,
+                f"{r[column]!r} for a {task.name} trial; expected it empty "
+                f"(a measure of another task)",
+            )
     for m in task.measures:
         text = r.get(m.name, "")
         if not text.strip():
@@ -165,10 +170,13 @@ def _file_trials(
     if ids:
         for pid, block_index, trial_index, attempt, status in session.execute(
             select(
-                Trial.participant_id, Trial.block_index, Trial.trial_index, Trial.attempt,
+                Trial.participant_id,
+                Trial.block_index,
+                Trial.trial_index,
+                Trial.attempt,
                 Trial.status,
             ).where(Trial.participant_id.in_(ids), Trial.practice.is_(False))
-        ):  # fmt: skip
+        ):
             taken.setdefault((pid, block_index, trial_index), []).append((attempt, status))
     for r in rows:
         participant = existing.get(r["code"])
@@ -297,8 +305,12 @@ def _check_codes(rows: list[dict[str, Any]], existing: Iterable[str], source: st
         key = _code_number(r["code"])
         other = spelled.setdefault(key, r["code"])
         if other != r["code"]:
-            p.add(r["row"], "participant", f"{r['code']!r} beside {other!r}, the same number "
-                  f"written with other zeros; expected {other}")  # fmt: skip
+            p.add(
+                r["row"],
+                "participant",
+                f"{r['code']!r} beside {other!r}, the same number "
+                f"written with other zeros; expected {other}",
+            )
     p.raise_if_any()
 
 
@@ -375,13 +387,19 @@ def import_data(
                 session.add(participant)
                 session.flush()
                 existing[t["code"]] = participant
-                session.add(AuditEntry(entity="participant", entity_id=participant.id,
-                                       field="enrolled", old_value=None,
-                                       new_value=json.dumps({"group": participant.group,
-                                                             "site": participant.site,
-                                                             "by": "import"}),
-                                       reason=f"first seen in {trials_csv.name}",
-                                       actor=who))  # fmt: skip
+                session.add(
+                    AuditEntry(
+                        entity="participant",
+                        entity_id=participant.id,
+                        field="enrolled",
+                        old_value=None,
+                        new_value=json.dumps(
+                            {"group": participant.group, "site": participant.site, "by": "import"}
+                        ),
+                        reason=f"first seen in {trials_csv.name}",
+                        actor=who,
+                    )
+                )
             if not participant.blocks:  # new here, or imported before it got a schedule
                 order = tuple(participant.condition_order)
                 participant.blocks = [ScheduleBlock(**b) for b in plan_blocks(design, order)]
@@ -411,13 +429,23 @@ def import_data(
             session.add(trial)
         for r in tlx:
             session.add(TlxResponse(participant_id=existing[r.pop("code")].id, **r))
-        for kind, path, n in (("trials_csv", trials_csv, len(trials)),
-                              ("tlx_csv", tlx_csv, len(tlx))):  # fmt: skip
+        for kind, path, n in (
+            ("trials_csv", trials_csv, len(trials)),
+            ("tlx_csv", tlx_csv, len(tlx)),
+        ):
             if path is not None:
                 record = {"file": str(path.resolve()), "sha256": _file_hash(path), "rows": n}
-                session.add(AuditEntry(entity="import", entity_id=study.id, field=kind,
-                                       old_value=None, new_value=json.dumps(record),
-                                       reason=None, actor=who))  # fmt: skip
+                session.add(
+                    AuditEntry(
+                        entity="import",
+                        entity_id=study.id,
+                        field=kind,
+                        old_value=None,
+                        new_value=json.dumps(record),
+                        reason=None,
+                        actor=who,
+                    )
+                )
         session.flush()
         session.commit()
     return len(trials), len(tlx)

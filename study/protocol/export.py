@@ -190,16 +190,27 @@ def export_data(
         sample_paths: list[Path] = []
         if samples and per_trial:
             result = write_samples_per_trial(
-                engine, export_trials, out_dir / "samples", fmt, selection,
-                progress=progress, workers=workers,
-            )  # fmt: skip
+                engine,
+                export_trials,
+                out_dir / "samples",
+                fmt,
+                selection,
+                progress=progress,
+                workers=workers,
+            )
             sample_paths = result.written + result.skipped
         elif samples:
             path = out_dir / f"samples.{fmt}"
             write_samples(
-                engine, export_trials, path, fmt, selection, progress=progress,
-                workers=workers, tasks=design.tasks,
-            )  # fmt: skip
+                engine,
+                export_trials,
+                path,
+                fmt,
+                selection,
+                progress=progress,
+                workers=workers,
+                tasks=design.tasks,
+            )
             sample_paths = [path]
         for out in staged:
             out.commit()

@@ -82,9 +82,7 @@ def process_alive(pid: int) -> bool:
     return stat.rpartition(")")[2].split()[0] not in ("Z", "X")
 
 
-def holder_is_dead(
-    lease: SessionLease, now: datetime, timeout_s: float, host: str
-) -> str | None:
+def holder_is_dead(lease: SessionLease, now: datetime, timeout_s: float, host: str) -> str | None:
     """Why the holder of `lease` counts as dead, or None while it is alive."""
     age_s = (now - _aware(lease.heartbeat_at)).total_seconds()
     if lease.host == host and not process_alive(lease.pid):
@@ -173,8 +171,7 @@ def acquire_lease(
                     "its process is alive on this host; once it ends, a new session takes "
                     "over at once"
                     if lease.host == host
-                    else f"once its heartbeat is {timeout_s:.0f} s old, a new session takes "
-                    "over"
+                    else f"once its heartbeat is {timeout_s:.0f} s old, a new session takes over"
                 )
                 raise SessionBusyError(
                     f"participant {code} already has a session running on {lease.host} "

@@ -167,10 +167,15 @@ class LastingObserver(SessionObserver):
         s = self.session
         keys = tuple(fields.get(k) for k in ("study", "participant", "group"))
         if s is None or (s.study, s.participant, s.group) != keys:
-            self.session_started(SessionInfo(
-                str(fields.get("study")), str(fields.get("participant")),
-                str(fields.get("group")), str(fields.get("driver", "keyboard")), None,
-            ))  # fmt: skip
+            self.session_started(
+                SessionInfo(
+                    str(fields.get("study")),
+                    str(fields.get("participant")),
+                    str(fields.get("group")),
+                    str(fields.get("driver", "keyboard")),
+                    None,
+                )
+            )
         self.observer.event(kind, **fields)
 
     def close(self) -> None:

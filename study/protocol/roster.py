@@ -141,11 +141,14 @@ def enrol(
             raise StudyInputError(
                 f"site {site!r}; expected 1-{MAX_SITE_CHARS} printable characters"
             )
-        used = [tuple(u) for u in session.scalars(
-            select(Participant.condition_order).where(
-                Participant.study_id == study.id, Participant.group == group
-            )
-        ).all()]  # fmt: skip
+        used = [
+            tuple(u)
+            for u in session.scalars(
+                select(Participant.condition_order).where(
+                    Participant.study_id == study.id, Participant.group == group
+                )
+            ).all()
+        ]
         target = design.groups[group]
         room = max(target - len(used), 0)
         if count > room and not beyond_target:
@@ -167,13 +170,19 @@ def enrol(
             participant.blocks = [ScheduleBlock(**b) for b in plan_blocks(design, order)]
             session.add(participant)
             session.flush()
-            session.add(AuditEntry(
-                entity="participant", entity_id=participant.id, field="enrolled",
-                old_value=None, actor=who,
-                new_value=json.dumps({"code": code, "group": group, "site": site,
-                                      "condition_order": list(order)}),
-                reason="past the group's target" if len(used) > target else None,
-            ))  # fmt: skip
+            session.add(
+                AuditEntry(
+                    entity="participant",
+                    entity_id=participant.id,
+                    field="enrolled",
+                    old_value=None,
+                    actor=who,
+                    new_value=json.dumps(
+                        {"code": code, "group": group, "site": site, "condition_order": list(order)}
+                    ),
+                    reason="past the group's target" if len(used) > target else None,
+                )
+            )
             session.flush()
             added.append(participant)
         session.expunge_all()

@@ -90,6 +90,8 @@ def _text_columns(schema: pa.Schema) -> tuple[str, ...]:
     """Dictionary-encoded in Parquet: the text columns (on every float column, pyarrow's
     default, it took 80 % of the writing time and gave a larger file)."""
     return tuple(f.name for f in schema if f.type == pa.string())
+
+
 MAX_WORKERS = 4
 """Most reader threads by default (one per CPU up to this)."""
 CSV_SPAN_ROWS = 16_384
@@ -382,12 +384,18 @@ def write_samples_per_trial(
     schemas = {name: sample_export_schema([name]) for name in dict.fromkeys(t.task for t in todo)}
     parts_of = {
         name: closing(
-            _read(engine, [t for t in todo if t.task == name],
-                  [spans_of[t.trial_id] for t in todo if t.task == name],
-                  fmt, selection, workers, schema)
+            _read(
+                engine,
+                [t for t in todo if t.task == name],
+                [spans_of[t.trial_id] for t in todo if t.task == name],
+                fmt,
+                selection,
+                workers,
+                schema,
+            )
         )
         for name, schema in schemas.items()
-    }  # fmt: skip
+    }
     with ExitStack() as stack:
         parts = {name: stack.enter_context(p) for name, p in parts_of.items()}
         for done, (trial, path, m) in enumerate(zip(trials, paths, missing, strict=True), 1):

@@ -258,9 +258,13 @@ class SessionStorageError(StudyInputError):
 
 
 def _storage_failure(
-    engine: Engine, code: str, participant_id: int, item: PendingTrial, n_completed: int,
+    engine: Engine,
+    code: str,
+    participant_id: int,
+    item: PendingTrial,
+    n_completed: int,
     exc: Exception,
-) -> str:  # fmt: skip
+) -> str:
     reason = str(getattr(exc, "orig", exc)).strip().splitlines()[0]
     kind = "practice trial" if item.practice else "trial"
     slot = f"{item.block.task}/{item.block.condition} {kind} {item.trial_index + 1}"
@@ -283,8 +287,10 @@ def _storage_failure(
 
 def _expected_storage(reason: str) -> str:
     if "locked" in reason.lower() or "busy" in reason.lower():
-        return ("the database free of another program's lock (retry when it is done, or "
-                "wait longer with ?timeout=SECONDS in the URL)")  # fmt: skip
+        return (
+            "the database free of another program's lock (retry when it is done, or "
+            "wait longer with ?timeout=SECONDS in the URL)"
+        )
     return "a database with free space"
 
 
@@ -328,15 +334,23 @@ def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
 
 def _place(participant: Participant, item: PendingTrial) -> TrialPlace:
     """Where the trial lies in the participant's session of its task."""
-    blocks = sorted((b for b in participant.blocks if b.task == item.block.task),
-                    key=lambda b: b.block_index)  # fmt: skip
+    blocks = sorted(
+        (b for b in participant.blocks if b.task == item.block.task), key=lambda b: b.block_index
+    )
     index = [b.block_index for b in blocks].index(item.block.block_index)
-    return session_place([b.condition for b in blocks], index, item.trial_index,
-                         item.block.n_trials, item.practice, item.block.n_practice)  # fmt: skip
+    return session_place(
+        [b.condition for b in blocks],
+        index,
+        item.trial_index,
+        item.block.n_trials,
+        item.practice,
+        item.block.n_practice,
+    )
 
 
-def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
-               run: TrialSetup) -> int | None:  # fmt: skip
+def _run_trial(
+    engine: Engine, participant: Participant, item: PendingTrial, run: TrialSetup
+) -> int | None:
     """Run one trial; its id, or None if it was no longer `running` at the end (another
     session took the lease over and recovered it)."""
     block, task = item.block, run.task
@@ -373,8 +387,13 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
         f"{item.trial_index}/{attempt}".encode()
     )
     gain = task.haptic_gain(run.design.haptic_gain_for(block.condition)) if task.has_dial else None
-    loop = task.make_loop(block.condition, seed, haptic_gain_n_m_per_n=gain,
-                          estimator=run.estimator, context=run.context)  # fmt: skip
+    loop = task.make_loop(
+        block.condition,
+        seed,
+        haptic_gain_n_m_per_n=gain,
+        estimator=run.estimator,
+        context=run.context,
+    )
     if driver is None:
         traits = apply_effects(run.traits, run.effects, _place(participant, item))
         driver = task.simulated_driver(traits, MAX_TRIAL_S, run.context)
@@ -383,16 +402,29 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
     step_s = STEP_S if run.pace is None else PACED_STEP_S
     wall0 = time.monotonic()
     info = TrialInfo(
-        trial_id, task, block.condition, block.block_index, item.trial_index, item.practice,
-        attempt, clock_origin_s=wall0, clock_rate=run.pace or 1.0,
+        trial_id,
+        task,
+        block.condition,
+        block.block_index,
+        item.trial_index,
+        item.practice,
+        attempt,
+        clock_origin_s=wall0,
+        clock_rate=run.pace or 1.0,
         realtime=run.pace is not None or bool(getattr(driver, "realtime", False)),
-    )  # fmt: skip
+    )
     observer = run.observer
     observer.trial_started(info)
     ending = trial_ending(observer, info, loop, SessionStopped)
     hold_s = HOLD_S if run.on_storage_wait is not None else 0.0
-    writer_at = SampleWriter(engine, trial_id, chunk_s=1.0, schema=task.sample_schema(),
-                             hold_s=hold_s, on_wait=run.on_storage_wait)  # fmt: skip
+    writer_at = SampleWriter(
+        engine,
+        trial_id,
+        chunk_s=1.0,
+        schema=task.sample_schema(),
+        hold_s=hold_s,
+        on_wait=run.on_storage_wait,
+    )
     with writer_at as writer, ending:
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
@@ -423,8 +455,13 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
         done = conn.execute(
             update(Trial)
             .where(Trial.id == trial_id, Trial.status == "running")
-            .values(status="completed", ended_at=utcnow(), success=bool(loop.success),
-                    summary=summary, **{COMPLETION_TIME: completion_s})
+            .values(
+                status="completed",
+                ended_at=utcnow(),
+                success=bool(loop.success),
+                summary=summary,
+                **{COMPLETION_TIME: completion_s},
+            )
         )
         if done.rowcount == 1 and values:
             conn.execute(
@@ -432,8 +469,11 @@ def _run_trial(engine: Engine, participant: Participant, item: PendingTrial,
                 [{"trial_id": trial_id, "name": k, "value": float(v)} for k, v in values.items()],
             )
     if done.rowcount == 1:
-        observer.trial_ended(info, "completed", {
-            "success": bool(loop.success), COMPLETION_TIME: completion_s, **values})  # fmt: skip
+        observer.trial_ended(
+            info,
+            "completed",
+            {"success": bool(loop.success), COMPLETION_TIME: completion_s, **values},
+        )
         return trial_id
     observer.trial_ended(info, "interrupted", {"reason": "taken over by another session"})
     return None

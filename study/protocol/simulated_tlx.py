@@ -18,8 +18,14 @@ import numpy as np
 from db.models.tlx import TLX_SUBSCALES
 from study.protocol.tlx import pair_order
 
-BASE = {"mental": 45.0, "physical": 20.0, "temporal": 35.0, "performance": 25.0,
-        "effort": 40.0, "frustration": 25.0}  # fmt: skip
+BASE = {
+    "mental": 45.0,
+    "physical": 20.0,
+    "temporal": 35.0,
+    "performance": 25.0,
+    "effort": 40.0,
+    "frustration": 25.0,
+}
 """Ratings of an uneventful block (assumption)."""
 
 

@@ -96,9 +96,12 @@ def write_streams(export: StreamExport, folder: Path, fmt: str) -> list[AtomicFi
         staged.append(out)
         if fmt == "csv":
             text = pa.Table.from_arrays(
-                [escape_array(c.combine_chunks()) if pa.types.is_string(c.type) else c
-                 for c in table.columns], names=table.column_names,
-            )  # fmt: skip
+                [
+                    escape_array(c.combine_chunks()) if pa.types.is_string(c.type) else c
+                    for c in table.columns
+                ],
+                names=table.column_names,
+            )
             pa_csv.write_csv(text, out.file)
         else:
             pq.write_table(table, out.file)

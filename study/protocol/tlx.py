@@ -177,9 +177,17 @@ def store_tlx(
             study, _ = load_study(session)
             group = find_participant(session, study, code).group
         _, raw, weighted = response_scores(response)
-        observer.event("questionnaire", study=study.name, participant=code, group=group,
-                       task=task, condition=condition, new=new, raw_tlx=raw,
-                       weighted_tlx=weighted)  # fmt: skip
+        observer.event(
+            "questionnaire",
+            study=study.name,
+            participant=code,
+            group=group,
+            task=task,
+            condition=condition,
+            new=new,
+            raw_tlx=raw,
+            weighted_tlx=weighted,
+        )
     return response, new
 
 
@@ -221,11 +229,15 @@ def _store_tlx(
         values: dict[str, Any] = {**ratings, **{f"w_{s}": weights[s] for s in TLX_SUBSCALES}}
         if existing is None:
             ran = session.scalar(
-                select(func.count()).select_from(Trial).where(
-                    Trial.participant_id == participant.id, Trial.task == task,
-                    Trial.condition == condition, Trial.status == "completed",
+                select(func.count())
+                .select_from(Trial)
+                .where(
+                    Trial.participant_id == participant.id,
+                    Trial.task == task,
+                    Trial.condition == condition,
+                    Trial.status == "completed",
                 )
-            )  # fmt: skip
+            )
             if not ran and not reason:
                 raise StudyInputError(
                     f"{code} {task}/{condition} has no completed trial yet; a questionnaire "
@@ -241,17 +253,37 @@ def _store_tlx(
             )
             session.add(response)
             session.flush()
-            session.add(AuditEntry(entity="tlx_response", entity_id=response.id,
-                                   field="entered", old_value=None,
-                                   new_value=_audit_text({"participant": code, "task": task,
-                                                          "condition": condition, **values,
-                                                          "pairwise": pairwise}),
-                                   reason=reason, actor=who))  # fmt: skip
+            session.add(
+                AuditEntry(
+                    entity="tlx_response",
+                    entity_id=response.id,
+                    field="entered",
+                    old_value=None,
+                    new_value=_audit_text(
+                        {
+                            "participant": code,
+                            "task": task,
+                            "condition": condition,
+                            **values,
+                            "pairwise": pairwise,
+                        }
+                    ),
+                    reason=reason,
+                    actor=who,
+                )
+            )
             if not ran:  # stored before its block ran: why, and by whom
-                session.add(AuditEntry(entity="tlx_response", entity_id=response.id,
-                                       field="stored_before_block_ran", old_value=None,
-                                       new_value="0 completed trials", reason=reason,
-                                       actor=who))  # fmt: skip
+                session.add(
+                    AuditEntry(
+                        entity="tlx_response",
+                        entity_id=response.id,
+                        field="stored_before_block_ran",
+                        old_value=None,
+                        new_value="0 completed trials",
+                        reason=reason,
+                        actor=who,
+                    )
+                )
                 session.flush()
             session.expunge(response)
             return response, True

@@ -36,9 +36,7 @@ def _check_text(what: str, text: str) -> str:
         )
     value = " ".join(text.split())
     if not value or len(value) > MAX_TEXT_CHARS:
-        raise StudyInputError(
-            f"{what} {text!r}; expected 1-{MAX_TEXT_CHARS} characters of text"
-        )
+        raise StudyInputError(f"{what} {text!r}; expected 1-{MAX_TEXT_CHARS} characters of text")
     return value
 
 
@@ -52,9 +50,17 @@ def _audited_change(engine: Engine, code: str, actor: str | None) -> Iterator[Ch
         p = find_participant(session, study, code)
 
         def audit(field: str, old: str | None, new: str, reason: str) -> None:
-            session.add(AuditEntry(entity="participant", entity_id=p.id, field=field,
-                                   old_value=old, new_value=new, reason=reason,
-                                   actor=who))  # fmt: skip
+            session.add(
+                AuditEntry(
+                    entity="participant",
+                    entity_id=p.id,
+                    field=field,
+                    old_value=old,
+                    new_value=new,
+                    reason=reason,
+                    actor=who,
+                )
+            )
 
         yield p, audit
 

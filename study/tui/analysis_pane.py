@@ -48,8 +48,10 @@ def bar_chart(comparisons: Any, measure: str, width: int = 40) -> Text:
             text.append(f"{name:<9}{label} ")
             text.append("█" * n, style)
             text.append(f" {value:.3g}\n")
-    text.append("p (Holm) per group: " + ", ".join(
-        f"{r['group']} {r['p_holm']:.3f}" for _, r in rows.iterrows()))  # fmt: skip
+    text.append(
+        "p (Holm) per group: "
+        + ", ".join(f"{r['group']} {r['p_holm']:.3f}" for _, r in rows.iterrows())
+    )
     return text
 
 
@@ -131,20 +133,28 @@ class AnalysisPane(SafeWorkers, Vertical):
         table.clear()
         for _, r in comparisons.iterrows():
             table.add_row(
-                r["measure"], r["group"], str(r["n"]), f"{r['mean_vo']:.3g}", f"{r['mean_hv']:.3g}",
-                r["test"], p_text(r["p_holm"]), _effect(r["effect_size"], r["effect_size_kind"]),
-            )  # fmt: skip
+                r["measure"],
+                r["group"],
+                str(r["n"]),
+                f"{r['mean_vo']:.3g}",
+                f"{r['mean_hv']:.3g}",
+                r["test"],
+                p_text(r["p_holm"]),
+                _effect(r["effect_size"], r["effect_size_kind"]),
+            )
         measures = list(dict.fromkeys(comparisons["measure"]))
         select = self.query_one("#measure", Select)
         select.set_options([(m, m) for m in measures])
         if measures:
-            select.value = "peak_proximal_force_n" if "peak_proximal_force_n" in measures else (
-                measures[0])  # fmt: skip
+            select.value = (
+                "peak_proximal_force_n" if "peak_proximal_force_n" in measures else (measures[0])
+            )
         notes = len(event.result.exclusions) + len(event.result.warnings)
         note = event.result.source.note
-        self._status(f"{len(comparisons)} comparisons, {notes} exclusions and notes "
-                     "(n: read them, with the mixed ANOVA)"
-                     + (f"; data: {note}" if note else ""))  # fmt: skip
+        self._status(
+            f"{len(comparisons)} comparisons, {notes} exclusions and notes "
+            "(n: read them, with the mixed ANOVA)" + (f"; data: {note}" if note else "")
+        )
 
     def action_notes(self) -> None:
         """The exclusions, the analysis's notes and the mixed ANOVA, over the screen."""
@@ -153,8 +163,9 @@ class AnalysisPane(SafeWorkers, Vertical):
         if self.result is None:
             self._status("r: run the analysis first; n then shows its notes")
             return
-        self.app.push_screen(TextScreen("Exclusions, notes and the mixed ANOVA",
-                                        details_text(self.result)))  # fmt: skip
+        self.app.push_screen(
+            TextScreen("Exclusions, notes and the mixed ANOVA", details_text(self.result))
+        )
 
     @on(Select.Changed, "#measure")
     def _measure(self, event: Select.Changed) -> None:

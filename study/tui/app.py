@@ -142,7 +142,7 @@ class StudyApp(SafeWorkers, App[None]):
                 self.settings.figures_dir,
                 self.settings.figure_formats,
                 id="analysis-pane",
-            ),  # fmt: skip,
+            ),
             "calibration": CalibrationPane(
                 self.services, self.settings.calibrations_dir, id="calibration-pane"
             ),
@@ -259,9 +259,7 @@ class StudyApp(SafeWorkers, App[None]):
         if hasattr(pane, "focus_first"):  # the screen knows which field comes first
             pane.focus_first()
             return
-        target = pane if pane.focusable else next(
-            (w for w in pane.query("*") if w.focusable), None
-        )  # fmt: skip
+        target = pane if pane.focusable else next((w for w in pane.query("*") if w.focusable), None)
         if target is not None:
             target.focus()
 
@@ -301,8 +299,12 @@ class StudyApp(SafeWorkers, App[None]):
                     await self._quit_now()
 
             blocks = ", ".join(f"{c} {t}/{k}" for c, t, k in unsaved)
-            self.push_screen(Confirm(f"NASA-TLX answers typed and not saved ({blocks}). "
-                                     "Quit without saving them?"), leave)  # fmt: skip
+            self.push_screen(
+                Confirm(
+                    f"NASA-TLX answers typed and not saved ({blocks}). Quit without saving them?"
+                ),
+                leave,
+            )
             return
         if self.ready and self._pane("run").run is not None:  # type: ignore[attr-defined]
             from study.tui.confirm import Confirm

@@ -85,12 +85,19 @@ class CalibrationPane(SafeWorkers, Vertical):
     def compose(self) -> ComposeResult:
         with Horizontal(classes="row"):
             yield Label("Recording ")
-            yield Input(placeholder="path to RECORDING.csv", id="recording", compact=True,
-                        select_on_focus=False)  # fmt: skip
+            yield Input(
+                placeholder="path to RECORDING.csv",
+                id="recording",
+                compact=True,
+                select_on_focus=False,
+            )
             yield Select[str](
-                [(m, m) for m in MODELS], id="model", value="follower", compact=True,
+                [(m, m) for m in MODELS],
+                id="model",
+                value="follower",
+                compact=True,
                 allow_blank=False,
-            )  # fmt: skip
+            )
         waiting = self.services.calibrate is None
         yield Static(
             "no calibration loop was given to this app"
@@ -103,8 +110,9 @@ class CalibrationPane(SafeWorkers, Vertical):
         yield table
         yield Label("Stored calibrations (newest first)")
         stored = DataTable(id="stored", zebra_stripes=True, cursor_type="row")
-        stored.add_columns("id", "when (UTC)", "model", "recording", "RMSE before -> after",
-                           "verdict")  # fmt: skip
+        stored.add_columns(
+            "id", "when (UTC)", "model", "recording", "RMSE before -> after", "verdict"
+        )
         yield stored
 
     def on_mount(self) -> None:
@@ -125,8 +133,14 @@ class CalibrationPane(SafeWorkers, Vertical):
         table.clear()
         for r in stored:
             rmse = f"{_fmt(r['rmse_before'])} -> {_fmt(r['rmse_after'])}"
-            table.add_row(str(r["id"]), f"{r['at']:%Y-%m-%d %H:%M}", r["model"], r["recording"],
-                          rmse, r["verdict"] or "")  # fmt: skip
+            table.add_row(
+                str(r["id"]),
+                f"{r['at']:%Y-%m-%d %H:%M}",
+                r["model"],
+                r["recording"],
+                rmse,
+                r["verdict"] or "",
+            )
 
     def action_calibrate(self) -> None:
         if self.services.calibrate is None:
@@ -196,10 +210,14 @@ class CalibrationPane(SafeWorkers, Vertical):
         for k, e in enumerate(report.get("effects_added") or [], 1):
             # one parameter per line: a row grows in height, not past the screen's width
             params = e.get("params")
-            cell = ("\n".join(f"{name} {_fmt(v)}" for name, v in params.items())
-                    if isinstance(params, dict) else _fmt(params))  # fmt: skip
-            table.add_row(str(k), str(e.get("family")), _fmt(e.get("rmse_after_step")), cell,
-                          height=None)  # fmt: skip
+            cell = (
+                "\n".join(f"{name} {_fmt(v)}" for name, v in params.items())
+                if isinstance(params, dict)
+                else _fmt(params)
+            )
+            table.add_row(
+                str(k), str(e.get("family")), _fmt(e.get("rmse_after_step")), cell, height=None
+            )
 
     def _summary(self, text: str | Text) -> None:
         self.query_one("#calib-summary", Static).update(text)

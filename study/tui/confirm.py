@@ -94,8 +94,9 @@ class ReasonScreen(ModalScreen[str | None]):
         with Vertical(id="reason-box"):
             yield Label(self.question, id="question")
             # the cursor after the text, none of it selected: typing adds to it
-            yield Input(self.value, id="reason-text", placeholder=self.placeholder,
-                        select_on_focus=False)  # fmt: skip
+            yield Input(
+                self.value, id="reason-text", placeholder=self.placeholder, select_on_focus=False
+            )
             yield Label("Enter: record it    Esc: cancel", id="reason-keys")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:

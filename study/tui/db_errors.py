@@ -17,24 +17,46 @@ from textual.worker import Worker, WorkerState
 
 # (what the driver's message contains, what the user reads): the first match wins
 _CAUSES = (
-    (("readonly", "read-only", "read only"),
-     "the database is read-only: nothing was written; open a writable copy of it, or "
-     "fix its permissions, and try again"),
-    (("database is locked", "lock timeout", "could not obtain lock", "deadlock"),
-     "the database is locked by another program: nothing was written; try again when that "
-     "program has finished"),
-    (("disk is full", "no space left", "diskfull", "disk full"),
-     "the disk holding the database is full: nothing more was written; free some space "
-     "and try again"),
-    (("unable to open database", "disk i/o error", "no such table", "malformed",
-      "not a database"),
-     "the database file cannot be read (moved, deleted or damaged?): nothing was written; "
-     "restart `study tui` with the right --db"),
-    (("could not connect", "connection refused", "server closed", "terminating connection",
-      "connection is closed", "connection timed out", "no route to host"),
-     "the database server cannot be reached: nothing was written; check the server and "
-     "the network, then try again"),
-)  # fmt: skip
+    (
+        ("readonly", "read-only", "read only"),
+        "the database is read-only: nothing was written; open a writable copy of it, or "
+        "fix its permissions, and try again",
+    ),
+    (
+        ("database is locked", "lock timeout", "could not obtain lock", "deadlock"),
+        "the database is locked by another program: nothing was written; try again when that "
+        "program has finished",
+    ),
+    (
+        ("disk is full", "no space left", "diskfull", "disk full"),
+        "the disk holding the database is full: nothing more was written; free some space "
+        "and try again",
+    ),
+    (
+        (
+            "unable to open database",
+            "disk i/o error",
+            "no such table",
+            "malformed",
+            "not a database",
+        ),
+        "the database file cannot be read (moved, deleted or damaged?): nothing was written; "
+        "restart `study tui` with the right --db",
+    ),
+    (
+        (
+            "could not connect",
+            "connection refused",
+            "server closed",
+            "terminating connection",
+            "connection is closed",
+            "connection timed out",
+            "no route to host",
+        ),
+        "the database server cannot be reached: nothing was written; check the server and "
+        "the network, then try again",
+    ),
+)
 
 
 def plain_line(error: BaseException | None) -> str:

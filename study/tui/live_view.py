@@ -81,9 +81,13 @@ class BrailleCanvas:
 
 
 def gauge(
-    label: str, value: float, full_scale: float, width: int, unit: str = "N",
+    label: str,
+    value: float,
+    full_scale: float,
+    width: int,
+    unit: str = "N",
     magnitude: bool = False,
-) -> Text:  # fmt: skip
+) -> Text:
     """`label  0.53 N  ██████░░░░` with the bar filled to value / full_scale (with
     `magnitude`, to |value| / full_scale, the number keeping its sign)."""
     level = abs(value) if magnitude else value
@@ -107,8 +111,9 @@ def sparkline(values: tuple[float, ...], width: int, full_scale: float) -> str:
         return ""
     n = min(width, len(values))
     step = len(values) / n
-    bins = [max(values[int(k * step) : max(int((k + 1) * step), int(k * step) + 1)])
-            for k in range(n)]  # fmt: skip
+    bins = [
+        max(values[int(k * step) : max(int((k + 1) * step), int(k * step) + 1)]) for k in range(n)
+    ]
     top = len(SPARK) - 1
     return "".join(SPARK[min(max(round(top * v / full_scale), 0), top)] for v in bins)
 

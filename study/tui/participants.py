@@ -79,8 +79,11 @@ class ParticipantsPane(SafeWorkers, Vertical):
             yield Label("", id="add-status")
         with Horizontal(id="filter-row"):
             yield Label("Find ")
-            yield Input(id="filter", placeholder="code, group or state (e.g. P01, expert, "
-                        "withdrawn, done)", compact=True)  # fmt: skip
+            yield Input(
+                id="filter",
+                placeholder="code, group or state (e.g. P01, expert, withdrawn, done)",
+                compact=True,
+            )
         table = DataTable(id="people", cursor_type="row", zebra_stripes=True)
         table.add_columns("code", "group", "order", "progress", "next")
         yield table
@@ -118,8 +121,13 @@ class ParticipantsPane(SafeWorkers, Vertical):
                 r["group"],
                 " -> ".join(r["condition_order"]),
                 f"{r['trials_completed']}/{r['trials_planned']}",
-                (f"withdrawn: {r['withdrawn']}" if r.get("withdrawn")
-                 else nxt.describe() if nxt else "done"),
+                (
+                    f"withdrawn: {r['withdrawn']}"
+                    if r.get("withdrawn")
+                    else nxt.describe()
+                    if nxt
+                    else "done"
+                ),
             )
             if wanted and not any(wanted in str(cell).lower() for cell in row):
                 continue
@@ -144,12 +152,19 @@ class ParticipantsPane(SafeWorkers, Vertical):
         answered = self._roster.answered
         blocks = []
         for b in row["blocks"]:
-            tlx = "TLX stored" if (code, b["task"], b["condition"]) in answered else (
-                "TLX due" if b["completed"] >= b["planned"] else "")  # fmt: skip
-            blocks.append(f"{b['task']}/{b['condition']} {b['completed']}/{b['planned']}"
-                          + (f" {tlx}" if tlx else ""))  # fmt: skip
-        lines = [f"{code} ({row['group']}): " + ", ".join(blocks),
-                 f"note: {row.get('note') or '(none)'}"]  # fmt: skip
+            tlx = (
+                "TLX stored"
+                if (code, b["task"], b["condition"]) in answered
+                else ("TLX due" if b["completed"] >= b["planned"] else "")
+            )
+            blocks.append(
+                f"{b['task']}/{b['condition']} {b['completed']}/{b['planned']}"
+                + (f" {tlx}" if tlx else "")
+            )
+        lines = [
+            f"{code} ({row['group']}): " + ", ".join(blocks),
+            f"note: {row.get('note') or '(none)'}",
+        ]
         if row.get("withdrawn"):
             lines.append(f"withdrawn: {row['withdrawn']}")
         detail.update("\n".join(lines))
@@ -179,9 +194,12 @@ class ParticipantsPane(SafeWorkers, Vertical):
                     self._status(f"not enrolled: the {group} group is full")
 
             self.app.push_screen(
-                Confirm(f"The {group} group has its {fill['target']} participants. "
-                        f"Enrol one more {group} all the same?"), answered,
-            )  # fmt: skip
+                Confirm(
+                    f"The {group} group has its {fill['target']} participants. "
+                    f"Enrol one more {group} all the same?"
+                ),
+                answered,
+            )
             return
         self._start_enrolment(str(group))
 
@@ -247,9 +265,12 @@ class ParticipantsPane(SafeWorkers, Vertical):
                 self._withdraw(code, reason)
 
         self.app.push_screen(
-            ReasonScreen(f"Withdraw {code}? Their data are kept and marked, no more sessions "
-                         "run, and the analysis leaves them out. Why?"), answered,
-        )  # fmt: skip
+            ReasonScreen(
+                f"Withdraw {code}? Their data are kept and marked, no more sessions "
+                "run, and the analysis leaves them out. Why?"
+            ),
+            answered,
+        )
 
     @work(thread=True, exclusive=True, group="withdraw", exit_on_error=False)
     def _withdraw(self, code: str, reason: str) -> None:

@@ -29,9 +29,9 @@ def due_probes(engine: Engine, code: str) -> list[str]:
         if not design.probes:
             return []
         participant = find_participant(session, study, code)
-        started = set(session.scalars(
-            select(Trial.block_index).where(Trial.participant_id == participant.id)
-        ))  # fmt: skip
+        started = set(
+            session.scalars(select(Trial.block_index).where(Trial.participant_id == participant.id))
+        )
         pid = participant.id
     # blocks are numbered from 0 in the schedule, from 1 in the design's before_block
     if len(started) < design.probes_before_block - 1:
@@ -49,8 +49,10 @@ def run_due_probes(
     if not due:
         return None
     if driver_kind != "simulated":
-        return (f"{code} has probes due before this block ({', '.join(due)}): run "
-                f"`study probe run --participant {code} --driver {driver_kind}`")  # fmt: skip
+        return (
+            f"{code} has probes due before this block ({', '.join(due)}): run "
+            f"`study probe run --participant {code} --driver {driver_kind}`"
+        )
     from study.probes.store import run_participant_probes
 
     stored = run_participant_probes(engine, code, only=tuple(due), observer=observer)

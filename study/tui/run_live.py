@@ -76,14 +76,18 @@ class LiveViewMixin:
         histories = (frame.first_history, frame.second_history)
         for k, trace in enumerate(frame.task.live_traces):
             value = frame.values[trace.column]  # signed; the bar shows |value| if magnitude
-            text.append_text(gauge(trace.label, value, trace.full_scale, 14,
-                                   magnitude=trace.magnitude))  # fmt: skip
+            text.append_text(
+                gauge(trace.label, value, trace.full_scale, 14, magnitude=trace.magnitude)
+            )
             text.append("\n" + sparkline(histories[k], width, trace.full_scale) + "\n\n")
         lines = frame.task.live_lines(frame.values)
         wait = run.live.storage_wait
         if wait is not None:  # the trial goes on; its samples wait in memory
-            lines.insert(0, f"waiting for the database (locked by another program) "
-                            f"{wait[0]:.0f} s: {wait[1]} samples held, none lost")  # fmt: skip
+            lines.insert(
+                0,
+                f"waiting for the database (locked by another program) "
+                f"{wait[0]:.0f} s: {wait[1]} samples held, none lost",
+            )
         if run.keyboard is not None:
             lines.append(f"{frame.task.keyboard_aim_label} {run.keyboard.aim_rad:+4.2f} rad")
         text.append("\n".join(lines))
@@ -115,4 +119,3 @@ class KeyboardMixin:
 
     def action_end_trial(self) -> None:
         self._press("end_trial")
-

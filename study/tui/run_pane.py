@@ -46,6 +46,8 @@ PACES: tuple[float | None, ...] = (1.0, 4.0, None)
 """Pace choices for a simulated participant (times real time; None: as fast as it goes)."""
 REDRAW_HZ = 30.0
 """Live-view redraws per second (the issue asks for >= 20 Hz; 30 leaves room on a busy machine)."""
+
+
 class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=True):
     """Run a participant's next trial with a live view."""
 
@@ -145,8 +147,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             (code, task, condition), at = self._ended_at
             row = next((r for r in roster.participants if r["code"] == code), None)
             blocks = row["blocks"] if row else []
-            if any(b["task"] == task and b["condition"] == condition
-                   and b["completed"] >= b["planned"] for b in blocks):  # fmt: skip
+            if any(
+                b["task"] == task and b["condition"] == condition and b["completed"] >= b["planned"]
+                for b in blocks
+            ):
                 self._breaks[code] = at
                 self._ended_at = None
         codes = [r["code"] for r in roster.participants]
@@ -255,10 +259,13 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 self._press("end_trial")
 
         self.app.push_screen(
-            Confirm(f"End {run.code}'s measured trial now? It is stored as completed and "
-                    "not successful (x stops it instead: kept as interrupted, repeated "
-                    "later)."), answered,
-        )  # fmt: skip
+            Confirm(
+                f"End {run.code}'s measured trial now? It is stored as completed and "
+                "not successful (x stops it instead: kept as interrupted, repeated "
+                "later)."
+            ),
+            answered,
+        )
 
     def action_start(self) -> None:
         code, nxt = self.code, self._next
@@ -268,8 +275,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         if due:  # the session flow: a finished block's questionnaire before the next block
             task, condition = due
             self._show_next()
-            self.app.notify(f"{code} finished {task}/{condition}: its NASA-TLX comes before "
-                            "the next block (F4)", severity="warning")  # fmt: skip
+            self.app.notify(
+                f"{code} finished {task}/{condition}: its NASA-TLX comes before "
+                "the next block (F4)",
+                severity="warning",
+            )
             return
         left = self.break_left_s(code)
         if left > 0:
@@ -281,10 +291,13 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                     self._start(code, nxt)
 
             self.app.push_screen(
-                Confirm(f"{code}'s break after the last block has {left:.0f} s left of the "
-                        f"design's {self.roster.break_s if self.roster else 0:g} s. Start the "
-                        "next block now?"), answered,
-            )  # fmt: skip
+                Confirm(
+                    f"{code}'s break after the last block has {left:.0f} s left of the "
+                    f"design's {self.roster.break_s if self.roster else 0:g} s. Start the "
+                    "next block now?"
+                ),
+                answered,
+            )
             return
         if code not in self._checked:  # the session checklist, once per participant
             from study.tui.confirm import Confirm
@@ -295,9 +308,12 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                     self._start(code, nxt, checklist=True)
 
             self.app.push_screen(
-                Confirm(f"Session checklist for {code}: consent confirmed and the device "
-                        "checked? (recorded with the session)"), confirmed,
-            )  # fmt: skip
+                Confirm(
+                    f"Session checklist for {code}: consent confirmed and the device "
+                    "checked? (recorded with the session)"
+                ),
+                confirmed,
+            )
             return
         self._start(code, nxt)
 
@@ -342,9 +358,14 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         keyboard = TuiKeyboardDriver() if self.driver_kind == "keyboard" else None
         pace = 1.0 if keyboard is not None else self.pace
         self.run = TrialRun(
-            self.services.engine, None, code, self.driver_kind, pace, keyboard=keyboard,
+            self.services.engine,
+            None,
+            code,
+            self.driver_kind,
+            pace,
+            keyboard=keyboard,
             observer=observer,
-        )  # fmt: skip
+        )
         self.status = "starting"
         self.refresh_bindings()
         self._trial_task = get_task(nxt.task)
@@ -367,9 +388,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         from study.tui.confirm import Confirm
 
         self.app.push_screen(
-            Confirm(f"Stop {run.code}'s running trial? It is kept as interrupted and "
-                    "repeated later."), answered,
-        )  # fmt: skip
+            Confirm(
+                f"Stop {run.code}'s running trial? It is kept as interrupted and repeated later."
+            ),
+            answered,
+        )
 
     # -- the workers ----------------------------------------------------------------------
 
@@ -462,8 +485,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
         elif outcome.error:
             self.status = "failed"
-            text = (f"{outcome.code}: {outcome.error}; the next start marks the trial "
-                    "interrupted and repeats it")  # fmt: skip
+            text = (
+                f"{outcome.code}: {outcome.error}; the next start marks the trial "
+                "interrupted and repeats it"
+            )
         elif outcome.interrupted:
             self.status = "interrupted"
             text = f"{outcome.code}: trial stopped; kept as interrupted, to be repeated"

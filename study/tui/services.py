@@ -148,9 +148,11 @@ class StudyServices:
             with Session(self.engine) as session:
                 design = load_study(session)[1]
             self._lsl["observer"] = lasting_observers(
-                self.engine, design, self.lsl_publish,
+                self.engine,
+                design,
+                self.lsl_publish,
                 lambda line: self._lsl.get("notice", lambda _: None)(line),
-            )  # fmt: skip
+            )
         return self._lsl["observer"]
 
     def close_lsl(self) -> None:

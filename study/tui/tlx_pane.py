@@ -33,17 +33,37 @@ __all__ = ["TLX_SCALES", "PairChoice", "TlxPane"]
 
 TLX_SCALES = {
     "mental": ("Mental demand", "How mentally demanding was the task?", "Very low", "Very high"),
-    "physical": ("Physical demand", "How physically demanding was the task?", "Very low",
-                 "Very high"),
-    "temporal": ("Temporal demand", "How hurried or rushed was the pace of the task?",
-                 "Very low", "Very high"),
-    "performance": ("Performance", "How successful were you in accomplishing what you were "
-                    "asked to do?", "Perfect", "Failure"),
-    "effort": ("Effort", "How hard did you have to work to accomplish your level of "
-               "performance?", "Very low", "Very high"),
-    "frustration": ("Frustration", "How insecure, discouraged, irritated, stressed, and "
-                    "annoyed were you?", "Very low", "Very high"),
-}  # fmt: skip
+    "physical": (
+        "Physical demand",
+        "How physically demanding was the task?",
+        "Very low",
+        "Very high",
+    ),
+    "temporal": (
+        "Temporal demand",
+        "How hurried or rushed was the pace of the task?",
+        "Very low",
+        "Very high",
+    ),
+    "performance": (
+        "Performance",
+        "How successful were you in accomplishing what you were asked to do?",
+        "Perfect",
+        "Failure",
+    ),
+    "effort": (
+        "Effort",
+        "How hard did you have to work to accomplish your level of performance?",
+        "Very low",
+        "Very high",
+    ),
+    "frustration": (
+        "Frustration",
+        "How insecure, discouraged, irritated, stressed, and annoyed were you?",
+        "Very low",
+        "Very high",
+    ),
+}
 """subscale -> (title, question, low anchor, high anchor), as on the NASA-TLX form."""
 
 
@@ -181,8 +201,9 @@ class TlxPane(SafeWorkers, VerticalScroll):
             yield PairChoice(k + 1, ("", ""), id=f"pair-{k}")
         with Horizontal(classes="row"):
             yield Label("Reason ")
-            yield Input(id="reason", placeholder="for an edit, or a block not run yet",
-                        compact=True)  # fmt: skip
+            yield Input(
+                id="reason", placeholder="for an edit, or a block not run yet", compact=True
+            )
         yield Button("Save (ctrl+s)", id="save", compact=True)
         yield Static("", id="tlx-status")
         yield Static("", id="audit")
@@ -218,8 +239,10 @@ class TlxPane(SafeWorkers, VerticalScroll):
         if code == self._blocks_code:  # already shown (open_block, then Select.Changed)
             return
         self._blocks_code = code
-        row = next((r for r in (self.roster.participants if self.roster else ()) if
-                    r["code"] == code), None)  # fmt: skip
+        row = next(
+            (r for r in (self.roster.participants if self.roster else ()) if r["code"] == code),
+            None,
+        )
         blocks = [f"{b['task']}/{b['condition']}" for b in row["blocks"]] if row else []
         self.query_one("#tlx-block", Select).set_options([(b, b) for b in blocks])
         seed = self.roster.seed if self.roster else 0
@@ -306,11 +329,15 @@ class TlxPane(SafeWorkers, VerticalScroll):
             return
         typed_meanwhile = self.form_state()
         self.editing_id = None if response is None else response.id
-        stored = EMPTY if response is None else FormState(
-            tuple(str(getattr(response, s)) for s in TLX_SUBSCALES),
-            tuple([c for _, _, c in (response.pairwise or [])] + [None] * 15)[:15],
-            "",
-        )  # fmt: skip
+        stored = (
+            EMPTY
+            if response is None
+            else FormState(
+                tuple(str(getattr(response, s)) for s in TLX_SUBSCALES),
+                tuple([c for _, _, c in (response.pairwise or [])] + [None] * 15)[:15],
+                "",
+            )
+        )
         self._apply(stored)
         self._baseline, self.loaded_block = stored, block
         state = "stored: editing it needs a reason" if response is not None else "new"
@@ -392,8 +419,11 @@ class TlxPane(SafeWorkers, VerticalScroll):
     def action_save(self) -> None:
         block = self.loaded_block
         if block is None:
-            why = "pick a participant and a block first" if self._shown is None else (
-                "the block's answers are still loading")  # fmt: skip
+            why = (
+                "pick a participant and a block first"
+                if self._shown is None
+                else ("the block's answers are still loading")
+            )
             self._set_status(f"refused: {why}", notify=True)
             return
         state = self.form_state()
@@ -435,8 +465,9 @@ class TlxPane(SafeWorkers, VerticalScroll):
         except Exception:  # the run screen says why; the answers are stored regardless
             observer = None
         try:
-            _, new = store_tlx(self.services.engine, *block, ratings, chosen, reason,
-                               observer=observer)  # fmt: skip
+            _, new = store_tlx(
+                self.services.engine, *block, ratings, chosen, reason, observer=observer
+            )
         except ValueError as exc:
             self.app.call_from_thread(self._set_status, f"refused: {exc}", True)
             return

@@ -62,14 +62,14 @@ class Simulation:
                 estimator = self._load()
                 for task in tasks():  # the tasks with a dial share the compiled loop
                     if task.has_dial:
-                        loop = task.make_loop("HV", 0, estimator=estimator,
-                                              context=task.session_context())  # fmt: skip
+                        loop = task.make_loop(
+                            "HV", 0, estimator=estimator, context=task.session_context()
+                        )
                         loop.start(SimulatedOperator())
                         loop.advance(0.05)
                         break
                 self.estimator = estimator
             return self.estimator
-
 
     def prepare_in_background(
         self, done: Callable[[], None], failed: Callable[[BaseException], None]

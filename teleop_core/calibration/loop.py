@@ -146,9 +146,18 @@ class Calibrator:
         reason = _verdict(cand, self.min_gain, self.alpha)
         if not reason:
             own = effect_coefficients(coef, effect, data.signals, cand.searched_value)
-            reason = implausible(effect, own, cand.searched_value, self.base_.out,
-                                 self.base_.unit, data.signals,
-                                 self.base_.passive_loop_sign) or ""  # fmt: skip
+            reason = (
+                implausible(
+                    effect,
+                    own,
+                    cand.searched_value,
+                    self.base_.out,
+                    self.base_.unit,
+                    data.signals,
+                    self.base_.passive_loop_sign,
+                )
+                or ""
+            )
         edge = _search_edge(effect, cand.searched_value, data.signals)
         if not reason and edge and UNLOCATED_AT.get(cand.family) == edge[0]:
             reason = f"not located: {edge[1]}"
@@ -184,9 +193,11 @@ class Calibrator:
             )
         families = list(self.families or self.model.families)
         families = [f for f in families if all(k in data.signals for k in EFFECTS[f].needs)]
-        open_terms = [] if self.families else [
-            f for f, e in OPEN_TERMS.items() if all(k in data.signals for k in e.needs)
-        ]  # fmt: skip
+        open_terms = (
+            []
+            if self.families
+            else [f for f, e in OPEN_TERMS.items() if all(k in data.signals for k in e.needs)]
+        )
         self.train_, self.test_ = self._split(len(data), data.held_out_blocks)
         # the base model's own assumptions (eq. 1's sign width) fitted on training only
         self.base_ = self.model.fitted_to(data, self.train_)
@@ -278,16 +289,29 @@ class Calibrator:
         ):
             share = (mse[i] - mse[i + 1]) / explained if explained > 0 else 0.0
             if alike:
-                ambiguous.append({"families": [e.family, *alike], "params": p["params"],
-                                  "ci": p["ci"], "rmse_after_step": r,
-                                  "share_of_explained_variance": share})  # fmt: skip
+                ambiguous.append(
+                    {
+                        "families": [e.family, *alike],
+                        "params": p["params"],
+                        "ci": p["ci"],
+                        "rmse_after_step": r,
+                        "share_of_explained_variance": share,
+                    }
+                )
             elif isinstance(e, OpenTerm):
-                discovered.append({**term_report(e, p["params"], p["ci"], share),
-                                   "rmse_after_step": r})  # fmt: skip
+                discovered.append(
+                    {**term_report(e, p["params"], p["ci"], share), "rmse_after_step": r}
+                )
             else:
-                added.append({"family": e.family, "params": p["params"], "ci": p["ci"],
-                              "rmse_after_step": r,
-                              "share_of_explained_variance": share})  # fmt: skip
+                added.append(
+                    {
+                        "family": e.family,
+                        "params": p["params"],
+                        "ci": p["ci"],
+                        "rmse_after_step": r,
+                        "share_of_explained_variance": share,
+                    }
+                )
         in_model = {e.family for e, _ in self.chain_}
         last: dict[str, Candidate] = {}
         for c in self.candidates_:

@@ -44,20 +44,26 @@ def implausible(
     if effect.family == "hysteresis" and loop_sign and constant and half is not None:
         if half * loop_sign <= 0:
             side = "positive" if loop_sign > 0 else "negative"
-            return (f"implausible: hysteresis half loop {half:.3g} {unit.replace('_', ' ')} "
-                    f"is a negative loop (a loss between drive and force gives a {side} "
-                    "one here)")  # fmt: skip
+            return (
+                f"implausible: hysteresis half loop {half:.3g} {unit.replace('_', ' ')} "
+                f"is a negative loop (a loss between drive and force gives a {side} "
+                "one here)"
+            )
     if effect.family == "stribeck":
         excess = next(v for k, v in params.items() if k.startswith("static_minus_coulomb"))
         if excess <= 0:
-            return (f"implausible: static - Coulomb friction {excess:.3g} <= 0 (a Stribeck "
-                    "friction falls with speed)")  # fmt: skip
+            return (
+                f"implausible: static - Coulomb friction {excess:.3g} <= 0 (a Stribeck "
+                "friction falls with speed)"
+            )
     if effect.family == "drift" and effect.searched is not None:
         grid = effect.grid(signals)
         lo, hi = float(np.min(grid)), float(np.max(grid))
         if value <= lo * 1.001 or value >= hi * 0.999:
-            return (f"implausible: drift time constant {value:.3g} s at the end of its "
-                    f"search range [{lo:.3g}, {hi:.3g}] s")  # fmt: skip
+            return (
+                f"implausible: drift time constant {value:.3g} s at the end of its "
+                f"search range [{lo:.3g}, {hi:.3g}] s"
+            )
     return None
 
 

@@ -173,9 +173,13 @@ class RigidAxisBase(BaseModel):
             cutoff = fit_cutoff(t, q, u, self.columns_of, int(self.train_fraction * len(t)))
         qf, qd, qdd, cutoff = derivatives(t, q, cutoff)
         signals: Signals = {
-            "t": t, "angle": qf, "speed": qd, "accel": qdd, "direction": qd,
+            "t": t,
+            "angle": qf,
+            "speed": qd,
+            "accel": qdd,
+            "direction": qd,
             "direction_sign": np.sign(qd),
-        }  # fmt: skip
+        }
         for column in frame.columns:
             if column not in RIGID_COLUMNS and column not in signals:
                 signals[column] = frame[column].to_numpy(float)

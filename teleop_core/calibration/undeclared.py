@@ -30,8 +30,13 @@ from teleop_core.calibration.models import CalibrationData, FollowerBase
 from teleop_core.calibration.synthetic import JND_N, follower_recording
 from teleop_core.calibration.verdict import distance_since_reversal
 
-UNDECLARED = ("load_friction", "gain_change", "ripple_harmonics", "presliding_memory",
-              "hidden_force")  # fmt: skip
+UNDECLARED = (
+    "load_friction",
+    "gain_change",
+    "ripple_harmonics",
+    "presliding_memory",
+    "hidden_force",
+)
 VISIBLE = UNDECLARED[:-1]
 """Those a model of the recorded channels can explain."""
 
@@ -64,9 +69,12 @@ def _shape(kind: str, s: dict[str, Float1D], rng: np.random.Generator) -> tuple[
 
 
 def undeclared_recording(
-    kind: str, duration_s: float = 240.0, rate_hz: float = 200.0, seed: int = 0,
+    kind: str,
+    duration_s: float = 240.0,
+    rate_hz: float = 200.0,
+    seed: int = 0,
     size_n: float = JND_N,
-) -> tuple[CalibrationData, Float2D, dict[str, Any]]:  # fmt: skip
+) -> tuple[CalibrationData, Float2D, dict[str, Any]]:
     """Calibration data with `kind` added, the oracle's extra columns, and the truth."""
     rec, _ = follower_recording(duration_s, (), rate_hz=rate_hz, seed=seed)
     data = FollowerBase().data(rec)

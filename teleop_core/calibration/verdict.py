@@ -135,10 +135,15 @@ def binned_share(residual: Float1D, x: Float1D, bins: int = BINS) -> tuple[float
     ss_between = float(np.sum(count * (mean - e.mean()) ** 2))
     share = ss_between / ss_total if ss_total > 0 else 0.0
     table = [
-        {"low": float(lows[i]), "high": float(highs[i]), "n": int(count[i]),
-         "mean_residual": float(mean[i])}
-        for i in range(len(count)) if count[i]
-    ]  # fmt: skip
+        {
+            "low": float(lows[i]),
+            "high": float(highs[i]),
+            "n": int(count[i]),
+            "mean_residual": float(mean[i]),
+        }
+        for i in range(len(count))
+        if count[i]
+    ]
     return share, table
 
 
@@ -179,5 +184,8 @@ def unexplained(
 def verdict(residual: Float1D, where: dict[str, Any]) -> str:
     """`white` or `structure_remains` (see the module docstring)."""
     smooth = durbin_watson(np.asarray(residual, float)) < DW_STRUCTURE
-    return "structure_remains" if smooth or where["share_beyond_chance"] >= SHARE_STRUCTURE else (
-        "white")  # fmt: skip
+    return (
+        "structure_remains"
+        if smooth or where["share_beyond_chance"] >= SHARE_STRUCTURE
+        else ("white")
+    )

@@ -80,19 +80,25 @@ class MemorySpec:
     @property
     def feature_names(self) -> tuple[str, ...]:
         """All GRU inputs per time step: the base inputs, then `col-ema<tau>s` each."""
-        extra = tuple(
-            f"{c}-ema{tau:g}s" for c in self.columns for tau in self.time_constants_s
-        ) if self.enabled else ()  # fmt: skip
+        extra = (
+            tuple(f"{c}-ema{tau:g}s" for c in self.columns for tau in self.time_constants_s)
+            if self.enabled
+            else ()
+        )
         return BASE_FEATURES + extra
 
     def kernel_table(self) -> Float2D:
         """Shape (n_features, 2): [column index in BASE_FEATURES, 1 / tau] per feature, in
         `feature_names` order; what `stream.stream_push` reads (0 rows: no memory)."""
-        rows = [
-            (float(BASE_FEATURES.index(c)), 1.0 / tau)
-            for c in self.columns
-            for tau in self.time_constants_s
-        ] if self.enabled else []  # fmt: skip
+        rows = (
+            [
+                (float(BASE_FEATURES.index(c)), 1.0 / tau)
+                for c in self.columns
+                for tau in self.time_constants_s
+            ]
+            if self.enabled
+            else []
+        )
         return np.ascontiguousarray(np.array(rows, dtype=np.float64).reshape(-1, 2))
 
     def to_dict(self) -> dict[str, Any]:

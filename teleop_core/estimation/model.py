@@ -324,25 +324,50 @@ class CausalEstimator:
     def kernel_arrays(self) -> tuple:
         """The arrays in the order the loop's kernel unpacks them (`stream.NO_STREAM_ARRAYS`
         has dummies of the same types)."""
-        return (self.buffer, self.state, self.mean, self.std, self.mem, self.physics, *self.weights,
-                self.target, self.ekf_state, self.ekf_settings)  # fmt: skip
+        return (
+            self.buffer,
+            self.state,
+            self.mean,
+            self.std,
+            self.mem,
+            self.physics,
+            *self.weights,
+            self.target,
+            self.ekf_state,
+            self.ekf_settings,
+        )
 
     def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
         """Add a sample (s, A, rad/s, optionally rad/s^2) to the window without estimating:
         the 50 Hz pipeline sees every 100 Hz sample but estimates on every other one."""
         given = alpha is not None
         stream_push(
-            self.state, self.buffer, self.mean, self.std, self.mem, t, iq, omega,
-            alpha if given else 0.0, given,
-        )  # fmt: skip
+            self.state,
+            self.buffer,
+            self.mean,
+            self.std,
+            self.mem,
+            t,
+            iq,
+            omega,
+            alpha if given else 0.0,
+            given,
+        )
 
     def estimate(self) -> tuple[float, float, float] | None:
         """(F_physics, F*_GRU, F*_Final) in N from the samples pushed so far, or None
         while the window fills."""
         ok = stream_estimate(
-            self.state, self.buffer, self.physics, *self.weights, self.target,
-            self.ekf_state, self.ekf_settings, self.dt_s, self._out,
-        )  # fmt: skip
+            self.state,
+            self.buffer,
+            self.physics,
+            *self.weights,
+            self.target,
+            self.ekf_state,
+            self.ekf_settings,
+            self.dt_s,
+            self._out,
+        )
         if not ok:
             return None
         out = self._out

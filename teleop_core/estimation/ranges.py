@@ -39,9 +39,7 @@ class InputRange:
     @classmethod
     def fit(cls, features: Float2D) -> InputRange:
         """From per-sample inputs, shape (n, 3)."""
-        return cls(
-            tuple(features.min(axis=0).tolist()), tuple(features.max(axis=0).tolist())
-        )
+        return cls(tuple(features.min(axis=0).tolist()), tuple(features.max(axis=0).tolist()))
 
     def contains(self, features: Float2D) -> np.ndarray:
         """True for each row of `features` (n, 3) whose every input is inside the range."""

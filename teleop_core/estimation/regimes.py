@@ -38,9 +38,11 @@ from teleop_core.estimation.metrics import rmse
 SPEED = ("rest", "slow", "fast", "reversal")
 DIRECTION = ("forward", "backward", "none")
 LOAD = ("low", "mid", "high")
-LABELS = tuple(f"speed:{s}" for s in SPEED) + tuple(
-    f"direction:{d}" for d in DIRECTION
-) + tuple(f"load:{ld}" for ld in LOAD)
+LABELS = (
+    tuple(f"speed:{s}" for s in SPEED)
+    + tuple(f"direction:{d}" for d in DIRECTION)
+    + tuple(f"load:{ld}" for ld in LOAD)
+)
 """Every regime label, as the summaries name them."""
 DIMENSIONS = 3
 """Speed, direction, load: each sample carries one label of each."""

@@ -31,8 +31,23 @@ ESTIMATE_OUT = 3
 
 
 _Z1, _Z2 = np.zeros(1), np.zeros((1, 1))
-NO_STREAM_ARRAYS = (np.zeros((1, N_FEATURES)), _Z1, _Z1, _Z1, np.zeros((0, 2)), _Z1, _Z2, _Z2, _Z1,
-                    _Z1, _Z1, 0.0, _Z1, _Z1, _Z1)  # fmt: skip
+NO_STREAM_ARRAYS = (
+    np.zeros((1, N_FEATURES)),
+    _Z1,
+    _Z1,
+    _Z1,
+    np.zeros((0, 2)),
+    _Z1,
+    _Z2,
+    _Z2,
+    _Z1,
+    _Z1,
+    _Z1,
+    0.0,
+    _Z1,
+    _Z1,
+    _Z1,
+)
 """`CausalEstimator.kernel_arrays()` without an estimator: dummies of the same types, so
 one compiled loop kernel serves both."""
 
@@ -60,8 +75,10 @@ def stream_push(
     n = buf.shape[0]
     for i in range(n - 1):
         buf[i, X_IQ], buf[i, X_OMEGA], buf[i, X_ALPHA] = (
-            buf[i + 1, X_IQ], buf[i + 1, X_OMEGA], buf[i + 1, X_ALPHA],
-        )  # fmt: skip
+            buf[i + 1, X_IQ],
+            buf[i + 1, X_OMEGA],
+            buf[i + 1, X_ALPHA],
+        )
         for j in range(mem.shape[0]):
             buf[i, N_FEATURES + j] = buf[i + 1, N_FEATURES + j]
     buf[n - 1, X_IQ] = (iq - mean[X_IQ]) / std[X_IQ]

@@ -250,9 +250,17 @@ class TeleopLoop:
             # on the fast path every packet crosses the kernel's own link
             packets = NO_PACKETS if self._fast else self._packets(k, nxt)
             m = kernel(
-                n, *state, env.state, env.params, log, packets,
-                self._est_arrays, self._noise, self._samples, links,
-            )  # fmt: skip
+                n,
+                *state,
+                env.state,
+                env.params,
+                log,
+                packets,
+                self._est_arrays,
+                self._noise,
+                self._samples,
+                links,
+            )
             c.ticks = nxt
             if m:
                 blocks.append(self._samples[:m].copy())

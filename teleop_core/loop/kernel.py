@@ -148,9 +148,7 @@ def _cached_kernel(env_fn: Callable[..., None]) -> Callable[..., None] | None:
     return build_ahead_of_time(folder, key, jit.py_func, jit) or jit
 
 
-def _jit_kernel(
-    folder: Path, module: str, name: str, key: str
-) -> tuple[Callable[..., None], bool]:
+def _jit_kernel(folder: Path, module: str, name: str, key: str) -> tuple[Callable[..., None], bool]:
     """The kernel through numba's on-disk cache: its source written once into a module
     of its own that imports the environment as a global (numba caches a module-level
     function, not a closure); and whether the source was written just now."""

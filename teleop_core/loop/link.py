@@ -169,8 +169,11 @@ def kernel_deliver(
             # remove: move the last row here
             n -= 1
             queue[i, Q_ARRIVAL], queue[i, Q_SEQ], queue[i, Q_V1], queue[i, Q_V2] = (
-                queue[n, Q_ARRIVAL], queue[n, Q_SEQ], queue[n, Q_V1], queue[n, Q_V2],
-            )  # fmt: skip
+                queue[n, Q_ARRIVAL],
+                queue[n, Q_SEQ],
+                queue[n, Q_V1],
+                queue[n, Q_V2],
+            )
         else:
             i += 1
     ls[LS_COUNT] = n
@@ -182,10 +185,15 @@ def kernel_deliver(
 
 
 NO_LINKS = (
-    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(LINK_PARAM_SIZE),
-    np.zeros((1, QUEUE_WIDTH)), np.zeros(LINK_STATE_SIZE), np.zeros(LINK_PARAM_SIZE),
-    np.zeros(1), np.zeros(1),
-)  # fmt: skip
+    np.zeros((1, QUEUE_WIDTH)),
+    np.zeros(LINK_STATE_SIZE),
+    np.zeros(LINK_PARAM_SIZE),
+    np.zeros((1, QUEUE_WIDTH)),
+    np.zeros(LINK_STATE_SIZE),
+    np.zeros(LINK_PARAM_SIZE),
+    np.zeros(1),
+    np.zeros(1),
+)
 """The kernel's link arrays when the loop runs its links in Python (same types)."""
 NO_PACKETS = np.zeros((0, SCHEDULE_WIDTH))
 
@@ -201,10 +209,15 @@ def kernel_links(to_master: LinkParams, to_follower: LinkParams) -> tuple:
         return ls
 
     return (
-        np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(to_master),
-        np.zeros((QUEUE_ROWS, QUEUE_WIDTH)), state(), link_vector(to_follower),
-        np.zeros(0), np.zeros(1),
-    )  # fmt: skip
+        np.zeros((QUEUE_ROWS, QUEUE_WIDTH)),
+        state(),
+        link_vector(to_master),
+        np.zeros((QUEUE_ROWS, QUEUE_WIDTH)),
+        state(),
+        link_vector(to_follower),
+        np.zeros(0),
+        np.zeros(1),
+    )
 
 
 def packet_schedule(

@@ -301,9 +301,21 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
                     stream_push(st, buf, mean, std, mem, t, iq, row[LOG_OMEGA_EST], 0.0, False)
                     if estimating:
                         ok = stream_estimate(
-                            st, buf, pv, w_ih, w_hh, b_ih, b_hh, w_out, b_out, target,
-                            ekf_s, ekf_v, mp[M_EST_DT], est_out,
-                        )  # fmt: skip
+                            st,
+                            buf,
+                            pv,
+                            w_ih,
+                            w_hh,
+                            b_ih,
+                            b_hh,
+                            w_out,
+                            b_out,
+                            target,
+                            ekf_s,
+                            ekf_v,
+                            mp[M_EST_DT],
+                            est_out,
+                        )
                         loop[L_FORCE_EST] = est_out[EST_FINAL] if ok else 0.0
                 elif estimating:
                     loop[L_FORCE_EST] = row[LOG_PROXIMAL]

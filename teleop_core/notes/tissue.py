@@ -198,9 +198,13 @@ class NotesAbdomen:
         )
 
     def step(
-        self, depth_m: float, roll_rad: float, speed_m_s: float, roll_rate_rad_s: float,
+        self,
+        depth_m: float,
+        roll_rad: float,
+        speed_m_s: float,
+        roll_rate_rad_s: float,
         dt_s: float,
-    ) -> TissueState:  # fmt: skip
+    ) -> TissueState:
         """Advance the tissue's state by `dt_s` with the scope at (depth, roll) moving at
         (speed, roll rate); the force and torque it demands."""
         p = self.params
@@ -230,7 +234,7 @@ class NotesAbdomen:
                 self.breached = True
         elif self.at_fold(depth_m, roll_rad):
             tip = p.fold_stiffness_n_per_m * (depth_m - p.fold_depth_m)
-                # T = R z + c_r omega
+            # T = R z + c_r omega
         torque = p.torque_level_n_m(depth_m, self.breached) * self.z_roll
         torque += p.roll_damping_n_m_s_per_rad * roll_rate_rad_s
         # the tube passes a counter-clockwise torque at eta

@@ -45,31 +45,47 @@ def _old_database(url: str) -> None:
         command.upgrade(alembic_config(conn), OLD)
     now = datetime(2026, 11, 1, tzinfo=UTC)
     with engine.begin() as conn:
-        conn.execute(text(
-            "INSERT INTO studies (id, name, design_toml, design, seed, created_at) "
-            "VALUES (1, 's', '', :design, 1, :now)"
-        ), {"design": json.dumps({"tasks": ["lcca"]}), "now": now})  # fmt: skip
-        conn.execute(text(
-            "INSERT INTO participants (id, study_id, code, \"group\", condition_order, "
-            "created_at) VALUES (1, 1, 'P001', 'novice', :order, :now)"
-        ), {"order": json.dumps(["VO", "HV"]), "now": now})  # fmt: skip
+        conn.execute(
+            text(
+                "INSERT INTO studies (id, name, design_toml, design, seed, created_at) "
+                "VALUES (1, 's', '', :design, 1, :now)"
+            ),
+            {"design": json.dumps({"tasks": ["lcca"]}), "now": now},
+        )
+        conn.execute(
+            text(
+                'INSERT INTO participants (id, study_id, code, "group", condition_order, '
+                "created_at) VALUES (1, 1, 'P001', 'novice', :order, :now)"
+            ),
+            {"order": json.dumps(["VO", "HV"]), "now": now},
+        )
         for trial_id, rows in _rows().items():
-            conn.execute(text(
-                "INSERT INTO trials (id, participant_id, task, condition, block_index, "
-                "trial_index, practice, attempt, status, created_at) VALUES "
-                "(:id, 1, 'lcca', 'VO', 0, :id, false, 1, 'completed', :now)"
-            ), {"id": trial_id, "now": now})  # fmt: skip
+            conn.execute(
+                text(
+                    "INSERT INTO trials (id, participant_id, task, condition, block_index, "
+                    "trial_index, practice, attempt, status, created_at) VALUES "
+                    "(:id, 1, 'lcca', 'VO', 0, :id, false, 1, 'completed', :now)"
+                ),
+                {"id": trial_id, "now": now},
+            )
             conn.execute(
                 text(
                     "INSERT INTO samples (trial_id, seq, t_s, insertion_m, branch, "
                     "proximal_force_n, distal_force_n) VALUES (:trial, :seq, :t, :x, :b, :p, :d)"
                 ),
                 [
-                    {"trial": trial_id, "seq": r[0], "t": r[1], "x": r[2], "b": r[3],
-                     "p": r[4], "d": r[5]}
+                    {
+                        "trial": trial_id,
+                        "seq": r[0],
+                        "t": r[1],
+                        "x": r[2],
+                        "b": r[3],
+                        "p": r[4],
+                        "d": r[5],
+                    }
                     for r in rows
                 ],
-            )  # fmt: skip
+            )
     engine.dispose()
 
 
@@ -89,10 +105,12 @@ def test_old_sample_rows_move_into_chunks_and_back(db_url: str) -> None:
     assert inspect_database(db_url).samples == 2750  # and now the chunks' samples
     try:
         with engine.connect() as conn:
-            chunks = conn.execute(text(
-                "SELECT trial_id, first_seq, n_samples, t_first_s, t_last_s FROM sample_chunks "
-                "ORDER BY trial_id, first_seq"
-            )).all()  # fmt: skip
+            chunks = conn.execute(
+                text(
+                    "SELECT trial_id, first_seq, n_samples, t_first_s, t_last_s FROM sample_chunks "
+                    "ORDER BY trial_id, first_seq"
+                )
+            ).all()
             tables = set(inspect(conn).get_table_names())
         assert "samples" not in tables
         # 1 kHz: [0, 1) s, [1, 2) s, [2, 2.5) s. 100 Hz: seq 0-99, then from the gap

@@ -24,23 +24,51 @@ from study.protocol.tasks import get_task
 
 OLD = "0005_sample_chunks"
 OLD_COLUMNS = (
-    "t_s", "insertion_m", "rotation_rad", "tip_x_m", "tip_y_m", "tip_z_m", "branch",
-    "proximal_force_n", "proximal_force_est_n", "distal_force_n", "dial_angle_rad",
+    "t_s",
+    "insertion_m",
+    "rotation_rad",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "branch",
+    "proximal_force_n",
+    "proximal_force_est_n",
+    "distal_force_n",
+    "dial_angle_rad",
     "dial_torque_n_m",
-)  # fmt: skip
+)
 OLD_SCHEMA = pa.schema(
     [pa.field(c, pa.string() if c == "branch" else pa.float64(), c != "t_s") for c in OLD_COLUMNS]
 )
 NOTES_NAMES = (
-    "t_s", "insertion_m", "rotation_rad", "tip_x_m", "tip_y_m", "tip_z_m", "region",
-    "force_demanded_n", "force_rendered_n", "tip_force_n", "dial_angle_rad",
-    "torque_rendered_n_m", "torque_demanded_n_m",
-)  # fmt: skip
+    "t_s",
+    "insertion_m",
+    "rotation_rad",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "region",
+    "force_demanded_n",
+    "force_rendered_n",
+    "tip_force_n",
+    "dial_angle_rad",
+    "torque_rendered_n_m",
+    "torque_demanded_n_m",
+)
 LCCA_NAMES = (
-    "t_s", "insertion_m", "rotation_rad", "tip_x_m", "tip_y_m", "tip_z_m", "branch",
-    "reference_force_n", "proximal_force_n", "distal_force_n", "dial_angle_rad",
+    "t_s",
+    "insertion_m",
+    "rotation_rad",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "branch",
+    "reference_force_n",
+    "proximal_force_n",
+    "distal_force_n",
+    "dial_angle_rad",
     "dial_torque_n_m",
-)  # fmt: skip
+)
 TRIALS = {1: "lcca", 2: "notes", 3: "probe"}
 """Trial id -> task; `probe` stands for a lab's task the revision does not know."""
 
@@ -65,29 +93,46 @@ def _old_database(url: str) -> dict[int, list[pa.RecordBatch]]:
     now = datetime(2026, 11, 1, tzinfo=UTC)
     written: dict[int, list[pa.RecordBatch]] = {}
     with engine.begin() as conn:
-        conn.execute(text(
-            "INSERT INTO studies (id, name, design_toml, design, seed, created_at) "
-            "VALUES (1, 's', '', :design, 1, :now)"
-        ), {"design": json.dumps({"tasks": ["lcca", "notes"]}), "now": now})  # fmt: skip
-        conn.execute(text(
-            "INSERT INTO participants (id, study_id, code, \"group\", condition_order, "
-            "created_at) VALUES (1, 1, 'P001', 'novice', :order, :now)"
-        ), {"order": json.dumps(["VO", "HV"]), "now": now})  # fmt: skip
+        conn.execute(
+            text(
+                "INSERT INTO studies (id, name, design_toml, design, seed, created_at) "
+                "VALUES (1, 's', '', :design, 1, :now)"
+            ),
+            {"design": json.dumps({"tasks": ["lcca", "notes"]}), "now": now},
+        )
+        conn.execute(
+            text(
+                'INSERT INTO participants (id, study_id, code, "group", condition_order, '
+                "created_at) VALUES (1, 1, 'P001', 'novice', :order, :now)"
+            ),
+            {"order": json.dumps(["VO", "HV"]), "now": now},
+        )
         for trial_id, task in TRIALS.items():
-            conn.execute(text(
-                "INSERT INTO trials (id, participant_id, task, condition, block_index, "
-                "trial_index, practice, attempt, status, created_at) VALUES "
-                "(:id, 1, :task, 'VO', 0, :id, false, 1, 'completed', :now)"
-            ), {"id": trial_id, "task": task, "now": now})  # fmt: skip
+            conn.execute(
+                text(
+                    "INSERT INTO trials (id, participant_id, task, condition, block_index, "
+                    "trial_index, practice, attempt, status, created_at) VALUES "
+                    "(:id, 1, :task, 'VO', 0, :id, false, 1, 'completed', :now)"
+                ),
+                {"id": trial_id, "task": task, "now": now},
+            )
             written[trial_id] = []
             for first, n in ((0, 5), (5, 3)):
                 batch = _old_chunk(trial_id, first, n)
                 message = batch.serialize()
-                conn.execute(text(
-                    "INSERT INTO sample_chunks (trial_id, first_seq, n_samples, t_first_s, "
-                    "t_last_s, raw_bytes, data) VALUES (:t, :f, :n, 0, 1, :raw, :data)"
-                ), {"t": trial_id, "f": first, "n": n, "raw": message.size,
-                    "data": pa.compress(message, codec="zstd", asbytes=True)})  # fmt: skip
+                conn.execute(
+                    text(
+                        "INSERT INTO sample_chunks (trial_id, first_seq, n_samples, t_first_s, "
+                        "t_last_s, raw_bytes, data) VALUES (:t, :f, :n, 0, 1, :raw, :data)"
+                    ),
+                    {
+                        "t": trial_id,
+                        "f": first,
+                        "n": n,
+                        "raw": message.size,
+                        "data": pa.compress(message, codec="zstd", asbytes=True),
+                    },
+                )
                 written[trial_id].append(batch)
     engine.dispose()
     return written
@@ -96,10 +141,13 @@ def _old_database(url: str) -> dict[int, list[pa.RecordBatch]]:
 def _stored(engine: Engine, trial_id: int) -> list[pa.RecordBatch]:
     """The trial's chunks decoded with plain pyarrow in their stored schemas."""
     with engine.connect() as conn:
-        rows = conn.execute(text(
-            "SELECT c.raw_bytes, c.data, s.data FROM sample_chunks c JOIN sample_schemas s "
-            "ON s.id = c.schema_id WHERE c.trial_id = :t ORDER BY c.first_seq"
-        ), {"t": trial_id}).all()  # fmt: skip
+        rows = conn.execute(
+            text(
+                "SELECT c.raw_bytes, c.data, s.data FROM sample_chunks c JOIN sample_schemas s "
+                "ON s.id = c.schema_id WHERE c.trial_id = :t ORDER BY c.first_seq"
+            ),
+            {"t": trial_id},
+        ).all()
     out = []
     for raw_bytes, data, schema_data in rows:
         schema = pa.ipc.read_schema(pa.py_buffer(bytes(schema_data)))
@@ -111,9 +159,12 @@ def _stored(engine: Engine, trial_id: int) -> list[pa.RecordBatch]:
 def _old_values(engine: Engine, trial_id: int) -> list[dict]:
     """The trial's chunks decoded in the old layout (after the downgrade)."""
     with engine.connect() as conn:
-        rows = conn.execute(text(
-            "SELECT raw_bytes, data FROM sample_chunks WHERE trial_id = :t ORDER BY first_seq"
-        ), {"t": trial_id}).all()  # fmt: skip
+        rows = conn.execute(
+            text(
+                "SELECT raw_bytes, data FROM sample_chunks WHERE trial_id = :t ORDER BY first_seq"
+            ),
+            {"t": trial_id},
+        ).all()
     return [
         pa.ipc.read_record_batch(
             pa.decompress(bytes(data), decompressed_size=raw, codec="zstd"), OLD_SCHEMA
@@ -129,8 +180,10 @@ def test_old_chunks_move_to_their_tasks_own_schemas_and_back(db_url: str) -> Non
         notes = _stored(engine, 2)
         assert [b.schema.names for b in notes] == [list(NOTES_NAMES)] * 2
         field = notes[0].schema.field("force_demanded_n")
-        assert field.metadata == {b"unit": b"N", b"description": (
-            b"tissue resistance on the scope, positive resisting insertion")}  # fmt: skip
+        assert field.metadata == {
+            b"unit": b"N",
+            b"description": (b"tissue resistance on the scope, positive resisting insertion"),
+        }
         for new, old in zip(notes, written[2], strict=True):
             assert new["region"] == old["branch"]
             assert new["force_demanded_n"] == old["proximal_force_n"]

@@ -22,27 +22,49 @@ def _old_database(url: str) -> None:
         command.upgrade(alembic_config(conn), OLD)
     now = datetime(2026, 11, 1, tzinfo=UTC)
     with engine.begin() as conn:
-        conn.execute(text(
-            "INSERT INTO studies (id, name, design_toml, design, seed, created_at) "
-            "VALUES (1, 's', '', :design, 1, :now)"
-        ), {"design": json.dumps({"tasks": ["lcca", "notes"]}), "now": now})  # fmt: skip
-        conn.execute(text(
-            "INSERT INTO participants (id, study_id, code, \"group\", condition_order, "
-            "created_at) VALUES (1, 1, 'P001', 'novice', :order, :now)"
-        ), {"order": json.dumps(["VO", "HV"]), "now": now})  # fmt: skip
+        conn.execute(
+            text(
+                "INSERT INTO studies (id, name, design_toml, design, seed, created_at) "
+                "VALUES (1, 's', '', :design, 1, :now)"
+            ),
+            {"design": json.dumps({"tasks": ["lcca", "notes"]}), "now": now},
+        )
+        conn.execute(
+            text(
+                'INSERT INTO participants (id, study_id, code, "group", condition_order, '
+                "created_at) VALUES (1, 1, 'P001', 'novice', :order, :now)"
+            ),
+            {"order": json.dumps(["VO", "HV"]), "now": now},
+        )
         for trial_id, task, proximal, distal, contacts, summary in (
             (1, "lcca", 0.81, 0.42, 2, {"peak_proximal_reference_force_n": 0.8}),
-            (2, "notes", 9.5, 3.25, None, {"peak_force_rendered_n": 5.6,
-                                           "push_over_capacity_fraction": 0.21}),
+            (
+                2,
+                "notes",
+                9.5,
+                3.25,
+                None,
+                {"peak_force_rendered_n": 5.6, "push_over_capacity_fraction": 0.21},
+            ),
             (3, "lcca", None, None, None, None),  # a trial that never completed
-        ):  # fmt: skip
-            conn.execute(text(
-                "INSERT INTO trials (id, participant_id, task, condition, block_index, "
-                "trial_index, practice, attempt, status, created_at, peak_proximal_force_n, "
-                "peak_distal_force_n, wall_contacts, summary) VALUES (:id, 1, :task, 'VO', 0, "
-                ":id, false, 1, 'completed', :now, :p, :d, :w, :s)"
-            ), {"id": trial_id, "task": task, "now": now, "p": proximal, "d": distal,
-                "w": contacts, "s": json.dumps(summary) if summary else None})  # fmt: skip
+        ):
+            conn.execute(
+                text(
+                    "INSERT INTO trials (id, participant_id, task, condition, block_index, "
+                    "trial_index, practice, attempt, status, created_at, peak_proximal_force_n, "
+                    "peak_distal_force_n, wall_contacts, summary) VALUES (:id, 1, :task, 'VO', 0, "
+                    ":id, false, 1, 'completed', :now, :p, :d, :w, :s)"
+                ),
+                {
+                    "id": trial_id,
+                    "task": task,
+                    "now": now,
+                    "p": proximal,
+                    "d": distal,
+                    "w": contacts,
+                    "s": json.dumps(summary) if summary else None,
+                },
+            )
     engine.dispose()
 
 
@@ -70,15 +92,19 @@ def test_old_measures_move_to_their_tasks_names_and_back(db_url: str) -> None:
     with engine.begin() as conn:
         command.downgrade(alembic_config(conn), OLD)
     with engine.connect() as conn:
-        back = conn.execute(text(
-            "SELECT id, peak_proximal_force_n, peak_distal_force_n, wall_contacts FROM trials "
-            "ORDER BY id"
-        )).all()  # fmt: skip
+        back = conn.execute(
+            text(
+                "SELECT id, peak_proximal_force_n, peak_distal_force_n, wall_contacts FROM trials "
+                "ORDER BY id"
+            )
+        ).all()
         tables = inspect(conn).get_table_names()
     with engine.begin() as conn:  # and up again, for the next test on this server
         command.upgrade(alembic_config(conn), head_revision())
     engine.dispose()
     assert [tuple(r) for r in back] == [
-        (1, 0.81, 0.42, 2), (2, 9.5, 3.25, None), (3, None, None, None)
-    ]  # fmt: skip
+        (1, 0.81, 0.42, 2),
+        (2, 9.5, 3.25, None),
+        (3, None, None, None),
+    ]
     assert "trial_measures" not in tables

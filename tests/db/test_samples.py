@@ -93,9 +93,7 @@ def test_values_round_trip_exactly_with_nulls_for_missing_columns(engine: Engine
         )
     with SampleReader(engine) as reader:
         rows = [
-            SimpleNamespace(**row)
-            for batch in reader.trial(trial_id)
-            for row in batch.to_pylist()
+            SimpleNamespace(**row) for batch in reader.trial(trial_id) for row in batch.to_pylist()
         ]
     assert [r.seq for r in rows] == list(range(100, 120))
     assert [r.proximal_force_n for r in rows] == force.tolist()  # bit-exact doubles

@@ -39,8 +39,9 @@ class Locker:
             "sys.stdin.readline(); db.execute('ROLLBACK'); db.close()\n"
             "print('released', flush=True)\n"
         )
-        self.process = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE,
-                                        stdout=subprocess.PIPE, text=True)  # fmt: skip
+        self.process = subprocess.Popen(
+            [sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+        )
         assert self.process.stdout.readline().strip() == "locked"
 
     def release(self) -> None:
@@ -59,8 +60,9 @@ def test_a_lock_during_the_trial_holds_the_samples_and_commits_them_after(
 ) -> None:
     trial_id = _trial(sqlite_engine)
     waits: list[tuple[float | None, int]] = []
-    writer = SampleWriter(sqlite_engine, trial_id, hold_s=60.0,
-                          on_wait=lambda s, n: waits.append((s, n)))  # fmt: skip
+    writer = SampleWriter(
+        sqlite_engine, trial_id, hold_s=60.0, on_wait=lambda s, n: waits.append((s, n))
+    )
     t = np.arange(1000) / 100.0  # 10 s at 100 Hz, handed in 0.5 s steps
     writer.extend(_columns(t[:150]))  # 1.5 s: committed (the writer commits ahead)
     before = _stored(sqlite_engine, trial_id)
@@ -84,8 +86,9 @@ def test_a_lock_during_the_trial_holds_the_samples_and_commits_them_after(
         stored = np.concatenate([b.column("t_s").to_numpy() for b in reader.trial(trial_id)])
     np.testing.assert_array_equal(stored, t)
     with sqlite_engine.connect() as conn:
-        seqs = conn.execute(select(SampleChunk.first_seq, SampleChunk.n_samples)
-                            .order_by(SampleChunk.first_seq)).all()  # fmt: skip
+        seqs = conn.execute(
+            select(SampleChunk.first_seq, SampleChunk.n_samples).order_by(SampleChunk.first_seq)
+        ).all()
     assert all(a + n == b for (a, n), (b, _) in itertools.pairwise(seqs))
 
 

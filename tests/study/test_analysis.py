@@ -31,11 +31,23 @@ def _long(values: dict[str, tuple[list[float], list[float]]], measure: str = "m"
         for i, (a, b) in enumerate(zip(vo, hv, strict=True)):
             code = f"{group[0].upper()}{i:02d}"
             rows += [
-                {"participant": code, "group": group, "task": "lcca", "condition": "VO",
-                 "measure": measure, "value": a},
-                {"participant": code, "group": group, "task": "lcca", "condition": "HV",
-                 "measure": measure, "value": b},
-            ]  # fmt: skip
+                {
+                    "participant": code,
+                    "group": group,
+                    "task": "lcca",
+                    "condition": "VO",
+                    "measure": measure,
+                    "value": a,
+                },
+                {
+                    "participant": code,
+                    "group": group,
+                    "task": "lcca",
+                    "condition": "HV",
+                    "measure": measure,
+                    "value": b,
+                },
+            ]
     return pd.DataFrame(rows)
 
 
@@ -156,8 +168,15 @@ def test_mixed_model_condition_effect_is_the_mean_paired_difference() -> None:
             base = rng.normal(10, 2)
             for cond, effect in (("VO", 0.0), ("HV", shift)):
                 for trial in range(3):
-                    rows.append({"participant": f"{group}{i}", "group": group, "task": "lcca",
-                                 "condition": cond, "m": base + effect + 0.1 * trial})  # fmt: skip
+                    rows.append(
+                        {
+                            "participant": f"{group}{i}",
+                            "group": group,
+                            "task": "lcca",
+                            "condition": cond,
+                            "m": base + effect + 0.1 * trial,
+                        }
+                    )
     trials = pd.DataFrame(rows)
     table, _ = mixed_model(trials, ("m",))
     est = table.set_index("term")["estimate"]
@@ -197,19 +216,39 @@ def test_study_analyze_writes_the_json_contract(
     report = json.loads((tmp_path / "a.json").read_text())
     assert set(report) >= {"comparisons", "mixed_anova", "lmm", "exclusions"}
     first = report["comparisons"][0]
-    assert list(first) == ["task", "measure", "group", "n", "mean_vo", "mean_hv", "sd_vo",
-                           "sd_hv", "test", "statistic", "p", "p_holm", "effect_size",
-                           "effect_size_kind", "p_method"]  # fmt: skip
+    assert list(first) == [
+        "task",
+        "measure",
+        "group",
+        "n",
+        "mean_vo",
+        "mean_hv",
+        "sd_vo",
+        "sd_hv",
+        "test",
+        "statistic",
+        "p",
+        "p_holm",
+        "effect_size",
+        "effect_size_kind",
+        "p_method",
+    ]
     measures = {c["measure"] for c in report["comparisons"]}
-    assert {"completion_time_s", "peak_proximal_force_n", "tlx_raw", "tlx_weighted",
-            "tlx_mental"} <= measures  # fmt: skip
+    assert {
+        "completion_time_s",
+        "peak_proximal_force_n",
+        "tlx_raw",
+        "tlx_weighted",
+        "tlx_mental",
+    } <= measures
     assert {a["source"] for a in report["mixed_anova"]} == {"group", "condition", "interaction"}
     assert set(report["lmm"][0]) == {"task", "measure", "term", "estimate", "se", "p", "p_method"}
     assert {r["p_method"] for r in report["lmm"]} == {"Wald z"}
     assert report["methods"]["mixed_anova"]["ss_type"] == 2  # the default, stated
     assert {a["ss_type"] for a in report["mixed_anova"]} == {2}
-    tlx_novice = [c for c in report["comparisons"]
-                  if c["measure"] == "tlx_raw" and c["group"] == "novice"]  # fmt: skip
+    tlx_novice = [
+        c for c in report["comparisons"] if c["measure"] == "tlx_raw" and c["group"] == "novice"
+    ]
     assert tlx_novice[0]["n"] == 4  # P005 has no questionnaires: not in the TLX analyses
     for name in ("comparisons.md", "comparisons.tex", "tests.csv", "methods.md"):
         assert (out / name).stat().st_size > 100
@@ -219,8 +258,15 @@ def test_study_analyze_writes_the_json_contract(
         assert (out / f"{table}.md").read_text().startswith(f"**Table: {table}.**")
         assert len(pd.read_csv(out / f"{table}.csv")) > 0
     methods = (out / "methods.md").read_text()
-    for phrase in ("Type II sums of squares (the default)", "Holm", "Wald z", "REML",
-                   "Shapiro-Wilk", "exact p when", "scipy "):  # fmt: skip
+    for phrase in (
+        "Type II sums of squares (the default)",
+        "Holm",
+        "Wald z",
+        "REML",
+        "Shapiro-Wilk",
+        "exact p when",
+        "scipy ",
+    ):
         assert phrase in methods
     assert "Type II sums of squares (the default)" in (out / "mixed_anova.tex").read_text()
     assert "Wald z" in (out / "lmm.md").read_text()
@@ -251,31 +297,47 @@ DEMO_MEANS = Path(__file__).parent.parent / "data" / "demo_seed1_means.csv"
 #          type = ty, anova_table = list(es = "pes", correction = "none"))
 # columns: F, Pr(>F), pes for group, condition, group:condition (printed to 12 digits)
 AFEX = {
-    ("completion_time_s", 2): [(7.231398183085, 0.00248685346378, 0.304718589579),
-                               (10.515660560822, 0.00270840837380, 0.241652325285),
-                               (0.586604591339, 0.56190757305701, 0.034331255704)],
-    ("completion_time_s", 3): [(7.231398183085, 0.00248685346378, 0.304718589579),
-                               (9.352709648518, 0.00439463346009, 0.220829073892),
-                               (0.586604591339, 0.56190757305701, 0.034331255704)],
-    ("peak_proximal_force_n", 2): [(8.62982649650, 9.66848644552e-04, 0.343409712666),
-                                   (62.18117468232, 4.31381047181e-09, 0.653292784943),
-                                   (8.06629639128, 1.40565984701e-03, 0.328348085638)],
-    ("peak_proximal_force_n", 3): [(8.62982649650, 9.66848644552e-04, 0.343409712666),
-                                   (31.20052626357, 3.27245769090e-06, 0.485985521917),
-                                   (8.06629639128, 1.40565984701e-03, 0.328348085638)],
-    ("peak_distal_force_n", 2): [(10.47839736752, 2.99722020478e-04, 0.388399548897),
-                                 (62.22883097912, 4.27780649359e-09, 0.653466291031),
-                                 (8.46827963717, 1.07540699069e-03, 0.339161518544)],
-    ("peak_distal_force_n", 3): [(10.47839736752, 2.99722020478e-04, 0.388399548897),
-                                 (30.98900515267, 3.46101863991e-06, 0.484286403246),
-                                 (8.46827963717, 1.07540699069e-03, 0.339161518544)],
-    ("tlx_raw", 2): [(3.53683391095, 4.05793380547e-02, 0.176516605701),
-                     (26.52060292459, 1.18599402508e-05, 0.445570132382),
-                     (2.34088410618, 1.12024751717e-01, 0.124244918284)],
-    ("tlx_raw", 3): [(3.53683391095, 0.040579338054718, 0.176516605701),
-                     (14.65882210787, 0.000545671878993, 0.307578355056),
-                     (2.34088410618, 0.112024751716547, 0.124244918284)],
-}  # fmt: skip
+    ("completion_time_s", 2): [
+        (7.231398183085, 0.00248685346378, 0.304718589579),
+        (10.515660560822, 0.00270840837380, 0.241652325285),
+        (0.586604591339, 0.56190757305701, 0.034331255704),
+    ],
+    ("completion_time_s", 3): [
+        (7.231398183085, 0.00248685346378, 0.304718589579),
+        (9.352709648518, 0.00439463346009, 0.220829073892),
+        (0.586604591339, 0.56190757305701, 0.034331255704),
+    ],
+    ("peak_proximal_force_n", 2): [
+        (8.62982649650, 9.66848644552e-04, 0.343409712666),
+        (62.18117468232, 4.31381047181e-09, 0.653292784943),
+        (8.06629639128, 1.40565984701e-03, 0.328348085638),
+    ],
+    ("peak_proximal_force_n", 3): [
+        (8.62982649650, 9.66848644552e-04, 0.343409712666),
+        (31.20052626357, 3.27245769090e-06, 0.485985521917),
+        (8.06629639128, 1.40565984701e-03, 0.328348085638),
+    ],
+    ("peak_distal_force_n", 2): [
+        (10.47839736752, 2.99722020478e-04, 0.388399548897),
+        (62.22883097912, 4.27780649359e-09, 0.653466291031),
+        (8.46827963717, 1.07540699069e-03, 0.339161518544),
+    ],
+    ("peak_distal_force_n", 3): [
+        (10.47839736752, 2.99722020478e-04, 0.388399548897),
+        (30.98900515267, 3.46101863991e-06, 0.484286403246),
+        (8.46827963717, 1.07540699069e-03, 0.339161518544),
+    ],
+    ("tlx_raw", 2): [
+        (3.53683391095, 4.05793380547e-02, 0.176516605701),
+        (26.52060292459, 1.18599402508e-05, 0.445570132382),
+        (2.34088410618, 1.12024751717e-01, 0.124244918284),
+    ],
+    ("tlx_raw", 3): [
+        (3.53683391095, 0.040579338054718, 0.176516605701),
+        (14.65882210787, 0.000545671878993, 0.307578355056),
+        (2.34088410618, 0.112024751716547, 0.124244918284),
+    ],
+}
 
 
 @pytest.mark.parametrize("ss_type", [2, 3])
@@ -283,19 +345,20 @@ def test_mixed_anova_equals_afex_on_the_demo_study(ss_type: int) -> None:
     long = pd.read_csv(DEMO_MEANS)
     table, notes = mixed_anova(long, ss_type=ss_type)
     assert any("unequal group sizes outsider 20, novice 8, expert 8" in n for n in notes)
-    for measure in ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n",
-                    "tlx_raw"):  # fmt: skip
+    for measure in ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n", "tlx_raw"):
         rows = table[table["measure"] == measure].set_index("source")
-        for source, (f, p, pes) in zip(("group", "condition", "interaction"),
-                                       AFEX[(measure, ss_type)], strict=True):  # fmt: skip
+        for source, (f, p, pes) in zip(
+            ("group", "condition", "interaction"), AFEX[(measure, ss_type)], strict=True
+        ):
             assert rows.loc[source, "F"] == pytest.approx(f, abs=1e-6), (measure, source)
             assert rows.loc[source, "p"] == pytest.approx(p, abs=1e-6), (measure, source)
             assert rows.loc[source, "np2"] == pytest.approx(pes, abs=1e-6), (measure, source)
             assert rows.loc[source, "df2"] == 33  # 36 participants - 3 groups
     if ss_type == 2:  # Type II is also pingouin's mixed ANOVA
         g = long[long["measure"] == "peak_proximal_force_n"]
-        pg_table = pg.mixed_anova(data=g, dv="value", within="condition",
-                                  subject="participant", between="group")  # fmt: skip
+        pg_table = pg.mixed_anova(
+            data=g, dv="value", within="condition", subject="participant", between="group"
+        )
         assert table.loc[table["measure"] == "peak_proximal_force_n", "F"].tolist() == (
             pytest.approx(pg_table["F"].tolist(), rel=1e-9)
         )
@@ -338,8 +401,16 @@ def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -
     for group, shift in (("novice", 1.0), ("expert", 2.0)):
         for i in range(4):
             for condition, value in (("VO", 10.0 + i * i), ("HV", 10.0 + i * i + shift)):
-                rows.append({"participant": f"{group}{i}", "group": group, "task": "lcca",
-                             "measure": "m", "condition": condition, "value": value})  # fmt: skip
+                rows.append(
+                    {
+                        "participant": f"{group}{i}",
+                        "group": group,
+                        "task": "lcca",
+                        "measure": "m",
+                        "condition": condition,
+                        "value": value,
+                    }
+                )
     table, _ = mixed_anova(pd.DataFrame(rows))
     rows_by = table.set_index("source")
     for source in ("condition", "interaction"):
@@ -364,10 +435,22 @@ def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -
 #                                   # and "... with zeroes"
 #   wilcox.test(hv[1:12] - vo[1:12])  # unrounded: V = 67, exact p = 0.02685546875, the
 #                                     # floating-point noise deciding the method
-TIED_VO = [20.00, 30.85, 25.13, 27.40, 22.75, 33.10, 29.95, 24.60, 31.20, 26.05, 28.33, 23.47,
-           10.3]  # fmt: skip
-TIED_HV = [21.2, 32.05, 24.78, 29.5, 23.55, 31.55, 33.35, 25.41, 44.1, 27.8, 27.73, 24.42,
-           10.1 + 0.2]  # fmt: skip
+TIED_VO = [20.00, 30.85, 25.13, 27.40, 22.75, 33.10, 29.95, 24.60, 31.20, 26.05, 28.33, 23.47, 10.3]
+TIED_HV = [
+    21.2,
+    32.05,
+    24.78,
+    29.5,
+    23.55,
+    31.55,
+    33.35,
+    25.41,
+    44.1,
+    27.8,
+    27.73,
+    24.42,
+    10.1 + 0.2,
+]
 
 
 def test_wilcoxon_ties_and_zeros_at_the_data_resolution_equal_r() -> None:
@@ -408,25 +491,40 @@ DEMO_TRIALS = Path(__file__).parent.parent / "data" / "demo_seed1_trials.csv"
 #   fixef(f); sqrt(diag(vcov(f))); isSingular(f0)  # FALSE for all three measures
 # rows: (estimate, SE) of Intercept, HV, novice, outsider, HV:novice, HV:outsider
 LME4 = {
-    "completion_time_s": (0.72731518581495413, [
-        (23.5566666666669953, 3.1935777713747311), (3.0149999999999659, 2.8080022939928941),
-        (9.1899999999996371, 4.5164009967713801), (11.9633333333331819, 3.7786921777972711),
-        (2.8283333333333864, 3.9711149273395145), (1.2249999999999819, 3.3224731204777402)]),
-    "peak_proximal_force_n": (0.23179884414988436, [
-        (0.654986757299080513, 0.063749683056112103),
-        (-0.088459671184823022, 0.083664455544403257),
-        (0.078670136328576820, 0.090155666374940019),
-        (0.374747173674815748, 0.075429642221454582),
-        (-0.080931714866508381, 0.118319407719455968),
-        (-0.337929661949778692, 0.098993118802056135)]),
-    "peak_distal_force_n": (0.13531450527827771, [
-        (0.216786258852353780, 0.055185227528665379),
-        (-0.061372116258316345, 0.075984673972566960),
-        (0.097012265457953495, 0.078043697213683663),
-        (0.340877044003124352, 0.065296041781617908),
-        (-0.084457702070322438, 0.107458556464502128),
-        (-0.286398036040933057, 0.089906278702903769)]),
-}  # fmt: skip
+    "completion_time_s": (
+        0.72731518581495413,
+        [
+            (23.5566666666669953, 3.1935777713747311),
+            (3.0149999999999659, 2.8080022939928941),
+            (9.1899999999996371, 4.5164009967713801),
+            (11.9633333333331819, 3.7786921777972711),
+            (2.8283333333333864, 3.9711149273395145),
+            (1.2249999999999819, 3.3224731204777402),
+        ],
+    ),
+    "peak_proximal_force_n": (
+        0.23179884414988436,
+        [
+            (0.654986757299080513, 0.063749683056112103),
+            (-0.088459671184823022, 0.083664455544403257),
+            (0.078670136328576820, 0.090155666374940019),
+            (0.374747173674815748, 0.075429642221454582),
+            (-0.080931714866508381, 0.118319407719455968),
+            (-0.337929661949778692, 0.098993118802056135),
+        ],
+    ),
+    "peak_distal_force_n": (
+        0.13531450527827771,
+        [
+            (0.216786258852353780, 0.055185227528665379),
+            (-0.061372116258316345, 0.075984673972566960),
+            (0.097012265457953495, 0.078043697213683663),
+            (0.340877044003124352, 0.065296041781617908),
+            (-0.084457702070322438, 0.107458556464502128),
+            (-0.286398036040933057, 0.089906278702903769),
+        ],
+    ),
+}
 
 
 def test_mixed_model_equals_lme4_reml_on_the_demo_study() -> None:
@@ -445,8 +543,9 @@ def test_mixed_model_equals_lme4_reml_on_the_demo_study() -> None:
             z = est / se
             assert row["p"] == pytest.approx(2 * stats.norm.sf(abs(z)), rel=1e-6)
         data = trials.rename(columns={measure: "value"})
-        fit = fit_random_intercept(lmm_design(data)[0], data["value"].to_numpy(float),
-                                   data["participant"].to_numpy())  # fmt: skip
+        fit = fit_random_intercept(
+            lmm_design(data)[0], data["value"].to_numpy(float), data["participant"].to_numpy()
+        )
         assert fit.theta == pytest.approx(theta, rel=1e-8)
 
 
@@ -465,12 +564,23 @@ def test_a_singular_fit_is_noted_and_equals_lme4() -> None:
         order = [k, (k + 1) % 3, (k + 2) % 3]
         values = [base[j] for j in order] + [base[3 + j] for j in order]
         for v, cond in zip(values, ["VO"] * 3 + ["HV"] * 3, strict=True):
-            rows.append({"participant": f"P{i + 1:02d}", "group": group, "task": "lcca",
-                         "condition": cond, "m": v + 2 * (group == "novice")})  # fmt: skip
+            rows.append(
+                {
+                    "participant": f"P{i + 1:02d}",
+                    "group": group,
+                    "task": "lcca",
+                    "condition": cond,
+                    "m": v + 2 * (group == "novice"),
+                }
+            )
     table, notes = mixed_model(pd.DataFrame(rows), ("m",))
     assert len(notes) == 1 and "singular fit" in notes[0] and "isSingular" in notes[0]
-    ref = [(11.1666666666667, 0.300462606288666), (-2.33333333333333, 0.424918292799399),
-           (2.0, 0.424918292799399), (0.0, 0.600925212577332)]  # fmt: skip
+    ref = [
+        (11.1666666666667, 0.300462606288666),
+        (-2.33333333333333, 0.424918292799399),
+        (2.0, 0.424918292799399),
+        (0.0, 0.600925212577332),
+    ]
     for (est, se), (_, row) in zip(ref, table.iterrows(), strict=True):
         assert row["estimate"] == pytest.approx(est, rel=1e-12, abs=1e-12)
         assert row["se"] == pytest.approx(se, rel=1e-12)
@@ -498,8 +608,10 @@ def test_tables_give_t_df_v_and_human_labels() -> None:
     normal = _long({"novice": (VO, HV), "expert": (list(TIED_VO), list(TIED_HV))})
     trials = normal.rename(columns={"value": "completion_time_s"})
     trials = trials[trials["measure"] == "m"].drop(columns="measure")
-    trials = trials.assign(peak_proximal_force_n=trials["completion_time_s"] / 10,
-                           peak_distal_force_n=trials["completion_time_s"] / 20)  # fmt: skip
+    trials = trials.assign(
+        peak_proximal_force_n=trials["completion_time_s"] / 10,
+        peak_distal_force_n=trials["completion_time_s"] / 20,
+    )
     analysis = analyze(trials, normal)
     c = comparisons_table(analysis).display.set_index("group")
     assert c.loc["novice", "statistic"].startswith("t(5) = ")  # 6 pairs, df 5
@@ -514,9 +626,12 @@ def test_tables_give_t_df_v_and_human_labels() -> None:
 
 
 def test_a_mixed_model_without_residual_df_is_a_note_not_an_error() -> None:
-    rows = [{"participant": f"P{i}", "group": g, "task": "lcca", "condition": c, "m": v}
-            for i, (g, c, v) in enumerate([("a", "VO", 1.0), ("a", "HV", 2.0), ("b", "VO", 3.0),
-                                           ("b", "HV", 5.0)])]  # fmt: skip
+    rows = [
+        {"participant": f"P{i}", "group": g, "task": "lcca", "condition": c, "m": v}
+        for i, (g, c, v) in enumerate(
+            [("a", "VO", 1.0), ("a", "HV", 2.0), ("b", "VO", 3.0), ("b", "HV", 5.0)]
+        )
+    ]
     table, notes = mixed_model(pd.DataFrame(rows), ("m",))
     assert table.empty and notes == [
         "lcca/m: mixed model could not be fitted: 4 trials for 4 fixed effects: no residual "
@@ -533,19 +648,49 @@ def test_a_mixed_model_without_residual_df_is_a_note_not_an_error() -> None:
 # (t, p_t, V, p_W, shapiro p); the outsiders' completion time holds a tie that floating-
 # point noise had split (then "exact" p = .189; R on the tie: asymptotic .191)
 R_DEMO = {
-    ("completion_time_s", "outsider"): (1.98398848224652, 0.0618942430020153, 140.5,
-                                        0.191295160961024, 0.0151792852311702),
-    ("completion_time_s", "novice"): (2.35162813545057, 0.0509652280723797, 32, 0.0546875,
-                                      0.932873233060212),
-    ("peak_proximal_force_n", "outsider"): (-7.21836971644834, 7.45093920504869e-07, 0,
-                                            1.9073486328125e-06, 0.0430613214458504),
-    ("peak_proximal_force_n", "expert"): (-1.62522394325726, 0.148142318187824, 5, 0.078125,
-                                          0.00134195845507016),
-    ("peak_distal_force_n", "expert"): (-1.28628418260779, 0.239250924916312, 2,
-                                        0.361310428526179, 0.00635893776220218),
-    ("tlx_raw", "outsider"): (-5.17021276595745, 5.44354877219215e-05, 11,
-                              0.000479738755364896, 0.599337802674218),
-}  # fmt: skip
+    ("completion_time_s", "outsider"): (
+        1.98398848224652,
+        0.0618942430020153,
+        140.5,
+        0.191295160961024,
+        0.0151792852311702,
+    ),
+    ("completion_time_s", "novice"): (
+        2.35162813545057,
+        0.0509652280723797,
+        32,
+        0.0546875,
+        0.932873233060212,
+    ),
+    ("peak_proximal_force_n", "outsider"): (
+        -7.21836971644834,
+        7.45093920504869e-07,
+        0,
+        1.9073486328125e-06,
+        0.0430613214458504,
+    ),
+    ("peak_proximal_force_n", "expert"): (
+        -1.62522394325726,
+        0.148142318187824,
+        5,
+        0.078125,
+        0.00134195845507016,
+    ),
+    ("peak_distal_force_n", "expert"): (
+        -1.28628418260779,
+        0.239250924916312,
+        2,
+        0.361310428526179,
+        0.00635893776220218,
+    ),
+    ("tlx_raw", "outsider"): (
+        -5.17021276595745,
+        5.44354877219215e-05,
+        11,
+        0.000479738755364896,
+        0.599337802674218,
+    ),
+}
 
 
 def test_comparisons_equal_r_on_the_demo_study() -> None:

@@ -19,8 +19,14 @@ from study.cli import main
 from study.protocol.design import TEMPLATE
 from study.protocol.tlx import pair_order
 
-RATINGS = {"mental": 70, "physical": 20, "temporal": 50, "performance": 30, "effort": 60,
-           "frustration": 40}  # fmt: skip
+RATINGS = {
+    "mental": 70,
+    "physical": 20,
+    "temporal": 50,
+    "performance": 30,
+    "effort": 60,
+    "frustration": 40,
+}
 
 
 def _enter(db: str, *extra: str, **ratings: int) -> int:
@@ -52,7 +58,8 @@ def test_edits_need_a_reason_name_the_actor_and_audit_the_pairwise_choices(
     capsys.readouterr()
     created = _audit(db_url)  # the first entry, and why before its block ran
     assert [(r.field, r.reason) for r in created] == [
-        ("entered", "paper form"), ("stored_before_block_ran", "paper form")
+        ("entered", "paper form"),
+        ("stored_before_block_ran", "paper form"),
     ]
     entered = json.loads(created[0].new_value)
     assert entered["participant"] == "P001" and entered["mental"] == RATINGS["mental"]
@@ -63,8 +70,19 @@ def test_edits_need_a_reason_name_the_actor_and_audit_the_pairwise_choices(
     assert len(_audit(db_url)) == 2
     # the choices changed: the pairwise list is audited beside the weights it gives
     second = [b for _, b in pairs]
-    assert _enter(db_url, "--choices", ",".join(second), "--reason", "form misread",
-                  "--actor", "EXP02", effort=65) == 0  # fmt: skip
+    assert (
+        _enter(
+            db_url,
+            "--choices",
+            ",".join(second),
+            "--reason",
+            "form misread",
+            "--actor",
+            "EXP02",
+            effort=65,
+        )
+        == 0
+    )
     rows = _audit(db_url)[2:]
     fields = {r.field: r for r in rows}
     assert "effort" in fields and "pairwise" in fields

@@ -70,17 +70,34 @@ def imp(csv: bytes, expect: str, id: str, before: list[list[str]] | None = None)
 
 def imp_tlx(tlx_row: str, expect: str, id: str) -> Case:
     """`study import` of a good trial and a questionnaire row with one bad value."""
-    return Case(id, ["import", "--trials", "t.csv", "--tlx", "x.csv"], expect,
-                {"t.csv": trials(TRIAL_ROW), "x.csv": tlx(tlx_row)})  # fmt: skip
+    return Case(
+        id,
+        ["import", "--trials", "t.csv", "--tlx", "x.csv"],
+        expect,
+        {"t.csv": trials(TRIAL_ROW), "x.csv": tlx(tlx_row)},
+    )
 
 
 def init(toml: bytes, expect: str, id: str) -> Case:
     return Case(id, ["init", "--design", "d2.toml", "--db", "new.db"], expect, {"d2.toml": toml})
 
 
-ENTER = ["tlx", "enter", "--participant", "P001", "--task", "lcca", "--condition", "VO",
-         "--mental=70", "--physical=20", "--temporal=50", "--performance=30", "--effort=60",
-         "--frustration=40"]  # fmt: skip
+ENTER = [
+    "tlx",
+    "enter",
+    "--participant",
+    "P001",
+    "--task",
+    "lcca",
+    "--condition",
+    "VO",
+    "--mental=70",
+    "--physical=20",
+    "--temporal=50",
+    "--performance=30",
+    "--effort=60",
+    "--frustration=40",
+]
 ENTER_UNRUN = [*ENTER, "--reason", "paper form, block not run"]
 SIMULATE = ["simulate", "--group", "novice", "--condition", "HV", "--out", "sim.csv"]
 POWER = ["power", "--design", "d.toml", "--n-sim", "10"]
@@ -88,123 +105,248 @@ POWER = ["power", "--design", "d.toml", "--n-sim", "10"]
 
 CASES = [
     # 5: tracebacks
-    imp(trials(TRIAL_ROW), "P001 lcca/VO trial 1 is already stored", "same file twice",
-        before=[["import", "--trials", "t.csv"]]),
-    Case("tlx for a block that has one", ["import", "--trials", "t.csv", "--tlx", "x.csv"],
-         "P001/lcca/VO already has a questionnaire",
-         {"t.csv": trials("P001,novice,lcca,HV,1,31.5,0.81,0.42,true"), "x.csv": tlx(TLX_ROW)},
-         [ENTER_UNRUN]),
+    imp(
+        trials(TRIAL_ROW),
+        "P001 lcca/VO trial 1 is already stored",
+        "same file twice",
+        before=[["import", "--trials", "t.csv"]],
+    ),
+    Case(
+        "tlx for a block that has one",
+        ["import", "--trials", "t.csv", "--tlx", "x.csv"],
+        "P001/lcca/VO already has a questionnaire",
+        {"t.csv": trials("P001,novice,lcca,HV,1,31.5,0.81,0.42,true"), "x.csv": tlx(TLX_ROW)},
+        [ENTER_UNRUN],
+    ),
     imp(b"", "t.csv is empty", "empty csv"),
     imp(trials(), "t.csv has a header but no rows", "header only"),
-    imp_tlx(TLX_ROW.replace(",70,", ",inf,"),
-            "column mental: 'inf' is not a plain decimal", "rating inf"),
-    imp_tlx(TLX_ROW.replace(",70,", ",1e400,"),
-            "mental rating inf is off the scale", "rating 1e400"),
-    imp_tlx(TLX_ROW.replace(",5,0,", ",1e400,0,"),
-            "mental weight inf; expected a whole number of choices 0-5", "weight 1e400"),
-    imp(trials(TRIAL_ROW.replace(",1,31.5", ",²,31.5")), "'²'; expected a whole number from 1 to 3",
-        "trial superscript two"),
-    imp(trials(TRIAL_ROW.replace(",1,31.5", ",99999999999999999999999,31.5")),
-        "expected a whole number from 1 to 3", "trial 1e23"),
+    imp_tlx(
+        TLX_ROW.replace(",70,", ",inf,"),
+        "column mental: 'inf' is not a plain decimal",
+        "rating inf",
+    ),
+    imp_tlx(
+        TLX_ROW.replace(",70,", ",1e400,"), "mental rating inf is off the scale", "rating 1e400"
+    ),
+    imp_tlx(
+        TLX_ROW.replace(",5,0,", ",1e400,0,"),
+        "mental weight inf; expected a whole number of choices 0-5",
+        "weight 1e400",
+    ),
+    imp(
+        trials(TRIAL_ROW.replace(",1,31.5", ",²,31.5")),
+        "'²'; expected a whole number from 1 to 3",
+        "trial superscript two",
+    ),
+    imp(
+        trials(TRIAL_ROW.replace(",1,31.5", ",99999999999999999999999,31.5")),
+        "expected a whole number from 1 to 3",
+        "trial 1e23",
+    ),
     init(b'name = "caf\xe9"\n', "not UTF-8 text (byte 0xe9 at offset 11)", "non-utf8 design"),
     init(design(seed="-1"), "seed = -1; expected 0 to 2147483647", "seed -1"),
     init(design(seed=str(2**70)), f"seed = {2**70}; expected 0 to 2147483647", "seed 2**70"),
-    init(design(trials_per_condition=str(2**63)), "trials_per_condition = 9223372036854775808;"
-         " expected 1 to 100", "trials 2**63"),
+    init(
+        design(trials_per_condition=str(2**63)),
+        "trials_per_condition = 9223372036854775808; expected 1 to 100",
+        "trials 2**63",
+    ),
     Case("corrupted database", ["schedule", "--db", "bad.db"], "bad.db", {}),
-    Case("corrupted database, add", ["participant", "add", "--group", "novice", "--db", "bad.db"],
-         "bad.db"),
+    Case(
+        "corrupted database, add",
+        ["participant", "add", "--group", "novice", "--db", "bad.db"],
+        "bad.db",
+    ),
     Case("corrupted database, run", ["run", "--participant", "P001", "--db", "bad.db"], "bad.db"),
     Case("corrupted database, export", ["export", "--out", "out", "--db", "bad.db"], "bad.db"),
-    Case("unparsable postgres url", ["schedule", "--db", "postgresql+psycopg://::::"],
-         "'postgresql+psycopg://::::' is not a URL; expected"),
-    Case("site over 64", ["participant", "add", "--group", "novice", "--site", "s" * 65],
-         "expected 1-64 printable characters"),
-    init(design(**{"groups." + "g" * 33: "2"}), "expected 1-32 printable characters",
-         "group over 32"),
+    Case(
+        "unparsable postgres url",
+        ["schedule", "--db", "postgresql+psycopg://::::"],
+        "'postgresql+psycopg://::::' is not a URL; expected",
+    ),
+    Case(
+        "site over 64",
+        ["participant", "add", "--group", "novice", "--site", "s" * 65],
+        "expected 1-64 printable characters",
+    ),
+    init(
+        design(**{"groups." + "g" * 33: "2"}), "expected 1-32 printable characters", "group over 32"
+    ),
     init(design(break_s="nan"), "break_s = nan; expected 0 to 3600 s", "break nan"),
     # 6: nonsense that was accepted
-    imp(trials(TRIAL_ROW.replace("31.5", "1e308")),
+    imp(
+        trials(TRIAL_ROW.replace("31.5", "1e308")),
         "column completion_time_s: '1e308' is out of range; expected a number from 0 to 180",
-        "time 1e308"),
-    imp(trials(TRIAL_ROW.replace("0.81", "1e6")),
+        "time 1e308",
+    ),
+    imp(
+        trials(TRIAL_ROW.replace("0.81", "1e6")),
         "column peak_proximal_force_n: '1e6' is out of range; expected a number from 0 to 20",
-        "force 1e6 N"),
-    imp(trials(TRIAL_ROW.replace(",1,31.5", ",1000000,31.5")),
-        "'1000000'; expected a whole number from 1 to 3", "trial 1000000"),
+        "force 1e6 N",
+    ),
+    imp(
+        trials(TRIAL_ROW.replace(",1,31.5", ",1000000,31.5")),
+        "'1000000'; expected a whole number from 1 to 3",
+        "trial 1000000",
+    ),
     imp(trials(TRIAL_ROW.replace("31.5", "3_0")), "'3_0' is not a plain decimal", "3_0"),
-    init(design(**{"groups.novice": str(10**12)}), "expected a whole number from 1 to 1000",
-         "group 1e12"),
+    init(
+        design(**{"groups.novice": str(10**12)}),
+        "expected a whole number from 1 to 1000",
+        "group 1e12",
+    ),
     init(design(trials_per_condition="1000000000"), "expected 1 to 100", "1e9 trials"),
     init(design(break_s="inf"), "break_s = inf; expected 0 to 3600 s", "break inf"),
-    init(design(code_prefix='"ÄB"'), "code_prefix = 'ÄB'; expected 1-4 capital letters A-Z",
-         "code prefix"),
-    Case("pace nan", ["run", "--participant", "P001", "--pace", "nan"],
-         "--pace nan; expected a finite number 0.01<=x<=1000"),
+    init(
+        design(code_prefix='"ÄB"'),
+        "code_prefix = 'ÄB'; expected 1-4 capital letters A-Z",
+        "code prefix",
+    ),
+    Case(
+        "pace nan",
+        ["run", "--participant", "P001", "--pace", "nan"],
+        "--pace nan; expected a finite number 0.01<=x<=1000",
+    ),
     Case("pace inf", ["run", "--all", "--pace", "inf"], "inf is not in the range 0.01<=x<=1000"),
-    imp_tlx(TLX_ROW.replace("lcca,VO", "banana,VO"),
-            "column task: 'banana'; expected one of lcca", "tlx task banana"),
-    imp_tlx(TLX_ROW.replace("lcca,VO", "lcca,XX"),
-            "column condition: 'XX'; expected one of VO, HV", "tlx condition XX"),
+    imp_tlx(
+        TLX_ROW.replace("lcca,VO", "banana,VO"),
+        "column task: 'banana'; expected one of lcca",
+        "tlx task banana",
+    ),
+    imp_tlx(
+        TLX_ROW.replace("lcca,VO", "lcca,XX"),
+        "column condition: 'XX'; expected one of VO, HV",
+        "tlx condition XX",
+    ),
     # 8: a bad --port leaves no trial behind
-    Case("bad port", ["run", "--participant", "P001", "--driver", "hardware", "--port",
-                      "/dev/no-such-port"], "--port /dev/no-such-port: cannot open"),
+    Case(
+        "bad port",
+        ["run", "--participant", "P001", "--driver", "hardware", "--port", "/dev/no-such-port"],
+        "--port /dev/no-such-port: cannot open",
+    ),
     # 9: an edit needs a reason
-    Case("tlx edit without reason", [*ENTER[:12], "--effort=65", *ENTER[13:]], "needs a reason",
-         before=[ENTER_UNRUN]),
+    Case(
+        "tlx edit without reason",
+        [*ENTER[:12], "--effort=65", *ENTER[13:]],
+        "needs a reason",
+        before=[ENTER_UNRUN],
+    ),
     Case("tlx for a block not run, no reason", ENTER, "has no completed trial yet"),
     Case("actor too long", [*ENTER, "--actor", "a" * 65], "--actor 'aaaa"),
     # what independent checks found: tracebacks
-    Case("max-seconds nan", [*SIMULATE, "--max-seconds", "nan"],
-         "--max-seconds nan; expected a finite number 1<=x<=3600"),
+    Case(
+        "max-seconds nan",
+        [*SIMULATE, "--max-seconds", "nan"],
+        "--max-seconds nan; expected a finite number 1<=x<=3600",
+    ),
     Case("seed -1", [*SIMULATE, "--seed", "-1"], "-1 is not in the range 0<=x<=4294967295"),
-    Case("pace 1e-300", ["run", "--participant", "P001", "--pace", "1e-300"],
-         "1e-300 is not in the range 0.01<=x<=1000"),
+    Case(
+        "pace 1e-300",
+        ["run", "--participant", "P001", "--pace", "1e-300"],
+        "1e-300 is not in the range 0.01<=x<=1000",
+    ),
     # unbounded
-    Case("count 1e9", ["participant", "add", "--group", "novice", "--count", "1000000000"],
-         "--count 1000000000 for group novice, which has 2 of its 8 enrolled; expected at most 6"),
-    Case("count past the target", ["participant", "add", "--group", "novice", "--count", "7"],
-         "--count 7 for group novice, which has 2 of its 8 enrolled; expected at most 6"),
-    Case("n-sim 1e12", [*POWER, "--n-sim", "1000000000000"],
-         "1000000000000 is not in the range 10<=x<=100000", {"d.toml": TEMPLATE.encode()}),
+    Case(
+        "count 1e9",
+        ["participant", "add", "--group", "novice", "--count", "1000000000"],
+        "--count 1000000000 for group novice, which has 2 of its 8 enrolled; expected at most 6",
+    ),
+    Case(
+        "count past the target",
+        ["participant", "add", "--group", "novice", "--count", "7"],
+        "--count 7 for group novice, which has 2 of its 8 enrolled; expected at most 6",
+    ),
+    Case(
+        "n-sim 1e12",
+        [*POWER, "--n-sim", "1000000000000"],
+        "1000000000000 is not in the range 10<=x<=100000",
+        {"d.toml": TEMPLATE.encode()},
+    ),
     # accepted nonsense
-    *[Case(f"effect {v}", [*POWER, "--effect", v], f"--effect '{v}': outsider",
-           {"d.toml": TEMPLATE.encode()}) for v in ("nan", "inf", "-inf", "1e308")],
-    Case("effect per group nan", [*POWER, "--effect", "outsider=1,novice=nan,expert=1"],
-         "novice nan; expected a finite standardised effect from -10 to 10",
-         {"d.toml": TEMPLATE.encode()}),
-    Case("haptic gain 1e9", [*SIMULATE, "--haptic-gain", "1e9"],
-         "--haptic-gain 1000000000.0; expected 0 to 1 N m/N"),
-    Case("tlx show unknown", ["tlx", "show", "--participant", "P999"],
-         "unknown participant 'P999'"),
-    Case("note with control characters", ["participant", "note", "P001", "a\nb\x1b[2J"],
-         "holds control characters; expected 1-500 printable characters on one line"),
-    Case("session note with a tab", ["participant", "note", "P001", "a\tb", "--session"],
-         "holds control characters"),
-    Case("jobs with participant", ["run", "--participant", "P001", "--jobs", "2"],
-         "--jobs 2 with --participant; expected --all"),
-    Case("samples of trial 99", ["export", "--out", "o", "--samples", "--trial", "99"],
-         "--trial 99; expected 1 to 3"),
-    imp(trials(TRIAL_ROW.replace("0.81", "1e-400")),
-        "column peak_proximal_force_n: '1e-400' is too small to store", "force 1e-400"),
-    *[Case(f"db url {q}", ["db", "info", "--db", f"sqlite:///s.db?{q}"], want)
-      for q, want in (("timeout=abc", "timeout='abc'; expected seconds"),
-                      ("timeout=-1", "timeout='-1'; expected seconds"),
-                      ("timeout=nan", "timeout='nan'; expected seconds"),
-                      ("foo=bar", "has parameter 'foo'; expected only timeout, mode, uri"))],
+    *[
+        Case(
+            f"effect {v}",
+            [*POWER, "--effect", v],
+            f"--effect '{v}': outsider",
+            {"d.toml": TEMPLATE.encode()},
+        )
+        for v in ("nan", "inf", "-inf", "1e308")
+    ],
+    Case(
+        "effect per group nan",
+        [*POWER, "--effect", "outsider=1,novice=nan,expert=1"],
+        "novice nan; expected a finite standardised effect from -10 to 10",
+        {"d.toml": TEMPLATE.encode()},
+    ),
+    Case(
+        "haptic gain 1e9",
+        [*SIMULATE, "--haptic-gain", "1e9"],
+        "--haptic-gain 1000000000.0; expected 0 to 1 N m/N",
+    ),
+    Case(
+        "tlx show unknown", ["tlx", "show", "--participant", "P999"], "unknown participant 'P999'"
+    ),
+    Case(
+        "note with control characters",
+        ["participant", "note", "P001", "a\nb\x1b[2J"],
+        "holds control characters; expected 1-500 printable characters on one line",
+    ),
+    Case(
+        "session note with a tab",
+        ["participant", "note", "P001", "a\tb", "--session"],
+        "holds control characters",
+    ),
+    Case(
+        "jobs with participant",
+        ["run", "--participant", "P001", "--jobs", "2"],
+        "--jobs 2 with --participant; expected --all",
+    ),
+    Case(
+        "samples of trial 99",
+        ["export", "--out", "o", "--samples", "--trial", "99"],
+        "--trial 99; expected 1 to 3",
+    ),
+    imp(
+        trials(TRIAL_ROW.replace("0.81", "1e-400")),
+        "column peak_proximal_force_n: '1e-400' is too small to store",
+        "force 1e-400",
+    ),
+    *[
+        Case(f"db url {q}", ["db", "info", "--db", f"sqlite:///s.db?{q}"], want)
+        for q, want in (
+            ("timeout=abc", "timeout='abc'; expected seconds"),
+            ("timeout=-1", "timeout='-1'; expected seconds"),
+            ("timeout=nan", "timeout='nan'; expected seconds"),
+            ("foo=bar", "has parameter 'foo'; expected only timeout, mode, uri"),
+        )
+    ],
     init(b"", "d2.toml is empty; expected a study design", "empty design"),
     init(b"# only a comment\n", "d2.toml is empty; expected a study design", "comment design"),
-    init(design(**{f"groups.g{i}": "1" for i in range(13)}),
-         "[groups] has 16 groups; expected 1 to 12", "16 groups"),
-    imp(trials(TRIAL_ROW.replace("P001", "P0001")),
+    init(
+        design(**{f"groups.g{i}": "1" for i in range(13)}),
+        "[groups] has 16 groups; expected 1 to 12",
+        "16 groups",
+    ),
+    imp(
+        trials(TRIAL_ROW.replace("P001", "P0001")),
         "'P0001' beside 'P001', the same number written with other zeros; expected P001",
-        "P0001 beside P001"),
-    imp(trials(TRIAL_ROW.replace("P001", "P0003"),
-               TRIAL_ROW.replace("P001", "P003").replace(",1,31.5", ",2,31.5")),
-        "row 3, column participant: 'P003' beside 'P0003'", "P0003 and P003 in one file"),
+        "P0001 beside P001",
+    ),
+    imp(
+        trials(
+            TRIAL_ROW.replace("P001", "P0003"),
+            TRIAL_ROW.replace("P001", "P003").replace(",1,31.5", ",2,31.5"),
+        ),
+        "row 3, column participant: 'P003' beside 'P0003'",
+        "P0003 and P003 in one file",
+    ),
     # misleading messages
-    Case("duplicate column", ["import", "--trials", "t.csv"], "has column 'success' twice",
-         {"t.csv": (",".join(TRIAL_COLUMNS) + ",success\n" + TRIAL_ROW + ",true\n").encode()}),
+    Case(
+        "duplicate column",
+        ["import", "--trials", "t.csv"],
+        "has column 'success' twice",
+        {"t.csv": (",".join(TRIAL_COLUMNS) + ",success\n" + TRIAL_ROW + ",true\n").encode()},
+    ),
     imp(trials(TRIAL_ROW + ",VO,a,b"), "t.csv row 2: 12 fields; expected 9", "extra fields"),
 ]
 

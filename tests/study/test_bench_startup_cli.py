@@ -40,9 +40,16 @@ def test_bench_startup_reports_every_figure_as_json(
     assert main([*argv, "--json", str(out)]) == 0
     result = json.loads(out.read_text())
     assert set(result) == {
-        "runs", "simulate", "simulate_trial_s", "run_screen", "analyze", "analyze_db",
-        "writer", "demo", "load_average",
-    }  # fmt: skip
+        "runs",
+        "simulate",
+        "simulate_trial_s",
+        "run_screen",
+        "analyze",
+        "analyze_db",
+        "writer",
+        "demo",
+        "load_average",
+    }
     assert result["demo"] is None  # --demo-runs 0
     for figure in ("simulate", "run_screen", "analyze"):
         assert set(result[figure]) == {"seconds", "median_s", "target_s"}

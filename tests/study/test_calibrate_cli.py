@@ -53,8 +53,13 @@ def test_report_has_the_contract_keys(calibrated: Path) -> None:
     assert REPORT_KEYS <= set(report)
     assert report["rmse_after"] < report["rmse_before"]
     (effect,) = report["effects_added"][:1]
-    assert set(effect) == {"family", "params", "ci", "rmse_after_step",
-                           "share_of_explained_variance"}  # fmt: skip
+    assert set(effect) == {
+        "family",
+        "params",
+        "ci",
+        "rmse_after_step",
+        "share_of_explained_variance",
+    }
     # the shares of the steps add up to the whole held-out MSE cut
     shares = [e["share_of_explained_variance"] for e in report["effects_added"]]
     shares += [e["share_of_explained_variance"] for e in report["discovered_terms"]]

@@ -75,20 +75,52 @@ def test_the_plan_has_every_family_mixtures_and_clean_in_round_robin() -> None:
 
 def test_shares_are_counted_as_stated() -> None:
     runs = [
-        {"group": "a", "families": ["a"], "within_2x_oracle": True, "right_first": True,
-         "wrong_named": False, "ambiguous": [], "honest": True, "ratio_to_oracle": 1.0,
-         "seconds": 1.0, "verdict": "white"},
-        {"group": "a", "families": ["a"], "within_2x_oracle": False, "right_first": False,
-         "wrong_named": True, "ambiguous": [["x", "y"]], "honest": False,
-         "ratio_to_oracle": 3.0, "seconds": 2.0, "verdict": "white"},
-        {"group": "clean", "families": [], "within_2x_oracle": True, "right_first": None,
-         "wrong_named": False, "ambiguous": [], "honest": True, "ratio_to_oracle": 1.0,
-         "seconds": 1.0, "verdict": "white"},
-    ]  # fmt: skip
+        {
+            "group": "a",
+            "families": ["a"],
+            "within_2x_oracle": True,
+            "right_first": True,
+            "wrong_named": False,
+            "ambiguous": [],
+            "honest": True,
+            "ratio_to_oracle": 1.0,
+            "seconds": 1.0,
+            "verdict": "white",
+        },
+        {
+            "group": "a",
+            "families": ["a"],
+            "within_2x_oracle": False,
+            "right_first": False,
+            "wrong_named": True,
+            "ambiguous": [["x", "y"]],
+            "honest": False,
+            "ratio_to_oracle": 3.0,
+            "seconds": 2.0,
+            "verdict": "white",
+        },
+        {
+            "group": "clean",
+            "families": [],
+            "within_2x_oracle": True,
+            "right_first": None,
+            "wrong_named": False,
+            "ambiguous": [],
+            "honest": True,
+            "ratio_to_oracle": 1.0,
+            "seconds": 1.0,
+            "verdict": "white",
+        },
+    ]
     s = summarise(runs)
     a = s["per_group"]["a"]
-    assert (a["within_2x_oracle"], a["right_first"], a["wrong_named"], a["ambiguous"],
-            a["honest"]) == (0.5, 0.5, 0.5, 0.5, 0.5)  # fmt: skip
+    assert (
+        a["within_2x_oracle"],
+        a["right_first"],
+        a["wrong_named"],
+        a["ambiguous"],
+        a["honest"],
+    ) == (0.5, 0.5, 0.5, 0.5, 0.5)
     assert s["per_group"]["clean"]["right_first"] is None
     assert s["overall"]["within_2x_oracle"] == 0.5 and s["overall"]["clean_untouched"] == 1.0
     # the run outside 2x ended white: not every unexplained recording is honest
@@ -97,9 +129,14 @@ def test_shares_are_counted_as_stated() -> None:
 
 def test_a_small_run_end_to_end(tmp_path: Path) -> None:
     config = GeneraliseConfig(
-        per_family=1, mixtures_of_two=0, mixtures_of_three=0, clean=1,
-        duration_s=30.0, rate_hz=100.0, families=("stribeck", "slip"),
-    )  # fmt: skip
+        per_family=1,
+        mixtures_of_two=0,
+        mixtures_of_three=0,
+        clean=1,
+        duration_s=30.0,
+        rate_hz=100.0,
+        families=("stribeck", "slip"),
+    )
     report = run_generalise_bench(config, tmp_path)
     assert "not measured" in report["data"]
     assert set(report["summary"]["per_group"]) == {"stribeck", "slip", "clean"}

@@ -102,8 +102,9 @@ def test_overview_writes_the_unexplained_figure_only_when_structure_remains(
     x = quantities({k: v[held] for k, v in signals.items()}, prediction[held])[where["quantity"]]
     remains = {"verdict": "structure_remains", "unexplained": where}
     (tmp_path / "a").mkdir()
-    written = overview_figures(tmp_path / "a", t, residual + 0.1, residual, held, remains, x,
-                               "follower")  # fmt: skip
+    written = overview_figures(
+        tmp_path / "a", t, residual + 0.1, residual, held, remains, x, "follower"
+    )
     assert {p.name for p in written} == {"residual_blocks.png", "residual_vs_unexplained.png"}
     assert all(p.stat().st_size > 10_000 for p in written)
     (tmp_path / "b").mkdir()

@@ -85,9 +85,16 @@ def _cluster_run(text: str, root: Path, workers: int) -> bytes:
     spec = parse_campaign(text)
     folder = CampaignDir.open(root, spec, text)
     folder.create()
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, host="127.0.0.1") as cluster, \
-            Client(cluster) as c:  # fmt: skip
+    with (
+        LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            host="127.0.0.1",
+        ) as cluster,
+        Client(cluster) as c,
+    ):
         assert len(c.scheduler_info()["workers"]) == workers
         assert run_pending(folder, c) == len(spec.units())
     folder.write_tables()
@@ -104,7 +111,9 @@ def test_template_is_a_valid_campaign_of_the_papers_groups(
     assert len(spec.units()) == 3 * 50
     # 20/8/8 x 0.5 and x 1.5, rounded
     assert [spec.sizes(c) for c in spec.cells()][0::2] == [
-        {"outsider": 10, "novice": 4, "expert": 4}, {"outsider": 30, "novice": 12, "expert": 12}]
+        {"outsider": 10, "novice": 4, "expert": 4},
+        {"outsider": 30, "novice": 12, "expert": 12},
+    ]
     # replicate r has the same study seed in every cell, and replicates differ
     assert study_seed(1, 0) != study_seed(1, 1)
     assert TEMPLATE.count("SIMULATED") == 1
@@ -117,9 +126,9 @@ def test_template_is_a_valid_campaign_of_the_papers_groups(
         (("group_scale = [1.0, 1.34]", "group_scale = [1.0, 0.5]"), "group_scale 0.5"),
         (("group_scale = [1.0, 1.34]", "haptic_gain = [0.01]"), "factors.haptic_gain"),
         (("group_scale = [1.0, 1.34]", "gain = [1]"), "unknown factor 'gain'"),
-        (("task = \"notes\"", "task = \"suturing\""), "'suturing'"),
+        (('task = "notes"', 'task = "suturing"'), "'suturing'"),
         (("novice = 3", "surgeon = 3"), "groups.surgeon"),
-        (("seed = 11", "seed = \"x\""), "seed = 'x'"),
+        (("seed = 11", 'seed = "x"'), "seed = 'x'"),
     ],
 )
 def test_bad_campaign_file_is_one_line_exit_2_and_nothing_written(
@@ -144,8 +153,20 @@ def test_bad_loss_scheduler_and_folder_are_one_line(
     cases = [
         (["campaign", "run", str(lossy), "--out", out], "link_loss value 1"),
         (["campaign", "run", str(path), "--out", out, "--scheduler", "localhost"], "'localhost'"),
-        (["campaign", "run", str(path), "--out", out, "--workers", "2", "--scheduler",
-          "tcp://127.0.0.1:1"], "--workers 2 with --scheduler"),
+        (
+            [
+                "campaign",
+                "run",
+                str(path),
+                "--out",
+                out,
+                "--workers",
+                "2",
+                "--scheduler",
+                "tcp://127.0.0.1:1",
+            ],
+            "--workers 2 with --scheduler",
+        ),
         (["campaign", "run", str(tmp_path / "none.toml"), "--out", out], "none.toml"),
         (["campaign", "report", out], "does not exist"),
     ]
@@ -164,12 +185,18 @@ def test_bad_loss_scheduler_and_folder_are_one_line(
 
 def test_power_interval_is_wilsons_and_effect_interval_t_based() -> None:
     # 10 replicates of one cell, 8 significant (6 of them with HV below VO)
-    results = pd.DataFrame({
-        "group_scale": 1.0, "group": "novice", "measure": "peak_proximal_force_n", "n": 8,
-        "significant": [True] * 8 + [False] * 2,
-        "mean_vo": [1.0] * 10, "mean_hv": [0.5] * 6 + [1.5] * 4,
-        "effect": np.arange(10, dtype=float) / 10,
-    })  # fmt: skip
+    results = pd.DataFrame(
+        {
+            "group_scale": 1.0,
+            "group": "novice",
+            "measure": "peak_proximal_force_n",
+            "n": 8,
+            "significant": [True] * 8 + [False] * 2,
+            "mean_vo": [1.0] * 10,
+            "mean_hv": [0.5] * 6 + [1.5] * 4,
+            "effect": np.arange(10, dtype=float) / 10,
+        }
+    )
     row = summarise(results, ["group_scale"], ["novice"]).iloc[0]
     # Wilson score interval, closed form: (p + z^2/2n +- z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
     z, n, p = 1.959963984540054, 10, 0.8
@@ -179,8 +206,9 @@ def test_power_interval_is_wilsons_and_effect_interval_t_based() -> None:
     assert row["power_ci_high"] == pytest.approx((centre + half) / (1 + z**2 / n), abs=1e-12)
     # mean 0.45, sd of 0..0.9 step 0.1 = 0.30277, t(0.975, 9) = 2.262157 (R: qt(0.975, 9))
     assert row["effect_mean"] == pytest.approx(0.45)
-    assert row["effect_ci_high"] - 0.45 == pytest.approx(2.262157 * 0.3027650 / math.sqrt(10),
-                                                         rel=1e-6)  # fmt: skip
+    assert row["effect_ci_high"] - 0.45 == pytest.approx(
+        2.262157 * 0.3027650 / math.sqrt(10), rel=1e-6
+    )
     assert row["data_source"] == "simulated"
 
 
@@ -191,8 +219,9 @@ def test_a_unit_is_the_study_that_study_run_simulates(tmp_path: Path) -> None:
     cell = spec.cells()[1]  # haptic_gain 0.02: the device's default, as `study run` uses
     seed = study_seed(spec.seed, 0)
     design = tmp_path / "d.toml"
-    design.write_text(f"seed = {seed}\ntrials_per_condition = 1\npractice_trials = 0\n"
-                      "[groups]\nexpert = 3\n")  # fmt: skip
+    design.write_text(
+        f"seed = {seed}\ntrials_per_condition = 1\npractice_trials = 0\n[groups]\nexpert = 3\n"
+    )
     db = str(tmp_path / "s.db")
     assert main(["init", "--design", str(design), "--db", db]) == 0
     for _ in range(3):
@@ -201,12 +230,28 @@ def test_a_unit_is_the_study_that_study_run_simulates(tmp_path: Path) -> None:
     engine = create_engine(f"sqlite:///{db}")
     with Session(engine) as s:
         stored = pd.DataFrame(
-            [(code, t.condition, t.completion_time_s, t.measure_values["peak_proximal_force_n"],
-              t.measure_values["peak_distal_force_n"])
-             for code, t in s.execute(select(Participant.code, Trial).join(Trial)
-                                      .order_by(Participant.code, Trial.condition))],
-            columns=["participant", "condition", "completion_time_s", "peak_proximal_force_n",
-                     "peak_distal_force_n"])  # fmt: skip
+            [
+                (
+                    code,
+                    t.condition,
+                    t.completion_time_s,
+                    t.measure_values["peak_proximal_force_n"],
+                    t.measure_values["peak_distal_force_n"],
+                )
+                for code, t in s.execute(
+                    select(Participant.code, Trial)
+                    .join(Trial)
+                    .order_by(Participant.code, Trial.condition)
+                )
+            ],
+            columns=[
+                "participant",
+                "condition",
+                "completion_time_s",
+                "peak_proximal_force_n",
+                "peak_distal_force_n",
+            ],
+        )
     engine.dispose()
     unit = simulate_study(spec, cell, 0).sort_values(["participant", "condition"])
     columns = list(stored.columns)
@@ -234,8 +279,13 @@ def test_one_and_two_workers_give_the_serial_results_byte_for_byte(
 
 
 def _spawn(argv: list[str]) -> subprocess.Popen[bytes]:
-    return subprocess.Popen(argv, env=_env(), start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
+    return subprocess.Popen(
+        argv,
+        env=_env(),
+        start_new_session=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
 
 
 def _stop(process: subprocess.Popen[bytes]) -> None:
@@ -257,8 +307,20 @@ def test_a_killed_campaign_resumes_to_the_uninterrupted_results(
 ) -> None:
     path, out = tmp_path / "c.toml", tmp_path / "out"
     path.write_text(NOTES)
-    run = _spawn([sys.executable, "-m", "study.cli", "campaign", "run", str(path), "--out",
-                  str(out), "--workers", "1"])  # fmt: skip
+    run = _spawn(
+        [
+            sys.executable,
+            "-m",
+            "study.cli",
+            "campaign",
+            "run",
+            str(path),
+            "--out",
+            str(out),
+            "--workers",
+            "1",
+        ]
+    )
     try:
         _wait_for(lambda: len(list((out / "units").glob("*.parquet"))) >= 1)
     finally:
@@ -284,14 +346,27 @@ def dask_cluster() -> Iterator[tuple[str, list[subprocess.Popen[bytes]]]]:
     dask = str(Path(sys.executable).parent / "dask")
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
-    processes = [_spawn([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port),
-                         "--no-dashboard"])]  # fmt: skip
+    processes = [
+        _spawn([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"])
+    ]
     try:
         with Client(address, timeout=60):
             pass
         for _ in range(2):
-            processes.append(_spawn([dask, "worker", address, "--nthreads", "1",
-                                     "--no-dashboard", "--host", "127.0.0.1"]))  # fmt: skip
+            processes.append(
+                _spawn(
+                    [
+                        dask,
+                        "worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--no-dashboard",
+                        "--host",
+                        "127.0.0.1",
+                    ]
+                )
+            )
         with Client(address, timeout=60) as c:
             c.wait_for_workers(2, timeout=120)
         yield address, processes
@@ -308,8 +383,20 @@ def test_an_external_scheduler_runs_it_and_a_lost_worker_costs_one_unit(
     address, processes = dask_cluster
     path, out = tmp_path / "c.toml", tmp_path / "out"
     path.write_text(NOTES)
-    run = _spawn([sys.executable, "-m", "study.cli", "campaign", "run", str(path), "--out",
-                  str(out), "--scheduler", address])  # fmt: skip
+    run = _spawn(
+        [
+            sys.executable,
+            "-m",
+            "study.cli",
+            "campaign",
+            "run",
+            str(path),
+            "--out",
+            str(out),
+            "--scheduler",
+            address,
+        ]
+    )
     try:
         _wait_for(lambda: len(list((out / "units").glob("*.parquet"))) >= 1)
         _stop(processes[1])  # one `dask worker` dies, whatever it was running
@@ -319,15 +406,20 @@ def test_an_external_scheduler_runs_it_and_a_lost_worker_costs_one_unit(
     assert (out / "results.csv").read_bytes() == notes_reference
 
 
-def test_report_redraws_labelled_figures(notes_reference: bytes, tmp_path: Path,
-                                         capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+def test_report_redraws_labelled_figures(
+    notes_reference: bytes, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "out"
     _serial(NOTES, out)
     assert main(["campaign", "report", str(out)]) == 0
     assert "complete, simulated" in capsys.readouterr().out
     figures = sorted(p.name for p in (out / "figures").iterdir())
-    assert figures == ["effect_group_scale.pdf", "effect_group_scale.png",
-                       "power_group_scale.pdf", "power_group_scale.png"]  # fmt: skip
+    assert figures == [
+        "effect_group_scale.pdf",
+        "effect_group_scale.png",
+        "power_group_scale.pdf",
+        "power_group_scale.png",
+    ]
     assert (out / "results.csv").read_bytes() == notes_reference
     import json
 
@@ -336,8 +428,10 @@ def test_report_redraws_labelled_figures(notes_reference: bytes, tmp_path: Path,
 
 def test_bench_campaign_runs_both_clusters_and_reports_identical_results(tmp_path: Path) -> None:
     out = tmp_path / "bench.json"
-    assert main(["bench", "campaign", "--replicates", "2", "--group-size", "3",
-                 "--json", str(out)]) == 0  # fmt: skip
+    assert (
+        main(["bench", "campaign", "--replicates", "2", "--group-size", "3", "--json", str(out)])
+        == 0
+    )
     report = json.loads(out.read_text())
     assert [r["workers"] for r in report["runs"]] == [1, 2]
     assert all(r["units"] == 2 and len(r["unit_seconds"]) == 2 for r in report["runs"])

@@ -33,8 +33,9 @@ def _init(tmp_path: Path) -> str:
 def _audit(db: str, entity: str) -> list[AuditEntry]:
     engine = make_engine(f"sqlite:///{db}")
     with Session(engine) as s:
-        rows = list(s.scalars(select(AuditEntry).where(AuditEntry.entity == entity)
-                              .order_by(AuditEntry.id)))  # fmt: skip
+        rows = list(
+            s.scalars(select(AuditEntry).where(AuditEntry.entity == entity).order_by(AuditEntry.id))
+        )
         s.expunge_all()
     engine.dispose()
     return rows
@@ -75,8 +76,11 @@ def test_enrolment_and_imports_are_audited(tmp_path: Path) -> None:
     assert main(["import", "--trials", str(csv), "--actor", "EXP02", "--db", db]) == 0
     (imported,) = _audit(db, "import")
     record = json.loads(imported.new_value)
-    assert record == {"file": str(csv.resolve()), "rows": 1,
-                      "sha256": hashlib.sha256(csv.read_bytes()).hexdigest()}  # fmt: skip
+    assert record == {
+        "file": str(csv.resolve()),
+        "rows": 1,
+        "sha256": hashlib.sha256(csv.read_bytes()).hexdigest(),
+    }
     assert (imported.field, imported.actor) == ("trials_csv", "EXP02")
     assert imported.at is not None
     # the participant the import created is enrolled in the log too, by the import
@@ -86,9 +90,11 @@ def test_enrolment_and_imports_are_audited(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("through", ["link", "link/sub"])
 def test_out_through_a_symbolic_link_is_refused(
-    tmp_path: Path, through: str, capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    through: str,
+    capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
-) -> None:  # fmt: skip
+) -> None:
     db = _init(tmp_path)
     (tmp_path / "elsewhere").mkdir()
     (tmp_path / "link").symlink_to(tmp_path / "elsewhere")
@@ -108,8 +114,10 @@ def test_the_lease_refusal_says_when_a_session_is_taken_over(tmp_path: Path) -> 
     engine = make_engine(f"sqlite:///{db}")
     try:
         held = acquire_lease(engine, 1, "P001")  # this process: alive on this host
-        with pytest.raises(SessionBusyError, match="alive on this host; once it ends, a new "
-                                                   "session takes over at once"):  # fmt: skip
+        with pytest.raises(
+            SessionBusyError,
+            match="alive on this host; once it ends, a new session takes over at once",
+        ):
             acquire_lease(engine, 1, "P001")
         with engine.begin() as conn:
             conn.exec_driver_sql("UPDATE session_leases SET host = 'lab-pc-2'")
@@ -167,10 +175,24 @@ def test_killing_the_parent_of_jobs_2_prints_no_leaked_semaphore_warning(tmp_pat
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     shm = set(os.listdir("/dev/shm")) if os.path.isdir("/dev/shm") else set()
     run = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from study.cli import main; sys.exit(main())",
-         "run", "--all", "--jobs", "2", "--pace", "1", "--db", db],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-c",
+            "import sys; from study.cli import main; sys.exit(main())",
+            "run",
+            "--all",
+            "--jobs",
+            "2",
+            "--pace",
+            "1",
+            "--db",
+            db,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline:  # kill once both workers run a trial
         with closing(sqlite3.connect(db)) as conn:

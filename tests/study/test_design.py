@@ -98,11 +98,17 @@ def _add_trials(engine, code: str, block_index: int, statuses: list[str]) -> Non
         p = session.scalars(select(Participant).where(Participant.code == code)).one()
         block = p.blocks[block_index]
         for k, status in enumerate(statuses):
-            session.add(Trial(
-                participant_id=p.id, block_id=block.id, task=block.task,
-                condition=block.condition, block_index=block_index, trial_index=k,
-                status=status,
-            ))  # fmt: skip
+            session.add(
+                Trial(
+                    participant_id=p.id,
+                    block_id=block.id,
+                    task=block.task,
+                    condition=block.condition,
+                    block_index=block_index,
+                    trial_index=k,
+                    status=status,
+                )
+            )
         session.commit()
 
 

@@ -32,8 +32,11 @@ def small_tmpfs(tmp_path: Path) -> Iterator[Path]:
         pytest.skip("mounting a tmpfs needs root")
     where = tmp_path / "tmpfs"
     where.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(where)],
-                             capture_output=True, text=True)  # fmt: skip
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(where)],
+        capture_output=True,
+        text=True,
+    )
     if mounted.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here: {mounted.stderr.strip()}")
     try:
@@ -67,8 +70,13 @@ def test_a_full_disk_names_the_participant_trial_and_time_kept(
     db = _study(small_tmpfs)
     filler = _fill(small_tmpfs, leave_kib)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    out = subprocess.run([*STUDY, "run", "--participant", "P001", "--db", db],
-                         capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
+    out = subprocess.run(
+        [*STUDY, "run", "--participant", "P001", "--db", db],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     err = out.stderr.strip().splitlines()
     assert out.returncode == 2, out.stderr
     assert len(err) == 1, err  # one line: not followed by a second error from the lease
@@ -76,7 +84,9 @@ def test_a_full_disk_names_the_participant_trial_and_time_kept(
     found = re.search(
         r"storing P001's (\w+)/(\w+) (practice trial|trial) (\d+) failed \((.*full.*)\): kept "
         r"(\d+) trial\(s\) of P001 completed in this session and (?:its samples up to t = "
-        r"([0-9.]+) s|no samples) of ", err[0])  # fmt: skip
+        r"([0-9.]+) s|no samples) of ",
+        err[0],
+    )
     assert found, err[0]
     task, condition, kind, number, _, n_completed, kept_s = found.groups()
     with closing(sqlite3.connect(f"file:{db}?mode=ro", uri=True)) as conn:
@@ -98,8 +108,13 @@ def test_a_full_disk_names_the_participant_trial_and_time_kept(
     assert (last_s is None and kept_s is None) or float(kept_s) == pytest.approx(last_s, abs=0.005)
     # with space again, the next run marks it interrupted and finishes the schedule
     filler.unlink()
-    again = subprocess.run([*STUDY, "run", "--participant", "P001", "--db", db],
-                           capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
+    again = subprocess.run(
+        [*STUDY, "run", "--participant", "P001", "--db", db],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
     assert again.returncode == 0, again.stderr
     with closing(sqlite3.connect(db)) as conn:
         statuses = dict(conn.execute("SELECT status, count(*) FROM trials GROUP BY status"))
@@ -114,8 +129,10 @@ def test_a_locked_database_is_named_as_locked(
         holder.execute("BEGIN IMMEDIATE")  # another program's write lock
         capsys.readouterr()
         url = f"sqlite:///{db}?timeout=0.2"
-        for argv in (["participant", "add", "--group", "novice", "--db", url],
-                     ["run", "--participant", "P001", "--db", url]):  # fmt: skip
+        for argv in (
+            ["participant", "add", "--group", "novice", "--db", url],
+            ["run", "--participant", "P001", "--db", url],
+        ):
             assert main(argv) == 2
             err = capsys.readouterr().err.strip().splitlines()
             assert len(err) == 1, err

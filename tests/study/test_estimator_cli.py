@@ -103,8 +103,21 @@ def test_memory_none_trains_the_plain_window_and_runs(
     recording_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "plain"
-    argv = ["estimator", "train", str(recording_csv), "--out", str(out), "--window", "6",
-            "--epochs", "1", "--hidden-size", "4", "--memory", "none"]  # fmt: skip
+    argv = [
+        "estimator",
+        "train",
+        str(recording_csv),
+        "--out",
+        str(out),
+        "--window",
+        "6",
+        "--epochs",
+        "1",
+        "--hidden-size",
+        "4",
+        "--memory",
+        "none",
+    ]
     assert main(argv) == 0
     std = json.loads((out / "standardisation.json").read_text())
     assert std["memory"]["kind"] == "none"

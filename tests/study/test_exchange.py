@@ -128,13 +128,27 @@ def test_parquet_export_has_the_same_columns(tmp_path: Path) -> None:
 
 def test_the_column_contracts_are_the_issues() -> None:
     assert TRIAL_COLUMNS == (
-        "participant", "group", "task", "condition", "trial", "completion_time_s",
-        "peak_proximal_force_n", "peak_distal_force_n", "success",
-    )  # fmt: skip
+        "participant",
+        "group",
+        "task",
+        "condition",
+        "trial",
+        "completion_time_s",
+        "peak_proximal_force_n",
+        "peak_distal_force_n",
+        "success",
+    )
     assert TLX_COLUMNS == (
-        "participant", "task", "condition", "mental", "physical", "temporal", "performance",
-        "effort", "frustration",
-    )  # fmt: skip
+        "participant",
+        "task",
+        "condition",
+        "mental",
+        "physical",
+        "temporal",
+        "performance",
+        "effort",
+        "frustration",
+    )
     assert TLX_WEIGHT_COLUMNS == tuple(
         f"w_{s}" for s in ("mental", "physical", "temporal", "performance", "effort", "frustration")
     )

@@ -55,8 +55,9 @@ def _trial_rows(rng: np.random.Generator) -> list[list[object]]:
                         # each task's two analysed peaks in its own columns
                         pair, empty = [force, distal], ["", ""]
                         peaks = pair + empty if task == "lcca" else empty + pair
-                        rows.append([code, group, task, cond, trial, 30 + rng.normal(0, 3),
-                                     *peaks, "true"])  # fmt: skip
+                        rows.append(
+                            [code, group, task, cond, trial, 30 + rng.normal(0, 3), *peaks, "true"]
+                        )
     return rows
 
 
@@ -85,12 +86,14 @@ def _give_samples(engine: Engine) -> None:
         session.commit()
     for trial_id, gain in gains.items():
         with SampleWriter(engine, trial_id) as writer:
-            writer.extend({
-                "t_s": t,
-                "proximal_force_n": 2.5 * gain * push,
-                "proximal_force_est_n": 2.5 * gain * push + 0.05,
-                "distal_force_n": np.maximum(gain * push, 0.0),
-            })  # fmt: skip
+            writer.extend(
+                {
+                    "t_s": t,
+                    "proximal_force_n": 2.5 * gain * push,
+                    "proximal_force_est_n": 2.5 * gain * push + 0.05,
+                    "distal_force_n": np.maximum(gain * push, 0.0),
+                }
+            )
 
 
 @pytest.fixture(scope="module")
@@ -128,8 +131,11 @@ def engine(study_db: str) -> Iterator[Engine]:
 def test_every_figure_passes_the_check_at_both_widths(engine: Engine, width: str) -> None:
     drawn = draw_figures(engine, width)
     names = sorted(d.name for d in drawn)
-    assert names == sorted(f"{f}_{t}" for t in ("lcca", "notes")
-                           for f in ("fig12_groups", "fig9_forces", "tlx_profile"))  # fmt: skip
+    assert names == sorted(
+        f"{f}_{t}"
+        for t in ("lcca", "notes")
+        for f in ("fig12_groups", "fig9_forces", "tlx_profile")
+    )
     for d in drawn:
         assert d.problems() == [], d.name
         texts = [t.get_text() for t in d.figure.findobj(plt.Text)]
@@ -149,20 +155,25 @@ def test_each_task_gets_its_own_fig12_with_its_own_marks(engine: Engine) -> None
     tip = {"lcca": "peak_distal_force_n", "notes": "peak_tip_force_n"}
     for task in ("lcca", "notes"):
         d = drawn[f"fig12_groups_{task}"]
-        rows = reported[(reported["task"] == task)
-                        & reported["measure"].isin(["completion_time_s", force[task],
-                                                    tip[task], "tlx_raw"])]  # fmt: skip
+        rows = reported[
+            (reported["task"] == task)
+            & reported["measure"].isin(["completion_time_s", force[task], tip[task], "tlx_raw"])
+        ]
         expected = {f"{r.measure}/{r.group}": r.p_holm for r in rows.itertuples()}
         assert d.expected_marks == pytest.approx(expected)  # the p values analyze reports
         assert check_figure(d.figure, expected) == []
-        marks = {t.get_gid(): t.get_text() for t in d.figure.findobj(plt.Text)
-                 if (t.get_gid() or "").startswith("mark:")}  # fmt: skip
+        marks = {
+            t.get_gid(): t.get_text()
+            for t in d.figure.findobj(plt.Text)
+            if (t.get_gid() or "").startswith("mark:")
+        }
         seen[task] = marks[f"mark:{force[task]}/novice"]
     # HV lowers the lcca force (-0.3 N) and not the notes force: the marks differ by task
     assert seen["lcca"] in {"*", "**", "***"} and seen["notes"] == "n.s."
     # the tied expert VO forces give a Wilcoxon, named under its group
-    ticks = [t.get_text() for ax in drawn["fig12_groups_lcca"].figure.axes
-             for t in ax.get_xticklabels()]  # fmt: skip
+    ticks = [
+        t.get_text() for ax in drawn["fig12_groups_lcca"].figure.axes for t in ax.get_xticklabels()
+    ]
     assert "expert\nWilcoxon\n(exact)" in ticks
     assert any(t.endswith("\npaired t") for t in ticks)
 
@@ -195,7 +206,11 @@ def test_the_check_catches_small_text_overlaps_and_wrong_marks() -> None:
     assert check_figure(fig, {"m/novice": 0.03}) == ["text 'outside' reaches outside the figure"]
     plt.close(fig)
     assert [stars(p) for p in (0.0009, 0.009, 0.049, 0.05, None)] == [
-        "***", "**", "*", "n.s.", "n/a"
+        "***",
+        "**",
+        "*",
+        "n.s.",
+        "n/a",
     ]
 
 
@@ -214,8 +229,11 @@ def test_cousineau_morey_interval_by_hand() -> None:
 
 
 def test_fig9_one_figure_shared_axis_reference_above_estimate(engine: Engine) -> None:
-    fig = next(d.figure for d in draw_figures(engine, "double", task="lcca")
-               if d.name == "fig9_forces_lcca")  # fmt: skip
+    fig = next(
+        d.figure
+        for d in draw_figures(engine, "double", task="lcca")
+        if d.name == "fig9_forces_lcca"
+    )
     vo, hv = [ax for ax in fig.axes if ax.get_title()]
     assert vo.get_title().split(", ")[1] == "VO" and hv.get_title().split(", ")[1] == "HV"
     assert vo.get_ylim() == hv.get_ylim()
@@ -230,8 +248,11 @@ def test_fig9_one_figure_shared_axis_reference_above_estimate(engine: Engine) ->
 def test_fig9_draws_every_stored_sample_of_the_two_trials(engine: Engine) -> None:
     """The traces are the samples `_give_samples` wrote (read batch by batch now, issue
     26): t from 0 to 10 s, the reference 2.5 N x gain x sin, VO gain 1, HV gain 0.4."""
-    fig = next(d.figure for d in draw_figures(engine, "double", task="lcca")
-               if d.name == "fig9_forces_lcca")  # fmt: skip
+    fig = next(
+        d.figure
+        for d in draw_figures(engine, "double", task="lcca")
+        if d.name == "fig9_forces_lcca"
+    )
     t = np.linspace(0, 10, 200)
     push = np.sin(t / 10 * 2 * np.pi)
     for ax, gain in zip([ax for ax in fig.axes if ax.get_title()], (1.0, 0.4), strict=True):
@@ -253,23 +274,32 @@ def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> No
         fig = plot_power_curve(equal, width, **assumed)
         assert check_figure(fig) == []
         ax_groups, ax_inter = fig.axes
-        lines = {line.get_label(): line for line in ax_groups.get_lines()
-                 if not line.get_label().startswith("_")}  # fmt: skip
+        lines = {
+            line.get_label(): line
+            for line in ax_groups.get_lines()
+            if not line.get_label().startswith("_")
+        }
         assert list(lines["novice"].get_xdata()) == [4, 8]  # the group's own n
         assert list(lines["outsider"].get_xdata()) == [10, 20]
         styles = {(line.get_marker(), line.get_linestyle()) for line in lines.values()}
         assert len(styles) == 3  # distinguishable without colour
         assert "type I error" in ax_inter.get_ylabel()
         plt.close(fig)
-    unequal = power_curve(sizes, {"outsider": 0.2, "novice": 0.8, "expert": 1.2}, 0.5, 20, 0,
-                          scales=(1.0,))  # fmt: skip
+    unequal = power_curve(
+        sizes, {"outsider": 0.2, "novice": 0.8, "expert": 1.2}, 0.5, 20, 0, scales=(1.0,)
+    )
     effects = {"outsider": 0.2, "novice": 0.8, "expert": 1.2}
     fig = plot_power_curve(unequal, "single", effects=effects, rho=0.5, n_sim=20)
     assert "power" in fig.axes[1].get_ylabel() and "type I" not in fig.axes[1].get_ylabel()
     # the assumptions stated in the figure
     key = fig.legends[0].get_title().get_text().replace("\n", " ")
-    for phrase in ("outsider 0.2, novice 0.8, expert 1.2", "correlation 0.5", "alpha 0.05",
-                   "20 simulated studies per size", "Monte-Carlo"):  # fmt: skip
+    for phrase in (
+        "outsider 0.2, novice 0.8, expert 1.2",
+        "correlation 0.5",
+        "alpha 0.05",
+        "20 simulated studies per size",
+        "Monte-Carlo",
+    ):
         assert phrase in key, key
     # each estimate's 95 % Monte-Carlo (Wilson) band, drawn around it: novice's power p of
     # 20 studies, by hand: (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
@@ -283,13 +313,16 @@ def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> No
     plt.close(fig)
 
 
-def test_study_figures_task_option(study_db: str, tmp_path: Path,
-                                   capsys: pytest.CaptureFixture[str]) -> None:  # fmt: skip
+def test_study_figures_task_option(
+    study_db: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "figs"
     argv = ["figures", "--db", study_db, "--out", str(out), "--format", "png"]
     assert main([*argv, "--task", "notes", "--width", "single"]) == 0
     assert sorted(p.name for p in out.iterdir()) == [
-        "fig12_groups_notes.png", "fig9_forces_notes.png", "tlx_profile_notes.png"
+        "fig12_groups_notes.png",
+        "fig9_forces_notes.png",
+        "tlx_profile_notes.png",
     ]
     capsys.readouterr()
     assert main([*argv, "--task", "knee"]) == 2

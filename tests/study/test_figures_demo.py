@@ -55,8 +55,7 @@ def test_quick_demo_writes_analysis_and_figures(
     assert sorted(p.suffix for p in figs.iterdir()) == [".png"] * 3
     capsys.readouterr()
     assert (
-        main(["figures", "--db", str(demo / "demo.db"), "--out", str(figs), "--format", "gif"])
-        == 2
+        main(["figures", "--db", str(demo / "demo.db"), "--out", str(figs), "--format", "gif"]) == 2
     )
     assert "expected some of pdf,svg,png" in capsys.readouterr().err
     assert main(["demo", "--quick", "--out", str(demo)]) == 2  # never overwrites a demo
@@ -66,8 +65,12 @@ def test_every_demo_output_says_simulated(demo: Path) -> None:
     # quick design: 6 participants x 2 conditions x 1 measured trial, all simulated
     report = json.loads((demo / "analysis" / "analysis.json").read_text())
     source = report["data_source"]
-    assert source["trials_by_driver"] == {"simulated": 12, "keyboard": 0, "hardware": 0,
-                                          "imported": 0}  # fmt: skip
+    assert source["trials_by_driver"] == {
+        "simulated": 12,
+        "keyboard": 0,
+        "hardware": 0,
+        "imported": 0,
+    }
     assert source["label"] == "simulated" and "Simulated participants" in source["note"]
     assert "Simulated participants" in (demo / "analysis" / "comparisons.md").read_text()
     assert "Simulated participants" in (demo / "analysis" / "comparisons.tex").read_text()
@@ -99,8 +102,12 @@ def test_mixed_database_reports_the_mix_and_driver_restricts(
     out = tmp_path / "all"
     assert main(["analyze", "--out", str(out), "--db", str(db)]) == 0
     source = json.loads((out / "analysis.json").read_text())["data_source"]
-    assert source["trials_by_driver"] == {"simulated": 12, "keyboard": 0, "hardware": 0,
-                                          "imported": 6}  # fmt: skip
+    assert source["trials_by_driver"] == {
+        "simulated": 12,
+        "keyboard": 0,
+        "hardware": 0,
+        "imported": 6,
+    }
     assert source["label"] == "mixed"
     assert source["note"] == "Mixed data: 12 of 18 trials simulated (6 imported)"
     assert "Mixed data: 12 of 18 trials simulated" in capsys.readouterr().out
@@ -128,8 +135,9 @@ def test_imported_database_carries_no_simulated_label(
 ) -> None:
     db = init_study(tmp_path)
     codes = [f"M{k:02d}" for k in range(9)]
-    assert main(["import", "--trials", str(_measured_csv(tmp_path / "t.csv", codes)),
-                 "--db", db]) == 0  # fmt: skip
+    assert (
+        main(["import", "--trials", str(_measured_csv(tmp_path / "t.csv", codes)), "--db", db]) == 0
+    )
     out = tmp_path / "a"
     assert main(["analyze", "--out", str(out), "--db", db]) == 0
     report = json.loads((out / "analysis.json").read_text())

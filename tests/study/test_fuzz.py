@@ -35,8 +35,9 @@ from study.protocol.design import TEMPLATE
 from study.protocol.exchange import TRIAL_COLUMNS
 
 HANG_S = 10
-FAST = settings(deadline=None, suppress_health_check=list(HealthCheck), derandomize=True,
-                database=None)  # fmt: skip
+FAST = settings(
+    deadline=None, suppress_health_check=list(HealthCheck), derandomize=True, database=None
+)
 """Deterministic draws (the same cases on every CI run), no example database."""
 
 
@@ -149,8 +150,9 @@ def workdir() -> Iterator[Path]:
     with tempfile.TemporaryDirectory() as folder:
         where = Path(folder)
         (where / "d.toml").write_text(TEMPLATE)
-        (where / "t.csv").write_text(",".join(TRIAL_COLUMNS) + "\n"
-                                     "P001,novice,lcca,VO,1,31.5,0.81,0.42,true\n")  # fmt: skip
+        (where / "t.csv").write_text(
+            ",".join(TRIAL_COLUMNS) + "\nP001,novice,lcca,VO,1,31.5,0.81,0.42,true\n"
+        )
         yield where
 
 
@@ -179,38 +181,97 @@ def _refused(case: tuple) -> None:
 # -- the study-data commands with random options ---------------------------------------
 
 TEXT = st.one_of(
-    st.sampled_from(["P001", "P002", "P999", "P0001", "novice", "expert", "lcca", "VO", "HV",
-                     "a note", "", " ", "x" * 600, "a\nb", "\x1b[2J", "caf\u00e9", "-1"]),
+    st.sampled_from(
+        [
+            "P001",
+            "P002",
+            "P999",
+            "P0001",
+            "novice",
+            "expert",
+            "lcca",
+            "VO",
+            "HV",
+            "a note",
+            "",
+            " ",
+            "x" * 600,
+            "a\nb",
+            "\x1b[2J",
+            "caf\u00e9",
+            "-1",
+        ]
+    ),
     st.text(max_size=12),
-)  # fmt: skip
+)
 NUMBER = st.one_of(
-    st.sampled_from(["0", "1", "3", "5", "50", "100", "101", "-1", "nan", "inf", "1e308",
-                     "1e-400", "2147483648", "99", "0.5"]),
+    st.sampled_from(
+        [
+            "0",
+            "1",
+            "3",
+            "5",
+            "50",
+            "100",
+            "101",
+            "-1",
+            "nan",
+            "inf",
+            "1e308",
+            "1e-400",
+            "2147483648",
+            "99",
+            "0.5",
+        ]
+    ),
     st.integers(-10, 10_000).map(str),
-)  # fmt: skip
+)
 
 CODE = st.sampled_from(["P001", "P002", "P999", "P0001", "p001", "", "P001\n"])
-BY_OPTION = {"CODE": CODE, "--participant": CODE,
-             "--group": st.sampled_from(["novice", "expert", "outsider", "surgeon", ""]),
-             "--task": st.sampled_from(["lcca", "notes", "x"]),
-             "--condition": st.sampled_from(["VO", "HV", "XX"])}  # fmt: skip
+BY_OPTION = {
+    "CODE": CODE,
+    "--participant": CODE,
+    "--group": st.sampled_from(["novice", "expert", "outsider", "surgeon", ""]),
+    "--task": st.sampled_from(["lcca", "notes", "x"]),
+    "--condition": st.sampled_from(["VO", "HV", "XX"]),
+}
 
 LIGHT = {
     "participant add": ["--group", "--site", "--count", "--actor"],
     "participant note": ["CODE", "TEXT", "--actor"],
     "participant withdraw": ["CODE", "--reason", "--actor"],
-    "tlx enter": ["--participant", "--task", "--condition", "--mental", "--physical",
-                  "--temporal", "--performance", "--effort", "--frustration", "--reason",
-                  "--actor"],
+    "tlx enter": [
+        "--participant",
+        "--task",
+        "--condition",
+        "--mental",
+        "--physical",
+        "--temporal",
+        "--performance",
+        "--effort",
+        "--frustration",
+        "--reason",
+        "--actor",
+    ],
     "tlx show": ["--participant"],
     "tlx pairs": ["--participant"],
     "schedule": [],
     "db info": [],
     "export": ["--out", "--trial", "--participant", "--from-s", "--to-s", "--format"],
     "import": ["--trials", "--actor"],
-}  # fmt: skip
-NUMERIC = {"--count", "--mental", "--physical", "--temporal", "--performance", "--effort",
-           "--frustration", "--trial", "--from-s", "--to-s"}  # fmt: skip
+}
+NUMERIC = {
+    "--count",
+    "--mental",
+    "--physical",
+    "--temporal",
+    "--performance",
+    "--effort",
+    "--frustration",
+    "--trial",
+    "--from-s",
+    "--to-s",
+}
 
 
 @pytest.fixture(scope="module")
@@ -273,7 +334,7 @@ CELL = {
     "peak_proximal_force_n": NUMBER,
     "peak_distal_force_n": NUMBER,
     "success": st.sampled_from(["true", "false", "yes", "maybe", ""]),
-}  # fmt: skip
+}
 
 
 def _sane_trials(db: Path) -> list[str]:
@@ -290,22 +351,26 @@ def _sane_trials(db: Path) -> list[str]:
         if len(set(numbers)) != len(numbers):
             bad.append(f"codes {codes}")
         for (pid,) in conn.execute("SELECT id FROM participants"):
-            n = conn.execute("SELECT count(*) FROM schedule_blocks WHERE participant_id=?",
-                             (pid,)).fetchone()[0]  # fmt: skip
+            n = conn.execute(
+                "SELECT count(*) FROM schedule_blocks WHERE participant_id=?", (pid,)
+            ).fetchone()[0]
             if n == 0:
                 bad.append(f"participant {pid} without a schedule")
     return bad
 
 
 @settings(FAST, max_examples=250)
-@given(rows=st.lists(st.fixed_dictionaries(CELL), min_size=1, max_size=4),
-       extra=st.sampled_from(["", "", ",success", ",x", "fields"]))  # fmt: skip
+@given(
+    rows=st.lists(st.fixed_dictionaries(CELL), min_size=1, max_size=4),
+    extra=st.sampled_from(["", "", ",success", ",x", "fields"]),
+)
 def test_trial_csvs(small_study: Path, rows: list[dict[str, str]], extra: str) -> None:
     header = ",".join(CELL) + ("" if extra == "fields" else extra)
     body = "\n".join(",".join(r.values()).replace("\n", " ") for r in rows)
     if extra:  # every row as long as the header, or (fields) two longer
-        body = "\n".join(line + (",a,b" if extra == "fields" else ",1")
-                         for line in body.split("\n"))  # fmt: skip
+        body = "\n".join(
+            line + (",a,b" if extra == "fields" else ",1") for line in body.split("\n")
+        )
     with workdir() as where:
         shutil.copy(small_study, where / "s.db")
         (where / "f.csv").write_text(header + "\n" + body + "\n")
@@ -313,8 +378,11 @@ def test_trial_csvs(small_study: Path, rows: list[dict[str, str]], extra: str) -
         assert code in (0, 2), (header, body, err)
         if code == 2:
             assert_one_line_refusal(code, err, [header, body])
-            want = {",success": "'success' twice", "fields": "11 fields; expected 9",
-                    ",x": "unknown column 'x'"}.get(extra)  # fmt: skip
+            want = {
+                ",success": "'success' twice",
+                "fields": "11 fields; expected 9",
+                ",x": "unknown column 'x'",
+            }.get(extra)
             assert want is None or want in err, (extra, err)
         else:
             assert extra == "", "a repeated or unknown column was accepted"
@@ -323,9 +391,10 @@ def test_trial_csvs(small_study: Path, rows: list[dict[str, str]], extra: str) -
 
 
 TOML_VALUE = st.one_of(
-    st.integers(-5, 5000), st.sampled_from([float("nan"), float("inf"), -1.5, 0.0, 1e308]),
+    st.integers(-5, 5000),
+    st.sampled_from([float("nan"), float("inf"), -1.5, 0.0, 1e308]),
     st.sampled_from(['"x"', '""', "true", "[]", '["VO", "HV"]', '["lcca"]', '"P"', '"ÄB"']),
-)  # fmt: skip
+)
 KEYS = [
     "name",
     "seed",
@@ -348,9 +417,12 @@ def _toml(value: object) -> str:
 
 
 @settings(FAST, max_examples=200)
-@given(top=st.dictionaries(st.sampled_from(KEYS), TOML_VALUE, max_size=4),
-       groups=st.dictionaries(st.sampled_from(["novice", "expert", "g", " a", "x" * 40]),
-                              TOML_VALUE, max_size=4))  # fmt: skip
+@given(
+    top=st.dictionaries(st.sampled_from(KEYS), TOML_VALUE, max_size=4),
+    groups=st.dictionaries(
+        st.sampled_from(["novice", "expert", "g", " a", "x" * 40]), TOML_VALUE, max_size=4
+    ),
+)
 def test_design_tomls(top: dict[str, object], groups: dict[str, object]) -> None:
     text = "".join(f"{k} = {_toml(v)}\n" for k, v in top.items())
     if groups:

@@ -53,8 +53,10 @@ def test_study_run_uses_the_designs_gain_in_hv(tmp_path: Path) -> None:
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     engine = open_database(db)
     with Session(engine) as session:
-        gains = {t.condition: t.summary.get("haptic_gain_n_m_per_n")
-                 for t in session.scalars(select(Trial))}  # fmt: skip
+        gains = {
+            t.condition: t.summary.get("haptic_gain_n_m_per_n")
+            for t in session.scalars(select(Trial))
+        }
     engine.dispose()
     # HV at the design's gain; VO renders nothing
     assert gains == {"HV": 0.013, "VO": 0.0}
@@ -64,8 +66,19 @@ def test_simulate_refuses_a_gain_for_a_task_without_a_dial(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "t.csv"
-    argv = ["simulate", "--task", "notes", "--group", "expert", "--condition", "HV",
-            "--haptic-gain", "2", "--out", str(out)]  # fmt: skip
+    argv = [
+        "simulate",
+        "--task",
+        "notes",
+        "--group",
+        "expert",
+        "--condition",
+        "HV",
+        "--haptic-gain",
+        "2",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [

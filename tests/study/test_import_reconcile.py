@@ -127,8 +127,7 @@ def test_the_same_file_imported_twice_is_refused_with_one_line(
 ) -> None:
     _init(tmp_path, db_url)
     rows = (
-        "P001,novice,lcca,VO,1,31.5,0.81,0.42,,,true\n"
-        "P009,expert,lcca,HV,2,22.0,0.7,0.3,,,true\n"
+        "P001,novice,lcca,VO,1,31.5,0.81,0.42,,,true\nP009,expert,lcca,HV,2,22.0,0.7,0.3,,,true\n"
     )
     assert _import(tmp_path, db_url, rows) == 0
     capsys.readouterr()

@@ -128,8 +128,9 @@ def test_a_session_killed_at_random_points_loses_no_trial_and_at_most_one_second
         die_at_s = round(float(rng.uniform(0.3, 8.0)), 2)
         before = _trials(url)
         log = tmp_path / f"kill{k}.log"
-        rc = _run(server, kill_children.session_killed_at, url, code, after_trials, die_at_s,
-                  str(log))  # fmt: skip
+        rc = _run(
+            server, kill_children.session_killed_at, url, code, after_trials, die_at_s, str(log)
+        )
         lines = log.read_text().split()
         assert rc == -signal.SIGKILL, rc  # 6 trials a participant: never run out first
         killed_at_s = float(lines[-1])

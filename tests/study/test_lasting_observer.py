@@ -41,11 +41,18 @@ def test_sessions_of_one_participant_are_one_until_something_changes() -> None:
     lasting.close()
     lasting.close()  # once only
     assert log.calls == [
-        ("start", "P001", "simulated", None), ("probe", "P001"), ("end",),
-        ("start", "P001", "simulated", 1.0), ("questionnaire", "P001"), ("end",),
-        ("start", "P001", "simulated", None), ("end",),
-        ("start", "P002", "keyboard", None), ("questionnaire", "P002"), ("end",),
-    ]  # fmt: skip
+        ("start", "P001", "simulated", None),
+        ("probe", "P001"),
+        ("end",),
+        ("start", "P001", "simulated", 1.0),
+        ("questionnaire", "P001"),
+        ("end",),
+        ("start", "P001", "simulated", None),
+        ("end",),
+        ("start", "P002", "keyboard", None),
+        ("questionnaire", "P002"),
+        ("end",),
+    ]
 
 
 def test_a_session_that_failed_to_start_is_ended_and_not_kept() -> None:

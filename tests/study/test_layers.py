@@ -18,8 +18,9 @@ PLANTED = {  # module -> (statement, contract it breaks)
 
 def test_planted_violations_break_the_study_contracts(tmp_path: Path) -> None:
     for name in ("teleop_core", "db", "study"):
-        shutil.copytree(ROOT / name, tmp_path / name,
-                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))  # fmt: skip
+        shutil.copytree(
+            ROOT / name, tmp_path / name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc")
+        )
     shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
     for module, (statement, _) in PLANTED.items():
         tmp_path.joinpath(*module.split(".")).with_suffix(".py").write_text(f"{statement}\n")

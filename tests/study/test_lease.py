@@ -165,8 +165,11 @@ def test_second_run_of_a_participant_is_refused_then_takes_over_after_kill_9(
     assert sorted(completed) == sorted(set(completed)) and len(completed) == 2
     engine = make_engine(db_url)
     with Session(engine) as s:
-        audit = s.scalars(select(AuditEntry).where(AuditEntry.entity == "trial",
-                                                AuditEntry.entity_id == killed[0])).one()
+        audit = s.scalars(
+            select(AuditEntry).where(
+                AuditEntry.entity == "trial", AuditEntry.entity_id == killed[0]
+            )
+        ).one()
     engine.dispose()
     assert audit.new_value == "interrupted"
     assert f"process {first.pid}" in audit.reason and "gone" in audit.reason

@@ -29,8 +29,10 @@ CLI = [sys.executable, "-c", "from study.cli import main; raise SystemExit(main(
 
 def _both(*argvs: list[str]) -> None:
     """Start the commands together, as two machines would, and wait for both."""
-    procs = [subprocess.Popen([*CLI, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-             for argv in argvs]  # fmt: skip
+    procs = [
+        subprocess.Popen([*CLI, *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        for argv in argvs
+    ]
     for proc in procs:
         _, err = proc.communicate(timeout=300)
         assert proc.returncode == 0, err.decode()
@@ -58,9 +60,7 @@ def test_two_sites_enrol_and_run_at_once(db_url: str, tmp_path: Path) -> None:
                 (p.id, c) for p in people[:2] for c in ("VO", "HV")
             )
             for t in trials:
-                n = s.scalar(
-                    stored_samples(t.id)
-                )
+                n = s.scalar(stored_samples(t.id))
                 assert n == round(t.completion_time_s * 100)
     finally:
         engine.dispose()

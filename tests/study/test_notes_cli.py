@@ -121,21 +121,35 @@ def test_a_study_with_lcca_and_notes_runs_notes_blocks(tmp_path: Path) -> None:
     with sqlite3.connect(db) as raw:
         expose_samples(raw)
         # stored under the NOTES task's own columns, the demanded roll torque with them
-        demanded = dict(raw.execute(
-            "SELECT trial_id, MAX(ABS(force_demanded_n)) FROM samples GROUP BY trial_id"
-        ).fetchall())  # fmt: skip
-        torque = dict(raw.execute(
-            "SELECT trial_id, MAX(ABS(torque_demanded_n_m)) FROM samples GROUP BY trial_id"
-        ).fetchall())  # fmt: skip
+        demanded = dict(
+            raw.execute(
+                "SELECT trial_id, MAX(ABS(force_demanded_n)) FROM samples GROUP BY trial_id"
+            ).fetchall()
+        )
+        torque = dict(
+            raw.execute(
+                "SELECT trial_id, MAX(ABS(torque_demanded_n_m)) FROM samples GROUP BY trial_id"
+            ).fetchall()
+        )
         stored_columns = [r[1] for r in raw.execute("PRAGMA table_info(samples)")]
     with engine.connect() as conn:
-        torque_peaks = dict(conn.execute(text(
-            "SELECT trial_id, value FROM trial_measures WHERE name = 'peak_torque_demanded_n_m'"
-        )).all())  # fmt: skip
+        torque_peaks = dict(
+            conn.execute(
+                text(
+                    "SELECT trial_id, value FROM trial_measures"
+                    " WHERE name = 'peak_torque_demanded_n_m'"
+                )
+            ).all()
+        )
     with engine.connect() as conn:
-        stored = dict(conn.execute(text(
-            "SELECT trial_id, value FROM trial_measures WHERE name = 'peak_force_demanded_n'"
-        )).all())  # fmt: skip
+        stored = dict(
+            conn.execute(
+                text(
+                    "SELECT trial_id, value FROM trial_measures"
+                    " WHERE name = 'peak_force_demanded_n'"
+                )
+            ).all()
+        )
     engine.dispose()
     assert list(frame["task"]) == ["notes", "notes"]
     assert sorted(frame["condition"]) == ["HV", "VO"]

@@ -48,9 +48,14 @@ the target branch against the speed before)."""
 
 
 def _truth() -> dict:
-    return {g: [dataclasses.replace(p, preferred_speed_m_s=(TRUE_SPEED_M_S[g], 0.0015),
-                                    caution=(TRUE_CAUTION[g], 0.05))]
-            for g, p in PROFILES.items()}  # fmt: skip
+    return {
+        g: [
+            dataclasses.replace(
+                p, preferred_speed_m_s=(TRUE_SPEED_M_S[g], 0.0015), caution=(TRUE_CAUTION[g], 0.05)
+            )
+        ]
+        for g, p in PROFILES.items()
+    }
 
 
 @pytest.fixture(scope="module")
@@ -92,8 +97,10 @@ def test_data_from_the_model_itself_show_no_trend_and_no_order_effect(fitted) ->
     model, _ = fitted
     tests = model["lacks"]["tests"]
     assert {(r["check"], r["measure"]) for r in tests} == {
-        (c, m) for c in ("trend", "order")
-        for m in ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")}  # fmt: skip
+        (c, m)
+        for c in ("trend", "order")
+        for m in ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
+    }
     assert not any(row["flagged"] for row in tests)
     line = model["lacks"]["line"]
     assert "trend over trials" not in line and "condition order" not in line
@@ -107,8 +114,9 @@ def test_data_from_the_model_itself_show_no_trend_and_no_order_effect(fitted) ->
     assert [f"{c}:{m}" for c in ("VO", "HV") for m in measures] == outliers["moments"]
     assert len(outliers["distance"]) == 18 and outliers["df"] == df
     assert outliers["limit"] == pytest.approx(stats.chi2.ppf(1 - 0.01 / 18, df), abs=1e-3)
-    assert outliers["flagged"] == sorted(p for p, d in outliers["distance"].items()
-                                         if d > outliers["limit"])  # fmt: skip
+    assert outliers["flagged"] == sorted(
+        p for p, d in outliers["distance"].items() if d > outliers["limit"]
+    )
     # every group mean (3 groups x 3 measures x VO, HV, VO - HV) is reproduced
     means = model["lacks"]["group_means"]
     assert len(means["rows"]) == 27 and means["flagged"] == []
@@ -121,14 +129,17 @@ def test_a_group_mean_no_trait_setting_reproduces_is_reported(emulator, trials) 
     expert_hv = (trials["group"] == "expert") & (trials["condition"] == "HV")
     offset = trials.assign(peak_distal_force_n=trials["peak_distal_force_n"] + 0.5 * expert_hv)
     model, _ = fit_trials(offset, "lcca", SETTINGS, emulator, "test data")
-    flagged = {(r["group"], r["condition"], r["measure"])
-               for r in model["lacks"]["group_means"]["flagged"]}  # fmt: skip
+    flagged = {
+        (r["group"], r["condition"], r["measure"]) for r in model["lacks"]["group_means"]["flagged"]
+    }
     assert ("expert", "HV", "peak_distal_force_n") in flagged
     # the rest of the study is reproduced
     assert not any(g != "expert" for g, _, _ in flagged)
-    row = next(r for r in model["lacks"]["group_means"]["rows"]
-               if (r["group"], r["condition"], r["measure"])
-               == ("expert", "HV", "peak_distal_force_n"))  # fmt: skip
+    row = next(
+        r
+        for r in model["lacks"]["group_means"]["rows"]
+        if (r["group"], r["condition"], r["measure"]) == ("expert", "HV", "peak_distal_force_n")
+    )
     observed = offset[expert_hv].groupby("participant")["peak_distal_force_n"].mean().mean()
     assert row["observed"] == pytest.approx(observed)
     assert row["observed"] - row["simulated"] == pytest.approx(0.5, abs=0.1)
@@ -140,11 +151,15 @@ def test_a_group_mean_no_trait_setting_reproduces_is_reported(emulator, trials) 
 
 def test_times_shrinking_over_trials_are_reported_not_absorbed(emulator, trials) -> None:
     # learning: each trial 25 % faster than the one before, in whichever condition
-    learning = trials.assign(completion_time_s=trials["completion_time_s"]
-                             * 0.75 ** trials["position"])  # fmt: skip
+    learning = trials.assign(
+        completion_time_s=trials["completion_time_s"] * 0.75 ** trials["position"]
+    )
     model, _ = fit_trials(learning, "lcca", SETTINGS, emulator, "test data")
-    trend = next(r for r in model["lacks"]["tests"]
-                 if r["check"] == "trend" and r["measure"] == "completion_time_s")  # fmt: skip
+    trend = next(
+        r
+        for r in model["lacks"]["tests"]
+        if r["check"] == "trend" and r["measure"] == "completion_time_s"
+    )
     assert trend["flagged"]
     # 0.75 per trial is -25 %; the fitted model's own people do not learn: their slope is
     # the noise of 12 people's 4 trials (8 % seen), far from the observed
@@ -152,8 +167,11 @@ def test_times_shrinking_over_trials_are_reported_not_absorbed(emulator, trials)
     assert abs(trend["simulated_pct_per_trial"]) < 12.0
     assert "a trend over trials in completion_time_s" in model["lacks"]["line"]
     # a trend shows as a period effect too, which the order check reports
-    order = next(r for r in model["lacks"]["tests"]
-                 if r["check"] == "order" and r["measure"] == "completion_time_s")  # fmt: skip
+    order = next(
+        r
+        for r in model["lacks"]["tests"]
+        if r["check"] == "order" and r["measure"] == "completion_time_s"
+    )
     assert order["flagged"] and order["observed_vo_first_minus_hv_first_pct"] < 0
 
 
@@ -166,39 +184,51 @@ def test_a_study_with_too_few_participants_per_group_is_refused(
     run_demo(db, 1, jobs=1, quick=True)  # 2 people per group, one trial per block
     out = tmp_path / "model.json"
     line = one_error_line(capsys, ["participants", "fit", "--db", db, "--out", str(out)])
-    assert line == ("study participants fit: error: group outsider has 2 participant(s) with "
-                    "lcca trials in both VO and HV; expected at least 4 per group to fit its "
-                    "trait distribution")  # fmt: skip
+    assert line == (
+        "study participants fit: error: group outsider has 2 participant(s) with "
+        "lcca trials in both VO and HV; expected at least 4 per group to fit its "
+        "trait distribution"
+    )
     assert not out.exists() and not out.with_suffix(".png").exists()
 
 
 def test_an_unknown_task_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ["participants", "fit", "--db", str(tmp_path / "none.db"), "--task", "suturing",
-            "--out", str(tmp_path / "m.json")]  # fmt: skip
+    argv = [
+        "participants",
+        "fit",
+        "--db",
+        str(tmp_path / "none.db"),
+        "--task",
+        "suturing",
+        "--out",
+        str(tmp_path / "m.json"),
+    ]
     line = one_error_line(capsys, argv)
     assert line.startswith("study participants fit: error: task 'suturing'; expected one of lcca")
 
 
-@pytest.mark.parametrize("content", ["{not json", json.dumps({"format": "other"}),
-                                     "MEAN"])  # fmt: skip
+@pytest.mark.parametrize("content", ["{not json", json.dumps({"format": "other"}), "MEAN"])
 def test_a_bad_model_is_one_line_for_every_command(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str
 ) -> None:
     model = tmp_path / "model.json"
     if content == "MEAN":  # a valid file but for one trait's mean outside its range
         expert = dataclasses.asdict(PROFILES["expert"])
-        good = {"format": "haptic-study participant model", "task": "lcca",
-                "data_source": "measured",
-                "groups": {"expert": {t: {"mean": m, "sd": sd}
-                                      for t, (m, sd) in expert.items()}}}  # fmt: skip
+        good = {
+            "format": "haptic-study participant model",
+            "task": "lcca",
+            "data_source": "measured",
+            "groups": {"expert": {t: {"mean": m, "sd": sd} for t, (m, sd) in expert.items()}},
+        }
         good["groups"]["expert"]["caution"]["mean"] = 1.7
         content = json.dumps(good)
     model.write_text(content)
     from study.protocol.design import TEMPLATE
 
     (tmp_path / "d.toml").write_text(TEMPLATE)
-    (tmp_path / "c.toml").write_text('seed = 1\nreplicates = 1\nparticipants = "model.json"\n'
-                                     "[groups]\nexpert = 3\n")  # fmt: skip
+    (tmp_path / "c.toml").write_text(
+        'seed = 1\nreplicates = 1\nparticipants = "model.json"\n[groups]\nexpert = 3\n'
+    )
     commands = [
         ["simulate", "--group", "expert", "--condition", "VO", "--out", str(tmp_path / "t.csv")],
         ["run", "--all", "--db", str(tmp_path / "none.db")],
@@ -208,8 +238,9 @@ def test_a_bad_model_is_one_line_for_every_command(
     for argv in commands:
         line = one_error_line(capsys, [*argv, "--participants", str(model)])
         assert f"participant model {model}" in line and "expected" in line, line
-    line = one_error_line(capsys, ["campaign", "run", str(tmp_path / "c.toml"),
-                                   "--out", str(tmp_path / "camp")])  # fmt: skip
+    line = one_error_line(
+        capsys, ["campaign", "run", str(tmp_path / "c.toml"), "--out", str(tmp_path / "camp")]
+    )
     assert f"participant model {model}" in line and "expected" in line, line
     assert not (tmp_path / "demo").exists() and not (tmp_path / "camp").exists()
     assert not (tmp_path / "t.csv").exists()
@@ -231,8 +262,9 @@ def test_the_emulator_is_checked_against_the_people_simulated_from_the_fit(fitte
         ("expert", "t", "VO", "simulated", 8.0, 7.5, 8.5),
         ("expert", "t", "VO", "model", 8.8, 0, 0),
     ]
-    made = pd.DataFrame(rows, columns=["group", "measure", "condition", "source", "mean",
-                                       "ci_low", "ci_high"])  # fmt: skip
+    made = pd.DataFrame(
+        rows, columns=["group", "measure", "condition", "source", "mean", "ci_low", "ci_high"]
+    )
     check = emulator_check(made)
     assert [r["inside"] for r in check["rows"]] == [True, False]
     assert check["outside"] == 1
@@ -263,12 +295,18 @@ def test_the_figure_draws_an_estimate_outside_its_bootstrap_interval() -> None:
 
     rows = [
         (g, "completion_time_s", c, s, 10.0, 9.0, 11.0)
-        for g in ("novice", "expert") for c in ("VO", "HV", "VO-HV")
-        for s in ("observed", "simulated")]  # fmt: skip
-    rows += [(g, "completion_time_s", c, "model", 12.0, 9.5, 11.5)
-             for g in ("novice", "expert") for c in ("VO", "HV", "VO-HV")]  # fmt: skip
-    table = pd.DataFrame(rows, columns=["group", "measure", "condition", "source", "mean",
-                                        "ci_low", "ci_high"])  # fmt: skip
+        for g in ("novice", "expert")
+        for c in ("VO", "HV", "VO-HV")
+        for s in ("observed", "simulated")
+    ]
+    rows += [
+        (g, "completion_time_s", c, "model", 12.0, 9.5, 11.5)
+        for g in ("novice", "expert")
+        for c in ("VO", "HV", "VO-HV")
+    ]
+    table = pd.DataFrame(
+        rows, columns=["group", "measure", "condition", "source", "mean", "ci_low", "ci_high"]
+    )
     fig = fit_figure(table, "SIMULATED test")
     ax = fig.axes[0]
     segments = [seg for c in ax.collections for seg in c.get_segments()]

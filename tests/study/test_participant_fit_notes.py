@@ -34,16 +34,21 @@ condition is about +/- 15 %."""
 
 
 def test_the_notes_groups_preferred_speeds_are_recovered() -> None:
-    truth = {g: [dataclasses.replace(p, preferred_speed_m_s=(TRUE_SPEED_M_S[g], 0.0015))]
-             for g, p in PROFILES.items()}  # fmt: skip
+    truth = {
+        g: [dataclasses.replace(p, preferred_speed_m_s=(TRUE_SPEED_M_S[g], 0.0015))]
+        for g, p in PROFILES.items()
+    }
     data = dataclasses.replace(SETTINGS, seed=23)
     trials = simulate_people("notes", truth, 6, 2, data, lambda *_: None)
     model, table = fit_trials(
         trials, "notes", SETTINGS, build_emulator("notes", SETTINGS), "test data"
     )
     assert model["task"] == "notes" and model["data_source"] == "simulated"
-    assert model["moments"] == [f"{c}:{m}" for c in ("VO", "HV") for m in (
-        "completion_time_s", "peak_force_demanded_n", "peak_tip_force_n")]  # fmt: skip
+    assert model["moments"] == [
+        f"{c}:{m}"
+        for c in ("VO", "HV")
+        for m in ("completion_time_s", "peak_force_demanded_n", "peak_tip_force_n")
+    ]
     assert "preferred_speed_m_s" in model["identifiable"]
     for group, true in TRUE_SPEED_M_S.items():
         got = model["groups"][group]["preferred_speed_m_s"]["mean"]
@@ -52,7 +57,10 @@ def test_the_notes_groups_preferred_speeds_are_recovered() -> None:
         assert abs(prior - true) > TOLERANCE * true  # the prior alone would fail
     # the summaries compare the NOTES measures, observed against simulated from the fit
     assert set(table["measure"]) == {
-        "completion_time_s", "peak_force_demanded_n", "peak_tip_force_n"}  # fmt: skip
+        "completion_time_s",
+        "peak_force_demanded_n",
+        "peak_tip_force_n",
+    }
     assert set(table["source"]) == {"observed", "simulated", "model"}
 
 
@@ -70,9 +78,26 @@ def test_a_notes_study_is_fitted_from_the_command_and_the_model_drives_simulate(
         assert main(["participant", "add", "--group", group, "--count", "4", "--db", db]) == 0
     assert main(["run", "--all", "--jobs", "1", "--db", db]) == 0
     out = tmp_path / "model.json"
-    argv = ["participants", "fit", "--db", db, "--task", "notes", "--out", str(out),
-            "--design", "16", "--repeats", "1", "--check", "4", "--bootstrap", "20",
-            "--jobs", "1"]  # fmt: skip
+    argv = [
+        "participants",
+        "fit",
+        "--db",
+        db,
+        "--task",
+        "notes",
+        "--out",
+        str(out),
+        "--design",
+        "16",
+        "--repeats",
+        "1",
+        "--check",
+        "4",
+        "--bootstrap",
+        "20",
+        "--jobs",
+        "1",
+    ]
     capsys.readouterr()
     assert main(argv) == 0
     printed = capsys.readouterr().out
@@ -87,9 +112,23 @@ def test_a_notes_study_is_fitted_from_the_command_and_the_model_drives_simulate(
     assert model["data_source"] == "simulated"  # run --all's people: simulated, and said so
     assert out.with_suffix(".png").stat().st_size > 10_000
     csv = tmp_path / "t.csv"
-    argv = ["simulate", "--task", "notes", "--group", "expert", "--condition", "VO",
-            "--seed", "2", "--max-seconds", "60", "--out", str(csv),
-            "--participants", str(out)]  # fmt: skip
+    argv = [
+        "simulate",
+        "--task",
+        "notes",
+        "--group",
+        "expert",
+        "--condition",
+        "VO",
+        "--seed",
+        "2",
+        "--max-seconds",
+        "60",
+        "--out",
+        str(csv),
+        "--participants",
+        str(out),
+    ]
     assert main(argv) == 0
     summary = json.loads(csv.with_suffix(".json").read_text())
     assert summary["participant_model"]["path"] == str(out)

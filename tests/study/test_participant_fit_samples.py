@@ -67,9 +67,10 @@ def test_a_trial_without_samples_gives_the_measures_only(tmp_path: Path) -> None
     try:
         with Session(engine) as session, session.begin():
             first = session.scalars(
-                select(Trial.id).where(Trial.task == "lcca", Trial.status == "completed")
+                select(Trial.id)
+                .where(Trial.task == "lcca", Trial.status == "completed")
                 .order_by(Trial.id)
-            ).first()  # fmt: skip
+            ).first()
             session.execute(delete(SampleChunk).where(SampleChunk.trial_id == first))
         trials = observed_trials(engine, "lcca")
         features, counts = with_features(engine, trials, "lcca")
@@ -140,8 +141,9 @@ def test_the_oracle_bound_is_the_normal_mean_s_chance_of_lying_within_the_tolera
     # s sqrt(1/2 - 1/(2 pi)); 8 people's mean is within 15 % when below 1.15 c, by the
     # normal approximation Phi((0.15 c - s / sqrt(2 pi)) / (s sqrt(1/2 - 1/(2 pi)) / sqrt(8)))
     c, s = 0.002, 0.0005
-    on_bound = GroupProfile(**{**{t: (mid[t], sd[t]) for t in TRAITS},
-                               "haptic_threshold_n_m": (c, s)})  # fmt: skip
+    on_bound = GroupProfile(
+        **{**{t: (mid[t], sd[t]) for t in TRAITS}, "haptic_threshold_n_m": (c, s)}
+    )
     clipped = oracle_within({"e": on_bound}, {"e": 8}, studies=20000)
     haptic = next(r for r in clipped["per_trait"] if r["trait"] == "haptic_threshold_n_m")
     z = (0.15 * c - s / np.sqrt(2 * np.pi)) / (s * np.sqrt(0.5 - 0.5 / np.pi) / np.sqrt(8))

@@ -35,8 +35,14 @@ def _trials(x: np.ndarray, repeats: int, rng: np.random.Generator) -> pd.DataFra
         for r in range(repeats):
             for condition in ("VO", "HV"):
                 noisy = np.exp(logs + rng.normal(0.0, NOISE, 2))
-                rows.append({"setting": k, "condition": condition, "repeat": r,
-                             **dict(zip(MEASURES, noisy, strict=True))})  # fmt: skip
+                rows.append(
+                    {
+                        "setting": k,
+                        "condition": condition,
+                        "repeat": r,
+                        **dict(zip(MEASURES, noisy, strict=True)),
+                    }
+                )
     return pd.DataFrame(rows)
 
 
@@ -185,8 +191,9 @@ def test_a_traits_held_out_information_grows_with_the_studys_trials_per_conditio
     speed = "preferred_speed_m_s"
 
     def ratio(k: float, held_k: float | None) -> float:
-        return identifiable(em, {"novice": profile}, sizes, {"novice": k},
-                            np.full(len(TRAITS), held_error), held_k)[1][speed]  # fmt: skip
+        return identifiable(
+            em, {"novice": profile}, sizes, {"novice": k}, np.full(len(TRAITS), held_error), held_k
+        )[1][speed]
 
     def by_hand(info: float) -> float:
         # a group of n people N(mu, 1) (prior SDs), each with information `info`

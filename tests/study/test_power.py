@@ -18,8 +18,9 @@ from study.cli import main
 
 
 def test_no_effect_rejects_at_the_nominal_rate() -> None:
-    result = simulate_power({"a": 12, "b": 12}, {"a": 0.0, "b": 0.0}, 0.5, 1000,
-                            np.random.default_rng(1))  # fmt: skip
+    result = simulate_power(
+        {"a": 12, "b": 12}, {"a": 0.0, "b": 0.0}, 0.5, 1000, np.random.default_rng(1)
+    )
     # binomial(1000, .05): sd = 0.0069; 4 sd either way
     for p in (*result.groups.values(), result.interaction):
         assert abs(p - 0.05) < 0.028
@@ -45,8 +46,9 @@ def test_the_interaction_is_the_one_way_anova_of_the_differences() -> None:
             rows += [(f"{group}{i}", group, "VO", vo[i]), (f"{group}{i}", group, "HV", hv[i])]
     data = pd.DataFrame(rows, columns=["participant", "group", "condition", "value"])
     # pg.mixed_anova(data, dv="value", within="condition", subject="participant", between="group")
-    table = pg.mixed_anova(data=data, dv="value", within="condition", subject="participant",
-                           between="group").set_index("Source")  # fmt: skip
+    table = pg.mixed_anova(
+        data=data, dv="value", within="condition", subject="participant", between="group"
+    ).set_index("Source")
     one_way = stats.f_oneway(*diffs)
     assert table.loc["Interaction", "F"] == pytest.approx(one_way.statistic)
 

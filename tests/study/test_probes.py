@@ -35,8 +35,12 @@ def _person(**values: float) -> ParticipantTraits:
 
 def test_the_builtin_probes_tell_every_trait_the_task_tells_weakly() -> None:
     told = {get_probe(n).trait for n in probe_names()}
-    assert {"steering_error_rad", "haptic_threshold_n_m", "visual_stall_s",
-            "comfort_torque_n_m"} <= told  # fmt: skip
+    assert {
+        "steering_error_rad",
+        "haptic_threshold_n_m",
+        "visual_stall_s",
+        "comfort_torque_n_m",
+    } <= told
     assert told <= set(TRAITS)
 
 
@@ -71,8 +75,13 @@ def test_the_force_threshold_in_newtons_is_the_trait_over_the_gain() -> None:
     person = _person(haptic_threshold_n_m=0.00384)
     for gain in (0.02, 0.01):
         rng = np.random.default_rng(3)
-        runs = run_probe("force_threshold", 80, SimulatedResponder(person, rng, 0.0), rng,
-                         {"gain_n_m_per_n": gain})  # fmt: skip
+        runs = run_probe(
+            "force_threshold",
+            80,
+            SimulatedResponder(person, rng, 0.0),
+            rng,
+            {"gain_n_m_per_n": gain},
+        )
         got = trait_estimates(runs)["haptic_threshold_n_m"]
         assert abs(got.value / gain - 0.00384 / gain) <= 3 * got.se / gain
 
@@ -80,8 +89,11 @@ def test_the_force_threshold_in_newtons_is_the_trait_over_the_gain() -> None:
 def test_the_simulated_groups_thresholds_sit_near_the_papers_jnd() -> None:
     # seed 000: a JND of 0.192 N; at the paper's gain the 20/8/8 study's mean threshold
     rng = np.random.default_rng(0)
-    people = [draw_traits(g, rng) for g, n in (("outsider", 20), ("novice", 8), ("expert", 8))
-              for _ in range(n * 50)]  # fmt: skip
+    people = [
+        draw_traits(g, rng)
+        for g, n in (("outsider", 20), ("novice", 8), ("expert", 8))
+        for _ in range(n * 50)
+    ]
     mean_n = np.mean([p.haptic_threshold_n_m for p in people]) / 0.02
     assert abs(mean_n - 0.192) < 0.01
 
@@ -102,8 +114,12 @@ def test_the_keyboard_and_a_device_stream_answer_through_the_same_probes() -> No
     clock = iter([0.0, 0.2, 0.31])
     shown: list[str] = []
     slept: list[float] = []
-    kb = KeyboardResponder(read_key=lambda: next(keys), show=shown.append,
-                           clock=lambda: next(clock), sleep=slept.append)  # fmt: skip
+    kb = KeyboardResponder(
+        read_key=lambda: next(keys),
+        show=shown.append,
+        clock=lambda: next(clock),
+        sleep=slept.append,
+    )
     # the foreperiod (the stimulus, 2 s) passes, GO shows, the time counts from there
     answer = kb.respond(get_probe("reaction_time"), 2.0, {})
     assert slept == [2.0] and shown[1] == "GO"
@@ -170,8 +186,9 @@ def test_the_templates_probes_parse_and_bad_ones_are_one_line() -> None:
 def test_probe_run_stores_export_import_and_covariate(tmp_path, capsys) -> None:
     from tests.study.conftest import init_study
 
-    db = init_study(tmp_path, DESIGN, ("outsider", "outsider", "novice", "novice", "expert",
-                                       "expert"))  # fmt: skip
+    db = init_study(
+        tmp_path, DESIGN, ("outsider", "outsider", "novice", "novice", "expert", "expert")
+    )
     assert main(["probe", "run", "--participant", "P001", "--db", db]) == 0
     out = capsys.readouterr().out
     assert "P001: force_threshold 20 trials stored (simulated)" in out
@@ -196,8 +213,20 @@ def test_probe_run_stores_export_import_and_covariate(tmp_path, capsys) -> None:
     db2 = init_study(tmp_path / "b", DESIGN)
     capsys.readouterr()
     ex = tmp_path / "ex"
-    assert main(["import", "--trials", str(ex / "trials.csv"), "--probes",
-                 str(ex / "probe_trials.csv"), "--db", db2]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "import",
+                "--trials",
+                str(ex / "trials.csv"),
+                "--probes",
+                str(ex / "probe_trials.csv"),
+                "--db",
+                db2,
+            ]
+        )
+        == 0
+    )
     assert "and 330 probe trials" in capsys.readouterr().out
     from study.probes.measure import probe_table
     from study.probes.store import probe_frame
@@ -208,19 +237,44 @@ def test_probe_run_stores_export_import_and_covariate(tmp_path, capsys) -> None:
         e.dispose()
     pd.testing.assert_frame_equal(tables[0], tables[1])
     # importing it again changes nothing: one line, exit 2, the trials not doubled either
-    line = one_error_line(capsys, ["import", "--trials", str(ex / "trials.csv"), "--probes",
-                                   str(ex / "probe_trials.csv"), "--db", db2])  # fmt: skip
+    line = one_error_line(
+        capsys,
+        [
+            "import",
+            "--trials",
+            str(ex / "trials.csv"),
+            "--probes",
+            str(ex / "probe_trials.csv"),
+            "--db",
+            db2,
+        ],
+    )
     assert "already stored" in line
     # the covariate
     capsys.readouterr()
-    assert main(["analyze", "--out", str(tmp_path / "an"), "--covariate", "force_threshold",
-                 "--db", db2]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "analyze",
+                "--out",
+                str(tmp_path / "an"),
+                "--covariate",
+                "force_threshold",
+                "--db",
+                db2,
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "probe trials by driver: imported 330" in out
     ancova = pd.read_csv(tmp_path / "an" / "ancova_haptic_threshold_n_m.csv")
     assert len(ancova), out
-    assert set(ancova["measure"]) == {"completion_time_s", "peak_proximal_force_n",
-                                      "peak_distal_force_n"}  # fmt: skip
+    assert set(ancova["measure"]) == {
+        "completion_time_s",
+        "peak_proximal_force_n",
+        "peak_distal_force_n",
+    }
 
 
 def test_bad_probe_input_is_one_line(tmp_path, capsys) -> None:
@@ -233,29 +287,45 @@ def test_bad_probe_input_is_one_line(tmp_path, capsys) -> None:
     assert "unknown participant 'P404'" in one_error_line(
         capsys, ["probe", "run", "--participant", "P404", "--db", db]
     )
-    argv = ["probe", "run", "--participant", "P001", "--driver", "hardware", "--port",
-            str(tmp_path / "no-port"), "--db", db]  # fmt: skip
+    argv = [
+        "probe",
+        "run",
+        "--participant",
+        "P001",
+        "--driver",
+        "hardware",
+        "--port",
+        str(tmp_path / "no-port"),
+        "--db",
+        db,
+    ]
     line = one_error_line(capsys, argv)
     assert "no-port: cannot open serial port" in line and "expected the serial port" in line
     bad_design = tmp_path / "bad.toml"
     bad_design.write_text(DESIGN.replace("aiming = 10", "aiming = 'ten'"))
-    line = one_error_line(capsys, ["init", "--design", str(bad_design), "--db",
-                                   str(tmp_path / "other.db")])  # fmt: skip
+    line = one_error_line(
+        capsys, ["init", "--design", str(bad_design), "--db", str(tmp_path / "other.db")]
+    )
     assert "probes.aiming = 'ten'; expected a whole number of trials from 1 to 200" in line
     assert not (tmp_path / "other.db").exists()
     assert "--covariate 'nope'; expected a probe or its trait" in one_error_line(
         capsys, ["analyze", "--out", str(tmp_path / "a"), "--covariate", "nope", "--db", db]
     )
     bad = tmp_path / "p.csv"
-    bad.write_text("participant,probe,probe_trial,stimulus,stimulus_unit,response,"
-                   "response_unit,correct,context,driver\n"
-                   "P001,aiming,1,0.1,rad,inf,rad,,{},keyboard\n")  # fmt: skip
+    bad.write_text(
+        "participant,probe,probe_trial,stimulus,stimulus_unit,response,"
+        "response_unit,correct,context,driver\n"
+        "P001,aiming,1,0.1,rad,inf,rad,,{},keyboard\n"
+    )
     trials = tmp_path / "t.csv"
-    trials.write_text("participant,group,task,condition,trial,completion_time_s,"
-                      "peak_proximal_force_n,peak_distal_force_n,success\n"
-                      "P001,outsider,lcca,VO,1,30,1.0,0.5,true\n")  # fmt: skip
-    line = one_error_line(capsys, ["import", "--trials", str(trials), "--probes", str(bad),
-                                   "--db", db])  # fmt: skip
+    trials.write_text(
+        "participant,group,task,condition,trial,completion_time_s,"
+        "peak_proximal_force_n,peak_distal_force_n,success\n"
+        "P001,outsider,lcca,VO,1,30,1.0,0.5,true\n"
+    )
+    line = one_error_line(
+        capsys, ["import", "--trials", str(trials), "--probes", str(bad), "--db", db]
+    )
     assert "p.csv row 2, column response: 'inf'; expected a plain decimal number" in line
     # nothing half-written: the trials file was not imported either
     engine = open_database(db, create=False)

@@ -49,17 +49,23 @@ force threshold needs 100 two-interval trials for that with the experts."""
 
 def _truth() -> dict:
     return {
-        g: [dataclasses.replace(p, haptic_threshold_n_m=(TRUE_THRESHOLD_N_M[g], 0.0004),
-                                comfort_torque_n_m=(TRUE_COMFORT_N_M[g], 0.0008))]
+        g: [
+            dataclasses.replace(
+                p,
+                haptic_threshold_n_m=(TRUE_THRESHOLD_N_M[g], 0.0004),
+                comfort_torque_n_m=(TRUE_COMFORT_N_M[g], 0.0008),
+            )
+        ]
         for g, p in PROFILES.items()
-    }  # fmt: skip
+    }
 
 
 def _people(seed: int, per_group: int) -> dict[str, object]:
     """The people `simulate_people` draws (its rng and order), by their codes S001..."""
     rng = np.random.default_rng([seed, 0xC4EC])
-    people = [draw_traits(g, rng, {g: ps[0]}) for g, ps in _truth().items()
-              for _ in range(per_group)]  # fmt: skip
+    people = [
+        draw_traits(g, rng, {g: ps[0]}) for g, ps in _truth().items() for _ in range(per_group)
+    ]
     return {f"S{i + 1:03d}": t for i, t in enumerate(people)}
 
 
@@ -70,10 +76,28 @@ def _probe_frame(people: dict[str, object]) -> pd.DataFrame:
         responder = SimulatedResponder(traits, rng)
         for name in probe_names():
             for t in run_probe(name, PROBE_TRIALS[name], responder, rng, {"gain_n_m_per_n": 0.02}):
-                rows.append((code, t.probe, t.trial_index, t.stimulus, t.response, t.correct,
-                             dict(t.context), t.driver))  # fmt: skip
-    columns = ["participant", "probe", "trial_index", "stimulus", "response", "correct",
-               "context", "driver"]  # fmt: skip
+                rows.append(
+                    (
+                        code,
+                        t.probe,
+                        t.trial_index,
+                        t.stimulus,
+                        t.response,
+                        t.correct,
+                        dict(t.context),
+                        t.driver,
+                    )
+                )
+    columns = [
+        "participant",
+        "probe",
+        "trial_index",
+        "stimulus",
+        "response",
+        "correct",
+        "context",
+        "driver",
+    ]
     return pd.DataFrame(rows, columns=columns)
 
 
@@ -93,8 +117,9 @@ def emulator():
 
 def test_with_probes_every_trait_is_fitted_and_the_probed_ones_recovered(study, emulator):
     trials, people, probe_trials = study
-    model, _ = fit_trials(trials, "lcca", SETTINGS, emulator, "test data",
-                          probes=probe_table(probe_trials))  # fmt: skip
+    model, _ = fit_trials(
+        trials, "lcca", SETTINGS, emulator, "test data", probes=probe_table(probe_trials)
+    )
     assert model["fixed_at_prior"] == [] and model["shrunk_to_prior"] == []
     assert set(model["identifiable"]) == set(TRAITS)
     assert all(r < IDENTIFIED_RATIO for r in model["identification_ratio"].values()), model[
@@ -104,8 +129,12 @@ def test_with_probes_every_trait_is_fitted_and_the_probed_ones_recovered(study, 
     assert set(model["probes"]["measured"]) == set(TRAITS) - {"preferred_speed_m_s", "caution"}
     # each group's fitted mean against the mean of its own six people's true values: a
     # group of 6 with 100-trial thresholds carries about 8 % SE on the threshold's mean
-    for trait, tolerance in (("haptic_threshold_n_m", 0.25), ("comfort_torque_n_m", 0.15),
-                             ("visual_stall_s", 0.15), ("steering_error_rad", 0.25)):  # fmt: skip
+    for trait, tolerance in (
+        ("haptic_threshold_n_m", 0.25),
+        ("comfort_torque_n_m", 0.15),
+        ("visual_stall_s", 0.15),
+        ("steering_error_rad", 0.25),
+    ):
         for group in PROFILES:
             own = np.mean([getattr(t, trait) for t in people.values() if t.group == group])
             got = model["groups"][group][trait]["mean"]
@@ -114,10 +143,12 @@ def test_with_probes_every_trait_is_fitted_and_the_probed_ones_recovered(study, 
 
 def test_a_participant_missing_a_probe_still_fits_and_the_output_says_so(study, emulator):
     trials, _, probe_trials = study
-    lacking = probe_trials[~((probe_trials["participant"] == "S002")
-                             & (probe_trials["probe"] == "force_threshold"))]  # fmt: skip
-    model, _ = fit_trials(trials, "lcca", SETTINGS, emulator, "test data",
-                          probes=probe_table(lacking))  # fmt: skip
+    lacking = probe_trials[
+        ~((probe_trials["participant"] == "S002") & (probe_trials["probe"] == "force_threshold"))
+    ]
+    model, _ = fit_trials(
+        trials, "lcca", SETTINGS, emulator, "test data", probes=probe_table(lacking)
+    )
     assert model["probes"]["missing"] == {"S002": ["haptic_threshold_n_m"]}
     assert "S002 lacks haptic_threshold_n_m" in model["probes"]["line"]
     person = model["fit"]["outsider"]["people"]["S002"]

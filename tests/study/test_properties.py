@@ -39,9 +39,34 @@ from study.protocol.design import (
 from study.protocol.exchange import TRIAL_COLUMNS
 from study.tasks.lcca.task import MAX_FORCE_N
 
-JUNK = ["", " ", "inf", "-inf", "nan", "NaN", "-1", "1e400", "1e308", "3_0", "²", "0x10",
-        "99999999999999999999999", "1e6", "=1+1", "+1", "P1", "lcca", "HV", "true", "yes",
-        "1.5", "180.0001", "20.5", "\u00a0", "é"]  # fmt: skip
+JUNK = [
+    "",
+    " ",
+    "inf",
+    "-inf",
+    "nan",
+    "NaN",
+    "-1",
+    "1e400",
+    "1e308",
+    "3_0",
+    "²",
+    "0x10",
+    "99999999999999999999999",
+    "1e6",
+    "=1+1",
+    "+1",
+    "P1",
+    "lcca",
+    "HV",
+    "true",
+    "yes",
+    "1.5",
+    "180.0001",
+    "20.5",
+    "\u00a0",
+    "é",
+]
 PEOPLE = [("P001", "novice"), ("P002", "novice"), ("P009", "expert"), ("Q12", "outsider")]
 VALID = {
     "task": ["lcca"],
@@ -106,8 +131,12 @@ def _counts(db: Path) -> dict[str, int]:
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
 )
 @given(rows=ROWS)
-@example(rows=[("P001", "novice", "lcca", "HV", "3", "180", "19.99", "0", "yes"),
-               ("Q12", "outsider", "lcca", "VO", "1", "12.5", "1e-3", "20", "0")])  # fmt: skip
+@example(
+    rows=[
+        ("P001", "novice", "lcca", "HV", "3", "180", "19.99", "0", "yes"),
+        ("Q12", "outsider", "lcca", "VO", "1", "12.5", "1e-3", "20", "0"),
+    ]
+)
 def test_an_import_is_accepted_and_round_trips_or_refused_with_one_line(
     rows: list[tuple[str, ...]], template_db: Path, tmp_path: Path
 ) -> None:

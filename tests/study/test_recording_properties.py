@@ -57,30 +57,71 @@ def _rigid(path: Path) -> dict[str, np.ndarray]:
 
 def _calibrate(model: str) -> Callable[[Path, Path], list[str]]:
     def argv(rec: Path, out: Path) -> list[str]:
-        return ["calibrate", "--model", model, str(rec), "--json", str(out / "r.json"),
-                "--predictions", str(out / "p.csv"), "--out", str(out / "figs")]  # fmt: skip
+        return [
+            "calibrate",
+            "--model",
+            model,
+            str(rec),
+            "--json",
+            str(out / "r.json"),
+            "--predictions",
+            str(out / "p.csv"),
+            "--out",
+            str(out / "figs"),
+        ]
 
     return argv
 
 
 CONTRACTS = {
     "follower": Contract(
-        REQUIRED_COLUMNS, 30, lambda p: read_checked_csv(p, REQUIRED_COLUMNS, OPTIONAL_COLUMNS),
+        REQUIRED_COLUMNS,
+        30,
+        lambda p: read_checked_csv(p, REQUIRED_COLUMNS, OPTIONAL_COLUMNS),
         lambda rec, out: ["estimator", "train", str(rec), "--out", str(out / "model")],
     ),
     "master": Contract(
         MASTER_COLUMNS, 30, lambda p: read_checked_csv(p, MASTER_COLUMNS), _calibrate("master")
     ),
     "notes": Contract(
-        ("t", "f_des", "f_ee"), 200, _notes,
-        lambda rec, out: ["identify", "notes", "--dof", "translation", str(rec),
-                          "--json", str(out / "r.json")],
+        ("t", "f_des", "f_ee"),
+        200,
+        _notes,
+        lambda rec, out: [
+            "identify",
+            "notes",
+            "--dof",
+            "translation",
+            str(rec),
+            "--json",
+            str(out / "r.json"),
+        ],
     ),
     "rigid": Contract(RIGID_COLUMNS, 200, _rigid, _calibrate("rigid-axis")),
-}  # fmt: skip
+}
 N_ROWS = 205
-JUNK = ["", " ", "nan", "NaN", "inf", "-inf", "1e400", "-1e300", "1e13", "3_0", "0x10", "²",
-        "1,5", "true", "=1+1", "\u00a0", "é", "99999999999999999999999", '"', "1e-400"]  # fmt: skip
+JUNK = [
+    "",
+    " ",
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "1e400",
+    "-1e300",
+    "1e13",
+    "3_0",
+    "0x10",
+    "²",
+    "1,5",
+    "true",
+    "=1+1",
+    "\u00a0",
+    "é",
+    "99999999999999999999999",
+    '"',
+    "1e-400",
+]
 T_SCALES = [1e-9, 1e-6, 1e-3, 1.0, 1e3, 1e6, 1e300]
 
 
@@ -97,8 +138,22 @@ def _valid(columns: tuple[str, ...]) -> list[list[str]]:
 def _broken(draw: st.DrawFn, columns: tuple[str, ...]) -> bytes:
     rows = _valid(columns)
     for _ in range(draw(st.integers(0, 3))):
-        kind = draw(st.sampled_from(["cell", "cell", "drop", "repeat", "time", "short",
-                                     "scale", "ragged", "bytes", "empty"]))  # fmt: skip
+        kind = draw(
+            st.sampled_from(
+                [
+                    "cell",
+                    "cell",
+                    "drop",
+                    "repeat",
+                    "time",
+                    "short",
+                    "scale",
+                    "ragged",
+                    "bytes",
+                    "empty",
+                ]
+            )
+        )
         n = len(rows)
         if kind == "cell" and n > 1:
             r, c = draw(st.integers(1, n - 1)), draw(st.integers(0, len(rows[0]) - 1))
@@ -205,8 +260,12 @@ def test_an_all_zero_recording_is_one_line_and_no_output(name: str, tmp_path: Pa
     contract = CONTRACTS[name]
     rows = _valid(contract.columns)
     path = tmp_path / "zero.csv"
-    path.write_text("".join(",".join([r[0], *("0" for _ in r[1:])]) + "\n" if i else
-                            ",".join(r) + "\n" for i, r in enumerate(rows)))  # fmt: skip
+    path.write_text(
+        "".join(
+            ",".join([r[0], *("0" for _ in r[1:])]) + "\n" if i else ",".join(r) + "\n"
+            for i, r in enumerate(rows)
+        )
+    )
     out = tmp_path / "out"
     out.mkdir()
     rc, err = _run(contract.argv(path, out))

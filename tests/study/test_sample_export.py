@@ -31,10 +31,19 @@ from study.protocol.export import export_data
 from tests.conftest import decode_stored_chunk
 
 LCCA_COLUMNS = (
-    "t_s", "insertion_m", "rotation_rad", "tip_x_m", "tip_y_m", "tip_z_m", "branch",
-    "reference_force_n", "proximal_force_n", "distal_force_n", "dial_angle_rad",
+    "t_s",
+    "insertion_m",
+    "rotation_rad",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "branch",
+    "reference_force_n",
+    "proximal_force_n",
+    "distal_force_n",
+    "dial_angle_rad",
     "dial_torque_n_m",
-)  # fmt: skip
+)
 """The LCCA task's own sample columns, written out here."""
 SAMPLE_EXPORT_COLUMNS = ("participant", "task", "condition", "trial", "seq", *LCCA_COLUMNS)
 OLD_TO_LCCA = {"proximal_force_n": "reference_force_n", "proximal_force_est_n": "proximal_force_n"}
@@ -50,7 +59,6 @@ JOIN participants p ON t.participant_id = p.id
 WHERE t.status = 'completed' AND NOT t.practice
 ORDER BY t.id, c.first_seq
 """
-
 
 
 def _columns(rng: np.random.Generator, n: int, start_null: bool) -> dict[str, object]:
@@ -95,16 +103,33 @@ def _build_study(db: str, tmp_path: Path, sizes: dict[tuple[str, str, int], int]
             trials = {}
             for (code, cond, number), _ in sizes.items():
                 trials[(code, cond, number)] = Trial(
-                    participant=people[code], task="lcca", condition=cond,
-                    block_index=["VO", "HV"].index(cond), trial_index=number - 1,
-                    status="completed", practice=False,
-                )  # fmt: skip
+                    participant=people[code],
+                    task="lcca",
+                    condition=cond,
+                    block_index=["VO", "HV"].index(cond),
+                    trial_index=number - 1,
+                    status="completed",
+                    practice=False,
+                )
             extra = [
-                Trial(participant=people["P001"], task="lcca", condition="VO", block_index=0,
-                      trial_index=0, practice=True, status="completed"),
-                Trial(participant=people["P001"], task="lcca", condition="HV", block_index=1,
-                      trial_index=2, status="interrupted"),
-            ]  # fmt: skip
+                Trial(
+                    participant=people["P001"],
+                    task="lcca",
+                    condition="VO",
+                    block_index=0,
+                    trial_index=0,
+                    practice=True,
+                    status="completed",
+                ),
+                Trial(
+                    participant=people["P001"],
+                    task="lcca",
+                    condition="HV",
+                    block_index=1,
+                    trial_index=2,
+                    status="interrupted",
+                ),
+            ]
             session.add_all([*trials.values(), *extra])
             session.flush()
             ids = {k: t.id for k, t in trials.items()}
@@ -152,8 +177,12 @@ def _reference(db: str) -> pd.DataFrame:
 
 def _read(path: Path) -> pd.DataFrame:
     if path.suffix == ".csv":
-        frame = pd.read_csv(path, dtype={"branch": object}, keep_default_na=False,
-                            na_values={c: [""] for c in SAMPLE_EXPORT_COLUMNS})  # fmt: skip
+        frame = pd.read_csv(
+            path,
+            dtype={"branch": object},
+            keep_default_na=False,
+            na_values={c: [""] for c in SAMPLE_EXPORT_COLUMNS},
+        )
     else:
         frame = pd.read_parquet(path)
     return _norm(frame)
@@ -163,9 +192,7 @@ def _norm(frame: pd.DataFrame) -> pd.DataFrame:
     """Text as Python str or None, numbers as int64/float64 (NaN for NULL)."""
     frame = frame.reset_index(drop=True).copy()
     for c in ("participant", "task", "condition", "branch"):
-        frame[c] = pd.Series(
-            [v if isinstance(v, str) else None for v in frame[c]], dtype=object
-        )
+        frame[c] = pd.Series([v if isinstance(v, str) else None for v in frame[c]], dtype=object)
     for c in LCCA_COLUMNS:
         if c != "branch":
             frame[c] = frame[c].astype(float)
@@ -177,9 +204,7 @@ def _same(got: pd.DataFrame, want: pd.DataFrame) -> None:
 
 
 @pytest.mark.parametrize("fmt", ["csv", "parquet"])
-def test_export_equals_the_rows_the_database_holds(
-    db_url: str, tmp_path: Path, fmt: str
-) -> None:
+def test_export_equals_the_rows_the_database_holds(db_url: str, tmp_path: Path, fmt: str) -> None:
     _build_study(db_url, tmp_path, _SIZES)
     out = tmp_path / "out"
     assert main(["export", "--out", str(out), "--samples", "--format", fmt, "--db", db_url]) == 0
@@ -218,8 +243,11 @@ def test_reader_yields_bounded_batches_that_add_up_to_the_trial(
     engine = open_database(db_url, create=False)
     try:
         with make_session_factory(engine)() as session:
-            trial_id = session.query(Trial.id).filter_by(condition="VO", trial_index=0,
-                                                         practice=False).scalar()  # fmt: skip
+            trial_id = (
+                session.query(Trial.id)
+                .filter_by(condition="VO", trial_index=0, practice=False)
+                .scalar()
+            )
         with SampleReader(engine, batch_rows=300) as reader:
             batches = list(reader.trial(trial_id))
     finally:
@@ -241,9 +269,11 @@ def test_per_trial_export_resumes_and_matches_the_single_file(
     assert main(argv) == 0
     files = sorted((out / "samples").iterdir())
     assert [f.name for f in files] == [
-        "P001_lcca_HV_trial2.csv", "P001_lcca_VO_trial1.csv",
-        "P002_lcca_HV_trial1.csv", "P002_lcca_VO_trial3.csv",
-    ]  # fmt: skip
+        "P001_lcca_HV_trial2.csv",
+        "P001_lcca_VO_trial1.csv",
+        "P002_lcca_HV_trial1.csv",
+        "P002_lcca_VO_trial3.csv",
+    ]
     # An interrupted run leaves complete files only; the rerun writes the missing one.
     kept = files[0].stat().st_mtime_ns
     files[1].unlink()
@@ -315,12 +345,18 @@ def test_export_memory_does_not_grow_with_the_samples(tmp_path: Path) -> None:
     reader threads' tables, CSV text, the Parquet row group being encoded and the
     allocator's cache: 30-50 MB measured, the same for 400,000 and 1,200,000 samples)."""
     db = str(tmp_path / "big.db")
-    _build_study(db, tmp_path, {("P001", "VO", k): 100_000 for k in (1, 2, 3)}
-                 | {(f"P{p:03d}", "HV", 1): 100_000 for p in range(2, 15)})  # fmt: skip
+    _build_study(
+        db,
+        tmp_path,
+        {("P001", "VO", k): 100_000 for k in (1, 2, 3)}
+        | {(f"P{p:03d}", "HV", 1): 100_000 for p in range(2, 15)},
+    )
     probe = subprocess.run(
         [sys.executable, "-c", _MEMORY_PROBE, db, str(tmp_path / "mem")],
-        capture_output=True, text=True, check=True,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     peaks_kib = json.loads(probe.stdout)
     grown_mb = (peaks_kib[-1] - peaks_kib[0]) / 1024
     assert grown_mb < 80, peaks_kib

@@ -52,8 +52,11 @@ def test_small_spans_on_three_threads_give_the_rows_the_database_holds(
     # the per-trial files hold the same rows, trial by trial
     for trial in trials:
         got = _read(tmp_path / "pt" / f"{trial.file_stem}.{fmt}")
-        mine = want[(want.participant == trial.participant) & (want.trial == trial.trial)
-                    & (want.condition == trial.condition)]  # fmt: skip
+        mine = want[
+            (want.participant == trial.participant)
+            & (want.trial == trial.trial)
+            & (want.condition == trial.condition)
+        ]
         _same(got, mine)
 
 

@@ -45,10 +45,7 @@ def _trials(db: str) -> list[tuple[int, int, str, int, int]]:
                 Trial.id, Trial.block_index * 10 + Trial.trial_index, Trial.status, Trial.attempt
             ).order_by(Trial.id)
         ).all()
-        out = [
-            (*r, s.scalar(stored_samples(r[0])))
-            for r in rows
-        ]
+        out = [(*r, s.scalar(stored_samples(r[0]))) for r in rows]
     engine.dispose()
     return out
 
@@ -62,9 +59,7 @@ def test_a_session_stores_every_trial_with_its_samples(tmp_path: Path) -> None:
     with Session(engine) as s:
         for trial in s.scalars(select(Trial)):
             # one row per 100 Hz sample over the trial
-            n = s.scalar(
-                stored_samples(trial.id)
-            )
+            n = s.scalar(stored_samples(trial.id))
             assert n == round(trial.completion_time_s * 100)
             assert trial.summary["samples"] == n
     engine.dispose()

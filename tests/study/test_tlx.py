@@ -90,8 +90,9 @@ def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
         chosen = [a for a, _ in pairs]
         with pytest.raises(StudyInputError, match="has no completed trial yet"):
             store_tlx(engine, p.code, "lcca", "HV", RATINGS, chosen)
-        stored, new = store_tlx(engine, p.code, "lcca", "HV", RATINGS, chosen,
-                                reason="paper form before the block")  # fmt: skip
+        stored, new = store_tlx(
+            engine, p.code, "lcca", "HV", RATINGS, chosen, reason="paper form before the block"
+        )
         assert new and sum(getattr(stored, f"w_{s}") for s in RATINGS) == 15
         edited, new = store_tlx(
             engine, p.code, "lcca", "HV", {**RATINGS, "effort": 65}, reason="typo"
@@ -100,7 +101,9 @@ def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
         with Session(engine) as s:
             audit = s.scalars(select(AuditEntry).where(AuditEntry.entity == "tlx_response")).all()
         assert (audit[0].field, audit[0].old_value, audit[0].reason) == (
-            "entered", None, "paper form before the block"
+            "entered",
+            None,
+            "paper form before the block",
         )  # the first entry, with every value
         assert json.loads(audit[0].new_value)["effort"] == 60
         assert [(a.field, a.old_value, a.new_value, a.reason) for a in audit][1:] == [
@@ -144,8 +147,21 @@ def test_show_and_the_analysis_frame_give_the_hand_computed_scores(
     assert weights_from_choices(pair_order(1, "P001"), chosen) == WEIGHTS
     ratings = [f"--{k}={v}" for k, v in RATINGS.items()]
     block = ["--task", "lcca", "--condition", "VO", "--reason", "paper form", "--db", db]
-    assert main(["tlx", "enter", "--participant", "P001", *block, *ratings,
-                 "--choices", ",".join(chosen)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "tlx",
+                "enter",
+                "--participant",
+                "P001",
+                *block,
+                *ratings,
+                "--choices",
+                ",".join(chosen),
+            ]
+        )
+        == 0
+    )
     assert main(["tlx", "enter", "--participant", "P002", *block, *ratings]) == 0
     assert capsys.readouterr().out.splitlines()[-2:] == [
         "P001 lcca/VO: stored; raw TLX 45.0, weighted TLX 56.0",

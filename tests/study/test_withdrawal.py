@@ -45,29 +45,50 @@ def test_withdrawal_is_kept_audited_and_left_out_of_the_analysis(
             select(Participant.code).where(Participant.group == "novice").order_by(Participant.code)
         ).all()
     code = novices[0]
-    assert main(["participant", "withdraw", code, "--reason", "felt unwell",
-                 "--actor", "EXP02", "--db", db]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "participant",
+                "withdraw",
+                code,
+                "--reason",
+                "felt unwell",
+                "--actor",
+                "EXP02",
+                "--db",
+                db,
+            ]
+        )
+        == 0
+    )
     with Session(engine) as session:
         p = session.scalars(select(Participant).where(Participant.code == code)).one()
         entry = session.scalars(select(AuditEntry).where(AuditEntry.field == "status")).one()
     assert p.withdrawn_at is not None and p.withdrawal_reason == "felt unwell"
     assert (entry.old_value, entry.new_value, entry.reason, entry.actor) == (
-        "enrolled", "withdrawn", "felt unwell", "EXP02"
-    )  # fmt: skip
+        "enrolled",
+        "withdrawn",
+        "felt unwell",
+        "EXP02",
+    )
     # the analysis leaves them out and says why; the novice n drops from 3 to 2
     out = tmp_path / "res.json"
     assert main(["analyze", "--out", str(tmp_path / "res"), "--json", str(out), "--db", db]) == 0
     report = json.loads(out.read_text())
     assert f"lcca/all measures: excluded {code} (withdrawn: felt unwell)" in report["exclusions"]
-    [peak] = [d for d in report["descriptives"] if d["measure"] == "peak_proximal_force_n"
-              and d["group"] == "novice" and d["condition"] == "VO"]  # fmt: skip
+    [peak] = [
+        d
+        for d in report["descriptives"]
+        if d["measure"] == "peak_proximal_force_n"
+        and d["group"] == "novice"
+        and d["condition"] == "VO"
+    ]
     assert peak["n"] == 2
     # the remaining novices' VO mean, by hand from the stored peaks (the first one left)
     vo = PEAKS[("novice", "VO")]
     others = [v for k, v in enumerate(vo) if novices[k] != code]
     assert peak["mean"] == pytest.approx(sum(others) / 2)
-    assert "lcca/peak_proximal_force_n/novice: n = 2 pairs, too few to test" in report[
-        "exclusions"]  # fmt: skip
+    assert "lcca/peak_proximal_force_n/novice: n = 2 pairs, too few to test" in report["exclusions"]
     # their trials stay in the database and in the export
     exported = tmp_path / "export"
     assert main(["export", "--out", str(exported), "--db", db]) == 0
@@ -75,14 +96,16 @@ def test_withdrawal_is_kept_audited_and_left_out_of_the_analysis(
     assert (trials["participant"] == code).sum() == 2
     # no more sessions for them
     line = one_error_line(capsys, ["run", "--participant", code, "--db", db])
-    assert line.endswith(f"participant {code} withdrew (felt unwell); expected a participant "
-                         "still in the study")  # fmt: skip
+    assert line.endswith(
+        f"participant {code} withdrew (felt unwell); expected a participant still in the study"
+    )
     engine.dispose()
 
 
 def test_bad_withdrawals_are_one_line(db: str, capsys: pytest.CaptureFixture[str]) -> None:
-    assert "P999" in one_error_line(capsys, ["participant", "withdraw", "P999", "--reason", "x",
-                                    "--db", db])  # fmt: skip
+    assert "P999" in one_error_line(
+        capsys, ["participant", "withdraw", "P999", "--reason", "x", "--db", db]
+    )
     assert "expected 1-500 characters" in one_error_line(
         capsys, ["participant", "withdraw", "P001", "--reason", "  ", "--db", db]
     )
@@ -103,8 +126,9 @@ def test_a_note_is_kept_and_its_edits_audited(db: str) -> None:
     engine.dispose()
     assert p.note == "left-handed grip"
     assert [(e.old_value, e.new_value) for e in edits] == [
-        (None, "prefers the left hand"), ("prefers the left hand", "left-handed grip")
-    ]  # fmt: skip
+        (None, "prefers the left hand"),
+        ("prefers the left hand", "left-handed grip"),
+    ]
 
 
 def test_session_notes_are_added_beside_the_participants_note(db: str) -> None:
@@ -122,8 +146,9 @@ def test_session_notes_are_added_beside_the_participants_note(db: str) -> None:
     # the participant's note stays; each session note is its own row, none replaced
     assert p.note == "left-handed grip"
     assert [(n.entity_id, n.old_value, n.new_value) for n in notes] == [
-        (p.id, None, "dial recalibrated after trial 2"), (p.id, None, "fire alarm: 5 min pause")
-    ]  # fmt: skip
+        (p.id, None, "dial recalibrated after trial 2"),
+        (p.id, None, "fire alarm: 5 min pause"),
+    ]
     assert all(n.reason.startswith("note on the session of 20") for n in notes)
 
 
@@ -135,10 +160,13 @@ def test_a_participant_withdrawn_before_any_trial_is_listed_in_the_exclusions(
     engine = open_database(db)
     code = add_participant(engine, "expert").code  # enrolled, never run
     engine.dispose()
-    assert main(["participant", "withdraw", code, "--reason", "changed their mind",
-                 "--db", db]) == 0  # fmt: skip
+    assert (
+        main(["participant", "withdraw", code, "--reason", "changed their mind", "--db", db]) == 0
+    )
     out = tmp_path / "res.json"
     assert main(["analyze", "--out", str(tmp_path / "res"), "--json", str(out), "--db", db]) == 0
     report = json.loads(out.read_text())
-    assert (f"all tasks: excluded {code} (withdrawn: changed their mind; no data stored)"
-            in report["exclusions"])  # fmt: skip
+    assert (
+        f"all tasks: excluded {code} (withdrawn: changed their mind; no data stored)"
+        in report["exclusions"]
+    )

@@ -252,8 +252,14 @@ def test_look_alike_families_are_reported_as_ambiguous_not_named() -> None:
     t = np.arange(n) * dt
     w = np.array([0.5, 1.2, 2.0, -1.0])[rng.integers(0, 4, n // 200).repeat(200)]
     i = 0.3 * np.sin(2 * np.pi * 0.05 * t) + rng.normal(size=n).cumsum() / 300
-    s = {"t": t, "drive": i, "speed": w, "accel": np.zeros(n), "angle": np.cumsum(w) * dt,
-         "direction": w}  # fmt: skip
+    s = {
+        "t": t,
+        "drive": i,
+        "speed": w,
+        "accel": np.zeros(n),
+        "angle": np.cumsum(w) * dt,
+        "direction": w,
+    }
     model = FollowerBase()
     X = model.columns(s)
     base = X @ np.linalg.lstsq(X, 5 * i - 0.2 * w - 0.1 * np.sign(w), rcond=None)[0]

@@ -47,8 +47,12 @@ def _trial_process(tmp_path: Path, name: str) -> dict[str, object]:
     env = {**os.environ, "HAPTIC_STUDY_CACHE": str(tmp_path / "cache")}
     done = subprocess.run(
         [sys.executable, "-c", TRIAL, str(tmp_path / name)],
-        env=env, capture_output=True, text=True, timeout=600, check=False,
-    )  # fmt: skip
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr
     result: dict[str, object] = json.loads(done.stdout.splitlines()[-1])
     return result
@@ -147,8 +151,9 @@ def test_importing_the_loop_and_estimator_modules_imports_no_numba() -> None:
         "import teleop_core.calibration.effects\n"
         "print('numba' in sys.modules)\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=300, check=True)  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True
+    )
     assert done.stdout.strip() == "False", done.stderr
 
 
@@ -185,8 +190,12 @@ def test_the_first_demo_after_install_says_it_compiles_the_loop_once(
     def demo(out: str) -> subprocess.CompletedProcess[str]:
         done = subprocess.run(
             [sys.executable, "-m", "study.cli", "demo", "--quick", "--out", str(tmp_path / out)],
-            env=env, capture_output=True, text=True, timeout=600, check=False,
-        )  # fmt: skip
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+            check=False,
+        )
         assert done.returncode == 0, done.stderr
         return done
 

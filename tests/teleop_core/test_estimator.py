@@ -63,9 +63,13 @@ def test_damaged_gru_weights_are_refused_with_the_file_named(tmp_path: Path, tra
     weights = estimator.gru.weights
     np.savez(
         tmp_path / "model" / "gru.npz",
-        w_ih=weights.w_ih, w_hh=weights.w_hh[:-1], b_ih=weights.b_ih, b_hh=weights.b_hh,
-        w_out=weights.w_out, b_out=weights.b_out,
-    )  # fmt: skip
+        w_ih=weights.w_ih,
+        w_hh=weights.w_hh[:-1],
+        b_ih=weights.b_ih,
+        b_hh=weights.b_hh,
+        w_out=weights.w_out,
+        b_out=weights.b_out,
+    )
     with pytest.raises(TeleopInputError, match=rf"w_hh has shape .*expected \({3 * hidden}"):
         ForceEstimator.load(tmp_path / "model")
 

@@ -193,9 +193,12 @@ def test_the_return_damper_is_what_keeps_a_released_dial_stable(
 
 @pytest.mark.parametrize(
     "link",
-    [LinkParams(), LinkParams(delay_s=0.002, jitter_s=0.001, loss=0.01),
-     LinkParams(delay_s=0.015, jitter_s=0.02, loss=0.2)],
-)  # fmt: skip
+    [
+        LinkParams(),
+        LinkParams(delay_s=0.002, jitter_s=0.001, loss=0.01),
+        LinkParams(delay_s=0.015, jitter_s=0.02, loss=0.2),
+    ],
+)
 def test_in_kernel_acquisition_matches_the_event_by_event_loop(
     small_estimator,
     link: LinkParams,
@@ -235,8 +238,15 @@ class _LibmStream:
                     self.buffer, w.w_ih, w.w_hh, w.b_ih, w.b_hh, w.w_out, w.b_out
                 )
                 f_hybrid = f_phys + y * self.target[0] + self.target[1]
-                final = ekf_update(self.ekf_state, self.ekf_settings, self.physics, self.dt_s,
-                                   f_phys, f_hybrid, st[S_OMEGA])  # fmt: skip
+                final = ekf_update(
+                    self.ekf_state,
+                    self.ekf_settings,
+                    self.physics,
+                    self.dt_s,
+                    f_phys,
+                    f_hybrid,
+                    st[S_OMEGA],
+                )
                 return f_phys, f_hybrid, final
 
         return Stream(estimator)

@@ -33,8 +33,14 @@ def test_a_step_decays_as_the_discrete_exponential() -> None:
         expected = np.where(k >= s, scale * np.exp(-(k - s + 1) * dt / tau), 0.0)
         np.testing.assert_allclose(got[:, j], expected, rtol=1e-12, atol=1e-15)
     assert spec.feature_names == (
-        "iq", "omega", "alpha", "iq-ema0.1s", "iq-ema1s", "omega-ema0.1s", "omega-ema1s"
-    )  # fmt: skip
+        "iq",
+        "omega",
+        "alpha",
+        "iq-ema0.1s",
+        "iq-ema1s",
+        "omega-ema0.1s",
+        "omega-ema1s",
+    )
 
 
 def test_irregular_steps_use_each_samples_own_time_step() -> None:
@@ -96,8 +102,10 @@ def test_the_memory_choice_is_saved_and_loaded(
     estimator.save(tmp_path / "m", summary)
     meta = json.loads((tmp_path / "m" / "standardisation.json").read_text())
     assert meta["memory"] == {
-        "kind": "ema_residual", "columns": ["iq", "omega"], "time_constants_s": [0.2, 2.0]
-    }  # fmt: skip
+        "kind": "ema_residual",
+        "columns": ["iq", "omega"],
+        "time_constants_s": [0.2, 2.0],
+    }
     loaded = ForceEstimator.load(tmp_path / "m")
     assert loaded.gru.memory == SMALL.memory
     rec = short_recording.slice(3000, 3600)

@@ -94,23 +94,40 @@ def test_missing_and_empty_files_are_refused(tmp_path: Path) -> None:
     ("edit", "message"),
     [
         # issue 18: each was accepted (and failed later) or gave a traceback
-        (lambda h, rows: (h, ["0.00,1e300,0,2,0.5", *rows[1:]]),
-         r"line 2, column 'iq': '1e300' is beyond ±1e\+12; expected a value in SI units"),
-        (lambda h, rows: (h, [*rows[:5], rows[4], *rows[6:]]),
-         r"line 7, column 't': 0.04 repeats 0.04 on the line before; expected strictly"),
-        (lambda h, rows: (h, [f"{1e-9 * i!r}," + r.split(",", 1)[1] for i, r in enumerate(rows)]),
-         r"column 't', lines 2-41: median step 1e-09 s \(1e\+09 Hz\); expected a sampling rate "
-         r"from 10 Hz to 1e\+06 Hz"),
-        (lambda h, rows: (h, [f"{10 * i}," + r.split(",", 1)[1] for i, r in enumerate(rows)]),
-         r"median step 10 s \(0.1 Hz\)"),
-        (lambda h, rows: (h + ",iq", [r + ",1" for r in rows]),
-         r"line 1: column 'iq' appears twice; expected distinct column names"),
-        (lambda h, rows: (h, [*rows[:3], rows[3].rsplit(",", 1)[0], *rows[4:]]),
-         r"line 5, column 'f_ref': '' is not a finite number; expected a plain decimal"),
+        (
+            lambda h, rows: (h, ["0.00,1e300,0,2,0.5", *rows[1:]]),
+            r"line 2, column 'iq': '1e300' is beyond ±1e\+12; expected a value in SI units",
+        ),
+        (
+            lambda h, rows: (h, [*rows[:5], rows[4], *rows[6:]]),
+            r"line 7, column 't': 0.04 repeats 0.04 on the line before; expected strictly",
+        ),
+        (
+            lambda h, rows: (
+                h,
+                [f"{1e-9 * i!r}," + r.split(",", 1)[1] for i, r in enumerate(rows)],
+            ),
+            r"column 't', lines 2-41: median step 1e-09 s \(1e\+09 Hz\); expected a sampling rate "
+            r"from 10 Hz to 1e\+06 Hz",
+        ),
+        (
+            lambda h, rows: (h, [f"{10 * i}," + r.split(",", 1)[1] for i, r in enumerate(rows)]),
+            r"median step 10 s \(0.1 Hz\)",
+        ),
+        (
+            lambda h, rows: (h + ",iq", [r + ",1" for r in rows]),
+            r"line 1: column 'iq' appears twice; expected distinct column names",
+        ),
+        (
+            lambda h, rows: (h, [*rows[:3], rows[3].rsplit(",", 1)[0], *rows[4:]]),
+            r"line 5, column 'f_ref': '' is not a finite number; expected a plain decimal",
+        ),
     ],
-)  # fmt: skip
+)
 def test_nonsense_is_refused_with_one_line_naming_line_column_and_expectation(
-    tmp_path: Path, edit, message: str  # type: ignore[no-untyped-def]
+    tmp_path: Path,
+    edit,
+    message: str,  # type: ignore[no-untyped-def]
 ) -> None:
     header, rows = edit("t,iq,theta,omega,f_ref", _rows())
     with pytest.raises(RecordingError, match=message) as caught:

@@ -29,13 +29,21 @@ from teleop_core.calibration.verdict import (
 )
 
 EMPS = Path(__file__).parent.parent / "data" / "emps" / "DATA_EMPS.mat"
-EMPS_REFERENCE = {"mass_kg": 95.1089, "viscous_friction_n_s_per_m": 203.5034,
-                  "coulomb_friction_n": 20.3935, "offset_n": -3.1648}  # fmt: skip
+EMPS_REFERENCE = {
+    "mass_kg": 95.1089,
+    "viscous_friction_n_s_per_m": 203.5034,
+    "coulomb_friction_n": 20.3935,
+    "offset_n": -3.1648,
+}
 """The benchmark's IDIM-LS reference model (its README and paper)."""
 
 
-def _axis_recording(seed: int, duration_s: float = 40.0, rate_hz: float = 500.0,
-                    reverse_viscous_n_s_per_m: float = 0.0) -> pd.DataFrame:  # fmt: skip
+def _axis_recording(
+    seed: int,
+    duration_s: float = 40.0,
+    rate_hz: float = 500.0,
+    reverse_viscous_n_s_per_m: float = 0.0,
+) -> pd.DataFrame:
     """u = M q'' + Fv q' + Fc sgn(q') + offset (+ extra viscous friction in reverse),
     q a sum of sines (reversals and rests of speed), u with white noise of 0.3 N."""
     rng = np.random.default_rng(seed)
@@ -85,8 +93,12 @@ def test_a_clean_axis_gets_its_parameters_nothing_added_and_a_white_verdict(seed
     report = cal.report()
     assert report["effects_added"] == []
     assert report["verdict"] == "white" and report["unexplained"] is None
-    truth = {"mass_kg": 20.0, "viscous_friction_n_s_per_m": 150.0,
-             "coulomb_friction_n": 8.0, "offset_n": -1.5}  # fmt: skip
+    truth = {
+        "mass_kg": 20.0,
+        "viscous_friction_n_s_per_m": 150.0,
+        "coulomb_friction_n": 8.0,
+        "offset_n": -1.5,
+    }
     params, ci = report["base_params"]["params"], report["base_params"]["ci"]
     for name, value in truth.items():
         assert abs(params[name] - value) < 0.02 * abs(value) + 0.05, name
@@ -109,8 +121,18 @@ def test_direction_dependent_friction_is_found_and_named() -> None:
 
 
 def test_emps_measured_data_recovers_the_benchmark_and_names_direction(tmp_path: Path) -> None:
-    argv = ["calibrate", str(EMPS), "--model", "rigid-axis", "--json", str(tmp_path / "r.json"),
-            "--predictions", str(tmp_path / "p.csv"), "--out", str(tmp_path / "f")]  # fmt: skip
+    argv = [
+        "calibrate",
+        str(EMPS),
+        "--model",
+        "rigid-axis",
+        "--json",
+        str(tmp_path / "r.json"),
+        "--predictions",
+        str(tmp_path / "p.csv"),
+        "--out",
+        str(tmp_path / "f"),
+    ]
     assert main(argv) == 0
     report = json.loads((tmp_path / "r.json").read_text())
     # the base fit before any effect, with the fitted cutoff, is the benchmark's model
@@ -138,8 +160,9 @@ def test_emps_measured_data_recovers_the_benchmark_and_names_direction(tmp_path:
     t = s["t"]
     qd_p = np.gradient(signal.filtfilt(b, a, mat_to_frame(EMPS)["q"].to_numpy()), t)
     qdd_p = np.gradient(qd_p, t)
-    plain = np.column_stack([qdd_p, qd_p * (qd_p > 0), qd_p * (qd_p < 0), qd_p > 0, qd_p < 0,
-                             np.ones(len(t))])  # fmt: skip
+    plain = np.column_stack(
+        [qdd_p, qd_p * (qd_p > 0), qd_p * (qd_p < 0), qd_p > 0, qd_p < 0, np.ones(len(t))]
+    )
     cut = round(0.75 * len(t))
     c_plain, *_ = np.linalg.lstsq(plain[:cut], data.y[:cut], rcond=None)
     rmse_plain = float(np.sqrt(np.mean((data.y[cut:] - plain[cut:] @ c_plain) ** 2)))
@@ -152,8 +175,18 @@ def test_emps_measured_data_recovers_the_benchmark_and_names_direction(tmp_path:
 def test_a_bad_mat_mapping_is_one_line_and_nothing_written(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    argv = ["calibrate", str(EMPS), "--model", "rigid-axis", "--json", str(tmp_path / "r.json"),
-            "--predictions", str(tmp_path / "p.csv"), "--out", str(tmp_path / "f")]  # fmt: skip
+    argv = [
+        "calibrate",
+        str(EMPS),
+        "--model",
+        "rigid-axis",
+        "--json",
+        str(tmp_path / "r.json"),
+        "--predictions",
+        str(tmp_path / "p.csv"),
+        "--out",
+        str(tmp_path / "f"),
+    ]
     assert main([*argv, "--mat-columns", "t=t,q=qx,u=gtau*vir"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "variable 'qx' not found" in err[0]
@@ -196,8 +229,12 @@ def test_unexplained_names_the_quantity_and_ignores_noise() -> None:
     rng = np.random.default_rng(4)
     t = np.arange(0, 60, 0.01)
     speed = np.sin(0.7 * t) + 0.3 * np.sin(2.3 * t)
-    signals = {"t": t, "speed": speed, "angle": np.cumsum(speed) * 0.01,
-               "drive": rng.normal(size=len(t))}  # fmt: skip
+    signals = {
+        "t": t,
+        "speed": speed,
+        "angle": np.cumsum(speed) * 0.01,
+        "drive": rng.normal(size=len(t)),
+    }
     noise = rng.normal(0, 0.1, len(t))
     # an extra friction of 0.1 N against the motion: half the residual's variance
     where = unexplained(noise + 0.1 * np.sign(speed), signals, np.zeros(len(t)))
@@ -286,8 +323,12 @@ def test_a_negative_hysteresis_loop_is_not_named(seed: int) -> None:
     assert named and named[0]["params"]["half_loop_n_m"] < 0
     report = Calibrator(FollowerBase()).fit(data).report()
     assert "hysteresis" not in [e["family"] for e in report["effects_added"]]
-    refused = [c for c in report["candidates"] if c["family"] == "hysteresis"
-               and c["reason"].startswith("implausible: hysteresis half loop")]  # fmt: skip
+    refused = [
+        c
+        for c in report["candidates"]
+        if c["family"] == "hysteresis"
+        and c["reason"].startswith("implausible: hysteresis half loop")
+    ]
     assert refused and "negative loop" in refused[0]["reason"]
     assert report["verdict"] == "structure_remains"
     assert report["rmse_after"] <= report["rmse_before"]
@@ -303,8 +344,9 @@ def test_a_positive_loop_is_still_named_on_the_follower() -> None:
     assert report["effects_added"][0]["params"]["half_loop_n_m"] > 0
 
 
-@pytest.mark.parametrize("kind", ["load_friction", "gain_change", "ripple_harmonics",
-                                  "presliding_memory"])  # fmt: skip
+@pytest.mark.parametrize(
+    "kind", ["load_friction", "gain_change", "ripple_harmonics", "presliding_memory"]
+)
 def test_effects_outside_the_families_reach_the_oracle(kind: str) -> None:
     data, oracle, truth = undeclared_recording(kind, duration_s=80.0, rate_hz=200.0, seed=2)
     report = Calibrator(FollowerBase()).fit(data).report()
@@ -321,8 +363,11 @@ def test_effects_outside_the_families_reach_the_oracle(kind: str) -> None:
         (term,) = report["discovered_terms"]
         assert term["params"]["change_time_s"] == pytest.approx(truth["change_time_s"], abs=1.0)
     if kind == "ripple_harmonics":  # two periods, each found by position_periodic
-        periods = sorted(e["params"]["period_rad"] for e in report["effects_added"]
-                         if e["family"] == "position_periodic")  # fmt: skip
+        periods = sorted(
+            e["params"]["period_rad"]
+            for e in report["effects_added"]
+            if e["family"] == "position_periodic"
+        )
         for p in (truth["period_1_rad"], truth["period_2_rad"]):
             assert min(abs(q - p) / p for q in periods) < 0.02
 
@@ -334,10 +379,26 @@ def test_a_hidden_force_remains_unexplained_and_the_cli_says_so(
     s = data.signals
     csv = tmp_path / "rec.csv"
     # the follower contract: t, iq, theta, omega, f_ref (alpha optional)
-    pd.DataFrame({"t": s["t"], "iq": s["drive"], "theta": s["angle"], "omega": s["speed"],
-                  "alpha": s["accel"], "f_ref": data.y}).to_csv(csv, index=False)  # fmt: skip
-    argv = ["calibrate", str(csv), "--json", str(tmp_path / "r.json"),
-            "--predictions", str(tmp_path / "p.csv"), "--out", str(tmp_path / "f")]  # fmt: skip
+    pd.DataFrame(
+        {
+            "t": s["t"],
+            "iq": s["drive"],
+            "theta": s["angle"],
+            "omega": s["speed"],
+            "alpha": s["accel"],
+            "f_ref": data.y,
+        }
+    ).to_csv(csv, index=False)
+    argv = [
+        "calibrate",
+        str(csv),
+        "--json",
+        str(tmp_path / "r.json"),
+        "--predictions",
+        str(tmp_path / "p.csv"),
+        "--out",
+        str(tmp_path / "f"),
+    ]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "verdict: structure remains" in out

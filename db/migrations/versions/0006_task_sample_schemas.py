@@ -64,10 +64,18 @@ TASK_COLUMNS: dict[str, tuple[tuple[str, str | None, str, str], ...]] = {
         ("tip_y_m", "tip_y_m", "m", "tip position, phantom frame"),
         ("tip_z_m", "tip_z_m", "m", "tip position, phantom frame"),
         ("branch", "branch", "", "vessel the tip is in (DAo, arch, ...)"),
-        ("reference_force_n", "proximal_force_n", "N",
-         "true proximal insertion force (simulation) or reference sensor"),
-        ("proximal_force_n", "proximal_force_est_n", "N",
-         "proximal force estimated from the motor current (what is rendered)"),
+        (
+            "reference_force_n",
+            "proximal_force_n",
+            "N",
+            "true proximal insertion force (simulation) or reference sensor",
+        ),
+        (
+            "proximal_force_n",
+            "proximal_force_est_n",
+            "N",
+            "proximal force estimated from the motor current (what is rendered)",
+        ),
         ("distal_force_n", "distal_force_n", "N", "tip force on the vessel wall"),
         ("dial_angle_rad", "dial_angle_rad", "rad", "haptic dial angle"),
         ("dial_torque_n_m", "dial_torque_n_m", "N m", "torque on the hand"),
@@ -80,18 +88,34 @@ TASK_COLUMNS: dict[str, tuple[tuple[str, str | None, str, str], ...]] = {
         ("tip_y_m", "tip_y_m", "m", "tip position"),
         ("tip_z_m", "tip_z_m", "m", "tip position"),
         ("region", "branch", "", "where the tip is (canal, fornix, ...)"),
-        ("force_demanded_n", "proximal_force_n", "N",
-         "tissue resistance on the scope, positive resisting insertion"),
-        ("force_rendered_n", "proximal_force_est_n", "N",
-         "force the device renders (saturates at its continuous limit)"),
-        ("tip_force_n", "distal_force_n", "N",
-         "the tissue's push on the tip (the fornix or the fold)"),
+        (
+            "force_demanded_n",
+            "proximal_force_n",
+            "N",
+            "tissue resistance on the scope, positive resisting insertion",
+        ),
+        (
+            "force_rendered_n",
+            "proximal_force_est_n",
+            "N",
+            "force the device renders (saturates at its continuous limit)",
+        ),
+        (
+            "tip_force_n",
+            "distal_force_n",
+            "N",
+            "the tissue's push on the tip (the fornix or the fold)",
+        ),
         ("dial_angle_rad", "dial_angle_rad", "rad", "the hand's aim (rate input)"),
         ("torque_rendered_n_m", "dial_torque_n_m", "N m", "torque rendered"),
-        ("torque_demanded_n_m", None, "N m",
-         "tissue resistance to roll, positive resisting clockwise roll"),
+        (
+            "torque_demanded_n_m",
+            None,
+            "N m",
+            "tissue resistance to roll, positive resisting clockwise roll",
+        ),
     ),
-}  # fmt: skip
+}
 """Each task's sample columns at this revision: (its name, the old layout's column that
 held it or None, unit, description), in the task's order."""
 REGION_COLUMNS = ("branch", "region")
@@ -149,12 +173,11 @@ def _recode(
         last = -1
         while True:
             page = conn.execute(
-                sa.select(chunks.c.first_seq, chunks.c.raw_bytes, chunks.c.schema_id,
-                          chunks.c.data)
+                sa.select(chunks.c.first_seq, chunks.c.raw_bytes, chunks.c.schema_id, chunks.c.data)
                 .where(chunks.c.trial_id == trial_id, chunks.c.first_seq > last)
                 .order_by(chunks.c.first_seq)
                 .limit(PAGE)
-            ).all()  # fmt: skip
+            ).all()
             for first_seq, raw_bytes, old_id, data in page:
                 batch = recode(decode(data, raw_bytes, from_schemas[old_id]))
                 new_data, new_raw = encode(batch)

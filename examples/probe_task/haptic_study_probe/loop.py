@@ -63,7 +63,13 @@ class ProbeLoop:
             if self.done:
                 break
             view = OperatorView(
-                self.t_s, 0.0, 0.0, self.depth_m, 0.0, (self.depth_m, 0.0, 0.0), "medium",
+                self.t_s,
+                0.0,
+                0.0,
+                self.depth_m,
+                0.0,
+                (self.depth_m, 0.0, 0.0),
+                "medium",
                 self.success,
             )
             action = self.driver.act(view)
@@ -79,7 +85,17 @@ class ProbeLoop:
             # F = B v
             force = DAMPING_N_S_PER_M * speed
             rows.append(
-                [self.t_s, self.depth_m, 0.0, self.depth_m, 0.0, 0.0, region, force,
-                 action.dial_target_rad, speed]
+                [
+                    self.t_s,
+                    self.depth_m,
+                    0.0,
+                    self.depth_m,
+                    0.0,
+                    0.0,
+                    region,
+                    force,
+                    action.dial_target_rad,
+                    speed,
+                ]
             )
         return np.array(rows, dtype=float).reshape(-1, COLUMNS)

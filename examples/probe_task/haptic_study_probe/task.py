@@ -44,7 +44,13 @@ class ProbeTask(Task):
     track_length_m = 0.1
 
     def make_loop(
-        self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None, context=None,
+        self,
+        condition,
+        seed,
+        *,
+        haptic_gain_n_m_per_n=None,
+        estimator=None,
+        context=None,
         link=None,
     ):
         return ProbeLoop(condition)

@@ -185,8 +185,9 @@ def outliers(
 
     df = len(names) - len(free)
     sim = distances(simulated)
-    c = max(float(np.percentile(sim, 100 * CALIBRATION_Q)) / stats.chi2.ppf(CALIBRATION_Q, df),
-            1e-9)  # fmt: skip
+    c = max(
+        float(np.percentile(sim, 100 * CALIBRATION_Q)) / stats.chi2.ppf(CALIBRATION_Q, df), 1e-9
+    )
     obs = distances(people)
     scaled = {p: float(d / c) for p, d in obs.items()}
     limit = float(stats.chi2.ppf(1 - OUTLIER_ALPHA / max(len(obs), 1), df))
@@ -213,15 +214,25 @@ def summary_misfit(
     means, Welch's p, p_holm and flagged; `held`: the traits held at their priors (named
     in the line as a possible cause)."""
     rows: list[dict[str, Any]] = []
-    pairs = zip(condition_values(observed, measures, groups),
-                condition_values(simulated, measures, groups), strict=True)  # fmt: skip
+    pairs = zip(
+        condition_values(observed, measures, groups),
+        condition_values(simulated, measures, groups),
+        strict=True,
+    )
     for (group, m, label, a), (*_, b) in pairs:
         if len(a) < 2 or len(b) < 2:
             continue
         p = float(stats.ttest_ind(a, b, equal_var=False).pvalue)
-        rows.append({"group": group, "measure": m, "condition": label,
-                     "observed": float(a.mean()), "simulated": float(b.mean()),
-                     "p": p if np.isfinite(p) else 1.0})  # fmt: skip
+        rows.append(
+            {
+                "group": group,
+                "measure": m,
+                "condition": label,
+                "observed": float(a.mean()),
+                "simulated": float(b.mean()),
+                "p": p if np.isfinite(p) else 1.0,
+            }
+        )
     if rows:
         reject, p_holm, _, _ = multipletests([r["p"] for r in rows], ALPHA, method="holm")
         for r, flag, ph in zip(rows, reject, p_holm, strict=True):
@@ -293,12 +304,15 @@ def emulator_check(table: pd.DataFrame) -> dict[str, Any]:
     rows = []
     for key, sim in simulated.iterrows():
         predicted = float(model.loc[key, "mean"])
-        rows.append({
-            **dict(zip(keys, key, strict=True)),
-            "emulator": predicted, "simulated": float(sim["mean"]),
-            "simulated_ci95": [float(sim["ci_low"]), float(sim["ci_high"])],
-            "inside": bool(sim["ci_low"] <= predicted <= sim["ci_high"]),
-        })  # fmt: skip
+        rows.append(
+            {
+                **dict(zip(keys, key, strict=True)),
+                "emulator": predicted,
+                "simulated": float(sim["mean"]),
+                "simulated_ci95": [float(sim["ci_low"]), float(sim["ci_high"])],
+                "inside": bool(sim["ci_low"] <= predicted <= sim["ci_high"]),
+            }
+        )
     outside = [r for r in rows if not r["inside"]]
     if not outside:
         line = (

@@ -41,8 +41,11 @@ def fit_figure(table: pd.DataFrame, note: str) -> plt.Figure:
             for j, column in enumerate(COLUMNS):
                 ax = axes[i][j]
                 for k, (source, (_, colour, marker)) in enumerate(SOURCES.items()):
-                    rows = table[(table["measure"] == m) & (table["condition"] == column)
-                                 & (table["source"] == source)].set_index("group")  # fmt: skip
+                    rows = table[
+                        (table["measure"] == m)
+                        & (table["condition"] == column)
+                        & (table["source"] == source)
+                    ].set_index("group")
                     rows = rows.reindex(groups)
                     x = [g + (k - 1) * 0.22 for g in range(len(groups))]
                     # the interval as drawn, the estimate as a marker: a bootstrap
@@ -63,9 +66,21 @@ def fit_figure(table: pd.DataFrame, note: str) -> plt.Figure:
         handles = [
             plt.Line2D([], [], color=c, marker=mk, ls="", ms=4) for _, c, mk in SOURCES.values()
         ]
-        fig.legend(handles, [lab for lab, _, _ in SOURCES.values()], loc="lower center", ncol=3,
-                   fontsize=FONT_PT, frameon=False)  # fmt: skip
-        fig.suptitle(wrap(note, WIDTHS_IN["double"]), x=0.02, ha="left", fontsize=FONT_PT,
-                     fontstyle="italic", color="#444444")  # fmt: skip
+        fig.legend(
+            handles,
+            [lab for lab, _, _ in SOURCES.values()],
+            loc="lower center",
+            ncol=3,
+            fontsize=FONT_PT,
+            frameon=False,
+        )
+        fig.suptitle(
+            wrap(note, WIDTHS_IN["double"]),
+            x=0.02,
+            ha="left",
+            fontsize=FONT_PT,
+            fontstyle="italic",
+            color="#444444",
+        )
         fig.tight_layout(rect=(0, 0.05, 1, 0.95))
     return fig

@@ -127,8 +127,11 @@ def simulate_people(
     bootstrap replicates, so that the people carry the fit's uncertainty too; every
     trial carries the participant `effects` at its place in the person's session."""
     rng = np.random.default_rng([settings.seed, 0xC4EC])
-    people = [(g, draw_traits(g, rng, {g: ps[i % len(ps)]}))
-              for g, ps in profiles.items() for i in range(per_group)]  # fmt: skip
+    people = [
+        (g, draw_traits(g, rng, {g: ps[i % len(ps)]}))
+        for g, ps in profiles.items()
+        for i in range(per_group)
+    ]
     firsts = [KNOWN_CONDITIONS[i % 2] for i in range(len(people))]
     frame = simulate_settings(
         task,
@@ -151,13 +154,20 @@ def simulate_people(
     return frame
 
 
-def build_emulator(task: str, settings: FitSettings,
-                   progress: Progress = _no_progress) -> MomentEmulator:  # fmt: skip
+def build_emulator(
+    task: str, settings: FitSettings, progress: Progress = _no_progress
+) -> MomentEmulator:
     """Simulate the design's trait settings and fit the emulator of the task's moments."""
     x = design_settings(settings.design, settings.seed, design_box())
     people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
-    design = simulate_settings(task, people, settings.repeats, settings.jobs, settings.max_s,
-                               lambda a, b: progress("emulator", a, b))  # fmt: skip
+    design = simulate_settings(
+        task,
+        people,
+        settings.repeats,
+        settings.jobs,
+        settings.max_s,
+        lambda a, b: progress("emulator", a, b),
+    )
     the_task = get_task(task)
     emulator = MomentEmulator().fit(x, design, the_task.analysed_measures, the_task.fit_features)
     progress("validating", 0, 1)
@@ -214,8 +224,13 @@ class FitData:
         return self.by_group[group][names].to_numpy(float)
 
 
-def read_data(trials: pd.DataFrame, task: str, emulator: MomentEmulator,
-              db_label: str, probes: pd.DataFrame | None = None) -> FitData:  # fmt: skip
+def read_data(
+    trials: pd.DataFrame,
+    task: str,
+    emulator: MomentEmulator,
+    db_label: str,
+    probes: pd.DataFrame | None = None,
+) -> FitData:
     """Step 1: the people's moments (and their probe estimates, `probes`:
     `study.probes.measure.probe_table`); one line when a group has too few people."""
     measures = list(get_task(task).analysed_measures)
@@ -303,9 +318,15 @@ def plan_traits(
         for g in data.groups
         if g in data.probed
     } or None
-    told, ratios = identifiable(emulator, {g: PROFILES[g] for g in data.groups}, data.sizes,
-                                data.ks, held_out, validate.held_out_trials(emulator),
-                                probe_info)  # fmt: skip
+    told, ratios = identifiable(
+        emulator,
+        {g: PROFILES[g] for g in data.groups},
+        data.sizes,
+        data.ks,
+        held_out,
+        validate.held_out_trials(emulator),
+        probe_info,
+    )
     sources = dict(sources or {})
     told = [j for j in told if TRAITS[j] not in sources]
     # the traits the data tell weakly: held at the profile, or fitted under its prior
@@ -394,8 +415,9 @@ def fit_group(
     """One group's trait distribution, its bootstrap over participants (resampled, the
     weak traits' prior centre drawn) and the model's predicted means per replicate."""
     names = emulator.moments_
-    est = GroupEstimator(emulator, PROFILES[group], plan.free, data.ks[group], settings.seed,
-                         plan.weak)  # fmt: skip
+    est = GroupEstimator(
+        emulator, PROFILES[group], plan.free, data.ks[group], settings.seed, plan.weak
+    )
     y = data.moments(group, names)
     probed = data.probed.get(group)
     best = est.fit(y, probes=probed)
@@ -461,8 +483,7 @@ def check_model(
     measures, groups = data.measures, data.groups
     k_sim = round(float(np.median(data.people["k"])))
     replicates = {g: fits[g].replicates for g in groups}
-    simulated = simulate_people(task, replicates, settings.check, k_sim, settings, progress,
-                                added)  # fmt: skip
+    simulated = simulate_people(task, replicates, settings.check, k_sim, settings, progress, added)
     rows = checks.trend_and_order(data.trials, simulated, measures)
     means = {g: fits[g].fit.mean for g in groups}
     sim_people = person_moments(simulated, measures, emulator.features_)
@@ -478,8 +499,11 @@ def check_model(
         plan.told,
     )
     predicted = {g: fits[g].predicted for g in groups}
-    table = pd.DataFrame(summaries(data.trials, simulated, measures, groups, predicted, rng,
-                                   max(settings.bootstrap, 200)))  # fmt: skip
+    table = pd.DataFrame(
+        summaries(
+            data.trials, simulated, measures, groups, predicted, rng, max(settings.bootstrap, 200)
+        )
+    )
     misfit = checks.summary_misfit(data.trials, simulated, measures, groups, plan.fixed)
     return ModelChecks(simulated, table, rows, outlier, misfit)
 
@@ -611,8 +635,14 @@ def run_fit(
     plan = plan_traits(emulator, observed, settings, sources)
     found, data = None, observed
     if loop:
-        found = effects.search(observed.trials, emulator, plan.free, plan.weak, settings.seed,
-                               progress=lambda a, b: progress("effects", a, b))  # fmt: skip
+        found = effects.search(
+            observed.trials,
+            emulator,
+            plan.free,
+            plan.weak,
+            settings.seed,
+            progress=lambda a, b: progress("effects", a, b),
+        )
         if found.effects:
             data = read_data(found.adjusted, task, emulator, db_label, probes)
     rng = np.random.default_rng([settings.seed, 0xB007])
@@ -638,8 +668,9 @@ def fit_trials(
     """MODEL.json's content and the summaries' frame of `run_fit` without the loop on
     the people (what the traits alone explain, and what the checks find they lack);
     `probes` as `run_fit`'s."""
-    result = run_fit(trials, task, settings, emulator, db_label, progress, loop=False,
-                     probes=probes)  # fmt: skip
+    result = run_fit(
+        trials, task, settings, emulator, db_label, progress, loop=False, probes=probes
+    )
     return result.to_dict(), result.table
 
 

@@ -174,8 +174,14 @@ class Task:
         import numpy as np
 
         context = self.session_context() if context is None else context
-        loop = self.make_loop(condition, seed, haptic_gain_n_m_per_n=haptic_gain_n_m_per_n,
-                              estimator=estimator, context=context, link=link)  # fmt: skip
+        loop = self.make_loop(
+            condition,
+            seed,
+            haptic_gain_n_m_per_n=haptic_gain_n_m_per_n,
+            estimator=estimator,
+            context=context,
+            link=link,
+        )
         driver = self.simulated_driver(traits, max_s, context)
         loop.start(driver)
         chunks = []
@@ -184,10 +190,17 @@ class Task:
         samples = np.concatenate(chunks)
         values, extras = self.trial_measures(samples, loop.success)
         summary = {
-            "task": self.name, "group": traits.group, "condition": condition, "seed": seed,
-            "success": bool(loop.success), COMPLETION_TIME: self.completion_time_s(samples),
-            **values, **extras, **self.driver_counts(driver), "participant": traits.to_dict(),
-        }  # fmt: skip
+            "task": self.name,
+            "group": traits.group,
+            "condition": condition,
+            "seed": seed,
+            "success": bool(loop.success),
+            COMPLETION_TIME: self.completion_time_s(samples),
+            **values,
+            **extras,
+            **self.driver_counts(driver),
+            "participant": traits.to_dict(),
+        }
         return TrialResult(self.trial_frame(samples), summary)
 
     def trial_figure(self, frame: pd.DataFrame, title: str) -> Any:
@@ -335,8 +348,10 @@ _LOADED = _ENTRY_POINTS_LOADED = False
 def register(task: Task) -> Task:
     """Add `task` to the registry (replacing one of the same name); returns it."""
     if not getattr(task, "name", "") or not task.name.isidentifier() or len(task.name) > 16:
-        raise ValueError(f"task name {getattr(task, 'name', None)!r}; expected an identifier "
-                         "of at most 16 characters")  # fmt: skip
+        raise ValueError(
+            f"task name {getattr(task, 'name', None)!r}; expected an identifier "
+            "of at most 16 characters"
+        )
     stored = [c.stored_as for c in task.sample_columns]
     for required in ("t_s", "branch", "insertion_m", "rotation_rad"):
         if required not in stored:

@@ -29,23 +29,46 @@ class LccaTask(Task):
     sample_columns = (
         *pose_columns("guidewire inserted", "guidewire roll", "tip position, phantom frame"),
         SampleColumn("branch", "branch", "", "vessel the tip is in (DAo, arch, ...)"),
-        SampleColumn("reference_force_n", "proximal_force_n", "N",
-                     "true proximal insertion force (simulation) or reference sensor"),
-        SampleColumn("proximal_force_n", "proximal_force_est_n", "N",
-                     "proximal force estimated from the motor current (what is rendered)"),
+        SampleColumn(
+            "reference_force_n",
+            "proximal_force_n",
+            "N",
+            "true proximal insertion force (simulation) or reference sensor",
+        ),
+        SampleColumn(
+            "proximal_force_n",
+            "proximal_force_est_n",
+            "N",
+            "proximal force estimated from the motor current (what is rendered)",
+        ),
         SampleColumn("distal_force_n", "distal_force_n", "N", "tip force on the vessel wall"),
         SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "haptic dial angle"),
         SampleColumn("dial_torque_n_m", "dial_torque_n_m", "N m", "torque on the hand"),
-    )  # fmt: skip
+    )
     measures = (
-        Measure("peak_proximal_force_n", "N", "peak proximal force",
-                "largest proximal insertion force (the drive's estimate)",
-                max_value=MAX_FORCE_N),
-        Measure("peak_distal_force_n", "N", "peak distal force",
-                "largest distal force on the phantom", max_value=MAX_FORCE_N),
-        Measure("wall_contacts", "", "wall contacts",
-                "times the distal force rose through 0.2 N", analysed=False, integer=True),
-    )  # fmt: skip
+        Measure(
+            "peak_proximal_force_n",
+            "N",
+            "peak proximal force",
+            "largest proximal insertion force (the drive's estimate)",
+            max_value=MAX_FORCE_N,
+        ),
+        Measure(
+            "peak_distal_force_n",
+            "N",
+            "peak distal force",
+            "largest distal force on the phantom",
+            max_value=MAX_FORCE_N,
+        ),
+        Measure(
+            "wall_contacts",
+            "",
+            "wall contacts",
+            "times the distal force rose through 0.2 N",
+            analysed=False,
+            integer=True,
+        ),
+    )
     live_traces = (
         LiveTrace("proximal_force_n", "proximal", 2.0),
         LiveTrace("distal_force_n", "distal", 1.0),
@@ -84,18 +107,37 @@ class LccaTask(Task):
 
         return plot_trial(frame, LccaPhantom(), title)
 
-    def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
-                  context=None, link=None):  # fmt: skip
+    def make_loop(
+        self,
+        condition,
+        seed,
+        *,
+        haptic_gain_n_m_per_n=None,
+        estimator=None,
+        context=None,
+        link=None,
+    ):
         from study.tasks.lcca.trial import lcca_loop
 
         return lcca_loop(condition, seed, estimator, haptic_gain_n_m_per_n, context, link)
 
-    def simulate(self, traits, condition, seed, max_s, *, haptic_gain_n_m_per_n=None,
-                 estimator=None, link=None, context=None):  # fmt: skip
+    def simulate(
+        self,
+        traits,
+        condition,
+        seed,
+        max_s,
+        *,
+        haptic_gain_n_m_per_n=None,
+        estimator=None,
+        link=None,
+        context=None,
+    ):
         from study.tasks.lcca.trial import run_lcca_trial
 
-        return run_lcca_trial(traits, condition, seed, estimator, haptic_gain_n_m_per_n,
-                              max_s, context, link)  # fmt: skip
+        return run_lcca_trial(
+            traits, condition, seed, estimator, haptic_gain_n_m_per_n, max_s, context, link
+        )
 
     def summary_line(self, summary):
         return (
@@ -119,9 +161,17 @@ class LccaTask(Task):
         }
 
     fit_features = (
-        "advance_speed_m_s", "approach_m", "approaches", "target_speed_ratio", "aim_error_rad",
-        "turn_peak_s", "turn_swing_s", "stall_s", "stall_backoffs", "peak_felt_rise_n_m",
-    )  # fmt: skip
+        "advance_speed_m_s",
+        "approach_m",
+        "approaches",
+        "target_speed_ratio",
+        "aim_error_rad",
+        "turn_peak_s",
+        "turn_swing_s",
+        "stall_s",
+        "stall_backoffs",
+        "peak_felt_rise_n_m",
+    )
     """`study.tasks.lcca.features.FEATURES` (a test keeps them equal)."""
 
     def trial_features(self, frame, context):
@@ -143,8 +193,11 @@ class LccaTask(Task):
         if isinstance(driver, SimulatedParticipant):
             # the person's state in this trial (their traits varied from trial to trial)
             state = {k: v for k, v in driver.traits.to_dict().items() if k != "group"}
-            return {"obstacles_felt": driver.obstacles_felt,
-                    "obstacles_seen": driver.obstacles_seen, "trial_state": state}  # fmt: skip
+            return {
+                "obstacles_felt": driver.obstacles_felt,
+                "obstacles_seen": driver.obstacles_seen,
+                "trial_state": state,
+            }
         return {}
 
     def trial_frame(self, samples):

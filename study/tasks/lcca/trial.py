@@ -135,4 +135,3 @@ def run_lcca_trial(
 def trial_frame(raw: pd.DataFrame) -> pd.DataFrame:
     """TRIAL.csv's columns from the loop's sample frame."""
     return raw[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
-

@@ -30,41 +30,110 @@ class NotesTask(Task):
     sample_columns = (
         *pose_columns("scope depth from the introitus", "scope roll", "tip position"),
         SampleColumn("region", "branch", "", "where the tip is (canal, fornix, ...)"),
-        SampleColumn("force_demanded_n", "proximal_force_n", "N",
-                     "tissue resistance on the scope, positive resisting insertion"),
-        SampleColumn("force_rendered_n", "proximal_force_est_n", "N",
-                     "force the device renders (saturates at its continuous limit)"),
-        SampleColumn("tip_force_n", "distal_force_n", "N",
-                     "the tissue's push on the tip (the fornix or the fold)"),
+        SampleColumn(
+            "force_demanded_n",
+            "proximal_force_n",
+            "N",
+            "tissue resistance on the scope, positive resisting insertion",
+        ),
+        SampleColumn(
+            "force_rendered_n",
+            "proximal_force_est_n",
+            "N",
+            "force the device renders (saturates at its continuous limit)",
+        ),
+        SampleColumn(
+            "tip_force_n",
+            "distal_force_n",
+            "N",
+            "the tissue's push on the tip (the fornix or the fold)",
+        ),
         SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "the hand's aim (rate input)"),
         SampleColumn("torque_rendered_n_m", "dial_torque_n_m", "N m", "torque rendered"),
-        SampleColumn("torque_demanded_n_m", None, "N m",
-                     "tissue resistance to roll, positive resisting clockwise roll"),
-    )  # fmt: skip
+        SampleColumn(
+            "torque_demanded_n_m",
+            None,
+            "N m",
+            "tissue resistance to roll, positive resisting clockwise roll",
+        ),
+    )
     measures = (
-        Measure("peak_force_demanded_n", "N", "peak demanded force",
-                "largest |force| the tissue demanded of the scope", max_value=MAX_FORCE_N),
-        Measure("peak_tip_force_n", "N", "peak tip force",
-                "largest force of the fornix or the fold on the tip", max_value=MAX_FORCE_N),
-        Measure("peak_force_rendered_n", "N", "peak rendered force",
-                "largest |force| the device rendered", analysed=False, max_value=MAX_FORCE_N),
-        Measure("peak_torque_demanded_n_m", "N m", "peak demanded torque",
-                "largest |torque| the tissue demanded", analysed=False),
-        Measure("peak_torque_rendered_n_m", "N m", "peak rendered torque",
-                "largest |torque| the device rendered", analysed=False),
-        Measure("peak_push_n", "N", "peak push", "largest demanded push (force resisting "
-                "insertion), as the surgeons' max push of seed 001", analysed=False,
-                max_value=MAX_FORCE_N),
-        Measure("peak_pull_n", "N", "peak pull", "largest demanded pull (force resisting "
-                "withdrawal), a magnitude", analysed=False, max_value=MAX_FORCE_N),
-        Measure("peak_torque_cw_n_m", "N m", "peak CW torque",
-                "largest demanded torque resisting a clockwise roll", analysed=False),
-        Measure("peak_torque_ccw_n_m", "N m", "peak CCW torque", "largest demanded torque "
-                "resisting a counter-clockwise roll, a magnitude", analysed=False),
-        Measure("push_over_capacity_fraction", "", "push over capacity",
-                "share of samples with the demanded push above the device's continuous "
-                "force (5.62 N)", analysed=False, max_value=1.0),
-    )  # fmt: skip
+        Measure(
+            "peak_force_demanded_n",
+            "N",
+            "peak demanded force",
+            "largest |force| the tissue demanded of the scope",
+            max_value=MAX_FORCE_N,
+        ),
+        Measure(
+            "peak_tip_force_n",
+            "N",
+            "peak tip force",
+            "largest force of the fornix or the fold on the tip",
+            max_value=MAX_FORCE_N,
+        ),
+        Measure(
+            "peak_force_rendered_n",
+            "N",
+            "peak rendered force",
+            "largest |force| the device rendered",
+            analysed=False,
+            max_value=MAX_FORCE_N,
+        ),
+        Measure(
+            "peak_torque_demanded_n_m",
+            "N m",
+            "peak demanded torque",
+            "largest |torque| the tissue demanded",
+            analysed=False,
+        ),
+        Measure(
+            "peak_torque_rendered_n_m",
+            "N m",
+            "peak rendered torque",
+            "largest |torque| the device rendered",
+            analysed=False,
+        ),
+        Measure(
+            "peak_push_n",
+            "N",
+            "peak push",
+            "largest demanded push (force resisting "
+            "insertion), as the surgeons' max push of seed 001",
+            analysed=False,
+            max_value=MAX_FORCE_N,
+        ),
+        Measure(
+            "peak_pull_n",
+            "N",
+            "peak pull",
+            "largest demanded pull (force resisting withdrawal), a magnitude",
+            analysed=False,
+            max_value=MAX_FORCE_N,
+        ),
+        Measure(
+            "peak_torque_cw_n_m",
+            "N m",
+            "peak CW torque",
+            "largest demanded torque resisting a clockwise roll",
+            analysed=False,
+        ),
+        Measure(
+            "peak_torque_ccw_n_m",
+            "N m",
+            "peak CCW torque",
+            "largest demanded torque resisting a counter-clockwise roll, a magnitude",
+            analysed=False,
+        ),
+        Measure(
+            "push_over_capacity_fraction",
+            "",
+            "push over capacity",
+            "share of samples with the demanded push above the device's continuous force (5.62 N)",
+            analysed=False,
+            max_value=1.0,
+        ),
+    )
     live_traces = (
         LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
         LiveTrace("force_rendered_n", "rendered", FULL_SCALE_N, magnitude=True),
@@ -92,15 +161,33 @@ class NotesTask(Task):
 
         return notes_trial_plot(frame, title)
 
-    def make_loop(self, condition, seed, *, haptic_gain_n_m_per_n=None, estimator=None,
-                  context=None, link=None):  # fmt: skip
+    def make_loop(
+        self,
+        condition,
+        seed,
+        *,
+        haptic_gain_n_m_per_n=None,
+        estimator=None,
+        context=None,
+        link=None,
+    ):
         from study.tasks.notes.trial import notes_loop
 
         self.haptic_gain(haptic_gain_n_m_per_n)  # refuses a gain: the device has no dial
         return notes_loop(condition, seed)
 
-    def simulate(self, traits, condition, seed, max_s, *, haptic_gain_n_m_per_n=None,
-                 estimator=None, link=None, context=None):  # fmt: skip
+    def simulate(
+        self,
+        traits,
+        condition,
+        seed,
+        max_s,
+        *,
+        haptic_gain_n_m_per_n=None,
+        estimator=None,
+        link=None,
+        context=None,
+    ):
         from study.tasks.notes.trial import run_notes_trial
 
         self.haptic_gain(haptic_gain_n_m_per_n)

@@ -56,12 +56,21 @@ def _markers(trials: list[Trial], starts: list[float], length_s: float) -> XdfSt
     stamps.append(starts[0] - 1.0)
     values.append([encode("session_start", **session)])
     for t, start in zip(trials, starts, strict=True):
-        keys = {"trial_id": t.id, "task": t.task, "condition": t.condition,
-                "block": t.block_index, "trial": t.trial_index, "practice": t.practice,
-                "attempt": t.attempt, "clock_rate": 1.0}  # fmt: skip
+        keys = {
+            "trial_id": t.id,
+            "task": t.task,
+            "condition": t.condition,
+            "block": t.block_index,
+            "trial": t.trial_index,
+            "practice": t.practice,
+            "attempt": t.attempt,
+            "clock_rate": 1.0,
+        }
         stamps += [start, start + length_s]
-        values += [[encode("trial_start", **session, **keys)],
-                   [encode("trial_end", **session, **keys, status="completed")]]  # fmt: skip
+        values += [
+            [encode("trial_start", **session, **keys)],
+            [encode("trial_end", **session, **keys, status="completed")],
+        ]
     return XdfStream(MARKER_STREAM, "Markers", "string", 0.0, [("marker", "")], stamps, values)
 
 
@@ -69,16 +78,31 @@ def _emg(t0: float, n: int) -> XdfStream:
     """A 2-channel EMG stream on the amplifier's clock (the recorder's minus OFFSET_S)."""
     stamps = [t0 + k / RATE_HZ for k in range(n)]
     values = [[float(k), np.sin(k / 10)] for k in range(n)]
-    return XdfStream("EMG-amp", "EMG", "double64", RATE_HZ, [("index", "count"), ("flexor", "uV")],
-                     stamps, values, source_id="amp-1",
-                     clock_offsets=[(t0, OFFSET_S), (t0 + n / RATE_HZ, OFFSET_S)])  # fmt: skip
+    return XdfStream(
+        "EMG-amp",
+        "EMG",
+        "double64",
+        RATE_HZ,
+        [("index", "count"), ("flexor", "uV")],
+        stamps,
+        values,
+        source_id="amp-1",
+        clock_offsets=[(t0, OFFSET_S), (t0 + n / RATE_HZ, OFFSET_S)],
+    )
 
 
 def _recording(tmp: Path, trials: list[Trial], name: str = "rec.xdf") -> Path:
     starts = [100.0, 110.0]  # the recorder's clock
     emg = _emg(95.0 - OFFSET_S, int(25 * RATE_HZ))  # 95 s to 120 s on the recorder's clock
-    ours = XdfStream("haptic-study lcca", SAMPLE_STREAM_TYPE, "double64", 100.0, [("t_s", "s")],
-                     [100.0, 100.01], [[0.0], [0.01]])  # fmt: skip
+    ours = XdfStream(
+        "haptic-study lcca",
+        SAMPLE_STREAM_TYPE,
+        "double64",
+        100.0,
+        [("t_s", "s")],
+        [100.0, 100.01],
+        [[0.0], [0.01]],
+    )
     other = XdfStream("PsychoPy", "Markers", "string", 0.0, [("m", "")], [101.0], [["go"]])
     return write_xdf(tmp / name, [_markers(trials, starts, 3.0), emg, ours, other])
 
@@ -145,9 +169,11 @@ def test_a_recording_imports_each_streams_samples_to_its_trial(
         s.expunge_all()
     # the EMG and PsychoPy's markers (the session's own sample stream is not imported again)
     assert [(st.trial_id, st.name) for st in streams] == [
-        (trials[0].id, "EMG-amp"), (trials[0].id, "PsychoPy"),
-        (trials[1].id, "EMG-amp"), (trials[1].id, "PsychoPy"),
-    ]  # fmt: skip
+        (trials[0].id, "EMG-amp"),
+        (trials[0].id, "PsychoPy"),
+        (trials[1].id, "EMG-amp"),
+        (trials[1].id, "PsychoPy"),
+    ]
     for stream, start in ((streams[0], 100.0), (streams[2], 110.0)):
         assert stream.origin == "xdf" and stream.time_correction_s == pytest.approx(OFFSET_S)
         assert [c["name"] for c in stream.channels] == ["index", "flexor"]
@@ -172,8 +198,17 @@ def test_a_recording_imports_each_streams_samples_to_its_trial(
     out = tmp_path / "export"
     assert main(["export", "--out", str(out), "--samples", "--db", db]) == 0
     emg = pd.read_csv(out / "streams" / "EMG-amp.csv")
-    assert list(emg.columns) == ["participant", "task", "condition", "trial", "seq", "t_s",
-                                 "lsl_time_s", "index", "flexor"]  # fmt: skip
+    assert list(emg.columns) == [
+        "participant",
+        "task",
+        "condition",
+        "trial",
+        "seq",
+        "t_s",
+        "lsl_time_s",
+        "index",
+        "flexor",
+    ]
     assert len(emg) == 2 * (3 * RATE_HZ + 1)
     assert set(emg["condition"]) == {t.condition for t in trials}
     assert pd.read_csv(out / "streams" / "PsychoPy.csv")["m"].tolist() == ["go"]

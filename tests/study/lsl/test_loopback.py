@@ -43,8 +43,14 @@ def test_liblsl_reads_the_config_the_suite_set(tmp_path: Path) -> None:
     cfg = write_loopback_config(tmp_path / "cfg")
     cfg.write_text(cfg.read_text().replace("level = -3", "level = 0"))
     env = {**os.environ, ENV: str(cfg)}
-    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
-                         env=env, timeout=60, check=True)  # fmt: skip
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60,
+        check=True,
+    )
     assert out.stdout.strip().splitlines()[-1] == "True"
     assert f"Configuration loaded from {cfg}" in out.stderr
 

@@ -57,10 +57,14 @@ def test_probe_run_with_lsl_sends_a_marker_per_probe_trial(
     engine.dispose()
     # the design's order: reaction_time's 3 trials, then force_threshold's 4
     assert [(m["probe"], m["trial_index"]) for m in markers[1:-1]] == [
-        ("reaction_time", 0), ("reaction_time", 1), ("reaction_time", 2),
-        ("force_threshold", 0), ("force_threshold", 1), ("force_threshold", 2),
+        ("reaction_time", 0),
+        ("reaction_time", 1),
+        ("reaction_time", 2),
+        ("force_threshold", 0),
+        ("force_threshold", 1),
+        ("force_threshold", 2),
         ("force_threshold", 3),
-    ]  # fmt: skip
+    ]
     for m in markers:
         assert (m["participant"], m["group"], m["study"]) == ("P001", "novice", f"markers {tag}")
     by_trial = {(r.probe, r.trial_index): r for r in stored.itertuples()}
@@ -84,11 +88,24 @@ def test_a_stored_questionnaire_sends_one_marker_with_its_block(tmp_path: Path) 
     assert observer is not None
     listener = MarkerInlet(f"haptic-study/markers {tag}/P001")
     listener.start()
-    ratings = {"mental": 50, "physical": 20, "temporal": 35, "performance": 10,
-               "effort": 60, "frustration": 5}  # fmt: skip
+    ratings = {
+        "mental": 50,
+        "physical": 20,
+        "temporal": 35,
+        "performance": 10,
+        "effort": 60,
+        "frustration": 5,
+    }
     try:
-        store_tlx(engine, "P001", "lcca", "HV", ratings, reason="entered before the block",
-                  observer=observer)  # fmt: skip
+        store_tlx(
+            engine,
+            "P001",
+            "lcca",
+            "HV",
+            ratings,
+            reason="entered before the block",
+            observer=observer,
+        )
     finally:
         observer.close()
         engine.dispose()

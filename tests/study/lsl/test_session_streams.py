@@ -58,14 +58,19 @@ class Origins(SessionObserver):
 def _device(name: str, seconds: float, log: Path) -> subprocess.Popen[str]:
     proc = subprocess.Popen(
         [sys.executable, str(DEVICE), name, "EMG", "1000", str(seconds), str(log)],
-        stdout=subprocess.PIPE, text=True,
-    )  # fmt: skip
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
     return proc
 
 
-def _session(db: str, observers: list[SessionObserver], max_trials: int | None = None,
-             trial_s: float = TRIAL_S) -> list[int]:  # fmt: skip
+def _session(
+    db: str,
+    observers: list[SessionObserver],
+    max_trials: int | None = None,
+    trial_s: float = TRIAL_S,
+) -> list[int]:
     from study.protocol.default_estimator import load_estimator
     from study.protocol.session import participant_traits, run_session
     from study.tasks.lcca.simulated_participant import SimulatedParticipant
@@ -76,10 +81,15 @@ def _session(db: str, observers: list[SessionObserver], max_trials: int | None =
     traits = participant_traits(1, "P001", "novice")
     try:
         return run_session(
-            engine, "P001", "simulated", load_estimator(),
+            engine,
+            "P001",
+            "simulated",
+            load_estimator(),
             make_driver=lambda: SimulatedParticipant(traits, phantom, give_up_s=trial_s),
-            pace=1.0, observer=Observers(observers), max_trials=max_trials,
-        )  # fmt: skip
+            pace=1.0,
+            observer=Observers(observers),
+            max_trials=max_trials,
+        )
     finally:
         engine.dispose()
 
@@ -179,8 +189,15 @@ def paced(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     listener.join(timeout=20)
     ended.set()
     samples.join(timeout=20)
-    return {"db": db, "engine": engine, "completed": completed, "origins": origins,
-            "markers": listener.markers, "notices": notices, "samples": samples}  # fmt: skip
+    return {
+        "db": db,
+        "engine": engine,
+        "completed": completed,
+        "origins": origins,
+        "markers": listener.markers,
+        "notices": notices,
+        "samples": samples,
+    }
 
 
 def test_an_outside_instrument_is_stored_sample_for_sample_on_the_trials_clock(
@@ -225,20 +242,46 @@ def test_a_marker_inlet_receives_every_marker_in_order_with_the_databases_trials
     markers = [(stamp, parse(text)) for stamp, text in paced["markers"]]
     assert all(m is not None for _, m in markers)
     events = [m["event"] for _, m in markers]
-    assert events == ["session_start", "trial_start", "trial_end", "trial_start", "trial_end",
-                      "session_end"]  # fmt: skip
+    assert events == [
+        "session_start",
+        "trial_start",
+        "trial_end",
+        "trial_start",
+        "trial_end",
+        "session_end",
+    ]
     stamps = [stamp for stamp, _ in markers]
     assert stamps == sorted(stamps)
     with Session(paced["engine"]) as s:
         trials = s.scalars(select(Trial).order_by(Trial.id)).all()
-        rows = [(t.id, t.participant.code, t.participant.group, t.task, t.condition,
-                 t.block_index, t.trial_index, t.practice, t.success) for t in trials]  # fmt: skip
+        rows = [
+            (
+                t.id,
+                t.participant.code,
+                t.participant.group,
+                t.task,
+                t.condition,
+                t.block_index,
+                t.trial_index,
+                t.practice,
+                t.success,
+            )
+            for t in trials
+        ]
     starts = [m for _, m in markers if m["event"] == "trial_start"]
     ends = [m for _, m in markers if m["event"] == "trial_end"]
     for start, end, row in zip(starts, ends, rows, strict=True):
         for m in (start, end):
-            got = (m["trial_id"], m["participant"], m["group"], m["task"], m["condition"],
-                   m["block"], m["trial"], m["practice"])  # fmt: skip
+            got = (
+                m["trial_id"],
+                m["participant"],
+                m["group"],
+                m["task"],
+                m["condition"],
+                m["block"],
+                m["trial"],
+                m["practice"],
+            )
             assert got == row[:8]
         assert end["status"] == "completed" and end["success"] == row[8]
     # a trial's start marker is stamped at its t = 0, its end at its last sample

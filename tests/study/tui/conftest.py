@@ -118,9 +118,11 @@ async def analysed(pilot) -> Any:
 
 
 PEAKS = {  # (group, condition) -> peak proximal force of each participant's trial, N
-    ("novice", "VO"): (1.0, 1.2, 1.4), ("novice", "HV"): (0.5, 0.6, 0.7),
-    ("expert", "VO"): (0.8, 0.9, 1.0), ("expert", "HV"): (0.4, 0.5, 0.9),
-}  # fmt: skip
+    ("novice", "VO"): (1.0, 1.2, 1.4),
+    ("novice", "HV"): (0.5, 0.6, 0.7),
+    ("expert", "VO"): (0.8, 0.9, 1.0),
+    ("expert", "HV"): (0.4, 0.5, 0.9),
+}
 
 
 def store_trials(engine: Engine) -> None:
@@ -144,21 +146,38 @@ def store_trials(engine: Engine) -> None:
                 k = counts[(p.group, block.condition)]
                 counts[(p.group, block.condition)] += 1
                 peak = PEAKS[(p.group, block.condition)][k]
-                session.add(Trial(
-                    participant_id=p.id, block_id=block.id, task="lcca",
-                    condition=block.condition, block_index=block.block_index, trial_index=0,
-                    status="completed", completion_time_s=20.0 + 10 * peak,
-                    success=True, driver="simulated",
-                    measure_values={"peak_proximal_force_n": peak,
-                                    "peak_distal_force_n": peak / 2, "wall_contacts": 0},
-                ))  # fmt: skip
+                session.add(
+                    Trial(
+                        participant_id=p.id,
+                        block_id=block.id,
+                        task="lcca",
+                        condition=block.condition,
+                        block_index=block.block_index,
+                        trial_index=0,
+                        status="completed",
+                        completion_time_s=20.0 + 10 * peak,
+                        success=True,
+                        driver="simulated",
+                        measure_values={
+                            "peak_proximal_force_n": peak,
+                            "peak_distal_force_n": peak / 2,
+                            "wall_contacts": 0,
+                        },
+                    )
+                )
         session.commit()
         ids = session.scalars(select(Trial.id)).all()
     for trial_id in ids:
         with SampleWriter(engine, trial_id) as out:
             force = [0.1, 0.2]
-            out.extend({"t_s": [0.0, 0.01], "proximal_force_n": force,
-                        "proximal_force_est_n": force, "distal_force_n": [0.0, 0.1]})  # fmt: skip
+            out.extend(
+                {
+                    "t_s": [0.0, 0.01],
+                    "proximal_force_n": force,
+                    "proximal_force_est_n": force,
+                    "distal_force_n": [0.0, 0.1],
+                }
+            )
 
 
 def complete_block(engine: Engine, code: str, task: str, condition: str) -> None:
@@ -173,10 +192,22 @@ def complete_block(engine: Engine, code: str, task: str, condition: str) -> None
     with Session(engine) as session, session.begin():
         p = session.scalars(select(Participant).where(Participant.code == code)).one()
         block = next(b for b in p.blocks if (b.task, b.condition) == (task, condition))
-        session.add(Trial(
-            participant_id=p.id, block_id=block.id, task=task, condition=condition,
-            block_index=block.block_index, trial_index=0, status="completed",
-            completion_time_s=30.0, success=True, driver="simulated",
-            measure_values={"peak_proximal_force_n": 0.5, "peak_distal_force_n": 0.2,
-                            "wall_contacts": 0},
-        ))  # fmt: skip
+        session.add(
+            Trial(
+                participant_id=p.id,
+                block_id=block.id,
+                task=task,
+                condition=condition,
+                block_index=block.block_index,
+                trial_index=0,
+                status="completed",
+                completion_time_s=30.0,
+                success=True,
+                driver="simulated",
+                measure_values={
+                    "peak_proximal_force_n": 0.5,
+                    "peak_distal_force_n": 0.2,
+                    "wall_contacts": 0,
+                },
+            )
+        )

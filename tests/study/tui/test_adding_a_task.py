@@ -49,10 +49,21 @@ def probe_site(tmp_path_factory: pytest.TempPathFactory) -> Path:
     shutil.copytree(EXAMPLE, root / "src")
     site = root / "site"
     subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-index",
-         "--no-build-isolation", "--target", str(site), str(root / "src")],
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--no-deps",
+            "--no-index",
+            "--no-build-isolation",
+            "--target",
+            str(site),
+            str(root / "src"),
+        ],
         check=True,
-    )  # fmt: skip
+    )
     return site
 
 
@@ -110,8 +121,9 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
         speed = RATE_GAIN_M_S_PER_RAD * AIM_RAD
         for t in trials:
             # hand-computed: F = B v at the constant aim, t = depth / v (to a 10 ms sample)
-            assert t.measure_values == {"peak_push_force_n": pytest.approx(
-                DAMPING_N_S_PER_M * speed)}  # fmt: skip
+            assert t.measure_values == {
+                "peak_push_force_n": pytest.approx(DAMPING_N_S_PER_M * speed)
+            }
             assert t.completion_time_s == pytest.approx(DEPTH_M / speed, abs=0.011)
             assert t.success
     engine.dispose()
@@ -119,9 +131,15 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
     assert main(["export", "--out", str(tmp_path / "out"), "--db", db]) == 0
     exported = pd.read_csv(tmp_path / "out" / "trials.csv")
     assert list(exported.columns) == [
-        "participant", "group", "task", "condition", "trial", "completion_time_s",
-        "peak_push_force_n", "success",
-    ]  # fmt: skip
+        "participant",
+        "group",
+        "task",
+        "condition",
+        "trial",
+        "completion_time_s",
+        "peak_push_force_n",
+        "success",
+    ]
     assert len(exported) == 24 and (exported["task"] == "probe").all()
     book = pd.read_csv(tmp_path / "out" / "codebook.csv").set_index("column")
     assert book.loc["peak_push_force_n", "unit"] == "N"
@@ -131,9 +149,22 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
     assert main(["export", "--out", str(tmp_path / "s"), "--samples", "--db", db]) == 0
     samples = pd.read_csv(tmp_path / "s" / "samples.csv")
     assert list(samples.columns) == [
-        "participant", "task", "condition", "trial", "seq", "t_s", "depth_m", "roll_rad",
-        "tip_x_m", "tip_y_m", "tip_z_m", "where", "push_force_n", "aim_rad", "medium_speed_m_s",
-    ]  # fmt: skip
+        "participant",
+        "task",
+        "condition",
+        "trial",
+        "seq",
+        "t_s",
+        "depth_m",
+        "roll_rad",
+        "tip_x_m",
+        "tip_y_m",
+        "tip_z_m",
+        "where",
+        "push_force_n",
+        "aim_rad",
+        "medium_speed_m_s",
+    ]
     assert samples["medium_speed_m_s"].to_numpy() == pytest.approx(speed)
     assert set(samples["where"]) == {"medium", "depth"}
     book = pd.read_csv(tmp_path / "s" / "codebook.csv").set_index("column")

@@ -51,8 +51,11 @@ async def test_ctrl_e_exports_from_inside_the_folder_field(make_test_app, tmp_pa
         await pilot.press("ctrl+e")
         status = app.query_one("#analysis-status", Static)
         # the export ran (this study has no trials, so it is refused with one line)
-        await wait_for(pilot, lambda: "figures" in str(status.render()) or "refused" in str(
-            status.render()), 30)  # fmt: skip
+        await wait_for(
+            pilot,
+            lambda: "figures" in str(status.render()) or "refused" in str(status.render()),
+            30,
+        )
         assert str(status.render()) != "r: run the analysis; ctrl+e: export the paper's figures"
         assert field.value == str(tmp_path / "figs")
 
@@ -166,7 +169,8 @@ async def test_withdrawing_from_the_list_asks_why_and_marks_the_row(
         app.query_one("#run-pane").select_participant("P002")
         await pilot.pause()
         assert "P002 withdrew (ended early): no more sessions" in str(
-            app.query_one("#next").render())  # fmt: skip
+            app.query_one("#next").render()
+        )
     with Session(study_engine) as session:
         p = session.scalars(select(Participant).where(Participant.code == "P002")).one()
         p1 = session.scalars(select(Participant).where(Participant.code == "P001")).one()
@@ -271,8 +275,11 @@ async def test_notes_on_a_participant_and_on_their_session_from_the_list(
             if text.startswith(";"):
                 field = app.screen.query_one("#reason-text", Input)
                 assert field.value == "left-handed grip"
-                await wait_for(pilot, lambda: "note: left-handed grip" in str(
-                    app.query_one("#detail").render()), 10)  # fmt: skip
+                await wait_for(
+                    pilot,
+                    lambda: "note: left-handed grip" in str(app.query_one("#detail").render()),
+                    10,
+                )
             await pilot.press(*text, "enter")
             kind = "session note" if key == "o" else "note"
             await wait_for(

@@ -17,14 +17,25 @@ from teleop_core.phantom.anatomy import ArchAnatomy
 
 def _roster(completed: list[int], practice: int = 1, per_block: int = 3) -> Roster:
     blocks = [
-        {"block_index": k, "task": "lcca", "condition": c, "planned": per_block,
-         "completed": n, "interrupted": 0}
+        {
+            "block_index": k,
+            "task": "lcca",
+            "condition": c,
+            "planned": per_block,
+            "completed": n,
+            "interrupted": 0,
+        }
         for k, (c, n) in enumerate(zip(("VO", "HV"), completed, strict=True))
-    ]  # fmt: skip
+    ]
     row = {
-        "code": "P001", "group": "novice", "site": None, "condition_order": ["VO", "HV"],
-        "trials_planned": 2 * per_block, "trials_completed": sum(completed), "blocks": blocks,
-    }  # fmt: skip
+        "code": "P001",
+        "group": "novice",
+        "site": None,
+        "condition_order": ["VO", "HV"],
+        "trials_planned": 2 * per_block,
+        "trials_completed": sum(completed),
+        "blocks": blocks,
+    }
     return Roster("s", 1, practice, {"novice": {"target": 2, "enrolled": 1}}, [row])
 
 
@@ -72,8 +83,11 @@ def test_phantom_frame_keeps_the_arch_shape_on_one_scale() -> None:
     # the arch's top (x = -r, z = L + r) and its two feet (x = 0 and -2r at z = L) are
     # r above the feet on one scale in both axes
     r, length = anatomy.arch_radius_m, anatomy.descending_length_m
-    top, left, right = frame.to_dot(-r, length + r), frame.to_dot(0, length), frame.to_dot(
-        -2 * r, length)  # fmt: skip
+    top, left, right = (
+        frame.to_dot(-r, length + r),
+        frame.to_dot(0, length),
+        frame.to_dot(-2 * r, length),
+    )
     assert abs((left[1] - top[1]) - r * frame.scale) <= 1
     assert abs((left[0] - right[0]) - 2 * r * frame.scale) <= 1
     assert 0 <= right[0] < left[0] < 80 and 0 <= top[1] < 68
@@ -95,9 +109,12 @@ def test_notes_scene_puts_the_tip_fornix_and_targets_on_their_columns() -> None:
     # 45 columns: depth 0-220 mm (target 200 mm + 20), roll -90..+90 deg, each over 44 steps
     task = get_task("notes")
     values = {c.name: 0.0 for c in task.sample_columns} | {
-        "t_s": 1.0, "tip_x_m": 0.11, "region": REGIONS.index("canal"), "insertion_m": 0.11,
+        "t_s": 1.0,
+        "tip_x_m": 0.11,
+        "region": REGIONS.index("canal"),
+        "insertion_m": 0.11,
         "force_demanded_n": 1.0,
-    }  # fmt: skip
+    }
     frame = LiveFrame(task, values, (), ())
     lines = notes_scene(frame, 45).plain.split("\n")
     assert lines[0].startswith("depth   110 mm   in the canal")
@@ -117,8 +134,9 @@ def test_live_state_reads_notes_samples_the_notes_way() -> None:
     # two NOTES samples: a push of 3 N demanded (2.5 rendered), then a pull of -6 N
     col = {name: k for k, name in enumerate(NOTES_COLUMNS)}
     samples = np.zeros((2, len(NOTES_COLUMNS)))
-    for k, (demanded, rendered, tip, torque) in enumerate(((3.0, 2.5, 1.0, 0.02),
-                                                          (-6.0, -5.6, 0.0, -0.05))):  # fmt: skip
+    for k, (demanded, rendered, tip, torque) in enumerate(
+        ((3.0, 2.5, 1.0, 0.02), (-6.0, -5.6, 0.0, -0.05))
+    ):
         samples[k, col["t_s"]] = 0.01 * (k + 1)
         samples[k, col["proximal_force_n"]] = demanded
         samples[k, col["proximal_force_est_n"]] = rendered
@@ -132,8 +150,10 @@ def test_live_state_reads_notes_samples_the_notes_way() -> None:
     assert frame.task.name == "notes"
     v = frame.values
     assert (v["force_demanded_n"], v["force_rendered_n"], v["torque_demanded_n_m"]) == (
-        -6.0, -5.6, -0.05,
-    )  # fmt: skip
+        -6.0,
+        -5.6,
+        -0.05,
+    )
     assert frame.insertion_m == 0.1
     # the traces are magnitudes; the peaks are as the NOTES summary's (max |.|)
     assert frame.first_history == (3.0, 6.0) and frame.second_history == (2.5, 5.6)

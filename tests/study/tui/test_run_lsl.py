@@ -44,8 +44,10 @@ async def test_trials_run_from_the_screen_send_their_markers_on_one_stream(
     add_participant(engine, "novice")
     listener = MarkerInlet(f"haptic-study/tui lsl {tag}/P001")
     listener.start()
-    app = make_app(StudyServices(engine, load_estimator),
-                   TuiSettings(simulated_pace=None, figures_dir=tmp_path / "f"))  # fmt: skip
+    app = make_app(
+        StudyServices(engine, load_estimator),
+        TuiSettings(simulated_pace=None, figures_dir=tmp_path / "f"),
+    )
     try:
         async with app.run_test(size=(80, 24)) as pilot:
             pane = await run_screen(pilot, "P001")
@@ -64,8 +66,9 @@ async def test_trials_run_from_the_screen_send_their_markers_on_one_stream(
         assert not listener.is_alive()
         with Session(engine) as s:
             trials = s.scalars(select(Trial).order_by(Trial.id)).all()
-            rows = [(t.id, t.task, t.condition, t.block_index, t.trial_index, t.success)
-                    for t in trials]  # fmt: skip
+            rows = [
+                (t.id, t.task, t.condition, t.block_index, t.trial_index, t.success) for t in trials
+            ]
     finally:
         engine.dispose()
     assert len(rows) == 2

@@ -36,10 +36,8 @@ def _trials(engine) -> list[tuple[str, str, int]]:
     with Session(engine) as session:
         rows = session.execute(select(Trial.id, Trial.status, Trial.driver)).all()
         return [
-            (status, driver, session.scalar(
-                stored_samples(tid)))
-            for tid, status, driver in rows
-        ]  # fmt: skip
+            (status, driver, session.scalar(stored_samples(tid))) for tid, status, driver in rows
+        ]
 
 
 async def _start(pilot, code: str, *keys: str) -> RunPane:
@@ -123,8 +121,10 @@ async def test_quitting_mid_trial_marks_it_interrupted_and_keeps_its_samples(
     with Session(study_engine) as session:
         entry = session.scalars(select(AuditEntry).where(AuditEntry.field == "status")).one()
     assert (entry.old_value, entry.new_value, entry.reason) == (
-        "running", "interrupted", STOPPED_REASON
-    )  # fmt: skip
+        "running",
+        "interrupted",
+        STOPPED_REASON,
+    )
 
 
 NOTES_DESIGN = """\
@@ -198,8 +198,9 @@ async def test_a_design_can_let_the_next_block_start_before_the_questionnaire(
 ) -> None:
     from tests.study.tui.conftest import complete_block
 
-    text = NOTES_DESIGN.replace('tasks = ["notes"]', 'tasks = ["lcca"]\nbreak_s = 0\n'
-                                'tlx_before_next_block = false')  # fmt: skip
+    text = NOTES_DESIGN.replace(
+        'tasks = ["notes"]', 'tasks = ["lcca"]\nbreak_s = 0\ntlx_before_next_block = false'
+    )
     design = parse_design(text)
     assert design.tlx_before_next_block is False
     assert parse_design(NOTES_DESIGN).tlx_before_next_block  # on by default

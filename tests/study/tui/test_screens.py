@@ -38,8 +38,9 @@ async def test_overview_shows_groups_sessions_and_what_is_next(make_test_app) ->
         table = app.query_one("#groups", DataTable)
         # DESIGN: novice 2, expert 2; one of each enrolled
         assert [table.get_row(g)[:3] for g in ("novice", "expert")] == [
-            ["novice", "1", "2"], ["expert", "1", "2"]
-        ]  # fmt: skip
+            ["novice", "1", "2"],
+            ["expert", "1", "2"],
+        ]
         progress = _text(app, "#progress")
         assert "Sessions done: 0 of 2 enrolled (4 planned)" in progress
         assert "Trials:        0 of 4" in progress
@@ -85,8 +86,14 @@ async def _type_ratings(pilot, ratings: dict[str, str], typed: str = "mental") -
             field.value = value
 
 
-RATINGS = {"mental": "55", "physical": "10", "temporal": "40", "performance": "25",
-           "effort": "60", "frustration": "20"}  # fmt: skip
+RATINGS = {
+    "mental": "55",
+    "physical": "10",
+    "temporal": "40",
+    "performance": "25",
+    "effort": "60",
+    "frustration": "20",
+}
 
 
 async def test_tlx_entered_on_the_form_is_stored(make_test_app, study_engine) -> None:
@@ -203,11 +210,25 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
     def calibrate(path, model, progress):
         calls.append((path, model))
         progress("fitting the base model")
-        return {"rmse_before": 0.3, "rmse_after": 0.1, "candidates_rejected": ["delay"],
-                "effects_added": [{"family": "stribeck", "params": {
-                    "v_s_rad_s": 2.0, "f_static_over_coulomb": 1.35, "shape_exponent": 2.0,
-                    "coulomb_scale": 0.987654, "viscous_scale": 1.0123}, "ci": {},
-                    "rmse_after_step": 0.1}]}  # fmt: skip
+        return {
+            "rmse_before": 0.3,
+            "rmse_after": 0.1,
+            "candidates_rejected": ["delay"],
+            "effects_added": [
+                {
+                    "family": "stribeck",
+                    "params": {
+                        "v_s_rad_s": 2.0,
+                        "f_static_over_coulomb": 1.35,
+                        "shape_exponent": 2.0,
+                        "coulomb_scale": 0.987654,
+                        "viscous_scale": 1.0123,
+                    },
+                    "ci": {},
+                    "rmse_after_step": 0.1,
+                }
+            ],
+        }
 
     app = make_test_app(calibrate=calibrate)
     async with on_screen(app, "f6") as pilot:
@@ -217,15 +238,19 @@ async def test_calibration_screen_waits_without_the_loop_and_shows_a_report(
         await wait_for(pilot, lambda: pane.report is not None)
         # (0.3 - 0.1) / 0.3 = 67 % lower
         assert _text(app, "#calib-summary").splitlines() == [
-            "held-out RMSE 0.3000 N -> 0.1000 N (67 % lower)", "rejected: delay"
-        ]  # fmt: skip
+            "held-out RMSE 0.3000 N -> 0.1000 N (67 % lower)",
+            "rejected: delay",
+        ]
         effects = app.query_one("#effects", DataTable)
         assert effects.get_row_at(0)[1] == "stribeck"
         # five parameters, one per line: the row is five lines tall, no wider than a line
         assert effects.get_row_at(0)[3].split("\n") == [
-            "v_s_rad_s 2", "f_static_over_coulomb 1.35", "shape_exponent 2",
-            "coulomb_scale 0.9877", "viscous_scale 1.012",
-        ]  # fmt: skip
+            "v_s_rad_s 2",
+            "f_static_over_coulomb 1.35",
+            "shape_exponent 2",
+            "coulomb_scale 0.9877",
+            "viscous_scale 1.012",
+        ]
         assert effects.rows[effects.coordinate_to_cell_key((0, 0)).row_key].height == 5
         assert effects.virtual_size.width <= 80
         # the result is kept: a row in the calibrations table, a report file, the list

@@ -30,10 +30,16 @@ def _shot(snap_compare, app, key: str | None = None, then=None) -> bool:
 
 @pytest.mark.parametrize(
     ("key", "theme"),
-    [(None, "textual-dark"), (None, "textual-light"), ("f2", "textual-dark"),
-     ("f3", "textual-dark"), ("f5", "textual-dark"), ("f6", "textual-dark")],
+    [
+        (None, "textual-dark"),
+        (None, "textual-light"),
+        ("f2", "textual-dark"),
+        ("f3", "textual-dark"),
+        ("f5", "textual-dark"),
+        ("f6", "textual-dark"),
+    ],
     ids=["overview", "overview-light", "participants", "run", "analysis", "calibration"],
-)  # fmt: skip
+)
 def test_screen(snap_compare, make_test_app, key, theme) -> None:
     # a relative figures folder: the tests' temporary one changes from run to run
     assert _shot(snap_compare, make_test_app(theme=theme, figures_dir=Path("figures")), key)

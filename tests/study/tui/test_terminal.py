@@ -23,9 +23,14 @@ def test_study_tui_in_a_pseudo_terminal(study_engine: Engine, tmp_path: Path) ->
     study = Path(sys.executable).with_name("study")
     env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "80", "LINES": "24"}
     child = pexpect.spawn(
-        str(study), ["tui", "--db", str(db)], dimensions=(24, 80), env=env, cwd=str(tmp_path),
-        timeout=90, encoding="utf-8",
-    )  # fmt: skip
+        str(study),
+        ["tui", "--db", str(db)],
+        dimensions=(24, 80),
+        env=env,
+        cwd=str(tmp_path),
+        timeout=90,
+        encoding="utf-8",
+    )
     # the overview, filled from the database (DESIGN in conftest: 2 + 2 planned), and
     # the footer's bindings; in whatever order the terminal receives them (the footer
     # can be painted before or after the roster arrives from its worker)
@@ -59,8 +64,17 @@ def test_the_overview_loads_neither_numpy_nor_the_other_screens(study_engine: En
         f"engine = open_database({db!r}, create=False); "
         "StudyServices(engine, lambda: None).roster(); engine.dispose()"
     )
-    heavy = ("numpy", "pandas", "torch", "scipy", "alembic", "study.tui.run_pane",
-             "study.tui.analysis_pane", "study.tui.tlx_pane", "study.commands.analyze")  # fmt: skip
+    heavy = (
+        "numpy",
+        "pandas",
+        "torch",
+        "scipy",
+        "alembic",
+        "study.tui.run_pane",
+        "study.tui.analysis_pane",
+        "study.tui.tlx_pane",
+        "study.commands.analyze",
+    )
     assert modules_loaded(code, heavy) == []
 
 
@@ -87,9 +101,14 @@ def test_closing_the_terminal_mid_trial_marks_the_trial_interrupted(
     study = Path(sys.executable).with_name("study")
     env = {**os.environ, "TERM": "xterm-256color"}
     child = pexpect.spawn(
-        str(study), ["tui", "--db", str(db), "--pace", "1"], dimensions=(24, 80), env=env,
-        cwd=str(tmp_path), timeout=120, encoding="utf-8",
-    )  # fmt: skip
+        str(study),
+        ["tui", "--db", str(db), "--pace", "1"],
+        dimensions=(24, 80),
+        env=env,
+        cwd=str(tmp_path),
+        timeout=120,
+        encoding="utf-8",
+    )
     try:
         child.expect("Sessions done")
         child.send("\x1bOR")  # F3: the run screen
@@ -116,5 +135,7 @@ def test_closing_the_terminal_mid_trial_marks_the_trial_interrupted(
         entry = session.scalars(select(AuditEntry).where(AuditEntry.field == "status")).one()
     assert trial.status == "interrupted" and samples >= 100
     assert (entry.old_value, entry.new_value, entry.reason) == (
-        "running", "interrupted", STOPPED_REASON
-    )  # fmt: skip
+        "running",
+        "interrupted",
+        STOPPED_REASON,
+    )

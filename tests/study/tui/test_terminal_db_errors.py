@@ -39,17 +39,33 @@ def words(*parts: str) -> str:
 class App:
     """`study tui --db DB` in a pseudo-terminal; everything it drew is in `self.drawn`."""
 
-    def __init__(self, db: str, cwd: Path, prefix: Sequence[str] = (), env: dict | None = None,
-                 args: Sequence[str] = ()):  # fmt: skip
+    def __init__(
+        self,
+        db: str,
+        cwd: Path,
+        prefix: Sequence[str] = (),
+        env: dict | None = None,
+        args: Sequence[str] = (),
+    ):
         study = Path(sys.executable).with_name("study")
-        env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "80", "LINES": "24",
-               **(env or {})}  # fmt: skip
+        env = {
+            **os.environ,
+            "TERM": "xterm-256color",
+            "COLUMNS": "80",
+            "LINES": "24",
+            **(env or {}),
+        }
         command, *args = [*prefix, str(study), "tui", "--db", db, *args]
         self.drawn = io.StringIO()
         self.child = pexpect.spawn(
-            command, args, dimensions=(24, 80), env=env, cwd=str(cwd), timeout=60,
+            command,
+            args,
+            dimensions=(24, 80),
+            env=env,
+            cwd=str(cwd),
+            timeout=60,
             encoding="utf-8",
-        )  # fmt: skip
+        )
         self.child.logfile_read = self.drawn
 
     def loaded(self) -> None:

@@ -122,14 +122,17 @@ async def test_quit_warns_only_about_drafts_that_exist(make_test_app, study_engi
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
         pane = await _form(pilot)
-        for code, condition, ratings in (("P001", "VO", P001_RATINGS),
-                                         ("P002", "HV", P002_RATINGS)):  # fmt: skip
+        for code, condition, ratings in (
+            ("P001", "VO", P001_RATINGS),
+            ("P002", "HV", P002_RATINGS),
+        ):
             pane.open_block(code, "lcca", condition)
             await _shown(pilot, pane, code, "lcca", condition)
             await _type(pilot, ratings, SIDES)
             await pilot.press("ctrl+s")
-            await wait_for(pilot, lambda c=code, k=condition: pane.status == f"{c} lcca/{k}: "
-                           "stored", 10)  # fmt: skip
+            await wait_for(
+                pilot, lambda c=code, k=condition: pane.status == f"{c} lcca/{k}: stored", 10
+            )
         # back on the first, stored block: it is no draft
         pane.open_block("P001", "lcca", "VO")
         await _shown(pilot, pane, "P001", "lcca", "VO")

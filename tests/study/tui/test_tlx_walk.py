@@ -82,8 +82,9 @@ class Model:
         ratings, choices, reason = self.form(block)
         partial = any(c is None for c in choices) and any(c is not None for c in choices)
         needs_reason = block in self.stored or block not in self.run
-        return (not all(_valid(r) for r in ratings) or partial
-                or (needs_reason and not reason.strip()))  # fmt: skip
+        return (
+            not all(_valid(r) for r in ratings) or partial or (needs_reason and not reason.strip())
+        )
 
 
 class Walk:
@@ -106,8 +107,13 @@ class Walk:
     async def settled(self) -> None:
         """Wait until the form holds the block the model says it shows."""
         want = self.model.shown
-        await wait_for(self.pilot, lambda: self.pane.loaded_block == want
-                       and (want is not None or self.pane._shown is None), 20)  # fmt: skip
+        await wait_for(
+            self.pilot,
+            lambda: (
+                self.pane.loaded_block == want and (want is not None or self.pane._shown is None)
+            ),
+            20,
+        )
         await self.pilot.pause()
 
     # -- the steps --------------------------------------------------------------------
@@ -128,8 +134,11 @@ class Walk:
         """The next trial of a participant with one, by the run screen (s, confirmations)."""
         m = self.model
         roster = self.app.roster
-        ready = [c for c in m.codes if roster.next_trial(c) is not None
-                 and not [b for b in roster.tlx_due() if b[0] == c]]  # fmt: skip
+        ready = [
+            c
+            for c in m.codes
+            if roster.next_trial(c) is not None and not [b for b in roster.tlx_due() if b[0] == c]
+        ]
         if not ready:
             return
         code = self.rng.choice(ready)
@@ -146,8 +155,9 @@ class Walk:
             return run.run is not None or run.last_outcome != ""
 
         while not started():  # the checklist or the break is asked first
-            await wait_for(self.pilot, lambda: isinstance(self.app.screen, Confirm)
-                           or started(), 20)  # fmt: skip
+            await wait_for(
+                self.pilot, lambda: isinstance(self.app.screen, Confirm) or started(), 20
+            )
             if isinstance(self.app.screen, Confirm):
                 await self.pilot.press("y")
                 await self.pilot.pause()
@@ -252,8 +262,11 @@ class Walk:
             return
         code, task, condition = m.shown
         done = (f"{code} {task}/{condition}: stored", f"{code} {task}/{condition}: updated")
-        await wait_for(self.pilot, lambda: self.pane.status.startswith(done)
-                       and self.pane.loaded_block == m.shown, 20)  # fmt: skip
+        await wait_for(
+            self.pilot,
+            lambda: self.pane.status.startswith(done) and self.pane.loaded_block == m.shown,
+            20,
+        )
         assert self.pane.status != before or before.startswith(done)
         ratings, choices, _ = m.form(m.shown)
         m.stored[m.shown] = (ratings, choices, "")
@@ -317,9 +330,17 @@ def shared_estimator():
 
 
 STEP_WEIGHTS = {
-    "enrol": 1, "run_block": 2, "open_block": 5, "pick_participant": 4, "pick_block": 4,
-    "type_rating": 16, "pick_pair": 8, "type_reason": 2, "save": 6, "quit": 2,
-}  # fmt: skip
+    "enrol": 1,
+    "run_block": 2,
+    "open_block": 5,
+    "pick_participant": 4,
+    "pick_block": 4,
+    "type_rating": 16,
+    "pick_pair": 8,
+    "type_reason": 2,
+    "save": 6,
+    "quit": 2,
+}
 
 
 @pytest.mark.slow
