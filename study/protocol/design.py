@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from study.errors import StudyInputError
+from study.protocol.tasks.declarations import MAX_HAPTIC_GAIN_N_M_PER_N
 
 KNOWN_CONDITIONS = ("VO", "HV")
 MAX_TRIAL_S = 180.0
@@ -94,8 +95,6 @@ MAX_LSL_STREAMS = 16
 MAX_PREDICATE_CHARS = 500
 MAX_PROBE_TRIALS = 200
 """Far above any probe's need (an adaptive threshold settles in 40-80 trials)."""
-MAX_HAPTIC_GAIN_N_M_PER_N = 1.0
-"""Far above any usable gain (the paper's is 0.02 N m/N; the dial saturates at 0.1 N m)."""
 
 
 @dataclass(frozen=True)

@@ -21,12 +21,19 @@ a task's module imports its loop and its numerics inside its methods.
 from __future__ import annotations
 
 import importlib
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from study.errors import StudyInputError
-from study.protocol.tasks.declarations import LiveTrace, Measure, SampleColumn, pose_columns
+from study.protocol.tasks.declarations import (
+    MAX_HAPTIC_GAIN_N_M_PER_N,
+    LiveTrace,
+    Measure,
+    SampleColumn,
+    pose_columns,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -330,13 +337,18 @@ class Task:
         return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 
     def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
-        """`gain_n_m_per_n`, else the task's default; refused for a task without a dial."""
+        """`gain_n_m_per_n`, else the task's default; refused for a task without a dial
+        and outside 0 to `MAX_HAPTIC_GAIN_N_M_PER_N` (the bound a design file has)."""
         if gain_n_m_per_n is None:
             return self.default_haptic_gain_n_m_per_n
         if not self.has_dial:
             raise StudyInputError(
                 f"haptic gain {gain_n_m_per_n!r} for the {self.name} task, which has no "
                 "haptic dial; expected no gain for it"
+            )
+        if not (math.isfinite(gain_n_m_per_n) and 0 <= gain_n_m_per_n <= MAX_HAPTIC_GAIN_N_M_PER_N):
+            raise StudyInputError(
+                f"haptic gain {gain_n_m_per_n!r}; expected 0 to {MAX_HAPTIC_GAIN_N_M_PER_N:g} N m/N"
             )
         return gain_n_m_per_n
 

@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+MAX_HAPTIC_GAIN_N_M_PER_N = 1.0
+"""Far above any usable gain (the paper's is 0.02 N m/N; the dial saturates at 0.1 N m)."""
+
 
 @dataclass(frozen=True)
 class Measure:
