@@ -203,13 +203,11 @@ class ParticipantPage(SafeWorkers, Screen[None]):
         return next((t for t in self.record.trials if str(t.id) == key), None)
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        """Offer only what applies: undo for a withdrawn participant, the group before
-        the first trial."""
+        """Undo only for a withdrawn participant (the group key stays: once a trial is
+        stored it says in one line why the group cannot change)."""
         record = self.record
         if action == "reinstate":
             return record is not None and record.withdrawn is not None
-        if action == "group":
-            return record is not None and not record.trials and not record.probes
         return True
 
     # -- corrections ----------------------------------------------------------------------

@@ -4,7 +4,7 @@ trial (task/condition, block), searched by code or group as it is typed.
 `ParticipantSelect` is the run screen's `Select` of codes whose Enter (or a click) opens
 `ParticipantPicker` over the screen instead of the plain list: the search field has the
 focus, Up/Down move through the matching rows, Enter picks the highlighted one (the first
-match at once), Esc leaves the choice as it was. The value is still the code, so
+match once something is typed), Esc leaves the choice as it was. The value is still the code, so
 everything that reads or sets the Select works as before.
 """
 
@@ -24,6 +24,9 @@ if TYPE_CHECKING:
     from study.tui.services import Roster
 
 __all__ = ["ParticipantPicker", "ParticipantSelect", "picker_rows"]
+
+KEEP = "-keep-"
+"""The row key of the picker's first row, which leaves the choice as it is."""
 
 
 def picker_rows(roster: Roster) -> list[tuple[str, str, str, str]]:
@@ -89,8 +92,12 @@ class ParticipantPicker(ModalScreen[str | None]):
         return first + more
 
     def _fill(self, text: str) -> None:
+        """The matching rows; without a search, a first row that keeps the choice as it
+        is (as the plain list's prompt did: Enter, Down, Enter still picks the first)."""
         table = self.query_one("#picker-table", DataTable)
         table.clear()
+        if not text.strip():
+            table.add_row("-", "", "", "(no change)", key=KEEP)
         for row in self.matching(text):
             table.add_row(*row, key=row[0])
         if table.row_count:
@@ -119,7 +126,8 @@ class ParticipantPicker(ModalScreen[str | None]):
     def _pick(self) -> None:
         table = self.query_one("#picker-table", DataTable)
         if table.row_count:
-            self.dismiss(str(table.get_row_at(table.cursor_row)[0]))
+            key = table.coordinate_to_cell_key(table.cursor_coordinate).row_key.value
+            self.dismiss(None if key == KEEP else key)
 
     def action_cancel(self) -> None:
         self.dismiss(None)
