@@ -41,6 +41,7 @@ class TrialRow:
     completion_time_s: float | None
     success: bool | None
     measures: dict[str, float]
+    """By name, in the order the task declares them."""
     invalid_reason: str | None
     why: str | None
     """The audit log's reason for the last status change (why it was interrupted)."""
@@ -87,6 +88,19 @@ class ParticipantRecord:
 
     def next_block(self) -> BlockRow | None:
         return next((b for b in self.blocks if b.completed < b.planned), None)
+
+
+def _in_task_order(task: str, values: dict[str, float]) -> dict[str, float]:
+    """`values` in the order the task declares its measures (a task this version does not
+    know: as stored)."""
+    from study.protocol.tasks import get_task
+
+    try:
+        names = [m.name for m in get_task(task).all_measures]
+    except ValueError:
+        names = []
+    first = {n: values[n] for n in names if n in values}
+    return first | {n: v for n, v in values.items() if n not in first}
 
 
 def participant_record(engine: Engine, code: str) -> ParticipantRecord:
@@ -152,7 +166,7 @@ def participant_record(engine: Engine, code: str) -> ParticipantRecord:
                 driver=t.driver,
                 completion_time_s=t.completion_time_s,
                 success=t.success,
-                measures=dict(t.measure_values),
+                measures=_in_task_order(t.task, dict(t.measure_values)),
                 invalid_reason=t.invalid_reason,
                 why=why.get(t.id),
             )

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, ClassVar
 
-from textual import work
+from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Vertical
@@ -28,36 +28,45 @@ if TYPE_CHECKING:
     from study.protocol.participant_record import ParticipantRecord, TrialRow
     from study.tui.services import StudyServices
 
-__all__ = ["GroupScreen", "ParticipantPage", "schedule_line", "trial_cells"]
+__all__ = ["GroupScreen", "ParticipantPage", "schedule_line", "trial_cells", "trial_detail"]
 
 NOTES_SHOWN = 4
 """Notes listed under the trials (the newest); all of them are in the audit log."""
 
 
 def trial_cells(t: TrialRow) -> tuple[str, ...]:
-    """One row of the page's trial table."""
-    from study.protocol.tasks import get_task
-
-    try:  # the task's own order of its measures (the first peak is the one it is about)
-        names = [m.name for m in get_task(t.task).all_measures]
-    except ValueError:  # a task this version does not know: the stored order
-        names = list(t.measures)
-    forces = [k for k in names if k.startswith("peak_") and k.endswith("_n")]  # in N
-    peaks = [t.measures[k] for k in forces if k in t.measures]
-    status = t.status
-    if t.status == "interrupted" and t.why:
-        status = f"interrupted: {t.why}"
+    """One row of the page's trial table (short cells: 80 columns hold them all; the
+    reasons are on the line under the table)."""
+    forces = [n for n in t.measures if n.startswith("peak_") and n.endswith("_n")]
+    measured = t.status == "completed" and not t.practice
     return (
         str(t.id),
         f"{t.block_index + 1} {t.task}/{t.condition}",
         t.label(),
         str(t.attempt),
+        t.status,
         "-" if t.completion_time_s is None else f"{t.completion_time_s:.1f}",
         "-" if t.success is None else ("yes" if t.success else "no"),
-        "/".join(f"{p:.2f}" for p in peaks) + (" N" if peaks else "-"),
-        f"INVALID: {t.invalid_reason}" if t.invalid_reason else "",
-        status,
+        "/".join(f"{t.measures[n]:.2f}" for n in forces) + (" N" if forces else "-"),
+        ("NO" if t.invalid_reason else "yes") if measured else "-",
     )
+
+
+def trial_detail(t: TrialRow) -> str:
+    """The highlighted trial in full: why it was interrupted, its measures, validity."""
+    line = f"trial {t.id}, {t.task}/{t.condition} {t.label()}, attempt {t.attempt}: {t.status}"
+    if t.why and t.status in ("interrupted", "aborted"):
+        line += f" ({t.why})"
+    if t.completion_time_s is not None:
+        line += f" in {t.completion_time_s:.2f} s"
+    if t.success is not None:
+        line += ", success" if t.success else ", no success"
+    measures = ", ".join(f"{n} {t.measures[n]:.3g}" for n in t.measures)
+    if measures:
+        line += f"; {measures}"
+    if t.invalid_reason:
+        line += f"; INVALID: {t.invalid_reason}"
+    return line
 
 
 def schedule_line(record: ParticipantRecord) -> str:
@@ -80,6 +89,7 @@ class GroupScreen(ModalScreen[tuple[str, str] | None]):
     GroupScreen { align: center middle; }
     GroupScreen #group-box { width: 64; height: auto; border: thick $warning; padding: 1 2;
                              background: $surface; }
+    GroupScreen #question { width: 100%; }
     GroupScreen #group-keys { color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]
@@ -92,8 +102,8 @@ class GroupScreen(ModalScreen[tuple[str, str] | None]):
     def compose(self) -> ComposeResult:
         with Vertical(id="group-box"):
             yield Label(self.question, id="question")
-            yield Select[str](
-                [(g, g) for g in self.groups], id="new-group", compact=True, prompt="group"
+            yield Select[str](  # the first other group at once: one group, no choosing
+                [(g, g) for g in self.groups], id="new-group", compact=True, allow_blank=False
             )
             yield Input(id="group-reason", placeholder="reason")
             yield Label("Tab: next field    Enter: record it    Esc: cancel", id="group-keys")
@@ -116,15 +126,16 @@ class ParticipantPage(SafeWorkers, Screen[None]):
     ParticipantPage #who { height: auto; text-style: bold; padding: 0 1; }
     ParticipantPage #schedule, ParticipantPage #probes { height: auto; padding: 0 1; }
     ParticipantPage #trials { height: 1fr; }
+    ParticipantPage #trial-detail { height: auto; max-height: 3; padding: 0 1; }
     ParticipantPage #notes { height: auto; max-height: 6; padding: 0 1; color: $text-muted; }
     ParticipantPage #page-status { height: auto; padding: 0 1; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("escape", "back", "Back"),
-        Binding("i", "validity", "Invalid/valid"),
+        Binding("i", "validity", "Validity"),
         Binding("a", "add_note", "Add note"),
         Binding("e", "edit_note", "Edit note"),
-        Binding("u", "reinstate", "Undo withdrawal"),
+        Binding("u", "reinstate", "Reinstate"),
         Binding("g", "group", "Group"),
     ]
 
@@ -142,12 +153,13 @@ class ParticipantPage(SafeWorkers, Screen[None]):
         yield Static("", id="probes", markup=False)
         table = DataTable(id="trials", cursor_type="row", zebra_stripes=True)
         table.add_columns(
-            "id", "block", "trial", "att", "time s", "success", "peaks", "valid", "status"
+            "id", "block", "trial", "att", "status", "time s", "success", "peaks", "valid"
         )
         yield table
+        yield Static("", id="trial-detail", markup=False)
         yield Static("", id="notes", markup=False)
         yield Label("", id="page-status")
-        yield Footer(compact=True)
+        yield Footer(compact=True, show_command_palette=False)  # every key fits at 80
 
     def on_mount(self) -> None:
         self.query_one("#trials", DataTable).focus()
@@ -182,6 +194,7 @@ class ParticipantPage(SafeWorkers, Screen[None]):
             table.add_row(*trial_cells(t), key=str(t.id))
         if record.trials:
             table.move_cursor(row=min(kept, len(record.trials) - 1))
+        self._show_detail()
         lines = [f"note: {record.note or '(none)'}"]
         for n in record.notes[-NOTES_SHOWN:]:
             kind = "added" if n.kind == "session" else "note set"
@@ -190,6 +203,17 @@ class ParticipantPage(SafeWorkers, Screen[None]):
             lines.insert(1, f"({len(record.notes) - NOTES_SHOWN} older notes in the audit log)")
         self.query_one("#notes", Static).update("\n".join(lines))
         self.refresh_bindings()
+
+    @on(DataTable.RowHighlighted, "#trials")
+    def _highlighted(self, event: DataTable.RowHighlighted) -> None:
+        event.stop()
+        self._show_detail()
+
+    def _show_detail(self) -> None:
+        t = self.highlighted_trial()
+        self.query_one("#trial-detail", Static).update(
+            trial_detail(t) if t is not None else "no trials stored"
+        )
 
     def _status(self, text: str) -> None:
         self.last_message = text

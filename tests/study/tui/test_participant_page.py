@@ -105,29 +105,23 @@ async def test_the_page_shows_what_is_stored_and_makes_audited_corrections(
         table = page.query_one("#trials", DataTable)
         rows = [table.get_row_at(k) for k in range(table.row_count)]
         assert rows == [
-            [
-                str(stopped_id),
-                f"1 lcca/{a}",
-                "trial 1",
-                "1",
-                "-",
-                "-",
-                "-",
-                "",
-                "interrupted: stopped: fire alarm",
-            ],
+            [str(stopped_id), f"1 lcca/{a}", "trial 1", "1", "interrupted", "-", "-", "-", "-"],
             [
                 str(done_id),
                 f"1 lcca/{a}",
                 "trial 1",
                 "2",
+                "completed",
                 "31.5",
                 "yes",
                 "1.25/0.50 N",
-                "",
-                "completed",
+                "yes",
             ],
         ]
+        # the highlighted row in full: why it was interrupted
+        assert _text(app, "#trial-detail") == (
+            f"trial {stopped_id}, lcca/{a} trial 1, attempt 1: interrupted (stopped: fire alarm)"
+        )
         notes = _text(app, "#notes").splitlines()
         assert notes[0] == "note: wears glasses"
         assert notes[1].endswith("EXP01 note set: wears glasses")
@@ -147,7 +141,11 @@ async def test_the_page_shows_what_is_stored_and_makes_audited_corrections(
         await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
         await pilot.press(*"sensor cable loose", "enter")
         await wait_for(pilot, lambda: "marked invalid" in page.last_message, 10)
-        await wait_for(pilot, lambda: table.get_row_at(1)[7] == "INVALID: sensor cable loose")
+        await wait_for(pilot, lambda: table.get_row_at(1)[8] == "NO")
+        assert _text(app, "#trial-detail") == (
+            f"trial {done_id}, lcca/{a} trial 1, attempt 2: completed in 31.50 s, success; "
+            "peak_proximal_force_n 1.25, peak_distal_force_n 0.5; INVALID: sensor cable loose"
+        )
         # i again: valid again
         await pilot.press("i")
         await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
