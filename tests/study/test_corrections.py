@@ -25,11 +25,12 @@ from tests.study.tui.conftest import DESIGN, PEAKS, store_trials
 
 
 @pytest.fixture
-def db(tmp_path: Path) -> str:
-    """P001-P006 (three novices, three experts), one completed trial per condition."""
+def db(db_url: str) -> str:
+    """P001-P006 (three novices, three experts), one completed trial per condition, on
+    each backend."""
     from study.protocol.roster import add_participant
 
-    url = str(tmp_path / "study.db")
+    url = db_url
     engine = open_database(url, create=True)
     create_study(engine, parse_design(DESIGN), DESIGN)
     add_participant(engine, "novice")
