@@ -301,3 +301,38 @@ async def test_the_palette_offers_the_apps_own_commands(
     with Session(study_engine) as session:
         groups = session.scalars(select(Participant.group).order_by(Participant.id)).all()
     assert groups == ["novice", "expert", "novice"]
+
+
+async def test_f5_leaves_an_invalid_trial_out_and_lists_it_with_its_reason(
+    make_test_app, study_engine: Engine
+) -> None:
+    from study.protocol.corrections import mark_trial
+    from study.tui.confirm import TextScreen
+    from tests.study.tui.conftest import analysed, store_trials
+
+    store_trials(study_engine)
+    with Session(study_engine) as session:
+        trial_id, code = session.execute(
+            select(Trial.id, Participant.code)
+            .join(Participant)
+            .where(Participant.group == "expert", Trial.condition == "HV")
+            .order_by(Participant.code)
+        ).first()
+    mark_trial(study_engine, trial_id, False, "alarm went off", "EXP01")
+    app = make_test_app()
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await analysed(pilot)
+        line = f"lcca/all measures: excluded {code} HV trial 1 (marked invalid: alarm went off)"
+        assert line in pane.result.exclusions
+        [row] = [
+            d
+            for d in pane.result.descriptives.to_dict("records")
+            if d["measure"] == "peak_proximal_force_n"
+            and d["group"] == "expert"
+            and d["condition"] == "HV"
+        ]
+        # the other two experts' HV peaks (PEAKS, by hand): (0.5 + 0.9) / 2
+        assert row["n"] == 2 and abs(row["mean"] - 0.7) < 1e-12
+        await pilot.press("n")
+        await wait_for(pilot, lambda: isinstance(app.screen, TextScreen), 10)
+        assert line in app.screen.text
