@@ -144,9 +144,7 @@ def test_an_invalid_trial_is_kept_audited_left_out_and_listed_then_valid_again(
     assert "is valid; expected an invalid trial" in one_error_line(capsys, [*back, "--db", db])
 
 
-def test_trial_corrections_refused_in_one_line(
-    db: str, capsys: pytest.CaptureFixture[str]
-) -> None:
+def test_trial_corrections_refused_in_one_line(db: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert one_error_line(
         capsys, ["trial", "invalidate", "9999", "--reason", "x", "--db", db]
     ).endswith("unknown trial id 9999; expected an id from `study trial list CODE`")
