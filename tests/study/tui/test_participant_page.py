@@ -169,6 +169,13 @@ async def test_the_page_shows_what_is_stored_and_makes_audited_corrections(
         withdraw(study_engine, "P001", "felt unwell")
         page.reload()
         await wait_for(pilot, lambda: "withdrawn: felt unwell" in _text(app, "#who"), 10)
+        # the longest footer (u offered too): every key whole within 80 columns
+        await pilot.pause(0.2)
+        footer = list(app.screen.query("FooterKey"))
+        assert {k.key for k in footer} >= {"escape", "i", "a", "e", "u", "g", "question_mark"}
+        assert all(0 < k.region.width and k.region.right <= 80 for k in footer)
+        regions = [k.region for k in footer]  # none drawn over another (a docked hint)
+        assert not any(r.overlaps(q) for n, r in enumerate(regions) for q in regions[n + 1 :])
         await pilot.press("u")
         await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
         await pilot.press(*"better after a rest", "enter")
