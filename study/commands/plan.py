@@ -83,7 +83,7 @@ def template() -> None:
 
 @click.group("participant", cls=StudyGroup)
 def participant() -> None:
-    """Enrol participants (pseudonymous codes only)."""
+    """Enrol participants (pseudonymous codes only); withdraw, reinstate, correct a group."""
 
 
 @participant.command("add")
