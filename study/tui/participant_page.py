@@ -253,7 +253,8 @@ class ParticipantPage(SafeWorkers, Screen[None]):
         if t is None:
             return
         if t.practice or t.status != "completed":
-            self._status(f"trial {t.id} is {t.status}; only a completed measured trial is marked")
+            state = "a practice trial" if t.practice else t.status
+            self._status(f"trial {t.id} is {state}; only a completed measured trial is marked")
             return
         valid = t.invalid_reason is not None
         what = f"{t.task}/{t.condition} {t.label()} (id {t.id})"
