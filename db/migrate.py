@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from alembic.script import ScriptDirectory
 
 MIGRATIONS_DIR = Path(__file__).parent / "migrations"
-HEAD_REVISION = "0008_probe_trials"
+HEAD_REVISION = "0009_trial_validity"
 """The newest revision in `db/migrations/versions` (kept equal to it by a test)."""
 VERSION_TABLE = "alembic_version"
 

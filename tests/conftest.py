@@ -213,6 +213,7 @@ SLOW_MODULES = frozenset(
         "tests/study/tui/test_terminal_db_errors.py",
         "tests/study/tui/test_db_errors.py",
         "tests/study/tui/test_screens.py",
+        "tests/study/tui/test_participant_page.py",
         "tests/study/test_lease.py",
         "tests/test_layering.py",
         "tests/study/test_layers.py",

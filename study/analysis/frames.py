@@ -63,13 +63,13 @@ def without_withdrawn(
 ) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
     """The frames without withdrawn participants, and one exclusion note per task and
     withdrawn participant who had data in it (their data stay in the database); one
-    withdrawn before any data is listed too, so every withdrawal is accounted for."""
+    withdrawn before any data is listed too, so every withdrawal is accounted for. The
+    trials marked invalid (`study.protocol.corrections.mark_trial`) are left out as
+    well, each listed with its reason."""
     from study.protocol.withdrawal import withdrawn_participants
 
     withdrawn = withdrawn_participants(engine)
-    if not withdrawn:
-        return trials, tlx, []
-    notes = []
+    notes: list[str] = []
     for frame in (trials, tlx):
         gone = frame[frame["participant"].isin(list(withdrawn))]
         for task, code in gone[["task", "participant"]].drop_duplicates().itertuples(index=False):
@@ -82,7 +82,27 @@ def without_withdrawn(
             notes.append(f"all tasks: excluded {code} (withdrawn: {reason}; no data stored)")
     keep_trials = trials[~trials["participant"].isin(list(withdrawn))]
     keep_tlx = tlx[~tlx["participant"].isin(list(withdrawn))]
-    return keep_trials.reset_index(drop=True), keep_tlx.reset_index(drop=True), notes
+    keep_trials, invalid = _without_invalid(engine, keep_trials)
+    return keep_trials.reset_index(drop=True), keep_tlx.reset_index(drop=True), notes + invalid
+
+
+def _without_invalid(engine: Engine, trials: pd.DataFrame) -> tuple[pd.DataFrame, list[str]]:
+    """`trials` without the trials marked invalid, and one exclusion note per trial."""
+    from study.protocol.corrections import invalid_trials
+
+    invalid = invalid_trials(engine)
+    if not invalid or not len(trials):
+        return trials, []
+    columns = (trials[c] for c in ("participant", "task", "condition", "trial"))
+    keys = [(str(p), str(t), str(c), int(n)) for p, t, c, n in zip(*columns, strict=True)]
+    drop = [key in invalid for key in keys]
+    notes = [
+        f"{task}/all measures: excluded {code} {condition} trial {n} "
+        f"(marked invalid: {invalid[(code, task, condition, n)]})"
+        for (code, task, condition, n), d in zip(keys, drop, strict=True)
+        if d
+    ]
+    return trials[[not d for d in drop]].reset_index(drop=True), notes
 
 
 def participant_means(trials: pd.DataFrame, tlx: pd.DataFrame) -> pd.DataFrame:

@@ -130,6 +130,19 @@ def _groups(analysis: Analysis) -> str:
     return ", ".join(f"{n} {g}" for g, n in sizes.items())
 
 
+def _invalid(analysis: Analysis) -> str:
+    """The sentence naming the trials the experimenter marked invalid, with the reasons."""
+    marked = [e.split(": excluded ", 1)[1] for e in analysis.exclusions if "(marked invalid: " in e]
+    if not marked:
+        return ""
+    return (
+        f" {len(marked)} measured trial{'s' if len(marked) > 1 else ''} marked invalid by "
+        f"the experimenter {'were' if len(marked) > 1 else 'was'} left out: "
+        + "; ".join(m.replace("(marked invalid: ", "(") for m in marked)
+        + "."
+    )
+
+
 def methods_markdown(analysis: Analysis) -> str:
     """`methods.md`: the statistics paragraph, the data source and the software."""
     counts = ", ".join(f"{n} {d}" for d, n in analysis.source.trials_by_driver.items() if n)
@@ -148,7 +161,7 @@ def methods_markdown(analysis: Analysis) -> str:
         f"{_groups(analysis)}. Measures: {measures or 'none'}. Each participant's trials of "
         "a block were averaged, and participant means were the unit of analysis; "
         "participants without both conditions of a comparison were excluded from it "
-        f"({len(analysis.exclusions)} exclusions, listed with the tables).\n\n"
+        f"({len(analysis.exclusions)} exclusions, listed with the tables).{_invalid(analysis)}\n\n"
         f"{comparison_method()}\n\n"
         f"{anova_method(analysis.ss_type)}\n\n"
         f"{lmm_method()}\n\n"

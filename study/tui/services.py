@@ -195,6 +195,32 @@ class StudyServices:
 
         (add_session_note if session else set_note)(self.engine, code, text)
 
+    # the participant page (`study.tui.participant_page`): what is stored, corrections
+
+    def participant_record(self, code: str) -> Any:
+        """`study.protocol.participant_record.ParticipantRecord` of `code`."""
+        from study.protocol.participant_record import participant_record
+
+        return participant_record(self.engine, code)
+
+    def mark_trial(self, trial_id: int, valid: bool, reason: str) -> str:
+        """Mark a measured trial invalid or valid again (audited); its description."""
+        from study.protocol.corrections import mark_trial
+
+        return mark_trial(self.engine, trial_id, valid, reason)
+
+    def reinstate(self, code: str, reason: str) -> None:
+        """Undo `code`'s withdrawal (audited)."""
+        from study.protocol.corrections import reinstate
+
+        reinstate(self.engine, code, reason)
+
+    def correct_group(self, code: str, group: str, reason: str) -> tuple[str, ...]:
+        """Move `code` to `group` before their first trial (audited); the new order."""
+        from study.protocol.corrections import correct_group
+
+        return correct_group(self.engine, code, group, reason, beyond_target=True)
+
     def add_participant(self, group: str) -> str:
         from study.protocol.roster import add_participant
 
