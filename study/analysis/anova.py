@@ -14,7 +14,8 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy import stats
+
+from study.analysis.distributions import f_sf
 
 
 def one_way(y: np.ndarray, group: np.ndarray) -> dict[str, Any]:
@@ -74,7 +75,7 @@ def anova_rows(wide: pd.DataFrame, a: str, b: str, ss_type: int) -> list[dict[st
                 "F": float(f),
                 "df1": float(effect["df"]),
                 "df2": float(error["df"]),
-                "p": float(stats.f.sf(f, effect["df"], error["df"])),
+                "p": f_sf(float(f), float(effect["df"]), float(error["df"])),
                 "np2": float(effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])),
                 "ss_type": ss_type,
             }

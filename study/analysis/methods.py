@@ -17,15 +17,17 @@ from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE, EXACT_MAX_N, RESOLUTION
 if TYPE_CHECKING:
     from study.analysis.stats import Analysis
 
-PACKAGES = ("haptic-study", "numpy", "scipy", "pandas", "matplotlib")
+PACKAGES = ("haptic-study", "numpy", "pandas", "matplotlib")
 """The packages that compute or draw the results (`COMPUTED_BY` says which does what)."""
 
 COMPUTED_BY = (
-    "Shapiro-Wilk, paired t, Wilcoxon signed-rank p-values and the F, t and normal "
-    "distributions: scipy.stats; Hedges' g_av, the rank-biserial correlation, Holm's "
-    "correction, the mixed ANOVA's sums of squares (closed form, two conditions) and the "
-    "mixed model's REML fit (profiled criterion, exact optimum): haptic-study's own code "
-    "with numpy and scipy, checked in its tests against R (afex, lme4, stats) and pingouin"
+    "Shapiro-Wilk (Royston's AS R94, as R's shapiro.test), paired t, Wilcoxon signed-rank "
+    "p-values (exact or normal approximation, as R's wilcox.test) and the F, t and normal "
+    "distributions (the regularized incomplete beta function and the normal integral), "
+    "Hedges' g_av, the rank-biserial correlation, Holm's correction, the mixed ANOVA's "
+    "sums of squares (closed form, two conditions) and the mixed model's REML fit "
+    "(profiled criterion, exact optimum): haptic-study's own code with numpy, checked in "
+    "its tests against R (afex, lme4, stats), scipy and pingouin"
 )
 
 WILCOXON_RULE = (
