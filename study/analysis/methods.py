@@ -125,17 +125,18 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
 
 
 def _groups(analysis: Analysis) -> str:
-    d = analysis.descriptives
-    if not len(d):
+    sizes: dict[Any, int] = {}
+    for r in analysis.descriptive_rows:
+        sizes[r["group"]] = max(sizes.get(r["group"], 0), r["n"])
+    if not sizes:
         return "no participants"
-    sizes = d.groupby("group", sort=False)["n"].max()
     return ", ".join(f"{n} {g}" for g, n in sizes.items())
 
 
 def methods_markdown(analysis: Analysis) -> str:
     """`methods.md`: the statistics paragraph, the data source and the software."""
     counts = ", ".join(f"{n} {d}" for d, n in analysis.source.trials_by_driver.items() if n)
-    measures = ", ".join(dict.fromkeys(analysis.descriptives.get("measure", [])))
+    measures = ", ".join(dict.fromkeys(r["measure"] for r in analysis.descriptive_rows))
     source = (
         f"**{analysis.source.note}.** These results describe simulated participants and "
         "are not evidence about people.\n\n"

@@ -417,7 +417,7 @@ def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -
         assert math.isinf(rows_by.loc[source, "F"]) and rows_by.loc[source, "p"] == 0.0
         assert rows_by.loc[source, "np2"] == 1.0
     assert math.isfinite(rows_by.loc["group", "F"])
-    records = _records(table, ANOVA_KEYS)
+    records = _records(table.to_dict("records"), ANOVA_KEYS)
     json.dumps(records, allow_nan=False)  # strict JSON: no Infinity
     assert [r["F"] is None for r in records] == [False, True, True]
 
