@@ -23,6 +23,12 @@
 
 Participants without both conditions of a comparison are excluded from it, and each
 exclusion is stated.
+
+Each analysis runs on rows: participant means as `Long` tuples and trials as dicts
+(`descriptive_rows`, `comparison_rows`, `mixed_anova_rows`, `mixed_model_rows`,
+`analyze_rows`), which is what `study analyze` calls, so that it loads no pandas; the
+functions above take and return pandas frames around them. The distributions and the
+Shapiro-Wilk and Wilcoxon p-values are `study.analysis.distributions` (no scipy).
 """
 
 from __future__ import annotations
