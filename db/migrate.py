@@ -37,14 +37,13 @@ from db.errors import (
     MissingDatabaseError,
     NotAStudyDatabaseError,
 )
+from db.revision import HEAD_REVISION
 
 if TYPE_CHECKING:
     from alembic.config import Config
     from alembic.script import ScriptDirectory
 
 MIGRATIONS_DIR = Path(__file__).parent / "migrations"
-HEAD_REVISION = "0009_trial_validity"
-"""The newest revision in `db/migrations/versions` (kept equal to it by a test)."""
 VERSION_TABLE = "alembic_version"
 
 

@@ -17,15 +17,17 @@ from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE, EXACT_MAX_N, RESOLUTION
 if TYPE_CHECKING:
     from study.analysis.stats import Analysis
 
-PACKAGES = ("haptic-study", "numpy", "scipy", "pandas", "matplotlib")
+PACKAGES = ("haptic-study", "numpy", "pandas", "matplotlib")
 """The packages that compute or draw the results (`COMPUTED_BY` says which does what)."""
 
 COMPUTED_BY = (
-    "Shapiro-Wilk, paired t, Wilcoxon signed-rank p-values and the F, t and normal "
-    "distributions: scipy.stats; Hedges' g_av, the rank-biserial correlation, Holm's "
-    "correction, the mixed ANOVA's sums of squares (closed form, two conditions) and the "
-    "mixed model's REML fit (profiled criterion, exact optimum): haptic-study's own code "
-    "with numpy and scipy, checked in its tests against R (afex, lme4, stats) and pingouin"
+    "Shapiro-Wilk (Royston's AS R94, as R's shapiro.test), paired t, Wilcoxon signed-rank "
+    "p-values (exact or normal approximation, as R's wilcox.test) and the F, t and normal "
+    "distributions (the regularized incomplete beta function and the normal integral), "
+    "Hedges' g_av, the rank-biserial correlation, Holm's correction, the mixed ANOVA's "
+    "sums of squares (closed form, two conditions) and the mixed model's REML fit "
+    "(profiled criterion, exact optimum): haptic-study's own code with numpy, checked in "
+    "its tests against R (afex, lme4, stats), scipy and pingouin"
 )
 
 WILCOXON_RULE = (
@@ -123,10 +125,11 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
 
 
 def _groups(analysis: Analysis) -> str:
-    d = analysis.descriptives
-    if not len(d):
+    sizes: dict[Any, int] = {}
+    for r in analysis.descriptive_rows:
+        sizes[r["group"]] = max(sizes.get(r["group"], 0), r["n"])
+    if not sizes:
         return "no participants"
-    sizes = d.groupby("group", sort=False)["n"].max()
     return ", ".join(f"{n} {g}" for g, n in sizes.items())
 
 
@@ -146,7 +149,7 @@ def _invalid(analysis: Analysis) -> str:
 def methods_markdown(analysis: Analysis) -> str:
     """`methods.md`: the statistics paragraph, the data source and the software."""
     counts = ", ".join(f"{n} {d}" for d, n in analysis.source.trials_by_driver.items() if n)
-    measures = ", ".join(dict.fromkeys(analysis.descriptives.get("measure", [])))
+    measures = ", ".join(dict.fromkeys(r["measure"] for r in analysis.descriptive_rows))
     source = (
         f"**{analysis.source.note}.** These results describe simulated participants and "
         "are not evidence about people.\n\n"

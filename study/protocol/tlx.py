@@ -33,6 +33,7 @@ from study.errors import StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.observer import SessionObserver
 from study.protocol.roster import find_participant, load_study
+from study.protocol.study_rows import raw_tlx, weighted_tlx
 
 PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
 """The 15 pairs of subscales."""
@@ -105,16 +106,6 @@ def weights_from_choices(pairs: Sequence[tuple[str, str]], chosen: Sequence[str]
             )
         weights[pick] += 1
     return weights
-
-
-def raw_tlx(ratings: Mapping[str, int]) -> float:
-    """Mean of the six ratings."""
-    return sum(ratings[s] for s in TLX_SUBSCALES) / len(TLX_SUBSCALES)
-
-
-def weighted_tlx(ratings: Mapping[str, int], weights: Mapping[str, int]) -> float:
-    """sum(weight x rating) / 15."""
-    return sum(weights[s] * ratings[s] for s in TLX_SUBSCALES) / 15.0
 
 
 def response_scores(response: TlxResponse) -> tuple[dict[str, int], float, float | None]:
