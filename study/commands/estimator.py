@@ -198,13 +198,13 @@ def train_cmd(
     with_effects = f"eq. 1 + effects {v['effects']:.4f} N, " if "effects" in v else ""
     chosen = summary.residual["chosen"]
     stage = "physics+GRU" if chosen == "gru" else "physics+trees"
-    epochs = (
+    trained = (
         f"best epoch {summary.best_epoch} of {summary.epochs_run}"
         if chosen == "gru"
         else "residual stage: trees"
     )
     click.echo(
-        f"{out_dir}: {epochs}; validation RMSE "
+        f"{out_dir}: {trained}; validation RMSE "
         f"physics {v['physics']:.4f} N, {with_effects}{stage} {v['hybrid']:.4f} N, "
         f"after EKF {v['final']:.4f} N"
     )

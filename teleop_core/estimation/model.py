@@ -350,6 +350,9 @@ class CausalEstimator:
 
     def __init__(self, estimator: ForceEstimator) -> None:
         self.est = estimator
+        if not isinstance(estimator.gru, GruModel):
+            estimator.check_streams()  # raises: a trees model does not stream
+        assert isinstance(estimator.gru, GruModel)
         std = estimator.gru.standardisation
         w = estimator.gru.weights
         self.mem = estimator.gru.memory.kernel_table()

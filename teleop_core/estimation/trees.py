@@ -218,7 +218,8 @@ def train_trees(
     samples = np.unique((train_idx[:, None] + np.arange(window)).ravel())
     std = Standardisation.fit(inputs[samples], residual[samples])
     std = Standardisation(std.feature_mean, std.feature_std, 0.0, 1.0)
-    shell = TreesModel(TreeArrays(*([np.zeros(0)] * 8), baseline=0.0), std, window, memory=memory)
+    empty = {name: np.zeros(0) for name in (*_ARRAY_NAMES, "roots")}
+    shell = TreesModel(TreeArrays(**empty, baseline=0.0), std, window, memory=memory)
     x = shell.rows(inputs)[train_idx]
     y = residual[window - 1 :][train_idx]
     fitted = HistGradientBoostingRegressor(
