@@ -180,6 +180,7 @@ SLOW_MODULES = frozenset(
         "tests/teleop_core/test_loop.py",
         "tests/teleop_core/test_hardware.py",
         "tests/study/test_estimator_cli.py",
+        "tests/study/test_estimator_residual_cli.py",
         "tests/study/test_estimator_effects_cli.py",
         "tests/study/test_estimator_calibration_cli.py",
         "tests/study/test_calibrate_cli.py",

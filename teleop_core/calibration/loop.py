@@ -19,7 +19,11 @@
 A winner that another passing family explains as well on the held-out block (the
 winner's errors not significantly smaller, `_look_alikes`) is kept in the model, since
 it predicts as well either way, but the report lists it under `ambiguous_effects` with
-its alternatives instead of naming it.
+its alternatives instead of naming it. A `delay` that wins is also checked against
+what the library has no family for, a first-order lag of the whole force
+(`_lag_alike`, `first_order_lag`): a pure delay and a lag of a few tens of ms shift
+the force alike at the speeds a recording holds, and the recording names the delay
+only where the lag predicts the held-out block significantly worse.
 
 The residual tests (`residual.py`) are reported before and after; they describe the
 residual, while the decision rests on held-out prediction, which they cannot game.
@@ -33,6 +37,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy import signal
 from statsmodels.stats.stattools import durbin_watson
 
 from teleop_core._typing import Float1D, Rows
@@ -46,7 +51,7 @@ from teleop_core.calibration.candidates import (
     _search_edge,
     _verdict,
 )
-from teleop_core.calibration.effects import EFFECTS, Effect
+from teleop_core.calibration.effects import EFFECTS, MAX_LAG_S, Effect
 from teleop_core.calibration.fitting import (
     CalibratedModel,
     Chain,
@@ -62,6 +67,10 @@ from teleop_core.calibration.residual import diebold_mariano, residual_tests
 from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
 
+LAG_ALTERNATIVE = "first_order_lag"
+"""The name a first-order lag of the whole force takes among a delay's alternatives."""
+LAG_GRID = 24
+"""Time constants tried for that lag, log-spaced from one sample period to 0.2 s."""
 BIC_DECISIVE = 10.0
 """Training-BIC difference that decides between two candidates (Kass and Raftery
 1995: above 10 is "very strong" evidence): a look-alike further behind is no
@@ -184,6 +193,45 @@ class Calibrator:
                 out.append(cand.family)
         return out
 
+    def _lag_alike(
+        self, data: CalibrationData, chain: Chain, delay: tuple[Effect, float]
+    ) -> list[str]:
+        """[`first_order_lag`] when a first-order lag of the whole force, in place of the
+        `delay` that won, predicts the held-out block about as well.
+
+        The lag acts on the model's force as on the recording's: every column of the
+        design of base + `chain` (the effects before the delay) through
+        y_k = a y_{k-1} + (1 - a) x_k, a = exp(-dt / tau), tau searched on the training
+        block. Filtering the columns also filters the current's noise, which alone cuts
+        the error of any recording, so the delay is judged with the same filter after
+        it (its own tau searched alike): the lag is an alternative when its held-out
+        RMSE is within `min_gain` of the filtered delay's (or below) and the delay's
+        errors are not significantly smaller (one-sided Diebold-Mariano at `alpha`)."""
+        lag = self._filtered_errors(data, chain)
+        delayed = self._filtered_errors(data, [*chain, delay])
+        near = _rmse(lag) * (1.0 - self.min_gain) <= _rmse(delayed)
+        alike = near and diebold_mariano(lag, delayed) >= self.alpha
+        return [LAG_ALTERNATIVE] if alike else []
+
+    def _filtered_errors(self, data: CalibrationData, chain: Chain) -> Float1D:
+        """Held-out errors of base + `chain` with every column through the first-order
+        lag whose tau fits the training block best."""
+        X, _ = design(self.base_, data.signals, chain)
+        dt = float(np.median(np.diff(data.signals["t"])))
+        y = data.y
+        best: tuple[float, Float1D] | None = None
+        for tau in np.geomspace(dt, 2 * MAX_LAG_S, LAG_GRID):
+            a = float(np.exp(-dt / tau))
+            Xf = signal.lfilter([1.0 - a], [1.0, -a], X, axis=0, zi=a * X[:1])[0]
+            coef = solve(Xf[self.train_], y[self.train_])
+            pred = Xf @ coef
+            e = y[self.train_] - pred[self.train_]
+            sse = float(e @ e)
+            if best is None or sse < best[0]:
+                best = (sse, pred)
+        assert best is not None
+        return y[self.test_] - best[1][self.test_]
+
     def fit(self, data: CalibrationData, progress: Progress | None = None) -> Calibrator:
         """Run the loop on `data`; fitted attributes end in `_`."""
         if len(data) < 200:
@@ -247,7 +295,10 @@ class Calibrator:
                 break
             best = _best(passing, self.min_gain)
             best[0].accepted = True
-            self.ambiguous_.append(self._look_alikes(best, passing, y_test))
+            alike = self._look_alikes(best, passing, y_test)
+            if best[1].family == "delay":
+                alike += self._lag_alike(data, chain, (best[1], best[0].searched_value))
+            self.ambiguous_.append(alike)
             for other in passing:
                 if other is not best:
                     other[0].reason = f"passed, but {best[0].family} cut the error more"
