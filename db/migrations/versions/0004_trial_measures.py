@@ -10,7 +10,6 @@ and drops the three columns.
 
 Revision ID: 0004_trial_measures
 Revises: 0003_withdrawal
-Create Date: 2026-11-23
 """
 
 import json

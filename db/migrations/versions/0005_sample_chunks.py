@@ -2,8 +2,8 @@
 
 Before, a trial's samples were rows of `samples` (trial, seq, 14 columns): about 115
 bytes a sample in SQLite, and reading them back cost 1.1 us of CPU a sample, which
-held the Parquet export below a million samples a second (issue 26); the writer bound
-a Python value per sample (issue 21). Now each committed chunk (at most a second of
+held the Parquet export below a million samples a second; the writer bound
+a Python value per sample. Now each committed chunk (at most a second of
 trial time, as the writer commits) is one row of `sample_chunks` holding the chunk's
 columns as one zstd-compressed Arrow record batch (`db.sample_codec`).
 
@@ -14,7 +14,6 @@ decodes the chunks back into rows.
 
 Revision ID: 0005_sample_chunks
 Revises: 0004_trial_measures
-Create Date: 2026-11-23
 """
 
 from collections.abc import Iterator, Sequence

@@ -18,7 +18,6 @@ in the old layout (dropping the columns it has no place for) and drops the schem
 
 Revision ID: 0006_task_sample_schemas
 Revises: 0005_sample_chunks
-Create Date: 2026-11-27
 """
 
 import hashlib
