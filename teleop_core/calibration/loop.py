@@ -280,7 +280,7 @@ class Calibrator:
         return self
 
     def report(self) -> dict[str, Any]:
-        """The JSON report of issue 10: the contract keys first, then context."""
+        """The JSON report: the contract keys first, then context."""
         added, discovered, ambiguous = [], [], []
         mse = [self.rmse_before_**2] + [r**2 for r in self.step_rmse_]
         explained = mse[0] - mse[-1]

@@ -1,4 +1,4 @@
-"""Training the GRU stage with PyTorch (seed 000, eqs. 3-4 and 12-13): see `gru.py`.
+"""Training the GRU stage with PyTorch ([endovascular], eqs. 3-4 and 12-13): see `gru.py`.
 
 Only training imports this module, so that running a trained estimator never loads
 PyTorch, an optional dependency (the `train` extra; without it, importing this module

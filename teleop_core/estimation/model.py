@@ -111,7 +111,7 @@ class ForceEstimator:
     sample_rate_hz: float
     pipeline_rate_hz: float = FollowerSensorParams.estimation_rate_hz
     extension: ExtendedPhysics | None = None
-    """The calibrated physics stage (issue 10) replacing eq. 1, if any."""
+    """The calibrated physics stage replacing eq. 1, if any."""
     input_range: InputRange | None = None
     """The inputs' range over the training samples (None for models saved before it)."""
 

@@ -3,8 +3,8 @@
 Kept apart from `estimator.py` (the model, its files and its causal path) because
 training owns the choices made on data: which blocks validate (`regimes.py`: every
 operating regime in both parts), when the GRU stops, what the EKF's noise is and
-whether the EKF is used at all. Issue 17 found each of these choices rewarding an
-estimator that learned nothing; the rules here are the ones that answer it:
+whether the EKF is used at all. Each of these choices, left naive, rewards an
+estimator that learned nothing; the rules here are the ones that prevent it:
 
 - validation blocks represent the recording's speed bands (with reversals and rest),
   directions and load levels, and the summary gives the validation error per regime;
@@ -94,7 +94,7 @@ def tune_process_noise(
     training data: the lowest error against F_ref among the settings that trail the
     hybrid estimate by at most `max_lag_samples` (one pipeline period).
 
-    Seed 000, IV-C tuned Q "to minimise tracking delay", capped where noise grew; here
+    [endovascular], IV-C tuned Q "to minimise tracking delay", capped where noise grew; here
     the cap is the lag and the choice the error. Returns the settings and their lag.
     """
     best: tuple[float, EkfSettings, float] | None = None
