@@ -1,4 +1,4 @@
-"""The study's statistics on participant means (seed 000, IV-D; the analysis issue).
+"""The study's statistics on participant means ([endovascular], IV-D; the analysis issue).
 
 - `descriptives`: per task, measure, group and condition: n, mean, SD, median, IQR and
   the t-based 95 % confidence interval of the mean.

@@ -1,4 +1,4 @@
-"""`study bench calibrate`: the calibration loop's targets (issue 10), measured.
+"""`study bench calibrate`: the calibration loop's targets, measured.
 
 - Per family: a 4-minute, 200 Hz follower recording carrying that one effect at the
   JND's size (RMS 0.192 N over the recording; `delay` at the size its drawn lag makes),
@@ -11,8 +11,8 @@
   on it, with eq. 1 and with the calibrated physics stage: the validation RMSE of the
   physics stage, of physics + GRU and after the EKF, before and after calibration.
 
-- NOTES (issue 6's model): clamped static ramps and 1-30 Hz chirps of both axes at
-  1 kHz with 2 % sensor noise, from the linear Fig. 8 model; the paper's friction
+- NOTES (the linear Fig. 8 model of [notes]): clamped static ramps and 1-30 Hz chirps
+  of both axes at 1 kHz with 2 % sensor noise; the paper's friction
   hysteresis and counter-clockwise loss should be named on the ramps.
 """
 
@@ -34,9 +34,9 @@ from teleop_core.calibration.synthetic import JND_N, follower_recording, master_
 @dataclass(frozen=True)
 class CalibrateBenchConfig:
     duration_s: float = 240.0
-    """Length of each follower recording, s (the issue's 4 minutes)."""
+    """Length of each follower recording, s (the target's 4 minutes)."""
     rate_hz: float = 200.0
-    """Sampling rate, Hz (the issue's 200 Hz)."""
+    """Sampling rate, Hz (the target's 200 Hz)."""
     estimator_duration_s: float = 240.0
     """Length of the drive recording the estimators are trained on, s (at 100 Hz)."""
     epochs: int = 30

@@ -1,4 +1,4 @@
-"""`study bench calibrate`, issue 16's part: measured data and effects outside the list.
+"""`study bench calibrate`, the open library's part: measured data and effects outside the list.
 
 - EMPS (measured, 1 kHz, 24.8 s): the `rigid-axis` loop against the benchmark's own
   direction-dependent inverse model (Fv and Fc per direction of motion, IDIM-LS)

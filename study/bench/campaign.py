@@ -1,4 +1,4 @@
-"""`study bench campaign`: what Dask gives a campaign on this machine (issue 23).
+"""`study bench campaign`: what Dask gives a campaign on this machine.
 
 One small campaign (a few simulated studies at the physics level) runs twice from
 scratch, on a `LocalCluster` of 1 worker and of N workers, in fresh folders. For each:

@@ -2,18 +2,18 @@
 
 - Table I: velocity sensing during ramp and step commands. The drive's proprioceptive
   speed (the AS5600 estimate the force estimator uses) against the external 2000 P/R
-  encoder, as in seed 000, IV-B ("to evaluate the fidelity of the proprioceptive
+  encoder, as in [endovascular], IV-B ("to evaluate the fidelity of the proprioceptive
   velocity estimation"); the encoder against the command is reported beside it.
 - Table II: force estimation with the wheel held at zero speed under 0.5-3 Hz
   sinusoidal loads (IV-C, Fig. 6), by the trained estimator (final, after the EKF).
 - Table III: residual learning + physics against direct prediction of the force by the
-  same GRU, both trained on the same data: the dataset seed 000, IV-C describes for the
+  same GRU, both trained on the same data: the dataset [endovascular], IV-C describes for the
   compensator ("the full guidewire insertion system under various teleoperation
   scenarios", 60,000 samples), i.e. navigation in the bench phantom without the
   zero-speed calibration platform Table II's estimator also sees. Errors are pooled over
   four held-out representative cases (Fig. 9, `CASES`): the bench phantom itself and
   three study conditions with loads or speeds beyond the training recording. The physics
-  prior's value is that it extrapolates (seed 000, III-A-3); on the bench phantom alone
+  prior's value is that it extrapolates ([endovascular], III-A-3); on the bench phantom alone
   the simulated drive is clean enough that both reach the sensor noise floor, and the
   table says so per case.
 - Fig. 8: validation RMSE against the window length T, and the residual distribution.
@@ -21,7 +21,7 @@
 
 The training recording copies the paper's dataset size, 60,000 samples at 100 Hz:
 navigation in the bench phantom plus the zero-speed calibration platform with
-sinusoidal loads (seed 000, IV-C calibrates the estimator on that platform). Table II's
+sinusoidal loads ([endovascular], IV-C calibrates the estimator on that platform). Table II's
 loads and every Table III case are separate recordings with their own seeds.
 """
 
@@ -114,7 +114,7 @@ def simulate(
 
 def training_recording(seconds: float, seed: int) -> FollowerRecording:
     """The estimator's training data: navigation in the bench phantom (80 %) and the
-    zero-speed calibration platform with sinusoidal loads (20 %), as seed 000, IV-C
+    zero-speed calibration platform with sinusoidal loads (20 %), as [endovascular], IV-C
     calibrates on both; 60,000 samples at 100 Hz by default."""
     rng = np.random.default_rng(seed)
     cmd_a, load_a = scenarios.teleoperation(0.8 * seconds, rng, **TRAINING_PHANTOM)

@@ -1,4 +1,4 @@
-"""`study bench follower`, generalisation part (issue 17): the estimator on data it never saw.
+"""`study bench follower`, generalisation part: the estimator on data it never saw.
 
 For each unmodelled effect (Stribeck dip, hysteresis, direction-dependent load, drift)
 and each seed: a 4-minute, 200 Hz follower recording carrying that one effect at the
@@ -38,7 +38,7 @@ from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.training import train_estimator
 
 EFFECTS = ("stribeck", "hysteresis", "direction_asymmetry", "drift")
-"""The unmodelled effects of issue 17's tests and targets."""
+"""The unmodelled effects the generalisation tests and targets use."""
 DATA_NOTE = (
     "simulated follower recordings (teleop_core.calibration.synthetic.follower_recording), "
     "not measured data"

@@ -1,6 +1,6 @@
 """`study bench lcca`: the paper's user study, rehearsed with simulated participants.
 
-The design of seed 000, IV-D: 20 engineering outsiders, 8 novice doctors, 8 expert
+The design of [endovascular], IV-D: 20 engineering outsiders, 8 novice doctors, 8 expert
 physicians, each navigating into the LCCA under VO and HV (within-subject; the same
 simulated person, seed for seed, in both conditions). Reported per group: mean and SD
 of completion time, peak proximal force (the estimate the drive renders), peak distal

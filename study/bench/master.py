@@ -1,4 +1,4 @@
-"""`study bench master`: the paper's master-side experiments (seed 000, IV-D, Figs. 10-11).
+"""`study bench master`: the paper's master-side experiments ([endovascular], IV-D, Figs. 10-11).
 
 - Calibration (Fig. 10(b)): the dial presses its lever on the force gauge while the
   current command sweeps up and down the calibrated range; quadratics refitted to the

@@ -8,7 +8,7 @@ Here `n` simulated experts (the paper's 10 by default) each do one NOTES trial i
 (nothing rendered: the tissue's demand is what a hand on a real scope would feel), and
 the same people in HV beside them; each trial's measures are the task's own
 (`study.tasks.notes.trial.measures`). The table puts the paper's figure, the target
-band of issue 24, and the simulated people's mean, SD, min and max side by side; every
+band of the participant fit, and the simulated people's mean, SD, min and max side by side; every
 table and key says the trials are simulated.
 """
 

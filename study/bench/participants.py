@@ -11,7 +11,7 @@
    group drawn from the truth and simulated (1 trial per condition, independent seeds),
    their mean difference per group with its standard error. 300 by default: with 60 the
    truth's own standard error (0.02-0.04 N) was half the fitted model's interval, so a
-   truth estimate off by chance could fall outside it (one of six did, 2026-11-23).
+   truth estimate off by chance could fall outside it.
 4. Targets: each group's fitted mean of each trait within 15 % of the truth's (reported
    for every trait, with the mean of the study's own people beside it: with 8 people
    a group's sample mean is itself off its distribution's by about 7 %; and beside the

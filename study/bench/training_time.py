@@ -1,5 +1,5 @@
 """`study bench follower --only training`: the time `study estimator train` takes on the
-paper's dataset size (issue 17's target: 60,000 samples in at most 600 s here).
+paper's dataset size (target: 60,000 samples in at most 600 s here).
 
 Two runs on the bench's training recording (`follower.training_recording`, 60,000
 samples at 100 Hz by default), both with the command's defaults (the effect search, the
@@ -26,7 +26,7 @@ from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.training import train_estimator
 
 TARGET_S = 600.0
-"""Issue 17: training 60,000 samples stays within 600 s on this machine."""
+"""Target: training 60,000 samples stays within 600 s on this machine."""
 
 
 def _timed_training(

@@ -125,7 +125,7 @@ def bench_follower(
     only: str | None,
     generalisation_seeds: str | None,
 ) -> None:
-    """Tables I-III and Fig. 8 of seed 000 on the simulated follower, and the estimator on
+    """Tables I-III and Fig. 8 of [endovascular] on the simulated follower, and the estimator on
     recordings it never saw, and the training time of `study estimator train` (about 30 min,
     several hours and 10 min)."""
     from study.bench.follower import PARTS, FollowerBenchConfig, run_follower_bench
@@ -158,7 +158,7 @@ def bench_follower(
 def bench_master(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
-    """Figs. 10-11 of seed 000 on the simulated dial, latency, and the loop's speed."""
+    """Figs. 10-11 of [endovascular] on the simulated dial, latency, and the loop's speed."""
     from study.bench.master import MasterBenchConfig, run_master_bench
 
     config = replace(MasterBenchConfig.quick() if quick else MasterBenchConfig(), seed=seed)

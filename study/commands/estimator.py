@@ -28,7 +28,7 @@ _err = Console(stderr=True)
 
 @click.group("estimator", cls=StudyGroup)
 def estimator() -> None:
-    """Follower force estimator: physics model + GRU residual + EKF (seed 000)."""
+    """Follower force estimator: physics model + GRU residual + EKF ([endovascular])."""
 
 
 @estimator.command("train")

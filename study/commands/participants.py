@@ -1,4 +1,4 @@
-"""`study participants fit`: simulated participants fitted to a study's trials (issue 24).
+"""`study participants fit`: simulated participants fitted to a study's trials.
 
 `study participant` (singular) enrols people; this group is about the simulated ones.
 """

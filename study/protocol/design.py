@@ -1,7 +1,7 @@
 """Study designs: the TOML file a researcher writes, validated into a `StudyDesign`.
 
 Every problem is reported as one line naming the key, the value and what was expected
-(`StudyInputError`), before anything is written. Defaults follow seed 000, IV-D: 20
+(`StudyInputError`), before anything is written. Defaults follow [endovascular], IV-D: 20
 engineering outsiders, 8 novice doctors, 8 expert physicians; conditions VO and HV; the
 LCCA task.
 
@@ -31,7 +31,7 @@ MAX_TRIALS_PER_CONDITION = 100
 MAX_PRACTICE_TRIALS = 20
 MAX_GROUP_SIZE = 1000
 MAX_BREAK_S = 3600.0
-"""Sane sizes (issue 18: 2**63 trials, a group of 1e12 and a break of inf were accepted):
+"""Sane sizes (2**63 trials, a group of 1e12 and a break of inf are refused):
 far above any lab study, far below what breaks storage or a schedule."""
 MAX_GROUP_CHARS = 32
 MAX_GROUPS = 12
@@ -40,10 +40,10 @@ compares them pairwise and draws one panel each)."""
 MAX_NAME_CHARS = 200
 """Column widths of `participants.group` and `studies.name` (PostgreSQL enforces them)."""
 DEFAULT_GROUPS = ("outsider", "novice", "expert")
-"""The paper's experience groups (seed 000, IV-D), the simulated participants' groups."""
+"""The paper's experience groups ([endovascular], IV-D), the simulated participants' groups."""
 
 TEMPLATE = """\
-# A haptic-teleoperation user study (seed 000, IV-D). `study init --design THIS_FILE`.
+# A haptic-teleoperation user study ([endovascular], IV-D). `study init --design THIS_FILE`.
 
 name = "LCCA navigation, VO vs HV"
 seed = 1                       # seeds counterbalancing ties and simulated participants
@@ -58,7 +58,7 @@ tlx_before_next_block = true   # a block's NASA-TLX is due before the next block
 code_prefix = "P"              # participant codes: P001, P002, ...
 
 [haptic_gain_n_m_per_n]        # the dial's torque per newton of estimated force (LCCA)
-HV = 0.02                      # the paper's gain (seed 000); VO renders nothing (0)
+HV = 0.02                      # the paper's gain ([endovascular]); VO renders nothing (0)
 
 [probes]                       # short measurements before a block: `study probe run`
 before_block = 1               # the block they run before (1: before the first)

@@ -16,7 +16,7 @@ An import is checked row by row before anything is written, and written in one
 transaction: all or nothing. Errors name the file, the row (as a spreadsheet numbers
 it: the header is row 1), the column, and what was expected.
 
-Reconciliation with the database (issue 18): a trial is filed in the block of its task
+Reconciliation with the database: a trial is filed in the block of its task
 and condition (the participant's scheduled block, or for a participant known only from
 imports the block that task and condition would have under the design); a slot that
 already holds a completed trial (the same file imported twice, a trial already run) is

@@ -7,15 +7,15 @@ long trial in windows) by a few threads (`read_spans`, one connection each), and
 written span by span with pyarrow's incremental Parquet writer, one row group per
 span, or as CSV text. Memory stays at a few spans whatever the size of the study.
 
-Where the time goes (issue 26, the 10,000,000 samples of `study bench export`, in CPU
-seconds): decoding the stored chunks about 3 s (`db.sample_reader`), Parquet encoding
-with snappy about 4 s (lz4 would save 0.3 s, no codec 0.4 s: not worth a file fewer
-tools read), the key columns 0.2 s. The reader threads read and decode, build the key
+Where the time goes (`study bench export`; its figures are on the Benchmarks page):
+decoding the stored chunks (`db.sample_reader`) and Parquet encoding with snappy, each
+about half (lz4 or no codec would save little: not worth a file fewer tools read), the
+key columns little. The reader threads read and decode, build the key
 columns (a `take` of each trial's values by the row's `trial_id`) and, for CSV, format
 the text (pyarrow's CSV writer, in C++), so the calling thread only encodes Parquet or
 copies bytes to the file. The Parquet encoder writes to a pyarrow file, not a Python
 one, so that it never waits for the GIL the readers hold: through a Python file object
-the export ran on one core (15 s; now 6.6 s on two). pyarrow does the writing because
+the export ran on one core. pyarrow does the writing because
 it already is the Parquet dependency; pandas' `to_csv` per chunk would take most of
 the time.
 

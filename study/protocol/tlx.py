@@ -166,7 +166,7 @@ def store_tlx(
     """Store (or edit) the questionnaire of one block; return it and whether it was new.
 
     An edit needs a `reason`, and so does a questionnaire for a block with no completed
-    trial yet (issue 19: the lab confirms why; the reason goes to the audit log);
+    trial yet (the lab confirms why; the reason goes to the audit log);
     `actor` defaults to `current_actor()`. Once it is committed, `observer` is told (a
     `questionnaire` event: the participant's keys, the block's task and condition,
     whether it was new, the raw and weighted TLX).

@@ -4,7 +4,7 @@ Every task's simulated participant is the same person (speed, reaction, steering
 caution, what it notices and what it accepts) doing that task; the traits are therefore
 the study's, not a task's, and live here below the tasks (`study.tasks.*`), the session
 runner and the participant fit. Group distributions (mean, sd; truncated to plausible
-ranges) are assumptions shaped by seed 000, IV-D, not measured values; a fitted model
+ranges) are assumptions shaped by [endovascular], IV-D, not measured values; a fitted model
 (`study.protocol.participant_model`) replaces them where one is given.
 """
 

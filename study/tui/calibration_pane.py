@@ -1,6 +1,6 @@
 """The calibration screen: run the calibration loop on a recording and show its report.
 
-The loop itself (issue 10, `teleop_core.calibration`) is passed into `make_app` as
+The loop itself (`teleop_core.calibration`) is passed into `make_app` as
 `StudyServices.calibrate` (recording, model, progress) -> report, with the keys of
 `study calibrate`'s REPORT.json (`rmse_before`, `rmse_after`, `effects_added`,
 `candidates_rejected`); `study tui` passes `services.calibrate_recording`. Without one

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from teleop_core.estimation.estimator import ForceEstimator
 
 CalibrateFn = Callable[[Path, str, Callable[[str], None]], dict[str, Any]]
-"""calibrate(recording, model, progress) -> the report (issue 10's REPORT.json keys)."""
+"""calibrate(recording, model, progress) -> the report (`study calibrate`'s REPORT.json keys)."""
 
 
 @dataclass(frozen=True)
@@ -127,7 +127,7 @@ class StudyServices:
     load_estimator: Callable[[], ForceEstimator]
     """Called once, in a worker, before the first trial (loading it imports torch)."""
     calibrate: CalibrateFn | None = None
-    """The calibration loop (issue 10); None leaves the calibration screen waiting."""
+    """The calibration loop; None leaves the calibration screen waiting."""
     lsl_publish: bool = False
     """Publish the trials' markers and samples as LSL streams even when the design's
     `[lsl]` table does not say so (`study tui --lsl`)."""
@@ -229,7 +229,7 @@ class StudyServices:
 def calibrate_recording(
     recording: Path, model: str, progress: Callable[[str], None] = lambda _: None
 ) -> dict[str, Any]:
-    """The calibration loop of `study calibrate` (issue 10) on one recording: its report.
+    """The calibration loop of `study calibrate` on one recording: its report.
 
     The same steps as the command (`BASE_MODELS[model].read`, `Calibrator.fit`,
     `report()`), without the files it writes; the app passes this into `make_app`.

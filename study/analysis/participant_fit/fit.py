@@ -73,8 +73,8 @@ from study.protocol.traits import PROFILES, TRAITS, GroupProfile, draw_traits
 @dataclass(frozen=True)
 class FitSettings:
     design: int = 320
-    """Trait settings the emulator is built from: held-out people's reaction time was
-    off by 1.13 novice prior SDs with 160, by 0.79 with 320 (`validate.py`, 2026-11-26)."""
+    """Trait settings the emulator is built from: with 160, held-out people's reaction
+    time was off by noticeably more than with 320 (`validate.py`)."""
     repeats: int = 2
     """Trials per condition at each setting."""
     check: int = 24
@@ -86,7 +86,7 @@ class FitSettings:
     weak_traits: str = "prior"
     """What becomes of the traits the data tell weakly: `prior` holds them at the hand-set
     profile; `shrink` fits them with their group mean under the profile's prior. On three
-    seeds of `study bench participants` (2026-11-26), shrink put 18-20 of 21 group means
+    seeds of `study bench participants`, shrink put 18-20 of 21 group means
     within 15 % of the truth (prior: 16-17), but its VO - HV peak-force intervals held
     the truth in 3-6 of 6 (prior: 6 of 6): a weak trait absorbs the emulator's local
     bias (the outsiders' comfort torque came out 25 % low with a narrow interval), and

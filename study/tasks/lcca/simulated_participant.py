@@ -19,7 +19,7 @@ After an obstacle (felt or seen) it backs off and tries again. It gives up at
 `give_up_s`.
 
 Group distributions (mean, sd; truncated to plausible ranges) are assumptions shaped
-by seed 000, IV-D (experts faster and steadier; the paper reports comparable times and
+by [endovascular], IV-D (experts faster and steadier; the paper reports comparable times and
 lower peak forces with haptics in every group), not measured values. The traits and
 their group distributions are the study's (`study.protocol.traits`, shared by every
 task's simulated participant); a model fitted to a study's trials (`study participants
