@@ -19,6 +19,7 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
@@ -124,7 +125,7 @@ def make_engine(url: str | URL) -> Engine:
             # An in-memory or read-only (?mode=ro) database cannot switch to WAL.
             wal = url.database not in (None, "", ":memory:") and url.query.get("mode") != "ro"
             _configure_sqlite(engine, wal=wal, busy_timeout_ms=timeout_ms)
-            if wal and not url.query.get("uri"):
+            if wal and url.database and not url.query.get("uri"):
                 _watch_sqlite_file(engine, Path(url.database))
         else:
             engine = create_engine(url, pool_pre_ping=True)
@@ -154,7 +155,7 @@ def busy_timeout_ms(url: URL) -> int:
 
 def _configure_sqlite(engine: Engine, *, wal: bool, busy_timeout_ms: int) -> None:
     @event.listens_for(engine, "connect")
-    def _on_connect(dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+    def _on_connect(dbapi_connection: Any, _record: Any) -> None:
         # Let SQLAlchemy, not pysqlite, decide when a transaction begins.
         dbapi_connection.isolation_level = None
         cursor = dbapi_connection.cursor()
@@ -197,11 +198,11 @@ def _watch_sqlite_file(engine: Engine, path: Path) -> None:
             )
 
     @event.listens_for(engine, "do_connect")
-    def _before_connect(_dialect, _record, _cargs, _cparams) -> None:  # type: ignore[no-untyped-def]
+    def _before_connect(_dialect: Any, _record: Any, _cargs: Any, _cparams: Any) -> None:
         still_there()
 
     @event.listens_for(engine, "connect")
-    def _connected(_dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+    def _connected(_dbapi_connection: Any, _record: Any) -> None:
         if not identity:
             st = os.stat(path)
             identity.append((st.st_dev, st.st_ino))

@@ -68,7 +68,7 @@ def _chunks_table(conn: sa.Connection) -> sa.Table:
 def _cut(rows: Iterator[Sequence[Any]]) -> Iterator[tuple[int, int, list[Sequence[Any]]]]:
     """(trial id, first seq, rows) per chunk of the rows (ordered by trial and seq)."""
     held: list[Sequence[Any]] = []
-    key = (None, None, None)  # trial, next seq, chunk start time
+    key: tuple[Any, Any, Any] = (None, None, None)  # trial, next seq, chunk start time
     for row in rows:
         trial_id, seq, t_s = row[0], row[1], row[2]
         same = trial_id == key[0] and seq == key[1] and t_s < key[2] + CHUNK_S

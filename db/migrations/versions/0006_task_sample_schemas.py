@@ -135,7 +135,7 @@ def _schema(task: str) -> pa.Schema:
     )
 
 
-def _schemas_table() -> sa.Table:
+def _schemas_table() -> sa.TableClause:
     return sa.table(
         "sample_schemas",
         sa.column("id", sa.Integer()),
@@ -144,7 +144,7 @@ def _schemas_table() -> sa.Table:
     )
 
 
-def _chunks_table() -> sa.Table:
+def _chunks_table() -> sa.TableClause:
     return sa.table(
         "sample_chunks",
         sa.column("trial_id", sa.Integer()),
