@@ -74,7 +74,7 @@ novice = 8                     # novice doctors
 expert = 8                     # expert interventional physicians
 """
 
-_KEYS = {
+_KEYS: dict[str, type | tuple[type, ...]] = {
     "name": str,
     "seed": int,
     "conditions": list,

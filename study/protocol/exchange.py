@@ -40,7 +40,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +76,8 @@ def _check_trials(
     frame: pd.DataFrame, design: StudyDesign, source: str, known: dict[str, str]
 ) -> list[dict[str, Any]]:
     p = Problems(source, [])
-    rows, seen = [], {}
+    rows: list[dict[str, Any]] = []
+    seen: dict[tuple[Any, ...], int] = {}
     for i, r in enumerate(frame.to_dict("records")):
         row = i + 2
         code = r["participant"].strip()
@@ -180,6 +181,7 @@ def _file_trials(
             taken.setdefault((pid, block_index, trial_index), []).append((attempt, status))
     for r in rows:
         participant = existing.get(r["code"])
+        blocks: list[tuple[int, int | None, str, str, int]]
         if participant is not None and participant.blocks:
             blocks = [
                 (b.block_index, b.id, b.task, b.condition, b.n_trials) for b in participant.blocks
@@ -262,7 +264,7 @@ def _check_tlx(
                 ratings[s] = check_rating(s, float(text))
             except StudyInputError as exc:
                 p.add(row, s, str(exc))
-        weights = dict.fromkeys(TLX_SUBSCALES)
+        weights: Mapping[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
         if weighted:
             texts = {s: r[f"w_{s}"].strip() for s in TLX_SUBSCALES}
             bad = [s for s in TLX_SUBSCALES if not DECIMAL.match(texts[s])]

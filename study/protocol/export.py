@@ -30,7 +30,7 @@ from study.protocol.stream_export import (
     collect_streams,
     write_streams,
 )
-from study.protocol.tasks import COMPLETION_TIME, get_task
+from study.protocol.tasks import COMPLETION_TIME, SampleColumn, get_task
 from study.protocol.trial_table import measure_columns, trial_frame
 
 if TYPE_CHECKING:
@@ -66,9 +66,9 @@ def trial_columns(tasks: Iterable[str]) -> tuple[str, ...]:
 def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
     """Column -> (unit, meaning) for a study of `tasks`: the common columns, each task's
     measures, and each task's sample columns (under their own names, as exported)."""
-    tasks = [get_task(t) for t in tasks]
+    specs = [get_task(t) for t in tasks]
     measures: dict[str, tuple[str, str]] = {}
-    for t in tasks:
+    for t in specs:
         for m in t.measures:
             measures.setdefault(m.name, (m.unit, f"{t.name}: {m.description}"))
     out: dict[str, tuple[str, str]] = {}
@@ -76,9 +76,9 @@ def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
         out[column] = entry
         if column == COMPLETION_TIME:
             out.update(measures)
-    out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in tasks))
-    samples: dict[str, list[tuple[str, object]]] = {}
-    for t in tasks:
+    out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in specs))
+    samples: dict[str, list[tuple[str, SampleColumn]]] = {}
+    for t in specs:
         for c in t.sample_columns:
             samples.setdefault(c.name, []).append((t.name, c))
     for column, uses in samples.items():

@@ -69,7 +69,7 @@ def find_participant(session: Session, study: Study, code: str) -> Participant:
 
 def plan_blocks(design: StudyDesign, order: tuple[str, ...]) -> list[dict[str, Any]]:
     """A participant's blocks: each task, its conditions in the participant's order."""
-    blocks = []
+    blocks: list[dict[str, Any]] = []
     for task in design.tasks:
         for condition in order:
             blocks.append(

@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable
 from contextlib import ExitStack, closing
 from dataclasses import dataclass
 from itertools import chain
@@ -299,7 +299,7 @@ def _read(
     selection: SampleSelection,
     workers: int | None,
     schema: pa.Schema,
-) -> Iterator[_Encoded]:
+) -> Generator[_Encoded, None, None]:
     return read_spans(
         engine,
         chain.from_iterable(plan),

@@ -243,7 +243,7 @@ def run_session(
             except SessionStopped:
                 recover_interrupted(engine, participant_id, STOPPED_WITH_PARENT, actor)
                 break
-            except (OperationalError, engine.dialect.dbapi.OperationalError) as exc:
+            except (OperationalError, engine.dialect.loaded_dbapi.OperationalError) as exc:
                 # a full disk, the server gone (the sample writer uses the driver's cursor)
                 raise SessionStorageError(
                     _storage_failure(engine, code, participant_id, item, len(completed), exc)

@@ -19,7 +19,7 @@ import json
 import math
 import zlib
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, TypeGuard
 
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
@@ -38,7 +38,7 @@ PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
 """The 15 pairs of subscales."""
 
 
-def _whole_number(value: object, top: int) -> bool:
+def _whole_number(value: object, top: int) -> TypeGuard[int | float]:
     """Whether `value` is a finite whole number from 0 to `top` (a bool is not one)."""
     return (
         not isinstance(value, bool)
@@ -213,7 +213,7 @@ def _store_tlx(
                 f"{code} has no {task}/{condition} block; expected one of "
                 f"{', '.join(f'{t}/{c}' for t, c in sorted(blocks))}"
             )
-        weights: dict[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
+        weights: Mapping[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
         pairwise = None
         if chosen is not None:
             pairs = pair_order(study.seed, code)

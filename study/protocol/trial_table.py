@@ -9,6 +9,7 @@ lives here, below both, so that the export and the exchange read no analysis mod
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
 import pandas as pd
 from sqlalchemy import Engine, select
@@ -41,7 +42,7 @@ def trial_frame(engine: Engine, tasks: Iterable[str] = ()) -> pd.DataFrame:
             .where(Trial.status == "completed", Trial.practice.is_(False))
             .order_by(Participant.code, Trial.block_index, Trial.trial_index, Trial.attempt)
         ).all()
-        latest = {}
+        latest: dict[tuple[str, str, str, int], dict[str, Any]] = {}
         for code, group, t in rows:
             latest[(code, t.task, t.condition, t.trial_index)] = {
                 "participant": code,

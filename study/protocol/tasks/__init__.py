@@ -71,7 +71,8 @@ class Traits(Protocol):
     """A simulated person (`study.tasks.lcca.simulated_participant.ParticipantTraits`; named here by
     what a task uses of it, so that the registry does not import the participants)."""
 
-    group: str
+    @property
+    def group(self) -> str: ...
 
     def to_dict(self) -> dict[str, Any]: ...
 
@@ -304,8 +305,9 @@ class Task:
         for k, column in enumerate(self.sample_columns):
             values = samples[:, k]
             if column.name == region:
-                values = [self.regions[int(v)] for v in values.tolist()]
-            out[column.name] = values
+                out[column.name] = [self.regions[int(v)] for v in values.tolist()]
+            else:
+                out[column.name] = values
         return out
 
     def stored_table(self, table: pa.Table) -> pa.Table:
