@@ -177,80 +177,18 @@ def parse_design(text: str, source: str = "design") -> StudyDesign:
 
 
 def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
-    if not data:  # an empty file would silently be the default study
-        raise StudyInputError(
-            f"{source} is empty; expected a study design (`study design template` prints one)"
-        )
-    unknown = sorted(set(data) - set(_KEYS))
-    if unknown:
-        raise StudyInputError(
-            f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(sorted(_KEYS))}"
-        )
-    for key, kind in _KEYS.items():
-        if key in data and (
-            not isinstance(data[key], kind) or (kind is int and isinstance(data[key], bool))
-        ):
-            expected = kind.__name__ if isinstance(kind, type) else "a number"
-            raise StudyInputError(f"{source}: {key} = {data[key]!r}; expected {expected}")
+    """The design that `data` (a parsed design file) describes; StudyInputError naming the
+    first value out of place, checked in the file's reading order."""
+    _check_keys(data, source)
     d = StudyDesign()
     conditions = tuple(data.get("conditions", d.conditions))
     tasks = tuple(data.get("tasks", d.tasks))
     groups = dict(data.get("groups", d.groups))
-    for c in conditions:
-        if c not in KNOWN_CONDITIONS:
-            raise StudyInputError(
-                f"{source}: condition {c!r}; expected {' or '.join(KNOWN_CONDITIONS)}"
-            )
-    if len(set(conditions)) != len(conditions) or len(conditions) < 2:
-        raise StudyInputError(
-            f"{source}: conditions = {list(conditions)}; expected at least two, each once"
-        )
-    from study.protocol.tasks import is_task, task_names
-
-    for t in tasks:
-        if not is_task(t):
-            raise StudyInputError(
-                f"{source}: task {t!r}; expected one of {', '.join(task_names())}"
-            )
-    if not tasks or len(set(tasks)) != len(tasks):
-        raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
-    if not groups:
-        raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
-    if len(groups) > MAX_GROUPS:
-        raise StudyInputError(
-            f"{source}: [groups] has {len(groups)} groups; expected 1 to {MAX_GROUPS}"
-        )
-    for g, n in groups.items():
-        if not (0 < len(g) <= MAX_GROUP_CHARS and g.isprintable() and g.strip() == g):
-            raise StudyInputError(
-                f"{source}: group name {g!r}; expected 1-{MAX_GROUP_CHARS} printable "
-                "characters without surrounding spaces"
-            )
-        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_GROUP_SIZE):
-            raise StudyInputError(
-                f"{source}: groups.{g} = {n!r}; expected a whole number from 1 to {MAX_GROUP_SIZE}"
-            )
-    for key, low, high in (
-        ("trials_per_condition", 1, MAX_TRIALS_PER_CONDITION),
-        ("practice_trials", 0, MAX_PRACTICE_TRIALS),
-        ("seed", 0, MAX_SEED),
-    ):
-        value = data.get(key, getattr(d, key))
-        if not low <= value <= high:
-            raise StudyInputError(f"{source}: {key} = {value!r}; expected {low} to {high}")
-    break_s = data.get("break_s", d.break_s)
-    if not (math.isfinite(break_s) and 0 <= break_s <= MAX_BREAK_S):
-        raise StudyInputError(f"{source}: break_s = {break_s!r}; expected 0 to {MAX_BREAK_S:g} s")
-    name = data.get("name", d.name)
-    if not (0 < len(name.strip()) and len(name) <= MAX_NAME_CHARS and name.isprintable()):
-        raise StudyInputError(
-            f"{source}: name = {name!r}; expected 1-{MAX_NAME_CHARS} printable characters"
-        )
+    _check_conditions(conditions, source)
+    _check_tasks(tasks, source)
+    _check_groups(groups, source)
+    _check_sizes(data, d, source)
     prefix = data.get("code_prefix", d.code_prefix)
-    if not (1 <= len(prefix) <= 4 and prefix.isascii() and prefix.isalpha() and prefix.isupper()):
-        raise StudyInputError(
-            f"{source}: code_prefix = {prefix!r}; expected 1-4 capital letters A-Z, e.g. P"
-        )
     scheme = data.get("counterbalancing", d.counterbalancing)
     gains = _haptic_gains(data.get("haptic_gain_n_m_per_n", {}), conditions, source)
     probes, before = _probes(data.get("probes", {}), len(tasks) * len(conditions), source)
@@ -273,6 +211,93 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
     )
     condition_orders(conditions, scheme, source)  # refuses a scheme that does not fit
     return design
+
+
+def _check_keys(data: dict[str, Any], source: str) -> None:
+    """Known keys only, each of its kind."""
+    if not data:  # an empty file would silently be the default study
+        raise StudyInputError(
+            f"{source} is empty; expected a study design (`study design template` prints one)"
+        )
+    unknown = sorted(set(data) - set(_KEYS))
+    if unknown:
+        raise StudyInputError(
+            f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(sorted(_KEYS))}"
+        )
+    for key, kind in _KEYS.items():
+        if key in data and (
+            not isinstance(data[key], kind) or (kind is int and isinstance(data[key], bool))
+        ):
+            expected = kind.__name__ if isinstance(kind, type) else "a number"
+            raise StudyInputError(f"{source}: {key} = {data[key]!r}; expected {expected}")
+
+
+def _check_conditions(conditions: tuple[str, ...], source: str) -> None:
+    for c in conditions:
+        if c not in KNOWN_CONDITIONS:
+            raise StudyInputError(
+                f"{source}: condition {c!r}; expected {' or '.join(KNOWN_CONDITIONS)}"
+            )
+    if len(set(conditions)) != len(conditions) or len(conditions) < 2:
+        raise StudyInputError(
+            f"{source}: conditions = {list(conditions)}; expected at least two, each once"
+        )
+
+
+def _check_tasks(tasks: tuple[str, ...], source: str) -> None:
+    from study.protocol.tasks import is_task, task_names
+
+    for t in tasks:
+        if not is_task(t):
+            raise StudyInputError(
+                f"{source}: task {t!r}; expected one of {', '.join(task_names())}"
+            )
+    if not tasks or len(set(tasks)) != len(tasks):
+        raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
+
+
+def _check_groups(groups: dict[str, Any], source: str) -> None:
+    if not groups:
+        raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
+    if len(groups) > MAX_GROUPS:
+        raise StudyInputError(
+            f"{source}: [groups] has {len(groups)} groups; expected 1 to {MAX_GROUPS}"
+        )
+    for g, n in groups.items():
+        if not (0 < len(g) <= MAX_GROUP_CHARS and g.isprintable() and g.strip() == g):
+            raise StudyInputError(
+                f"{source}: group name {g!r}; expected 1-{MAX_GROUP_CHARS} printable "
+                "characters without surrounding spaces"
+            )
+        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_GROUP_SIZE):
+            raise StudyInputError(
+                f"{source}: groups.{g} = {n!r}; expected a whole number from 1 to {MAX_GROUP_SIZE}"
+            )
+
+
+def _check_sizes(data: dict[str, Any], d: StudyDesign, source: str) -> None:
+    """The counts, the seed, the break, the name and the code prefix within bounds."""
+    for key, low, high in (
+        ("trials_per_condition", 1, MAX_TRIALS_PER_CONDITION),
+        ("practice_trials", 0, MAX_PRACTICE_TRIALS),
+        ("seed", 0, MAX_SEED),
+    ):
+        value = data.get(key, getattr(d, key))
+        if not low <= value <= high:
+            raise StudyInputError(f"{source}: {key} = {value!r}; expected {low} to {high}")
+    break_s = data.get("break_s", d.break_s)
+    if not (math.isfinite(break_s) and 0 <= break_s <= MAX_BREAK_S):
+        raise StudyInputError(f"{source}: break_s = {break_s!r}; expected 0 to {MAX_BREAK_S:g} s")
+    name = data.get("name", d.name)
+    if not (0 < len(name.strip()) and len(name) <= MAX_NAME_CHARS and name.isprintable()):
+        raise StudyInputError(
+            f"{source}: name = {name!r}; expected 1-{MAX_NAME_CHARS} printable characters"
+        )
+    prefix = data.get("code_prefix", d.code_prefix)
+    if not (1 <= len(prefix) <= 4 and prefix.isascii() and prefix.isalpha() and prefix.isupper()):
+        raise StudyInputError(
+            f"{source}: code_prefix = {prefix!r}; expected 1-4 capital letters A-Z, e.g. P"
+        )
 
 
 def _haptic_gains(
