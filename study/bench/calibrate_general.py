@@ -133,36 +133,45 @@ def run_one(
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per group of recordings and over all: the shares of the runs' outcomes."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in runs:
         groups.setdefault(r["group"], []).append(r)
-    out = {}
-    for name, rs in groups.items():
-        rf = [r["right_first"] for r in rs if r["right_first"] is not None]
-        out[name] = {
-            "recordings": len(rs),
-            "within_2x_oracle": float(np.mean([r["within_2x_oracle"] for r in rs])),
-            "right_first": float(np.mean(rf)) if rf else None,
-            "wrong_named": float(np.mean([r["wrong_named"] for r in rs])),
-            "ambiguous": float(np.mean([bool(r["ambiguous"]) for r in rs])),
-            "honest": float(np.mean([r["honest"] for r in rs])),
-            "median_ratio_to_oracle": float(np.median([r["ratio_to_oracle"] for r in rs])),
-            "slowest_s": float(max(r["seconds"] for r in rs)),
-        }
+    out = {name: _group_summary(rs) for name, rs in groups.items()}
+    return {"per_group": out, "overall": _overall(runs)}
+
+
+def _share(runs: list[dict[str, Any]], key: str) -> float | None:
+    """The mean of `key` over `runs` (the share of the true ones), None without runs."""
+    return float(np.mean([bool(r[key]) for r in runs])) if runs else None
+
+
+def _group_summary(rs: list[dict[str, Any]]) -> dict[str, Any]:
+    rf = [r["right_first"] for r in rs if r["right_first"] is not None]
+    return {
+        "recordings": len(rs),
+        "within_2x_oracle": float(np.mean([r["within_2x_oracle"] for r in rs])),
+        "right_first": float(np.mean(rf)) if rf else None,
+        "wrong_named": float(np.mean([r["wrong_named"] for r in rs])),
+        "ambiguous": float(np.mean([bool(r["ambiguous"]) for r in rs])),
+        "honest": float(np.mean([r["honest"] for r in rs])),
+        "median_ratio_to_oracle": float(np.median([r["ratio_to_oracle"] for r in rs])),
+        "slowest_s": float(max(r["seconds"] for r in rs)),
+    }
+
+
+def _overall(runs: list[dict[str, Any]]) -> dict[str, Any]:
     effects = [r for r in runs if r["families"]]
     clean = [r for r in runs if not r["families"]]
-    out_all = {
-        "within_2x_oracle": float(np.mean([r["within_2x_oracle"] for r in effects]))
-        if effects
-        else None,
-        "wrong_named": float(np.mean([r["wrong_named"] for r in effects])) if effects else None,
-        "clean_untouched": float(np.mean([r["honest"] for r in clean])) if clean else None,
+    return {
+        "within_2x_oracle": _share(effects, "within_2x_oracle"),
+        "wrong_named": _share(effects, "wrong_named"),
+        "clean_untouched": _share(clean, "honest"),
         "not_explained_end_structure_remains": all(
             r["verdict"] == "structure_remains" for r in effects if not r["within_2x_oracle"]
         ),
         "slowest_s": float(max(r["seconds"] for r in runs)) if runs else None,
     }
-    return {"per_group": out, "overall": out_all}
 
 
 def run_generalise_bench(

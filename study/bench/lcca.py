@@ -86,6 +86,60 @@ def _paired(frame: pd.DataFrame, measure: str, a: str, b: str) -> dict[str, floa
     }
 
 
+def _row(summary: dict[str, Any]) -> dict[str, Any]:
+    """A trial's row of the bench's table: its keys, measures and counts."""
+    keys = ("group", "condition", "success", *MEASURES, "wall_contacts", "attempts")
+    return {key: summary[key] for key in (*keys, "obstacles_felt", "obstacles_seen")}
+
+
+def _group_summaries(
+    frame: pd.DataFrame, group_order: list[str]
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Per group and condition the measures' means and SDs, and per group and measure
+    the paired VO-HV test."""
+    groups: dict[str, Any] = {}
+    tests = []
+    for group in group_order:
+        g = frame[frame["group"] == group]
+        groups[group] = {
+            condition: {
+                **{f"{m}_mean": float(c[m].mean()) for m in MEASURES},
+                **{f"{m}_sd": float(c[m].std(ddof=1)) if len(c) > 1 else 0.0 for m in MEASURES},
+                "success_rate": float(c["success"].mean()),
+                "wall_contacts_mean": float(c["wall_contacts"].mean()),
+            }
+            for condition, c in g.groupby("condition")
+        }
+        for measure in MEASURES:
+            tests.append({"group": group, "measure": measure, **_paired(g, measure, "VO", "HV")})
+    return groups, tests
+
+
+def _gain_zero(
+    config: LccaBenchConfig, estimator: ForceEstimator, phantom: LccaPhantom
+) -> dict[str, Any]:
+    """VO against HV at haptic gain 0 in `config.gain_zero_group`, paired per measure."""
+    zero_rows = []
+    for i in range(config.group_sizes.get(config.gain_zero_group, 0)):
+        seed = config.seed + 1000 * GROUPS.index(config.gain_zero_group) + i
+        traits = simulated_participant(config.gain_zero_group, seed)
+        for condition, gain, loop_seed in (("VO", None, seed), ("HV", 0.0, seed + 500)):
+            s = run_lcca_trial(
+                traits,
+                condition,
+                loop_seed,
+                estimator,
+                haptic_gain=gain,
+                max_s=config.max_s,
+                phantom=phantom,
+            ).summary
+            zero_rows.append(
+                {"participant": i, "condition": condition, **{m: s[m] for m in MEASURES}}
+            )
+    zero = pd.DataFrame(zero_rows)
+    return {m: _paired(zero, m, "VO", "HV") for m in MEASURES} if len(zero) else {}
+
+
 def run_lcca_bench(
     config: LccaBenchConfig,
     estimator: ForceEstimator,
@@ -121,65 +175,15 @@ def run_lcca_bench(
                 if publisher is not None:
                     publish_walls.append(_publish(publisher, result.frame, condition, len(factors)))
                     wall += publish_walls[-1]
-                s = result.summary
-                factors.append(s["completion_time_s"] / wall)
-                rows.append(
-                    {
-                        "participant": f"{group}-{i:02d}",
-                        **{
-                            key: s[key]
-                            for key in (
-                                "group",
-                                "condition",
-                                "success",
-                                *MEASURES,
-                                "wall_contacts",
-                                "attempts",
-                                "obstacles_felt",
-                                "obstacles_seen",
-                            )
-                        },
-                    }
-                )
+                factors.append(result.summary["completion_time_s"] / wall)
+                rows.append({"participant": f"{group}-{i:02d}", **_row(result.summary)})
                 if group == "outsider":
                     paths.append((result.frame, condition))
     frame = pd.DataFrame(rows)
-    groups: dict[str, Any] = {}
-    tests = []
-    for group in config.group_sizes:
-        g = frame[frame["group"] == group]
-        groups[group] = {
-            condition: {
-                **{f"{m}_mean": float(c[m].mean()) for m in MEASURES},
-                **{f"{m}_sd": float(c[m].std(ddof=1)) if len(c) > 1 else 0.0 for m in MEASURES},
-                "success_rate": float(c["success"].mean()),
-                "wall_contacts_mean": float(c["wall_contacts"].mean()),
-            }
-            for condition, c in g.groupby("condition")
-        }
-        for measure in MEASURES:
-            tests.append({"group": group, "measure": measure, **_paired(g, measure, "VO", "HV")})
+    groups, tests = _group_summaries(frame, list(config.group_sizes))
     # HV at zero gain against VO: the participants must not tell them apart
     progress("HV with haptic gain 0")
-    zero_rows = []
-    for i in range(config.group_sizes.get(config.gain_zero_group, 0)):
-        seed = config.seed + 1000 * GROUPS.index(config.gain_zero_group) + i
-        traits = simulated_participant(config.gain_zero_group, seed)
-        for condition, gain, loop_seed in (("VO", None, seed), ("HV", 0.0, seed + 500)):
-            s = run_lcca_trial(
-                traits,
-                condition,
-                loop_seed,
-                estimator,
-                haptic_gain=gain,
-                max_s=config.max_s,
-                phantom=phantom,
-            ).summary
-            zero_rows.append(
-                {"participant": i, "condition": condition, **{m: s[m] for m in MEASURES}}
-            )
-    zero = pd.DataFrame(zero_rows)
-    gain_zero = {m: _paired(zero, m, "VO", "HV") for m in MEASURES} if len(zero) else {}
+    gain_zero = _gain_zero(config, estimator, phantom)
     report = {
         "config": asdict(config),
         "groups": groups,
