@@ -71,6 +71,21 @@ Progress = Callable[[int, int, str], None]
 """progress(done, total, what): called before each candidate of each round."""
 
 
+_Found = tuple[Candidate, Effect, Float1D, Float1D, int]
+"""A candidate, its effect, the chain's coefficients, prediction and parameter count."""
+
+
+@dataclass(frozen=True)
+class _Round:
+    """One round of the forward selection: the chain so far and how it does."""
+
+    number: int
+    chain: Chain
+    pred: Float1D
+    rmse: float
+    bic: float
+
+
 @dataclass
 class Calibrator:
     """Greedy forward selection of effects on a base model, judged on a held-out block.
@@ -215,30 +230,8 @@ class Calibrator:
             remaining = _remaining(families, chain, marker=bool(open_terms))
             if not remaining:
                 break
-            bic = self._bic(data, pred, k)
-            found: list[tuple[Candidate, Effect, Float1D, Float1D, int]] = []
-            for i, family in enumerate(remaining):
-                if family == OPEN:
-                    remaining.extend(_remaining(open_terms, chain, marker=False))
-                    continue
-                if progress is not None:
-                    progress(i, len(remaining), f"round {round_ + 1}: {family}")
-                effect = self.base_.effect(family)
-                value = search(self.base_, data, self.train_, chain, effect)
-                c_coef, c_pred, c_k = self._fit_chain(data, [*chain, (effect, value)])
-                c_rmse = _rmse(y_test - c_pred[self.test_])
-                p = diebold_mariano(y_test - pred[self.test_], y_test - c_pred[self.test_])
-                cand = Candidate(
-                    family,
-                    round_ + 1,
-                    value,
-                    c_rmse,
-                    1.0 - c_rmse / rmse,
-                    p,
-                    self._bic(data, c_pred, c_k) - bic,
-                )
-                found.append((cand, effect, c_coef, c_pred, c_k))
-                cand.reason = self._reason(cand, effect, c_coef, data)
+            step = _Round(round_ + 1, chain, pred, rmse, self._bic(data, pred, k))
+            found = self._candidates(data, step, remaining, open_terms, progress)
             passing = [f for f in found if not f[0].reason]
             self.candidates_.extend(f[0] for f in found)
             if progress is not None:
@@ -260,6 +253,49 @@ class Calibrator:
         self.model_ = CalibratedModel(self.base_, chain, coef, _settings(self.base_))
         self.prediction_ = pred
         self.chain_ = chain
+        self._diagnose(data, pred)
+        return self
+
+    def _candidates(
+        self,
+        data: CalibrationData,
+        step: _Round,
+        remaining: list[str],
+        open_terms: list[str],
+        progress: Progress | None,
+    ) -> list[_Found]:
+        """Each remaining family (the open terms in place of their marker) searched,
+        fitted after `step.chain` and judged on the held-out block."""
+        y_test = data.y[self.test_]
+        found: list[_Found] = []
+        for i, family in enumerate(remaining):
+            if family == OPEN:
+                remaining.extend(_remaining(open_terms, step.chain, marker=False))
+                continue
+            if progress is not None:
+                progress(i, len(remaining), f"round {step.number}: {family}")
+            effect = self.base_.effect(family)
+            value = search(self.base_, data, self.train_, step.chain, effect)
+            c_coef, c_pred, c_k = self._fit_chain(data, [*step.chain, (effect, value)])
+            c_rmse = _rmse(y_test - c_pred[self.test_])
+            p = diebold_mariano(y_test - step.pred[self.test_], y_test - c_pred[self.test_])
+            cand = Candidate(
+                family,
+                step.number,
+                value,
+                c_rmse,
+                1.0 - c_rmse / step.rmse,
+                p,
+                self._bic(data, c_pred, c_k) - step.bic,
+            )
+            found.append((cand, effect, c_coef, c_pred, c_k))
+            cand.reason = self._reason(cand, effect, c_coef, data)
+        return found
+
+    def _diagnose(self, data: CalibrationData, pred: Float1D) -> None:
+        """The residual tests, the verdict, the fit percentages and the confidence
+        intervals of the fitted model on the held-out block."""
+        y_test = data.y[self.test_]
         inputs = {k: v[self.test_] for k, v in data.signals.items() if k != "t"}
         self.tests_before_ = residual_tests(
             y_test - self.base_prediction_[self.test_], inputs, self.max_lag
@@ -277,7 +313,6 @@ class Calibrator:
             self.model_, data, self.train_
         )
         self.data_ = data
-        return self
 
     def report(self) -> dict[str, Any]:
         """The JSON report: the contract keys first, then context."""
