@@ -28,7 +28,7 @@ residual, while the decision rests on held-out prediction, which they cannot gam
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -61,14 +61,12 @@ from teleop_core.calibration.plausibility import effect_coefficients, implausibl
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
 from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
+from teleop_core.progress import Progress, no_progress
 
 BIC_DECISIVE = 10.0
 """Training-BIC difference that decides between two candidates (Kass and Raftery
 1995: above 10 is "very strong" evidence): a look-alike further behind is no
 alternative, whatever the held-out block says."""
-
-Progress = Callable[[int, int, str], None]
-"""progress(done, total, what): called before each candidate of each round."""
 
 
 _Found = tuple[Candidate, Effect, Float1D, Float1D, int]
@@ -199,8 +197,29 @@ class Calibrator:
                 out.append(cand.family)
         return out
 
-    def fit(self, data: CalibrationData, progress: Progress | None = None) -> Calibrator:
-        """Run the loop on `data`; fitted attributes end in `_`."""
+    def fit(self, data: CalibrationData, progress: Progress = no_progress) -> Calibrator:
+        """Run the loop on `data`; fitted attributes end in `_`.
+
+        Parameters
+        ----------
+        data
+            The recording as the base model reads it (`BaseModel.read` or `.data`).
+        progress
+            Told each candidate of each round (``"round 2: stribeck"``, k of n) and
+            each round's end.
+
+        Returns
+        -------
+        Calibrator
+            Itself, fitted: `model_` (the calibrated model), `chain_` (the effects
+            added), `candidates_`, `rmse_before_` / `rmse_after_` on the held-out block,
+            the residual tests and the verdict.
+
+        Raises
+        ------
+        TeleopInputError
+            The recording has fewer than 200 samples.
+        """
         if len(data) < 200:
             raise TeleopInputError(
                 f"recording {data.name} has {len(data)} samples; expected at least 200 "
@@ -234,8 +253,7 @@ class Calibrator:
             found = self._candidates(data, step, remaining, open_terms, progress)
             passing = [f for f in found if not f[0].reason]
             self.candidates_.extend(f[0] for f in found)
-            if progress is not None:
-                progress(len(remaining), len(remaining), f"round {round_ + 1} done")
+            progress(f"round {round_ + 1} done", len(remaining), len(remaining))
             if not passing:
                 break
             best = _best(passing, self.min_gain)
@@ -262,7 +280,7 @@ class Calibrator:
         step: _Round,
         remaining: list[str],
         open_terms: list[str],
-        progress: Progress | None,
+        progress: Progress,
     ) -> list[_Found]:
         """Each remaining family (the open terms in place of their marker) searched,
         fitted after `step.chain` and judged on the held-out block."""
@@ -272,8 +290,7 @@ class Calibrator:
             if family == OPEN:
                 remaining.extend(_remaining(open_terms, step.chain, marker=False))
                 continue
-            if progress is not None:
-                progress(i, len(remaining), f"round {step.number}: {family}")
+            progress(f"round {step.number}: {family}", i, len(remaining))
             effect = self.base_.effect(family)
             value = search(self.base_, data, self.train_, step.chain, effect)
             c_coef, c_pred, c_k = self._fit_chain(data, [*step.chain, (effect, value)])
@@ -315,7 +332,16 @@ class Calibrator:
         self.data_ = data
 
     def report(self) -> dict[str, Any]:
-        """The JSON report: the contract keys first, then context."""
+        """The JSON report of a fitted loop (`study calibrate`'s REPORT.json).
+
+        Returns
+        -------
+        dict
+            The contract keys first (``rmse_before``, ``rmse_after``,
+            ``effects_added``, ``candidates_rejected``), then context: the base
+            model's parameters with intervals, the residual tests before and after, the
+            verdict, the look-alikes.
+        """
         added, discovered, ambiguous = [], [], []
         mse = [self.rmse_before_**2] + [r**2 for r in self.step_rmse_]
         explained = mse[0] - mse[-1]

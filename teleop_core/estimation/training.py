@@ -20,7 +20,6 @@ estimator that learned nothing; the rules here are the ones that prevent it:
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -44,6 +43,7 @@ from teleop_core.estimation.regimes import (
 )
 from teleop_core.follower.physics import PhysicsParams, fit_physics
 from teleop_core.follower.recording import FollowerRecording
+from teleop_core.progress import Progress, no_progress
 
 R_PHYSICS_SCALES = (1.0, 4.0, 16.0)
 """Multiples of eq. 1's training error variance tried as the EKF's physics-model R."""
@@ -163,7 +163,7 @@ def train_estimator(
     pipeline_rate_hz: float = ForceEstimator.pipeline_rate_hz,
     physics: PhysicsParams | None = None,
     ekf_q_n2: float | None = None,
-    progress: Callable[[int, float, float], None] | None = None,
+    progress: Progress = no_progress,
     extension: ExtendedPhysics | None = None,
     effects: bool = False,
 ) -> tuple[ForceEstimator, TrainingSummary]:
@@ -207,6 +207,7 @@ def train_estimator(
     train_mask = np.zeros(len(recording), bool)
     train_mask[train_idx + T - 1] = True
     if extension is None and physics is None and effects:
+        progress("finding the effects eq. 1 lacks")
         extension, report = find_effects(recording, wheel_radius_m=wheel_radius_m)
         notes.append(_effects_note(extension, report))
     if extension is not None and extension.stage == "physics":
