@@ -32,9 +32,10 @@ from study.protocol.stream_export import (
 )
 from study.protocol.tasks import COMPLETION_TIME, SampleColumn, get_task
 from study.protocol.trial_table import measure_columns, trial_frame
+from teleop_core.progress import Progress, no_progress
 
 if TYPE_CHECKING:
-    from study.protocol.sample_export import ExportTrial, Progress, SampleSelection
+    from study.protocol.sample_export import ExportTrial, SampleSelection
 
 CODEBOOK = {
     "participant": ("", "pseudonymous participant code, e.g. P007"),
@@ -97,7 +98,7 @@ def export_data(
     *,
     per_trial: bool = False,
     workers: int | None = None,
-    progress: Progress | None = None,
+    progress: Progress = no_progress,
 ) -> list[Path]:
     """Write trials, tlx (and samples) with the contract's columns, plus the codebook.
 
@@ -242,7 +243,7 @@ def _write_sample_files(
     selection: SampleSelection,
     *,
     per_trial: bool,
-    progress: Progress | None,
+    progress: Progress,
     workers: int | None,
     tasks: tuple[str, ...],
 ) -> list[Path]:

@@ -62,6 +62,7 @@ from study.errors import StudyInputError
 from study.protocol.design import StudyDesign
 from study.protocol.export_files import StagedTableFile, escape_array, refuse_symlink
 from study.protocol.tasks import Task, get_task
+from teleop_core.progress import Progress, no_progress
 
 _KEY_FIELDS = [
     pa.field("participant", pa.string()),
@@ -99,9 +100,6 @@ CSV_SPAN_ROWS = 16_384
 threads and waits its turn, so CSV spans are smaller than Parquet's (`SPAN_ROWS`, one
 row group each). Measured on 2 million samples with two threads: 65,536-sample CSV
 spans raised the peak memory by 125 MB, 16,384-sample ones by 69 MB."""
-
-Progress = Callable[[int, int], None]
-"""Called as `progress(trials_done, trials_total)` after each trial."""
 
 
 @dataclass(frozen=True)
@@ -317,7 +315,7 @@ def write_samples(
     fmt: str,
     selection: SampleSelection = SampleSelection(),
     *,
-    progress: Progress | None = None,
+    progress: Progress = no_progress,
     span_rows: int | None = None,
     workers: int | None = None,
     tasks: Iterable[str] = (),
@@ -337,8 +335,7 @@ def write_samples(
             for done, spans in enumerate(plan, 1):
                 for _ in spans:
                     out.write(next(parts))
-                if progress is not None:
-                    progress(done, len(trials))
+                progress("samples", done, len(trials))
         out.commit()
     return out.rows
 
@@ -360,7 +357,7 @@ def write_samples_per_trial(
     fmt: str,
     selection: SampleSelection = SampleSelection(),
     *,
-    progress: Progress | None = None,
+    progress: Progress = no_progress,
     span_rows: int | None = None,
     workers: int | None = None,
 ) -> PerTrialResult:
@@ -408,6 +405,5 @@ def write_samples_per_trial(
                         out.write(next(parts[trial.task]))
                     written.append(out.commit())
                 rows += out.rows
-            if progress is not None:
-                progress(done, len(trials))
+            progress("samples", done, len(trials))
     return PerTrialResult(written, skipped, rows)
