@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,6 +28,7 @@ import numpy as np
 
 from teleop_core.calibration import FAMILIES, Calibrator, FollowerBase, MasterBase
 from teleop_core.calibration.synthetic import JND_N, follower_recording, master_recording
+from teleop_core.progress import Progress, no_progress
 
 
 @dataclass(frozen=True)
@@ -131,14 +131,14 @@ def notes_runs(config: CalibrateBenchConfig) -> dict[str, Any]:
 def run_calibrate_bench(
     config: CalibrateBenchConfig,
     out_dir: Path,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress = no_progress,
     only_open: bool = False,
 ) -> dict[str, Any]:
     """Run every part, write `calibrate_bench.md` and `calibrate.json` to `out_dir`."""
     from study.bench.calibrate_open import markdown as open_markdown
     from study.bench.calibrate_open import open_part
 
-    say = progress or (lambda _msg: None)
+    say = progress
     out_dir.mkdir(parents=True, exist_ok=True)
     measured = open_part(config.duration_s, config.rate_hz, config.seed, say)
     if only_open:

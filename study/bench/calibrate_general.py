@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -41,6 +40,7 @@ from teleop_core.calibration.general import (
     general_recording,
     oracle_rmse,
 )
+from teleop_core.progress import Progress, no_progress
 
 DATA_NOTE = "simulated follower recordings (teleop_core.calibration.general), not measured data"
 
@@ -175,7 +175,7 @@ def _overall(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run_generalise_bench(
-    config: GeneraliseConfig, folder: Path, say: Callable[[str], None] | None = None
+    config: GeneraliseConfig, folder: Path, say: Progress = no_progress
 ) -> dict[str, Any]:
     """Run every recording of `plan`, then write DIR/calibrate_general.md; the report."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -184,10 +184,7 @@ def run_generalise_bench(
     todo = plan(config)
     runs = []
     for i, (group, families, seed) in enumerate(todo):
-        if say is not None:
-            say(
-                f"generalisation {i + 1}/{len(todo)}: {'+'.join(families) or 'clean'} (seed {seed})"
-            )
+        say(f"generalisation: {'+'.join(families) or 'clean'} (seed {seed})", i + 1, len(todo))
         run = run_one(group, families, seed, config)
         runs.append(run)
         with log.open("a") as fh:

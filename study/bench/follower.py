@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,6 +53,7 @@ from teleop_core.follower import scenarios
 from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.plant import FollowerDrive
 from teleop_core.follower.sensors import acquire, decimation, reference_velocity
+from teleop_core.progress import Progress, no_progress
 
 PARTS = ("tables", "generalisation", "training")
 SIMULATED_NOTE = (
@@ -204,7 +204,7 @@ def table_ii(
 def table_iii(
     config: FollowerBenchConfig,
     gru_config: GruConfig,
-    progress: Callable[[str], None],
+    progress: Progress,
 ) -> tuple[dict[str, Any], plt.Figure, np.ndarray]:
     progress("Table III: simulating the teleoperation dataset")
     recording = navigation_recording(
@@ -285,7 +285,7 @@ def table_iii(
 
 
 def window_sweep(
-    recording: FollowerRecording, config: FollowerBenchConfig, progress: Callable[[str], None]
+    recording: FollowerRecording, config: FollowerBenchConfig, progress: Progress
 ) -> dict[str, float]:
     out: dict[str, float] = {}
     for T in config.sweep_windows:
@@ -328,7 +328,7 @@ def causal_update_timing(
 def run_follower_bench(
     config: FollowerBenchConfig,
     out_dir: Path,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
 ) -> dict[str, Any]:
     """Run every experiment, write DIR/follower_bench.md and the figures; return the report."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -357,7 +357,7 @@ def run_tables(
     recording: FollowerRecording,
     out_dir: Path,
     report: dict[str, Any],
-    progress: Callable[[str], None],
+    progress: Progress,
 ) -> None:
     """Tables I-III, Fig. 8 and the costs, into `report` and DIR's figures."""
     progress("Table I: velocity sensing")
@@ -368,10 +368,8 @@ def run_tables(
     gru_config = GruConfig(max_epochs=config.epochs)
     start = time.perf_counter()
 
-    def on_epoch(epoch: int, train_rmse: float, val_rmse: float) -> None:
-        progress(
-            f"training the residual GRU: epoch {epoch}/{config.epochs}, validation {val_rmse:.4f} N"
-        )
+    def on_epoch(step: str, done: int = 0, total: int = 0) -> None:
+        progress(f"training the residual GRU: {step}", done, total)
 
     estimator, summary = train_estimator(recording, gru_config, seed=config.seed, progress=on_epoch)
     report["training"] = {

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +38,7 @@ from study.tasks.lcca.figures import CONDITION_COLORS, plot_tip_paths
 from study.tasks.lcca.trial import run_lcca_trial
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.phantom.lcca import LccaPhantom
+from teleop_core.progress import Progress, no_progress
 
 MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
 LABELS = {
@@ -144,7 +144,7 @@ def run_lcca_bench(
     config: LccaBenchConfig,
     estimator: ForceEstimator,
     out_dir: Path,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
 ) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     phantom = LccaPhantom()

@@ -14,12 +14,12 @@ table and key says the trials are simulated.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import pandas as pd
 
 from teleop_core.notes import task
+from teleop_core.progress import Progress, no_progress
 
 SOURCE = "simulated participants (study.tasks.notes.trial), not measured people"
 PAPER = {
@@ -68,9 +68,7 @@ def surgeons_summary(trials: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def surgeons_trials(
-    n: int, seed: int, progress: Callable[[str], None] = lambda _: None
-) -> pd.DataFrame:
+def surgeons_trials(n: int, seed: int, progress: Progress = no_progress) -> pd.DataFrame:
     """One NOTES trial per simulated expert in VO and in HV (the same person, seed for
     seed); one row per trial with the measures of `PAPER`, completion and success."""
     from study.protocol.traits import simulated_participant

@@ -43,6 +43,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from study.errors import StudyInputError
+from teleop_core.progress import Progress, no_progress
 
 SIMULATE_ARGS = (
     "simulate",
@@ -265,7 +266,7 @@ def bench_startup(
     runs: int,
     db_url: str | None = None,
     rows: int = 1_000_000,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
     demo_runs: int = 1,
 ) -> StartupBenchResult:
     """Every figure of the module's docstring. Without `db_url`, `study analyze` and the
