@@ -21,8 +21,10 @@ from study.commands.base import (
     count_option,
     json_option,
     out_dir_option,
+    status_progress,
 )
 from study.errors import StudyInputError
+from teleop_core.progress import Progress
 
 _json_option = json_option("Write every table as JSON here.")
 _out_option = out_dir_option("Folder for the Markdown tables, the figures and any data files.")
@@ -39,14 +41,14 @@ def _run_report(
     json_path: Path,
     markdown: Path,
     status: str,
-    run: Callable[[Callable[[str], None]], dict[str, Any]],
+    run: Callable[[Progress], dict[str, Any]],
 ) -> None:
     """Run a bench under a status line on stderr, write its JSON, show its Markdown
     (the command has checked the JSON's folder before loading anything)."""
     from rich.console import Console
 
     with Console(stderr=True).status(status) as line:
-        report = run(line.update)
+        report = run(status_progress(line))
     write_json(json_path, report)
     click.echo(markdown.read_text())
 
@@ -56,7 +58,7 @@ def _run_with_estimator(
     model_dir: Path | None,
     markdown: Path,
     status: str,
-    run: Callable[[Any, Callable[[str], None]], dict[str, Any]],
+    run: Callable[[Any, Progress], dict[str, Any]],
 ) -> None:
     """`_run_report` of a bench that runs the force estimator of --estimator (loaded
     after the JSON's folder is checked): `run(estimator, progress)`."""

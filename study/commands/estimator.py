@@ -165,12 +165,8 @@ def train_cmd(
     ) as progress:
         task = progress.add_task("epochs", total=epochs, rmse="")
 
-        def report(epoch: int, train_rmse: float, val_rmse: float) -> None:
-            progress.update(
-                task,
-                completed=epoch,
-                rmse=f"train {train_rmse:.4f} N, validation {val_rmse:.4f} N",
-            )
+        def report(step: str, done: int = 0, total: int = 0) -> None:
+            progress.update(task, completed=done, rmse=step)
 
         model, summary = train_estimator(
             data,

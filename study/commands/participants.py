@@ -101,7 +101,7 @@ def fit(
     with opened_database(db_url) as engine, progress_bar() as bar:
         bars: dict[str, object] = {}
 
-        def progress(step: str, k: int, n: int) -> None:
+        def progress(step: str, k: int = 0, n: int = 0) -> None:
             if step not in bars:
                 bars[step] = bar.add_task(
                     {

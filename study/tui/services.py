@@ -19,12 +19,13 @@ from sqlalchemy import Engine
 from sqlalchemy.orm import Session
 
 from study.protocol.roster import load_study, schedule
+from teleop_core.progress import Progress, no_progress
 
 if TYPE_CHECKING:
     from study.protocol.observer import LastingObserver
     from teleop_core.estimation.estimator import ForceEstimator
 
-CalibrateFn = Callable[[Path, str, Callable[[str], None]], dict[str, Any]]
+CalibrateFn = Callable[[Path, str, Progress], dict[str, Any]]
 """calibrate(recording, model, progress) -> the report (`study calibrate`'s REPORT.json keys)."""
 
 
@@ -227,7 +228,7 @@ class StudyServices:
 
 
 def calibrate_recording(
-    recording: Path, model: str, progress: Callable[[str], None] = lambda _: None
+    recording: Path, model: str, progress: Progress = no_progress
 ) -> dict[str, Any]:
     """The calibration loop of `study calibrate` on one recording: its report.
 
@@ -243,7 +244,7 @@ def calibrate_recording(
     base = BASE_MODELS[model]
     calibrator = Calibrator(base).fit(
         base.read(recording),
-        progress=lambda done, total, what: progress(f"calibrating: {what} ({done}/{total})"),
+        progress=progress,
     )
     return calibrator.report()
 
