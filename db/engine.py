@@ -40,7 +40,23 @@ _WRITE_LOCK_KEY = 7_240_001
 def resolve_url(db: str | URL | None = None) -> URL:
     """The database URL from `--db`, else `STUDY_DB`, else `./study.db`.
 
-    A value without `://` is a path to an SQLite file.
+    Parameters
+    ----------
+    db
+        A URL (`sqlite:///FILE`, `postgresql+psycopg://USER@HOST:PORT/DB`), a path to an
+        SQLite file (a value without `://`), or None for the environment's or the
+        default.
+
+    Returns
+    -------
+    URL
+        The parsed URL, its SQLite parameters checked.
+
+    Raises
+    ------
+    DbInputError
+        The text is no URL, names another backend, or has an SQLite parameter
+        `study` does not know (`SQLITE_QUERY`) or a value out of range.
     """
     if isinstance(db, URL):
         return db
@@ -105,18 +121,48 @@ def _seconds(text: str) -> float | None:
 
 
 def describe(url: URL | Engine) -> str:
-    """The URL as it can be shown to a user (password hidden)."""
+    """The URL as it can be shown to a user.
+
+    Parameters
+    ----------
+    url
+        A URL, or an engine whose URL is meant.
+
+    Returns
+    -------
+    str
+        The URL with its password hidden.
+    """
     if isinstance(url, Engine):
         url = url.url
     return url.render_as_string(hide_password=True)
 
 
 def is_sqlite(bind: Engine | Connection) -> bool:
+    """Whether `bind` (an engine or a connection) talks to SQLite."""
     return bind.dialect.name == "sqlite"
 
 
 def make_engine(url: str | URL) -> Engine:
-    """An engine for `url` with the per-backend settings described in the module docstring."""
+    """An engine for `url` with the per-backend settings described in the module docstring.
+
+    Parameters
+    ----------
+    url
+        A database URL (see `resolve_url`).
+
+    Returns
+    -------
+    Engine
+        SQLite: WAL (unless in memory or read-only), foreign keys on, the busy timeout
+        of `busy_timeout_ms`, and a watch for the file being deleted or moved;
+        PostgreSQL: connections checked before use.
+
+    Raises
+    ------
+    DbInputError
+        The URL names a driver that is not installed or cannot be used.
+    """
     url = make_url(url) if isinstance(url, str) else url
     try:
         if url.get_backend_name() == "sqlite":
@@ -138,8 +184,23 @@ def make_engine(url: str | URL) -> Engine:
 
 
 def busy_timeout_ms(url: URL) -> int:
-    """How long a writer waits for another's lock: `?timeout=SECONDS` in the URL (as
-    pysqlite spells it), else `SQLITE_BUSY_TIMEOUT_MS`."""
+    """How long a writer waits for another's lock.
+
+    Parameters
+    ----------
+    url
+        An SQLite URL, possibly with `?timeout=SECONDS` (as pysqlite spells it).
+
+    Returns
+    -------
+    int
+        The timeout in milliseconds: the URL's, else `SQLITE_BUSY_TIMEOUT_MS`.
+
+    Raises
+    ------
+    DbInputError
+        The timeout is not a number of seconds from 0 to `MAX_TIMEOUT_S`.
+    """
     raw = url.query.get("timeout")
     if raw is None:
         return SQLITE_BUSY_TIMEOUT_MS
@@ -218,7 +279,18 @@ def write_transaction(engine: Engine) -> Iterator[Connection]:
 
     Use it for read-then-write work that must not interleave with another process
     (the next participant code, a schema upgrade). SQLite: `BEGIN IMMEDIATE`;
-    PostgreSQL: a transaction-scoped advisory lock. Commits on success.
+    PostgreSQL: a transaction-scoped advisory lock.
+
+    Parameters
+    ----------
+    engine
+        The study database.
+
+    Yields
+    ------
+    Connection
+        A connection inside the transaction; it commits when the block ends without an
+        exception and rolls back otherwise.
     """
     with engine.connect() as conn:
         if is_sqlite(conn):
@@ -230,5 +302,16 @@ def write_transaction(engine: Engine) -> Iterator[Connection]:
 
 
 def make_session_factory(engine: Engine) -> sessionmaker[Session]:
-    """ORM sessions bound to `engine`; objects stay readable after commit."""
+    """ORM sessions bound to `engine`.
+
+    Parameters
+    ----------
+    engine
+        The study database.
+
+    Returns
+    -------
+    sessionmaker
+        A session factory whose objects stay readable after commit.
+    """
     return sessionmaker(engine, expire_on_commit=False)

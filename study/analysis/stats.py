@@ -66,6 +66,24 @@ ANOVA_COLUMNS = ("task", "measure", "source", "F", "df1", "df2", "p", "np2", "ss
 
 @dataclass
 class Analysis:
+    """The study's analysis: its tables, notes and data source (`analyze` returns it).
+
+    Attributes
+    ----------
+    descriptives
+        `descriptives` of the participant means.
+    comparisons
+        `compare_conditions`' tests, `COMPARISON_COLUMNS`.
+    mixed_anova
+        `mixed_anova`'s table, `ANOVA_COLUMNS`.
+    lmm
+        `mixed_model`'s fixed effects.
+    exclusions
+        Who was left out of which test, and why (one line each).
+    warnings
+        Notes of the ANOVA and the mixed model (skipped fits, unequal groups, boundary).
+    """
+
     descriptives: pd.DataFrame
     comparisons: pd.DataFrame
     mixed_anova: pd.DataFrame
@@ -105,7 +123,20 @@ class Analysis:
 
 
 def descriptives(long: pd.DataFrame) -> pd.DataFrame:
-    """Columns: task, measure, group, condition, n, mean, sd, median, iqr, ci_low, ci_high."""
+    """Descriptive statistics of the participant means.
+
+    Parameters
+    ----------
+    long
+        One row per participant, task, measure and condition: columns task, measure,
+        group, condition, participant, value.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Per task, measure, group and condition: n, mean, sd, median, iqr and the
+        t-based 95 % interval of the mean (ci_low, ci_high); NaN where n = 1.
+    """
     rows = []
     for (task, measure, group, condition), g in long.groupby(
         ["task", "measure", "group", "condition"], sort=False
@@ -135,7 +166,19 @@ def descriptives(long: pd.DataFrame) -> pd.DataFrame:
 
 
 def hedges_g_av(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Lakens (2013) eq. 10 with Hedges' correction: d_av (1 - 3 / (4 (n1 + n2) - 9))."""
+    """Hedges' g_av of paired samples [lakens2013].
+
+    Parameters
+    ----------
+    vo, hv
+        The participants' values in the two conditions, paired by position.
+
+    Returns
+    -------
+    float
+        Lakens' eq. 10 with Hedges' correction, d_av (1 - 3 / (4 (n1 + n2) - 9)), of
+        HV - VO; NaN when neither condition has any spread.
+    """
     n = len(vo)
     sd_av = (np.std(vo, ddof=1) + np.std(hv, ddof=1)) / 2
     if sd_av == 0:
@@ -208,8 +251,19 @@ def at_resolution(diff: np.ndarray, scale: float | None = None) -> np.ndarray:
 
 
 def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Matched-pairs rank-biserial correlation of HV - VO (Kerby 2014): (R+ - R-) / total,
-    on the differences at the data's resolution (`at_resolution`)."""
+    """Matched-pairs rank-biserial correlation of HV - VO [kerby2014].
+
+    Parameters
+    ----------
+    vo, hv
+        The participants' values in the two conditions, paired by position.
+
+    Returns
+    -------
+    float
+        (R+ - R-) / total over the ranks of the non-zero differences, taken at the
+        data's resolution (`at_resolution`); 0 when every difference is zero.
+    """
     d = at_resolution(hv - vo, _magnitude(vo, hv))
     d = d[d != 0]
     ranks = stats.rankdata(np.abs(d))
@@ -233,6 +287,18 @@ def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[
     convention) and p is the normal approximation with the tie-corrected variance and a
     continuity correction ("asymptotic"). V is R's statistic: the sum of the ranks of the
     positive differences (scipy reports min(R+, R-) instead).
+
+    Parameters
+    ----------
+    diff
+        The paired differences (HV - VO).
+    scale
+        The magnitude of the measured values (default the largest |diff|).
+
+    Returns
+    -------
+    tuple of (float, float, str)
+        V, the two-sided p-value, and the method, ``"exact"`` or ``"asymptotic"``.
     """
     full = at_resolution(diff, scale)
     d = full[full != 0]
@@ -249,6 +315,26 @@ def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[
 def compare_conditions(
     long: pd.DataFrame, a: str = "VO", b: str = "HV"
 ) -> tuple[pd.DataFrame, list[str]]:
+    """Condition `b` against `a` per task, measure and group, on participant means.
+
+    A paired t test with Hedges' g_av where the differences pass Shapiro-Wilk at
+    `ALPHA`, else the Wilcoxon signed-rank test with the rank-biserial correlation; the
+    p-values of the groups of one task and measure are Holm-adjusted together.
+
+    Parameters
+    ----------
+    long
+        One row per participant, task, measure and condition (columns task, measure,
+        group, condition, participant, value).
+    a, b
+        The two conditions.
+
+    Returns
+    -------
+    tuple of (pandas.DataFrame, list of str)
+        The tests (`COMPARISON_COLUMNS`), and the exclusions: participants without both
+        conditions, and groups with fewer than 3 pairs (not tested).
+    """
     rows, excluded = [], []
     # one pivot for everything (a pivot per group costs more than all the tests)
     keys = ["task", "measure", "group", "participant"]
@@ -324,8 +410,26 @@ def mixed_anova(
 ) -> tuple[pd.DataFrame, list[str]]:
     """Group x condition mixed ANOVA per task x measure, with Type II or III sums of squares.
 
-    Returns columns task, measure, source (group, condition, interaction), F, df1, df2,
-    p, np2 (partial eta squared), ss_type; and notes (skipped analyses, unequal sizes).
+    Parameters
+    ----------
+    long
+        One row per participant, task, measure and condition (columns task, measure,
+        group, condition, participant, value).
+    a, b
+        The two conditions.
+    ss_type
+        2 or 3 (`DEFAULT_SS_TYPE` says why 2 by default).
+
+    Returns
+    -------
+    tuple of (pandas.DataFrame, list of str)
+        Columns task, measure, source (group, condition, interaction), F, df1, df2, p,
+        np2 (partial eta squared), ss_type; and notes (skipped analyses, unequal sizes).
+
+    Raises
+    ------
+    StudyInputError
+        `ss_type` is neither 2 nor 3.
     """
     if ss_type not in SS_TYPES:
         raise StudyInputError(f"sums-of-squares type {ss_type!r}; expected 2 or 3")
@@ -357,8 +461,19 @@ CONDITION_TERM = "C(condition, Treatment('VO'))"
 
 
 def lmm_design(data: pd.DataFrame) -> tuple[np.ndarray, list[str]]:
-    """The fixed-effects design of value ~ condition * group, treatment coding with VO and
-    the alphabetically first group as reference, columns named as patsy names them."""
+    """The fixed-effects design of value ~ condition * group.
+
+    Parameters
+    ----------
+    data
+        One row per trial, with columns condition and group.
+
+    Returns
+    -------
+    tuple of (numpy.ndarray, list of str)
+        The design matrix (treatment coding, VO and the alphabetically first group as
+        reference) and its columns' names as patsy names them.
+    """
     conditions = [c for c in sorted(data["condition"].unique()) if c != "VO"]
     groups = sorted(data["group"].unique())[1:]
     cond = {c: (data["condition"] == c).to_numpy(float) for c in conditions}
@@ -383,7 +498,22 @@ def mixed_model(
     """The linear mixed model of every trial measure (default: each task's analysed
     measures, `study.protocol.tasks`), per task: REML with a random intercept per
     participant (`stats_lmm`, lme4's optimum); p from Wald z tests. A fit on the boundary
-    (lme4's `isSingular`) is noted."""
+    (lme4's `isSingular`) is noted.
+
+    Parameters
+    ----------
+    trials
+        One row per measured trial: participant, group, task, condition and the
+        measures.
+    measures
+        The measures to model (default: each task's analysed measures).
+
+    Returns
+    -------
+    tuple of (pandas.DataFrame, list of str)
+        The fixed effects (task, measure, term, estimate, se, p, p_method), and notes (skipped
+        or singular fits).
+    """
     from study.analysis.stats_lmm import SINGULAR_TOL, fit_random_intercept
     from study.protocol.tasks import get_task
 
@@ -446,8 +576,26 @@ def analyze(
     ss_type: int = DEFAULT_SS_TYPE,
     withdrawn: Sequence[str] = (),
 ) -> Analysis:
-    """The analysis of `trials` and the participant means `long`; `withdrawn` are the
-    exclusion notes of participants already left out (`frames.without_withdrawn`)."""
+    """The study's analysis: descriptives, condition tests, mixed ANOVA, mixed model.
+
+    Parameters
+    ----------
+    trials
+        One row per measured trial (`study.analysis.frames`).
+    long
+        The participant means, one row per participant, task, measure and condition.
+    ss_type
+        Sums-of-squares type of the mixed ANOVA (2 or 3).
+    withdrawn
+        The exclusion notes of participants already left out
+        (`frames.without_withdrawn`).
+
+    Returns
+    -------
+    Analysis
+        The tables, the exclusions and notes, and the data source (simulated or
+        measured trials).
+    """
     comparisons, excluded = compare_conditions(long)
     excluded = [*withdrawn, *_missing_questionnaires(trials, long), *excluded]
     anova, anova_notes = mixed_anova(long, ss_type=ss_type)
