@@ -1,4 +1,4 @@
-"""`study bench notes`: the NOTES device's targets (seed 001) measured on the simulation.
+"""`study bench notes`: the NOTES device's targets ([notes]) measured on the simulation.
 
 - Default parameters: force bandwidth and settling time of the linear model and as
   characterised (ramps and chirps with friction on), continuous limits from the ramps.

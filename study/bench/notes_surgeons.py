@@ -1,7 +1,7 @@
-"""The surgeons' benchmark of seed 001 (IV, [20]) on simulated experts: part of
+"""The surgeons' benchmark of [notes] (IV, [20]) on simulated experts: part of
 `study bench notes`.
 
-Seed 001 reports, over 10 surgeons in porcine NOTES procedures, the mean of each
+[notes] reports, over 10 surgeons in porcine NOTES procedures, the mean of each
 surgeon's maximum pull and push, the mean maximum clockwise and counter-clockwise
 torque, and the share of the procedure's time the push exceeded the device's 5.62 N.
 Here `n` simulated experts (the paper's 10 by default) each do one NOTES trial in VO
@@ -110,7 +110,7 @@ def surgeons_report(trials: pd.DataFrame) -> tuple[dict[str, Any], list[str]]:
     n = int(vo["n"].iloc[0])
     md = [
         "",
-        f"Surgeons' benchmark (seed 001, IV: 10 surgeons, porcine NOTES) against {n} "
+        f"Surgeons' benchmark ([notes], IV: 10 surgeons, porcine NOTES) against {n} "
         f"SIMULATED experts in {CONDITION}, one trial each (HV: the same people):",
         "",
         "| measure | paper | target | simulated VO mean | SD | min-max | within | "

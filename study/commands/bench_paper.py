@@ -292,13 +292,13 @@ def bench_calibrate(
 @count_option("--draws", 10, "Seeded parameter draws per axis for the identification round trip.")
 @count_option("--trials", 4, "Simulated NOTES trials per group and condition.")
 @count_option(
-    "--surgeons", 10, "Simulated experts for the surgeons' benchmark (seed 001 had 10).", minimum=2
+    "--surgeons", 10, "Simulated experts for the surgeons' benchmark ([notes] had 10).", minimum=2
 )
 @_seed_option
 def bench_notes(
     json_path: Path, out_dir: Path, draws: int, trials: int, surgeons: int, seed: int
 ) -> None:
-    """Seed 001's NOTES device: bandwidth, settling, limits, identification round trip,
+    """The NOTES device of [notes]: bandwidth, settling, limits, identification round trip,
     and the surgeons' benchmark on simulated experts."""
     from study.bench.notes import NotesBenchConfig, run_notes_bench
 
