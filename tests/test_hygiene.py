@@ -17,7 +17,7 @@ SUFFIXES = {".py", ".md", ".toml", ".mako", ".txt", ".cfg"}
 NOTEBOOK = re.compile(
     r"\bissues?\s*#?\d+"  # "issue 24", "issue #24", "Issue 17's"
     r"|(?<![\w\"'&/])#\d{1,5}\b"  # "#24" (not a colour "#999999", not a URL fragment)
-    r"|\bseed\s+000\b"  # the paper is cited by its bibliography key
+    r"|\bseed\s+00\d\b"  # a paper is cited by its bibliography key ("seed 000", "seed 001")
     r"|\b20\d\d-[01]\d-[0-3]\d\b",  # a date
     re.IGNORECASE,
 )
@@ -37,6 +37,8 @@ def notebook_lines(text: str) -> list[tuple[int, str]]:
         ("the target band of Issue 24's fit", True),
         ("fixed in #41", True),
         ("the paper's gain (seed 000)", True),
+        ("the surgeons' benchmark of Seed 001", True),
+        ("simulated with --seed 1", False),
         ("Create Date: 2026-11-27", True),
         ('color="#999999", lw=0.6', False),
         ("the paper's gain ([endovascular], IV-D)", False),
