@@ -23,20 +23,26 @@ __all__ = ["Progress", "as_step", "describe", "no_progress"]
 
 
 class Progress(Protocol):
-    """A progress callback: `progress(step, done=0, total=0)`, its arguments by position
-    (so that a lambda with other parameter names is one).
+    """A progress callback: `progress(step, done=0, total=0)`.
 
-    Parameters
-    ----------
-    step
-        What runs now, one short line (e.g. ``"round 2: stribeck"``).
-    done
-        Units of the step done so far.
-    total
-        Units the step has in all; 0 when it is not counted.
+    `step` says what runs now in one short line (e.g. ``"round 2: stribeck"``), `done`
+    how many units of it are done and `total` how many it has (0: not counted). The
+    arguments are passed by position, so a function or lambda with other parameter
+    names is a `Progress` too.
     """
 
-    def __call__(self, step: str, done: int = 0, total: int = 0, /) -> None: ...
+    def __call__(self, step: str, done: int = 0, total: int = 0, /) -> None:
+        """Tell how far the work has come.
+
+        Parameters
+        ----------
+        step
+            What runs now, one short line.
+        done
+            Units of the step done so far.
+        total
+            Units the step has in all; 0 when it is not counted.
+        """
 
 
 def no_progress(step: str, done: int = 0, total: int = 0) -> None:
