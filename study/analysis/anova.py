@@ -3,7 +3,7 @@ one-way between-subject models, computed here in closed form.
 
 Written by hand rather than through statsmodels' `anova_lm(OLS.from_formula(...))`:
 the sums of squares of a one-way model are a few lines, and the formula parser and two
-model fits per measure cost 0.15 s of `study analyze` (issue 21). The values equal R's
+model fits per measure were most of `study analyze`'s time. The values equal R's
 afex `aov_ez(type = 2|3)` (tests/study/test_analysis.py quotes them).
 """
 
@@ -20,7 +20,7 @@ from study.analysis.distributions import f_sf
 def one_way(y: np.ndarray, group: np.ndarray) -> dict[str, Any]:
     """The sums of squares of the one-way model y ~ C(group, Sum), in closed form (what
     statsmodels' `anova_lm(OLS.from_formula(...), typ=3)` gives, without a formula
-    parser and two model fits per measure, 0.15 s of `study analyze`, issue 21).
+    parser and two model fits per measure).
 
     Group: sum over groups of n_g (mean_g - mean)^2, df G - 1 (one factor: Types I-III
     agree); residual: the within-group SS, df N - G. The intercept: Type II, N mean^2

@@ -1,4 +1,4 @@
-"""The study's statistics on participant means (seed 000, IV-D; the analysis issue).
+"""The study's statistics on participant means ([endovascular], IV-D; the analysis issue).
 
 - `descriptives`: per task, measure, group and condition: n, mean, SD, median, IQR and
   the t-based 95 % confidence interval of the mean.
@@ -219,7 +219,19 @@ def descriptive_rows(long: Long) -> list[Row]:
 
 
 def hedges_g_av(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Lakens (2013) eq. 10 with Hedges' correction: d_av (1 - 3 / (4 (n1 + n2) - 9))."""
+    """Hedges' g_av of paired samples [lakens2013].
+
+    Parameters
+    ----------
+    vo, hv
+        The participants' values in the two conditions, paired by position.
+
+    Returns
+    -------
+    float
+        Lakens' eq. 10 with Hedges' correction, d_av (1 - 3 / (4 (n1 + n2) - 9)), of
+        HV - VO; NaN when neither condition has any spread.
+    """
     n = len(vo)
     sd_av = (np.std(vo, ddof=1) + np.std(hv, ddof=1)) / 2
     if sd_av == 0:
@@ -300,8 +312,19 @@ def at_resolution(diff: np.ndarray, scale: float | None = None) -> np.ndarray:
 
 
 def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Matched-pairs rank-biserial correlation of HV - VO (Kerby 2014): (R+ - R-) / total,
-    on the differences at the data's resolution (`at_resolution`)."""
+    """Matched-pairs rank-biserial correlation of HV - VO [kerby2014].
+
+    Parameters
+    ----------
+    vo, hv
+        The participants' values in the two conditions, paired by position.
+
+    Returns
+    -------
+    float
+        (R+ - R-) / total over the ranks of the non-zero differences, taken at the
+        data's resolution (`at_resolution`); 0 when every difference is zero.
+    """
     d = at_resolution(hv - vo, _magnitude(vo, hv))
     d = d[d != 0]
     ranks = rank_average(np.abs(d))
@@ -325,6 +348,18 @@ def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[
     convention) and p is the normal approximation with the tie-corrected variance and a
     continuity correction ("asymptotic"). V is R's statistic: the sum of the ranks of the
     positive differences (scipy reports min(R+, R-) instead).
+
+    Parameters
+    ----------
+    diff
+        The paired differences (HV - VO).
+    scale
+        The magnitude of the measured values (default the largest |diff|).
+
+    Returns
+    -------
+    tuple of (float, float, str)
+        V, the two-sided p-value, and the method, ``"exact"`` or ``"asymptotic"``.
     """
     full = at_resolution(diff, scale)
     d = full[full != 0]
@@ -433,8 +468,26 @@ def mixed_anova(
 ) -> tuple[pd.DataFrame, list[str]]:
     """Group x condition mixed ANOVA per task x measure, with Type II or III sums of squares.
 
-    Returns columns task, measure, source (group, condition, interaction), F, df1, df2,
-    p, np2 (partial eta squared), ss_type; and notes (skipped analyses, unequal sizes).
+    Parameters
+    ----------
+    long
+        One row per participant, task, measure and condition (columns task, measure,
+        group, condition, participant, value).
+    a, b
+        The two conditions.
+    ss_type
+        2 or 3 (`DEFAULT_SS_TYPE` says why 2 by default).
+
+    Returns
+    -------
+    tuple of (pandas.DataFrame, list of str)
+        Columns task, measure, source (group, condition, interaction), F, df1, df2, p,
+        np2 (partial eta squared), ss_type; and notes (skipped analyses, unequal sizes).
+
+    Raises
+    ------
+    StudyInputError
+        `ss_type` is neither 2 nor 3.
     """
     rows, notes = mixed_anova_rows(long_records(long), a, b, ss_type)
     return frame(rows, ANOVA_COLUMNS), notes

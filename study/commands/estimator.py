@@ -28,7 +28,7 @@ _err = Console(stderr=True)
 
 @click.group("estimator", cls=StudyGroup)
 def estimator() -> None:
-    """Follower force estimator: physics model + GRU residual + EKF (seed 000)."""
+    """Follower force estimator: physics model + GRU residual + EKF ([endovascular])."""
 
 
 @estimator.command("train")
@@ -176,12 +176,8 @@ def train_cmd(
     ) as progress:
         task = progress.add_task("epochs", total=epochs, rmse="")
 
-        def report(epoch: int, train_rmse: float, val_rmse: float) -> None:
-            progress.update(
-                task,
-                completed=epoch,
-                rmse=f"train {train_rmse:.4f} N, validation {val_rmse:.4f} N",
-            )
+        def report(step: str, done: int = 0, total: int = 0) -> None:
+            progress.update(task, completed=done, rmse=step)
 
         model, summary = train_estimator(
             data,

@@ -1,4 +1,4 @@
-"""Export files that are safe to open in a spreadsheet and never half-written (issue 18).
+"""Export files that are safe to open in a spreadsheet and never half-written.
 
 This module owns how `study export` puts a file on disk, so the rule lives in one place
 for the trials, TLX, codebook and samples files:

@@ -32,7 +32,7 @@ residual, while the decision rests on held-out prediction, which they cannot gam
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -66,6 +66,7 @@ from teleop_core.calibration.plausibility import effect_coefficients, implausibl
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
 from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
+from teleop_core.progress import Progress, no_progress
 
 LAG_ALTERNATIVE = "first_order_lag"
 """The name a first-order lag of the whole force takes among a delay's alternatives."""
@@ -76,8 +77,20 @@ BIC_DECISIVE = 10.0
 1995: above 10 is "very strong" evidence): a look-alike further behind is no
 alternative, whatever the held-out block says."""
 
-Progress = Callable[[int, int, str], None]
-"""progress(done, total, what): called before each candidate of each round."""
+
+_Found = tuple[Candidate, Effect, Float1D, Float1D, int]
+"""A candidate, its effect, the chain's coefficients, prediction and parameter count."""
+
+
+@dataclass(frozen=True)
+class _Round:
+    """One round of the forward selection: the chain so far and how it does."""
+
+    number: int
+    chain: Chain
+    pred: Float1D
+    rmse: float
+    bic: float
 
 
 @dataclass
@@ -232,8 +245,29 @@ class Calibrator:
         assert best is not None
         return y[self.test_] - best[1][self.test_]
 
-    def fit(self, data: CalibrationData, progress: Progress | None = None) -> Calibrator:
-        """Run the loop on `data`; fitted attributes end in `_`."""
+    def fit(self, data: CalibrationData, progress: Progress = no_progress) -> Calibrator:
+        """Run the loop on `data`; fitted attributes end in `_`.
+
+        Parameters
+        ----------
+        data
+            The recording as the base model reads it (`BaseModel.read` or `.data`).
+        progress
+            Told each candidate of each round (``"round 2: stribeck"``, k of n) and
+            each round's end.
+
+        Returns
+        -------
+        Calibrator
+            Itself, fitted: `model_` (the calibrated model), `chain_` (the effects
+            added), `candidates_`, `rmse_before_` / `rmse_after_` on the held-out block,
+            the residual tests and the verdict.
+
+        Raises
+        ------
+        TeleopInputError
+            The recording has fewer than 200 samples.
+        """
         if len(data) < 200:
             raise TeleopInputError(
                 f"recording {data.name} has {len(data)} samples; expected at least 200 "
@@ -263,34 +297,11 @@ class Calibrator:
             remaining = _remaining(families, chain, marker=bool(open_terms))
             if not remaining:
                 break
-            bic = self._bic(data, pred, k)
-            found: list[tuple[Candidate, Effect, Float1D, Float1D, int]] = []
-            for i, family in enumerate(remaining):
-                if family == OPEN:
-                    remaining.extend(_remaining(open_terms, chain, marker=False))
-                    continue
-                if progress is not None:
-                    progress(i, len(remaining), f"round {round_ + 1}: {family}")
-                effect = self.base_.effect(family)
-                value = search(self.base_, data, self.train_, chain, effect)
-                c_coef, c_pred, c_k = self._fit_chain(data, [*chain, (effect, value)])
-                c_rmse = _rmse(y_test - c_pred[self.test_])
-                p = diebold_mariano(y_test - pred[self.test_], y_test - c_pred[self.test_])
-                cand = Candidate(
-                    family,
-                    round_ + 1,
-                    value,
-                    c_rmse,
-                    1.0 - c_rmse / rmse,
-                    p,
-                    self._bic(data, c_pred, c_k) - bic,
-                )
-                found.append((cand, effect, c_coef, c_pred, c_k))
-                cand.reason = self._reason(cand, effect, c_coef, data)
+            step = _Round(round_ + 1, chain, pred, rmse, self._bic(data, pred, k))
+            found = self._candidates(data, step, remaining, open_terms, progress)
             passing = [f for f in found if not f[0].reason]
             self.candidates_.extend(f[0] for f in found)
-            if progress is not None:
-                progress(len(remaining), len(remaining), f"round {round_ + 1} done")
+            progress(f"round {round_ + 1} done", len(remaining), len(remaining))
             if not passing:
                 break
             best = _best(passing, self.min_gain)
@@ -311,6 +322,48 @@ class Calibrator:
         self.model_ = CalibratedModel(self.base_, chain, coef, _settings(self.base_))
         self.prediction_ = pred
         self.chain_ = chain
+        self._diagnose(data, pred)
+        return self
+
+    def _candidates(
+        self,
+        data: CalibrationData,
+        step: _Round,
+        remaining: list[str],
+        open_terms: list[str],
+        progress: Progress,
+    ) -> list[_Found]:
+        """Each remaining family (the open terms in place of their marker) searched,
+        fitted after `step.chain` and judged on the held-out block."""
+        y_test = data.y[self.test_]
+        found: list[_Found] = []
+        for i, family in enumerate(remaining):
+            if family == OPEN:
+                remaining.extend(_remaining(open_terms, step.chain, marker=False))
+                continue
+            progress(f"round {step.number}: {family}", i, len(remaining))
+            effect = self.base_.effect(family)
+            value = search(self.base_, data, self.train_, step.chain, effect)
+            c_coef, c_pred, c_k = self._fit_chain(data, [*step.chain, (effect, value)])
+            c_rmse = _rmse(y_test - c_pred[self.test_])
+            p = diebold_mariano(y_test - step.pred[self.test_], y_test - c_pred[self.test_])
+            cand = Candidate(
+                family,
+                step.number,
+                value,
+                c_rmse,
+                1.0 - c_rmse / step.rmse,
+                p,
+                self._bic(data, c_pred, c_k) - step.bic,
+            )
+            found.append((cand, effect, c_coef, c_pred, c_k))
+            cand.reason = self._reason(cand, effect, c_coef, data)
+        return found
+
+    def _diagnose(self, data: CalibrationData, pred: Float1D) -> None:
+        """The residual tests, the verdict, the fit percentages and the confidence
+        intervals of the fitted model on the held-out block."""
+        y_test = data.y[self.test_]
         inputs = {k: v[self.test_] for k, v in data.signals.items() if k != "t"}
         self.tests_before_ = residual_tests(
             y_test - self.base_prediction_[self.test_], inputs, self.max_lag
@@ -328,10 +381,18 @@ class Calibrator:
             self.model_, data, self.train_
         )
         self.data_ = data
-        return self
 
     def report(self) -> dict[str, Any]:
-        """The JSON report of issue 10: the contract keys first, then context."""
+        """The JSON report of a fitted loop (`study calibrate`'s REPORT.json).
+
+        Returns
+        -------
+        dict
+            The contract keys first (``rmse_before``, ``rmse_after``,
+            ``effects_added``, ``candidates_rejected``), then context: the base
+            model's parameters with intervals, the residual tests before and after, the
+            verdict, the look-alikes.
+        """
         added, discovered, ambiguous = [], [], []
         mse = [self.rmse_before_**2] + [r**2 for r in self.step_rmse_]
         explained = mse[0] - mse[-1]

@@ -111,6 +111,26 @@ class EstimateResult:
 
 @dataclass
 class ForceEstimator:
+    """The follower's force estimator: eq. 1, the GRU's residual and the EKF [endovascular].
+
+    Trained by `study estimator train` (`teleop_core.estimation.training`), kept as a
+    folder (`save`, `load`), run over a recording (`predict`) or one sample at a time
+    in the control loop (`stream`).
+
+    Attributes
+    ----------
+    physics
+        Eq. 1's parameters (torque constant, friction, wheel radius).
+    gru
+        The residual compensator (numba inference; PyTorch only to train it).
+    ekf
+        The EKF's noise settings and whether it is used.
+    sample_rate_hz
+        The rate the model was trained at, Hz.
+    pipeline_rate_hz
+        The rate the estimation pipeline runs at in the loop, Hz.
+    """
+
     physics: PhysicsParams
     gru: GruModel | TreesModel
     """The residual stage: the GRU, or the boosted trees (`trees.py`) in its place."""
@@ -118,7 +138,7 @@ class ForceEstimator:
     sample_rate_hz: float
     pipeline_rate_hz: float = FollowerSensorParams.estimation_rate_hz
     extension: ExtendedPhysics | None = None
-    """The calibrated physics stage (issue 10) replacing eq. 1, if any."""
+    """The calibrated physics stage replacing eq. 1, if any."""
     input_range: InputRange | None = None
     """The inputs' range over the training samples (None for models saved before it)."""
 
@@ -143,7 +163,26 @@ class ForceEstimator:
         return recording
 
     def predict(self, recording: FollowerRecording) -> EstimateResult:
-        """Estimate the force over a recording already at the model's rate."""
+        """Estimate the force over a recording.
+
+        Parameters
+        ----------
+        recording
+            A follower recording at the model's rate (`conform` resamples one that
+            is not).
+
+        Returns
+        -------
+        EstimateResult
+            For every sample with a full window: the reference, eq. 1's force,
+            physics + GRU, the final (EKF) estimate, and whether the inputs were inside
+            the training range.
+
+        Raises
+        ------
+        TeleopInputError
+            The recording is shorter than the GRU's window.
+        """
         T = self.window
         if len(recording) < T:
             raise TeleopInputError(
@@ -247,6 +286,24 @@ class ForceEstimator:
 
     @classmethod
     def load(cls, folder: Path) -> ForceEstimator:
+        """Read a model folder written by `save` (`study estimator train --out`).
+
+        Parameters
+        ----------
+        folder
+            The model folder.
+
+        Returns
+        -------
+        ForceEstimator
+            The model.
+
+        Raises
+        ------
+        TeleopInputError
+            The folder does not exist, lacks one of `MODEL_FILES`, or holds a file that
+            cannot be read; one line naming it.
+        """
         folder = Path(folder)
         if not folder.is_dir():
             raise TeleopInputError(

@@ -3,8 +3,8 @@
 Kept apart from `estimator.py` (the model, its files and its causal path) because
 training owns the choices made on data: which blocks validate (`regimes.py`: every
 operating regime in both parts), when the GRU stops, what the EKF's noise is and
-whether the EKF is used at all. Issue 17 found each of these choices rewarding an
-estimator that learned nothing; the rules here are the ones that answer it:
+whether the EKF is used at all. Each of these choices, left naive, rewards an
+estimator that learned nothing; the rules here are the ones that prevent it:
 
 - validation blocks represent the recording's speed bands (with reversals and rest),
   directions and load levels, and the summary gives the validation error per regime;
@@ -24,7 +24,6 @@ estimator that learned nothing; the rules here are the ones that answer it:
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -48,6 +47,7 @@ from teleop_core.estimation.regimes import (
 from teleop_core.estimation.trees import TreesConfig, TreesModel, train_trees
 from teleop_core.follower.physics import PhysicsParams, fit_physics
 from teleop_core.follower.recording import FollowerRecording
+from teleop_core.progress import Progress, no_progress
 
 RESIDUAL_CHOICES = ("gru", "trees", "auto")
 """`study estimator train --residual`: the GRU, the trees, or the better on validation."""
@@ -103,7 +103,7 @@ def tune_process_noise(
     training data: the lowest error against F_ref among the settings that trail the
     hybrid estimate by at most `max_lag_samples` (one pipeline period).
 
-    Seed 000, IV-C tuned Q "to minimise tracking delay", capped where noise grew; here
+    [endovascular], IV-C tuned Q "to minimise tracking delay", capped where noise grew; here
     the cap is the lag and the choice the error. Returns the settings and their lag.
     """
     best: tuple[float, EkfSettings, float] | None = None
@@ -172,7 +172,7 @@ def train_estimator(
     pipeline_rate_hz: float = ForceEstimator.pipeline_rate_hz,
     physics: PhysicsParams | None = None,
     ekf_q_n2: float | None = None,
-    progress: Callable[[int, float, float], None] | None = None,
+    progress: Progress = no_progress,
     extension: ExtendedPhysics | None = None,
     effects: bool = False,
     residual_stage: str = "gru",
@@ -224,6 +224,7 @@ def train_estimator(
     train_mask = np.zeros(len(recording), bool)
     train_mask[train_idx + T - 1] = True
     if extension is None and physics is None and effects:
+        progress("finding the effects eq. 1 lacks")
         extension, report = find_effects(recording, wheel_radius_m=wheel_radius_m)
         notes.append(_effects_note(extension, report))
     if extension is not None and extension.stage == "physics":

@@ -19,6 +19,7 @@ class Measure:
     name: str
     """With its unit in the name (`peak_tip_force_n`)."""
     unit: str
+    """SI unit as printed (``"N"``, ``"s"``), empty for a count."""
     label: str
     """Axis label, without the unit (`peak tip force`)."""
     description: str
@@ -28,9 +29,11 @@ class Measure:
     max_value: float | None = None
     """Largest value an import accepts (a device's bound); None: no bound."""
     integer: bool = False
+    """A count: its values are whole numbers (e.g. wall contacts)."""
 
     @property
     def axis_label(self) -> str:
+        """The axis label with the unit in brackets, e.g. ``peak tip force (N)``."""
         return f"{self.label} ({self.unit})" if self.unit else self.label
 
 
