@@ -7,7 +7,6 @@ Each change is an audit row (`study.protocol.corrections`).
 
 Revision ID: 0009_trial_validity
 Revises: 0008_probe_trials
-Create Date: 2026-11-27
 """
 
 from collections.abc import Sequence
