@@ -227,9 +227,10 @@ SLOW_TESTS = (
     "tests/study/test_notes_cli.py::test_characterize_",
     "tests/db/test_migrations.py::test_two_processes_",
     "tests/db/test_samples.py::test_kill_9_",
+    "tests/study/tui/test_trial_lock.py::test_a_60_s_lock_",
 )
 """Single tests (node id prefixes) marked `slow` in modules that are otherwise fast:
-subprocesses, kill -9, memory measured over a large export."""
+subprocesses, kill -9, memory measured over a large export, a lock held for a minute."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
