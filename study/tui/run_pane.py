@@ -16,6 +16,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 from typing import ClassVar
 
 from textual import on, work
@@ -88,12 +89,19 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         """(code, task, condition) of the trial's block."""
 
     def __init__(
-        self, services: StudyServices, simulated_pace: float | None = 1.0, **kwargs: object
+        self,
+        services: StudyServices,
+        simulated_pace: float | None = 1.0,
+        driver: str = "simulated",
+        preferences_file: Path | None = None,
+        **kwargs: object,
     ) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
         self.services = services
         self.roster: Roster | None = None
-        self.driver_kind = "simulated"
+        self.driver_kind = driver
+        self.preferences_file = preferences_file
+        """Where d and p are remembered for the next start (None: not remembered)."""
         self.pace: float | None = simulated_pace
         self.paces: tuple[float | None, ...] = tuple(dict.fromkeys((simulated_pace, *PACES)))
         """What p cycles through: the pace the app was started with, then 1x, 4x, fastest."""
@@ -225,12 +233,29 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             self.driver_kind = "keyboard" if self.driver_kind == "simulated" else "simulated"
             self._show_mode()
             self.refresh_bindings()
+            self._remember()
 
     def action_pace(self) -> None:
         if self.run is None and self.driver_kind == "simulated":
             k = self.paces.index(self.pace) if self.pace in self.paces else -1
             self.pace = self.paces[(k + 1) % len(self.paces)]
             self._show_mode()
+            self._remember()
+
+    def _remember(self) -> None:
+        """Keep the driver and pace for the app's next start on this database."""
+        if self.preferences_file is None:
+            return
+        from study.tui.preferences import RunChoices, save_run_choices
+
+        try:
+            choices = RunChoices(self.driver_kind, self.pace)
+            save_run_choices(self.services.engine, choices, self.preferences_file)
+        except OSError as exc:
+            self.app.notify(
+                f"driver and pace not remembered for the next start: {plain_line(exc)}",
+                severity="warning",
+            )
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         """Offer only the keys that act now: no driver or pace change during a trial (and
