@@ -40,6 +40,7 @@ from study.tui.trial_runner import (
     TuiKeyboardDriver,
     _if_app_alive,
 )
+from study.tui.trial_summary import TrialReport, report_lines, trial_report
 
 __all__ = ["RunPane"]
 
@@ -87,6 +88,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         outcome: TrialOutcome
         block: tuple[str, str, str]
         """(code, task, condition) of the trial's block."""
+        report: TrialReport | None = None
+        """The stored trial's figures (and its block's, at a block's end)."""
 
     def __init__(
         self,
@@ -480,7 +483,13 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             line = f"trial failed: {plain_line(exc)}"
             outcome = TrialOutcome(run.code, [], 0, 0.0, line)
             self.app.call_from_thread(self.app.notify, line, severity="error", timeout=15)
-        self.post_message(self.TrialEnded(outcome, block))
+        report = None
+        if outcome.trial_ids:
+            try:
+                report = trial_report(self.services.engine, outcome.trial_ids[0])
+            except Exception:  # the trial is stored; only its figures are not shown
+                report = None
+        self.post_message(self.TrialEnded(outcome, block, report))
 
     @on(TrialStarted)
     def _started(self, event: TrialStarted) -> None:
@@ -508,6 +517,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                     f" {run.live.peaks[1]:.2f} N {second.label}"
                 )
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
+            if event.report is not None:
+                text = "\n".join(report_lines(outcome.code, event.report))
         elif outcome.error:
             self.status = "failed"
             text = (
