@@ -9,6 +9,10 @@ hand holds it there; in HV the felt torque deflects the dial from the aim, which
 the guidewire), left/right turn the rotation joystick, space lets go of the dial, `e`
 ends the trial (`KeyboardDriver.press`). `x` stops a trial in the middle: its samples
 stay, it is marked interrupted, and it is repeated as a new attempt.
+
+After a block the design's break is counted down on the status line; its clock stands
+while the NASA-TLX screen is open on the participant's questionnaire still to fill in
+(that is not rest), and the terminal bell rings when it ends.
 """
 
 from __future__ import annotations
@@ -121,6 +125,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         """Participants whose session checklist was confirmed in this app."""
         self._breaks: dict[str, float] = {}
         """Participant -> time.monotonic() when their last finished block ended."""
+        self._paused_s: dict[str, float] = {}
+        """Participant -> seconds of their break spent on their NASA-TLX form (not rest)."""
+        self._rung: set[str] = set()
+        """Participants whose break has ended and been rung."""
+        self._tick = time.monotonic()
         self._ended_at: tuple[tuple[str, str, str], float] | None = None
         """The last completed trial's block and when it ended (until the roster knows)."""
         self._trial_task: Task = tasks()[0]
@@ -146,9 +155,35 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self.set_interval(1.0, self._count_down)
 
     def _count_down(self) -> None:
-        """The break's countdown on the status line, once a second while it lasts."""
+        """Once a second: the break's clock (held while the participant fills in the
+        NASA-TLX), the bell when a break ends, the countdown on the status line."""
+        now = time.monotonic()
+        step, self._tick = now - self._tick, now
+        for code in list(self._breaks):
+            if code in self._rung:
+                continue
+            roster = self.roster
+            if roster is None or roster.break_s <= 0 or roster.next_trial(code) is None:
+                continue  # no break to ring the end of (none planned, or nothing left)
+            if self._filling_in_tlx(code):
+                self._paused_s[code] = self._paused_s.get(code, 0.0) + step
+            elif self.break_left_s(code) <= 0:
+                self._rung.add(code)
+                self.app.bell()
+                self.app.notify(f"{code}'s break is over: s starts the next block")
         if self.run is None and self.code is not None and self.code in self._breaks:
             self._show_next()
+
+    def _filling_in_tlx(self, code: str) -> bool:
+        """The NASA-TLX screen is shown while `code` has a questionnaire to fill in."""
+        if self.roster is None or self.app.query_one("#tabs").active != "tlx":
+            return False
+        return any(b[0] == code for b in self.roster.tlx_due())
+
+    def _break_starts(self, code: str, at: float) -> None:
+        self._breaks[code] = at
+        self._paused_s.pop(code, None)
+        self._rung.discard(code)
 
     # -- roster and selection -------------------------------------------------------------
 
@@ -162,7 +197,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 b["task"] == task and b["condition"] == condition and b["completed"] >= b["planned"]
                 for b in blocks
             ):
-                self._breaks[code] = at
+                self._break_starts(code, at)
                 self._ended_at = None
         codes = [r["code"] for r in roster.participants]
         select = self.query_one("#participant", Select)
@@ -316,6 +351,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             def answered(yes: bool | None) -> None:
                 if yes and self._next == nxt and self.run is None:
                     self._breaks.pop(code, None)
+                    self._rung.add(code)  # ended early: no bell later
                     self._start(code, nxt)
 
             self.app.push_screen(
@@ -377,7 +413,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         ended = self._breaks.get(code)
         if ended is None or self.roster is None:
             return 0.0
-        return max(0.0, self.roster.break_s - (time.monotonic() - ended))
+        rested = time.monotonic() - ended - self._paused_s.get(code, 0.0)
+        return max(0.0, self.roster.break_s - rested)
 
     def _start(self, code: str, nxt: NextTrial, checklist: bool = False) -> None:
         opened, observer = self._lsl_observer()
