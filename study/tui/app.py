@@ -56,6 +56,10 @@ class TuiSettings:
     """Where the analysis screen exports the paper's figures by default."""
     calibrations_dir: Path = Path("calibrations")
     """Where the calibration screen writes each result's report file."""
+    exports_dir: Path = Path("exports")
+    """Where the overview's `e` exports the data (a new folder per export)."""
+    backups_dir: Path = Path("backups")
+    """Where the overview's `b` writes the end-of-day copy of the database."""
     figure_formats: tuple[str, ...] = ("pdf", "svg", "png")
     """Formats of the exported figures (as `study figures --format`)."""
     theme: str = "textual-dark"
