@@ -45,7 +45,8 @@ class TrialReport:
     trial_index: int
     success: bool | None
     measures: list[tuple[str, str, float]]
-    """(label, unit, value) of the completion time and each of the task's measures."""
+    """(label, unit, value) of the completion time and each of the task's measures (a
+    count, such as wall contacts, as a whole number)."""
     block: list[BlockStat] | None
     """The block's summary when this trial completed it, else None."""
 
@@ -61,7 +62,7 @@ def trial_report(engine: Engine, trial_id: int) -> TrialReport:
         trial = session.get_one(Trial, trial_id)
         task = get_task(trial.task)
         measures = [
-            (m.label, m.unit, v)
+            (m.label, m.unit, int(v) if m.integer else v)
             for m in task.all_measures
             if (v := _value(trial, m.name)) is not None
         ]
@@ -104,7 +105,10 @@ def _block_stats(task, trials: list[Trial]) -> list[BlockStat]:
 
 
 def _number(value: float, unit: str) -> str:
-    text = f"{value:.2f}" if abs(value) < 10 else f"{value:.1f}"
+    if isinstance(value, int):
+        text = str(value)
+    else:
+        text = f"{value:.2f}" if abs(value) < 10 else f"{value:.1f}"
     return f"{text} {unit}" if unit else text
 
 

@@ -104,7 +104,7 @@ def test_the_block_summary_is_the_mean_and_sd_of_its_measured_trials(tmp_path) -
         ("completion time", "s", 20.0),
         ("peak proximal force", "N", 1.0),
         ("peak distal force", "N", 0.25),
-        ("wall contacts", "", 0.0),
+        ("wall contacts", "", 0),
     ]
     # by hand: times 20, 24, 31: mean 25, SD sqrt((25 + 1 + 36) / 2) = sqrt(31);
     # peaks 1, 1.5, 2: mean 1.5, SD 0.5; contacts 0, 2, 4: mean 2, SD 2
@@ -123,4 +123,6 @@ def test_the_block_summary_is_the_mean_and_sd_of_its_measured_trials(tmp_path) -
     ]
     assert "  completion time 25.0 ± 5.57 s" in lines
     assert "  peak proximal force 1.50 ± 0.50 N" in lines
+    assert "  wall contacts 4" in lines  # the trial's count, a whole number
+    assert "  wall contacts 2.00 ± 2.00" in lines  # the block's mean and SD
     assert all(len(line) <= 38 for line in lines)  # the readout's width
