@@ -173,7 +173,13 @@ async def test_a_notes_trial_shows_the_scope_and_stores_its_samples(
         assert view.display and not app.query_one(PhantomView).display
         assert view._frame is not None and view._frame.task.name == "notes"
         assert app.query_one("#phantom-box").border_title == "NOTES: scope depth and roll"
-        peak = float(pane.last_outcome.split("peaks ")[1].split(" N demanded")[0])
+        # the trial's line (the block's summary, of this one trial, repeats it)
+        shown = next(
+            line
+            for line in pane.last_outcome.split("\n")
+            if line.startswith("  peak demanded force ")
+        )
+        peak = float(shown.split()[3])
     with Session(notes_engine) as session:
         trial = session.scalars(select(Trial)).one()
         n = session.scalar(select(func.coalesce(func.sum(SampleChunk.n_samples), 0)))
