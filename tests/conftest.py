@@ -215,6 +215,10 @@ SLOW_MODULES = frozenset(
         "tests/study/tui/test_db_errors.py",
         "tests/study/tui/test_screens.py",
         "tests/study/tui/test_participant_page.py",
+        "tests/study/tui/test_terminal_read_only.py",
+        "tests/study/tui/test_ops_keys.py",
+        "tests/study/tui/test_break_bell.py",
+        "tests/study/tui/test_run_choices.py",
         "tests/study/test_lease.py",
         "tests/test_layering.py",
         "tests/study/test_layers.py",
@@ -229,9 +233,10 @@ SLOW_TESTS = (
     "tests/study/test_notes_cli.py::test_characterize_",
     "tests/db/test_migrations.py::test_two_processes_",
     "tests/db/test_samples.py::test_kill_9_",
+    "tests/study/tui/test_trial_lock.py::test_a_60_s_lock_",
 )
 """Single tests (node id prefixes) marked `slow` in modules that are otherwise fast:
-subprocesses, kill -9, memory measured over a large export."""
+subprocesses, kill -9, memory measured over a large export, a lock held for a minute."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -1,4 +1,4 @@
-"""`study db ...`: create, upgrade and describe the study database."""
+"""`study db ...`: create, upgrade, describe, check and back up the study database."""
 
 from __future__ import annotations
 
@@ -10,11 +10,12 @@ import click
 from db.engine import describe
 from db.migrate import head_revision, inspect_database, open_database
 from study.commands.base import StudyGroup, db_option
+from study.errors import StudyInputError
 
 
 @click.group("db", cls=StudyGroup)
 def database() -> None:
-    """Create, upgrade and describe the study database."""
+    """Create, upgrade, describe, check and back up the study database."""
 
 
 @database.command("upgrade")
@@ -50,3 +51,59 @@ def info_cmd(db_url: str | None, as_json: bool) -> None:
     for name, rows in info.row_counts.items():
         click.echo(f"  {name:<16} {rows:>10,} rows")
     click.echo(f"samples:  {info.samples:,}")
+
+
+@database.command("check")
+@db_option
+def check_cmd(db_url: str | None) -> None:
+    """Check the database's integrity, in one line (never writes).
+
+    SQLite: PRAGMA integrity_check and foreign_key_check; PostgreSQL: every table's
+    rows counted and no row pointing at a missing one. Both: the schema at the newest
+    revision. Exit status 1 when problems are found.
+    """
+    from db.maintenance import check_database
+
+    engine = open_database(db_url, create=False)
+    try:
+        result = check_database(engine)
+    finally:
+        engine.dispose()
+    click.echo(result.line())
+    if not result.ok:
+        raise click.exceptions.Exit(1)
+
+
+@database.command("backup")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("backups"),
+    show_default=True,
+    help="Folder of the copies (made if missing); each copy is NAME-YYYYMMDDTHHMMSSZ.db.",
+)
+@db_option
+def backup_cmd(out_dir: Path, db_url: str | None) -> None:
+    """End of day: check the database, copy it to one SQLite file, check the copy.
+
+    The copy is one consistent snapshot while sessions run (SQLite: VACUUM INTO;
+    PostgreSQL: every table in one REPEATABLE READ transaction, no pg_dump needed) and
+    opens with `study tui --db COPY`. One line: the check, the copy, its size and
+    SHA-256. Exit status 1 (and no copy) when the database has problems.
+    """
+    from db.maintenance import backup_database
+
+    engine = open_database(db_url, create=False)
+    try:
+        result = backup_database(engine, out_dir)
+    except OSError as exc:
+        raise StudyInputError(
+            f"backup to {out_dir} failed: {exc.strerror or exc}; expected a writable folder "
+            "with free space"
+        ) from exc
+    finally:
+        engine.dispose()
+    click.echo(result.line())
+    if not (result.source.ok and result.copy.ok):
+        raise click.exceptions.Exit(1)

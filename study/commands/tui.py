@@ -18,7 +18,10 @@ from study.commands.base import StudyCommand, db_option, positive_option
     help="Default folder for the analysis screen's figure export.",
 )
 @positive_option(
-    "--pace", 1.0, "Times real time for a simulated participant (the screen's p key cycles it)."
+    "--pace",
+    None,
+    "Times real time for a simulated participant (the screen's p key cycles it). "
+    "Default: the pace last chosen with p on this database, else 1.",
 )
 @click.option("--light", is_flag=True, help="Start in the light theme (ctrl+t toggles).")
 @click.option(
@@ -28,10 +31,11 @@ from study.commands.base import StudyCommand, db_option, positive_option
     "`[lsl] publish = true` in the design does); needs LSLAPICFG (see `study lsl-config`).",
 )
 @db_option
-def tui(figures_dir: Path, pace: float, light: bool, lsl: bool, db_url: str | None) -> None:
+def tui(figures_dir: Path, pace: float | None, light: bool, lsl: bool, db_url: str | None) -> None:
     """The terminal app: overview, participants, sessions, NASA-TLX, analysis, calibration."""
     from db.migrate import open_database
     from study.tui import StudyServices, TuiSettings, make_app
+    from study.tui.preferences import RunChoices, load_run_choices, preferences_path
     from study.tui.services import calibrate_recording, load_shipped_estimator
 
     if lsl:
@@ -43,8 +47,12 @@ def tui(figures_dir: Path, pace: float, light: bool, lsl: bool, db_url: str | No
         engine, load_shipped_estimator, calibrate=calibrate_recording, lsl_publish=lsl
     )
     try:
+        # the driver and pace of the last start on this database (d, p), unless --pace
+        remembered = load_run_choices(engine) or RunChoices()
         settings = TuiSettings(
-            simulated_pace=pace,
+            simulated_pace=remembered.pace if pace is None else pace,
+            driver=remembered.driver,
+            preferences_file=preferences_path(),
             figures_dir=figures_dir,
             theme="textual-light" if light else "textual-dark",
         )

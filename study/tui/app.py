@@ -58,9 +58,18 @@ class TuiSettings:
     """Where the analysis screen exports the paper's figures by default."""
     calibrations_dir: Path = Path("calibrations")
     """Where the calibration screen writes each result's report file."""
+    exports_dir: Path = Path("exports")
+    """Where the overview's `e` exports the data (a new folder per export)."""
+    backups_dir: Path = Path("backups")
+    """Where the overview's `b` writes the end-of-day copy of the database."""
     figure_formats: tuple[str, ...] = ("pdf", "svg", "png")
     """Formats of the exported figures (as `study figures --format`)."""
     theme: str = "textual-dark"
+    driver: str = "simulated"
+    """The run screen's driver at start (`simulated` or `keyboard`)."""
+    preferences_file: Path | None = None
+    """Where the run screen remembers its driver and pace (`study.tui.preferences`);
+    None: nothing is remembered."""
     prepare_simulation: bool = True
     """Load the estimator and compile the loop when the run screen is first shown (a few
     seconds of one core, in a worker); off, the first trial pays it instead."""
@@ -68,6 +77,8 @@ class TuiSettings:
     def __post_init__(self) -> None:
         if self.simulated_pace is not None and not self.simulated_pace > 0:
             raise ValueError(f"simulated pace {self.simulated_pace!r}; expected > 0 or None")
+        if self.driver not in ("simulated", "keyboard"):
+            raise ValueError(f"driver {self.driver!r}; expected simulated or keyboard")
 
 
 class StudyApp(SafeWorkers, App[None]):
@@ -139,7 +150,13 @@ class StudyApp(SafeWorkers, App[None]):
 
         return {
             "participants": ParticipantsPane(self.services, id="participants-pane"),
-            "run": RunPane(self.services, self.settings.simulated_pace, id="run-pane"),
+            "run": RunPane(
+                self.services,
+                self.settings.simulated_pace,
+                driver=self.settings.driver,
+                preferences_file=self.settings.preferences_file,
+                id="run-pane",
+            ),
             "tlx": TlxPane(self.services, id="tlx-pane"),
             "analysis": AnalysisPane(
                 self.services,

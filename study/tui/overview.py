@@ -6,11 +6,15 @@ first paint waits for nothing but the one roster query (`study bench tui`).
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 from rich.text import Text
 from textual.app import ComposeResult
+from textual.binding import Binding, BindingType
 from textual.containers import Vertical
 from textual.widgets import DataTable, Static
 
+from study.tui.ops import OpsMixin
 from study.tui.services import Roster
 
 __all__ = ["OverviewPane"]
@@ -21,8 +25,14 @@ def _bar(done: int, total: int, width: int = 20) -> str:
     return "█" * filled + "░" * (width - filled)
 
 
-class OverviewPane(Vertical):
-    """Study name, group fill, session progress and the next things to do."""
+class OverviewPane(OpsMixin, Vertical, can_focus=True):
+    """Study name, group fill, session progress and the next things to do; `e` exports
+    the data, `b` checks the database and backs it up (`study.tui.ops`)."""
+
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("e", "export_data", "Export data"),
+        Binding("b", "backup", "Check+backup"),
+    ]
 
     DEFAULT_CSS = """
     OverviewPane { height: 1fr; }
@@ -30,7 +40,10 @@ class OverviewPane(Vertical):
     OverviewPane #groups { height: auto; max-height: 8; }
     OverviewPane #progress { height: auto; margin: 1 0 0 0; }
     OverviewPane #next-up { height: auto; border: round $primary-muted; }
+    OverviewPane #ops-status { height: auto; color: $text-muted; }
     """
+
+    _shown_once = False
 
     def compose(self) -> ComposeResult:
         yield Static("loading the study...", id="study-title")
@@ -41,8 +54,13 @@ class OverviewPane(Vertical):
         next_up = Static("", id="next-up")
         next_up.border_title = "what is next"
         yield next_up
+        yield Static("e: export the data   b: end of day, check and back up", id="ops-status")
 
     def show(self, roster: Roster) -> None:
+        if not self._shown_once:  # the first roster: the overview's keys (e, b) act at once
+            self._shown_once = True
+            if self.app.focused is None or type(self.app.focused).__name__ == "ContentTabs":
+                self.focus()
         self.query_one("#study-title", Static).update(f"Study: {roster.study}")
         table = self.query_one("#groups", DataTable)
         table.clear()

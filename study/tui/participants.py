@@ -70,6 +70,8 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self._roster: Roster | None = None
         self._unsent: dict[tuple[str, bool], str] = {}
         """(code, session note?) -> a note the database refused, offered again."""
+        self._note_sent: tuple[str, bool] = ("", False)
+        """(code, session note?) of the note last handed to the database."""
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="add-row"):
@@ -244,11 +246,22 @@ class ParticipantsPane(SafeWorkers, Vertical):
         rows = self._roster.participants if self._roster is not None else []
         return next((r for r in rows if r["code"] == code), None)
 
+    def _reopen_note(self, code: str, session: bool) -> None:
+        """The note dialog again on `code`, holding the text the database refused."""
+        table = self.query_one("#people", DataTable)
+        codes = [str(table.get_row_at(k)[0]) for k in range(table.row_count)]
+        from study.tui.confirm import ReasonScreen
+
+        if code in codes and not isinstance(self.app.screen, ReasonScreen):
+            table.move_cursor(row=codes.index(code))
+            self.action_note(session)
+
     def action_session_note(self) -> None:
         self.action_note(session=True)
 
     @work(thread=True, group="note", exit_on_error=False)
     def _note(self, code: str, text: str, session: bool) -> None:
+        self._note_sent = (code, session)
         try:
             self.services.note(code, text, session)
         except ValueError as exc:
@@ -305,8 +318,11 @@ class ParticipantsPane(SafeWorkers, Vertical):
 
     def worker_failed(self, group: str, line: str) -> None:
         failed = {"enrol": "not enrolled", "withdraw": "not withdrawn"}
-        if group == "note":  # what was typed is offered again by the same key
-            line = f"note not kept: {line}; n or o opens it again as typed"
+        if group == "note":  # the dialog comes back with what was typed
+            line = f"note not kept: {line}; it is open again as typed (Esc: keep it for later)"
+            code, session = self._note_sent
+            if self._row(code) is not None:
+                self.call_after_refresh(self._reopen_note, code, session)
         else:
             line = f"{failed.get(group, 'failed')}: {line}"
         self._status(line)

@@ -31,6 +31,17 @@ KEY_ACTIONS = {
 """Pane action -> `KeyboardDriver.press` key."""
 
 
+def task_lines(frame: LiveFrame) -> list[str]:
+    """The task's readout lines for `frame`, told the trial's condition when the task's
+    `live_lines` takes one (a task written before it was passed need not)."""
+    import inspect
+
+    live_lines = frame.task.live_lines
+    if "condition" in inspect.signature(live_lines).parameters:
+        return live_lines(frame.values, condition=frame.condition)
+    return live_lines(frame.values)
+
+
 class LiveViewMixin:
     """The live view of `RunPane` (which provides run, status, last_outcome, _redraws)."""
 
@@ -80,7 +91,7 @@ class LiveViewMixin:
                 gauge(trace.label, value, trace.full_scale, 14, magnitude=trace.magnitude)
             )
             text.append("\n" + sparkline(histories[k], width, trace.full_scale) + "\n\n")
-        lines = frame.task.live_lines(frame.values)
+        lines = task_lines(frame)
         wait = run.live.storage_wait
         if wait is not None:  # the trial goes on; its samples wait in memory
             lines.insert(

@@ -10,6 +10,10 @@ the guidewire), left/right turn the rotation joystick, space lets go of the dial
 ends the trial (`KeyboardDriver.press`). `x` stops a trial in the middle, with a reason: its
 samples stay, it is marked interrupted (the reason audited), and it is repeated as a new
 attempt.
+
+After a block the design's break is counted down on the status line; its clock stands
+while the NASA-TLX screen is open on the participant's questionnaire still to fill in
+(that is not rest), and the terminal bell rings when it ends.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 from typing import ClassVar
 
 from textual import on, work
@@ -41,6 +46,7 @@ from study.tui.trial_runner import (
     TuiKeyboardDriver,
     _if_app_alive,
 )
+from study.tui.trial_summary import TrialReport, report_lines, trial_report
 
 __all__ = ["RunPane"]
 
@@ -89,14 +95,23 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         outcome: TrialOutcome
         block: tuple[str, str, str]
         """(code, task, condition) of the trial's block."""
+        report: TrialReport | None = None
+        """The stored trial's figures (and its block's, at a block's end)."""
 
     def __init__(
-        self, services: StudyServices, simulated_pace: float | None = 1.0, **kwargs: object
+        self,
+        services: StudyServices,
+        simulated_pace: float | None = 1.0,
+        driver: str = "simulated",
+        preferences_file: Path | None = None,
+        **kwargs: object,
     ) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
         self.services = services
         self.roster: Roster | None = None
-        self.driver_kind = "simulated"
+        self.driver_kind = driver
+        self.preferences_file = preferences_file
+        """Where d and p are remembered for the next start (None: not remembered)."""
         self.pace: float | None = simulated_pace
         self.paces: tuple[float | None, ...] = tuple(dict.fromkeys((simulated_pace, *PACES)))
         """What p cycles through: the pace the app was started with, then 1x, 4x, fastest."""
@@ -113,6 +128,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         """Participants whose session checklist was confirmed in this app."""
         self._breaks: dict[str, float] = {}
         """Participant -> time.monotonic() when their last finished block ended."""
+        self._paused_s: dict[str, float] = {}
+        """Participant -> seconds of their break spent on their NASA-TLX form (not rest)."""
+        self._rung: set[str] = set()
+        """Participants whose break has ended and been rung."""
+        self._tick = time.monotonic()
         self._ended_at: tuple[tuple[str, str, str], float] | None = None
         """The last completed trial's block and when it ended (until the roster knows)."""
         self._trial_task: Task = tasks()[0]
@@ -138,9 +158,35 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self.set_interval(1.0, self._count_down)
 
     def _count_down(self) -> None:
-        """The break's countdown on the status line, once a second while it lasts."""
+        """Once a second: the break's clock (held while the participant fills in the
+        NASA-TLX), the bell when a break ends, the countdown on the status line."""
+        now = time.monotonic()
+        step, self._tick = now - self._tick, now
+        for code in list(self._breaks):
+            if code in self._rung:
+                continue
+            roster = self.roster
+            if roster is None or roster.break_s <= 0 or roster.next_trial(code) is None:
+                continue  # no break to ring the end of (none planned, or nothing left)
+            if self._filling_in_tlx(code):
+                self._paused_s[code] = self._paused_s.get(code, 0.0) + step
+            elif self.break_left_s(code) <= 0:
+                self._rung.add(code)
+                self.app.bell()
+                self.app.notify(f"{code}'s break is over: s starts the next block")
         if self.run is None and self.code is not None and self.code in self._breaks:
             self._show_next()
+
+    def _filling_in_tlx(self, code: str) -> bool:
+        """The NASA-TLX screen is shown while `code` has a questionnaire to fill in."""
+        if self.roster is None or self.app.query_one("#tabs").active != "tlx":
+            return False
+        return any(b[0] == code for b in self.roster.tlx_due())
+
+    def _break_starts(self, code: str, at: float) -> None:
+        self._breaks[code] = at
+        self._paused_s.pop(code, None)
+        self._rung.discard(code)
 
     # -- roster and selection -------------------------------------------------------------
 
@@ -154,7 +200,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 b["task"] == task and b["condition"] == condition and b["completed"] >= b["planned"]
                 for b in blocks
             ):
-                self._breaks[code] = at
+                self._break_starts(code, at)
                 self._ended_at = None
         codes = [r["code"] for r in roster.participants]
         select = self.query_one("#participant", ParticipantSelect)
@@ -229,12 +275,29 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             self.driver_kind = "keyboard" if self.driver_kind == "simulated" else "simulated"
             self._show_mode()
             self.refresh_bindings()
+            self._remember()
 
     def action_pace(self) -> None:
         if self.run is None and self.driver_kind == "simulated":
             k = self.paces.index(self.pace) if self.pace in self.paces else -1
             self.pace = self.paces[(k + 1) % len(self.paces)]
             self._show_mode()
+            self._remember()
+
+    def _remember(self) -> None:
+        """Keep the driver and pace for the app's next start on this database."""
+        if self.preferences_file is None:
+            return
+        from study.tui.preferences import RunChoices, save_run_choices
+
+        try:
+            choices = RunChoices(self.driver_kind, self.pace)
+            save_run_choices(self.services.engine, choices, self.preferences_file)
+        except OSError as exc:
+            self.app.notify(
+                f"driver and pace not remembered for the next start: {plain_line(exc)}",
+                severity="warning",
+            )
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         """Offer only the keys that act now: no driver or pace change during a trial (and
@@ -294,6 +357,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             def answered(yes: bool | None) -> None:
                 if yes and self._next == nxt and self.run is None:
                     self._breaks.pop(code, None)
+                    self._rung.add(code)  # ended early: no bell later
                     self._start(code, nxt)
 
             self.app.push_screen(
@@ -360,7 +424,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         ended = self._breaks.get(code)
         if ended is None or self.roster is None:
             return 0.0
-        return max(0.0, self.roster.break_s - (time.monotonic() - ended))
+        rested = time.monotonic() - ended - self._paused_s.get(code, 0.0)
+        return max(0.0, self.roster.break_s - rested)
 
     def _start(self, code: str, nxt: NextTrial, checklist: bool = False) -> None:
         opened, observer = self._lsl_observer()
@@ -468,7 +533,13 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             line = f"trial failed: {plain_line(exc)}"
             outcome = TrialOutcome(run.code, [], 0, 0.0, line)
             self.app.call_from_thread(self.app.notify, line, severity="error", timeout=15)
-        self.post_message(self.TrialEnded(outcome, block))
+        report = None
+        if outcome.trial_ids:
+            try:
+                report = trial_report(self.services.engine, outcome.trial_ids[0])
+            except Exception:  # the trial is stored; only its figures are not shown
+                report = None
+        self.post_message(self.TrialEnded(outcome, block, report))
 
     @on(TrialStarted)
     def _started(self, event: TrialStarted) -> None:
@@ -496,6 +567,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                     f" {run.live.peaks[1]:.2f} N {second.label}"
                 )
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
+            if event.report is not None:
+                text = "\n".join(report_lines(outcome.code, event.report))
         elif outcome.error:
             self.status = "failed"
             text = (

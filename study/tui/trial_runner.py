@@ -122,6 +122,8 @@ class LiveFrame:
     values: dict[str, float]
     first_history: tuple[float, ...]
     second_history: tuple[float, ...]
+    condition: str | None = None
+    """The trial's condition (VO renders no force on the hand), if known."""
 
     def _stored(self, column: str) -> float:
         return self.values[self.task.stored_name(column)]
@@ -163,6 +165,8 @@ class LiveState:
     def __init__(self, rate_hz: float = 100.0) -> None:
         self.task: Task | None = None
         """The running trial's task, set by `start` before its first samples."""
+        self.condition: str | None = None
+        """The running trial's condition, set by `start`."""
         self._lock = threading.Lock()
         self._last: np.ndarray | None = None
         self._index: dict[str, int] = {}
@@ -175,10 +179,10 @@ class LiveState:
         self.peaks = [0.0, 0.0]
         """The largest values of the task's two `live_peaks` so far."""
 
-    def start(self, task: Task) -> None:
-        """A trial of `task` begins (in the worker, before its samples)."""
+    def start(self, task: Task, condition: str | None = None) -> None:
+        """A trial of `task` in `condition` begins (in the worker, before its samples)."""
         with self._lock:
-            self.task = task
+            self.task, self.condition = task, condition
             self._index = task.column_index()
             self._last = None
             self._first.clear()
@@ -205,12 +209,12 @@ class LiveState:
 
     def frame(self) -> LiveFrame | None:
         with self._lock:
-            row, task = self._last, self.task
+            row, task, condition = self._last, self.task, self.condition
             if row is None or task is None:
                 return None
             first, second = tuple(self._first), tuple(self._second)
         values = {c.name: float(row[k]) for k, c in enumerate(task.sample_columns)}
-        return LiveFrame(task, values, first, second)
+        return LiveFrame(task, values, first, second, condition)
 
 
 @dataclass(frozen=True)
@@ -282,7 +286,7 @@ class TrialRun:
             from study.protocol.tasks import get_task
 
             self.participant_id = item.block.participant_id
-            self.live.start(get_task(item.block.task))
+            self.live.start(get_task(item.block.task), item.block.condition)
             on_start(item)
 
         keyboard = self.keyboard

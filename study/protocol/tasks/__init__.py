@@ -337,8 +337,9 @@ class Task:
         frame[region] = np.asarray(self.regions, dtype=object)[codes]
         return frame
 
-    def live_lines(self, values: Mapping[str, float]) -> list[str]:
-        """Readout lines under the live gauges, from the newest sample by column name."""
+    def live_lines(self, values: Mapping[str, float], condition: str | None = None) -> list[str]:
+        """Readout lines under the live gauges, from the newest sample by column name, in
+        the trial's `condition` (None: not known)."""
         region = self.regions[int(values[self.region_column])]
         return [
             f"in {region}, inserted {values[self.stored_name('insertion_m')] * 1000:5.0f} mm",

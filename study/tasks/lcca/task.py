@@ -206,13 +206,20 @@ class LccaTask(Task):
         frame = super().trial_frame(samples)
         return frame[list(TRIAL_COLUMNS.values())]
 
-    def live_lines(self, values):
+    def live_lines(self, values, condition=None):
+        # VO renders no force on the dial: the stored torque is the return spring's and
+        # the model's, none of it felt as feedback
+        torque = (
+            "torque on the hand: none (VO, no haptic feedback)"
+            if condition == "VO"
+            else f"torque on the hand {values['dial_torque_n_m'] * 1000:+5.1f} mN m"
+        )
         return [
             f"tip in {self.regions[int(values['branch'])]}, inserted "
             f"{values['insertion_m'] * 1000:5.0f} mm",
             f"rotation {values['rotation_rad']:+5.2f} rad",
             f"dial {values['dial_angle_rad']:+5.2f} rad",
-            f"torque on the hand {values['dial_torque_n_m'] * 1000:+5.1f} mN m",
+            torque,
         ]
 
 

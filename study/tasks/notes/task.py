@@ -220,11 +220,16 @@ class NotesTask(Task):
 
         return {"stalls_seen": driver.stalls_seen} if isinstance(driver, NotesParticipant) else {}
 
-    def live_lines(self, values):
+    def live_lines(self, values, condition=None):
+        rendered = (
+            "torque rendered: none (VO, no haptic feedback)"
+            if condition == "VO"
+            else f"torque rendered {values['torque_rendered_n_m'] * 1000:+6.1f} mN m"
+        )
         return [
             f"tip on the fornix {values['tip_force_n']:5.2f} N",
             f"torque demanded {values['torque_demanded_n_m'] * 1000:+6.1f} mN m",
-            f"torque rendered {values['torque_rendered_n_m'] * 1000:+6.1f} mN m",
+            rendered,
         ]
 
 

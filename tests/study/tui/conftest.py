@@ -41,6 +41,12 @@ def no_cursor_blink(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(Input, "__init__", init)
 
 
+@pytest.fixture(autouse=True)
+def own_settings_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`study tui` remembers d and p in the user's settings file: each test its own."""
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+
+
 @pytest.fixture
 def study_engine(tmp_path: Path) -> Iterator[Engine]:
     """A study with P001 (novice) and P002 (expert) enrolled, nothing run."""

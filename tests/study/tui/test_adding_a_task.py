@@ -215,8 +215,12 @@ async def test_the_run_screen_shows_the_example_task(probe: Any, tmp_path: Path)
         # the last frame drawn (the trial may end between two redraws): the probe on its way
         drawn = re.search(r"inserted +(\d+) mm   in (medium|depth)", track.render().plain)
         assert drawn is not None and 0 < int(drawn.group(1)) <= 80
-        # the peak shown when the trial ended is the stored measure
-        peak = float(pane.last_outcome.split("peaks ")[1].split(" N push")[0])
+        # the peak shown when the trial ended is the stored measure (the trial's line;
+        # the block's summary, of this one trial, repeats it)
+        shown = next(
+            line for line in pane.last_outcome.split("\n") if line.startswith("  peak push force ")
+        )
+        peak = float(shown.split()[3])
     with Session(engine) as session:
         trial = session.scalars(select(Trial)).one()
     engine.dispose()

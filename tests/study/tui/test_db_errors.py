@@ -212,10 +212,10 @@ async def test_a_note_refused_by_a_read_only_database_is_kept_for_the_next_try(
             # it names the note, not a withdrawal, and the read-only cause
             assert "withdrawn" not in pane.last_message
             assert "the database is read-only" in pane.last_message
-        # writable again: the same key opens the note as it was typed
-        await pilot.press("o")
-        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
-        assert app.screen.query_one("#reason-text", Input).value == "dial recalibrated"
+            # the dialog is open again, holding the note as it was typed
+            await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+            assert app.screen.query_one("#reason-text", Input).value == "dial recalibrated"
+        # writable again: Enter keeps it
         await pilot.press("enter")
         await wait_for(pilot, lambda: pane.last_message == "P001: session note kept", 30)
     with Session(study_engine) as session:

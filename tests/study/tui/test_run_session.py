@@ -59,7 +59,10 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
     async with app.run_test(size=(80, 24)) as pilot:
         pane = await _start(pilot, "P001")
         await wait_for(pilot, lambda: pane.status == "completed", 120)
-        assert pane.last_outcome.startswith("P001: trial stored (id 1, peaks")
+        # the stored trial's figures, then (one trial per block) the block's
+        shown = pane.last_outcome.split("\n")
+        assert shown[0] == "P001: lcca/VO trial 1 stored"
+        assert "block lcca/VO done:" in shown and "  1 measured trial, mean ± SD" in shown
         # the live view was fed while the trial ran
         assert app.query_one(PhantomView)._frame is not None
         # one trial per block in DESIGN: the block is done, the form opens for it
@@ -86,6 +89,13 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
         trial = session.scalars(select(Trial)).one()
         n = session.scalar(select(func.coalesce(func.sum(SampleChunk.n_samples), 0)))
     assert (trial.status, trial.driver, trial.condition) == ("completed", "simulated", "VO")
+    success = "yes" if trial.success else "no"
+    assert shown[1:3] == [
+        f"  success {success}",
+        f"  completion time {trial.completion_time_s:.1f} s",
+    ]
+    peak = trial.measure_values["peak_proximal_force_n"]
+    assert f"  peak proximal force {peak:.2f} N" in shown  # the stored peak
     with Session(study_engine) as session:
         checklist = session.scalars(
             select(AuditEntry).where(AuditEntry.field == "session_checklist")
@@ -163,7 +173,13 @@ async def test_a_notes_trial_shows_the_scope_and_stores_its_samples(
         assert view.display and not app.query_one(PhantomView).display
         assert view._frame is not None and view._frame.task.name == "notes"
         assert app.query_one("#phantom-box").border_title == "NOTES: scope depth and roll"
-        peak = float(pane.last_outcome.split("peaks ")[1].split(" N demanded")[0])
+        # the trial's line (the block's summary, of this one trial, repeats it)
+        shown = next(
+            line
+            for line in pane.last_outcome.split("\n")
+            if line.startswith("  peak demanded force ")
+        )
+        peak = float(shown.split()[3])
     with Session(notes_engine) as session:
         trial = session.scalars(select(Trial)).one()
         n = session.scalar(select(func.coalesce(func.sum(SampleChunk.n_samples), 0)))

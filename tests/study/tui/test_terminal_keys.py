@@ -77,8 +77,7 @@ def test_a_note_refused_by_a_read_only_database_is_kept(
         app.child.send("dial recalibrated\r")
         app.child.expect(words("note", "not", "kept:", "the", "database", "is", "read-only"))
         assert "not withdrawn" not in app.drawn.getvalue()
-        app.child.send("o")  # the same key: the note as typed
-        app.child.expect("dial recalibrated")
+        app.child.expect("dial recalibrated")  # the dialog again, the note as typed
         app.child.send("\x1b")
         app.still_answers()
         app.quit()

@@ -1,0 +1,110 @@
+"""The overview screen's end-of-day keys: export the data, check and back up the database.
+
+`e` writes what `study export` writes (trials, NASA-TLX and the codebook, CSV) to a new
+folder under the app's exports folder; `b` runs `study db backup`'s check and copy
+(`db.maintenance`). Each asks for the folder first (the default filled in), runs in a
+worker, and ends in one line on the overview and in a notification; a failure is the
+database-error line of `study.tui.db_errors`, and nothing half-written is left.
+"""
+
+from __future__ import annotations
+
+import shutil
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from textual import work
+
+from study.tui.db_errors import SafeWorkers
+
+__all__ = ["OpsMixin", "export_folder"]
+
+
+def export_folder(base: Path, now: datetime | None = None) -> Path:
+    """A new folder under `base` named by the time (UTC) of the export."""
+    stamp = (now or datetime.now(UTC)).astimezone(UTC).strftime("%Y%m%dT%H%M%SZ")
+    return base / stamp
+
+
+class OpsMixin(SafeWorkers):
+    """Export and end-of-day backup for a pane with an `#ops-status` Static."""
+
+    last_ops_line = ""
+
+    def _ask_folder(self, question: str, default: Path, then: Any) -> None:
+        from study.tui.confirm import ReasonScreen
+
+        def answered(text: str | None) -> None:
+            if text:
+                then(Path(text).expanduser())
+
+        self.app.push_screen(ReasonScreen(question, "folder", str(default)), answered)  # type: ignore[attr-defined]
+
+    def action_export_data(self) -> None:
+        """e: trials, NASA-TLX and the codebook, as `study export --out FOLDER` writes them."""
+        settings = self.app.settings  # type: ignore[attr-defined]
+        self._ask_folder(
+            "Export the trials, NASA-TLX and codebook (CSV) to the folder:",
+            export_folder(settings.exports_dir),
+            self._start_export,
+        )
+
+    def _start_export(self, folder: Path) -> None:
+        self._ops_status(f"exporting to {folder}...")
+        self._export(folder)
+
+    @work(thread=True, exclusive=True, group="export", exit_on_error=False)
+    def _export(self, folder: Path) -> None:
+        from study.protocol.export import export_data
+
+        created = not folder.exists()
+        try:
+            written = export_data(self.app.services.engine, folder, "csv")  # type: ignore[attr-defined]
+        except BaseException:
+            if created and folder.is_dir():  # nothing half-written: the folder made goes
+                shutil.rmtree(folder, ignore_errors=True)
+            raise
+        names = ", ".join(p.name for p in written)
+        line = f"exported {len(written)} files to {folder}: {names}"
+        self.app.call_from_thread(self._ops_done, line, True)
+
+    def action_backup(self) -> None:
+        """b: the integrity check, then a checked copy (`study db backup`)."""
+        settings = self.app.settings  # type: ignore[attr-defined]
+        self._ask_folder(
+            "End of day: check the database, then copy it (one SQLite file) to the folder:",
+            settings.backups_dir,
+            self._start_backup,
+        )
+
+    def _start_backup(self, folder: Path) -> None:
+        self._ops_status("checking the database...")
+        self._backup(folder)
+
+    @work(thread=True, exclusive=True, group="backup", exit_on_error=False)
+    def _backup(self, folder: Path) -> None:
+        from db.maintenance import backup_database
+
+        def progress(line: str) -> None:
+            self.app.call_from_thread(self._ops_status, f"{line}...")
+
+        result = backup_database(self.app.services.engine, folder, progress=progress)  # type: ignore[attr-defined]
+        ok = result.source.ok and result.copy.ok
+        self.app.call_from_thread(self._ops_done, result.line(), ok)
+
+    def _ops_done(self, line: str, ok: bool) -> None:
+        self._ops_status(line)
+        self.app.notify(line, severity="information" if ok else "error", timeout=15)  # type: ignore[attr-defined]
+
+    def worker_failed(self, group: str, line: str) -> None:
+        what = {"export": "not exported", "backup": "no backup made"}.get(group, "failed")
+        line = f"{what}: {line}"
+        self._ops_status(line)
+        super().worker_failed(group, line)
+
+    def _ops_status(self, text: str) -> None:
+        from textual.widgets import Static
+
+        self.last_ops_line = text
+        self.query_one("#ops-status", Static).update(text)  # type: ignore[attr-defined]
