@@ -85,7 +85,7 @@ def study(injected: tuple[ParticipantEffect, ...], seed: int = 5) -> pd.DataFram
 
 
 def _search(trials: pd.DataFrame, emulator: MomentEmulator) -> effects.EffectSearch:
-    return effects.search(trials, emulator, FREE, [], seed=3, bootstrap=20)
+    return effects.search(trials, emulator, FREE, [], seed=3, bootstrap=10)
 
 
 def test_clean_closed_form_data_get_nothing(emulator) -> None:
