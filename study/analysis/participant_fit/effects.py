@@ -341,6 +341,8 @@ TOUCHES: dict[str, tuple[str, ...]] = {
     "carry_over": ("preferred_speed_m_s", "visual_stall_s"),
 }
 """The traits each family's multipliers act on (`ParticipantEffect.factors`)."""
+LEVEL = 0.5
+"""How far (log) a group's level of such a trait may move in the effects' least squares."""
 
 
 def _least_squares(
@@ -364,8 +366,14 @@ def _least_squares(
     touched = sorted({TRAITS.index(t) for family, _ in spec for t in TOUCHES[family]} & set(free))
     g_index = np.searchsorted(np.array(groups), arrays.groups)
     n_level = len(groups) * len(touched)
-    low = np.array([FIT_BOUNDS[n][0] for n in names] + [-1.0] * n_level)
-    high = np.array([FIT_BOUNDS[n][1] for n in names] + [1.0] * n_level)
+    # a decay longer than the session's measured trials is a level, not a decay: the
+    # traits' own (a practice effect at the slowing's bound with a decay of 15 trials
+    # and every group's speed at the emulator's edge fitted 6-trial sessions as well
+    # as the true one, and predicted held-out people far worse)
+    span = float(max(p.position for p in arrays.places) + 1)
+    bounds = {**FIT_BOUNDS, "decay_trials": (FIT_BOUNDS["decay_trials"][0], max(span, 1.0))}
+    low = np.array([bounds[n][0] for n in names] + [-LEVEL] * n_level)
+    high = np.array([bounds[n][1] for n in names] + [LEVEL] * n_level)
     noise = np.sqrt(emulator.within_var_[arrays.columns])
     k = len(names)
 
