@@ -367,9 +367,9 @@ def _least_squares(
     g_index = np.searchsorted(np.array(groups), arrays.groups)
     n_level = len(groups) * len(touched)
     # a decay longer than the session's measured trials is a level, not a decay: the
-    # traits' own (a practice effect at the slowing's bound with a decay of 15 trials
-    # and every group's speed at the emulator's edge fitted 6-trial sessions as well
-    # as the true one, and predicted held-out people far worse)
+    # traits' own (a large slowing decaying over many sessions' length, with every
+    # group's speed raised to match, fits the trials as well as the true effect and
+    # predicts held-out people far worse)
     span = float(max(p.position for p in arrays.places) + 1)
     bounds = {**FIT_BOUNDS, "decay_trials": (FIT_BOUNDS["decay_trials"][0], max(span, 1.0))}
     low = np.array([bounds[n][0] for n in names] + [-LEVEL] * n_level)

@@ -61,8 +61,7 @@ def expanded_interval(boots: np.ndarray, n: int, level: float = 0.95) -> np.ndar
     sqrt(n / (n - 1)) * t(n - 1) / z, Hesterberg's expanded percentile interval (The
     American Statistician 69:371, 2015). A plain percentile interval of a mean over 8-20
     people is too narrow: the resampled people spread by (n - 1) / n of the people's
-    variance, and z stands where t belongs (it held the truth in 84 % of simulated
-    studies, `coverage.py`)."""
+    variance, and z stands where t belongs (`coverage.py` checks it by simulation)."""
     tail = 100 * (1 - level) / 2
     low, mid, high = np.percentile(boots, [tail, 50.0, 100 - tail], axis=0)
     if n < 2:
