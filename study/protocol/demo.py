@@ -51,12 +51,13 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
                         t.measure_values.get("wall_contacts", 0),
                         t.success,
                         (t.summary or {}).get("obstacles_seen", 0),
+                        (t.summary or {}).get("obstacles_felt", 0),
                     )
                     for t in session.scalars(
                         select(Trial).where(Trial.status == "completed", Trial.practice.is_(False))
                     )
                 ],
-                columns=["pid", "task", "condition", "time", "contacts", "success", "seen"],
+                columns=["pid", "task", "condition", "time", "contacts", "success", "seen", "felt"],
             )
             plan = [(p.id, p.code, [(b.task, b.condition) for b in p.blocks]) for p in people]
         for pid, code, blocks in plan:
@@ -77,6 +78,7 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
                     rng,
                     offsets,
                     int(block["seen"].sum()),
+                    int(block["felt"].sum()),
                 )
                 store_tlx(engine, code, task, condition, ratings, chosen)
                 stored += 1

@@ -16,7 +16,9 @@ function of where a trial lies in the session (`TrialPlace`):
   follows the other condition, the preferred speed and the time the tip must stall on
   screen before it counts as an obstacle are both times (1 - share), with one share per
   direction (`vo_after_hv`: VO pushed more gently after HV first, as if still feeling
-  the force; `hv_after_vo`);
+  the force; `hv_after_vo`). The fit moves one direction and holds the other at 0: with
+  two condition orders the data tell only their difference, and both shares equal
+  would be a period effect, which is practice's (or fatigue's) to explain;
 - `unexplained_person`: a person no trait setting reproduces. Reported, never absorbed:
   it has no multiplier, and a simulation never draws it.
 

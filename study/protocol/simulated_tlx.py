@@ -27,6 +27,11 @@ BASE = {
     "frustration": 25.0,
 }
 """Ratings of an uneventful block (assumption)."""
+VIGILANCE = {"mental": 30.0, "effort": 12.0, "frustration": 15.0}
+"""What watching the screen for every obstacle adds to these ratings, against feeling
+them all in the hand (assumption, sized so that the default study's TLX is lower with
+haptics in every group, as seed 000, IV-D reports: "haptic feedback effectively
+alleviates the sustained concentration required for visual force compensation")."""
 
 
 def block_ratings(
@@ -36,16 +41,23 @@ def block_ratings(
     rng: np.random.Generator,
     offsets: dict[str, float],
     seen_stalls: int = 0,
+    felt_obstacles: int = 0,
 ) -> dict[str, int]:
     """Six ratings (0-100, steps of 5) for one block.
 
     `seen_stalls` counts the obstacles the participant had to spot on the screen (a
     stalled tip): watching for them is the sustained visual vigilance that haptic
     feedback relieves ([endovascular], IV-D), so it weighs on mental demand and frustration.
+    `felt_obstacles` counts those it felt in the hand first: the share of the block's
+    obstacles it had to watch for (`VIGILANCE`, all of them when it felt none) weighs
+    on mental demand, effort and frustration, whether or not many obstacles came.
     """
     time_s = float(np.mean(completion_times_s)) if completion_times_s else 60.0
     contacts = float(np.sum(wall_contacts))
     failures = sum(1 for s in successes if not s)
+    met = seen_stalls + felt_obstacles
+    watched = seen_stalls / met if met else 1.0
+    v = {s: VIGILANCE[s] * watched for s in VIGILANCE}
     raw = {
         "mental": BASE["mental"] + 4.0 * contacts + 6.0 * seen_stalls + 8.0 * failures,
         "physical": BASE["physical"] + 0.1 * time_s,
@@ -54,6 +66,8 @@ def block_ratings(
         "effort": BASE["effort"] + 0.15 * (time_s - 30.0) + 3.0 * contacts + 3.0 * seen_stalls,
         "frustration": BASE["frustration"] + 6.0 * contacts + 5.0 * seen_stalls + 12.0 * failures,
     }
+    for s, extra in v.items():
+        raw[s] += extra
     out = {}
     for s in TLX_SUBSCALES:
         value = raw[s] + offsets[s] + rng.normal(0.0, 5.0)

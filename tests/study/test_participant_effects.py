@@ -224,3 +224,27 @@ def test_tlx_weights_differ_between_a_persons_blocks() -> None:
         differ += vo != hv
     # 15 choices with a block's own shift of the weights: hardly anyone repeats all 15
     assert differ >= 18
+
+
+def test_obstacles_felt_in_the_hand_relieve_the_tlx_of_watching_for_them() -> None:
+    from study.protocol.simulated_tlx import block_ratings
+
+    scales = ("mental", "physical", "temporal", "performance", "effort", "frustration")
+    offsets = dict.fromkeys(scales, -20.0)  # away from the form's ends: nothing clipped
+
+    def rate(seen: int, felt: int) -> dict[str, int]:
+        # the same rating noise each time: only the obstacles differ
+        return block_ratings([30.0], [0], [True], np.random.default_rng(7), offsets, seen, felt)
+
+    # five obstacles all spotted on the screen (nothing to feel, as in VO) against the
+    # same five all felt first: the seen stalls' own terms (mental 6, frustration 5
+    # each) and watching for all of them (mental 30, frustration 15) against none;
+    # the differences are multiples of the form's steps of 5, so rounding keeps them
+    watched, felt = rate(5, 0), rate(0, 5)
+    assert watched["mental"] - felt["mental"] == 5 * 6 + 30
+    assert watched["frustration"] - felt["frustration"] == 5 * 5 + 15
+    assert watched["physical"] == felt["physical"]
+    # a block without obstacles was all watched, whatever the condition
+    calm = rate(0, 0)
+    assert calm["mental"] - felt["mental"] == 30
+    assert calm["frustration"] - felt["frustration"] == 15

@@ -5,7 +5,8 @@ studies are drawn from a known truth (each group's trait distribution), each per
 moments from the emulator (f(traits) plus the noise of their k trials' mean: the
 emulator's trial-noise covariance over k, with the surface's misfit), and each group's
 free traits fitted as `study participants fit` fits them (`estimate.GroupEstimator`, the
-bootstrap over participants with the weak traits' prior centre drawn); a trait's
+bootstrap over participants with the weak traits' prior centre drawn, its expanded
+percentile interval `estimate.expanded_interval`); a trait's
 interval covers when it holds the truth's mean.
 
 The studies are drawn on the emulator, not through the physics: the check is of the
@@ -21,7 +22,13 @@ from typing import Any
 import numpy as np
 
 from study.analysis.participant_fit.emulator import MomentEmulator
-from study.analysis.participant_fit.estimate import HIGH, LOW, GroupEstimator, prior_arrays
+from study.analysis.participant_fit.estimate import (
+    HIGH,
+    LOW,
+    GroupEstimator,
+    expanded_interval,
+    prior_arrays,
+)
 from study.protocol.traits import PROFILES, TRAITS, GroupProfile
 from teleop_core.progress import Progress, no_progress
 
@@ -76,7 +83,7 @@ def coverage(
                     for _ in range(bootstrap)
                 ]
             )
-            low, high = np.percentile(boots, [2.5, 97.5], axis=0)
+            low, high = expanded_interval(boots, n)
             true = prior_arrays(truth[group])[0]
             spread = boots.std(axis=0, ddof=1)
             for j in free:

@@ -17,10 +17,14 @@ every simulation drawn from the model carries. Here:
 - **an effect's parameters** (`fit_effects`): least squares (`scipy.optimize.
   least_squares`, within each parameter's range) of every trial's log measures against
   the emulator's prediction for the person's fitted traits times the effects' multipliers
-  at the trial's place, each measure in units of its trial noise; alternated with the
-  trait fit on the data with the effects taken out (each person's traits are then their
-  plateau's), three rounds. The parameters' 95 % intervals: the same least squares on
-  people resampled within group (the traits held).
+  at the trial's place, each measure in units of its trial noise, each group's level of
+  the free traits the family acts on moving with the parameters (`TOUCHES`); alternated
+  with the trait fit on the data with the effects taken out (each person's traits are
+  then their plateau's), three rounds. The carry-over is fitted one direction at a time
+  (`FREE`): in a two-period crossover only the difference between the condition orders
+  tells a carry-over, and one free in both directions is a period effect too. The
+  parameters' 95 % intervals: the same least squares on people resampled within group
+  (each person's traits held, the groups' levels moving).
 - **prediction error** (`prediction_error`): each quarter of the people (within group)
   held out in turn, the traits and the effects fitted to the other three quarters; in
   each cell of group x condition x condition order x trial position, the held-out
@@ -75,7 +79,24 @@ ROUNDS = 3
 FOLDS = 4
 BOOTSTRAP = 200
 """People resamplings for the effects' parameter intervals."""
-START = {"slowing": 0.3, "decay_trials": 2.0, "rate": 0.0, "vo_after_hv": 0.0, "hv_after_vo": 0.0}
+FREE: dict[str, tuple[tuple[str, ...], ...]] = {
+    "practice": (FAMILIES["practice"],),
+    "fatigue": (FAMILIES["fatigue"],),
+    "carry_over": (("vo_after_hv",), ("hv_after_vo",)),
+}
+"""The parameters the least squares moves together, per family, and the alternatives
+tried. The carry-over moves one direction at a time, the other held at 0: in a
+two-period crossover the data tell only the difference between the two condition
+orders, and a carry-over free in both directions reproduces a period effect exactly
+(both shares equal), so it would take a practice effect's common speed-up between the
+blocks for itself. One direction cannot: it moves one condition's second block only,
+which is what the orders' difference is."""
+FIT_BOUNDS = {**BOUNDS, "rate": (0.0, BOUNDS["rate"][1])}
+"""The parameters' ranges in the fit: `BOUNDS`, but the fatigue's rate only slows (a
+negative rate, a session-long speed-up, is learning, which is practice's to name: with
+three trials per condition the two shapes are close, and a fitted negative fatigue
+took the place of an injected practice effect)."""
+START = {"slowing": 0.3, "decay_trials": 2.0, "rate": 0.01, "vo_after_hv": 0.0, "hv_after_vo": 0.0}
 DEFINITION = (
     "each quarter of the people (within group) held out in turn and the model (traits "
     "and participant effects) fitted to the other three; per cell of group x condition x "
@@ -285,42 +306,89 @@ def fit_traits(
     return out
 
 
+Spec = tuple[tuple[str, tuple[str, ...]], ...]
+"""Families with the parameters the least squares moves (the others held at 0)."""
+
+
+def _specs(families: Sequence[str]) -> list[Spec]:
+    """Every way to fit `families`: one per combination of their `FREE` alternatives."""
+    out: list[Spec] = [()]
+    for family in families:
+        out = [(*spec, (family, names)) for spec in out for names in FREE[family]]
+    return out
+
+
 def _effects(
-    families: Sequence[str],
+    spec: Spec,
     x: np.ndarray,
     groups: tuple[str, ...],
     intervals: dict[str, tuple[float, float]] | None = None,
 ) -> list[ParticipantEffect]:
     out, k = [], 0
-    for family in families:
-        names = FAMILIES[family]
-        params = {n: float(np.clip(x[k + i], *BOUNDS[n])) for i, n in enumerate(names)}
-        ivs = {n: intervals[n] for n in names if intervals and n in intervals}
+    for family, free in spec:
+        params = {n: 0.0 for n in FAMILIES[family]}
+        params.update({n: float(np.clip(x[k + i], *FIT_BOUNDS[n])) for i, n in enumerate(free)})
+        ivs = {n: intervals[n] for n in free if intervals and n in intervals}
+        # a parameter held at 0 has no spread to report: its interval is the point
+        ivs.update({n: (0.0, 0.0) for n in FAMILIES[family] if n not in free and intervals})
         out.append(ParticipantEffect(family, params, groups, ivs))
-        k += len(names)
+        k += len(free)
     return out
+
+
+TOUCHES: dict[str, tuple[str, ...]] = {
+    "practice": ("preferred_speed_m_s",),
+    "fatigue": ("preferred_speed_m_s", "reaction_s"),
+    "carry_over": ("preferred_speed_m_s", "visual_stall_s"),
+}
+"""The traits each family's multipliers act on (`ParticipantEffect.factors`)."""
+LEVEL = 0.5
+"""How far (log) a group's level of such a trait may move in the effects' least squares."""
 
 
 def _least_squares(
     arrays: TrialArrays,
     emulator: MomentEmulator,
     theta: np.ndarray,
-    families: Sequence[str],
+    spec: Spec,
     groups: tuple[str, ...],
     start: np.ndarray,
     weights: np.ndarray,
-) -> np.ndarray:
-    names = [n for f in families for n in FAMILIES[f]]
-    low = np.array([BOUNDS[n][0] for n in names])
-    high = np.array([BOUNDS[n][1] for n in names])
+    free: Sequence[int] = (),
+) -> tuple[np.ndarray, float]:
+    """The free parameters of `spec` and the trials' squared standardised error there.
+
+    With `free` (the fitted traits), each group's level of every free trait the
+    families act on moves with them (a log multiplier, not returned): a practice effect
+    and a slower person are the same slowing in a session's mean, so the effect's
+    parameters against traits held where they were fitted without it come out too
+    small, and alternating with the trait fit closes the gap only slowly."""
+    names = [n for _, free_names in spec for n in free_names]
+    touched = sorted({TRAITS.index(t) for family, _ in spec for t in TOUCHES[family]} & set(free))
+    g_index = np.searchsorted(np.array(groups), arrays.groups)
+    n_level = len(groups) * len(touched)
+    # a decay longer than the session's measured trials is a level, not a decay: the
+    # traits' own (a large slowing decaying over many sessions' length, with every
+    # group's speed raised to match, fits the trials as well as the true effect and
+    # predicts held-out people far worse)
+    span = float(max(p.position for p in arrays.places) + 1)
+    bounds = {**FIT_BOUNDS, "decay_trials": (FIT_BOUNDS["decay_trials"][0], max(span, 1.0))}
+    low = np.array([bounds[n][0] for n in names] + [-LEVEL] * n_level)
+    high = np.array([bounds[n][1] for n in names] + [LEVEL] * n_level)
     noise = np.sqrt(emulator.within_var_[arrays.columns])
+    k = len(names)
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        factors = factor_matrix(_effects(families, x, groups), arrays.places, arrays.groups)
+        factors = factor_matrix(_effects(spec, x[:k], groups), arrays.places, arrays.groups)
+        if n_level:
+            level = np.exp(x[k:].reshape(len(groups), len(touched)))
+            factors[:, touched] *= level[g_index]
         r = (arrays.y - _predicted(emulator, theta, factors, arrays.columns)) / noise
         return (r * weights[:, None]).ravel()
 
-    return least_squares(residuals, np.clip(start, low, high), bounds=(low, high), x_scale="jac").x
+    x0 = np.concatenate([start[:k], np.zeros(n_level)])
+    found = least_squares(residuals, np.clip(x0, low, high), bounds=(low, high), x_scale="jac")
+    return found.x[:k], 2.0 * float(found.cost)
 
 
 def fit_effects(
@@ -339,16 +407,22 @@ def fit_effects(
     if not families:
         return fit
     arrays = trial_arrays(trials, emulator)
-    x = np.array([START[n] for f in families for n in FAMILIES[f]])
     ones = np.ones(len(arrays.y))
+    theta = np.array([fit.theta[p] for p in arrays.people])
+    # each way to fit the families (the carry-over's one direction or the other) from
+    # the traits fitted without effects; the one that fits the trials best is kept
+    tried = []
+    for spec in _specs(families):
+        start = np.array([START[n] for _, names in spec for n in names])
+        x, cost = _least_squares(arrays, emulator, theta, spec, groups, start, ones, free)
+        tried.append((cost, spec, x))
+    _, spec, x = min(tried, key=lambda t: t[0])
     for _ in range(ROUNDS):
-        theta = np.array([fit.theta[p] for p in arrays.people])
-        x = _least_squares(arrays, emulator, theta, families, groups, x, ones)
-        effects = _effects(families, x, groups)
+        effects = _effects(spec, x, groups)
         adjusted = without_effects(trials, emulator, effects, theta)
         fit = fit_traits(adjusted, emulator, free, weak, seed)
-    theta = np.array([fit.theta[p] for p in arrays.people])
-    x = _least_squares(arrays, emulator, theta, families, groups, x, ones)
+        theta = np.array([fit.theta[p] for p in arrays.people])
+        x, _ = _least_squares(arrays, emulator, theta, spec, groups, x, ones, free)
     intervals = None
     if bootstrap:
         rng = np.random.default_rng([seed, 0xEFFE])
@@ -361,14 +435,14 @@ def fit_effects(
             )
             counts = picked.value_counts()
             w = np.sqrt(np.array([counts.get(p, 0) for p in arrays.people], dtype=float))
-            draws.append(_least_squares(arrays, emulator, theta, families, groups, x, w))
+            draws.append(_least_squares(arrays, emulator, theta, spec, groups, x, w, free)[0])
         draws_arr = np.array(draws)
-        names = [n for f in families for n in FAMILIES[f]]
+        names = [n for _, free_names in spec for n in free_names]
         intervals = {
             n: tuple(np.percentile(draws_arr[:, i], [2.5, 97.5]).tolist())
             for i, n in enumerate(names)
         }
-    fit.effects = _effects(families, x, groups, intervals)
+    fit.effects = _effects(spec, x, groups, intervals)
     return fit
 
 

@@ -48,6 +48,7 @@ from study.analysis.participant_fit.estimate import (
     NU0,
     GroupEstimator,
     GroupFit,
+    expanded_interval,
     identifiable,
     observed_moments,
     prior_arrays,
@@ -372,8 +373,8 @@ class GroupResult:
                 "identifiable": j in plan.told,
             }
             if j in plan.free:
-                out["mean_ci95"] = np.percentile(self.boots[:, j], [2.5, 97.5]).tolist()
-                out["sd_ci95"] = np.percentile(self.boots[:, n + j], [2.5, 97.5]).tolist()
+                out["mean_ci95"] = expanded_interval(self.boots[:, j], len(self.y)).tolist()
+                out["sd_ci95"] = expanded_interval(self.boots[:, n + j], len(self.y)).tolist()
             if j not in plan.told:
                 out["prior"] = list(getattr(PROFILES[group], t))
             return out
