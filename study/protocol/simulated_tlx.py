@@ -30,7 +30,7 @@ BASE = {
 VIGILANCE = {"mental": 30.0, "effort": 12.0, "frustration": 15.0}
 """What watching the screen for every obstacle adds to these ratings, against feeling
 them all in the hand (assumption, sized so that the default study's TLX is lower with
-haptics in every group, as seed 000, IV-D reports: "haptic feedback effectively
+haptics in every group, as [endovascular], IV-D reports: "haptic feedback effectively
 alleviates the sustained concentration required for visual force compensation")."""
 
 
