@@ -399,56 +399,77 @@ def comparison_rows(long: Long, a: str = "VO", b: str = "HV") -> tuple[list[Row]
     """`compare_conditions` on `Long` tuples: the rows and the exclusion notes."""
     rows, excluded = [], []
     for (task, measure, group), people in _pairs(long, a, b).items():
-        people = {p: c for p, c in people.items() if c}  # a pivot drops all-empty rows
-        missing = [p for p, c in people.items() if a not in c or b not in c]
-        if missing:
-            excluded.append(
-                f"{task}/{measure}/{group}: excluded {', '.join(map(str, missing))} "
-                f"(missing {a} or {b})"
-            )
-        complete = [c for c in people.values() if a in c and b in c]
+        label = f"{task}/{measure}/{group}"
+        complete, missing_note = _complete_pairs(people, a, b, label)
+        excluded += missing_note
         n = len(complete)
-        row: Row = {"task": task, "measure": measure, "group": group, "n": n}
         if n < 3:
-            excluded.append(f"{task}/{measure}/{group}: n = {n} pairs, too few to test")
+            excluded.append(f"{label}: n = {n} pairs, too few to test")
             continue
         vo = np.array([c[a] for c in complete])
         hv = np.array([c[b] for c in complete])
-        diff = hv - vo
-        normal_p = shapiro_wilk(diff)[1] if np.ptp(diff) > 0 else 1.0
-        row.update(
-            mean_vo=float(vo.mean()),
-            mean_hv=float(hv.mean()),
-            sd_vo=float(vo.std(ddof=1)),
-            sd_hv=float(hv.std(ddof=1)),
-            shapiro_p=normal_p,
-        )
-        if normal_p >= ALPHA:
-            t = paired_t(hv, vo)
-            row.update(
-                test="paired_t",
-                statistic=t,
-                p=t_two_sided(t, n - 1),
-                effect_size=hedges_g_av(vo, hv),
-                effect_size_kind="hedges_g_av",
-                p_method="t distribution",
-            )
-        else:
-            w_stat, w_p, method = wilcoxon_signed_rank(diff, _magnitude(vo, hv))
-            row.update(
-                test="wilcoxon",
-                statistic=w_stat,
-                p=w_p,
-                effect_size=rank_biserial(vo, hv),
-                effect_size_kind="rank_biserial",
-                p_method=method,
-            )
+        row: Row = {"task": task, "measure": measure, "group": group, "n": n}
+        row.update(_paired_test(vo, hv))
         rows.append({c: row.get(c, float("nan")) for c in COMPARISON_COLUMNS})
+    _holm_within_families(rows)
+    return rows, excluded
+
+
+def _complete_pairs(
+    people: dict[Any, dict[str, float]], a: str, b: str, label: str
+) -> tuple[list[dict[str, float]], list[str]]:
+    """The condition means of the participants with both `a` and `b`, and the note
+    (none or one) naming those without one of them."""
+    people = {p: c for p, c in people.items() if c}  # a pivot drops all-empty rows
+    missing = [p for p, c in people.items() if a not in c or b not in c]
+    complete = [c for c in people.values() if a in c and b in c]
+    if not missing:
+        return complete, []
+    return complete, [f"{label}: excluded {', '.join(map(str, missing))} (missing {a} or {b})"]
+
+
+def _paired_test(vo: np.ndarray, hv: np.ndarray) -> Row:
+    """Both conditions' means and SDs, Shapiro-Wilk on the differences, and the test it
+    picks: the paired t-test with Hedges' g_av, or the Wilcoxon signed-rank test with
+    the rank-biserial correlation."""
+    diff = hv - vo
+    normal_p = shapiro_wilk(diff)[1] if np.ptp(diff) > 0 else 1.0
+    row: Row = {
+        "mean_vo": float(vo.mean()),
+        "mean_hv": float(hv.mean()),
+        "sd_vo": float(vo.std(ddof=1)),
+        "sd_hv": float(hv.std(ddof=1)),
+        "shapiro_p": normal_p,
+    }
+    if normal_p >= ALPHA:
+        t = paired_t(hv, vo)
+        row.update(
+            test="paired_t",
+            statistic=t,
+            p=t_two_sided(t, len(vo) - 1),
+            effect_size=hedges_g_av(vo, hv),
+            effect_size_kind="hedges_g_av",
+            p_method="t distribution",
+        )
+    else:
+        w_stat, w_p, method = wilcoxon_signed_rank(diff, _magnitude(vo, hv))
+        row.update(
+            test="wilcoxon",
+            statistic=w_stat,
+            p=w_p,
+            effect_size=rank_biserial(vo, hv),
+            effect_size_kind="rank_biserial",
+            p_method=method,
+        )
+    return row
+
+
+def _holm_within_families(rows: list[Row]) -> None:
+    """Set each row's `p_holm`: Holm's correction across the groups of one task x measure."""
     families = _groups(((r["task"], r["measure"]), r) for r in rows)
     for family in families.values():
         for r, adjusted in zip(family, holm(np.array([r["p"] for r in family])), strict=True):
             r["p_holm"] = float(adjusted)
-    return rows, excluded
 
 
 def _sizes(counts: dict[Any, int]) -> str:
@@ -500,38 +521,63 @@ def mixed_anova_rows(
     if ss_type not in SS_TYPES:
         raise StudyInputError(f"sums-of-squares type {ss_type!r}; expected 2 or 3")
     rows, notes = [], []
+    for (task, measure), people in _condition_values(long, a, b).items():
+        anova, cell_notes = _anova_of(f"{task}/{measure}", _wide(people, a, b), ss_type)
+        notes += cell_notes
+        for row in anova:
+            rows.append({"task": task, "measure": measure, **row})
+    return rows, notes
+
+
+def _condition_values(
+    long: Long, a: str, b: str
+) -> dict[tuple[Any, Any], dict[tuple[Any, Any], dict[str, list[float]]]]:
+    """(task, measure) -> (participant, group) -> condition -> its finite values, for the
+    conditions `a` and `b`, in order of first appearance."""
     measures: dict[tuple[Any, Any], dict[tuple[Any, Any], dict[str, list[float]]]] = {}
     for participant, group, task, condition, measure, value in long:
         if condition in (a, b) and _finite(value):
             people = measures.setdefault((task, measure), {})
             people.setdefault((participant, group), {}).setdefault(condition, []).append(value)
-    for (task, measure), people in measures.items():
-        # one participant per row, sorted by participant (a pivot table's order)
-        wide = [
-            (group, float(np.mean(c[a])), float(np.mean(c[b])))
-            for (_, group), c in sorted(people.items(), key=lambda item: item[0])
-            if a in c and b in c
-        ]
-        sizes: dict[Any, int] = {}
-        for group, _, _ in wide:
-            sizes[group] = sizes.get(group, 0) + 1
-        if len(sizes) < 2 or min(sizes.values()) < 2:
-            notes.append(f"{task}/{measure}: mixed ANOVA skipped (groups {_sizes(sizes)})")
-            continue
-        if len(set(sizes.values())) > 1:
-            notes.append(
-                f"{task}/{measure}: mixed ANOVA on unequal group sizes {_sizes(sizes)}, "
-                f"Type {'II' if ss_type == 2 else 'III'} sums of squares"
-            )
-        group = np.array([g for g, _, _ in wide], dtype=object)
-        va = np.array([x for _, x, _ in wide])
-        vb = np.array([y for _, _, y in wide])
-        if all(np.var(v[group == g], ddof=1) == 0 for g in sizes for v in (va, vb)):
-            notes.append(f"{task}/{measure}: mixed ANOVA skipped (no variance within groups)")
-            continue
-        for row in anova_rows(group, va, vb, ss_type):
-            rows.append({"task": task, "measure": measure, **row})
-    return rows, notes
+    return measures
+
+
+def _wide(
+    people: dict[tuple[Any, Any], dict[str, list[float]]], a: str, b: str
+) -> list[tuple[Any, float, float]]:
+    """(group, mean of `a`, mean of `b`) of each participant with both conditions."""
+    # one participant per row, sorted by participant (a pivot table's order)
+    return [
+        (group, float(np.mean(c[a])), float(np.mean(c[b])))
+        for (_, group), c in sorted(people.items(), key=lambda item: item[0])
+        if a in c and b in c
+    ]
+
+
+def _anova_of(
+    label: str, wide: list[tuple[Any, float, float]], ss_type: int
+) -> tuple[list[Row], list[str]]:
+    """The mixed ANOVA of one task x measure (`wide`: `_wide`), or none when a group has
+    fewer than two participants or no group varies; and the notes saying so, or that the
+    groups are unequal."""
+    sizes: dict[Any, int] = {}
+    for group, _, _ in wide:
+        sizes[group] = sizes.get(group, 0) + 1
+    if len(sizes) < 2 or min(sizes.values()) < 2:
+        return [], [f"{label}: mixed ANOVA skipped (groups {_sizes(sizes)})"]
+    notes = []
+    if len(set(sizes.values())) > 1:
+        notes.append(
+            f"{label}: mixed ANOVA on unequal group sizes {_sizes(sizes)}, "
+            f"Type {'II' if ss_type == 2 else 'III'} sums of squares"
+        )
+    group = np.array([g for g, _, _ in wide], dtype=object)
+    va = np.array([x for _, x, _ in wide])
+    vb = np.array([y for _, _, y in wide])
+    if all(np.var(v[group == g], ddof=1) == 0 for g in sizes for v in (va, vb)):
+        notes.append(f"{label}: mixed ANOVA skipped (no variance within groups)")
+        return [], notes
+    return anova_rows(group, va, vb, ss_type), notes
 
 
 CONDITION_TERM = "C(condition, Treatment('VO'))"

@@ -4,12 +4,18 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from study.analysis.source import DRIVERS
 from study.commands.base import StudyCommand, check_parent_folder, db_option
 from study.errors import StudyInputError
+
+if TYPE_CHECKING:  # pandas only where the covariate needs it
+    import pandas as pd
+
+Row = dict[str, Any]
 
 
 @click.command("analyze", cls=StudyCommand)
@@ -60,43 +66,18 @@ def analyze(
     Every output counts the trials by driver (simulated, keyboard, hardware, imported) and
     says so when any is simulated.
     """
-    from study.analysis.means import (
-        participant_mean_rows,
-        restrict_rows,
-        tlx_measure_rows,
-        without_invalid_rows,
-        without_withdrawn_rows,
-    )
+    from study.analysis.means import participant_mean_rows, restrict_rows, tlx_measure_rows
     from study.analysis.report import write
     from study.analysis.stats import analyze_rows
 
     if json_path is not None:
         check_parent_folder(json_path)
     start = time.monotonic()
-    trials, tlx, withdrawn_codes, invalid = _read(db_url)
-    trials, tlx, withdrawn = without_withdrawn_rows(withdrawn_codes, trials, tlx)
-    trials, invalid_notes = without_invalid_rows(invalid, trials)
-    withdrawn += invalid_notes
+    trials, tlx, withdrawn = _usable_rows(db_url)
     if covariate is not None:
-        from db.migrate import open_database
-        from study.analysis.covariate import covariate_values
-        from study.probes.store import probe_frame
-
-        engine = open_database(db_url, create=False)
-        try:
-            probe_trials = probe_frame(engine)
-        finally:
-            engine.dispose()
-        trait, values = covariate_values(probe_trials, covariate)
+        probe_trials, trait, values = _probe_covariate(db_url, covariate)
     if task is not None:
-        known = {r["task"] for r in trials} | {r["task"] for r in tlx}
-        if task not in known:
-            raise StudyInputError(
-                f"no data for task {task!r}; expected one of "
-                f"{', '.join(sorted(known)) or 'none stored'}"
-            )
-        trials = [r for r in trials if r["task"] == task]
-        tlx = [r for r in tlx if r["task"] == task]
+        trials, tlx = _only_task(trials, tlx, task)
     if not trials and not tlx:
         raise StudyInputError("the database holds no completed trials or questionnaires to analyse")
     trials, tlx = restrict_rows(trials, tlx, driver)
@@ -109,19 +90,63 @@ def analyze(
     if covariate is not None:
         from study.protocol.trial_table import trial_table
 
-        drivers = probe_trials["driver"].value_counts().to_dict()
-        click.echo(
-            f"covariate {covariate}: probe trials by driver: "
-            + ", ".join(f"{d} {n}" for d, n in sorted(drivers.items()))
-            + (" (SIMULATED participants' answers)" if "simulated" in drivers else "")
-        )
+        _echo_probe_drivers(covariate, probe_trials)
         _covariate(trial_table(trials), values, trait, out_dir)
-    n_ex = len(result.exclusions)
     if result.source.note:
         click.echo(result.source.note)
     click.echo(
-        f"{len(result.comparison_rows)} comparisons, {n_ex} exclusions, "
+        f"{len(result.comparison_rows)} comparisons, {len(result.exclusions)} exclusions, "
         f"{len(result.warnings)} notes, in {time.monotonic() - start:.1f} s"
+    )
+
+
+def _usable_rows(db_url: str | None) -> tuple[list[Row], list[Row], list[str]]:
+    """The trials and questionnaires to analyse (`_read`) without the withdrawn
+    participants and the trials marked invalid, and the notes saying who and which
+    were left out."""
+    from study.analysis.means import without_invalid_rows, without_withdrawn_rows
+
+    trials, tlx, withdrawn_codes, invalid = _read(db_url)
+    trials, tlx, withdrawn = without_withdrawn_rows(withdrawn_codes, trials, tlx)
+    trials, invalid_notes = without_invalid_rows(invalid, trials)
+    withdrawn += invalid_notes
+    return trials, tlx, withdrawn
+
+
+def _probe_covariate(db_url: str | None, covariate: str) -> tuple[pd.DataFrame, str, pd.Series]:
+    """The stored probe trials, and the trait `covariate` names with its estimate per
+    participant (`covariate_values`)."""
+    from db.migrate import open_database
+    from study.analysis.covariate import covariate_values
+    from study.probes.store import probe_frame
+
+    engine = open_database(db_url, create=False)
+    try:
+        probe_trials = probe_frame(engine)
+    finally:
+        engine.dispose()
+    trait, values = covariate_values(probe_trials, covariate)
+    return probe_trials, trait, values
+
+
+def _only_task(trials: list[Row], tlx: list[Row], task: str) -> tuple[list[Row], list[Row]]:
+    """The trials and questionnaires of `task`; a task without either is bad input."""
+    known = {r["task"] for r in trials} | {r["task"] for r in tlx}
+    if task not in known:
+        raise StudyInputError(
+            f"no data for task {task!r}; expected one of "
+            f"{', '.join(sorted(known)) or 'none stored'}"
+        )
+    return [r for r in trials if r["task"] == task], [r for r in tlx if r["task"] == task]
+
+
+def _echo_probe_drivers(covariate: str, probe_trials: pd.DataFrame) -> None:
+    """Print the probe trials' count by driver, saying so when any is simulated."""
+    drivers = probe_trials["driver"].value_counts().to_dict()
+    click.echo(
+        f"covariate {covariate}: probe trials by driver: "
+        + ", ".join(f"{d} {n}" for d, n in sorted(drivers.items()))
+        + (" (SIMULATED participants' answers)" if "simulated" in drivers else "")
     )
 
 

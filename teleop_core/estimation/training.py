@@ -29,14 +29,14 @@ from typing import Any
 
 import numpy as np
 
-from teleop_core._typing import Float1D
+from teleop_core._typing import Float1D, Float2D
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.ekf import EkfSettings, filter_forces, rest_variances
 from teleop_core.estimation.extended import ExtendedPhysics, find_effects, physics_force
 from teleop_core.estimation.gru import GruConfig, GruModel, TrainingHistory
 from teleop_core.estimation.memory import memory_inputs
 from teleop_core.estimation.metrics import lag_samples, rmse
-from teleop_core.estimation.model import ForceEstimator, features_of
+from teleop_core.estimation.model import EstimateResult, ForceEstimator, features_of
 from teleop_core.estimation.ranges import InputRange
 from teleop_core.estimation.regimes import (
     RegimeRules,
@@ -198,11 +198,144 @@ def train_estimator(
             f"residual stage {residual_stage!r}; expected one of {', '.join(RESIDUAL_CHOICES)}"
         )
     config = config or GruConfig()
-    notes: list[str] = []
+    recording, notes = _regularly_sampled(recording)
+    T = config.window
+    blocks = _validation_blocks(recording, config, seed)
+    notes += blocks.notes
+    train_idx, val_idx = blocks.train_idx, blocks.val_idx
+    physics, extension, physics_notes = _physics_stage(
+        recording,
+        blocks.train_mask,
+        physics,
+        extension,
+        effects=effects,
+        wheel_radius_m=wheel_radius_m,
+        sign_speed_rad_s=sign_speed_rad_s,
+        progress=progress,
+    )
+    notes += physics_notes
+    f_phys_all = physics_force(physics, extension, recording)
+    residual = recording.f_ref - f_phys_all  # r_t = F_ref - F_physics   (eq. 13)
+    features = features_of(recording)
+    # [I_q, theta_d, theta_dd] and the memory features of config.memory (memory.py)
+    inputs = memory_inputs(recording.t, features, config.memory)
+    stages = _residual_stages(
+        inputs, residual, config, blocks, residual_stage, trees, seed=seed, progress=progress
+    )
+    # physics+residual against F_ref on the validation windows: the residual's own error,
+    # from each stage's float64 prediction (the GRU's history is PyTorch's float32)
+    target = residual[T - 1 :]
+    stage_val = {
+        name: rmse(model.predict(inputs)[val_idx], target[val_idx])
+        for name, (model, _) in stages.items()
+    }
+    chosen = min(stage_val, key=stage_val.__getitem__)
+    gru, history = stages[chosen]
+    if residual_stage == "auto":
+        notes.append(
+            f"residual stage chosen on the validation blocks: {chosen} (physics+residual "
+            + ", ".join(f"{name} {v:.4f} N" for name, v in stage_val.items())
+            + ")"
+        )
+    rate = recording.sample_rate_hz
+    train_samples = np.unique((train_idx[:, None] + np.arange(T)).ravel())
+    input_range = InputRange.fit(features[train_samples])
+    base, rest_found = _ekf_base(recording, blocks.train_mask, residual, history.best_val_rmse)
+    if not rest_found:
+        notes.append("the wheel is never at rest: EKF R from the default sensor noise")
+    estimator = ForceEstimator(physics, gru, base, rate, pipeline_rate_hz, extension, input_range)
+    result = estimator.predict(recording)
+    omega = recording.omega[T - 1 :]
+    settings, lag = _process_noise(
+        physics, base, result, omega, train_idx, rate, pipeline_rate_hz, ekf_q_n2
+    )
+    # The filter runs over the whole recording (its state carries across the blocks),
+    # and is judged on the validation blocks against the hybrid estimate it filters.
+    result.f_final = _filtered(settings, physics, rate, result, omega)
+    ekf_check = _ekf_check(result, val_idx)
+    if ekf_check["passthrough"]:
+        settings = EkfSettings(**{**settings.to_dict(), "passthrough": True})
+        result.f_final = result.f_hybrid.copy()
+        lag = 0.0
+        notes.append(
+            f"the EKF did not improve the hybrid estimate on the validation blocks "
+            f"({ekf_check['validation_rmse_filtered_n']:.4f} N against "
+            f"{ekf_check['validation_rmse_hybrid_n']:.4f} N): it passes the hybrid "
+            "estimate through"
+        )
+    estimator = ForceEstimator(
+        physics, gru, settings, rate, pipeline_rate_hz, extension, input_range
+    )
+    val_masks = {label: m[T - 1 :][val_idx] for label, m in blocks.masks.items()}
+    summary = TrainingSummary(
+        window=T,
+        epochs_run=len(history.val_rmse),
+        best_epoch=history.best_epoch,
+        sample_rate_hz=rate,
+        train_samples=len(train_idx),
+        validation_samples=len(val_idx),
+        train_rmse_n=_stage_rmse(result, train_idx),
+        validation_rmse_n=_stage_rmse(result, val_idx),
+        history={"train_rmse_n": history.train_rmse, "validation_rmse_n": history.val_rmse},
+        ekf_rest_samples_found=rest_found,
+        ekf_lag_s=lag / rate,
+        recording=recording.name,
+        recording_sha256=recording.sha256(),
+        seed=seed,
+        validation_rmse_by_regime_n=regime_rmse(
+            val_masks,
+            result.f_ref[val_idx],
+            physics=result.f_physics[val_idx],
+            hybrid=result.f_hybrid[val_idx],
+            final=result.f_final[val_idx],
+        ),
+        split=blocks.split,
+        regime_rules=blocks.rules.to_dict(),
+        ekf_check=ekf_check,
+        config=asdict(config) | ({"trees": asdict(trees)} if trees is not None else {}),
+        notes=notes,
+        residual={
+            "requested": residual_stage,
+            "chosen": chosen,
+            "validation_rmse_n": stage_val,
+        },
+    )
+    return estimator, summary
+
+
+def _regularly_sampled(recording: FollowerRecording) -> tuple[FollowerRecording, list[str]]:
+    """`recording`, resampled at its nominal rate when a sample interval strays more than
+    10 % from the median; and the note saying so."""
     dt = np.diff(recording.t)
     if np.max(np.abs(dt / np.median(dt) - 1.0)) > 0.1:
         recording = recording.resampled(recording.sample_rate_hz)
-        notes.append(f"irregular sampling: resampled to {recording.sample_rate_hz:.6g} Hz")
+        return recording, [f"irregular sampling: resampled to {recording.sample_rate_hz:.6g} Hz"]
+    return recording, []
+
+
+@dataclass(frozen=True)
+class _Blocks:
+    """The training and validation windows of one recording (`representative_split`)."""
+
+    train_idx: np.ndarray
+    """Training windows, by their first sample."""
+    val_idx: np.ndarray
+    """Validation windows, by their first sample."""
+    train_mask: np.ndarray
+    """Per sample: it ends a training window."""
+    masks: dict[str, np.ndarray]
+    """Per regime label (`regimes.label_samples`): the samples in that regime."""
+    split: dict[str, Any]
+    """`representative_split`'s account: the blocks, each regime's shares, those missing."""
+    rules: RegimeRules
+    """The speed and load thresholds the regimes were labelled with."""
+    notes: list[str]
+    """What the summary says about the split (regimes missing from a part)."""
+
+
+def _validation_blocks(recording: FollowerRecording, config: GruConfig, seed: int) -> _Blocks:
+    """Label the samples by regime and choose validation blocks that hold every regime
+    (`representative_split`); a recording too short for the blocks is bad input."""
     T = config.window
     n_windows = len(recording) - T + 1
     if n_windows < 2 * config.blocks:
@@ -210,12 +343,12 @@ def train_estimator(
             f"recording {recording.name} has {len(recording)} samples; expected at least "
             f"{2 * config.blocks + T - 1} for a window of {T} and {config.blocks} blocks"
         )
-    rate = recording.sample_rate_hz
     rules = RegimeRules.for_loads(recording.f_ref)
-    masks = label_samples(recording.omega, recording.f_ref, rate, rules)
+    masks = label_samples(recording.omega, recording.f_ref, recording.sample_rate_hz, rules)
     train_idx, val_idx, split = representative_split(
         masks, n_windows, T, config.blocks, config.validation_fraction, seed
     )
+    notes = []
     if split["missing"]:
         notes.append(
             "no choice of validation blocks holds every regime in both parts; missing: "
@@ -223,6 +356,24 @@ def train_estimator(
         )
     train_mask = np.zeros(len(recording), bool)
     train_mask[train_idx + T - 1] = True
+    return _Blocks(train_idx, val_idx, train_mask, masks, split, rules, notes)
+
+
+def _physics_stage(
+    recording: FollowerRecording,
+    train_mask: np.ndarray,
+    physics: PhysicsParams | None,
+    extension: ExtendedPhysics | None,
+    *,
+    effects: bool,
+    wheel_radius_m: float,
+    sign_speed_rad_s: float,
+    progress: Progress,
+) -> tuple[PhysicsParams, ExtendedPhysics | None, list[str]]:
+    """Eq. 1 and the effects added to it: `physics` and `extension` as given, the
+    effects found on the recording (`effects`), and eq. 1 fitted on the training
+    samples where no parameters are given; and the notes saying which."""
+    notes = []
     if extension is None and physics is None and effects:
         progress("finding the effects eq. 1 lacks")
         extension, report = find_effects(recording, wheel_radius_m=wheel_radius_m)
@@ -240,11 +391,23 @@ def train_estimator(
             sign_speed_rad_s=sign_speed_rad_s,
             mask=train_mask,
         )
-    f_phys_all = physics_force(physics, extension, recording)
-    residual = recording.f_ref - f_phys_all  # r_t = F_ref - F_physics   (eq. 13)
-    features = features_of(recording)
-    # [I_q, theta_d, theta_dd] and the memory features of config.memory (memory.py)
-    inputs = memory_inputs(recording.t, features, config.memory)
+    return physics, extension, notes
+
+
+def _residual_stages(
+    inputs: Float2D,
+    residual: Float1D,
+    config: GruConfig,
+    blocks: _Blocks,
+    residual_stage: str,
+    trees: TreesConfig | None,
+    *,
+    seed: int,
+    progress: Progress,
+) -> dict[str, tuple[GruModel | TreesModel, TrainingHistory]]:
+    """The residual stages `residual_stage` asks for, trained on the same training
+    windows: the GRU (stopped early on the validation windows), the trees, or both."""
+    train_idx, val_idx, T = blocks.train_idx, blocks.val_idx, config.window
     stages: dict[str, tuple[GruModel | TreesModel, TrainingHistory]] = {}
     if residual_stage in ("gru", "auto"):
         from teleop_core.estimation.gru_torch import train_gru
@@ -264,115 +427,70 @@ def train_estimator(
                 best_epoch=1,
             ),
         )
-    # physics+residual against F_ref on the validation windows: the residual's own error,
-    # from each stage's float64 prediction (the GRU's history is PyTorch's float32)
-    target = residual[T - 1 :]
-    stage_val = {
-        name: rmse(model.predict(inputs)[val_idx], target[val_idx])
-        for name, (model, _) in stages.items()
-    }
-    chosen = min(stage_val, key=stage_val.__getitem__)
-    gru, history = stages[chosen]
-    if residual_stage == "auto":
-        notes.append(
-            f"residual stage chosen on the validation blocks: {chosen} (physics+residual "
-            + ", ".join(f"{name} {v:.4f} N" for name, v in stage_val.items())
-            + ")"
-        )
-    train_samples = np.unique((train_idx[:, None] + np.arange(T)).ravel())
-    input_range = InputRange.fit(features[train_samples])
-    base, rest_found = _ekf_base(recording, train_mask, residual, history.best_val_rmse)
-    if not rest_found:
-        notes.append("the wheel is never at rest: EKF R from the default sensor noise")
-    estimator = ForceEstimator(physics, gru, base, rate, pipeline_rate_hz, extension, input_range)
-    result = estimator.predict(recording)
-    omega = recording.omega[T - 1 :]
+    return stages
 
-    def filtered(settings: EkfSettings) -> Float1D:
-        return filter_forces(settings, physics, 1.0 / rate, result.f_model, result.f_hybrid, omega)
 
+def _filtered(
+    settings: EkfSettings,
+    physics: PhysicsParams,
+    rate_hz: float,
+    result: EstimateResult,
+    omega: Float1D,
+) -> Float1D:
+    """The EKF with `settings` over the whole prediction `result`."""
+    return filter_forces(settings, physics, 1.0 / rate_hz, result.f_model, result.f_hybrid, omega)
+
+
+def _process_noise(
+    physics: PhysicsParams,
+    base: EkfSettings,
+    result: EstimateResult,
+    omega: Float1D,
+    train_idx: np.ndarray,
+    rate_hz: float,
+    pipeline_rate_hz: float,
+    ekf_q_n2: float | None,
+) -> tuple[EkfSettings, float]:
+    """The EKF's settings and lag (samples): Q tuned on the training windows
+    (`tune_process_noise`), or `ekf_q_n2` for both states when given."""
     if ekf_q_n2 is None:
-        settings, lag = tune_process_noise(
+        return tune_process_noise(
             physics,
             base,
-            1.0 / rate,
+            1.0 / rate_hz,
             result.f_model[train_idx],
             result.f_hybrid[train_idx],
             omega[train_idx],
             result.f_ref[train_idx],
-            max_lag_samples=rate / pipeline_rate_hz,
+            max_lag_samples=rate_hz / pipeline_rate_hz,
             r_physics_scales=R_PHYSICS_SCALES,
         )
-    else:
-        q = {"q_physics_n2": ekf_q_n2, "q_hybrid_n2": ekf_q_n2}
-        settings = EkfSettings(**{**base.to_dict(), **q})
-        lag = lag_samples(filtered(settings)[train_idx], result.f_hybrid[train_idx])
-    # The filter runs over the whole recording (its state carries across the blocks),
-    # and is judged on the validation blocks against the hybrid estimate it filters.
-    result.f_final = filtered(settings)
+    q = {"q_physics_n2": ekf_q_n2, "q_hybrid_n2": ekf_q_n2}
+    settings = EkfSettings(**{**base.to_dict(), **q})
+    filtered = _filtered(settings, physics, rate_hz, result, omega)
+    return settings, lag_samples(filtered[train_idx], result.f_hybrid[train_idx])
+
+
+def _ekf_check(result: EstimateResult, val_idx: np.ndarray) -> dict[str, Any]:
+    """Validation RMSE of the hybrid estimate and of the filter, and whether the filter
+    passes the hybrid estimate through (it does not improve it)."""
     hybrid_val = rmse(result.f_hybrid[val_idx], result.f_ref[val_idx])
     filter_val = rmse(result.f_final[val_idx], result.f_ref[val_idx])
-    passthrough = not filter_val < hybrid_val
-    if passthrough:
-        settings = EkfSettings(**{**settings.to_dict(), "passthrough": True})
-        result.f_final = result.f_hybrid.copy()
-        lag = 0.0
-        notes.append(
-            f"the EKF did not improve the hybrid estimate on the validation blocks "
-            f"({filter_val:.4f} N against {hybrid_val:.4f} N): it passes the hybrid "
-            "estimate through"
-        )
-    estimator = ForceEstimator(
-        physics, gru, settings, rate, pipeline_rate_hz, extension, input_range
-    )
+    return {
+        "validation_rmse_hybrid_n": hybrid_val,
+        "validation_rmse_filtered_n": filter_val,
+        "passthrough": not filter_val < hybrid_val,
+    }
 
-    def stage_rmse(rows: np.ndarray) -> dict[str, float]:
-        return {
-            "physics": rmse(result.f_physics[rows], result.f_ref[rows]),
-            "hybrid": rmse(result.f_hybrid[rows], result.f_ref[rows]),
-            "final": rmse(result.f_final[rows], result.f_ref[rows]),
-        } | (
-            {}
-            if result.f_effects is None
-            else {"effects": rmse(result.f_effects[rows], result.f_ref[rows])}
-        )
 
-    val_masks = {label: m[T - 1 :][val_idx] for label, m in masks.items()}
-    summary = TrainingSummary(
-        window=T,
-        epochs_run=len(history.val_rmse),
-        best_epoch=history.best_epoch,
-        sample_rate_hz=rate,
-        train_samples=len(train_idx),
-        validation_samples=len(val_idx),
-        train_rmse_n=stage_rmse(train_idx),
-        validation_rmse_n=stage_rmse(val_idx),
-        history={"train_rmse_n": history.train_rmse, "validation_rmse_n": history.val_rmse},
-        ekf_rest_samples_found=rest_found,
-        ekf_lag_s=lag / rate,
-        recording=recording.name,
-        recording_sha256=recording.sha256(),
-        seed=seed,
-        validation_rmse_by_regime_n=regime_rmse(
-            val_masks,
-            result.f_ref[val_idx],
-            physics=result.f_physics[val_idx],
-            hybrid=result.f_hybrid[val_idx],
-            final=result.f_final[val_idx],
-        ),
-        split=split,
-        regime_rules=rules.to_dict(),
-        ekf_check={
-            "validation_rmse_hybrid_n": hybrid_val,
-            "validation_rmse_filtered_n": filter_val,
-            "passthrough": passthrough,
-        },
-        config=asdict(config) | ({"trees": asdict(trees)} if trees is not None else {}),
-        notes=notes,
-        residual={
-            "requested": residual_stage,
-            "chosen": chosen,
-            "validation_rmse_n": stage_val,
-        },
+def _stage_rmse(result: EstimateResult, rows: np.ndarray) -> dict[str, float]:
+    """RMSE against F_ref of each stage of `result` over `rows`."""
+    return {
+        "physics": rmse(result.f_physics[rows], result.f_ref[rows]),
+        "hybrid": rmse(result.f_hybrid[rows], result.f_ref[rows]),
+        "final": rmse(result.f_final[rows], result.f_ref[rows]),
+    } | (
+        {}
+        if result.f_effects is None
+        else {"effects": rmse(result.f_effects[rows], result.f_ref[rows])}
     )
-    return estimator, summary
