@@ -127,8 +127,21 @@ def _finite(value: Any) -> bool:
 
 @dataclass
 class Analysis:
-    """The analysis' four tables as rows (`*_rows`; the `descriptives`, `comparisons`,
-    `mixed_anova` and `lmm` properties give them as pandas frames), its notes and source."""
+    """The study's analysis: its four tables, notes and data source (`analyze` returns it).
+
+    Attributes
+    ----------
+    descriptive_rows, comparison_rows, anova_rows, lmm_rows
+        The tables as rows; the `descriptives`, `comparisons`, `mixed_anova` and `lmm`
+        properties give them as pandas frames (`DESCRIPTIVE_COLUMNS`,
+        `COMPARISON_COLUMNS`, `ANOVA_COLUMNS`, `LMM_COLUMNS`).
+    exclusions
+        Who or what was left out of which test, and why (one line each).
+    warnings
+        Notes of the ANOVA and the mixed model (skipped fits, unequal groups, boundary).
+    source
+        The analysed trials by driver.
+    """
 
     descriptive_rows: list[Row]
     comparison_rows: list[Row]
@@ -185,7 +198,20 @@ class Analysis:
 
 
 def descriptives(long: pd.DataFrame) -> pd.DataFrame:
-    """Columns: task, measure, group, condition, n, mean, sd, median, iqr, ci_low, ci_high."""
+    """Descriptive statistics of the participant means.
+
+    Parameters
+    ----------
+    long
+        One row per participant, task, measure and condition: columns task, measure,
+        group, condition, participant, value.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Per task, measure, group and condition: n, mean, sd, median, iqr and the
+        t-based 95 % interval of the mean (ci_low, ci_high); NaN where n = 1.
+    """
     return frame(descriptive_rows(long_records(long)), DESCRIPTIVE_COLUMNS)
 
 
@@ -377,6 +403,26 @@ def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[
 def compare_conditions(
     long: pd.DataFrame, a: str = "VO", b: str = "HV"
 ) -> tuple[pd.DataFrame, list[str]]:
+    """Condition `b` against `a` per task, measure and group, on participant means.
+
+    A paired t test with Hedges' g_av where the differences pass Shapiro-Wilk at
+    `ALPHA`, else the Wilcoxon signed-rank test with the rank-biserial correlation; the
+    p-values of the groups of one task and measure are Holm-adjusted together.
+
+    Parameters
+    ----------
+    long
+        One row per participant, task, measure and condition (columns task, measure,
+        group, condition, participant, value).
+    a, b
+        The two conditions.
+
+    Returns
+    -------
+    tuple of (pandas.DataFrame, list of str)
+        The tests (`COMPARISON_COLUMNS`) and notes: participants left out of a test for
+        lacking one of the conditions, and tests skipped for too few pairs.
+    """
     rows, excluded = comparison_rows(long_records(long), a, b)
     return frame(rows, COMPARISON_COLUMNS), excluded
 
@@ -610,10 +656,25 @@ def lmm_design(data: Any) -> tuple[np.ndarray, list[str]]:
 def mixed_model(
     trials: pd.DataFrame, measures: tuple[str, ...] | None = None
 ) -> tuple[pd.DataFrame, list[str]]:
-    """The linear mixed model of every trial measure (default: each task's analysed
-    measures, `study.protocol.tasks`), per task: REML with a random intercept per
-    participant (`stats_lmm`, lme4's optimum); p from Wald z tests. A fit on the boundary
-    (lme4's `isSingular`) is noted."""
+    """The linear mixed model of every trial measure, per task.
+
+    REML with a random intercept per participant (`stats_lmm`, lme4's optimum); p from
+    Wald z tests.
+
+    Parameters
+    ----------
+    trials
+        One row per measured trial (participant, group, task, condition, measures).
+    measures
+        The measures to model; default each task's analysed measures
+        (`study.protocol.tasks`).
+
+    Returns
+    -------
+    tuple of (pandas.DataFrame, list of str)
+        The fixed effects (`LMM_COLUMNS`) and notes (skipped fits, a fit on the
+        boundary as lme4's `isSingular` says).
+    """
     rows, notes = mixed_model_rows(trials.to_dict("records"), measures)
     return frame(rows, LMM_COLUMNS), notes
 
@@ -685,8 +746,24 @@ def analyze(
     ss_type: int = DEFAULT_SS_TYPE,
     withdrawn: Sequence[str] = (),
 ) -> Analysis:
-    """The analysis of `trials` and the participant means `long`; `withdrawn` are the
-    exclusion notes of participants already left out (`frames.without_withdrawn`)."""
+    """The study's analysis: descriptives, condition tests, mixed ANOVA, mixed model.
+
+    Parameters
+    ----------
+    trials
+        The measured trials (`frames.trial_frame`).
+    long
+        The participant means (`frames.participant_means`).
+    ss_type
+        Sums of squares of the mixed ANOVA, 2 or 3.
+    withdrawn
+        Exclusion notes of what was already left out (`frames.without_withdrawn`).
+
+    Returns
+    -------
+    Analysis
+        The tables, the exclusions and warnings, and the data source.
+    """
     return analyze_rows(trials.to_dict("records"), long_records(long), ss_type, withdrawn)
 
 
