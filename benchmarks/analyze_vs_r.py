@@ -8,7 +8,8 @@ The participant means R reads are written from the database first (the long CSV 
 value; the same file format as tests/data/demo_seed1_means.csv). Each round runs
 `study analyze --db DB --out TMP` and `Rscript benchmarks/analyze_r.R MEANS.csv OUT.txt`
 (the order alternating), each a fresh process; CPU seconds (user + system of the process
-and its children) and wall seconds, medians, and Python's over R's.
+and its children) and wall seconds, medians, and Python's over R's; the machine's 1-minute
+load average at the start and the end.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ def main() -> None:
     from study.analysis.frames import participant_means, tlx_frame, trial_frame
 
     runs: dict[str, list[dict[str, float]]] = {"python": [], "r": []}
+    load_start = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         engine = create_engine(f"sqlite:///{args.db}")
         means = participant_means(trial_frame(engine), tlx_frame(engine))
@@ -62,6 +64,7 @@ def main() -> None:
         "rounds": args.rounds,
         "participants": int(means["participant"].nunique()),
         "nice": os.nice(0),
+        "load_average_1min": {"start": load_start, "end": os.getloadavg()[0]},
         "median": medians,
         "python_over_r": {k: medians["python"][k] / medians["r"][k] for k in medians["r"]},
         "runs": runs,

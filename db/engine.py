@@ -19,6 +19,7 @@ import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
@@ -39,7 +40,23 @@ _WRITE_LOCK_KEY = 7_240_001
 def resolve_url(db: str | URL | None = None) -> URL:
     """The database URL from `--db`, else `STUDY_DB`, else `./study.db`.
 
-    A value without `://` is a path to an SQLite file.
+    Parameters
+    ----------
+    db
+        A URL (`sqlite:///FILE`, `postgresql+psycopg://USER@HOST:PORT/DB`), a path to an
+        SQLite file (a value without `://`), or None for the environment's or the
+        default.
+
+    Returns
+    -------
+    URL
+        The parsed URL, its SQLite parameters checked.
+
+    Raises
+    ------
+    DbInputError
+        The text is no URL, names another backend, or has an SQLite parameter
+        `study` does not know (`SQLITE_QUERY`) or a value out of range.
     """
     if isinstance(db, URL):
         return db
@@ -104,18 +121,48 @@ def _seconds(text: str) -> float | None:
 
 
 def describe(url: URL | Engine) -> str:
-    """The URL as it can be shown to a user (password hidden)."""
+    """The URL as it can be shown to a user.
+
+    Parameters
+    ----------
+    url
+        A URL, or an engine whose URL is meant.
+
+    Returns
+    -------
+    str
+        The URL with its password hidden.
+    """
     if isinstance(url, Engine):
         url = url.url
     return url.render_as_string(hide_password=True)
 
 
 def is_sqlite(bind: Engine | Connection) -> bool:
+    """Whether `bind` (an engine or a connection) talks to SQLite."""
     return bind.dialect.name == "sqlite"
 
 
 def make_engine(url: str | URL) -> Engine:
-    """An engine for `url` with the per-backend settings described in the module docstring."""
+    """An engine for `url` with the per-backend settings described in the module docstring.
+
+    Parameters
+    ----------
+    url
+        A database URL (see `resolve_url`).
+
+    Returns
+    -------
+    Engine
+        SQLite: WAL (unless in memory or read-only), foreign keys on, the busy timeout
+        of `busy_timeout_ms`, and a watch for the file being deleted or moved;
+        PostgreSQL: connections checked before use.
+
+    Raises
+    ------
+    DbInputError
+        The URL names a driver that is not installed or cannot be used.
+    """
     url = make_url(url) if isinstance(url, str) else url
     try:
         if url.get_backend_name() == "sqlite":
@@ -124,7 +171,7 @@ def make_engine(url: str | URL) -> Engine:
             # An in-memory or read-only (?mode=ro) database cannot switch to WAL.
             wal = url.database not in (None, "", ":memory:") and url.query.get("mode") != "ro"
             _configure_sqlite(engine, wal=wal, busy_timeout_ms=timeout_ms)
-            if wal and not url.query.get("uri"):
+            if wal and url.database and not url.query.get("uri"):
                 _watch_sqlite_file(engine, Path(url.database))
         else:
             engine = create_engine(url, pool_pre_ping=True)
@@ -137,8 +184,23 @@ def make_engine(url: str | URL) -> Engine:
 
 
 def busy_timeout_ms(url: URL) -> int:
-    """How long a writer waits for another's lock: `?timeout=SECONDS` in the URL (as
-    pysqlite spells it), else `SQLITE_BUSY_TIMEOUT_MS`."""
+    """How long a writer waits for another's lock.
+
+    Parameters
+    ----------
+    url
+        An SQLite URL, possibly with `?timeout=SECONDS` (as pysqlite spells it).
+
+    Returns
+    -------
+    int
+        The timeout in milliseconds: the URL's, else `SQLITE_BUSY_TIMEOUT_MS`.
+
+    Raises
+    ------
+    DbInputError
+        The timeout is not a number of seconds from 0 to `MAX_TIMEOUT_S`.
+    """
     raw = url.query.get("timeout")
     if raw is None:
         return SQLITE_BUSY_TIMEOUT_MS
@@ -154,7 +216,7 @@ def busy_timeout_ms(url: URL) -> int:
 
 def _configure_sqlite(engine: Engine, *, wal: bool, busy_timeout_ms: int) -> None:
     @event.listens_for(engine, "connect")
-    def _on_connect(dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+    def _on_connect(dbapi_connection: Any, _record: Any) -> None:
         # Let SQLAlchemy, not pysqlite, decide when a transaction begins.
         dbapi_connection.isolation_level = None
         cursor = dbapi_connection.cursor()
@@ -197,11 +259,11 @@ def _watch_sqlite_file(engine: Engine, path: Path) -> None:
             )
 
     @event.listens_for(engine, "do_connect")
-    def _before_connect(_dialect, _record, _cargs, _cparams) -> None:  # type: ignore[no-untyped-def]
+    def _before_connect(_dialect: Any, _record: Any, _cargs: Any, _cparams: Any) -> None:
         still_there()
 
     @event.listens_for(engine, "connect")
-    def _connected(_dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]
+    def _connected(_dbapi_connection: Any, _record: Any) -> None:
         if not identity:
             st = os.stat(path)
             identity.append((st.st_dev, st.st_ino))
@@ -217,7 +279,18 @@ def write_transaction(engine: Engine) -> Iterator[Connection]:
 
     Use it for read-then-write work that must not interleave with another process
     (the next participant code, a schema upgrade). SQLite: `BEGIN IMMEDIATE`;
-    PostgreSQL: a transaction-scoped advisory lock. Commits on success.
+    PostgreSQL: a transaction-scoped advisory lock.
+
+    Parameters
+    ----------
+    engine
+        The study database.
+
+    Yields
+    ------
+    Connection
+        A connection inside the transaction; it commits when the block ends without an
+        exception and rolls back otherwise.
     """
     with engine.connect() as conn:
         if is_sqlite(conn):
@@ -229,5 +302,16 @@ def write_transaction(engine: Engine) -> Iterator[Connection]:
 
 
 def make_session_factory(engine: Engine) -> sessionmaker[Session]:
-    """ORM sessions bound to `engine`; objects stay readable after commit."""
+    """ORM sessions bound to `engine`.
+
+    Parameters
+    ----------
+    engine
+        The study database.
+
+    Returns
+    -------
+    sessionmaker
+        A session factory whose objects stay readable after commit.
+    """
     return sessionmaker(engine, expire_on_commit=False)

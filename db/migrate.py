@@ -27,7 +27,18 @@ from enum import Enum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import URL, Connection, Engine, column, func, inspect, select, table
+from sqlalchemy import (
+    URL,
+    Connection,
+    Engine,
+    Integer,
+    String,
+    column,
+    func,
+    inspect,
+    select,
+    table,
+)
 from sqlalchemy.exc import DBAPIError
 
 from db.engine import describe, make_engine, resolve_url, write_transaction
@@ -37,14 +48,13 @@ from db.errors import (
     MissingDatabaseError,
     NotAStudyDatabaseError,
 )
+from db.revision import HEAD_REVISION
 
 if TYPE_CHECKING:
     from alembic.config import Config
     from alembic.script import ScriptDirectory
 
 MIGRATIONS_DIR = Path(__file__).parent / "migrations"
-HEAD_REVISION = "0008_probe_trials"
-"""The newest revision in `db/migrations/versions` (kept equal to it by a test)."""
 VERSION_TABLE = "alembic_version"
 
 
@@ -93,7 +103,7 @@ def current_revision(conn: Connection) -> str | None:
     """The revision stamped in the database, None if it has none (one row at most)."""
     if not inspect(conn).has_table(VERSION_TABLE):
         return None
-    rows = conn.execute(select(column("version_num")).select_from(table(VERSION_TABLE)))
+    rows = conn.execute(select(column("version_num", String)).select_from(table(VERSION_TABLE)))
     revisions = rows.scalars().all()
     if len(revisions) > 1:
         raise DatabaseVersionError(
@@ -267,7 +277,9 @@ def inspect_database(db: str | URL | None = None) -> DatabaseInfo:
         }
         samples = counts.get("samples", 0)  # a database from before revision 0005
         if "sample_chunks" in tables:
-            stored = select(func.sum(column("n_samples"))).select_from(table("sample_chunks"))
+            stored = select(func.sum(column("n_samples", Integer))).select_from(
+                table("sample_chunks")
+            )
             samples += int(conn.execute(stored).scalar_one() or 0)
     return DatabaseInfo(
         url=describe(url),

@@ -1,13 +1,11 @@
 """How a chunk of samples is stored: one row of `sample_chunks` per committed second.
 
 A trial's samples are stored per chunk (what `SampleWriter` commits at once, at most a
-second of trial time) as one compressed Arrow record batch, not as a row per sample
-(issues 21 and 26). Measured on the 10,000,000 samples of `study bench export`: a row
-per sample took about 115 bytes in SQLite and 1.1 us of CPU per sample to read back
-(SQLite decoding each record, a driver call per value), which held the Parquet export
-below a million samples a second on two cores; a chunk takes about 45 bytes and
+second of trial time) as one compressed Arrow record batch, not as a row per sample:
+a row per sample took more than twice the bytes in SQLite and a driver call per value
+to read back, which held the Parquet export below a million samples a second; a chunk
 decodes at several million samples a second, and the writer binds one row per second
-instead of a thousand.
+instead of a thousand (`study bench export`; the figures are on the Benchmarks page).
 
 The format, for anyone reading a study database without this package:
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import deque
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TypeVar
@@ -384,7 +384,7 @@ def read_spans(
     workers: int = 1,
     from_s: float | None = None,
     to_s: float | None = None,
-) -> Iterator[T]:
+) -> Generator[T, None, None]:
     """`work(span, table)` for each span, in the spans' order, read by `workers` threads.
 
     Each thread reads with its own `SampleReader`; `work` runs in that thread too. At

@@ -6,17 +6,17 @@ default). What a crash loses is what the writer holds plus what the caller is co
 for its next call, so the writer commits by trial time, whatever the size of the steps
 it is handed: a chunk never spans more than `chunk_s`, and after each call it commits
 at once when waiting for one more step of the same length would put more than `chunk_s`
-at risk (issue 18: unpaced sessions hand 0.5 s steps, and committing only when the next
+at risk (unpaced sessions handed 0.5 s steps, and committing only when the next
 step arrived lost 1.5 s). Each chunk is one transaction; `flush`/`close` commit the rest.
 
 A chunk is stored as one row of `sample_chunks`: its columns as one compressed Arrow
-record batch (`db.sample_codec`), not a row per sample (issue 21: binding a Python
-value per sample held the writer at 0.55-0.6x of a plain multi-row INSERT; a chunk is
-one row whatever its length, so the writer's cost is the encoding, about 0.3 us a
-sample). The columns handed in are kept as arrays until the chunk is encoded; no
-Python object is built per sample. The writer keeps one connection for its life (taken
-at the first chunk, given back at `close` or after any failed commit), so a chunk costs
-its transaction, not also a checkout from the pool and the reset on return.
+record batch (`db.sample_codec`), not a row per sample (binding a Python
+value per sample held the writer well below a plain multi-row INSERT; a chunk is
+one row whatever its length, so the writer's cost is the encoding). The columns handed
+in are kept as arrays until the chunk is encoded; no Python object is built per sample.
+The writer keeps one connection for its life (taken at the first chunk, given back at
+`close` or after any failed commit), so a chunk costs its transaction, not also a
+checkout from the pool and the reset on return.
 
 Another program's lock (SQLite allows one writer at a time) need not stop a trial: with
 `hold_s` > 0 a chunk that meets a lock is kept in memory and committed with the next one,

@@ -44,6 +44,7 @@ COMMANDS = {
     "schedule": "study.commands.plan:schedule_cmd",
     "simulate": "study.commands.simulate:simulate",
     "tlx": "study.commands.tlx:tlx",
+    "trial": "study.commands.trial:trial",
     "tui": "study.commands.tui:tui",
 }
 """Every subcommand: its name -> "module:attribute", imported when it is called."""

@@ -1,4 +1,4 @@
-"""numba's `njit`, with numba imported only when compiled code is first needed (issue 21).
+"""numba's `njit`, with numba imported only when compiled code is first needed.
 
 Importing numba and setting up its CPU target costs about 1.5 s per process, even when
 every function comes from its on-disk cache. A simulated trial whose loop kernel is

@@ -3,7 +3,7 @@
 The follower (`teleop_core.follower.recording`), the master's calibration, the NOTES
 bench (`teleop_core.notes.recording`) and any drive's rigid-axis recording
 (`teleop_core.calibration.rigid_axis`) each have their own columns, but a file that is
-not a recording at all must be refused the same way by all of them (issue 18), with
+not a recording at all must be refused the same way by all of them, with
 one line naming the file, the line (the CSV's line number: the header is line 1), the
 column, the value and what was expected, before `study calibrate`, `study estimator`
 or `study identify` writes anything:

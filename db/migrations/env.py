@@ -5,6 +5,7 @@ transaction holding the write lock); the `alembic` command line is not used.
 """
 
 from alembic import context
+from sqlalchemy import Connection
 
 import db.models  # noqa: F401  (registers every table on Base.metadata)
 from db.base import Base
@@ -12,7 +13,7 @@ from db.base import Base
 config = context.config
 
 
-def _run(connection) -> None:  # type: ignore[no-untyped-def]
+def _run(connection: Connection) -> None:
     context.configure(
         connection=connection,
         target_metadata=Base.metadata,

@@ -16,18 +16,11 @@ from sqlalchemy import CheckConstraint, ForeignKey, String, UniqueConstraint
 from sqlalchemy.orm import Mapped, mapped_column, relationship
 
 from db.base import Base, utcnow
+from db.tlx_subscales import TLX_SUBSCALES
 
 if TYPE_CHECKING:
     from db.models.study import Participant
 
-TLX_SUBSCALES = (
-    "mental",
-    "physical",
-    "temporal",
-    "performance",
-    "effort",
-    "frustration",
-)
 
 _rating_checks = tuple(
     CheckConstraint(f"{s} BETWEEN 0 AND 100 AND {s} % 5 = 0", name=f"{s}_on_scale")

@@ -31,6 +31,7 @@ from sqlalchemy import (
     Index,
     LargeBinary,
     String,
+    Text,
     UniqueConstraint,
 )
 from sqlalchemy.ext.associationproxy import AssociationProxy, association_proxy
@@ -77,6 +78,9 @@ class Trial(Base):
     ended_at: Mapped[datetime | None]
     completion_time_s: Mapped[float | None]
     success: Mapped[bool | None]
+    invalid_reason: Mapped[str | None] = mapped_column(Text)
+    """Why a completed trial was marked invalid (kept, left out of the analysis); empty
+    while it is valid."""
     summary: Mapped[dict[str, Any] | None]
     """Further values of the trial (seed, sample count, what a simulated participant
     noticed), SI units in the key names; the measures are in `measures`."""

@@ -3,7 +3,7 @@ one-way between-subject models, computed here in closed form.
 
 Written by hand rather than through statsmodels' `anova_lm(OLS.from_formula(...))`:
 the sums of squares of a one-way model are a few lines, and the formula parser and two
-model fits per measure cost 0.15 s of `study analyze` (issue 21). The values equal R's
+model fits per measure were most of `study analyze`'s time. The values equal R's
 afex `aov_ez(type = 2|3)` (tests/study/test_analysis.py quotes them).
 """
 
@@ -13,14 +13,14 @@ import math
 from typing import Any
 
 import numpy as np
-import pandas as pd
-from scipy import stats
+
+from study.analysis.distributions import f_sf
 
 
 def one_way(y: np.ndarray, group: np.ndarray) -> dict[str, Any]:
     """The sums of squares of the one-way model y ~ C(group, Sum), in closed form (what
     statsmodels' `anova_lm(OLS.from_formula(...), typ=3)` gives, without a formula
-    parser and two model fits per measure, 0.15 s of `study analyze`, issue 21).
+    parser and two model fits per measure).
 
     Group: sum over groups of n_g (mean_g - mean)^2, df G - 1 (one factor: Types I-III
     agree); residual: the within-group SS, df N - G. The intercept: Type II, N mean^2
@@ -43,8 +43,11 @@ def one_way(y: np.ndarray, group: np.ndarray) -> dict[str, Any]:
     }
 
 
-def anova_rows(wide: pd.DataFrame, a: str, b: str, ss_type: int) -> list[dict[str, Any]]:
-    """Group (between) x condition (two levels, within) on one participant per row.
+def anova_rows(
+    group: np.ndarray, a: np.ndarray, b: np.ndarray, ss_type: int
+) -> list[dict[str, Any]]:
+    """Group (between) x condition (two levels, within), one participant per element:
+    their group and their means in the two conditions `a` and `b`.
 
     With two conditions the mixed ANOVA splits into two between-subject models (the
     multivariate approach car::Anova and afex use): the participant sums
@@ -54,9 +57,8 @@ def anova_rows(wide: pd.DataFrame, a: str, b: str, ss_type: int) -> list[dict[st
     (`one_way`): Type III condition is the sum-coded intercept's SS, Type II the
     intercept's alone, N mean(d)^2.
     """
-    group = wide["group"].to_numpy()
-    between = one_way((wide[a] + wide[b]).to_numpy(float) / math.sqrt(2), group)
-    within = one_way((wide[b] - wide[a]).to_numpy(float) / math.sqrt(2), group)
+    between = one_way((a + b) / math.sqrt(2), group)
+    within = one_way((b - a) / math.sqrt(2), group)
     # Type II: SS(condition) = N dbar^2; Type III: the sum-coded intercept's SS
     ss_condition = within["intercept_ii"] if ss_type == 2 else within["intercept_iii"]
     terms = (
@@ -74,7 +76,7 @@ def anova_rows(wide: pd.DataFrame, a: str, b: str, ss_type: int) -> list[dict[st
                 "F": float(f),
                 "df1": float(effect["df"]),
                 "df2": float(error["df"]),
-                "p": float(stats.f.sf(f, effect["df"], error["df"])),
+                "p": f_sf(float(f), float(effect["df"]), float(error["df"])),
                 "np2": float(effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])),
                 "ss_type": ss_type,
             }

@@ -3,7 +3,7 @@
 One figure per view, each with the base model's residual (grey) and the calibrated
 model's (blue): against time, against each of the model's signals (speed and angle for
 the follower, current for the master), and the autocorrelation with the white-noise
-bounds of the residual tests, all on the held-out block. Two more (issue 16, point 4):
+bounds of the residual tests, all on the held-out block. Two more:
 
 - `residual_blocks`: the residual over the whole recording, before and after, with the
   training and held-out blocks shaded and labelled, so that what the fit saw and what

@@ -4,7 +4,7 @@ The style (`STYLE`, `WIDTHS_IN`, Okabe-Ito colours) is shared by every figure of
 project: IEEE single (3.5 in) and double (7.16 in) column widths, every text at 8 pt
 (IEEE's minimum at column width; `figcheck` verifies it on the drawn figure), Type 42
 (TrueType) fonts in PDF so text stays text, colour-blind-safe colours (Okabe & Ito
-2008). Helpers every figure uses: `label_source` (the simulated-data note, issue 25),
+2008). Helpers every figure uses: `label_source` (the simulated-data note),
 `figure_key` (the legend under the panels, its title the caption: sign convention,
 interval method), `jitter`
 (seeded, so a figure is the same on every run) and `save`.

@@ -18,8 +18,21 @@ from __future__ import annotations
 import pandas as pd
 from sqlalchemy import Engine
 
-from db.models.tlx import TLX_SUBSCALES
-from study.protocol.trial_table import TRIAL_KEYS, measure_columns, trial_frame
+from study.analysis.means import (
+    KEYS,
+    TLX_MEASURES,
+    participant_mean_rows,
+    tlx_measure_rows,
+    withdrawal_notes,
+    without_invalid_rows,
+)
+from study.protocol.study_rows import tlx_rows
+from study.protocol.trial_table import (
+    TRIAL_KEYS,
+    driver_connection,
+    measure_columns,
+    trial_frame,
+)
 
 __all__ = [
     "TLX_MEASURES",
@@ -32,8 +45,6 @@ __all__ = [
     "without_withdrawn",
 ]
 
-TLX_MEASURES = ("tlx_raw", "tlx_weighted", *(f"tlx_{s}" for s in TLX_SUBSCALES))
-
 
 def trial_measures(trials: pd.DataFrame) -> list[str]:
     """The analysed measure columns of the tasks in `trials`."""
@@ -41,21 +52,9 @@ def trial_measures(trials: pd.DataFrame) -> list[str]:
 
 
 def tlx_frame(engine: Engine) -> pd.DataFrame:
-    from study.protocol.tlx import scored_tlx
-
-    out = [
-        {
-            "participant": r["participant"],
-            "group": r["group"],
-            "task": r["task"],
-            "condition": r["condition"],
-            "tlx_raw": r["tlx_raw"],
-            "tlx_weighted": float("nan") if r["tlx_weighted"] is None else r["tlx_weighted"],
-            **{f"tlx_{s}": float(r[s]) for s in TLX_SUBSCALES},
-        }
-        for r in scored_tlx(engine)
-    ]
-    return pd.DataFrame(out, columns=["participant", "group", "task", "condition", *TLX_MEASURES])
+    with driver_connection(engine) as conn:
+        rows = tlx_measure_rows(tlx_rows(conn))
+    return pd.DataFrame(rows, columns=[*KEYS, *TLX_MEASURES])
 
 
 def without_withdrawn(
@@ -63,41 +62,37 @@ def without_withdrawn(
 ) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
     """The frames without withdrawn participants, and one exclusion note per task and
     withdrawn participant who had data in it (their data stay in the database); one
-    withdrawn before any data is listed too, so every withdrawal is accounted for."""
+    withdrawn before any data is listed too, so every withdrawal is accounted for. The
+    trials marked invalid (`study.protocol.corrections.mark_trial`) are left out as
+    well, each listed with its reason."""
     from study.protocol.withdrawal import withdrawn_participants
 
     withdrawn = withdrawn_participants(engine)
-    if not withdrawn:
-        return trials, tlx, []
-    notes = []
-    for frame in (trials, tlx):
-        gone = frame[frame["participant"].isin(list(withdrawn))]
-        for task, code in gone[["task", "participant"]].drop_duplicates().itertuples(index=False):
-            note = f"{task}/all measures: excluded {code} (withdrawn: {withdrawn[code]})"
-            if note not in notes:
-                notes.append(note)
-    with_data = set(trials["participant"]) | set(tlx["participant"])
-    for code, reason in withdrawn.items():
-        if code not in with_data:
-            notes.append(f"all tasks: excluded {code} (withdrawn: {reason}; no data stored)")
+    columns = ["participant", "task"]
+    notes = withdrawal_notes(
+        withdrawn, trials[columns].to_dict("records"), tlx[columns].to_dict("records")
+    )
     keep_trials = trials[~trials["participant"].isin(list(withdrawn))]
     keep_tlx = tlx[~tlx["participant"].isin(list(withdrawn))]
-    return keep_trials.reset_index(drop=True), keep_tlx.reset_index(drop=True), notes
+    keep_trials, invalid = _without_invalid(engine, keep_trials)
+    return keep_trials.reset_index(drop=True), keep_tlx.reset_index(drop=True), notes + invalid
+
+
+def _without_invalid(engine: Engine, trials: pd.DataFrame) -> tuple[pd.DataFrame, list[str]]:
+    """`trials` without the trials marked invalid, and one exclusion note per trial."""
+    from study.protocol.study_rows import invalid_rows
+    from study.protocol.trial_table import driver_connection
+
+    with driver_connection(engine) as conn:
+        invalid = invalid_rows(conn)
+    if not invalid or not len(trials):
+        return trials, []
+    kept, notes = without_invalid_rows(invalid, trials.to_dict("records"))
+    return pd.DataFrame(kept, columns=trials.columns), notes
 
 
 def participant_means(trials: pd.DataFrame, tlx: pd.DataFrame) -> pd.DataFrame:
-    """Long format: participant, group, task, condition, measure, value."""
-    keys = ["participant", "group", "task", "condition"]
-    parts = []
-    if len(trials):
-        means = trials.groupby(keys, as_index=False)[trial_measures(trials)].mean()
-        parts.append(means.melt(id_vars=keys, var_name="measure", value_name="value"))
-    if len(tlx):
-        parts.append(
-            tlx[keys + list(TLX_MEASURES)].melt(
-                id_vars=keys, var_name="measure", value_name="value"
-            )
-        )
-    if not parts:
-        return pd.DataFrame(columns=[*keys, "measure", "value"])
-    return pd.concat(parts, ignore_index=True).dropna(subset=["value"])
+    """Long format: participant, group, task, condition, measure, value
+    (`means.participant_mean_rows`)."""
+    rows = participant_mean_rows(trials.to_dict("records"), tlx.to_dict("records"))
+    return pd.DataFrame(rows, columns=[*KEYS, "measure", "value"])

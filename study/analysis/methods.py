@@ -17,15 +17,17 @@ from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE, EXACT_MAX_N, RESOLUTION
 if TYPE_CHECKING:
     from study.analysis.stats import Analysis
 
-PACKAGES = ("haptic-study", "numpy", "scipy", "pandas", "matplotlib")
+PACKAGES = ("haptic-study", "numpy", "pandas", "matplotlib")
 """The packages that compute or draw the results (`COMPUTED_BY` says which does what)."""
 
 COMPUTED_BY = (
-    "Shapiro-Wilk, paired t, Wilcoxon signed-rank p-values and the F, t and normal "
-    "distributions: scipy.stats; Hedges' g_av, the rank-biserial correlation, Holm's "
-    "correction, the mixed ANOVA's sums of squares (closed form, two conditions) and the "
-    "mixed model's REML fit (profiled criterion, exact optimum): haptic-study's own code "
-    "with numpy and scipy, checked in its tests against R (afex, lme4, stats) and pingouin"
+    "Shapiro-Wilk (Royston's AS R94, as R's shapiro.test), paired t, Wilcoxon signed-rank "
+    "p-values (exact or normal approximation, as R's wilcox.test) and the F, t and normal "
+    "distributions (the regularized incomplete beta function and the normal integral), "
+    "Hedges' g_av, the rank-biserial correlation, Holm's correction, the mixed ANOVA's "
+    "sums of squares (closed form, two conditions) and the mixed model's REML fit "
+    "(profiled criterion, exact optimum): haptic-study's own code with numpy, checked in "
+    "its tests against R (afex, lme4, stats), scipy and pingouin"
 )
 
 WILCOXON_RULE = (
@@ -123,17 +125,31 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
 
 
 def _groups(analysis: Analysis) -> str:
-    d = analysis.descriptives
-    if not len(d):
+    sizes: dict[Any, int] = {}
+    for r in analysis.descriptive_rows:
+        sizes[r["group"]] = max(sizes.get(r["group"], 0), r["n"])
+    if not sizes:
         return "no participants"
-    sizes = d.groupby("group", sort=False)["n"].max()
     return ", ".join(f"{n} {g}" for g, n in sizes.items())
+
+
+def _invalid(analysis: Analysis) -> str:
+    """The sentence naming the trials the experimenter marked invalid, with the reasons."""
+    marked = [e.split(": excluded ", 1)[1] for e in analysis.exclusions if "(marked invalid: " in e]
+    if not marked:
+        return ""
+    return (
+        f" {len(marked)} measured trial{'s' if len(marked) > 1 else ''} marked invalid by "
+        f"the experimenter {'were' if len(marked) > 1 else 'was'} left out: "
+        + "; ".join(m.replace("(marked invalid: ", "(") for m in marked)
+        + "."
+    )
 
 
 def methods_markdown(analysis: Analysis) -> str:
     """`methods.md`: the statistics paragraph, the data source and the software."""
     counts = ", ".join(f"{n} {d}" for d, n in analysis.source.trials_by_driver.items() if n)
-    measures = ", ".join(dict.fromkeys(analysis.descriptives.get("measure", [])))
+    measures = ", ".join(dict.fromkeys(r["measure"] for r in analysis.descriptive_rows))
     source = (
         f"**{analysis.source.note}.** These results describe simulated participants and "
         "are not evidence about people.\n\n"
@@ -148,7 +164,7 @@ def methods_markdown(analysis: Analysis) -> str:
         f"{_groups(analysis)}. Measures: {measures or 'none'}. Each participant's trials of "
         "a block were averaged, and participant means were the unit of analysis; "
         "participants without both conditions of a comparison were excluded from it "
-        f"({len(analysis.exclusions)} exclusions, listed with the tables).\n\n"
+        f"({len(analysis.exclusions)} exclusions, listed with the tables).{_invalid(analysis)}\n\n"
         f"{comparison_method()}\n\n"
         f"{anova_method(analysis.ss_type)}\n\n"
         f"{lmm_method()}\n\n"

@@ -1,4 +1,4 @@
-"""Figures of the NOTES device's characterisation (seed 001, Figs. 6-7 and 9-11).
+"""Figures of the NOTES device's characterisation ([notes], Figs. 6-7 and 9-11).
 
 - `bode`: |F|, |V| and |Z_device| of both axes, measured points with the grey-box fit
   overlaid (Figs. 9-11);

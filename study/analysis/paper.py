@@ -39,8 +39,8 @@ def _samples(engine: Engine, trial_id: int, task: str, columns: Sequence[str]) -
     """The `columns` (the task's names) of one trial's samples, in `seq` order.
 
     Read in Arrow batches (`SampleReader`) keeping only the columns drawn. A trial of
-    ten minutes at 1 kHz (600,000 samples) read as ORM objects raised the peak memory
-    by 1.27 GB and took 39 s; read this way, by 0.1 GB in 2 s (issue 26).
+    ten minutes at 1 kHz (600,000 samples) read as ORM objects raised the peak memory by
+    more than a gigabyte; read this way, by a tenth of it (`study bench export`).
     """
     the_task = get_task(task)
     with SampleReader(engine) as reader:

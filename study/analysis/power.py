@@ -21,13 +21,13 @@ group's standardised effect (HV - VO over the per-condition SD).
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
 
 from study.analysis.stats import ALPHA, wilcoxon_signed_rank
+from teleop_core.progress import Progress, no_progress
 
 SCALES = (0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
 """Group sizes of the power curve, as multiples of the design's."""
@@ -63,11 +63,11 @@ def simulate_power(
     rho: float,
     n_sim: int,
     rng: np.random.Generator,
-    tick: Callable[[], None] = lambda: None,
+    progress: Progress = no_progress,
 ) -> PowerResult:
     hits = dict.fromkeys(sizes, 0)
     interaction_hits = 0
-    for _ in range(n_sim):
+    for i in range(n_sim):
         diffs = []
         for group, n in sizes.items():
             u = rng.normal(0.0, np.sqrt(rho), n)
@@ -77,7 +77,7 @@ def simulate_power(
             diffs.append(hv - vo)
         if len(diffs) > 1:
             interaction_hits += stats.f_oneway(*diffs).pvalue < ALPHA
-        tick()
+        progress("simulated studies", i + 1, n_sim)
     return PowerResult(
         sizes=dict(sizes),
         groups={g: hits[g] / n_sim for g in sizes},
@@ -92,12 +92,16 @@ def power_curve(
     rho: float,
     n_sim: int,
     seed: int,
-    tick: Callable[[], None] = lambda: None,
+    progress: Progress = no_progress,
     scales: tuple[float, ...] = SCALES,
 ) -> list[tuple[float, PowerResult]]:
     out = []
     for k, scale in enumerate(scales):
         scaled = {g: max(3, round(n * scale)) for g, n in sizes.items()}
         rng = np.random.default_rng([seed, k])
-        out.append((scale, simulate_power(scaled, effects, rho, n_sim, rng, tick)))
+
+        def told(step: str, i: int = 0, _n: int = 0, before: int = k * n_sim) -> None:
+            progress(step, before + i, len(scales) * n_sim)  # counted over every scale
+
+        out.append((scale, simulate_power(scaled, effects, rho, n_sim, rng, told)))
     return out

@@ -14,11 +14,9 @@ import math
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
-
 from study.analysis.methods import methods_json, methods_markdown
-from study.analysis.stats import Analysis
-from study.analysis.tables import all_tables
+from study.analysis.stats import ANOVA_COLUMNS, COMPARISON_COLUMNS, LMM_COLUMNS, Analysis, Row
+from study.analysis.tables import all_tables, write_csv
 
 COMPARISON_KEYS = (
     "task",
@@ -54,29 +52,25 @@ DESCRIPTIVE_KEYS = (
 )
 
 
-def _records(frame: pd.DataFrame, keys: tuple[str, ...]) -> list[dict[str, Any]]:
-    if not len(frame):
-        return []
-    out = []
-    for row in frame[list(keys)].to_dict("records"):
-        # NaN, and the infinite F of a residual that is exactly zero: null (strict JSON)
-        out.append(
-            {
-                k: None if isinstance(v, float) and not math.isfinite(v) else v
-                for k, v in row.items()
-            }
-        )
-    return out
+def _records(rows: list[Row], keys: tuple[str, ...]) -> list[dict[str, Any]]:
+    # NaN, and the infinite F of a residual that is exactly zero: null (strict JSON)
+    return [
+        {
+            k: None if isinstance(v, float) and not math.isfinite(v) else v
+            for k, v in ((k, row[k]) for k in keys)
+        }
+        for row in rows
+    ]
 
 
 def to_json(analysis: Analysis) -> dict[str, Any]:
     return {
         "data_source": analysis.source.to_dict(),
         "methods": methods_json(analysis),
-        "comparisons": _records(analysis.comparisons, COMPARISON_KEYS),
-        "mixed_anova": _records(analysis.mixed_anova, ANOVA_KEYS),
-        "lmm": _records(analysis.lmm, LMM_KEYS),
-        "descriptives": _records(analysis.descriptives, DESCRIPTIVE_KEYS),
+        "comparisons": _records(analysis.comparison_rows, COMPARISON_KEYS),
+        "mixed_anova": _records(analysis.anova_rows, ANOVA_KEYS),
+        "lmm": _records(analysis.lmm_rows, LMM_KEYS),
+        "descriptives": _records(analysis.descriptive_rows, DESCRIPTIVE_KEYS),
         "exclusions": analysis.exclusions,
         "warnings": analysis.warnings,
     }
@@ -91,22 +85,26 @@ def _write_set(analysis: Analysis, folder: Path) -> list[Path]:
     return paths
 
 
-def write(analysis: Analysis, out_dir: Path, json_path: Path | None) -> list[Path]:
-    from study.protocol.export_files import escape_frame
+TESTS_COLUMNS = tuple(
+    dict.fromkeys(
+        [*COMPARISON_COLUMNS, "analysis", *ANOVA_COLUMNS, *LMM_COLUMNS, "note", "data_source"]
+    )
+)
+"""tests.csv: every test, exclusion and note, the columns of the three tables joined."""
 
+
+def write(analysis: Analysis, out_dir: Path, json_path: Path | None) -> list[Path]:
     paths = _write_set(analysis, out_dir)
-    tests = pd.concat(
-        [
-            analysis.comparisons.assign(analysis="paired comparison"),
-            analysis.mixed_anova.assign(analysis="mixed ANOVA"),
-            analysis.lmm.assign(analysis="linear mixed model"),
-            # the exclusions and notes travel with the tests
-            pd.DataFrame({"analysis": "exclusion", "note": analysis.exclusions}),
-            pd.DataFrame({"analysis": "note", "note": analysis.warnings}),
-        ],
-        ignore_index=True,
-    ).assign(data_source=analysis.source.label)
-    escape_frame(tests).to_csv(out_dir / "tests.csv", index=False)  # spreadsheet-safe text
+    label = analysis.source.label
+    tests = [
+        *({**r, "analysis": "paired comparison"} for r in analysis.comparison_rows),
+        *({**r, "analysis": "mixed ANOVA"} for r in analysis.anova_rows),
+        *({**r, "analysis": "linear mixed model"} for r in analysis.lmm_rows),
+        # the exclusions and notes travel with the tests
+        *({"analysis": "exclusion", "note": n} for n in analysis.exclusions),
+        *({"analysis": "note", "note": n} for n in analysis.warnings),
+    ]
+    write_csv(out_dir / "tests.csv", TESTS_COLUMNS, [{**r, "data_source": label} for r in tests])
     target = json_path or out_dir / "analysis.json"
     target.write_text(json.dumps(to_json(analysis), indent=2) + "\n")
     paths += [out_dir / "tests.csv", target]

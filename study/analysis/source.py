@@ -35,7 +35,12 @@ class DataSource:
 
     @classmethod
     def of(cls, trials: pd.DataFrame) -> DataSource:
-        drivers = trials["driver"].fillna(UNKNOWN).tolist() if "driver" in trials else []
+        return cls.of_drivers(trials["driver"].tolist() if "driver" in trials else [])
+
+    @classmethod
+    def of_drivers(cls, drivers: list[Any]) -> DataSource:
+        """The counts of the analysed trials' drivers (None or NaN: `UNKNOWN`)."""
+        drivers = [d if isinstance(d, str) else UNKNOWN for d in drivers]
         counts = {d: drivers.count(d) for d in DRIVERS}
         if UNKNOWN in drivers:
             counts[UNKNOWN] = drivers.count(UNKNOWN)

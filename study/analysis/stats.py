@@ -1,4 +1,4 @@
-"""The study's statistics on participant means (seed 000, IV-D; the analysis issue).
+"""The study's statistics on participant means ([endovascular], IV-D; the analysis issue).
 
 - `descriptives`: per task, measure, group and condition: n, mean, SD, median, IQR and
   the t-based 95 % confidence interval of the mean.
@@ -23,22 +23,39 @@
 
 Participants without both conditions of a comparison are excluded from it, and each
 exclusion is stated.
+
+Each analysis runs on rows: participant means as `Long` tuples and trials as dicts
+(`descriptive_rows`, `comparison_rows`, `mixed_anova_rows`, `mixed_model_rows`,
+`analyze_rows`), which is what `study analyze` calls, so that it loads no pandas; the
+functions above take and return pandas frames around them. The distributions and the
+Shapiro-Wilk and Wilcoxon p-values are `study.analysis.distributions` (no scipy).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pandas as pd
-from scipy import stats
 
 from study.analysis.anova import anova_rows
+from study.analysis.distributions import (
+    norm_sf,
+    rank_average,
+    shapiro_wilk,
+    signed_rank_exact_p,
+    signed_rank_normal_p,
+    t_ppf,
+    t_two_sided,
+)
 from study.analysis.source import DRIVERS, DataSource
 from study.errors import StudyInputError
+
+if TYPE_CHECKING:  # the command's path builds no frame: pandas only for the frame API
+    import pandas as pd
 
 ALPHA = 0.05
 COMPARISON_COLUMNS = (
@@ -62,14 +79,61 @@ COMPARISON_COLUMNS = (
 EXACT_MAX_N = 50
 """The Wilcoxon p is exact below this many non-zero differences (R's `wilcox.test`)."""
 ANOVA_COLUMNS = ("task", "measure", "source", "F", "df1", "df2", "p", "np2", "ss_type")
+LMM_COLUMNS = ("task", "measure", "term", "estimate", "se", "p", "p_method")
+DESCRIPTIVE_COLUMNS = (
+    "task",
+    "measure",
+    "group",
+    "condition",
+    "n",
+    "mean",
+    "sd",
+    "median",
+    "iqr",
+    "ci_low",
+    "ci_high",
+)
+LONG_COLUMNS = ("participant", "group", "task", "condition", "measure", "value")
+"""The participant means (`frames.participant_means`): one row per participant x task x
+condition x measure."""
+Row = dict[str, Any]
+Long = list[tuple[Any, ...]]
+"""Participant means as tuples in the order of `LONG_COLUMNS`."""
+
+
+def frame(rows: list[Row], columns: Sequence[str]) -> pd.DataFrame:
+    """Rows as a pandas frame with `columns` (imported here: the frame API's cost only)."""
+    import pandas as pd
+
+    return pd.DataFrame(rows, columns=list(columns))
+
+
+def long_records(long: pd.DataFrame) -> Long:
+    """A frame of participant means as `Long` tuples."""
+    return list(long[list(LONG_COLUMNS)].itertuples(index=False, name=None))
+
+
+def _groups(items: Iterable[tuple[Any, Any]]) -> dict[Any, list[Any]]:
+    """key -> values, keys in order of first appearance (pandas' `groupby(sort=False)`)."""
+    out: dict[Any, list[Any]] = {}
+    for key, value in items:
+        out.setdefault(key, []).append(value)
+    return out
+
+
+def _finite(value: Any) -> bool:
+    return value is not None and not (isinstance(value, float) and math.isnan(value))
 
 
 @dataclass
 class Analysis:
-    descriptives: pd.DataFrame
-    comparisons: pd.DataFrame
-    mixed_anova: pd.DataFrame
-    lmm: pd.DataFrame
+    """The analysis' four tables as rows (`*_rows`; the `descriptives`, `comparisons`,
+    `mixed_anova` and `lmm` properties give them as pandas frames), its notes and source."""
+
+    descriptive_rows: list[Row]
+    comparison_rows: list[Row]
+    anova_rows: list[Row]
+    lmm_rows: list[Row]
     exclusions: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     source: DataSource = field(default_factory=lambda: DataSource(dict.fromkeys(DRIVERS, 0)))
@@ -77,10 +141,26 @@ class Analysis:
     ss_type: int = 2
     """Sums-of-squares type of the mixed ANOVA."""
 
+    @cached_property
+    def descriptives(self) -> pd.DataFrame:
+        return frame(self.descriptive_rows, DESCRIPTIVE_COLUMNS)
+
+    @cached_property
+    def comparisons(self) -> pd.DataFrame:
+        return frame(self.comparison_rows, COMPARISON_COLUMNS)
+
+    @cached_property
+    def mixed_anova(self) -> pd.DataFrame:
+        return frame(self.anova_rows, ANOVA_COLUMNS)
+
+    @cached_property
+    def lmm(self) -> pd.DataFrame:
+        return frame(self.lmm_rows, LMM_COLUMNS)
+
     @property
     def tasks(self) -> list[str]:
-        frames = (self.descriptives, self.comparisons, self.mixed_anova, self.lmm)
-        return list(dict.fromkeys(t for f in frames if len(f) for t in f["task"]))
+        tables = (self.descriptive_rows, self.comparison_rows, self.anova_rows, self.lmm_rows)
+        return list(dict.fromkeys(r["task"] for rows in tables for r in rows))
 
     def warnings_about(self, kind: str) -> list[str]:
         """The notes of one analysis ('mixed ANOVA', 'mixed model')."""
@@ -89,14 +169,14 @@ class Analysis:
     def for_task(self, task: str) -> Analysis:
         """The same analysis restricted to one task (its tables, notes and exclusions)."""
 
-        def keep(frame: pd.DataFrame) -> pd.DataFrame:
-            return frame[frame["task"] == task].reset_index(drop=True) if len(frame) else frame
+        def keep(rows: list[Row]) -> list[Row]:
+            return [r for r in rows if r["task"] == task]
 
         return Analysis(
-            descriptives=keep(self.descriptives),
-            comparisons=keep(self.comparisons),
-            mixed_anova=keep(self.mixed_anova),
-            lmm=keep(self.lmm),
+            descriptive_rows=keep(self.descriptive_rows),
+            comparison_rows=keep(self.comparison_rows),
+            anova_rows=keep(self.anova_rows),
+            lmm_rows=keep(self.lmm_rows),
             exclusions=[e for e in self.exclusions if e.startswith(f"{task}/")],
             warnings=[w for w in self.warnings if w.startswith(f"{task}/")],
             source=self.source,
@@ -106,15 +186,19 @@ class Analysis:
 
 def descriptives(long: pd.DataFrame) -> pd.DataFrame:
     """Columns: task, measure, group, condition, n, mean, sd, median, iqr, ci_low, ci_high."""
+    return frame(descriptive_rows(long_records(long)), DESCRIPTIVE_COLUMNS)
+
+
+def descriptive_rows(long: Long) -> list[Row]:
+    """`descriptives` on `Long` tuples, cells in order of first appearance."""
     rows = []
-    for (task, measure, group, condition), g in long.groupby(
-        ["task", "measure", "group", "condition"], sort=False
-    ):
-        x = g["value"].to_numpy(float)
+    cells = _groups(((t, m, g, c), v) for _, g, t, c, m, v in long)
+    for (task, measure, group, condition), values in cells.items():
+        x = np.array(values, dtype=float)
         n = len(x)
         mean = float(np.mean(x))
         sd = float(np.std(x, ddof=1)) if n > 1 else float("nan")
-        half = float(stats.t.ppf(0.975, n - 1) * sd / math.sqrt(n)) if n > 1 else float("nan")
+        half = float(t_ppf(0.975, n - 1) * sd / math.sqrt(n)) if n > 1 else float("nan")
         q1, q3 = np.percentile(x, [25, 75])
         rows.append(
             {
@@ -131,17 +215,37 @@ def descriptives(long: pd.DataFrame) -> pd.DataFrame:
                 "ci_high": mean + half,
             }
         )
-    return pd.DataFrame(rows)
+    return rows
 
 
 def hedges_g_av(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Lakens (2013) eq. 10 with Hedges' correction: d_av (1 - 3 / (4 (n1 + n2) - 9))."""
+    """Hedges' g_av of paired samples [lakens2013].
+
+    Parameters
+    ----------
+    vo, hv
+        The participants' values in the two conditions, paired by position.
+
+    Returns
+    -------
+    float
+        Lakens' eq. 10 with Hedges' correction, d_av (1 - 3 / (4 (n1 + n2) - 9)), of
+        HV - VO; NaN when neither condition has any spread.
+    """
     n = len(vo)
     sd_av = (np.std(vo, ddof=1) + np.std(hv, ddof=1)) / 2
     if sd_av == 0:
         return float("nan")  # no spread: no standardised effect
     d_av = (np.mean(hv) - np.mean(vo)) / sd_av
     return float(d_av * (1 - 3 / (4 * (2 * n) - 9)))
+
+
+def paired_t(b: np.ndarray, a: np.ndarray) -> float:
+    """The paired t statistic of b - a: mean difference over its standard error (scipy's
+    `ttest_rel`; infinite or NaN when the differences have no spread)."""
+    d = b - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(np.mean(d) / np.sqrt(np.var(d, ddof=1) / len(d)))
 
 
 def holm(p: np.ndarray) -> np.ndarray:
@@ -208,11 +312,22 @@ def at_resolution(diff: np.ndarray, scale: float | None = None) -> np.ndarray:
 
 
 def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Matched-pairs rank-biserial correlation of HV - VO (Kerby 2014): (R+ - R-) / total,
-    on the differences at the data's resolution (`at_resolution`)."""
+    """Matched-pairs rank-biserial correlation of HV - VO [kerby2014].
+
+    Parameters
+    ----------
+    vo, hv
+        The participants' values in the two conditions, paired by position.
+
+    Returns
+    -------
+    float
+        (R+ - R-) / total over the ranks of the non-zero differences, taken at the
+        data's resolution (`at_resolution`); 0 when every difference is zero.
+    """
     d = at_resolution(hv - vo, _magnitude(vo, hv))
     d = d[d != 0]
-    ranks = stats.rankdata(np.abs(d))
+    ranks = rank_average(np.abs(d))
     total = ranks.sum()
     return float((ranks[d > 0].sum() - ranks[d < 0].sum()) / total) if total else 0.0
 
@@ -233,6 +348,18 @@ def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[
     convention) and p is the normal approximation with the tie-corrected variance and a
     continuity correction ("asymptotic"). V is R's statistic: the sum of the ranks of the
     positive differences (scipy reports min(R+, R-) instead).
+
+    Parameters
+    ----------
+    diff
+        The paired differences (HV - VO).
+    scale
+        The magnitude of the measured values (default the largest |diff|).
+
+    Returns
+    -------
+    tuple of (float, float, str)
+        V, the two-sided p-value, and the method, ``"exact"`` or ``"asymptotic"``.
     """
     full = at_resolution(diff, scale)
     d = full[full != 0]
@@ -241,37 +368,54 @@ def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[
     ties = len(np.unique(np.abs(d))) < len(d)
     exact = len(d) == len(full) and len(d) < EXACT_MAX_N and not ties
     method = "exact" if exact else "asymptotic"
-    w = stats.wilcoxon(d, method=method, correction=method == "asymptotic")
-    v = float(stats.rankdata(np.abs(d))[d > 0].sum())
-    return v, float(w.pvalue), method
+    ranks = rank_average(np.abs(d))
+    v = float(ranks[d > 0].sum())
+    p = signed_rank_exact_p(v, len(d)) if exact else signed_rank_normal_p(ranks, v)
+    return v, p, method
 
 
 def compare_conditions(
     long: pd.DataFrame, a: str = "VO", b: str = "HV"
 ) -> tuple[pd.DataFrame, list[str]]:
+    rows, excluded = comparison_rows(long_records(long), a, b)
+    return frame(rows, COMPARISON_COLUMNS), excluded
+
+
+def _pairs(long: Long, a: str, b: str) -> dict[tuple[Any, ...], dict[Any, dict[str, float]]]:
+    """(task, measure, group) -> participant -> condition -> mean value (duplicates
+    averaged, as a pivot table does), in order of first appearance."""
+    cells: dict[tuple[Any, ...], dict[Any, dict[str, list[float]]]] = {}
+    for participant, group, task, condition, measure, value in long:
+        block = cells.setdefault((task, measure, group), {}).setdefault(participant, {})
+        if _finite(value):
+            block.setdefault(condition, []).append(float(value))
+    return {
+        key: {p: {c: float(np.mean(v)) for c, v in conds.items()} for p, conds in people.items()}
+        for key, people in cells.items()
+    }
+
+
+def comparison_rows(long: Long, a: str = "VO", b: str = "HV") -> tuple[list[Row], list[str]]:
+    """`compare_conditions` on `Long` tuples: the rows and the exclusion notes."""
     rows, excluded = [], []
-    # one pivot for everything (a pivot per group costs more than all the tests)
-    keys = ["task", "measure", "group", "participant"]
-    everything = long.pivot_table(index=keys, columns="condition", values="value", sort=False)
-    for c in (a, b):
-        if c not in everything:
-            everything[c] = np.nan
-    for (task, measure, group), wide in everything.groupby(level=[0, 1, 2], sort=False):
-        wide = wide.droplevel([0, 1, 2])
-        missing = wide[wide[[a, b]].isna().any(axis=1)].index.tolist()
+    for (task, measure, group), people in _pairs(long, a, b).items():
+        people = {p: c for p, c in people.items() if c}  # a pivot drops all-empty rows
+        missing = [p for p, c in people.items() if a not in c or b not in c]
         if missing:
             excluded.append(
-                f"{task}/{measure}/{group}: excluded {', '.join(missing)} (missing {a} or {b})"
+                f"{task}/{measure}/{group}: excluded {', '.join(map(str, missing))} "
+                f"(missing {a} or {b})"
             )
-        wide = wide.dropna(subset=[a, b])
-        n = len(wide)
-        row: dict[str, Any] = {"task": task, "measure": measure, "group": group, "n": n}
+        complete = [c for c in people.values() if a in c and b in c]
+        n = len(complete)
+        row: Row = {"task": task, "measure": measure, "group": group, "n": n}
         if n < 3:
             excluded.append(f"{task}/{measure}/{group}: n = {n} pairs, too few to test")
             continue
-        vo, hv = wide[a].to_numpy(float), wide[b].to_numpy(float)
+        vo = np.array([c[a] for c in complete])
+        hv = np.array([c[b] for c in complete])
         diff = hv - vo
-        normal_p = float(stats.shapiro(diff).pvalue) if np.ptp(diff) > 0 else 1.0
+        normal_p = shapiro_wilk(diff)[1] if np.ptp(diff) > 0 else 1.0
         row.update(
             mean_vo=float(vo.mean()),
             mean_hv=float(hv.mean()),
@@ -280,11 +424,11 @@ def compare_conditions(
             shapiro_p=normal_p,
         )
         if normal_p >= ALPHA:
-            t = stats.ttest_rel(hv, vo)
+            t = paired_t(hv, vo)
             row.update(
                 test="paired_t",
-                statistic=float(t.statistic),
-                p=float(t.pvalue),
+                statistic=t,
+                p=t_two_sided(t, n - 1),
                 effect_size=hedges_g_av(vo, hv),
                 effect_size_kind="hedges_g_av",
                 p_method="t distribution",
@@ -299,15 +443,15 @@ def compare_conditions(
                 effect_size_kind="rank_biserial",
                 p_method=method,
             )
-        rows.append(row)
-    frame = pd.DataFrame(rows, columns=list(COMPARISON_COLUMNS))
-    if len(frame):
-        for _, idx in frame.groupby(["task", "measure"]).groups.items():
-            frame.loc[idx, "p_holm"] = holm(frame.loc[idx, "p"].to_numpy())
-    return frame, excluded
+        rows.append({c: row.get(c, float("nan")) for c in COMPARISON_COLUMNS})
+    families = _groups(((r["task"], r["measure"]), r) for r in rows)
+    for family in families.values():
+        for r, adjusted in zip(family, holm(np.array([r["p"] for r in family])), strict=True):
+            r["p_holm"] = float(adjusted)
+    return rows, excluded
 
 
-def _sizes(counts: pd.Series) -> str:
+def _sizes(counts: dict[Any, int]) -> str:
     return ", ".join(f"{g} {int(n)}" for g, n in counts.items())
 
 
@@ -324,46 +468,86 @@ def mixed_anova(
 ) -> tuple[pd.DataFrame, list[str]]:
     """Group x condition mixed ANOVA per task x measure, with Type II or III sums of squares.
 
-    Returns columns task, measure, source (group, condition, interaction), F, df1, df2,
-    p, np2 (partial eta squared), ss_type; and notes (skipped analyses, unequal sizes).
+    Parameters
+    ----------
+    long
+        One row per participant, task, measure and condition (columns task, measure,
+        group, condition, participant, value).
+    a, b
+        The two conditions.
+    ss_type
+        2 or 3 (`DEFAULT_SS_TYPE` says why 2 by default).
+
+    Returns
+    -------
+    tuple of (pandas.DataFrame, list of str)
+        Columns task, measure, source (group, condition, interaction), F, df1, df2, p,
+        np2 (partial eta squared), ss_type; and notes (skipped analyses, unequal sizes).
+
+    Raises
+    ------
+    StudyInputError
+        `ss_type` is neither 2 nor 3.
     """
+    rows, notes = mixed_anova_rows(long_records(long), a, b, ss_type)
+    return frame(rows, ANOVA_COLUMNS), notes
+
+
+def mixed_anova_rows(
+    long: Long, a: str = "VO", b: str = "HV", ss_type: int = DEFAULT_SS_TYPE
+) -> tuple[list[Row], list[str]]:
+    """`mixed_anova` on `Long` tuples: the rows and the notes."""
     if ss_type not in SS_TYPES:
         raise StudyInputError(f"sums-of-squares type {ss_type!r}; expected 2 or 3")
     rows, notes = [], []
-    pairs = long[long["condition"].isin((a, b))]
-    for (task, measure), g in pairs.groupby(["task", "measure"], sort=False):
-        wide = g.pivot_table(
-            index=["participant", "group"], columns="condition", values="value"
-        ).reset_index()
-        wide = wide.dropna(subset=[c for c in (a, b) if c in wide])
-        sizes = wide["group"].value_counts(sort=False) if {a, b} <= set(wide) else pd.Series()
-        if len(sizes) < 2 or (sizes < 2).any():
+    measures: dict[tuple[Any, Any], dict[tuple[Any, Any], dict[str, list[float]]]] = {}
+    for participant, group, task, condition, measure, value in long:
+        if condition in (a, b) and _finite(value):
+            people = measures.setdefault((task, measure), {})
+            people.setdefault((participant, group), {}).setdefault(condition, []).append(value)
+    for (task, measure), people in measures.items():
+        # one participant per row, sorted by participant (a pivot table's order)
+        wide = [
+            (group, float(np.mean(c[a])), float(np.mean(c[b])))
+            for (_, group), c in sorted(people.items(), key=lambda item: item[0])
+            if a in c and b in c
+        ]
+        sizes: dict[Any, int] = {}
+        for group, _, _ in wide:
+            sizes[group] = sizes.get(group, 0) + 1
+        if len(sizes) < 2 or min(sizes.values()) < 2:
             notes.append(f"{task}/{measure}: mixed ANOVA skipped (groups {_sizes(sizes)})")
             continue
-        if sizes.nunique() > 1:
+        if len(set(sizes.values())) > 1:
             notes.append(
                 f"{task}/{measure}: mixed ANOVA on unequal group sizes {_sizes(sizes)}, "
                 f"Type {'II' if ss_type == 2 else 'III'} sums of squares"
             )
-        if (wide.groupby("group")[[a, b]].var() == 0).all().all():
+        group = np.array([g for g, _, _ in wide], dtype=object)
+        va = np.array([x for _, x, _ in wide])
+        vb = np.array([y for _, _, y in wide])
+        if all(np.var(v[group == g], ddof=1) == 0 for g in sizes for v in (va, vb)):
             notes.append(f"{task}/{measure}: mixed ANOVA skipped (no variance within groups)")
             continue
-        for row in anova_rows(wide, a, b, ss_type):
+        for row in anova_rows(group, va, vb, ss_type):
             rows.append({"task": task, "measure": measure, **row})
-    return pd.DataFrame(rows, columns=ANOVA_COLUMNS), notes
+    return rows, notes
 
 
 CONDITION_TERM = "C(condition, Treatment('VO'))"
 
 
-def lmm_design(data: pd.DataFrame) -> tuple[np.ndarray, list[str]]:
+def lmm_design(data: Any) -> tuple[np.ndarray, list[str]]:
     """The fixed-effects design of value ~ condition * group, treatment coding with VO and
-    the alphabetically first group as reference, columns named as patsy names them."""
-    conditions = [c for c in sorted(data["condition"].unique()) if c != "VO"]
-    groups = sorted(data["group"].unique())[1:]
-    cond = {c: (data["condition"] == c).to_numpy(float) for c in conditions}
-    grp = {g: (data["group"] == g).to_numpy(float) for g in groups}
-    columns, names = [np.ones(len(data))], ["Intercept"]
+    the alphabetically first group as reference, columns named as patsy names them
+    (`data["condition"]`, `data["group"]`: a frame's columns or arrays)."""
+    condition = np.asarray(data["condition"], dtype=object)
+    group_of = np.asarray(data["group"], dtype=object)
+    conditions = [c for c in sorted(set(condition)) if c != "VO"]
+    groups = sorted(set(group_of))[1:]
+    cond = {c: (condition == c).astype(float) for c in conditions}
+    grp = {g: (group_of == g).astype(float) for g in groups}
+    columns, names = [np.ones(len(condition))], ["Intercept"]
     for c in conditions:
         columns.append(cond[c])
         names.append(f"{CONDITION_TERM}[T.{c}]")
@@ -384,23 +568,33 @@ def mixed_model(
     measures, `study.protocol.tasks`), per task: REML with a random intercept per
     participant (`stats_lmm`, lme4's optimum); p from Wald z tests. A fit on the boundary
     (lme4's `isSingular`) is noted."""
+    rows, notes = mixed_model_rows(trials.to_dict("records"), measures)
+    return frame(rows, LMM_COLUMNS), notes
+
+
+def mixed_model_rows(
+    trials: list[Row], measures: tuple[str, ...] | None = None
+) -> tuple[list[Row], list[str]]:
+    """`mixed_model` on trial rows (dicts: participant, group, task, condition, measures)."""
     from study.analysis.stats_lmm import SINGULAR_TOL, fit_random_intercept
     from study.protocol.tasks import get_task
 
     rows, notes = [], []
-    for task, g in trials.groupby("task", sort=False):
+    keys = ("participant", "group", "condition")
+    for task, g in _groups((t["task"], t) for t in trials).items():
         for measure in measures or get_task(task).analysed_measures:
-            data = g[["participant", "group", "condition", measure]].dropna()
-            data = data.rename(columns={measure: "value"})
-            if data["participant"].nunique() < 3:
+            data = [t for t in g if _finite(t.get(measure)) and all(_finite(t[k]) for k in keys)]
+            participants = np.array([t["participant"] for t in data], dtype=object)
+            if len(set(participants)) < 3:
                 notes.append(f"{task}/{measure}: mixed model skipped (fewer than 3 participants)")
                 continue
-            X, names = lmm_design(data)
+            design = {k: [t[k] for t in data] for k in ("condition", "group")}
+            X, names = lmm_design(design)
             try:
                 if np.linalg.matrix_rank(X) < X.shape[1]:
                     raise ValueError("a condition x group cell has no trials")
                 fit = fit_random_intercept(
-                    X, data["value"].to_numpy(float), data["participant"].to_numpy()
+                    X, np.array([t[measure] for t in data], dtype=float), participants
                 )
             except (np.linalg.LinAlgError, ValueError) as exc:
                 notes.append(f"{task}/{measure}: mixed model could not be fitted: {exc}")
@@ -411,9 +605,7 @@ def mixed_model(
                     f"intercept SD is {fit.theta:.2g} of the residual SD (below lme4's "
                     f"isSingular tolerance {SINGULAR_TOL:g})"
                 )
-            z = fit.beta / fit.se
-            p_values = 2 * stats.norm.sf(np.abs(z))
-            for term, est, se, p_value in zip(names, fit.beta, fit.se, p_values, strict=True):
+            for term, est, se in zip(names, fit.beta, fit.se, strict=True):
                 rows.append(
                     {
                         "task": task,
@@ -421,20 +613,21 @@ def mixed_model(
                         "term": term,
                         "estimate": float(est),
                         "se": float(se),
-                        "p": float(p_value),
+                        "p": 2 * norm_sf(abs(float(est / se))),
                         "p_method": "Wald z",
                     }
                 )
-    columns = ["task", "measure", "term", "estimate", "se", "p", "p_method"]
-    return pd.DataFrame(rows, columns=columns), notes
+    return rows, notes
 
 
-def _missing_questionnaires(trials: pd.DataFrame, long: pd.DataFrame) -> list[str]:
+def _missing_questionnaires(trials: list[Row], long: Long) -> list[str]:
     notes = []
-    tlx = long[long["measure"].str.startswith("tlx_")]
-    for task, g in trials.groupby("task", sort=False):
-        answered = set(tlx.loc[tlx["task"] == task, "participant"])
-        missing = sorted(set(g["participant"]) - answered)
+    answered: dict[Any, set[Any]] = {}
+    for participant, _, task, _, measure, _ in long:
+        if str(measure).startswith("tlx_"):
+            answered.setdefault(task, set()).add(participant)
+    for task, people in _groups((t["task"], t["participant"]) for t in trials).items():
+        missing = sorted(set(people) - answered.get(task, set()))
         if missing:
             notes.append(f"{task}/tlx_*: excluded {', '.join(missing)} (no questionnaires)")
     return notes
@@ -448,17 +641,28 @@ def analyze(
 ) -> Analysis:
     """The analysis of `trials` and the participant means `long`; `withdrawn` are the
     exclusion notes of participants already left out (`frames.without_withdrawn`)."""
-    comparisons, excluded = compare_conditions(long)
+    return analyze_rows(trials.to_dict("records"), long_records(long), ss_type, withdrawn)
+
+
+def analyze_rows(
+    trials: list[Row],
+    long: Long,
+    ss_type: int = DEFAULT_SS_TYPE,
+    withdrawn: Sequence[str] = (),
+) -> Analysis:
+    """`analyze` on trial rows (`study.protocol.study_rows.trial_rows`) and `Long` tuples
+    (`frames.participant_mean_rows`): what `study analyze` runs, without pandas."""
+    comparisons, excluded = comparison_rows(long)
     excluded = [*withdrawn, *_missing_questionnaires(trials, long), *excluded]
-    anova, anova_notes = mixed_anova(long, ss_type=ss_type)
-    lmm, lmm_notes = mixed_model(trials)
+    anova, anova_notes = mixed_anova_rows(long, ss_type=ss_type)
+    lmm, lmm_notes = mixed_model_rows(trials)
     return Analysis(
-        descriptives=descriptives(long),
-        comparisons=comparisons,
-        mixed_anova=anova,
-        lmm=lmm,
+        descriptive_rows=descriptive_rows(long),
+        comparison_rows=comparisons,
+        anova_rows=anova,
+        lmm_rows=lmm,
         exclusions=excluded,
         warnings=anova_notes + lmm_notes,
-        source=DataSource.of(trials),
+        source=DataSource.of_drivers([t["driver"] for t in trials if "driver" in t]),
         ss_type=ss_type,
     )

@@ -25,7 +25,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize
+
+from study.analysis.distributions import brentq
 
 SINGULAR_TOL = 1e-4
 """lme4's `isSingular(tol = 1e-4)`: a random-effect SD ratio theta below it is a boundary fit."""
@@ -96,7 +97,7 @@ def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fi
             hi *= 4
             if hi > 1e12:
                 raise ValueError("the random-intercept variance does not converge")
-        lam = optimize.brentq(_gradient, 0.0, hi, args=args, xtol=1e-300, rtol=1e-15, maxiter=500)
+        lam = brentq(lambda x: _gradient(x, *args), 0.0, hi, xtol=1e-300, rtol=1e-15, maxiter=500)
     A, beta, q, _, _ = _parts(lam, *args)
     sigma2 = q / (n - p)
     se = np.sqrt(np.diag(np.linalg.inv(A)) * sigma2)

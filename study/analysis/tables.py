@@ -1,6 +1,6 @@
-"""The results tables a paper takes: one display frame per table, written as CSV (raw
-numbers), Markdown and LaTeX (booktabs, pandas' Styler), each with a caption that names
-its methods, the data source and the exclusions.
+"""The results tables a paper takes: one table of formatted cells per table, written as
+CSV (raw numbers), Markdown and LaTeX (booktabs, in the layout of pandas' Styler), each
+with a caption that names its methods, the data source and the exclusions.
 
 Every caption is built here from the same facts as `methods.md` (`study.analysis.methods`),
 so a table never says less than the methods paragraph.
@@ -8,15 +8,27 @@ so a table never says less than the methods paragraph.
 
 from __future__ import annotations
 
+import csv
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any
 
 from study.analysis.apa import bounded_text, p_text
 from study.analysis.methods import anova_method, comparison_method, lmm_method
-from study.analysis.stats import Analysis
+from study.analysis.stats import (
+    ANOVA_COLUMNS,
+    COMPARISON_COLUMNS,
+    DESCRIPTIVE_COLUMNS,
+    LMM_COLUMNS,
+    Analysis,
+    Row,
+)
+from study.protocol.cells import escape_cell
+
+if TYPE_CHECKING:  # `Table.display` as a frame, for callers that want one
+    import pandas as pd
 
 
 @dataclass(frozen=True)
@@ -24,43 +36,132 @@ class Table:
     """One results table: raw numbers for the CSV, formatted cells and a caption."""
 
     name: str
-    raw: pd.DataFrame
-    display: pd.DataFrame
+    columns: tuple[str, ...]
+    rows: list[Row]
+    """The raw numbers, one dict per row."""
+    header: tuple[str, ...]
+    cells: list[list[Any]]
+    """The formatted cells, one list per row in the order of `header`."""
     caption: str
 
+    @property
+    def display(self) -> pd.DataFrame:
+        """The formatted cells as a pandas frame."""
+        import pandas as pd
+
+        return pd.DataFrame(self.cells, columns=list(self.header))
+
     def markdown(self) -> str:
-        header = "| " + " | ".join(self.display.columns) + " |"
-        rule = "|" + "---|" * len(self.display.columns)
-        body = ["| " + " | ".join(map(str, r)) + " |" for r in self.display.to_numpy()]
+        header = "| " + " | ".join(self.header) + " |"
+        rule = "|" + "---|" * len(self.header)
+        body = ["| " + " | ".join(map(str, r)) + " |" for r in self.cells]
         if not body:
-            body = ["| " + " | ".join(["-"] * len(self.display.columns)) + " |"]
+            body = ["| " + " | ".join(["-"] * len(self.header)) + " |"]
         lines = [f"**Table: {self.name}.** {self.caption}", "", header, rule, *body]
         return "\n".join(lines) + "\n"
 
     def latex(self) -> str:
-        styler = (
-            self.display.style.hide(axis="index")
-            .format(escape="latex")
-            .format_index(escape="latex", axis=1)
-        )
-        text = styler.to_latex(
-            hrules=True,
-            caption=tex_escape(self.caption),
-            label=f"tab:{self.name}",
-            position_float="centering",
-        )
+        """A booktabs table as pandas' `Styler.to_latex(hrules=True)` writes it: numeric
+        columns right-aligned, text escaped (`latex_escape`), the caption and label."""
+        numeric = [
+            bool(self.cells) and all(_is_number(r[i]) for r in self.cells)
+            for i in range(len(self.header))
+        ]
+        align = "".join("r" if n else "l" for n in numeric)
+        lines = [
+            "\\begin{table}",
+            "\\centering",
+            f"\\caption{{{tex_escape(self.caption)}}}",
+            f"\\label{{tab:{self.name}}}",
+            f"\\begin{{tabular}}{{{align}}}",
+            "\\toprule",
+            " & ".join(latex_escape(h) for h in self.header) + " \\\\",
+            "\\midrule",
+            *(" & ".join(_latex_cell(v) for v in r) + " \\\\" for r in self.cells),
+            "\\bottomrule",
+            "\\end{tabular}",
+            "\\end{table}",
+        ]
+        text = "\n".join(lines) + "\n"
         return text.replace("< .001", "$<$ .001")  # '<' is a text-mode glyph only in T1
 
     def write(self, folder: Path, data_source: str) -> list[Path]:
         """NAME.csv (raw numbers; a data_source column, for a table may travel alone),
         NAME.md and NAME.tex (formatted, captioned)."""
-        from study.protocol.export_files import escape_frame  # spreadsheet-safe text
-
         paths = [folder / f"{self.name}.{ext}" for ext in ("csv", "md", "tex")]
-        escape_frame(self.raw.assign(data_source=data_source)).to_csv(paths[0], index=False)
+        rows = [{**r, "data_source": data_source} for r in self.rows]
+        write_csv(paths[0], [*self.columns, "data_source"], rows)
         paths[1].write_text(self.markdown())
         paths[2].write_text(self.latex())
         return paths
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _latex_cell(value: Any) -> str:
+    if isinstance(value, float):
+        return f"{value:.6f}"  # Styler's default precision
+    return latex_escape(value) if isinstance(value, str) else str(value)
+
+
+def latex_escape(text: str) -> str:
+    """Text for a LaTeX cell, as pandas' Styler escapes it (`format(escape="latex")`)."""
+    return (
+        text.replace("\\", "ab2\u00a7=\u00a78yz")
+        .replace("ab2\u00a7=\u00a78yz ", "ab2\u00a7=\u00a78yz\\space ")
+        .replace("&", "\\&")
+        .replace("%", "\\%")
+        .replace("$", "\\$")
+        .replace("#", "\\#")
+        .replace("_", "\\_")
+        .replace("{", "\\{")
+        .replace("}", "\\}")
+        .replace("~ ", "~\\space ")
+        .replace("~", "\\textasciitilde ")
+        .replace("^ ", "^\\space ")
+        .replace("^", "\\textasciicircum ")
+        .replace("ab2\u00a7=\u00a78yz", "\\textbackslash ")
+    )
+
+
+def _csv_formatters(columns: Sequence[str], rows: list[Row]) -> list[Any]:
+    """Per column, how pandas' `to_csv` prints its cells: an integer column with a gap is
+    a float column (20 -> 20.0), NaN and None are empty, floats their shortest repr."""
+    out = []
+    for c in columns:
+        values = [r.get(c) for r in rows]
+        ints = [v for v in values if isinstance(v, int) and not isinstance(v, bool)]
+        present = [v for v in values if v is not None]
+        as_float = bool(ints) and len(ints) < len(values) and len(ints) == len(present)
+        out.append(as_float)
+    return out
+
+
+def _csv_cell(value: Any, as_float: bool) -> Any:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, bool):
+        return str(value)
+    if isinstance(value, int):
+        return repr(float(value)) if as_float else str(value)
+    if isinstance(value, float):
+        return repr(float(value))
+    return escape_cell(value)  # spreadsheet-safe text
+
+
+def write_csv(path: Path, columns: Sequence[str], rows: list[Row]) -> None:
+    """`rows` as CSV with `columns`, cell by cell as pandas' `to_csv(index=False)` writes
+    them (a missing key is an empty cell), text made spreadsheet-safe."""
+    floats = _csv_formatters(columns, rows)
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(columns)
+        for r in rows:
+            writer.writerow(
+                [_csv_cell(r.get(c), fl) for c, fl in zip(columns, floats, strict=True)]
+            )
 
 
 TEX_SPECIAL = {
@@ -83,10 +184,6 @@ def tex_escape(text: str) -> str:
 
 def _num(x: float | None, digits: int = 3) -> str:
     return "n/a" if x is None or not math.isfinite(x) else f"{x:.{digits}f}"
-
-
-def _mean_sd(means: pd.Series, sds: pd.Series) -> list[str]:
-    return [f"{_num(m)} ({_num(s)})" for m, s in zip(means, sds, strict=True)]
 
 
 def _preamble(analysis: Analysis) -> str:
@@ -125,105 +222,134 @@ def term_label(term: str) -> str:
 
 
 def comparisons_table(analysis: Analysis) -> Table:
-    c = analysis.comparisons
-    display = pd.DataFrame(
-        {
-            "task": c["task"],
-            "measure": c["measure"],
-            "group": c["group"],
-            "n": c["n"],
-            "VO mean (SD)": _mean_sd(c["mean_vo"], c["sd_vo"]),
-            "HV mean (SD)": _mean_sd(c["mean_hv"], c["sd_hv"]),
-            "test": c["test"].map(TEST_LABELS),
-            "statistic": [
-                _statistic(t, v, n)
-                for t, v, n in zip(c["test"], c["statistic"], c["n"], strict=True)
-            ],
-            "p": [p_text(v) for v in c["p"]],
-            "p from": c["p_method"],
-            "p (Holm)": [p_text(v) for v in c["p_holm"]],
-            "effect size": [
-                _effect(v, k) for v, k in zip(c["effect_size"], c["effect_size_kind"], strict=True)
-            ],
-        }
+    c = analysis.comparison_rows
+    header = (
+        "task",
+        "measure",
+        "group",
+        "n",
+        "VO mean (SD)",
+        "HV mean (SD)",
+        "test",
+        "statistic",
+        "p",
+        "p from",
+        "p (Holm)",
+        "effect size",
     )
+    cells = [
+        [
+            r["task"],
+            r["measure"],
+            r["group"],
+            r["n"],
+            f"{_num(r['mean_vo'])} ({_num(r['sd_vo'])})",
+            f"{_num(r['mean_hv'])} ({_num(r['sd_hv'])})",
+            TEST_LABELS.get(r["test"], "nan"),
+            _statistic(r["test"], r["statistic"], r["n"]),
+            p_text(r["p"]),
+            r["p_method"],
+            p_text(r["p_holm"]),
+            _effect(r["effect_size"], r["effect_size_kind"]),
+        ]
+        for r in c
+    ]
     exclusions = "; ".join(analysis.exclusions) or "none"
     caption = f"{_preamble(analysis)}{comparison_method()} Exclusions: {exclusions}."
-    return Table("comparisons", c, display, caption)
+    return Table("comparisons", COMPARISON_COLUMNS, c, header, cells, caption)
 
 
 def anova_table(analysis: Analysis) -> Table:
-    a = analysis.mixed_anova
-    display = pd.DataFrame(
-        {
-            "task": a["task"],
-            "measure": a["measure"],
-            "source": a["source"],
-            "F": [_num(v, 2) for v in a["F"]],
-            "df": [f"{d1:g}, {d2:g}" for d1, d2 in zip(a["df1"], a["df2"], strict=True)],
-            "p": [p_text(v) for v in a["p"]],
-            "partial eta squared": [bounded_text(v, 3) for v in a["np2"]],
-            "SS type": a["ss_type"].map(lambda t: "II" if t == 2 else "III"),
-        }
-    )
+    a = analysis.anova_rows
+    header = ("task", "measure", "source", "F", "df", "p", "partial eta squared", "SS type")
+    cells = [
+        [
+            r["task"],
+            r["measure"],
+            r["source"],
+            _num(r["F"], 2),
+            f"{r['df1']:g}, {r['df2']:g}",
+            p_text(r["p"]),
+            bounded_text(r["np2"], 3),
+            "II" if r["ss_type"] == 2 else "III",
+        ]
+        for r in a
+    ]
     return _model_table(
-        analysis, "mixed_anova", a, display, anova_method(analysis.ss_type), "mixed ANOVA"
+        analysis,
+        "mixed_anova",
+        (ANOVA_COLUMNS, a, header, cells),
+        anova_method(analysis.ss_type),
+        "mixed ANOVA",
     )
 
 
 def lmm_table(analysis: Analysis) -> Table:
-    m = analysis.lmm
-    display = pd.DataFrame(
-        {
-            "task": m["task"],
-            "measure": m["measure"],
-            "term": [term_label(t) for t in m["term"]],
-            "estimate": [_num(v, 4) for v in m["estimate"]],
-            "SE": [_num(v, 4) for v in m["se"]],
-            "p (Wald z)": [p_text(v) for v in m["p"]],
-        }
+    m = analysis.lmm_rows
+    header = ("task", "measure", "term", "estimate", "SE", "p (Wald z)")
+    cells = [
+        [
+            r["task"],
+            r["measure"],
+            term_label(r["term"]),
+            _num(r["estimate"], 4),
+            _num(r["se"], 4),
+            p_text(r["p"]),
+        ]
+        for r in m
+    ]
+    return _model_table(
+        analysis, "lmm", (LMM_COLUMNS, m, header, cells), lmm_method(), "mixed model"
     )
-    return _model_table(analysis, "lmm", m, display, lmm_method(), "mixed model")
 
 
 def _model_table(
     analysis: Analysis,
     name: str,
-    frame: pd.DataFrame,
-    display: pd.DataFrame,
+    parts: tuple[tuple[str, ...], list[Row], tuple[str, ...], list[list[Any]]],
     method: str,
     model: str,
 ) -> Table:
     """A model's table, its caption noting the warnings the fit of `model` raised."""
     notes = "; ".join(analysis.warnings_about(model)) or "none"
-    return Table(name, frame, display, f"{_preamble(analysis)}{method} Notes: {notes}.")
+    return Table(name, *parts, f"{_preamble(analysis)}{method} Notes: {notes}.")
 
 
 def descriptives_table(analysis: Analysis) -> Table:
-    d = analysis.descriptives
-    display = pd.DataFrame(
-        {
-            "task": d.get("task", []),
-            "measure": d.get("measure", []),
-            "group": d.get("group", []),
-            "condition": d.get("condition", []),
-            "n": d.get("n", []),
-            "mean": [_num(v) for v in d.get("mean", [])],
-            "SD": [_num(v) for v in d.get("sd", [])],
-            "median": [_num(v) for v in d.get("median", [])],
-            "IQR": [_num(v) for v in d.get("iqr", [])],
-            "95 % CI": [
-                f"[{_num(lo)}, {_num(hi)}]"
-                for lo, hi in zip(d.get("ci_low", []), d.get("ci_high", []), strict=True)
-            ],
-        }
+    d = analysis.descriptive_rows
+    header = (
+        "task",
+        "measure",
+        "group",
+        "condition",
+        "n",
+        "mean",
+        "SD",
+        "median",
+        "IQR",
+        "95 % CI",
     )
+    cells = [
+        [
+            r["task"],
+            r["measure"],
+            r["group"],
+            r["condition"],
+            r["n"],
+            _num(r["mean"]),
+            _num(r["sd"]),
+            _num(r["median"]),
+            _num(r["iqr"]),
+            f"[{_num(r['ci_low'])}, {_num(r['ci_high'])}]",
+        ]
+        for r in d
+    ]
     caption = (
         f"{_preamble(analysis)}Participant means (the mean of each block's measured trials; "
         "NASA-TLX as rated): n, mean, SD, median, interquartile range and the t-based 95 % "
         "confidence interval of the mean."
     )
-    return Table("descriptives", d, display, caption)
+    return Table("descriptives", DESCRIPTIVE_COLUMNS, d, header, cells, caption)
 
 
 def all_tables(analysis: Analysis) -> list[Table]:

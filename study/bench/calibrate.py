@@ -1,4 +1,4 @@
-"""`study bench calibrate`: the calibration loop's targets (issue 10), measured.
+"""`study bench calibrate`: the calibration loop's targets, measured.
 
 - Per family: a 4-minute, 200 Hz follower recording carrying that one effect at the
   JND's size (RMS 0.192 N over the recording; `delay` at the size its drawn lag makes),
@@ -11,8 +11,8 @@
   on it, with eq. 1 and with the calibrated physics stage: the validation RMSE of the
   physics stage, of physics + GRU and after the EKF, before and after calibration.
 
-- NOTES (issue 6's model): clamped static ramps and 1-30 Hz chirps of both axes at
-  1 kHz with 2 % sensor noise, from the linear Fig. 8 model; the paper's friction
+- NOTES (the linear Fig. 8 model of [notes]): clamped static ramps and 1-30 Hz chirps
+  of both axes at 1 kHz with 2 % sensor noise; the paper's friction
   hysteresis and counter-clockwise loss should be named on the ramps.
 """
 
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,14 +28,15 @@ import numpy as np
 
 from teleop_core.calibration import FAMILIES, Calibrator, FollowerBase, MasterBase
 from teleop_core.calibration.synthetic import JND_N, follower_recording, master_recording
+from teleop_core.progress import Progress, no_progress
 
 
 @dataclass(frozen=True)
 class CalibrateBenchConfig:
     duration_s: float = 240.0
-    """Length of each follower recording, s (the issue's 4 minutes)."""
+    """Length of each follower recording, s (the target's 4 minutes)."""
     rate_hz: float = 200.0
-    """Sampling rate, Hz (the issue's 200 Hz)."""
+    """Sampling rate, Hz (the target's 200 Hz)."""
     estimator_duration_s: float = 240.0
     """Length of the drive recording the estimators are trained on, s (at 100 Hz)."""
     epochs: int = 30
@@ -131,14 +131,14 @@ def notes_runs(config: CalibrateBenchConfig) -> dict[str, Any]:
 def run_calibrate_bench(
     config: CalibrateBenchConfig,
     out_dir: Path,
-    progress: Callable[[str], None] | None = None,
+    progress: Progress = no_progress,
     only_open: bool = False,
 ) -> dict[str, Any]:
     """Run every part, write `calibrate_bench.md` and `calibrate.json` to `out_dir`."""
     from study.bench.calibrate_open import markdown as open_markdown
     from study.bench.calibrate_open import open_part
 
-    say = progress or (lambda _msg: None)
+    say = progress
     out_dir.mkdir(parents=True, exist_ok=True)
     measured = open_part(config.duration_s, config.rate_hz, config.seed, say)
     if only_open:

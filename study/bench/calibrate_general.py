@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -41,6 +40,7 @@ from teleop_core.calibration.general import (
     general_recording,
     oracle_rmse,
 )
+from teleop_core.progress import Progress, no_progress
 
 DATA_NOTE = "simulated follower recordings (teleop_core.calibration.general), not measured data"
 
@@ -133,40 +133,49 @@ def run_one(
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per group of recordings and over all: the shares of the runs' outcomes."""
     groups: dict[str, list[dict[str, Any]]] = {}
     for r in runs:
         groups.setdefault(r["group"], []).append(r)
-    out = {}
-    for name, rs in groups.items():
-        rf = [r["right_first"] for r in rs if r["right_first"] is not None]
-        out[name] = {
-            "recordings": len(rs),
-            "within_2x_oracle": float(np.mean([r["within_2x_oracle"] for r in rs])),
-            "right_first": float(np.mean(rf)) if rf else None,
-            "wrong_named": float(np.mean([r["wrong_named"] for r in rs])),
-            "ambiguous": float(np.mean([bool(r["ambiguous"]) for r in rs])),
-            "honest": float(np.mean([r["honest"] for r in rs])),
-            "median_ratio_to_oracle": float(np.median([r["ratio_to_oracle"] for r in rs])),
-            "slowest_s": float(max(r["seconds"] for r in rs)),
-        }
+    out = {name: _group_summary(rs) for name, rs in groups.items()}
+    return {"per_group": out, "overall": _overall(runs)}
+
+
+def _share(runs: list[dict[str, Any]], key: str) -> float | None:
+    """The mean of `key` over `runs` (the share of the true ones), None without runs."""
+    return float(np.mean([bool(r[key]) for r in runs])) if runs else None
+
+
+def _group_summary(rs: list[dict[str, Any]]) -> dict[str, Any]:
+    rf = [r["right_first"] for r in rs if r["right_first"] is not None]
+    return {
+        "recordings": len(rs),
+        "within_2x_oracle": float(np.mean([r["within_2x_oracle"] for r in rs])),
+        "right_first": float(np.mean(rf)) if rf else None,
+        "wrong_named": float(np.mean([r["wrong_named"] for r in rs])),
+        "ambiguous": float(np.mean([bool(r["ambiguous"]) for r in rs])),
+        "honest": float(np.mean([r["honest"] for r in rs])),
+        "median_ratio_to_oracle": float(np.median([r["ratio_to_oracle"] for r in rs])),
+        "slowest_s": float(max(r["seconds"] for r in rs)),
+    }
+
+
+def _overall(runs: list[dict[str, Any]]) -> dict[str, Any]:
     effects = [r for r in runs if r["families"]]
     clean = [r for r in runs if not r["families"]]
-    out_all = {
-        "within_2x_oracle": float(np.mean([r["within_2x_oracle"] for r in effects]))
-        if effects
-        else None,
-        "wrong_named": float(np.mean([r["wrong_named"] for r in effects])) if effects else None,
-        "clean_untouched": float(np.mean([r["honest"] for r in clean])) if clean else None,
+    return {
+        "within_2x_oracle": _share(effects, "within_2x_oracle"),
+        "wrong_named": _share(effects, "wrong_named"),
+        "clean_untouched": _share(clean, "honest"),
         "not_explained_end_structure_remains": all(
             r["verdict"] == "structure_remains" for r in effects if not r["within_2x_oracle"]
         ),
         "slowest_s": float(max(r["seconds"] for r in runs)) if runs else None,
     }
-    return {"per_group": out, "overall": out_all}
 
 
 def run_generalise_bench(
-    config: GeneraliseConfig, folder: Path, say: Callable[[str], None] | None = None
+    config: GeneraliseConfig, folder: Path, say: Progress = no_progress
 ) -> dict[str, Any]:
     """Run every recording of `plan`, then write DIR/calibrate_general.md; the report."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -175,10 +184,7 @@ def run_generalise_bench(
     todo = plan(config)
     runs = []
     for i, (group, families, seed) in enumerate(todo):
-        if say is not None:
-            say(
-                f"generalisation {i + 1}/{len(todo)}: {'+'.join(families) or 'clean'} (seed {seed})"
-            )
+        say(f"generalisation: {'+'.join(families) or 'clean'} (seed {seed})", i + 1, len(todo))
         run = run_one(group, families, seed, config)
         runs.append(run)
         with log.open("a") as fh:

@@ -1,4 +1,4 @@
-"""`study bench calibrate`, issue 16's part: measured data and effects outside the list.
+"""`study bench calibrate`, the open library's part: measured data and effects outside the list.
 
 - EMPS (measured, 1 kHz, 24.8 s): the `rigid-axis` loop against the benchmark's own
   direction-dependent inverse model (Fv and Fc per direction of motion, IDIM-LS)
@@ -18,7 +18,6 @@ on Nonlinear System Identification Benchmarks, 2019 (tests/data/emps/).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +33,7 @@ from teleop_core.calibration.undeclared import (
     undeclared_recording,
 )
 from teleop_core.calibration.verdict import fit_percent
+from teleop_core.progress import Progress
 
 EMPS_FILE = Path(__file__).resolve().parents[2] / "tests" / "data" / "emps" / "DATA_EMPS.mat"
 
@@ -76,9 +76,7 @@ def emps_run(path: Path = EMPS_FILE) -> dict[str, Any]:
     }
 
 
-def undeclared_runs(
-    duration_s: float, rate_hz: float, seed: int, say: Callable[[str], None]
-) -> dict[str, Any]:
+def undeclared_runs(duration_s: float, rate_hz: float, seed: int, say: Progress) -> dict[str, Any]:
     runs = {}
     for i, kind in enumerate(UNDECLARED):
         say(f"undeclared: {kind} ({i + 1}/{len(UNDECLARED)})")
@@ -106,7 +104,7 @@ def undeclared_runs(
 
 
 def clean_seeds(
-    duration_s: float, rate_hz: float, seeds: int, say: Callable[[str], None]
+    duration_s: float, rate_hz: float, seeds: int, say: Progress
 ) -> list[dict[str, Any]]:
     out = []
     for seed in range(seeds):
@@ -125,9 +123,7 @@ def clean_seeds(
     return out
 
 
-def open_part(
-    duration_s: float, rate_hz: float, seed: int, say: Callable[[str], None]
-) -> dict[str, Any]:
+def open_part(duration_s: float, rate_hz: float, seed: int, say: Progress) -> dict[str, Any]:
     say("EMPS (measured)")
     emps = emps_run()
     undeclared = undeclared_runs(duration_s, rate_hz, seed, say)

@@ -1,4 +1,4 @@
-"""`study bench campaign`: what Dask gives a campaign on this machine (issue 23).
+"""`study bench campaign`: what Dask gives a campaign on this machine.
 
 One small campaign (a few simulated studies at the physics level) runs twice from
 scratch, on a `LocalCluster` of 1 worker and of N workers, in fresh folders. For each:
@@ -21,10 +21,11 @@ import hashlib
 import os
 import tempfile
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
+
+from teleop_core.progress import Progress
 
 TOML = """\
 name = "bench campaign"
@@ -100,7 +101,7 @@ class CampaignBench:
 
 
 def run_campaign_bench(
-    replicates: int, group_size: int, workers: int, progress: Callable[[str], None]
+    replicates: int, group_size: int, workers: int, progress: Progress
 ) -> CampaignBench:
     from study.campaign.engine import close_client, open_client, run_pending
     from study.campaign.spec import parse_campaign

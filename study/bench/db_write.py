@@ -11,7 +11,7 @@ from __future__ import annotations
 import tempfile
 import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -24,6 +24,7 @@ from db.errors import DbInputError
 from db.migrate import open_database
 from db.models import Participant, SampleChunk, Study, Trial
 from db.samples import SampleWriter
+from teleop_core.progress import Progress, no_progress
 
 
 @dataclass(frozen=True)
@@ -113,7 +114,7 @@ def bench_sample_write(
     rate_hz: float = 1000.0,
     chunk_s: float = 1.0,
     seed: int = 0,
-    progress: Callable[[int], None] | None = None,
+    progress: Progress = no_progress,
 ) -> WriteBenchResult:
     """Write `rows` samples of one trial and time the writing (set-up excluded)."""
     with scratch_database(db) as engine:
@@ -124,8 +125,7 @@ def bench_sample_write(
         with SampleWriter(engine, trial_id, chunk_s=chunk_s) as writer:
             for lo in range(0, rows, per_second):
                 writer.extend({k: v[lo : lo + per_second] for k, v in columns.items()})
-                if progress is not None:
-                    progress(min(per_second, rows - lo))
+                progress("writing samples", min(lo + per_second, rows), rows)
         seconds = time.perf_counter() - start
         with engine.connect() as conn:
             stored = conn.scalar(select(func.sum(SampleChunk.n_samples)))

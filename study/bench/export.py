@@ -26,7 +26,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -39,6 +38,7 @@ from db.samples import SampleWriter
 from study.bench.db_write import scratch_database
 from study.protocol.design import TEMPLATE, parse_design
 from study.protocol.roster import create_study
+from teleop_core.progress import Progress, no_progress
 
 TRIALS_PER_PARTICIPANT = 8
 """Template design with two tasks' worth of blocks: 2 conditions x 4 trials."""
@@ -105,7 +105,7 @@ def build_study(
     participants: int,
     *,
     seed: int = 0,
-    progress: Callable[[int], None] | None = None,
+    progress: Progress = no_progress,
 ) -> tuple[int, float]:
     """Write the benchmark study; returns (trials, seconds spent in the sample writer)."""
     design = parse_design(TEMPLATE)
@@ -140,6 +140,7 @@ def build_study(
     per_trial = np.full(n_trials, samples // n_trials)
     per_trial[: samples % n_trials] += 1
     writing = 0.0
+    written = 0
     measures: dict[int, dict[str, float]] = {}
     for trial_id, n in zip(ids, per_trial, strict=True):
         columns = _columns(rng, int(n))
@@ -153,8 +154,8 @@ def build_study(
             "peak_proximal_force_n": float(np.max(columns["proximal_force_n"])),  # type: ignore[call-overload]
             "peak_distal_force_n": float(np.max(columns["distal_force_n"])),  # type: ignore[call-overload]
         }
-        if progress is not None:
-            progress(int(n))
+        written += int(n)
+        progress("writing the study's samples", written, samples)
     _store_measures(engine, measures)
     return n_trials, writing
 
@@ -275,7 +276,7 @@ def bench_export(
     participants: int = 360,
     formats: tuple[str, ...] = ("parquet", "csv"),
     workers: int | None = None,
-    progress: Callable[[int], None] | None = None,
+    progress: Progress = no_progress,
 ) -> ExportBenchResult:
     """Build the study, export it once per format (files in a temporary folder), then
     draw its figures with `study figures` and with the app's analysis screen."""

@@ -2,18 +2,18 @@
 
 - Table I: velocity sensing during ramp and step commands. The drive's proprioceptive
   speed (the AS5600 estimate the force estimator uses) against the external 2000 P/R
-  encoder, as in seed 000, IV-B ("to evaluate the fidelity of the proprioceptive
+  encoder, as in [endovascular], IV-B ("to evaluate the fidelity of the proprioceptive
   velocity estimation"); the encoder against the command is reported beside it.
 - Table II: force estimation with the wheel held at zero speed under 0.5-3 Hz
   sinusoidal loads (IV-C, Fig. 6), by the trained estimator (final, after the EKF).
 - Table III: residual learning + physics against direct prediction of the force by the
-  same GRU, both trained on the same data: the dataset seed 000, IV-C describes for the
+  same GRU, both trained on the same data: the dataset [endovascular], IV-C describes for the
   compensator ("the full guidewire insertion system under various teleoperation
   scenarios", 60,000 samples), i.e. navigation in the bench phantom without the
   zero-speed calibration platform Table II's estimator also sees. Errors are pooled over
   four held-out representative cases (Fig. 9, `CASES`): the bench phantom itself and
   three study conditions with loads or speeds beyond the training recording. The physics
-  prior's value is that it extrapolates (seed 000, III-A-3); on the bench phantom alone
+  prior's value is that it extrapolates ([endovascular], III-A-3); on the bench phantom alone
   the simulated drive is clean enough that both reach the sensor noise floor, and the
   table says so per case.
 - Fig. 8: validation RMSE against the window length T, and the residual distribution.
@@ -21,7 +21,7 @@
 
 The training recording copies the paper's dataset size, 60,000 samples at 100 Hz:
 navigation in the bench phantom plus the zero-speed calibration platform with
-sinusoidal loads (seed 000, IV-C calibrates the estimator on that platform). Table II's
+sinusoidal loads ([endovascular], IV-C calibrates the estimator on that platform). Table II's
 loads and every Table III case are separate recordings with their own seeds.
 """
 
@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,6 +53,7 @@ from teleop_core.follower import scenarios
 from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.plant import FollowerDrive
 from teleop_core.follower.sensors import acquire, decimation, reference_velocity
+from teleop_core.progress import Progress, no_progress
 
 PARTS = ("tables", "generalisation", "training")
 SIMULATED_NOTE = (
@@ -114,7 +114,7 @@ def simulate(
 
 def training_recording(seconds: float, seed: int) -> FollowerRecording:
     """The estimator's training data: navigation in the bench phantom (80 %) and the
-    zero-speed calibration platform with sinusoidal loads (20 %), as seed 000, IV-C
+    zero-speed calibration platform with sinusoidal loads (20 %), as [endovascular], IV-C
     calibrates on both; 60,000 samples at 100 Hz by default."""
     rng = np.random.default_rng(seed)
     cmd_a, load_a = scenarios.teleoperation(0.8 * seconds, rng, **TRAINING_PHANTOM)
@@ -204,7 +204,7 @@ def table_ii(
 def table_iii(
     config: FollowerBenchConfig,
     gru_config: GruConfig,
-    progress: Callable[[str], None],
+    progress: Progress,
 ) -> tuple[dict[str, Any], plt.Figure, np.ndarray]:
     progress("Table III: simulating the teleoperation dataset")
     recording = navigation_recording(
@@ -285,7 +285,7 @@ def table_iii(
 
 
 def window_sweep(
-    recording: FollowerRecording, config: FollowerBenchConfig, progress: Callable[[str], None]
+    recording: FollowerRecording, config: FollowerBenchConfig, progress: Progress
 ) -> dict[str, float]:
     out: dict[str, float] = {}
     for T in config.sweep_windows:
@@ -328,7 +328,7 @@ def causal_update_timing(
 def run_follower_bench(
     config: FollowerBenchConfig,
     out_dir: Path,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
 ) -> dict[str, Any]:
     """Run every experiment, write DIR/follower_bench.md and the figures; return the report."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -357,7 +357,7 @@ def run_tables(
     recording: FollowerRecording,
     out_dir: Path,
     report: dict[str, Any],
-    progress: Callable[[str], None],
+    progress: Progress,
 ) -> None:
     """Tables I-III, Fig. 8 and the costs, into `report` and DIR's figures."""
     progress("Table I: velocity sensing")
@@ -368,10 +368,8 @@ def run_tables(
     gru_config = GruConfig(max_epochs=config.epochs)
     start = time.perf_counter()
 
-    def on_epoch(epoch: int, train_rmse: float, val_rmse: float) -> None:
-        progress(
-            f"training the residual GRU: epoch {epoch}/{config.epochs}, validation {val_rmse:.4f} N"
-        )
+    def on_epoch(step: str, done: int = 0, total: int = 0) -> None:
+        progress(f"training the residual GRU: {step}", done, total)
 
     estimator, summary = train_estimator(recording, gru_config, seed=config.seed, progress=on_epoch)
     report["training"] = {

@@ -1,4 +1,4 @@
-"""`study bench follower`, generalisation part (issue 17): the estimator on data it never saw.
+"""`study bench follower`, generalisation part: the estimator on data it never saw.
 
 For each unmodelled effect (Stribeck dip, hysteresis, direction-dependent load, drift)
 and each seed: a 4-minute, 200 Hz follower recording carrying that one effect at the
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,9 +36,10 @@ from teleop_core.estimation.gru import GruConfig, make_windows
 from teleop_core.estimation.metrics import rmse
 from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.training import train_estimator
+from teleop_core.progress import Progress, no_progress
 
 EFFECTS = ("stribeck", "hysteresis", "direction_asymmetry", "drift")
-"""The unmodelled effects of issue 17's tests and targets."""
+"""The unmodelled effects the generalisation tests and targets use."""
 DATA_NOTE = (
     "simulated follower recordings (teleop_core.calibration.synthetic.follower_recording), "
     "not measured data"
@@ -119,7 +120,7 @@ def run_one(
     effect: str,
     seed: int,
     config: GeneralisationConfig,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
 ) -> dict[str, Any]:
     """Train on the first part of one recording, run on the rest; errors in N.
 
@@ -131,11 +132,8 @@ def run_one(
     train, test = rec.slice(0, cut), rec.slice(cut, len(rec))
     start = time.perf_counter()
 
-    def epoch_done(epoch: int, train_rmse: float, val_rmse: float) -> None:
-        progress(
-            f"epoch {epoch}/{config.gru.max_epochs}: train {train_rmse:.4f} N, "
-            f"validation {val_rmse:.4f} N"
-        )
+    def epoch_done(step: str, done: int = 0, total: int = 0) -> None:
+        progress(f"epoch {done}/{total}: {step}" if total else step)
 
     estimator, summary = train_estimator(
         train, config.gru, seed=seed, progress=epoch_done, effects=config.find_effects
@@ -184,7 +182,7 @@ def run_one(
 def run_generalisation(
     config: GeneralisationConfig,
     out_dir: Path,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
 ) -> dict[str, Any]:
     """Every effect x seed; returns the runs and the per-effect spread over seeds."""
     runs: list[dict[str, Any]] = []
@@ -196,7 +194,12 @@ def run_generalisation(
             label = f"generalisation {len(runs) + 1}/{total}: {effect}, seed {seed}"
             progress(label)
             runs.append(
-                run_one(effect, seed, config, lambda line, at=label: progress(f"{at}, {line}"))
+                run_one(
+                    effect,
+                    seed,
+                    config,
+                    lambda line, done=0, total=0, at=label: progress(f"{at}, {line}", done, total),
+                )
             )
             partial.write_text(json.dumps(runs, indent=2) + "\n")
     return {"data": DATA_NOTE, "runs": runs, "by_effect": spread(runs, config.effects)}

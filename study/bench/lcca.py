@@ -1,6 +1,6 @@
 """`study bench lcca`: the paper's user study, rehearsed with simulated participants.
 
-The design of seed 000, IV-D: 20 engineering outsiders, 8 novice doctors, 8 expert
+The design of [endovascular], IV-D: 20 engineering outsiders, 8 novice doctors, 8 expert
 physicians, each navigating into the LCCA under VO and HV (within-subject; the same
 simulated person, seed for seed, in both conditions). Reported per group: mean and SD
 of completion time, peak proximal force (the estimate the drive renders), peak distal
@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +38,7 @@ from study.tasks.lcca.figures import CONDITION_COLORS, plot_tip_paths
 from study.tasks.lcca.trial import run_lcca_trial
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.phantom.lcca import LccaPhantom
+from teleop_core.progress import Progress, no_progress
 
 MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
 LABELS = {
@@ -86,11 +86,65 @@ def _paired(frame: pd.DataFrame, measure: str, a: str, b: str) -> dict[str, floa
     }
 
 
+def _row(summary: dict[str, Any]) -> dict[str, Any]:
+    """A trial's row of the bench's table: its keys, measures and counts."""
+    keys = ("group", "condition", "success", *MEASURES, "wall_contacts", "attempts")
+    return {key: summary[key] for key in (*keys, "obstacles_felt", "obstacles_seen")}
+
+
+def _group_summaries(
+    frame: pd.DataFrame, group_order: list[str]
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Per group and condition the measures' means and SDs, and per group and measure
+    the paired VO-HV test."""
+    groups: dict[str, Any] = {}
+    tests = []
+    for group in group_order:
+        g = frame[frame["group"] == group]
+        groups[group] = {
+            condition: {
+                **{f"{m}_mean": float(c[m].mean()) for m in MEASURES},
+                **{f"{m}_sd": float(c[m].std(ddof=1)) if len(c) > 1 else 0.0 for m in MEASURES},
+                "success_rate": float(c["success"].mean()),
+                "wall_contacts_mean": float(c["wall_contacts"].mean()),
+            }
+            for condition, c in g.groupby("condition")
+        }
+        for measure in MEASURES:
+            tests.append({"group": group, "measure": measure, **_paired(g, measure, "VO", "HV")})
+    return groups, tests
+
+
+def _gain_zero(
+    config: LccaBenchConfig, estimator: ForceEstimator, phantom: LccaPhantom
+) -> dict[str, Any]:
+    """VO against HV at haptic gain 0 in `config.gain_zero_group`, paired per measure."""
+    zero_rows = []
+    for i in range(config.group_sizes.get(config.gain_zero_group, 0)):
+        seed = config.seed + 1000 * GROUPS.index(config.gain_zero_group) + i
+        traits = simulated_participant(config.gain_zero_group, seed)
+        for condition, gain, loop_seed in (("VO", None, seed), ("HV", 0.0, seed + 500)):
+            s = run_lcca_trial(
+                traits,
+                condition,
+                loop_seed,
+                estimator,
+                haptic_gain=gain,
+                max_s=config.max_s,
+                phantom=phantom,
+            ).summary
+            zero_rows.append(
+                {"participant": i, "condition": condition, **{m: s[m] for m in MEASURES}}
+            )
+    zero = pd.DataFrame(zero_rows)
+    return {m: _paired(zero, m, "VO", "HV") for m in MEASURES} if len(zero) else {}
+
+
 def run_lcca_bench(
     config: LccaBenchConfig,
     estimator: ForceEstimator,
     out_dir: Path,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
 ) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     phantom = LccaPhantom()
@@ -121,65 +175,15 @@ def run_lcca_bench(
                 if publisher is not None:
                     publish_walls.append(_publish(publisher, result.frame, condition, len(factors)))
                     wall += publish_walls[-1]
-                s = result.summary
-                factors.append(s["completion_time_s"] / wall)
-                rows.append(
-                    {
-                        "participant": f"{group}-{i:02d}",
-                        **{
-                            key: s[key]
-                            for key in (
-                                "group",
-                                "condition",
-                                "success",
-                                *MEASURES,
-                                "wall_contacts",
-                                "attempts",
-                                "obstacles_felt",
-                                "obstacles_seen",
-                            )
-                        },
-                    }
-                )
+                factors.append(result.summary["completion_time_s"] / wall)
+                rows.append({"participant": f"{group}-{i:02d}", **_row(result.summary)})
                 if group == "outsider":
                     paths.append((result.frame, condition))
     frame = pd.DataFrame(rows)
-    groups: dict[str, Any] = {}
-    tests = []
-    for group in config.group_sizes:
-        g = frame[frame["group"] == group]
-        groups[group] = {
-            condition: {
-                **{f"{m}_mean": float(c[m].mean()) for m in MEASURES},
-                **{f"{m}_sd": float(c[m].std(ddof=1)) if len(c) > 1 else 0.0 for m in MEASURES},
-                "success_rate": float(c["success"].mean()),
-                "wall_contacts_mean": float(c["wall_contacts"].mean()),
-            }
-            for condition, c in g.groupby("condition")
-        }
-        for measure in MEASURES:
-            tests.append({"group": group, "measure": measure, **_paired(g, measure, "VO", "HV")})
+    groups, tests = _group_summaries(frame, list(config.group_sizes))
     # HV at zero gain against VO: the participants must not tell them apart
     progress("HV with haptic gain 0")
-    zero_rows = []
-    for i in range(config.group_sizes.get(config.gain_zero_group, 0)):
-        seed = config.seed + 1000 * GROUPS.index(config.gain_zero_group) + i
-        traits = simulated_participant(config.gain_zero_group, seed)
-        for condition, gain, loop_seed in (("VO", None, seed), ("HV", 0.0, seed + 500)):
-            s = run_lcca_trial(
-                traits,
-                condition,
-                loop_seed,
-                estimator,
-                haptic_gain=gain,
-                max_s=config.max_s,
-                phantom=phantom,
-            ).summary
-            zero_rows.append(
-                {"participant": i, "condition": condition, **{m: s[m] for m in MEASURES}}
-            )
-    zero = pd.DataFrame(zero_rows)
-    gain_zero = {m: _paired(zero, m, "VO", "HV") for m in MEASURES} if len(zero) else {}
+    gain_zero = _gain_zero(config, estimator, phantom)
     report = {
         "config": asdict(config),
         "groups": groups,

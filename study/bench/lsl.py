@@ -17,7 +17,6 @@ import sys
 import tempfile
 import time
 import uuid
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from study.protocol.observer import Observers, SessionObserver, TrialInfo
+from teleop_core.progress import Progress, no_progress
 
 SIMULATED_NOTE = (
     "SIMULATED: a simulated participant in the simulated LCCA loop, and a simulated "
@@ -62,7 +62,7 @@ class Origins(SessionObserver):
 
 
 def run_lsl_bench(
-    config: LslBenchConfig, out_dir: Path, progress: Callable[[str], None] = lambda _: None
+    config: LslBenchConfig, out_dir: Path, progress: Progress = no_progress
 ) -> dict[str, Any]:
     """Run the bench (module docstring); writes lsl_bench.json and .md to `out_dir`."""
     from study.lsl.publish import Publisher

@@ -1,4 +1,4 @@
-"""`study bench master`: the paper's master-side experiments (seed 000, IV-D, Figs. 10-11).
+"""`study bench master`: the paper's master-side experiments ([endovascular], IV-D, Figs. 10-11).
 
 - Calibration (Fig. 10(b)): the dial presses its lever on the force gauge while the
   current command sweeps up and down the calibrated range; quadratics refitted to the
@@ -22,7 +22,6 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -47,6 +46,7 @@ from teleop_core.loop.environments import free_space, tube_with_wall
 from teleop_core.loop.link import LinkParams
 from teleop_core.master.dial import gauge_force
 from teleop_core.master.params import DialParams
+from teleop_core.progress import Progress, no_progress
 
 FREQUENCIES_HZ = tuple(float(f) for f in range(1, 13))
 FIG11_FREQUENCIES_HZ = (1.0, 4.0, 8.0, 12.0)
@@ -278,7 +278,7 @@ degraded network."""
 
 
 def closed_loop_speed(
-    config: MasterBenchConfig, estimator: ForceEstimator, progress: Callable[[str], None]
+    config: MasterBenchConfig, estimator: ForceEstimator, progress: Progress
 ) -> dict[str, Any]:
     """Real-time factor of the headless loop over each link in LINKS; the top-level
     figures are the wired link's."""
@@ -372,7 +372,7 @@ def run_master_bench(
     config: MasterBenchConfig,
     out_dir: Path,
     estimator: ForceEstimator,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
 ) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(config.seed)

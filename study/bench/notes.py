@@ -1,4 +1,4 @@
-"""`study bench notes`: the NOTES device's targets (seed 001) measured on the simulation.
+"""`study bench notes`: the NOTES device's targets ([notes]) measured on the simulation.
 
 - Default parameters: force bandwidth and settling time of the linear model and as
   characterised (ramps and chirps with friction on), continuous limits from the ramps.
@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -30,6 +29,7 @@ from teleop_core.notes.params import DOFS, MSD_FIELDS, default_params
 from teleop_core.notes.recording import NotesRecording
 from teleop_core.notes.simulate import BOUNDARIES, simulate_recording
 from teleop_core.notes.transfer import force_bandwidth_hz, settling_time_s
+from teleop_core.progress import Progress, no_progress
 
 PAPER = {"translation": (18.1, 5.62), "rotation": (5.7, 0.19005)}
 """Force bandwidth (Hz) and continuous limit (N, N m) the paper reports."""
@@ -88,9 +88,7 @@ TRIAL_MEASURES = (
 )
 
 
-def notes_trials(
-    config: NotesBenchConfig, progress: Callable[[str], None]
-) -> tuple[pd.DataFrame, float]:
+def notes_trials(config: NotesBenchConfig, progress: Progress) -> tuple[pd.DataFrame, float]:
     """`trials` simulated NOTES trials per group and condition; (measures, wall seconds)."""
     from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
     from study.protocol.traits import GROUPS, simulated_participant
@@ -116,7 +114,7 @@ def notes_trials(
 
 
 def run_notes_bench(
-    config: NotesBenchConfig, out_dir: Path, progress: Callable[[str], None] = lambda _: None
+    config: NotesBenchConfig, out_dir: Path, progress: Progress = no_progress
 ) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {"config": config.__dict__}

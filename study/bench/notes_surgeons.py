@@ -1,25 +1,25 @@
-"""The surgeons' benchmark of seed 001 (IV, [20]) on simulated experts: part of
+"""The surgeons' benchmark of [notes] (IV, [20]) on simulated experts: part of
 `study bench notes`.
 
-Seed 001 reports, over 10 surgeons in porcine NOTES procedures, the mean of each
+[notes] reports, over 10 surgeons in porcine NOTES procedures, the mean of each
 surgeon's maximum pull and push, the mean maximum clockwise and counter-clockwise
 torque, and the share of the procedure's time the push exceeded the device's 5.62 N.
 Here `n` simulated experts (the paper's 10 by default) each do one NOTES trial in VO
 (nothing rendered: the tissue's demand is what a hand on a real scope would feel), and
 the same people in HV beside them; each trial's measures are the task's own
 (`study.tasks.notes.trial.measures`). The table puts the paper's figure, the target
-band of issue 24, and the simulated people's mean, SD, min and max side by side; every
+band of the participant fit, and the simulated people's mean, SD, min and max side by side; every
 table and key says the trials are simulated.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import pandas as pd
 
 from teleop_core.notes import task
+from teleop_core.progress import Progress, no_progress
 
 SOURCE = "simulated participants (study.tasks.notes.trial), not measured people"
 PAPER = {
@@ -68,9 +68,7 @@ def surgeons_summary(trials: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def surgeons_trials(
-    n: int, seed: int, progress: Callable[[str], None] = lambda _: None
-) -> pd.DataFrame:
+def surgeons_trials(n: int, seed: int, progress: Progress = no_progress) -> pd.DataFrame:
     """One NOTES trial per simulated expert in VO and in HV (the same person, seed for
     seed); one row per trial with the measures of `PAPER`, completion and success."""
     from study.protocol.traits import simulated_participant
@@ -112,7 +110,7 @@ def surgeons_report(trials: pd.DataFrame) -> tuple[dict[str, Any], list[str]]:
     n = int(vo["n"].iloc[0])
     md = [
         "",
-        f"Surgeons' benchmark (seed 001, IV: 10 surgeons, porcine NOTES) against {n} "
+        f"Surgeons' benchmark ([notes], IV: 10 surgeons, porcine NOTES) against {n} "
         f"SIMULATED experts in {CONDITION}, one trial each (HV: the same people):",
         "",
         "| measure | paper | target | simulated VO mean | SD | min-max | within | "

@@ -11,7 +11,7 @@
    group drawn from the truth and simulated (1 trial per condition, independent seeds),
    their mean difference per group with its standard error. 300 by default: with 60 the
    truth's own standard error (0.02-0.04 N) was half the fitted model's interval, so a
-   truth estimate off by chance could fall outside it (one of six did, 2026-11-23).
+   truth estimate off by chance could fall outside it.
 4. Targets: each group's fitted mean of each trait within 15 % of the truth's (reported
    for every trait, with the mean of the study's own people beside it: with 8 people
    a group's sample mean is itself off its distribution's by about 7 %; and beside the
@@ -33,7 +33,6 @@ import os
 import resource
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +46,7 @@ from study.protocol.demo import run_demo
 from study.protocol.participant_model import FORMAT, load_model
 from study.protocol.session import participant_traits
 from study.protocol.traits import PROFILES, TRAIT_BOUNDS, TRAITS, GroupProfile
+from teleop_core.progress import Progress, as_step, no_progress
 
 TOLERANCE = 0.15
 """Largest relative error of a recovered group mean."""
@@ -131,7 +131,7 @@ def run_participants_bench(
     truth_people: int,
     seed: int,
     out_dir: Path | None,
-    status: Callable[[str], None] = lambda _: None,
+    status: Progress = no_progress,
     shift_sd: float = SHIFT_SD,
     probes: bool = False,
     coverage_studies: int = 0,
@@ -161,9 +161,7 @@ def run_participants_bench(
         if probes:
             from study.probes.store import run_all_probes
 
-            run_all_probes(
-                engine, load_model(Path(tmp) / "truth.json"), lambda code: status(f"probes: {code}")
-            )
+            run_all_probes(engine, load_model(Path(tmp) / "truth.json"), as_step(status, "probes"))
         try:
             start, cpu0 = time.monotonic(), _cpu_s()
             result = fit_study(
@@ -171,7 +169,7 @@ def run_participants_bench(
                 "lcca",
                 settings,
                 "simulated 20/8/8 study",
-                lambda step, k, n: status(f"fit: {step} {k}/{n}"),
+                lambda step, k=0, n=0: status(f"fit: {step}", k, n),
             )
             fit_s, fit_cpu_s = time.monotonic() - start, _cpu_s() - cpu0
         finally:
@@ -189,7 +187,7 @@ def run_participants_bench(
             settings.bootstrap,
             seed,
             result.plan.weak,
-            lambda k, n: status(f"coverage: study {k}/{n}"),
+            as_step(status, "coverage: study"),
         )
     status("the truth's VO - HV differences")
     truth_trials = simulate_people(

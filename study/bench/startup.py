@@ -1,4 +1,4 @@
-"""`study bench startup`: what a user waits for from a cold process (issue 21).
+"""`study bench startup`: what a user waits for from a cold process.
 
 Each figure but the writer's is the median of `runs` fresh subprocesses, after one
 warm-up run that is not counted (it leaves the loop kernel compiled ahead of time in
@@ -43,6 +43,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from study.errors import StudyInputError
+from teleop_core.progress import Progress, no_progress
 
 SIMULATE_ARGS = (
     "simulate",
@@ -59,7 +60,7 @@ SIMULATE_ARGS = (
 )
 """A trial that runs its full 30 s (seed 3 does not reach the target in time)."""
 TARGETS_S = {"simulate": 1.0, "run_screen": 1.0, "analyze": 2.0, "demo": 30.0}
-"""The issue's targets, s; the writer's is `WRITER_TARGET_RATIO`."""
+"""The targets, s; the writer's is `WRITER_TARGET_RATIO`."""
 WRITER_TARGET_RATIO = 0.9
 _REFERENCE_ROWS_PER_COMMIT = 1000
 
@@ -89,7 +90,7 @@ class WriterRatio:
     """The same with `PRAGMA foreign_keys=ON`, as the study database's connections have
     (each sample's trial_id is then looked up in `trials`), each run."""
     ratio: float
-    """Median writer rows/s over median plain sqlite3 rows/s (the issue's target)."""
+    """Median writer rows/s over median plain sqlite3 rows/s (the target)."""
     ratio_foreign_keys: float
     """Median writer rows/s over median sqlite3 rows/s with foreign keys checked."""
     target_ratio: float = WRITER_TARGET_RATIO
@@ -265,7 +266,7 @@ def bench_startup(
     runs: int,
     db_url: str | None = None,
     rows: int = 1_000_000,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
     demo_runs: int = 1,
 ) -> StartupBenchResult:
     """Every figure of the module's docstring. Without `db_url`, `study analyze` and the

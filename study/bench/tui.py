@@ -29,7 +29,7 @@ from study.errors import StudyInputError
 
 MARKER = b"Sessions done"
 TARGET_S = 1.5
-"""The issue's target: the overview within 1.5 s of starting."""
+"""The target: the overview within 1.5 s of starting."""
 
 
 @dataclass(frozen=True)

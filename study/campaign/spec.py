@@ -231,35 +231,10 @@ def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
         raise StudyInputError(
             f"{source}: task = {task!r}; expected one of {', '.join(task_names())}"
         )
-    the_task = get_task(task)
     groups = data["groups"]
-    if not groups:
-        raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
-    for g, n in groups.items():
-        if g not in DEFAULT_GROUPS:
-            raise StudyInputError(
-                f"{source}: groups.{g}; expected groups with simulated participants: "
-                f"{', '.join(DEFAULT_GROUPS)}"
-            )
-        _whole(source, f"groups.{g}", n, 1)
+    _check_groups(groups, source)
     factors_in = data.get("factors", {})
-    for name in factors_in:
-        if name not in FACTORS:
-            raise StudyInputError(
-                f"{source}: unknown factor {name!r}; expected any of {', '.join(FACTORS)}"
-            )
-        lacks = (
-            "haptic dial"
-            if name == "haptic_gain" and not the_task.has_dial
-            else "master-follower link"
-            if name.startswith("link_") and not the_task.has_link
-            else None
-        )
-        if lacks:
-            raise StudyInputError(
-                f"{source}: factors.{name} with task = {task!r}, which has no {lacks}; "
-                "expected only the factors its trials use"
-            )
+    _check_factor_names(factors_in, task, source)
     factors = {n: _factor(source, n, factors_in[n]) for n in FACTORS if n in factors_in}
     spec = CampaignSpec(
         name=data.get("name", "campaign"),
@@ -282,3 +257,38 @@ def validate(data: dict[str, Any], source: str = "campaign") -> CampaignSpec:
                     "(the fewest the paired tests take)"
                 )
     return spec
+
+
+def _check_groups(groups: dict[str, Any], source: str) -> None:
+    """Groups with simulated participants, each a whole number of at least one."""
+    if not groups:
+        raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
+    for g, n in groups.items():
+        if g not in DEFAULT_GROUPS:
+            raise StudyInputError(
+                f"{source}: groups.{g}; expected groups with simulated participants: "
+                f"{', '.join(DEFAULT_GROUPS)}"
+            )
+        _whole(source, f"groups.{g}", n, 1)
+
+
+def _check_factor_names(factors: dict[str, Any], task: str, source: str) -> None:
+    """Known factors only, and only those the task's trials use."""
+    the_task = get_task(task)
+    for name in factors:
+        if name not in FACTORS:
+            raise StudyInputError(
+                f"{source}: unknown factor {name!r}; expected any of {', '.join(FACTORS)}"
+            )
+        lacks = (
+            "haptic dial"
+            if name == "haptic_gain" and not the_task.has_dial
+            else "master-follower link"
+            if name.startswith("link_") and not the_task.has_link
+            else None
+        )
+        if lacks:
+            raise StudyInputError(
+                f"{source}: factors.{name} with task = {task!r}, which has no {lacks}; "
+                "expected only the factors its trials use"
+            )

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import click
 
-from db.migrate import open_database
 from study.analysis.source import DRIVERS
 from study.commands.base import StudyCommand, check_parent_folder, db_option
 from study.errors import StudyInputError
@@ -61,59 +60,94 @@ def analyze(
     Every output counts the trials by driver (simulated, keyboard, hardware, imported) and
     says so when any is simulated.
     """
-    from study.analysis.frames import participant_means, tlx_frame, trial_frame, without_withdrawn
+    from study.analysis.means import (
+        participant_mean_rows,
+        restrict_rows,
+        tlx_measure_rows,
+        without_invalid_rows,
+        without_withdrawn_rows,
+    )
     from study.analysis.report import write
-    from study.analysis.source import restrict
-    from study.analysis.stats import analyze as run_analysis
+    from study.analysis.stats import analyze_rows
 
     if json_path is not None:
         check_parent_folder(json_path)
     start = time.monotonic()
-    engine = open_database(db_url, create=False)
-    try:
-        trials, tlx = trial_frame(engine), tlx_frame(engine)
-        trials, tlx, withdrawn = without_withdrawn(engine, trials, tlx)
-        if covariate is not None:
-            from study.analysis.covariate import covariate_values
-            from study.probes.store import probe_frame
+    trials, tlx, withdrawn_codes, invalid = _read(db_url)
+    trials, tlx, withdrawn = without_withdrawn_rows(withdrawn_codes, trials, tlx)
+    trials, invalid_notes = without_invalid_rows(invalid, trials)
+    withdrawn += invalid_notes
+    if covariate is not None:
+        from db.migrate import open_database
+        from study.analysis.covariate import covariate_values
+        from study.probes.store import probe_frame
 
+        engine = open_database(db_url, create=False)
+        try:
             probe_trials = probe_frame(engine)
-            trait, values = covariate_values(probe_trials, covariate)
-    finally:
-        engine.dispose()
+        finally:
+            engine.dispose()
+        trait, values = covariate_values(probe_trials, covariate)
     if task is not None:
-        known = set(trials["task"]) | set(tlx["task"])
+        known = {r["task"] for r in trials} | {r["task"] for r in tlx}
         if task not in known:
             raise StudyInputError(
                 f"no data for task {task!r}; expected one of "
                 f"{', '.join(sorted(known)) or 'none stored'}"
             )
-        trials, tlx = trials[trials["task"] == task], tlx[tlx["task"] == task]
-    if not len(trials) and not len(tlx):
+        trials = [r for r in trials if r["task"] == task]
+        tlx = [r for r in tlx if r["task"] == task]
+    if not trials and not tlx:
         raise StudyInputError("the database holds no completed trials or questionnaires to analyse")
-    trials, tlx = restrict(trials, tlx, driver)
+    trials, tlx = restrict_rows(trials, tlx, driver)
     withdrawn = [n for n in withdrawn if task is None or n.startswith(f"{task}/")]
-    result = run_analysis(
-        trials, participant_means(trials, tlx), ss_type=int(ss_type), withdrawn=withdrawn
-    )
+    long = participant_mean_rows(trials, tlx_measure_rows(tlx))
+    result = analyze_rows(trials, long, ss_type=int(ss_type), withdrawn=withdrawn)
     written = write(result, out_dir, json_path)
     for path in written:
         click.echo(str(path))
     if covariate is not None:
+        from study.protocol.trial_table import trial_table
+
         drivers = probe_trials["driver"].value_counts().to_dict()
         click.echo(
             f"covariate {covariate}: probe trials by driver: "
             + ", ".join(f"{d} {n}" for d, n in sorted(drivers.items()))
             + (" (SIMULATED participants' answers)" if "simulated" in drivers else "")
         )
-        _covariate(trials, values, trait, out_dir)
+        _covariate(trial_table(trials), values, trait, out_dir)
     n_ex = len(result.exclusions)
     if result.source.note:
         click.echo(result.source.note)
     click.echo(
-        f"{len(result.comparisons)} comparisons, {n_ex} exclusions, "
+        f"{len(result.comparison_rows)} comparisons, {n_ex} exclusions, "
         f"{len(result.warnings)} notes, in {time.monotonic() - start:.1f} s"
     )
+
+
+def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], dict]:  # type: ignore[type-arg]
+    """The trials, questionnaires, withdrawn participants and trials marked invalid
+    (`study_rows`): from an
+    SQLite file at the current schema through `sqlite3` alone (`db.plain`), otherwise
+    through `open_database` (which upgrades an older schema and serves PostgreSQL)."""
+    from db.plain import plain_sqlite
+    from study.protocol.study_rows import invalid_rows, tlx_rows, trial_rows, withdrawn_rows
+
+    conn = plain_sqlite(db_url)
+    if conn is not None:
+        try:
+            return trial_rows(conn), tlx_rows(conn), withdrawn_rows(conn), invalid_rows(conn)
+        finally:
+            conn.close()
+    from db.migrate import open_database
+    from study.protocol.trial_table import driver_connection
+
+    engine = open_database(db_url, create=False)
+    try:
+        with driver_connection(engine) as conn:
+            return trial_rows(conn), tlx_rows(conn), withdrawn_rows(conn), invalid_rows(conn)
+    finally:
+        engine.dispose()
 
 
 def _covariate(trials, values, trait: str, out_dir: Path) -> None:  # type: ignore[no-untyped-def]

@@ -16,10 +16,12 @@ from teleop_core.errors import TeleopInputError
 
 if TYPE_CHECKING:
     from rich.console import Console
-    from rich.progress import Progress
+    from rich.progress import Progress, TaskID
+    from rich.status import Status
     from sqlalchemy import Engine
 
     from study.protocol.participant_model import ParticipantModel
+    from teleop_core import progress
 
 USER_ERRORS = (DbInputError, DatabaseGoneError, StudyInputError, TeleopInputError)
 
@@ -249,6 +251,31 @@ def progress_bar(*columns: Any, transient: bool = True, console: Console | None 
     console = console or Console(stderr=True)
     # off where stderr is no terminal: rich draws nothing there but a lone newline
     return Progress(*columns, transient=transient, console=console, disable=not console.is_terminal)
+
+
+def bar_progress(bar: Progress, task: TaskID, *, describe: bool = True) -> progress.Progress:
+    """The `teleop_core.progress.Progress` that moves `task` of `bar`: done of total (a
+    step without a count leaves the bar's count as it is) and, with `describe`, the step
+    as the task's description."""
+
+    def told(step: str, done: int = 0, total: int = 0) -> None:
+        fields: dict[str, Any] = {"description": step} if describe else {}
+        if total:
+            fields.update(completed=done, total=total)
+        bar.update(task, **fields)
+
+    return told
+
+
+def status_progress(status: Status, prefix: str = "") -> progress.Progress:
+    """The `teleop_core.progress.Progress` that shows each step on a Rich status line
+    (`prefix`, then the step and its count)."""
+    from teleop_core.progress import describe
+
+    def told(step: str, done: int = 0, total: int = 0) -> None:
+        status.update(prefix + describe(step, done, total))
+
+    return told
 
 
 def write_json_atomically(data: dict[str, Any], path: Path) -> None:

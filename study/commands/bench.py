@@ -18,9 +18,11 @@ from study.commands.base import (
     SEED,
     StudyCommand,
     StudyGroup,
+    bar_progress,
     check_parent_folder,
     positive_option,
     progress_bar,
+    status_progress,
 )
 from study.commands.bench_paper import PAPER_BENCHES, write_json
 
@@ -57,9 +59,8 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
 
     with progress_bar() as progress:
         task = progress.add_task("writing samples", total=rows)
-        result = bench_sample_write(
-            db_url, rows=rows, rate_hz=rate_hz, progress=lambda n: progress.advance(task, n)
-        )
+        told = bar_progress(progress, task, describe=False)
+        result = bench_sample_write(db_url, rows=rows, rate_hz=rate_hz, progress=told)
     click.echo(
         f"{result.backend}: {result.rows:,} rows in {result.chunks:,} committed chunks, "
         f"{result.seconds:.2f} s, {result.rows_per_s:,.0f} rows/s"
@@ -94,7 +95,7 @@ def bench_export(
             samples=samples,
             participants=participants,
             workers=jobs,
-            progress=lambda n: progress.advance(task, n),
+            progress=bar_progress(progress, task, describe=False),
         )
     click.echo(
         f"{result.backend}: {result.samples:,} samples in {result.trials:,} trials, written at "
@@ -140,7 +141,7 @@ def bench_campaign(replicates: int, group_size: int, workers: int, json_path: Pa
     if json_path is not None:
         check_parent_folder(json_path)
     with Console(stderr=True).status("campaign bench") as status:
-        result = run_campaign_bench(replicates, group_size, workers, status.update)
+        result = run_campaign_bench(replicates, group_size, workers, status_progress(status))
     for run in result.runs:
         mean = sum(run.unit_seconds) / len(run.unit_seconds)
         click.echo(
@@ -183,7 +184,7 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
 
             db_url = str(Path(tmp) / "demo.db")
             status.update("building the full demo study (36 participants)")
-            run_demo(db_url, seed=1, progress=status.update)
+            run_demo(db_url, seed=1, progress=status_progress(status))
         status.update(f"starting `study tui` {runs} times")
         result = run_bench(db_url, overview_seconds, runs)
     click.echo(
@@ -240,7 +241,9 @@ def bench_startup(
     if json_path is not None:
         check_parent_folder(json_path)
     with Console(stderr=True).status("startup") as status:
-        result = run_bench(runs, db_url, rows, progress=status.update, demo_runs=demo_runs)
+        result = run_bench(
+            runs, db_url, rows, progress=status_progress(status), demo_runs=demo_runs
+        )
 
     def line(name: str, t) -> str:  # type: ignore[no-untyped-def]
         each = ", ".join(f"{s:.2f}" for s in t.seconds)
@@ -352,7 +355,7 @@ def bench_participants(
             truth_people,
             seed,
             out_dir,
-            status.update,
+            status_progress(status),
             truth_shift,
             probes,
             coverage_studies,
@@ -383,6 +386,6 @@ def bench_lsl(json_path: Path | None, out_dir: Path, quick: bool) -> None:
     load_pylsl()  # one line now, rather than from the instrument's process
     config = LslBenchConfig.quick() if quick else LslBenchConfig()
     with Console(stderr=True).status("LSL bench") as line:
-        report = run_lsl_bench(config, out_dir, line.update)
+        report = run_lsl_bench(config, out_dir, status_progress(line))
     write_json(json_path, report)
     click.echo((out_dir / "lsl_bench.md").read_text())

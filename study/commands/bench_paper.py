@@ -21,8 +21,10 @@ from study.commands.base import (
     count_option,
     json_option,
     out_dir_option,
+    status_progress,
 )
 from study.errors import StudyInputError
+from teleop_core.progress import Progress
 
 _json_option = json_option("Write every table as JSON here.")
 _out_option = out_dir_option("Folder for the Markdown tables, the figures and any data files.")
@@ -39,14 +41,14 @@ def _run_report(
     json_path: Path,
     markdown: Path,
     status: str,
-    run: Callable[[Callable[[str], None]], dict[str, Any]],
+    run: Callable[[Progress], dict[str, Any]],
 ) -> None:
     """Run a bench under a status line on stderr, write its JSON, show its Markdown
     (the command has checked the JSON's folder before loading anything)."""
     from rich.console import Console
 
     with Console(stderr=True).status(status) as line:
-        report = run(line.update)
+        report = run(status_progress(line))
     write_json(json_path, report)
     click.echo(markdown.read_text())
 
@@ -56,7 +58,7 @@ def _run_with_estimator(
     model_dir: Path | None,
     markdown: Path,
     status: str,
-    run: Callable[[Any, Callable[[str], None]], dict[str, Any]],
+    run: Callable[[Any, Progress], dict[str, Any]],
 ) -> None:
     """`_run_report` of a bench that runs the force estimator of --estimator (loaded
     after the JSON's folder is checked): `run(estimator, progress)`."""
@@ -125,7 +127,7 @@ def bench_follower(
     only: str | None,
     generalisation_seeds: str | None,
 ) -> None:
-    """Tables I-III and Fig. 8 of seed 000 on the simulated follower, and the estimator on
+    """Tables I-III and Fig. 8 of [endovascular] on the simulated follower, and the estimator on
     recordings it never saw, and the training time of `study estimator train` (about 30 min,
     several hours and 10 min)."""
     from study.bench.follower import PARTS, FollowerBenchConfig, run_follower_bench
@@ -158,7 +160,7 @@ def bench_follower(
 def bench_master(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
-    """Figs. 10-11 of seed 000 on the simulated dial, latency, and the loop's speed."""
+    """Figs. 10-11 of [endovascular] on the simulated dial, latency, and the loop's speed."""
     from study.bench.master import MasterBenchConfig, run_master_bench
 
     config = replace(MasterBenchConfig.quick() if quick else MasterBenchConfig(), seed=seed)
@@ -290,13 +292,13 @@ def bench_calibrate(
 @count_option("--draws", 10, "Seeded parameter draws per axis for the identification round trip.")
 @count_option("--trials", 4, "Simulated NOTES trials per group and condition.")
 @count_option(
-    "--surgeons", 10, "Simulated experts for the surgeons' benchmark (seed 001 had 10).", minimum=2
+    "--surgeons", 10, "Simulated experts for the surgeons' benchmark ([notes] had 10).", minimum=2
 )
 @_seed_option
 def bench_notes(
     json_path: Path, out_dir: Path, draws: int, trials: int, surgeons: int, seed: int
 ) -> None:
-    """Seed 001's NOTES device: bandwidth, settling, limits, identification round trip,
+    """The NOTES device of [notes]: bandwidth, settling, limits, identification round trip,
     and the surgeons' benchmark on simulated experts."""
     from study.bench.notes import NotesBenchConfig, run_notes_bench
 

@@ -77,8 +77,8 @@ def run_calibration(
     ) as progress:
         task = progress.add_task("loop", total=None, what="")
 
-        def report(done: int, total: int, what: str) -> None:
-            progress.update(task, completed=done, total=total, what=what)
+        def report(step: str, done: int = 0, total: int = 0) -> None:
+            progress.update(task, completed=done, total=total or None, what=step)
 
         calibrator.fit(data, progress=report)
     return calibrator

@@ -1,4 +1,4 @@
-"""`study characterize notes`: the NOTES device's characterisation (seed 001, III)."""
+"""`study characterize notes`: the NOTES device's characterisation ([notes], III)."""
 
 from __future__ import annotations
 

@@ -28,7 +28,7 @@ _err = Console(stderr=True)
 
 @click.group("estimator", cls=StudyGroup)
 def estimator() -> None:
-    """Follower force estimator: physics model + GRU residual + EKF (seed 000)."""
+    """Follower force estimator: physics model + GRU residual + EKF ([endovascular])."""
 
 
 @estimator.command("train")
@@ -94,6 +94,16 @@ def estimator() -> None:
     "rest. A model with effects runs over recordings (`study estimator run`), not in the "
     "loop: none gives eq. 1 + GRU, which the loop can run.",
 )
+@click.option(
+    "--residual",
+    "residual_stage",
+    type=click.Choice(["gru", "trees", "auto"]),
+    default="gru",
+    show_default=True,
+    help="The residual stage after the physics model: gru (the paper's), trees (gradient-"
+    "boosted trees on the same windows; runs over recordings, not in the loop), or auto "
+    "(both on the same training blocks; the one with the lower validation RMSE is kept).",
+)
 @click.option("--force", is_flag=True, help="Replace an existing model folder.")
 def train_cmd(
     recording: Path,
@@ -111,9 +121,10 @@ def train_cmd(
     ekf_q: float | None,
     calibration: Path | None,
     effects: str,
+    residual_stage: str,
     force: bool,
 ) -> None:
-    """Fit eq. 1 to RECORDING, train the GRU on its residual, set up the EKF.
+    """Fit eq. 1 to RECORDING, train the GRU (or trees) on its residual, set up the EKF.
 
     RECORDING is a follower CSV (t, iq, theta, omega, f_ref; alpha optional).
     """
@@ -165,12 +176,8 @@ def train_cmd(
     ) as progress:
         task = progress.add_task("epochs", total=epochs, rmse="")
 
-        def report(epoch: int, train_rmse: float, val_rmse: float) -> None:
-            progress.update(
-                task,
-                completed=epoch,
-                rmse=f"train {train_rmse:.4f} N, validation {val_rmse:.4f} N",
-            )
+        def report(step: str, done: int = 0, total: int = 0) -> None:
+            progress.update(task, completed=done, rmse=step)
 
         model, summary = train_estimator(
             data,
@@ -180,15 +187,29 @@ def train_cmd(
             progress=report,
             extension=extension,
             effects=effects == "auto",
+            residual_stage=residual_stage,
         )
     model.save(out_dir, summary.to_dict())
     v = summary.validation_rmse_n
     with_effects = f"eq. 1 + effects {v['effects']:.4f} N, " if "effects" in v else ""
+    chosen = summary.residual["chosen"]
+    stage = "physics+GRU" if chosen == "gru" else "physics+trees"
+    trained = (
+        f"best epoch {summary.best_epoch} of {summary.epochs_run}"
+        if chosen == "gru"
+        else "residual stage: trees"
+    )
     click.echo(
-        f"{out_dir}: best epoch {summary.best_epoch} of {summary.epochs_run}; validation RMSE "
-        f"physics {v['physics']:.4f} N, {with_effects}physics+GRU {v['hybrid']:.4f} N, "
+        f"{out_dir}: {trained}; validation RMSE "
+        f"physics {v['physics']:.4f} N, {with_effects}{stage} {v['hybrid']:.4f} N, "
         f"after EKF {v['final']:.4f} N"
     )
+    if residual_stage == "auto":
+        stages = summary.residual["validation_rmse_n"]
+        click.echo(
+            f"residual stage: {chosen}, the lower validation RMSE of physics+residual "
+            f"(GRU {stages['gru']:.4f} N, trees {stages['trees']:.4f} N)"
+        )
     _echo_regimes("validation RMSE per regime", summary.validation_rmse_by_regime_n)
     for note in summary.notes:
         click.echo(f"note: {note}")
@@ -239,9 +260,10 @@ def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
         if result.f_effects is None
         else f"eq. 1 + effects {rmse(result.f_effects, result.f_ref):.4f} N, "
     )
+    stage = "physics+GRU" if model.residual == "gru" else "physics+trees"
     click.echo(
         f"{out_csv}: {len(result.t)} estimates; RMSE against f_ref: physics "
-        f"{rmse(result.f_physics, result.f_ref):.4f} N, {with_effects}physics+GRU "
+        f"{rmse(result.f_physics, result.f_ref):.4f} N, {with_effects}{stage} "
         f"{rmse(result.f_hybrid, result.f_ref):.4f} N, "
         f"after EKF {rmse(result.f_final, result.f_ref):.4f} N"
     )

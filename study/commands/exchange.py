@@ -10,6 +10,7 @@ from db.migrate import open_database
 from study.commands.base import (
     StudyCommand,
     actor_option,
+    bar_progress,
     db_option,
     file_option,
     opened_database,
@@ -159,7 +160,7 @@ def export_cmd(
                 selection,
                 per_trial=per_trial,
                 workers=jobs,
-                progress=lambda done, total: bar.update(task, completed=done, total=total),
+                progress=bar_progress(bar, task, describe=False),
             )
     except BaseException as exc:
         # nothing half-written: a folder this command made and left empty goes again

@@ -16,6 +16,7 @@ from study.commands.base import (
     db_option,
     load_participants,
     participants_option,
+    status_progress,
 )
 from study.errors import StudyInputError
 
@@ -134,7 +135,7 @@ def demo(
             db_url,
             seed,
             jobs,
-            progress=status.update,
+            progress=status_progress(status),
             quick=quick,
             participants=str(participants_path) if model is not None else None,
             notice=notice,

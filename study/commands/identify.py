@@ -1,4 +1,4 @@
-"""`study identify notes`: fit the NOTES model to one recorded bench file (seed 001, III)."""
+"""`study identify notes`: fit the NOTES model to one recorded bench file ([notes], III)."""
 
 from __future__ import annotations
 

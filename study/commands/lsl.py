@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, db_option, progress_bar
+from study.commands.base import StudyCommand, bar_progress, db_option, progress_bar
 from study.errors import StudyInputError
 
 
@@ -29,7 +29,7 @@ def import_xdf(xdf: Path, db_url: str | None) -> None:
     try:
         with progress_bar("{task.description}") as bar:
             task = bar.add_task(f"reading {xdf.name}", total=None)
-            result = run_import(engine, xdf, lambda what: bar.update(task, description=what))
+            result = run_import(engine, xdf, bar_progress(bar, task))
     finally:
         engine.dispose()
     click.echo(

@@ -1,4 +1,4 @@
-"""`study participants fit`: simulated participants fitted to a study's trials (issue 24).
+"""`study participants fit`: simulated participants fitted to a study's trials.
 
 `study participant` (singular) enrols people; this group is about the simulated ones.
 """
@@ -101,7 +101,7 @@ def fit(
     with opened_database(db_url) as engine, progress_bar() as bar:
         bars: dict[str, object] = {}
 
-        def progress(step: str, k: int, n: int) -> None:
+        def progress(step: str, k: int = 0, n: int = 0) -> None:
             if step not in bars:
                 bars[step] = bar.add_task(
                     {

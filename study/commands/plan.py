@@ -83,7 +83,7 @@ def template() -> None:
 
 @click.group("participant", cls=StudyGroup)
 def participant() -> None:
-    """Enrol participants (pseudonymous codes only)."""
+    """Enrol participants (pseudonymous codes only); withdraw, reinstate, correct a group."""
 
 
 @participant.command("add")
@@ -125,6 +125,47 @@ def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str 
     with opened_database(db_url) as engine:
         withdraw(engine, code, reason, actor)
     click.echo(f"{code} withdrawn ({reason}); their data are kept and left out of the analysis")
+
+
+@participant.command("reinstate")
+@click.argument("code")
+@click.option("--reason", required=True, help="Why the withdrawal is undone (audit log).")
+@actor_option
+@db_option
+def participant_reinstate(code: str, reason: str, actor: str | None, db_url: str | None) -> None:
+    """Undo a withdrawal (audited): the participant continues where they stopped and the
+    analysis counts them again."""
+    from study.protocol.corrections import reinstate
+
+    with opened_database(db_url) as engine:
+        reinstate(engine, code, reason, actor)
+    click.echo(f"{code} is in the study again ({reason}); their sessions go on")
+
+
+@participant.command("correct-group")
+@click.argument("code")
+@click.option("--group", required=True, help="The right experience group, by its design name.")
+@click.option("--reason", required=True, help="Why the group is corrected (audit log).")
+@click.option(
+    "--beyond-target", is_flag=True, help="Move past the new group's target in the design."
+)
+@actor_option
+@db_option
+def participant_correct_group(
+    code: str,
+    group: str,
+    reason: str,
+    beyond_target: bool,
+    actor: str | None,
+    db_url: str | None,
+) -> None:
+    """Correct a participant's group before their first trial (audited): they take the
+    new group's next counterbalanced condition order; refused once a trial is stored."""
+    from study.protocol.corrections import correct_group
+
+    with opened_database(db_url) as engine:
+        order = correct_group(engine, code, group, reason, actor, beyond_target=beyond_target)
+    click.echo(f"{code} ({group}): conditions {' then '.join(order)} ({reason})")
 
 
 @participant.command("note")

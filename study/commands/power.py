@@ -12,6 +12,7 @@ import click
 from study.commands.base import (
     SEED,
     StudyCommand,
+    bar_progress,
     file_option,
     load_participants,
     out_dir_option,
@@ -146,7 +147,8 @@ def power(
         effects, rho = _model_effects(ctx, model, list(design.groups), measure)
     with progress_bar() as bar:
         task = bar.add_task("simulated studies", total=n_sim * len(SCALES))
-        curve = power_curve(design.groups, effects, rho, n_sim, seed, lambda: bar.advance(task))
+        told = bar_progress(bar, task, describe=False)
+        curve = power_curve(design.groups, effects, rho, n_sim, seed, told)
     at_design = next(r for s, r in curve if s == 1.0)
     for group, p in at_design.groups.items():
         click.echo(f"{group:<10} n = {at_design.sizes[group]:>3}  power {p:.3f}")

@@ -91,7 +91,7 @@ def run(
             with progress_bar() as bar:
                 tasks: dict[str, object] = {}
 
-                def progress(name: str, k: int, n: int) -> None:
+                def progress(name: str, k: int = 0, n: int = 0) -> None:
                     if name not in tasks:
                         tasks[name] = bar.add_task(f"{code} {name}", total=n)
                     bar.update(tasks[name], completed=k)

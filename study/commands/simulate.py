@@ -10,7 +10,7 @@ from rich.console import Console
 
 from study.commands.base import SEED, StudyCommand, load_participants, participants_option
 from study.errors import StudyInputError
-from study.protocol.design import DEFAULT_GROUPS, KNOWN_CONDITIONS, MAX_HAPTIC_GAIN_N_M_PER_N
+from study.protocol.design import DEFAULT_GROUPS, KNOWN_CONDITIONS
 from study.protocol.tasks import get_task, task_names
 
 MAX_TRIAL_S = 3600.0
@@ -67,11 +67,6 @@ def simulate(
     model = load_participants(participants_path)
     # refuse a bad gain, or a gain for a task without a dial, before any work
     the_task.haptic_gain(haptic_gain)
-    if haptic_gain is not None and haptic_gain > MAX_HAPTIC_GAIN_N_M_PER_N:
-        raise StudyInputError(
-            f"--haptic-gain {haptic_gain!r}; expected 0 to {MAX_HAPTIC_GAIN_N_M_PER_N:g} N m/N, "
-            "as in a design file"
-        )
     from teleop_core.loop import kernel
 
     kernel.COMPILE_NOTICE = lambda message: click.echo(f"study simulate: {message}", err=True)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import platform
 import threading
+import time
 from types import ModuleType
 from typing import Any
 
@@ -37,12 +38,25 @@ ACQUISITION_RATE_HZ = LoopConfig().acquisition_rate_hz
 """The rate the sample outlets are declared at until a trial's rows say otherwise."""
 
 
+CLOSE_AFTER_S = 2.0
+"""How long a closed outlet lingers before it is destroyed: liblsl drops what an outlet
+has queued but not yet sent when it is destroyed, so a marker pushed just before (the
+session's end) could miss a subscribed recorder on a busy machine."""
+
+
 def _close_later(outlets: list[Any]) -> None:
-    """Drop `outlets` (the only references to them) in a thread of its own: liblsl's
-    destructor waits for an outlet's network threads to end (tens of ms)."""
+    """Drop `outlets` (the only references to them) in a thread of its own, after
+    `CLOSE_AFTER_S`: liblsl's destructor waits for an outlet's network threads to end
+    (tens of ms), and the wait lets the last pushed samples leave."""
     outlets[:] = [o for o in outlets if o is not None]
     if outlets:
-        threading.Thread(target=outlets.clear, daemon=True).start()
+
+        def close() -> None:
+            time.sleep(CLOSE_AFTER_S)
+            outlets.clear()
+
+        # not a daemon: a command that ends right after waits for its last markers to leave
+        threading.Thread(target=close, daemon=False).start()
 
 
 class Publisher(SessionObserver):

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import logging
 import struct
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,6 +37,7 @@ from db.models.trial import Trial
 from study.errors import StudyInputError
 from study.lsl.markers import SAMPLE_STREAM_TYPE, parse
 from study.protocol.roster import load_study
+from teleop_core.progress import Progress, no_progress
 
 MAGIC = b"XDF:"
 CHUNK_S = 1.0
@@ -173,9 +173,7 @@ class ImportResult:
     samples: int
 
 
-def import_xdf(
-    engine: Engine, path: Path, progress: Callable[[str], None] = lambda _: None
-) -> ImportResult:
+def import_xdf(engine: Engine, path: Path, progress: Progress = no_progress) -> ImportResult:
     """Store the recording's streams with the trials its markers name (module docstring)."""
     import pyxdf
 

@@ -46,7 +46,7 @@ RELATIVE_NOISE = 0.25
 """A simulated participant's sensory noise, as a share of its threshold (a Weber-like
 spread: the psychometric function's SD a quarter of its threshold; assumption)."""
 PAPER_GAIN_N_M_PER_N = 0.02
-"""The dial's gain when the design names none for HV (`HapticParams`, seed 000)."""
+"""The dial's gain when the design names none for HV (`HapticParams`, [endovascular])."""
 
 
 def _quest(stimuli: np.ndarray = STIMULI_N) -> Any:

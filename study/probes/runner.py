@@ -26,6 +26,7 @@ import numpy as np
 
 from study.probes import get_probe
 from study.probes.base import LAPSE_RATE, Probe, ProbeResponse, ProbeTrial
+from teleop_core.progress import Progress, no_progress
 
 CONFIRM_RAD = 0.3
 """A device answer is confirmed when the dial is turned past this angle (rad) either way."""
@@ -125,7 +126,7 @@ def run_probe(
     responder: Responder,
     rng: np.random.Generator,
     context: Mapping[str, float] | None = None,
-    progress: Callable[[int, int], None] = lambda k, n: None,
+    progress: Progress = no_progress,
     on_trial: Callable[[ProbeTrial], None] = lambda trial: None,
 ) -> list[ProbeTrial]:
     """`n_trials` trials of probe `name` answered by `responder`; `on_trial` sees each
@@ -147,5 +148,5 @@ def run_probe(
             )
         )
         on_trial(trials[-1])
-        progress(k + 1, n_trials)
+        progress(name, k + 1, n_trials)
     return trials

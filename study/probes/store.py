@@ -8,7 +8,6 @@ probe that was running, never half of one; a probe already stored is not run aga
 from __future__ import annotations
 
 import zlib
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -25,6 +24,7 @@ from study.probes.runner import Responder, SimulatedResponder, run_probe
 from study.protocol.design import StudyDesign
 from study.protocol.observer import SessionObserver
 from study.protocol.roster import find_participant, load_study
+from teleop_core.progress import Progress, no_progress
 
 PROBE_COLUMNS = (
     "participant",
@@ -80,7 +80,7 @@ def run_participant_probes(
     code: str,
     responder: Responder | None = None,
     only: tuple[str, ...] = (),
-    progress: Callable[[str, int, int], None] = lambda probe, k, n: None,
+    progress: Progress = no_progress,
     model: Any = None,
     observer: SessionObserver | None = None,
 ) -> dict[str, int]:
@@ -136,7 +136,7 @@ def run_participant_probes(
             responder,
             rng,
             probe_context(design),
-            lambda k, total, name=name: progress(name, k, total),
+            progress,
             told,
         )
         store_trials(engine, pid, trials)
@@ -144,16 +144,14 @@ def run_participant_probes(
     return stored
 
 
-def run_all_probes(
-    engine: Engine, model: Any = None, progress: Callable[[str], None] = lambda code: None
-) -> int:
+def run_all_probes(engine: Engine, model: Any = None, progress: Progress = no_progress) -> int:
     """Every participant's probes answered by its simulated person; returns the trials
     stored."""
     with Session(engine) as session:
         codes = list(session.scalars(select(Participant.code).order_by(Participant.code)))
     stored = 0
-    for code in codes:
-        progress(code)
+    for k, code in enumerate(codes):
+        progress(code, k, len(codes))
         stored += sum(run_participant_probes(engine, code, model=model).values())
     return stored
 

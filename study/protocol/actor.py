@@ -1,7 +1,7 @@
 """Who is acting: the name written into audit rows and session leases.
 
 `--actor NAME` on the command line, else the `STUDY_ACTOR` environment variable, else
-`user@host` from the operating system (issue 18: every audit row names an actor). The
+`user@host` from the operating system (every audit row names an actor). The
 audit column holds 64 characters; an actor is one printable line of at most that.
 """
 

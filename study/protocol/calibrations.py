@@ -1,6 +1,6 @@
 """Calibration results kept with the study: the `calibrations` table and a report file.
 
-A calibration run from the terminal app (issue 19) is stored as one row, with the
+A calibration run from the terminal app is stored as one row, with the
 recording's name and SHA-256 (so that a result can be traced to the exact file), the
 held-out RMSE before and after and the whole report, and written beside it as a JSON
 file (the same keys as `study calibrate`'s REPORT.json) that can be attached to a paper.

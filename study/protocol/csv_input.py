@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,7 +25,7 @@ class Problems:
     def add(self, row: int, column: str, message: str) -> None:
         self.items.append(f"{self.source} row {row}, column {column}: {message}")
 
-    def one_of(self, row: int, record: dict, column: str, allowed: Sequence[str]) -> bool:
+    def one_of(self, row: int, record: dict, column: str, allowed: Collection[str]) -> bool:
         """Whether `record[column]` is one of `allowed`; adds the problem where not."""
         if record[column] in allowed:
             return True

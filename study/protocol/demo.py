@@ -31,6 +31,7 @@ from study.protocol.simulated_tlx import (
     person_preference,
 )
 from study.protocol.tlx import store_tlx
+from teleop_core.progress import Progress, no_progress
 
 
 def fill_tlx(db_url: str, study_seed: int) -> int:
@@ -98,7 +99,7 @@ def run_demo(
     db_url: str,
     seed: int,
     jobs: int = 2,
-    progress: Callable[[str], None] = lambda _: None,
+    progress: Progress = no_progress,
     quick: bool = False,
     participants: str | None = None,
     sizes: dict[str, int] | None = None,

@@ -1,7 +1,7 @@
 """Study designs: the TOML file a researcher writes, validated into a `StudyDesign`.
 
 Every problem is reported as one line naming the key, the value and what was expected
-(`StudyInputError`), before anything is written. Defaults follow seed 000, IV-D: 20
+(`StudyInputError`), before anything is written. Defaults follow [endovascular], IV-D: 20
 engineering outsiders, 8 novice doctors, 8 expert physicians; conditions VO and HV; the
 LCCA task.
 
@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from study.errors import StudyInputError
+from study.protocol.tasks.declarations import MAX_HAPTIC_GAIN_N_M_PER_N
 
 KNOWN_CONDITIONS = ("VO", "HV")
 MAX_TRIAL_S = 180.0
@@ -31,7 +32,7 @@ MAX_TRIALS_PER_CONDITION = 100
 MAX_PRACTICE_TRIALS = 20
 MAX_GROUP_SIZE = 1000
 MAX_BREAK_S = 3600.0
-"""Sane sizes (issue 18: 2**63 trials, a group of 1e12 and a break of inf were accepted):
+"""Sane sizes (2**63 trials, a group of 1e12 and a break of inf are refused):
 far above any lab study, far below what breaks storage or a schedule."""
 MAX_GROUP_CHARS = 32
 MAX_GROUPS = 12
@@ -40,10 +41,10 @@ compares them pairwise and draws one panel each)."""
 MAX_NAME_CHARS = 200
 """Column widths of `participants.group` and `studies.name` (PostgreSQL enforces them)."""
 DEFAULT_GROUPS = ("outsider", "novice", "expert")
-"""The paper's experience groups (seed 000, IV-D), the simulated participants' groups."""
+"""The paper's experience groups ([endovascular], IV-D), the simulated participants' groups."""
 
 TEMPLATE = """\
-# A haptic-teleoperation user study (seed 000, IV-D). `study init --design THIS_FILE`.
+# A haptic-teleoperation user study ([endovascular], IV-D). `study init --design THIS_FILE`.
 
 name = "LCCA navigation, VO vs HV"
 seed = 1                       # seeds counterbalancing ties and simulated participants
@@ -58,7 +59,7 @@ tlx_before_next_block = true   # a block's NASA-TLX is due before the next block
 code_prefix = "P"              # participant codes: P001, P002, ...
 
 [haptic_gain_n_m_per_n]        # the dial's torque per newton of estimated force (LCCA)
-HV = 0.02                      # the paper's gain (seed 000); VO renders nothing (0)
+HV = 0.02                      # the paper's gain ([endovascular]); VO renders nothing (0)
 
 [probes]                       # short measurements before a block: `study probe run`
 before_block = 1               # the block they run before (1: before the first)
@@ -74,7 +75,7 @@ novice = 8                     # novice doctors
 expert = 8                     # expert interventional physicians
 """
 
-_KEYS = {
+_KEYS: dict[str, type | tuple[type, ...]] = {
     "name": str,
     "seed": int,
     "conditions": list,
@@ -94,8 +95,6 @@ MAX_LSL_STREAMS = 16
 MAX_PREDICATE_CHARS = 500
 MAX_PROBE_TRIALS = 200
 """Far above any probe's need (an adaptive threshold settles in 40-80 trials)."""
-MAX_HAPTIC_GAIN_N_M_PER_N = 1.0
-"""Far above any usable gain (the paper's is 0.02 N m/N; the dial saturates at 0.1 N m)."""
 
 
 @dataclass(frozen=True)
@@ -177,80 +176,18 @@ def parse_design(text: str, source: str = "design") -> StudyDesign:
 
 
 def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
-    if not data:  # an empty file would silently be the default study
-        raise StudyInputError(
-            f"{source} is empty; expected a study design (`study design template` prints one)"
-        )
-    unknown = sorted(set(data) - set(_KEYS))
-    if unknown:
-        raise StudyInputError(
-            f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(sorted(_KEYS))}"
-        )
-    for key, kind in _KEYS.items():
-        if key in data and (
-            not isinstance(data[key], kind) or (kind is int and isinstance(data[key], bool))
-        ):
-            expected = kind.__name__ if isinstance(kind, type) else "a number"
-            raise StudyInputError(f"{source}: {key} = {data[key]!r}; expected {expected}")
+    """The design that `data` (a parsed design file) describes; StudyInputError naming the
+    first value out of place, checked in the file's reading order."""
+    _check_keys(data, source)
     d = StudyDesign()
     conditions = tuple(data.get("conditions", d.conditions))
     tasks = tuple(data.get("tasks", d.tasks))
     groups = dict(data.get("groups", d.groups))
-    for c in conditions:
-        if c not in KNOWN_CONDITIONS:
-            raise StudyInputError(
-                f"{source}: condition {c!r}; expected {' or '.join(KNOWN_CONDITIONS)}"
-            )
-    if len(set(conditions)) != len(conditions) or len(conditions) < 2:
-        raise StudyInputError(
-            f"{source}: conditions = {list(conditions)}; expected at least two, each once"
-        )
-    from study.protocol.tasks import is_task, task_names
-
-    for t in tasks:
-        if not is_task(t):
-            raise StudyInputError(
-                f"{source}: task {t!r}; expected one of {', '.join(task_names())}"
-            )
-    if not tasks or len(set(tasks)) != len(tasks):
-        raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
-    if not groups:
-        raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
-    if len(groups) > MAX_GROUPS:
-        raise StudyInputError(
-            f"{source}: [groups] has {len(groups)} groups; expected 1 to {MAX_GROUPS}"
-        )
-    for g, n in groups.items():
-        if not (0 < len(g) <= MAX_GROUP_CHARS and g.isprintable() and g.strip() == g):
-            raise StudyInputError(
-                f"{source}: group name {g!r}; expected 1-{MAX_GROUP_CHARS} printable "
-                "characters without surrounding spaces"
-            )
-        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_GROUP_SIZE):
-            raise StudyInputError(
-                f"{source}: groups.{g} = {n!r}; expected a whole number from 1 to {MAX_GROUP_SIZE}"
-            )
-    for key, low, high in (
-        ("trials_per_condition", 1, MAX_TRIALS_PER_CONDITION),
-        ("practice_trials", 0, MAX_PRACTICE_TRIALS),
-        ("seed", 0, MAX_SEED),
-    ):
-        value = data.get(key, getattr(d, key))
-        if not low <= value <= high:
-            raise StudyInputError(f"{source}: {key} = {value!r}; expected {low} to {high}")
-    break_s = data.get("break_s", d.break_s)
-    if not (math.isfinite(break_s) and 0 <= break_s <= MAX_BREAK_S):
-        raise StudyInputError(f"{source}: break_s = {break_s!r}; expected 0 to {MAX_BREAK_S:g} s")
-    name = data.get("name", d.name)
-    if not (0 < len(name.strip()) and len(name) <= MAX_NAME_CHARS and name.isprintable()):
-        raise StudyInputError(
-            f"{source}: name = {name!r}; expected 1-{MAX_NAME_CHARS} printable characters"
-        )
+    _check_conditions(conditions, source)
+    _check_tasks(tasks, source)
+    _check_groups(groups, source)
+    _check_sizes(data, d, source)
     prefix = data.get("code_prefix", d.code_prefix)
-    if not (1 <= len(prefix) <= 4 and prefix.isascii() and prefix.isalpha() and prefix.isupper()):
-        raise StudyInputError(
-            f"{source}: code_prefix = {prefix!r}; expected 1-4 capital letters A-Z, e.g. P"
-        )
     scheme = data.get("counterbalancing", d.counterbalancing)
     gains = _haptic_gains(data.get("haptic_gain_n_m_per_n", {}), conditions, source)
     probes, before = _probes(data.get("probes", {}), len(tasks) * len(conditions), source)
@@ -273,6 +210,93 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
     )
     condition_orders(conditions, scheme, source)  # refuses a scheme that does not fit
     return design
+
+
+def _check_keys(data: dict[str, Any], source: str) -> None:
+    """Known keys only, each of its kind."""
+    if not data:  # an empty file would silently be the default study
+        raise StudyInputError(
+            f"{source} is empty; expected a study design (`study design template` prints one)"
+        )
+    unknown = sorted(set(data) - set(_KEYS))
+    if unknown:
+        raise StudyInputError(
+            f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(sorted(_KEYS))}"
+        )
+    for key, kind in _KEYS.items():
+        if key in data and (
+            not isinstance(data[key], kind) or (kind is int and isinstance(data[key], bool))
+        ):
+            expected = kind.__name__ if isinstance(kind, type) else "a number"
+            raise StudyInputError(f"{source}: {key} = {data[key]!r}; expected {expected}")
+
+
+def _check_conditions(conditions: tuple[str, ...], source: str) -> None:
+    for c in conditions:
+        if c not in KNOWN_CONDITIONS:
+            raise StudyInputError(
+                f"{source}: condition {c!r}; expected {' or '.join(KNOWN_CONDITIONS)}"
+            )
+    if len(set(conditions)) != len(conditions) or len(conditions) < 2:
+        raise StudyInputError(
+            f"{source}: conditions = {list(conditions)}; expected at least two, each once"
+        )
+
+
+def _check_tasks(tasks: tuple[str, ...], source: str) -> None:
+    from study.protocol.tasks import is_task, task_names
+
+    for t in tasks:
+        if not is_task(t):
+            raise StudyInputError(
+                f"{source}: task {t!r}; expected one of {', '.join(task_names())}"
+            )
+    if not tasks or len(set(tasks)) != len(tasks):
+        raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
+
+
+def _check_groups(groups: dict[str, Any], source: str) -> None:
+    if not groups:
+        raise StudyInputError(f"{source}: [groups] is empty; expected e.g. novice = 8")
+    if len(groups) > MAX_GROUPS:
+        raise StudyInputError(
+            f"{source}: [groups] has {len(groups)} groups; expected 1 to {MAX_GROUPS}"
+        )
+    for g, n in groups.items():
+        if not (0 < len(g) <= MAX_GROUP_CHARS and g.isprintable() and g.strip() == g):
+            raise StudyInputError(
+                f"{source}: group name {g!r}; expected 1-{MAX_GROUP_CHARS} printable "
+                "characters without surrounding spaces"
+            )
+        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_GROUP_SIZE):
+            raise StudyInputError(
+                f"{source}: groups.{g} = {n!r}; expected a whole number from 1 to {MAX_GROUP_SIZE}"
+            )
+
+
+def _check_sizes(data: dict[str, Any], d: StudyDesign, source: str) -> None:
+    """The counts, the seed, the break, the name and the code prefix within bounds."""
+    for key, low, high in (
+        ("trials_per_condition", 1, MAX_TRIALS_PER_CONDITION),
+        ("practice_trials", 0, MAX_PRACTICE_TRIALS),
+        ("seed", 0, MAX_SEED),
+    ):
+        value = data.get(key, getattr(d, key))
+        if not low <= value <= high:
+            raise StudyInputError(f"{source}: {key} = {value!r}; expected {low} to {high}")
+    break_s = data.get("break_s", d.break_s)
+    if not (math.isfinite(break_s) and 0 <= break_s <= MAX_BREAK_S):
+        raise StudyInputError(f"{source}: break_s = {break_s!r}; expected 0 to {MAX_BREAK_S:g} s")
+    name = data.get("name", d.name)
+    if not (0 < len(name.strip()) and len(name) <= MAX_NAME_CHARS and name.isprintable()):
+        raise StudyInputError(
+            f"{source}: name = {name!r}; expected 1-{MAX_NAME_CHARS} printable characters"
+        )
+    prefix = data.get("code_prefix", d.code_prefix)
+    if not (1 <= len(prefix) <= 4 and prefix.isascii() and prefix.isalpha() and prefix.isupper()):
+        raise StudyInputError(
+            f"{source}: code_prefix = {prefix!r}; expected 1-4 capital letters A-Z, e.g. P"
+        )
 
 
 def _haptic_gains(

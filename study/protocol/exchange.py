@@ -16,7 +16,7 @@ An import is checked row by row before anything is written, and written in one
 transaction: all or nothing. Errors name the file, the row (as a spreadsheet numbers
 it: the header is row 1), the column, and what was expected.
 
-Reconciliation with the database (issue 18): a trial is filed in the block of its task
+Reconciliation with the database: a trial is filed in the block of its task
 and condition (the participant's scheduled block, or for a participant known only from
 imports the block that task and condition would have under the design); a slot that
 already holds a completed trial (the same file imported twice, a trial already run) is
@@ -40,7 +40,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +76,8 @@ def _check_trials(
     frame: pd.DataFrame, design: StudyDesign, source: str, known: dict[str, str]
 ) -> list[dict[str, Any]]:
     p = Problems(source, [])
-    rows, seen = [], {}
+    rows: list[dict[str, Any]] = []
+    seen: dict[tuple[Any, ...], int] = {}
     for i, r in enumerate(frame.to_dict("records")):
         row = i + 2
         code = r["participant"].strip()
@@ -180,6 +181,7 @@ def _file_trials(
             taken.setdefault((pid, block_index, trial_index), []).append((attempt, status))
     for r in rows:
         participant = existing.get(r["code"])
+        blocks: list[tuple[int, int | None, str, str, int]]
         if participant is not None and participant.blocks:
             blocks = [
                 (b.block_index, b.id, b.task, b.condition, b.n_trials) for b in participant.blocks
@@ -262,7 +264,7 @@ def _check_tlx(
                 ratings[s] = check_rating(s, float(text))
             except StudyInputError as exc:
                 p.add(row, s, str(exc))
-        weights = dict.fromkeys(TLX_SUBSCALES)
+        weights: Mapping[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
         if weighted:
             texts = {s: r[f"w_{s}"].strip() for s in TLX_SUBSCALES}
             bad = [s for s in TLX_SUBSCALES if not DECIMAL.match(texts[s])]
@@ -375,58 +377,12 @@ def import_data(
             else []
         )
         for t in trials:
-            participant = existing.get(t["code"])
-            if participant is None:
-                participant = Participant(
-                    study_id=study.id,
-                    code=t["code"],
-                    group=t["group"],
-                    condition_order=list(design.conditions),
-                    site="imported",
-                )
-                session.add(participant)
-                session.flush()
-                existing[t["code"]] = participant
-                session.add(
-                    AuditEntry(
-                        entity="participant",
-                        entity_id=participant.id,
-                        field="enrolled",
-                        old_value=None,
-                        new_value=json.dumps(
-                            {"group": participant.group, "site": participant.site, "by": "import"}
-                        ),
-                        reason=f"first seen in {trials_csv.name}",
-                        actor=who,
-                    )
-                )
-            if not participant.blocks:  # new here, or imported before it got a schedule
-                order = tuple(participant.condition_order)
-                participant.blocks = [ScheduleBlock(**b) for b in plan_blocks(design, order)]
-                session.flush()
+            participant = _participant_of(session, t, existing, study.id, design, trials_csv, who)
             if t["block_id"] is None:  # a block planned above
                 t["block_id"] = next(
                     b.id for b in participant.blocks if b.block_index == t["block_index"]
                 )
-            trial = Trial(
-                participant_id=participant.id,
-                task=t["task"],
-                condition=t["condition"],
-                block_id=t["block_id"],
-                block_index=t["block_index"],
-                trial_index=t["trial"] - 1,
-                practice=False,
-                attempt=t["attempt"],
-                driver="imported",
-                status="completed",
-                completion_time_s=t[COMPLETION_TIME],
-                success=t["success"],
-            )
-            own = [m.name for m in get_task(t["task"]).measures]
-            trial.measures = {
-                name: TrialMeasure(name=name, value=t[name]) for name in own if name in t
-            }
-            session.add(trial)
+            session.add(_imported_trial(t, participant.id))
         for r in tlx:
             session.add(TlxResponse(participant_id=existing[r.pop("code")].id, **r))
         for kind, path, n in (
@@ -434,18 +390,85 @@ def import_data(
             ("tlx_csv", tlx_csv, len(tlx)),
         ):
             if path is not None:
-                record = {"file": str(path.resolve()), "sha256": _file_hash(path), "rows": n}
-                session.add(
-                    AuditEntry(
-                        entity="import",
-                        entity_id=study.id,
-                        field=kind,
-                        old_value=None,
-                        new_value=json.dumps(record),
-                        reason=None,
-                        actor=who,
-                    )
-                )
+                session.add(_import_audit(kind, path, n, study.id, who))
         session.flush()
         session.commit()
     return len(trials), len(tlx)
+
+
+def _participant_of(
+    session: Session,
+    t: dict[str, Any],
+    existing: dict[str, Participant],
+    study_id: int,
+    design: StudyDesign,
+    trials_csv: Path,
+    who: str,
+) -> Participant:
+    """The participant of the checked trial row `t`: enrolled (with an audit row) when the
+    file is the first to name them, given the design's schedule when they have none."""
+    participant = existing.get(t["code"])
+    if participant is None:
+        participant = Participant(
+            study_id=study_id,
+            code=t["code"],
+            group=t["group"],
+            condition_order=list(design.conditions),
+            site="imported",
+        )
+        session.add(participant)
+        session.flush()
+        existing[t["code"]] = participant
+        session.add(
+            AuditEntry(
+                entity="participant",
+                entity_id=participant.id,
+                field="enrolled",
+                old_value=None,
+                new_value=json.dumps(
+                    {"group": participant.group, "site": participant.site, "by": "import"}
+                ),
+                reason=f"first seen in {trials_csv.name}",
+                actor=who,
+            )
+        )
+    if not participant.blocks:  # new here, or imported before it got a schedule
+        order = tuple(participant.condition_order)
+        participant.blocks = [ScheduleBlock(**b) for b in plan_blocks(design, order)]
+        session.flush()
+    return participant
+
+
+def _imported_trial(t: dict[str, Any], participant_id: int) -> Trial:
+    """The completed trial the checked row `t` describes, with its task's own measures."""
+    trial = Trial(
+        participant_id=participant_id,
+        task=t["task"],
+        condition=t["condition"],
+        block_id=t["block_id"],
+        block_index=t["block_index"],
+        trial_index=t["trial"] - 1,
+        practice=False,
+        attempt=t["attempt"],
+        driver="imported",
+        status="completed",
+        completion_time_s=t[COMPLETION_TIME],
+        success=t["success"],
+    )
+    own = [m.name for m in get_task(t["task"]).measures]
+    trial.measures = {name: TrialMeasure(name=name, value=t[name]) for name in own if name in t}
+    return trial
+
+
+def _import_audit(kind: str, path: Path, rows: int, study_id: int, who: str) -> AuditEntry:
+    """The audit row of one imported file: its name, SHA-256 and rows."""
+    record = {"file": str(path.resolve()), "sha256": _file_hash(path), "rows": rows}
+    return AuditEntry(
+        entity="import",
+        entity_id=study_id,
+        field=kind,
+        old_value=None,
+        new_value=json.dumps(record),
+        reason=None,
+        actor=who,
+    )

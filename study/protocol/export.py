@@ -30,11 +30,12 @@ from study.protocol.stream_export import (
     collect_streams,
     write_streams,
 )
-from study.protocol.tasks import COMPLETION_TIME, get_task
+from study.protocol.tasks import COMPLETION_TIME, SampleColumn, get_task
 from study.protocol.trial_table import measure_columns, trial_frame
+from teleop_core.progress import Progress, no_progress
 
 if TYPE_CHECKING:
-    from study.protocol.sample_export import Progress, SampleSelection
+    from study.protocol.sample_export import ExportTrial, SampleSelection
 
 CODEBOOK = {
     "participant": ("", "pseudonymous participant code, e.g. P007"),
@@ -66,9 +67,9 @@ def trial_columns(tasks: Iterable[str]) -> tuple[str, ...]:
 def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
     """Column -> (unit, meaning) for a study of `tasks`: the common columns, each task's
     measures, and each task's sample columns (under their own names, as exported)."""
-    tasks = [get_task(t) for t in tasks]
+    specs = [get_task(t) for t in tasks]
     measures: dict[str, tuple[str, str]] = {}
-    for t in tasks:
+    for t in specs:
         for m in t.measures:
             measures.setdefault(m.name, (m.unit, f"{t.name}: {m.description}"))
     out: dict[str, tuple[str, str]] = {}
@@ -76,9 +77,9 @@ def codebook(tasks: Iterable[str]) -> dict[str, tuple[str, str]]:
         out[column] = entry
         if column == COMPLETION_TIME:
             out.update(measures)
-    out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in tasks))
-    samples: dict[str, list[tuple[str, object]]] = {}
-    for t in tasks:
+    out["task"] = ("", "; ".join(f"{t.name} ({t.title})" for t in specs))
+    samples: dict[str, list[tuple[str, SampleColumn]]] = {}
+    for t in specs:
         for c in t.sample_columns:
             samples.setdefault(c.name, []).append((t.name, c))
     for column, uses in samples.items():
@@ -97,7 +98,7 @@ def export_data(
     *,
     per_trial: bool = False,
     workers: int | None = None,
-    progress: Progress | None = None,
+    progress: Progress = no_progress,
 ) -> list[Path]:
     """Write trials, tlx (and samples) with the contract's columns, plus the codebook.
 
@@ -107,13 +108,7 @@ def export_data(
     (default: one per CPU, at most 4). Every file is written under a temporary
     name and renamed only once all of them are complete.
     """
-    from study.protocol.sample_export import (
-        SampleSelection,
-        sample_export_columns,
-        select_trials,
-        write_samples,
-        write_samples_per_trial,
-    )
+    from study.protocol.sample_export import SampleSelection, select_trials
 
     if fmt not in ("csv", "parquet"):
         raise StudyInputError(f"format {fmt!r}; expected csv or parquet")
@@ -125,46 +120,11 @@ def export_data(
     with Session(engine) as session:
         _, design = load_study(session)
         export_trials = select_trials(session, design, selection) if samples else []
-        tlx_rows = [
-            {
-                "participant": code,
-                "task": r.task,
-                "condition": r.condition,
-                **{s: getattr(r, s) for s in TLX_SUBSCALES},
-                **{f"w_{s}": getattr(r, f"w_{s}") for s in TLX_SUBSCALES},
-            }
-            for r, code in session.execute(
-                select(TlxResponse, Participant.code).join(Participant).order_by(Participant.code)
-            )
-        ]
-    trials = trial_frame(engine, design.tasks)
-    trials = trials[list(trial_columns(dict.fromkeys([*design.tasks, *trials["task"]])))]
-    tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
-    frames = {"trials": trials, "tlx": tlx}
-    from study.probes.exchange import codebook as probe_codebook
-    from study.probes.exchange import export_frame
-    from study.probes.store import probe_frame
-
-    probe_trials = probe_frame(engine)
-    if len(probe_trials):  # a study that ran probes: their trials too
-        frames["probe_trials"] = export_frame(probe_trials)
-    columns = [c for f in frames.values() for c in f.columns]
-    study_tasks = list(dict.fromkeys([*design.tasks, *trials["task"]]))
-    if samples:
-        columns += sample_export_columns(study_tasks)
-    book = codebook(study_tasks)
-    book.update({c: e for c, e in probe_codebook().items() if c not in book})
+        tlx_rows = _tlx_rows(session)
+    frames = _frames(engine, design.tasks, tlx_rows)
+    study_tasks = list(dict.fromkeys([*design.tasks, *frames["trials"]["task"]]))
     streams = collect_streams(engine, export_trials, selection) if samples else StreamExport()
-    if streams.tables:  # every recorded instrument's channel, as `stream/channel`
-        book.update({c: e for c, e in STREAM_CODEBOOK.items() if c not in book})
-        book.update(streams.codebook)
-        columns += [*STREAM_CODEBOOK, *streams.codebook]
-    book_frame = pd.DataFrame(
-        [
-            {"column": c, "unit": book[c][0], "meaning": book[c][1]}
-            for c in sorted(set(columns), key=list(book).index)
-        ]
-    )
+    book_frame = _codebook_frame(frames, study_tasks, streams, samples)
     out_dir.mkdir(parents=True, exist_ok=True)
     # every target checked before anything is written: a link refuses the whole export
     names = [f"{name}.{fmt}" for name in frames] + ["codebook.csv"]
@@ -173,45 +133,26 @@ def export_data(
     for name in names:
         refuse_symlink(out_dir / name)
     staged: list[AtomicFile] = []
-
-    def stage(name: str) -> AtomicFile:
-        staged.append(AtomicFile(out_dir / name))
-        return staged[-1]
-
     try:
         for name, frame in frames.items():
-            out = stage(f"{name}.{fmt}")
-            if fmt == "csv":
-                escape_frame(frame).to_csv(out.file, index=False, encoding="utf-8")
-            else:
-                frame.to_parquet(out.file, index=False)
-        escape_frame(book_frame).to_csv(stage("codebook.csv").file, index=False, encoding="utf-8")
+            staged.append(_write_frame(frame, out_dir / f"{name}.{fmt}", fmt))
+        staged.append(_write_frame(book_frame, out_dir / "codebook.csv", "csv"))
         staged += write_streams(streams, out_dir / "streams", fmt)
-        sample_paths: list[Path] = []
-        if samples and per_trial:
-            result = write_samples_per_trial(
+        sample_paths = (
+            _write_sample_files(
                 engine,
                 export_trials,
-                out_dir / "samples",
+                out_dir,
                 fmt,
                 selection,
-                progress=progress,
-                workers=workers,
-            )
-            sample_paths = result.written + result.skipped
-        elif samples:
-            path = out_dir / f"samples.{fmt}"
-            write_samples(
-                engine,
-                export_trials,
-                path,
-                fmt,
-                selection,
+                per_trial=per_trial,
                 progress=progress,
                 workers=workers,
                 tasks=design.tasks,
             )
-            sample_paths = [path]
+            if samples
+            else []
+        )
         for out in staged:
             out.commit()
     except BaseException:
@@ -220,3 +161,115 @@ def export_data(
         raise
     written = [out.path for out in staged]
     return written[:2] + sample_paths + written[2:]
+
+
+def _tlx_rows(session: Session) -> list[dict[str, object]]:
+    """Every stored questionnaire, by participant code, with the contract's columns."""
+    return [
+        {
+            "participant": code,
+            "task": r.task,
+            "condition": r.condition,
+            **{s: getattr(r, s) for s in TLX_SUBSCALES},
+            **{f"w_{s}": getattr(r, f"w_{s}") for s in TLX_SUBSCALES},
+        }
+        for r, code in session.execute(
+            select(TlxResponse, Participant.code).join(Participant).order_by(Participant.code)
+        )
+    ]
+
+
+def _frames(
+    engine: Engine, tasks: tuple[str, ...], tlx_rows: list[dict[str, object]]
+) -> dict[str, pd.DataFrame]:
+    """The trials and TLX tables (and the probes' trials, if the study ran probes)."""
+    from study.probes.exchange import export_frame
+    from study.probes.store import probe_frame
+
+    trials = trial_frame(engine, tasks)
+    trials = trials[list(trial_columns(dict.fromkeys([*tasks, *trials["task"]])))]
+    tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
+    frames = {"trials": trials, "tlx": tlx}
+    probe_trials = probe_frame(engine)
+    if len(probe_trials):  # a study that ran probes: their trials too
+        frames["probe_trials"] = export_frame(probe_trials)
+    return frames
+
+
+def _codebook_frame(
+    frames: dict[str, pd.DataFrame], tasks: list[str], streams: StreamExport, samples: bool
+) -> pd.DataFrame:
+    """One row (column, unit, meaning) per column of the files written, in the
+    codebook's order."""
+    from study.probes.exchange import codebook as probe_codebook
+    from study.protocol.sample_export import sample_export_columns
+
+    columns = [c for f in frames.values() for c in f.columns]
+    if samples:
+        columns += sample_export_columns(tasks)
+    book = codebook(tasks)
+    book.update({c: e for c, e in probe_codebook().items() if c not in book})
+    if streams.tables:  # every recorded instrument's channel, as `stream/channel`
+        book.update({c: e for c, e in STREAM_CODEBOOK.items() if c not in book})
+        book.update(streams.codebook)
+        columns += [*STREAM_CODEBOOK, *streams.codebook]
+    return pd.DataFrame(
+        [
+            {"column": c, "unit": book[c][0], "meaning": book[c][1]}
+            for c in sorted(set(columns), key=list(book).index)
+        ]
+    )
+
+
+def _write_frame(frame: pd.DataFrame, path: Path, fmt: str) -> AtomicFile:
+    """`frame` staged at `path` (committed by the caller once every file is complete)."""
+    out = AtomicFile(path)
+    try:
+        if fmt == "csv":
+            escape_frame(frame).to_csv(out.file, index=False, encoding="utf-8")
+        else:
+            frame.to_parquet(out.file, index=False)
+    except BaseException:
+        out.abort()
+        raise
+    return out
+
+
+def _write_sample_files(
+    engine: Engine,
+    export_trials: list[ExportTrial],
+    out_dir: Path,
+    fmt: str,
+    selection: SampleSelection,
+    *,
+    per_trial: bool,
+    progress: Progress,
+    workers: int | None,
+    tasks: tuple[str, ...],
+) -> list[Path]:
+    """The samples file (or, `per_trial`, the files under `samples/`, written and kept)."""
+    from study.protocol.sample_export import write_samples, write_samples_per_trial
+
+    if per_trial:
+        result = write_samples_per_trial(
+            engine,
+            export_trials,
+            out_dir / "samples",
+            fmt,
+            selection,
+            progress=progress,
+            workers=workers,
+        )
+        return result.written + result.skipped
+    path = out_dir / f"samples.{fmt}"
+    write_samples(
+        engine,
+        export_trials,
+        path,
+        fmt,
+        selection,
+        progress=progress,
+        workers=workers,
+        tasks=tasks,
+    )
+    return [path]

@@ -1,4 +1,4 @@
-"""Export files that are safe to open in a spreadsheet and never half-written (issue 18).
+"""Export files that are safe to open in a spreadsheet and never half-written.
 
 This module owns how `study export` puts a file on disk, so the rule lives in one place
 for the trials, TLX, codebook and samples files:
@@ -25,7 +25,6 @@ for the trials, TLX, codebook and samples files:
 from __future__ import annotations
 
 import os
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
@@ -35,37 +34,23 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from study.errors import StudyInputError
+from study.protocol.cells import (
+    _FORMULA_REGEX,
+    _PLAIN_NUMBER,
+    escape_cell,
+)
+from study.protocol.cells import (
+    FORMULA_START as FORMULA_START,
+)
+from study.protocol.cells import unescape_cell as unescape_cell
 from teleop_core.files import replace_durably, temp_sibling
 
 if TYPE_CHECKING:
     import pyarrow.parquet as pq
 
-FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
-"""First characters that make a spreadsheet read a cell as a formula (OWASP)."""
-_PLAIN_NUMBER = re.compile(r"^[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?$")
-_FORMULA_REGEX = "^[=+\\-@\t\r]"
-_ESCAPED = re.compile(r"^'[=+\-@\t\r]")
-
 
 class ExportTargetError(StudyInputError):
     """An export target that must not be written (a symbolic link)."""
-
-
-def escape_cell(value: object) -> object:
-    """`value` with a leading single quote if it is text a spreadsheet would run.
-
-    >>> escape_cell('=HYPERLINK("http://x")'), escape_cell("-0.5"), escape_cell(-0.5)
-    ('\\'=HYPERLINK("http://x")', '-0.5', -0.5)
-    """
-    if isinstance(value, str) and value.startswith(FORMULA_START):
-        if not _PLAIN_NUMBER.match(value):
-            return "'" + value
-    return value
-
-
-def unescape_cell(value: str) -> str:
-    """Undo `escape_cell` on a cell read back from an exported file."""
-    return value[1:] if _ESCAPED.match(value) else value
 
 
 def escape_frame(frame: pd.DataFrame) -> pd.DataFrame:

@@ -1,4 +1,4 @@
-"""One running session per participant: leases with a heartbeat (issue 18).
+"""One running session per participant: leases with a heartbeat.
 
 `hold_lease` takes the participant's row in `session_leases` inside a
 `write_transaction` (SQLite `BEGIN IMMEDIATE`, a PostgreSQL advisory lock), so two

@@ -25,8 +25,8 @@ STOP_GRACE_S = 10.0
 
 
 def _watch_parent(parent_pid: int, stop: threading.Event, idle: threading.Event) -> None:
-    """End this worker when its parent dies (issue 18: after `kill -9` of `study run
-    --all --jobs 2` the workers kept running and writing). The session stops at its next
+    """End this worker when its parent dies (else, after `kill -9` of `study run
+    --all --jobs 2`, the workers would keep running and writing). The session stops at its next
     step and marks its trial interrupted; a worker stuck longer exits hard, which leaves
     a lease of a gone process that the next run takes over at once."""
     while os.getppid() == parent_pid:

@@ -150,7 +150,7 @@ def effect_from_dict(data: Any, where: str) -> ParticipantEffect | None:
     params = data.get("parameters")
     if not isinstance(params, dict):
         raise StudyInputError(f"{where}.parameters = {params!r}; expected an object")
-    values = {}
+    values: dict[str, Any] = {}  # checked by ParticipantEffect
     for name in FAMILIES[family]:
         value = params.get(name)
         values[name] = value.get("value") if isinstance(value, dict) else value

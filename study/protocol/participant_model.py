@@ -133,14 +133,17 @@ def model_from_dict(data: Any, source: str, digest: str = "") -> ParticipantMode
     )
 
 
+def _finite(where: str, key: str, value: object) -> int | float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise StudyInputError(f"{where}: {key} = {value!r}; expected a finite number")
+    return value
+
+
 def _mean_sd(where: str, key: str, value: Any, trait: str) -> tuple[float, float]:
     lo, hi = TRAIT_BOUNDS[trait]
     if not isinstance(value, dict):
         raise StudyInputError(f'{where}: {key} = {value!r}; expected {{"mean": ..., "sd": ...}}')
-    mean, sd = value.get("mean"), value.get("sd")
-    for name, v in (("mean", mean), ("sd", sd)):
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise StudyInputError(f"{where}: {key}.{name} = {v!r}; expected a finite number")
+    mean, sd = (_finite(where, f"{key}.{name}", value.get(name)) for name in ("mean", "sd"))
     if not lo <= mean <= hi:
         raise StudyInputError(
             f"{where}: {key}.mean = {mean!r}; expected a value in [{lo:g}, {hi:g}]"

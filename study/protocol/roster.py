@@ -69,7 +69,7 @@ def find_participant(session: Session, study: Study, code: str) -> Participant:
 
 def plan_blocks(design: StudyDesign, order: tuple[str, ...]) -> list[dict[str, Any]]:
     """A participant's blocks: each task, its conditions in the participant's order."""
-    blocks = []
+    blocks: list[dict[str, Any]] = []
     for task in design.tasks:
         for condition in order:
             blocks.append(
@@ -89,8 +89,8 @@ def next_code(session: Session, study: Study, prefix: str) -> str:
     """The code after the highest `PREFIX<digits>` code of the study.
 
     Not the participant count plus one: with imported participants (any code) that
-    collides with a code already taken (issue 18: P001-P002 enrolled, P004 imported,
-    the next enrolment chose P004 and every later one failed). Gaps are not reused, so
+    collides with a code already taken (P001-P002 enrolled and P004 imported would make
+    the next enrolment choose P004, and every later one fail). Gaps are not reused, so
     codes keep the order of enrolment.
     """
     codes = session.scalars(

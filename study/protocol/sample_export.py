@@ -1,21 +1,21 @@
 """Export of trial samples in bounded memory: one file, or one file per trial.
 
-`study export --samples` used to hold the whole samples table in a DataFrame (1.97 GB
+`study export --samples` used to hold the whole samples table in a DataFrame (gigabytes
 for the million samples of the demo study). Here the samples are read in spans of at
 most `SPAN_ROWS` samples (`db.sample_reader.plan_spans`: consecutive trials together, a
 long trial in windows) by a few threads (`read_spans`, one connection each), and
 written span by span with pyarrow's incremental Parquet writer, one row group per
 span, or as CSV text. Memory stays at a few spans whatever the size of the study.
 
-Where the time goes (issue 26, the 10,000,000 samples of `study bench export`, in CPU
-seconds): decoding the stored chunks about 3 s (`db.sample_reader`), Parquet encoding
-with snappy about 4 s (lz4 would save 0.3 s, no codec 0.4 s: not worth a file fewer
-tools read), the key columns 0.2 s. The reader threads read and decode, build the key
+Where the time goes (`study bench export`; its figures are on the Benchmarks page):
+decoding the stored chunks (`db.sample_reader`) and Parquet encoding with snappy, each
+about half (lz4 or no codec would save little: not worth a file fewer tools read), the
+key columns little. The reader threads read and decode, build the key
 columns (a `take` of each trial's values by the row's `trial_id`) and, for CSV, format
 the text (pyarrow's CSV writer, in C++), so the calling thread only encodes Parquet or
 copies bytes to the file. The Parquet encoder writes to a pyarrow file, not a Python
 one, so that it never waits for the GIL the readers hold: through a Python file object
-the export ran on one core (15 s; now 6.6 s on two). pyarrow does the writing because
+the export ran on one core. pyarrow does the writing because
 it already is the Parquet dependency; pandas' `to_csv` per chunk would take most of
 the time.
 
@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable
 from contextlib import ExitStack, closing
 from dataclasses import dataclass
 from itertools import chain
@@ -62,6 +62,7 @@ from study.errors import StudyInputError
 from study.protocol.design import StudyDesign
 from study.protocol.export_files import StagedTableFile, escape_array, refuse_symlink
 from study.protocol.tasks import Task, get_task
+from teleop_core.progress import Progress, no_progress
 
 _KEY_FIELDS = [
     pa.field("participant", pa.string()),
@@ -88,7 +89,7 @@ def sample_export_columns(tasks: Iterable[str]) -> tuple[str, ...]:
 
 def _text_columns(schema: pa.Schema) -> tuple[str, ...]:
     """Dictionary-encoded in Parquet: the text columns (on every float column, pyarrow's
-    default, it took 80 % of the writing time and gave a larger file)."""
+    default, it took most of the writing time and gave a larger file)."""
     return tuple(f.name for f in schema if f.type == pa.string())
 
 
@@ -97,11 +98,8 @@ MAX_WORKERS = 4
 CSV_SPAN_ROWS = 16_384
 """Samples per span for CSV: its text (about 230 bytes a sample) is built in the reader
 threads and waits its turn, so CSV spans are smaller than Parquet's (`SPAN_ROWS`, one
-row group each). Measured on 2 million samples with two threads: 65,536-sample CSV
-spans raised the peak memory by 125 MB, 16,384-sample ones by 69 MB."""
-
-Progress = Callable[[int, int], None]
-"""Called as `progress(trials_done, trials_total)` after each trial."""
+row group each): spans four times larger nearly doubled the export's added peak memory
+(`study bench export`)."""
 
 
 @dataclass(frozen=True)
@@ -299,7 +297,7 @@ def _read(
     selection: SampleSelection,
     workers: int | None,
     schema: pa.Schema,
-) -> Iterator[_Encoded]:
+) -> Generator[_Encoded, None, None]:
     return read_spans(
         engine,
         chain.from_iterable(plan),
@@ -317,7 +315,7 @@ def write_samples(
     fmt: str,
     selection: SampleSelection = SampleSelection(),
     *,
-    progress: Progress | None = None,
+    progress: Progress = no_progress,
     span_rows: int | None = None,
     workers: int | None = None,
     tasks: Iterable[str] = (),
@@ -337,8 +335,7 @@ def write_samples(
             for done, spans in enumerate(plan, 1):
                 for _ in spans:
                     out.write(next(parts))
-                if progress is not None:
-                    progress(done, len(trials))
+                progress("samples", done, len(trials))
         out.commit()
     return out.rows
 
@@ -360,7 +357,7 @@ def write_samples_per_trial(
     fmt: str,
     selection: SampleSelection = SampleSelection(),
     *,
-    progress: Progress | None = None,
+    progress: Progress = no_progress,
     span_rows: int | None = None,
     workers: int | None = None,
 ) -> PerTrialResult:
@@ -408,6 +405,5 @@ def write_samples_per_trial(
                         out.write(next(parts[trial.task]))
                     written.append(out.commit())
                 rows += out.rows
-            if progress is not None:
-                progress(done, len(trials))
+            progress("samples", done, len(trials))
     return PerTrialResult(written, skipped, rows)

@@ -40,7 +40,7 @@ from sqlalchemy.orm import Session
 from db.base import utcnow
 from db.engine import write_transaction
 from db.models.audit import AuditEntry
-from db.models.study import Participant, ScheduleBlock
+from db.models.study import Participant, ScheduleBlock, Study
 from db.models.trial import SampleChunk, Trial, TrialMeasure
 from db.samples import SampleWriter
 from study.errors import StudyInputError
@@ -184,17 +184,7 @@ def run_session(
     stop the trial: up to `HOLD_S` of its samples wait in memory (`SampleWriter`'s
     `hold_s`) and this is called while they do (None, 0 when they are committed).
     """
-    if pace is not None and not (math.isfinite(pace) and pace > 0):
-        raise StudyInputError(f"pace {pace!r}; expected a finite number > 0 (times real time)")
-    with Session(engine) as session:
-        study, design = load_study(session)
-        participant = find_participant(session, study, code)
-        participant_id = participant.id
-        if participant.withdrawn_at is not None:
-            raise StudyInputError(
-                f"participant {code} withdrew ({participant.withdrawal_reason}); "
-                "expected a participant still in the study"
-            )
+    study, design, participant_id = _session_start(engine, code, pace)
     observer = observer or SessionObserver()
     with hold_lease(engine, participant_id, code, actor) as lease, session_ending(observer):
         # read the schedule and what is done only once no other session can change it
@@ -246,7 +236,7 @@ def run_session(
             except SessionStopped:
                 recover_interrupted(engine, participant_id, STOPPED_WITH_PARENT, actor)
                 break
-            except (OperationalError, engine.dialect.dbapi.OperationalError) as exc:
+            except (OperationalError, engine.dialect.loaded_dbapi.OperationalError) as exc:
                 # a full disk, the server gone (the sample writer uses the driver's cursor)
                 raise SessionStorageError(
                     _storage_failure(engine, code, participant_id, item, len(completed), exc)
@@ -254,6 +244,22 @@ def run_session(
             if trial_id is not None:
                 completed.append(trial_id)
     return completed
+
+
+def _session_start(engine: Engine, code: str, pace: float | None) -> tuple[Study, StudyDesign, int]:
+    """The study, its design and the participant's id; StudyInputError for a pace that
+    is no speed, or a participant who withdrew."""
+    if pace is not None and not (math.isfinite(pace) and pace > 0):
+        raise StudyInputError(f"pace {pace!r}; expected a finite number > 0 (times real time)")
+    with Session(engine) as session:
+        study, design = load_study(session)
+        participant = find_participant(session, study, code)
+        if participant.withdrawn_at is not None:
+            raise StudyInputError(
+                f"participant {code} withdrew ({participant.withdrawal_reason}); "
+                "expected a participant still in the study"
+            )
+        return study, design, participant.id
 
 
 class SessionStorageError(StudyInputError):

@@ -41,7 +41,7 @@ def block_ratings(
 
     `seen_stalls` counts the obstacles the participant had to spot on the screen (a
     stalled tip): watching for them is the sustained visual vigilance that haptic
-    feedback relieves (seed 000, IV-D), so it weighs on mental demand and frustration.
+    feedback relieves ([endovascular], IV-D), so it weighs on mental demand and frustration.
     """
     time_s = float(np.mean(completion_times_s)) if completion_times_s else 60.0
     contacts = float(np.sum(wall_contacts))

@@ -19,7 +19,7 @@ import json
 import math
 import zlib
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, TypeGuard
 
 from sqlalchemy import Engine, func, select
 from sqlalchemy.orm import Session
@@ -33,12 +33,13 @@ from study.errors import StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.observer import SessionObserver
 from study.protocol.roster import find_participant, load_study
+from study.protocol.study_rows import raw_tlx, weighted_tlx
 
 PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
 """The 15 pairs of subscales."""
 
 
-def _whole_number(value: object, top: int) -> bool:
+def _whole_number(value: object, top: int) -> TypeGuard[int | float]:
     """Whether `value` is a finite whole number from 0 to `top` (a bool is not one)."""
     return (
         not isinstance(value, bool)
@@ -50,7 +51,25 @@ def _whole_number(value: object, top: int) -> bool:
 
 
 def check_rating(subscale: str, value: object) -> int:
-    """A rating on the scale, or StudyInputError naming it."""
+    """A rating on the TLX scale.
+
+    Parameters
+    ----------
+    subscale
+        The subscale's name, for the message (e.g. ``"mental"``).
+    value
+        The rating as given (a number, from a form or a file).
+
+    Returns
+    -------
+    int
+        The rating, a whole number from 0 to 100 in steps of 5.
+
+    Raises
+    ------
+    StudyInputError
+        The value is not on the scale; the message names the subscale and the value.
+    """
     if not _whole_number(value, 100) or int(value) % 5:
         raise StudyInputError(
             f"{subscale} rating {value!r} is off the scale; expected 0-100 in steps of 5"
@@ -59,6 +78,23 @@ def check_rating(subscale: str, value: object) -> int:
 
 
 def check_ratings(ratings: Mapping[str, object]) -> dict[str, int]:
+    """The six ratings of one questionnaire, each checked by `check_rating`.
+
+    Parameters
+    ----------
+    ratings
+        Subscale -> rating, all six subscales of `TLX_SUBSCALES`.
+
+    Returns
+    -------
+    dict of str to int
+        The ratings in the subscales' order.
+
+    Raises
+    ------
+    StudyInputError
+        A subscale is missing or a rating is off the scale.
+    """
     missing = [s for s in TLX_SUBSCALES if s not in ratings]
     if missing:
         raise StudyInputError(f"TLX ratings lack {', '.join(missing)}; expected all six subscales")
@@ -66,7 +102,23 @@ def check_ratings(ratings: Mapping[str, object]) -> dict[str, int]:
 
 
 def check_weights(weights: Mapping[str, object]) -> dict[str, int]:
-    """Tallies of the 15 choices: whole numbers 0-5 summing to 15."""
+    """The weights of the weighted TLX: the tallies of the 15 pairwise choices.
+
+    Parameters
+    ----------
+    weights
+        Subscale -> how often it was chosen.
+
+    Returns
+    -------
+    dict of str to int
+        The tallies, whole numbers 0-5 that sum to 15.
+
+    Raises
+    ------
+    StudyInputError
+        A tally is missing, not a whole number 0-5, or the tallies do not sum to 15.
+    """
     out = {}
     for s in TLX_SUBSCALES:
         w = weights.get(s)
@@ -81,7 +133,21 @@ def check_weights(weights: Mapping[str, object]) -> dict[str, int]:
 
 
 def pair_order(study_seed: int, code: str) -> list[tuple[str, str]]:
-    """The 15 pairs as this participant sees them: seeded order and left/right sides."""
+    """The 15 pairs of subscales as this participant sees them.
+
+    Parameters
+    ----------
+    study_seed
+        The study's seed (`StudyDesign.seed`).
+    code
+        The participant's code.
+
+    Returns
+    -------
+    list of (str, str)
+        The pairs in the participant's own order, each with its own left/right sides:
+        the same on every run for the same study and participant.
+    """
     import numpy as np  # here: `study tui` reads the answered blocks before numpy loads
 
     rng = np.random.default_rng([study_seed, zlib.crc32(code.encode()), 0x71C])
@@ -92,7 +158,25 @@ def pair_order(study_seed: int, code: str) -> list[tuple[str, str]]:
 
 
 def weights_from_choices(pairs: Sequence[tuple[str, str]], chosen: Sequence[str]) -> dict[str, int]:
-    """Tally the subscale chosen from each pair (in the order the pairs were shown)."""
+    """Tally the subscale chosen from each pair.
+
+    Parameters
+    ----------
+    pairs
+        The pairs in the order they were shown (`pair_order`).
+    chosen
+        The subscale chosen from each pair, in the same order.
+
+    Returns
+    -------
+    dict of str to int
+        Subscale -> times chosen (0-5; they sum to the number of pairs).
+
+    Raises
+    ------
+    StudyInputError
+        There is not one choice per pair, or a choice is neither side of its pair.
+    """
     if len(chosen) != len(pairs):
         raise StudyInputError(
             f"{len(chosen)} pairwise choices; expected {len(pairs)}, one per pair shown"
@@ -107,19 +191,20 @@ def weights_from_choices(pairs: Sequence[tuple[str, str]], chosen: Sequence[str]
     return weights
 
 
-def raw_tlx(ratings: Mapping[str, int]) -> float:
-    """Mean of the six ratings."""
-    return sum(ratings[s] for s in TLX_SUBSCALES) / len(TLX_SUBSCALES)
-
-
-def weighted_tlx(ratings: Mapping[str, int], weights: Mapping[str, int]) -> float:
-    """sum(weight x rating) / 15."""
-    return sum(weights[s] * ratings[s] for s in TLX_SUBSCALES) / 15.0
-
-
 def response_scores(response: TlxResponse) -> tuple[dict[str, int], float, float | None]:
-    """A stored questionnaire's ratings, raw TLX and weighted TLX (None without the
-    pairwise comparisons): the one scorer `study tlx` and the analysis frames share."""
+    """A stored questionnaire's scores: the one scorer `study tlx` and the analysis share.
+
+    Parameters
+    ----------
+    response
+        A stored questionnaire.
+
+    Returns
+    -------
+    tuple of (dict of str to int, float, float or None)
+        The six ratings, the raw TLX and the weighted TLX (None for a questionnaire
+        without the pairwise comparisons).
+    """
     ratings = {s: getattr(response, s) for s in TLX_SUBSCALES}
     weights = {s: getattr(response, f"w_{s}") for s in TLX_SUBSCALES}
     weighted = weighted_tlx(ratings, weights) if weights["mental"] is not None else None
@@ -127,8 +212,26 @@ def response_scores(response: TlxResponse) -> tuple[dict[str, int], float, float
 
 
 def scored_tlx(engine: Engine, code: str | None = None) -> list[dict[str, Any]]:
-    """Every stored questionnaire (or one participant's), in the order they were stored:
-    participant, group, task, condition, the six ratings, tlx_raw and tlx_weighted."""
+    """Every stored questionnaire (or one participant's), in the order they were stored.
+
+    Parameters
+    ----------
+    engine
+        The study database.
+    code
+        A participant's code; None for everyone.
+
+    Returns
+    -------
+    list of dict
+        One row per questionnaire: participant, group, task, condition, the six ratings,
+        tlx_raw and tlx_weighted (None without the pairwise comparisons).
+
+    Raises
+    ------
+    StudyInputError
+        `code` names no participant of the study.
+    """
     query = select(TlxResponse, Participant.code, Participant.group).join(Participant)
     if code:
         query = query.where(Participant.code == code)
@@ -166,10 +269,39 @@ def store_tlx(
     """Store (or edit) the questionnaire of one block; return it and whether it was new.
 
     An edit needs a `reason`, and so does a questionnaire for a block with no completed
-    trial yet (issue 19: the lab confirms why; the reason goes to the audit log);
+    trial yet (the lab confirms why; the reason goes to the audit log);
     `actor` defaults to `current_actor()`. Once it is committed, `observer` is told (a
     `questionnaire` event: the participant's keys, the block's task and condition,
     whether it was new, the raw and weighted TLX).
+
+    Parameters
+    ----------
+    engine
+        The study database.
+    code, task, condition
+        The block: the participant's code, its task and its condition.
+    ratings
+        Subscale -> rating (0-100 in steps of 5), all six.
+    chosen
+        The subscale chosen from each pair of `pair_order`, in that order; None for a
+        questionnaire without the pairwise comparisons (raw TLX only).
+    reason
+        Why the questionnaire is edited (or entered before the block's first trial).
+    actor
+        Who enters it (default `current_actor()`).
+    observer
+        Told the `questionnaire` event once it is committed.
+
+    Returns
+    -------
+    tuple of (TlxResponse, bool)
+        The stored questionnaire and whether it was new (False for an edit).
+
+    Raises
+    ------
+    StudyInputError
+        A rating or choice is off the scale, the participant or block is unknown, or a
+        reason is needed and missing; nothing is stored then.
     """
     response, new = _store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
     if observer is not None:
@@ -213,7 +345,7 @@ def _store_tlx(
                 f"{code} has no {task}/{condition} block; expected one of "
                 f"{', '.join(f'{t}/{c}' for t, c in sorted(blocks))}"
             )
-        weights: dict[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
+        weights: Mapping[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
         pairwise = None
         if chosen is not None:
             pairs = pair_order(study.seed, code)
@@ -325,7 +457,20 @@ def _audit_text(value: object) -> str | None:
 
 
 def load_tlx(engine: Engine, code: str, task: str, condition: str) -> TlxResponse | None:
-    """The stored questionnaire of one block (detached), or None (for editing it)."""
+    """The stored questionnaire of one block, for editing it.
+
+    Parameters
+    ----------
+    engine
+        The study database.
+    code, task, condition
+        The block: the participant's code, its task and its condition.
+
+    Returns
+    -------
+    TlxResponse or None
+        The questionnaire (detached from its session), None if there is none.
+    """
     with Session(engine) as session:
         response = session.scalars(
             select(TlxResponse)
@@ -342,7 +487,18 @@ def load_tlx(engine: Engine, code: str, task: str, condition: str) -> TlxRespons
 
 
 def answered_blocks(engine: Engine) -> set[tuple[str, str, str]]:
-    """(code, task, condition) of every block that has its questionnaire."""
+    """The blocks that have their questionnaire.
+
+    Parameters
+    ----------
+    engine
+        The study database.
+
+    Returns
+    -------
+    set of (str, str, str)
+        (participant code, task, condition) of each such block.
+    """
     with Session(engine) as session:
         rows = session.execute(
             select(Participant.code, TlxResponse.task, TlxResponse.condition).join(Participant)
@@ -351,7 +507,20 @@ def answered_blocks(engine: Engine) -> set[tuple[str, str, str]]:
 
 
 def tlx_audit(engine: Engine, response_id: int) -> list[AuditEntry]:
-    """The audit trail of one questionnaire, oldest first (detached)."""
+    """The audit trail of one questionnaire.
+
+    Parameters
+    ----------
+    engine
+        The study database.
+    response_id
+        The questionnaire's id (`TlxResponse.id`).
+
+    Returns
+    -------
+    list of AuditEntry
+        Its audit rows, oldest first, detached from their session.
+    """
     with Session(engine) as session:
         entries = session.scalars(
             select(AuditEntry)

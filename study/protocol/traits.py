@@ -4,7 +4,7 @@ Every task's simulated participant is the same person (speed, reaction, steering
 caution, what it notices and what it accepts) doing that task; the traits are therefore
 the study's, not a task's, and live here below the tasks (`study.tasks.*`), the session
 runner and the participant fit. Group distributions (mean, sd; truncated to plausible
-ranges) are assumptions shaped by seed 000, IV-D, not measured values; a fitted model
+ranges) are assumptions shaped by [endovascular], IV-D, not measured values; a fitted model
 (`study.protocol.participant_model`) replaces them where one is given.
 """
 
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -121,13 +121,13 @@ caution stay the person's (the aim is drawn per attempt already)."""
 def trial_state(traits: ParticipantTraits, rng: np.random.Generator) -> ParticipantTraits:
     """The person as they are in one trial: each trait in `TRIAL_CV` times a lognormal
     factor of mean 1 and that CV, clipped into `TRAIT_BOUNDS`."""
-    values = traits.to_dict()
+    values: dict[str, Any] = traits.to_dict()
     for name, cv in TRIAL_CV.items():
         # log factor ~ N(-s^2 / 2, s^2), s^2 = log(1 + cv^2): E[factor] = 1, CV = cv
         s = math.sqrt(math.log1p(cv * cv))
         lo, hi = TRAIT_BOUNDS[name]
         values[name] = float(np.clip(values[name] * math.exp(rng.normal(-s * s / 2, s)), lo, hi))
-    return ParticipantTraits(**values)  # type: ignore[arg-type]
+    return ParticipantTraits(**values)
 
 
 def draw_traits(

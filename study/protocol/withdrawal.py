@@ -1,4 +1,4 @@
-"""Withdrawing a participant, a note per participant, the session checklist (issue 19).
+"""Withdrawing a participant, a note per participant, the session checklist.
 
 A participant who withdraws is kept, not deleted: their trials, samples and
 questionnaires stay in the database and in every export, the participant is marked

@@ -30,9 +30,11 @@ from textual.widgets import Footer, TabbedContent, TabPane
 
 from study.tui.db_errors import SafeWorkers
 from study.tui.overview import OverviewPane
+from study.tui.palette import StudyCommands
 from study.tui.services import Roster, StudyServices
 
 if TYPE_CHECKING:  # imported when first mounted, after the overview has shown
+    from study.tui.participant_page import ParticipantPage
     from study.tui.participants import ParticipantsPane
     from study.tui.run_pane import RunPane
     from study.tui.tlx_pane import TlxPane
@@ -79,6 +81,8 @@ class StudyApp(SafeWorkers, App[None]):
     Input:focus, Select:focus > SelectCurrent, DataTable:focus, Button:focus,
     PairChoice:focus { background-tint: $accent 35%; }
     """
+    COMMANDS = App.COMMANDS | {StudyCommands}
+    """ctrl+p: Textual's commands and the app's own (`study.tui.palette`)."""
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("ctrl+q", "quit", "Quit", priority=True),
         Binding("ctrl+t", "toggle_theme", "Theme", show=False),  # in ? and ctrl+p
@@ -244,6 +248,15 @@ class StudyApp(SafeWorkers, App[None]):
         self.notify(f"{code} finished the {task}/{condition} block: NASA-TLX now")
 
     # -- actions --------------------------------------------------------------------------
+
+    def open_participant(self, code: str) -> ParticipantPage:
+        """`code`'s page over the screens (`study.tui.participant_page`); Esc comes back."""
+        from study.tui.participant_page import ParticipantPage
+
+        groups = list(self.roster.groups) if self.roster is not None else []
+        page = ParticipantPage(self.services, code, groups)
+        self.push_screen(page)
+        return page
 
     @on(TabbedContent.TabActivated)
     def _tab_shown(self, event: TabbedContent.TabActivated) -> None:

@@ -1,6 +1,6 @@
 """The calibration screen: run the calibration loop on a recording and show its report.
 
-The loop itself (issue 10, `teleop_core.calibration`) is passed into `make_app` as
+The loop itself (`teleop_core.calibration`) is passed into `make_app` as
 `StudyServices.calibrate` (recording, model, progress) -> report, with the keys of
 `study calibrate`'s REPORT.json (`rmse_before`, `rmse_after`, `effects_added`,
 `candidates_rejected`); `study tui` passes `services.calibrate_recording`. Without one
@@ -24,6 +24,7 @@ from textual.widgets import DataTable, Input, Label, Select, Static
 
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import StudyServices
+from teleop_core.progress import describe
 
 __all__ = ["MODELS", "CalibrationPane"]
 
@@ -158,13 +159,17 @@ class CalibrationPane(SafeWorkers, Vertical):
         self._summary(f"calibrating {path.name} ({model})...")
         self._run(path, model)
 
+    def _told(self, step: str, done: int = 0, total: int = 0) -> None:
+        """The loop's `teleop_core.progress.Progress`: a line under the form."""
+        self.post_message(self.Progress(f"calibrating: {describe(step, done, total)}"))
+
     @work(thread=True, exclusive=True, group="calibrate", exit_on_error=False)
     def _run(self, path: Path, model: str) -> None:
         calibrate = self.services.calibrate
         if calibrate is None:  # pragma: no cover - checked before the worker starts
             return
         try:
-            report = calibrate(path, model, lambda text: self.post_message(self.Progress(text)))
+            report = calibrate(path, model, self._told)
         except ValueError as exc:
             self.app.call_from_thread(self._summary, f"refused: {exc}")
             return

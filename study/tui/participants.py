@@ -141,6 +141,14 @@ class ParticipantsPane(SafeWorkers, Vertical):
         event.stop()
         self._show_detail()
 
+    @on(DataTable.RowSelected, "#people")
+    def _selected(self, event: DataTable.RowSelected) -> None:
+        """Enter on a participant: their page (trials, notes, corrections)."""
+        event.stop()
+        code = self._under_cursor()
+        if code is not None:
+            self.app.open_participant(code)  # type: ignore[attr-defined]
+
     def _show_detail(self) -> None:
         """The participant under the cursor: their note, blocks and questionnaires."""
         code = self._under_cursor()

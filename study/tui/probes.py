@@ -78,7 +78,7 @@ def print_analysis_figures_peak(db_url: str, folder: str) -> None:
     """In a fresh process: the analysis screen's two jobs on the study, headless (120 x
     40): the overview, then F5, `r` (the analysis) and ctrl+e (the paper's figures, as
     PNG, into `folder`); prints JSON with the seconds, the figure files and the peak
-    resident memory of this process in MB (`study bench export`, issue 26)."""
+    resident memory of this process in MB (`study bench export`)."""
     import resource
     from pathlib import Path
 

@@ -7,8 +7,9 @@ trial does. Drivers: the participant's simulated person (paced at 1x, 4x or as f
 it goes) or the keyboard, paced at real time: up/down aim the dial forward/back (the
 hand holds it there; in HV the felt torque deflects the dial from the aim, which slows
 the guidewire), left/right turn the rotation joystick, space lets go of the dial, `e`
-ends the trial (`KeyboardDriver.press`). `x` stops a trial in the middle: its samples
-stay, it is marked interrupted, and it is repeated as a new attempt.
+ends the trial (`KeyboardDriver.press`). `x` stops a trial in the middle, with a reason: its
+samples stay, it is marked interrupted (the reason audited), and it is repeated as a new
+attempt.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from study.protocol.observer import SessionObserver
 from study.protocol.tasks import Task, get_task, tasks
 from study.tui.db_errors import SafeWorkers, plain_line
 from study.tui.live_view import LiveReadout
+from study.tui.picker import ParticipantSelect, picker_rows
 from study.tui.run_live import KeyboardMixin, LiveViewMixin
 from study.tui.scenes import TrackView, scene_class
 from study.tui.services import NextTrial, Roster, StudyServices
@@ -67,6 +69,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         Binding("d", "driver", "Driver"),
         Binding("p", "pace", "Pace"),
         Binding("n", "next_participant", "Next participant", show=False),
+        Binding("v", "participant_page", "Page"),
         Binding("up", "dial_forward", "Dial +", show=False),
         Binding("down", "dial_back", "Dial -", show=False),
         Binding("right", "rotate_cw", "Rotate", show=False),
@@ -118,7 +121,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
     def compose(self) -> ComposeResult:
         with Horizontal(id="run-top"):
             yield Label("Participant")
-            yield Select[str]([], id="participant", compact=True, prompt="pick")
+            yield ParticipantSelect([], id="participant", compact=True, prompt="pick")
             yield Label("", id="mode")
         yield Label("", id="next")
         with Horizontal(id="live"):
@@ -154,7 +157,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 self._breaks[code] = at
                 self._ended_at = None
         codes = [r["code"] for r in roster.participants]
-        select = self.query_one("#participant", Select)
+        select = self.query_one("#participant", ParticipantSelect)
+        select.rows = picker_rows(roster)  # group, progress and next trial, searched by code
         if codes != self._codes:
             self._codes = codes
             current = select.value
@@ -241,6 +245,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             return self.run is None and self.driver_kind == "simulated"
         if action == "stop":
             return self.run is not None
+        if action == "participant_page":  # not over a running trial's live view
+            return self.run is None
         return True
 
     def action_end_trial(self) -> None:
@@ -329,6 +335,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 return code
         return None
 
+    def action_participant_page(self) -> None:
+        """The picked participant's page (trials, notes, corrections)."""
+        if self.code is not None:
+            self.app.open_participant(self.code)  # type: ignore[attr-defined]
+
     def action_next_participant(self) -> None:
         """A finished participant leads to the next one."""
         if self.run is None and self.code is not None and self._next is None:
@@ -375,21 +386,23 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._run_trial(self.run, (code, nxt.task, nxt.condition), checklist)
 
     def action_stop(self) -> None:
-        """Stop the running trial, once the operator confirms (it is kept as interrupted)."""
+        """Stop the running trial, once the operator gives a reason (it is kept as
+        interrupted, the reason in its audit row); Esc leaves it running."""
         if self.run is None:
             return
         run = self.run
 
-        def answered(yes: bool | None) -> None:
-            if yes and self.run is run:
+        def answered(reason: str | None) -> None:
+            if reason and self.run is run:
                 self.status = "stopping"
-                run.stop()
+                run.stop(reason)
 
-        from study.tui.confirm import Confirm
+        from study.tui.confirm import ReasonScreen
 
         self.app.push_screen(
-            Confirm(
-                f"Stop {run.code}'s running trial? It is kept as interrupted and repeated later."
+            ReasonScreen(
+                f"Stop {run.code}'s running trial? It is kept as interrupted and repeated "
+                "later. Why (Esc: keep it running)?"
             ),
             answered,
         )

@@ -19,13 +19,14 @@ from sqlalchemy import Engine
 from sqlalchemy.orm import Session
 
 from study.protocol.roster import load_study, schedule
+from teleop_core.progress import Progress, no_progress
 
 if TYPE_CHECKING:
     from study.protocol.observer import LastingObserver
     from teleop_core.estimation.estimator import ForceEstimator
 
-CalibrateFn = Callable[[Path, str, Callable[[str], None]], dict[str, Any]]
-"""calibrate(recording, model, progress) -> the report (issue 10's REPORT.json keys)."""
+CalibrateFn = Callable[[Path, str, Progress], dict[str, Any]]
+"""calibrate(recording, model, progress) -> the report (`study calibrate`'s REPORT.json keys)."""
 
 
 @dataclass(frozen=True)
@@ -127,7 +128,7 @@ class StudyServices:
     load_estimator: Callable[[], ForceEstimator]
     """Called once, in a worker, before the first trial (loading it imports torch)."""
     calibrate: CalibrateFn | None = None
-    """The calibration loop (issue 10); None leaves the calibration screen waiting."""
+    """The calibration loop; None leaves the calibration screen waiting."""
     lsl_publish: bool = False
     """Publish the trials' markers and samples as LSL streams even when the design's
     `[lsl]` table does not say so (`study tui --lsl`)."""
@@ -195,6 +196,32 @@ class StudyServices:
 
         (add_session_note if session else set_note)(self.engine, code, text)
 
+    # the participant page (`study.tui.participant_page`): what is stored, corrections
+
+    def participant_record(self, code: str) -> Any:
+        """`study.protocol.participant_record.ParticipantRecord` of `code`."""
+        from study.protocol.participant_record import participant_record
+
+        return participant_record(self.engine, code)
+
+    def mark_trial(self, trial_id: int, valid: bool, reason: str) -> str:
+        """Mark a measured trial invalid or valid again (audited); its description."""
+        from study.protocol.corrections import mark_trial
+
+        return mark_trial(self.engine, trial_id, valid, reason)
+
+    def reinstate(self, code: str, reason: str) -> None:
+        """Undo `code`'s withdrawal (audited)."""
+        from study.protocol.corrections import reinstate
+
+        reinstate(self.engine, code, reason)
+
+    def correct_group(self, code: str, group: str, reason: str) -> tuple[str, ...]:
+        """Move `code` to `group` before their first trial (audited); the new order."""
+        from study.protocol.corrections import correct_group
+
+        return correct_group(self.engine, code, group, reason, beyond_target=True)
+
     def add_participant(self, group: str) -> str:
         from study.protocol.roster import add_participant
 
@@ -227,9 +254,9 @@ class StudyServices:
 
 
 def calibrate_recording(
-    recording: Path, model: str, progress: Callable[[str], None] = lambda _: None
+    recording: Path, model: str, progress: Progress = no_progress
 ) -> dict[str, Any]:
-    """The calibration loop of `study calibrate` (issue 10) on one recording: its report.
+    """The calibration loop of `study calibrate` on one recording: its report.
 
     The same steps as the command (`BASE_MODELS[model].read`, `Calibrator.fit`,
     `report()`), without the files it writes; the app passes this into `make_app`.
@@ -243,7 +270,7 @@ def calibrate_recording(
     base = BASE_MODELS[model]
     calibrator = Calibrator(base).fit(
         base.read(recording),
-        progress=lambda done, total, what: progress(f"calibrating: {what} ({done}/{total})"),
+        progress=progress,
     )
     return calibrator.report()
 

@@ -251,10 +251,15 @@ class TrialRun:
         self.finished = threading.Event()
         self.participant_id: int | None = None
         self.probe_line: str | None = None
+        self.stop_reason = STOPPED_REASON
+        """Why the trial was stopped, for the audit log (`stop`)."""
         """What the probe step did before the trial (`study.tui.probe_step`), if anything."""
 
-    def stop(self) -> None:
-        """Ask the trial to stop at its next batch of samples."""
+    def stop(self, reason: str | None = None) -> None:
+        """Ask the trial to stop at its next batch of samples; `reason` (the operator's)
+        goes into the audit row that marks it interrupted."""
+        if reason:
+            self.stop_reason = f"{STOPPED_REASON}: {reason}"
         self._stop.set()
 
     def _on_samples(self, samples: np.ndarray) -> None:
@@ -303,7 +308,7 @@ class TrialRun:
         except TrialStopped:
             n = 0
             if self.participant_id is not None:
-                n = recover_interrupted(self.engine, self.participant_id, STOPPED_REASON)
+                n = recover_interrupted(self.engine, self.participant_id, self.stop_reason)
             return TrialOutcome(self.code, [], n, time.monotonic() - start)
         finally:
             self.finished.set()

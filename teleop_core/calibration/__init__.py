@@ -1,4 +1,4 @@
-"""Calibration against measured data (issue 10): residual -> missing effect -> better model.
+"""Calibration against measured data: residual -> missing effect -> better model.
 
 `Calibrator(model).fit(data)` runs the loop of `loop.py` over a base model of
 `models.py` and the effect library of `effects.py`; `fitting.CalibratedModel` is the

@@ -1,4 +1,4 @@
-"""The library of candidate effects a base physics model may lack (issue 10, point 2).
+"""The library of candidate effects a base physics model may lack.
 
 Each effect adds regressor columns to the base model's design (or, for `delay`, shifts
 the drive-side signals), so that for a fixed value of its one searched parameter the

@@ -137,7 +137,7 @@ def _periodogram_peaks(
     The Schuster periodogram |sum_j e_j exp(-i k theta_j)|^2, gridded: residuals are
     summed into angle bins of `BIN_RAD` and transformed with numpy's FFT. scipy's
     `lombscargle` computes the same sums directly, O(samples x frequencies), which
-    took 6 s on a 30 s recording; the gridded form takes milliseconds.
+    took seconds on a 30 s recording; the gridded form takes milliseconds.
     """
     X, _ = design(model, data.signals, chain)
     e = data.y[train] - X[train] @ solve(X[train], data.y[train])

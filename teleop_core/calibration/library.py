@@ -1,4 +1,4 @@
-"""The open term library: effects outside the named families (issue 16, point 2).
+"""The open term library: effects outside the named families.
 
 When no named family passes a round of the loop, these terms compete under the same
 held-out rules (gain, Diebold-Mariano, BIC; `loop.py`). Each is a function of the

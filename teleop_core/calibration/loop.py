@@ -19,7 +19,11 @@
 A winner that another passing family explains as well on the held-out block (the
 winner's errors not significantly smaller, `_look_alikes`) is kept in the model, since
 it predicts as well either way, but the report lists it under `ambiguous_effects` with
-its alternatives instead of naming it.
+its alternatives instead of naming it. A `delay` that wins is also checked against
+what the library has no family for, a first-order lag of the whole force
+(`_lag_alike`, `first_order_lag`): a pure delay and a lag of a few tens of ms shift
+the force alike at the speeds a recording holds, and the recording names the delay
+only where the lag predicts the held-out block significantly worse.
 
 The residual tests (`residual.py`) are reported before and after; they describe the
 residual, while the decision rests on held-out prediction, which they cannot game.
@@ -28,11 +32,12 @@ residual, while the decision rests on held-out prediction, which they cannot gam
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy import signal
 from statsmodels.stats.stattools import durbin_watson
 
 from teleop_core._typing import Float1D, Rows
@@ -46,7 +51,7 @@ from teleop_core.calibration.candidates import (
     _search_edge,
     _verdict,
 )
-from teleop_core.calibration.effects import EFFECTS, Effect
+from teleop_core.calibration.effects import EFFECTS, MAX_LAG_S, Effect
 from teleop_core.calibration.fitting import (
     CalibratedModel,
     Chain,
@@ -61,14 +66,31 @@ from teleop_core.calibration.plausibility import effect_coefficients, implausibl
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
 from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
+from teleop_core.progress import Progress, no_progress
 
+LAG_ALTERNATIVE = "first_order_lag"
+"""The name a first-order lag of the whole force takes among a delay's alternatives."""
+LAG_GRID = 24
+"""Time constants tried for that lag, log-spaced from one sample period to 0.2 s."""
 BIC_DECISIVE = 10.0
 """Training-BIC difference that decides between two candidates (Kass and Raftery
 1995: above 10 is "very strong" evidence): a look-alike further behind is no
 alternative, whatever the held-out block says."""
 
-Progress = Callable[[int, int, str], None]
-"""progress(done, total, what): called before each candidate of each round."""
+
+_Found = tuple[Candidate, Effect, Float1D, Float1D, int]
+"""A candidate, its effect, the chain's coefficients, prediction and parameter count."""
+
+
+@dataclass(frozen=True)
+class _Round:
+    """One round of the forward selection: the chain so far and how it does."""
+
+    number: int
+    chain: Chain
+    pred: Float1D
+    rmse: float
+    bic: float
 
 
 @dataclass
@@ -184,8 +206,68 @@ class Calibrator:
                 out.append(cand.family)
         return out
 
-    def fit(self, data: CalibrationData, progress: Progress | None = None) -> Calibrator:
-        """Run the loop on `data`; fitted attributes end in `_`."""
+    def _lag_alike(
+        self, data: CalibrationData, chain: Chain, delay: tuple[Effect, float]
+    ) -> list[str]:
+        """[`first_order_lag`] when a first-order lag of the whole force, in place of the
+        `delay` that won, predicts the held-out block about as well.
+
+        The lag acts on the model's force as on the recording's: every column of the
+        design of base + `chain` (the effects before the delay) through
+        y_k = a y_{k-1} + (1 - a) x_k, a = exp(-dt / tau), tau searched on the training
+        block. Filtering the columns also filters the current's noise, which alone cuts
+        the error of any recording, so the delay is judged with the same filter after
+        it (its own tau searched alike): the lag is an alternative when its held-out
+        RMSE is within `min_gain` of the filtered delay's (or below) and the delay's
+        errors are not significantly smaller (one-sided Diebold-Mariano at `alpha`)."""
+        lag = self._filtered_errors(data, chain)
+        delayed = self._filtered_errors(data, [*chain, delay])
+        near = _rmse(lag) * (1.0 - self.min_gain) <= _rmse(delayed)
+        alike = near and diebold_mariano(lag, delayed) >= self.alpha
+        return [LAG_ALTERNATIVE] if alike else []
+
+    def _filtered_errors(self, data: CalibrationData, chain: Chain) -> Float1D:
+        """Held-out errors of base + `chain` with every column through the first-order
+        lag whose tau fits the training block best."""
+        X, _ = design(self.base_, data.signals, chain)
+        dt = float(np.median(np.diff(data.signals["t"])))
+        y = data.y
+        best: tuple[float, Float1D] | None = None
+        for tau in np.geomspace(dt, 2 * MAX_LAG_S, LAG_GRID):
+            a = float(np.exp(-dt / tau))
+            Xf = signal.lfilter([1.0 - a], [1.0, -a], X, axis=0, zi=a * X[:1])[0]
+            coef = solve(Xf[self.train_], y[self.train_])
+            pred = Xf @ coef
+            e = y[self.train_] - pred[self.train_]
+            sse = float(e @ e)
+            if best is None or sse < best[0]:
+                best = (sse, pred)
+        assert best is not None
+        return y[self.test_] - best[1][self.test_]
+
+    def fit(self, data: CalibrationData, progress: Progress = no_progress) -> Calibrator:
+        """Run the loop on `data`; fitted attributes end in `_`.
+
+        Parameters
+        ----------
+        data
+            The recording as the base model reads it (`BaseModel.read` or `.data`).
+        progress
+            Told each candidate of each round (``"round 2: stribeck"``, k of n) and
+            each round's end.
+
+        Returns
+        -------
+        Calibrator
+            Itself, fitted: `model_` (the calibrated model), `chain_` (the effects
+            added), `candidates_`, `rmse_before_` / `rmse_after_` on the held-out block,
+            the residual tests and the verdict.
+
+        Raises
+        ------
+        TeleopInputError
+            The recording has fewer than 200 samples.
+        """
         if len(data) < 200:
             raise TeleopInputError(
                 f"recording {data.name} has {len(data)} samples; expected at least 200 "
@@ -215,39 +297,19 @@ class Calibrator:
             remaining = _remaining(families, chain, marker=bool(open_terms))
             if not remaining:
                 break
-            bic = self._bic(data, pred, k)
-            found: list[tuple[Candidate, Effect, Float1D, Float1D, int]] = []
-            for i, family in enumerate(remaining):
-                if family == OPEN:
-                    remaining.extend(_remaining(open_terms, chain, marker=False))
-                    continue
-                if progress is not None:
-                    progress(i, len(remaining), f"round {round_ + 1}: {family}")
-                effect = self.base_.effect(family)
-                value = search(self.base_, data, self.train_, chain, effect)
-                c_coef, c_pred, c_k = self._fit_chain(data, [*chain, (effect, value)])
-                c_rmse = _rmse(y_test - c_pred[self.test_])
-                p = diebold_mariano(y_test - pred[self.test_], y_test - c_pred[self.test_])
-                cand = Candidate(
-                    family,
-                    round_ + 1,
-                    value,
-                    c_rmse,
-                    1.0 - c_rmse / rmse,
-                    p,
-                    self._bic(data, c_pred, c_k) - bic,
-                )
-                found.append((cand, effect, c_coef, c_pred, c_k))
-                cand.reason = self._reason(cand, effect, c_coef, data)
+            step = _Round(round_ + 1, chain, pred, rmse, self._bic(data, pred, k))
+            found = self._candidates(data, step, remaining, open_terms, progress)
             passing = [f for f in found if not f[0].reason]
             self.candidates_.extend(f[0] for f in found)
-            if progress is not None:
-                progress(len(remaining), len(remaining), f"round {round_ + 1} done")
+            progress(f"round {round_ + 1} done", len(remaining), len(remaining))
             if not passing:
                 break
             best = _best(passing, self.min_gain)
             best[0].accepted = True
-            self.ambiguous_.append(self._look_alikes(best, passing, y_test))
+            alike = self._look_alikes(best, passing, y_test)
+            if best[1].family == "delay":
+                alike += self._lag_alike(data, chain, (best[1], best[0].searched_value))
+            self.ambiguous_.append(alike)
             for other in passing:
                 if other is not best:
                     other[0].reason = f"passed, but {best[0].family} cut the error more"
@@ -260,6 +322,48 @@ class Calibrator:
         self.model_ = CalibratedModel(self.base_, chain, coef, _settings(self.base_))
         self.prediction_ = pred
         self.chain_ = chain
+        self._diagnose(data, pred)
+        return self
+
+    def _candidates(
+        self,
+        data: CalibrationData,
+        step: _Round,
+        remaining: list[str],
+        open_terms: list[str],
+        progress: Progress,
+    ) -> list[_Found]:
+        """Each remaining family (the open terms in place of their marker) searched,
+        fitted after `step.chain` and judged on the held-out block."""
+        y_test = data.y[self.test_]
+        found: list[_Found] = []
+        for i, family in enumerate(remaining):
+            if family == OPEN:
+                remaining.extend(_remaining(open_terms, step.chain, marker=False))
+                continue
+            progress(f"round {step.number}: {family}", i, len(remaining))
+            effect = self.base_.effect(family)
+            value = search(self.base_, data, self.train_, step.chain, effect)
+            c_coef, c_pred, c_k = self._fit_chain(data, [*step.chain, (effect, value)])
+            c_rmse = _rmse(y_test - c_pred[self.test_])
+            p = diebold_mariano(y_test - step.pred[self.test_], y_test - c_pred[self.test_])
+            cand = Candidate(
+                family,
+                step.number,
+                value,
+                c_rmse,
+                1.0 - c_rmse / step.rmse,
+                p,
+                self._bic(data, c_pred, c_k) - step.bic,
+            )
+            found.append((cand, effect, c_coef, c_pred, c_k))
+            cand.reason = self._reason(cand, effect, c_coef, data)
+        return found
+
+    def _diagnose(self, data: CalibrationData, pred: Float1D) -> None:
+        """The residual tests, the verdict, the fit percentages and the confidence
+        intervals of the fitted model on the held-out block."""
+        y_test = data.y[self.test_]
         inputs = {k: v[self.test_] for k, v in data.signals.items() if k != "t"}
         self.tests_before_ = residual_tests(
             y_test - self.base_prediction_[self.test_], inputs, self.max_lag
@@ -277,10 +381,18 @@ class Calibrator:
             self.model_, data, self.train_
         )
         self.data_ = data
-        return self
 
     def report(self) -> dict[str, Any]:
-        """The JSON report of issue 10: the contract keys first, then context."""
+        """The JSON report of a fitted loop (`study calibrate`'s REPORT.json).
+
+        Returns
+        -------
+        dict
+            The contract keys first (``rmse_before``, ``rmse_after``,
+            ``effects_added``, ``candidates_rejected``), then context: the base
+            model's parameters with intervals, the residual tests before and after, the
+            verdict, the look-alikes.
+        """
         added, discovered, ambiguous = [], [], []
         mse = [self.rmse_before_**2] + [r**2 for r in self.step_rmse_]
         explained = mse[0] - mse[-1]

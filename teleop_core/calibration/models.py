@@ -6,9 +6,9 @@ coefficients as physical parameters. This owns the link from a recording contrac
 the loop's named signals (`t`, `drive`, `speed`, `accel`, `angle`), so that the loop
 and the effect library never see a device's column names.
 
-- `FollowerBase`: eq. 1 of seed 000 solved for F, with a smoothed sign and an offset:
+- `FollowerBase`: eq. 1 of [endovascular] solved for F, with a smoothed sign and an offset:
   F = (K_t I_q - J theta_dd - b theta_d - tau_c tanh(theta_d / w_s)) / r + F_0. The
-  sign's width w_s is one of the base model's own assumptions (issue 16, point 5), so
+  sign's width w_s is one of the base model's own assumptions, so
   the loop fits it on the training block (`fit_sign_speed`) before anything else: a
   drive whose Coulomb step is sharper than the estimator's 0.3 rad/s would otherwise
   leave a residual near rest that a wrong family (`stribeck`) takes.
@@ -74,7 +74,7 @@ class CalibrationData:
                 f"calibration data {self.name}: signals {sorted(self.signals)} must include "
                 f"'t' and all have the {n} samples of the reference force"
             )
-        # an all-zero recording (issue 18) has nothing to fit: one line, not a traceback
+        # an all-zero recording has nothing to fit: one line, not a traceback
         y = np.asarray(self.y, float)
         if n and float(np.ptp(y)) == 0.0:
             raise TeleopInputError(
@@ -140,7 +140,7 @@ class BaseModel:
 
 @dataclass(frozen=True)
 class FollowerBase(BaseModel):
-    """Eq. 1 of seed 000 with an offset, for a follower recording (`recording.py`)."""
+    """Eq. 1 of [endovascular] with an offset, for a follower recording (`recording.py`)."""
 
     wheel_radius_m: float = FollowerPlantParams.wheel_radius_m
     """r, known (the wheel's measured radius); only ratios to r are identifiable."""

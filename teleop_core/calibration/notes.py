@@ -1,6 +1,6 @@
-"""The NOTES device's base model for calibration: the linear Fig. 8 model of issue 6.
+"""The NOTES device's base model for calibration: the linear Fig. 8 model of [notes].
 
-The NOTES model (`teleop_core.notes`, Engineer NOTES's issue 6) owns the device: its
+The NOTES model (`teleop_core.notes`) owns the device: its
 parameters, its linear mass-spring-damper response and its recording contract
 (`t, f_des, f_ee` for a clamped run). This module only puts that linear model in the
 calibration loop's form: the end-effector force (or torque) is

@@ -1,4 +1,4 @@
-"""Plausible names only (issue 16, point 3): a family is named only when its fitted
+"""Plausible names only: a family is named only when its fitted
 parameters are physically possible; otherwise the candidate is refused under that name
 and its evidence stays in the residual (and in the verdict's `unexplained`).
 

@@ -23,7 +23,7 @@ taken. On the EMPS benchmark it picks 75-100 Hz at 1 kHz, where the fitted
 M, Fv, Fc and offset come within 1 % of the benchmark's reference values.
 
 sgn(q') is the sharp sign of the filtered velocity, not eq. 1's tanh(w / 0.3): a real
-drive's Coulomb step is as sharp as the data show it (issue 16, point 5).
+drive's Coulomb step is as sharp as the data show it.
 
 `mat_to_frame` brings a MATLAB v5 `.mat` recording (the EMPS benchmark's, say) into the
 contract: variables named for `q` and `u` (products of variables, `gtau*vir`, are

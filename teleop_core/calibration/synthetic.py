@@ -1,4 +1,4 @@
-"""Simulated recordings carrying effects their base model lacks (issue 10, points 6 and targets).
+"""Simulated recordings carrying effects their base model lacks.
 
 `follower_recording` drives the wheel through a random teleoperation session
 (`scenarios.teleoperation`: advance, hold, withdraw against a phantom-like load),
@@ -38,7 +38,7 @@ from teleop_core.master.dial import gauge_force
 from teleop_core.master.params import DialParams
 
 JND_N = 0.192
-"""Just-noticeable difference of proximal force (seed 000), N."""
+"""Just-noticeable difference of proximal force ([endovascular]), N."""
 
 
 def _shape(

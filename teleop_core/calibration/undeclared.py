@@ -1,5 +1,5 @@
-"""Follower recordings carrying one effect that is *not* one of the named families
-(issue 16, point 6), with the oracle: the base model plus the true effect's shape.
+"""Follower recordings carrying one effect that is *not* one of the named families,
+with the oracle: the base model plus the true effect's shape.
 
 A clean `synthetic.follower_recording` (eq. 1 exactly, with its sensor noise) gets one
 of these forces added to its reference force, scaled to the JND's RMS (0.192 N) over

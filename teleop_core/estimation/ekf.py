@@ -1,6 +1,6 @@
 """The EKF stage: fuses the physics and hybrid force estimates with what is known of the noise.
 
-State x = [F_physics, F_GRU*] (N), measurement z = [I_q, theta_d] (seed 000, III-A-4).
+State x = [F_physics, F_GRU*] (N), measurement z = [I_q, theta_d] ([endovascular], III-A-4).
 The forces are not measured; they reach the filter through the two estimators, which
 are functions of z: y = [F_physics(z), F_GRU*(z window)]. The filter is "extended"
 because the measurement noise is mapped through those non-linear functions at every
@@ -9,7 +9,7 @@ step: R_k = G_k R_z G_k' with G_k the gradient of eq. 1's force with respect to
 backward difference make it speed- and rate-dependent), plus each estimator's own
 model error (the physics fit's and the GRU's residual variance on training data). R_z,
 the variance of I_q and theta_d, comes from the recording while the wheel is at rest
-(seed 000, IV-C). Both forces follow random walks with process noise Q (settable; by
+([endovascular], IV-C). Both forces follow random walks with process noise Q (settable; by
 default tuned like the paper's, see `estimator.tune_process_noise`).
 
 Written by hand rather than with filterpy (which the paper used): two states and a
@@ -48,7 +48,7 @@ class EkfSettings:
     """Variance of the hybrid estimate's own error (GRU validation), N^2."""
     passthrough: bool = False
     """Pass F_GRU* through unfiltered: set by training where the filter did not improve
-    the hybrid estimate on the validation blocks (issue 17)."""
+    the hybrid estimate on the validation blocks."""
 
     def __post_init__(self) -> None:
         for name, value in asdict(self).items():

@@ -1,6 +1,6 @@
 """The force estimator end to end: physics (eq. 1) -> GRU residual (eqs. 3-4) -> EKF.
 
-The public face of the estimator (issue 20 split it along its seams): the model and its
+The public face of the estimator (split along its seams): the model and its
 folder (`ForceEstimator`, `CausalEstimator`) are in `model.py`, the streaming steps the
 loop kernel calls in `stream.py`, training in `training.py`. Every name stays
 importable from here; training's only on first use, since it imports PyTorch (and

@@ -1,4 +1,4 @@
-"""The physics stage extended by a calibration (issue 10): eq. 1 plus the effects found.
+"""The physics stage extended by a calibration: eq. 1 plus the effects found.
 
 `ExtendedPhysics` wraps the calibrated follower model of a `study calibrate` report:
 its `force` replaces eq. 1 in the estimator's physics stage, so the GRU is trained on
@@ -155,7 +155,7 @@ def find_effects(
     wheel_radius_m: float,
     held_out_fraction: float = 0.25,
 ) -> tuple[ExtendedPhysics | None, dict[str, Any]]:
-    """Look for the effects eq. 1 lacks in a training recording (issue 17): the
+    """Look for the effects eq. 1 lacks in a training recording: the
     calibration loop of `study calibrate --model follower` (its library of physical
     effects and the undeclared terms it discovers, each kept only when it cuts the error
     of a chronologically held-out end of the recording), run by training itself.

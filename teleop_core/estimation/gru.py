@@ -2,7 +2,7 @@
 and, by default, their memory features (`memory.py`: each input minus its moving
 averages, which carry what happened before the window).
 
-Training (PyTorch) follows seed 000, eqs. 3-4 and 12-13: the residual compensator
+Training (PyTorch) follows [endovascular], eqs. 3-4 and 12-13: the residual compensator
 learns r_t = F_ref,t - F_physics,t (eq. 13) by minimising the mean squared error of
 eq. 12, with Adam, lr 1e-4, batch 32, up to 100 epochs, on standardised inputs; the
 checkpoint with the lowest validation RMSE is kept. The split is by contiguous time
@@ -49,7 +49,7 @@ PATIENCE = 10
 WEIGHT_DECAY = 1e-3
 DROPOUT = 0.0
 INPUT_NOISE = 0.0
-"""Regularisation defaults (issue 17). Not chosen by measurement: no alternative has been
+"""Regularisation defaults. Not chosen by measurement: no alternative has been
 run on the generalisation bench (`study bench follower --only generalisation`). What the
 bench measured with them (README, Performance): the GRU carries a Stribeck dip and a
 direction-dependent load over to unseen data, but at lr 1e-4 it is still improving at
@@ -58,7 +58,7 @@ epoch 100 there, and gradient-boosted trees on the same windows do better."""
 
 @dataclass(frozen=True)
 class GruConfig:
-    """Network and training settings (defaults: seed 000, IV-C)."""
+    """Network and training settings (defaults: [endovascular], IV-C)."""
 
     window: int = 20
     """T, samples per input window (Fig. 8: RMSE levels off at 20)."""
@@ -81,7 +81,7 @@ class GruConfig:
     memory: MemorySpec = field(default_factory=MemorySpec)
     """Memory features appended to each time step's inputs (`MemorySpec.none()`: the
     paper's plain window). On by default: without them the GRU learned nothing that
-    transfers for hysteresis (issue 17)."""
+    transfers for hysteresis."""
 
     @property
     def n_inputs(self) -> int:

@@ -1,4 +1,4 @@
-"""Training the GRU stage with PyTorch (seed 000, eqs. 3-4 and 12-13): see `gru.py`.
+"""Training the GRU stage with PyTorch ([endovascular], eqs. 3-4 and 12-13): see `gru.py`.
 
 Only training imports this module, so that running a trained estimator never loads
 PyTorch, an optional dependency (the `train` extra; without it, importing this module
@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from teleop_core._typing import Float1D, Float2D
 from teleop_core.errors import TeleopInputError
+from teleop_core.progress import Progress, no_progress
 
 try:
     import torch
@@ -96,7 +96,7 @@ def train_gru(
     seed: int = 0,
     target_kind: str = "residual",
     split: tuple[np.ndarray, np.ndarray] | None = None,
-    progress: Callable[[int, float, float], None] | None = None,
+    progress: Progress = no_progress,
 ) -> tuple[GruModel, TrainingHistory, np.ndarray, np.ndarray]:
     """Train the compensator on per-sample `features` (n, config.n_inputs): [I_q,
     theta_d, theta_dd] and the memory features of `config.memory` (`GruModel.inputs`
@@ -157,7 +157,7 @@ def _fit(
     std: Standardisation,
     config: GruConfig,
     generator: torch.Generator,
-    progress: Callable[[int, float, float], None] | None,
+    progress: Progress,
 ) -> tuple[TrainingHistory, dict[str, torch.Tensor]]:
     """The epoch loop; returns the history and the best validation state."""
     history = TrainingHistory()
@@ -186,8 +186,7 @@ def _fit(
         if val_rmse < best:
             best, history.best_epoch = val_rmse, epoch
             best_state = copy.deepcopy(net.state_dict())
-        if progress is not None:
-            progress(epoch, train_rmse, val_rmse)
+        progress(f"train {train_rmse:.4f} N, validation {val_rmse:.4f} N", epoch, config.max_epochs)
         if config.patience is not None and epoch - history.best_epoch >= config.patience:
             break
     return history, best_state

@@ -2,8 +2,8 @@
 
 The GRU sees the last T samples (0.1 s at 200 Hz at T = 20). An effect whose state
 lies further back, such as hysteresis (the direction state turns only after the
-current has moved by the loop's width), is not in such a window (issue 17: physics+GRU
-/ physics ~0.98 on the generalisation bench). These features carry the longer past
+current has moved by the loop's width), is not in such a window (physics+GRU barely
+beat physics alone on the generalisation bench without them). These features carry the longer past
 into every time step at the cost of a few inputs: for I_q and theta_d, the value minus
 its exponential moving average at time constants of 0.1, 0.3, 1 and 3 s. They are what
 the input did over the last tau seconds, scaled to the GRU's inputs by the same

@@ -12,6 +12,8 @@ fits all three stages to one bench recording; `save`/`load` keep them in a model
 | `gru.npz` | GRU weights as plain float64 arrays: what inference reads (no PyTorch) |
 | `gru.pt` | the same weights as a PyTorch state dict for `GruNet` (for further training;
   read only where a folder older than `gru.npz` has no `gru.npz`) |
+| `trees.npz` | in place of the two above, for a model whose residual stage is the
+  boosted trees (`trees.py`; `standardisation.json`'s `residual` is `trees`) |
 | `standardisation.json` | window, hidden size, input names, means/SDs, target scale,
   the memory features (`memory`, `memory.py`; absent: none), the inputs' training range
   (`input_range`, `ranges.py`) |
@@ -52,12 +54,16 @@ from teleop_core.estimation.stream import (
     stream_estimate,
     stream_push,
 )
+from teleop_core.estimation.trees import TreesModel
 from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.physics import PhysicsParams
 from teleop_core.follower.recording import FollowerRecording
 
 MODEL_FILES = ("physics.json", "standardisation.json", "ekf.json", "summary.json")
-"""Besides one of `gru.npz` (read) or `gru.pt` (a folder older than `gru.npz`)."""
+"""Besides one of `gru.npz` (read), `gru.pt` (a folder older than `gru.npz`) or
+`trees.npz` (a trees residual stage)."""
+RESIDUAL_KINDS = ("gru", "trees")
+"""The residual stages a model can hold (`ForceEstimator.residual`)."""
 RATE_TOLERANCE = 0.02
 """A recording whose rate differs from the model's by more than this is resampled."""
 
@@ -67,7 +73,7 @@ def features_of(recording: FollowerRecording) -> Float2D:
     return np.column_stack([recording.iq, recording.omega, recording.alpha])
 
 
-def inputs_of(recording: FollowerRecording, gru: GruModel) -> Float2D:
+def inputs_of(recording: FollowerRecording, gru: GruModel | TreesModel) -> Float2D:
     """Per-sample inputs of `gru`: [I_q, theta_d, theta_dd] and its memory features."""
     return gru.inputs(recording.t, features_of(recording))
 
@@ -105,19 +111,45 @@ class EstimateResult:
 
 @dataclass
 class ForceEstimator:
+    """The follower's force estimator: eq. 1, the GRU's residual and the EKF [endovascular].
+
+    Trained by `study estimator train` (`teleop_core.estimation.training`), kept as a
+    folder (`save`, `load`), run over a recording (`predict`) or one sample at a time
+    in the control loop (`stream`).
+
+    Attributes
+    ----------
+    physics
+        Eq. 1's parameters (torque constant, friction, wheel radius).
+    gru
+        The residual compensator (numba inference; PyTorch only to train it).
+    ekf
+        The EKF's noise settings and whether it is used.
+    sample_rate_hz
+        The rate the model was trained at, Hz.
+    pipeline_rate_hz
+        The rate the estimation pipeline runs at in the loop, Hz.
+    """
+
     physics: PhysicsParams
-    gru: GruModel
+    gru: GruModel | TreesModel
+    """The residual stage: the GRU, or the boosted trees (`trees.py`) in its place."""
     ekf: EkfSettings
     sample_rate_hz: float
     pipeline_rate_hz: float = FollowerSensorParams.estimation_rate_hz
     extension: ExtendedPhysics | None = None
-    """The calibrated physics stage (issue 10) replacing eq. 1, if any."""
+    """The calibrated physics stage replacing eq. 1, if any."""
     input_range: InputRange | None = None
     """The inputs' range over the training samples (None for models saved before it)."""
 
     @property
     def window(self) -> int:
         return self.gru.window
+
+    @property
+    def residual(self) -> str:
+        """Which residual stage the model holds: `gru` or `trees`."""
+        return "trees" if isinstance(self.gru, TreesModel) else "gru"
 
     @property
     def dt_s(self) -> float:
@@ -131,7 +163,26 @@ class ForceEstimator:
         return recording
 
     def predict(self, recording: FollowerRecording) -> EstimateResult:
-        """Estimate the force over a recording already at the model's rate."""
+        """Estimate the force over a recording.
+
+        Parameters
+        ----------
+        recording
+            A follower recording at the model's rate (`conform` resamples one that
+            is not).
+
+        Returns
+        -------
+        EstimateResult
+            For every sample with a full window: the reference, eq. 1's force,
+            physics + GRU, the final (EKF) estimate, and whether the inputs were inside
+            the training range.
+
+        Raises
+        ------
+        TeleopInputError
+            The recording is shorter than the GRU's window.
+        """
         T = self.window
         if len(recording) < T:
             raise TeleopInputError(
@@ -168,7 +219,14 @@ class ForceEstimator:
 
     def check_streams(self) -> None:
         """Raise (one line) unless the model can run one sample at a time, as the loop
-        does: a model whose physics stage or correction holds calibrated effects cannot."""
+        does: a model whose physics stage or correction holds calibrated effects cannot,
+        nor one whose residual stage is the trees (the loop's kernel runs the GRU)."""
+        if isinstance(self.gru, TreesModel):
+            raise TeleopInputError(
+                "this estimator's residual stage is the boosted trees, which run with "
+                "predict(), not one sample at a time; for the loop, train with "
+                "`--residual gru`"
+            )
         if self.extension is not None:
             effects = ", ".join(self.extension.families)
             raise TeleopInputError(
@@ -185,18 +243,23 @@ class ForceEstimator:
         tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
         try:
             _write_json(tmp / "physics.json", self.physics.to_dict())
-            self.gru.weights.save_npz(tmp / "gru.npz")
-            try:  # gru.pt, for training on from these weights, where PyTorch is installed
-                from teleop_core.estimation.gru_torch import save_torch_weights
-            except TeleopInputError:
-                pass
+            if isinstance(self.gru, TreesModel):
+                self.gru.save_npz(tmp / "trees.npz")
+                stage: dict[str, Any] = {"residual": "trees"}
             else:
-                save_torch_weights(self.gru.weights, tmp / "gru.pt")
+                self.gru.weights.save_npz(tmp / "gru.npz")
+                try:  # gru.pt, for training on from these weights, where PyTorch is installed
+                    from teleop_core.estimation.gru_torch import save_torch_weights
+                except TeleopInputError:
+                    pass
+                else:
+                    save_torch_weights(self.gru.weights, tmp / "gru.pt")
+                stage = {"hidden_size": int(self.gru.weights.w_hh.shape[1])}
             _write_json(
                 tmp / "standardisation.json",
                 {
                     "window": self.window,
-                    "hidden_size": int(self.gru.weights.w_hh.shape[1]),
+                    **stage,
                     "target": self.gru.target,
                     "sample_rate_hz": self.sample_rate_hz,
                     "pipeline_rate_hz": self.pipeline_rate_hz,
@@ -223,6 +286,24 @@ class ForceEstimator:
 
     @classmethod
     def load(cls, folder: Path) -> ForceEstimator:
+        """Read a model folder written by `save` (`study estimator train --out`).
+
+        Parameters
+        ----------
+        folder
+            The model folder.
+
+        Returns
+        -------
+        ForceEstimator
+            The model.
+
+        Raises
+        ------
+        TeleopInputError
+            The folder does not exist, lacks one of `MODEL_FILES`, or holds a file that
+            cannot be read; one line naming it.
+        """
         folder = Path(folder)
         if not folder.is_dir():
             raise TeleopInputError(
@@ -230,7 +311,7 @@ class ForceEstimator:
                 "expected the --out of `study estimator train`"
             )
         missing = [f for f in MODEL_FILES if not (folder / f).is_file()]
-        if not (folder / "gru.npz").is_file() and not (folder / "gru.pt").is_file():
+        if not any((folder / f).is_file() for f in ("gru.npz", "gru.pt", "trees.npz")):
             missing.append("gru.npz")
         if missing:
             raise TeleopInputError(
@@ -248,21 +329,41 @@ class ForceEstimator:
             )
             # A folder saved before memory features has no `memory`: the plain window.
             memory = MemorySpec.from_dict(meta.get("memory"))
-            weights = _load_gru_weights(folder)
             names = list(meta.get("features", memory.feature_names))
+            kind = meta.get("residual", "gru")
+            if kind not in RESIDUAL_KINDS:
+                raise TeleopInputError(
+                    f"model folder {folder}: residual stage {kind!r}; expected one of "
+                    + ", ".join(RESIDUAL_KINDS)
+                )
+            if kind == "trees":
+                if not (folder / "trees.npz").is_file():
+                    raise TeleopInputError(
+                        f"model folder {folder} has no trees.npz; expected a folder written "
+                        "by `study estimator train --residual trees`"
+                    )
+                n_inputs = len(memory.feature_names)
+            else:
+                weights = _load_gru_weights(folder)
+                n_inputs = weights.n_inputs
             if (
                 names != list(memory.feature_names)
-                or weights.n_inputs != len(names)
+                or n_inputs != len(names)
                 or len(std.feature_mean) != len(names)
             ):
                 raise TeleopInputError(
-                    f"model folder {folder}: its network takes {weights.n_inputs} inputs per "
+                    f"model folder {folder}: its network takes {n_inputs} inputs per "
                     f"step, its standardisation {len(std.feature_mean)} ({', '.join(names)}), "
                     f"its memory features ({memory.to_dict()['kind']}) give "
                     f"{len(memory.feature_names)}; expected them to agree, as "
                     "`study estimator train` writes them"
                 )
-            gru = GruModel(weights, std, int(meta["window"]), meta["target"], memory)
+            gru: GruModel | TreesModel
+            if kind == "trees":
+                trees = TreesModel.load_trees(folder / "trees.npz")
+                gru = TreesModel(trees, std, int(meta["window"]), meta["target"], memory)
+            else:
+                gru = GruModel(weights, std, int(meta["window"]), meta["target"], memory)
             ekf = EkfSettings(**_read_json(folder / "ekf.json"))
             extension = None
             if (folder / "calibration.json").is_file():
@@ -306,6 +407,9 @@ class CausalEstimator:
 
     def __init__(self, estimator: ForceEstimator) -> None:
         self.est = estimator
+        if not isinstance(estimator.gru, GruModel):
+            estimator.check_streams()  # raises: a trees model does not stream
+        assert isinstance(estimator.gru, GruModel)
         std = estimator.gru.standardisation
         w = estimator.gru.weights
         self.mem = estimator.gru.memory.kernel_table()

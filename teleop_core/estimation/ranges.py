@@ -2,7 +2,7 @@
 
 A network extrapolates without warning; `study estimator run` flags the samples whose
 inputs [I_q, theta_d, theta_dd] lie outside the smallest and largest value each took
-in the training samples (issue 17: column `in_range` of PRED.csv, a summary line with
+in the training samples (column `in_range` of PRED.csv, a summary line with
 the share outside). The range is stored in `standardisation.json` as `input_range`.
 """
 

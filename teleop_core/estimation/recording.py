@@ -1,4 +1,4 @@
-"""Moved to `teleop_core.follower.recording` (issue 20): calibration needs it too, and
+"""Moved to `teleop_core.follower.recording`: calibration needs it too, and
 calibration sits below the estimator, so it lives with the follower drive it describes.
 This name is the same module object, so old imports (and monkeypatching) keep working."""
 

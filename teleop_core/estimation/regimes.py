@@ -1,7 +1,7 @@
 """Operating regimes of a follower recording, and a validation split that represents them.
 
 A network validated on blocks that hold little of what it must learn picks the epoch
-that learned nothing (issue 17: two random blocks out of ten, with a third of the
+that learned nothing (two random blocks out of ten can hold a fraction of the
 training blocks' physics error). So every sample gets a label in three dimensions:
 
 - speed: `rest`, `slow`, `fast`, `reversal`. `reversal`: speeds of both signs beyond

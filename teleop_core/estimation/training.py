@@ -3,8 +3,8 @@
 Kept apart from `estimator.py` (the model, its files and its causal path) because
 training owns the choices made on data: which blocks validate (`regimes.py`: every
 operating regime in both parts), when the GRU stops, what the EKF's noise is and
-whether the EKF is used at all. Issue 17 found each of these choices rewarding an
-estimator that learned nothing; the rules here are the ones that answer it:
+whether the EKF is used at all. Each of these choices, left naive, rewards an
+estimator that learned nothing; the rules here are the ones that prevent it:
 
 - validation blocks represent the recording's speed bands (with reversals and rest),
   directions and load levels, and the summary gives the validation error per regime;
@@ -15,12 +15,15 @@ estimator that learned nothing; the rules here are the ones that answer it:
 - the EKF's Q and R are tuned on the training blocks and checked on the validation
   blocks; where the filter does not improve the hybrid estimate there, it is set to
   pass the hybrid estimate through (`EkfSettings.passthrough`, which the causal path
-  and the loop's kernel obey too), and the summary says so.
+  and the loop's kernel obey too), and the summary says so;
+- the residual stage is the GRU, the boosted trees of `trees.py` on the same inputs,
+  or (`auto`) whichever of the two has the lower physics+residual RMSE on the
+  validation blocks, both trained on the same training blocks; the summary keeps
+  both figures and the choice.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -30,8 +33,7 @@ from teleop_core._typing import Float1D
 from teleop_core.errors import TeleopInputError
 from teleop_core.estimation.ekf import EkfSettings, filter_forces, rest_variances
 from teleop_core.estimation.extended import ExtendedPhysics, find_effects, physics_force
-from teleop_core.estimation.gru import GruConfig
-from teleop_core.estimation.gru_torch import train_gru
+from teleop_core.estimation.gru import GruConfig, GruModel, TrainingHistory
 from teleop_core.estimation.memory import memory_inputs
 from teleop_core.estimation.metrics import lag_samples, rmse
 from teleop_core.estimation.model import ForceEstimator, features_of
@@ -42,9 +44,13 @@ from teleop_core.estimation.regimes import (
     regime_rmse,
     representative_split,
 )
+from teleop_core.estimation.trees import TreesConfig, TreesModel, train_trees
 from teleop_core.follower.physics import PhysicsParams, fit_physics
 from teleop_core.follower.recording import FollowerRecording
+from teleop_core.progress import Progress, no_progress
 
+RESIDUAL_CHOICES = ("gru", "trees", "auto")
+"""`study estimator train --residual`: the GRU, the trees, or the better on validation."""
 R_PHYSICS_SCALES = (1.0, 4.0, 16.0)
 """Multiples of eq. 1's training error variance tried as the EKF's physics-model R."""
 
@@ -74,6 +80,9 @@ class TrainingSummary:
     """Validation RMSE of the hybrid estimate and of the filter, and whether it passes through."""
     config: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    residual: dict[str, Any] = field(default_factory=dict)
+    """The residual stage asked for (`requested`), the one kept (`chosen`), and the
+    validation RMSE of physics+residual for each stage trained (`validation_rmse_n`)."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -94,7 +103,7 @@ def tune_process_noise(
     training data: the lowest error against F_ref among the settings that trail the
     hybrid estimate by at most `max_lag_samples` (one pipeline period).
 
-    Seed 000, IV-C tuned Q "to minimise tracking delay", capped where noise grew; here
+    [endovascular], IV-C tuned Q "to minimise tracking delay", capped where noise grew; here
     the cap is the lag and the choice the error. Returns the settings and their lag.
     """
     best: tuple[float, EkfSettings, float] | None = None
@@ -163,9 +172,11 @@ def train_estimator(
     pipeline_rate_hz: float = ForceEstimator.pipeline_rate_hz,
     physics: PhysicsParams | None = None,
     ekf_q_n2: float | None = None,
-    progress: Callable[[int, float, float], None] | None = None,
+    progress: Progress = no_progress,
     extension: ExtendedPhysics | None = None,
     effects: bool = False,
+    residual_stage: str = "gru",
+    trees: TreesConfig | None = None,
 ) -> tuple[ForceEstimator, TrainingSummary]:
     """Fit eq. 1, train the GRU on its residual, and set up the EKF, on one recording.
 
@@ -178,8 +189,14 @@ def train_estimator(
     that model still misses. `effects` (without `extension` or `physics`) runs the
     calibration loop on the recording first (`extended.find_effects`): the effects it
     adds to eq. 1 are the first part of the correction, the GRU learns the rest, and
-    F_physics stays eq. 1 fitted alone.
+    F_physics stays eq. 1 fitted alone. `residual_stage` is `gru`, `trees` (`trees.py`,
+    with `trees`'s settings) or `auto`: both, on the same training blocks, and the one
+    with the lower validation RMSE of physics+residual is kept.
     """
+    if residual_stage not in RESIDUAL_CHOICES:
+        raise TeleopInputError(
+            f"residual stage {residual_stage!r}; expected one of {', '.join(RESIDUAL_CHOICES)}"
+        )
     config = config or GruConfig()
     notes: list[str] = []
     dt = np.diff(recording.t)
@@ -207,6 +224,7 @@ def train_estimator(
     train_mask = np.zeros(len(recording), bool)
     train_mask[train_idx + T - 1] = True
     if extension is None and physics is None and effects:
+        progress("finding the effects eq. 1 lacks")
         extension, report = find_effects(recording, wheel_radius_m=wheel_radius_m)
         notes.append(_effects_note(extension, report))
     if extension is not None and extension.stage == "physics":
@@ -227,9 +245,40 @@ def train_estimator(
     features = features_of(recording)
     # [I_q, theta_d, theta_dd] and the memory features of config.memory (memory.py)
     inputs = memory_inputs(recording.t, features, config.memory)
-    gru, history, _, _ = train_gru(
-        inputs, residual, config, seed=seed, split=(train_idx, val_idx), progress=progress
-    )
+    stages: dict[str, tuple[GruModel | TreesModel, TrainingHistory]] = {}
+    if residual_stage in ("gru", "auto"):
+        from teleop_core.estimation.gru_torch import train_gru
+
+        net, gru_history, _, _ = train_gru(
+            inputs, residual, config, seed=seed, split=(train_idx, val_idx), progress=progress
+        )
+        stages["gru"] = (net, gru_history)
+    if residual_stage in ("trees", "auto"):
+        boosted = train_trees(inputs, residual, T, config.memory, train_idx, trees, seed)
+        fitted, target = boosted.predict(inputs), residual[T - 1 :]
+        stages["trees"] = (
+            boosted,
+            TrainingHistory(
+                train_rmse=[rmse(fitted[train_idx], target[train_idx])],
+                val_rmse=[rmse(fitted[val_idx], target[val_idx])],
+                best_epoch=1,
+            ),
+        )
+    # physics+residual against F_ref on the validation windows: the residual's own error,
+    # from each stage's float64 prediction (the GRU's history is PyTorch's float32)
+    target = residual[T - 1 :]
+    stage_val = {
+        name: rmse(model.predict(inputs)[val_idx], target[val_idx])
+        for name, (model, _) in stages.items()
+    }
+    chosen = min(stage_val, key=stage_val.__getitem__)
+    gru, history = stages[chosen]
+    if residual_stage == "auto":
+        notes.append(
+            f"residual stage chosen on the validation blocks: {chosen} (physics+residual "
+            + ", ".join(f"{name} {v:.4f} N" for name, v in stage_val.items())
+            + ")"
+        )
     train_samples = np.unique((train_idx[:, None] + np.arange(T)).ravel())
     input_range = InputRange.fit(features[train_samples])
     base, rest_found = _ekf_base(recording, train_mask, residual, history.best_val_rmse)
@@ -318,7 +367,12 @@ def train_estimator(
             "validation_rmse_filtered_n": filter_val,
             "passthrough": passthrough,
         },
-        config=asdict(config),
+        config=asdict(config) | ({"trees": asdict(trees)} if trees is not None else {}),
         notes=notes,
+        residual={
+            "requested": residual_stage,
+            "chosen": chosen,
+            "validation_rmse_n": stage_val,
+        },
     )
     return estimator, summary

@@ -1,4 +1,4 @@
-"""Parameters of the simulated friction-wheel guidewire drive (seed 000, sections III-A, IV-A).
+"""Parameters of the simulated friction-wheel guidewire drive ([endovascular], III-A, IV-A).
 
 Every field is SI with the unit in its name and cites its source: a paper equation or
 table, or "assumption" where the paper is silent (DESIGN.md lists the assumed 2804
@@ -102,7 +102,7 @@ class FollowerPlantParams:
 
 @dataclass(frozen=True)
 class FollowerControlParams:
-    """FOC current loop and speed loop as run on the ESP32 unit (seed 000, IV-A)."""
+    """FOC current loop and speed loop as run on the ESP32 unit ([endovascular], IV-A)."""
 
     current_loop_rate_hz: float = 10_000.0
     """FOC current loop rate; assumption (SimpleFOC on ESP32)."""
@@ -125,22 +125,22 @@ class FollowerControlParams:
 
 @dataclass(frozen=True)
 class FollowerSensorParams:
-    """The paper's sensor chain (seed 000, IV-A) and the bench's reference instruments."""
+    """The paper's sensor chain ([endovascular], IV-A) and the bench's reference instruments."""
 
     encoder_counts_per_rev: int = 4096
-    """AS5600 magnetic encoder, 12 bit (seed 000, IV-A)."""
+    """AS5600 magnetic encoder, 12 bit ([endovascular], IV-A)."""
     current_filter_s: float = 0.005
     """Low-pass of the firmware's measured q-axis current; assumption (SimpleFOC default)."""
     current_noise_a: float = 0.006
     """INA240 + ESP32 ADC noise on each acquired I_q sample, standard deviation; assumption."""
     acquisition_rate_hz: float = 100.0
-    """Hardware data acquisition rate (seed 000, IV-A)."""
+    """Hardware data acquisition rate ([endovascular], IV-A)."""
     estimation_rate_hz: float = 50.0
-    """Rate of the estimation pipeline (seed 000, IV-A)."""
+    """Rate of the estimation pipeline ([endovascular], IV-A)."""
     force_sensor_noise_n: float = 0.008
     """DYLY-109 reference load cell noise, standard deviation; assumption."""
     reference_encoder_counts_per_rev: int = 8000
-    """E6B2-CWZ6C, 2000 P/R read in quadrature (seed 000, IV-B)."""
+    """E6B2-CWZ6C, 2000 P/R read in quadrature ([endovascular], IV-B)."""
 
     def __post_init__(self) -> None:
         require_positive(

@@ -1,6 +1,6 @@
 """The simulated friction-wheel guidewire drive: PMSM, FOC current loop, speed loop.
 
-What is simulated (seed 000, III-A and IV-A; parameters in `params.py`):
+What is simulated ([endovascular], III-A and IV-A; parameters in `params.py`):
 
 - q-axis electrics, L di/dt = v - R i - e, with e = (2/3) K_t omega (amplitude-invariant
   dq frame), integrated exactly over each current-loop period; d-axis held at zero;

@@ -156,7 +156,7 @@ def read_checked_csv(
 
     Raises `RecordingError` naming the first problem (file, line, column) before
     anything is computed from the data; the other recording contracts (the master's
-    calibration, issue 10) share these checks.
+    calibration) share these checks.
     """
     path = Path(path)
     frame = read_cells(path, RecordingError)

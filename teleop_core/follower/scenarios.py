@@ -1,7 +1,7 @@
 """Speed commands and load forces that exercise the simulated drive like the paper's benches.
 
 All profiles are sampled at the drive's 1 kHz tick. `teleoperation` imitates the
-dataset of seed 000, IV-C (a guidewire advanced, held and withdrawn through a phantom
+dataset of [endovascular], IV-C (a guidewire advanced, held and withdrawn through a phantom
 by rate control); `sinusoidal_load` the Table II bench (wheel held at zero speed, a
 linear stage loading the guidewire through a spring); `ramp` and `step` the Table I
 velocity commands. The load model here is a stand-in for the vascular phantom of the
@@ -93,7 +93,7 @@ def sinusoidal_load(
 def characterisation(
     duration_s: float, rng: np.random.Generator, *, segment_s: float = 10.0, dt_s: float = 1e-3
 ) -> tuple[Float1D, Float1D]:
-    """The calibration platform of seed 000, IV-C: wheel at zero speed, sinusoidal loads.
+    """The calibration platform of [endovascular], IV-C: wheel at zero speed, sinusoidal loads.
 
     Segments of `segment_s` with a random frequency (0.3-3.5 Hz), mean (0.4-1.2 N) and
     amplitude (0.2-0.8 N), each taken up and released gently.

@@ -1,4 +1,4 @@
-"""The paper's sensor chain between the simulated drive and a recording (seed 000, IV-A).
+"""The paper's sensor chain between the simulated drive and a recording ([endovascular], IV-A).
 
 The ESP32 unit samples at the 100 Hz acquisition rate: the q-axis current through the
 INA240 (low-passed by the firmware as SimpleFOC does, plus ADC noise), the

@@ -1,4 +1,4 @@
-"""The loop kernel compiled ahead of time into an extension module (issue 21).
+"""The loop kernel compiled ahead of time into an extension module.
 
 Through numba's on-disk cache a fresh process still imports numba and sets up its CPU
 target before it can load the kernel: about 2 s of a 20 s trial's 2.5 s. The first

@@ -1,6 +1,6 @@
 """`TeleopLoop`: the dial, the follower and the estimator at their own rates, joined by a link.
 
-Rates (seed 000, IV-A): device physics and the master controller at 1 kHz (the compiled
+Rates ([endovascular], IV-A): device physics and the master controller at 1 kHz (the compiled
 tick in `kernel.py`), acquisition at 100 Hz (the drive's ESP32 samples current, angle
 and speed; the master reads the dial and sends the rate command), estimation at 50 Hz
 (physics + GRU + EKF on the 100 Hz samples, every other one), the driver at 100 Hz.

@@ -1,6 +1,6 @@
 """The hardware driver: the real dial on its ESP32, over a serial line.
 
-Seed 000, IV-A: one ESP32 unit per motor (2804 gimbal PMSM, DRV8313 driver, INA240
+[endovascular], IV-A: one ESP32 unit per motor (2804 gimbal PMSM, DRV8313 driver, INA240
 current sense, AS5600 encoder), joined to the host by a serial port. The line protocol
 below is ours (the paper does not publish one); firmware that speaks it makes the real
 dial a `Driver` like any other.

@@ -1,4 +1,4 @@
-"""The master-follower network link: delay, jitter and packet loss (seed 000, IV-A).
+"""The master-follower network link: delay, jitter and packet loss ([endovascular], IV-A).
 
 Packets are datagrams: each is delayed by `delay_s` plus a jitter drawn uniformly from
 [0, jitter_s], dropped with probability `loss`, and a receiver keeps only the newest

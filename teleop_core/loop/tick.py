@@ -7,7 +7,7 @@ call per tick costs more than the whole budget of 5 us per tick. Between two eve
 cross the link are held, so `run_ticks` advances many ticks per call; the Python side
 (`core.py`) handles the events.
 
-Per tick, in this order (seed 000, III-B and IV-A):
+Per tick, in this order ([endovascular], III-B and IV-A):
 0. packets due from the link (scheduled by the caller, so that a packet arriving
    between events does not cost a call of its own);
 1. master controller at 1 kHz on the dial's 12-bit encoder: tau_h (eq. 7, HV only) from

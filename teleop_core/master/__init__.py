@@ -1,1 +1,1 @@
-"""The haptic master: the rotary dial of seed 000, III-B (eqs. 5-10, 14-15)."""
+"""The haptic master: the rotary dial of [endovascular], III-B (eqs. 5-10, 14-15)."""

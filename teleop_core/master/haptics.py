@@ -1,4 +1,4 @@
-"""The dial's rendering laws (seed 000, III-B): eqs. 5, 7, 8, 9 and the inverse map Psi (eq. 10).
+"""The dial's rendering laws ([endovascular], III-B): eqs. 5, 7-9 and the inverse map Psi (eq. 10).
 
 Each law is a scalar numba function so that the closed loop's compiled kernel
 (`teleop_core.loop.kernel`) calls exactly the code the tests exercise; `InverseMap`

@@ -1,4 +1,4 @@
-"""Parameters of the simulated haptic dial and its rendering (seed 000, III-B, IV-D).
+"""Parameters of the simulated haptic dial and its rendering ([endovascular], III-B, IV-D).
 
 SI units in the field names; mA only for the calibration polynomials, whose published
 form (eqs. 14-15) takes the current in mA. Each field cites its equation or says

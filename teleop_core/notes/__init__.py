@@ -1,1 +1,1 @@
-"""The NOTES simulator's 2-DOF haptic device (seed 001): model, characterisation, task."""
+"""The NOTES simulator's 2-DOF haptic device ([notes]): model, characterisation, task."""

@@ -1,4 +1,4 @@
-"""The characterisation of one NOTES axis end to end (seed 001, III): ramps, chirps, fit.
+"""The characterisation of one NOTES axis end to end ([notes], III): ramps, chirps, fit.
 
 Owns the sequence the paper runs on its bench, on the simulated device or on recorded
 files: a clamped static ramp (continuous limit, hysteresis, direction gains), the same

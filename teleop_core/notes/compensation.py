@@ -1,4 +1,4 @@
-"""Friction and direction compensation for the NOTES device (seed 001, III-A, IV).
+"""Friction and direction compensation for the NOTES device ([notes], III-A, IV).
 
 The paper plans "Karnopp's friction model ... to dynamically compensate for the friction"
 and "a direction specific compensator" for the flexible shaft's CCW loss. This module

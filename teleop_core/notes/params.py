@@ -1,4 +1,4 @@
-"""Parameters of the NOTES haptic device's two decoupled axes (seed 001, II-B, Fig. 8).
+"""Parameters of the NOTES haptic device's two decoupled axes ([notes], II-B, Fig. 8).
 
 Each axis is the paper's 4th-order mass-spring-damper of Fig. 8: the manipulator
 (motor rotors and friction rollers, or motor and drive-shaft input) of mass M_m with a

@@ -1,4 +1,4 @@
-"""The NOTES trial: transvaginal access and navigation to a target (seed 001, II-A, IV).
+"""The NOTES trial: transvaginal access and navigation to a target ([notes], II-A, IV).
 
 Owns the virtual abdomen and the closed loop of one trial on the 2-DOF device. The
 hand holds the physical scope; its insertion depth d and roll phi (the device's
@@ -14,7 +14,7 @@ The tissue (`teleop_core.notes.tissue`): canal wall friction, the posterior forn
 torn at a tenting, the colpotomy's grip, the bowed shaft's push-only resistance in the
 cavity, a fold that only a tip rolled counter-clockwise passes, and the roll's torque
 through the scope's tube; its coefficients are assumptions tuned against the surgeons'
-benchmark of seed 001 (IV). The target lies at `TARGET_M` and roll `TARGET_ROLL_RAD`;
+benchmark of [notes] (IV). The target lies at `TARGET_M` and roll `TARGET_ROLL_RAD`;
 the trial succeeds when the tip is within `TARGET_TOLERANCE_M` and
 `TARGET_ROLL_TOLERANCE_RAD` of it.
 

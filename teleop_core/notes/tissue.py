@@ -1,5 +1,5 @@
 """The virtual abdomen of the NOTES task: the force and torque the tissue demands of the
-scope along the transvaginal path (seed 001, IV; the task in `teleop_core.notes.task`).
+scope along the transvaginal path ([notes], IV; the task in `teleop_core.notes.task`).
 
 Owns the tissue's physics and its state (the friction's stick, the fornix's tear, the
 fold), nothing of the device or the hand, so it can be checked on its own against
@@ -37,9 +37,9 @@ the axial Coulomb level; in the cavity the articulated tip, bent off the axis by
 `tip_offset_m`, sweeps the viscera when the scope rolls (`tip_lateral_force_n` times
 that offset). The torque reaches the hand through the scope's insertion tube, whose
 helical steel band transmits counter-clockwise less well (`ccw_transmission`), the
-loss seed 001 (III-A) reports for its own wound drive shaft.
+loss [notes] (III-A) reports for its own wound drive shaft.
 
-Where the numbers come from: the surgeons' benchmark of seed 001 (IV, [20]) gives only
+Where the numbers come from: the surgeons' benchmark of [notes] (IV, [20]) gives only
 maxima and a share of time (pull 4.5 N, push 9.9 N, CW / CCW torque 76.7 / 85 N mm,
 push above 5.62 N for 23.57 % of the procedure). Every coefficient below is an
 assumption, chosen so that these figures follow from a plausible procedure

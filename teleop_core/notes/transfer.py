@@ -1,4 +1,4 @@
-"""Transfer functions of the Fig. 8 model, derived from the mechanics (seed 001, III-B).
+"""Transfer functions of the Fig. 8 model, derived from the mechanics ([notes], III-B).
 
 The model (one axis; x_m manipulator, x_s scope, F the actuator's force F_des)::
 

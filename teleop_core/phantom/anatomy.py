@@ -2,7 +2,7 @@
 
 The phantom is a set of centreline paths from the access point, each sampled every
 `STEP_M` with position, cumulative turning angle and curvature. Sizes are typical adult
-values, rounded (the phantom of seed 000 is a commercial arch model; its drawings are
+values, rounded (the phantom of [endovascular] is a commercial arch model; its drawings are
 not published):
 
 - aortic arch: radius of curvature ~35 mm (arch width 70-80 mm, height 35-40 mm;

@@ -281,7 +281,7 @@ CASES = [
     Case(
         "haptic gain 1e9",
         [*SIMULATE, "--haptic-gain", "1e9"],
-        "--haptic-gain 1000000000.0; expected 0 to 1 N m/N",
+        "haptic gain 1000000000.0; expected 0 to 1 N m/N",
     ),
     Case(
         "tlx show unknown", ["tlx", "show", "--participant", "P999"], "unknown participant 'P999'"

@@ -166,8 +166,10 @@ def test_an_analysis_table_csv_escapes_a_formula_group_and_keeps_negative_number
 ) -> None:
     from study.analysis.tables import Table
 
-    raw = pd.DataFrame({"group": [EVIL, "novice"], "hedges_g": [-0.5, 0.25]})
-    table = Table("comparisons", raw, raw, "caption")
+    raw = [{"group": EVIL, "hedges_g": -0.5}, {"group": "novice", "hedges_g": 0.25}]
+    cells = [[r["group"], r["hedges_g"]] for r in raw]
+    columns = ("group", "hedges_g")
+    table = Table("comparisons", columns, raw, columns, cells, "caption")
     csv_path = table.write(tmp_path, "simulated")[0]
     with open(csv_path, newline="", encoding="utf-8") as f:
         rows = list(csv.DictReader(f))

@@ -86,3 +86,14 @@ def test_simulate_refuses_a_gain_for_a_task_without_a_dial(
         "dial; expected no gain for it"
     ]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("gain", [1.0000001, 1e9, -0.01, float("nan"), float("inf")])
+def test_the_task_refuses_a_gain_outside_the_design_files_bound(gain: float) -> None:
+    # every caller (simulate, sessions, campaigns) goes through Task.haptic_gain
+    with pytest.raises(StudyInputError, match=r"expected 0 to 1 N m/N"):
+        get_task("lcca").haptic_gain(gain)
+
+
+def test_the_task_accepts_the_bound_itself() -> None:
+    assert get_task("lcca").haptic_gain(1.0) == 1.0

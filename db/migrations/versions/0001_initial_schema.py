@@ -2,7 +2,6 @@
 
 Revision ID: 0001
 Revises:
-Create Date: 2026-11-21 13:32:08.484423
 """
 
 from collections.abc import Sequence

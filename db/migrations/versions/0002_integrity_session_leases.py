@@ -2,7 +2,6 @@
 
 Revision ID: 0002_integrity
 Revises: 0001
-Create Date: 2026-11-23
 """
 
 from collections.abc import Sequence

@@ -2,7 +2,6 @@
 
 Revision ID: 0003_withdrawal
 Revises: 0002_integrity
-Create Date: 2026-11-23
 """
 
 from collections.abc import Sequence

@@ -10,7 +10,6 @@ and drops the three columns.
 
 Revision ID: 0004_trial_measures
 Revises: 0003_withdrawal
-Create Date: 2026-11-23
 """
 
 import json
@@ -107,9 +106,9 @@ def downgrade() -> None:
         batch.add_column(sa.Column("wall_contacts", sa.Integer(), nullable=True))
         for column, check in CHECKS.items():
             batch.create_check_constraint(op.f(f"ck_trials_{check}"), f"{column} >= 0")
-    tasks = dict(conn.execute(sa.text("SELECT id, task FROM trials")).all())
+    tasks: dict[int, str] = dict(conn.execute(sa.text("SELECT id, task FROM trials")).all())
     for trial_id, name, value in kept:
-        for column, measure in COLUMN_MEASURES.get(tasks.get(trial_id), {}).items():
+        for column, measure in COLUMN_MEASURES.get(tasks.get(trial_id, ""), {}).items():
             if measure == name:
                 value = int(value) if column == "wall_contacts" else value
                 conn.execute(

@@ -2,8 +2,8 @@
 
 Before, a trial's samples were rows of `samples` (trial, seq, 14 columns): about 115
 bytes a sample in SQLite, and reading them back cost 1.1 us of CPU a sample, which
-held the Parquet export below a million samples a second (issue 26); the writer bound
-a Python value per sample (issue 21). Now each committed chunk (at most a second of
+held the Parquet export below a million samples a second; the writer bound
+a Python value per sample. Now each committed chunk (at most a second of
 trial time, as the writer commits) is one row of `sample_chunks` holding the chunk's
 columns as one zstd-compressed Arrow record batch (`db.sample_codec`).
 
@@ -14,7 +14,6 @@ decodes the chunks back into rows.
 
 Revision ID: 0005_sample_chunks
 Revises: 0004_trial_measures
-Create Date: 2026-11-23
 """
 
 from collections.abc import Iterator, Sequence
@@ -69,7 +68,7 @@ def _chunks_table(conn: sa.Connection) -> sa.Table:
 def _cut(rows: Iterator[Sequence[Any]]) -> Iterator[tuple[int, int, list[Sequence[Any]]]]:
     """(trial id, first seq, rows) per chunk of the rows (ordered by trial and seq)."""
     held: list[Sequence[Any]] = []
-    key = (None, None, None)  # trial, next seq, chunk start time
+    key: tuple[Any, Any, Any] = (None, None, None)  # trial, next seq, chunk start time
     for row in rows:
         trial_id, seq, t_s = row[0], row[1], row[2]
         same = trial_id == key[0] and seq == key[1] and t_s < key[2] + CHUNK_S

@@ -18,7 +18,6 @@ in the old layout (dropping the columns it has no place for) and drops the schem
 
 Revision ID: 0006_task_sample_schemas
 Revises: 0005_sample_chunks
-Create Date: 2026-11-27
 """
 
 import hashlib
@@ -136,7 +135,7 @@ def _schema(task: str) -> pa.Schema:
     )
 
 
-def _schemas_table() -> sa.Table:
+def _schemas_table() -> sa.TableClause:
     return sa.table(
         "sample_schemas",
         sa.column("id", sa.Integer()),
@@ -145,7 +144,7 @@ def _schemas_table() -> sa.Table:
     )
 
 
-def _chunks_table() -> sa.Table:
+def _chunks_table() -> sa.TableClause:
     return sa.table(
         "sample_chunks",
         sa.column("trial_id", sa.Integer()),

@@ -8,7 +8,6 @@ tables only; nothing existing changes.
 
 Revision ID: 0007_lsl_streams
 Revises: 0006_task_sample_schemas
-Create Date: 2026-11-27
 """
 
 from collections.abc import Sequence

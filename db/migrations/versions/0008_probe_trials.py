@@ -6,7 +6,6 @@ the task's trials cannot. This revision adds their table; nothing existing chang
 
 Revision ID: 0008_probe_trials
 Revises: 0007_lsl_streams
-Create Date: 2026-11-27
 """
 
 from collections.abc import Sequence

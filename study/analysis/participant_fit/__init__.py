@@ -1,4 +1,4 @@
-"""Simulated participants fitted to a study's trials (issue 24): `study participants fit`.
+"""Simulated participants fitted to a study's trials: `study participants fit`.
 
 - `observed.py`: the task's trials from the database, their sample features (the task's
   `fit_features`, e.g. `study.tasks.lcca.features`), each person's moments.

@@ -16,7 +16,6 @@ physics, 50 studies of 36 people would take hours on this machine.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -24,6 +23,7 @@ import numpy as np
 from study.analysis.participant_fit.emulator import MomentEmulator
 from study.analysis.participant_fit.estimate import HIGH, LOW, GroupEstimator, prior_arrays
 from study.protocol.traits import PROFILES, TRAITS, GroupProfile
+from teleop_core.progress import Progress, no_progress
 
 TARGET = (0.90, 0.98)
 """The share of intervals holding the truth that a calibrated 95 % interval gives, with
@@ -56,7 +56,7 @@ def coverage(
     bootstrap: int,
     seed: int = 0,
     weak: list[int] | None = None,
-    progress: Callable[[int, int], None] = lambda k, n: None,
+    progress: Progress = no_progress,
 ) -> dict[str, Any]:
     """The share of `studies` simulated studies in which each group's fitted mean of each
     free trait has a 95 % bootstrap interval (`bootstrap` replicates) holding the truth."""
@@ -64,7 +64,7 @@ def coverage(
     hits: dict[tuple[str, str], list[bool]] = {}
     errors: dict[tuple[str, str], list[float]] = {}
     for s in range(studies):
-        progress(s, studies)
+        progress("coverage", s, studies)
         for group, n in sizes.items():
             y = draw_moments(emulator, truth[group], n, k, rng)
             est = GroupEstimator(emulator, PROFILES[group], free, k, seed, weak)
@@ -86,7 +86,7 @@ def coverage(
                 errors.setdefault((group, TRAITS[j]), []).append(
                     float((best.mean[j] - true[j]) / max(spread[j], 1e-12))
                 )
-    progress(studies, studies)
+    progress("coverage", studies, studies)
     per = [
         {
             "group": g,

@@ -62,6 +62,7 @@ from study.protocol.participant_effects import (
     TrialPlace,
 )
 from study.protocol.traits import PROFILES, TRAITS
+from teleop_core.progress import Progress, no_progress
 
 ALPHA = 0.05
 """Family-wise error rate of the structure tests (Holm)."""
@@ -591,7 +592,7 @@ def search(
     weak: list[int],
     seed: int,
     bootstrap: int = BOOTSTRAP,
-    progress=lambda k, n: None,
+    progress: Progress = no_progress,
 ) -> EffectSearch:
     """The loop: test, add the family that explains the structure, refit, test again."""
     arrays = trial_arrays(trials, emulator)
@@ -606,7 +607,7 @@ def search(
         candidates = [f for f in FAMILIES if f not in added]
         scored = []
         for family in candidates:
-            progress(steps, len(FAMILIES) + 1)
+            progress("effects", steps, len(FAMILIES) + 1)
             steps += 1
             trial_fit = fit_effects(trials, emulator, [*added, family], free, weak, seed)
             scored.append((_sse(trials, emulator, trial_fit), family))
@@ -631,7 +632,7 @@ def search(
         error_now, sse_now = error, sse
         fit = fit_effects(trials, emulator, added, free, weak, seed, bootstrap)
         after = residual_structure(trials, emulator, fit)
-    progress(len(FAMILIES) + 1, len(FAMILIES) + 1)
+    progress("effects", len(FAMILIES) + 1, len(FAMILIES) + 1)
     adjusted = trials
     if fit.effects:
         people = trial_arrays(trials, emulator).people

@@ -12,7 +12,7 @@ condition, is regressed on the traits: a quadratic response surface in the log t
 leave-one-out (generalised) cross-validation.
 
 Why logs and a penalty per moment (held-out people simulated apart from the design,
-2026-11-26): with raw traits and one penalty (1) for every moment, a noisy feature's
+`study bench participants`): with raw traits and one penalty (1) for every moment, a noisy feature's
 36 quadratic terms followed the design's luck, and the aim error's surface was off by
 +0.20 in log at steering errors of 0.2-0.28 rad (its noise SE 0.09); the group fits
 then put the novices' and experts' steering error 15-30 % high. With log traits (the

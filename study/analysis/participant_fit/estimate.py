@@ -34,7 +34,7 @@ shrink`) they are fitted too, under a prior on their group mean: N(the hand-set
 profile's mean, `HYPER_SD` of its SD), so the data move such a mean as far as their
 information allows. On four simulated 20/8/8 studies with 3 trials per condition, 92 %
 of the group means were within 15 % of the truth this way, 86 % fitted freely, 81 % at
-the priors (2026-11-26); why it is not the default: `fit.FitSettings.weak_traits`.
+the priors (`study bench participants`); why it is not the default: `fit.FitSettings.weak_traits`.
 
 The EM, the batched Levenberg-Marquardt and the Laplace covariances are written here
 (about 80 lines of numpy) because the likelihood is on the emulator, where every step

@@ -30,7 +30,7 @@ Steps (each reported through `progress(step, k, n)`):
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -68,13 +68,14 @@ from study.protocol.participant_effects import ParticipantEffect
 from study.protocol.participant_model import FORMAT
 from study.protocol.tasks import get_task
 from study.protocol.traits import PROFILES, TRAITS, GroupProfile, draw_traits
+from teleop_core.progress import Progress, as_step, no_progress
 
 
 @dataclass(frozen=True)
 class FitSettings:
     design: int = 320
-    """Trait settings the emulator is built from: held-out people's reaction time was
-    off by 1.13 novice prior SDs with 160, by 0.79 with 320 (`validate.py`, 2026-11-26)."""
+    """Trait settings the emulator is built from: with 160, held-out people's reaction
+    time was off by noticeably more than with 320 (`validate.py`)."""
     repeats: int = 2
     """Trials per condition at each setting."""
     check: int = 24
@@ -86,7 +87,7 @@ class FitSettings:
     weak_traits: str = "prior"
     """What becomes of the traits the data tell weakly: `prior` holds them at the hand-set
     profile; `shrink` fits them with their group mean under the profile's prior. On three
-    seeds of `study bench participants` (2026-11-26), shrink put 18-20 of 21 group means
+    seeds of `study bench participants`, shrink put 18-20 of 21 group means
     within 15 % of the truth (prior: 16-17), but its VO - HV peak-force intervals held
     the truth in 3-6 of 6 (prior: 6 of 6): a weak trait absorbs the emulator's local
     bias (the outsiders' comfort torque came out 25 % low with a narrow interval), and
@@ -99,11 +100,7 @@ class FitSettings:
             )
 
 
-Progress = Callable[[str, int, int], None]
-
-
-def _no_progress(step: str, k: int, n: int) -> None:
-    return None
+_no_progress = no_progress
 
 
 def _profile(mean: np.ndarray, sd: np.ndarray) -> GroupProfile:
@@ -139,7 +136,7 @@ def simulate_people(
         k,
         settings.jobs,
         settings.max_s,
-        lambda a, b: progress("checking", a, b),
+        as_step(progress, "checking"),
         salt="check",
         effects=effects,
     )
@@ -166,7 +163,7 @@ def build_emulator(
         settings.repeats,
         settings.jobs,
         settings.max_s,
-        lambda a, b: progress("emulator", a, b),
+        as_step(progress, "emulator"),
     )
     the_task = get_task(task)
     emulator = MomentEmulator().fit(x, design, the_task.analysed_measures, the_task.fit_features)
@@ -186,7 +183,7 @@ def fit_study(
     """The fit to the database's completed trials of `task`."""
     trials = observed_trials(engine, task)
     check_fittable(trials, task, db_label)
-    trials, _ = with_features(engine, trials, task, lambda a, b: progress("samples", a, b))
+    trials, _ = with_features(engine, trials, task, progress)
     from study.probes.measure import probe_table
     from study.probes.store import probe_frame
 
@@ -641,7 +638,7 @@ def run_fit(
             plan.free,
             plan.weak,
             settings.seed,
-            progress=lambda a, b: progress("effects", a, b),
+            progress=progress,
         )
         if found.effects:
             data = read_data(found.adjusted, task, emulator, db_label, probes)

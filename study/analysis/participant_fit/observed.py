@@ -16,7 +16,7 @@ condition.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
@@ -34,8 +34,8 @@ from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS
 from study.protocol.tasks import get_task
 from study.protocol.traits import PROFILES
+from teleop_core.progress import Progress, no_progress
 
-Progress = Callable[[int, int], None]
 MIN_PER_GROUP = 4
 """The fewest participants (with trials in both conditions) a group needs to be fitted:
 a mean and an SD of each moment, with one degree of freedom left over."""
@@ -90,7 +90,7 @@ def check_fittable(trials: pd.DataFrame, task: str, db_label: str) -> list[str]:
 
 
 def with_features(
-    engine: Engine, trials: pd.DataFrame, task: str, progress: Progress = lambda k, n: None
+    engine: Engine, trials: pd.DataFrame, task: str, progress: Progress = no_progress
 ) -> tuple[pd.DataFrame, dict[str, int]]:
     """`trials` with the task's fit features read off each trial's stored samples (NaN
     for a trial without samples: an imported one), and the counts of trials with and
@@ -119,7 +119,7 @@ def with_features(
             table = the_task.stored_table(pa.Table.from_batches(list(reader.trial(tid))))
             features = the_task.trial_features(table.to_pandas(), context)
             values[i] = [features.get(f, np.nan) for f in names]
-            progress(done + 1, len(todo))
+            progress("samples", done + 1, len(todo))
     out[names] = values
     return out, {"with_samples": len(todo), "without_samples": len(trials) - len(todo)}
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import multiprocessing
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from functools import lru_cache
 from typing import Any
@@ -35,6 +35,7 @@ from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
 from study.protocol.participant_effects import ParticipantEffect, apply_effects, session_place
 from study.protocol.tasks import get_task
 from study.protocol.traits import ParticipantTraits
+from teleop_core.progress import Progress, no_progress
 
 
 def trial_seed(setting: int, repeat: int, salt: str = "fit", condition: str = "") -> int:
@@ -114,13 +115,13 @@ def simulate_settings(
     repeats: int,
     jobs: int = 1,
     max_s: float = MAX_TRIAL_S,
-    progress: Callable[[int, int], None] = lambda k, n: None,
+    progress: Progress = no_progress,
     salt: str = "fit",
     effects: Sequence[ParticipantEffect] = (),
 ) -> pd.DataFrame:
     """One row per trial of every setting: `setting` (its index), condition, repeat,
-    success, the task's analysed measures and fit features; `progress(k, n)` after each
-    setting."""
+    success, the task's analysed measures and fit features; `progress("simulating", k, n)`
+    after each setting."""
     rows: list[dict[str, Any]] = []
     n = len(settings)
     if jobs <= 1 or n <= 1:
@@ -129,7 +130,7 @@ def simulate_settings(
                 {"setting": k, **row}
                 for row in simulate_setting(task, k, setting, repeats, max_s, salt, effects)
             ]
-            progress(k + 1, n)
+            progress("simulating", k + 1, n)
     else:
         context = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(
@@ -141,7 +142,7 @@ def simulate_settings(
             }
             for done, future in enumerate(as_completed(futures), 1):
                 rows += [{"setting": futures[future], **row} for row in future.result()]
-                progress(done, n)
+                progress("simulating", done, n)
     frame = pd.DataFrame(rows)
     return frame.sort_values(["setting", "repeat", "condition"], kind="stable").reset_index(
         drop=True

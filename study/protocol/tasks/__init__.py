@@ -21,12 +21,19 @@ a task's module imports its loop and its numerics inside its methods.
 from __future__ import annotations
 
 import importlib
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from study.errors import StudyInputError
-from study.protocol.tasks.declarations import LiveTrace, Measure, SampleColumn, pose_columns
+from study.protocol.tasks.declarations import (
+    MAX_HAPTIC_GAIN_N_M_PER_N,
+    LiveTrace,
+    Measure,
+    SampleColumn,
+    pose_columns,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -71,7 +78,8 @@ class Traits(Protocol):
     """A simulated person (`study.tasks.lcca.simulated_participant.ParticipantTraits`; named here by
     what a task uses of it, so that the registry does not import the participants)."""
 
-    group: str
+    @property
+    def group(self) -> str: ...
 
     def to_dict(self) -> dict[str, Any]: ...
 
@@ -144,18 +152,68 @@ class Task:
         context: Any = None,
         link: Any = None,
     ) -> TrialLoop:
-        """The closed loop of one trial (not started). `link`: the master-follower link's
-        delay, jitter and loss (`teleop_core.loop.link.LinkParams`) where the task has one."""
+        """The closed loop of one trial, not started.
+
+        Parameters
+        ----------
+        condition
+            ``"VO"`` or ``"HV"``.
+        seed
+            Seeds the trial's randomness (the same seed gives the same trial).
+        haptic_gain_n_m_per_n
+            The dial's haptic gain where the task has a dial (None: the task's default).
+        estimator
+            The follower's force estimator, for tasks that estimate the force.
+        context
+            What `session_context` built for the session.
+        link
+            The master-follower link's delay, jitter and loss
+            (`teleop_core.loop.link.LinkParams`) where the task has one.
+
+        Returns
+        -------
+        TrialLoop
+            The loop; the session runner starts it with a driver and advances it.
+        """
         raise NotImplementedError
 
     def simulated_driver(self, traits: Traits, max_s: float, context: Any) -> Driver:
+        """The simulated participant's hand for one trial.
+
+        Parameters
+        ----------
+        traits
+            The simulated person (`study.protocol.traits.ParticipantTraits`).
+        max_s
+            The trial's time limit, s (the person gives up by then).
+        context
+            What `session_context` built for the session.
+
+        Returns
+        -------
+        Driver
+            The driver the loop asks for the hand's action each step.
+        """
         raise NotImplementedError
 
     def trial_measures(
         self, samples: np.ndarray, success: bool
     ) -> tuple[dict[str, float], dict[str, Any]]:
-        """(the stored measures by name, further summary values) of one trial's samples
-        (the loop's rows); `completion_time_s` is added by the caller."""
+        """The measures of one trial.
+
+        Parameters
+        ----------
+        samples
+            The trial's samples: the loop's rows, in `sample_columns`' order.
+        success
+            Whether the trial reached its goal.
+
+        Returns
+        -------
+        tuple of (dict of str to float, dict of str to Any)
+            The stored measures by name (the task's `measures`; `completion_time_s` is
+            added by the caller) and further summary values.
+        """
         raise NotImplementedError
 
     def simulate(
@@ -170,7 +228,27 @@ class Task:
         link: Any = None,
         context: Any = None,
     ) -> TrialResult:
-        """One headless trial of the simulated participant `traits`, to its end or `max_s`."""
+        """One headless trial of the simulated participant `traits`.
+
+        Parameters
+        ----------
+        traits
+            The simulated person.
+        condition
+            ``"VO"`` or ``"HV"``.
+        seed
+            Seeds the trial (the same seed gives the same samples, byte for byte).
+        max_s
+            The trial runs to its end or this many seconds.
+        haptic_gain_n_m_per_n, estimator, link, context
+            As for `make_loop` (`context` built by `session_context` when None).
+
+        Returns
+        -------
+        TrialResult
+            The trial's frame (TRIAL.csv) and its summary (measures, success, the
+            person's traits).
+        """
         import numpy as np
 
         context = self.session_context() if context is None else context
@@ -213,6 +291,21 @@ class Task:
     """`trial_features`' keys: a trial frame's features for the participant fit (> 0, SI)."""
 
     def trial_features(self, frame: pd.DataFrame, context: Any) -> dict[str, float]:
+        """The participant fit's features of one trial.
+
+        Parameters
+        ----------
+        frame
+            The trial's samples under the task's column names (its TRIAL.csv frame).
+        context
+            What `session_context` built.
+
+        Returns
+        -------
+        dict of str to float
+            `fit_features` -> value (NaN where the trial does not show it); empty for a
+            task the participant fit does not cover.
+        """
         return {}
 
     def completion_time_s(self, samples: np.ndarray) -> float:
@@ -304,8 +397,9 @@ class Task:
         for k, column in enumerate(self.sample_columns):
             values = samples[:, k]
             if column.name == region:
-                values = [self.regions[int(v)] for v in values.tolist()]
-            out[column.name] = values
+                out[column.name] = [self.regions[int(v)] for v in values.tolist()]
+            else:
+                out[column.name] = values
         return out
 
     def stored_table(self, table: pa.Table) -> pa.Table:
@@ -330,13 +424,18 @@ class Task:
         return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 
     def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
-        """`gain_n_m_per_n`, else the task's default; refused for a task without a dial."""
+        """`gain_n_m_per_n`, else the task's default; refused for a task without a dial
+        and outside 0 to `MAX_HAPTIC_GAIN_N_M_PER_N` (the bound a design file has)."""
         if gain_n_m_per_n is None:
             return self.default_haptic_gain_n_m_per_n
         if not self.has_dial:
             raise StudyInputError(
                 f"haptic gain {gain_n_m_per_n!r} for the {self.name} task, which has no "
                 "haptic dial; expected no gain for it"
+            )
+        if not (math.isfinite(gain_n_m_per_n) and 0 <= gain_n_m_per_n <= MAX_HAPTIC_GAIN_N_M_PER_N):
+            raise StudyInputError(
+                f"haptic gain {gain_n_m_per_n!r}; expected 0 to {MAX_HAPTIC_GAIN_N_M_PER_N:g} N m/N"
             )
         return gain_n_m_per_n
 
@@ -346,7 +445,24 @@ _LOADED = _ENTRY_POINTS_LOADED = False
 
 
 def register(task: Task) -> Task:
-    """Add `task` to the registry (replacing one of the same name); returns it."""
+    """Add `task` to the registry, replacing one of the same name.
+
+    Parameters
+    ----------
+    task
+        A `Task` instance.
+
+    Returns
+    -------
+    Task
+        `task` itself (so a module can write ``TASK = register(MyTask())``).
+
+    Raises
+    ------
+    ValueError
+        Its name is not an identifier of at most 16 characters, or it stores no sample
+        column as one of ``t_s``, ``branch``, ``insertion_m``, ``rotation_rad``.
+    """
     if not getattr(task, "name", "") or not task.name.isidentifier() or len(task.name) > 16:
         raise ValueError(
             f"task name {getattr(task, 'name', None)!r}; expected an identifier "
@@ -361,6 +477,7 @@ def register(task: Task) -> Task:
 
 
 def unregister(name: str) -> None:
+    """Remove the task called `name` from the registry (nothing if there is none)."""
     _REGISTRY.pop(name, None)
 
 
@@ -381,6 +498,7 @@ def _load(entry_points_too: bool = False) -> None:
 
 
 def is_task(name: str) -> bool:
+    """Whether a task called `name` is built in, registered or installed."""
     _load()
     if name not in _REGISTRY:
         _load(entry_points_too=True)
@@ -388,13 +506,36 @@ def is_task(name: str) -> bool:
 
 
 def task_names() -> tuple[str, ...]:
-    """The tasks a design may name: the built-in ones first, then those registered."""
+    """The tasks a design may name.
+
+    Returns
+    -------
+    tuple of str
+        The built-in tasks' names first, then those registered or installed (entry
+        point group ``haptic_study.tasks``).
+    """
     _load(entry_points_too=True)
     return tuple(_REGISTRY)
 
 
 def get_task(name: str) -> Task:
-    """The task called `name`; an unknown name gets one line listing the known ones."""
+    """The task called `name`.
+
+    Parameters
+    ----------
+    name
+        A task's name, e.g. ``"lcca"``.
+
+    Returns
+    -------
+    Task
+        The registered task.
+
+    Raises
+    ------
+    StudyInputError
+        No task has that name; the one-line message lists the known ones.
+    """
     if not is_task(name):
         raise StudyInputError(f"task {name!r}; expected one of {', '.join(task_names())}")
     return _REGISTRY[name]
@@ -410,5 +551,6 @@ def measure_named(name: str) -> Measure | None:
 
 
 def tasks() -> tuple[Task, ...]:
+    """Every known task, in `task_names`' order."""
     _load(entry_points_too=True)
     return tuple(_REGISTRY.values())

@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+MAX_HAPTIC_GAIN_N_M_PER_N = 1.0
+"""Far above any usable gain (the paper's is 0.02 N m/N; the dial saturates at 0.1 N m)."""
+
 
 @dataclass(frozen=True)
 class Measure:
@@ -16,6 +19,7 @@ class Measure:
     name: str
     """With its unit in the name (`peak_tip_force_n`)."""
     unit: str
+    """SI unit as printed (``"N"``, ``"s"``), empty for a count."""
     label: str
     """Axis label, without the unit (`peak tip force`)."""
     description: str
@@ -25,9 +29,11 @@ class Measure:
     max_value: float | None = None
     """Largest value an import accepts (a device's bound); None: no bound."""
     integer: bool = False
+    """A count: its values are whole numbers (e.g. wall contacts)."""
 
     @property
     def axis_label(self) -> str:
+        """The axis label with the unit in brackets, e.g. ``peak tip force (N)``."""
         return f"{self.label} ({self.unit})" if self.unit else self.label
 
 

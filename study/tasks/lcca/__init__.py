@@ -1,1 +1,1 @@
-"""The LCCA guidewire navigation task (seed 000): see `study.tasks.lcca.task`."""
+"""The LCCA guidewire navigation task ([endovascular]): see `study.tasks.lcca.task`."""

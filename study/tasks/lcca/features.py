@@ -140,27 +140,58 @@ def lcca_features(
     speed = float(np.median(v[free]))
     out["advance_speed_m_s"] = speed
     if len(reached):
-        first = reached[0]
-        out["aim_error_rad"] = abs(math.remainder(rot[first] - target_phi_rad, 2 * math.pi))
-        out["aim_error_rad"] += AIM_FLOOR_RAD
-        ref = v[max(first - 200, 0) : first]
-        ref = ref[np.isfinite(ref) & (ref > 0.001)]
-        slow = np.flatnonzero(v[first:] < SLOW_SHARE * (np.median(ref) if len(ref) else speed))
-        if len(slow) and x[first + slow[0]] < ostium_m:
-            out["approach_m"] = ostium_m - x[first + slow[0]]
-        near = x >= ostium_m - OSTIUM_BAND_M
-        behind = x < ostium_m - 1.5 * OSTIUM_BAND_M
-        count, armed = 0, True
-        for k in np.flatnonzero(near | behind):
-            if near[k] and armed:
-                count, armed = count + 1, False
-            elif behind[k]:
-                armed = True
-        out["approaches"] = float(max(count, 1))
+        out.update(_approach(x, rot, v, reached[0], ostium_m, target_phi_rad, speed))
     forward = in_target & (v > 0.001)
     if np.count_nonzero(forward) >= 10:
         out["target_speed_ratio"] = float(np.median(v[forward])) / speed
-    # the first turn: from its start to its first turning point, and on to the next
+    out.update(_first_turn(t, rot))
+    # only on the way to the target (a retreat from a side branch is no stall)
+    on_route = frame["branch"].isin(list(route)).to_numpy()[index]
+    out.update(_stalls(t, aim, tip, on_route))
+    # the felt resistance against its mean 1-3 s before, while pushing forward
+    sums = np.concatenate([[0.0], np.cumsum(felt)])
+    i = np.arange(300, len(felt))
+    level = (sums[i - 100] - sums[i - 300]) / 200
+    rise = (felt[i] - level)[aim[i] > 0.02]
+    if len(rise):
+        out["peak_felt_rise_n_m"] = max(float(rise.max()), 0.0) + RISE_FLOOR_N_M
+    return out
+
+
+def _approach(
+    x: np.ndarray,
+    rot: np.ndarray,
+    v: np.ndarray,
+    first: int,
+    ostium_m: float,
+    target_phi_rad: float,
+    speed: float,
+) -> dict[str, float]:
+    """The aim error, the approach distance and the approaches, from `first`, the first
+    grid point in the approach zone."""
+    out: dict[str, float] = {}
+    out["aim_error_rad"] = abs(math.remainder(rot[first] - target_phi_rad, 2 * math.pi))
+    out["aim_error_rad"] += AIM_FLOOR_RAD
+    ref = v[max(first - 200, 0) : first]
+    ref = ref[np.isfinite(ref) & (ref > 0.001)]
+    slow = np.flatnonzero(v[first:] < SLOW_SHARE * (np.median(ref) if len(ref) else speed))
+    if len(slow) and x[first + slow[0]] < ostium_m:
+        out["approach_m"] = ostium_m - x[first + slow[0]]
+    near = x >= ostium_m - OSTIUM_BAND_M
+    behind = x < ostium_m - 1.5 * OSTIUM_BAND_M
+    count, armed = 0, True
+    for k in np.flatnonzero(near | behind):
+        if near[k] and armed:
+            count, armed = count + 1, False
+        elif behind[k]:
+            armed = True
+    out["approaches"] = float(max(count, 1))
+    return out
+
+
+def _first_turn(t: np.ndarray, rot: np.ndarray) -> dict[str, float]:
+    """The first turn: from its start to its first turning point, and on to the next."""
+    out: dict[str, float] = {}
     moved = np.flatnonzero(np.abs(rot - rot[0]) > 0.005)
     if len(moved):
         sign = float(np.sign(rot[moved[0]] - rot[0]))
@@ -170,11 +201,16 @@ def lcca_features(
             swing = _turning_point(rot, peak, -sign)
             if swing is not None:
                 out["turn_swing_s"] = t[swing] - t[peak]
-    # backing off: the dial's aim from forward to backward
+    return out
+
+
+def _stalls(
+    t: np.ndarray, aim: np.ndarray, tip: np.ndarray, on_route: np.ndarray
+) -> dict[str, float]:
+    """Backing off: the dial's aim from forward to backward, on the route and after the
+    first `START_S` (the screen lags the hand by the reaction time at the start)."""
+    out: dict[str, float] = {}
     stalls = []
-    # only on the way to the target (a retreat from a side branch is no stall) and after
-    # the first `START_S` (the screen lags the hand by the reaction time at the start)
-    on_route = frame["branch"].isin(list(route)).to_numpy()[index]
     for k in np.flatnonzero((aim[:-1] > 0.02) & (aim[1:] <= 0.0)):
         if not on_route[k] or t[k] - t[0] < START_S:
             continue
@@ -183,11 +219,4 @@ def lcca_features(
     if stalls:
         out["stall_s"] = float(np.mean(stalls)) + GRID_S
     out["stall_backoffs"] = 1.0 + sum(d >= MIN_STALL_S for d in stalls)
-    # the felt resistance against its mean 1-3 s before, while pushing forward
-    sums = np.concatenate([[0.0], np.cumsum(felt)])
-    i = np.arange(300, len(felt))
-    level = (sums[i - 100] - sums[i - 300]) / 200
-    rise = (felt[i] - level)[aim[i] > 0.02]
-    if len(rise):
-        out["peak_felt_rise_n_m"] = max(float(rise.max()), 0.0) + RISE_FLOOR_N_M
     return out

@@ -19,7 +19,7 @@ After an obstacle (felt or seen) it backs off and tries again. It gives up at
 `give_up_s`.
 
 Group distributions (mean, sd; truncated to plausible ranges) are assumptions shaped
-by seed 000, IV-D (experts faster and steadier; the paper reports comparable times and
+by [endovascular], IV-D (experts faster and steadier; the paper reports comparable times and
 lower peak forces with haptics in every group), not measured values. The traits and
 their group distributions are the study's (`study.protocol.traits`, shared by every
 task's simulated participant); a model fitted to a study's trials (`study participants
@@ -138,10 +138,36 @@ class SimulatedParticipant(Driver):
             s_tip = self.ostium_m + math.dist(seen.tip_m, self.ostium_xyz)
         else:
             s_tip = self._arc_length(seen.tip_m)
+        dt = 1.0 / self.rate_hz
+        felt_for = self._feel(view, dt)
+        stalled = self._stalled(seen, dt)
+        if self.phase in ("advance", "enter", "navigate") and (
+            stalled or felt_for > tr.reaction_s * 0.6
+        ):
+            self._back_off(stalled, s_tip, in_target)
+        speed, rotation = self._plan(view, seen, s_tip, in_target)
+        # asked to keep forces low, a participant who feels the resistance pushes more
+        # gently the more it exceeds what it finds comfortable (HV only: without
+        # haptics there is nothing to feel)
+        excess = min(max(self._felt - tr.comfort_torque_n_m, 0.0) / tr.comfort_torque_n_m, 3.0)
+        if speed > 0:
+            speed /= 1.0 + tr.caution * excess
+        aim = speed / self.speed_gain_guess
+        self._last_aim = aim
+        return HandAction(
+            dial_target_rad=aim,
+            grip_stiffness_n_m_per_rad=GRIP_STIFFNESS_N_M_PER_RAD,
+            grip_damping_n_m_s_per_rad=GRIP_DAMPING_N_M_S_PER_RAD,
+            rotation_rate_rad_s=rotation,
+        )
+
+    def _feel(self, view: OperatorView, dt: float) -> float:
+        """How long (s) the hand has felt a rise of resistance above its threshold, 0 if
+        it feels none now."""
+        tr = self.traits
         # felt torque: what the hand holds beyond what the spring alone explains
         # (positive when the dial resists the forward push), smoothed over 0.1 s as a
         # hand feels it; without haptics it stays near zero
-        dt = 1.0 / self.rate_hz
         hand = GRIP_STIFFNESS_N_M_PER_RAD * (self._last_aim - view.dial_angle_rad)
         surplus = hand - self.spring_guess * view.dial_angle_rad
         self._felt += (surplus - self._felt) * dt / 0.1
@@ -161,9 +187,11 @@ class SimulatedParticipant(Driver):
             self._felt_since = view.t_s
         elif not felt:
             self._felt_since = math.nan
-        felt_for = 0.0 if math.isnan(self._felt_since) else view.t_s - self._felt_since
-        # seen obstacle: the hand has pushed for visual_stall_s in all since the tip on the
-        # screen last moved a millimetre
+        return 0.0 if math.isnan(self._felt_since) else view.t_s - self._felt_since
+
+    def _stalled(self, seen: OperatorView, dt: float) -> bool:
+        """Whether the hand has pushed for `visual_stall_s` in all since the tip on the
+        screen last moved a millimetre (a seen obstacle)."""
         if math.dist(seen.tip_m, self._stall_ref) >= 0.001:
             self._stall_ref = seen.tip_m
             self._stall_clock = 0.0
@@ -171,35 +199,20 @@ class SimulatedParticipant(Driver):
             self._stall_clock += dt
         # a slow push needs longer to show a millimetre
         expected_speed = max(self.speed_gain_guess * self._last_aim, 0.001)
-        stalled = self._stall_clock >= tr.visual_stall_s + min(0.001 / expected_speed, 1.0)
-        if self.phase in ("advance", "enter", "navigate") and (
-            stalled or felt_for > tr.reaction_s * 0.6
-        ):
-            if stalled:
-                self.obstacles_seen += 1
-            else:
-                self.obstacles_felt += 1
-            self.phase = "back_off"
-            # behind the ostium if the tip stuck at it, else a centimetre back
-            near_ostium = abs(s_tip - self.ostium_m) < 0.01 and not in_target
-            self.back_off_to = self.ostium_m - 0.01 if near_ostium else max(s_tip - 0.01, 0.005)
-            self._stall_clock = 0.0
-            self._felt_since = math.nan
-        speed, rotation = self._plan(view, seen, s_tip, in_target)
-        # asked to keep forces low, a participant who feels the resistance pushes more
-        # gently the more it exceeds what it finds comfortable (HV only: without
-        # haptics there is nothing to feel)
-        excess = min(max(self._felt - tr.comfort_torque_n_m, 0.0) / tr.comfort_torque_n_m, 3.0)
-        if speed > 0:
-            speed /= 1.0 + tr.caution * excess
-        aim = speed / self.speed_gain_guess
-        self._last_aim = aim
-        return HandAction(
-            dial_target_rad=aim,
-            grip_stiffness_n_m_per_rad=GRIP_STIFFNESS_N_M_PER_RAD,
-            grip_damping_n_m_s_per_rad=GRIP_DAMPING_N_M_S_PER_RAD,
-            rotation_rate_rad_s=rotation,
-        )
+        return self._stall_clock >= self.traits.visual_stall_s + min(0.001 / expected_speed, 1.0)
+
+    def _back_off(self, stalled: bool, s_tip: float, in_target: bool) -> None:
+        """An obstacle seen (`stalled`) or felt: count it and back off."""
+        if stalled:
+            self.obstacles_seen += 1
+        else:
+            self.obstacles_felt += 1
+        self.phase = "back_off"
+        # behind the ostium if the tip stuck at it, else a centimetre back
+        near_ostium = abs(s_tip - self.ostium_m) < 0.01 and not in_target
+        self.back_off_to = self.ostium_m - 0.01 if near_ostium else max(s_tip - 0.01, 0.005)
+        self._stall_clock = 0.0
+        self._felt_since = math.nan
 
     def _plan(
         self, view: OperatorView, seen: OperatorView, s_tip: float, in_target: bool

@@ -1,5 +1,5 @@
 """The LCCA task: a guidewire from the descending aorta into the left common carotid
-(seed 000), driven by the friction-wheel robot through the haptic dial.
+([endovascular]), driven by the friction-wheel robot through the haptic dial.
 
 Its trials are `study.tasks.lcca.trial` (loop, simulated participant, measures);
 this module says what they are to the rest of the tool (`study.protocol.tasks`).

@@ -1,6 +1,6 @@
 """One simulated LCCA trial: phantom + loop + a simulated participant, and its summary.
 
-The summary measures are those the study analyses (seed 000, IV-D): completion time,
+The summary measures are those the study analyses ([endovascular], IV-D): completion time,
 peak proximal force (the estimate the robot renders, as a sensorless drive measures it;
 the simulated reference is kept beside it), peak distal force (the phantom's sensor),
 success, and wall contacts (distal force rising through `CONTACT_THRESHOLD_N`).

@@ -1,1 +1,1 @@
-"""The NOTES endoscopy task (seed 001): see `study.tasks.notes.task`."""
+"""The NOTES endoscopy task ([notes]): see `study.tasks.notes.task`."""

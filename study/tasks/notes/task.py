@@ -1,5 +1,5 @@
 """The NOTES task: the 2-DOF haptic device rolling and pushing an endoscope through the
-posterior fornix to a target in the abdomen (seed 001).
+posterior fornix to a target in the abdomen ([notes]).
 
 Its trials are `study.tasks.notes.trial` (loop, simulated participant, measures);
 this module says what they are to the rest of the tool (`study.protocol.tasks`). The
@@ -99,7 +99,7 @@ class NotesTask(Task):
             "N",
             "peak push",
             "largest demanded push (force resisting "
-            "insertion), as the surgeons' max push of seed 001",
+            "insertion), as the surgeons' max push of [notes]",
             analysed=False,
             max_value=MAX_FORCE_N,
         ),

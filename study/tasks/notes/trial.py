@@ -11,10 +11,10 @@ its aim (`dial_angle_rad`). Past its comfort it settles for a slower pace, in
 proportion to its caution; it keeps its pace by pushing harder when the screen shows
 the scope falling behind (in HV the device resists; in VO nothing physical does).
 All its numbers are assumptions; the tissue's (`teleop_core.notes.tissue`) are tuned
-so that simulated experts in VO meet the surgeons' benchmark of seed 001 (IV), which
+so that simulated experts in VO meet the surgeons' benchmark of [notes] (IV), which
 `study bench notes` checks.
 
-Summary (seed 001, IV): completion time, peak demanded and rendered force and torque,
+Summary ([notes], IV): completion time, peak demanded and rendered force and torque,
 the largest push and pull and the largest clockwise and counter-clockwise torque
 demanded, and the fraction of the time the demanded push exceeds the device's
 continuous force (the paper's surgeons: 23.57 %). The study database stores them under these names

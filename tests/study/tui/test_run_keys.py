@@ -66,6 +66,7 @@ async def test_f3_focuses_the_participant_list_until_one_is_picked(make_test_app
     nothing until Tab); with a participant picked, the screen's own keys act."""
     from textual.widgets import Select
 
+    from study.tui.picker import ParticipantPicker
     from study.tui.run_pane import RunPane
     from tests.study.tui.conftest import loaded
 
@@ -78,7 +79,7 @@ async def test_f3_focuses_the_participant_list_until_one_is_picked(make_test_app
         assert app.focused is picker
         await pilot.press("enter")
         await pilot.pause()
-        assert picker.expanded
+        assert isinstance(app.screen, ParticipantPicker)
         await pilot.press("down", "enter")
         await pilot.pause()
         assert app.query_one(RunPane).code is not None

@@ -23,7 +23,7 @@ from study.protocol.tlx import store_tlx
 from study.tasks.lcca.scene import PhantomView
 from study.tasks.notes.scene import NotesView
 from study.tui import StudyServices, TuiSettings, make_app
-from study.tui.confirm import Confirm
+from study.tui.confirm import Confirm, ReasonScreen
 from study.tui.run_pane import RunPane
 from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON
@@ -185,12 +185,22 @@ async def test_the_keyboard_drives_a_notes_trial(notes_engine: Engine, tmp_path:
         await wait_for(pilot, lambda: pane.run.live.frame().rotation_rad > 0.01, 30)
         readout = str(app.query_one("#readout").render())
         assert "insertion-speed aim +" in readout and "dial aim" not in readout
+        # x asks why; Esc keeps the trial running, a reason stops it
         await pilot.press("x")
-        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
-        await pilot.press("y")
+        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+        await pilot.press("escape")
+        await pilot.pause(0.3)
+        assert pane.run is not None and pane.status == "running"
+        await pilot.press("x")
+        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+        await pilot.press(*"scope fogged", "enter")
         await wait_for(pilot, lambda: pane.status == "interrupted", 30)
     [(status, driver, samples)] = _trials(notes_engine)
     assert (status, driver) == ("interrupted", "keyboard") and samples > 0
+    with Session(notes_engine) as session:
+        entry = session.scalars(select(AuditEntry).where(AuditEntry.entity == "trial")).one()
+    assert (entry.old_value, entry.new_value) == ("running", "interrupted")
+    assert entry.reason == f"{STOPPED_REASON}: scope fogged"
 
 
 async def test_a_design_can_let_the_next_block_start_before_the_questionnaire(

@@ -160,7 +160,7 @@ def test_the_notes_key_hints_are_whole_at_80x24(notes_file: Path) -> None:
         app.child.expect(words("let", "go", "e", "end"), timeout=240)
         app.child.send("x")
         app.child.expect(r"Stop P001")
-        app.child.send("y")
+        app.child.send("tired\r")
         app.child.expect("interrupted")
         app.quit()
     finally:

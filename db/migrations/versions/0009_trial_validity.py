@@ -1,0 +1,30 @@
+"""trials: a measured trial marked invalid keeps its row, with the reason
+
+A completed trial the experimenter judges invalid (the participant was distracted, the
+device slipped) stays in the database and in every export; `invalid_reason` names why,
+and the analysis leaves the trial out and lists it among its exclusions. Empty: valid.
+Each change is an audit row (`study.protocol.corrections`).
+
+Revision ID: 0009_trial_validity
+Revises: 0008_probe_trials
+"""
+
+from collections.abc import Sequence
+
+import sqlalchemy as sa
+from alembic import op
+
+revision: str = "0009_trial_validity"
+down_revision: str | None = "0008_probe_trials"
+branch_labels: str | Sequence[str] | None = None
+depends_on: str | Sequence[str] | None = None
+
+
+def upgrade() -> None:
+    with op.batch_alter_table("trials") as batch:
+        batch.add_column(sa.Column("invalid_reason", sa.Text(), nullable=True))
+
+
+def downgrade() -> None:
+    with op.batch_alter_table("trials") as batch:
+        batch.drop_column("invalid_reason")

@@ -1,0 +1,74 @@
+"""`study trial list|invalidate|revalidate`: a participant's trials, and a measured trial
+marked invalid (kept, audited, left out of the analysis) or valid again."""
+
+from __future__ import annotations
+
+import click
+
+from study.commands.base import StudyGroup, actor_option, db_option, opened_database
+
+REASON_HELP = "Why (kept in the audit log; an invalid trial's reason is listed by the analysis)."
+
+
+@click.group("trial", cls=StudyGroup)
+def trial() -> None:
+    """A participant's trials; mark a measured trial invalid or valid again (audited)."""
+
+
+@trial.command("list")
+@click.argument("code")
+@db_option
+def trial_list(code: str, db_url: str | None) -> None:
+    """Every trial row of participant CODE (attempts and interrupted trials included),
+    with its id, status, completion time, success, measures and validity."""
+    from study.protocol.participant_record import participant_record
+
+    with opened_database(db_url) as engine:
+        record = participant_record(engine, code)
+    if not record.trials:
+        click.echo(f"{code}: no trials stored")
+    for t in record.trials:
+        time_s = "" if t.completion_time_s is None else f" {t.completion_time_s:.2f} s"
+        success = "" if t.success is None else (" success" if t.success else " no success")
+        measures = "".join(f" {k}={v:.3g}" for k, v in t.measures.items())
+        state = f" INVALID ({t.invalid_reason})" if t.invalid_reason else ""
+        why = f" ({t.why})" if t.status == "interrupted" and t.why else ""
+        click.echo(
+            f"{t.id:>6} {t.task}/{t.condition} {t.label()} attempt {t.attempt}: "
+            f"{t.status}{why}{time_s}{success}{measures}{state}"
+        )
+
+
+def _mark(trial_id: int, valid: bool, reason: str, actor: str | None, db_url: str | None) -> None:
+    from study.protocol.corrections import mark_trial
+
+    with opened_database(db_url) as engine:
+        what = mark_trial(engine, trial_id, valid, reason, actor)
+    if valid:
+        click.echo(f"trial {trial_id} ({what}) is valid again ({reason}); the analysis counts it")
+    else:
+        click.echo(
+            f"trial {trial_id} ({what}) marked invalid ({reason}); kept, and left out of "
+            "the analysis with its reason"
+        )
+
+
+@trial.command("invalidate")
+@click.argument("trial_id", metavar="ID", type=click.IntRange(min=1))
+@click.option("--reason", required=True, help=REASON_HELP)
+@actor_option
+@db_option
+def trial_invalidate(trial_id: int, reason: str, actor: str | None, db_url: str | None) -> None:
+    """Mark completed measured trial ID invalid: kept with its samples, audited, left out
+    of `study analyze` and listed among its exclusions with the reason."""
+    _mark(trial_id, False, reason, actor, db_url)
+
+
+@trial.command("revalidate")
+@click.argument("trial_id", metavar="ID", type=click.IntRange(min=1))
+@click.option("--reason", required=True, help=REASON_HELP)
+@actor_option
+@db_option
+def trial_revalidate(trial_id: int, reason: str, actor: str | None, db_url: str | None) -> None:
+    """Mark trial ID, marked invalid earlier, valid again (audited)."""
+    _mark(trial_id, True, reason, actor, db_url)

@@ -1,0 +1,137 @@
+"""The rows the analysis reads from a study database, with plain SQL over a DBAPI
+connection (sqlite3, or the driver connection of a SQLAlchemy engine): three queries,
+no ORM and no pandas, so that `study analyze` loads neither. `trial_table.trial_frame`
+and `analysis.frames` build their frames from these rows.
+
+- `trial_rows`: one dict per measured trial (completed, not practice, the latest attempt
+  of each slot): participant, group, task, condition, trial (1-based), completion_time_s,
+  the trial's measures under their names, success, driver.
+- `tlx_rows`: one dict per questionnaire in the order stored: participant, group, task,
+  condition, the six ratings, tlx_raw, tlx_weighted (None without the pairwise
+  comparisons).
+- `withdrawn_rows`: code -> withdrawal reason of every withdrawn participant.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from db.tlx_subscales import TLX_SUBSCALES
+from study.protocol.tasks import COMPLETION_TIME, get_task
+
+TRIAL_KEYS = ("participant", "group", "task", "condition", "trial")
+
+
+def measure_columns(tasks: Iterable[str], analysed_only: bool = False) -> list[str]:
+    """The measure columns of `tasks`' trials, in the tasks' order, each once."""
+    out: list[str] = []
+    for name in tasks:
+        task = get_task(name)
+        for m in task.all_measures:
+            if m.name not in out and (m.analysed or not analysed_only):
+                out.append(m.name)
+    return out
+
+
+TRIALS_SQL = (
+    'SELECT p.code, p."group", t.id, t.task, t.condition, t.trial_index, '
+    "t.completion_time_s, t.success, t.driver "
+    "FROM participants p JOIN trials t ON t.participant_id = p.id "
+    "WHERE t.status = 'completed' AND NOT t.practice "
+    "ORDER BY p.code, t.block_index, t.trial_index, t.attempt"
+)
+MEASURES_SQL = (
+    "SELECT m.trial_id, m.name, m.value FROM trial_measures m "
+    "JOIN trials t ON t.id = m.trial_id WHERE t.status = 'completed' AND NOT t.practice"
+)
+TLX_SQL = (
+    'SELECT p.code, p."group", r.task, r.condition, '
+    + ", ".join(f"r.{s}" for s in TLX_SUBSCALES)
+    + ", "
+    + ", ".join(f"r.w_{s}" for s in TLX_SUBSCALES)
+    + " FROM tlx_responses r JOIN participants p ON p.id = r.participant_id ORDER BY r.id"
+)
+INVALID_SQL = (
+    "SELECT p.code, t.task, t.condition, t.trial_index, t.invalid_reason "
+    "FROM participants p JOIN trials t ON t.participant_id = p.id "
+    "WHERE t.status = 'completed' AND NOT t.practice "
+    "ORDER BY p.code, t.block_index, t.trial_index, t.attempt"
+)
+WITHDRAWN_SQL = "SELECT code, withdrawal_reason FROM participants WHERE withdrawn_at IS NOT NULL"
+
+
+def _query(conn: Any, sql: str) -> list[tuple[Any, ...]]:
+    cursor = conn.cursor()
+    try:
+        cursor.execute(sql)
+        return cursor.fetchall()
+    finally:
+        cursor.close()
+
+
+def trial_rows(conn: Any) -> list[dict[str, Any]]:
+    measures: dict[int, dict[str, float]] = {}
+    for trial_id, name, value in _query(conn, MEASURES_SQL):
+        measures.setdefault(trial_id, {})[name] = value
+    latest: dict[tuple[Any, ...], dict[str, Any]] = {}
+    for code, group, trial_id, task, condition, index, time_s, success, driver in _query(
+        conn, TRIALS_SQL
+    ):
+        latest[(code, task, condition, index)] = {
+            "participant": code,
+            "group": group,
+            "task": task,
+            "condition": condition,
+            "trial": index + 1,
+            COMPLETION_TIME: time_s,
+            **measures.get(trial_id, {}),
+            "success": bool(success),
+            "driver": driver,
+        }
+    return list(latest.values())
+
+
+def raw_tlx(ratings: dict[str, int]) -> float:
+    """Mean of the six ratings."""
+    return sum(ratings[s] for s in TLX_SUBSCALES) / len(TLX_SUBSCALES)
+
+
+def weighted_tlx(ratings: dict[str, int], weights: dict[str, int]) -> float:
+    """sum(weight x rating) / 15."""
+    return sum(weights[s] * ratings[s] for s in TLX_SUBSCALES) / 15.0
+
+
+def tlx_rows(conn: Any) -> list[dict[str, Any]]:
+    k = len(TLX_SUBSCALES)
+    rows = []
+    for code, group, task, condition, *values in _query(conn, TLX_SQL):
+        ratings = dict(zip(TLX_SUBSCALES, values[:k], strict=True))
+        weights = dict(zip(TLX_SUBSCALES, values[k:], strict=True))
+        weighted = weighted_tlx(ratings, weights) if weights["mental"] is not None else None
+        rows.append(
+            {
+                "participant": code,
+                "group": group,
+                "task": task,
+                "condition": condition,
+                **ratings,
+                "tlx_raw": raw_tlx(ratings),
+                "tlx_weighted": weighted,
+            }
+        )
+    return rows
+
+
+def withdrawn_rows(conn: Any) -> dict[str, str]:
+    return {code: reason or "" for code, reason in _query(conn, WITHDRAWN_SQL)}
+
+
+def invalid_rows(conn: Any) -> dict[tuple[str, str, str, int], str]:
+    """(code, task, condition, trial number from 1) -> reason, for every trial that
+    `trial_rows` keeps (the latest completed attempt) and that is marked invalid
+    (`study.protocol.corrections`)."""
+    latest: dict[tuple[str, str, str, int], str | None] = {}
+    for code, task, condition, index, reason in _query(conn, INVALID_SQL):
+        latest[(code, task, condition, index + 1)] = reason
+    return {key: reason for key, reason in latest.items() if reason is not None}
