@@ -9,6 +9,7 @@ medians; CPU time of the child (rusage) is what other jobs on the machine distur
 from __future__ import annotations
 
 import json
+import os
 import resource
 import statistics
 import subprocess
@@ -18,14 +19,16 @@ from typing import Any
 
 
 def timed(*args: Any, **kwargs: Any) -> tuple[subprocess.CompletedProcess, dict[str, float]]:
-    """`subprocess.run(*args, **kwargs)` and its wall and CPU seconds (the child's)."""
+    """`subprocess.run(*args, **kwargs)`, its wall and CPU seconds (the child's) and the
+    machine's 1-minute load average as it started (the other jobs sharing the cores)."""
+    load = os.getloadavg()[0]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     done = subprocess.run(*args, **kwargs)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return done, {"wall_s": wall, "cpu_s": cpu}
+    return done, {"wall_s": wall, "cpu_s": cpu, "load_avg_1min": load}
 
 
 def medians(runs: dict[str, list[dict[str, float]]]) -> dict[str, dict[str, float]]:

@@ -74,6 +74,13 @@ def main() -> None:
             node[leaf] = value
         return out
 
+    # rates (simulated s per CPU s) read the other way round: new / baseline, the
+    # speed-up per simulated second whatever length each version's trials came out
+    inverse = {
+        k: medians["new"][k] / medians["baseline"][k]
+        for k in medians["new"]
+        if k in medians["baseline"] and medians["baseline"][k] != 0
+    }
     medians = {label: nest(m) for label, m in medians.items()}
     ratios = nest(ratios)
     report = {
@@ -86,6 +93,7 @@ def main() -> None:
         "nice": os.nice(0),
         "median": medians,
         "baseline_over_new": ratios,
+        "new_over_baseline": nest(inverse),
         "runs": runs,
     }
     alternate.write_report(report, args.out)

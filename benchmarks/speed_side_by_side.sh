@@ -6,7 +6,7 @@
 # written by `study demo` (for the participant fit). Results in benchmarks/results/.
 set -e
 B=$1; N=$2; DB=$3; R=benchmarks/results
-nice -n 10 python benchmarks/loop_side_by_side.py "$B" "$N" --rounds 5 \
+nice -n 10 python benchmarks/loop_side_by_side.py "$B" "$N" --rounds 3 \
   --out $R/loop_profile.json -- --trials 4 --calls 100000
 nice -n 10 python benchmarks/loop_side_by_side.py "$B" "$N" --rounds 3 --bench loop_speed.py \
   --out $R/loop_speed_long.json -- --trials 8 --max-s 180
@@ -15,6 +15,8 @@ nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 3 \
   'study bench lcca --quick --json {tmp}/out.json --out {tmp}'
 nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 3 \
   --out $R/demo_quick_side_by_side.json -- 'study demo --quick --out {tmp}/demo'
+nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 1 \
+  --out $R/demo_side_by_side.json -- 'study demo --out {tmp}/demo'
 nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 2 \
   --json-key runs.0.units_per_hour --out $R/campaign_side_by_side.json -- \
   'study bench campaign --replicates 4 --group-size 3 --workers 2 --json {tmp}/out.json'

@@ -6,7 +6,7 @@ default). What a crash loses is what the writer holds plus what the caller is co
 for its next call, so the writer commits by trial time, whatever the size of the steps
 it is handed: a chunk never spans more than `chunk_s`, and after each call it commits
 at once when waiting for one more step of the same length would put more than `chunk_s`
-at risk (unpaced sessions hand 0.5 s steps, and committing only when the next
+at risk (unpaced sessions handed 0.5 s steps, and committing only when the next
 step arrived lost 1.5 s). Each chunk is one transaction; `flush`/`close` commit the rest.
 
 A chunk is stored as one row of `sample_chunks`: its columns as one compressed Arrow
@@ -14,6 +14,9 @@ record batch (`db.sample_codec`), not a row per sample (binding a Python
 value per sample held the writer well below a plain multi-row INSERT; a chunk is
 one row whatever its length, so the writer's cost is the encoding). The columns handed
 in are kept as arrays until the chunk is encoded; no Python object is built per sample.
+The writer keeps one connection for its life (taken at the first chunk, given back at
+`close` or after any failed commit), so a chunk costs its transaction, not also a
+checkout from the pool and the reset on return.
 
 Another program's lock (SQLite allows one writer at a time) need not stop a trial: with
 `hold_s` > 0 a chunk that meets a lock is kept in memory and committed with the next one,
@@ -111,6 +114,7 @@ class SampleWriter:
         self.waiting_since: float | None = None
         """time.monotonic() of the first commit attempt that met a lock, while one lasts."""
         self.engine = engine
+        self._conn: Connection | None = None
         self.trial_id = trial_id
         self.chunk_s = chunk_s
         self.next_seq = start_seq
@@ -238,8 +242,11 @@ class SampleWriter:
         """Write the held chunks in one transaction. Not `wait`ing (SQLite), an attempt
         waits `LOCK_POLL_MS` for a lock and keeps the chunks if it is still held."""
         poll = not wait and self.engine.dialect.name == "sqlite"
+        if self._conn is None:
+            self._conn = self.engine.connect()
+        conn = self._conn
         try:
-            with self.engine.begin() as conn:
+            with conn.begin():
                 if poll:
                     conn.exec_driver_sql(f"PRAGMA busy_timeout={LOCK_POLL_MS}")
                 try:
@@ -251,8 +258,11 @@ class SampleWriter:
 
                         ms = busy_timeout_ms(self.engine.url)
                         conn.exec_driver_sql(f"PRAGMA busy_timeout={ms}")
-        except OperationalError as exc:
-            if wait or not _is_lock(exc):
+        except BaseException as exc:
+            # a failed transaction gives its connection back (the next attempt takes a
+            # fresh one: nothing of a broken connection is reused)
+            self._release()
+            if not isinstance(exc, OperationalError) or wait or not _is_lock(exc):
                 raise
             if self.waiting_since is None:
                 self.waiting_since = time.monotonic()
@@ -273,15 +283,24 @@ class SampleWriter:
             self._schema_id = stored_schema_id(self.engine, self.schema)
         return self._schema_id
 
+    def _release(self) -> None:
+        """Give the writer's connection back to the pool (taken again when needed)."""
+        conn, self._conn = self._conn, None
+        if conn is not None:
+            conn.close()
+
     def close(self) -> None:
         """Commit everything: held chunks wait for the lock up to `hold_s` of wall time."""
-        self.flush()
-        end = time.monotonic() + self.hold_s
-        while self._pending:
-            last = time.monotonic() >= end
-            self._commit(wait=last)
-            if self._pending:
-                time.sleep(LOCK_POLL_MS / 1000)
+        try:
+            self.flush()
+            end = time.monotonic() + self.hold_s
+            while self._pending:
+                last = time.monotonic() >= end
+                self._commit(wait=last)
+                if self._pending:
+                    time.sleep(LOCK_POLL_MS / 1000)
+        finally:
+            self._release()
 
     def __enter__(self) -> SampleWriter:
         # the schema's row before the first sample: a chunk encoded while another program

@@ -67,8 +67,11 @@ from study.protocol.traits import ParticipantTraits, draw_traits
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.drivers import Driver
 
-STEP_S = 0.5
-"""Simulated time advanced between writes to the sample writer."""
+STEP_S = 1.0
+"""Simulated time advanced between writes to the sample writer: the writer's chunk
+(`chunk_s`), so each step is one committed chunk (a kill loses at most the step being
+simulated) and the per-step costs (the writer's columns, the observer) come once per
+chunk instead of twice."""
 PACED_STEP_S = 0.05
 """The same when paced: short enough that a watcher (the TUI's live view, 20 Hz and up)
 and a keyboard driver see and act at real time rather than in half-second bursts."""

@@ -220,6 +220,9 @@ class TeleopLoop:
         """Run events and kernel calls until `end_tick` or the driver is done."""
         rows: list[tuple[float, ...]] = []  # the event-by-event path's samples
         blocks: list[np.ndarray] = []  # the kernel's samples, a block per call
+        # on the fast path the kernel writes its samples straight after the previous
+        # call's, into one array for the whole advance (no copy and no block per call)
+        out, filled = self._samples, 0
         logs: list[np.ndarray] = []
         env = self.environment
         c = self.counters
@@ -240,8 +243,10 @@ class TeleopLoop:
             if self._fast:
                 self._reserve_noise(n // acq + 2)
                 self._reserve_draws(4 * (n // acq + 2))
-                if len(self._samples) < n // acq + 2:
-                    self._samples = np.zeros((n // acq + 2, len(SAMPLE_COLUMNS)))
+                if len(out) - filled < n // acq + 2:
+                    grown = np.empty((filled + (end_tick - k) // acq + 2, len(SAMPLE_COLUMNS)))
+                    grown[:filled] = out[:filled]
+                    out = grown
                 # the command at a driver tick that ends this call waits for the driver
                 self.mp[K.M_DEFER_LAST] = 1.0 if nxt % drv == 0 and nxt % acq == 0 else 0.0
                 links = self._links
@@ -258,12 +263,15 @@ class TeleopLoop:
                 packets,
                 self._est_arrays,
                 self._noise,
-                self._samples,
+                out[filled:] if self._fast else self._samples,
                 links,
             )
             c.ticks = nxt
             if m:
-                blocks.append(self._samples[:m].copy())
+                if self._fast:
+                    filled += m
+                else:
+                    blocks.append(self._samples[:m].copy())
                 n_acq, n_est = int(loop[K.L_N_ACQ]), int(loop[K.L_N_EST])
                 c.acquisitions += n_acq
                 c.commands_sent += int(loop[K.L_N_CMD])
@@ -274,6 +282,8 @@ class TeleopLoop:
             if self.keep_ticks:
                 logs.append(log[:n].copy())
             self._on_events(rows)
+        if filled:
+            blocks.append(out[:filled])
         if rows:
             blocks.append(np.array(rows))
         samples = np.concatenate(blocks) if blocks else np.zeros((0, len(SAMPLE_COLUMNS)))

@@ -50,6 +50,32 @@ def test_commits_one_chunk_per_second_of_trial_time(engine: Engine) -> None:
     assert (_stored(engine, trial_id), writer.chunks_committed) == (3500, 4)
 
 
+def test_one_connection_for_the_writers_life_given_back_at_close(engine: Engine) -> None:
+    """Ten chunks take one connection from the pool (not one each) and it is back in the
+    pool after close."""
+    from sqlalchemy import event
+
+    trial_id = _trial(engine)
+    checkouts: list[int] = []
+
+    def _checkout(*_args: object) -> None:
+        checkouts.append(1)
+
+    writer = SampleWriter(engine, trial_id, chunk_s=1.0)
+    writer.__enter__()  # the schema's row: its own short transaction
+    event.listen(engine, "checkout", _checkout)
+    try:
+        t = np.arange(1000) / 100.0  # 10 s at 100 Hz in 0.5 s steps: 10 chunks
+        for k in range(0, 1000, 50):
+            writer.extend({"t_s": t[k : k + 50], "proximal_force_n": np.full(50, 0.5)})
+        writer.__exit__(None, None, None)
+    finally:
+        event.remove(engine, "checkout", _checkout)
+    assert writer.chunks_committed == 10 and _stored(engine, trial_id) == 1000
+    assert len(checkouts) == 1
+    assert engine.pool.checkedout() == 0
+
+
 @pytest.mark.parametrize("step_s", [0.05, 0.25, 0.5, 0.7, 1.0, 2.5])
 def test_held_plus_the_next_step_never_exceeds_one_second(engine: Engine, step_s: float) -> None:
     """A crash loses what the writer holds plus the step being computed (issue 18: 0.5 s

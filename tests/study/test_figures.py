@@ -373,3 +373,32 @@ def test_notes_device_figures_pass_the_check_in_the_shared_style() -> None:
     for fig in (bode(results), ramp_hysteresis(results)):
         assert check_figure(fig) == []
         plt.close(fig)
+
+
+def test_three_formats_are_written_from_one_layout_the_checked_one(tmp_path: Path) -> None:
+    """`save` lays a constrained figure out once for pdf, svg and png (not once per
+    format), and the axes keep the positions the figure check's draw gave them."""
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
+    from study.analysis.figures import save
+
+    fig, axes = plt.subplots(1, 2, figsize=(3.5, 2.0), layout="constrained")
+    axes[0].set_ylabel("a long label\non two lines")
+    fig.canvas.draw()  # what check_figure does: the layout it measures
+    checked = [ax.get_position().bounds for ax in axes]
+    calls: list[int] = []
+    original = ConstrainedLayoutEngine.execute
+
+    def counted(self: ConstrainedLayoutEngine, figure: plt.Figure) -> dict:
+        calls.append(1)
+        return original(self, figure)
+
+    ConstrainedLayoutEngine.execute = counted  # type: ignore[method-assign]
+    try:
+        paths = save(fig, tmp_path, "f", ["pdf", "svg", "png"])
+    finally:
+        ConstrainedLayoutEngine.execute = original  # type: ignore[method-assign]
+    assert [p.name for p in paths] == ["f.pdf", "f.svg", "f.png"]
+    assert all(p.stat().st_size > 0 for p in paths)
+    assert len(calls) == 1
+    assert [ax.get_position().bounds for ax in axes] == pytest.approx(checked, abs=1e-9)

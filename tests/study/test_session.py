@@ -161,7 +161,8 @@ run_session(engine, "P001", "simulated", load_estimator(),
 
 
 def test_an_unpaced_session_killed_at_any_time_loses_at_most_one_second(tmp_path: Path) -> None:
-    """Issue 18, point 4: unpaced runs hand the writer 0.5 s steps; a kill lost 1.5 s."""
+    """Issue 18, point 4: unpaced runs hand the writer steps of up to a chunk (1 s); a
+    kill lost 1.5 s when a chunk was committed only as the next step arrived."""
     db = _study(tmp_path)
     # kill times drawn once (numpy.random.default_rng(18).uniform(1, 8, 2).round(2))
     for die_at_s in (3.8, 6.02):
