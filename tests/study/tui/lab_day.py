@@ -31,6 +31,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,7 +86,8 @@ class Terminal:
         self.socket = Path(tempfile.mkdtemp(prefix="labday-tmux-")) / "sock"
         cols, rows = size
         shell = (
-            f"cd {shlex.quote(str(cwd))} && TERM=xterm-256color {shlex.join(command)}; "
+            f"cd {shlex.quote(str(cwd))} && TERM=xterm-256color COLUMNS={cols} LINES={rows} "
+            f"{shlex.join(command)}; "
             'echo "exit status: $?"; sleep 100000'
         )
         self._tmux(
@@ -108,17 +111,12 @@ class Terminal:
         )
         return out.stdout
 
-    def screen(self, styles: bool = False) -> str:
-        """The text on the screen (with `styles`, its colour escapes: the focus)."""
-        return self._tmux("capture-pane", "-p", *(["-e"] if styles else []), "-t", "lab")
+    def screen(self) -> str:
+        return self._tmux("capture-pane", "-p", "-t", "lab")
 
-    def changed(self, before: str, timeout_s: float = 10.0) -> None:
-        """Wait until the screen (its colours too) differs from `before`."""
-        end = time.monotonic() + timeout_s
-        while self.screen(styles=True) == before:
-            if time.monotonic() > end:
-                raise Timeout(f"the screen did not change in {timeout_s} s\n{self.screen()}")
-            time.sleep(0.02)
+    def history(self) -> str:
+        """The screen and the lines scrolled off it (a traceback after the app ended)."""
+        return self._tmux("capture-pane", "-p", "-t", "lab", "-S", "-5000")
 
     def until(self, pattern: str, *keys: str, tries: int = 20) -> None:
         """Send `keys` until `pattern` is on the screen (each try waits a second for it):
@@ -132,15 +130,12 @@ class Terminal:
                 continue
         raise Timeout(f"not on the screen after {tries} x {keys}: {pattern!r}\n{self.screen()}")
 
-    def key(self, key: str) -> None:
-        """One key, then wait until the screen shows its effect (a focus moved, say): the
-        app routes a key to the widget focused when it arrives, so the next key waits."""
-        before = self.screen(styles=True)
-        self.keys(key)
-        self.changed(before)
-
-    def history(self) -> str:
-        return self._tmux("capture-pane", "-p", "-t", "lab", "-S", "-5000")
+    def wait_until(self, condition, what: str, timeout_s: float = 10.0) -> None:
+        end = time.monotonic() + timeout_s
+        while not condition():
+            if time.monotonic() > end:
+                raise Timeout(f"not seen in {timeout_s} s: {what}\n{self.screen()}")
+            time.sleep(0.02)
 
     def keys(self, *keys: str) -> None:
         """tmux key names (F3, Down, C-s, BTab) or single characters, in one write."""
@@ -187,6 +182,16 @@ class LabDay:
         self.group_shown = GROUPS[0]  # the group list's value (the first group at start)
         self.histories: list[str] = []
         self.retried_keys = 0
+        self.seconds: dict[str, float] = {}
+        """Wall time spent per part of the day (enrolment, trials, forms, notes, starts)."""
+
+    @contextmanager
+    def timed(self, part: str) -> Iterator[None]:
+        start = time.monotonic()
+        try:
+            yield
+        finally:
+            self.seconds[part] = self.seconds.get(part, 0.0) + time.monotonic() - start
 
     # -- the app -------------------------------------------------------------------------
 
@@ -261,11 +266,13 @@ class LabDay:
         term = self.term
         self.to_screen("F2", r"a Add participant")  # the list has the focus
         for _ in range(200):
-            detail = re.search(r"^ (P\d{3}) \(", term.screen(), re.MULTILINE)
-            if detail and detail.group(1) == code:
+            under = _under_cursor(term.screen())
+            if under == code:
                 break
-            # the rows are in code order: down towards a later code, up to an earlier one
-            term.key("Down" if detail is None or detail.group(1) < code else "Up")
+            # the rows are in code order: down towards a later code, up to an earlier one;
+            # one row a key, and the next key once the detail below the list follows
+            term.keys("Down" if under is None or under < code else "Up")
+            term.wait_until(lambda u=under: _under_cursor(term.screen()) != u, "the cursor")
         else:
             raise Timeout(f"the list's cursor never reached {code}")
         term.keys("n")
@@ -300,12 +307,18 @@ class LabDay:
         term.keys("F3")
         nxt = term.wait(rf"next: {code} (\w+)/(\w+) trial 1", 20)
         task, condition = nxt.group(1), nxt.group(2)
-        term.keys("s")
-        shown = term.wait(rf"consent confirmed|running: {code}|Block {task}/{condition}", 30)
-        if "consent" in shown.group(0):
-            term.keys("y")
-        term.wait(rf"Participant {code}\s+▼\s+Block {task}/{condition}\s+▼", 120)
-        term.wait(r"How mentally demanding was the task\?", 10)  # the first rating focused
+        with self.timed("trials (s to the form shown)"):
+            term.keys("s")
+            shown = term.wait(rf"consent confirmed|running: {code}|Block {task}/{condition}", 30)
+            if "consent" in shown.group(0):
+                term.keys("y")
+            term.wait(rf"Participant {code}\s+▼\s+Block {task}/{condition}\s+▼", 120)
+            term.wait(r"How mentally demanding was the task\?", 10)  # the first rating focused
+        with self.timed("forms (typed, read, saved)"):
+            return self._fill_form(code, task, condition, last)
+
+    def _fill_form(self, code: str, task: str, condition: str, last: bool) -> tuple[str, str]:
+        term = self.term
         first = term.screen()
         block = (code, task, condition)
         ratings = {s: 5 * self.rng.randrange(21) for s in SUBSCALES}
@@ -343,6 +356,12 @@ class LabDay:
         if not last:
             self.term.keys("F3")
             self.term.wait(rf"{code}: every scheduled trial is done", 20)
+
+
+def _under_cursor(screen: str) -> str | None:
+    """The participant whose detail shows below the participants list."""
+    detail = re.search(r"^ (P\d{3}) \(", screen, re.MULTILINE)
+    return detail.group(1) if detail else None
 
 
 def _pairs(screen: str) -> dict[int, tuple[str, str]]:
@@ -383,15 +402,18 @@ def run_lab_day(workdir: Path, participants: int = 10, pace: float = 200.0, seed
     day.start()
     try:
         for code, group in zip(codes, enrolment, strict=True):
-            day.enrol(code, group)
+            with day.timed("enrolment"):
+                day.enrol(code, group)
         restart_after = math.ceil(participants / 2) - 1
         for k, code in enumerate(codes):
             last = k == participants - 1
             day.session(code, k, last=last)
-            day.note(code, f"{rng.choice(NOTE_WORDS)} {rng.choice(NOTE_WORDS)} {k}")
+            with day.timed("notes"):
+                day.note(code, f"{rng.choice(NOTE_WORDS)} {rng.choice(NOTE_WORDS)} {k}")
             if k == restart_after and not last:  # the app quit and started again
-                day.quit()
-                day.start()
+                with day.timed("quit and start"):
+                    day.quit()
+                    day.start()
         day.quit(unsaved="{} {}/{}".format(*day.typed.unsaved))
     finally:
         if day.term is not None:
@@ -402,6 +424,7 @@ def run_lab_day(workdir: Path, participants: int = 10, pace: float = 200.0, seed
         "seconds": time.monotonic() - started,
         "seed": seed,
         "retried_keys": day.retried_keys,
+        "parts_s": day.seconds,
     }
 
 
@@ -490,6 +513,8 @@ def main(argv: list[str] | None = None) -> int:
         f"blocks run at pace {args.pace:g}, {result['seconds']:.0f} s; "
         f"{len(wrong)} differences from what was typed"
     )
+    parts = ", ".join(f"{k} {v:.0f} s" for k, v in result["parts_s"].items())
+    print(f"  time: {parts}; keys pressed again: {result['retried_keys']}")
     for line in wrong:
         print("  " + line)
     if args.keep is None:
