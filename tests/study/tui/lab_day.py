@@ -118,13 +118,13 @@ class Terminal:
         """The screen and the lines scrolled off it (a traceback after the app ended)."""
         return self._tmux("capture-pane", "-p", "-t", "lab", "-S", "-5000")
 
-    def until(self, pattern: str, *keys: str, tries: int = 20) -> None:
-        """Send `keys` until `pattern` is on the screen (each try waits a second for it):
+    def until(self, pattern: str, *keys: str, tries: int = 20, each_s: float = 1.0) -> None:
+        """Send `keys` until `pattern` is on the screen (each try waits `each_s` for it):
         for keys that do nothing where the focus may still be on its way."""
         for _ in range(tries):
             self.keys(*keys)
             try:
-                self.wait(pattern, 1.0)
+                self.wait(pattern, each_s)
                 return
             except Timeout:
                 continue
@@ -240,7 +240,7 @@ class LabDay:
             # back along the fields (the list, the find field, the Add button, the group
             # list) until the group list has the focus: it opens with Down, which does
             # nothing on the others (Enter would press Add)
-            term.until(r"esc Dismiss menu", "BTab", "Down")
+            term.until(r"esc Dismiss menu", "BTab", "Down", tries=40, each_s=0.4)
             steps = GROUPS.index(group) - GROUPS.index(self.group_shown)
             term.keys(*(["Down"] * steps if steps > 0 else ["Up"] * -steps), "Enter")
             term.wait(rf"Group {group}\b", 10)
