@@ -208,6 +208,7 @@ SLOW_MODULES = frozenset(
         "tests/study/test_recording_properties.py",
         # the terminal app driven by its pilot or in a real terminal, and import-linter
         "tests/study/tui/test_lab_day.py",
+        "tests/study/tui/test_lab_day_terminal.py",
         "tests/study/tui/test_run_session.py",
         "tests/study/tui/test_adding_a_task.py",
         "tests/study/tui/test_snapshots.py",

@@ -133,11 +133,15 @@ class StudyApp(SafeWorkers, App[None]):
         yield Footer(compact=True)
 
     def on_resize(self, event: events.Resize) -> None:
-        """Short tab labels on a narrow terminal: every tab stays on the bar."""
-        titles = TITLES if event.size.width >= WIDE_COLUMNS else SHORT_TITLES
+        """Short tab labels on a narrow terminal: every tab stays on the bar; and no
+        `^p palette` on the footer, whose 12 columns cut the screen's last keys (ctrl+p
+        still opens it, and `?` lists it)."""
+        wide = event.size.width >= WIDE_COLUMNS
+        titles = TITLES if wide else SHORT_TITLES
         tabs = self.query_one("#tabs", TabbedContent)
         for k, tab in enumerate(TABS):
             tabs.get_tab(tab).label = f"F{k + 1} {titles[k]}"
+        self.query_one(Footer).show_command_palette = wide
 
     def _later_panes(self) -> dict[str, Widget]:
         # imported here, not at the top: the run screen alone pulls in the teleoperation

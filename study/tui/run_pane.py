@@ -300,9 +300,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             )
 
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
-        """Offer only the keys that act now: no driver or pace change during a trial (and
-        no pace for the keyboard, which runs at real time), no stop without a trial."""
-        if action == "driver":
+        """Offer only the keys that act now: no start, driver or pace change during a
+        trial (and no pace for the keyboard, which runs at real time), no stop without a
+        trial."""
+        if action in ("start", "driver"):
             return self.run is None
         if action == "pace":
             return self.run is None and self.driver_kind == "simulated"

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from textual import events, on, work
+from textual.actions import SkipAction
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, VerticalScroll
@@ -74,17 +75,22 @@ class PairChoice(Widget, can_focus=True):
     PairChoice { height: 1; padding: 0 1; }
     PairChoice:focus { background: $boost; text-style: bold; }
     """
-    BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("left", "pick(0)", "Left", show=False),
-        Binding("right", "pick(1)", "Right", show=False),
-        Binding("down", "app.focus_next", "Next pair", show=False),
-        Binding("up", "app.focus_previous", "Previous pair", show=False),
-    ]
 
     def __init__(self, number: int, pair: tuple[str, str], **kwargs: object) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
         self.number, self.pair = number, pair
         self.choice: str | None = None
+
+    # left and right pick on the pair that receives the key. As bindings they acted on
+    # whichever pair had the focus once the key had passed up to the app, which, with
+    # keys typed ahead, was a later pair; down and up: TlxPane.action_move_focus
+    def key_left(self, event: events.Key) -> None:
+        event.stop()
+        self.action_pick(0)
+
+    def key_right(self, event: events.Key) -> None:
+        event.stop()
+        self.action_pick(1)
 
     def action_pick(self, side: int) -> None:
         self.choice = self.pair[side]
@@ -152,9 +158,13 @@ class TlxPane(SafeWorkers, VerticalScroll):
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("ctrl+s", "save", "Save TLX"),
         # up/down move between the fields (the page scrolls to the focused one) instead
-        # of scrolling the page under the cursor
-        Binding("down", "app.focus_next", "Next field", show=False),
-        Binding("up", "app.focus_previous", "Previous field", show=False),
+        # of scrolling the page under the cursor. These four move the focus while the
+        # app hands out the keys (priority), not once the key has reached the field: a
+        # key typed right after one of them then goes to the new field, not the old one
+        *(
+            Binding(key, f"move_focus({step})", "Next field", show=False, priority=True)
+            for key, step in (("down", 1), ("up", -1), ("tab", 1), ("shift+tab", -1))
+        ),
     ]
 
     @dataclass
@@ -232,6 +242,12 @@ class TlxPane(SafeWorkers, VerticalScroll):
         self.query_one("#tlx-participant", Select).value = code
         self.query_one("#tlx-block", Select).value = f"{task}/{condition}"
         # the first rating takes the keys at once (it took three Tabs to reach)
+        self._to_first_rating()
+
+    def _to_first_rating(self) -> None:
+        """Focus the first rating with the form's top in view: whose block it is and the
+        question (a form left scrolled to its Save button reopened with both hidden)."""
+        self.scroll_home(animate=False, immediate=True)
         self.query_one(f"#rating-{TLX_SUBSCALES[0]}", Input).focus()
 
     def _set_blocks(self, code: str) -> None:
@@ -287,17 +303,32 @@ class TlxPane(SafeWorkers, VerticalScroll):
             self._set_status("loading")
             self._load_worker(block, "")
 
+    def action_move_focus(self, step: int) -> None:
+        """The next (1) or previous (-1) field, at once. In a participant or block list
+        the keys are the list's own (they move in its open menu)."""
+        focused = self.screen.focused
+        if focused is None or any(isinstance(w, Select) for w in (focused, *focused.ancestors)):
+            raise SkipAction()
+        if step > 0:
+            self.screen.focus_next()
+        else:
+            self.screen.focus_previous()
+
     def focus_first(self) -> None:
         """F4: the first rating of the block shown, else the participant list."""
         if self._shown is not None:
-            self.query_one(f"#rating-{TLX_SUBSCALES[0]}", Input).focus()
+            self._to_first_rating()
         else:
             self.query_one("#tlx-participant", Select).focus()
 
     def on_descendant_focus(self, event: events.DescendantFocus) -> None:
         """The question of the focused rating above the form, and the focused field in
-        view (shift+tab onto Save scrolled nothing)."""
-        widget = event.widget
+        view (shift+tab onto Save scrolled nothing). Of the field focused now, not of
+        the event's: these events can arrive out of order (the participant list's, from
+        when F4 focused it, after the first rating's), which blanked the question."""
+        widget = self.screen.focused
+        if widget is None or self not in widget.ancestors:
+            return
         text = ""
         if widget.id and widget.id.startswith("rating-"):
             text = TLX_SCALES[widget.id.removeprefix("rating-")][1]

@@ -43,8 +43,8 @@ async def test_e_asks_before_ending_a_measured_trial(make_test_app, study_engine
         await pilot.press("y")  # the session checklist
         await wait_for(pilot, lambda: pane.status == "running", 120)
         await pilot.pause()
-        # during the trial neither driver nor pace is offered; stop is
-        assert {"d", "p"}.isdisjoint(_footer_keys(app)) and "x" in _footer_keys(app)
+        # during the trial neither start, driver nor pace is offered; stop is
+        assert {"s", "d", "p"}.isdisjoint(_footer_keys(app)) and "x" in _footer_keys(app)
         await pilot.press("e")
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         assert "measured trial" in str(app.screen.query_one("#question").render())

@@ -1,7 +1,8 @@
 """A seeded random walk of a lab day through the app, checked against a model after every step.
 
 Each example enrols participants, runs blocks with simulated participants (as fast as they
-go), types NASA-TLX ratings and pairwise choices by key, switches participant and block
+go), types NASA-TLX ratings and pairwise choices by key (one at a time, or the whole form
+as one burst typed ahead), switches participant and block
 (by the lists and as the run screen does when a block ends), saves, and quits and
 restarts the app over the same database. The model holds what was typed on each block
 and what was stored; after every step:
@@ -239,6 +240,34 @@ class Walk:
             choices[k] = pair_order(SEED, code)[k][side]
         self._typed(choices=tuple(choices))
 
+    async def type_ahead(self) -> None:
+        """The whole form as one burst of keys, posted before the app handles the first
+        (a quick operator, or a busy app): six ratings with down between them, then a
+        side of each pair with down between them."""
+        from textual import events
+
+        if self.model.shown is None:
+            return
+        await self.to_form()
+        first = self.app.query_one(f"#rating-{TLX_SUBSCALES[0]}", Input)
+        first.focus()
+        await self.pilot.pause()  # focused: its text is selected, the burst replaces it
+        code = self.model.shown[0]
+        ratings = [str(self.rng.choice([*range(0, 101, 5), 103])) for _ in TLX_SUBSCALES]
+        sides = [self.rng.randrange(2) for _ in range(15)]
+        keys: list[str] = []
+        for value in ratings:
+            keys += [*value, "down"]
+        for side in sides:
+            keys += ["left" if side == 0 else "right", "down"]
+        for key in keys:
+            self.app.post_message(events.Key(key, key if len(key) == 1 else None))
+        await wait_for(self.pilot, lambda: self.app.focused is self.app.query_one("#reason"), 20)
+        await self.pilot.pause()
+        order = pair_order(SEED, code)
+        choices = tuple(order[k][side] for k, side in enumerate(sides))
+        self._typed(ratings=tuple(ratings), choices=choices)
+
     async def type_reason(self) -> None:
         if self.model.shown is None:
             return
@@ -337,6 +366,7 @@ STEP_WEIGHTS = {
     "pick_block": 4,
     "type_rating": 16,
     "pick_pair": 8,
+    "type_ahead": 2,
     "type_reason": 2,
     "save": 6,
     "quit": 2,
