@@ -309,3 +309,18 @@ def test_a_long_delay_is_still_named() -> None:
     report = Calibrator(model, families=["delay"]).fit(model.data(rec)).report()
     assert [e["family"] for e in report["effects_added"]] == ["delay"]
     assert report["ambiguous_effects"] == []
+
+
+def test_the_sign_width_is_refitted_once_an_effect_is_in() -> None:
+    # a 2 JND ripple (general.RANGES' "position_periodic") fills the training error
+    # before it is found, so eq. 1's sign width, fitted first, came out at 0.07 rad/s;
+    # refitted with the ripple in the chain it is the generator's 0.3 rad/s again
+    # (eq. 1's own width, as test_rigid_axis finds on a clean recording), and nothing
+    # is left for a Stribeck dip to take
+    from teleop_core.calibration.general import general_recording, oracle_rmse
+
+    drawn = general_recording(("position_periodic",), 5, 60.0, 100.0)
+    cal = Calibrator(FollowerBase(), families=["position_periodic", "stribeck"]).fit(drawn.data)
+    assert [e.family for e, _ in cal.chain_] == ["position_periodic"]
+    assert cal.base_.sign_speed_rad_s == pytest.approx(0.3, rel=0.05)
+    assert cal.rmse_after_ <= 1.005 * oracle_rmse(drawn)
