@@ -117,13 +117,13 @@ def distance_since_turn(angle: Float1D) -> Float1D:
     steps = np.abs(np.diff(x))
     smallest = float(steps[steps > rounding].min()) if np.any(steps > rounding) else 0.0
     half_width = max(3.0 * noise_sd(np.diff(x)), 1.5 * smallest, rounding)
+    # the direction once the angle has crossed most of the band (|h| > 0.5: h sits at
+    # +-1 only up to rounding, since the band is narrow against the angle)
     h = play_operator(x, half_width)
-    full = np.flatnonzero(np.abs(h) >= 1.0 - 1e-9)
+    full = np.flatnonzero(np.abs(h) > 0.5)
     if len(full) == 0:
         return np.abs(x - x[0])
-    held = np.sign(
-        h[np.maximum.accumulate(np.where(np.abs(h) >= 1.0 - 1e-9, np.arange(len(x)), 0))]
-    )
+    held = np.sign(h[np.maximum.accumulate(np.where(np.abs(h) > 0.5, np.arange(len(x)), 0))])
     held[: full[0]] = held[full[0]]
     turn = np.zeros(len(x), dtype=np.int64)
     previous = 0
