@@ -32,8 +32,7 @@ from typing import ClassVar
 import numpy as np
 
 from teleop_core._typing import Float1D, Float2D
-from teleop_core.calibration.effects import Effect, Signals, smooth_sign
-from teleop_core.calibration.verdict import distance_since_reversal
+from teleop_core.calibration.effects import Effect, Signals, noise_sd, play_operator, smooth_sign
 
 
 def _sign(s: Signals) -> Float1D:
@@ -89,16 +88,53 @@ class PreslidingMemory(OpenTerm):
     formula = "-sgn(speed) exp(-distance_since_reversal / memory_length)"
 
     def grid(self, s: Signals) -> Float1D:
-        d = distance_since_reversal(s["angle"], s["speed"])
+        d = distance_since_turn(s["angle"])
         top = float(np.percentile(d, 90)) or 1.0
         return np.geomspace(top / 300.0, top, 20)
 
     def columns(self, s: Signals, value: float) -> Float2D:
-        d = distance_since_reversal(s["angle"], s["speed"])
+        d = distance_since_turn(s["angle"])
         return (-_sign(s) * np.exp(-d / value))[:, None]
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
         return {f"extra_friction_after_reversal_{unit}": coef[0] * out, "memory_length": value}
+
+
+def distance_since_turn(angle: Float1D) -> Float1D:
+    """|angle - angle at its last turning point| (from the start until the first).
+
+    Turning points from the angle itself, not from the sign of the speed: a speed
+    sensor's noise changes the sign at every slow stretch, and each false reversal
+    would restart the memory. A turn counts once the angle has come back by twice a
+    deadband (a play operator's half width: three noise SDs of the angle's steps, and
+    at least one and a half of its smallest step, an encoder's count, and never within
+    rounding of zero); the turning point is then the last sample at the extreme of the
+    angle since the turn before.
+    """
+    x = np.ascontiguousarray(angle, dtype=float)
+    # steps below a billionth of the angle's size are rounding, not motion
+    rounding = 1e-9 * max(1.0, float(np.max(np.abs(x))))
+    steps = np.abs(np.diff(x))
+    smallest = float(steps[steps > rounding].min()) if np.any(steps > rounding) else 0.0
+    half_width = max(3.0 * noise_sd(np.diff(x)), 1.5 * smallest, rounding)
+    # the direction once the angle has crossed most of the band (|h| > 0.5: h sits at
+    # +-1 only up to rounding, since the band is narrow against the angle)
+    h = play_operator(x, half_width)
+    full = np.flatnonzero(np.abs(h) > 0.5)
+    if len(full) == 0:
+        return np.abs(x - x[0])
+    held = np.sign(h[np.maximum.accumulate(np.where(np.abs(h) > 0.5, np.arange(len(x)), 0))])
+    held[: full[0]] = held[full[0]]
+    turn = np.zeros(len(x), dtype=np.int64)
+    previous = 0
+    for c in np.flatnonzero(np.diff(held) != 0) + 1:
+        stroke = x[previous:c] if held[c] < 0 else -x[previous:c]
+        # the last sample at the extreme: a stroke that ends in a rest turns where the
+        # motion leaves it, and the memory holds while the axis stands
+        k = previous + int(np.flatnonzero(stroke >= stroke.max() - rounding)[-1])
+        # the extreme itself is the old stroke's end; the new one starts after it
+        turn[min(k + 1, len(x) - 1)] = previous = k
+    return np.abs(x - x[np.maximum.accumulate(turn)])
 
 
 OPEN_TERMS: dict[str, OpenTerm] = {

@@ -316,6 +316,14 @@ class Calibrator:
             chain.append((best[1], best[0].searched_value))
             coef, pred, k = best[2], best[3], best[4]
             rmse = best[0].rmse_held_out_n
+            refitted = self.model.fitted_to(data, self.train_, chain)
+            if refitted != self.base_:
+                # the base model's own assumptions again, now that the effect no longer
+                # fills the training error: what they got wrong before would otherwise
+                # be left for a wrong family to take in the next round
+                self.base_ = refitted
+                coef, pred, k = self._fit_chain(data, chain)
+                rmse = _rmse(y_test - pred[self.test_])
             self.step_rmse_.append(rmse)
             round_ += 1
         self.rmse_after_ = rmse

@@ -20,6 +20,7 @@ and the effect library never see a device's column names.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -111,9 +112,13 @@ class BaseModel:
     """Sign of a physical `hysteresis` loop's half height in this model's convention
     (`plausibility.py`): +1, -1, or None where the sign is not checked."""
 
-    def fitted_to(self, data: CalibrationData, train: slice | np.ndarray) -> BaseModel:
-        """This model with its own assumptions fitted on the `train` rows of `data` (the
-        loop calls it before anything else); the model itself where it has none."""
+    def fitted_to(
+        self, data: CalibrationData, train: slice | np.ndarray, chain: Sequence = ()
+    ) -> BaseModel:
+        """This model with its own assumptions fitted on the `train` rows of `data`
+        together with the effects of `chain` ((effect, searched value) pairs; the loop
+        calls it before anything else and again after each effect it adds); the model
+        itself where it has none."""
         return self
 
     def effect(self, family: str) -> Effect:
@@ -170,10 +175,12 @@ class FollowerBase(BaseModel):
         """w_s in use: the fitted or given one, else the estimator's."""
         return SIGN_SPEED_RAD_S if self.sign_speed_rad_s is None else self.sign_speed_rad_s
 
-    def fitted_to(self, data: CalibrationData, train: slice | np.ndarray) -> FollowerBase:
+    def fitted_to(
+        self, data: CalibrationData, train: slice | np.ndarray, chain: Sequence = ()
+    ) -> FollowerBase:
         if self.sign_speed_rad_s is not None:
             return self
-        width = fit_sign_speed(self, data.signals, data.y, train)
+        width = fit_sign_speed(self, data.signals, data.y, train, chain)
         return replace(self, sign_speed_rad_s=width)
 
     @property
@@ -244,7 +251,11 @@ width goes to 2 rad/s on a recording with a nonlinear drag and stands in for it.
 
 
 def fit_sign_speed(
-    model: FollowerBase, signals: Signals, y: Float1D, train: slice | np.ndarray
+    model: FollowerBase,
+    signals: Signals,
+    y: Float1D,
+    train: slice | np.ndarray,
+    chain: Sequence = (),
 ) -> float:
     """The width w_s of eq. 1's sign as sharp as the training data allow, rad/s.
 
@@ -254,12 +265,19 @@ def fit_sign_speed(
     a real pre-sliding range smear it, and those the data show. On eq. 1's own
     recordings (w_s = 0.3) it gives back 0.3; on ones with a step of 0.02 rad/s and
     the speed sensor's 0.01 rad/s noise, 0.06-0.08.
+
+    With `chain`, the effects' columns join the fit: an effect the base model lacks
+    (a ripple, a hysteresis loop) fills the training SSE so that 0.1 % of it spans
+    every width, and the sharpest is taken however wrong; the loop refits the width
+    once the effect is in its chain.
     """
-    s = {k: v[train] for k, v in signals.items()}
+    from teleop_core.calibration.fitting import design
+
     target = np.asarray(y, float)[train]
     sse = []
     for width in SIGN_WIDTHS_RAD_S:
-        X = replace(model, sign_speed_rad_s=float(width)).columns(s)
+        X = design(replace(model, sign_speed_rad_s=float(width)), signals, list(chain))[0]
+        X = X[train]
         coef, *_ = np.linalg.lstsq(X, target, rcond=None)
         e = target - X @ coef
         sse.append(float(e @ e))

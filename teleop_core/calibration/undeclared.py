@@ -58,7 +58,8 @@ def _shape(kind: str, s: dict[str, Float1D], rng: np.random.Generator) -> tuple[
         return col[:, None], {"period_1_rad": p1, "period_2_rad": p2}
     if kind == "presliding_memory":
         delta = rng.uniform(0.2, 1.0)
-        d = distance_since_reversal(theta, w)
+        # turns of the true motion: the bristles do not follow the speed sensor's noise
+        d = distance_since_reversal(s["true_angle"], s["true_speed"])
         return (-sign * np.exp(-d / delta))[:, None], {"memory_rad": delta}
     if kind == "hidden_force":
         n = len(t)
@@ -76,10 +77,12 @@ def undeclared_recording(
     size_n: float = JND_N,
 ) -> tuple[CalibrationData, Float2D, dict[str, Any]]:
     """Calibration data with `kind` added, the oracle's extra columns, and the truth."""
-    rec, _ = follower_recording(duration_s, (), rate_hz=rate_hz, seed=seed)
+    true: dict[str, Float1D] = {}
+    rec, _ = follower_recording(duration_s, (), rate_hz=rate_hz, seed=seed, noise_free=true)
     data = FollowerBase().data(rec)
     rng = np.random.default_rng(seed + 1000)
-    shape, truth = _shape(kind, data.signals, rng)
+    s = {**data.signals, "true_angle": true["angle"], "true_speed": true["speed"]}
+    shape, truth = _shape(kind, s, rng)
     scale = size_n / float(np.sqrt(np.mean(shape.sum(axis=1) ** 2)))
     y = data.y + scale * shape.sum(axis=1)
     truth.update(scale=scale, rms_n=size_n)
