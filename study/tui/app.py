@@ -91,6 +91,9 @@ class StudyApp(SafeWorkers, App[None]):
     /* focus that reads in both themes (the default was one grey step on the dark one) */
     Input:focus, Select:focus > SelectCurrent, DataTable:focus, Button:focus,
     PairChoice:focus { background-tint: $accent 35%; }
+    /* notices stack up from the footer, so they never cover a screen's first lines (whose
+       participant and block a NASA-TLX form opens on) */
+    ToastRack { align: right bottom; }
     """
     COMMANDS = App.COMMANDS | {StudyCommands}
     """ctrl+p: Textual's commands and the app's own (`study.tui.palette`)."""
@@ -265,8 +268,8 @@ class StudyApp(SafeWorkers, App[None]):
 
     def _open_tlx(self, code: str, task: str, condition: str) -> None:
         self.action_tab("tlx")
+        # the form's first line names the participant and block: no notice over it
         self._pane("tlx").open_block(code, task, condition)  # type: ignore[attr-defined]
-        self.notify(f"{code} finished the {task}/{condition} block: NASA-TLX now")
 
     # -- actions --------------------------------------------------------------------------
 

@@ -281,7 +281,8 @@ class LabDay:
         term.wait(r"contact details", 10)
         term.text(text)
         term.keys("Enter")
-        term.wait(rf"{code}: note kept", 30)
+        # the status line, or (when the block's notices cover it) the detail under the list
+        term.wait(rf"{code}: note kept|note: {re.escape(text)}", 30)
         self.typed.notes[code] = text
 
     # -- sessions ------------------------------------------------------------------------
@@ -293,7 +294,7 @@ class LabDay:
         self.to_screen("F3", r"s Start")
         if self.picked is None:  # nobody picked: the list has the focus
             term.keys("Enter")
-            term.wait(r"esc Dismiss menu", 10)  # the list is open
+            term.wait(r"Enter: pick", 10)  # the picker is open on "(no change)"
             term.keys(*["Down"] * (position + 1), "Enter")
         else:  # the one before is done: n goes on to the next
             term.wait(rf"{self.picked}: every scheduled trial is done; n: on to {code}", 20)

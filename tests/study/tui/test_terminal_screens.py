@@ -66,7 +66,7 @@ def _pick_first(term: Terminal) -> None:
     """F3 and P001 from the participant list (F3 focuses it while nobody is picked)."""
     term.keys("F3")
     term.wait(r"s Start")
-    term.until(r"esc Dismiss menu", "Enter")
+    term.until(r"Enter: pick", "Enter")  # the picker: "(no change)", then P001...
     term.keys("Down", "Enter")
     term.wait(r"next: P001 ")
 
@@ -123,7 +123,8 @@ def test_no_start_driver_or_pace_during_a_trial_and_p_changes_nothing(terminal: 
         term.keys("x")  # p did nothing: x asks to stop the trial
         term.wait(r"Stop P001's running trial\?")
         assert "pace: 1x (p)" in term.screen()
-        term.keys("y")
+        term.text("checking the keys")  # x asks why; the reason is audited
+        term.keys("Enter")
         term.wait(r"status: interrupted")
         term.wait(r"s Start d Driver p Pace")
         _quit(term)
@@ -167,7 +168,8 @@ def test_the_task_keys_are_whole_during_a_keyboard_trial(
         assert line.group(0).strip() == hints
         term.keys("x")
         term.wait(r"Stop P001's running trial\?")
-        term.keys("y")
+        term.text("checking the key hints")  # x asks why; the reason is audited
+        term.keys("Enter")
         term.wait(r"status: interrupted")
         _quit(term)
     finally:
