@@ -219,14 +219,14 @@ def backup_database(
     out_dir: Path,
     *,
     now: datetime | None = None,
-    progress: Callable[[str], None] = lambda _: None,
+    notice: Callable[[str], None] = lambda _: None,
 ) -> BackupResult:
     """Check the database, then write a checked copy to `out_dir/NAME-STAMP.db`.
 
     The source is checked first; a source with problems is not copied (its result says
     why, and no file is written). Raises OSError when `out_dir` cannot be written.
     """
-    progress("checking the database")
+    notice("checking the database")
     source_check = check_database(engine)
     path = out_dir / _copy_name(engine, now)
     if not source_check.ok:
@@ -235,11 +235,12 @@ def backup_database(
     part = out_dir / f".{path.name}.part"
     part.unlink(missing_ok=True)
     try:
-        progress(f"copying to {path}")
+        notice(f"copying to {path}")
         with _snapshot(engine) as conn:
             if is_sqlite(conn):
                 # outside any transaction (SQLAlchemy would begin one): the driver's own
                 raw = conn.connection.driver_connection
+                assert raw is not None  # an open connection has its driver's
                 raw.execute("VACUUM INTO ?", (str(part),))
                 expected = None  # writers may add rows after the snapshot: counted below
             else:
@@ -248,7 +249,7 @@ def backup_database(
                     expected = _copy_postgresql(conn, target)
                 finally:
                     target.dispose()
-        progress("checking the copy")
+        notice("checking the copy")
         copy_engine = create_engine(f"sqlite:///{part}", poolclass=NullPool)
         try:
             with copy_engine.connect() as conn:

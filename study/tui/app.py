@@ -32,6 +32,7 @@ from study.tui.db_errors import SafeWorkers
 from study.tui.overview import OverviewPane
 from study.tui.palette import StudyCommands
 from study.tui.services import Roster, StudyServices
+from study.tui.tabs import TABS, TITLES
 
 if TYPE_CHECKING:  # imported when first mounted, after the overview has shown
     from study.tui.participant_page import ParticipantPage
@@ -41,8 +42,6 @@ if TYPE_CHECKING:  # imported when first mounted, after the overview has shown
 
 __all__ = ["TABS", "StudyApp", "TuiSettings", "make_app"]
 
-TABS = ("overview", "participants", "run", "tlx", "analysis", "calibration")
-TITLES = ("Overview", "Participants", "Run", "NASA-TLX", "Analysis", "Calibration")
 SHORT_TITLES = ("Home", "People", "Run", "TLX", "Stats", "Calib")
 """The tab labels below `WIDE_COLUMNS` columns, so that all six stay on the bar."""
 WIDE_COLUMNS = 80

@@ -86,10 +86,10 @@ class OpsMixin(SafeWorkers):
     def _backup(self, folder: Path) -> None:
         from db.maintenance import backup_database
 
-        def progress(line: str) -> None:
+        def notice(line: str) -> None:
             self.app.call_from_thread(self._ops_status, f"{line}...")
 
-        result = backup_database(self.app.services.engine, folder, progress=progress)  # type: ignore[attr-defined]
+        result = backup_database(self.app.services.engine, folder, notice=notice)  # type: ignore[attr-defined]
         ok = result.source.ok and result.copy.ok
         self.app.call_from_thread(self._ops_done, result.line(), ok)
 

@@ -18,22 +18,21 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from textual.command import DiscoveryHit, Hit, Hits, Provider
-
-if TYPE_CHECKING:
-    from study.tui.app import StudyApp
 
 __all__ = ["StudyCommands", "study_commands"]
 
 Command = tuple[str, str, Callable[[], Any]]
+StudyApp = Any
+"""The app (`study.tui.app.StudyApp`), which imports this module: named, not imported."""
 """(name shown, help line, what it does)."""
 
 
 def study_commands(app: StudyApp) -> list[Command]:
     """The palette's commands for the app as it stands."""
-    from study.tui.app import TABS, TITLES
+    from study.tui.tabs import TABS, TITLES
 
     out: list[Command] = [
         (f"Screen: {TITLES[k]}", f"F{k + 1}", partial(app.action_tab, tab))
@@ -87,7 +86,7 @@ def study_commands(app: StudyApp) -> list[Command]:
 
 def _screen_keys(app: StudyApp) -> Iterator[Command]:
     """Every key a later screen shows in its footer, run on that screen."""
-    from study.tui.app import TABS, TITLES
+    from study.tui.tabs import TABS, TITLES
 
     for k, tab in enumerate(TABS[1:], start=1):
         try:

@@ -21,10 +21,14 @@ depends_on: str | Sequence[str] | None = None
 
 
 def upgrade() -> None:
-    with op.batch_alter_table("trials") as batch:
-        batch.add_column(sa.Column("invalid_reason", sa.Text(), nullable=True))
+    # a plain ALTER TABLE on both backends: a batch copy of `trials` on SQLite would drop
+    # the old table, and with it (ON DELETE CASCADE) every trial's samples and measures
+    op.add_column("trials", sa.Column("invalid_reason", sa.Text(), nullable=True))
 
 
 def downgrade() -> None:
-    with op.batch_alter_table("trials") as batch:
-        batch.drop_column("invalid_reason")
+    if op.get_bind().dialect.name == "sqlite":
+        # SQLite drops a column in place since 3.35 (no table copy, see upgrade)
+        op.execute("ALTER TABLE trials DROP COLUMN invalid_reason")
+    else:
+        op.drop_column("trials", "invalid_reason")
