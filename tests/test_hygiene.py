@@ -13,6 +13,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("study", "teleop_core", "db", "examples")
 SUFFIXES = {".py", ".md", ".toml", ".mako", ".txt", ".cfg"}
+CHECKED = (*PACKAGES, "tests")
+"""The trees checked for every suffix; `benchmarks/` is checked for its Python only, since
+its results and HISTORY.md rightly hold dates."""
 
 NOTEBOOK = re.compile(
     r"\bissues?\s*#?\d+"  # "issue 24", "issue #24", "Issue 17's"
@@ -50,12 +53,23 @@ def test_the_notebook_pattern_finds_what_it_should(line: str, found: bool) -> No
     assert bool(notebook_lines(line)) is found
 
 
+def checked_files() -> list[Path]:
+    """Code, tests and benchmark scripts; not this file, whose examples are the pattern's
+    test data."""
+    files = [
+        path
+        for tree in CHECKED
+        for path in sorted((ROOT / tree).rglob("*"))
+        if path.suffix in SUFFIXES and "__pycache__" not in path.parts
+    ]
+    files += sorted((ROOT / "benchmarks").rglob("*.py"))
+    return [path for path in files if path != Path(__file__).resolve()]
+
+
 def test_code_and_help_hold_no_issue_numbers_dates_or_unnamed_papers() -> None:
     hits = [
         f"{path.relative_to(ROOT)}:{n}: {line.strip()}"
-        for package in PACKAGES
-        for path in sorted((ROOT / package).rglob("*"))
-        if path.suffix in SUFFIXES and "__pycache__" not in path.parts
+        for path in checked_files()
         for n, line in notebook_lines(path.read_text(encoding="utf-8"))
     ]
     assert hits == [], "lab-notebook text in code:\n" + "\n".join(hits)

@@ -78,7 +78,7 @@ def test_one_connection_for_the_writers_life_given_back_at_close(engine: Engine)
 
 @pytest.mark.parametrize("step_s", [0.05, 0.25, 0.5, 0.7, 1.0, 2.5])
 def test_held_plus_the_next_step_never_exceeds_one_second(engine: Engine, step_s: float) -> None:
-    """A crash loses what the writer holds plus the step being computed (issue 18: 0.5 s
+    """A crash loses what the writer holds plus the step being computed (0.5 s
     steps used to put 1.5 s at risk)."""
     trial_id = _trial(engine)
     per_step = round(step_s * 100)  # 100 Hz, as the loops sample

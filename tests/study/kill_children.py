@@ -54,7 +54,7 @@ def session_killed_at(url: str, code: str, after_trials: int, die_at_s: float, l
 PACE = 20.0
 """Times real time the sessions of `run_all_jobs_2` run at: a session then outlasts the
 workers' check of their parent (`parallel.PARENT_POLL_S`, 0.5 s). Unpaced, a fast host
-(about 500x real time, 2026-11-26) ran a participant's six trials in under 0.5 s, and
+(about 500x real time) ran a participant's six trials in under 0.5 s, and
 the kill met sessions already finished instead of a trial to interrupt."""
 
 

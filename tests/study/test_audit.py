@@ -1,4 +1,4 @@
-"""The audit log (issue 18, point 9): an actor on every row, the pairwise choices
+"""The audit log: an actor on every row, the pairwise choices
 audited, a reason required for every edit."""
 
 from __future__ import annotations

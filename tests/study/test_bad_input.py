@@ -1,4 +1,4 @@
-"""Bad input through the real `study` command (issue 18, points 5, 6 and 8).
+"""Bad input through the real `study` command.
 
 Each case is an input that gave a traceback or was accepted as nonsense. Through
 `study.cli.main`, as the console script runs it, each must now end with exactly one
@@ -101,7 +101,7 @@ ENTER = [
 ENTER_UNRUN = [*ENTER, "--reason", "paper form, block not run"]
 SIMULATE = ["simulate", "--group", "novice", "--condition", "HV", "--out", "sim.csv"]
 POWER = ["power", "--design", "d.toml", "--n-sim", "10"]
-"""ENTER for a block with no trial yet: that needs a reason too (issue 19)."""
+"""ENTER for a block with no trial yet: that needs a reason too."""
 
 CASES = [
     # 5: tracebacks

@@ -1,4 +1,4 @@
-"""`study bench startup` (issue 21): one tiny run end to end, and its sqlite3 reference."""
+"""`study bench startup`: one tiny run end to end, and its sqlite3 reference."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The calibration figures of issue 16, point 4: the training and held-out blocks over
+"""The calibration figures: the training and held-out blocks over
 time, and the held-out residual against the quantity REPORT.json's `unexplained` names."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""`study estimator train --calibration REPORT.json` (issue 10, point 5), on small data."""
+"""`study estimator train --calibration REPORT.json`, on small data."""
 
 from __future__ import annotations
 

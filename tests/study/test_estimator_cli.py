@@ -80,7 +80,7 @@ def test_run_writes_one_estimate_per_full_window(
 def test_run_flags_the_estimates_whose_inputs_leave_the_training_range(
     model_dir: Path, recording_csv: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """Issue 17, point 4: the same drive three times as fast. Every sample faster than
+    """The same drive three times as fast. Every sample faster than
     anything in the whole training recording must be flagged, and the summary line gives
     the share the column holds."""
     fast = pd.read_csv(recording_csv)

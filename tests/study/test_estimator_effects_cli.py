@@ -1,5 +1,5 @@
 """`study estimator train` (default `--effects auto`) then `study estimator run` on the
-rest of the same recording (issue 17), as a lab would: a drive whose torque per amp falls
+rest of the same recording, as a lab would: a drive whose torque per amp falls
 as its winding heats, an effect eq. 1 lacks and no window of inputs tells.
 
 References: eq. 1's own error on the held-out part (PRED.csv's `f_physics`) and the

@@ -1,5 +1,5 @@
 """`study export` files are safe to open in a spreadsheet, replaced atomically and never
-written through a symbolic link (issue 18, Export)."""
+written through a symbolic link."""
 
 from __future__ import annotations
 

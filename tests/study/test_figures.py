@@ -139,7 +139,7 @@ def test_every_figure_passes_the_check_at_both_widths(engine: Engine, width: str
     for d in drawn:
         assert d.problems() == [], d.name
         texts = [t.get_text() for t in d.figure.findobj(plt.Text)]
-        assert any("Simulated participants" in t for t in texts), d.name  # issue 25
+        assert any("Simulated participants" in t for t in texts), d.name
         assert d.figure.get_figwidth() == {"single": 3.5, "double": 7.16}[width]
         if width == "single" and not d.name.startswith("fig9"):  # Fig. 12, TLX profile
             assert d.figure.get_figheight() <= 4.0, d.name

@@ -1,4 +1,4 @@
-"""Imports that reconcile with enrolment and the schedule (issue 18, points 2 and 3)."""
+"""Imports that reconcile with enrolment and the schedule."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
-"""Twenty `kill -9` at seeded random points (issue 18, Targets).
+"""Twenty `kill -9` at seeded random points.
 
-"20 kill -9 at random points, including the parent of --jobs 2: 0 completed trials
+The target: "20 kill -9 at random points, including the parent of --jobs 2: 0 completed trials
 lost, <= 1.0 s of samples lost, 0 slots completed twice."
 
 - Four chains of four kills of a session, each at a random trial time: the

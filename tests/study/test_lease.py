@@ -1,4 +1,4 @@
-"""One session per participant (issue 18, point 1): leases, takeover, `--jobs` workers.
+"""One session per participant: leases, takeover, `--jobs` workers.
 
 Reproductions from the issue: `study run --participant P001 --pace 5 & study run
 --participant P001` ran both sessions (slots completed twice); after `kill -9` of the

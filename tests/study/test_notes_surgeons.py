@@ -1,4 +1,4 @@
-"""The NOTES measures the surgeons' benchmark compares (seed 001, IV), on hand-built
+"""The NOTES measures the surgeons' benchmark compares ([notes], IV), on hand-built
 traces, and the benchmark's summary against hand-computed statistics."""
 
 from __future__ import annotations

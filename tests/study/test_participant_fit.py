@@ -1,4 +1,4 @@
-"""`study participants fit` (issue 24): recovery of known trait distributions, an effect
+"""`study participants fit`: recovery of known trait distributions, an effect
 the participants lack reported instead of absorbed, and bad input refused in one line.
 
 The data are simulated through the real engine (`Task.simulate`: the LCCA loop, the

@@ -1,4 +1,4 @@
-"""`study participants fit --task notes` (issue 24): the NOTES task fitted through the same
+"""`study participants fit --task notes`: the NOTES task fitted through the same
 engine as the LCCA, recovery of a known trait, and the fitted model taken by
 `study simulate`. Small data, as in `test_participant_fit.py`: 6 people per group, an
 emulator of 120 settings (with 40, checked on held-out settings, the preferred speed was

@@ -1,5 +1,5 @@
 """The participant fit reads each trial's behavioural features off the samples the session
-runner stored (issue 24): checked against the simulated people's own traits, which the
+runner stored: checked against the simulated people's own traits, which the
 study's seed and the participants' codes give back (`session.participant_traits`), on
 SQLite and on the PostgreSQL server."""
 

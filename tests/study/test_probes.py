@@ -87,7 +87,7 @@ def test_the_force_threshold_in_newtons_is_the_trait_over_the_gain() -> None:
 
 
 def test_the_simulated_groups_thresholds_sit_near_the_papers_jnd() -> None:
-    # seed 000: a JND of 0.192 N; at the paper's gain the 20/8/8 study's mean threshold
+    # [endovascular]: a JND of 0.192 N; at the paper's gain the 20/8/8 study's mean threshold
     rng = np.random.default_rng(0)
     people = [
         draw_traits(g, rng)

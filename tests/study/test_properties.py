@@ -1,4 +1,4 @@
-"""Property-based tests over the import and design parsers (issue 18, Tests).
+"""Property-based tests over the import and design parsers.
 
 Every generated input is either accepted, and then round-trips (an imported trial comes
 back out of `study export` with its values, all within the plausible ranges; a design

@@ -1,4 +1,4 @@
-"""Property-based tests over the recording parsers (issue 18, Tests).
+"""Property-based tests over the recording parsers.
 
 The CSV recordings that `study calibrate`, `study estimator train/run` and `study
 identify` read (follower, master, NOTES, rigid-axis) are generated valid and then
@@ -255,7 +255,7 @@ def test_a_refused_recording_stops_its_command_with_one_line_and_no_output(
 
 @pytest.mark.parametrize("name", list(CONTRACTS))
 def test_an_all_zero_recording_is_one_line_and_no_output(name: str, tmp_path: Path) -> None:
-    """Issue 18, point 5: all-zero recordings gave tracebacks (a division by zero in the
+    """All-zero recordings gave tracebacks (a division by zero in the
     fit) from calibrate, estimator train and identify notes."""
     contract = CONTRACTS[name]
     rows = _valid(contract.columns)

@@ -161,7 +161,7 @@ run_session(engine, "P001", "simulated", load_estimator(),
 
 
 def test_an_unpaced_session_killed_at_any_time_loses_at_most_one_second(tmp_path: Path) -> None:
-    """Issue 18, point 4: unpaced runs hand the writer steps of up to a chunk (1 s); a
+    """Unpaced runs hand the writer steps of up to a chunk (1 s); a
     kill lost 1.5 s when a chunk was committed only as the next step arrived."""
     db = _study(tmp_path)
     # kill times drawn once (numpy.random.default_rng(18).uniform(1, 8, 2).round(2))
@@ -184,7 +184,7 @@ def test_an_unpaced_session_killed_at_any_time_loses_at_most_one_second(tmp_path
 
 
 def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) -> None:
-    """Issue 18, point 5: a full disk gave 2-4 chained tracebacks. SQLite's page limit
+    """A full disk gave 2-4 chained tracebacks. SQLite's page limit
     makes the database full for real (SQLITE_FULL) a few pages into the first trial."""
     from sqlalchemy import event
 

@@ -1,4 +1,4 @@
-"""Withdrawing a participant (issue 19): kept and marked, audited, no more sessions,
+"""Withdrawing a participant: kept and marked, audited, no more sessions,
 left out of the analysis with the reason, still in the export."""
 
 from __future__ import annotations

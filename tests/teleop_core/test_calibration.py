@@ -1,10 +1,10 @@
-"""The calibration loop on recordings with effects nobody declared (issue 10, point 6).
+"""The calibration loop on recordings with effects nobody declared.
 
 Each simulated recording carries one effect (or two, or none) that eq. 1 lacks, with
 its parameters drawn from the seed in the test; the loop must name it, cut the
 held-out error, and leave the clean recording alone. The references are the drawn
 parameters themselves, the published eqs. 14-15 for the dial, the NOTES model's own
-friction and transmission parameters (issue 6), and direct computations (numpy's
+friction and transmission parameters, and direct computations (numpy's
 corrcoef, statsmodels' own Ljung-Box) for the residual tests.
 """
 
@@ -179,7 +179,7 @@ def test_bad_settings_are_refused() -> None:
 
 @pytest.mark.parametrize("dof", ["translation", "rotation"])
 def test_notes_ramps_show_the_papers_hysteresis_and_ccw_loss(dof: str) -> None:
-    """Seed 001's static ramps: friction hysteresis in both axes, and in rotation the
+    """The static ramps of [notes]: friction hysteresis in both axes, and in rotation the
     counter-clockwise loss; the linear Fig. 8 device gets nothing."""
     params = default_params(dof)
     model = NotesBase(dof)

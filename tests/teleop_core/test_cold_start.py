@@ -1,5 +1,5 @@
 """A fresh process: no PyTorch to run a trained estimator, no compilation of the loop
-kernel and no numba after the first process (issue 21). Each check runs in its own
+kernel and no numba after the first process. Each check runs in its own
 interpreter, since what is imported or compiled is a property of a process."""
 
 from __future__ import annotations

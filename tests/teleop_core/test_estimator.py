@@ -108,7 +108,7 @@ def test_a_recording_at_another_rate_is_resampled_to_the_models(trained, short_r
 def test_a_filter_that_hurts_on_validation_passes_the_hybrid_estimate_through(
     tmp_path: Path, short_recording: FollowerRecording
 ) -> None:
-    """Issue 17, point 3: a process noise far too small freezes the filter on its first
+    """A process noise far too small freezes the filter on its first
     state, which the validation blocks see as a large error; the model then passes the
     hybrid estimate through, in the batch path, the causal path and once saved."""
     rec = short_recording.slice(0, 3000)

@@ -1,4 +1,4 @@
-"""The estimator with a calibrated physics stage (issue 10, point 5), on small data."""
+"""The estimator with a calibrated physics stage, on small data."""
 
 from __future__ import annotations
 

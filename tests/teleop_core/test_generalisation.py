@@ -1,4 +1,4 @@
-"""The estimator on a time block it never saw (issue 17, point 6).
+"""The estimator on a time block it never saw.
 
 Each recording carries one seeded effect eq. 1 lacks, at the JND's size
 (`calibration.synthetic.follower_recording`): the estimator is trained on the first

@@ -1,4 +1,4 @@
-"""Memory features (issue 17): values against closed forms, the causal path, the folder."""
+"""Memory features: values against closed forms, the causal path, the folder."""
 
 from __future__ import annotations
 

@@ -93,7 +93,7 @@ def test_missing_and_empty_files_are_refused(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
-        # issue 18: each was accepted (and failed later) or gave a traceback
+        # each was accepted (and failed later) or gave a traceback
         (
             lambda h, rows: (h, ["0.00,1e300,0,2,0.5", *rows[1:]]),
             r"line 2, column 'iq': '1e300' is beyond ±1e\+12; expected a value in SI units",

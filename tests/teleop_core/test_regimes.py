@@ -1,4 +1,4 @@
-"""Regime labels and the validation split that must hold every regime (issue 17, point 1)."""
+"""Regime labels and the validation split that must hold every regime."""
 
 from __future__ import annotations
 
@@ -68,7 +68,7 @@ def test_split_puts_a_rare_regime_in_both_parts(seed: int) -> None:
 
 
 def test_a_random_choice_of_blocks_often_misses_the_rare_regime() -> None:
-    """The old rule (seeded random blocks): the case issue 17 describes."""
+    """The old rule (seeded random blocks): what the regime-covering split replaces."""
     n, T = 20_000, 20
     backward = _rare_regime_masks(n)["direction:backward"]
     misses = 0

@@ -1,5 +1,5 @@
 """The `rigid-axis` base model on measured data (EMPS) and on recordings built here, and
-the loop's verdict on what it leaves (issue 16).
+the loop's verdict on what it leaves.
 
 EMPS: A. Janot, M. Gautier, M. Brunot, "Data Set and Reference Models of EMPS",
 Workshop on Nonlinear System Identification Benchmarks, 2019 (tests/data/emps/).
@@ -289,7 +289,7 @@ def test_a_sharp_coulomb_step_gets_nothing_added(seed: int) -> None:
 
 
 def test_eq1_with_its_fixed_sign_width_names_a_spurious_stribeck() -> None:
-    # what the fitted width prevents (issue 16): eq. 1's tanh(w / 0.3) on the same
+    # what the fitted width prevents: eq. 1's tanh(w / 0.3) on the same
     # recording as seed 0 above leaves a residual near rest that `stribeck` takes
     rec, _ = follower_recording(120.0, (), rate_hz=200.0, seed=500, sign_speed_rad_s=0.02)
     model = FollowerBase(sign_speed_rad_s=0.3)

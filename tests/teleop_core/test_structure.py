@@ -1,4 +1,4 @@
-"""Structure targets of issue 20 that must stay met: no teleop_core module over 400
+"""Structure targets that must stay met: no teleop_core module over 400
 lines, and no import cycle among teleop_core's modules (grimp, as import-linter sees
 them; `pyproject.toml`'s contracts hold the layering)."""
 

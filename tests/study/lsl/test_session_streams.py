@@ -347,7 +347,7 @@ def test_the_trials_samples_go_out_with_the_tasks_channels_units_and_clock(
     task = get_task("lcca")
     inlet = paced["samples"]
     assert inlet.channels == [(c.name, c.unit) for c in task.sample_columns]
-    assert inlet.rate_hz == 100.0  # the loop's acquisition rate (seed 000, IV-A)
+    assert inlet.rate_hz == 100.0  # the loop's acquisition rate ([endovascular], IV-A)
     rows, stamps = np.concatenate(inlet.rows), np.asarray(inlet.stamps)
     # every stored sample of both trials, in order, as stored
     engine = paced["engine"]

@@ -1,5 +1,5 @@
 """The app never ends on a database error: a read-only or locked database gives one
-plain line, the screen stays, and what was typed is kept (issue 19, first point).
+plain line, the screen stays, and what was typed is kept.
 
 The database is a real SQLite file made read-only per connection (`PRAGMA query_only`:
 the tests run as root, for whom file permissions do not stop a write) or write-locked by

@@ -1,4 +1,4 @@
-"""A lab day's keys (issue 19): digits in a form stay in the form, every shown key works
+"""A lab day's keys: digits in a form stay in the form, every shown key works
 where it is shown, `?` lists the keys, and what cannot be undone is asked first."""
 
 from __future__ import annotations

@@ -284,7 +284,7 @@ async def test_calibration_screen_runs_the_loop_on_a_recording(make_test_app, tm
     from teleop_core.notes.params import default_params
     from teleop_core.notes.simulate import simulate_recording
 
-    # a clamped ramp of the NOTES rotation: seed 001 reports friction hysteresis and a
+    # a clamped ramp of the NOTES rotation: [notes] reports friction hysteresis and a
     # counter-clockwise loss, which the loop must name (`direction_asymmetry`)
     simulate_recording(
         default_params("rotation"), "ramp", "clamped", noise=0.02, seed=4, rate_hz=200.0

@@ -79,7 +79,7 @@ def test_the_overview_loads_neither_numpy_nor_the_other_screens(study_engine: En
 
 
 def test_the_later_screens_load_no_statistics() -> None:
-    # they are mounted before the run screen can prepare the simulation (issue 21):
+    # they are mounted before the run screen can prepare the simulation:
     # the analysis screen loads scipy.stats and statsmodels only when it analyses
     code = (
         "from study.tui.app import StudyApp; "

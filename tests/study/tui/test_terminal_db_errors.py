@@ -2,7 +2,7 @@
 fails under it: read-only, locked by another program, or deleted mid-session. Each time
 the app shows one plain line naming the cause (in the status of the participants
 screen and in a notification), shows no traceback, still switches screens, and quits
-cleanly with ctrl+q (issue 19, last point). The Pilot tests of the same cases are in
+cleanly with ctrl+q. The Pilot tests of the same cases are in
 test_db_errors.py.
 """
 
