@@ -271,13 +271,16 @@ def fit_sign_speed(
     every width, and the sharpest is taken however wrong; the loop refits the width
     once the effect is in its chain.
     """
-    from teleop_core.calibration.fitting import design
-
+    # the design of base + chain (`fitting.design`, which imports this module): the
+    # effects' signals and columns do not depend on the width, so they are made once
+    for effect, value in chain:
+        signals = effect.transform(signals, value)
+    effect_columns = [effect.columns(signals, value) for effect, value in chain]
     target = np.asarray(y, float)[train]
     sse = []
     for width in SIGN_WIDTHS_RAD_S:
-        X = design(replace(model, sign_speed_rad_s=float(width)), signals, list(chain))[0]
-        X = X[train]
+        base = replace(model, sign_speed_rad_s=float(width)).columns(signals)
+        X = np.column_stack([base, *effect_columns])[train]
         coef, *_ = np.linalg.lstsq(X, target, rcond=None)
         e = target - X @ coef
         sse.append(float(e @ e))

@@ -102,7 +102,7 @@ def test_a_lock_during_a_trial_is_shown_and_nothing_is_lost(study_file: Path) ->
         app.child.expect(r"t +\d+\.\d s")  # the live view goes on meanwhile
         locker.release()
         # the block is done: the app opens its questionnaire
-        app.child.expect(words("finished", "the", "lcca/VO", "block"), timeout=120)
+        app.child.expect(words("How", "mentally", "demanding"), timeout=120)
         assert "free space" not in app.drawn.getvalue()
         app.quit()
     finally:
@@ -126,7 +126,7 @@ def test_e_asks_before_ending_a_measured_trial(study_file: Path) -> None:
         app.child.expect(words("measured", "trial", "now?"))
         app.child.send("y")
         # the block is done: the app opens its questionnaire
-        app.child.expect(words("finished", "the", "lcca/VO", "block"), timeout=60)
+        app.child.expect(words("How", "mentally", "demanding"), timeout=60)
         app.quit()
     finally:
         app.close()

@@ -251,7 +251,11 @@ class Walk:
         await self.to_form()
         first = self.app.query_one(f"#rating-{TLX_SUBSCALES[0]}", Input)
         first.focus()
-        await self.pilot.pause()  # focused: its text is selected, the burst replaces it
+        await self.pilot.pause()
+        # its text selected, so the burst replaces it (focusing selects it, but the field
+        # may have the focus already, as a form opens on it)
+        first.select_all()
+        await wait_for(self.pilot, lambda: first.selected_text == first.value, 10)
         code = self.model.shown[0]
         ratings = [str(self.rng.choice([*range(0, 101, 5), 103])) for _ in TLX_SUBSCALES]
         sides = [self.rng.randrange(2) for _ in range(15)]
