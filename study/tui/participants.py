@@ -38,7 +38,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
     ParticipantsPane #detail { height: auto; max-height: 4; color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("a", "add", "Add participant"),
+        Binding("a", "add", "Enrol"),
         Binding("w", "withdraw", "Withdraw"),
         Binding("n", "note", "Note"),
         Binding("o", "session_note", "Session note"),

@@ -201,7 +201,7 @@ class LabDay:
         self.term = Terminal(command, self.workdir)
         self.term.wait(r"Study: lab day", 60)
         # the other screens are mounted after the overview shows: F2 acts once they are
-        self.term.until(r"a Add participant", "F2", tries=60)
+        self.term.until(r"a Enrol", "F2", tries=60)
         self.group_shown = GROUPS[0]
         self.picked: str | None = None
 
@@ -233,7 +233,7 @@ class LabDay:
 
     def enrol(self, code: str, group: str) -> None:
         term = self.term
-        self.to_screen("F2", r"a Add participant")  # the list has the focus
+        self.to_screen("F2", r"a Enrol")  # the list has the focus
         if group != self.group_shown:
             # from the list back over the find field and the Add button to the group
             # list; Enter opens it on the group shown
@@ -266,7 +266,7 @@ class LabDay:
     def note(self, code: str, text: str) -> None:
         """The participant's note: F2, the cursor to their row, n, the text, Enter."""
         term = self.term
-        self.to_screen("F2", r"a Add participant")  # the list has the focus
+        self.to_screen("F2", r"a Enrol")  # the list has the focus
         for _ in range(200):
             under = _under_cursor(term.screen())
             if under == code:

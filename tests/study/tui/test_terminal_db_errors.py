@@ -75,7 +75,7 @@ class App:
     def enrol(self) -> None:
         """The participants screen (F2) and its add key."""
         self.child.send(F2)
-        self.child.expect("Add participant")  # its footer
+        self.child.expect("Enrol")  # its footer
         self.child.send("a")
 
     def refused(self, *cause: str) -> None:
@@ -93,7 +93,7 @@ class App:
         self.child.send(F1)
         self.child.expect("Sessions done")
         self.child.send(F2)
-        self.child.expect("Add participant")
+        self.child.expect("Enrol")
         assert self.child.isalive()
 
     def quit(self) -> None:

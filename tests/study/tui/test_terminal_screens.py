@@ -48,7 +48,7 @@ def _start(db: Path, *args: str, size: tuple[int, int] = (80, 24)) -> Terminal:
     term = Terminal([str(study), "tui", "--db", str(db), *args], db.parent, size=size)
     term.wait(r"Sessions done", 60)
     # the other screens are mounted after the overview shows: F2 acts once they are
-    term.until(r"a Add participant", "F2", tries=60)
+    term.until(r"a Enrol", "F2", tries=60)
     term.keys("F1")
     term.wait(r"Sessions done")
     return term
