@@ -217,6 +217,8 @@ SLOW_MODULES = frozenset(
         "tests/study/tui/test_db_errors.py",
         "tests/study/tui/test_screens.py",
         "tests/study/tui/test_participant_page.py",
+        "tests/study/tui/test_terminal_keys.py",
+        "tests/study/tui/test_terminal_screens.py",
         "tests/study/tui/test_terminal_read_only.py",
         "tests/study/tui/test_ops_keys.py",
         "tests/study/tui/test_break_bell.py",
