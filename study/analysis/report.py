@@ -15,7 +15,14 @@ from pathlib import Path
 from typing import Any
 
 from study.analysis.methods import methods_json, methods_markdown
-from study.analysis.stats import ANOVA_COLUMNS, COMPARISON_COLUMNS, LMM_COLUMNS, Analysis, Row
+from study.analysis.stats import (
+    ANOVA_COLUMNS,
+    COMPARISON_COLUMNS,
+    DESCRIPTIVE_COLUMNS,
+    LMM_COLUMNS,
+    Analysis,
+    Row,
+)
 from study.analysis.tables import all_tables, write_csv
 
 COMPARISON_KEYS = (
@@ -35,21 +42,8 @@ COMPARISON_KEYS = (
     "effect_size_kind",
     "p_method",
 )
-ANOVA_KEYS = ("task", "measure", "source", "F", "df1", "df2", "p", "np2", "ss_type")
-LMM_KEYS = ("task", "measure", "term", "estimate", "se", "p", "p_method")
-DESCRIPTIVE_KEYS = (
-    "task",
-    "measure",
-    "group",
-    "condition",
-    "n",
-    "mean",
-    "sd",
-    "median",
-    "iqr",
-    "ci_low",
-    "ci_high",
-)
+# the JSON's keys of the other three tables are their columns, in their order
+ANOVA_KEYS, LMM_KEYS, DESCRIPTIVE_KEYS = ANOVA_COLUMNS, LMM_COLUMNS, DESCRIPTIVE_COLUMNS
 
 
 def _records(rows: list[Row], keys: tuple[str, ...]) -> list[dict[str, Any]]:
