@@ -68,8 +68,13 @@ def anova_rows(
     )
     rows = []
     for source, effect, error in terms:
-        # F = (SS_effect / df_effect) / (SS_error / df_error); partial eta^2 = SS / (SS + SS_err)
-        f = (effect["sum_sq"] / effect["df"]) / (error["sum_sq"] / error["df"])
+        # F = (SS_effect / df_effect) / (SS_error / df_error); partial eta^2 = SS / (SS + SS_err).
+        # No error variance (every participant answered alike): F is inf when the effect is
+        # not zero (p = 0, as R's F on an exact fit) and undefined (nan) when it is; numpy's
+        # float64 division gives exactly these, so its warnings are silenced, not its values.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = (effect["sum_sq"] / effect["df"]) / (error["sum_sq"] / error["df"])
+            np2 = effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])
         rows.append(
             {
                 "source": source,
@@ -77,7 +82,7 @@ def anova_rows(
                 "df1": float(effect["df"]),
                 "df2": float(error["df"]),
                 "p": f_sf(float(f), float(effect["df"]), float(error["df"])),
-                "np2": float(effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])),
+                "np2": float(np2),
                 "ss_type": ss_type,
             }
         )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -411,7 +412,9 @@ def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -
                         "value": value,
                     }
                 )
-    table, _ = mixed_anova(pd.DataFrame(rows))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # the division by zero is meant
+        table, _ = mixed_anova(pd.DataFrame(rows))
     rows_by = table.set_index("source")
     for source in ("condition", "interaction"):
         assert math.isinf(rows_by.loc[source, "F"]) and rows_by.loc[source, "p"] == 0.0
@@ -420,6 +423,29 @@ def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -
     records = _records(table.to_dict("records"), ANOVA_KEYS)
     json.dumps(records, allow_nan=False)  # strict JSON: no Infinity
     assert [r["F"] is None for r in records] == [False, True, True]
+
+
+def test_identical_answers_give_an_undefined_f_without_a_warning() -> None:
+    """Every participant gives the same value in both conditions (identical TLX answers):
+    effect and error sums of squares are both zero, so F, p and partial eta squared are
+    0 / 0, undefined (nan, null in the JSON), and no RuntimeWarning reaches the user."""
+    rows = [
+        {
+            "participant": f"{group}{i}",
+            "group": group,
+            "task": "lcca",
+            "measure": "m",
+            "condition": condition,
+            "value": 50.0,
+        }
+        for group in ("novice", "expert")
+        for i in range(3)
+        for condition in ("VO", "HV")
+    ]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        table, _ = mixed_anova(pd.DataFrame(rows))
+    assert table[["F", "p", "np2"]].isna().all().all()
 
 
 # A study on a 0.01 s grid whose HV - VO differences hold a tie (1.20 twice, computed as
