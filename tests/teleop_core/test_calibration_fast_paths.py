@@ -4,6 +4,8 @@
   against `train_sse` (the whole design built and solved for every value);
 - the Diebold-Mariano test's closed-form Newey-West variance against statsmodels' OLS
   on a constant with `cov_type="HAC"`;
+- `fit_sign_speed` (the normal equations with only the sign's column new per width)
+  against the least-squares fit of the whole design per width;
 - `null_share` (bin indices shifted) against `binned_share` of the shifted quantity;
 - `one_blas_thread`: BLAS on one thread inside, as before outside.
 """
@@ -16,10 +18,15 @@ from scipy import stats
 from statsmodels.regression.linear_model import OLS
 from threadpoolctl import threadpool_info
 
-from teleop_core.calibration import FollowerBase
 from teleop_core.calibration.effects import EFFECTS
 from teleop_core.calibration.fitting import SearchCost, one_blas_thread, train_sse
-from teleop_core.calibration.models import CalibrationData
+from teleop_core.calibration.models import (
+    SIGN_WIDTHS_RAD_S,
+    CalibrationData,
+    FollowerBase,
+    _sse_with,
+    fit_sign_speed,
+)
 from teleop_core.calibration.residual import diebold_mariano
 from teleop_core.calibration.synthetic import follower_recording
 from teleop_core.calibration.verdict import BINS, SHIFTS, binned_share, null_share
@@ -79,6 +86,60 @@ def test_search_cost_falls_back_on_a_rank_deficient_design(data: CalibrationData
     alone = train_sse(MODEL, data, TRAIN, chain)
     assert cost(0.5) == pytest.approx(train_sse(MODEL, data, TRAIN, [*chain, (stribeck, 0.5)]))
     assert cost(0.5) == pytest.approx(alone, rel=1e-9)
+
+
+def _reference_sign_speed(data: CalibrationData, chain: list) -> tuple[float, list[float]]:
+    """`fit_sign_speed` as first written: lstsq of the whole design for every width."""
+    signals = data.signals
+    for effect, value in chain:
+        signals = effect.transform(signals, value)
+    extra = [effect.columns(signals, value) for effect, value in chain]
+    target = data.y[TRAIN]
+    sse = []
+    for width in SIGN_WIDTHS_RAD_S:
+        base = FollowerBase(sign_speed_rad_s=float(width)).columns(signals)
+        X = np.column_stack([base, *extra])[TRAIN]
+        coef, *_ = np.linalg.lstsq(X, target, rcond=None)
+        sse.append(float(np.sum((target - X @ coef) ** 2)))
+    near = np.flatnonzero(np.asarray(sse) <= 1.001 * min(sse))
+    return float(SIGN_WIDTHS_RAD_S[near[0]]), sse
+
+
+@pytest.mark.parametrize(
+    "chain_families", [(), ("hysteresis", "drift"), ("delay", "direction_asymmetry")]
+)
+def test_sign_width_fit_is_the_whole_designs_least_squares(
+    data: CalibrationData, chain_families: tuple[str, ...]
+) -> None:
+    values = {"hysteresis": 0.05, "drift": 20.0, "delay": 0.03}
+    chain = [(MODEL.effect(f), values.get(f, float("nan"))) for f in chain_families]
+    width, sse = _reference_sign_speed(data, chain)
+    assert fit_sign_speed(FollowerBase(), data.signals, data.y, TRAIN, chain) == width
+    # the SSE per width, with the sign's column joined last to the scaled others
+    signals = data.signals
+    for effect, value in chain:
+        signals = effect.transform(signals, value)
+    base = FollowerBase().columns(signals)
+    fixed = np.column_stack(
+        [np.delete(base, 3, axis=1)] + [e.columns(signals, v) for e, v in chain]
+    )[TRAIN]
+    fixed = fixed / np.abs(fixed).max(axis=0)
+    y = data.y[TRAIN]
+    for w, expected in list(zip(SIGN_WIDTHS_RAD_S, sse, strict=True))[::6]:
+        sign = FollowerBase(sign_speed_rad_s=float(w)).columns(signals)[TRAIN, 3]
+        got = _sse_with(fixed, fixed.T @ fixed, fixed.T @ y, sign, y)
+        assert got == pytest.approx(expected, rel=1e-9)
+
+
+def test_sign_width_sse_falls_back_on_a_repeated_column(data: CalibrationData) -> None:
+    """The sign's column already among the others: singular normal equations, the
+    SVD's SSE, which is the SSE without the repeated column."""
+    y = data.y[TRAIN]
+    base = MODEL.columns(data.signals)[TRAIN]
+    fixed = base / np.abs(base).max(axis=0)
+    alone = y - fixed @ np.linalg.lstsq(fixed, y, rcond=None)[0]
+    got = _sse_with(fixed, fixed.T @ fixed, fixed.T @ y, base[:, 3], y)
+    assert got == pytest.approx(float(alone @ alone), rel=1e-9)
 
 
 def _statsmodels_dm(error_a: np.ndarray, error_b: np.ndarray, lags: int) -> float:
