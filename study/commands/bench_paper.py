@@ -236,6 +236,14 @@ def bench_lcca(
     help="With --generalise: recordings per family, per mixture size and clean "
     "[20 per family and mixture size, 50 clean; 1 each with --quick].",
 )
+@click.option(
+    "--time",
+    "timing",
+    is_flag=True,
+    help="How long `study calibrate` takes instead: 4-minute 200 Hz recordings (clean, "
+    "one effect, three, a ripple) and EMPS, each run twice in a fresh process; CPU and "
+    "wall seconds, load average (--seed: the simulated recordings').",
+)
 def bench_calibrate(
     json_path: Path,
     out_dir: Path | None,
@@ -245,6 +253,7 @@ def bench_calibrate(
     only_open: bool,
     generalise: bool,
     count: int | None,
+    timing: bool,
 ) -> None:
     """Calibration loop: every family, the clean recording, speed, estimator."""
     from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
@@ -252,6 +261,9 @@ def bench_calibrate(
     check_parent_folder(json_path)
     if count is not None and not generalise:
         raise StudyInputError(f"--count {count}; expected it only with --generalise")
+    if timing:
+        _bench_calibrate_time(json_path, out_dir, seed, quick, generalise or only_open)
+        return
     if generalise:
         from study.bench.calibrate_general import GeneraliseConfig, run_generalise_bench
 
@@ -283,6 +295,24 @@ def bench_calibrate(
         lambda progress: run_calibrate_bench(
             config, folder, progress=progress, only_open=only_open
         ),
+    )
+
+
+def _bench_calibrate_time(
+    json_path: Path, out_dir: Path | None, seed: int, quick: bool, other: bool
+) -> None:
+    """`study bench calibrate --time` (`study.bench.calibrate_time`)."""
+    from study.bench.calibrate_time import CalibrateTimeConfig, run_calibrate_time_bench
+
+    if other:
+        raise StudyInputError("--time; expected it without --generalise and --only-open")
+    config = replace(CalibrateTimeConfig.quick() if quick else CalibrateTimeConfig(), seed=seed)
+    folder = out_dir or json_path.parent
+    _run_report(
+        json_path,
+        folder / "calibrate_time.md",
+        "timing study calibrate",
+        lambda progress: run_calibrate_time_bench(config, folder, progress),
     )
 
 

@@ -17,8 +17,10 @@ position-periodic disturbance, `scipy.signal.lombscargle` on the residual agains
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ParamSpec, TypeVar
 
 import numpy as np
 from scipy import signal, stats
@@ -39,6 +41,29 @@ BIN_RAD = 1e-3
 K_MIN, K_MAX = 1.0, 300.0
 """Wavenumbers searched, rad^-1: once a turn up to 300 times a turn."""
 
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def one_blas_thread(func: Callable[_P, _R]) -> Callable[_P, _R]:
+    """`func` run with the BLAS libraries (OpenBLAS under numpy and scipy) on one thread.
+
+    The loop's linear algebra is thousands of small products of tall, narrow matrices
+    (tens of thousands of rows, a dozen columns): a second BLAS thread gains little on
+    them, and on a machine whose cores are busy with other work its threads wait for
+    each other in spin loops that cost more CPU time than the products themselves.
+    The limit (`threadpoolctl`) is lifted again when `func` returns.
+    """
+
+    @functools.wraps(func)
+    def limited(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return func(*args, **kwargs)
+
+    return limited
+
 
 def design(model: BaseModel, s: Signals, chain: Chain) -> tuple[Float2D, list[int]]:
     """The design matrix of base + chain over all samples, and each block's column count."""
@@ -57,23 +82,87 @@ def solve(X: Float2D, y: Float1D) -> Float1D:
     """
     scale = np.maximum(np.abs(X).max(axis=0), 1e-12)
     Xs = X / scale
-    gram = Xs.T @ Xs
-    try:
-        # (X'X) b = X'y
-        c, low = cho_factor(gram)
-        coef = cho_solve((c, low), Xs.T @ y)
-        if np.linalg.cond(gram) > 1e12:
-            raise np.linalg.LinAlgError
-    except np.linalg.LinAlgError:
+    coef = _solve_normal(Xs.T @ Xs, Xs.T @ y)
+    if coef is None:
         coef, *_ = np.linalg.lstsq(Xs, y, rcond=None)
     return coef / scale
 
 
+def _solve_normal(gram: Float2D, rhs: Float1D) -> Float1D | None:
+    """(X'X) b = X'y by Cholesky for scaled columns; None where the Gram matrix is
+    singular or too ill-conditioned (cond > 1e12) for the normal equations."""
+    try:
+        c, low = cho_factor(gram)
+        coef = cho_solve((c, low), rhs)
+    except np.linalg.LinAlgError:
+        return None
+    if np.linalg.cond(gram) > 1e12:
+        return None
+    return np.asarray(coef)
+
+
 def train_sse(model: BaseModel, data: CalibrationData, train: Rows, chain: Chain) -> float:
+    """Training SSE of base + `chain` fitted on the `train` rows (the reference path:
+    the whole design built and solved; `SearchCost` is its fast form for a search)."""
     X, _ = design(model, data.signals, chain)
     coef = solve(X[train], data.y[train])
     e = data.y[train] - X[train] @ coef
     return float(e @ e)
+
+
+class SearchCost:
+    """`train_sse` of base + `chain` + (`effect`, value) as a function of the value,
+    with the part that does not depend on it made once.
+
+    The signals after the chain's transforms, the scaled training columns of base +
+    chain and their Gram matrix are computed here; each call makes only the
+    candidate's columns, the Gram blocks that involve them, and the residual. The
+    arithmetic is `solve`'s (the same column scaling, Cholesky and conditioning rule),
+    blocked, so the SSE agrees with `train_sse` to rounding. An effect that transforms
+    the signals (`delay`) changes every column and goes through `train_sse`, as does a
+    value whose design is too ill-conditioned for the normal equations.
+    """
+
+    def __init__(
+        self, model: BaseModel, data: CalibrationData, train: Rows, chain: Chain, effect: Effect
+    ) -> None:
+        self.model, self.data, self.train, self.chain, self.effect = (
+            model,
+            data,
+            train,
+            chain,
+            effect,
+        )
+        self.fast = type(effect).transform is Effect.transform
+        if not self.fast:
+            return
+        s = data.signals
+        for e, v in chain:
+            s = e.transform(s, v)
+        self.signals = s
+        X = np.column_stack([model.columns(s)] + [e.columns(s, v) for e, v in chain])[train]
+        scale = np.maximum(np.abs(X).max(axis=0), 1e-12)
+        self.scale = scale
+        self.As = np.ascontiguousarray(X / scale)
+        self.y = np.ascontiguousarray(data.y[train])
+        self.gram = self.As.T @ self.As
+        self.rhs = self.As.T @ self.y
+
+    def __call__(self, value: float) -> float:
+        """Training SSE with the candidate's searched parameter at `value`."""
+        if not self.fast:
+            return train_sse(self.model, self.data, self.train, [*self.chain, (self.effect, value)])
+        C = self.effect.columns(self.signals, value)[self.train]
+        c_scale = np.maximum(np.abs(C).max(axis=0), 1e-12)
+        Cs = C / c_scale
+        cross = self.As.T @ Cs
+        gram = np.block([[self.gram, cross], [cross.T, Cs.T @ Cs]])
+        coef = _solve_normal(gram, np.concatenate([self.rhs, Cs.T @ self.y]))
+        if coef is None:
+            return train_sse(self.model, self.data, self.train, [*self.chain, (self.effect, value)])
+        k = self.As.shape[1]
+        e = self.y - self.As @ coef[:k] - Cs @ coef[k:]
+        return float(e @ e)
 
 
 def search(
@@ -83,8 +172,7 @@ def search(
     if effect.searched is None:
         return float("nan")
 
-    def cost(value: float) -> float:
-        return train_sse(model, data, train, [*chain, (effect, value)])
+    cost = SearchCost(model, data, train, chain, effect)
 
     if effect.family == "position_periodic":
         grid, brackets = _periodogram_peaks(model, data, train, chain)

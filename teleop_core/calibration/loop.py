@@ -57,6 +57,7 @@ from teleop_core.calibration.fitting import (
     Chain,
     confidence,
     design,
+    one_blas_thread,
     search,
     solve,
 )
@@ -245,6 +246,7 @@ class Calibrator:
         assert best is not None
         return y[self.test_] - best[1][self.test_]
 
+    @one_blas_thread
     def fit(self, data: CalibrationData, progress: Progress = no_progress) -> Calibrator:
         """Run the loop on `data`; fitted attributes end in `_`.
 

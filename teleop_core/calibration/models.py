@@ -272,17 +272,42 @@ def fit_sign_speed(
     once the effect is in its chain.
     """
     # the design of base + chain (`fitting.design`, which imports this module): the
-    # effects' signals and columns do not depend on the width, so they are made once
+    # effects' signals and columns do not depend on the width, so they are made once,
+    # and so is everything of the normal equations but the sign's column and its blocks
     for effect, value in chain:
         signals = effect.transform(signals, value)
-    effect_columns = [effect.columns(signals, value) for effect, value in chain]
+    base = model.columns(signals)
+    fixed = np.column_stack(
+        [np.delete(base, RC_TC, axis=1)]
+        + [effect.columns(signals, value) for effect, value in chain]
+    )[train]
     target = np.asarray(y, float)[train]
+    scale = np.maximum(np.abs(fixed).max(axis=0), 1e-12)
+    fixed = fixed / scale
+    gram, rhs = fixed.T @ fixed, fixed.T @ target
     sse = []
     for width in SIGN_WIDTHS_RAD_S:
-        base = replace(model, sign_speed_rad_s=float(width)).columns(signals)
-        X = np.column_stack([base, *effect_columns])[train]
-        coef, *_ = np.linalg.lstsq(X, target, rcond=None)
-        e = target - X @ coef
-        sse.append(float(e @ e))
+        sign = replace(model, sign_speed_rad_s=float(width)).columns(signals)[train, RC_TC]
+        sse.append(_sse_with(fixed, gram, rhs, sign, target))
     near = np.flatnonzero(np.asarray(sse) <= 1.001 * min(sse))
     return float(SIGN_WIDTHS_RAD_S[near[0]])
+
+
+def _sse_with(fixed: Float2D, gram: Float2D, rhs: Float1D, column: Float1D, y: Float1D) -> float:
+    """Least-squares SSE of y on the scaled columns `fixed` (Gram matrix `gram`, `rhs`
+    their products with y) and one more `column`: the normal equations by Cholesky with
+    that column scaled alike, the SVD where they are singular or ill-conditioned."""
+    c = column / max(float(np.abs(column).max()), 1e-12)
+    cross = fixed.T @ c
+    full = np.block([[gram, cross[:, None]], [cross[None, :], np.array([[c @ c]])]])
+    X = None
+    try:
+        chol = np.linalg.cholesky(full)
+        if np.linalg.cond(full) > 1e12:
+            raise np.linalg.LinAlgError
+        coef = np.linalg.solve(chol.T, np.linalg.solve(chol, np.r_[rhs, c @ y]))
+    except np.linalg.LinAlgError:
+        X = np.column_stack([fixed, c])
+        coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    e = y - fixed @ coef[:-1] - c * coef[-1] if X is None else y - X @ coef
+    return float(e @ e)

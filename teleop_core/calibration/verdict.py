@@ -116,24 +116,11 @@ def binned_share(residual: Float1D, x: Float1D, bins: int = BINS) -> tuple[float
     is binned by value: its quantiles would merge them all into one bin.
     """
     e = np.asarray(residual, float)
-    x = np.asarray(x, float)
-    values = np.unique(x)
-    if len(values) <= bins:
-        if len(values) < 2:
-            return 0.0, []
-        k = np.searchsorted(values, x)
-        edges = np.r_[values, values[-1]]
-        lows, highs = values, values
-    else:
-        edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
-        k = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
-        lows, highs = edges[:-1], edges[1:]
-    count = np.bincount(k, minlength=len(edges) - 1)
-    total = np.bincount(k, weights=e, minlength=len(edges) - 1)
-    mean = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
-    ss_total = float(np.sum((e - e.mean()) ** 2))
-    ss_between = float(np.sum(count * (mean - e.mean()) ** 2))
-    share = ss_between / ss_total if ss_total > 0 else 0.0
+    binned = _bin_index(np.asarray(x, float), bins)
+    if binned is None:
+        return 0.0, []
+    k, lows, highs = binned
+    share, count, mean = _share(e, k, len(lows))
     table = [
         {
             "low": float(lows[i]),
@@ -147,16 +134,50 @@ def binned_share(residual: Float1D, x: Float1D, bins: int = BINS) -> tuple[float
     return share, table
 
 
+def _bin_index(x: Float1D, bins: int) -> tuple[np.ndarray, Float1D, Float1D] | None:
+    """Each sample's bin (by value, or by quantile of x) and the bins' low and high
+    ends; None when x has a single value."""
+    values = np.unique(x)
+    if len(values) <= bins:
+        if len(values) < 2:
+            return None
+        return np.searchsorted(values, x), values, values
+    edges = np.unique(np.quantile(x, np.linspace(0, 1, bins + 1)))
+    k = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+    return k, edges[:-1], edges[1:]
+
+
+def _share(e: Float1D, k: np.ndarray, bins: int) -> tuple[float, np.ndarray, Float1D]:
+    """Share of var(e) that the means of e in the bins `k` explain, the bins' counts
+    and means."""
+    count = np.bincount(k, minlength=bins)
+    total = np.bincount(k, weights=e, minlength=bins)
+    mean = np.divide(total, count, out=np.zeros_like(total), where=count > 0)
+    ss_total = float(np.sum((e - e.mean()) ** 2))
+    ss_between = float(np.sum(count * (mean - e.mean()) ** 2))
+    return (ss_between / ss_total if ss_total > 0 else 0.0), count, mean
+
+
 def null_share(residual: Float1D, x: Float1D, shifts: int = SHIFTS, seed: int = 0) -> Float1D:
     """Shares that x explains by chance: x circularly shifted against the residual by
     `shifts` random offsets of at least a tenth of the record. A shift keeps both
     series' autocorrelation, so slow noise or a slowly varying quantity (few long
     stretches per bin) does not pass for structure, as it would against n i.i.d.
-    samples."""
+    samples.
+
+    A shifted x has the same values, hence the same quantile bins, as x: each sample's
+    bin is found once and the bin indices are shifted (`binned_share` of the shifted
+    x, without sorting it again for every offset).
+    """
     n = len(x)
     rng = np.random.default_rng(seed)
     offsets = rng.integers(n // 10, n - n // 10, size=shifts)
-    return np.array([binned_share(residual, np.roll(x, int(k)))[0] for k in offsets])
+    e = np.asarray(residual, float)
+    binned = _bin_index(np.asarray(x, float), BINS)
+    if binned is None:
+        return np.zeros(shifts)
+    k, lows, _ = binned
+    return np.array([_share(e, np.roll(k, int(o)), len(lows))[0] for o in offsets])
 
 
 def unexplained(
