@@ -1,12 +1,13 @@
 """The loop on the people (`participant_fit.effects`): an effect injected into a study
-simulated here is named and the held-out prediction error falls; clean data get nothing
-and the verdict `white`; MODEL.json reports it and the people simulated from the fit
-carry it.
+simulated here (practice, carry-over, fatigue) is named and the held-out prediction
+error falls; clean data get nothing and the verdict `white`; a person no trait setting
+reproduces is reported, never absorbed; MODEL.json reports the effect and the people
+simulated from the fit carry it.
 
 The studies go through the real engine (the LCCA loop, the shipped estimator, the
 simulated participant carrying the injected effect), kept small: 8 people per group, 3
 trials per condition, trials capped at 60 s, an emulator of 200 settings with one trial
-per condition each (about 650 trials in all, a few CPU minutes).
+per condition each (about 1000 trials in all; slow lane).
 """
 
 from __future__ import annotations
