@@ -106,6 +106,20 @@ def test_a_practice_effect_is_named_practice_not_carry_over(emulator) -> None:
     # model removes (the reduction is bounded by 1 - noise floor / error before)
     assert found.reduction() >= 0.20
     assert found.error_after.excess < 0.02 < found.error_before.excess
+    # the model given the true effect instead of fitting it reaches the fitted one's
+    # error (within the fit's own estimation error), and no model goes below the floor
+    true = [ParticipantEffect("practice", {"slowing": 0.5, "decay_trials": 2.0})]
+    known = effects.prediction_error(trials, emulator, [], FREE, [], 3, known=true)
+    assert abs(known.error - found.error_after.error) < 0.1 * found.error_after.error
+    # the RMS is over every (cell, measure): 3 groups x 6 positions x 2 orders, 3 measures
+    # (a position and an order fix the condition), and each measure's RMS is its part
+    out = found.to_dict()["prediction_error"]
+    assert out["cells"] == 3 * 6 * 2 * 3
+    mean_square = np.mean([v**2 for v in out["by_measure"]["after"].values()])
+    assert out["after"] == pytest.approx(np.sqrt(mean_square))
+    # the slowing acts on the completion time: its cells gain most
+    by = out["by_measure"]
+    assert by["after"]["completion_time_s"] < 0.7 * by["before"]["completion_time_s"]
 
 
 def test_a_one_way_carry_over_is_named_with_the_other_direction_held_at_zero(emulator) -> None:

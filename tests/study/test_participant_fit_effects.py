@@ -1,12 +1,13 @@
 """The loop on the people (`participant_fit.effects`): an effect injected into a study
-simulated here is named and the held-out prediction error falls; clean data get nothing
-and the verdict `white`; MODEL.json reports it and the people simulated from the fit
-carry it.
+simulated here (practice, carry-over, fatigue) is named and the held-out prediction
+error falls; clean data get nothing and the verdict `white`; a person no trait setting
+reproduces is reported, never absorbed; MODEL.json reports the effect and the people
+simulated from the fit carry it.
 
 The studies go through the real engine (the LCCA loop, the shipped estimator, the
 simulated participant carrying the injected effect), kept small: 8 people per group, 3
 trials per condition, trials capped at 60 s, an emulator of 200 settings with one trial
-per condition each (about 650 trials in all, a few CPU minutes).
+per condition each (about 1000 trials in all; slow lane).
 """
 
 from __future__ import annotations
@@ -35,6 +36,9 @@ PRACTICE = ParticipantEffect("practice", {"slowing": 0.5, "decay_trials": 2.0})
 CARRY_OVER = ParticipantEffect("carry_over", {"vo_after_hv": 0.3, "hv_after_vo": 0.0})
 """VO after HV first pushed 30 % slower and a stall taken for an obstacle 30 % sooner:
 VO peak proximal forces about a quarter lower after HV first."""
+FATIGUE = ParticipantEffect("fatigue", {"rate": 0.08})
+"""Each measured trial's preferred speed 8 % lower and reaction time 8 % longer than the
+one before it: the second block slower than the first in either order."""
 
 
 @pytest.fixture(scope="module")
@@ -56,6 +60,7 @@ def studies():
             ("clean", ()),
             ("practice", (PRACTICE,)),
             ("carry_over", (CARRY_OVER,)),
+            ("fatigue", (FATIGUE,)),
         )
     }
 
@@ -114,6 +119,39 @@ def test_an_injected_carry_over_is_named_and_lowers_the_held_out_error_by_a_tent
     assert 0.1 < share < 0.6
     assert found.reduction() >= 0.10
     assert found.verdict == "white"
+
+
+def test_an_injected_fatigue_is_named_and_lowers_the_held_out_error(emulator, studies) -> None:
+    trials = studies["fatigue"]
+    # the injected fatigue slows the second block in either order: each person's
+    # second-block completion times above their first's
+    log_time = np.log(trials["completion_time_s"])
+    block = trials["position"] >= 3
+    by = log_time.groupby([trials["participant"], block]).mean().unstack()
+    assert (by[True] - by[False]).mean() > 0.1
+    found = _search(trials, emulator)
+    assert [e.family for e in found.effects] == ["fatigue"]
+    rate = found.effects[0].parameters["rate"]
+    low, high = found.effects[0].intervals["rate"]
+    assert low <= rate <= high and 0.02 < rate <= 0.1
+    assert found.error_after.error < found.error_before.error
+
+
+def test_a_person_no_trait_setting_reproduces_is_reported_never_absorbed(emulator, studies) -> None:
+    trials = studies["clean"].copy()
+    # one person whose HV forces are five times their VO forces: haptic feedback
+    # lowers the forces of every trait setting, so no traits reproduce them
+    odd = trials["participant"].iloc[0]
+    hv = (trials["participant"] == odd) & (trials["condition"] == "HV")
+    vo = (trials["participant"] == odd) & (trials["condition"] == "VO")
+    for m in ("peak_proximal_force_n", "peak_distal_force_n"):
+        trials.loc[hv, m] = 5.0 * trials.loc[vo, m].max()
+    model = run_fit(trials, "lcca", SETTINGS, emulator, "test data").to_dict()
+    assert odd in model["lacks"]["outliers"]["flagged"]
+    unexplained = model["unexplained_people"]
+    assert unexplained["family"] == "unexplained_person" and odd in unexplained["participants"]
+    # reported, never absorbed: no effect is fitted to one person
+    assert model["participant_effects"] == []
 
 
 def test_model_json_reports_the_effect_and_the_fits_people_carry_it(emulator, studies) -> None:

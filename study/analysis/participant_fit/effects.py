@@ -27,11 +27,17 @@ every simulation drawn from the model carries. Here:
   (each person's traits held, the groups' levels moving).
 - **prediction error** (`prediction_error`): each quarter of the people (within group)
   held out in turn, the traits and the effects fitted to the other three quarters; in
-  each cell of group x condition x condition order x trial position, the held-out
-  people's mean log measure (every person is held out once, so all of the cell's
-  people) minus the fitted model's mean there (the emulator's mean
-  log measure over `DRAWS` people drawn from the fitted group distribution, with the
-  effects at the cell's place); the RMS over the cells and the measures.
+  each cell of group x condition x condition order x trial position (the trial's place
+  among the person's measured trials over both blocks; practice trials are not among
+  the fit's trials), the held-out people's mean log measure minus the fitted model's
+  mean there (the emulator's mean log measure over `DRAWS` people drawn from the fitted
+  group distribution, the same draws for every cell, with the effects at the cell's
+  place). The residuals of the four folds are pooled per cell before the mean (every
+  person is held out once, so a cell's mean is over all of its people, not a fold's one
+  to three); the RMS is over the cells and the measures. Beside it, the cells' noise
+  floor (the RMS of their standard errors: the held-out people's own scatter, which no
+  model removes) and the RMS of each measure alone; with `known` effects instead of
+  fitted ones, the error a model that had the true effect reaches on the same people.
 - **the loop** (`search`): while the structure tests flag something, each family not
   yet added is fitted, the one that lowers the trials' squared error most is taken if
   that drop passes a likelihood-ratio test (`LR_ALPHA`) and it lowers the held-out
@@ -58,7 +64,7 @@ from scipy.optimize import least_squares
 from statsmodels.stats.multitest import multipletests
 
 from study.analysis.participant_fit.emulator import MomentEmulator, floor, log_moment
-from study.analysis.participant_fit.estimate import HIGH, LOW, GroupEstimator, GroupFit
+from study.analysis.participant_fit.estimate import DRAWS, HIGH, LOW, GroupEstimator, GroupFit
 from study.protocol.participant_effects import (
     BOUNDS,
     FAMILIES,
@@ -98,12 +104,15 @@ three trials per condition the two shapes are close, and a fitted negative fatig
 took the place of an injected practice effect)."""
 START = {"slowing": 0.3, "decay_trials": 2.0, "rate": 0.01, "vo_after_hv": 0.0, "hv_after_vo": 0.0}
 DEFINITION = (
-    "each quarter of the people (within group) held out in turn and the model (traits "
-    "and participant effects) fitted to the other three; per cell of group x condition x "
-    "condition order x trial position: the held-out people's mean log measure minus the "
-    "fitted model's mean log measure there (the emulator's, over people drawn from the "
-    "fitted group distributions, effects at the cell's place); RMS over the cells and "
-    "the measures, log units"
+    "each quarter of the people (dealt within group) held out in turn and the model "
+    "(traits and participant effects) fitted to the other three; every held-out trial's "
+    "log measure minus the fitted model's mean log measure in its cell of group x "
+    "condition x condition order x trial position (the trial's place among the person's "
+    "measured trials over both blocks, practice trials not among them), the model's "
+    f"mean being the emulator's over {DRAWS} people drawn from the fitted group "
+    "distribution with the effects at the cell's place; the residuals of all four folds "
+    "pooled per cell (every person is held out once) and averaged there; the RMS of "
+    "these cell means over every cell and measure observed, each weighted alike; log units"
 )
 
 
@@ -446,6 +455,26 @@ def fit_effects(
     return fit
 
 
+def fit_known(
+    trials: pd.DataFrame,
+    emulator: MomentEmulator,
+    known: Sequence[ParticipantEffect],
+    free: list[int],
+    weak: list[int],
+    seed: int,
+) -> PeopleFit:
+    """The traits fitted to the trials with `known` effects taken out (alternated
+    `ROUNDS` times, as `fit_effects` does), the effects held as given."""
+    people = trial_arrays(trials, emulator).people
+    fit = fit_traits(trials, emulator, free, weak, seed)
+    for _ in range(ROUNDS):
+        theta = np.array([fit.theta[p] for p in people])
+        adjusted = without_effects(trials, emulator, known, theta)
+        fit = fit_traits(adjusted, emulator, free, weak, seed)
+    fit.effects = list(known)
+    return fit
+
+
 def residual_structure(
     trials: pd.DataFrame, emulator: MomentEmulator, fit: PeopleFit
 ) -> list[dict[str, Any]]:
@@ -517,6 +546,12 @@ class HeldOut:
     noise_floor: float
     """RMS of the cells' standard errors: what a model that knew every cell's true
     mean would still show, from the held-out people's own scatter."""
+    by_measure: dict[str, float] = field(default_factory=dict)
+    """The same RMS over the cells of each measure alone."""
+    floor_by_measure: dict[str, float] = field(default_factory=dict)
+    """The noise floor over the cells of each measure alone."""
+    cells: int = 0
+    """The (cell, measure) means the RMS is over."""
 
     @property
     def excess(self) -> float:
@@ -531,10 +566,13 @@ def prediction_error(
     free: list[int],
     weak: list[int],
     seed: int,
+    known: Sequence[ParticipantEffect] = (),
 ) -> HeldOut:
     """The held-out prediction error (`DEFINITION`): every person is held out once (in
     their quarter), their trials set against the model fitted to the other quarters in
-    their cell; a cell's error is the mean over its held-out trials."""
+    their cell; a cell's error is the mean over its held-out trials. With `known`, the
+    model's effects are those (not fitted; `families` unused): what a model that had
+    the true effect would reach on these people, the bound a fitted one is set against."""
     fold = trials["participant"].map(folds(trials, seed))
     keys = ["group", "condition", "order", "position"]
     parts = []
@@ -542,7 +580,10 @@ def prediction_error(
         train, test = trials[fold != k], trials[fold == k]
         if test.empty:
             continue
-        fit = fit_effects(train, emulator, families, free, weak, seed)
+        if known:
+            fit = fit_known(train, emulator, known, free, weak, seed)
+        else:
+            fit = fit_effects(train, emulator, families, free, weak, seed)
         test = test[test["group"].isin(list(fit.groups))]
         logged = test.assign(**{m: log_moment(test[m]) for m in emulator.measures_})
         cells = pd.MultiIndex.from_frame(logged[keys].drop_duplicates())
@@ -564,7 +605,19 @@ def prediction_error(
     mean, se = d.mean().to_numpy(), (d.std(ddof=1) / np.sqrt(d.count())).to_numpy()
     ok = np.isfinite(mean)
     return HeldOut(
-        float(np.sqrt(np.mean(mean[ok] ** 2))), float(np.sqrt(np.nanmean(se[np.isfinite(se)] ** 2)))
+        float(np.sqrt(np.mean(mean[ok] ** 2))),
+        float(np.sqrt(np.nanmean(se[np.isfinite(se)] ** 2))),
+        {
+            m: float(np.sqrt(np.mean(mean[ok[:, j], j] ** 2)))
+            for j, m in enumerate(emulator.measures_)
+            if ok[:, j].any()
+        },
+        {
+            m: float(np.sqrt(np.nanmean(se[np.isfinite(se[:, j]), j] ** 2)))
+            for j, m in enumerate(emulator.measures_)
+            if np.isfinite(se[:, j]).any()
+        },
+        int(ok.sum()),
     )
 
 
@@ -635,9 +688,16 @@ class EffectSearch:
                     "before": self.error_before.excess,
                     "after": self.error_after.excess,
                 },
+                "by_measure": {
+                    "before": self.error_before.by_measure,
+                    "after": self.error_after.by_measure,
+                    "noise_floor": self.error_before.floor_by_measure,
+                },
+                "cells": self.error_before.cells,
                 "noise_note": "noise_floor: the RMS of the cells' standard errors (the held-out "
                 "people's own scatter, which no model removes); beyond_noise: "
-                "sqrt(error^2 - noise_floor^2)",
+                "sqrt(error^2 - noise_floor^2); by_measure: the same RMS over the cells of "
+                "each measure alone; cells: the (cell, measure) means the RMS is over",
             },
             "verdict": self.verdict,
             "remains": remains,
