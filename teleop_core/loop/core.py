@@ -104,6 +104,8 @@ class TeleopLoop:
         self.follower = np.zeros(STATE_SIZE)
         self.fp = _param_vector(cfg.plant, cfg.control)
         self.f_enc_step = 2 * math.pi / cfg.sensors.encoder_counts_per_rev
+        self._wheel_radius_m = cfg.plant.wheel_radius_m
+        self._branches = self.environment.branches
         self.counters = LoopCounters()
         self._stream = estimator.stream() if estimator is not None else None
         self._log = np.zeros((max(self._acq_every, self._drv_every, self._est_every), K.LOG_WIDTH))
@@ -147,6 +149,23 @@ class TeleopLoop:
             tip_m=(float(row[K.LOG_TIP_X]), float(row[K.LOG_TIP_Y]), float(row[K.LOG_TIP_Z])),
             branch=branch,
             success=bool(row[K.LOG_SUCCESS]),
+        )
+
+    def _row_view(self) -> OperatorView:
+        """`view` from the last tick's log row alone (the fast path: no real dial writes
+        the dial's state between the kernel's calls). The row holds the dial's,
+        follower's and platform's state as the tick left them, so the view is the
+        same, with no reads of the state arrays."""
+        row = self._last_row
+        return OperatorView(
+            t_s=self.counters.ticks * self.dt_s,
+            dial_angle_rad=row[K.LOG_DIAL_ANGLE],
+            dial_speed_rad_s=row[K.LOG_DIAL_SPEED],
+            insertion_m=row[K.LOG_WHEEL_ANGLE] * self._wheel_radius_m,
+            rotation_rad=row[K.LOG_ROTATION],
+            tip_m=(row[K.LOG_TIP_X], row[K.LOG_TIP_Y], row[K.LOG_TIP_Z]),
+            branch=self._branches[int(row[K.LOG_BRANCH])],
+            success=row[K.LOG_SUCCESS] != 0.0,
         )
 
     def run(self, seconds: float, driver: Driver, stop_when_done: bool = True) -> LoopResult:
@@ -316,7 +335,7 @@ class TeleopLoop:
         kernel, log, env = self._kernel, self._log, self.environment
         fixed = (self.loop, mp, self.dial, self.dp, self.follower, self.fp, self.f_enc_step)
         fixed += (env.state, env.params, log, NO_PACKETS, self._est_arrays, self._noise)
-        links, act, view = self._links, self.driver.act, self.view  # type: ignore[union-attr]
+        links, act, view = self._links, self.driver.act, self._row_view  # type: ignore[union-attr]
         loop[K.L_N_ACQ] = loop[K.L_N_EST] = loop[K.L_N_CMD] = 0.0
         defer = -1.0
         filled, updates = 0, 0
