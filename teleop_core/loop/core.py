@@ -239,6 +239,10 @@ class TeleopLoop:
         """Run events and kernel calls until `end_tick` or the driver is done."""
         if self._fast and not self.keep_ticks:
             return self._advance_fast(end_tick), None
+        return self._advance_events(end_tick)
+
+    def _advance_events(self, end_tick: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """`_advance_to` event by event, or on the fast path keeping every tick's row."""
         rows: list[tuple[float, ...]] = []  # the event-by-event path's samples
         blocks: list[np.ndarray] = []  # the kernel's samples, a block per call
         # on the fast path the kernel writes its samples straight after the previous
