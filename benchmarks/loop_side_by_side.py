@@ -48,6 +48,7 @@ def main() -> None:
         order = [("baseline", args.baseline), ("new", args.new)]
         for label, checkout in order if r % 2 == 0 else order[::-1]:
             env = {**os.environ, "PYTHONPATH": str(Path(checkout).resolve())}
+            load = os.getloadavg()[0]  # the other jobs sharing the cores, as it starts
             done = subprocess.run(
                 [sys.executable, str(HERE / args.bench), *rest],
                 env=env,
@@ -55,7 +56,8 @@ def main() -> None:
                 text=True,
                 check=True,
             )
-            runs[label].append(_flatten(json.loads(done.stdout.strip().splitlines()[-1])))
+            row = _flatten(json.loads(done.stdout.strip().splitlines()[-1]))
+            runs[label].append({**row, "load_avg_1min": load})
             print(f"round {r + 1}/{args.rounds} {label} done", file=sys.stderr)
     medians = alternate.medians(runs)
     ratios = {

@@ -104,6 +104,8 @@ class TeleopLoop:
         self.follower = np.zeros(STATE_SIZE)
         self.fp = _param_vector(cfg.plant, cfg.control)
         self.f_enc_step = 2 * math.pi / cfg.sensors.encoder_counts_per_rev
+        self._wheel_radius_m = cfg.plant.wheel_radius_m
+        self._branches = self.environment.branches
         self.counters = LoopCounters()
         self._stream = estimator.stream() if estimator is not None else None
         self._log = np.zeros((max(self._acq_every, self._drv_every, self._est_every), K.LOG_WIDTH))
@@ -147,6 +149,23 @@ class TeleopLoop:
             tip_m=(float(row[K.LOG_TIP_X]), float(row[K.LOG_TIP_Y]), float(row[K.LOG_TIP_Z])),
             branch=branch,
             success=bool(row[K.LOG_SUCCESS]),
+        )
+
+    def _row_view(self) -> OperatorView:
+        """`view` from the last tick's log row alone (the fast path: no real dial writes
+        the dial's state between the kernel's calls). The row holds the dial's,
+        follower's and platform's state as the tick left them, so the view is the
+        same, with no reads of the state arrays."""
+        row = self._last_row
+        return OperatorView(
+            t_s=self.counters.ticks * self.dt_s,
+            dial_angle_rad=row[K.LOG_DIAL_ANGLE],
+            dial_speed_rad_s=row[K.LOG_DIAL_SPEED],
+            insertion_m=row[K.LOG_WHEEL_ANGLE] * self._wheel_radius_m,
+            rotation_rad=row[K.LOG_ROTATION],
+            tip_m=(row[K.LOG_TIP_X], row[K.LOG_TIP_Y], row[K.LOG_TIP_Z]),
+            branch=self._branches[int(row[K.LOG_BRANCH])],
+            success=row[K.LOG_SUCCESS] != 0.0,
         )
 
     def run(self, seconds: float, driver: Driver, stop_when_done: bool = True) -> LoopResult:
@@ -218,6 +237,12 @@ class TeleopLoop:
 
     def _advance_to(self, end_tick: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Run events and kernel calls until `end_tick` or the driver is done."""
+        if self._fast and not self.keep_ticks:
+            return self._advance_fast(end_tick), None
+        return self._advance_events(end_tick)
+
+    def _advance_events(self, end_tick: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """`_advance_to` event by event, or on the fast path keeping every tick's row."""
         rows: list[tuple[float, ...]] = []  # the event-by-event path's samples
         blocks: list[np.ndarray] = []  # the kernel's samples, a block per call
         # on the fast path the kernel writes its samples straight after the previous
@@ -289,18 +314,77 @@ class TeleopLoop:
         samples = np.concatenate(blocks) if blocks else np.zeros((0, len(SAMPLE_COLUMNS)))
         return samples, (np.concatenate(logs) if logs else None)
 
+    def _advance_fast(self, end_tick: int) -> np.ndarray:
+        """`_advance_to` on the fast path, with its per-call work hoisted out of the
+        calls: a kernel call per driver update, and between them only the driver.
+
+        The noise, the link's draws and the sample rows are reserved for the whole
+        advance at once (later values continue the same random streams, so when they
+        are drawn does not change them); the kernel counts acquisitions, estimates and
+        commands across its calls, and itself marks the rate command it defers to after
+        the driver acts (`L_SEND_PENDING`); the counters are read once at the end.
+        """
+        c, loop, mp = self.counters, self.loop, self.mp
+        acq, drv = self._acq_every, self._drv_every
+        k = c.ticks
+        if k >= end_tick or not math.isnan(self._done_s):
+            return np.zeros((0, len(SAMPLE_COLUMNS)))
+        rows_max = (end_tick - k) // acq + 2
+        self._reserve_noise(rows_max)
+        self._reserve_draws(4 * rows_max)
+        # a fresh array per advance: the samples returned are a view of it
+        out = np.empty((rows_max, len(SAMPLE_COLUMNS)))
+        if len(self._log) < drv:
+            self._log = np.zeros((drv, K.LOG_WIDTH))
+        kernel, log, env = self._kernel, self._log, self.environment
+        fixed = (self.loop, mp, self.dial, self.dp, self.follower, self.fp, self.f_enc_step)
+        fixed += (env.state, env.params, log, NO_PACKETS, self._est_arrays, self._noise)
+        links, act, view = self._links, self.driver.act, self._row_view  # type: ignore[union-attr]
+        loop[K.L_N_ACQ] = loop[K.L_N_EST] = loop[K.L_N_CMD] = 0.0
+        defer = -1.0
+        filled, updates = 0, 0
+        while k < end_tick:
+            nxt = min((k // drv + 1) * drv, end_tick)
+            n = nxt - k
+            # the command at a driver tick that ends this call waits for the driver
+            at_driver = nxt % drv == 0
+            flag = 1.0 if at_driver and nxt % acq == 0 else 0.0
+            if flag != defer:
+                mp[K.M_DEFER_LAST] = defer = flag
+            filled += kernel(n, *fixed, out[filled:], links)
+            k = c.ticks = nxt
+            self._last_row = log[n - 1].tolist()  # Python floats: cheap to index
+            if at_driver:
+                # the driver decides what the hand does until its next update
+                updates += 1
+                action = act(view())
+                self._action = action
+                loop[K.L_ROT_ACTION] = action.rotation_rate_rad_s
+                loop[K.L_HAND_TARGET] = action.dial_target_rad
+                loop[K.L_HAND_K] = action.grip_stiffness_n_m_per_rad
+                loop[K.L_HAND_B] = action.grip_damping_n_m_s_per_rad
+                loop[K.L_HAND_PUSH] = action.push_n_m
+                if action.done:
+                    self._done_s = self.t_s
+                    break
+        n_acq, n_est = int(loop[K.L_N_ACQ]), int(loop[K.L_N_EST])
+        c.driver_updates += updates
+        c.acquisitions += n_acq
+        c.commands_sent += int(loop[K.L_N_CMD])
+        c.estimates += n_est
+        c.forces_sent += n_est
+        self._success = self._success or loop[K.L_SUCCESS] != 0.0
+        return out[:filled]
+
     def _on_events(self, rows: list[tuple[float, ...]]) -> None:
         c = self.counters
         if self._fast:
             # the kernel has acquired this tick; after a driver update the master sends
-            # the rate command, carrying the new rotation, into the kernel's link
+            # the rate command, carrying the new rotation, into the kernel's link: the
+            # kernel, which deferred it (M_DEFER_LAST), sends it first thing in its next
+            # call, at this tick's time and with the draws it would have taken here
             if c.ticks % self._drv_every == 0:
                 self._drive()
-                if c.ticks % self._acq_every == 0:
-                    # the kernel sends it first thing in its next call, at this tick's
-                    # time and with the draws this send would have taken from here
-                    self.loop[K.L_SEND_PENDING] = 1.0
-                    c.commands_sent += 1
             return
         if c.ticks % self._drv_every == 0:
             self._drive()

@@ -338,7 +338,10 @@ def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
                 if not (k == n_ticks - 1 and mp[M_DEFER_LAST] != 0.0):
                     speed = rate_command(loop[L_THETA_Q_PREV], mp[M_KV]) / r
                     kernel_send(q_f, ls_f, lp_f, pool, pos, t, speed, loop[L_ROT_ACTION])
-                    loop[L_N_CMD] += 1.0
+                else:
+                    # sent at the start of the next call, after the driver has acted
+                    loop[L_SEND_PENDING] = 1.0
+                loop[L_N_CMD] += 1.0
         return n_samples
 
     return run_ticks
