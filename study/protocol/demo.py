@@ -34,9 +34,10 @@ from study.protocol.tlx import store_tlx
 from teleop_core.progress import Progress, no_progress
 
 
-def fill_tlx(db_url: str, study_seed: int) -> int:
-    """A questionnaire for every block of every participant; returns how many."""
-    engine = open_database(db_url, create=False)
+def fill_tlx(db_url: str, study_seed: int, durable: bool = True) -> int:
+    """A questionnaire for every block of every participant; returns how many.
+    `durable=False`: commits not synced one by one (`db.engine.make_engine`)."""
+    engine = open_database(db_url, create=False, durable=durable)
     stored = 0
     try:
         with Session(engine) as session:
@@ -113,7 +114,13 @@ def run_demo(
     `participants`: a fitted participant model (MODEL.json) the people are drawn from;
     `sizes` and `trials_per_condition` replace the default design's (a study of another
     size, e.g. for the participant fit's benchmark), with no practice trials. `notice`
-    is told when the simulation loop is compiled (the first run after install)."""
+    is told when the simulation loop is compiled (the first run after install).
+
+    The study is new (`create_study` refuses a database that holds one) and a demo
+    stopped halfway is run again rather than continued, so its commits are not synced
+    to the disk one by one (`durable=False` of `db.engine.make_engine`): a power cut
+    can lose its last commits, which the run that replaces it writes again. Its
+    samples, one commit per second of trial time, each waited for a sync before."""
     text = TEMPLATE.replace("seed = 1 ", f"seed = {seed} ")
     for old, new in QUICK.items() if quick else ():
         text = text.replace(old, new)
@@ -128,7 +135,7 @@ def run_demo(
         )
         text = re.sub(r"^practice_trials = \d+", "practice_trials = 0", text, flags=re.M)
     design = parse_design(text)
-    engine = open_database(db_url, create=True)
+    engine = open_database(db_url, create=True, durable=False)
     try:
         create_study(engine, design, text)
         codes = [
@@ -138,8 +145,10 @@ def run_demo(
         ]
     finally:
         engine.dispose()
-    runs = run_participants(db_url, codes, jobs, participants=participants, notice=notice)
+    runs = run_participants(
+        db_url, codes, jobs, participants=participants, notice=notice, durable=False
+    )
     for k, (code, _) in enumerate(runs, 1):
         progress(f"sessions: {k}/{len(codes)} participants ({code})")
     progress("NASA-TLX")
-    fill_tlx(db_url, design.seed)
+    fill_tlx(db_url, design.seed, durable=False)

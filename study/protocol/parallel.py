@@ -41,12 +41,13 @@ def _worker_init(
     parent_pid: int | None = None,
     actor: str | None = None,
     participants: str | None = None,
+    durable: bool = True,
 ) -> None:
     from db.migrate import open_database
     from study.protocol.default_estimator import load_estimator
     from study.protocol.participant_model import load_model
 
-    _WORKER["engine"] = open_database(db_url, create=False)
+    _WORKER["engine"] = open_database(db_url, create=False, durable=durable)
     _WORKER["estimator"] = load_estimator()
     _WORKER["actor"] = actor
     _WORKER["participants"] = load_model(participants) if participants is not None else None
@@ -121,6 +122,7 @@ def run_participants(
     on_busy: Callable[[str, str], None] | None = None,
     participants: str | None = None,
     notice: Callable[[str], None] | None = None,
+    durable: bool = True,
 ) -> Iterator[tuple[str, int]]:
     """Run simulated sessions for `codes` in `jobs` processes; yield (code, trials) as each
     finishes. Each process opens its own connection and loads the estimator once, and
@@ -130,6 +132,8 @@ def run_participants(
     reported through `on_busy(code, message)` (raised when `on_busy` is None).
     `participants`: the path of a fitted participant model (MODEL.json) to draw from.
     `notice` is told when the loop's kernel is compiled first (`compile_loop_once`).
+    `durable=False`: the workers' commits are not synced one by one
+    (`db.engine.make_engine`), for a database thrown away when it is not finished.
     """
     from study.protocol.lease import SessionBusyError
 
@@ -142,7 +146,7 @@ def run_participants(
         return code, 0
 
     if jobs == 1:
-        _worker_init(db_url, actor=actor, participants=participants)
+        _worker_init(db_url, actor=actor, participants=participants, durable=durable)
         for code in codes:
             try:
                 yield _worker_run(code, pace)
@@ -155,7 +159,7 @@ def run_participants(
         jobs,
         mp_context=context,
         initializer=_worker_init,
-        initargs=(db_url, os.getpid(), actor, participants),
+        initargs=(db_url, os.getpid(), actor, participants, durable),
     ) as pool:
         futures = {pool.submit(_worker_run, code, pace): code for code in codes}
         for future in as_completed(futures):
