@@ -232,3 +232,15 @@ def write_figures(
         paths += save(d.figure, out_dir, d.name, formats)
     return paths
 
+
+def write_figures_at(db_url: str, out_dir: Path, width: str = "double") -> list[Path]:
+    """`write_figures` (every format) for the database at `db_url`, opened and closed
+    here: what `study demo` hands a session worker, which draws one width while the
+    command draws the other."""
+    from db.migrate import open_database
+
+    engine = open_database(db_url, create=False)
+    try:
+        return write_figures(engine, out_dir, width=width)
+    finally:
+        engine.dispose()

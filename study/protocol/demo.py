@@ -21,7 +21,7 @@ from db.migrate import open_database
 from db.models.study import Participant
 from db.models.trial import Trial
 from study.protocol.design import TEMPLATE, parse_design
-from study.protocol.parallel import run_participants
+from study.protocol.parallel import Workers, start_workers
 from study.protocol.roster import add_participant, create_study
 from study.protocol.simulated_tlx import (
     block_preference,
@@ -88,6 +88,11 @@ def fill_tlx(db_url: str, study_seed: int, durable: bool = True) -> int:
     return stored
 
 
+def _run_sessions(workers: Workers, codes: list[str], progress: Progress) -> None:
+    for k, (code, _) in enumerate(workers.run(codes), 1):
+        progress(f"sessions: {k}/{len(codes)} participants ({code})")
+
+
 QUICK = {
     "outsider = 20": "outsider = 2",
     "novice = 8": "novice = 2",
@@ -108,6 +113,7 @@ def run_demo(
     sizes: dict[str, int] | None = None,
     trials_per_condition: int | None = None,
     notice: Callable[[str], None] | None = None,
+    workers: Workers | None = None,
 ) -> None:
     """Create, enrol, run and fill in the questionnaires of the default study.
 
@@ -115,6 +121,9 @@ def run_demo(
     `sizes` and `trials_per_condition` replace the default design's (a study of another
     size, e.g. for the participant fit's benchmark), with no practice trials. `notice`
     is told when the simulation loop is compiled (the first run after install).
+    `workers`: the session workers to run them (`start_workers(db_url, jobs,
+    participants=..., durable=False)`, started by the caller before this), else
+    `jobs` processes started here.
 
     The study is new (`create_study` refuses a database that holds one) and a demo
     stopped halfway is run again rather than continued, so its commits are not synced
@@ -145,10 +154,12 @@ def run_demo(
         ]
     finally:
         engine.dispose()
-    runs = run_participants(
-        db_url, codes, jobs, participants=participants, notice=notice, durable=False
-    )
-    for k, (code, _) in enumerate(runs, 1):
-        progress(f"sessions: {k}/{len(codes)} participants ({code})")
+    if workers is None:
+        with start_workers(
+            db_url, jobs, participants=participants, notice=notice, durable=False
+        ) as own:
+            _run_sessions(own, codes, progress)
+    else:
+        _run_sessions(workers, codes, progress)
     progress("NASA-TLX")
     fill_tlx(db_url, design.seed, durable=False)
