@@ -61,17 +61,16 @@ def fill_tlx(db_url: str, study_seed: int, durable: bool = True) -> int:
                 columns=["pid", "task", "condition", "time", "contacts", "success", "seen", "felt"],
             )
             plan = [(p.id, p.code, [(b.task, b.condition) for b in p.blocks]) for p in people]
+        # each block's trials, in stored order (one pass, not a filter per block)
+        by_block = {key: rows for key, rows in trials.groupby(["pid", "task", "condition"])}
+        empty = trials.iloc[:0]
         for pid, code, blocks in plan:
             rng = np.random.default_rng([study_seed, zlib.crc32(code.encode()), 0x7A])
             offsets = person_offsets(rng)
             preference = person_preference(rng)
             for task, condition in blocks:
                 chosen = pairwise_choices(study_seed, code, rng, block_preference(preference, rng))
-                block = trials[
-                    (trials["pid"] == pid)
-                    & (trials["task"] == task)
-                    & (trials["condition"] == condition)
-                ]
+                block = by_block.get((pid, task, condition), empty)
                 ratings = block_ratings(
                     block["time"].tolist(),
                     block["contacts"].tolist(),
