@@ -2,9 +2,9 @@
 
 SQLite (the embedded default) is set up on every new connection: WAL journal so that
 readers (the TUI, `study schedule`) never block the session writing samples, foreign
-keys on, `synchronous=FULL` so a committed chunk survives a power cut, and a busy
-timeout so that two processes writing at once wait instead of failing (30 s, or
-`?timeout=SECONDS` in the URL). pysqlite's own
+keys on, `synchronous=FULL` so a committed chunk survives a power cut (`durable=False`:
+`synchronous=NORMAL`, see `make_engine`), and a busy timeout so that two processes
+writing at once wait instead of failing (30 s, or `?timeout=SECONDS` in the URL). pysqlite's own
 implicit transaction handling is switched off and `BEGIN` is emitted by SQLAlchemy
 (the recipe in SQLAlchemy's SQLite dialect documentation), which makes transactional
 DDL work for Alembic and lets `write_transaction` take the write lock up front.
@@ -143,13 +143,19 @@ def is_sqlite(bind: Engine | Connection) -> bool:
     return bind.dialect.name == "sqlite"
 
 
-def make_engine(url: str | URL) -> Engine:
+def make_engine(url: str | URL, *, durable: bool = True) -> Engine:
     """An engine for `url` with the per-backend settings described in the module docstring.
 
     Parameters
     ----------
     url
         A database URL (see `resolve_url`).
+    durable
+        SQLite: every commit synced to the disk (`synchronous=FULL`: a committed chunk
+        survives a power cut). False: `synchronous=NORMAL`, no sync per commit (in WAL
+        mode a power cut can lose the last commits, never the file's consistency), for a
+        database that is thrown away when it is not finished, as `study demo`'s: its
+        chunks of samples, one commit per second of trial time, each waited for a sync.
 
     Returns
     -------
@@ -170,7 +176,7 @@ def make_engine(url: str | URL) -> Engine:
             engine = create_engine(url, connect_args={"timeout": timeout_ms / 1000})
             # An in-memory or read-only (?mode=ro) database cannot switch to WAL.
             wal = url.database not in (None, "", ":memory:") and url.query.get("mode") != "ro"
-            _configure_sqlite(engine, wal=wal, busy_timeout_ms=timeout_ms)
+            _configure_sqlite(engine, wal=wal, busy_timeout_ms=timeout_ms, durable=durable)
             if wal and url.database and not url.query.get("uri"):
                 _watch_sqlite_file(engine, Path(url.database))
         else:
@@ -214,7 +220,11 @@ def busy_timeout_ms(url: URL) -> int:
     return round(seconds * 1000)
 
 
-def _configure_sqlite(engine: Engine, *, wal: bool, busy_timeout_ms: int) -> None:
+def _configure_sqlite(
+    engine: Engine, *, wal: bool, busy_timeout_ms: int, durable: bool = True
+) -> None:
+    synchronous = "FULL" if durable else "NORMAL"
+
     @event.listens_for(engine, "connect")
     def _on_connect(dbapi_connection: Any, _record: Any) -> None:
         # Let SQLAlchemy, not pysqlite, decide when a transaction begins.
@@ -223,7 +233,7 @@ def _configure_sqlite(engine: Engine, *, wal: bool, busy_timeout_ms: int) -> Non
         if wal:
             cursor.execute("PRAGMA journal_mode=WAL")
         cursor.execute("PRAGMA foreign_keys=ON")
-        cursor.execute("PRAGMA synchronous=FULL")
+        cursor.execute(f"PRAGMA synchronous={synchronous}")
         cursor.execute(f"PRAGMA busy_timeout={busy_timeout_ms}")
         cursor.close()
 

@@ -200,13 +200,15 @@ def open_database(
     create: bool = True,
     version_locations: Sequence[Path] = (),
     on_upgrade: Callable[[str | None, str, Path | None], None] | None = None,
+    durable: bool = True,
 ) -> Engine:
     """Open the study database at `db` (URL or SQLite path; see `resolve_url`).
 
     Creates the schema in an empty database when `create`; upgrades an older one (an
     SQLite file is backed up first) and reports it through `on_upgrade(before, after,
     backup_path)`; refuses unknown or foreign schemas with a `DbInputError` before
-    anything is written.
+    anything is written. `durable=False`: commits are not synced to the disk one by one
+    (`db.engine.make_engine`), for a database thrown away when it is not finished.
     """
     url = resolve_url(db)
     shown = describe(url)
@@ -227,7 +229,7 @@ def open_database(
         raise MissingDatabaseError(
             f"database {shown} is empty; expected a study database (run `study init` first)"
         )
-    engine = make_engine(url)
+    engine = make_engine(url, durable=durable)
     try:
         if state in (SchemaState.EMPTY, SchemaState.OLDER):
             older = state is SchemaState.OLDER

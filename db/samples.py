@@ -106,6 +106,8 @@ class SampleWriter:
         if not hold_s >= 0:
             raise DbInputError(f"hold_s {hold_s!r} is not a duration in s >= 0")
         self.schema = check_schema(schema)
+        self._names: list[str] = self.schema.names
+        self._name_set = frozenset(self._names)
         self._schema_id: int | None = None
         self.hold_s = hold_s
         self.on_wait = on_wait
@@ -132,8 +134,8 @@ class SampleWriter:
 
     def extend(self, columns: Mapping[str, Sequence[Any] | np.ndarray]) -> None:
         """Add samples given as equal-length columns named as in the schema."""
-        names = self.schema.names
-        unknown = set(columns) - set(names)
+        names = self._names
+        unknown = columns.keys() - self._name_set
         if unknown or "t_s" not in columns:
             raise DbInputError(
                 f"sample columns {sorted(columns)} must include 't_s' and only names from {names}"
@@ -181,7 +183,7 @@ class SampleWriter:
             # Samples before chunk_start + chunk_s belong to the current chunk.
             j = int(np.searchsorted(t, self._chunk_start_t + self.chunk_s, side="left"))
             j = max(j, i)
-            self._buffer.append(block[i:j])
+            self._buffer.append(block if i == 0 and j == len(t) else block[i:j])
             self._last_t = float(t[j - 1]) if j > i else self._last_t
             if j < len(t):
                 self.flush()
@@ -207,13 +209,14 @@ class SampleWriter:
             self._commit(wait=self.hold_s <= 0 or self._held_s() > self.hold_s)
 
     def _encode(self, n: int) -> dict[str, Any]:
-        batch = pa.RecordBatch.from_arrays(
-            [
+        if len(self._buffer) == 1:  # one call's samples: its columns as they are
+            columns = self._buffer[0].columns
+        else:
+            columns = [
                 pa.concat_arrays([b.columns[k] for b in self._buffer])
                 for k in range(len(self.schema))
-            ],
-            schema=self.schema,
-        )
+            ]
+        batch = pa.RecordBatch.from_arrays(columns, schema=self.schema)
         data, raw_bytes = encode(batch)
         t_s = batch.column(0)
         row = {

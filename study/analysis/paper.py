@@ -54,7 +54,9 @@ def _samples(engine: Engine, trial_id: int, task: str, columns: Sequence[str]) -
 def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[tuple[int, str]]:
     """The task's VO trial with the highest `trace_measure` (LCCA: peak distal force),
     and the same participant's HV trial with the same number: a collision felt and not
-    felt. Only trials with samples (imported ones have none)."""
+    felt. Only trials with samples (imported ones have none). Of equal values, the first
+    participant's (by code) first trial: not the first stored, which depends on which
+    session worker committed first."""
     recorded = exists().where(SampleChunk.trial_id == Trial.id)
     measured = (Trial.status == "completed", Trial.practice.is_(False), Trial.task == task)
     traced = get_task(task).trace_measure
@@ -67,7 +69,7 @@ def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[
         select(Trial, Participant.code)
         .join(Participant)
         .where(*measured, Trial.condition == "VO", recorded)
-        .order_by(pick.desc(), Trial.id)
+        .order_by(pick.desc(), Participant.code, Trial.block_index, Trial.trial_index, Trial.id)
     )
     if driver is not None:
         query = query.where(Trial.driver == driver)
@@ -229,3 +231,16 @@ def write_figures(
     for d in drawn:
         paths += save(d.figure, out_dir, d.name, formats)
     return paths
+
+
+def write_figures_at(db_url: str, out_dir: Path, width: str = "double") -> list[Path]:
+    """`write_figures` (every format) for the database at `db_url`, opened and closed
+    here: what `study demo` hands a session worker, which draws one width while the
+    command draws the other."""
+    from db.migrate import open_database
+
+    engine = open_database(db_url, create=False)
+    try:
+        return write_figures(engine, out_dir, width=width)
+    finally:
+        engine.dispose()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
@@ -19,6 +20,9 @@ from study.commands.base import (
     status_progress,
 )
 from study.errors import StudyInputError
+
+if TYPE_CHECKING:
+    from study.protocol.parallel import Workers
 
 FORMATS = ("pdf", "svg", "png")
 
@@ -84,6 +88,26 @@ def figures(
         engine.dispose()
 
 
+def _analyse_demo(db_url: str, out_dir: Path, workers: Workers) -> None:
+    """The demo's analysis and figures; a paper needs both IEEE widths: double column in
+    FIGURES, single in FIGURES/single, drawn by a session worker meanwhile."""
+    from study.analysis.frames import participant_means, tlx_frame, trial_frame
+    from study.analysis.paper import write_figures, write_figures_at
+    from study.analysis.report import write
+    from study.analysis.stats import analyze
+
+    single = workers.submit(write_figures_at, db_url, out_dir / "figures" / "single", "single")
+    engine = open_database(db_url, create=False)
+    try:
+        trials, tlx = trial_frame(engine), tlx_frame(engine)
+        result = analyze(trials, participant_means(trials, tlx))
+        write(result, out_dir / "analysis", None)
+        write_figures(engine, out_dir / "figures")
+    finally:
+        engine.dispose()
+    single.result()
+
+
 @click.command("demo", cls=StudyCommand)
 @click.option(
     "--out",
@@ -112,11 +136,7 @@ def demo(
     participants_path: Path | None,
 ) -> None:
     """Simulate the paper's whole study (20/8/8, VO and HV, NASA-TLX) and analyse it."""
-    from study.analysis.frames import participant_means, tlx_frame, trial_frame
-    from study.analysis.paper import write_figures
-    from study.analysis.report import write
-    from study.analysis.stats import analyze
-    from study.protocol.demo import run_demo
+    from study.protocol.parallel import start_workers
 
     start = time.monotonic()
     model = load_participants(participants_path)
@@ -131,26 +151,26 @@ def demo(
         def notice(message: str) -> None:
             status.console.print(f"study demo: {message}", markup=False)
 
-        run_demo(
-            db_url,
-            seed,
-            jobs,
-            progress=status_progress(status),
-            quick=quick,
-            participants=str(participants_path) if model is not None else None,
-            notice=notice,
-        )
-        status.update("analysis and figures")
-        engine = open_database(db_url, create=False)
-        try:
-            trials, tlx = trial_frame(engine), tlx_frame(engine)
-            result = analyze(trials, participant_means(trials, tlx))
-            write(result, out_dir / "analysis", None)
-            # a paper needs both IEEE widths: double column here, single in single/
-            write_figures(engine, out_dir / "figures")
-            write_figures(engine, out_dir / "figures" / "single", width="single")
-        finally:
-            engine.dispose()
+        model_path = str(participants_path) if model is not None else None
+        # the workers start first: their start runs beside this process's imports and the
+        # creation of the study
+        with start_workers(
+            db_url, jobs, participants=model_path, notice=notice, durable=False
+        ) as workers:
+            from study.protocol.demo import run_demo
+
+            run_demo(
+                db_url,
+                seed,
+                jobs,
+                progress=status_progress(status),
+                quick=quick,
+                participants=model_path,
+                notice=notice,
+                workers=workers,
+            )
+            status.update("analysis and figures")
+            _analyse_demo(db_url, out_dir, workers)
     if model is not None:
         click.echo(f"simulated participants drawn from the {model.label()}")
     click.echo(

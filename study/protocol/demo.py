@@ -21,7 +21,7 @@ from db.migrate import open_database
 from db.models.study import Participant
 from db.models.trial import Trial
 from study.protocol.design import TEMPLATE, parse_design
-from study.protocol.parallel import run_participants
+from study.protocol.parallel import Workers, start_workers
 from study.protocol.roster import add_participant, create_study
 from study.protocol.simulated_tlx import (
     block_preference,
@@ -34,9 +34,10 @@ from study.protocol.tlx import store_tlx
 from teleop_core.progress import Progress, no_progress
 
 
-def fill_tlx(db_url: str, study_seed: int) -> int:
-    """A questionnaire for every block of every participant; returns how many."""
-    engine = open_database(db_url, create=False)
+def fill_tlx(db_url: str, study_seed: int, durable: bool = True) -> int:
+    """A questionnaire for every block of every participant; returns how many.
+    `durable=False`: commits not synced one by one (`db.engine.make_engine`)."""
+    engine = open_database(db_url, create=False, durable=durable)
     stored = 0
     try:
         with Session(engine) as session:
@@ -60,17 +61,16 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
                 columns=["pid", "task", "condition", "time", "contacts", "success", "seen", "felt"],
             )
             plan = [(p.id, p.code, [(b.task, b.condition) for b in p.blocks]) for p in people]
+        # each block's trials, in stored order (one pass, not a filter per block)
+        by_block = {key: rows for key, rows in trials.groupby(["pid", "task", "condition"])}
+        empty = trials.iloc[:0]
         for pid, code, blocks in plan:
             rng = np.random.default_rng([study_seed, zlib.crc32(code.encode()), 0x7A])
             offsets = person_offsets(rng)
             preference = person_preference(rng)
             for task, condition in blocks:
                 chosen = pairwise_choices(study_seed, code, rng, block_preference(preference, rng))
-                block = trials[
-                    (trials["pid"] == pid)
-                    & (trials["task"] == task)
-                    & (trials["condition"] == condition)
-                ]
+                block = by_block.get((pid, task, condition), empty)
                 ratings = block_ratings(
                     block["time"].tolist(),
                     block["contacts"].tolist(),
@@ -85,6 +85,11 @@ def fill_tlx(db_url: str, study_seed: int) -> int:
     finally:
         engine.dispose()
     return stored
+
+
+def _run_sessions(workers: Workers, codes: list[str], progress: Progress) -> None:
+    for k, (code, _) in enumerate(workers.run(codes), 1):
+        progress(f"sessions: {k}/{len(codes)} participants ({code})")
 
 
 QUICK = {
@@ -107,13 +112,23 @@ def run_demo(
     sizes: dict[str, int] | None = None,
     trials_per_condition: int | None = None,
     notice: Callable[[str], None] | None = None,
+    workers: Workers | None = None,
 ) -> None:
     """Create, enrol, run and fill in the questionnaires of the default study.
 
     `participants`: a fitted participant model (MODEL.json) the people are drawn from;
     `sizes` and `trials_per_condition` replace the default design's (a study of another
     size, e.g. for the participant fit's benchmark), with no practice trials. `notice`
-    is told when the simulation loop is compiled (the first run after install)."""
+    is told when the simulation loop is compiled (the first run after install).
+    `workers`: the session workers to run them (`start_workers(db_url, jobs,
+    participants=..., durable=False)`, started by the caller before this), else
+    `jobs` processes started here.
+
+    The study is new (`create_study` refuses a database that holds one) and a demo
+    stopped halfway is run again rather than continued, so its commits are not synced
+    to the disk one by one (`durable=False` of `db.engine.make_engine`): a power cut
+    can lose its last commits, which the run that replaces it writes again. Its
+    samples, one commit per second of trial time, each waited for a sync before."""
     text = TEMPLATE.replace("seed = 1 ", f"seed = {seed} ")
     for old, new in QUICK.items() if quick else ():
         text = text.replace(old, new)
@@ -128,7 +143,7 @@ def run_demo(
         )
         text = re.sub(r"^practice_trials = \d+", "practice_trials = 0", text, flags=re.M)
     design = parse_design(text)
-    engine = open_database(db_url, create=True)
+    engine = open_database(db_url, create=True, durable=False)
     try:
         create_study(engine, design, text)
         codes = [
@@ -138,8 +153,12 @@ def run_demo(
         ]
     finally:
         engine.dispose()
-    runs = run_participants(db_url, codes, jobs, participants=participants, notice=notice)
-    for k, (code, _) in enumerate(runs, 1):
-        progress(f"sessions: {k}/{len(codes)} participants ({code})")
+    if workers is None:
+        with start_workers(
+            db_url, jobs, participants=participants, notice=notice, durable=False
+        ) as own:
+            _run_sessions(own, codes, progress)
+    else:
+        _run_sessions(workers, codes, progress)
     progress("NASA-TLX")
-    fill_tlx(db_url, design.seed)
+    fill_tlx(db_url, design.seed, durable=False)

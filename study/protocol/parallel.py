@@ -4,19 +4,27 @@ Each worker process opens its own connection, loads the estimator once and runs 
 sessions (`study.protocol.session.run_session`) one participant at a time; a worker
 ends when its parent dies (it watches the parent's pid), marking its running trial
 interrupted first.
+
+`start_workers` starts the processes before their database need exist (each opens it
+at its first session), so that their start (an interpreter each, and the imports of a
+session) runs beside the caller's own start; `Workers.run` runs the sessions and
+`Workers.submit` hands them other work once the sessions are done (`study demo`'s
+second set of figures).
 """
 
 from __future__ import annotations
 
+import importlib
 import multiprocessing
 import os
 import threading
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from types import TracebackType
+from typing import Any, TypeVar
 
-from study.protocol.session import run_session
-
+T = TypeVar("T")
 _WORKER: dict[str, object] = {}
 PARENT_POLL_S = 0.5
 """How often a `--jobs` worker checks that its parent is alive."""
@@ -41,12 +49,16 @@ def _worker_init(
     parent_pid: int | None = None,
     actor: str | None = None,
     participants: str | None = None,
+    durable: bool = True,
 ) -> None:
-    from db.migrate import open_database
     from study.protocol.default_estimator import load_estimator
     from study.protocol.participant_model import load_model
 
-    _WORKER["engine"] = open_database(db_url, create=False)
+    importlib.import_module("study.protocol.session")  # here, not at the first session
+    old = _WORKER.pop("engine", None)  # one job: this process's earlier database
+    if old is not None:
+        old.dispose()  # type: ignore[attr-defined]
+    _WORKER["db_url"], _WORKER["durable"] = db_url, durable
     _WORKER["estimator"] = load_estimator()
     _WORKER["actor"] = actor
     _WORKER["participants"] = load_model(participants) if participants is not None else None
@@ -59,12 +71,28 @@ def _worker_init(
         ).start()
 
 
+def _worker_engine() -> Any:
+    """The worker's engine, opened at its first session (the database may not exist yet
+    when the worker starts)."""
+    if "engine" not in _WORKER:
+        from db.migrate import open_database
+
+        _WORKER["engine"] = open_database(
+            _WORKER["db_url"],  # type: ignore[arg-type]
+            create=False,
+            durable=bool(_WORKER["durable"]),
+        )
+    return _WORKER["engine"]
+
+
 def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
+    from study.protocol.session import run_session
+
     idle: threading.Event = _WORKER["idle"]  # type: ignore[assignment]
     idle.clear()
     try:
         done = run_session(
-            _WORKER["engine"],  # type: ignore[arg-type]
+            _worker_engine(),
             code,
             "simulated",
             _WORKER["estimator"],  # type: ignore[arg-type]
@@ -112,6 +140,108 @@ def compile_loop_once(notice: Callable[[str], None] | None = None) -> bool:
     return True
 
 
+def _started() -> None:
+    """A worker's first task: returns once the worker has started (its initializer ran)."""
+
+
+class Workers:
+    """The processes of `start_workers`; use as a context manager (the processes end at
+    its exit). With one job there is no process: the work runs in this one."""
+
+    def __init__(
+        self,
+        db_url: str | None,
+        jobs: int,
+        actor: str | None = None,
+        participants: str | None = None,
+        durable: bool = True,
+    ) -> None:
+        self.jobs = jobs
+        self._pool: ProcessPoolExecutor | None = None
+        if jobs == 1:
+            _worker_init(db_url, actor=actor, participants=participants, durable=durable)
+            return
+        quiet_resource_tracker()
+        context = multiprocessing.get_context("spawn")
+        self._pool = ProcessPoolExecutor(
+            jobs,
+            mp_context=context,
+            initializer=_worker_init,
+            initargs=(db_url, os.getpid(), actor, participants, durable),
+        )
+        self._pool.submit(_started)  # the pool starts its processes at the first task
+
+    def __enter__(self) -> Workers:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=exc is not None)
+
+    def run(
+        self,
+        codes: list[str],
+        pace: float | None = None,
+        on_busy: Callable[[str, str], None] | None = None,
+    ) -> Iterator[tuple[str, int]]:
+        """Run the sessions of `codes`; yield (code, trials) as each finishes (see
+        `run_participants`)."""
+        from study.protocol.lease import SessionBusyError
+
+        def busy(code: str, exc: SessionBusyError) -> tuple[str, int]:
+            if on_busy is None:
+                raise exc
+            on_busy(code, str(exc))
+            return code, 0
+
+        if self._pool is None:
+            for code in codes:
+                try:
+                    yield _worker_run(code, pace)
+                except SessionBusyError as exc:
+                    yield busy(code, exc)
+            return
+        futures = {self._pool.submit(_worker_run, code, pace): code for code in codes}
+        for future in as_completed(futures):
+            try:
+                yield future.result()
+            except SessionBusyError as exc:
+                yield busy(futures[future], exc)
+
+    def submit(self, fn: Callable[..., T], *args: Any) -> Future[T]:
+        """Run `fn(*args)` in a worker (a module-level function: it is sent by name); with
+        one job, here and now."""
+        if self._pool is not None:
+            return self._pool.submit(fn, *args)
+        done: Future[T] = Future()
+        try:
+            done.set_result(fn(*args))
+        except Exception as exc:  # handed to the caller, as the pool does
+            done.set_exception(exc)
+        return done
+
+
+def start_workers(
+    db_url: str | None,
+    jobs: int,
+    actor: str | None = None,
+    participants: str | None = None,
+    notice: Callable[[str], None] | None = None,
+    durable: bool = True,
+) -> Workers:
+    """Start `jobs` session workers for the database at `db_url`, which need not exist
+    yet (a worker opens it at its first session). The loop's kernel is compiled first
+    where it is not yet (`compile_loop_once`, told through `notice`). `participants`,
+    `actor`, `durable`: as in `run_participants`."""
+    compile_loop_once(notice)
+    return Workers(db_url, jobs, actor, participants, durable)
+
+
 def run_participants(
     db_url: str | None,
     codes: list[str],
@@ -121,6 +251,7 @@ def run_participants(
     on_busy: Callable[[str, str], None] | None = None,
     participants: str | None = None,
     notice: Callable[[str], None] | None = None,
+    durable: bool = True,
 ) -> Iterator[tuple[str, int]]:
     """Run simulated sessions for `codes` in `jobs` processes; yield (code, trials) as each
     finishes. Each process opens its own connection and loads the estimator once, and
@@ -130,36 +261,8 @@ def run_participants(
     reported through `on_busy(code, message)` (raised when `on_busy` is None).
     `participants`: the path of a fitted participant model (MODEL.json) to draw from.
     `notice` is told when the loop's kernel is compiled first (`compile_loop_once`).
+    `durable=False`: the workers' commits are not synced one by one
+    (`db.engine.make_engine`), for a database thrown away when it is not finished.
     """
-    from study.protocol.lease import SessionBusyError
-
-    compile_loop_once(notice)
-
-    def busy(code: str, exc: SessionBusyError) -> tuple[str, int]:
-        if on_busy is None:
-            raise exc
-        on_busy(code, str(exc))
-        return code, 0
-
-    if jobs == 1:
-        _worker_init(db_url, actor=actor, participants=participants)
-        for code in codes:
-            try:
-                yield _worker_run(code, pace)
-            except SessionBusyError as exc:
-                yield busy(code, exc)
-        return
-    quiet_resource_tracker()
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(
-        jobs,
-        mp_context=context,
-        initializer=_worker_init,
-        initargs=(db_url, os.getpid(), actor, participants),
-    ) as pool:
-        futures = {pool.submit(_worker_run, code, pace): code for code in codes}
-        for future in as_completed(futures):
-            try:
-                yield future.result()
-            except SessionBusyError as exc:
-                yield busy(futures[future], exc)
+    with start_workers(db_url, jobs, actor, participants, notice, durable) as workers:
+        yield from workers.run(codes, pace, on_busy)

@@ -45,6 +45,22 @@ def test_sqlite_runs_in_wal_mode_with_foreign_keys(sqlite_url: str) -> None:
     engine.dispose()
 
 
+def test_a_database_opened_not_durable_keeps_wal_without_a_sync_per_commit(
+    sqlite_url: str,
+) -> None:
+    from db.migrate import open_database
+
+    engine = open_database(sqlite_url, durable=False)
+    with engine.connect() as conn:
+        assert conn.exec_driver_sql("PRAGMA journal_mode").scalar() == "wal"
+        assert conn.exec_driver_sql("PRAGMA synchronous").scalar() == 1  # NORMAL
+    engine.dispose()
+    again = open_database(sqlite_url, create=False)  # the setting is the connection's
+    with again.connect() as conn:
+        assert conn.exec_driver_sql("PRAGMA synchronous").scalar() == 2
+    again.dispose()
+
+
 def _tlx(pid: int, **overrides: object) -> dict[str, object]:
     return {"participant_id": pid, "task": "lcca", "condition": "HV", **RATINGS, **overrides}
 

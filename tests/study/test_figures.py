@@ -402,3 +402,61 @@ def test_three_formats_are_written_from_one_layout_the_checked_one(tmp_path: Pat
     assert all(p.stat().st_size > 0 for p in paths)
     assert len(calls) == 1
     assert [ax.get_position().bounds for ax in axes] == pytest.approx(checked, abs=1e-9)
+
+
+def test_fig9_of_tied_peaks_draws_the_first_participant_by_code(
+    study_db: str, tmp_path: Path
+) -> None:
+    """Two VO trials with the same peak (the demo's simulated experts tie): Fig. 9 takes
+    the first participant by code, not the trial stored first (which, in the demo,
+    is whichever session worker committed first)."""
+    from db.models.study import Participant
+    from db.models.trial import TrialMeasure
+    from study.analysis.paper import _trace_trials
+
+    db = tmp_path / "tie.db"
+    db.write_bytes(Path(study_db).read_bytes())
+    engine = open_database(str(db), create=False)
+    try:
+        with Session(engine) as session:
+            first = session.scalars(select(Participant).where(Participant.code == "P001")).one()
+            first.code = "P999"  # stored first, now last by code
+            session.commit()
+        _give_samples_to(engine, "P002")
+        with Session(engine) as session:
+            lcca_vo = select(Trial.id).where(
+                Trial.task == "lcca", Trial.condition == "VO", Trial.trial_index == 0
+            )
+            session.execute(
+                update(TrialMeasure)
+                .where(
+                    TrialMeasure.name == "peak_distal_force_n",
+                    TrialMeasure.trial_id.in_(lcca_vo),
+                    TrialMeasure.trial_id.in_(
+                        select(Trial.id)
+                        .join(Participant)
+                        .where(Participant.code.in_(["P999", "P002"]))
+                    ),
+                )
+                .values(value=5.0)
+            )
+            session.commit()
+        picked = _trace_trials(engine, "lcca")
+    finally:
+        engine.dispose()
+    assert [title.split(",")[0] for _, title in picked] == ["P002", "P002"]
+
+
+def _give_samples_to(engine: Engine, code: str) -> None:
+    from db.models.study import Participant
+
+    t = np.linspace(0, 1, 20)
+    with Session(engine) as session:
+        ids = session.scalars(
+            select(Trial.id)
+            .join(Participant)
+            .where(Participant.code == code, Trial.task == "lcca", Trial.trial_index == 0)
+        ).all()
+    for trial_id in ids:
+        with SampleWriter(engine, trial_id) as writer:
+            writer.extend({"t_s": t, "proximal_force_n": t, "distal_force_n": t})

@@ -134,6 +134,32 @@ def test_run_all_runs_every_participant_in_two_processes(tmp_path: Path) -> None
     assert main(["run", "--all", "--participant", "P001", "--db", db]) == 2
 
 
+def test_workers_started_before_their_database_exists_run_its_sessions(tmp_path: Path) -> None:
+    """`study demo`'s order: the workers start, then the study is created; a worker opens
+    the database at its first session, and takes other work after the sessions."""
+    from study.protocol.parallel import start_workers
+
+    db = str(tmp_path / "s.db")
+    with start_workers(db, 2, durable=False) as workers:
+        (tmp_path / "d.toml").write_text(DESIGN)
+        assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
+        for _ in range(2):
+            assert main(["participant", "add", "--group", "novice", "--db", db]) == 0
+        done = sorted(workers.run(["P001", "P002"]))
+        assert workers.submit(divmod, 7, 2).result() == (3, 1)
+    assert done == [("P001", 4), ("P002", 4)]
+    assert [t[2] for t in _trials(db)] == ["completed"] * 8
+
+
+def test_one_job_runs_the_work_here_and_hands_back_its_error(tmp_path: Path) -> None:
+    from study.protocol.parallel import Workers
+
+    with Workers(str(tmp_path / "not_yet.db"), 1) as workers:
+        assert workers.submit(divmod, 7, 2).result() == (3, 1)
+        with pytest.raises(ZeroDivisionError):
+            workers.submit(divmod, 1, 0).result()
+
+
 _DIE_AT = """
 import os, signal, sys
 from db.migrate import open_database
