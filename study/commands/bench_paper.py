@@ -236,6 +236,14 @@ def bench_lcca(
     help="With --generalise: recordings per family, per mixture size and clean "
     "[20 per family and mixture size, 50 clean; 1 each with --quick].",
 )
+@click.option(
+    "--family",
+    "only",
+    multiple=True,
+    metavar="NAME",
+    help="With --generalise: only this group (a family, 'mixtures' or 'clean'; repeat "
+    "for more); each recording keeps the seed it has in the whole bench [all].",
+)
 def bench_calibrate(
     json_path: Path,
     out_dir: Path | None,
@@ -245,6 +253,7 @@ def bench_calibrate(
     only_open: bool,
     generalise: bool,
     count: int | None,
+    only: tuple[str, ...],
 ) -> None:
     """Calibration loop: every family, the clean recording, speed, estimator."""
     from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
@@ -252,8 +261,21 @@ def bench_calibrate(
     check_parent_folder(json_path)
     if count is not None and not generalise:
         raise StudyInputError(f"--count {count}; expected it only with --generalise")
+    if only and not generalise:
+        raise StudyInputError(f"--family {only[0]}; expected it only with --generalise")
     if generalise:
-        from study.bench.calibrate_general import GeneraliseConfig, run_generalise_bench
+        from study.bench.calibrate_general import (
+            GROUP_WORDS,
+            GeneraliseConfig,
+            run_generalise_bench,
+        )
+        from teleop_core.calibration.general import FAMILIES
+
+        unknown = [g for g in only if g not in (*FAMILIES, *GROUP_WORDS)]
+        if unknown:
+            raise StudyInputError(
+                f"--family {unknown[0]}; expected one of {', '.join((*FAMILIES, *GROUP_WORDS))}"
+            )
 
         general = GeneraliseConfig.quick(count or 1) if quick else GeneraliseConfig()
         if count is not None and not quick:
@@ -264,7 +286,7 @@ def bench_calibrate(
                 mixtures_of_three=count,
                 clean=count,
             )
-        general = replace(general, seed=seed)
+        general = replace(general, seed=seed, only=only)
         folder = out_dir or json_path.parent
         _run_report(
             json_path,
