@@ -244,6 +244,14 @@ def bench_lcca(
     "one effect, three, a ripple) and EMPS, each run twice in a fresh process; CPU and "
     "wall seconds, load average (--seed: the simulated recordings').",
 )
+@click.option(
+    "--family",
+    "only",
+    multiple=True,
+    metavar="NAME",
+    help="With --generalise: only this group (a family, 'mixtures' or 'clean'; repeat "
+    "for more); each recording keeps the seed it has in the whole bench [all].",
+)
 def bench_calibrate(
     json_path: Path,
     out_dir: Path | None,
@@ -254,6 +262,7 @@ def bench_calibrate(
     generalise: bool,
     count: int | None,
     timing: bool,
+    only: tuple[str, ...],
 ) -> None:
     """Calibration loop: every family, the clean recording, speed, estimator."""
     from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
@@ -261,11 +270,24 @@ def bench_calibrate(
     check_parent_folder(json_path)
     if count is not None and not generalise:
         raise StudyInputError(f"--count {count}; expected it only with --generalise")
+    if only and not generalise:
+        raise StudyInputError(f"--family {only[0]}; expected it only with --generalise")
     if timing:
         _bench_calibrate_time(json_path, out_dir, seed, quick, generalise or only_open)
         return
     if generalise:
-        from study.bench.calibrate_general import GeneraliseConfig, run_generalise_bench
+        from study.bench.calibrate_general import (
+            GROUP_WORDS,
+            GeneraliseConfig,
+            run_generalise_bench,
+        )
+        from teleop_core.calibration.general import FAMILIES
+
+        unknown = [g for g in only if g not in (*FAMILIES, *GROUP_WORDS)]
+        if unknown:
+            raise StudyInputError(
+                f"--family {unknown[0]}; expected one of {', '.join((*FAMILIES, *GROUP_WORDS))}"
+            )
 
         general = GeneraliseConfig.quick(count or 1) if quick else GeneraliseConfig()
         if count is not None and not quick:
@@ -276,7 +298,7 @@ def bench_calibrate(
                 mixtures_of_three=count,
                 clean=count,
             )
-        general = replace(general, seed=seed)
+        general = replace(general, seed=seed, only=only)
         folder = out_dir or json_path.parent
         _run_report(
             json_path,

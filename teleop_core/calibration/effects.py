@@ -21,7 +21,7 @@ The families and their names are the report's contract:
 | `hysteresis`           | play operator of the drive current     | half-width      |
 | `delay`                | signals taken at t - d                 | d, s            |
 | `drift`                | -i (1 - exp(-t / tau))                 | tau, s          |
-| `current_nonlinearity` | i^3 (torque per amp falling with i^2)  | -               |
+| `current_nonlinearity` | sgn(i) abs(i)^p (torque per amp vs i)  | p               |
 
 The play operator is a hand-written numba loop: scipy and statsmodels have no
 hysteresis operator, and it has to run over tens of thousands of samples per grid value.
@@ -284,14 +284,28 @@ class Drift(Effect):
 
 
 class CurrentNonlinearity(Effect):
+    """K(i) i = K i + k sgn(i) |i|^p: the torque per amp changing with the current (k < 0:
+    magnetic saturation). The exponent is searched: a saturation bends the curve from a
+    power near 2 (a soft knee) to well above 3 (a sharp one), and a fixed cube left the
+    rest of a softer bend for a wrong family (load-dependent friction) to take."""
+
     family = "current_nonlinearity"
+    searched = "exponent"
+    log_search = False
+    LEGACY_EXPONENT: ClassVar[float] = 3.0
+    """The exponent of a model saved before the exponent was searched (value nan)."""
+
+    def grid(self, s: Signals) -> Float1D:
+        return np.linspace(1.5, 5.0, 15)
 
     def columns(self, s: Signals, value: float) -> Float2D:
-        # K(i) i = K i + k3 i^3 (k3 < 0: saturation)
-        return (s["drive"] ** 3)[:, None]
+        p = self.LEGACY_EXPONENT if math.isnan(value) else value
+        i = s["drive"]
+        return (np.sign(i) * np.abs(i) ** p)[:, None]
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
-        return {f"cubic_{unit}_per_drive_unit3": coef[0] * out}
+        p = self.LEGACY_EXPONENT if math.isnan(value) else value
+        return {f"gain_{unit}_per_drive_unit_pow_p": coef[0] * out, "exponent": p}
 
 
 EFFECTS: dict[str, Effect] = {

@@ -16,8 +16,9 @@ the training block. Its held-out RMSE is the floor a model that knew the effect'
 shape would reach.
 
 `NAMES` says which report names count as the right family for each injected one
-(the loop's family, or the open library's term; none for effects the library has no
-term for, where any name given is a wrong one).
+(the loop's family, or the open library's term; none for slip, which the library has
+no term for, so that any name given is a wrong one: the loop reports the current
+nonlinearity it looks like as ambiguous with `force_saturation`).
 
 Simulated data, not measured: every result built from these says so.
 """
@@ -73,7 +74,7 @@ NAMES: dict[str, frozenset[str]] = {
     "gain_change": frozenset({"gain_change"}),
     "ripple_harmonics": frozenset({"position_periodic"}),
     "lag": frozenset({"first_order_lag"}),
-    "backlash": frozenset(),
+    "backlash": frozenset({"backlash"}),
     "slip": frozenset(),
 }
 """Report names that count as the right family for an injected one."""

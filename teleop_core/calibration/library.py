@@ -10,8 +10,13 @@ recorded channels and their history with at most one searched parameter:
 | `gain_change`       | drive * [t >= t_c]                    | t_c (s)  | a gain change point     |
 | `presliding_memory` | -sgn(w) exp(-d / delta), d = distance | delta    | pre-sliding friction    |
 |                     | since reversal                        |          |                         |
+| `backlash`          | play operator of the angle            | half gap | a gap in the drive      |
+|                     | (+-1 after 2 half gaps of travel)     |          |                         |
 
-None maps to a named family.
+None maps to a named family. `presliding_memory` and `backlash` both change the
+friction over the travel after a reversal (an exponential approach against a linear
+one across the gap): on a recording whose reversals do not tell the two shapes apart
+they tie, and the loop reports the winner as ambiguous with the other (`loop.py`).
 
 Lags of the inputs are the `delay` family's, and powers of speed `viscous_nonlinear`'s.
 A second ripple harmonic needs no term here: `position_periodic` may be added more
@@ -100,6 +105,33 @@ class PreslidingMemory(OpenTerm):
         return {f"extra_friction_after_reversal_{unit}": coef[0] * out, "memory_length": value}
 
 
+class Backlash(OpenTerm):
+    """A gap in the drive: after each reversal the force the load side holds changes
+    linearly with the travel until the gap is crossed, then stays (the play operator of
+    the angle, the same operator as `hysteresis` has on the drive)."""
+
+    family = "backlash"
+    needs = ("angle",)
+    searched = "half_gap"
+    formula = "play_operator(angle, half_gap)"
+
+    def grid(self, s: Signals) -> Float1D:
+        # from a ten-thousandth of the typical stroke (and two encoder counts) to half
+        # of it: a drive's gap is a fraction of a degree, a stroke tens of radians
+        x = s["angle"]
+        top = float(np.percentile(distance_since_turn(x), 90)) or 1.0
+        steps = np.abs(np.diff(x))
+        moving = steps[steps > 1e-9 * max(1.0, float(np.max(np.abs(x))))]
+        count = float(moving.min()) if len(moving) else 0.0
+        return np.geomspace(min(max(2.0 * count, 1e-4 * top), top / 4.0), top / 2.0, 30)
+
+    def columns(self, s: Signals, value: float) -> Float2D:
+        return play_operator(np.ascontiguousarray(s["angle"]), value)[:, None]
+
+    def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
+        return {f"force_across_gap_{unit}": coef[0] * out, "half_gap": value}
+
+
 def distance_since_turn(angle: Float1D) -> Float1D:
     """|angle - angle at its last turning point| (from the start until the first).
 
@@ -138,7 +170,7 @@ def distance_since_turn(angle: Float1D) -> Float1D:
 
 
 OPEN_TERMS: dict[str, OpenTerm] = {
-    e.family: e for e in (LoadFriction(), GainChange(), PreslidingMemory())
+    e.family: e for e in (LoadFriction(), GainChange(), PreslidingMemory(), Backlash())
 }
 """The open library by name."""
 

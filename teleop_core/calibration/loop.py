@@ -71,6 +71,11 @@ from teleop_core.progress import Progress, no_progress
 
 LAG_ALTERNATIVE = "first_order_lag"
 """The name a first-order lag of the whole force takes among a delay's alternatives."""
+SATURATION_ALTERNATIVE = "force_saturation"
+"""The name a saturation of the whole force (a slip, a force limit) takes among a
+current nonlinearity's alternatives."""
+SATURATION_QUANTILES = np.linspace(0.2, 0.99, 20)
+"""Saturation levels tried, as quantiles of the model's |force| on the training block."""
 LAG_GRID = 24
 """Time constants tried for that lag, log-spaced from one sample period to 0.2 s."""
 BIC_DECISIVE = 10.0
@@ -207,6 +212,21 @@ class Calibrator:
                 out.append(cand.family)
         return out
 
+    def _alternatives(  # type: ignore[no-untyped-def]
+        self, data: CalibrationData, chain: Chain, pred: Float1D, best, passing
+    ) -> list[str]:
+        """What the recording does not tell apart from the round's winner `best`: the
+        passing look-alikes, and for a `delay` a first-order lag, for a
+        `current_nonlinearity` a saturation of the whole force (`pred`: the model's
+        force before the round)."""
+        y_test = data.y[self.test_]
+        alike = self._look_alikes(best, passing, y_test)
+        if best[1].family == "delay":
+            alike += self._lag_alike(data, chain, (best[1], best[0].searched_value))
+        if best[1].family == "current_nonlinearity":
+            alike += self._saturation_alike(data, chain, pred, data.y - best[3])
+        return alike
+
     def _lag_alike(
         self, data: CalibrationData, chain: Chain, delay: tuple[Effect, float]
     ) -> list[str]:
@@ -226,6 +246,46 @@ class Calibrator:
         near = _rmse(lag) * (1.0 - self.min_gain) <= _rmse(delayed)
         alike = near and diebold_mariano(lag, delayed) >= self.alpha
         return [LAG_ALTERNATIVE] if alike else []
+
+    def _saturation_alike(
+        self, data: CalibrationData, chain: Chain, pred: Float1D, e_best: Float1D
+    ) -> list[str]:
+        """[`force_saturation`] when a saturation of the whole force, in place of the
+        `current_nonlinearity` that won (`e_best`: its errors), is not worse on both
+        blocks.
+
+        A current nonlinearity bends the force of the current alone; a slip or a force
+        limit clips the whole force (friction and inertia with it). Where the current's
+        force is most of the force the two bend alike. The saturation is the column
+        -sgn(f) max(|f| - L, 0) of the model's force f before the round (base +
+        `chain`), L searched over quantiles of |f| on the training block, fitted with
+        base + `chain`. It is an alternative when its held-out RMSE is within
+        `min_gain` of the winner's (or below) and the winner's errors are not
+        significantly smaller (one-sided Diebold-Mariano at `alpha`), or when it fits
+        the training block decisively better (BIC lower by `BIC_DECISIVE`; both have
+        one coefficient and one searched value): the blocks then disagree, and the
+        recording names neither."""
+        X, _ = design(self.base_, data.signals, chain)
+        y = data.y
+        size = np.abs(pred)
+        best: tuple[float, Float1D] | None = None
+        for level in np.quantile(size[self.train_], SATURATION_QUANTILES):
+            column = -np.sign(pred) * np.maximum(size - level, 0.0)
+            Xs = np.column_stack([X, column])
+            coef = solve(Xs[self.train_], y[self.train_])
+            fit = Xs @ coef
+            e = y[self.train_] - fit[self.train_]
+            sse = float(e @ e)
+            if best is None or sse < best[0]:
+                best = (sse, fit)
+        assert best is not None
+        e_sat = y[self.test_] - best[1][self.test_]
+        e_win = e_best[self.test_]
+        near = _rmse(e_sat) * (1.0 - self.min_gain) <= _rmse(e_win)
+        tied = near and diebold_mariano(e_sat, e_win) >= self.alpha
+        train = e_best[self.train_]
+        better = len(train) * np.log(best[0] / float(train @ train)) < -BIC_DECISIVE
+        return [SATURATION_ALTERNATIVE] if tied or better else []
 
     def _filtered_errors(self, data: CalibrationData, chain: Chain) -> Float1D:
         """Held-out errors of base + `chain` with every column through the first-order
@@ -308,10 +368,7 @@ class Calibrator:
                 break
             best = _best(passing, self.min_gain)
             best[0].accepted = True
-            alike = self._look_alikes(best, passing, y_test)
-            if best[1].family == "delay":
-                alike += self._lag_alike(data, chain, (best[1], best[0].searched_value))
-            self.ambiguous_.append(alike)
+            self.ambiguous_.append(self._alternatives(data, chain, pred, best, passing))
             for other in passing:
                 if other is not best:
                     other[0].reason = f"passed, but {best[0].family} cut the error more"

@@ -5,6 +5,7 @@ small run works end to end."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +72,21 @@ def test_the_plan_has_every_family_mixtures_and_clean_in_round_robin() -> None:
             assert len(set(families)) == int(g[-1]) and not {"delay", "lag"} <= set(families)
     # the first round has one recording of every group
     assert set(groups[: len(FAMILIES) + 3]) == set(groups)
+
+
+def test_a_group_filter_keeps_each_recordings_seed_from_the_whole_plan() -> None:
+    whole = GeneraliseConfig(per_family=2, mixtures_of_two=2, mixtures_of_three=1, clean=2)
+    only = plan(replace(whole, only=("backlash", "mixtures")))
+    expected = [r for r in plan(whole) if r[0] == "backlash" or r[0].startswith("mixture")]
+    assert only == expected and len(only) == 2 + 2 + 1
+
+
+def test_an_unknown_family_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["bench", "calibrate", "--generalise", "--family", "friction"]
+    assert main([*argv, "--json", str(tmp_path / "r.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--family friction" in err[0] and "backlash" in err[0]
+    assert not (tmp_path / "r.json").exists()
 
 
 def test_shares_are_counted_as_stated() -> None:

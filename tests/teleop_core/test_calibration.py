@@ -83,13 +83,20 @@ def test_two_effects_at_once_are_both_found() -> None:
     assert cal.step_rmse_[1] < cal.step_rmse_[0] < cal.rmse_before_
     assert cal.step_rmse_[1] <= cal.rmse_before_ / 3
     report = cal.report()
-    cubic = next(e for e in report["effects_added"] if e["family"] == "current_nonlinearity")
-    # f = -scale i^3 in N, the cubic coefficient in N m per A^3 is -scale r
-    expected = -truth["current_nonlinearity"]["scale"] * 0.010
-    lo, hi = cubic["ci"]["cubic_n_m_per_drive_unit3"]
-    assert lo < hi and cubic["params"]["cubic_n_m_per_drive_unit3"] == pytest.approx(
-        expected, rel=0.1
-    )
+    bend = next(e for e in report["effects_added"] if e["family"] == "current_nonlinearity")
+    # f = -scale i^3 in N: the searched exponent comes back near 3 (as the other
+    # searched values, within 20 %: the current's noise blurs the bend), and the motor's
+    # torque K i + g sgn(i) |i|^p (N m; eq. 1's K shares the linear part of the bend)
+    # is the generator's 0.043 i - scale r i^3 where the current is large, to a fifth
+    # of the JND at the wheel (r = 0.010 m; the effect itself is a JND RMS)
+    p, g = bend["params"]["exponent"], bend["params"]["gain_n_m_per_drive_unit_pow_p"]
+    assert p == pytest.approx(3.0, rel=0.2)
+    lo, hi = bend["ci"]["gain_n_m_per_drive_unit_pow_p"]
+    assert lo < g < hi
+    k = report["base_params"]["params"]["torque_constant_n_m_per_a"]
+    i = np.quantile(np.abs(cal.data_.signals["drive"]), [0.9, 0.99])
+    expected = 0.043 * i - truth["current_nonlinearity"]["scale"] * 0.010 * i**3
+    np.testing.assert_allclose(k * i + g * i**p, expected, rtol=0, atol=0.2 * JND_N * 0.010)
 
 
 def test_injected_effects_have_the_jnd_size() -> None:
@@ -356,3 +363,66 @@ def test_distance_since_turn_holds_through_a_rest_and_ignores_rounding() -> None
     np.testing.assert_allclose(d[:25], np.abs(angle[:25]), atol=1e-12)
     np.testing.assert_allclose(d[25:40], 2.0 - down, atol=1e-12)
     np.testing.assert_allclose(d[40:], up2 - 0.5, atol=1e-12)
+
+
+def _with_deviation(shape, size_jnd: float, seed: int) -> tuple[CalibrationData, float]:
+    """A clean 60 s follower recording at 100 Hz whose true force gets `shape(true)`
+    scaled to `size_jnd` JND (RMS), the sensors' noise on top (as `general` builds
+    them); with the held-out RMSE of eq. 1 plus the exact deviation (the oracle)."""
+    true: dict = {}
+    rec, _ = follower_recording(60.0, (), rate_hz=100.0, seed=seed, noise_free=true)
+    data = FollowerBase().data(rec)
+    deviation = shape(true)
+    deviation = size_jnd * JND_N * deviation / np.sqrt(np.mean(deviation**2))
+    y = data.y + deviation
+    X = np.column_stack([FollowerBase().columns(data.signals), deviation])
+    cut = round(0.75 * len(y))
+    coef, *_ = np.linalg.lstsq(X[:cut], y[:cut], rcond=None)
+    oracle = float(np.sqrt(np.mean((y[cut:] - X[cut:] @ coef) ** 2)))
+    return CalibrationData(data.signals, y, f"test (seed {seed}, simulated)"), oracle
+
+
+def test_a_soft_current_knee_is_named_with_its_exponent_and_nothing_else() -> None:
+    # the torque per amp falling with |i| (force -sgn(i) |i|^2): a fixed cube fitted
+    # part of it and load-dependent friction (-sgn(w) |i|) took the rest under a wrong
+    # name; with the exponent searched the family holds the whole bend
+    data, oracle = _with_deviation(
+        lambda s: -np.sign(s["drive"]) * np.abs(s["drive"]) ** 2, 2.0, seed=11
+    )
+    report = Calibrator(FollowerBase()).fit(data).report()
+    assert [e["family"] for e in report["effects_added"]] == ["current_nonlinearity"]
+    assert report["discovered_terms"] == [] and report["ambiguous_effects"] == []
+    assert report["effects_added"][0]["params"]["exponent"] == pytest.approx(2.0, abs=0.15)
+    assert report["rmse_after"] <= 1.1 * oracle
+
+
+def test_a_saturated_force_is_not_named_a_current_nonlinearity() -> None:
+    # the whole force clipped at the level that takes 2 JND away from it (a slip,
+    # general's generator): a current nonlinearity bends the force alike where the
+    # current's force is most of it, so the winner is reported ambiguous with
+    # force_saturation, not named
+    from teleop_core.calibration.general import _slip
+
+    def clip(s: dict) -> np.ndarray:
+        return _slip(s["force"], 2.0 * JND_N) - s["force"]
+
+    data, _ = _with_deviation(clip, 2.0, seed=12)
+    report = Calibrator(FollowerBase()).fit(data).report()
+    named = [e["family"] for e in report["effects_added"]]
+    named += [t["term"] for t in report["discovered_terms"]]
+    assert "current_nonlinearity" not in named
+    assert ["current_nonlinearity", "force_saturation"] in [
+        a["families"] for a in report["ambiguous_effects"]
+    ]
+
+
+def test_a_gap_in_the_drive_is_named_backlash_with_its_half_gap() -> None:
+    # the force across a 0.02 rad half gap (the play operator of the true angle): the
+    # open library's backlash term, its half gap found, nothing else named
+    data, oracle = _with_deviation(lambda s: play_operator(s["angle"], 0.02), 1.5, seed=13)
+    report = Calibrator(FollowerBase()).fit(data).report()
+    assert report["effects_added"] == [] and report["ambiguous_effects"] == []
+    (term,) = report["discovered_terms"]
+    assert term["term"] == "backlash"
+    assert term["params"]["half_gap"] == pytest.approx(0.02, rel=0.2)
+    assert report["rmse_after"] <= 1.1 * oracle
