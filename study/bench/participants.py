@@ -261,6 +261,7 @@ def run_participants_bench(
         "shrunk_to_prior": model["shrunk_to_prior"],
         "identification_ratio": model["identification_ratio"],
         "probes": model["probes"]["line"],
+        "probe_se": _probe_se(result, probes),
         "held_out_trait_error": model["held_out_trait_error"],
         "truth_shift_prior_sds": shift_sd,
         "recovery": recovery,
@@ -322,8 +323,16 @@ def _coverage(
         seed,
         result.plan.weak,
         as_step(status, "coverage: study"),
-        typical_probe_se(result.data.probed) if probes else None,
+        None if not probes else typical_probe_se(result.data.probed),
     )
+
+
+def _probe_se(result: Any, probes: bool) -> dict[str, list[float]] | None:
+    """Per group, each trait's typical probe SE (NaN where no probe tells it), when the
+    study ran the probes."""
+    if not probes:
+        return None
+    return {g: v.tolist() for g, v in typical_probe_se(result.data.probed).items()}
 
 
 def _realized(engine: Any, model_path: Path) -> dict[str, dict[str, float]]:
