@@ -75,6 +75,7 @@ def summarise(out: Path) -> None:
     path = out / "participants_probes.json"
     data = json.loads(path.read_text())
     data["summary"] = [_summary(r) for r in data["seeds"]]
+    data["summary_by"] = f"python benchmarks/participants_probes.py {out} --summarise"
     path.write_text(json.dumps(data, indent=1, default=str))
 
 
@@ -99,9 +100,22 @@ def main() -> None:
         help="only the coverage, with OUT/participants_probes.json's first seed",
     )
     parser.add_argument("--summarise", action="store_true", help="only recompute the summary")
+    parser.add_argument(
+        "--coverage-seed", type=int, help="the coverage's own seed (default: the first seed)"
+    )
+    parser.add_argument(
+        "--combine",
+        nargs="+",
+        type=Path,
+        help="merge these coverage JSONs (runs with different --coverage-seed) into "
+        "OUT/participants_coverage.json",
+    )
     args = parser.parse_args()
     if args.summarise:
         summarise(args.out)
+        return
+    if args.combine:
+        combine(args.out, args.combine)
         return
     command = "nice -n 10 python benchmarks/participants_probes.py " + " ".join(sys.argv[1:])
     settings = FitSettings(
@@ -123,7 +137,7 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     if args.coverage_only:
         first = json.loads((args.out / "participants_probes.json").read_text())["seeds"][0]
-        _coverage(emulator, first, settings, args.coverage, command, args.out)
+        _coverage(emulator, first, settings, args.coverage, command, args.out, args.coverage_seed)
         return
     reports: list[dict[str, Any]] = []
     for seed in args.seeds:
@@ -164,6 +178,7 @@ def _coverage(
     studies: int,
     command: str,
     out: Path,
+    seed: int | None = None,
 ) -> None:
     """The coverage on the shared emulator with the first seed's free traits and probe
     SEs (`participant_fit.coverage`)."""
@@ -179,7 +194,7 @@ def _coverage(
         free,
         studies,
         settings.bootstrap,
-        first["seed"],
+        first["seed"] if seed is None else seed,
         weak,
         as_step(_status, "coverage: study"),
         probe_se,
@@ -189,13 +204,52 @@ def _coverage(
             "data_source": "simulated",
             "command": command,
             "seed": first["seed"],
+            "coverage_seed": first["seed"] if seed is None else seed,
             "free": first["identifiable"],
             "probe_se": first["probe_se"],
             "seconds": round(time.monotonic() - start, 1),
             "interval": "expanded percentile (estimate.expanded_interval)",
         }
     )
-    (out / "participants_coverage.json").write_text(json.dumps(covered, indent=1))
+    name = "participants_coverage.json" if seed is None else f"participants_coverage_{seed}.json"
+    (out / name).write_text(json.dumps(covered, indent=1))
+
+
+def combine(out: Path, paths: list[Path]) -> None:
+    """One coverage report from runs with different coverage seeds: the studies pooled."""
+    runs = [json.loads(p.read_text()) for p in paths]
+    per: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for run in runs:
+        for row in run["per_trait"]:
+            per.setdefault((row["group"], row["trait"]), []).append(row)
+    studies = sum(r["studies"] for r in runs)
+    hits = sum(r["coverage"] * r["intervals"] for r in runs)
+    intervals = sum(r["intervals"] for r in runs)
+    share = hits / intervals
+    merged = {
+        **{k: v for k, v in runs[0].items() if k not in ("per_trait", "seconds")},
+        "studies": studies,
+        "intervals": intervals,
+        "coverage": share,
+        "met": bool(runs[0]["target"][0] <= share <= runs[0]["target"][1]),
+        "coverage_seed": [r["coverage_seed"] for r in runs],
+        "seconds": [r["seconds"] for r in runs],
+        "commands": [r["command"] for r in runs],
+        "per_trait": [
+            {
+                "group": g,
+                "trait": t,
+                "studies": sum(r["studies"] for r in rows),
+                "coverage": sum(r["coverage"] * r["studies"] for r in rows)
+                / sum(r["studies"] for r in rows),
+                "error_mean_boot_sds": sum(r["error_mean_boot_sds"] * r["studies"] for r in rows)
+                / sum(r["studies"] for r in rows),
+            }
+            for (g, t), rows in per.items()
+        ],
+    }
+    merged.pop("command", None)
+    (out / "participants_coverage.json").write_text(json.dumps(merged, indent=1))
 
 
 if __name__ == "__main__":
