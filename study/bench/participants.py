@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 
 from db.migrate import open_database
-from study.analysis.participant_fit.coverage import coverage
+from study.analysis.participant_fit.coverage import coverage, typical_probe_se
+from study.analysis.participant_fit.emulator import MomentEmulator
 from study.analysis.participant_fit.estimate import HIGH, LOW, prior_arrays
 from study.analysis.participant_fit.fit import FitSettings, fit_study, simulate_people
 from study.protocol.demo import run_demo
@@ -135,11 +136,13 @@ def run_participants_bench(
     shift_sd: float = SHIFT_SD,
     probes: bool = False,
     coverage_studies: int = 0,
+    emulator: MomentEmulator | None = None,
 ) -> dict[str, Any]:
     """The bench's report (see the module docstring); `probes`: every simulated person
     also answers the design's probes before the fit (`study.probes`); with
     `coverage_studies`, the coverage of the fitted means' 95 % intervals over that many
-    studies simulated on the fit's emulator (`participant_fit.coverage`)."""
+    studies simulated on the fit's emulator (`participant_fit.coverage`); `emulator`: one
+    `build_emulator` built with `settings` (several seeds share it), else built."""
     load_before = os.getloadavg()
     truth = truth_profiles(shift_sd)
     with tempfile.TemporaryDirectory() as tmp:
@@ -170,25 +173,17 @@ def run_participants_bench(
                 settings,
                 "simulated 20/8/8 study",
                 lambda step, k=0, n=0: status(f"fit: {step}", k, n),
+                emulator,
             )
             fit_s, fit_cpu_s = time.monotonic() - start, _cpu_s() - cpu0
         finally:
             engine.dispose()
     model, table = result.to_dict(), result.table
-    covered = None
-    if coverage_studies:
-        covered = coverage(
-            result.emulator,
-            {g: truth[g] for g in groups},
-            groups,
-            float(trials),
-            result.plan.free,
-            coverage_studies,
-            settings.bootstrap,
-            seed,
-            result.plan.weak,
-            as_step(status, "coverage: study"),
-        )
+    covered = (
+        _coverage(result, truth, groups, trials, settings, seed, probes, coverage_studies, status)
+        if coverage_studies
+        else None
+    )
     status("the truth's VO - HV differences")
     truth_trials = simulate_people(
         "lcca",
@@ -266,6 +261,7 @@ def run_participants_bench(
         "shrunk_to_prior": model["shrunk_to_prior"],
         "identification_ratio": model["identification_ratio"],
         "probes": model["probes"]["line"],
+        "probe_se": _probe_se(result, probes),
         "held_out_trait_error": model["held_out_trait_error"],
         "truth_shift_prior_sds": shift_sd,
         "recovery": recovery,
@@ -301,6 +297,42 @@ def run_participants_bench(
         "load_average_after": [round(x, 2) for x in os.getloadavg()],
         "cpus": os.cpu_count(),
     }
+
+
+def _coverage(
+    result: Any,
+    truth: dict[str, GroupProfile],
+    groups: dict[str, int],
+    trials: int,
+    settings: FitSettings,
+    seed: int,
+    probes: bool,
+    studies: int,
+    status: Progress,
+) -> dict[str, Any]:
+    """The coverage of the fit's 95 % intervals over `studies` studies on its emulator,
+    each person answering the probes with the study's typical SEs when it ran them."""
+    return coverage(
+        result.emulator,
+        {g: truth[g] for g in groups},
+        groups,
+        float(trials),
+        result.plan.free,
+        studies,
+        settings.bootstrap,
+        seed,
+        result.plan.weak,
+        as_step(status, "coverage: study"),
+        None if not probes else typical_probe_se(result.data.probed),
+    )
+
+
+def _probe_se(result: Any, probes: bool) -> dict[str, list[float]] | None:
+    """Per group, each trait's typical probe SE (NaN where no probe tells it), when the
+    study ran the probes."""
+    if not probes:
+        return None
+    return {g: v.tolist() for g, v in typical_probe_se(result.data.probed).items()}
 
 
 def _realized(engine: Any, model_path: Path) -> dict[str, dict[str, float]]:

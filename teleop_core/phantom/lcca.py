@@ -90,6 +90,17 @@ class GuidewireParams:
     """Drag per metre inserted per m/s: the hydrophilic coating sliding in the saline-
     filled phantom (at 0.25 m and 17 mm/s about a third of the sliding friction);
     assumption. Slower insertion, lower force."""
+    tip_load_cv: float = 0.10
+    """Trial-to-trial coefficient of variation of the angled tip's bearing load in a
+    curve (EI kappa / l_tip): how the tip sits on the outer wall (its bend against the
+    curve's plane, where along the floppy tip it touches) changes from one pass to the
+    next; each trial draws a lognormal factor of mean 1. Assumption: contact-force
+    catheters read 1-3 gf differently at different tip-to-wall angles at the same load
+    (an in-vitro comparison of four catheter models, Authorea preprint 583547)."""
+    distal_offset_sd_n: float = 0.003
+    """SD of the distal force sensor's zero offset left after each trial's tare, about
+    one resolution step of a Nano17-class six-axis sensor (1/320 N, ATI's data sheet);
+    each trial draws its own; assumption."""
 
     def __post_init__(self) -> None:
         require_positive(
@@ -104,6 +115,11 @@ class GuidewireParams:
             "smoothing_speed_m_s",
             "viscous_n_s_per_m2",
         )
+        if not (self.tip_load_cv >= 0 and self.distal_offset_sd_n >= 0):
+            raise TeleopInputError(
+                f"tip_load_cv {self.tip_load_cv!r}, distal_offset_sd_n "
+                f"{self.distal_offset_sd_n!r}; expected values >= 0"
+            )
 
 
 # state
@@ -127,8 +143,9 @@ CATCH_DEPTH_M = 0.002
     H_TARGET_PATH,
     H_TARGET_DEPTH,
     H_VISC,
-) = range(14)
-HEADER = 14
+    H_DISTAL_OFFSET,
+) = range(15)
+HEADER = 15
 # per-path meta rows: end, ostium (arc length, m), ostium direction phi, half-width (rad)
 PM_END, PM_OSTIUM, PM_PHI, PM_HALF = range(4)
 PATH_META = 4
@@ -199,7 +216,7 @@ def lcca_phantom(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out)
     # T_proximal = T_distal e^(mu Theta) (capstan), friction spread along the path
     proximal = f_wall * capstan + sliding * math.sqrt(capstan)
     out[E_PROXIMAL] = proximal
-    out[E_DISTAL] = f_wall + f_curve_tip
+    out[E_DISTAL] = f_wall + f_curve_tip + params[H_DISTAL_OFFSET]
     out[E_TIP_X] = g[G_X]
     out[E_TIP_Y] = g[G_Y]
     out[E_TIP_Z] = g[G_Z]
@@ -241,10 +258,23 @@ class LccaPhantom:
         meta[0, PM_OSTIUM] = 1e9  # the aorta has no ostium
         return np.concatenate([header, meta.ravel(), self.geometry.ravel()])
 
-    def environment(self) -> Environment:
+    def trial_params(self, seed: int) -> np.ndarray:
+        """`params()` with one trial's contact conditions, drawn from `seed`: the tip's
+        bearing load times a lognormal factor of mean 1 (`tip_load_cv`, through the tip's
+        lever) and the distal sensor's zero offset (`distal_offset_sd_n`)."""
+        params, w = self.params(), self.wire
+        rng = np.random.default_rng([seed, 0x71B])
+        s = math.sqrt(math.log1p(w.tip_load_cv**2))
+        params[H_LTIP] /= math.exp(rng.normal(-s * s / 2, s))
+        params[H_DISTAL_OFFSET] = rng.normal(0.0, w.distal_offset_sd_n)
+        return params
+
+    def environment(self, seed: int | None = None) -> Environment:
+        """The phantom for a loop; with a trial's `seed`, that trial's contact conditions
+        (`trial_params`), else the nominal ones."""
         return Environment(
             lcca_phantom,
-            self.params(),
+            self.params() if seed is None else self.trial_params(seed),
             np.zeros(STATE_SIZE),
             name="LCCA phantom",
             branches=REGIONS,

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.analysis.participant_fit.coverage import coverage, draw_moments
+from study.analysis.participant_fit.coverage import coverage, draw_moments, typical_probe_se
 from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
 from study.protocol.traits import PROFILES, TRAITS
 
@@ -47,7 +47,8 @@ def _made_up_emulator() -> MomentEmulator:
 def test_people_drawn_on_the_emulator_have_the_noise_of_their_k_trials() -> None:
     emulator = _made_up_emulator()
     profile = PROFILES["novice"]
-    y = draw_moments(emulator, profile, 4000, 4.0, np.random.default_rng(1))
+    y, probed = draw_moments(emulator, profile, 4000, 4.0, np.random.default_rng(1))
+    assert probed is None
     # the time's spread over people: speed's and reaction's spread through the slopes
     # (sd of log speed ~ 0.003 / 0.014, of log reaction ~ 0.05 / 0.28), plus the noise of
     # a mean of 4 trials (NOISE_SD / 2); computed from the draws' own traits, it is the
@@ -56,6 +57,34 @@ def test_people_drawn_on_the_emulator_have_the_noise_of_their_k_trials() -> None
     speed_sd, reaction_sd = 0.003 / 0.014, 0.05 / 0.28
     expected = np.sqrt(speed_sd**2 + (0.5 * reaction_sd) ** 2 + (NOISE_SD / 2) ** 2)
     assert y[:, idx].std() == pytest.approx(expected, rel=0.1)
+
+
+def test_people_drawn_with_probes_carry_their_probe_error() -> None:
+    emulator = _made_up_emulator()
+    profile = PROFILES["novice"]
+    j = TRAITS.index("reaction_s")
+    se = np.full(len(TRAITS), np.nan)
+    se[j] = 0.04
+    _, probed = draw_moments(emulator, profile, 4000, 4.0, np.random.default_rng(3), se)
+    assert probed is not None and probed.shape == (4000, len(TRAITS), 2)
+    # a probe's estimate: the person's trait (N(0.28, 0.05), far inside its bounds) plus
+    # its error of SE 0.04: mean 0.28, SD sqrt(0.05^2 + 0.04^2) = 0.064
+    mean, sd = profile.reaction_s
+    assert probed[:, j, 0].mean() == pytest.approx(mean, abs=0.004)
+    assert probed[:, j, 0].std() == pytest.approx(np.hypot(sd, 0.04), rel=0.05)
+    assert (probed[:, j, 1] == 0.04).all()
+    others = [i for i in range(len(TRAITS)) if i != j]
+    assert np.isnan(probed[:, others]).all()
+
+
+def test_typical_probe_se_is_the_median_over_the_people_who_have_it() -> None:
+    arrays = np.full((3, len(TRAITS), 2), np.nan)
+    arrays[:, 0, 1] = [0.1, 0.3, 0.2]
+    arrays[:2, 1, 1] = [0.5, 0.7]  # the third person lacks this probe
+    se = typical_probe_se({"novice": arrays})["novice"]
+    assert se[0] == pytest.approx(0.2)
+    assert se[1] == pytest.approx(0.6)
+    assert np.isnan(se[2:]).all()
 
 
 def test_the_intervals_of_a_fit_whose_model_holds_cover_the_truth() -> None:

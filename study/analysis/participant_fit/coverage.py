@@ -43,14 +43,38 @@ def draw_moments(
     n: int,
     k: float,
     rng: np.random.Generator,
-) -> np.ndarray:
+    probe_se: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
     """(n, moments) the log moments of `n` people drawn from `profile`, each the mean of
-    `k` trials per condition, on the emulator."""
+    `k` trials per condition, on the emulator; with `probe_se` (len(TRAITS), NaN where no
+    probe tells a trait), also each person's probe estimates as the fit takes them,
+    (n, len(TRAITS), 2): their trait plus normal error of that SE (the probes'
+    measurement models, `study.probes.measure`), and the SE."""
     mean, sd = prior_arrays(profile)
     theta = np.clip(mean + sd * rng.standard_normal((n, len(TRAITS))), LOW, HIGH)
     cov = emulator.person_noise_cov() / k + np.diag(emulator.misfit_var_)
     noise = rng.multivariate_normal(np.zeros(len(cov)), cov, size=n, method="eigh")
-    return emulator.log_moments(theta) + noise
+    y = emulator.log_moments(theta) + noise
+    if probe_se is None:
+        return y, None
+    se = np.broadcast_to(np.asarray(probe_se, dtype=float), theta.shape)
+    told = np.isfinite(se)
+    value = np.where(
+        told, theta + np.where(told, se, 0.0) * rng.standard_normal(theta.shape), np.nan
+    )
+    return y, np.stack([value, np.where(told, se, np.nan)], axis=2)
+
+
+def typical_probe_se(probed: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per group, each trait's median probe SE over its people (NaN where no person has
+    a probe of it), from the fit's (people, len(TRAITS), 2) probe arrays."""
+    out = {}
+    for group, arrays in probed.items():
+        se = arrays[:, :, 1]
+        out[group] = np.array(
+            [np.median(c[np.isfinite(c)]) if np.isfinite(c).any() else np.nan for c in se.T]
+        )
+    return out
 
 
 def coverage(
@@ -64,25 +88,31 @@ def coverage(
     seed: int = 0,
     weak: list[int] | None = None,
     progress: Progress = no_progress,
+    probe_se: dict[str, np.ndarray] | None = None,
 ) -> dict[str, Any]:
     """The share of `studies` simulated studies in which each group's fitted mean of each
-    free trait has a 95 % bootstrap interval (`bootstrap` replicates) holding the truth."""
+    free trait has a 95 % bootstrap interval (`bootstrap` replicates) holding the truth;
+    `probe_se` (group -> per trait, `typical_probe_se`): every person also answers the
+    probes, with those SEs, and the fit takes them as `study participants fit` does."""
     rng = np.random.default_rng([seed, 0xC0FE])
     hits: dict[tuple[str, str], list[bool]] = {}
     errors: dict[tuple[str, str], list[float]] = {}
     for s in range(studies):
         progress("coverage", s, studies)
         for group, n in sizes.items():
-            y = draw_moments(emulator, truth[group], n, k, rng)
+            se = None if probe_se is None else probe_se.get(group)
+            y, probed = draw_moments(emulator, truth[group], n, k, rng, se)
             est = GroupEstimator(emulator, PROFILES[group], free, k, seed, weak)
-            best = est.fit(y)
+            best = est.fit(y, probes=probed)
             start = getattr(est, "x_", None)
-            boots = np.array(
-                [
-                    est.fit(y[rng.integers(0, n, n)], start, est.prior_centre(rng)).mean
-                    for _ in range(bootstrap)
-                ]
-            )
+            replicates = []
+            for _ in range(bootstrap):
+                pick = rng.integers(0, n, n)
+                fit = est.fit(
+                    y[pick], start, est.prior_centre(rng), None if probed is None else probed[pick]
+                )
+                replicates.append(fit.mean)
+            boots = np.array(replicates)
             low, high = expanded_interval(boots, n)
             true = prior_arrays(truth[group])[0]
             spread = boots.std(axis=0, ddof=1)

@@ -180,8 +180,10 @@ def fit_study(
     settings: FitSettings,
     db_label: str,
     progress: Progress = _no_progress,
+    emulator: MomentEmulator | None = None,
 ) -> FitResult:
-    """The fit to the database's completed trials of `task`."""
+    """The fit to the database's completed trials of `task`; `emulator`: one built by
+    `build_emulator` with the same `settings` (it depends on them only), else built."""
     trials = observed_trials(engine, task)
     check_fittable(trials, task, db_label)
     trials, _ = with_features(engine, trials, task, progress)
@@ -190,7 +192,7 @@ def fit_study(
 
     probe_trials = probe_frame(engine)
     probes = probe_table(probe_trials) if len(probe_trials) else None
-    emulator = build_emulator(task, settings, progress)
+    emulator = emulator or build_emulator(task, settings, progress)
     return run_fit(trials, task, settings, emulator, db_label, progress, probes=probes)
 
 

@@ -29,6 +29,7 @@ from db.models.trial import SampleChunk, Trial
 from db.sample_reader import SampleReader
 from study.analysis.frames import trial_frame, without_withdrawn
 from study.analysis.participant_fit.emulator import floor, log_moment, moment_names
+from study.analysis.participant_fit.estimate import expanded_interval
 from study.analysis.source import DataSource
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS
@@ -163,9 +164,14 @@ def data_source(trials: pd.DataFrame) -> tuple[str, dict[str, object]]:
 def bootstrap_means(
     values: np.ndarray, rng: np.random.Generator, n_boot: int
 ) -> tuple[float, float]:
-    """95 % percentile interval of the mean of `values` over resampled people."""
+    """95 % interval of the mean of `values` over resampled people: the expanded
+    percentile interval (`estimate.expanded_interval`), as the fitted means' are. A
+    plain percentile interval of a mean over the few people of a group (8 in a 20/8/8
+    study, as many per group as the fit's check simulates) holds the mean less often
+    than it claims, and the emulator check (`checks.emulator_check`) then counted an
+    unbiased emulator's predictions outside it."""
     if len(values) < 2:
         return float("nan"), float("nan")
     idx = rng.integers(0, len(values), (n_boot, len(values)))
-    low, high = np.percentile(values[idx].mean(axis=1), [2.5, 97.5])
+    low, high = expanded_interval(values[idx].mean(axis=1), len(values))
     return float(low), float(high)

@@ -78,7 +78,7 @@ def lcca_loop(
     config = LoopConfig(
         haptics=condition_haptics(condition, haptic_gain), to_follower=link, to_master=link
     )
-    return TeleopLoop(config, phantom.environment(), estimator=estimator, seed=seed)
+    return TeleopLoop(config, phantom.environment(seed), estimator=estimator, seed=seed)
 
 
 def measures(frame: pd.DataFrame, success: bool) -> dict[str, Any]:

@@ -1,0 +1,200 @@
+"""Where the participant fit's emulator is off: its predicted group means against fresh
+simulations of people drawn from the truth of `study bench participants` (the priors
+moved 0.7 SD), per group, condition and measure. SIMULATED throughout.
+
+    # the design's trials (a Latin hypercube, 1 trial per condition a setting) and
+    # PER fresh people a group at the truth (3 trials per condition)
+    nice -n 10 python benchmarks/emulator_bias.py simulate SEED DESIGN PER OUT.pkl
+    # the comparison: surfaces fitted to the pickles' designs (pooled), against the
+    # first pickle's fresh people; writes OUT.json
+    python benchmarks/emulator_bias.py analyse OUT.json A.pkl [B.pkl ...]
+
+Variants compared (each as z = (prediction - fresh mean) / the fresh mean's SE; an
+unbiased emulator gives an RMS z near 1): the emulator as the fit builds it (a global
+quadratic surface in the log traits, Duan's smearing); with a smearing that follows the
+traits (E[exp(residual) | traits] by ridge); a cubic surface; the measures fitted on
+their own scale; and a surface local to each group (the design's trials weighted by the
+group's prior density with its SDs widened `widen` times).
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+import sys
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+from sklearn.linear_model import RidgeCV
+
+from study.analysis.participant_fit.emulator import (
+    ALPHAS,
+    MomentEmulator,
+    design_box,
+    design_settings,
+    log_moment,
+    trial_matrix,
+)
+from study.analysis.participant_fit.estimate import GroupEstimator, prior_arrays
+from study.analysis.participant_fit.fit import FitSettings, simulate_people
+from study.analysis.participant_fit.simulate import simulate_settings
+from study.bench.participants import truth_profiles
+from study.protocol.tasks import get_task
+from study.protocol.traits import PROFILES, TRAITS
+
+TASK = get_task("lcca")
+MEASURES = list(TASK.analysed_measures)
+NAMES = [f"{c}:{m}" for c in ("VO", "HV") for m in MEASURES]
+
+
+def simulate(seed: int, design_n: int, per: int, out: str) -> None:
+    x = design_settings(design_n, seed, design_box())
+    people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
+    design = simulate_settings("lcca", people, 1, 2, 180.0, lambda *a: None)
+    truth = truth_profiles(0.7)
+    fresh = simulate_people(
+        "lcca",
+        {g: [truth[g]] for g in truth},
+        per,
+        3,
+        FitSettings(jobs=2, seed=seed + 500),
+        lambda *a: None,
+    )
+    with open(out, "wb") as f:
+        pickle.dump({"x": x, "design": design, "fresh": fresh}, f)
+
+
+def _surface(
+    x: np.ndarray, design: pd.DataFrame, emu: MomentEmulator, weights: np.ndarray, kind: str
+) -> Any:
+    """A predictor of each NAMES moment's expected value (own scale) at trait settings."""
+    wide = trial_matrix(design, MEASURES)
+    xs = x[wide.index.get_level_values("setting")]
+    phi = emu.terms(xs)
+    raw = wide[NAMES].to_numpy(float)
+    fits = []
+    for j in range(len(NAMES)):
+        ok = np.isfinite(raw[:, j])
+        target = raw[ok, j] if kind == "own_scale" else log_moment(raw[ok, j])
+        r = RidgeCV(alphas=list(ALPHAS)).fit(phi[ok], target, sample_weight=weights[ok])
+        res = target - r.predict(phi[ok])
+        smear = None
+        if kind == "local_smearing":
+            smear = RidgeCV(alphas=list(ALPHAS)).fit(phi[ok], np.exp(res))
+        fits.append((r, float(np.average(np.exp(res), weights=weights[ok])), smear))
+
+    def predict(traits: np.ndarray) -> np.ndarray:
+        t = emu.terms(traits)
+        cols = []
+        for r, smear, local in fits:
+            if kind == "own_scale":
+                cols.append(r.predict(t))
+            elif local is not None:
+                cols.append(np.exp(r.predict(t)) * np.maximum(local.predict(t), 0.2))
+            else:
+                cols.append(np.exp(r.predict(t)) * smear)
+        return np.column_stack(cols)
+
+    return predict, xs
+
+
+def _compare(predict_for: Any, fresh: pd.DataFrame, emu: MomentEmulator) -> dict[str, Any]:
+    truth = truth_profiles(0.7)
+    per = fresh.groupby(["group", "participant", "condition"])[MEASURES].mean()
+    rows = []
+    for g in truth:
+        mean, sd = prior_arrays(truth[g])
+        draws = GroupEstimator(emu, PROFILES[g], list(range(len(TRAITS))), 3.0).draws(mean, sd)
+        pred = dict(zip(NAMES, predict_for(g)(draws).mean(axis=0), strict=True))
+        people = per.xs(g, level="group")
+        for m in MEASURES:
+            wide = people[m].unstack()
+            for c in ("VO", "HV", "VO-HV"):
+                v = (wide["VO"] - wide["HV"]) if c == "VO-HV" else wide[c]
+                p = pred[f"VO:{m}"] - pred[f"HV:{m}"] if c == "VO-HV" else pred[f"{c}:{m}"]
+                se = float(v.std(ddof=1) / np.sqrt(len(v)))
+                rows.append(
+                    {
+                        "group": g,
+                        "condition": c,
+                        "measure": m,
+                        "fresh": float(v.mean()),
+                        "fresh_se": se,
+                        "predicted": float(p),
+                        "z": float((p - v.mean()) / se),
+                    }
+                )
+    z = np.array([r["z"] for r in rows])
+    return {
+        "rms_z": round(float(np.sqrt((z**2).mean())), 3),
+        "mean_z": round(float(z.mean()), 3),
+        "beyond_1_96": int((np.abs(z) > 1.96).sum()),
+        "of": len(z),
+        "rows": rows,
+    }
+
+
+def analyse(out: str, paths: list[str]) -> None:
+    loaded = []
+    for p in paths:
+        with open(p, "rb") as f:
+            loaded.append(pickle.load(f))
+    fresh = loaded[0]["fresh"]
+    results: dict[str, Any] = {}
+    designs = {f"{len(d['x'])} settings ({p})": [d] for p, d in zip(paths, loaded, strict=True)}
+    if len(loaded) > 1:
+        designs[f"{sum(len(d['x']) for d in loaded)} settings (pooled)"] = loaded
+    for label, ds in designs.items():
+        x = np.concatenate([d["x"] for d in ds])
+        parts, offset = [], 0
+        for d in ds:
+            part = d["design"].copy()
+            part["setting"] += offset
+            offset += len(d["x"])
+            parts.append(part)
+        design = pd.concat(parts, ignore_index=True)
+        emu = MomentEmulator().fit(x, design, MEASURES, TASK.fit_features)
+        idx = [emu.moments_.index(n) for n in NAMES]
+        results[f"{label}: as the fit builds it"] = _compare(
+            lambda g, emu=emu, idx=idx: lambda t: emu.means(t)[:, idx], fresh, emu
+        )
+        cubic = MomentEmulator(degree=3).fit(x, design, MEASURES, TASK.fit_features)
+        cidx = [cubic.moments_.index(n) for n in NAMES]
+        results[f"{label}: cubic"] = _compare(
+            lambda g, c=cubic, i=cidx: lambda t: c.means(t)[:, i], fresh, emu
+        )
+        ones = np.ones(len(trial_matrix(design, MEASURES)))
+        for kind in ("local_smearing", "own_scale"):
+            predict, _ = _surface(x, design, emu, ones, kind)
+            results[f"{label}: {kind}"] = _compare(lambda g, p=predict: p, fresh, emu)
+        _, xs = _surface(x, design, emu, ones, "log")
+        for widen in (3.0, 2.0, 1.5):
+            by_group = {}
+            for g in PROFILES:
+                m0, s0 = prior_arrays(PROFILES[g])
+                w = np.exp(stats.norm.logpdf((xs - m0) / (widen * s0)).sum(axis=1))
+                by_group[g] = _surface(x, design, emu, w / w.mean(), "log")[0]
+            results[f"{label}: local to each group, widen {widen:g}"] = _compare(
+                lambda g, b=by_group: b[g], fresh, emu
+            )
+    report = {
+        "data_source": "simulated",
+        "command": "python benchmarks/emulator_bias.py analyse " + " ".join([out, *paths]),
+        "fresh_people_per_group": int(fresh["participant"].nunique() / 3),
+        "summary": {
+            k: {kk: v[kk] for kk in ("rms_z", "mean_z", "beyond_1_96", "of")}
+            for k, v in results.items()
+        },
+        "variants": results,
+    }
+    with open(out, "w") as f:
+        json.dump(report, f, indent=1)
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "simulate":
+        simulate(int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5])
+    else:
+        analyse(sys.argv[2], sys.argv[3:])

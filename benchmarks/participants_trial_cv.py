@@ -1,0 +1,68 @@
+"""Within-block variability of simulated LCCA trials: a 20/8/8 study's people, 3 trials
+per condition, the shipped estimator; per measure, the mean over blocks of the block's
+SD over its mean, and how many blocks repeat a value exactly.
+
+    nice -n 10 python benchmarks/participants_trial_cv.py OUT.json
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import pandas as pd
+
+from study.campaign.unit import trial_seed
+from study.protocol.default_estimator import load_estimator
+from study.protocol.traits import simulated_participant
+from study.tasks.lcca.trial import run_lcca_trial
+from teleop_core.phantom.lcca import LccaPhantom
+
+MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
+GROUPS = {"outsider": 20, "novice": 8, "expert": 8}
+
+
+def main(out: str) -> None:
+    phantom, estimator = LccaPhantom(), load_estimator()
+    rows = []
+    for group, n in GROUPS.items():
+        for k in range(n):
+            code = f"{group}{k}"
+            person = simulated_participant(group, 100 + k + 1000 * len(group))
+            for block, condition in enumerate(("VO", "HV"), start=1):
+                for i in range(3):
+                    seed = trial_seed(1, code, block, i)
+                    s = run_lcca_trial(person, condition, seed, estimator, phantom=phantom)
+                    rows.append(
+                        {
+                            "code": code,
+                            "condition": condition,
+                            **{m: s.summary[m] for m in MEASURES},
+                        }
+                    )
+    trials = pd.DataFrame(rows)
+    blocks = trials.groupby(["code", "condition"])
+    report = {
+        "data_source": "simulated",
+        "command": f"nice -n 10 python benchmarks/participants_trial_cv.py {out}",
+        "groups": GROUPS,
+        "trials_per_block": 3,
+        "definition": "per measure: the mean over blocks of the block's SD (ddof 1) over "
+        "its mean; blocks_with_equal: blocks in which two trials have the same value",
+        "measures": {
+            m: {
+                "mean_cv": round(
+                    float(blocks[m].agg(lambda v: v.std(ddof=1) / v.mean()).mean()), 4
+                ),
+                "blocks_with_equal": int(blocks[m].agg(lambda v: v.nunique() < len(v)).sum()),
+                "blocks": int(blocks.ngroups),
+            }
+            for m in MEASURES
+        },
+    }
+    with open(out, "w") as f:
+        json.dump(report, f, indent=1)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
