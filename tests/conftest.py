@@ -240,6 +240,8 @@ SLOW_TESTS = (
     "tests/study/test_participant_fit_coverage.py::test_the_intervals_of_a_fit_whose_model_holds_",
     "tests/study/test_probes.py::test_probe_run_stores_export_import_and_covariate",
     "tests/study/test_fuzz.py::test_trial_csvs",
+    "tests/study/test_simulate_cli.py::test_simulate_writes_",
+    "tests/study/test_simulate_cli.py::test_bench_lcca_quick_",
     "tests/study/test_notes_cli.py::test_characterize_",
     "tests/db/test_migrations.py::test_two_processes_",
     "tests/db/test_samples.py::test_kill_9_",
@@ -248,7 +250,7 @@ SLOW_TESTS = (
 """Single tests (node id prefixes) marked `slow` in modules that are otherwise fast:
 subprocesses, kill -9, memory measured over a large export, a lock held for a minute,
 many simulated fits, a whole probe session stored, exported and imported, hundreds of
-generated trial files."""
+generated trial files, a GRU trained for the loop to run."""
 FAST_LANE = "not slow"
 """The fast lane's mark expression (README): given exactly, the modules of
 `SLOW_MODULES` are not even imported (PyTorch, the fit), which would all be deselected."""
