@@ -226,6 +226,7 @@ SLOW_MODULES = frozenset(
         "tests/study/tui/test_break_bell.py",
         "tests/study/tui/test_run_choices.py",
         "tests/study/tui/test_tlx_drafts.py",
+        "tests/study/tui/test_trial_lock.py",
         "tests/study/test_lease.py",
         "tests/test_layering.py",
         "tests/study/test_layers.py",
@@ -245,12 +246,11 @@ SLOW_TESTS = (
     "tests/study/test_notes_cli.py::test_characterize_",
     "tests/db/test_migrations.py::test_two_processes_",
     "tests/db/test_samples.py::test_kill_9_",
-    "tests/study/tui/test_trial_lock.py::test_a_60_s_lock_",
 )
 """Single tests (node id prefixes) marked `slow` in modules that are otherwise fast:
-subprocesses, kill -9, memory measured over a large export, a lock held for a minute,
-many simulated fits, a whole probe session stored, exported and imported, hundreds of
-generated trial files, a GRU trained for the loop to run."""
+subprocesses, kill -9, memory measured over a large export, many simulated fits, a whole
+probe session stored, exported and imported, hundreds of generated trial files, a GRU
+trained for the loop to run."""
 FAST_LANE = "not slow"
 """The fast lane's mark expression (README): given exactly, the modules of
 `SLOW_MODULES` are not even imported (PyTorch, the fit), which would all be deselected."""
