@@ -139,7 +139,18 @@ def describe(url: URL | Engine) -> str:
 
 
 def is_sqlite(bind: Engine | Connection) -> bool:
-    """Whether `bind` (an engine or a connection) talks to SQLite."""
+    """Whether `bind` (an engine or a connection) talks to SQLite.
+
+    Parameters
+    ----------
+    bind
+        An engine or a connection.
+
+    Returns
+    -------
+    bool
+        True for SQLite, False for any other backend (PostgreSQL).
+    """
     return bind.dialect.name == "sqlite"
 
 

@@ -46,11 +46,30 @@ class Progress(Protocol):
 
 
 def no_progress(step: str, done: int = 0, total: int = 0) -> None:
-    """The `Progress` that shows nothing (the default of every long function)."""
+    """The `Progress` that shows nothing (the default of every long function).
+
+    Parameters
+    ----------
+    step
+        What runs now (ignored).
+    done
+        Units of the step done so far (ignored).
+    total
+        Units the step has in all (ignored).
+    """
 
 
 def describe(step: str, done: int = 0, total: int = 0) -> str:
     """One line for a call of a `Progress`.
+
+    Parameters
+    ----------
+    step
+        What runs now.
+    done
+        Units of the step done so far.
+    total
+        Units the step has in all; 0 when it is not counted.
 
     Returns
     -------
@@ -70,6 +89,18 @@ def describe(step: str, done: int = 0, total: int = 0) -> str:
 def as_step(progress: Progress, step: str) -> Progress:
     """`progress` told every call as `step` (keeping the count): for a part of larger
     work that the caller names.
+
+    Parameters
+    ----------
+    progress
+        The `Progress` to tell.
+    step
+        The step every call is told as, whatever step the caller gives.
+
+    Returns
+    -------
+    Progress
+        A `Progress` passing each call's count on to `progress` under `step`.
 
     Examples
     --------

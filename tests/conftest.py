@@ -195,6 +195,7 @@ SLOW_MODULES = frozenset(
         "tests/study/test_participant_fit_notes.py",
         "tests/study/test_participant_fit_samples.py",
         "tests/study/test_participant_fit_validate.py",
+        "tests/study/test_probes_fit.py",
         "tests/study/test_figures_demo.py",
         "tests/study/test_figures.py",
         "tests/study/test_notes_surgeons.py",
@@ -224,6 +225,8 @@ SLOW_MODULES = frozenset(
         "tests/study/tui/test_ops_keys.py",
         "tests/study/tui/test_break_bell.py",
         "tests/study/tui/test_run_choices.py",
+        "tests/study/tui/test_tlx_drafts.py",
+        "tests/study/tui/test_trial_lock.py",
         "tests/study/test_lease.py",
         "tests/test_layering.py",
         "tests/study/test_layers.py",
@@ -235,13 +238,33 @@ terminal app or simulate whole studies; the full suite runs everything."""
 SLOW_TESTS = (
     "tests/study/test_sample_export.py::test_export_memory_does_not_grow_with_the_samples",
     "tests/study/test_analysis.py::test_study_analyze_",
+    "tests/study/test_participant_fit_coverage.py::test_the_intervals_of_a_fit_whose_model_holds_",
+    "tests/study/test_probes.py::test_probe_run_stores_export_import_and_covariate",
+    "tests/study/test_fuzz.py::test_trial_csvs",
+    "tests/study/test_simulate_cli.py::test_simulate_writes_",
+    "tests/study/test_simulate_cli.py::test_bench_lcca_quick_",
     "tests/study/test_notes_cli.py::test_characterize_",
     "tests/db/test_migrations.py::test_two_processes_",
     "tests/db/test_samples.py::test_kill_9_",
-    "tests/study/tui/test_trial_lock.py::test_a_60_s_lock_",
 )
 """Single tests (node id prefixes) marked `slow` in modules that are otherwise fast:
-subprocesses, kill -9, memory measured over a large export, a lock held for a minute."""
+subprocesses, kill -9, memory measured over a large export, many simulated fits, a whole
+probe session stored, exported and imported, hundreds of generated trial files, a GRU
+trained for the loop to run."""
+FAST_LANE = "not slow"
+"""The fast lane's mark expression (README): given exactly, the modules of
+`SLOW_MODULES` are not even imported (PyTorch, the fit), which would all be deselected."""
+
+
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
+    if " ".join(str(config.getoption("markexpr") or "").split()) != FAST_LANE:
+        return None
+    root = Path(__file__).resolve().parent.parent
+    try:
+        relative = collection_path.resolve().relative_to(root).as_posix()
+    except ValueError:
+        return None
+    return True if relative in SLOW_MODULES else None
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

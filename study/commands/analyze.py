@@ -179,13 +179,13 @@ def _covariate(trials, values, trait: str, out_dir: Path) -> None:  # type: igno
     """The covariate's mixed model and ANCOVA-style table: written, and the table printed."""
     from study.analysis.covariate import covariate_model
     from study.protocol.tasks import get_task
+    from teleop_core.files import atomic_path
 
     measures = {t: get_task(t).analysed_measures for t in trials["task"].unique()}
     lmm, ancova, notes = covariate_model(trials, values, measures, trait)
     for name, frame in ((f"covariate_{trait}.csv", lmm), (f"ancova_{trait}.csv", ancova)):
-        tmp = out_dir / f".{name}.tmp"
-        frame.to_csv(tmp, index=False)
-        tmp.replace(out_dir / name)
+        with atomic_path(out_dir / name) as tmp:
+            frame.to_csv(tmp, index=False)
         click.echo(str(out_dir / name))
     for note in notes:
         click.echo(note)

@@ -42,6 +42,7 @@ def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
     from study.analysis.figures import save
     from study.analysis.notes_figures import bode, compensation_table, ramp_hysteresis
     from teleop_core.estimation.recording import write_csv_atomically
+    from teleop_core.files import write_atomically
     from teleop_core.notes.characterize import characterize_simulated
     from teleop_core.notes.params import DOFS, default_params
 
@@ -59,9 +60,7 @@ def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
     save(bode(results), out_dir, "notes_bode", ["png", "pdf"])
     save(ramp_hysteresis(results), out_dir, "notes_ramp_compensation", ["png", "pdf"])
     payload = {ch.dof: ch.to_dict() for ch in results}
-    tmp = json_path.with_name(json_path.name + ".tmp")
-    tmp.write_text(json.dumps(payload, indent=2, default=_finite) + "\n")
-    tmp.replace(json_path)
+    write_atomically(json_path, json.dumps(payload, indent=2, default=_finite) + "\n")
     for ch in results:
         click.echo(
             f"{ch.dof}: bandwidth {ch.bandwidth_hz:.2f} Hz, settling {ch.settling_time_s:.3f} s, "

@@ -32,6 +32,7 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
 
     Columns t, f_des and x (open end) or f_ee (clamped), SI units (rotation: N m, rad).
     """
+    from teleop_core.files import write_atomically
     from teleop_core.notes.characterize import identify_recording
     from teleop_core.notes.params import default_params
     from teleop_core.notes.recording import NotesRecording, NotesRecordingError
@@ -50,9 +51,7 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
     )
     found, chirp = identify_recording(rec, default_params(dof).linear, dof)
     result = {"dof": dof, "recording": str(recording), **found}
-    tmp = json_path.with_name(json_path.name + ".tmp")
-    tmp.write_text(json.dumps(result, indent=2) + "\n")
-    tmp.replace(json_path)
+    write_atomically(json_path, json.dumps(result, indent=2) + "\n")
     if out_dir is not None and chirp is not None:
         from study.analysis.figures import save
         from study.analysis.notes_figures import bode

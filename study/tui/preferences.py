@@ -13,11 +13,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 from sqlalchemy import Engine
+
+from teleop_core.files import write_atomically
 
 __all__ = ["RunChoices", "database_key", "load_run_choices", "preferences_path", "save_run_choices"]
 
@@ -79,11 +80,4 @@ def save_run_choices(engine: Engine, choices: RunChoices, path: Path | None = No
         databases = data["databases"] = {}
     databases[database_key(engine)] = {"driver": choices.driver, "pace": choices.pace}
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".tui-", suffix=".json", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as out:
-            json.dump(data, out, indent=2, sort_keys=True)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_atomically(path, json.dumps(data, indent=2, sort_keys=True))
