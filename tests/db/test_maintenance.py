@@ -43,12 +43,15 @@ def test_check_and_backup_copy_every_row_and_sample(engine: Engine, tmp_path: Pa
     # the rows counted are those `study db info` counts
     info = inspect_database(engine.url)
     assert {k: v for k, v in info.row_counts.items() if k in check.rows} == check.rows
-    assert check.rows["sample_chunks"] == 3 and check.rows["participants"] == 1
+    assert check.rows["sample_chunks"] == 3
+    assert check.rows["participants"] == 1
     assert check.line().endswith(f"integrity ok (14 tables, {sum(check.rows.values()):,} rows)")
 
     result = backup_database(engine, tmp_path / "backups")
-    assert result.copy.ok and result.copy.rows == check.rows
-    assert result.path.parent == tmp_path / "backups" and result.path.suffix == ".db"
+    assert result.copy.ok
+    assert result.copy.rows == check.rows
+    assert result.path.parent == tmp_path / "backups"
+    assert result.path.suffix == ".db"
     assert sorted(p.name for p in result.path.parent.iterdir()) == [result.path.name]
     copy = open_database(str(result.path), create=False)
     try:
@@ -102,7 +105,8 @@ def test_a_damaged_sqlite_file_is_named_and_not_copied(sqlite_study: Path, tmp_p
     try:
         check = check_database(engine)
         assert not check.ok
-        assert "integrity problem" in check.line() and "\n" not in check.line()
+        assert "integrity problem" in check.line()
+        assert "\n" not in check.line()
         result = backup_database(engine, tmp_path / "backups")
     finally:
         engine.dispose()
@@ -132,7 +136,8 @@ def test_study_db_check_and_backup(sqlite_study: Path, tmp_path: Path, capsys) -
     assert main(["db", "backup", "--db", str(sqlite_study), "--out", str(out)]) == 0
     line = capsys.readouterr().out.strip()
     [copy] = list(out.iterdir())
-    assert f"; copy {copy} (" in line and line.endswith("checked ok")
+    assert f"; copy {copy} (" in line
+    assert line.endswith("checked ok")
     _damage_an_index(sqlite_study)
     assert main(["db", "check", "--db", str(sqlite_study)]) == 1
     assert "integrity problem" in capsys.readouterr().out

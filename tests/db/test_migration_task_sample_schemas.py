@@ -191,7 +191,8 @@ def test_old_chunks_move_to_their_tasks_own_schemas_and_back(db_url: str) -> Non
             assert new["tip_force_n"] == old["distal_force_n"]  # all NULL, kept NULL
             assert new["torque_rendered_n_m"] == old["dial_torque_n_m"]
             assert new["torque_demanded_n_m"].null_count == new.num_rows
-            assert new["t_s"] == old["t_s"] and new["tip_z_m"] == old["tip_z_m"]
+            assert new["t_s"] == old["t_s"]
+            assert new["tip_z_m"] == old["tip_z_m"]
         lcca = _stored(engine, 1)
         assert [b.schema.names for b in lcca] == [list(LCCA_NAMES)] * 2
         for new, old in zip(lcca, written[1], strict=True):

@@ -93,7 +93,8 @@ def test_older_database_is_upgraded_in_place_keeping_its_data(
     assert (before, after) == (head_revision(), "9001")
     if db_url.startswith("sqlite"):
         # The file as it was before the upgrade is kept beside it.
-        assert backup is not None and backup.name.endswith(f".before-{head_revision()}.bak")
+        assert backup is not None
+        assert backup.name.endswith(f".before-{head_revision()}.bak")
         old = make_engine(f"sqlite:///{backup}")
         with old.connect() as conn:
             assert conn.execute(select(Study.name)).scalars().all() == ["pilot"]

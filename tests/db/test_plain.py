@@ -54,4 +54,5 @@ def test_anything_else_is_left_to_open_database(tmp_path: Path) -> None:
         "postgresql+psycopg://u@h/db",
     ):
         assert plain_sqlite(name) is None, name
-    assert sqlite_file(":memory:") is None and sqlite_file("sqlite:///") is None
+    assert sqlite_file(":memory:") is None
+    assert sqlite_file("sqlite:///") is None

@@ -71,7 +71,8 @@ def test_one_connection_for_the_writers_life_given_back_at_close(engine: Engine)
         writer.__exit__(None, None, None)
     finally:
         event.remove(engine, "checkout", _checkout)
-    assert writer.chunks_committed == 10 and _stored(engine, trial_id) == 1000
+    assert writer.chunks_committed == 10
+    assert _stored(engine, trial_id) == 1000
     assert len(checkouts) == 1
     assert engine.pool.checkedout() == 0
 

@@ -75,7 +75,8 @@ def test_a_lock_during_the_trial_holds_the_samples_and_commits_them_after(
         assert writer.waiting_since is not None
         held = [n for s, n in waits if s is not None]
         # more and more held: every chunk encoded since the lock, none dropped
-        assert held == sorted(held) and held[-1] == writer.next_seq - before >= 500
+        assert held == sorted(held)
+        assert held[-1] == writer.next_seq - before >= 500
     finally:
         locker.release()
     writer.extend(_columns(t[800:]))

@@ -59,12 +59,12 @@ HV = [9.0, 10.0, 9.0, 12.0, 10.0, 10.0]
 def test_paired_t_and_hedges_g_av_by_hand() -> None:
     result, excluded = compare_conditions(_long({"novice": (VO, HV)}))
     row = result.iloc[0]
-    assert row["test"] == "paired_t" and not excluded
+    assert row["test"] == "paired_t"
+    assert not excluded
     d = np.array(HV) - np.array(VO)  # -1, -2, 0, -2, -1, -3
     t = d.mean() / (d.std(ddof=1) / math.sqrt(6))  # -1.5 / (1.0488 / 2.4495) = -3.5032
-    assert row["statistic"] == pytest.approx(t) and row["statistic"] == pytest.approx(
-        -3.5032, abs=1e-4
-    )
+    assert row["statistic"] == pytest.approx(t)
+    assert row["statistic"] == pytest.approx(-3.5032, abs=1e-4)
     assert row["p"] == pytest.approx(2 * stats.t.sf(abs(t), 5))
     # Lakens (2013): d_av = mean diff / mean SD; Hedges' J = 1 - 3 / (4 (n1 + n2) - 9)
     d_av = -1.5 / ((np.std(VO, ddof=1) + np.std(HV, ddof=1)) / 2)
@@ -83,7 +83,8 @@ def test_non_normal_differences_go_to_wilcoxon_with_exact_p() -> None:
     vo = [1.0] * 8
     hv = [1.1, 1.2, 1.15, 1.12, 1.18, 6.0, 1.11, 1.13]  # one huge difference: not normal
     row = compare_conditions(_long({"expert": (vo, hv)}))[0].iloc[0]
-    assert row["shapiro_p"] < 0.05 and row["test"] == "wilcoxon"
+    assert row["shapiro_p"] < 0.05
+    assert row["test"] == "wilcoxon"
     # every difference positive: V = R+ = 1 + ... + 8 = 36 (R's statistic), exact
     # two-sided p = 2 / 2^8
     assert row["statistic"] == 36.0
@@ -255,7 +256,9 @@ def test_study_analyze_writes_the_json_contract(
         assert (out / name).stat().st_size > 100
     for table in ("descriptives", "comparisons", "mixed_anova", "lmm"):
         tex = (out / f"{table}.tex").read_text()
-        assert "\\toprule" in tex and "\\bottomrule" in tex and "\\caption{" in tex  # booktabs
+        assert "\\toprule" in tex
+        assert "\\bottomrule" in tex
+        assert "\\caption{" in tex
         assert (out / f"{table}.md").read_text().startswith(f"**Table: {table}.**")
         assert len(pd.read_csv(out / f"{table}.csv")) > 0
     methods = (out / "methods.md").read_text()
@@ -385,7 +388,8 @@ def test_mixed_anova_refuses_an_unknown_ss_type() -> None:
 )
 def test_wilcoxon_rule_is_r_wilcox_test(diff: list[float], p: float, w: float, method: str) -> None:
     got = wilcoxon_signed_rank(np.array(diff))
-    assert got[0] == w and got[2] == method
+    assert got[0] == w
+    assert got[2] == method
     assert got[1] == pytest.approx(p, abs=1e-12)
 
 
@@ -417,7 +421,8 @@ def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -
         table, _ = mixed_anova(pd.DataFrame(rows))
     rows_by = table.set_index("source")
     for source in ("condition", "interaction"):
-        assert math.isinf(rows_by.loc[source, "F"]) and rows_by.loc[source, "p"] == 0.0
+        assert math.isinf(rows_by.loc[source, "F"])
+        assert rows_by.loc[source, "p"] == 0.0
         assert rows_by.loc[source, "np2"] == 1.0
     assert math.isfinite(rows_by.loc["group", "F"])
     records = _records(table.to_dict("records"), ANOVA_KEYS)
@@ -600,7 +605,9 @@ def test_a_singular_fit_is_noted_and_equals_lme4() -> None:
                 }
             )
     table, notes = mixed_model(pd.DataFrame(rows), ("m",))
-    assert len(notes) == 1 and "singular fit" in notes[0] and "isSingular" in notes[0]
+    assert len(notes) == 1
+    assert "singular fit" in notes[0]
+    assert "isSingular" in notes[0]
     ref = [
         (11.1666666666667, 0.300462606288666),
         (-2.33333333333333, 0.424918292799399),
@@ -616,15 +623,19 @@ def test_apa_text() -> None:
     from study.analysis.apa import bounded_text, p_text
     from study.analysis.figcheck import stars
 
-    assert p_text(1.0) == "> .999" and p_text(0.9995) == "> .999"
-    assert p_text(0.0456) == ".046" and p_text(0.00099) == "< .001"
+    assert p_text(1.0) == "> .999"
+    assert p_text(0.9995) == "> .999"
+    assert p_text(0.0456) == ".046"
+    assert p_text(0.00099) == "< .001"
     # never rounded across a star threshold: the text and the figure's mark agree
     for p in (0.04996, 0.0500001, 0.0099996, 0.010004, 0.0010004, 0.049, 0.051):
         shown = float(p_text(p))
         assert stars(shown) == stars(p), p
     assert p_text(0.04996) == ".04996"
-    assert bounded_text(0.6532) == ".65" and bounded_text(-0.25) == "-.25"
-    assert bounded_text(0.6532, 3) == ".653" and bounded_text(float("nan")) == "n/a"
+    assert bounded_text(0.6532) == ".65"
+    assert bounded_text(-0.25) == "-.25"
+    assert bounded_text(0.6532, 3) == ".653"
+    assert bounded_text(float("nan")) == "n/a"
 
 
 def test_tables_give_t_df_v_and_human_labels() -> None:
@@ -659,7 +670,8 @@ def test_a_mixed_model_without_residual_df_is_a_note_not_an_error() -> None:
         )
     ]
     table, notes = mixed_model(pd.DataFrame(rows), ("m",))
-    assert table.empty and notes == [
+    assert table.empty
+    assert notes == [
         "lcca/m: mixed model could not be fitted: 4 trials for 4 fixed effects: no residual "
         "degrees of freedom"
     ]

@@ -62,11 +62,14 @@ def test_edits_need_a_reason_name_the_actor_and_audit_the_pairwise_choices(
         ("stored_before_block_ran", "paper form"),
     ]
     entered = json.loads(created[0].new_value)
-    assert entered["participant"] == "P001" and entered["mental"] == RATINGS["mental"]
+    assert entered["participant"] == "P001"
+    assert entered["mental"] == RATINGS["mental"]
     # an edit without a reason: one line, exit 2, nothing changed
     assert _enter(db_url, effort=65) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "needs a reason" in err[0] and "P001 lcca/VO" in err[0]
+    assert len(err) == 1
+    assert "needs a reason" in err[0]
+    assert "P001 lcca/VO" in err[0]
     assert len(_audit(db_url)) == 2
     # the choices changed: the pairwise list is audited beside the weights it gives
     second = [b for _, b in pairs]
@@ -85,7 +88,8 @@ def test_edits_need_a_reason_name_the_actor_and_audit_the_pairwise_choices(
     )
     rows = _audit(db_url)[2:]
     fields = {r.field: r for r in rows}
-    assert "effort" in fields and "pairwise" in fields
+    assert "effort" in fields
+    assert "pairwise" in fields
     assert [[a, b, c] for (a, b), c in zip(pairs, first, strict=True)] == json.loads(
         fields["pairwise"].old_value
     )
@@ -94,7 +98,8 @@ def test_edits_need_a_reason_name_the_actor_and_audit_the_pairwise_choices(
     engine = make_engine(db_url)
     with Session(engine) as s:
         stored = s.scalars(select(TlxResponse)).one()
-        assert stored.pairwise[0][2] == second[0] and stored.effort == 65
+        assert stored.pairwise[0][2] == second[0]
+        assert stored.effort == 65
     engine.dispose()
     # the actor from STUDY_ACTOR, else the operating-system user and host
     monkeypatch.setenv("STUDY_ACTOR", "EXP07")

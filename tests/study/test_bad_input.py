@@ -428,7 +428,8 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(
     assert main(case.argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
-    assert err[0].startswith("study ") and ": error: " in err[0], err
+    assert err[0].startswith("study "), err
+    assert ": error: " in err[0], err
     assert case.expect in err[0], err
     assert _state(tmp_path, "s.db") == before
     assert (tmp_path / "bad.db").read_bytes() == bad_bytes
@@ -457,7 +458,8 @@ def test_on_postgresql_too(
     capsys.readouterr()
     assert main([*argv, "--db", pg_url]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and expect in err[0], err
+    assert len(err) == 1, err
+    assert expect in err[0], err
     engine = make_engine(pg_url)
     with engine.connect() as conn:
         assert conn.scalar(select(func.count()).select_from(table("participants"))) == 0

@@ -38,5 +38,6 @@ def test_bench_study_measures_are_the_peaks_of_its_samples(tmp_path: Path) -> No
     # 2,003 samples over 16 trials: 125 each, the first three one more
     assert [r[1] for r in rows] == [126] * 3 + [125] * 13
     for _, n, last_t, completion, success, prox, distal, peak_prox, peak_distal in rows:
-        assert last_t == (n - 1) / 1000.0 == completion and success == 1
+        assert last_t == (n - 1) / 1000.0 == completion
+        assert success == 1
         assert (peak_prox, peak_distal) == (prox, distal)

@@ -64,4 +64,5 @@ def test_bench_master_with_a_missing_estimator_is_one_line(
     argv = ["bench", "master", "--json", str(tmp_path / "m.json"), "--out", str(tmp_path)]
     assert main([*argv, "--estimator", str(tmp_path / "nope")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "nope" in err[0]
+    assert len(err) == 1
+    assert "nope" in err[0]

@@ -56,7 +56,8 @@ def test_bench_startup_reports_every_figure_as_json(
         assert len(result[figure]["seconds"]) == 1
     assert result["simulate_trial_s"] == pytest.approx(30.0)
     writer = result["writer"]
-    assert writer["rows"] == 2000 and len(writer["writer_rows_per_s"]) == 1
+    assert writer["rows"] == 2000
+    assert len(writer["writer_rows_per_s"]) == 1
     assert writer["ratio"] == pytest.approx(
         writer["writer_rows_per_s"][0] / writer["sqlite3_rows_per_s"][0]
     )
@@ -68,7 +69,8 @@ def test_bench_startup_reports_every_figure_as_json(
 
 def test_bench_demo_times_whole_demo_runs_in_fresh_processes(tmp_path: Path) -> None:
     timing = bench_demo(tmp_path, 1, ("--quick",))
-    assert len(timing.seconds) == 1 and timing.target_s == 30.0
+    assert len(timing.seconds) == 1
+    assert timing.target_s == 30.0
     # the warm-up and the counted run each built a whole study: database, analysis, figures
     for k in (0, 1):
         assert (tmp_path / f"demo{k}" / "demo.db").is_file()

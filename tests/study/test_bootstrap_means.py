@@ -37,4 +37,5 @@ def test_intervals_of_eight_people_hold_the_mean_about_as_often_as_they_claim() 
 
 def test_fewer_than_two_people_have_no_interval() -> None:
     low, high = bootstrap_means(np.array([0.5]), np.random.default_rng(0), 100)
-    assert np.isnan(low) and np.isnan(high)
+    assert np.isnan(low)
+    assert np.isnan(high)

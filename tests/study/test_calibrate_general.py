@@ -64,12 +64,14 @@ def test_the_plan_has_every_family_mixtures_and_clean_in_round_robin() -> None:
     groups = [g for g, _, _ in todo]
     for f in FAMILIES:
         assert groups.count(f) == 2
-    assert groups.count("mixture of 2") == 3 and groups.count("mixture of 3") == 1
+    assert groups.count("mixture of 2") == 3
+    assert groups.count("mixture of 3") == 1
     assert groups.count("clean") == 4
     assert len({seed for _, _, seed in todo}) == len(todo)
     for g, families, _ in todo:
         if g.startswith("mixture"):
-            assert len(set(families)) == int(g[-1]) and not {"delay", "lag"} <= set(families)
+            assert len(set(families)) == int(g[-1])
+            assert not {"delay", "lag"} <= set(families)
     # the first round has one recording of every group
     assert set(groups[: len(FAMILIES) + 3]) == set(groups)
 
@@ -78,14 +80,17 @@ def test_a_group_filter_keeps_each_recordings_seed_from_the_whole_plan() -> None
     whole = GeneraliseConfig(per_family=2, mixtures_of_two=2, mixtures_of_three=1, clean=2)
     only = plan(replace(whole, only=("backlash", "mixtures")))
     expected = [r for r in plan(whole) if r[0] == "backlash" or r[0].startswith("mixture")]
-    assert only == expected and len(only) == 2 + 2 + 1
+    assert only == expected
+    assert len(only) == 2 + 2 + 1
 
 
 def test_an_unknown_family_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     argv = ["bench", "calibrate", "--generalise", "--family", "friction"]
     assert main([*argv, "--json", str(tmp_path / "r.json")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--family friction" in err[0] and "backlash" in err[0]
+    assert len(err) == 1
+    assert "--family friction" in err[0]
+    assert "backlash" in err[0]
     assert not (tmp_path / "r.json").exists()
 
 
@@ -138,7 +143,8 @@ def test_shares_are_counted_as_stated() -> None:
         a["honest"],
     ) == (0.5, 0.5, 0.5, 0.5, 0.5)
     assert s["per_group"]["clean"]["right_first"] is None
-    assert s["overall"]["within_2x_oracle"] == 0.5 and s["overall"]["clean_untouched"] == 1.0
+    assert s["overall"]["within_2x_oracle"] == 0.5
+    assert s["overall"]["clean_untouched"] == 1.0
     # the run outside 2x ended white: not every unexplained recording is honest
     assert s["overall"]["not_explained_end_structure_remains"] is False
 
@@ -162,7 +168,8 @@ def test_a_small_run_end_to_end(tmp_path: Path) -> None:
     for r in runs:
         assert r["ratio_to_oracle"] == pytest.approx(r["rmse_after_n"] / r["oracle_rmse_n"])
     slip = next(r for r in runs if r["group"] == "slip")
-    assert slip["right_first"] is None and slip["wrong_named"] == bool(slip["named"])
+    assert slip["right_first"] is None
+    assert slip["wrong_named"] == bool(slip["named"])
     assert "| stribeck | 1 |" in (tmp_path / "calibrate_general.md").read_text()
 
 
@@ -172,5 +179,7 @@ def test_count_without_generalise_is_refused(
     argv = ["bench", "calibrate", "--json", str(tmp_path / "r.json"), "--count", "2"]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--count 2" in err[0] and "--generalise" in err[0]
+    assert len(err) == 1
+    assert "--count 2" in err[0]
+    assert "--generalise" in err[0]
     assert not (tmp_path / "r.json").exists()

@@ -51,5 +51,6 @@ def test_time_with_another_bench_is_refused(
     out = tmp_path / "time.json"
     assert main(["bench", "calibrate", "--time", other, "--json", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--time" in err[0]
+    assert len(err) == 1
+    assert "--time" in err[0]
     assert not out.exists()

@@ -121,7 +121,8 @@ def test_many_blocks_are_named_by_a_legend() -> None:
     e = np.random.default_rng(2).normal(0, 0.1, len(t))
     with plt.rc_context(CAL_STYLE):
         axes = residual_blocks(t, e, e, held)
-    assert len(axes[0].patches) == 8 and len(axes[0].texts) == 0
+    assert len(axes[0].patches) == 8
+    assert len(axes[0].texts) == 0
     legend = axes[0].get_legend()
     assert [x.get_text() for x in legend.get_texts()] == ["held out", "training"]
     plt.close(axes[0].figure)

@@ -138,7 +138,8 @@ def test_bad_campaign_file_is_one_line_exit_2_and_nothing_written(
     path.write_text(NOTES.replace(*change))
     assert main(["campaign", "run", str(path), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and message in err[0], err
+    assert len(err) == 1, err
+    assert message in err[0], err
     assert not (tmp_path / "out").exists()
 
 
@@ -173,7 +174,8 @@ def test_bad_loss_scheduler_and_folder_are_one_line(
     for argv, message in cases:
         assert main(argv) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and message in err[0], err
+        assert len(err) == 1, err
+        assert message in err[0], err
         assert not Path(out).exists()
     # a folder holding another campaign is not overwritten
     other = tmp_path / "other"
@@ -201,7 +203,8 @@ def test_power_interval_is_wilsons_and_effect_interval_t_based() -> None:
     # Wilson score interval, closed form: (p + z^2/2n +- z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
     z, n, p = 1.959963984540054, 10, 0.8
     centre, half = p + z**2 / (2 * n), z * math.sqrt(p * (1 - p) / n + z**2 / (4 * n**2))
-    assert row["power"] == 0.8 and row["power_hv_lower"] == 0.6
+    assert row["power"] == 0.8
+    assert row["power_hv_lower"] == 0.6
     assert row["power_ci_low"] == pytest.approx((centre - half) / (1 + z**2 / n), abs=1e-12)
     assert row["power_ci_high"] == pytest.approx((centre + half) / (1 + z**2 / n), abs=1e-12)
     # mean 0.45, sd of 0..0.9 step 0.1 = 0.30277, t(0.975, 9) = 2.262157 (R: qt(0.975, 9))
@@ -268,7 +271,8 @@ def test_one_and_two_workers_give_the_serial_results_byte_for_byte(
 ) -> None:
     one = _cluster_run(NOTES, tmp_path / "one", workers=1)
     two = _cluster_run(NOTES, tmp_path / "two", workers=2)
-    assert one == notes_reference and two == notes_reference
+    assert one == notes_reference
+    assert two == notes_reference
     results = pd.read_csv(tmp_path / "two" / "results.csv")
     # one row per unit x group x measure, in grid order
     assert len(results) == 4 * 2 * 3
@@ -326,7 +330,8 @@ def test_a_killed_campaign_resumes_to_the_uninterrupted_results(
     finally:
         _stop(run)  # kill -9 of the client and its LocalCluster
     done = {p.name: p.stat().st_mtime_ns for p in (out / "units").glob("*.parquet")}
-    assert 1 <= len(done) < 4 and not (out / "results.csv").exists()
+    assert 1 <= len(done) < 4
+    assert not (out / "results.csv").exists()
     assert main(["campaign", "run", str(path), "--out", str(out), "--workers", "1"]) == 0
     assert (out / "results.csv").read_bytes() == notes_reference
     # the units finished before the kill were not run again

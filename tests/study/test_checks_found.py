@@ -102,7 +102,8 @@ def test_out_through_a_symbolic_link_is_refused(
     capsys.readouterr()
     assert main(["export", "--out", through, "--db", db]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "link is a symbolic link" in err[0], err
+    assert len(err) == 1, err
+    assert "link is a symbolic link" in err[0], err
     assert list((tmp_path / "elsewhere").iterdir()) == []
 
 

@@ -54,27 +54,33 @@ def _error(capsys: pytest.CaptureFixture[str], *args: str) -> str:
 
 def test_unknown_command_names_it(capsys: pytest.CaptureFixture[str]) -> None:
     line = _error(capsys, "frobnicate")
-    assert "frobnicate" in line and line.startswith("study: error:")
+    assert "frobnicate" in line
+    assert line.startswith("study: error:")
 
 
 def test_bad_option_value_names_value_and_expectation(capsys: pytest.CaptureFixture[str]) -> None:
     line = _error(capsys, "bench", "db", "--rows", "lots")
-    assert "'lots'" in line and "integer" in line and line.startswith("study bench db: error:")
+    assert "'lots'" in line
+    assert "integer" in line
+    assert line.startswith("study bench db: error:")
 
 
 def test_missing_option_argument_names_the_command(capsys: pytest.CaptureFixture[str]) -> None:
     line = _error(capsys, "bench", "db", "--rows")
-    assert line.startswith("study bench db: error:") and "'--rows' requires an argument" in line
+    assert line.startswith("study bench db: error:")
+    assert "'--rows' requires an argument" in line
 
 
 def test_out_of_range_option_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
     line = _error(capsys, "bench", "db", "--rows", "0")
-    assert "'--rows'" in line and "0" in line
+    assert "'--rows'" in line
+    assert "0" in line
 
 
 def test_bad_database_url_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
     line = _error(capsys, "db", "upgrade", "--db", "mysql://root@localhost/x")
-    assert "mysql" in line and "expected sqlite or postgresql" in line
+    assert "mysql" in line
+    assert "expected sqlite or postgresql" in line
 
 
 def test_unreachable_server_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
@@ -122,7 +128,8 @@ def test_db_info_on_missing_file_is_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     line = _error(capsys, "db", "info", "--db", str(tmp_path / "absent.db"))
-    assert "absent.db" in line and "expected an existing file" in line
+    assert "absent.db" in line
+    assert "expected an existing file" in line
 
 
 def test_bench_db_writes_its_figures_as_json(

@@ -108,7 +108,8 @@ def test_an_invalid_trial_is_kept_audited_left_out_and_listed_then_valid_again(
     assert f"left out: {code} VO trial 1 (dial slipped)." in methods
     peak = _novice_vo_peak(report)
     # the other two novices' VO peaks, from PEAKS by hand: (1.2 + 1.4) / 2
-    assert peak["n"] == 2 and peak["mean"] == pytest.approx((1.2 + 1.4) / 2)
+    assert peak["n"] == 2
+    assert peak["mean"] == pytest.approx((1.2 + 1.4) / 2)
     assert [p for _, _, p in rest] == [1.2, 1.4]
     # kept in the database and in the export
     exported = tmp_path / "export"

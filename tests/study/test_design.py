@@ -22,7 +22,8 @@ from study.protocol.roster import add_participant, create_study, schedule
 def test_the_template_is_the_papers_design() -> None:
     d = parse_design(TEMPLATE)
     assert d.groups == {"outsider": 20, "novice": 8, "expert": 8}
-    assert d.conditions == ("VO", "HV") and d.tasks == ("lcca",)
+    assert d.conditions == ("VO", "HV")
+    assert d.tasks == ("lcca",)
     assert d.orders == [("VO", "HV"), ("HV", "VO")]
 
 

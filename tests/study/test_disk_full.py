@@ -137,7 +137,8 @@ def test_a_locked_database_is_named_as_locked(
             err = capsys.readouterr().err.strip().splitlines()
             assert len(err) == 1, err
             assert "is locked by another program (database is locked)" in err[0], err
-            assert "?timeout=SECONDS" in err[0] and "backup" not in err[0]
+            assert "?timeout=SECONDS" in err[0]
+            assert "backup" not in err[0]
         holder.execute("ROLLBACK")
     with closing(sqlite3.connect(db)) as conn:  # nothing half-written
         assert conn.execute("SELECT count(*) FROM participants").fetchone()[0] == 1

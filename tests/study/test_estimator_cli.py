@@ -52,7 +52,8 @@ def test_train_writes_the_model_folder_with_a_summary(model_dir: Path) -> None:
     written = sorted(p.name for p in model_dir.iterdir())
     assert written == sorted([*MODEL_FILES, "gru.npz", "gru.pt"])
     summary = json.loads((model_dir / "summary.json").read_text())
-    assert summary["window"] == 6 and summary["epochs_run"] == 2
+    assert summary["window"] == 6
+    assert summary["epochs_run"] == 2
     assert (
         set(summary["train_rmse_n"])
         == set(summary["validation_rmse_n"])
@@ -121,7 +122,8 @@ def test_memory_none_trains_the_plain_window_and_runs(
     assert main(argv) == 0
     std = json.loads((out / "standardisation.json").read_text())
     assert std["memory"]["kind"] == "none"
-    assert std["features"] == ["iq", "omega", "alpha"] and len(std["feature_mean"]) == 3
+    assert std["features"] == ["iq", "omega", "alpha"]
+    assert len(std["feature_mean"]) == 3
     summary = json.loads((out / "summary.json").read_text())
     assert summary["config"]["memory"]["time_constants_s"] == []
     pred = tmp_path / "pred.csv"
@@ -177,7 +179,8 @@ def test_run_with_a_missing_model_is_one_line(
     line = one_error_line(
         capsys, ["estimator", "run", str(tmp_path / "none"), str(recording_csv), "--out", str(out)]
     )
-    assert "model folder" in line and "does not exist" in line
+    assert "model folder" in line
+    assert "does not exist" in line
     assert not out.exists()
 
 
@@ -212,13 +215,15 @@ def test_bench_follower_quick_writes_every_table(tmp_path: Path) -> None:
     assert report["timing"]["median_ms"] > 0
     # the training time: the command's defaults, with early stopping and with every epoch
     runs = report["training_time"]["runs"]
-    assert runs["all_epochs"]["epochs_run"] == 2 and runs["all_epochs"]["patience"] is None
+    assert runs["all_epochs"]["epochs_run"] == 2
+    assert runs["all_epochs"]["patience"] is None
     assert runs["default"]["patience"] == 10
     assert runs["default"]["samples"] == report["training"]["samples"]
     for run in runs.values():
         assert 0 < run["seconds_to_first_epoch_end"] < run["seconds"]
     gen = report["generalisation"]
-    assert "simulated" in gen["data"] and all("simulated" in r["data"] for r in gen["runs"])
+    assert "simulated" in gen["data"]
+    assert all("simulated" in r["data"] for r in gen["runs"])
     assert {(r["effect"], r["seed"]) for r in gen["runs"]} == {("stribeck", 0), ("drift", 0)}
     runs = json.loads((tmp_path / "fig" / "generalisation_runs.json").read_text())
     assert [r["effect"] for r in runs] == ["stribeck", "drift"]
@@ -257,7 +262,8 @@ def test_training_without_pytorch_is_one_line_naming_the_extra(
     _without_torch(monkeypatch)
     out = tmp_path / "m"
     line = one_error_line(capsys, ["estimator", "train", str(recording_csv), "--out", str(out)])
-    assert "needs PyTorch" in line and "pip install 'haptic-study[train]'" in line, line
+    assert "needs PyTorch" in line, line
+    assert "pip install 'haptic-study[train]'" in line, line
     assert not out.exists()
 
 

@@ -91,7 +91,8 @@ def test_a_bad_row_is_named_and_nothing_is_written(
     capsys.readouterr()
     assert main(["import", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and message in err[0]
+    assert len(err) == 1
+    assert message in err[0]
     assert _count_trials(db) == 0
 
 

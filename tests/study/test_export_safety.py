@@ -97,7 +97,9 @@ def test_a_symlinked_target_is_refused_and_its_file_untouched(
     capsys.readouterr()
     assert main(["export", "--out", str(out), "--db", db]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and str(out / name) in err[0] and "symbolic link" in err[0]
+    assert len(err) == 1
+    assert str(out / name) in err[0]
+    assert "symbolic link" in err[0]
     assert victim.read_text() == "precious\n"
     assert (out / name).is_symlink()
     assert sorted(p.name for p in out.iterdir()) == [name]  # nothing else written
@@ -129,7 +131,9 @@ def test_an_interrupted_export_leaves_the_previous_files(
     capsys.readouterr()
     assert main(["export", "--out", str(out), "--db", db_url]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "No space left on device" in err[0] and str(out) in err[0]
+    assert len(err) == 1
+    assert "No space left on device" in err[0]
+    assert str(out) in err[0]
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # no .partial either
     monkeypatch.undo()
     assert main(["export", "--out", str(out), "--db", db_url]) == 0

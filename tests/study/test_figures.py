@@ -169,7 +169,8 @@ def test_each_task_gets_its_own_fig12_with_its_own_marks(engine: Engine) -> None
         }
         seen[task] = marks[f"mark:{force[task]}/novice"]
     # HV lowers the lcca force (-0.3 N) and not the notes force: the marks differ by task
-    assert seen["lcca"] in {"*", "**", "***"} and seen["notes"] == "n.s."
+    assert seen["lcca"] in {"*", "**", "***"}
+    assert seen["notes"] == "n.s."
     # the tied expert VO forces give a Wilcoxon, named under its group
     ticks = [
         t.get_text() for ax in drawn["fig12_groups_lcca"].figure.axes for t in ax.get_xticklabels()
@@ -223,7 +224,8 @@ def test_cousineau_morey_interval_by_hand() -> None:
     half = 3.182446305284263 * 3.5355339059327378 / 2 * math.sqrt(2)
     assert cm.loc["VO", "half"] == pytest.approx(half) == pytest.approx(7.9561, abs=1e-4)
     assert cm.loc["HV", "half"] == pytest.approx(half)  # two conditions: the same width
-    assert cm.loc["VO", "mean"] == 55.0 and cm.loc["HV", "mean"] == 45.0
+    assert cm.loc["VO", "mean"] == 55.0
+    assert cm.loc["HV", "mean"] == 45.0
     # narrower than the between-subject interval of the raw VO ratings (SD 12.91)
     assert half < 3.182446 * 12.9099 / 2
 
@@ -235,14 +237,16 @@ def test_fig9_one_figure_shared_axis_reference_above_estimate(engine: Engine) ->
         if d.name == "fig9_forces_lcca"
     )
     vo, hv = [ax for ax in fig.axes if ax.get_title()]
-    assert vo.get_title().split(", ")[1] == "VO" and hv.get_title().split(", ")[1] == "HV"
+    assert vo.get_title().split(", ")[1] == "VO"
+    assert hv.get_title().split(", ")[1] == "HV"
     assert vo.get_ylim() == hv.get_ylim()
     assert vo.get_xlim() == hv.get_xlim()  # one time axis: the trials' lengths compare
     assert vo.get_shared_x_axes().joined(vo, hv)
     lines = {line.get_label(): line for line in vo.get_lines()}
     assert lines["proximal, reference"].get_zorder() > lines["proximal, estimated"].get_zorder()
     caption = fig.legends[0].get_title().get_text().replace("\n", " ")
-    assert "positive resists insertion" in caption and "negative resists withdrawal" in caption
+    assert "positive resists insertion" in caption
+    assert "negative resists withdrawal" in caption
 
 
 def test_fig9_draws_every_stored_sample_of_the_two_trials(engine: Engine) -> None:
@@ -290,7 +294,8 @@ def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> No
     )
     effects = {"outsider": 0.2, "novice": 0.8, "expert": 1.2}
     fig = plot_power_curve(unequal, "single", effects=effects, rho=0.5, n_sim=20)
-    assert "power" in fig.axes[1].get_ylabel() and "type I" not in fig.axes[1].get_ylabel()
+    assert "power" in fig.axes[1].get_ylabel()
+    assert "type I" not in fig.axes[1].get_ylabel()
     # the assumptions stated in the figure
     key = fig.legends[0].get_title().get_text().replace("\n", " ")
     for phrase in (
@@ -344,7 +349,8 @@ def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
     note = "Simulated participants: all 288 trials simulated, none measured"
     fig = label_source(fig12(long, comparisons, width), note)
     marks = _marks(long, comparisons, "lcca")
-    assert len(marks) == 12 and check_figure(fig, marks) == []
+    assert len(marks) == 12
+    assert check_figure(fig, marks) == []
     # the expert distal force: 4 of 8 zero differences, R's asymptotic p .361 -> n.s.
     assert marks["peak_distal_force_n/expert"] == pytest.approx(0.36131, abs=1e-5)
     ax = fig.axes[2]
@@ -357,7 +363,8 @@ def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
     # five expert VO values of 0.112 N: jittered apart, not one dot
     expert_vo = ax.collections[4].get_offsets()  # scatter order: group x (VO, HV)
     tied = expert_vo[np.isclose(expert_vo[:, 1], 0.112, atol=5e-4)]
-    assert len(tied) == 5 and len(np.unique(np.round(tied[:, 0], 3))) == 5
+    assert len(tied) == 5
+    assert len(np.unique(np.round(tied[:, 0], 3))) == 5
     again = fig12(long, comparisons, width).axes[2].collections[4].get_offsets()
     assert np.array_equal(again, expert_vo)  # seeded: the same figure on every run
     plt.close("all")

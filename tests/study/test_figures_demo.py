@@ -71,7 +71,8 @@ def test_every_demo_output_says_simulated(demo: Path) -> None:
         "hardware": 0,
         "imported": 0,
     }
-    assert source["label"] == "simulated" and "Simulated participants" in source["note"]
+    assert source["label"] == "simulated"
+    assert "Simulated participants" in source["note"]
     assert "Simulated participants" in (demo / "analysis" / "comparisons.md").read_text()
     assert "Simulated participants" in (demo / "analysis" / "comparisons.tex").read_text()
     for name in ("tests.csv", "descriptives.csv"):
@@ -127,7 +128,8 @@ def test_mixed_database_reports_the_mix_and_driver_restricts(
     argv = ["analyze", "--out", str(only), "--driver", "hardware", "--db", str(db)]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert "no trials driven by 'hardware'" in err and "simulated (12), imported (6)" in err
+    assert "no trials driven by 'hardware'" in err
+    assert "simulated (12), imported (6)" in err
 
 
 def test_imported_database_carries_no_simulated_label(
@@ -148,7 +150,8 @@ def test_imported_database_carries_no_simulated_label(
     }
     for name in ("comparisons.md", "comparisons.tex", "tests.csv"):
         text = (out / name).read_text()
-        assert "Simulated participants" not in text and "Mixed data" not in text, name
+        assert "Simulated participants" not in text, name
+        assert "Mixed data" not in text, name
     assert set(pd.read_csv(out / "tests.csv")["data_source"]) == {"imported"}
     figs = tmp_path / "figs"
     assert main(["figures", "--db", db, "--out", str(figs), "--format", "pdf"]) == 0

@@ -71,7 +71,8 @@ def run(argv: list[str], cwd: Path) -> tuple[int, str]:
 def assert_one_line_refusal(code: int, err: str, argv: list[str]) -> None:
     lines = err.strip().splitlines()
     assert code == 2, (argv, code, err)
-    assert len(lines) == 1 and ": error: " in lines[0], (argv, err)
+    assert len(lines) == 1, (argv, err)
+    assert ": error: " in lines[0], (argv, err)
 
 
 def leaf_commands() -> list[tuple[list[str], click.Command]]:
@@ -158,8 +159,10 @@ def workdir() -> Iterator[Path]:
 
 def test_every_number_option_is_covered() -> None:
     covered = {(" ".join(path), p.opts[0]) for path, _, p, _ in NUMBER_CASES}
-    assert len(covered) >= 40 and ("power", "--n-sim") in covered
-    assert ("simulate", "--max-seconds") in covered and ("run", "--pace") in covered
+    assert len(covered) >= 40
+    assert ("power", "--n-sim") in covered
+    assert ("simulate", "--max-seconds") in covered
+    assert ("run", "--pace") in covered
 
 
 @settings(FAST, max_examples=300)
@@ -439,8 +442,10 @@ def test_design_tomls(top: dict[str, object], groups: dict[str, object]) -> None
 
         design = parse_design(text)  # what was accepted, read back
         assert text.strip(), "an empty design was accepted"
-        assert 1 <= len(design.groups) <= 12 and all(1 <= n <= 1000 for n in design.groups.values())
-        assert math.isfinite(design.break_s) and 0 <= design.seed
+        assert 1 <= len(design.groups) <= 12
+        assert all(1 <= n <= 1000 for n in design.groups.values())
+        assert math.isfinite(design.break_s)
+        assert 0 <= design.seed
         assert stored_nonsense(where / "n.db") == []
 
 

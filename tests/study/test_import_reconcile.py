@@ -92,14 +92,17 @@ def test_imported_trials_land_in_the_block_of_their_task_and_condition(
         for task, condition, block_index, block_id in filed:
             assert blocks[block_index] == (task, condition)
             block = s.get(ScheduleBlock, block_id)
-            assert block is not None and (block.task, block.condition) == (task, condition)
+            assert block is not None
+            assert (block.task, block.condition) == (task, condition)
         # the session runs the other trials of those blocks, not one too few elsewhere
         todo = {
             (t.block.task, t.block.condition, t.practice, t.trial_index)
             for t in pending_trials(s, p)
         }
-        assert ("lcca", "VO", False, 0) not in todo and ("lcca", "HV", False, 0) in todo
-        assert ("notes", "HV", False, 1) not in todo and len(todo) == 4 * 4 - 2
+        assert ("lcca", "VO", False, 0) not in todo
+        assert ("lcca", "HV", False, 0) in todo
+        assert ("notes", "HV", False, 1) not in todo
+        assert len(todo) == 4 * 4 - 2
         # the participant known only from the import: one block index per task x condition
         p7 = s.scalars(select(Participant).where(Participant.code == "P007")).one()
         indexes = s.scalars(select(Trial.block_index).where(Trial.participant_id == p7.id)).all()
@@ -116,7 +119,8 @@ def test_imported_trials_land_in_the_block_of_their_task_and_condition(
     # each task's measures under its own names, the other task's left empty
     notes = mine[mine.task == "notes"].iloc[0]
     assert (notes["peak_force_demanded_n"], notes["peak_tip_force_n"]) == (3.10, 1.20)
-    assert pd.isna(notes["peak_proximal_force_n"]) and pd.isna(notes["peak_distal_force_n"])
+    assert pd.isna(notes["peak_proximal_force_n"])
+    assert pd.isna(notes["peak_distal_force_n"])
     lcca = mine[mine.task == "lcca"].iloc[0]
     assert (lcca["peak_proximal_force_n"], lcca["peak_distal_force_n"]) == (0.81, 0.42)
     assert pd.isna(lcca["peak_force_demanded_n"])
@@ -133,7 +137,9 @@ def test_the_same_file_imported_twice_is_refused_with_one_line(
     capsys.readouterr()
     assert _import(tmp_path, db_url, rows) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "row 2, column trial" in err[0] and "already stored" in err[0], err
+    assert len(err) == 1, err
+    assert "row 2, column trial" in err[0], err
+    assert "already stored" in err[0], err
     engine = make_engine(db_url)
     with Session(engine) as s:
         assert s.scalar(select(func.count()).select_from(Trial)) == 2

@@ -141,7 +141,8 @@ def test_a_session_killed_at_random_points_loses_no_trial_and_at_most_one_second
         n_finished = lines.count("start") - 1
         assert sum(t["status"] == "completed" for t in new.values()) == n_finished
         running = [t for t in after.values() if t["status"] == "running"]
-        assert len(running) == 1 and running[0] in new.values()
+        assert len(running) == 1
+        assert running[0] in new.values()
         kept_s = running[0]["last_s"] if running[0]["samples"] else 0.0
         assert killed_at_s - kept_s <= 1.0 + 0.011, (killed_at_s, kept_s)  # one 100 Hz step
     final = _trials(url)
@@ -168,7 +169,8 @@ def test_the_parent_of_jobs_2_killed_at_random_points_loses_nothing_completed(
                 if any(t["samples"] >= threshold for t in fresh) or not parent.is_alive():
                     break
             workers = kill_children.worker_pids(parent.pid)
-            assert parent.is_alive() and len(workers) == 2, "the kill point was never reached"
+            assert parent.is_alive(), "the kill point was never reached"
+            assert len(workers) == 2, "the kill point was never reached"
             seen = _trials(url)  # what the database held at the kill
             os.kill(parent.pid, signal.SIGKILL)
             parent.join(timeout=10)

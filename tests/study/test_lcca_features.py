@@ -100,7 +100,8 @@ def test_a_trial_without_backing_off_or_target_has_those_features_undefined() ->
     frame = _trace()
     frame = frame[frame["insertion_m"] < OSTIUM_M - 0.01]
     f = lcca_features(frame, OSTIUM_M, 0.0, TARGET, SPRING)
-    assert np.isnan(f["target_speed_ratio"]) and np.isnan(f["stall_s"])
+    assert np.isnan(f["target_speed_ratio"])
+    assert np.isnan(f["stall_s"])
     assert f["stall_backoffs"] == 1  # none, plus one
     # no rise of the felt resistance: the floor alone
     assert f["peak_felt_rise_n_m"] == pytest.approx(1e-4, abs=1e-12)

@@ -82,7 +82,8 @@ def test_a_live_holder_refuses_a_second_session_and_a_dead_one_is_taken_over(
     # ... silent for longer than the timeout: dead, taken over
     holder(heartbeat_at=utcnow() - timedelta(seconds=LEASE_TIMEOUT_S + 5))
     second = acquire_lease(engine, pid, "P001")
-    assert second.taken_over is not None and "no heartbeat from lab-pc-2" in second.taken_over
+    assert second.taken_over is not None
+    assert "no heartbeat from lab-pc-2" in second.taken_over
     # the first holder learns it lost the lease at its next heartbeat
     assert not first.beat()
     with pytest.raises(LeaseLostError, match="P001"):
@@ -90,10 +91,12 @@ def test_a_live_holder_refuses_a_second_session_and_a_dead_one_is_taken_over(
     assert second.beat()
     # a holder on this host whose process is gone is dead at once, however fresh its beat
     gone = _dead_pid()
-    assert not process_alive(gone) and process_alive(os.getpid())
+    assert not process_alive(gone)
+    assert process_alive(os.getpid())
     holder(host=socket.gethostname(), pid=gone, heartbeat_at=utcnow())
     third = acquire_lease(engine, pid, "P001")
-    assert third.taken_over is not None and f"process {gone}" in third.taken_over
+    assert third.taken_over is not None
+    assert f"process {gone}" in third.taken_over
     third.release()
     with Session(engine) as s:
         assert s.scalar(select(func.count()).select_from(SessionLease)) == 0
@@ -149,7 +152,8 @@ def test_second_run_of_a_participant_is_refused_then_takes_over_after_kill_9(
         capsys.readouterr()
         assert main(["run", "--participant", "P001", "--db", db_url]) == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert len(err) == 1 and "P001 already has a session running" in err[0], err
+        assert len(err) == 1, err
+        assert "P001 already has a session running" in err[0], err
         assert "EXP01" in err[0]
         # the refused session wrote nothing: no new trial, the running one untouched
         now = _trials(db_url)
@@ -162,7 +166,8 @@ def test_second_run_of_a_participant_is_refused_then_takes_over_after_kill_9(
     assert main(["run", "--participant", "P001", "--db", db_url]) == 0
     after = _trials(db_url)
     completed = [t[1] for t in after if t[2] == "completed"]
-    assert sorted(completed) == sorted(set(completed)) and len(completed) == 2
+    assert sorted(completed) == sorted(set(completed))
+    assert len(completed) == 2
     engine = make_engine(db_url)
     with Session(engine) as s:
         audit = s.scalars(
@@ -172,7 +177,8 @@ def test_second_run_of_a_participant_is_refused_then_takes_over_after_kill_9(
         ).one()
     engine.dispose()
     assert audit.new_value == "interrupted"
-    assert f"process {first.pid}" in audit.reason and "gone" in audit.reason
+    assert f"process {first.pid}" in audit.reason
+    assert "gone" in audit.reason
     assert audit.actor == current_actor()  # the operating-system user and host
 
 
@@ -224,7 +230,8 @@ def test_jobs_workers_end_with_their_parent_and_no_slot_completes_twice(
     assert main(["run", "--all", "--db", db]) == 0
     final = _trials(url)
     completed = [t[1] for t in final if t[2] == "completed"]
-    assert len(completed) == 4 and len(set(completed)) == 4  # 2 participants x 2 slots, once
+    assert len(completed) == 4
+    assert len(set(completed)) == 4
     engine = make_engine(url)
     with Session(engine) as s:
         reasons = s.scalars(select(AuditEntry.reason).where(AuditEntry.new_value == "interrupted"))

@@ -56,7 +56,8 @@ def test_identify_fits_an_open_chirp_and_measures_a_ramp(tmp_path: Path) -> None
     argv = ["identify", "notes", str(tmp_path / "chirp.csv"), "--dof", "rotation"]
     assert main([*argv, "--json", str(tmp_path / "i.json")]) == 0
     fit = json.loads((tmp_path / "i.json").read_text())
-    assert fit["experiment"] == "chirp" and fit["boundary"] == "open"
+    assert fit["experiment"] == "chirp"
+    assert fit["boundary"] == "open"
     for name, value in zip(("m_m", "m_s", "k_s", "b_m", "b_s"), truth.as_tuple(), strict=True):
         assert fit["parameters"][name] == pytest.approx(value, rel=0.03)
     simulate_recording(TranslationParams(), "ramp", "clamped").to_csv(
@@ -88,7 +89,8 @@ def test_simulate_notes_trial(tmp_path: Path) -> None:
     assert main([*argv, "--out", str(out), "--plot", str(tmp_path / "n.png")]) == 0
     frame = pd.read_csv(out)
     summary = json.loads(out.with_suffix(".json").read_text())
-    assert summary["task"] == "notes" and summary["success"]
+    assert summary["task"] == "notes"
+    assert summary["success"]
     assert summary["peak_force_demanded_n"] == pytest.approx(frame["force_demanded_n"].abs().max())
     assert summary["push_over_capacity_fraction"] == pytest.approx(
         (frame["force_demanded_n"] > 5.62).mean()
@@ -155,10 +157,12 @@ def test_a_study_with_lcca_and_notes_runs_notes_blocks(tmp_path: Path) -> None:
     assert sorted(frame["condition"]) == ["HV", "VO"]
     # NOTES measures under their own names, not in the LCCA's columns
     assert "peak_proximal_force_n" not in frame.columns
-    assert frame["completion_time_s"].notna().all() and frame["peak_force_demanded_n"].gt(0).all()
+    assert frame["completion_time_s"].notna().all()
+    assert frame["peak_force_demanded_n"].gt(0).all()
     assert frame["peak_tip_force_n"].notna().all()
     # the stored peak is the largest |demanded force| of the trial's stored samples
-    assert stored.keys() == demanded.keys() and len(stored) == 2
+    assert stored.keys() == demanded.keys()
+    assert len(stored) == 2
     for trial_id, value in stored.items():
         assert value == pytest.approx(demanded[trial_id])
         # the demanded torque's peak, once computed and dropped, is now in the samples

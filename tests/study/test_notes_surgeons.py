@@ -41,12 +41,14 @@ def test_measures_of_a_hand_built_trace() -> None:
     assert m["peak_torque_ccw_n_m"] == 0.085
     # strictly above the device's 5.62 N: 6.0, 9.9, 7.0 of ten samples
     assert m["push_over_capacity_fraction"] == pytest.approx(0.3)
-    assert m["peak_force_demanded_n"] == 9.9 and m["peak_torque_demanded_n_m"] == 0.085
+    assert m["peak_force_demanded_n"] == 9.9
+    assert m["peak_torque_demanded_n_m"] == 0.085
 
 
 def test_a_trace_that_never_pulls_has_no_pull() -> None:
     m = measures(_trace([1.0, 2.0, 6.0], [0.01, 0.02, 0.03]), success=False)
-    assert m["peak_pull_n"] == 0.0 and m["peak_torque_ccw_n_m"] == 0.0
+    assert m["peak_pull_n"] == 0.0
+    assert m["peak_torque_ccw_n_m"] == 0.0
     assert m["push_over_capacity_fraction"] == pytest.approx(1 / 3)
 
 
@@ -70,7 +72,8 @@ def test_surgeons_summary_is_mean_sd_and_range_beside_the_paper() -> None:
     assert s.loc["peak_push_n", "within_target"]
     assert not s.loc["peak_torque_ccw_n_m", "within_target"]
     assert s.loc["push_over_capacity_fraction", "paper"] == 0.2357
-    assert set(s.index) == set(PAPER) and (s["n"] == 3).all()
+    assert set(s.index) == set(PAPER)
+    assert (s["n"] == 3).all()
 
 
 def test_bench_notes_reports_the_surgeons_benchmark(tmp_path: Path) -> None:
@@ -80,11 +83,13 @@ def test_bench_notes_reports_the_surgeons_benchmark(tmp_path: Path) -> None:
     argv = ["bench", "notes", "--json", str(tmp_path / "n.json"), "--out", str(out)]
     assert main([*argv, "--draws", "1", "--trials", "1", "--surgeons", "2"]) == 0
     report = json.loads((tmp_path / "n.json").read_text())["surgeons_benchmark"]
-    assert "simulated" in report["source"] and report["condition"] == "VO"
+    assert "simulated" in report["source"]
+    assert report["condition"] == "VO"
     people = pd.DataFrame(report["participants"])
     vo = people[people["condition"] == "VO"]
     for row in report["summary"]:
         assert row["mean"] == pytest.approx(vo[row["measure"]].mean())
-        assert row["n"] == 2 and math.isfinite(row["sd"])
+        assert row["n"] == 2
+        assert math.isfinite(row["sd"])
     assert "SIMULATED experts" in (out / "notes_bench.md").read_text()
     assert len(pd.read_csv(out / "notes_surgeons.csv")) == 4

@@ -90,7 +90,8 @@ def _search(trials: pd.DataFrame, emulator: MomentEmulator) -> effects.EffectSea
 
 def test_clean_closed_form_data_get_nothing(emulator) -> None:
     found = _search(study(()), emulator)
-    assert found.effects == [] and found.verdict == "white"
+    assert found.effects == []
+    assert found.verdict == "white"
 
 
 def test_a_practice_effect_is_named_practice_not_carry_over(emulator) -> None:
@@ -101,7 +102,8 @@ def test_a_practice_effect_is_named_practice_not_carry_over(emulator) -> None:
     # the parameters themselves, not a smaller slowing over fewer trials (the fit's
     # trait levels move with the effect: held where the fit without it put them, the
     # slowing came out 0.39 over 1.25 trials)
-    assert 0.4 < practice["slowing"] < 0.6 and 1.5 < practice["decay_trials"] < 2.7
+    assert 0.4 < practice["slowing"] < 0.6
+    assert 1.5 < practice["decay_trials"] < 2.7
     # what remains is the cells' own noise: the held-out people's scatter, which no
     # model removes (the reduction is bounded by 1 - noise floor / error before)
     assert found.reduction() >= 0.20
@@ -127,6 +129,7 @@ def test_a_one_way_carry_over_is_named_with_the_other_direction_held_at_zero(emu
     found = _search(trials, emulator)
     assert [e.family for e in found.effects] == ["carry_over"]
     share = found.effects[0].parameters
-    assert 0.2 < share["vo_after_hv"] < 0.4 and share["hv_after_vo"] == 0.0
+    assert 0.2 < share["vo_after_hv"] < 0.4
+    assert share["hv_after_vo"] == 0.0
     assert found.effects[0].intervals["hv_after_vo"] == (0.0, 0.0)
     assert found.reduction() >= 0.10

@@ -86,7 +86,8 @@ def test_the_known_group_means_are_recovered(fitted) -> None:
     assert model["features"]["names"] == list(get_task("lcca").fit_features)
     assert model["features"]["trials_with_samples"] == 3 * 6 * 2 * 2
     # what the data cannot identify stays at its prior (the default), and says so
-    assert model["weak_traits"] == "prior" and model["shrunk_to_prior"] == []
+    assert model["weak_traits"] == "prior"
+    assert model["shrunk_to_prior"] == []
     assert set(model["fixed_at_prior"]) == set(TRAITS) - set(model["identifiable"])
     for trait in model["fixed_at_prior"]:
         assert model["groups"]["novice"][trait]["mean"] == getattr(PROFILES["novice"], trait)[0]
@@ -103,7 +104,8 @@ def test_data_from_the_model_itself_show_no_trend_and_no_order_effect(fitted) ->
     }
     assert not any(row["flagged"] for row in tests)
     line = model["lacks"]["line"]
-    assert "trend over trials" not in line and "condition order" not in line
+    assert "trend over trials" not in line
+    assert "condition order" not in line
     # the outlier rule: every person's calibrated distance against the chi-square quantile
     # at 1 - 0.01/18 with df = the measures' 6 moments - free traits. With only 4 simulated
     # people per group to calibrate it (24 by default) it does raise false alarms here, so only its
@@ -112,15 +114,18 @@ def test_data_from_the_model_itself_show_no_trend_and_no_order_effect(fitted) ->
     df = len(outliers["moments"]) - len(model["identifiable"])
     measures = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
     assert [f"{c}:{m}" for c in ("VO", "HV") for m in measures] == outliers["moments"]
-    assert len(outliers["distance"]) == 18 and outliers["df"] == df
+    assert len(outliers["distance"]) == 18
+    assert outliers["df"] == df
     assert outliers["limit"] == pytest.approx(stats.chi2.ppf(1 - 0.01 / 18, df), abs=1e-3)
     assert outliers["flagged"] == sorted(
         p for p, d in outliers["distance"].items() if d > outliers["limit"]
     )
     # every group mean (3 groups x 3 measures x VO, HV, VO - HV) is reproduced
     means = model["lacks"]["group_means"]
-    assert len(means["rows"]) == 27 and means["flagged"] == []
-    assert "does not reproduce" not in line and "group means" in line
+    assert len(means["rows"]) == 27
+    assert means["flagged"] == []
+    assert "does not reproduce" not in line
+    assert "group means" in line
 
 
 def test_a_group_mean_no_trait_setting_reproduces_is_reported(emulator, trials) -> None:
@@ -146,7 +151,8 @@ def test_a_group_mean_no_trait_setting_reproduces_is_reported(emulator, trials) 
     line = model["lacks"]["line"]
     assert "does not reproduce: expert HV peak_distal_force_n" in line
     # with traits held at their priors, the line names them as a possible cause
-    assert "held at their priors" in line and "haptic_threshold_n_m" in line
+    assert "held at their priors" in line
+    assert "haptic_threshold_n_m" in line
 
 
 def test_times_shrinking_over_trials_are_reported_not_absorbed(emulator, trials) -> None:
@@ -172,7 +178,8 @@ def test_times_shrinking_over_trials_are_reported_not_absorbed(emulator, trials)
         for r in model["lacks"]["tests"]
         if r["check"] == "order" and r["measure"] == "completion_time_s"
     )
-    assert order["flagged"] and order["observed_vo_first_minus_hv_first_pct"] < 0
+    assert order["flagged"]
+    assert order["observed_vo_first_minus_hv_first_pct"] < 0
 
 
 def test_a_study_with_too_few_participants_per_group_is_refused(
@@ -189,7 +196,8 @@ def test_a_study_with_too_few_participants_per_group_is_refused(
         "lcca trials in both VO and HV; expected at least 4 per group to fit its "
         "trait distribution"
     )
-    assert not out.exists() and not out.with_suffix(".png").exists()
+    assert not out.exists()
+    assert not out.with_suffix(".png").exists()
 
 
 def test_an_unknown_task_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -237,12 +245,15 @@ def test_a_bad_model_is_one_line_for_every_command(
     ]
     for argv in commands:
         line = one_error_line(capsys, [*argv, "--participants", str(model)])
-        assert f"participant model {model}" in line and "expected" in line, line
+        assert f"participant model {model}" in line, line
+        assert "expected" in line, line
     line = one_error_line(
         capsys, ["campaign", "run", str(tmp_path / "c.toml"), "--out", str(tmp_path / "camp")]
     )
-    assert f"participant model {model}" in line and "expected" in line, line
-    assert not (tmp_path / "demo").exists() and not (tmp_path / "camp").exists()
+    assert f"participant model {model}" in line, line
+    assert "expected" in line, line
+    assert not (tmp_path / "demo").exists()
+    assert not (tmp_path / "camp").exists()
     assert not (tmp_path / "t.csv").exists()
 
 
@@ -323,14 +334,16 @@ def test_weak_traits_shrink_fits_them_under_their_profiles_prior(emulator, trial
     interval."""
     shrink = dataclasses.replace(SETTINGS, weak_traits="shrink")
     model, _ = fit_trials(trials, "lcca", shrink, emulator, "test data")
-    assert model["weak_traits"] == "shrink" and model["fixed_at_prior"] == []
+    assert model["weak_traits"] == "shrink"
+    assert model["fixed_at_prior"] == []
     assert set(model["shrunk_to_prior"]) == set(TRAITS) - set(model["identifiable"])
     assert model["shrunk_to_prior"], "some trait is told weakly by 6 people's 2 trials"
     for trait in model["shrunk_to_prior"]:
         m0, s0 = getattr(PROFILES["novice"], trait)
         fitted = model["fit"]["novice"]["traits"][trait]
         assert abs(fitted["mean"] - m0) < 1.5 * s0, trait
-        assert fitted["fitted"] and not fitted["identifiable"]
+        assert fitted["fitted"]
+        assert not fitted["identifiable"]
         low, high = fitted["mean_ci95"]
         assert low < high
     with pytest.raises(StudyInputError, match="weak traits 'both'; expected one of prior, shrink"):

@@ -66,7 +66,8 @@ def test_people_drawn_with_probes_carry_their_probe_error() -> None:
     se = np.full(len(TRAITS), np.nan)
     se[j] = 0.04
     _, probed = draw_moments(emulator, profile, 4000, 4.0, np.random.default_rng(3), se)
-    assert probed is not None and probed.shape == (4000, len(TRAITS), 2)
+    assert probed is not None
+    assert probed.shape == (4000, len(TRAITS), 2)
     # a probe's estimate: the person's trait (N(0.28, 0.05), far inside its bounds) plus
     # its error of SE 0.04: mean 0.28, SD sqrt(0.05^2 + 0.04^2) = 0.064
     mean, sd = profile.reaction_s
@@ -133,9 +134,11 @@ def test_the_trait_plan_decides_per_trait_fitted_prior_or_told_by_another_source
     )
     plan = plan_traits(emulator, data, FitSettings())
     assert plan.role("preferred_speed_m_s") == "fitted"
-    assert plan.role("caution") == "prior" and "caution" in plan.fixed
+    assert plan.role("caution") == "prior"
+    assert "caution" in plan.fixed
     told = plan_traits(emulator, data, FitSettings(), {"preferred_speed_m_s": "probes"})
     assert told.role("preferred_speed_m_s") == "probes"
     j = TRAITS.index("preferred_speed_m_s")
-    assert j not in told.free and j not in told.told
+    assert j not in told.free
+    assert j not in told.told
     assert "preferred_speed_m_s" not in told.fixed

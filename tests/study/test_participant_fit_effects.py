@@ -73,14 +73,16 @@ def _search(trials, emulator) -> effects.EffectSearch:
 
 def test_clean_data_get_nothing_and_the_verdict_white(emulator, studies) -> None:
     found = _search(studies["clean"], emulator)
-    assert found.effects == [] and found.tried == []
+    assert found.effects == []
+    assert found.tried == []
     assert found.verdict == "white"
     assert not any(r["flagged"] for r in found.before)
     assert found.line() == (
         "participant effects: none added, the residual shows no structure (verdict white)"
     )
     out = found.to_dict()
-    assert out["participant_effects"] == [] and out["verdict"] == "white"
+    assert out["participant_effects"] == []
+    assert out["verdict"] == "white"
     assert out["prediction_error"]["before"] == out["prediction_error"]["after"] > 0
 
 
@@ -133,7 +135,8 @@ def test_an_injected_fatigue_is_named_and_lowers_the_held_out_error(emulator, st
     assert [e.family for e in found.effects] == ["fatigue"]
     rate = found.effects[0].parameters["rate"]
     low, high = found.effects[0].intervals["rate"]
-    assert low <= rate <= high and 0.02 < rate <= 0.1
+    assert low <= rate <= high
+    assert 0.02 < rate <= 0.1
     assert found.error_after.error < found.error_before.error
 
 
@@ -149,7 +152,8 @@ def test_a_person_no_trait_setting_reproduces_is_reported_never_absorbed(emulato
     model = run_fit(trials, "lcca", SETTINGS, emulator, "test data").to_dict()
     assert odd in model["lacks"]["outliers"]["flagged"]
     unexplained = model["unexplained_people"]
-    assert unexplained["family"] == "unexplained_person" and odd in unexplained["participants"]
+    assert unexplained["family"] == "unexplained_person"
+    assert odd in unexplained["participants"]
     # reported, never absorbed: no effect is fitted to one person
     assert model["participant_effects"] == []
 
@@ -164,8 +168,10 @@ def test_model_json_reports_the_effect_and_the_fits_people_carry_it(emulator, st
     assert low <= effect["parameters"]["vo_after_hv"]["value"] <= high
     assert effect["groups"] == ["expert", "novice", "outsider"]
     error = model["prediction_error"]
-    assert error["after"] < error["before"] and "held out" in error["definition"]
-    assert model["verdict"] == "white" and model["remains"] == []
+    assert error["after"] < error["before"]
+    assert "held out" in error["definition"]
+    assert model["verdict"] == "white"
+    assert model["remains"] == []
     assert model["effects_line"].startswith("participant effects: added carry_over")
     # the people simulated from the fit carry the effect: their VO forces are lower
     # after HV first, as the observed people's are
@@ -173,4 +179,5 @@ def test_model_json_reports_the_effect_and_the_fits_people_carry_it(emulator, st
     vo = sim[sim["condition"] == "VO"].groupby("order")["completion_time_s"].median()
     assert vo["HV-first"] > vo["VO-first"]
     # the traits were fitted to the trials with the effect taken out
-    assert result.search is not None and result.search.adjusted is not studies["carry_over"]
+    assert result.search is not None
+    assert result.search.adjusted is not studies["carry_over"]

@@ -43,7 +43,8 @@ def test_the_notes_groups_preferred_speeds_are_recovered() -> None:
     model, table = fit_trials(
         trials, "notes", SETTINGS, build_emulator("notes", SETTINGS), "test data"
     )
-    assert model["task"] == "notes" and model["data_source"] == "simulated"
+    assert model["task"] == "notes"
+    assert model["data_source"] == "simulated"
     assert model["moments"] == [
         f"{c}:{m}"
         for c in ("VO", "HV")
@@ -108,7 +109,8 @@ def test_a_notes_study_is_fitted_from_the_command_and_the_model_drives_simulate(
     assert model["verdict"] in ("white", "structure_remains")
     assert set(model["prediction_error"]) >= {"before", "after", "definition"}
     assert isinstance(model["participant_effects"], list)
-    assert model["task"] == "notes" and model["fitted_from"]["participants"] == 12
+    assert model["task"] == "notes"
+    assert model["fitted_from"]["participants"] == 12
     assert model["data_source"] == "simulated"  # run --all's people: simulated, and said so
     assert out.with_suffix(".png").stat().st_size > 10_000
     csv = tmp_path / "t.csv"

@@ -130,7 +130,8 @@ def test_the_oracle_bound_is_the_normal_mean_s_chance_of_lying_within_the_tolera
     # the traits are drawn independently: all at once is the product of the chances
     assert out["all_within_share"] == pytest.approx(np.prod(list(expected.values())), abs=0.015)
     shares = out["at_least_share"]
-    assert shares[2 * len(TRAITS)] == out["all_within_share"] and shares[0] == 1.0
+    assert shares[2 * len(TRAITS)] == out["all_within_share"]
+    assert shares[0] == 1.0
     assert all(shares[k] >= shares[k + 1] for k in range(2 * len(TRAITS)))
     # the mean count is the sum over k >= 1 of P(count >= k)
     assert sum(shares[k] for k in range(1, 2 * len(TRAITS) + 1)) == pytest.approx(

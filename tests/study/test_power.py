@@ -62,7 +62,8 @@ def test_power_command_writes_json_and_curve(
     assert main([*argv, "--out", str(tmp_path / "p")]) == 0
     report = json.loads((tmp_path / "p" / "power.json").read_text())
     assert report["design"] == {"novice": 6, "expert": 4}
-    assert set(report["groups"]) == {"novice", "expert"} and 0 <= report["interaction"] <= 1
+    assert set(report["groups"]) == {"novice", "expert"}
+    assert 0 <= report["interaction"] <= 1
     assert [c["scale"] for c in report["curve"]] == [0.5, 0.75, 1.0, 1.5, 2.0, 3.0]
     assert (tmp_path / "p" / "power_curve.png").stat().st_size > 10_000
     capsys.readouterr()

@@ -122,12 +122,15 @@ def test_the_keyboard_and_a_device_stream_answer_through_the_same_probes() -> No
     )
     # the foreperiod (the stimulus, 2 s) passes, GO shows, the time counts from there
     answer = kb.respond(get_probe("reaction_time"), 2.0, {})
-    assert slept == [2.0] and shown[1] == "GO"
-    assert answer == ProbeResponse(0.31) and "'x' is not an answer" in shown[2]
+    assert slept == [2.0]
+    assert shown[1] == "GO"
+    assert answer == ProbeResponse(0.31)
+    assert "'x' is not an answer" in shown[2]
     # the stall: dots at 10 Hz for the 1.5 s the tip moves, then none; Enter answers
     keys, clock, shown[:], slept[:] = iter([""]), iter([0.0, 0.8]), [], []
     assert kb.respond(get_probe("stall_detection"), 1.5, {}) == ProbeResponse(0.8)
-    assert shown[1:] == ["."] * 15 and slept == [0.1] * 15
+    assert shown[1:] == ["."] * 15
+    assert slept == [0.1] * 15
     # a fake dial unit: the joystick turns the tip at 0.5 of full rate for 0.4 s, then
     # the hand pushes the dial past the confirm angle
     state = {"t_ms": 0.0}
@@ -172,7 +175,8 @@ expert = 2
 
 def test_the_templates_probes_parse_and_bad_ones_are_one_line() -> None:
     design = parse_design(TEMPLATE)
-    assert set(design.probes) == set(probe_names()) and design.probes_before_block == 1
+    assert set(design.probes) == set(probe_names())
+    assert design.probes_before_block == 1
     assert parse_design(DESIGN).probes_before_block == 2
     for table, expected in (
         ("nope = 3", "probes.nope names no probe; expected before_block or one of"),
@@ -205,7 +209,8 @@ def test_probe_run_stores_export_import_and_covariate(tmp_path, capsys) -> None:
     assert main(["run", "--all", "--db", db]) == 0
     assert main(["export", "--out", str(tmp_path / "ex"), "--db", db]) == 0
     exported = pd.read_csv(tmp_path / "ex" / "probe_trials.csv")
-    assert len(exported) == 330 and set(exported["driver"]) == {"simulated"}
+    assert len(exported) == 330
+    assert set(exported["driver"]) == {"simulated"}
     book = pd.read_csv(tmp_path / "ex" / "codebook.csv").set_index("column")
     assert {"probe", "probe_trial", "stimulus", "response", "correct", "context"} <= set(book.index)
     # into a fresh database: the same estimates from the imported trials
@@ -300,7 +305,8 @@ def test_bad_probe_input_is_one_line(tmp_path, capsys) -> None:
         db,
     ]
     line = one_error_line(capsys, argv)
-    assert "no-port: cannot open serial port" in line and "expected the serial port" in line
+    assert "no-port: cannot open serial port" in line
+    assert "expected the serial port" in line
     bad_design = tmp_path / "bad.toml"
     bad_design.write_text(DESIGN.replace("aiming = 10", "aiming = 'ten'"))
     line = one_error_line(
@@ -382,16 +388,17 @@ def test_the_session_flow_runs_the_probes_due_before_the_block(tmp_path) -> None
     db = init_study(tmp_path, DESIGN, ("outsider",))
     engine = open_database(db, create=False)
     try:
-        assert (
-            due_probes(engine, "P001") == [] and run_due_probes(engine, "P001", "simulated") is None
-        )
+        assert due_probes(engine, "P001") == []
+        assert run_due_probes(engine, "P001", "simulated") is None
         assert main(["run", "--participant", "P001", "--db", db]) == 0
         # block 1 ran (both blocks here: `study run` runs every remaining trial)
         assert due_probes(engine, "P001") == list(parse_design(DESIGN).probes)
         line = run_due_probes(engine, "P001", "keyboard")
-        assert line is not None and "study probe run --participant P001 --driver keyboard" in line
+        assert line is not None
+        assert "study probe run --participant P001 --driver keyboard" in line
         line = run_due_probes(engine, "P001", "simulated")
-        assert line is not None and "force_threshold 20" in line
+        assert line is not None
+        assert "force_threshold 20" in line
         assert due_probes(engine, "P001") == []
     finally:
         engine.dispose()

@@ -120,7 +120,8 @@ def test_with_probes_every_trait_is_fitted_and_the_probed_ones_recovered(study, 
     model, _ = fit_trials(
         trials, "lcca", SETTINGS, emulator, "test data", probes=probe_table(probe_trials)
     )
-    assert model["fixed_at_prior"] == [] and model["shrunk_to_prior"] == []
+    assert model["fixed_at_prior"] == []
+    assert model["shrunk_to_prior"] == []
     assert set(model["identifiable"]) == set(TRAITS)
     assert all(r < IDENTIFIED_RATIO for r in model["identification_ratio"].values()), model[
         "identification_ratio"

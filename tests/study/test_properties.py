@@ -149,7 +149,8 @@ def test_an_import_is_accepted_and_round_trips_or_refused_with_one_line(
     before = _counts(db)
     rc, err = _run(["import", "--trials", str(path), "--db", str(db)])
     if rc == 2:
-        assert len(err) == 1 and err[0].startswith("study import: error: "), err
+        assert len(err) == 1, err
+        assert err[0].startswith("study import: error: "), err
         assert _counts(db) == before
         return
     assert rc == 0, err
@@ -231,11 +232,14 @@ def test_a_design_is_accepted_within_sane_sizes_or_refused_with_one_line(
     try:
         design = parse_design(text, "d.toml")
     except StudyInputError as exc:
-        assert "\n" not in str(exc) and str(exc).startswith("d.toml")
+        assert "\n" not in str(exc)
+        assert str(exc).startswith("d.toml")
         return
     assert StudyDesign.from_dict(json.loads(json.dumps(design.to_dict()))) == design
     assert 0 <= design.seed <= MAX_SEED
     assert 1 <= design.trials_per_condition <= MAX_TRIALS_PER_CONDITION
-    assert math.isfinite(design.break_s) and 0 <= design.break_s <= MAX_BREAK_S
+    assert math.isfinite(design.break_s)
+    assert 0 <= design.break_s <= MAX_BREAK_S
     assert all(1 <= n <= MAX_GROUP_SIZE and len(g) <= 32 for g, n in design.groups.items())
-    assert design.code_prefix.isascii() and design.code_prefix.isupper()
+    assert design.code_prefix.isascii()
+    assert design.code_prefix.isupper()

@@ -190,13 +190,16 @@ def _accepted_or_one_line(contract: Contract, path: Path) -> str | None:
         values = contract.parse(path)
     except TeleopInputError as exc:
         message = str(exc)
-        assert "\n" not in message and message and str(path) in message, message
+        assert "\n" not in message, message
+        assert message, message
+        assert str(path) in message, message
         return message
     t = values["t"]
     assert len(t) >= contract.min_rows
     assert set(contract.columns) <= set(values)
     for v in values.values():
-        assert np.all(np.isfinite(v)) and np.all(np.abs(v) <= MAX_ABS_VALUE)
+        assert np.all(np.isfinite(v))
+        assert np.all(np.abs(v) <= MAX_ABS_VALUE)
     assert np.all(np.diff(t) > 0)
     assert MIN_RATE_HZ <= 1.0 / float(np.median(np.diff(t))) <= MAX_RATE_HZ
     return None
@@ -249,7 +252,8 @@ def test_a_refused_recording_stops_its_command_with_one_line_and_no_output(
         out.mkdir()
         rc, err = _run(contract.argv(path, out))
         assert rc == 2, err
-        assert len(err) == 1 and err[0].endswith(message), (err, message)
+        assert len(err) == 1, (err, message)
+        assert err[0].endswith(message), (err, message)
         assert list(out.iterdir()) == []
 
 
@@ -269,6 +273,8 @@ def test_an_all_zero_recording_is_one_line_and_no_output(name: str, tmp_path: Pa
     out = tmp_path / "out"
     out.mkdir()
     rc, err = _run(contract.argv(path, out))
-    assert rc == 2 and len(err) == 1, err
-    assert "on every" in err[0] and "expected" in err[0]
+    assert rc == 2, err
+    assert len(err) == 1, err
+    assert "on every" in err[0]
+    assert "expected" in err[0]
     assert list(out.iterdir()) == []

@@ -252,7 +252,8 @@ def test_reader_yields_bounded_batches_that_add_up_to_the_trial(
             batches = list(reader.trial(trial_id))
     finally:
         engine.dispose()
-    assert max(b.num_rows for b in batches) <= 300 and len(batches) >= 2500 / 300
+    assert max(b.num_rows for b in batches) <= 300
+    assert len(batches) >= 2500 / 300
     got = pd.concat([b.to_pandas() for b in batches], ignore_index=True)
     ref = want[(want.participant == "P001") & (want.condition == "VO")]
     assert len(got) == len(ref) == 2500
@@ -278,7 +279,8 @@ def test_per_trial_export_resumes_and_matches_the_single_file(
     kept = files[0].stat().st_mtime_ns
     files[1].unlink()
     assert main(argv) == 0
-    assert files[0].stat().st_mtime_ns == kept and files[1].exists()
+    assert files[0].stat().st_mtime_ns == kept
+    assert files[1].exists()
     got = pd.concat([_read(f) for f in files]).sort_values(["participant", "condition", "seq"])
     want = _reference(sqlite_url).sort_values(["participant", "condition", "seq"])
     _same(got, want)
@@ -302,7 +304,8 @@ def test_a_bad_selection_is_named_and_nothing_is_written(
     out = tmp_path / "bad"
     assert main(["export", "--out", str(out), "--samples", *extra, "--db", db]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and message in err[0]
+    assert len(err) == 1
+    assert message in err[0]
     assert not out.exists() or not any(out.iterdir())
 
 

@@ -48,7 +48,8 @@ def test_small_spans_on_three_threads_give_the_rows_the_database_holds(
     if fmt == "parquet":
         groups = pq.ParquetFile(path).metadata
         sizes = [groups.row_group(k).num_rows for k in range(groups.num_row_groups)]
-        assert max(sizes) <= 700 and sum(sizes) == 5100
+        assert max(sizes) <= 700
+        assert sum(sizes) == 5100
     # the per-trial files hold the same rows, trial by trial
     for trial in trials:
         got = _read(tmp_path / "pt" / f"{trial.file_stem}.{fmt}")

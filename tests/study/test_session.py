@@ -97,15 +97,19 @@ def test_kill_9_mid_trial_keeps_completed_trials_and_repeats_the_running_one(
     before = _trials(db)
     killed = next(t for t in before if t[2] == "running")
     # the completed trials are intact; the running one kept its committed chunks
-    assert killed[4] > 0 and killed[4] % 100 == 0  # whole seconds: the last chunk is lost
+    assert killed[4] > 0
+    assert killed[4] % 100 == 0
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     after = {t[0]: t for t in _trials(db)}
     for t in before:
         if t[2] == "completed":
             assert after[t[0]] == t
-    assert after[killed[0]][2] == "interrupted" and after[killed[0]][4] == killed[4]
+    assert after[killed[0]][2] == "interrupted"
+    assert after[killed[0]][4] == killed[4]
     repeats = [t for t in after.values() if t[1] == killed[1] and t[0] != killed[0]]
-    assert len(repeats) == 1 and repeats[0][2] == "completed" and repeats[0][3] == 2
+    assert len(repeats) == 1
+    assert repeats[0][2] == "completed"
+    assert repeats[0][3] == 2
     assert sorted({t[1] for t in after.values() if t[2] == "completed"}) == [0, 1, 10, 11]
     engine = create_engine(f"sqlite:///{db}")
     with Session(engine) as s:
@@ -122,7 +126,9 @@ def test_unknown_participant_and_keyboard_driver_are_one_line(
     assert main(["run", "--participant", "P404", "--db", db]) == 2
     assert main(["run", "--participant", "P001", "--driver", "keyboard", "--db", db]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 2 and "P404" in err[0] and "study tui" in err[1]
+    assert len(err) == 2
+    assert "P404" in err[0]
+    assert "study tui" in err[1]
 
 
 def test_run_all_runs_every_participant_in_two_processes(tmp_path: Path) -> None:
@@ -130,7 +136,8 @@ def test_run_all_runs_every_participant_in_two_processes(tmp_path: Path) -> None
     assert main(["participant", "add", "--group", "novice", "--db", db]) == 0
     assert main(["run", "--all", "--jobs", "2", "--db", db]) == 0
     trials = _trials(db)
-    assert len(trials) == 8 and all(t[2] == "completed" for t in trials)
+    assert len(trials) == 8
+    assert all(t[2] == "completed" for t in trials)
     assert main(["run", "--all", "--participant", "P001", "--db", db]) == 2
 
 
@@ -234,7 +241,8 @@ def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) 
     finally:
         engine.dispose()
     message = str(caught.value)
-    assert "\n" not in message and "full" in message
+    assert "\n" not in message
+    assert "full" in message
     trials = _trials(db)
     assert [t[2] for t in trials] == ["running"]  # kept as it was, for the next run
     kept_s = float(message.split("samples up to t = ")[1].split(" s")[0])
@@ -276,7 +284,8 @@ def test_a_full_disk_after_a_completed_trial_is_one_line_and_keeps_that_trial(
     assert trials[0][4] + trials[1][4] == sum(commits)  # every commit before the failure
     kept_s = float(err[0].split("samples up to t = ")[1].split(" s")[0])
     assert abs(kept_s * 100 + 1 - trials[1][4]) <= 1  # the line matches what is stored
-    assert "database or disk is full" in err[0] and "kept 1 trial(s) of P001 completed" in err[0]
+    assert "database or disk is full" in err[0]
+    assert "kept 1 trial(s) of P001 completed" in err[0]
     monkeypatch.undo()
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     after = _trials(db)

@@ -33,7 +33,8 @@ def test_simulate_writes_samples_summary_and_figure(
     frame = pd.read_csv(out)
     proximal = [c for c in frame.columns if "proximal" in c]
     distal = [c for c in frame.columns if "distal" in c]
-    assert proximal == ["proximal_force_n"] and distal == ["distal_force_n"]
+    assert proximal == ["proximal_force_n"]
+    assert distal == ["distal_force_n"]
     summary = json.loads(out.with_suffix(".json").read_text())
     assert summary["peak_proximal_force_n"] == pytest.approx(frame["proximal_force_n"].max())
     assert summary["peak_distal_force_n"] == pytest.approx(frame["distal_force_n"].max())
@@ -42,7 +43,8 @@ def test_simulate_writes_samples_summary_and_figure(
     assert summary["success"] == bool(frame["branch"].iloc[-1] == "left common carotid")
     assert (tmp_path / "t.png").stat().st_size > 10_000
     printed = capsys.readouterr().out
-    assert "peak proximal" in printed and "wall contacts" in printed
+    assert "peak proximal" in printed
+    assert "wall contacts" in printed
 
 
 @pytest.mark.parametrize(
@@ -59,7 +61,8 @@ def test_bad_input_is_one_line_and_writes_nothing(
     out = tmp_path / "trial.csv"
     assert main(["simulate", *extra, "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and message in err[0]
+    assert len(err) == 1
+    assert message in err[0]
     assert list(tmp_path.iterdir()) == []
 
 

@@ -30,10 +30,12 @@ def test_the_notes_task_names_the_notes_loops_columns() -> None:
     assert len(task.sample_columns) == len(notes.SAMPLE_COLUMNS)
     # the loop's first columns are the database's; the demanded torque is not stored
     stored = [c.stored_as for c in task.sample_columns]
-    assert stored[: len(LOOP_COLUMNS)] == list(LOOP_COLUMNS) and stored[-1] is None
+    assert stored[: len(LOOP_COLUMNS)] == list(LOOP_COLUMNS)
+    assert stored[-1] is None
     assert task.sample_columns[-1].name == notes.SAMPLE_COLUMNS[-1] == "torque_demanded_n_m"
     assert task.regions == notes.REGIONS
-    assert not task.has_dial and get_task("lcca").has_dial
+    assert not task.has_dial
+    assert get_task("lcca").has_dial
 
 
 def test_every_measure_has_its_unit_in_its_name() -> None:

@@ -59,7 +59,8 @@ def test_off_scale_ratings_are_refused(value: object) -> None:
 
 def test_each_pair_is_shown_once_in_a_seeded_order_per_participant() -> None:
     a, b = pair_order(1, "P001"), pair_order(1, "P002")
-    assert a == pair_order(1, "P001") and a != b
+    assert a == pair_order(1, "P001")
+    assert a != b
     assert sorted(tuple(sorted(p)) for p in a) == sorted(tuple(sorted(p)) for p in PAIRS)
 
 
@@ -93,11 +94,14 @@ def test_edits_keep_the_old_value_in_the_audit_log(db_url: str) -> None:
         stored, new = store_tlx(
             engine, p.code, "lcca", "HV", RATINGS, chosen, reason="paper form before the block"
         )
-        assert new and sum(getattr(stored, f"w_{s}") for s in RATINGS) == 15
+        assert new
+        assert sum(getattr(stored, f"w_{s}") for s in RATINGS) == 15
         edited, new = store_tlx(
             engine, p.code, "lcca", "HV", {**RATINGS, "effort": 65}, reason="typo"
         )
-        assert not new and edited.effort == 65 and edited.w_mental == stored.w_mental
+        assert not new
+        assert edited.effort == 65
+        assert edited.w_mental == stored.w_mental
         with Session(engine) as s:
             audit = s.scalars(select(AuditEntry).where(AuditEntry.entity == "tlx_response")).all()
         assert (audit[0].field, audit[0].old_value, audit[0].reason) == (

@@ -64,7 +64,8 @@ def test_withdrawal_is_kept_audited_and_left_out_of_the_analysis(
     with Session(engine) as session:
         p = session.scalars(select(Participant).where(Participant.code == code)).one()
         entry = session.scalars(select(AuditEntry).where(AuditEntry.field == "status")).one()
-    assert p.withdrawn_at is not None and p.withdrawal_reason == "felt unwell"
+    assert p.withdrawn_at is not None
+    assert p.withdrawal_reason == "felt unwell"
     assert (entry.old_value, entry.new_value, entry.reason, entry.actor) == (
         "enrolled",
         "withdrawn",
@@ -113,7 +114,8 @@ def test_bad_withdrawals_are_one_line(db: str, capsys: pytest.CaptureFixture[str
     capsys.readouterr()
     again = ["participant", "withdraw", "P001", "--reason", "again", "--db", db]
     line = one_error_line(capsys, again)
-    assert "P001 withdrew on" in line and "(moved away)" in line
+    assert "P001 withdrew on" in line
+    assert "(moved away)" in line
 
 
 def test_a_note_is_kept_and_its_edits_audited(db: str) -> None:

@@ -142,14 +142,16 @@ def test_residual_tests_against_direct_computations() -> None:
     u = rng.normal(size=4000)
     white = rng.normal(size=4000)
     tests = residual_tests(white, {"u": u}, max_lag=10)
-    assert tests["autocorrelation"]["white"] and tests["cross_correlation"]["u"]["independent"]
+    assert tests["autocorrelation"]["white"]
+    assert tests["cross_correlation"]["u"]["independent"]
     ref = acorr_ljungbox(white, lags=[10], return_df=True)
     assert tests["ljung_box"]["statistic"] == pytest.approx(float(ref["lb_stat"].iloc[0]))
     # e[t] = u[t - 3] + noise: the cross-correlation peaks at lag +3 with corrcoef's value
     e = np.r_[np.zeros(3), u[:-3]] + 0.5 * rng.normal(size=4000)
     cross = residual_tests(e, {"u": u}, max_lag=10)["cross_correlation"]["u"]
     lag = cross["lags"][int(np.argmax(cross["values"]))]
-    assert lag == 3 and not cross["independent"]
+    assert lag == 3
+    assert not cross["independent"]
     direct = np.corrcoef(e[3:], u[:-3])[0, 1]
     assert cross["values"][cross["lags"].index(3)] == pytest.approx(direct, abs=0.01)
     # an AR(1) residual is not white
@@ -343,7 +345,8 @@ def test_presliding_memory_restarts_at_turns_of_the_angle_not_of_the_noisy_speed
     drawn = general_recording(("presliding_memory",), 2, 60.0, 100.0)
     report = Calibrator(FollowerBase()).fit(drawn.data).report()
     (term,) = report["discovered_terms"]
-    assert term["term"] == "presliding_memory" and report["effects_added"] == []
+    assert term["term"] == "presliding_memory"
+    assert report["effects_added"] == []
     truth = drawn.truth[0]["params"]["memory_rad"]
     assert term["params"]["memory_length"] == pytest.approx(truth, rel=0.1)
     assert report["rmse_after"] <= 1.1 * oracle_rmse(drawn)
@@ -391,7 +394,8 @@ def test_a_soft_current_knee_is_named_with_its_exponent_and_nothing_else() -> No
     )
     report = Calibrator(FollowerBase()).fit(data).report()
     assert [e["family"] for e in report["effects_added"]] == ["current_nonlinearity"]
-    assert report["discovered_terms"] == [] and report["ambiguous_effects"] == []
+    assert report["discovered_terms"] == []
+    assert report["ambiguous_effects"] == []
     assert report["effects_added"][0]["params"]["exponent"] == pytest.approx(2.0, abs=0.15)
     assert report["rmse_after"] <= 1.1 * oracle
 
@@ -421,7 +425,8 @@ def test_a_gap_in_the_drive_is_named_backlash_with_its_half_gap() -> None:
     # open library's backlash term, its half gap found, nothing else named
     data, oracle = _with_deviation(lambda s: play_operator(s["angle"], 0.02), 1.5, seed=13)
     report = Calibrator(FollowerBase()).fit(data).report()
-    assert report["effects_added"] == [] and report["ambiguous_effects"] == []
+    assert report["effects_added"] == []
+    assert report["ambiguous_effects"] == []
     (term,) = report["discovered_terms"]
     assert term["term"] == "backlash"
     assert term["params"]["half_gap"] == pytest.approx(0.02, rel=0.2)

@@ -190,5 +190,6 @@ def _blas_threads() -> list[int]:
 def test_one_blas_thread_limits_inside_and_restores_after() -> None:
     before = _blas_threads()
     inside = one_blas_thread(_blas_threads)()
-    assert inside and all(n == 1 for n in inside)
+    assert inside
+    assert all(n == 1 for n in inside)
     assert _blas_threads() == before

@@ -67,10 +67,13 @@ def test_a_second_process_loads_the_loop_kernel_and_never_imports_numba_or_torch
     # there), the second imports the extension module and never numba
     folder = tmp_path / "cache" / "kernels"
     assert list(folder.glob(f"_haptic_study_loop_aot_*{SUFFIX}")), list(folder.iterdir())
-    assert first["numba"] is True and second["numba"] is False
-    assert first["ahead_of_time"] is True and second["ahead_of_time"] is True
+    assert first["numba"] is True
+    assert second["numba"] is False
+    assert first["ahead_of_time"] is True
+    assert second["ahead_of_time"] is True
     # the trained GRU runs from gru.npz in the compiled kernel: PyTorch is never loaded
-    assert first["torch"] is False and second["torch"] is False
+    assert first["torch"] is False
+    assert second["torch"] is False
     np.testing.assert_array_equal(np.load(tmp_path / "first.npy"), np.load(tmp_path / "second.npy"))
     # the extension (compiled for this CPU) and numba's JIT kernel of the same source,
     # on the same trial: equal samples, not close ones
@@ -97,7 +100,8 @@ def test_without_a_compiler_the_kernel_runs_through_numbas_cache(
     monkeypatch.setenv("CC", str(tmp_path / "empty" / "cc"))
     env = tube_with_wall(friction_n_per_m=8.0)
     k = kernel._cached_kernel(env.fn)
-    assert k is not None and not getattr(k, "ahead_of_time", False)
+    assert k is not None
+    assert not getattr(k, "ahead_of_time", False)
     folder = tmp_path / "cache" / "kernels"
     assert list(folder.glob("_haptic_study_loop_aot_*.failed"))
     assert not list(folder.glob(f"_haptic_study_loop_aot_*{SUFFIX}"))
@@ -201,7 +205,8 @@ def test_the_first_demo_after_install_says_it_compiles_the_loop_once(
 
     first, second = demo("first"), demo("second")
     notice = "study demo: compiling the simulation loop (once after install"
-    assert notice in first.stderr and notice not in second.stderr
+    assert notice in first.stderr
+    assert notice not in second.stderr
     # and how long it took (a whole number of seconds)
     assert re.search(r"study demo: compiled the simulation loop in \d+ s", first.stderr)
     assert "compiled the simulation loop" not in second.stderr
@@ -210,9 +215,11 @@ def test_the_first_demo_after_install_says_it_compiles_the_loop_once(
     from teleop_core.phantom.lcca import lcca_phantom
 
     monkeypatch.setenv("HAPTIC_STUDY_CACHE", str(tmp_path / "cache"))
-    assert kernel.is_compiled(lcca_phantom) and not kernel.needs_compiling(lcca_phantom)
+    assert kernel.is_compiled(lcca_phantom)
+    assert not kernel.needs_compiling(lcca_phantom)
     monkeypatch.setenv("HAPTIC_STUDY_CACHE", str(tmp_path / "empty"))
-    assert not kernel.is_compiled(lcca_phantom) and kernel.needs_compiling(lcca_phantom)
+    assert not kernel.is_compiled(lcca_phantom)
+    assert kernel.needs_compiling(lcca_phantom)
     # a machine where building failed once (no C compiler) is not told it compiles
     # every run: the JIT kernel from numba's cache runs there
     key = kernel._kernel_module(lcca_phantom)[2]  # type: ignore[index]

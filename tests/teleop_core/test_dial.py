@@ -51,7 +51,8 @@ def _push(torque_n_m: float, seconds: float = 0.1) -> np.ndarray:
 
 def test_static_friction_holds_the_dial_below_breakaway() -> None:
     state = _push(0.9 * DialParams().static_friction_n_m)
-    assert state[D_THETA] == 0.0 and state[D_OMEGA] == 0.0
+    assert state[D_THETA] == 0.0
+    assert state[D_OMEGA] == 0.0
 
 
 def test_above_breakaway_the_dial_accelerates_as_eq6_says() -> None:

@@ -115,7 +115,8 @@ def test_a_filter_that_hurts_on_validation_passes_the_hybrid_estimate_through(
     estimator, summary = train_estimator(rec, SMALL, seed=1, ekf_q_n2=1e-12)
     check = summary.ekf_check
     assert check["validation_rmse_filtered_n"] > check["validation_rmse_hybrid_n"]
-    assert check["passthrough"] and estimator.ekf.passthrough
+    assert check["passthrough"]
+    assert estimator.ekf.passthrough
     assert any("passes the hybrid" in note for note in summary.notes)
     v = summary.validation_rmse_n
     assert v["final"] == v["hybrid"]
@@ -133,4 +134,5 @@ def test_a_filter_that_helps_on_validation_is_kept(trained) -> None:
     estimator, summary = trained
     check = summary["ekf_check"]
     assert check["validation_rmse_filtered_n"] < check["validation_rmse_hybrid_n"]
-    assert not check["passthrough"] and not estimator.ekf.passthrough
+    assert not check["passthrough"]
+    assert not estimator.ekf.passthrough

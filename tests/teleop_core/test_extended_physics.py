@@ -46,7 +46,8 @@ def test_the_gru_gets_a_smaller_residual_and_the_model_round_trips(
     assert summary.validation_rmse_n["final"] < plain.validation_rmse_n["final"]
     model.save(tmp_path / "m", summary.to_dict())
     again = ForceEstimator.load(tmp_path / "m")
-    assert again.extension is not None and again.extension.families == ["position_periodic"]
+    assert again.extension is not None
+    assert again.extension.families == ["position_periodic"]
     np.testing.assert_allclose(again.predict(rec).f_final, model.predict(rec).f_final)
     with pytest.raises(TeleopInputError, match="calibrated \\(position_periodic\\)"):
         again.stream()

@@ -46,7 +46,8 @@ def test_an_error_keeps_the_old_file_and_removes_the_temporary(tmp_path: Path) -
 def test_the_temporary_is_a_sibling_with_the_suffix_asked_for(tmp_path: Path) -> None:
     path = tmp_path / "fig.png"
     with atomic_path(path, suffix=".png") as tmp:
-        assert tmp.parent == tmp_path and tmp.name.startswith(".fig.png.")
+        assert tmp.parent == tmp_path
+        assert tmp.name.startswith(".fig.png.")
         assert tmp.suffix == ".png"
         tmp.write_bytes(b"\x89PNG")
     assert path.read_bytes() == b"\x89PNG"

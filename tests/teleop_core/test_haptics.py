@@ -110,4 +110,5 @@ def test_polynomials_from_the_paper_are_the_defaults() -> None:
     p = CalibrationPolynomials()
     assert p.force_n(3.0, "loading") == pytest.approx(f(LOAD, 3.0))
     assert p.force_n(3.0, "unloading") == pytest.approx(f(UNLOAD, 3.0))
-    assert np.allclose(p.loading, LOAD) and np.allclose(p.unloading, UNLOAD)
+    assert np.allclose(p.loading, LOAD)
+    assert np.allclose(p.unloading, UNLOAD)

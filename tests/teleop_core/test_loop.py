@@ -39,7 +39,8 @@ def test_each_part_runs_at_its_own_rate() -> None:
     result = loop.run(1.0, Hold())
     c = result.counters
     assert (c.ticks, c.acquisitions, c.estimates, c.driver_updates) == (1000, 100, 50, 100)
-    assert c.forces_sent == 50 and c.commands_sent == 100
+    assert c.forces_sent == 50
+    assert c.commands_sent == 100
     frame = result.to_frame()
     assert list(frame.columns) == list(SAMPLE_COLUMNS)
     assert np.allclose(frame["t_s"], np.arange(1, 101) * 0.01)
@@ -265,7 +266,8 @@ def test_vectorised_gru_keeps_the_samples_of_the_libm_gru(small_estimator, monke
     monkeypatch.setattr(type(small_estimator), "stream", lambda self: _LibmStream(self))
     old = TeleopLoop(cfg, tube_with_wall(), estimator=small_estimator, seed=3, fast=False)
     old_run = old.run(6.0, SimulatedOperator(target_depth_m=0.3))
-    assert new._fast and not old._fast
+    assert new._fast
+    assert not old._fast
     est = SAMPLE_COLUMNS.index("proximal_force_est_n")
     others = [i for i in range(len(SAMPLE_COLUMNS)) if i != est]
     assert np.array_equal(new_run.samples[:, others], old_run.samples[:, others])
@@ -295,7 +297,8 @@ def test_hv_samples_against_the_libm_gru_path(small_estimator, monkeypatch) -> N
     monkeypatch.setattr(type(small_estimator), "stream", lambda self: _LibmStream(self))
     old = TeleopLoop(LoopConfig(), tube_with_wall(), estimator=small_estimator, seed=3, fast=False)
     old_run = old.run(6.0, SimulatedOperator(target_depth_m=0.3))
-    assert new._fast and not old._fast
+    assert new._fast
+    assert not old._fast
     assert new_run.counters == old_run.counters
     a, b = new_run.samples, old_run.samples
     assert a.shape == b.shape

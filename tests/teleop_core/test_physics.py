@@ -70,5 +70,7 @@ def test_fit_respects_physical_signs() -> None:
     omega = rng.normal(0, 3, 500)
     rec = FollowerRecording.from_arrays(t, rng.normal(0, 0.1, 500), t, omega, rng.normal(0, 1, 500))
     fit = fit_physics(rec)
-    assert fit.inertia_kg_m2 >= 0 and fit.viscous_damping_n_m_s_per_rad >= 0
-    assert fit.coulomb_friction_n_m >= 0 and fit.torque_constant_n_m_per_a > 0
+    assert fit.inertia_kg_m2 >= 0
+    assert fit.viscous_damping_n_m_s_per_rad >= 0
+    assert fit.coulomb_friction_n_m >= 0
+    assert fit.torque_constant_n_m_per_a > 0

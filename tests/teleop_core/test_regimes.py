@@ -29,10 +29,13 @@ def test_labels_follow_the_rules_on_a_hand_built_profile() -> None:
     reversal = np.zeros(400, bool)
     reversal[288:312] = True
     np.testing.assert_array_equal(m["speed:reversal"], reversal)
-    assert m["speed:rest"][:100].all() and not m["speed:rest"][100:].any()
-    assert m["speed:slow"][100:200].all() and m["speed:slow"].sum() == 100
+    assert m["speed:rest"][:100].all()
+    assert not m["speed:rest"][100:].any()
+    assert m["speed:slow"][100:200].all()
+    assert m["speed:slow"].sum() == 100
     assert m["speed:fast"].sum() == 200 - 24
-    assert m["direction:backward"].sum() == 100 and m["direction:none"].sum() == 100
+    assert m["direction:backward"].sum() == 100
+    assert m["direction:none"].sum() == 100
     assert (m["load:low"].sum(), m["load:mid"].sum(), m["load:high"].sum()) == (100, 100, 200)
     # each dimension labels every sample exactly once
     for dim, names in (("speed", 4), ("direction", 3), ("load", 3)):
@@ -59,7 +62,8 @@ def test_split_puts_a_rare_regime_in_both_parts(seed: int) -> None:
     train, val, report = representative_split(masks, n - T + 1, T, 20, 0.2, seed)
     assert report["missing"] == []
     backward = masks["direction:backward"]
-    assert backward[train + T - 1].any() and backward[val + T - 1].any()
+    assert backward[train + T - 1].any()
+    assert backward[val + T - 1].any()
     train_samples = set((train[:, None] + np.arange(T)).ravel().tolist())
     val_samples = set((val[:, None] + np.arange(T)).ravel().tolist())
     assert not train_samples & val_samples

@@ -92,7 +92,8 @@ def test_a_clean_axis_gets_its_parameters_nothing_added_and_a_white_verdict(seed
     cal = Calibrator(model).fit(model.data_from_frame(_axis_recording(seed)))
     report = cal.report()
     assert report["effects_added"] == []
-    assert report["verdict"] == "white" and report["unexplained"] is None
+    assert report["verdict"] == "white"
+    assert report["unexplained"] is None
     truth = {
         "mass_kg": 20.0,
         "viscous_friction_n_s_per_m": 150.0,
@@ -189,9 +190,11 @@ def test_a_bad_mat_mapping_is_one_line_and_nothing_written(
     ]
     assert main([*argv, "--mat-columns", "t=t,q=qx,u=gtau*vir"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "variable 'qx' not found" in err[0]
+    assert len(err) == 1
+    assert "variable 'qx' not found" in err[0]
     assert main([*argv, "--mat-columns", "q=qm"]) == 2
-    assert not (tmp_path / "r.json").exists() and not (tmp_path / "f").exists()
+    assert not (tmp_path / "r.json").exists()
+    assert not (tmp_path / "f").exists()
 
 
 def test_mat_to_frame_keeps_other_vectors_as_channels() -> None:
@@ -256,7 +259,8 @@ def test_an_effect_outside_the_channels_is_said_to_remain_and_nothing_gets_worse
     assert report["verdict"] == "structure_remains"
     assert report["rmse_after"] <= report["rmse_before"]
     clean = Calibrator(model).fit(data).report()
-    assert clean["verdict"] == "white" and clean["effects_added"] == []
+    assert clean["verdict"] == "white"
+    assert clean["effects_added"] == []
 
 
 def test_a_friction_that_rises_with_speed_is_not_named_stribeck() -> None:
@@ -282,7 +286,8 @@ def test_a_sharp_coulomb_step_gets_nothing_added(seed: int) -> None:
     model = FollowerBase()
     cal = Calibrator(model).fit(model.data(rec))
     report = cal.report()
-    assert report["effects_added"] == [] and report["discovered_terms"] == []
+    assert report["effects_added"] == []
+    assert report["discovered_terms"] == []
     width = report["preparation"]["sign_speed_rad_s"]
     assert 0.02 <= width <= 0.1  # as sharp as the speed sensor's 0.01 rad/s noise allows
     assert report["calibrated_model"]["base_settings"]["sign_speed_rad_s"] == width
@@ -320,7 +325,8 @@ def test_a_negative_hysteresis_loop_is_not_named(seed: int) -> None:
     data, _, _ = undeclared_recording("hidden_force", duration_s=60.0, rate_hz=200.0, seed=seed)
     ungated = Calibrator(_UngatedFollower()).fit(data).report()
     named = [e for e in ungated["effects_added"] if e["family"] == "hysteresis"]
-    assert named and named[0]["params"]["half_loop_n_m"] < 0
+    assert named
+    assert named[0]["params"]["half_loop_n_m"] < 0
     report = Calibrator(FollowerBase()).fit(data).report()
     assert "hysteresis" not in [e["family"] for e in report["effects_added"]]
     refused = [
@@ -329,7 +335,8 @@ def test_a_negative_hysteresis_loop_is_not_named(seed: int) -> None:
         if c["family"] == "hysteresis"
         and c["reason"].startswith("implausible: hysteresis half loop")
     ]
-    assert refused and "negative loop" in refused[0]["reason"]
+    assert refused
+    assert "negative loop" in refused[0]["reason"]
     assert report["verdict"] == "structure_remains"
     assert report["rmse_after"] <= report["rmse_before"]
 
@@ -403,7 +410,8 @@ def test_a_hidden_force_remains_unexplained_and_the_cli_says_so(
     out = capsys.readouterr().out
     assert "verdict: structure remains" in out
     report = json.loads((tmp_path / "r.json").read_text())
-    assert report["verdict"] == "structure_remains" and report["unexplained"]["quantity"]
+    assert report["verdict"] == "structure_remains"
+    assert report["unexplained"]["quantity"]
     assert report["rmse_after"] <= report["rmse_before"]
     # the figures of the blocks and of the residual against the named quantity
     figs = {p.name for p in (tmp_path / "f").iterdir()}

@@ -12,17 +12,21 @@ def test_characterisation_holds_the_wheel_and_loads_within_the_platforms_range()
     assert len(cmd) == len(load) == 40_000
     assert np.all(cmd == 0.0)
     # mean <= 1.2 N plus amplitude <= 0.8 N; taken up from and released to zero
-    assert load.max() <= 2.0 and load.min() >= -0.4
-    assert load[0] == 0.0 and abs(load[9_999]) < 0.01
+    assert load.max() <= 2.0
+    assert load.min() >= -0.4
+    assert load[0] == 0.0
+    assert abs(load[9_999]) < 0.01
 
 
 def test_navigation_load_never_exceeds_what_the_drive_can_push() -> None:
     cmd, load = scenarios.teleoperation(120.0, np.random.default_rng(1), max_load_n=1.2)
-    assert load.max() <= 1.2 and np.abs(cmd).max() <= 10.0
+    assert load.max() <= 1.2
+    assert np.abs(cmd).max() <= 10.0
 
 
 def test_sinusoidal_load_has_the_asked_frequency() -> None:
     cmd, load = scenarios.sinusoidal_load(2.0, 10.0, mean_n=1.0, amplitude_n=0.5)
     spectrum = np.abs(np.fft.rfft(load[1000:] - load[1000:].mean()))
     freqs = np.fft.rfftfreq(len(load[1000:]), 1e-3)
-    assert freqs[np.argmax(spectrum)] == 2.0 and np.all(cmd == 0)
+    assert freqs[np.argmax(spectrum)] == 2.0
+    assert np.all(cmd == 0)

@@ -175,7 +175,8 @@ def test_a_recording_imports_each_streams_samples_to_its_trial(
         (trials[1].id, "PsychoPy"),
     ]
     for stream, start in ((streams[0], 100.0), (streams[2], 110.0)):
-        assert stream.origin == "xdf" and stream.time_correction_s == pytest.approx(OFFSET_S)
+        assert stream.origin == "xdf"
+        assert stream.time_correction_s == pytest.approx(OFFSET_S)
         assert [c["name"] for c in stream.channels] == ["index", "flexor"]
         assert [c["unit"] for c in stream.channels] == ["count", "uV"]
         table = read_stream(engine, stream.id)
@@ -187,13 +188,15 @@ def test_a_recording_imports_each_streams_samples_to_its_trial(
         np.testing.assert_allclose(table["flexor"].to_numpy(), np.sin(index / 10))
         np.testing.assert_allclose(table["t_s"].to_numpy(), (index - first) / RATE_HZ, atol=1e-9)
     psychopy = read_stream(engine, streams[1].id)
-    assert psychopy["m"].to_pylist() == ["go"] and psychopy["t_s"].to_pylist() == [1.0]
+    assert psychopy["m"].to_pylist() == ["go"]
+    assert psychopy["t_s"].to_pylist() == [1.0]
     assert read_stream(engine, streams[3].id).num_rows == 0
     engine.dispose()
     # the same recording again: refused, nothing added
     before = _stored(db)
     line = _one_line_exit_2(capsys, "import-xdf", str(path), "--db", db)
-    assert "is stored already" in line and _stored(db) == before
+    assert "is stored already" in line
+    assert _stored(db) == before
     # exported beside the trials' samples: one file per stream, every channel in the codebook
     out = tmp_path / "export"
     assert main(["export", "--out", str(out), "--samples", "--db", db]) == 0
@@ -215,7 +218,8 @@ def test_a_recording_imports_each_streams_samples_to_its_trial(
     book = pd.read_csv(out / "codebook.csv").set_index("column")
     assert book.loc["EMG-amp/index", "unit"] == "count"
     assert book.loc["EMG-amp/flexor", "unit"] == "uV"
-    assert "PsychoPy/m" in book.index and book.loc["lsl_time_s", "unit"] == "s"
+    assert "PsychoPy/m" in book.index
+    assert book.loc["lsl_time_s", "unit"] == "s"
     # drawn in the trial figure, as the design asks ([lsl] plot = ["EMG"])
     figures = tmp_path / "figures"
     assert main(["figures", "--out", str(figures), "--format", "png", "--db", db]) == 0

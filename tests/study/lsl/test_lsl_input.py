@@ -19,7 +19,8 @@ def test_the_lsl_table_reads_and_round_trips() -> None:
     assert type(design).from_dict(design.to_dict()).lsl == design.lsl
     # a design without the table stores as before (no `lsl` key) and has LSL off
     plain = parse_design('name = "no instruments"\n')
-    assert "lsl" not in plain.to_dict() and plain.lsl == LslSettings()
+    assert "lsl" not in plain.to_dict()
+    assert plain.lsl == LslSettings()
 
 
 @pytest.mark.parametrize(
@@ -70,7 +71,8 @@ def test_recording_needs_a_session_at_real_time(
     design = "[groups]\nnovice = 1\n[lsl]\nrecord = [\"type='EMG'\"]\n"
     db = init_study(tmp_path, design, ("novice",))
     line = _one_line(capsys, "run", "--participant", "P001", "--db", db)
-    assert "[lsl] record with an unpaced simulated session" in line and "--pace" in line
+    assert "[lsl] record with an unpaced simulated session" in line
+    assert "--pace" in line
 
 
 def test_lsl_config_writes_a_loopback_only_file_once(

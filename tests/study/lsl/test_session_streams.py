@@ -61,7 +61,8 @@ def _device(name: str, seconds: float, log: Path) -> subprocess.Popen[str]:
         stdout=subprocess.PIPE,
         text=True,
     )
-    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    assert proc.stdout is not None
+    assert proc.stdout.readline().strip() == "ready"
     return proc
 
 
@@ -212,7 +213,8 @@ def test_an_outside_instrument_is_stored_sample_for_sample_on_the_trials_clock(
     assert [st.trial_id for st in streams] == paced["completed"]
     previous_last = -1
     for stream in streams:
-        assert stream.type == "EMG" and stream.nominal_srate_hz == 1000.0
+        assert stream.type == "EMG"
+        assert stream.nominal_srate_hz == 1000.0
         assert [c["name"] for c in stream.channels] == ["index", "made_s"]
         assert [c["unit"] for c in stream.channels] == ["count", "s"]
         assert stream.gaps == []
@@ -232,7 +234,8 @@ def test_an_outside_instrument_is_stored_sample_for_sample_on_the_trials_clock(
         t = table["t_s"].to_numpy()
         # (within a few periods: the device's process may wait for a core at either end)
         end = ends[stream.trial_id]
-        assert 0 <= t[0] <= 0.05 and end - 0.05 <= t[-1] <= end
+        assert 0 <= t[0] <= 0.05
+        assert end - 0.05 <= t[-1] <= end
         assert len(t) == pytest.approx(end * 1000, rel=0.05)
 
 
@@ -283,7 +286,8 @@ def test_a_marker_inlet_receives_every_marker_in_order_with_the_databases_trials
                 m["practice"],
             )
             assert got == row[:8]
-        assert end["status"] == "completed" and end["success"] == row[8]
+        assert end["status"] == "completed"
+        assert end["success"] == row[8]
     # a trial's start marker is stamped at its t = 0, its end at its last sample
     origins = paced["origins"].trials
     pylsl = load_pylsl()
@@ -325,16 +329,19 @@ def test_a_stream_lost_mid_trial_is_a_recorded_gap_and_the_trial_completes(
     with Session(engine) as s:
         trial = s.get_one(Trial, completed[0])
         stream = s.scalars(select(LslStream)).one()
-        assert trial.status == "completed" and trial.completion_time_s >= 2.5
+        assert trial.status == "completed"
+        assert trial.completion_time_s >= 2.5
         gaps, end_s = stream.gaps, trial.completion_time_s
     t = read_stream(engine, stream.id)["t_s"].to_numpy()
     engine.dispose()
     # one gap, from the last sample before the instrument died to the trial's end
     assert len(gaps) == 1
     # (the paced loop makes a step's samples up to a step, 50 ms, before their time)
-    assert gaps[0][0] == pytest.approx(t[-1]) and 0.85 <= gaps[0][0] <= 1.2
+    assert gaps[0][0] == pytest.approx(t[-1])
+    assert 0.85 <= gaps[0][0] <= 1.2
     assert gaps[0][1] == pytest.approx(end_s)
-    assert len(notices) == 1 and f"LSL stream {device} (EMG) lost at t = " in notices[0]
+    assert len(notices) == 1
+    assert f"LSL stream {device} (EMG) lost at t = " in notices[0]
     assert "broke off" not in capfd.readouterr().err  # that line is the one on screen
 
 

@@ -117,7 +117,8 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
     engine = open_database(db)
     with Session(engine) as session:
         trials = session.scalars(select(Trial)).all()
-        assert len(trials) == 6 * 2 * 2 and {t.status for t in trials} == {"completed"}
+        assert len(trials) == 6 * 2 * 2
+        assert {t.status for t in trials} == {"completed"}
         speed = RATE_GAIN_M_S_PER_RAD * AIM_RAD
         for t in trials:
             # hand-computed: F = B v at the constant aim, t = depth / v (to a 10 ms sample)
@@ -140,7 +141,8 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
         "peak_push_force_n",
         "success",
     ]
-    assert len(exported) == 24 and (exported["task"] == "probe").all()
+    assert len(exported) == 24
+    assert (exported["task"] == "probe").all()
     book = pd.read_csv(tmp_path / "out" / "codebook.csv").set_index("column")
     assert book.loc["peak_push_force_n", "unit"] == "N"
     assert "largest push of the medium" in book.loc["peak_push_force_n", "meaning"]
@@ -184,7 +186,8 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
     figures = tmp_path / "figs"
     assert main(["figures", "--out", str(figures), "--format", "png", "--db", db]) == 0
     drawn = sorted(p.name for p in figures.glob("*.png"))
-    assert drawn and all(name.endswith("_probe.png") for name in drawn), drawn
+    assert drawn, drawn
+    assert all(name.endswith("_probe.png") for name in drawn), drawn
 
 
 async def test_the_run_screen_shows_the_example_task(probe: Any, tmp_path: Path) -> None:
@@ -208,13 +211,16 @@ async def test_the_run_screen_shows_the_example_task(probe: Any, tmp_path: Path)
         await pilot.press("y")
         await wait_for(pilot, lambda: pane.status == "completed", 60)
         track = app.query_one(TrackView)
-        assert track.display and not app.query_one(PhantomView).display
+        assert track.display
+        assert not app.query_one(PhantomView).display
         assert not app.query_one(NotesView).display
         assert app.query_one("#phantom-box").border_title == "Probe insertion: insertion"
-        assert track._frame is not None and track._frame.task is probe
+        assert track._frame is not None
+        assert track._frame.task is probe
         # the last frame drawn (the trial may end between two redraws): the probe on its way
         drawn = re.search(r"inserted +(\d+) mm   in (medium|depth)", track.render().plain)
-        assert drawn is not None and 0 < int(drawn.group(1)) <= 80
+        assert drawn is not None
+        assert 0 < int(drawn.group(1)) <= 80
         # the peak shown when the trial ended is the stored measure (the trial's line;
         # the block's summary, of this one trial, repeats it)
         shown = next(

@@ -69,7 +69,9 @@ def test_a_real_read_only_error_reads_as_one_plain_line(study_engine: Engine) ->
             conn.execute(insert(Participant).values(code="P900", group="novice"))
     line = plain_line(caught.value)
     assert line.startswith("the database is read-only: nothing was written")
-    assert "INSERT" not in line and "\n" not in line and "sqlalche.me" not in line
+    assert "INSERT" not in line
+    assert "\n" not in line
+    assert "sqlalche.me" not in line
     assert "INSERT" in str(caught.value)  # what SQLAlchemy itself would have shown
 
 
@@ -128,7 +130,8 @@ async def test_a_questionnaire_refused_by_a_read_only_database_keeps_what_was_ty
         await pilot.press("ctrl+s")  # the database is writable again: the same form saves
         await wait_for(pilot, lambda: pane.status == "P001 lcca/VO: stored", 30)
     stored = load_tlx(study_engine, "P001", "lcca", "VO")
-    assert stored is not None and stored.mental == int(RATINGS["mental"])
+    assert stored is not None
+    assert stored.mental == int(RATINGS["mental"])
 
 
 async def test_a_database_file_removed_mid_session_is_named_and_the_app_stays(
@@ -149,10 +152,12 @@ async def test_a_database_file_removed_mid_session_is_named_and_the_app_stays(
         await pilot.pause()
         status, table = pane.query_one("#add-status"), pane.query_one("#people")
         # the whole line is on the screen at 80 columns: it wraps, the list moves down
-        assert status.region.height > 1 and table.region.y > status.region.bottom
+        assert status.region.height > 1
+        assert table.region.y > status.region.bottom
         await pilot.press("f1")
         await pilot.press("f2")
-        assert app.is_running and app.screen.query_one("#participants-pane") is pane
+        assert app.is_running
+        assert app.screen.query_one("#participants-pane") is pane
     assert not db.exists()  # no empty database was created in its place
 
 
@@ -171,7 +176,8 @@ def test_a_real_full_disk_reads_as_one_plain_line(tmp_path) -> None:
     assert "database or disk is full" in str(caught.value)
     line = plain_line(caught.value)
     assert line.startswith("the disk holding the database is full: nothing more was written")
-    assert "\n" not in line and "INSERT" not in line
+    assert "\n" not in line
+    assert "INSERT" not in line
 
 
 @pytest.mark.postgres

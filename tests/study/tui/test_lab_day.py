@@ -112,7 +112,8 @@ async def test_analysis_prints_p_as_apa_labels_effects_and_shows_notes_and_anova
         await pilot.press("n")
         await wait_for(pilot, lambda: len(app.screen.query("#text")) == 1, 10)
         text = str(app.screen.query_one("#text", Static).render())
-        assert "Exclusions:" in text and "Notes:" in text
+        assert "Exclusions:" in text
+        assert "Notes:" in text
         # 6 participants in 2 groups: the condition effect has df (1, 6 - 2)
         assert re.search(r"lcca/peak_proximal_force_n condition: F\(1, 4\) = \d", text)
         await pilot.press("escape")
@@ -174,7 +175,8 @@ async def test_withdrawing_from_the_list_asks_why_and_marks_the_row(
     with Session(study_engine) as session:
         p = session.scalars(select(Participant).where(Participant.code == "P002")).one()
         p1 = session.scalars(select(Participant).where(Participant.code == "P001")).one()
-    assert p.withdrawal_reason == "ended early" and p1.withdrawn_at is None
+    assert p.withdrawal_reason == "ended early"
+    assert p1.withdrawn_at is None
 
 
 async def test_the_chart_follows_a_resize_and_the_form_opens_on_its_first_rating(

@@ -22,5 +22,6 @@ def test_a_lab_day_of_ten_participants_typed_by_keyboard(tmp_path: Path) -> None
     # every block of every participant run; every questionnaire typed and saved but
     # the last one, typed in part and left unsaved (quitting named it)
     assert sum(map(len, typed.blocks.values())) == 10 * len(TASK_BLOCKS)
-    assert len(typed.tlx) == 10 * len(TASK_BLOCKS) - 1 and typed.unsaved not in typed.tlx
+    assert len(typed.tlx) == 10 * len(TASK_BLOCKS) - 1
+    assert typed.unsaved not in typed.tlx
     assert compare(result["db"], typed) == []

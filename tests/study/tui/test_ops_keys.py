@@ -37,7 +37,8 @@ async def test_e_exports_what_study_export_writes(make_test_app, study_engine, t
         await _answer(pilot, tmp_path / "from-app")
         await wait_for(pilot, lambda: pane.last_ops_line.startswith("exported"), 60)
         line = pane.last_ops_line
-    assert "\n" not in line and line.startswith(f"exported 3 files to {tmp_path / 'from-app'}")
+    assert "\n" not in line
+    assert line.startswith(f"exported 3 files to {tmp_path / 'from-app'}")
     # the same files as the command writes, byte for byte (the codebook too)
     db = str(study_engine.url.database)
     assert main(["export", "--db", db, "--out", str(tmp_path / "from-cli")]) == 0
@@ -63,6 +64,8 @@ async def test_b_checks_and_backs_up_in_one_line(make_test_app, study_engine, tm
         await wait_for(pilot, lambda: pane.last_ops_line.endswith("checked ok"), 60)
         line = pane.last_ops_line
     [copy] = list((tmp_path / "backups").iterdir())
-    assert "\n" not in line and "integrity ok" in line and f"copy {copy} (" in line
+    assert "\n" not in line
+    assert "integrity ok" in line
+    assert f"copy {copy} (" in line
     # the copy is a study database the command checks as sound
     assert main(["db", "check", "--db", str(copy)]) == 0

@@ -129,7 +129,8 @@ async def test_the_page_shows_what_is_stored_and_makes_audited_corrections(
         # not withdrawn: no undo offered
         await pilot.pause(0.2)
         keys = {k.key for k in app.screen.query("FooterKey")}
-        assert {"i", "a", "e", "g", "escape"} <= keys and "u" not in keys
+        assert {"i", "a", "e", "g", "escape"} <= keys
+        assert "u" not in keys
         # i on the interrupted row: refused in one line, nothing asked
         await pilot.press("i")
         await pilot.pause()
@@ -339,7 +340,8 @@ async def test_f5_leaves_an_invalid_trial_out_and_lists_it_with_its_reason(
             and d["condition"] == "HV"
         ]
         # the other two experts' HV peaks (PEAKS, by hand): (0.5 + 0.9) / 2
-        assert row["n"] == 2 and abs(row["mean"] - 0.7) < 1e-12
+        assert row["n"] == 2
+        assert abs(row["mean"] - 0.7) < 1e-12
         await pilot.press("n")
         await wait_for(pilot, lambda: isinstance(app.screen, TextScreen), 10)
         assert line in app.screen.text

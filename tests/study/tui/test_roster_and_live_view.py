@@ -90,19 +90,23 @@ def test_phantom_frame_keeps_the_arch_shape_on_one_scale() -> None:
     )
     assert abs((left[1] - top[1]) - r * frame.scale) <= 1
     assert abs((left[0] - right[0]) - 2 * r * frame.scale) <= 1
-    assert 0 <= right[0] < left[0] < 80 and 0 <= top[1] < 68
+    assert 0 <= right[0] < left[0] < 80
+    assert 0 <= top[1] < 68
 
 
 def test_gauge_and_sparkline_scale() -> None:
     bar = gauge("distal", 0.5, 1.0, 10).plain
-    assert bar.count("█") == 5 and bar.count("░") == 5 and "0.50 N" in bar
+    assert bar.count("█") == 5
+    assert bar.count("░") == 5
+    assert "0.50 N" in bar
     assert gauge("distal", 3.0, 1.0, 10).plain.count("█") == 10
     # maximum of each bin, on eight levels: 0 -> lowest, full scale -> highest
     assert sparkline((0.0, 0.0, 1.0, 0.5), 2, 1.0) == "▁█"
     assert sparkline((), 5, 1.0) == ""
     # NOTES pulls: the bar by magnitude, the number signed
     pull = gauge("demanded", -4.0, 10.0, 10, magnitude=True).plain
-    assert pull.count("█") == 4 and "-4.00 N" in pull
+    assert pull.count("█") == 4
+    assert "-4.00 N" in pull
 
 
 def test_notes_scene_puts_the_tip_fornix_and_targets_on_their_columns() -> None:
@@ -126,7 +130,8 @@ def test_notes_scene_puts_the_tip_fornix_and_targets_on_their_columns() -> None:
     roll_axis = lines[6]
     # roll 0 sits on the zero mark (column 22); the target zone, 50-70 deg:
     # 44 x 140/180 = 34.2 -> 34 to 44 x 160/180 = 39.1 -> 39
-    assert roll_axis.index("●") == 22 and "┼" not in roll_axis
+    assert roll_axis.index("●") == 22
+    assert "┼" not in roll_axis
     assert [k for k, ch in enumerate(roll_axis) if ch == "▓"] == list(range(34, 40))
 
 
@@ -156,7 +161,8 @@ def test_live_state_reads_notes_samples_the_notes_way() -> None:
     )
     assert frame.insertion_m == 0.1
     # the traces are magnitudes; the peaks are as the NOTES summary's (max |.|)
-    assert frame.first_history == (3.0, 6.0) and frame.second_history == (2.5, 5.6)
+    assert frame.first_history == (3.0, 6.0)
+    assert frame.second_history == (2.5, 5.6)
     assert live.peaks == [6.0, 1.0]
 
 

@@ -37,20 +37,23 @@ async def test_e_asks_before_ending_a_measured_trial(make_test_app, study_engine
         pane = await run_screen(pilot, "P001")
         await pilot.press("d")  # the keyboard drives: p (pace) is not offered for it
         await pilot.pause()
-        assert "p" not in _footer_keys(app) and "d" in _footer_keys(app)
+        assert "p" not in _footer_keys(app)
+        assert "d" in _footer_keys(app)
         await pilot.press("s")
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         await pilot.press("y")  # the session checklist
         await wait_for(pilot, lambda: pane.status == "running", 120)
         await pilot.pause()
         # during the trial neither start, driver nor pace is offered; stop is
-        assert {"s", "d", "p"}.isdisjoint(_footer_keys(app)) and "x" in _footer_keys(app)
+        assert {"s", "d", "p"}.isdisjoint(_footer_keys(app))
+        assert "x" in _footer_keys(app)
         await pilot.press("e")
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         assert "measured trial" in str(app.screen.query_one("#question").render())
         await pilot.press("n")
         await pilot.pause(0.5)
-        assert pane.run is not None and pane.status == "running"
+        assert pane.run is not None
+        assert pane.status == "running"
         await pilot.press("e")
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         await pilot.press("y")

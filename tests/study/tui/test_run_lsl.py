@@ -81,7 +81,8 @@ async def test_trials_run_from_the_screen_send_their_markers_on_one_stream(
         got = (m["trial_id"], m["task"], m["condition"], m["block"], m["trial"])
         assert got == second[:5]
         assert (m["participant"], m["group"], m["study"]) == ("P001", "novice", f"tui lsl {tag}")
-    assert markers[-2]["status"] == "completed" and markers[-2]["success"] == second[5]
+    assert markers[-2]["status"] == "completed"
+    assert markers[-2]["success"] == second[5]
 
 
 def test_the_lsl_flag_publishes_for_a_design_without_the_table(study_engine) -> None:
@@ -89,5 +90,6 @@ def test_the_lsl_flag_publishes_for_a_design_without_the_table(study_engine) -> 
     assert StudyServices(study_engine, load_estimator).lsl_observer() is None
     services = StudyServices(study_engine, load_estimator, lsl_publish=True)
     observer = services.lsl_observer()
-    assert observer is not None and services.lsl_observer() is observer  # one for the app
+    assert observer is not None
+    assert services.lsl_observer() is observer
     services.close_lsl()

@@ -62,7 +62,8 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
         # the stored trial's figures, then (one trial per block) the block's
         shown = pane.last_outcome.split("\n")
         assert shown[0] == "P001: lcca/VO trial 1 stored"
-        assert "block lcca/VO done:" in shown and "  1 measured trial, mean ± SD" in shown
+        assert "block lcca/VO done:" in shown
+        assert "  1 measured trial, mean ± SD" in shown
         # the live view was fed while the trial ran
         assert app.query_one(PhantomView)._frame is not None
         # one trial per block in DESIGN: the block is done, the form opens for it
@@ -119,7 +120,8 @@ async def test_quitting_mid_trial_marks_it_interrupted_and_keeps_its_samples(
         # a trial is running: asked first, and "n" keeps it running
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         await pilot.press("n")
-        assert app.is_running and pane.run is not None
+        assert app.is_running
+        assert pane.run is not None
         await pilot.press("ctrl+q")
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         await pilot.press("y")
@@ -170,8 +172,10 @@ async def test_a_notes_trial_shows_the_scope_and_stores_its_samples(
         await wait_for(pilot, lambda: pane.status == "completed", 120)
         # the NOTES view, not the LCCA phantom, was shown and fed
         view = app.query_one(NotesView)
-        assert view.display and not app.query_one(PhantomView).display
-        assert view._frame is not None and view._frame.task.name == "notes"
+        assert view.display
+        assert not app.query_one(PhantomView).display
+        assert view._frame is not None
+        assert view._frame.task.name == "notes"
         assert app.query_one("#phantom-box").border_title == "NOTES: scope depth and roll"
         # the trial's line (the block's summary, of this one trial, repeats it)
         shown = next(
@@ -200,19 +204,22 @@ async def test_the_keyboard_drives_a_notes_trial(notes_engine: Engine, tmp_path:
         await wait_for(pilot, lambda: pane.run.live.frame().insertion_m > 0.01, 30)
         await wait_for(pilot, lambda: pane.run.live.frame().rotation_rad > 0.01, 30)
         readout = str(app.query_one("#readout").render())
-        assert "insertion-speed aim +" in readout and "dial aim" not in readout
+        assert "insertion-speed aim +" in readout
+        assert "dial aim" not in readout
         # x asks why; Esc keeps the trial running, a reason stops it
         await pilot.press("x")
         await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
         await pilot.press("escape")
         await pilot.pause(0.3)
-        assert pane.run is not None and pane.status == "running"
+        assert pane.run is not None
+        assert pane.status == "running"
         await pilot.press("x")
         await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
         await pilot.press(*"scope fogged", "enter")
         await wait_for(pilot, lambda: pane.status == "interrupted", 30)
     [(status, driver, samples)] = _trials(notes_engine)
-    assert (status, driver) == ("interrupted", "keyboard") and samples > 0
+    assert (status, driver) == ("interrupted", "keyboard")
+    assert samples > 0
     with Session(notes_engine) as session:
         entry = session.scalars(select(AuditEntry).where(AuditEntry.entity == "trial")).one()
     assert (entry.old_value, entry.new_value) == ("running", "interrupted")
@@ -244,6 +251,7 @@ async def test_a_design_can_let_the_next_block_start_before_the_questionnaire(
             # the questionnaire is still listed as due, but it does not hold the next block
             assert pane.roster.tlx_due() == [("P001", task, condition)]
             label = str(app.query_one("#next", Label).render())
-            assert label.startswith("next: P001 ") and "due first" not in label
+            assert label.startswith("next: P001 ")
+            assert "due first" not in label
     finally:
         engine.dispose()

@@ -301,7 +301,8 @@ async def test_calibration_screen_runs_the_loop_on_a_recording(make_test_app, tm
         summary = _text(app, "#calib-summary").splitlines()[0]
     assert {"hysteresis", "direction_asymmetry"} <= shown
     assert pane.report["rmse_after"] < pane.report["rmse_before"]
-    assert summary.startswith("held-out RMSE") and summary.endswith("% lower)")
+    assert summary.startswith("held-out RMSE")
+    assert summary.endswith("% lower)")
 
 
 async def test_a_questionnaire_for_a_block_not_run_needs_a_reason(

@@ -51,7 +51,8 @@ def test_study_tui_in_a_pseudo_terminal(study_engine: Engine, tmp_path: Path) ->
     finally:
         child.close(force=True)
     assert child.exitstatus == 0
-    assert "Traceback" not in child.before and "NoMatches" not in child.before
+    assert "Traceback" not in child.before
+    assert "NoMatches" not in child.before
 
 
 def test_the_overview_loads_neither_numpy_nor_the_other_screens(study_engine: Engine) -> None:
@@ -133,7 +134,8 @@ def test_closing_the_terminal_mid_trial_marks_the_trial_interrupted(
         trial = session.scalars(select(Trial)).one()
         samples = session.scalar(select(func.coalesce(func.sum(SampleChunk.n_samples), 0)))
         entry = session.scalars(select(AuditEntry).where(AuditEntry.field == "status")).one()
-    assert trial.status == "interrupted" and samples >= 100
+    assert trial.status == "interrupted"
+    assert samples >= 100
     assert (entry.old_value, entry.new_value, entry.reason) == (
         "running",
         "interrupted",

@@ -195,11 +195,13 @@ def locker(study_file: Path) -> Iterator[subprocess.Popen[str]]:
 
 
 def _lock(locker: subprocess.Popen[str]) -> None:
-    assert locker.stdout is not None and locker.stdout.readline().strip() == "locked"
+    assert locker.stdout is not None
+    assert locker.stdout.readline().strip() == "locked"
 
 
 def _release(locker: subprocess.Popen[str]) -> None:
-    assert locker.stdin is not None and locker.stdout is not None
+    assert locker.stdin is not None
+    assert locker.stdout is not None
     locker.stdin.write("\n")
     locker.stdin.flush()
     assert locker.stdout.readline().strip() == "released"

@@ -68,7 +68,8 @@ def test_a_note_on_an_immutable_database_says_read_only_and_is_kept(
         app.child.expect(words("note", "not", "kept:", "the", "database", "is", "read-only"))
         drawn = app.drawn.getvalue()
         assert "not withdrawn" not in drawn
-        assert "cannot be read" not in drawn and "restart" not in drawn
+        assert "cannot be read" not in drawn
+        assert "restart" not in drawn
         app.child.expect("dial recalibrated")  # the dialog is offered again, as typed
         app.child.send("\x1b")
         app.still_answers()

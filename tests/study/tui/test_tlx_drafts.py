@@ -104,7 +104,8 @@ async def test_switching_participant_and_back_keeps_the_drafts_choices(make_test
         await pilot.pause(0.1)
         app.query_one("#tlx-block", Select).value = "lcca/VO"
         await _shown(pilot, pane, "P002", "lcca", "VO")
-        assert _ratings(app) == ("",) * 6 and _choices(app) == [None] * 15
+        assert _ratings(app) == ("",) * 6
+        assert _choices(app) == [None] * 15
         app.query_one("#tlx-participant", Select).value = "P001"
         await wait_for(pilot, lambda: pane.loaded_block is None, 10)
         await pilot.pause(0.1)

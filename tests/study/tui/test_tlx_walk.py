@@ -349,7 +349,8 @@ class Walk:
             form = self.pane.form_state()
             assert (form.ratings, form.choices, form.reason) == m.form(m.shown), m.shown
             if self.pane.status.startswith("draft restored"):
-                assert m.shown not in m.stored and m.form(m.shown) != EMPTY
+                assert m.shown not in m.stored
+                assert m.form(m.shown) != EMPTY
             assert set(self.pane.unsaved()) == m.unsaved()
 
 

@@ -76,7 +76,8 @@ def test_roll_torque_is_the_closed_form_and_ccw_loses_through_the_tube() -> None
     ccw = _slide(a, 0.15, 0.0, 0.0, -w, 1.0).torque_n_m
     assert ccw == pytest.approx(-(r * z + 0.003 * w) / 0.9, rel=2e-3)
     # the surgeons' 76.7 / 85 N mm, each within the +/-10 N mm target
-    assert abs(cw - task.CW_BENCHMARK_N_M) < 0.01 and abs(-ccw - task.CCW_BENCHMARK_N_M) < 0.01
+    assert abs(cw - task.CW_BENCHMARK_N_M) < 0.01
+    assert abs(-ccw - task.CCW_BENCHMARK_N_M) < 0.01
 
 
 def test_fornix_tears_at_its_tenting() -> None:
@@ -107,7 +108,8 @@ def test_the_fold_blocks_a_clockwise_tip_and_lets_a_counter_clockwise_one_pass()
     a.breached = True
     a.step(P.fold_depth_m - 0.001, -0.4, 0.0, 0.0, DT)
     clear = a.step(past, -0.4, 0.0, 0.0, DT)
-    assert clear.tip_force_n == 0.0 and a.region(past, -0.4) == "cavity"
+    assert clear.tip_force_n == 0.0
+    assert a.region(past, -0.4) == "cavity"
     # once past, rolling back towards the target does not hit it again
     assert a.step(past, 0.5, 0.0, 0.0, DT).tip_force_n == 0.0
 
@@ -144,4 +146,6 @@ def test_keyboard_driver_moves_the_scope(haptics: bool) -> None:
     assert bool(abs(rendered[-1]) > 0.1) is haptics
     keys.press("stop")
     loop.advance(0.1)
-    assert loop.done and not loop.success and math.isfinite(loop.t_s)
+    assert loop.done
+    assert not loop.success
+    assert math.isfinite(loop.t_s)
