@@ -27,7 +27,6 @@ counts equal to the snapshot's, and only then renamed; it is never left half-wri
 from __future__ import annotations
 
 import hashlib
-import os
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -220,11 +219,33 @@ def backup_database(
     *,
     now: datetime | None = None,
     notice: Callable[[str], None] = lambda _: None,
+    replace_file: Callable[[Path, Path], object],
 ) -> BackupResult:
     """Check the database, then write a checked copy to `out_dir/NAME-STAMP.db`.
 
     The source is checked first; a source with problems is not copied (its result says
     why, and no file is written). Raises OSError when `out_dir` cannot be written.
+
+    Parameters
+    ----------
+    engine : Engine
+        The study database to copy (SQLite or PostgreSQL).
+    out_dir : Path
+        Folder for the copy; made if missing.
+    now : datetime, optional
+        The time stamped into the copy's name [the current time].
+    notice : callable, optional
+        Called with a line for each step (checking, copying, checking the copy).
+    replace_file : callable
+        Puts the checked temporary copy in place: ``replace_file(temporary, path)``.
+        The application passes the project's one atomic write
+        (`teleop_core.files.replace_durably`: the file and the rename flushed to disk);
+        `db` imports nothing from `teleop_core`, so it takes the function as an argument.
+
+    Returns
+    -------
+    BackupResult
+        The source's check, the copy's path, size, SHA-256 and the copy's check.
     """
     notice("checking the database")
     source_check = check_database(engine)
@@ -262,7 +283,7 @@ def backup_database(
         if Path(f"{part}-wal").exists():  # closed without a checkpoint: not a whole file
             raise OSError(f"the copy {part} kept a write-ahead log; expected it folded in")
         Path(f"{part}-shm").unlink(missing_ok=True)
-        os.replace(part, path)
+        replace_file(part, path)
     except BaseException:
         for suffix in ("", "-wal", "-shm"):
             Path(f"{part}{suffix}").unlink(missing_ok=True)

@@ -93,10 +93,11 @@ def backup_cmd(out_dir: Path, db_url: str | None) -> None:
     SHA-256. Exit status 1 (and no copy) when the database has problems.
     """
     from db.maintenance import backup_database
+    from teleop_core.files import replace_durably
 
     engine = open_database(db_url, create=False)
     try:
-        result = backup_database(engine, out_dir)
+        result = backup_database(engine, out_dir, replace_file=replace_durably)
     except OSError as exc:
         raise StudyInputError(
             f"backup to {out_dir} failed: {exc.strerror or exc}; expected a writable folder "

@@ -85,11 +85,13 @@ class OpsMixin(SafeWorkers):
     @work(thread=True, exclusive=True, group="backup", exit_on_error=False)
     def _backup(self, folder: Path) -> None:
         from db.maintenance import backup_database
+        from teleop_core.files import replace_durably
 
         def notice(line: str) -> None:
             self.app.call_from_thread(self._ops_status, f"{line}...")
 
-        result = backup_database(self.app.services.engine, folder, notice=notice)  # type: ignore[attr-defined]
+        engine = self.app.services.engine  # type: ignore[attr-defined]
+        result = backup_database(engine, folder, notice=notice, replace_file=replace_durably)
         ok = result.source.ok and result.copy.ok
         self.app.call_from_thread(self._ops_done, result.line(), ok)
 

@@ -4,6 +4,7 @@ a damaged SQLite file is named as such, not copied."""
 
 from __future__ import annotations
 
+import os
 import sqlite3
 from pathlib import Path
 
@@ -47,7 +48,7 @@ def test_check_and_backup_copy_every_row_and_sample(engine: Engine, tmp_path: Pa
     assert check.rows["participants"] == 1
     assert check.line().endswith(f"integrity ok (14 tables, {sum(check.rows.values()):,} rows)")
 
-    result = backup_database(engine, tmp_path / "backups")
+    result = backup_database(engine, tmp_path / "backups", replace_file=os.replace)
     assert result.copy.ok
     assert result.copy.rows == check.rows
     assert result.path.parent == tmp_path / "backups"
@@ -107,7 +108,7 @@ def test_a_damaged_sqlite_file_is_named_and_not_copied(sqlite_study: Path, tmp_p
         assert not check.ok
         assert "integrity problem" in check.line()
         assert "\n" not in check.line()
-        result = backup_database(engine, tmp_path / "backups")
+        result = backup_database(engine, tmp_path / "backups", replace_file=os.replace)
     finally:
         engine.dispose()
     assert result.line() == check.line()

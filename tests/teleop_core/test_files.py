@@ -19,7 +19,6 @@ HAND_MADE = re.compile(
 )
 """The pieces of a hand-made atomic write: a rename over the target, a temporary file."""
 RENAMED_BY_HAND = {
-    "db/maintenance.py": "the backup, a database file SQLite writes; db imports no teleop_core",
     "teleop_core/estimation/model.py": "a model folder written whole: a folder, not a file",
 }
 """The modules that rename something into place themselves, and why."""
