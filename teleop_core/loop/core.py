@@ -54,6 +54,15 @@ __all__ = [  # LoopConfig and the results moved to config.py, the columns to lay
 ]
 
 
+def _hand_to_loop(action: HandAction, loop: np.ndarray) -> None:
+    """Write what the hand does until the driver's next update into the loop's slots."""
+    loop[K.L_ROT_ACTION] = action.rotation_rate_rad_s
+    loop[K.L_HAND_TARGET] = action.dial_target_rad
+    loop[K.L_HAND_K] = action.grip_stiffness_n_m_per_rad
+    loop[K.L_HAND_B] = action.grip_damping_n_m_s_per_rad
+    loop[K.L_HAND_PUSH] = action.push_n_m
+
+
 class TeleopLoop:
     """One trial's closed loop. `run(seconds, driver)` or step it with `advance`.
 
@@ -359,11 +368,7 @@ class TeleopLoop:
                 updates += 1
                 action = act(view())
                 self._action = action
-                loop[K.L_ROT_ACTION] = action.rotation_rate_rad_s
-                loop[K.L_HAND_TARGET] = action.dial_target_rad
-                loop[K.L_HAND_K] = action.grip_stiffness_n_m_per_rad
-                loop[K.L_HAND_B] = action.grip_damping_n_m_s_per_rad
-                loop[K.L_HAND_PUSH] = action.push_n_m
+                _hand_to_loop(action, loop)
                 if action.done:
                     self._done_s = self.t_s
                     break
@@ -484,11 +489,6 @@ class TeleopLoop:
             self.dial[D_THETA], self.dial[D_OMEGA] = state.angle_rad, state.speed_rad_s
         action = self.driver.act(self.view())
         self._action = action
-        loop = self.loop
-        loop[K.L_ROT_ACTION] = action.rotation_rate_rad_s
-        loop[K.L_HAND_TARGET] = action.dial_target_rad
-        loop[K.L_HAND_K] = action.grip_stiffness_n_m_per_rad
-        loop[K.L_HAND_B] = action.grip_damping_n_m_s_per_rad
-        loop[K.L_HAND_PUSH] = action.push_n_m
+        _hand_to_loop(action, self.loop)
         if action.done:
             self._done_s = self.t_s
