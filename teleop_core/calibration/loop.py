@@ -121,6 +121,12 @@ class Calibrator:
         Most effects added.
     max_lag
         Lags, samples, of the residual tests.
+
+    Raises
+    ------
+    TeleopInputError
+        `held_out_fraction` lies outside 0.05 to 0.5, or `families` names an unknown
+        effect family.
     """
 
     model: BaseModel
@@ -535,8 +541,17 @@ class Calibrator:
         }
 
     def warnings(self) -> list[str]:
-        """Searched values that ended at an end of their search range: the effect may
-        stand in for something else there (a long lag for a slow dynamic)."""
+        """Searched values that ended at an end of their search range.
+
+        There the effect may stand in for something else (a long lag for a slow
+        dynamic).
+
+        Returns
+        -------
+        list of str
+            One line per selected effect whose fitted value lies at an edge of its
+            search range, naming the family; empty when none does.
+        """
         notes = []
         for effect, value in self.chain_:
             edge = _search_edge(effect, value, self.data_.signals)
