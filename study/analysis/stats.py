@@ -1,4 +1,4 @@
-"""The study's statistics on participant means ([endovascular], IV-D; the analysis issue).
+"""The study's statistics on participant means ([endovascular], IV-D).
 
 - `descriptives`: per task, measure, group and condition: n, mean, SD, median, IQR and
   the t-based 95 % confidence interval of the mean.
@@ -10,8 +10,8 @@
   `wilcox.test` rule on the differences at the data's resolution,
   `wilcoxon_signed_rank`). Holm's correction runs across the groups of one task x
   measure (`holm`, pingouin's `multicomp(method="holm")` line for line: importing
-  pingouin for it cost 2.3 s of `study analyze`'s start; statsmodels' `multipletests`
-  gives the same values but runs a garbage collection on every call, 0.2 s each).
+  pingouin for it would slow `study analyze`'s start; statsmodels' `multipletests`
+  gives the same values but runs a garbage collection on every call).
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
   pingouin's `mixed_anova` has Type II only, so both come from two one-way models in
@@ -284,7 +284,7 @@ def descriptives(long: pd.DataFrame) -> pd.DataFrame:
 
     Parameters
     ----------
-    long
+    long : pandas.DataFrame
         One row per participant, task, measure and condition: columns task, measure,
         group, condition, participant, value.
 
@@ -344,7 +344,7 @@ def hedges_g_av(vo: np.ndarray, hv: np.ndarray) -> float:
 
     Parameters
     ----------
-    vo, hv
+    vo, hv : numpy.ndarray
         The participants' values in the two conditions, paired by position.
 
     Returns
@@ -464,7 +464,7 @@ def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
 
     Parameters
     ----------
-    vo, hv
+    vo, hv : numpy.ndarray
         The participants' values in the two conditions, paired by position.
 
     Returns
@@ -499,9 +499,9 @@ def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[
 
     Parameters
     ----------
-    diff
+    diff : numpy.ndarray
         The paired differences (HV - VO).
-    scale
+    scale : float or None, optional
         The magnitude of the measured values (default the largest |diff|).
 
     Returns
@@ -533,10 +533,10 @@ def compare_conditions(
 
     Parameters
     ----------
-    long
+    long : pandas.DataFrame
         One row per participant, task, measure and condition (columns task, measure,
         group, condition, participant, value).
-    a, b
+    a, b : str, optional
         The two conditions.
 
     Returns
@@ -675,12 +675,12 @@ def mixed_anova(
 
     Parameters
     ----------
-    long
+    long : pandas.DataFrame
         One row per participant, task, measure and condition (columns task, measure,
         group, condition, participant, value).
-    a, b
+    a, b : str, optional
         The two conditions.
-    ss_type
+    ss_type : int, optional
         2 or 3 (`DEFAULT_SS_TYPE` says why 2 by default).
 
     Returns
@@ -839,9 +839,9 @@ def mixed_model(
 
     Parameters
     ----------
-    trials
+    trials : pandas.DataFrame
         One row per measured trial (participant, group, task, condition, measures).
-    measures
+    measures : tuple of str or None, optional
         The measures to model; default each task's analysed measures
         (`study.protocol.tasks`).
 
@@ -948,13 +948,13 @@ def analyze(
 
     Parameters
     ----------
-    trials
+    trials : pandas.DataFrame
         The measured trials (`frames.trial_frame`).
-    long
+    long : pandas.DataFrame
         The participant means (`frames.participant_means`).
-    ss_type
+    ss_type : int, optional
         Sums of squares of the mixed ANOVA, 2 or 3.
-    withdrawn
+    withdrawn : Sequence of str, optional
         Exclusion notes of what was already left out (`frames.without_withdrawn`).
 
     Returns

@@ -218,7 +218,7 @@ class ForceEstimator:
 
         Parameters
         ----------
-        recording
+        recording : FollowerRecording
             A follower recording at the model's rate (`conform` resamples one that
             is not).
 
@@ -373,7 +373,7 @@ class ForceEstimator:
 
         Parameters
         ----------
-        folder
+        folder : Path
             The model folder.
 
         Returns

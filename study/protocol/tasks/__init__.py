@@ -162,17 +162,18 @@ class Task:
 
         Parameters
         ----------
-        condition
+        condition : str
             ``"VO"`` or ``"HV"``.
-        seed
+        seed : int
             Seeds the trial's randomness (the same seed gives the same trial).
-        haptic_gain_n_m_per_n
-            The dial's haptic gain where the task has a dial (None: the task's default).
-        estimator
+        haptic_gain_n_m_per_n : float or None, optional
+            The dial's haptic gain, N m/N, where the task has a dial (None: the task's
+            default).
+        estimator : ForceEstimator or None, optional
             The follower's force estimator, for tasks that estimate the force.
-        context
+        context : Any, optional
             What `session_context` built for the session.
-        link
+        link : LinkParams or None, optional
             The master-follower link's delay, jitter and loss
             (`teleop_core.loop.link.LinkParams`) where the task has one.
 
@@ -188,11 +189,11 @@ class Task:
 
         Parameters
         ----------
-        traits
+        traits : Traits
             The simulated person (`study.protocol.traits.ParticipantTraits`).
-        max_s
+        max_s : float
             The trial's time limit, s (the person gives up by then).
-        context
+        context : Any
             What `session_context` built for the session.
 
         Returns
@@ -209,9 +210,9 @@ class Task:
 
         Parameters
         ----------
-        samples
+        samples : numpy.ndarray
             The trial's samples: the loop's rows, in `sample_columns`' order.
-        success
+        success : bool
             Whether the trial reached its goal.
 
         Returns
@@ -238,16 +239,22 @@ class Task:
 
         Parameters
         ----------
-        traits
+        traits : Traits
             The simulated person.
-        condition
+        condition : str
             ``"VO"`` or ``"HV"``.
-        seed
+        seed : int
             Seeds the trial (the same seed gives the same samples, byte for byte).
-        max_s
+        max_s : float
             The trial runs to its end or this many seconds.
-        haptic_gain_n_m_per_n, estimator, link, context
-            As for `make_loop` (`context` built by `session_context` when None).
+        haptic_gain_n_m_per_n : float or None, optional
+            The dial's haptic gain, N m/N, as for `make_loop`.
+        estimator : ForceEstimator or None, optional
+            As for `make_loop`.
+        link : LinkParams or None, optional
+            As for `make_loop`.
+        context : Any, optional
+            As for `make_loop`; built by `session_context` when None.
 
         Returns
         -------
@@ -313,9 +320,9 @@ class Task:
 
         Parameters
         ----------
-        frame
+        frame : pandas.DataFrame
             The trial's samples under the task's column names (its TRIAL.csv frame).
-        context
+        context : Any
             What `session_context` built.
 
         Returns
@@ -610,7 +617,7 @@ def register(task: Task) -> Task:
 
     Parameters
     ----------
-    task
+    task : Task
         A `Task` instance.
 
     Returns
@@ -684,7 +691,7 @@ def get_task(name: str) -> Task:
 
     Parameters
     ----------
-    name
+    name : str
         A task's name, e.g. ``"lcca"``.
 
     Returns
