@@ -155,15 +155,15 @@ class Analysis:
 
     Attributes
     ----------
-    descriptive_rows, comparison_rows, anova_rows, lmm_rows
+    descriptive_rows, comparison_rows, anova_rows, lmm_rows : list of dict of str to Any
         The tables as rows; the `descriptives`, `comparisons`, `mixed_anova` and `lmm`
         properties give them as pandas frames (`DESCRIPTIVE_COLUMNS`,
         `COMPARISON_COLUMNS`, `ANOVA_COLUMNS`, `LMM_COLUMNS`).
-    exclusions
+    exclusions : list of str
         Who or what was left out of which test, and why (one line each).
-    warnings
+    warnings : list of str
         Notes of the ANOVA and the mixed model (skipped fits, unequal groups, boundary).
-    source
+    source : DataSource
         The analysed trials by driver.
     """
 
@@ -536,8 +536,10 @@ def compare_conditions(
     long : pandas.DataFrame
         One row per participant, task, measure and condition (columns task, measure,
         group, condition, participant, value).
-    a, b : str, optional
-        The two conditions.
+    a : str, optional
+        The baseline condition.
+    b : str, optional
+        The condition compared against `a`.
 
     Returns
     -------
@@ -570,8 +572,10 @@ def comparison_rows(long: Long, a: str = "VO", b: str = "HV") -> tuple[list[Row]
     ----------
     long : Long
         The participant means as tuples in the order of `LONG_COLUMNS`.
-    a, b : str, optional
-        The two conditions; `b` is compared against `a`.
+    a : str, optional
+        The baseline condition.
+    b : str, optional
+        The condition compared against `a`.
 
     Returns
     -------
@@ -678,8 +682,10 @@ def mixed_anova(
     long : pandas.DataFrame
         One row per participant, task, measure and condition (columns task, measure,
         group, condition, participant, value).
-    a, b : str, optional
-        The two conditions.
+    a : str, optional
+        The first level of the within factor.
+    b : str, optional
+        The second level of the within factor.
     ss_type : int, optional
         2 or 3 (`DEFAULT_SS_TYPE` says why 2 by default).
 
@@ -707,8 +713,10 @@ def mixed_anova_rows(
     ----------
     long : Long
         The participant means as tuples in the order of `LONG_COLUMNS`.
-    a, b : str, optional
-        The two conditions (the within factor's levels).
+    a : str, optional
+        The first level of the within factor.
+    b : str, optional
+        The second level of the within factor.
     ss_type : int, optional
         Sums-of-squares type, 2 or 3 (`DEFAULT_SS_TYPE` says why 2 by default).
 

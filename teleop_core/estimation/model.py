@@ -115,9 +115,9 @@ class EstimateResult:
     f_physics: Float1D
     """The physics stage's force (eq. 1, or the calibrated physics stage replacing it), N."""
     f_hybrid: Float1D
-    """Physics + the residual stage's correction (F*_GRU), N."""
+    """Physics + the residual stage's correction (``F*_GRU``), N."""
     f_final: Float1D
-    """The EKF's fused estimate (F*_Final), N."""
+    """The EKF's fused estimate (``F*_Final``), N."""
     in_range: np.ndarray | None = None
     """Whether each sample's inputs lie inside the training range (None: range unknown)."""
     f_effects: Float1D | None = None
@@ -156,15 +156,15 @@ class ForceEstimator:
 
     Attributes
     ----------
-    physics
+    physics : PhysicsParams
         Eq. 1's parameters (torque constant, friction, wheel radius).
-    gru
+    gru : GruModel or TreesModel
         The residual compensator (numba inference; PyTorch only to train it).
-    ekf
+    ekf : EkfSettings
         The EKF's noise settings and whether it is used.
-    sample_rate_hz
+    sample_rate_hz : float
         The rate the model was trained at, Hz.
-    pipeline_rate_hz
+    pipeline_rate_hz : float
         The rate the estimation pipeline runs at in the loop, Hz.
     """
 
@@ -578,7 +578,7 @@ class CausalEstimator:
         Returns
         -------
         tuple of (float, float, float) or None
-            (F_physics, F*_GRU, F*_Final), N; None while the window fills.
+            ``(F_physics, F*_GRU, F*_Final)``, N; None while the window fills.
         """
         ok = stream_estimate(
             self.state,
@@ -615,7 +615,7 @@ class CausalEstimator:
         Returns
         -------
         tuple of (float, float, float) or None
-            (F_physics, F*_GRU, F*_Final), N; None while the window fills.
+            ``(F_physics, F*_GRU, F*_Final)``, N; None while the window fills.
         """
         self.push(t, iq, omega, alpha)
         return self.estimate()

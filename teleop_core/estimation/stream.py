@@ -154,7 +154,7 @@ def stream_estimate(
     dt_s : float
         The sample period, s.
     out : numpy.ndarray
-        Length `ESTIMATE_OUT`: receives F_physics, F*_GRU and F*_Final, N, at
+        Length `ESTIMATE_OUT`: receives ``F_physics``, ``F*_GRU`` and ``F*_Final``, N, at
         `EST_PHYSICS`, `EST_HYBRID`, `EST_FINAL`.
 
     Returns

@@ -105,14 +105,17 @@ class Task:
     has_dial: ClassVar[bool] = False
     """The haptic dial renders force in HV at a gain (`haptic_gain_n_m_per_n`)."""
     default_haptic_gain_n_m_per_n: ClassVar[float | None] = None
+    """The dial's haptic gain when the design sets none, N m/N (None: no dial)."""
     has_link: ClassVar[bool] = False
     """Master and follower talk over a link whose delay, jitter and loss can be set."""
     regions: ClassVar[tuple[str, ...]]
     """Where the tip can be; `samples.branch` stores the name, the loop the index."""
     sample_columns: ClassVar[tuple[SampleColumn, ...]]
+    """The columns of the loop's sample rows, in order (`pose_columns` first)."""
     measures: ClassVar[tuple[Measure, ...]]
     """The trial's summary measures after `completion_time_s` (see `all_measures`)."""
     live_traces: ClassVar[tuple[LiveTrace, LiveTrace]]
+    """The two forces the live view plots while a trial runs."""
     live_peaks: ClassVar[tuple[LiveTrace, LiveTrace]]
     """The two peaks reported when a trial ends (as stored measures)."""
     live_scene: ClassVar[str | None] = None
@@ -125,6 +128,7 @@ class Task:
     """What the keyboard driver's aim sets, as the run screen names it (the dial's angle;
     a task whose dial sets a speed says so)."""
     key_hints: ClassVar[str] = "↑↓ dial ←→ rotate space let go e end"
+    """The keyboard driver's keys, as the run screen lists them."""
     track_length_m: ClassVar[float] = 0.5
     """The `track` scene's full length of insertion, m."""
     trace_names: ClassVar[dict[str, str]]
