@@ -858,6 +858,11 @@ def mixed_model(
     tuple of (pandas.DataFrame, list of str)
         The fixed effects (`LMM_COLUMNS`) and notes (skipped fits, a fit on the
         boundary as lme4's `isSingular` says).
+
+    Raises
+    ------
+    StudyInputError
+        A trial names a task that is not known (with `measures` None).
     """
     rows, notes = mixed_model_rows(trials.to_dict("records"), measures)
     return frame(rows, LMM_COLUMNS), notes
@@ -969,6 +974,11 @@ def analyze(
     -------
     Analysis
         The tables, the exclusions and warnings, and the data source.
+
+    Raises
+    ------
+    StudyInputError
+        `ss_type` is neither 2 nor 3, or a trial names a task that is not known.
     """
     return analyze_rows(trials.to_dict("records"), long_records(long), ss_type, withdrawn)
 
