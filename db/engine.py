@@ -42,7 +42,7 @@ def resolve_url(db: str | URL | None = None) -> URL:
 
     Parameters
     ----------
-    db
+    db : str or URL or None, optional
         A URL (`sqlite:///FILE`, `postgresql+psycopg://USER@HOST:PORT/DB`), a path to an
         SQLite file (a value without `://`), or None for the environment's or the
         default.
@@ -125,7 +125,7 @@ def describe(url: URL | Engine) -> str:
 
     Parameters
     ----------
-    url
+    url : URL or Engine
         A URL, or an engine whose URL is meant.
 
     Returns
@@ -143,7 +143,7 @@ def is_sqlite(bind: Engine | Connection) -> bool:
 
     Parameters
     ----------
-    bind
+    bind : Engine or Connection
         An engine or a connection.
 
     Returns
@@ -159,9 +159,9 @@ def make_engine(url: str | URL, *, durable: bool = True) -> Engine:
 
     Parameters
     ----------
-    url
+    url : str or URL
         A database URL (see `resolve_url`).
-    durable
+    durable : bool, optional
         SQLite: every commit synced to the disk (`synchronous=FULL`: a committed chunk
         survives a power cut). False: `synchronous=NORMAL`, no sync per commit (in WAL
         mode a power cut can lose the last commits, never the file's consistency), for a
@@ -205,7 +205,7 @@ def busy_timeout_ms(url: URL) -> int:
 
     Parameters
     ----------
-    url
+    url : URL
         An SQLite URL, possibly with `?timeout=SECONDS` (as pysqlite spells it).
 
     Returns
@@ -304,7 +304,7 @@ def write_transaction(engine: Engine) -> Iterator[Connection]:
 
     Parameters
     ----------
-    engine
+    engine : Engine
         The study database.
 
     Yields
@@ -327,7 +327,7 @@ def make_session_factory(engine: Engine) -> sessionmaker[Session]:
 
     Parameters
     ----------
-    engine
+    engine : Engine
         The study database.
 
     Returns

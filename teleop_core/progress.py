@@ -36,11 +36,11 @@ class Progress(Protocol):
 
         Parameters
         ----------
-        step
+        step : str
             What runs now, one short line.
-        done
+        done : int, optional
             Units of the step done so far.
-        total
+        total : int, optional
             Units the step has in all; 0 when it is not counted.
         """
 
@@ -50,11 +50,11 @@ def no_progress(step: str, done: int = 0, total: int = 0) -> None:
 
     Parameters
     ----------
-    step
+    step : str
         What runs now (ignored).
-    done
+    done : int, optional
         Units of the step done so far (ignored).
-    total
+    total : int, optional
         Units the step has in all (ignored).
     """
 
@@ -64,11 +64,11 @@ def describe(step: str, done: int = 0, total: int = 0) -> str:
 
     Parameters
     ----------
-    step
+    step : str
         What runs now.
-    done
+    done : int, optional
         Units of the step done so far.
-    total
+    total : int, optional
         Units the step has in all; 0 when it is not counted.
 
     Returns
@@ -92,9 +92,9 @@ def as_step(progress: Progress, step: str) -> Progress:
 
     Parameters
     ----------
-    progress
+    progress : Progress
         The `Progress` to tell.
-    step
+    step : str
         The step every call is told as, whatever step the caller gives.
 
     Returns

@@ -1,4 +1,4 @@
-"""The study's statistics on participant means ([endovascular], IV-D; the analysis issue).
+"""The study's statistics on participant means ([endovascular], IV-D).
 
 - `descriptives`: per task, measure, group and condition: n, mean, SD, median, IQR and
   the t-based 95 % confidence interval of the mean.
@@ -10,8 +10,8 @@
   `wilcox.test` rule on the differences at the data's resolution,
   `wilcoxon_signed_rank`). Holm's correction runs across the groups of one task x
   measure (`holm`, pingouin's `multicomp(method="holm")` line for line: importing
-  pingouin for it cost 2.3 s of `study analyze`'s start; statsmodels' `multipletests`
-  gives the same values but runs a garbage collection on every call, 0.2 s each).
+  pingouin for it would slow `study analyze`'s start; statsmodels' `multipletests`
+  gives the same values but runs a garbage collection on every call).
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
   pingouin's `mixed_anova` has Type II only, so both come from two one-way models in
@@ -102,14 +102,38 @@ Long = list[tuple[Any, ...]]
 
 
 def frame(rows: list[Row], columns: Sequence[str]) -> pd.DataFrame:
-    """Rows as a pandas frame with `columns` (imported here: the frame API's cost only)."""
+    """Rows as a pandas frame (pandas imported here: the frame API's cost only).
+
+    Parameters
+    ----------
+    rows : list of dict of str to Any
+        The table's rows, each a column name -> value mapping.
+    columns : Sequence of str
+        The frame's columns, in order (a row's key not among them is dropped).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per element of `rows`, with exactly `columns`.
+    """
     import pandas as pd
 
     return pd.DataFrame(rows, columns=list(columns))
 
 
 def long_records(long: pd.DataFrame) -> Long:
-    """A frame of participant means as `Long` tuples."""
+    """A frame of participant means as `Long` tuples.
+
+    Parameters
+    ----------
+    long : pandas.DataFrame
+        The participant means, with at least the columns `LONG_COLUMNS`.
+
+    Returns
+    -------
+    Long
+        One tuple per row, its values in the order of `LONG_COLUMNS`.
+    """
     return list(long[list(LONG_COLUMNS)].itertuples(index=False, name=None))
 
 
@@ -131,15 +155,15 @@ class Analysis:
 
     Attributes
     ----------
-    descriptive_rows, comparison_rows, anova_rows, lmm_rows
+    descriptive_rows, comparison_rows, anova_rows, lmm_rows : list of dict of str to Any
         The tables as rows; the `descriptives`, `comparisons`, `mixed_anova` and `lmm`
         properties give them as pandas frames (`DESCRIPTIVE_COLUMNS`,
         `COMPARISON_COLUMNS`, `ANOVA_COLUMNS`, `LMM_COLUMNS`).
-    exclusions
+    exclusions : list of str
         Who or what was left out of which test, and why (one line each).
-    warnings
+    warnings : list of str
         Notes of the ANOVA and the mixed model (skipped fits, unequal groups, boundary).
-    source
+    source : DataSource
         The analysed trials by driver.
     """
 
@@ -156,31 +180,89 @@ class Analysis:
 
     @cached_property
     def descriptives(self) -> pd.DataFrame:
+        """The descriptive statistics as a frame.
+
+        Returns
+        -------
+        pandas.DataFrame
+            `descriptive_rows` under `DESCRIPTIVE_COLUMNS`.
+        """
         return frame(self.descriptive_rows, DESCRIPTIVE_COLUMNS)
 
     @cached_property
     def comparisons(self) -> pd.DataFrame:
+        """The VO against HV tests as a frame.
+
+        Returns
+        -------
+        pandas.DataFrame
+            `comparison_rows` under `COMPARISON_COLUMNS`.
+        """
         return frame(self.comparison_rows, COMPARISON_COLUMNS)
 
     @cached_property
     def mixed_anova(self) -> pd.DataFrame:
+        """The mixed ANOVA table as a frame.
+
+        Returns
+        -------
+        pandas.DataFrame
+            `anova_rows` under `ANOVA_COLUMNS`.
+        """
         return frame(self.anova_rows, ANOVA_COLUMNS)
 
     @cached_property
     def lmm(self) -> pd.DataFrame:
+        """The linear mixed model's fixed effects as a frame.
+
+        Returns
+        -------
+        pandas.DataFrame
+            `lmm_rows` under `LMM_COLUMNS`.
+        """
         return frame(self.lmm_rows, LMM_COLUMNS)
 
     @property
     def tasks(self) -> list[str]:
+        """The tasks the analysis has rows of.
+
+        Returns
+        -------
+        list of str
+            Task names, in order of first appearance across the four tables.
+        """
         tables = (self.descriptive_rows, self.comparison_rows, self.anova_rows, self.lmm_rows)
         return list(dict.fromkeys(r["task"] for rows in tables for r in rows))
 
     def warnings_about(self, kind: str) -> list[str]:
-        """The notes of one analysis ('mixed ANOVA', 'mixed model')."""
+        """The notes of one analysis.
+
+        Parameters
+        ----------
+        kind : str
+            The analysis as the notes name it: ``"mixed ANOVA"`` or ``"mixed model"``.
+
+        Returns
+        -------
+        list of str
+            The `warnings` that mention `kind`, in order.
+        """
         return [w for w in self.warnings if kind in w]
 
     def for_task(self, task: str) -> Analysis:
-        """The same analysis restricted to one task (its tables, notes and exclusions)."""
+        """The same analysis restricted to one task.
+
+        Parameters
+        ----------
+        task : str
+            A task's name (``"lcca"``).
+
+        Returns
+        -------
+        Analysis
+            The task's rows of the four tables, its notes and exclusions; the same
+            `source` and `ss_type`.
+        """
 
         def keep(rows: list[Row]) -> list[Row]:
             return [r for r in rows if r["task"] == task]
@@ -202,7 +284,7 @@ def descriptives(long: pd.DataFrame) -> pd.DataFrame:
 
     Parameters
     ----------
-    long
+    long : pandas.DataFrame
         One row per participant, task, measure and condition: columns task, measure,
         group, condition, participant, value.
 
@@ -216,7 +298,20 @@ def descriptives(long: pd.DataFrame) -> pd.DataFrame:
 
 
 def descriptive_rows(long: Long) -> list[Row]:
-    """`descriptives` on `Long` tuples, cells in order of first appearance."""
+    """`descriptives` on `Long` tuples.
+
+    Parameters
+    ----------
+    long : Long
+        The participant means as tuples in the order of `LONG_COLUMNS`.
+
+    Returns
+    -------
+    list of dict of str to Any
+        One row per task, measure, group and condition (in order of first
+        appearance), keyed by `DESCRIPTIVE_COLUMNS`; sd and the interval are NaN
+        where n = 1.
+    """
     rows = []
     cells = _groups(((t, m, g, c), v) for _, g, t, c, m, v in long)
     for (task, measure, group, condition), values in cells.items():
@@ -249,7 +344,7 @@ def hedges_g_av(vo: np.ndarray, hv: np.ndarray) -> float:
 
     Parameters
     ----------
-    vo, hv
+    vo, hv : numpy.ndarray
         The participants' values in the two conditions, paired by position.
 
     Returns
@@ -267,8 +362,19 @@ def hedges_g_av(vo: np.ndarray, hv: np.ndarray) -> float:
 
 
 def paired_t(b: np.ndarray, a: np.ndarray) -> float:
-    """The paired t statistic of b - a: mean difference over its standard error (scipy's
-    `ttest_rel`; infinite or NaN when the differences have no spread)."""
+    """The paired t statistic of b - a (scipy's `ttest_rel`).
+
+    Parameters
+    ----------
+    b, a : numpy.ndarray
+        The two samples, paired by position, in the measure's unit.
+
+    Returns
+    -------
+    float
+        The mean difference over its standard error; infinite or NaN when the
+        differences have no spread.
+    """
     d = b - a
     with np.errstate(divide="ignore", invalid="ignore"):
         return float(np.mean(d) / np.sqrt(np.var(d, ddof=1) / len(d)))
@@ -311,11 +417,27 @@ and so whether the Wilcoxon p is exact."""
 
 
 def at_resolution(diff: np.ndarray, scale: float | None = None) -> np.ndarray:
-    """`diff` with rounding noise removed: values within `RESOLUTION_REL` x `scale` (the
-    magnitude of the data the differences came from; default the largest |diff|) of zero
-    become 0, and runs of |values| that close become one value (the run's first), so that
-    ties and zeros are those of the data's resolution.
+    """`diff` with rounding noise removed.
 
+    Values within `RESOLUTION_REL` x `scale` of zero become 0, and runs of |values| that
+    close become one value (the run's first), so that ties and zeros are those of the
+    data's resolution.
+
+    Parameters
+    ----------
+    diff : numpy.ndarray
+        Differences of paired values, in the measure's unit.
+    scale : float or None, optional
+        The magnitude of the data the differences came from, in the same unit;
+        None: the largest |diff|.
+
+    Returns
+    -------
+    numpy.ndarray
+        A new float array of `diff`'s shape, signs kept.
+
+    Examples
+    --------
     >>> d = at_resolution(np.array([1.1999999999999993, -1.1999999999999957, 1e-15]), 30.0)
     >>> bool(d[0] == -d[1]), float(d[2])
     (True, 0.0)
@@ -342,7 +464,7 @@ def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
 
     Parameters
     ----------
-    vo, hv
+    vo, hv : numpy.ndarray
         The participants' values in the two conditions, paired by position.
 
     Returns
@@ -377,9 +499,9 @@ def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[
 
     Parameters
     ----------
-    diff
+    diff : numpy.ndarray
         The paired differences (HV - VO).
-    scale
+    scale : float or None, optional
         The magnitude of the measured values (default the largest |diff|).
 
     Returns
@@ -411,11 +533,13 @@ def compare_conditions(
 
     Parameters
     ----------
-    long
+    long : pandas.DataFrame
         One row per participant, task, measure and condition (columns task, measure,
         group, condition, participant, value).
-    a, b
-        The two conditions.
+    a : str, optional
+        The baseline condition.
+    b : str, optional
+        The condition compared against `a`.
 
     Returns
     -------
@@ -442,7 +566,25 @@ def _pairs(long: Long, a: str, b: str) -> dict[tuple[Any, ...], dict[Any, dict[s
 
 
 def comparison_rows(long: Long, a: str = "VO", b: str = "HV") -> tuple[list[Row], list[str]]:
-    """`compare_conditions` on `Long` tuples: the rows and the exclusion notes."""
+    """`compare_conditions` on `Long` tuples.
+
+    Parameters
+    ----------
+    long : Long
+        The participant means as tuples in the order of `LONG_COLUMNS`.
+    a : str, optional
+        The baseline condition.
+    b : str, optional
+        The condition compared against `a`.
+
+    Returns
+    -------
+    rows : list of dict of str to Any
+        One row per task, measure and group with at least three complete pairs, keyed
+        by `COMPARISON_COLUMNS`.
+    excluded : list of str
+        One line per exclusion (participants missing a condition, too few pairs).
+    """
     rows, excluded = [], []
     for (task, measure, group), people in _pairs(long, a, b).items():
         label = f"{task}/{measure}/{group}"
@@ -537,12 +679,14 @@ def mixed_anova(
 
     Parameters
     ----------
-    long
+    long : pandas.DataFrame
         One row per participant, task, measure and condition (columns task, measure,
         group, condition, participant, value).
-    a, b
-        The two conditions.
-    ss_type
+    a : str, optional
+        The first level of the within factor.
+    b : str, optional
+        The second level of the within factor.
+    ss_type : int, optional
         2 or 3 (`DEFAULT_SS_TYPE` says why 2 by default).
 
     Returns
@@ -563,7 +707,31 @@ def mixed_anova(
 def mixed_anova_rows(
     long: Long, a: str = "VO", b: str = "HV", ss_type: int = DEFAULT_SS_TYPE
 ) -> tuple[list[Row], list[str]]:
-    """`mixed_anova` on `Long` tuples: the rows and the notes."""
+    """`mixed_anova` on `Long` tuples.
+
+    Parameters
+    ----------
+    long : Long
+        The participant means as tuples in the order of `LONG_COLUMNS`.
+    a : str, optional
+        The first level of the within factor.
+    b : str, optional
+        The second level of the within factor.
+    ss_type : int, optional
+        Sums-of-squares type, 2 or 3 (`DEFAULT_SS_TYPE` says why 2 by default).
+
+    Returns
+    -------
+    rows : list of dict of str to Any
+        The ANOVA terms of each task x measure, keyed by `ANOVA_COLUMNS`.
+    notes : list of str
+        One line per skipped fit or unequal group sizes.
+
+    Raises
+    ------
+    StudyInputError
+        `ss_type` is neither 2 nor 3.
+    """
     if ss_type not in SS_TYPES:
         raise StudyInputError(f"sums-of-squares type {ss_type!r}; expected 2 or 3")
     rows, notes = [], []
@@ -630,9 +798,25 @@ CONDITION_TERM = "C(condition, Treatment('VO'))"
 
 
 def lmm_design(data: Any) -> tuple[np.ndarray, list[str]]:
-    """The fixed-effects design of value ~ condition * group, treatment coding with VO and
-    the alphabetically first group as reference, columns named as patsy names them
-    (`data["condition"]`, `data["group"]`: a frame's columns or arrays)."""
+    """The fixed-effects design of value ~ condition * group.
+
+    Treatment coding with VO and the alphabetically first group as reference.
+
+    Parameters
+    ----------
+    data : Any
+        Anything with ``data["condition"]`` and ``data["group"]`` (a frame's columns,
+        arrays or lists), one entry per trial.
+
+    Returns
+    -------
+    X : numpy.ndarray
+        The design matrix, one row per trial: intercept, condition, group and
+        condition x group indicator columns.
+    names : list of str
+        The columns' names as patsy names them (``Intercept``,
+        ``C(condition, Treatment('VO'))[T.HV]``, ...).
+    """
     condition = np.asarray(data["condition"], dtype=object)
     group_of = np.asarray(data["group"], dtype=object)
     conditions = [c for c in sorted(set(condition)) if c != "VO"]
@@ -663,9 +847,9 @@ def mixed_model(
 
     Parameters
     ----------
-    trials
+    trials : pandas.DataFrame
         One row per measured trial (participant, group, task, condition, measures).
-    measures
+    measures : tuple of str or None, optional
         The measures to model; default each task's analysed measures
         (`study.protocol.tasks`).
 
@@ -674,6 +858,11 @@ def mixed_model(
     tuple of (pandas.DataFrame, list of str)
         The fixed effects (`LMM_COLUMNS`) and notes (skipped fits, a fit on the
         boundary as lme4's `isSingular` says).
+
+    Raises
+    ------
+    StudyInputError
+        A trial names a task that is not known (with `measures` None).
     """
     rows, notes = mixed_model_rows(trials.to_dict("records"), measures)
     return frame(rows, LMM_COLUMNS), notes
@@ -682,7 +871,29 @@ def mixed_model(
 def mixed_model_rows(
     trials: list[Row], measures: tuple[str, ...] | None = None
 ) -> tuple[list[Row], list[str]]:
-    """`mixed_model` on trial rows (dicts: participant, group, task, condition, measures)."""
+    """`mixed_model` on trial rows.
+
+    Parameters
+    ----------
+    trials : list of dict of str to Any
+        One row per measured trial: participant, group, task, condition and the
+        measures by name.
+    measures : tuple of str or None, optional
+        The measures to model; None: each task's analysed measures
+        (`study.protocol.tasks`).
+
+    Returns
+    -------
+    rows : list of dict of str to Any
+        The fixed effects of each task x measure, keyed by `LMM_COLUMNS`.
+    notes : list of str
+        One line per skipped or failed fit and per singular fit.
+
+    Raises
+    ------
+    StudyInputError
+        A trial names a task that is not known (with `measures` None).
+    """
     from study.analysis.stats_lmm import SINGULAR_TOL, fit_random_intercept
     from study.protocol.tasks import get_task
 
@@ -750,19 +961,24 @@ def analyze(
 
     Parameters
     ----------
-    trials
+    trials : pandas.DataFrame
         The measured trials (`frames.trial_frame`).
-    long
+    long : pandas.DataFrame
         The participant means (`frames.participant_means`).
-    ss_type
+    ss_type : int, optional
         Sums of squares of the mixed ANOVA, 2 or 3.
-    withdrawn
+    withdrawn : Sequence of str, optional
         Exclusion notes of what was already left out (`frames.without_withdrawn`).
 
     Returns
     -------
     Analysis
         The tables, the exclusions and warnings, and the data source.
+
+    Raises
+    ------
+    StudyInputError
+        `ss_type` is neither 2 nor 3, or a trial names a task that is not known.
     """
     return analyze_rows(trials.to_dict("records"), long_records(long), ss_type, withdrawn)
 
@@ -773,8 +989,29 @@ def analyze_rows(
     ss_type: int = DEFAULT_SS_TYPE,
     withdrawn: Sequence[str] = (),
 ) -> Analysis:
-    """`analyze` on trial rows (`study.protocol.study_rows.trial_rows`) and `Long` tuples
-    (`frames.participant_mean_rows`): what `study analyze` runs, without pandas."""
+    """`analyze` on rows: what `study analyze` runs, without pandas.
+
+    Parameters
+    ----------
+    trials : list of dict of str to Any
+        The measured trials (`study.protocol.study_rows.trial_rows`).
+    long : Long
+        The participant means (`frames.participant_mean_rows`).
+    ss_type : int, optional
+        Sums-of-squares type of the mixed ANOVA, 2 or 3.
+    withdrawn : Sequence of str, optional
+        Exclusion lines for withdrawn participants, stated first.
+
+    Returns
+    -------
+    Analysis
+        The four tables, the exclusions and the notes.
+
+    Raises
+    ------
+    StudyInputError
+        `ss_type` is neither 2 nor 3, or a trial names a task that is not known.
+    """
     comparisons, excluded = comparison_rows(long)
     excluded = [*withdrawn, *_missing_questionnaires(trials, long), *excluded]
     anova, anova_notes = mixed_anova_rows(long, ss_type=ss_type)

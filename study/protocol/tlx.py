@@ -55,9 +55,9 @@ def check_rating(subscale: str, value: object) -> int:
 
     Parameters
     ----------
-    subscale
+    subscale : str
         The subscale's name, for the message (e.g. ``"mental"``).
-    value
+    value : object
         The rating as given (a number, from a form or a file).
 
     Returns
@@ -82,7 +82,7 @@ def check_ratings(ratings: Mapping[str, object]) -> dict[str, int]:
 
     Parameters
     ----------
-    ratings
+    ratings : Mapping of str to object
         Subscale -> rating, all six subscales of `TLX_SUBSCALES`.
 
     Returns
@@ -106,7 +106,7 @@ def check_weights(weights: Mapping[str, object]) -> dict[str, int]:
 
     Parameters
     ----------
-    weights
+    weights : Mapping of str to object
         Subscale -> how often it was chosen.
 
     Returns
@@ -137,9 +137,9 @@ def pair_order(study_seed: int, code: str) -> list[tuple[str, str]]:
 
     Parameters
     ----------
-    study_seed
+    study_seed : int
         The study's seed (`StudyDesign.seed`).
-    code
+    code : str
         The participant's code.
 
     Returns
@@ -162,9 +162,9 @@ def weights_from_choices(pairs: Sequence[tuple[str, str]], chosen: Sequence[str]
 
     Parameters
     ----------
-    pairs
+    pairs : Sequence of (str, str)
         The pairs in the order they were shown (`pair_order`).
-    chosen
+    chosen : Sequence of str
         The subscale chosen from each pair, in the same order.
 
     Returns
@@ -196,7 +196,7 @@ def response_scores(response: TlxResponse) -> tuple[dict[str, int], float, float
 
     Parameters
     ----------
-    response
+    response : TlxResponse
         A stored questionnaire.
 
     Returns
@@ -216,9 +216,9 @@ def scored_tlx(engine: Engine, code: str | None = None) -> list[dict[str, Any]]:
 
     Parameters
     ----------
-    engine
+    engine : Engine
         The study database.
-    code
+    code : str or None, optional
         A participant's code; None for everyone.
 
     Returns
@@ -276,20 +276,20 @@ def store_tlx(
 
     Parameters
     ----------
-    engine
+    engine : Engine
         The study database.
-    code, task, condition
+    code, task, condition : str
         The block: the participant's code, its task and its condition.
-    ratings
+    ratings : Mapping of str to object
         Subscale -> rating (0-100 in steps of 5), all six.
-    chosen
+    chosen : Sequence of str or None, optional
         The subscale chosen from each pair of `pair_order`, in that order; None for a
         questionnaire without the pairwise comparisons (raw TLX only).
-    reason
+    reason : str or None, optional
         Why the questionnaire is edited (or entered before the block's first trial).
-    actor
+    actor : str or None, optional
         Who enters it (default `current_actor()`).
-    observer
+    observer : SessionObserver or None, optional
         Told the `questionnaire` event once it is committed.
 
     Returns
@@ -461,9 +461,9 @@ def load_tlx(engine: Engine, code: str, task: str, condition: str) -> TlxRespons
 
     Parameters
     ----------
-    engine
+    engine : Engine
         The study database.
-    code, task, condition
+    code, task, condition : str
         The block: the participant's code, its task and its condition.
 
     Returns
@@ -491,7 +491,7 @@ def answered_blocks(engine: Engine) -> set[tuple[str, str, str]]:
 
     Parameters
     ----------
-    engine
+    engine : Engine
         The study database.
 
     Returns
@@ -511,9 +511,9 @@ def tlx_audit(engine: Engine, response_id: int) -> list[AuditEntry]:
 
     Parameters
     ----------
-    engine
+    engine : Engine
         The study database.
-    response_id
+    response_id : int
         The questionnaire's id (`TlxResponse.id`).
 
     Returns

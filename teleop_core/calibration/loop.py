@@ -105,22 +105,28 @@ class Calibrator:
 
     Parameters
     ----------
-    model
+    model : BaseModel
         Base model (`models.py`).
-    families
+    families : Sequence of str or None, optional
         Candidate families to try; default: all that apply to the model's signals.
-    held_out_fraction
+    held_out_fraction : float, optional
         Share of the recording, at its end, held out for testing.
-    alpha
+    alpha : float, optional
         Level of each candidate's Diebold-Mariano test.
-    min_gain
-        Smallest relative cut in held-out RMSE worth an effect: 5 %, above the 3-4 %
-        that the imperfect fit of an effect already in the model can leave for a wrong
-        family to take (seen on simulated recordings).
-    max_effects
+    min_gain : float, optional
+        Smallest relative cut in held-out RMSE worth an effect (default 5 %): above
+        the cut that the imperfect fit of an effect already in the model can leave for
+        a wrong family to take on simulated recordings.
+    max_effects : int, optional
         Most effects added.
-    max_lag
+    max_lag : int, optional
         Lags, samples, of the residual tests.
+
+    Raises
+    ------
+    TeleopInputError
+        `held_out_fraction` lies outside 0.05 to 0.5, or `families` names an unknown
+        effect family.
     """
 
     model: BaseModel
@@ -312,9 +318,9 @@ class Calibrator:
 
         Parameters
         ----------
-        data
+        data : CalibrationData
             The recording as the base model reads it (`BaseModel.read` or `.data`).
-        progress
+        progress : Progress, optional
             Told each candidate of each round (``"round 2: stribeck"``, k of n) and
             each round's end.
 
@@ -535,8 +541,17 @@ class Calibrator:
         }
 
     def warnings(self) -> list[str]:
-        """Searched values that ended at an end of their search range: the effect may
-        stand in for something else there (a long lag for a slow dynamic)."""
+        """Searched values that ended at an end of their search range.
+
+        There the effect may stand in for something else (a long lag for a slow
+        dynamic).
+
+        Returns
+        -------
+        list of str
+            One line per selected effect whose fitted value lies at an edge of its
+            search range, naming the family; empty when none does.
+        """
         notes = []
         for effect, value in self.chain_:
             edge = _search_edge(effect, value, self.data_.signals)

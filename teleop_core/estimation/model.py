@@ -69,12 +69,38 @@ RATE_TOLERANCE = 0.02
 
 
 def features_of(recording: FollowerRecording) -> Float2D:
-    """Per-sample GRU inputs [I_q, theta_d, theta_dd], shape (n, 3)."""
+    """Per-sample GRU inputs [I_q, theta_d, theta_dd].
+
+    Parameters
+    ----------
+    recording : FollowerRecording
+        A follower recording of n samples.
+
+    Returns
+    -------
+    Float2D
+        Shape (n, 3): motor current I_q (A), velocity theta_d (rad/s) and
+        acceleration theta_dd (rad/s^2).
+    """
     return np.column_stack([recording.iq, recording.omega, recording.alpha])
 
 
 def inputs_of(recording: FollowerRecording, gru: GruModel | TreesModel) -> Float2D:
-    """Per-sample inputs of `gru`: [I_q, theta_d, theta_dd] and its memory features."""
+    """Per-sample inputs of a residual stage: [I_q, theta_d, theta_dd] and its memory
+    features.
+
+    Parameters
+    ----------
+    recording : FollowerRecording
+        A follower recording of n samples.
+    gru : GruModel or TreesModel
+        The residual stage whose memory features (if any) are added.
+
+    Returns
+    -------
+    Float2D
+        Shape (n, 3 + number of memory features), unstandardised.
+    """
     return gru.inputs(recording.t, features_of(recording))
 
 
@@ -83,10 +109,15 @@ class EstimateResult:
     """Estimates for every sample with a full window; arrays of shape (n - T + 1,)."""
 
     t: Float1D
+    """Sample times, s."""
     f_ref: Float1D
+    """The reference force of the recording, N."""
     f_physics: Float1D
+    """The physics stage's force (eq. 1, or the calibrated physics stage replacing it), N."""
     f_hybrid: Float1D
+    """Physics + the residual stage's correction (``F*_GRU``), N."""
     f_final: Float1D
+    """The EKF's fused estimate (``F*_Final``), N."""
     in_range: np.ndarray | None = None
     """Whether each sample's inputs lie inside the training range (None: range unknown)."""
     f_effects: Float1D | None = None
@@ -98,8 +129,14 @@ class EstimateResult:
         return self.f_physics if self.f_effects is None else self.f_effects
 
     def to_frame(self) -> pd.DataFrame:
-        """Columns t, f_ref, f_physics, f_hybrid, f_final and, when known, in_range (0/1)
-        and f_effects (eq. 1 with the effects training found)."""
+        """The estimates as a frame.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Columns t (s), f_ref, f_physics, f_hybrid, f_final (N) and, when known,
+            in_range (0/1) and f_effects (eq. 1 with the effects training found, N).
+        """
         optional = ("in_range", "f_effects")
         frame = pd.DataFrame({k: v for k, v in asdict(self).items() if k not in optional})
         if self.in_range is not None:
@@ -119,15 +156,15 @@ class ForceEstimator:
 
     Attributes
     ----------
-    physics
+    physics : PhysicsParams
         Eq. 1's parameters (torque constant, friction, wheel radius).
-    gru
+    gru : GruModel or TreesModel
         The residual compensator (numba inference; PyTorch only to train it).
-    ekf
+    ekf : EkfSettings
         The EKF's noise settings and whether it is used.
-    sample_rate_hz
+    sample_rate_hz : float
         The rate the model was trained at, Hz.
-    pipeline_rate_hz
+    pipeline_rate_hz : float
         The rate the estimation pipeline runs at in the loop, Hz.
     """
 
@@ -144,6 +181,7 @@ class ForceEstimator:
 
     @property
     def window(self) -> int:
+        """The residual stage's window, samples (T): estimates start at the T-th sample."""
         return self.gru.window
 
     @property
@@ -153,10 +191,23 @@ class ForceEstimator:
 
     @property
     def dt_s(self) -> float:
+        """The sample period at the model's rate, s."""
         return 1.0 / self.sample_rate_hz
 
     def conform(self, recording: FollowerRecording) -> FollowerRecording:
-        """The recording at the model's sample rate (resampled only if it differs)."""
+        """The recording at the model's sample rate.
+
+        Parameters
+        ----------
+        recording : FollowerRecording
+            A follower recording at any rate.
+
+        Returns
+        -------
+        FollowerRecording
+            `recording` itself when its rate is within `RATE_TOLERANCE` of the model's,
+            else a copy resampled to `sample_rate_hz`.
+        """
         rate = recording.sample_rate_hz
         if abs(rate / self.sample_rate_hz - 1.0) > RATE_TOLERANCE:
             return recording.resampled(self.sample_rate_hz)
@@ -167,7 +218,7 @@ class ForceEstimator:
 
         Parameters
         ----------
-        recording
+        recording : FollowerRecording
             A follower recording at the model's rate (`conform` resamples one that
             is not).
 
@@ -214,13 +265,32 @@ class ForceEstimator:
         )
 
     def stream(self) -> CausalEstimator:
+        """The estimator fed one sample at a time, as the control loop runs it.
+
+        Returns
+        -------
+        CausalEstimator
+            A fresh streaming estimator with empty state.
+
+        Raises
+        ------
+        TeleopInputError
+            The model cannot stream (see `check_streams`).
+        """
         self.check_streams()
         return CausalEstimator(self)
 
     def check_streams(self) -> None:
-        """Raise (one line) unless the model can run one sample at a time, as the loop
-        does: a model whose physics stage or correction holds calibrated effects cannot,
-        nor one whose residual stage is the trees (the loop's kernel runs the GRU)."""
+        """Check that the model can run one sample at a time, as the loop does.
+
+        A model whose physics stage or correction holds calibrated effects cannot, nor
+        one whose residual stage is the trees (the loop's kernel runs the GRU).
+
+        Raises
+        ------
+        TeleopInputError
+            The model cannot stream; one line saying why and how to train one that can.
+        """
         if isinstance(self.gru, TreesModel):
             raise TeleopInputError(
                 "this estimator's residual stage is the boosted trees, which run with "
@@ -236,7 +306,20 @@ class ForceEstimator:
             )
 
     def save(self, folder: Path, summary: dict[str, Any]) -> None:
-        """Write the model folder, all or nothing (through a temporary sibling folder)."""
+        """Write the model folder, all or nothing (through a temporary sibling folder).
+
+        Parameters
+        ----------
+        folder : Path
+            The model folder to write; one already there is replaced.
+        summary : dict of str to Any
+            What training reports, written as `summary.json`.
+
+        Raises
+        ------
+        TeleopInputError
+            The folder's parent does not exist.
+        """
         folder = Path(folder)
         if not folder.parent.is_dir():
             raise TeleopInputError(f"folder {folder.parent} for the model does not exist")
@@ -290,7 +373,7 @@ class ForceEstimator:
 
         Parameters
         ----------
-        folder
+        folder : Path
             The model folder.
 
         Returns
@@ -402,7 +485,17 @@ class CausalEstimator:
 
     Its state lives in arrays and its steps are numba functions (`stream_push`,
     `stream_estimate`), so that the closed loop's compiled kernel can run the same
-    estimator between its events; `arrays()` hands them over.
+    estimator between its events; `kernel_arrays()` hands them over.
+
+    Parameters
+    ----------
+    estimator : ForceEstimator
+        A model that can stream (`ForceEstimator.check_streams`).
+
+    Raises
+    ------
+    TeleopInputError
+        The model cannot stream.
     """
 
     def __init__(self, estimator: ForceEstimator) -> None:
@@ -426,8 +519,15 @@ class CausalEstimator:
         self._out = np.zeros(ESTIMATE_OUT)
 
     def kernel_arrays(self) -> tuple:
-        """The arrays in the order the loop's kernel unpacks them (`stream.NO_STREAM_ARRAYS`
-        has dummies of the same types)."""
+        """The estimator's state and settings for the loop's compiled kernel.
+
+        Returns
+        -------
+        tuple
+            The arrays in the order the loop's kernel unpacks them
+            (`stream.NO_STREAM_ARRAYS` has dummies of the same types); the kernel
+            updates the state arrays in place.
+        """
         return (
             self.buffer,
             self.state,
@@ -442,8 +542,22 @@ class CausalEstimator:
         )
 
     def push(self, t: float, iq: float, omega: float, alpha: float | None = None) -> None:
-        """Add a sample (s, A, rad/s, optionally rad/s^2) to the window without estimating:
-        the 50 Hz pipeline sees every 100 Hz sample but estimates on every other one."""
+        """Add a sample to the window without estimating.
+
+        The 50 Hz pipeline sees every 100 Hz sample but estimates on every other one.
+
+        Parameters
+        ----------
+        t : float
+            The sample's time, s.
+        iq : float
+            Motor current I_q, A.
+        omega : float
+            Velocity theta_d, rad/s.
+        alpha : float or None, optional
+            Acceleration theta_dd, rad/s^2; None: the backward difference of `omega`
+            (0 for the first sample), as `FollowerRecording` derives it.
+        """
         given = alpha is not None
         stream_push(
             self.state,
@@ -459,8 +573,13 @@ class CausalEstimator:
         )
 
     def estimate(self) -> tuple[float, float, float] | None:
-        """(F_physics, F*_GRU, F*_Final) in N from the samples pushed so far, or None
-        while the window fills."""
+        """Estimate the force from the samples pushed so far.
+
+        Returns
+        -------
+        tuple of (float, float, float) or None
+            ``(F_physics, F*_GRU, F*_Final)``, N; None while the window fills.
+        """
         ok = stream_estimate(
             self.state,
             self.buffer,
@@ -480,9 +599,23 @@ class CausalEstimator:
     def update(
         self, t: float, iq: float, omega: float, alpha: float | None = None
     ) -> tuple[float, float, float] | None:
-        """Add a sample (s, A, rad/s, optionally rad/s^2) and estimate.
+        """Add a sample and estimate.
 
-        Returns (F_physics, F*_GRU, F*_Final) in N, or None while the window fills.
+        Parameters
+        ----------
+        t : float
+            The sample's time, s.
+        iq : float
+            Motor current I_q, A.
+        omega : float
+            Velocity theta_d, rad/s.
+        alpha : float or None, optional
+            Acceleration theta_dd, rad/s^2; None: derived as in `push`.
+
+        Returns
+        -------
+        tuple of (float, float, float) or None
+            ``(F_physics, F*_GRU, F*_Final)``, N; None while the window fills.
         """
         self.push(t, iq, omega, alpha)
         return self.estimate()

@@ -65,6 +65,30 @@ def stream_push(
     alpha: float,
     alpha_given: bool,
 ) -> None:  # pragma: no cover - compiled; exercised through CausalEstimator
+    """Add one sample to the window, in place (`CausalEstimator.push`).
+
+    Parameters
+    ----------
+    st : numpy.ndarray
+        The stream state (`STREAM_STATE_SIZE` fields, then the memory averages).
+    buf : numpy.ndarray
+        The window of standardised features, shape (T, 3 + memory features); shifted
+        by one row, the sample written last.
+    mean, std : numpy.ndarray
+        The features' standardisation.
+    mem : numpy.ndarray
+        The memory table, one row [input column, 1 / tau (1/s)] per memory feature.
+    t : float
+        The sample's time, s.
+    iq : float
+        Motor current I_q, A.
+    omega : float
+        Velocity theta_d, rad/s.
+    alpha : float
+        Acceleration theta_dd, rad/s^2 (ignored unless `alpha_given`).
+    alpha_given : bool
+        False: `alpha` is the backward difference of `omega` (0 for the first sample).
+    """
     first = st[S_HAS_LAST] == 0.0
     dt = 0.0 if first else t - st[S_LAST_T]
     if not alpha_given:
@@ -111,8 +135,33 @@ def stream_estimate(
     dt_s: float,
     out: np.ndarray,
 ) -> bool:  # pragma: no cover - compiled; exercised through CausalEstimator
-    """Physics, GRU and EKF on the current window; False while it fills. The GRU's
-    matrices come transposed (`GruWeights.kernel_weights`)."""
+    """Physics, GRU and EKF on the current window (`CausalEstimator.estimate`).
+
+    Parameters
+    ----------
+    st, buf : numpy.ndarray
+        The stream state and window `stream_push` fills.
+    pv : numpy.ndarray
+        Eq. 1's parameters as a vector (`PhysicsParams.vector`).
+    w_ih_t, w_hh_t, b_ih, b_hh, w_out : numpy.ndarray
+        The GRU's weights, matrices transposed (`GruWeights.kernel_weights`).
+    b_out : float
+        The GRU's output bias.
+    target : numpy.ndarray
+        [std, mean] of the residual target, N, to de-standardise the GRU's output.
+    ekf_state, ekf_settings : numpy.ndarray
+        The EKF's state (updated in place) and its settings vector.
+    dt_s : float
+        The sample period, s.
+    out : numpy.ndarray
+        Length `ESTIMATE_OUT`: receives ``F_physics``, ``F*_GRU`` and ``F*_Final``, N, at
+        `EST_PHYSICS`, `EST_HYBRID`, `EST_FINAL`.
+
+    Returns
+    -------
+    bool
+        True when `out` holds an estimate; False while the window fills.
+    """
     if st[S_COUNT] < buf.shape[0]:
         return False
     iq, omega, alpha = st[S_IQ], st[S_OMEGA], st[S_ALPHA]

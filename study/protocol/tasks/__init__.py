@@ -105,14 +105,17 @@ class Task:
     has_dial: ClassVar[bool] = False
     """The haptic dial renders force in HV at a gain (`haptic_gain_n_m_per_n`)."""
     default_haptic_gain_n_m_per_n: ClassVar[float | None] = None
+    """The dial's haptic gain when the design sets none, N m/N (None: no dial)."""
     has_link: ClassVar[bool] = False
     """Master and follower talk over a link whose delay, jitter and loss can be set."""
     regions: ClassVar[tuple[str, ...]]
     """Where the tip can be; `samples.branch` stores the name, the loop the index."""
     sample_columns: ClassVar[tuple[SampleColumn, ...]]
+    """The columns of the loop's sample rows, in order (`pose_columns` first)."""
     measures: ClassVar[tuple[Measure, ...]]
     """The trial's summary measures after `completion_time_s` (see `all_measures`)."""
     live_traces: ClassVar[tuple[LiveTrace, LiveTrace]]
+    """The two forces the live view plots while a trial runs."""
     live_peaks: ClassVar[tuple[LiveTrace, LiveTrace]]
     """The two peaks reported when a trial ends (as stored measures)."""
     live_scene: ClassVar[str | None] = None
@@ -125,6 +128,7 @@ class Task:
     """What the keyboard driver's aim sets, as the run screen names it (the dial's angle;
     a task whose dial sets a speed says so)."""
     key_hints: ClassVar[str] = "↑↓ dial ←→ rotate space let go e end"
+    """The keyboard driver's keys, as the run screen lists them."""
     track_length_m: ClassVar[float] = 0.5
     """The `track` scene's full length of insertion, m."""
     trace_names: ClassVar[dict[str, str]]
@@ -138,8 +142,14 @@ class Task:
     # -- the trial --------------------------------------------------------------------
 
     def session_context(self) -> Any:
-        """What the trials of one session share (built once per session), e.g. a
-        phantom; handed to `make_loop` and `simulated_driver`."""
+        """What the trials of one session share, built once per session.
+
+        Returns
+        -------
+        Any
+            The shared state (e.g. a phantom), handed to `make_loop` and
+            `simulated_driver`; None (the default) for a task that shares nothing.
+        """
         return None
 
     def make_loop(
@@ -156,17 +166,18 @@ class Task:
 
         Parameters
         ----------
-        condition
+        condition : str
             ``"VO"`` or ``"HV"``.
-        seed
+        seed : int
             Seeds the trial's randomness (the same seed gives the same trial).
-        haptic_gain_n_m_per_n
-            The dial's haptic gain where the task has a dial (None: the task's default).
-        estimator
+        haptic_gain_n_m_per_n : float or None, optional
+            The dial's haptic gain, N m/N, where the task has a dial (None: the task's
+            default).
+        estimator : ForceEstimator or None, optional
             The follower's force estimator, for tasks that estimate the force.
-        context
+        context : Any, optional
             What `session_context` built for the session.
-        link
+        link : LinkParams or None, optional
             The master-follower link's delay, jitter and loss
             (`teleop_core.loop.link.LinkParams`) where the task has one.
 
@@ -182,11 +193,11 @@ class Task:
 
         Parameters
         ----------
-        traits
+        traits : Traits
             The simulated person (`study.protocol.traits.ParticipantTraits`).
-        max_s
+        max_s : float
             The trial's time limit, s (the person gives up by then).
-        context
+        context : Any
             What `session_context` built for the session.
 
         Returns
@@ -203,9 +214,9 @@ class Task:
 
         Parameters
         ----------
-        samples
+        samples : numpy.ndarray
             The trial's samples: the loop's rows, in `sample_columns`' order.
-        success
+        success : bool
             Whether the trial reached its goal.
 
         Returns
@@ -232,16 +243,22 @@ class Task:
 
         Parameters
         ----------
-        traits
+        traits : Traits
             The simulated person.
-        condition
+        condition : str
             ``"VO"`` or ``"HV"``.
-        seed
+        seed : int
             Seeds the trial (the same seed gives the same samples, byte for byte).
-        max_s
+        max_s : float
             The trial runs to its end or this many seconds.
-        haptic_gain_n_m_per_n, estimator, link, context
-            As for `make_loop` (`context` built by `session_context` when None).
+        haptic_gain_n_m_per_n : float or None, optional
+            The dial's haptic gain, N m/N, as for `make_loop`.
+        estimator : ForceEstimator or None, optional
+            As for `make_loop`.
+        link : LinkParams or None, optional
+            As for `make_loop`.
+        context : Any, optional
+            As for `make_loop`; built by `session_context` when None.
 
         Returns
         -------
@@ -282,9 +299,21 @@ class Task:
         return TrialResult(self.trial_frame(samples), summary)
 
     def trial_figure(self, frame: pd.DataFrame, title: str) -> Any:
-        """The matplotlib figure `study simulate --plot` draws of one trial (its TRIAL.csv
-        frame), drawn by the task's package; None (the default): the insertion and the
-        live traces over time (`study.analysis.trial_plot.traces_plot`)."""
+        """The matplotlib figure `study simulate --plot` draws of one trial.
+
+        Parameters
+        ----------
+        frame : pandas.DataFrame
+            The trial's TRIAL.csv frame (the task's sample columns under its own names).
+        title : str
+            The figure's title.
+
+        Returns
+        -------
+        matplotlib.figure.Figure or None
+            The figure, drawn by the task's package; None (the default): the insertion
+            and the live traces over time (`study.analysis.trial_plot.traces_plot`).
+        """
         return None
 
     fit_features: ClassVar[tuple[str, ...]] = ()
@@ -295,9 +324,9 @@ class Task:
 
         Parameters
         ----------
-        frame
+        frame : pandas.DataFrame
             The trial's samples under the task's column names (its TRIAL.csv frame).
-        context
+        context : Any
             What `session_context` built.
 
         Returns
@@ -309,13 +338,36 @@ class Task:
         return {}
 
     def completion_time_s(self, samples: np.ndarray) -> float:
-        """The time of the trial's last sample (0 without samples), s."""
+        """The time of the trial's last sample.
+
+        Parameters
+        ----------
+        samples : numpy.ndarray
+            The trial's samples: the loop's rows, in `sample_columns`' order.
+
+        Returns
+        -------
+        float
+            The last sample's time, s; 0 without samples.
+        """
         if not len(samples):
             return 0.0
         return float(samples[-1, self.column_index()[self.stored_name("t_s")]])
 
     def summary_line(self, summary: Mapping[str, Any]) -> str:
-        """The measures of a simulated trial's summary, for one printed line."""
+        """The measures of a simulated trial's summary, for one printed line.
+
+        Parameters
+        ----------
+        summary : Mapping of str to Any
+            A trial's summary (`TrialResult.summary`): measure name -> value.
+
+        Returns
+        -------
+        str
+            ``label value unit`` for each of the task's `measures` in the summary,
+            separated by commas.
+        """
         return ", ".join(
             f"{m.label} {summary[m.name]:.3g}{' ' + m.unit if m.unit else ''}"
             for m in self.measures
@@ -323,11 +375,34 @@ class Task:
         )
 
     def driver_counts(self, driver: Driver) -> dict[str, int]:
-        """What a simulated participant noticed during the trial (kept in the summary)."""
+        """What a simulated participant noticed during the trial.
+
+        Parameters
+        ----------
+        driver : teleop_core.loop.drivers.Driver
+            The simulated participant's driver after the trial.
+
+        Returns
+        -------
+        dict of str to int
+            Counts kept in the trial's summary (name -> count); empty by default.
+        """
         return {}
 
     def trial_frame(self, samples: np.ndarray) -> pd.DataFrame:
-        """TRIAL.csv: the samples under the task's own column names, regions by name."""
+        """TRIAL.csv: the samples under the task's own column names, regions by name.
+
+        Parameters
+        ----------
+        samples : numpy.ndarray
+            The trial's samples: the loop's rows, in `sample_columns`' order.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One column per sample column, named as the task names it; the region
+            column holds the region's name (from `regions`), not its index.
+        """
         import numpy as np
         import pandas as pd
 
@@ -338,8 +413,22 @@ class Task:
         return frame
 
     def live_lines(self, values: Mapping[str, float], condition: str | None = None) -> list[str]:
-        """Readout lines under the live gauges, from the newest sample by column name, in
-        the trial's `condition` (None: not known)."""
+        """Readout lines under the live gauges, from the newest sample.
+
+        Parameters
+        ----------
+        values : Mapping of str to float
+            The newest sample by the task's column names (insertion in m, rotation in
+            rad, the region as its index in `regions`).
+        condition : str or None, optional
+            The trial's condition (``"VO"`` or ``"HV"``); None: not known.
+
+        Returns
+        -------
+        list of str
+            The lines to show (by default the region, the insertion in mm and the
+            rotation in rad).
+        """
         region = self.regions[int(values[self.region_column])]
         return [
             f"in {region}, inserted {values[self.stored_name('insertion_m')] * 1000:5.0f} mm",
@@ -348,6 +437,13 @@ class Task:
 
     @property
     def all_measures(self) -> tuple[Measure, ...]:
+        """Every stored measure: `completion_time_s` first, then the task's `measures`.
+
+        Returns
+        -------
+        tuple of Measure
+            The measures in the order they are stored and exported.
+        """
         return (
             Measure(COMPLETION_TIME, "s", "completion time", "seconds to the trial's end"),
             *self.measures,
@@ -361,10 +457,33 @@ class Task:
 
     @property
     def analysed_measures(self) -> tuple[str, ...]:
+        """The names of the measures the statistics and figures analyse.
+
+        Returns
+        -------
+        tuple of str
+            The names of `all_measures` whose `Measure.analysed` is true, in order.
+        """
         return tuple(m.name for m in self.all_measures if m.analysed)
 
     def stored_name(self, stored_as: str) -> str:
-        """The task's name of the sample column the `samples` table stores as `stored_as`."""
+        """The task's name of the sample column stored as `stored_as`.
+
+        Parameters
+        ----------
+        stored_as : str
+            A role in the loop's layout (`SampleColumn.stored_as`), e.g. ``"t_s"``.
+
+        Returns
+        -------
+        str
+            The `SampleColumn.name` of the task's column with that role.
+
+        Raises
+        ------
+        StopIteration
+            No sample column of the task has that role.
+        """
         return next(c.name for c in self.sample_columns if c.stored_as == stored_as)
 
     @property
@@ -373,11 +492,24 @@ class Task:
         return self.stored_name("branch")
 
     def column_index(self) -> dict[str, int]:
+        """Where each sample column sits in the loop's rows.
+
+        Returns
+        -------
+        dict of str to int
+            `SampleColumn.name` -> its index in `sample_columns` (and in a row).
+        """
         return {c.name: k for k, c in enumerate(self.sample_columns)}
 
     def sample_schema(self) -> pa.Schema:
-        """The Arrow schema the task's samples are stored in: its columns in order under
-        its own names, each with its unit and description; the region column is text."""
+        """The Arrow schema the task's samples are stored in.
+
+        Returns
+        -------
+        pyarrow.Schema
+            The task's sample columns in order under its own names, each with its unit
+            and description in the field's metadata; the region column is text.
+        """
         import pyarrow as pa
 
         from db.sample_codec import sample_field
@@ -391,8 +523,19 @@ class Task:
         )
 
     def stored_columns(self, samples: np.ndarray) -> dict[str, Any]:
-        """A batch of loop rows as the stored columns, by the task's names (regions by
-        name)."""
+        """A batch of loop rows as the stored columns, by the task's names.
+
+        Parameters
+        ----------
+        samples : numpy.ndarray
+            Loop rows, in `sample_columns`' order.
+
+        Returns
+        -------
+        dict of str to Any
+            `SampleColumn.name` -> that column's values (a numpy array; for the region
+            column, a list of region names).
+        """
         out: dict[str, Any] = {}
         region = self.region_column
         for k, column in enumerate(self.sample_columns):
@@ -404,10 +547,22 @@ class Task:
         return out
 
     def stored_table(self, table: pa.Table) -> pa.Table:
-        """Samples read from the database (`db.sample_reader`) under the task's own
-        columns: key columns (`trial_id`, `seq`) kept in front, then every sample column
-        in the task's order. Chunks stored in the layout of before the tasks' own schemas
-        (`SampleColumn.stored_as`) are renamed; a column they lack is NULL."""
+        """Samples read from the database under the task's own columns.
+
+        Chunks stored in the layout of before the tasks' own schemas
+        (`SampleColumn.stored_as`) are renamed; a column they lack is NULL.
+
+        Parameters
+        ----------
+        table : pyarrow.Table
+            Samples as `db.sample_reader` reads them, in either layout.
+
+        Returns
+        -------
+        pyarrow.Table
+            The key columns (`trial_id`, `seq`) kept in front, then every sample column
+            in the task's order, typed as in `sample_schema`.
+        """
         import pyarrow as pa
 
         keys = [k for k in ("trial_id", "seq") if k in table.column_names]
@@ -425,8 +580,24 @@ class Task:
         return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 
     def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
-        """`gain_n_m_per_n`, else the task's default; refused for a task without a dial
-        and outside 0 to `MAX_HAPTIC_GAIN_N_M_PER_N` (the bound a design file has)."""
+        """The haptic gain a trial runs at.
+
+        Parameters
+        ----------
+        gain_n_m_per_n : float or None
+            The asked-for gain of the haptic dial, N m/N; None: the task's default.
+
+        Returns
+        -------
+        float or None
+            `gain_n_m_per_n`, else `default_haptic_gain_n_m_per_n`.
+
+        Raises
+        ------
+        StudyInputError
+            A gain is given for a task without a dial, or it is not finite or lies
+            outside 0 to `MAX_HAPTIC_GAIN_N_M_PER_N` (the bound a design file has).
+        """
         if gain_n_m_per_n is None:
             return self.default_haptic_gain_n_m_per_n
         if not self.has_dial:
@@ -450,7 +621,7 @@ def register(task: Task) -> Task:
 
     Parameters
     ----------
-    task
+    task : Task
         A `Task` instance.
 
     Returns
@@ -524,7 +695,7 @@ def get_task(name: str) -> Task:
 
     Parameters
     ----------
-    name
+    name : str
         A task's name, e.g. ``"lcca"``.
 
     Returns
