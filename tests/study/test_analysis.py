@@ -129,7 +129,7 @@ def test_holm_equals_pingouin(p: list[float]) -> None:
 
 
 def test_study_analyze_imports_neither_pingouin_nor_plotting() -> None:
-    # a fresh process: pingouin pulled in seaborn, matplotlib and xarray, 2.3 s
+    # a fresh process: pingouin pulls in seaborn, matplotlib and xarray (seconds of imports)
     code = "import study.commands.analyze, study.analysis.report, study.analysis.frames"
     heavy = ("pingouin", "matplotlib", "seaborn", "statsmodels.formula.api")
     assert modules_loaded(code, heavy) == []
