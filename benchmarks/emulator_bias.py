@@ -31,9 +31,11 @@ from sklearn.linear_model import RidgeCV
 
 from study.analysis.participant_fit.emulator import (
     ALPHAS,
+    LOCAL_WIDEN,
     MomentEmulator,
     design_box,
     design_settings,
+    group_design_settings,
     log_moment,
     trial_matrix,
 )
@@ -49,18 +51,27 @@ MEASURES = list(TASK.analysed_measures)
 NAMES = [f"{c}:{m}" for c in ("VO", "HV") for m in MEASURES]
 
 
-def simulate(seed: int, design_n: int, per: int, out: str) -> None:
-    x = design_settings(design_n, seed, design_box())
+def simulate(
+    seed: int, design_n: int, per: int, out: str, grouped: bool = False, repeats: int = 1
+) -> None:
+    if grouped:
+        x = group_design_settings(design_n, seed)[0]
+    else:
+        x = design_settings(design_n, seed, design_box())
     people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
-    design = simulate_settings("lcca", people, 1, 2, 180.0, lambda *a: None)
+    design = simulate_settings("lcca", people, repeats, 2, 180.0, lambda *a: None)
     truth = truth_profiles(0.7)
-    fresh = simulate_people(
-        "lcca",
-        {g: [truth[g]] for g in truth},
-        per,
-        3,
-        FitSettings(jobs=2, seed=seed + 500),
-        lambda *a: None,
+    fresh = (
+        simulate_people(
+            "lcca",
+            {g: [truth[g]] for g in truth},
+            per,
+            3,
+            FitSettings(jobs=2, seed=seed + 500),
+            lambda *a: None,
+        )
+        if per
+        else None
     )
     with open(out, "wb") as f:
         pickle.dump({"x": x, "design": design, "fresh": fresh}, f)
@@ -136,12 +147,12 @@ def _compare(predict_for: Any, fresh: pd.DataFrame, emu: MomentEmulator) -> dict
     }
 
 
-def analyse(out: str, paths: list[str]) -> None:
+def analyse(out: str, paths: list[str], only_local: bool = False) -> None:
     loaded = []
     for p in paths:
         with open(p, "rb") as f:
             loaded.append(pickle.load(f))
-    fresh = loaded[0]["fresh"]
+    fresh = next(d["fresh"] for d in loaded if d["fresh"] is not None)
     results: dict[str, Any] = {}
     designs = {f"{len(d['x'])} settings ({p})": [d] for p, d in zip(paths, loaded, strict=True)}
     if len(loaded) > 1:
@@ -165,6 +176,13 @@ def analyse(out: str, paths: list[str]) -> None:
         results[f"{label}: cubic"] = _compare(
             lambda g, c=cubic, i=cidx: lambda t: c.means(t)[:, i], fresh, emu
         )
+        for widen in (2.0, LOCAL_WIDEN, 3.0):
+            local = {g: emu.local(PROFILES[g], widen) for g in PROFILES}
+            results[f"{label}: the fit's local emulator, widen {widen:g}"] = _compare(
+                lambda g, lo=local, i=idx: lambda t: lo[g].means(t)[:, i], fresh, emu
+            )
+        if only_local:
+            continue
         ones = np.ones(len(trial_matrix(design, MEASURES)))
         for kind in ("local_smearing", "own_scale"):
             predict, _ = _surface(x, design, emu, ones, kind)
@@ -195,6 +213,15 @@ def analyse(out: str, paths: list[str]) -> None:
 
 if __name__ == "__main__":
     if sys.argv[1] == "simulate":
-        simulate(int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5])
+        repeats = next((int(a.split("=")[1]) for a in sys.argv if a.startswith("--repeats=")), 1)
+        simulate(
+            int(sys.argv[2]),
+            int(sys.argv[3]),
+            int(sys.argv[4]),
+            sys.argv[5],
+            "--grouped" in sys.argv,
+            repeats,
+        )
     else:
-        analyse(sys.argv[2], sys.argv[3:])
+        args = [a for a in sys.argv[3:] if a != "--only-local"]
+        analyse(sys.argv[2], args, "--only-local" in sys.argv)
