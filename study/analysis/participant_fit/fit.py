@@ -602,9 +602,7 @@ class FitResult:
             "fit": group_out,
             "emulator": {
                 **self.emulator.to_dict(),
-                "local_surfaces": {
-                    g: r.estimator.emulator.local_ for g, r in self.groups.items()
-                },
+                "local_surfaces": {g: r.estimator.emulator.local_ for g, r in self.groups.items()},
                 "local_note": "each group's trait estimates and predicted means rest on its "
                 "own surface: the design refitted with each setting weighted by the group's "
                 "prior density, its SDs widened `widen` times (`effective_settings`: Kish's "
