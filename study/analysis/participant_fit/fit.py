@@ -41,7 +41,12 @@ from sqlalchemy import Engine
 
 from study.analysis.participant_fit import WEAK_TRAITS, checks, effects, validate
 from study.analysis.participant_fit.effects import EffectSearch
-from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
+from study.analysis.participant_fit.emulator import (
+    MomentEmulator,
+    design_box,
+    design_settings,
+    group_design_settings,
+)
 from study.analysis.participant_fit.estimate import (
     HYPER_SD,
     IDENTIFIED_RATIO,
@@ -79,6 +84,9 @@ class FitSettings:
     time was off by noticeably more than with 320 (`validate.py`)."""
     repeats: int = 2
     """Trials per condition at each setting."""
+    design_by_group: bool = False
+    """The design's settings split evenly across the groups, each group's about its
+    prior (`emulator.group_design_settings`), not one Latin hypercube over the box."""
     check: int = 24
     """People per group simulated from the fitted model (summaries and checks)."""
     bootstrap: int = 100
@@ -156,7 +164,10 @@ def build_emulator(
     task: str, settings: FitSettings, progress: Progress = _no_progress
 ) -> MomentEmulator:
     """Simulate the design's trait settings and fit the emulator of the task's moments."""
-    x = design_settings(settings.design, settings.seed, design_box())
+    if settings.design_by_group:
+        x = group_design_settings(settings.design, settings.seed)[0]
+    else:
+        x = design_settings(settings.design, settings.seed, design_box())
     people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
     design = simulate_settings(
         task,
