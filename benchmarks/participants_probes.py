@@ -90,11 +90,6 @@ def main() -> None:
     parser.add_argument("--truth-people", type=int, default=60)
     parser.add_argument("--coverage", type=int, default=0)
     parser.add_argument(
-        "--design-by-group",
-        action="store_true",
-        help="the emulator's design split across the groups (FitSettings.design_by_group)",
-    )
-    parser.add_argument(
         "--emulator-cache",
         type=Path,
         help="pickle of the emulator: loaded if present, else written",
@@ -130,7 +125,6 @@ def main() -> None:
         bootstrap=args.bootstrap,
         jobs=2,
         seed=0,
-        design_by_group=args.design_by_group,
     )
     start = time.monotonic()
     if args.emulator_cache is not None and args.emulator_cache.exists():

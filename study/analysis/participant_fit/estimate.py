@@ -135,7 +135,6 @@ def identifiable(
     held_out: np.ndarray | None = None,
     held_out_k: float | None = None,
     probe_info: dict[str, np.ndarray] | None = None,
-    local: dict[str, MomentEmulator] | None = None,
 ) -> tuple[list[int], dict[str, float]]:
     """The traits whose group means the data identify (indices into TRAITS) and each
     trait's ratio: posterior / prior SD of the group mean, linearised at the priors, in
@@ -156,21 +155,19 @@ def identifiable(
     trait, a person's mean information from the probes in prior SDs, (prior SD / SE)^2,
     `study.probes.measure.probe_information`) adds to both. Starting from all traits, the worst
     is fixed at its prior until every ratio is below `IDENTIFIED_RATIO` (`sizes`: the
-    people defining each moment; a moment fewer than two people define tells nothing;
-    `local`: a group's own emulator for its slopes and noise, where given)."""
+    people defining each moment; a moment fewer than two people define tells nothing)."""
     setup = {}
     for group, profile in profiles.items():
         mu, sd = prior_arrays(profile)
-        own = (local or {}).get(group, emulator)
-        jac = own.jacobian(mu, 0.1 * sd) * sd
+        jac = emulator.jacobian(mu, 0.1 * sd) * sd
         defined = np.asarray(sizes[group]) >= 2
         jac = np.where(defined[:, None], np.nan_to_num(jac), 0.0)
         n = int(np.max(sizes[group]))
         # the same rule on the error of held-out people (`validate.py`), trait by trait
         held = None if held_out is None else (sd / np.maximum(held_out, 1e-12)) ** 2
-        noise_held = person_noise_var(own, held_out_k or ks[group])
+        noise_held = person_noise_var(emulator, held_out_k or ks[group])
         probe = np.zeros(len(TRAITS)) if probe_info is None else probe_info[group]
-        setup[group] = (jac, person_noise_var(own, ks[group]), n, held, noise_held, probe)
+        setup[group] = (jac, person_noise_var(emulator, ks[group]), n, held, noise_held, probe)
 
     def ratios(free: list[int]) -> np.ndarray:
         worst = np.zeros(len(free))

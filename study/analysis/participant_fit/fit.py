@@ -41,12 +41,7 @@ from sqlalchemy import Engine
 
 from study.analysis.participant_fit import WEAK_TRAITS, checks, effects, validate
 from study.analysis.participant_fit.effects import EffectSearch
-from study.analysis.participant_fit.emulator import (
-    MomentEmulator,
-    design_box,
-    design_settings,
-    group_design_settings,
-)
+from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
 from study.analysis.participant_fit.estimate import (
     HYPER_SD,
     IDENTIFIED_RATIO,
@@ -84,9 +79,6 @@ class FitSettings:
     time was off by noticeably more than with 320 (`validate.py`)."""
     repeats: int = 2
     """Trials per condition at each setting."""
-    design_by_group: bool = False
-    """The design's settings split evenly across the groups, each group's about its
-    prior (`emulator.group_design_settings`), not one Latin hypercube over the box."""
     check: int = 24
     """People per group simulated from the fitted model (summaries and checks)."""
     bootstrap: int = 100
@@ -164,10 +156,7 @@ def build_emulator(
     task: str, settings: FitSettings, progress: Progress = _no_progress
 ) -> MomentEmulator:
     """Simulate the design's trait settings and fit the emulator of the task's moments."""
-    if settings.design_by_group:
-        x = group_design_settings(settings.design, settings.seed)[0]
-    else:
-        x = design_settings(settings.design, settings.seed, design_box())
+    x = design_settings(settings.design, settings.seed, design_box())
     people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
     design = simulate_settings(
         task,
@@ -183,14 +172,6 @@ def build_emulator(
     validate.attach(emulator, x, design, settings.repeats)
     progress("validating", 1, 1)
     return emulator
-
-
-def local_emulators(emulator: MomentEmulator, groups: Sequence[str]) -> dict[str, MomentEmulator]:
-    """Each group's own emulator: the design refitted with its settings weighted by the
-    group's prior (`MomentEmulator.local`). Against fresh simulations at a group's
-    traits, one global quadratic surface is off by about twice the simulations' SE: it
-    bends to fit every group's range at once (`benchmarks/emulator_bias.py`)."""
-    return {g: emulator.local(PROFILES[g]) for g in groups}
 
 
 def fit_study(
@@ -315,12 +296,10 @@ def plan_traits(
     data: FitData,
     settings: FitSettings,
     sources: dict[str, str] | None = None,
-    local: dict[str, MomentEmulator] | None = None,
 ) -> TraitPlan:
-    """Which traits the data identify (`identifiable`, each group on its `local`
-    emulator where given), and so per trait: fitted from the task's data, held at the
-    prior (the weakly told ones by default), or told by another source (`sources`:
-    trait -> its name)."""
+    """Which traits the data identify (`identifiable`), and so per trait: fitted from the
+    task's data, held at the prior (the weakly told ones by default), or told by another
+    source (`sources`: trait -> its name)."""
     names = emulator.moments_
     # the features every group's data hold (an imported study without samples: none)
     held = [
@@ -347,7 +326,6 @@ def plan_traits(
         held_out,
         validate.held_out_trials(emulator),
         probe_info,
-        local,
     )
     sources = dict(sources or {})
     told = [j for j in told if TRAITS[j] not in sources]
@@ -435,8 +413,7 @@ def fit_group(
     rng: np.random.Generator,
 ) -> GroupResult:
     """One group's trait distribution, its bootstrap over participants (resampled, the
-    weak traits' prior centre drawn) and the model's predicted means per replicate;
-    `emulator`: the group's own (`MomentEmulator.local`)."""
+    weak traits' prior centre drawn) and the model's predicted means per replicate."""
     names = emulator.moments_
     est = GroupEstimator(
         emulator, PROFILES[group], plan.free, data.ks[group], settings.seed, plan.weak
@@ -569,8 +546,7 @@ class FitResult:
                 "note": data.counts["note"],
             },
             "method": "hierarchical model fitted by EM on an emulator (quadratic response "
-            "surface of log measures and log sample features on log traits, one per group: "
-            "the design weighted by the group's prior): each person's "
+            "surface of log measures and log sample features on log traits): each person's "
             "traits N(group mean, group sd), their posterior modes by Levenberg-Marquardt "
             f"(Laplace covariances); group sds pooled with {NU0:g} pseudo-people at the "
             "profile's; the weakly told traits' group means under the profile's prior; "
@@ -611,14 +587,7 @@ class FitResult:
                 for g, out in group_out.items()
             },
             "fit": group_out,
-            "emulator": {
-                **self.emulator.to_dict(),
-                "local_surfaces": {g: r.estimator.emulator.local_ for g, r in self.groups.items()},
-                "local_note": "each group's trait estimates and predicted means rest on its "
-                "own surface: the design refitted with each setting weighted by the group's "
-                "prior density, its SDs widened `widen` times (`effective_settings`: Kish's "
-                "effective number of the design's settings)",
-            },
+            "emulator": self.emulator.to_dict(),
             "summaries": self.table.round(6).to_dict(orient="records"),
             "simulated_summaries_note": f"'simulated' rows: {settings.check} people per group "
             "SIMULATED from the fitted model (each from one of the fit's bootstrap replicates, "
@@ -663,8 +632,7 @@ def run_fit(
     probe estimates (`study.probes.measure.probe_table`), each a measurement of a trait
     beside the task's moments."""
     observed = read_data(trials, task, emulator, db_label, probes)
-    local = local_emulators(emulator, observed.groups)
-    plan = plan_traits(emulator, observed, settings, sources, local)
+    plan = plan_traits(emulator, observed, settings, sources)
     found, data = None, observed
     if loop:
         found = effects.search(
@@ -681,7 +649,7 @@ def run_fit(
     fits = {}
     for k, g in enumerate(data.groups):
         progress("fitting", k, len(data.groups))
-        fits[g] = fit_group(local[g], data, g, plan, settings, rng)
+        fits[g] = fit_group(emulator, data, g, plan, settings, rng)
     progress("fitting", len(data.groups), len(data.groups))
     added = found.effects if found is not None else []
     checked = check_model(task, emulator, observed, plan, fits, settings, rng, progress, added)
