@@ -2,19 +2,23 @@
 simulations of people drawn from the truth of `study bench participants` (the priors
 moved 0.7 SD), per group, condition and measure. SIMULATED throughout.
 
-    # the design's trials (a Latin hypercube, 1 trial per condition a setting) and
-    # PER fresh people a group at the truth (3 trials per condition)
+    # the design's trials (a Latin hypercube over the box, or with --grouped one split
+    # across the groups about their priors; --repeats=R trials per condition a setting,
+    # default 1) and PER fresh people a group at the truth (3 trials per condition; 0:
+    # none)
     nice -n 10 python benchmarks/emulator_bias.py simulate SEED DESIGN PER OUT.pkl
-    # the comparison: surfaces fitted to the pickles' designs (pooled), against the
-    # first pickle's fresh people; writes OUT.json
+    # the comparison: surfaces fitted to the pickles' designs (each, and pooled), against
+    # the first fresh people among the pickles; writes OUT.json (--only-local: the
+    # fit's surfaces, the cubic and the local emulator only)
     python benchmarks/emulator_bias.py analyse OUT.json A.pkl [B.pkl ...]
 
 Variants compared (each as z = (prediction - fresh mean) / the fresh mean's SE; an
 unbiased emulator gives an RMS z near 1): the emulator as the fit builds it (a global
 quadratic surface in the log traits, Duan's smearing); with a smearing that follows the
 traits (E[exp(residual) | traits] by ridge); a cubic surface; the measures fitted on
-their own scale; and a surface local to each group (the design's trials weighted by the
-group's prior density with its SDs widened `widen` times).
+their own scale; a surface local to each group (the design's trials weighted by the
+group's prior density with its SDs widened `widen` times); and the same as the library
+builds it (`MomentEmulator.local`, the residual's statistics weighted too).
 """
 
 from __future__ import annotations
