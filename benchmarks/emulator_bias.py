@@ -2,19 +2,23 @@
 simulations of people drawn from the truth of `study bench participants` (the priors
 moved 0.7 SD), per group, condition and measure. SIMULATED throughout.
 
-    # the design's trials (a Latin hypercube, 1 trial per condition a setting) and
-    # PER fresh people a group at the truth (3 trials per condition)
+    # the design's trials (a Latin hypercube over the box, or with --grouped one split
+    # across the groups about their priors; --repeats=R trials per condition a setting,
+    # default 1) and PER fresh people a group at the truth (3 trials per condition; 0:
+    # none)
     nice -n 10 python benchmarks/emulator_bias.py simulate SEED DESIGN PER OUT.pkl
-    # the comparison: surfaces fitted to the pickles' designs (pooled), against the
-    # first pickle's fresh people; writes OUT.json
+    # the comparison: surfaces fitted to the pickles' designs (each, and pooled), against
+    # the first fresh people among the pickles; writes OUT.json (--only-local: the
+    # fit's surfaces, the cubic and the local emulator only)
     python benchmarks/emulator_bias.py analyse OUT.json A.pkl [B.pkl ...]
 
 Variants compared (each as z = (prediction - fresh mean) / the fresh mean's SE; an
 unbiased emulator gives an RMS z near 1): the emulator as the fit builds it (a global
 quadratic surface in the log traits, Duan's smearing); with a smearing that follows the
 traits (E[exp(residual) | traits] by ridge); a cubic surface; the measures fitted on
-their own scale; and a surface local to each group (the design's trials weighted by the
-group's prior density with its SDs widened `widen` times).
+their own scale; a surface local to each group (the design's trials weighted by the
+group's prior density with its SDs widened `widen` times); and the same as the library
+builds it (`MomentEmulator.local`, the residual's statistics weighted too).
 """
 
 from __future__ import annotations
@@ -31,9 +35,11 @@ from sklearn.linear_model import RidgeCV
 
 from study.analysis.participant_fit.emulator import (
     ALPHAS,
+    LOCAL_WIDEN,
     MomentEmulator,
     design_box,
     design_settings,
+    group_design_settings,
     log_moment,
     trial_matrix,
 )
@@ -49,18 +55,27 @@ MEASURES = list(TASK.analysed_measures)
 NAMES = [f"{c}:{m}" for c in ("VO", "HV") for m in MEASURES]
 
 
-def simulate(seed: int, design_n: int, per: int, out: str) -> None:
-    x = design_settings(design_n, seed, design_box())
+def simulate(
+    seed: int, design_n: int, per: int, out: str, grouped: bool = False, repeats: int = 1
+) -> None:
+    if grouped:
+        x = group_design_settings(design_n, seed)[0]
+    else:
+        x = design_settings(design_n, seed, design_box())
     people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
-    design = simulate_settings("lcca", people, 1, 2, 180.0, lambda *a: None)
+    design = simulate_settings("lcca", people, repeats, 2, 180.0, lambda *a: None)
     truth = truth_profiles(0.7)
-    fresh = simulate_people(
-        "lcca",
-        {g: [truth[g]] for g in truth},
-        per,
-        3,
-        FitSettings(jobs=2, seed=seed + 500),
-        lambda *a: None,
+    fresh = (
+        simulate_people(
+            "lcca",
+            {g: [truth[g]] for g in truth},
+            per,
+            3,
+            FitSettings(jobs=2, seed=seed + 500),
+            lambda *a: None,
+        )
+        if per
+        else None
     )
     with open(out, "wb") as f:
         pickle.dump({"x": x, "design": design, "fresh": fresh}, f)
@@ -136,12 +151,12 @@ def _compare(predict_for: Any, fresh: pd.DataFrame, emu: MomentEmulator) -> dict
     }
 
 
-def analyse(out: str, paths: list[str]) -> None:
+def analyse(out: str, paths: list[str], only_local: bool = False) -> None:
     loaded = []
     for p in paths:
         with open(p, "rb") as f:
             loaded.append(pickle.load(f))
-    fresh = loaded[0]["fresh"]
+    fresh = next(d["fresh"] for d in loaded if d["fresh"] is not None)
     results: dict[str, Any] = {}
     designs = {f"{len(d['x'])} settings ({p})": [d] for p, d in zip(paths, loaded, strict=True)}
     if len(loaded) > 1:
@@ -165,6 +180,13 @@ def analyse(out: str, paths: list[str]) -> None:
         results[f"{label}: cubic"] = _compare(
             lambda g, c=cubic, i=cidx: lambda t: c.means(t)[:, i], fresh, emu
         )
+        for widen in (2.0, LOCAL_WIDEN, 3.0):
+            local = {g: emu.local(PROFILES[g], widen) for g in PROFILES}
+            results[f"{label}: the fit's local emulator, widen {widen:g}"] = _compare(
+                lambda g, lo=local, i=idx: lambda t: lo[g].means(t)[:, i], fresh, emu
+            )
+        if only_local:
+            continue
         ones = np.ones(len(trial_matrix(design, MEASURES)))
         for kind in ("local_smearing", "own_scale"):
             predict, _ = _surface(x, design, emu, ones, kind)
@@ -195,6 +217,15 @@ def analyse(out: str, paths: list[str]) -> None:
 
 if __name__ == "__main__":
     if sys.argv[1] == "simulate":
-        simulate(int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5])
+        repeats = next((int(a.split("=")[1]) for a in sys.argv if a.startswith("--repeats=")), 1)
+        simulate(
+            int(sys.argv[2]),
+            int(sys.argv[3]),
+            int(sys.argv[4]),
+            sys.argv[5],
+            "--grouped" in sys.argv,
+            repeats,
+        )
     else:
-        analyse(sys.argv[2], sys.argv[3:])
+        args = [a for a in sys.argv[3:] if a != "--only-local"]
+        analyse(sys.argv[2], args, "--only-local" in sys.argv)

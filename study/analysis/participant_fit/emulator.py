@@ -42,6 +42,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 from scipy.stats import qmc
 from sklearn.linear_model import RidgeCV
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
@@ -100,6 +101,29 @@ def design_settings(n: int, seed: int, box: tuple[np.ndarray, np.ndarray]) -> np
     return qmc.scale(unit, box[0], box[1])
 
 
+LOCAL_WIDEN = 2.5
+"""A group's share of the design, and its weight in the group's local surface, follow
+the group's prior with its SDs widened this many times."""
+
+
+def group_design_settings(
+    n: int, seed: int, profiles: dict[str, GroupProfile] = PROFILES, widen: float = LOCAL_WIDEN
+) -> tuple[np.ndarray, np.ndarray]:
+    """`n` trait settings split evenly across the groups, each group's a Latin hypercube
+    of normal quantiles about its prior mean with the SDs widened `widen` times (within
+    `design_box`); and the group index of each setting."""
+    low, high = design_box(profiles)
+    parts, owner = [], []
+    for g, profile in enumerate(profiles.values()):
+        size = n // len(profiles) + (g < n % len(profiles))
+        unit = qmc.LatinHypercube(d=len(TRAITS), seed=np.random.default_rng([seed, g])).random(size)
+        mean = np.array([getattr(profile, t)[0] for t in TRAITS])
+        sd = np.array([getattr(profile, t)[1] for t in TRAITS])
+        parts.append(np.clip(mean + widen * sd * stats.norm.ppf(unit), low, high))
+        owner += [g] * size
+    return np.concatenate(parts), np.array(owner)
+
+
 def trial_matrix(trials: pd.DataFrame, columns: Sequence[str]) -> pd.DataFrame:
     """One row per (setting, repeat): every condition's `columns` (measures, features)
     side by side, named `moment_names(columns)`."""
@@ -115,6 +139,26 @@ def trial_matrix(trials: pd.DataFrame, columns: Sequence[str]) -> pd.DataFrame:
 
 MIN_DEFINED = 20
 """Fewest design trials a feature must be defined in to be emulated (else it is dropped)."""
+
+
+def _weighted_mean(values: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Column means of `values` (rows, columns) weighted by `w` (rows,) or (rows, 1),
+    over the rows where a column is defined; NaN where none is."""
+    w = np.broadcast_to(np.reshape(w, (len(values), -1)), values.shape)
+    ok = np.isfinite(values) & (w > 0)
+    total = np.where(ok, w, 0.0).sum(axis=0)
+    summed = np.where(ok, values * w, 0.0).sum(axis=0)
+    return np.divide(summed, total, out=np.full(values.shape[1], np.nan), where=total > 0)
+
+
+def _weighted_variance(values: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Column variances (about the weighted mean, no correction) weighted by `w`."""
+    return _weighted_mean((values - _weighted_mean(values, w)) ** 2, w)
+
+
+def _effective(weights: np.ndarray) -> float:
+    """Kish's effective number of settings of `weights`."""
+    return float(weights.sum() ** 2 / (weights**2).sum())
 
 
 class MomentEmulator:
@@ -147,9 +191,13 @@ class MomentEmulator:
         trials: pd.DataFrame,
         measures: Sequence[str],
         features: Sequence[str] = (),
+        weights: np.ndarray | None = None,
     ) -> MomentEmulator:
-        """`settings` (n, len(TRAITS)); `trials` from `simulate_settings` over them."""
+        """`settings` (n, len(TRAITS)); `trials` from `simulate_settings` over them;
+        `weights` (n,): each setting's weight in the surface and in the residual's
+        statistics (default equal; `local` weights them by a group's prior)."""
         self.measures_ = list(measures)
+        self.training_ = (settings, trials, tuple(features))
         features = [f for f in features if f in trials and trials[f].notna().any()]
         names = [*moment_names(measures), *moment_names(features)]
         wide = trial_matrix(trials, [*measures, *features])[names]
@@ -160,6 +208,9 @@ class MomentEmulator:
         self.moments_ = [n for n, k in zip(wide.columns, keep, strict=True) if k]
         self.features_ = [f for f in features if any(n.endswith(f":{f}") for n in self.moments_)]
         y = y[:, keep]
+        setting_w = np.ones(len(settings)) if weights is None else np.asarray(weights, float)
+        w = setting_w[wide.index.get_level_values("setting")]
+        w = w / w.mean()
         scaler = StandardScaler().fit(surface_traits(x))
         self.centre_, self.scale_ = scaler.mean_, scaler.scale_
         self.powers_ = PolynomialFeatures(self.degree).fit(x).powers_
@@ -170,36 +221,66 @@ class MomentEmulator:
         resid = np.full_like(y, np.nan)
         for j in range(y.shape[1]):
             ok = np.isfinite(y[:, j])
-            ridge = RidgeCV(alphas=list(self.alphas)).fit(phi[ok], y[ok, j])
+            ridge = RidgeCV(alphas=list(self.alphas)).fit(phi[ok], y[ok, j], sample_weight=w[ok])
             self.coef_[:, j], self.intercept_[j] = ridge.coef_, ridge.intercept_
             self.alpha_[j] = ridge.alpha_
             resid[ok, j] = y[ok, j] - ridge.predict(phi[ok])
-        self.defined_ = np.isfinite(y).mean(axis=0)
+        self.defined_ = _weighted_mean(np.isfinite(y).astype(float), w)
+        self._residual_statistics(resid, w, wide.index.get_level_values("setting"))
+        total = _weighted_variance(y, w)
+        r2 = 1 - _weighted_variance(resid, w) / np.where(total > 0, total, 1)
+        self.r2_ = dict(zip(self.moments_, r2, strict=True))
+        self.n_settings_, self.n_trials_ = len(settings), len(trials)
+        self.box_ = (settings.min(axis=0), settings.max(axis=0))
+        return self
+
+    def _residual_statistics(self, resid: np.ndarray, w: np.ndarray, setting: pd.Index) -> None:
+        """The trials' noise about the surface, weighted by `w` (each trial's, mean 1)."""
         # the surface's own error at a setting does not average away over a person's
         # trials: split the residual into the trials' scatter about their setting's mean
         # (pooled within settings) and the spread of those means beyond what the scatter
         # explains (the misfit)
         # (with one trial per setting the two cannot be told apart: all is scatter)
-        by_setting = pd.DataFrame(resid).groupby(wide.index.get_level_values("setting"))
-        within = by_setting.var(ddof=1).mean().to_numpy()
-        total_var = np.nan_to_num(np.nanvar(resid, axis=0))
+        scaled = resid * np.sqrt(w)[:, None]
+        by_setting = pd.DataFrame(resid).groupby(setting)
+        setting_w = pd.Series(w).groupby(setting).mean().to_numpy()[:, None]
+        within = _weighted_mean(by_setting.var(ddof=1).to_numpy(), setting_w)
+        total_var = np.nan_to_num(_weighted_variance(resid, w))
         self.within_var_ = np.maximum(np.where(np.isfinite(within), within, total_var), 1e-10)
         per = by_setting.count().mean().to_numpy()
-        between = by_setting.mean().var(ddof=1).to_numpy() - self.within_var_ / per
+        means = by_setting.mean().to_numpy()
+        n_means = np.isfinite(means).sum(axis=0)
+        spread = _weighted_variance(means, setting_w) * n_means / np.maximum(n_means - 1, 1)
+        between = spread - self.within_var_ / per
         between = np.clip(np.nan_to_num(between), 0.0, None)
         self.misfit_var_ = np.where(np.isfinite(within), between, 0.0)
-        self.smearing_ = np.nanmean(np.exp(resid), axis=0)
+        self.smearing_ = _weighted_mean(np.exp(resid), w)
         # noise of one trial's log-moments (and the surface's misfit), across moments:
         # pairwise where features are undefined, then made positive definite
-        cov = pd.DataFrame(resid).cov(min_periods=MIN_DEFINED // 2).fillna(0.0).to_numpy()
-        w, v = np.linalg.eigh(cov)
-        self.noise_cov_ = np.atleast_2d((v * np.maximum(w, 1e-6 * w.max())) @ v.T)
-        total = np.nanvar(y, axis=0)
-        r2 = 1 - np.nanvar(resid, axis=0) / np.where(total > 0, total, 1)
-        self.r2_ = dict(zip(self.moments_, r2, strict=True))
-        self.n_settings_, self.n_trials_ = len(settings), len(trials)
-        self.box_ = (settings.min(axis=0), settings.max(axis=0))
-        return self
+        cov = pd.DataFrame(scaled).cov(min_periods=MIN_DEFINED // 2).fillna(0.0).to_numpy()
+        ev, v = np.linalg.eigh(cov)
+        self.noise_cov_ = np.atleast_2d((v * np.maximum(ev, 1e-6 * ev.max())) @ v.T)
+
+    def local(self, profile: GroupProfile, widen: float = LOCAL_WIDEN) -> MomentEmulator:
+        """The same emulator refitted to its design with each setting weighted by the
+        group's prior density (`profile`, its SDs widened `widen` times): a surface that
+        fits the group's own range of traits, where a global quadratic surface bends to
+        fit the other groups' too. The design's range (`box_`) and held-out errors are
+        kept."""
+        settings, trials, features = self.training_
+        mean = np.array([getattr(profile, t)[0] for t in TRAITS])
+        sd = np.array([getattr(profile, t)[1] for t in TRAITS])
+        log_w = stats.norm.logpdf((settings - mean) / (widen * sd)).sum(axis=1)
+        weights = np.exp(log_w - log_w.max())
+        out = MomentEmulator(self.degree, self.alphas).fit(
+            settings, trials, self.measures_, features, weights
+        )
+        out.box_ = self.box_
+        out.local_ = {"widen": widen, "effective_settings": _effective(weights)}
+        for kept in ("held_out_error_", "design_"):
+            if hasattr(self, kept):
+                setattr(out, kept, getattr(self, kept))
+        return out
 
     def subset(self, names: Sequence[str]) -> MomentEmulator:
         """The same emulator over the moments `names` only."""
