@@ -103,7 +103,8 @@ class App:
             self.child.send("y")
             self.child.expect(pexpect.EOF)
         self.child.wait()
-        assert self.child.exitstatus == 0
+        # the app's last screen and what it printed on leaving (a traceback) name the cause
+        assert self.child.exitstatus == 0, self.drawn.getvalue()[-3000:]
         assert "Traceback" not in self.drawn.getvalue()
 
     def close(self) -> None:
