@@ -18,7 +18,7 @@ position-periodic disturbance, `scipy.signal.lombscargle` on the residual agains
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, ParamSpec, TypeVar
 
@@ -108,6 +108,22 @@ def train_sse(model: BaseModel, data: CalibrationData, train: Rows, chain: Chain
     coef = solve(X[train], data.y[train])
     e = data.y[train] - X[train] @ coef
     return float(e @ e)
+
+
+def best_training_fit(designs: Iterable[Float2D], y: Float1D, train: Rows) -> tuple[float, Float1D]:
+    """Of `designs`, the one whose least-squares fit on the `train` rows leaves the
+    smallest training SSE (the first of equals): that SSE and its fitted values on
+    every row (a grid search over a value that enters the design itself)."""
+    best: tuple[float, Float1D] | None = None
+    for X in designs:
+        fit = X @ solve(X[train], y[train])
+        e = y[train] - fit[train]
+        sse = float(e @ e)
+        if best is None or sse < best[0]:
+            best = (sse, fit)
+    if best is None:
+        raise ValueError("best_training_fit: no design given")
+    return best
 
 
 class SearchCost:

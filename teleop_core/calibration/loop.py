@@ -55,6 +55,7 @@ from teleop_core.calibration.effects import EFFECTS, MAX_LAG_S, Effect
 from teleop_core.calibration.fitting import (
     CalibratedModel,
     Chain,
+    best_training_fit,
     confidence,
     design,
     one_blas_thread,
@@ -274,23 +275,20 @@ class Calibrator:
         X, _ = design(self.base_, data.signals, chain)
         y = data.y
         size = np.abs(pred)
-        best: tuple[float, Float1D] | None = None
-        for level in np.quantile(size[self.train_], SATURATION_QUANTILES):
-            column = -np.sign(pred) * np.maximum(size - level, 0.0)
-            Xs = np.column_stack([X, column])
-            coef = solve(Xs[self.train_], y[self.train_])
-            fit = Xs @ coef
-            e = y[self.train_] - fit[self.train_]
-            sse = float(e @ e)
-            if best is None or sse < best[0]:
-                best = (sse, fit)
-        assert best is not None
-        e_sat = y[self.test_] - best[1][self.test_]
+        sse_sat, fit_sat = best_training_fit(
+            (
+                np.column_stack([X, -np.sign(pred) * np.maximum(size - level, 0.0)])
+                for level in np.quantile(size[self.train_], SATURATION_QUANTILES)
+            ),
+            y,
+            self.train_,
+        )
+        e_sat = y[self.test_] - fit_sat[self.test_]
         e_win = e_best[self.test_]
         near = _rmse(e_sat) * (1.0 - self.min_gain) <= _rmse(e_win)
         tied = near and diebold_mariano(e_sat, e_win) >= self.alpha
         train = e_best[self.train_]
-        better = len(train) * np.log(best[0] / float(train @ train)) < -BIC_DECISIVE
+        better = len(train) * np.log(sse_sat / float(train @ train)) < -BIC_DECISIVE
         return [SATURATION_ALTERNATIVE] if tied or better else []
 
     def _filtered_errors(self, data: CalibrationData, chain: Chain) -> Float1D:
@@ -299,18 +297,10 @@ class Calibrator:
         X, _ = design(self.base_, data.signals, chain)
         dt = float(np.median(np.diff(data.signals["t"])))
         y = data.y
-        best: tuple[float, Float1D] | None = None
-        for tau in np.geomspace(dt, 2 * MAX_LAG_S, LAG_GRID):
-            a = float(np.exp(-dt / tau))
-            Xf = signal.lfilter([1.0 - a], [1.0, -a], X, axis=0, zi=a * X[:1])[0]
-            coef = solve(Xf[self.train_], y[self.train_])
-            pred = Xf @ coef
-            e = y[self.train_] - pred[self.train_]
-            sse = float(e @ e)
-            if best is None or sse < best[0]:
-                best = (sse, pred)
-        assert best is not None
-        return y[self.test_] - best[1][self.test_]
+        poles = (float(np.exp(-dt / tau)) for tau in np.geomspace(dt, 2 * MAX_LAG_S, LAG_GRID))
+        lagged = (signal.lfilter([1.0 - a], [1.0, -a], X, axis=0, zi=a * X[:1])[0] for a in poles)
+        _, fit = best_training_fit(lagged, y, self.train_)
+        return y[self.test_] - fit[self.test_]
 
     @one_blas_thread
     def fit(self, data: CalibrationData, progress: Progress = no_progress) -> Calibrator:
