@@ -17,9 +17,8 @@ from study.analysis.participant_fit.emulator import (
 )
 from study.analysis.participant_fit.estimate import prior_arrays
 from study.protocol.traits import PROFILES, TRAITS, GroupProfile
+from tests.study.test_participant_fit_validate import MEASURES, NOISE, synthetic_trials
 
-MEASURES = ("completion_time_s", "peak_proximal_force_n")
-NOISE = 0.02
 """SD of a trial's log measure about its law."""
 
 
@@ -32,20 +31,7 @@ def _law(traits: np.ndarray) -> np.ndarray:
 
 
 def _trials(x: np.ndarray, rng: np.random.Generator) -> pd.DataFrame:
-    rows = []
-    for k, logs in enumerate(_law(x)):
-        for r in range(2):
-            for condition in ("VO", "HV"):
-                noisy = np.exp(logs + rng.normal(0.0, NOISE, 2))
-                rows.append(
-                    {
-                        "setting": k,
-                        "condition": condition,
-                        "repeat": r,
-                        **dict(zip(MEASURES, noisy, strict=True)),
-                    }
-                )
-    return pd.DataFrame(rows)
+    return synthetic_trials(_law(x), 2, rng)
 
 
 def _errors(emulator: MomentEmulator, centre: np.ndarray) -> np.ndarray:

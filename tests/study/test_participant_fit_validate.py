@@ -29,12 +29,14 @@ def _law(traits: np.ndarray) -> np.ndarray:
     return np.column_stack([np.log(0.25 / speed), np.log(0.4 + 0.5 * caution)])
 
 
-def _trials(x: np.ndarray, repeats: int, rng: np.random.Generator) -> pd.DataFrame:
+def synthetic_trials(logs: np.ndarray, repeats: int, rng: np.random.Generator) -> pd.DataFrame:
+    """Trials of the design settings whose log measures are the rows of `logs`: each
+    setting `repeats` times in VO and HV, with log-normal noise of SD `NOISE`."""
     rows = []
-    for k, logs in enumerate(_law(x)):
+    for k, setting_logs in enumerate(logs):
         for r in range(repeats):
             for condition in ("VO", "HV"):
-                noisy = np.exp(logs + rng.normal(0.0, NOISE, 2))
+                noisy = np.exp(setting_logs + rng.normal(0.0, NOISE, 2))
                 rows.append(
                     {
                         "setting": k,
@@ -44,6 +46,10 @@ def _trials(x: np.ndarray, repeats: int, rng: np.random.Generator) -> pd.DataFra
                     }
                 )
     return pd.DataFrame(rows)
+
+
+def _trials(x: np.ndarray, repeats: int, rng: np.random.Generator) -> pd.DataFrame:
+    return synthetic_trials(_law(x), repeats, rng)
 
 
 def test_held_out_people_tell_the_traits_their_moments_follow() -> None:
