@@ -49,7 +49,7 @@ def held_out_errors(
     errors, truth = [], []
     for f in range(FOLDS):
         held = fold[design["setting"].to_numpy()] == f
-        emulator = MomentEmulator(surface.degree, surface.alphas).fit(
+        emulator = MomentEmulator(surface.degree, surface.alphas, mean_surface=False).fit(
             x, design[~held], measures, features
         )
         test = design[held].assign(
