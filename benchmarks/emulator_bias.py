@@ -5,16 +5,21 @@ moved 0.7 SD), per group, condition and measure. SIMULATED throughout.
     # the design's trials (a Latin hypercube over the box, or with --grouped one split
     # across the groups about their priors; --repeats=R trials per condition a setting,
     # default 1) and PER fresh people a group at the truth (3 trials per condition; 0:
-    # none)
+    # none; --fresh-seed=S: their seed, default SEED + 500; SEED 0, DESIGN 320 and
+    # --repeats=2 are the fit's own design, `build_emulator`'s)
     nice -n 10 python benchmarks/emulator_bias.py simulate SEED DESIGN PER OUT.pkl
     # the comparison: surfaces fitted to the pickles' designs (each, and pooled), against
     # the first fresh people among the pickles; writes OUT.json (--only-local: the
-    # fit's surfaces, the cubic and the local emulator only)
+    # fit's surfaces, the cubic and the local emulator only; --design-boot=B: the fit's
+    # surfaces' own noise by B bootstrap resamples of the design's settings, and z
+    # against the fresh SE and that noise together)
     python benchmarks/emulator_bias.py analyse OUT.json A.pkl [B.pkl ...]
 
 Variants compared (each as z = (prediction - fresh mean) / the fresh mean's SE; an
-unbiased emulator gives an RMS z near 1): the emulator as the fit builds it (a global
-quadratic surface in the log traits, Duan's smearing); with a smearing that follows the
+unbiased emulator gives an RMS z near 1, more by its own design's noise): the
+emulator as the fit builds it (a global quadratic surface in the log traits; the
+measures' means from a log-link surface of the measures themselves); the means as
+before it, exp(log surface) times Duan's smearing factor; with a smearing that follows the
 traits (E[exp(residual) | traits] by ridge); a cubic surface; the measures fitted on
 their own scale; a surface local to each group (the design's trials weighted by the
 group's prior density with its SDs widened `widen` times); and the same as the library
@@ -56,7 +61,13 @@ NAMES = [f"{c}:{m}" for c in ("VO", "HV") for m in MEASURES]
 
 
 def simulate(
-    seed: int, design_n: int, per: int, out: str, grouped: bool = False, repeats: int = 1
+    seed: int,
+    design_n: int,
+    per: int,
+    out: str,
+    grouped: bool = False,
+    repeats: int = 1,
+    fresh_seed: int | None = None,
 ) -> None:
     if grouped:
         x = group_design_settings(design_n, seed)[0]
@@ -71,7 +82,7 @@ def simulate(
             {g: [truth[g]] for g in truth},
             per,
             3,
-            FitSettings(jobs=2, seed=seed + 500),
+            FitSettings(jobs=2, seed=seed + 500 if fresh_seed is None else fresh_seed),
             lambda *a: None,
         )
         if per
@@ -115,7 +126,52 @@ def _surface(
     return predict, xs
 
 
-def _compare(predict_for: Any, fresh: pd.DataFrame, emu: MomentEmulator) -> dict[str, Any]:
+def _group_predictions(predict_for: Any, emu: MomentEmulator) -> list[float]:
+    """The predicted group means at the truth, in `_compare`'s row order."""
+    truth = truth_profiles(0.7)
+    out = []
+    for g in truth:
+        mean, sd = prior_arrays(truth[g])
+        draws = GroupEstimator(emu, PROFILES[g], list(range(len(TRAITS))), 3.0).draws(mean, sd)
+        pred = dict(zip(NAMES, predict_for(g)(draws).mean(axis=0), strict=True))
+        for m in MEASURES:
+            for c in ("VO", "HV", "VO-HV"):
+                p = pred[f"VO:{m}"] - pred[f"HV:{m}"] if c == "VO-HV" else pred[f"{c}:{m}"]
+                out.append(float(p))
+    return out
+
+
+def design_noise(
+    x: np.ndarray, design: pd.DataFrame, emu: MomentEmulator, boots: int, mean_surface: bool
+) -> np.ndarray:
+    """The SD of each `_compare` row's prediction over emulators refitted to `boots`
+    resamples of the design's settings (each with its trials): the emulator's own noise,
+    which the fresh people's SE leaves out."""
+    rng = np.random.default_rng(5)
+    preds = []
+    for _ in range(boots):
+        pick = rng.integers(0, len(x), len(x))
+        parts = []
+        for new, old in enumerate(pick):
+            part = design[design["setting"] == old].copy()
+            part["setting"] = new
+            parts.append(part)
+        e = MomentEmulator(mean_surface=mean_surface).fit(
+            x[pick], pd.concat(parts, ignore_index=True), MEASURES, ()
+        )
+        idx = [e.moments_.index(n) for n in NAMES]
+        preds.append(_group_predictions(lambda g, e=e, i=idx: lambda t: e.means(t)[:, i], emu))
+    return np.std(preds, axis=0, ddof=1)
+
+
+def _compare(
+    predict_for: Any,
+    fresh: pd.DataFrame,
+    emu: MomentEmulator,
+    noise: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """Per row z against the fresh mean's SE; with `noise` (`design_noise`) also
+    against sqrt(SE^2 + noise^2)."""
     truth = truth_profiles(0.7)
     per = fresh.groupby(["group", "participant", "condition"])[MEASURES].mean()
     rows = []
@@ -142,16 +198,30 @@ def _compare(predict_for: Any, fresh: pd.DataFrame, emu: MomentEmulator) -> dict
                     }
                 )
     z = np.array([r["z"] for r in rows])
-    return {
+    out: dict[str, Any] = {
         "rms_z": round(float(np.sqrt((z**2).mean())), 3),
         "mean_z": round(float(z.mean()), 3),
         "beyond_1_96": int((np.abs(z) > 1.96).sum()),
         "of": len(z),
-        "rows": rows,
     }
+    if noise is not None:
+        for r, sd in zip(rows, noise, strict=True):
+            r["design_noise_sd"] = float(sd)
+            r["z_with_design_noise"] = (r["predicted"] - r["fresh"]) / float(
+                np.hypot(r["fresh_se"], sd)
+            )
+        zt = np.array([r["z_with_design_noise"] for r in rows])
+        out.update(
+            {
+                "rms_z_with_design_noise": round(float(np.sqrt((zt**2).mean())), 3),
+                "beyond_1_96_with_design_noise": int((np.abs(zt) > 1.96).sum()),
+            }
+        )
+    out["rows"] = rows
+    return out
 
 
-def analyse(out: str, paths: list[str], only_local: bool = False) -> None:
+def analyse(out: str, paths: list[str], only_local: bool = False, boots: int = 0) -> None:
     loaded = []
     for p in paths:
         with open(p, "rb") as f:
@@ -172,8 +242,15 @@ def analyse(out: str, paths: list[str], only_local: bool = False) -> None:
         design = pd.concat(parts, ignore_index=True)
         emu = MomentEmulator().fit(x, design, MEASURES, TASK.fit_features)
         idx = [emu.moments_.index(n) for n in NAMES]
+        noise = (design_noise(x, design, emu, boots, True) if boots else None, None)
         results[f"{label}: as the fit builds it"] = _compare(
-            lambda g, emu=emu, idx=idx: lambda t: emu.means(t)[:, idx], fresh, emu
+            lambda g, emu=emu, idx=idx: lambda t: emu.means(t)[:, idx], fresh, emu, noise[0]
+        )
+        if boots:
+            noise = (noise[0], design_noise(x, design, emu, boots, False))
+        smeared = MomentEmulator(mean_surface=False).fit(x, design, MEASURES, TASK.fit_features)
+        results[f"{label}: exp(log surface) x Duan's smearing (the means before)"] = _compare(
+            lambda g, s=smeared, i=idx: lambda t: s.means(t)[:, i], fresh, emu, noise[1]
         )
         cubic = MomentEmulator(degree=3).fit(x, design, MEASURES, TASK.fit_features)
         cidx = [cubic.moments_.index(n) for n in NAMES]
@@ -203,8 +280,9 @@ def analyse(out: str, paths: list[str], only_local: bool = False) -> None:
             )
     report = {
         "data_source": "simulated",
-        "command": "python benchmarks/emulator_bias.py analyse " + " ".join([out, *paths]),
+        "command": "python benchmarks/emulator_bias.py analyse " + " ".join(sys.argv[2:]),
         "fresh_people_per_group": int(fresh["participant"].nunique() / 3),
+        "design_bootstrap": boots,
         "summary": {
             k: {kk: v[kk] for kk in ("rms_z", "mean_z", "beyond_1_96", "of")}
             for k, v in results.items()
@@ -218,6 +296,9 @@ def analyse(out: str, paths: list[str], only_local: bool = False) -> None:
 if __name__ == "__main__":
     if sys.argv[1] == "simulate":
         repeats = next((int(a.split("=")[1]) for a in sys.argv if a.startswith("--repeats=")), 1)
+        fresh_seed = next(
+            (int(a.split("=")[1]) for a in sys.argv if a.startswith("--fresh-seed=")), None
+        )
         simulate(
             int(sys.argv[2]),
             int(sys.argv[3]),
@@ -225,7 +306,9 @@ if __name__ == "__main__":
             sys.argv[5],
             "--grouped" in sys.argv,
             repeats,
+            fresh_seed,
         )
     else:
-        args = [a for a in sys.argv[3:] if a != "--only-local"]
-        analyse(sys.argv[2], args, "--only-local" in sys.argv)
+        args = [a for a in sys.argv[3:] if not a.startswith("--")]
+        boots = next((int(a.split("=")[1]) for a in sys.argv if a.startswith("--design-boot=")), 0)
+        analyse(sys.argv[2], args, "--only-local" in sys.argv, boots)

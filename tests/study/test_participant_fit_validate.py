@@ -29,14 +29,21 @@ def _law(traits: np.ndarray) -> np.ndarray:
     return np.column_stack([np.log(0.25 / speed), np.log(0.4 + 0.5 * caution)])
 
 
-def synthetic_trials(logs: np.ndarray, repeats: int, rng: np.random.Generator) -> pd.DataFrame:
+def synthetic_trials(
+    logs: np.ndarray,
+    repeats: int,
+    rng: np.random.Generator,
+    noise: float | np.ndarray = NOISE,
+) -> pd.DataFrame:
     """Trials of the design settings whose log measures are the rows of `logs`: each
-    setting `repeats` times in VO and HV, with log-normal noise of SD `NOISE`."""
+    setting `repeats` times in VO and HV, with log-normal noise of SD `noise` (one for
+    all, or one per setting and measure, shaped like `logs`)."""
+    sds = np.broadcast_to(noise, logs.shape)
     rows = []
     for k, setting_logs in enumerate(logs):
         for r in range(repeats):
             for condition in ("VO", "HV"):
-                noisy = np.exp(setting_logs + rng.normal(0.0, NOISE, 2))
+                noisy = np.exp(setting_logs + rng.normal(0.0, 1.0, 2) * sds[k])
                 rows.append(
                     {
                         "setting": k,
