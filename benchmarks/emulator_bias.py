@@ -58,6 +58,15 @@ from study.protocol.traits import PROFILES, TRAITS
 TASK = get_task("lcca")
 MEASURES = list(TASK.analysed_measures)
 NAMES = [f"{c}:{m}" for c in ("VO", "HV") for m in MEASURES]
+SUMMARY = (
+    "rms_z",
+    "mean_z",
+    "beyond_1_96",
+    "of",
+    "rms_z_with_design_noise",
+    "beyond_1_96_with_design_noise",
+    "expected_outside_check_if_unbiased",
+)
 
 
 def simulate(
@@ -164,6 +173,22 @@ def design_noise(
     return np.std(preds, axis=0, ddof=1)
 
 
+CHECK_PEOPLE = 24
+"""People a group the fit's emulator check simulates (`FitSettings.check`)."""
+
+
+def expected_outside(rows: list[dict[str, Any]], fresh_people: int) -> float:
+    """How many of `rows` an unbiased emulator with the rows' design noise would put
+    outside the emulator check's 95 % intervals: each row's simulated mean has the SE of
+    `CHECK_PEOPLE` people (the fresh SE scaled by sqrt(fresh / CHECK_PEOPLE)), and the
+    prediction misses it by N(0, SE^2 + noise^2); outside when beyond 1.96 SE."""
+    total = 0.0
+    for r in rows:
+        se = r["fresh_se"] * np.sqrt(fresh_people / CHECK_PEOPLE)
+        total += 2 * stats.norm.sf(1.96 * se / np.hypot(se, r["design_noise_sd"]))
+    return float(total)
+
+
 def _compare(
     predict_for: Any,
     fresh: pd.DataFrame,
@@ -215,6 +240,9 @@ def _compare(
             {
                 "rms_z_with_design_noise": round(float(np.sqrt((zt**2).mean())), 3),
                 "beyond_1_96_with_design_noise": int((np.abs(zt) > 1.96).sum()),
+                "expected_outside_check_if_unbiased": round(
+                    expected_outside(rows, len(fresh["participant"].unique()) // 3), 2
+                ),
             }
         )
     out["rows"] = rows
@@ -283,10 +311,7 @@ def analyse(out: str, paths: list[str], only_local: bool = False, boots: int = 0
         "command": "python benchmarks/emulator_bias.py analyse " + " ".join(sys.argv[2:]),
         "fresh_people_per_group": int(fresh["participant"].nunique() / 3),
         "design_bootstrap": boots,
-        "summary": {
-            k: {kk: v[kk] for kk in ("rms_z", "mean_z", "beyond_1_96", "of")}
-            for k, v in results.items()
-        },
+        "summary": {k: {kk: v[kk] for kk in SUMMARY if kk in v} for k, v in results.items()},
         "variants": results,
     }
     with open(out, "w") as f:
