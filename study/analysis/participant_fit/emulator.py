@@ -32,13 +32,11 @@ reach, whatever the noise's distribution), with a small penalty (`MEAN_ALPHA`).
 Why not exp(log surface) times one smearing factor (Duan's mean of exp(residual), which
 the features keep): that factor is a single constant, and the measures' residual is
 neither lognormal nor of one spread across the traits. A peak distal force is a
-mixture (about 0.1 N without contact, 0.3-1.4 N spikes with it, 2.5 % of the design's
-trials near 0 N: a log residual of -3 to -5), and the share of spikes follows the
-traits; a completion time has a cap (a give-up at the trial's limit) reached in the
-slow corners of the design only. Measured against fresh simulated people (40 a group
-at the bench's truth, `benchmarks/emulator_bias.py`): the group's own smearing factor
-of the distal force was 1.37-1.64 where the global one was 1.52, the experts' and
-novices' 10 % lower than it.
+mixture (a low level without contact, spikes with it, a few trials near 0 N far out
+in log), and the share of spikes follows the traits; a completion time has a cap (a
+give-up at the trial's limit) reached in the slow corners of the design only, so a
+group's own smearing factor differs from the design's average (against fresh simulated
+people, `benchmarks/emulator_bias.py`).
 
 The measures alone (a trial's time and peak forces) identify little more than the
 preferred speed: every trait slows a trial or raises its peaks a little, and with a
@@ -78,16 +76,9 @@ ALPHAS = tuple(np.logspace(-1, 4, 21))
 MEAN_ALPHA = 1e-3
 """The mean surface's penalty (scikit-learn's `PoissonRegressor.alpha`, on the measure
 divided by its mean): a small one, for a well-posed Newton step only. Chosen against
-fresh simulated people (40 a group at the bench's truth; RMS z of the groups' means
-1.58-1.64 for 1e-4-1e-2, 2.2-3.1 for 0.1-0.3); a 5-fold cross-validation of the
-deviance over the design's box chose 0.03-0.3, which drew the groups' means towards
-the box's (RMS z 2.48)."""
-
-
-def poisson_deviance(y: np.ndarray, mu: np.ndarray, w: np.ndarray) -> float:
-    """The weighted Poisson deviance of means `mu` for values `y` (>= 0)."""
-    ratio = np.where(y > 0, y / np.where(y > 0, mu, 1.0), 1.0)
-    return float(np.sum(w * 2 * (y * np.log(ratio) - (y - mu))))
+fresh simulated people (`benchmarks/emulator_bias.py`): penalties a cross-validation
+of the deviance over the design's whole box prefers draw the groups' means towards the
+box's."""
 
 
 def poisson_ridge(
@@ -96,9 +87,10 @@ def poisson_ridge(
     """(coef, intercept) minimising mean_w(deviance) / 2 + alpha / 2 * |coef|^2 of a
     log-link Poisson model of `y` on `phi` (the intercept unpenalised; `w` normalised to
     mean 1): scikit-learn's `PoissonRegressor(alpha)` objective, by Newton's method with
-    step halving. Written here because the solver's setup and checks cost 0.25 s per
-    fit in scikit-learn, against a few ms here (six fits per emulator, more in the
-    local surfaces and benches); the tests hold it to scikit-learn's answer."""
+    step halving. Written here because scikit-learn's solvers spend most of a fit this
+    small on their setup and checks, a hundred times this loop's time (six fits per
+    emulator, more in the local surfaces and benches); the tests hold it to
+    scikit-learn's answer."""
     w = w / w.mean()
     n, p = phi.shape
     x = np.column_stack([np.ones(n), phi])
