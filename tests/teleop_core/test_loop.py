@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import replace
 
@@ -314,3 +315,41 @@ def test_hv_samples_against_the_libm_gru_path(small_estimator, monkeypatch) -> N
     assert np.ptp(b[:, SAMPLE_COLUMNS.index("dial_torque_n_m")]) > 0.01  # the dial felt it
     assert np.max(np.abs(a[:, est] - b[:, est])) <= _estimate_tolerance_n(small_estimator)
     assert np.max(np.abs(a[:, others] - b[:, others])) <= HV_TOLERANCE
+
+
+def test_the_fast_paths_view_is_the_view_of_the_state() -> None:
+    # the fast path builds the driver's view from the last log row, bypassing the
+    # dataclass's __init__: it must equal the view read from the state arrays
+    loop = TeleopLoop(LoopConfig(), tube_with_wall(), seed=2)
+    loop.start(SimulatedOperator(target_depth_m=0.3))
+    for _ in range(5):
+        loop.advance(0.37)
+        fast, slow = loop._row_view(), loop.view()
+        assert type(fast) is OperatorView
+        assert fast == slow
+    assert loop.view().insertion_m > 0.0  # the loop moved
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"dial_target_rad": math.nan},
+        {"push_n_m": math.inf},
+        {"rotation_rate_rad_s": -math.inf},
+        {"grip_stiffness_n_m_per_rad": -0.1},
+        {"grip_damping_n_m_s_per_rad": -1e-3},
+    ],
+)
+def test_a_hand_action_refuses_bad_values(kwargs: dict[str, float]) -> None:
+    with pytest.raises(TeleopInputError, match="hand action"):
+        HandAction(**kwargs)
+
+
+def test_a_hand_action_is_a_frozen_dataclass_with_its_defaults() -> None:
+    action = HandAction(0.1, 0.3, rotation_rate_rad_s=0.5)
+    assert action == HandAction(0.1, 0.3, 0.0, 0.0, 0.5, False)
+    assert action.grip_damping_n_m_s_per_rad == 0.0
+    assert not action.done
+    assert [f.name for f in dataclasses.fields(HandAction)][-1] == "done"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        action.done = True  # type: ignore[misc]
