@@ -11,7 +11,7 @@ nice -n 10 python benchmarks/loop_side_by_side.py "$B" "$N" --rounds 3 \
   --out $R/loop_profile.json -- --trials 4 --calls 100000
 nice -n 10 python benchmarks/loop_side_by_side.py "$B" "$N" --rounds 3 --bench loop_speed.py \
   --out $R/loop_speed_long.json -- --trials 8 --max-s 180
-nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 3 \
+nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 5 \
   --json-key speed.realtime_factor_median --out $R/loop_bench_lcca_quick.json -- \
   'study bench lcca --quick --json {tmp}/out.json --out {tmp}'
 nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 3 \

@@ -13,15 +13,17 @@ direct variant (Table III) learns F_ref itself with the same network.
 Inference does not use PyTorch, and this module does not import it (1.7-4 s of a fresh
 process's start): the weights are saved at training time as plain arrays (`gru.npz`,
 `GruWeights.save_npz`) beside PyTorch's `gru.pt`, and run through a small numba kernel
-in float64, with the weights transposed so that each matrix-vector product runs down
-contiguous columns and sigma and tanh through a vectorised exp (`_window_forward`; the
-plain form with libm's functions, `_window_forward_libm`, is kept as the reference it is
-tested against). Inference is what lets the estimator sit inside a 1 kHz simulation
+in float32, the precision PyTorch trains and runs the network in (the weights it
+trains are float32 values, so they convert exactly), with the weights transposed so
+that each matrix-vector product runs down contiguous columns and sigma and tanh through
+a vectorised rational tanh (`_window_forward`). The plain float64 form with libm's
+functions, `_window_forward_libm`, is what the loop ran before; tests hold the float32
+kernel to torch's own float32 GRU and the loop's samples to that older path within
+stated tolerances. Inference is what lets the estimator sit inside a 1 kHz simulation
 loop, so its cost per window is measured in `benchmarks/loop_profile.py`.
 The same compiled function serves one window (causal, sample by sample) and every
-window of a recording (batch), so the two agree to the last bit. A test checks the
-kernel against `torch.nn.GRU`. Training, and everything else that needs PyTorch, is in
-`gru_torch.py`.
+window of a recording (batch), so the two agree to the last bit. Training, and
+everything else that needs PyTorch, is in `gru_torch.py`.
 """
 
 from __future__ import annotations
@@ -137,7 +139,8 @@ class Standardisation:
 
 @dataclass(frozen=True)
 class GruWeights:
-    """A trained network in float64 numpy arrays for the inference kernel."""
+    """A trained network in float64 numpy arrays (`kernel_weights`: the inference
+    kernel's float32 form)."""
 
     w_ih: Float2D  # (3H, inputs), gates in torch's order r, z, n
     w_hh: Float2D  # (3H, H)
@@ -166,14 +169,16 @@ class GruWeights:
 
     def kernel_weights(self) -> tuple[Float2D, Float2D, Float1D, Float1D, Float1D, float]:
         """(w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out): the arguments `_window_forward`
-        takes after the window, the matrices transposed and contiguous."""
+        takes after the window, in float32 (the precision PyTorch trains the network in,
+        so that weights trained there convert exactly), the matrices transposed and
+        contiguous."""
         return (
-            np.ascontiguousarray(self.w_ih.T),
-            np.ascontiguousarray(self.w_hh.T),
-            self.b_ih,
-            self.b_hh,
-            self.w_out,
-            float(self.b_out),
+            np.ascontiguousarray(self.w_ih.T, dtype=np.float32),
+            np.ascontiguousarray(self.w_hh.T, dtype=np.float32),
+            np.ascontiguousarray(self.b_ih, dtype=np.float32),
+            np.ascontiguousarray(self.b_hh, dtype=np.float32),
+            np.ascontiguousarray(self.w_out, dtype=np.float32),
+            float(np.float32(self.b_out)),
         )
 
     @property
@@ -257,117 +262,118 @@ def _window_forward_libm(x, w_ih, w_hh, b_ih, b_hh, w_out, b_out):  # type: igno
     return y
 
 
-# exp(v) = 2^n exp(r), n = round(v / ln 2), r = v - n ln 2 (Cody and Waite's reduction,
-# ln 2 split in two so that n ln2_hi is exact); |r| <= ln 2 / 2, where Taylor's series to
-# r^13 leaves a remainder below 4e-18 relative.
-_LOG2E = 1.4426950408889634
-_LN2_HI = 6.93147180369123816490e-01
-_LN2_LO = 1.90821492927058770002e-10
-_SHIFT = 6755399441055744.0
-"""1.5 * 2^52: v / ln 2 + _SHIFT rounds to an integer held in the low bits."""
-_SHIFT_BITS = 0x4338000000000000
-_EXP_LIMIT = 700.0
-"""|v| clamped here: 2^n stays a normal number; the gates are saturated long before."""
-_TAYLOR = tuple(1.0 / math.factorial(k) for k in range(14))
+# tanh(x) ~ x P(x^2) / Q(x^2) on [-9, 9], P of degree 6 and Q of degree 3 in x^2: the
+# float32 rational approximation of Eigen's generic_fast_tanh_float (Eigen 3.3-3.4,
+# MathFunctionsImpl.h); within 3e-7 of tanh (a test checks it against numpy's float64
+# tanh), while tanh(9) rounds to 1 in float32. Only multiply-adds, one division and a
+# clamp: it vectorises, where libm's tanhf and expf are one call per value.
+_F32 = np.float32
+_TANH_CLAMP = _F32(9.0)
+_TANH_P = tuple(
+    _F32(c)
+    for c in (
+        -2.76076847742355e-16,
+        2.00018790482477e-13,
+        -8.60467152213735e-11,
+        5.12229709037114e-08,
+        1.48572235717979e-05,
+        6.37261928875436e-04,
+        4.89352455891786e-03,
+    )
+)
+_TANH_Q = tuple(
+    _F32(c)
+    for c in (
+        1.19825839466702e-06,
+        1.18534705686654e-04,
+        2.26843463243900e-03,
+        4.89352518554385e-03,
+    )
+)
+_HALF, _ONE = _F32(0.5), _F32(1.0)
 
 
-@njit(cache=True, fastmath={"contract"})
-def _exp_into(v, out, bits):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """out[j] = exp(v[j]) within 2 ulp, in loops LLVM vectorises (libm's exp is one call
-        per value). No reassociation: it would cancel the rounding shift (fused multiply-adds
-    only round less).
-        `bits` is int64 scratch of v's length."""
-    m = v.shape[0]
-    shifted = out.view(np.int64)
-    for j in range(m):
-        x = min(max(v[j], -_EXP_LIMIT), _EXP_LIMIT)
-        s = x * _LOG2E + _SHIFT
-        nf = s - _SHIFT
-        r = (x - nf * _LN2_HI) - nf * _LN2_LO
-        p = _TAYLOR[13]
-        p = p * r + _TAYLOR[12]
-        p = p * r + _TAYLOR[11]
-        p = p * r + _TAYLOR[10]
-        p = p * r + _TAYLOR[9]
-        p = p * r + _TAYLOR[8]
-        p = p * r + _TAYLOR[7]
-        p = p * r + _TAYLOR[6]
-        p = p * r + _TAYLOR[5]
-        p = p * r + _TAYLOR[4]
-        p = p * r + _TAYLOR[3]
-        p = p * r + _TAYLOR[2]
-        p = p * r + 1.0
-        p = p * r + 1.0
-        v[j] = p
-        out[j] = s
-    scale = bits.view(np.float64)
-    for j in range(m):
-        # 2^n: the biased exponent n + 1023 in the exponent field
-        bits[j] = (shifted[j] - _SHIFT_BITS + 1023) << 52
-    for j in range(m):
-        out[j] = v[j] * scale[j]
+@njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
+def _tanh32(x):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """tanh of a float32 within 3e-7 (the rational form above)."""
+    x = min(max(x, -_TANH_CLAMP), _TANH_CLAMP)
+    x2 = x * x
+    p = _TANH_P[0]
+    p = p * x2 + _TANH_P[1]
+    p = p * x2 + _TANH_P[2]
+    p = p * x2 + _TANH_P[3]
+    p = p * x2 + _TANH_P[4]
+    p = p * x2 + _TANH_P[5]
+    p = p * x2 + _TANH_P[6]
+    q = _TANH_Q[0]
+    q = q * x2 + _TANH_Q[1]
+    q = q * x2 + _TANH_Q[2]
+    q = q * x2 + _TANH_Q[3]
+    return x * p / q
 
 
-@njit(cache=True, fastmath={"contract"})
+@njit(cache=True, error_model="numpy", fastmath={"contract"})
+def _tanh32_into(v, out):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """out[j] = `_tanh32`(v[j]) (for tests of the approximation)."""
+    for j in range(v.shape[0]):
+        out[j] = _tanh32(v[j])
+
+
+@njit(cache=True, error_model="numpy", fastmath={"contract"})
 def _window_forward(x, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """The GRU's output for one standardised window `x` (T, inputs), weights transposed
-    (`GruWeights.transposed`: w_ih_t (inputs, 3H), w_hh_t (H, 3H)).
+    """The GRU's output for one standardised window `x` (T, inputs), in float32 as the
+    network was trained; weights as `GruWeights.kernel_weights` gives them (float32,
+    transposed: w_ih_t (inputs, 3H), w_hh_t (H, 3H)).
 
-    The same equations as `_window_forward_libm`, arranged for the vector unit: each
-    product W h is a sum of the columns of W scaled by h's units (no horizontal sums),
-    the first step skips W_hh h (h = 0), and sigma and tanh come from `_exp_into` over
-    all units at once. It agrees with the libm form to about 1e-15 (rounding only; a
-    test holds it within 1e-12).
+    The equations of `_window_forward_libm` (torch.nn.GRU's), arranged for the vector
+    unit: each product W h is a sum of the columns of W scaled by h's units (eight per
+    pass over gh, no horizontal sums), the first step skips W_hh h (h = 0), and sigma and
+    tanh come from `_tanh32` (sigma(a) = (1 + tanh(a / 2)) / 2). The inputs are rounded
+    to float32 as torch rounds them. `error_model="numpy"`: a division by zero would give
+    inf instead of raising (the divisors here are >= 1e-3), so the loops have no branch
+    and vectorise. A test holds the output to torch's own float32 GRU.
     """
     n_hidden = w_hh_t.shape[0]
     n_in = w_ih_t.shape[0]
     n3 = 3 * n_hidden
-    h = np.zeros(n_hidden)
-    gh = np.empty(n3)
-    gi = np.empty(n3)
-    a_rz, e_rz, bits_rz = (
-        np.empty(2 * n_hidden),
-        np.empty(2 * n_hidden),
-        np.empty(2 * n_hidden, dtype=np.int64),
-    )
-    a_n, e_n, bits_n = np.empty(n_hidden), np.empty(n_hidden), np.empty(n_hidden, dtype=np.int64)
+    h = np.zeros(n_hidden, dtype=np.float32)
+    gh = np.empty(n3, dtype=np.float32)
+    gi = np.empty(n3, dtype=np.float32)
     for t in range(x.shape[0]):
         # gi = W_ih x + b_ih, gh = W_hh h + b_hh
         for j in range(n3):
             gi[j] = b_ih[j]
             gh[j] = b_hh[j]
         for k in range(n_in):
-            xk = x[t, k]
+            xk = _F32(x[t, k])
             for j in range(n3):
                 gi[j] += w_ih_t[k, j] * xk
         if t > 0:
-            # four columns per pass over gh: a quarter of its loads and stores
+            # eight columns per pass over gh: an eighth of its loads and stores
             k = 0
-            while k + 4 <= n_hidden:
+            while k + 8 <= n_hidden:
                 h0, h1, h2, h3 = h[k], h[k + 1], h[k + 2], h[k + 3]
+                h4, h5, h6, h7 = h[k + 4], h[k + 5], h[k + 6], h[k + 7]
                 w0, w1, w2, w3 = w_hh_t[k], w_hh_t[k + 1], w_hh_t[k + 2], w_hh_t[k + 3]
+                w4, w5, w6, w7 = w_hh_t[k + 4], w_hh_t[k + 5], w_hh_t[k + 6], w_hh_t[k + 7]
                 for j in range(n3):
-                    gh[j] += (w0[j] * h0 + w1[j] * h1) + (w2[j] * h2 + w3[j] * h3)
-                k += 4
+                    gh[j] += ((w0[j] * h0 + w1[j] * h1) + (w2[j] * h2 + w3[j] * h3)) + (
+                        (w4[j] * h4 + w5[j] * h5) + (w6[j] * h6 + w7[j] * h7)
+                    )
+                k += 8
             while k < n_hidden:
                 hk, wk = h[k], w_hh_t[k]
                 for j in range(n3):
                     gh[j] += wk[j] * hk
                 k += 1
-        # r, z = sigma(a) = 1 / (1 + exp(-a)); n = tanh(b) = 2 / (1 + exp(-2 b)) - 1
-        for j in range(2 * n_hidden):
-            a_rz[j] = -(gi[j] + gh[j])
-        _exp_into(a_rz, e_rz, bits_rz)
         for j in range(n_hidden):
-            r = 1.0 / (1.0 + e_rz[j])
-            a_n[j] = -2.0 * (gi[2 * n_hidden + j] + r * gh[2 * n_hidden + j])
-        _exp_into(a_n, e_n, bits_n)
-        for j in range(n_hidden):
-            z = 1.0 / (1.0 + e_rz[n_hidden + j])
-            n = 2.0 / (1.0 + e_n[j]) - 1.0
+            # r, z = sigma(W_i x + b_i + W_h h + b_h); n = tanh(W_in x + b_in + r (W_hn h + b_hn))
+            r = _HALF + _HALF * _tanh32(_HALF * (gi[j] + gh[j]))
+            z = _HALF + _HALF * _tanh32(_HALF * (gi[n_hidden + j] + gh[n_hidden + j]))
+            n = _tanh32(gi[2 * n_hidden + j] + r * gh[2 * n_hidden + j])
             # h' = (1 - z) n + z h
-            h[j] = (1.0 - z) * n + z * h[j]
-    y = b_out
+            h[j] = (_ONE - z) * n + z * h[j]
+    y = _F32(b_out)
     for j in range(n_hidden):
         y += w_out[j] * h[j]
     return y

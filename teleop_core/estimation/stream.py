@@ -30,7 +30,7 @@ EST_PHYSICS, EST_HYBRID, EST_FINAL = range(3)
 ESTIMATE_OUT = 3
 
 
-_Z1, _Z2 = np.zeros(1), np.zeros((1, 1))
+_Z1, _Z1_32, _Z2_32 = np.zeros(1), np.zeros(1, np.float32), np.zeros((1, 1), np.float32)
 NO_STREAM_ARRAYS = (
     np.zeros((1, N_FEATURES)),
     _Z1,
@@ -38,11 +38,11 @@ NO_STREAM_ARRAYS = (
     _Z1,
     np.zeros((0, 2)),
     _Z1,
-    _Z2,
-    _Z2,
-    _Z1,
-    _Z1,
-    _Z1,
+    _Z2_32,
+    _Z2_32,
+    _Z1_32,
+    _Z1_32,
+    _Z1_32,
     0.0,
     _Z1,
     _Z1,
@@ -144,7 +144,7 @@ def stream_estimate(
     pv : numpy.ndarray
         Eq. 1's parameters as a vector (`PhysicsParams.vector`).
     w_ih_t, w_hh_t, b_ih, b_hh, w_out : numpy.ndarray
-        The GRU's weights, matrices transposed (`GruWeights.kernel_weights`).
+        The GRU's weights in float32, matrices transposed (`GruWeights.kernel_weights`).
     b_out : float
         The GRU's output bias.
     target : numpy.ndarray
@@ -167,7 +167,7 @@ def stream_estimate(
     iq, omega, alpha = st[S_IQ], st[S_OMEGA], st[S_ALPHA]
     f_physics = force_at(pv, iq, omega, alpha)
     # F*_GRU = F_physics + GRU residual (eq. 3), de-standardised
-    y = _window_forward(buf, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out)
+    y = float(_window_forward(buf, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out))
     f_hybrid = f_physics + y * target[T_STD] + target[T_MEAN]
     out[EST_PHYSICS] = f_physics
     out[EST_HYBRID] = f_hybrid

@@ -129,6 +129,8 @@ def follower_tick(
     decay = math.exp(-R * dte / L)
     ke = (2.0 / 3.0) * kt
     lpf = tf / (tf + dt)
+    # reciprocals once per tick: a division's latency would sit on every substep's chain
+    inv_ws, dte_j, inv_r = 1.0 / ws, dte / J, 1.0 / R
     # Speed loop: quantised encoder angle, differentiated and low-passed.
     theta_q = math.floor(state[THETA] / encoder_step_rad) * encoder_step_rad
     w_raw = (theta_q - state[THETA_Q_PREV]) / dt
@@ -154,7 +156,7 @@ def follower_tick(
         else:
             state[IQ_INT] += kii * e_i * dte
         # L di/dt = v - R i - e, exact over one current-loop period.
-        i_ss = (v - ke * omega) / R
+        i_ss = (v - ke * omega) * inv_r
         iq = i_ss + (iq - i_ss) * decay
         state[IQ] = iq
         iq_sum += iq
@@ -168,10 +170,11 @@ def follower_tick(
                 continue  # stuck: friction balances the applied torque
             tau_f = breakaway if tau > 0.0 else -breakaway
         else:
-            mag = tc + (ts - tc) * math.exp(-(omega / ws) * (omega / ws))
+            u = omega * inv_ws
+            mag = tc + (ts - tc) * math.exp(-u * u)
             tau_f = mag if omega > 0.0 else -mag * retract
             tau_f += drag2 * omega * abs(omega)
-        omega_new = omega + dte * (tau - b * omega - tau_f) / J
+        omega_new = omega + (tau - b * omega - tau_f) * dte_j
         if omega != 0.0 and omega_new * omega < 0.0:
             omega_new = 0.0  # friction cannot reverse the motion: stick at zero speed
         state[OMEGA] = omega_new

@@ -40,9 +40,10 @@ def _name(key: str) -> str:
 def signature(nt: Any) -> Any:
     """`run_ticks`'s types (`tick.py`), in numba's terms (`nt`: `numba.types`)."""
     a1, a2, f = nt.float64[::1], nt.float64[:, ::1], nt.float64
+    s1, s2 = nt.float32[::1], nt.float32[:, ::1]
     # CausalEstimator.kernel_arrays: buf, st, mean, std, mem, pv, w_ih_t, w_hh_t, b_ih, b_hh,
-    # w_out, b_out, target, ekf_s, ekf_v
-    est = nt.Tuple((a2, a1, a1, a1, a2, a1, a2, a2, a1, a1, a1, f, a1, a1, a1))
+    # w_out (the GRU's weights in float32), b_out, target, ekf_s, ekf_v
+    est = nt.Tuple((a2, a1, a1, a1, a2, a1, s2, s2, s1, s1, s1, f, a1, a1, a1))
     # the in-kernel links: q_m, ls_m, lp_m, q_f, ls_f, lp_f, pool, pos
     links = nt.Tuple((a2, a1, a1, a2, a1, a1, a1, a1))
     return nt.int64(nt.int64, a1, a1, a1, a1, a1, a1, f, a1, a1, a2, a2, est, a1, a2, links)

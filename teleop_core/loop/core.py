@@ -164,9 +164,12 @@ class TeleopLoop:
         """`view` from the last tick's log row alone (the fast path: no real dial writes
         the dial's state between the kernel's calls). The row holds the dial's,
         follower's and platform's state as the tick left them, so the view is the
-        same, with no reads of the state arrays."""
+        same, with no reads of the state arrays. Its fields are written into the
+        instance's dict at once (one view per driver update; the frozen dataclass's own
+        __init__ sets each through object.__setattr__)."""
         row = self._last_row
-        return OperatorView(
+        view = object.__new__(OperatorView)
+        view.__dict__.update(
             t_s=self.counters.ticks * self.dt_s,
             dial_angle_rad=row[K.LOG_DIAL_ANGLE],
             dial_speed_rad_s=row[K.LOG_DIAL_SPEED],
@@ -176,6 +179,7 @@ class TeleopLoop:
             branch=self._branches[int(row[K.LOG_BRANCH])],
             success=row[K.LOG_SUCCESS] != 0.0,
         )
+        return view
 
     def run(self, seconds: float, driver: Driver, stop_when_done: bool = True) -> LoopResult:
         """Run up to `seconds` (or until the driver says done); return every sample."""

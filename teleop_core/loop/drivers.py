@@ -45,7 +45,7 @@ class OperatorView:
     success: bool
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class HandAction:
     """The hand on the dial and the joystick until the next driver update."""
 
@@ -61,17 +61,36 @@ class HandAction:
     done: bool = False
     """The operator ends the trial."""
 
-    def __post_init__(self) -> None:
+    def __init__(
+        self,
+        dial_target_rad: float = 0.0,
+        grip_stiffness_n_m_per_rad: float = 0.0,
+        grip_damping_n_m_s_per_rad: float = 0.0,
+        push_n_m: float = 0.0,
+        rotation_rate_rad_s: float = 0.0,
+        done: bool = False,
+    ) -> None:
+        # The fields written into the instance's dict at once (the same instance): the
+        # generated __init__ of a frozen dataclass sets each through object.__setattr__,
+        # a cost every driver update pays
+        self.__dict__.update(
+            dial_target_rad=dial_target_rad,
+            grip_stiffness_n_m_per_rad=grip_stiffness_n_m_per_rad,
+            grip_damping_n_m_s_per_rad=grip_damping_n_m_s_per_rad,
+            push_n_m=push_n_m,
+            rotation_rate_rad_s=rotation_rate_rad_s,
+            done=done,
+        )
         values = (
-            self.dial_target_rad,
-            self.grip_stiffness_n_m_per_rad,
-            self.grip_damping_n_m_s_per_rad,
-            self.push_n_m,
-            self.rotation_rate_rad_s,
+            dial_target_rad,
+            grip_stiffness_n_m_per_rad,
+            grip_damping_n_m_s_per_rad,
+            push_n_m,
+            rotation_rate_rad_s,
         )
         if not all(map(math.isfinite, values)):
             raise TeleopInputError(f"hand action {self}; expected finite values")
-        if self.grip_stiffness_n_m_per_rad < 0 or self.grip_damping_n_m_s_per_rad < 0:
+        if grip_stiffness_n_m_per_rad < 0 or grip_damping_n_m_s_per_rad < 0:
             raise TeleopInputError(f"hand action {self}; expected grip stiffness and damping >= 0")
 
 

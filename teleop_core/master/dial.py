@@ -111,6 +111,7 @@ def dial_tick(
     dte = dt / SUBSTEPS
     J, B, ts, tc = p[P_J], p[P_B], p[P_TS], p[P_TC]
     gain = current_gain(p, dte)
+    dte_j = dte / J  # once per tick: a division would sit on every substep's chain
     tau_sum = 0.0
     for _ in range(SUBSTEPS):
         tau_motor = actuator_torque(state, p, i_cmd_ma, gain)
@@ -129,7 +130,7 @@ def dial_tick(
         else:
             tau_f = tc if omega > 0.0 else -tc
         # J_m theta_dd + B_m theta_d + tau_friction = tau_motor + tau_hand   (eq. 6)
-        omega_new = omega + dte * (tau - B * omega - tau_f) / J
+        omega_new = omega + (tau - B * omega - tau_f) * dte_j
         if omega != 0.0 and omega_new * omega < 0.0:
             omega_new = 0.0  # friction stops the dial; it cannot reverse it
         state[D_OMEGA] = omega_new
