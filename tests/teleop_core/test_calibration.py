@@ -497,3 +497,17 @@ def test_a_look_alike_that_only_corrects_an_earlier_effect_is_not_named() -> Non
     assert [a["families"] for a in report["ambiguous_effects"]] == [
         ["viscous_nonlinear", "stribeck"]
     ]
+
+
+def test_the_verdicts_distance_since_reversal_restarts_at_the_angles_turns_only() -> None:
+    from teleop_core.calibration.verdict import _raw_quantities
+
+    # up 0 -> 1 and back to 0 (100 Hz), the speed sensor's noise flipping the sign of
+    # the measured speed at every slow stretch near the turns
+    t = np.linspace(0.0, 2.0, 201)
+    angle = 0.5 - 0.5 * np.cos(np.pi * np.where(t <= 1.0, t, 2.0 - t))
+    speed = np.gradient(angle, t) + np.random.default_rng(0).normal(0.0, 0.3, len(t))
+    assert np.sum(np.diff(np.sign(speed)) != 0) > 5
+    d = _raw_quantities({"t": t, "angle": angle, "speed": speed}, np.zeros_like(t))
+    by_hand = np.where(t <= 1.0, angle, 1.0 - angle)
+    np.testing.assert_allclose(d["distance since reversal"], by_hand, atol=1e-12)
