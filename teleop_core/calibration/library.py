@@ -49,8 +49,9 @@ class OpenTerm(Effect):
 
     formula: ClassVar[str] = ""
     maps_to: ClassVar[str] = "no named family"
-    look_alike: ClassVar[bool] = True
-    """Whether a tie with a named winner makes the winner ambiguous (`loop.py`)."""
+    look_alike: ClassVar[bool | frozenset[str]] = True
+    """Whether a tie with a named winner makes the winner ambiguous (`loop.py`): always,
+    never, or only for winners of these families."""
 
 
 class LoadFriction(OpenTerm):
@@ -72,8 +73,10 @@ class GainChange(OpenTerm):
     log_search = False
     formula = "drive [t >= change_time_s]"
     # a step placed at the held-out block's one reversal or load change ties with any
-    # effect that acts there: such a tie says nothing about the winner
-    look_alike = False
+    # effect that acts there: such a tie says nothing about the winner. A drift is
+    # another matter: a gain that settles within a fraction of the recording and a
+    # gain that steps there change the force alike
+    look_alike = frozenset({"drift"})
 
     def grid(self, s: Signals) -> Float1D:
         t = s["t"]

@@ -211,9 +211,10 @@ class Calibrator:
         from its winner: on the held-out block the winner's errors are not
         significantly smaller than theirs (one-sided Diebold-Mariano at `alpha`), and
         on the training block their BIC is within `BIC_DECISIVE` of the winner's.
-        An open term that is no look-alike (`OpenTerm.look_alike`: the gain step) is
-        no alternative. Empty when the winner is identified. Look-alikes this
-        catches: a direction asymmetry and a velocity nonlinearity on a recording
+        An open term that is no look-alike of the winner's family (`OpenTerm.look_alike`:
+        the gain step is one of a drift's only) is no alternative. Empty when the
+        winner is identified. Look-alikes this catches: a drift and a gain step early
+        in the recording, a direction asymmetry and a velocity nonlinearity on a recording
         with few speeds in one direction, pre-sliding memory and a direction
         asymmetry or a Stribeck dip on one with few reversals."""
         out = []
@@ -221,7 +222,8 @@ class Calibrator:
         for cand, effect, _, c_pred, _ in passing:
             if cand is best[0] or cand.bic_change - best[0].bic_change > BIC_DECISIVE:
                 continue
-            if not getattr(effect, "look_alike", True):
+            alike_of = getattr(effect, "look_alike", True)
+            if alike_of is False or (alike_of is not True and best[1].family not in alike_of):
                 continue
             if diebold_mariano(y_test - c_pred[self.test_], e_best) >= self.alpha:
                 out.append(cand.family)
