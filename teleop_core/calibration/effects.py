@@ -102,37 +102,6 @@ class Effect:
         raise NotImplementedError
 
 
-_LAST_SLOW_SPEED: list[tuple[Float1D, Float1D]] = []
-"""The last angle array `slow_speed` derived a speed from, and that speed."""
-
-
-def slow_speed(s: Signals) -> Float1D:
-    """The speed a shape that lives at low speeds (a Stribeck dip) is computed from: the
-    recorded speed, or the angle's zero-phase derivative (central differences) where
-    that is the less noisy of the two by both measures: the RMS of the second
-    differences (white noise of SD s gives sqrt(6) s; an encoder's counts give the
-    jumps of their differences) and `noise_sd` (robust to the rare jumps of a speed
-    that steps, whose angle's derivative would only smooth them).
-
-    A dip narrower than a few noise SDs of the speed is smeared by the noise into
-    another shape; its size is the static friction's excess, many times its RMS over
-    the recording, so the smeared part is larger than the oracle's error. Computed
-    once per angle array (the same object: the loop's arrays are never written to).
-    """
-    w = s["speed"]
-    if "angle" not in s or "t" not in s or len(w) < 5:
-        return w
-    angle = s["angle"]
-    if _LAST_SLOW_SPEED and _LAST_SLOW_SPEED[0][0] is angle:
-        return _LAST_SLOW_SPEED[0][1]
-    from_angle = np.gradient(angle, s["t"])
-    rough = [float(np.sqrt(np.mean(np.diff(x, 2) ** 2))) for x in (w, from_angle)]
-    quieter = rough[1] < rough[0] and noise_sd(from_angle) < noise_sd(w)
-    out = from_angle if quieter else w
-    _LAST_SLOW_SPEED[:] = [(angle, out)]
-    return out
-
-
 class Stribeck(Effect):
     family = "stribeck"
     needs = ("speed",)
@@ -142,7 +111,7 @@ class Stribeck(Effect):
         return np.geomspace(0.03, 10.0, 28)
 
     def columns(self, s: Signals, value: float) -> Float2D:
-        w = slow_speed(s)
+        w = s["speed"]
         # friction excess over Coulomb: (tau_s - tau_c) exp(-(w / w_s)^2) sgn(w)
         return (-np.exp(-((w / value) ** 2)) * smooth_sign(w))[:, None]
 

@@ -484,20 +484,14 @@ def test_an_effect_found_early_is_searched_again_once_the_later_ones_are_in() ->
 
 
 def test_a_look_alike_that_only_corrects_an_earlier_effect_is_not_named() -> None:
-    # a wide Stribeck dip (1.9 rad/s, 1.8 JND; general's seed 10019) on the recorded
-    # speed (the angle read by an encoder of 4096 counts a turn, whose derivative is
-    # the noisier): held through the noisy speed it leaves a residual shaped like it,
-    # which a viscous nonlinearity took under its own name; a second Stribeck term does
-    # as well, so the viscous nonlinearity is reported ambiguous with the Stribeck dip
-    from teleop_core.calibration.effects import slow_speed
+    # a wide Stribeck dip (1.9 rad/s, 1.8 JND; general's seed 10019): held through the
+    # noisy speed it leaves a residual shaped like it, which a viscous nonlinearity
+    # took under its own name; a second Stribeck term does as well, so the viscous
+    # nonlinearity is reported ambiguous with the Stribeck dip
     from teleop_core.calibration.general import general_recording
 
     drawn = general_recording(("stribeck",), 10019)
-    s = dict(drawn.data.signals)
-    count = 2 * np.pi / 4096
-    s["angle"] = np.round(s["angle"] / count) * count
-    assert slow_speed(s) is s["speed"]
-    report = Calibrator(FollowerBase()).fit(CalibrationData(s, drawn.data.y, "encoder")).report()
+    report = Calibrator(FollowerBase()).fit(drawn.data).report()
     assert [e["family"] for e in report["effects_added"]] == ["stribeck"]
     assert report["discovered_terms"] == []
     assert [a["families"] for a in report["ambiguous_effects"]] == [
@@ -517,41 +511,6 @@ def test_the_verdicts_distance_since_reversal_restarts_at_the_angles_turns_only(
     d = _raw_quantities({"t": t, "angle": angle, "speed": speed}, np.zeros_like(t))
     by_hand = np.where(t <= 1.0, angle, 1.0 - angle)
     np.testing.assert_allclose(d["distance since reversal"], by_hand, atol=1e-12)
-
-
-def test_a_narrow_stribeck_dip_is_found_on_the_angles_speed() -> None:
-    # a 0.06 rad/s dip (general.RANGES' "stribeck" reaches 0.05 rad/s) at 1 JND: its
-    # peak is many times its RMS, and on the recorded speed (noise SD 0.01 rad/s) the
-    # term was smeared, nothing passed and the held-out error stayed at 6.9x the
-    # oracle's; the exact angle's derivative holds it
-    def dip(s: dict) -> np.ndarray:
-        w = s["speed"]
-        return -np.exp(-((w / 0.06) ** 2)) * np.tanh(w / 0.3)
-
-    data, oracle = _with_deviation(dip, 1.0, seed=24)
-    report = Calibrator(FollowerBase()).fit(data).report()
-    assert [e["family"] for e in report["effects_added"]] == ["stribeck"]
-    assert report["effects_added"][0]["params"]["stribeck_speed_rad_s"] == pytest.approx(
-        0.06, rel=0.2
-    )
-    assert report["rmse_after"] <= 1.5 * oracle
-
-
-def test_the_slow_speed_is_the_less_noisy_of_the_recorded_and_the_angles() -> None:
-    from teleop_core.calibration.effects import slow_speed
-
-    t = np.arange(2000) / 200.0
-    angle = np.sin(t)
-    speed = np.cos(t) + np.random.default_rng(1).normal(0.0, 0.01, len(t))
-    # an exact angle: its central differences, within (dt^2 / 6) max |angle'''|
-    np.testing.assert_allclose(
-        slow_speed({"t": t, "angle": angle, "speed": speed})[1:-1], np.cos(t)[1:-1], atol=1e-5
-    )
-    # an encoder of 4096 counts a turn: the recorded speed
-    counts = np.round(angle / (2 * np.pi / 4096)) * (2 * np.pi / 4096)
-    assert slow_speed({"t": t, "angle": counts, "speed": speed}) is speed
-    # no angle: the recorded speed
-    assert slow_speed({"t": t, "speed": speed}) is speed
 
 
 def test_a_gain_step_early_in_the_recording_is_not_named_a_drift() -> None:
