@@ -198,6 +198,17 @@ def general_recording(
     return Drawn(data, y - y0, truth)
 
 
+def shown_in_training(truth: list[dict[str, Any]], held_out_fraction: float = 0.25) -> bool:
+    """Whether the training block (all but the last `held_out_fraction`) shows every
+    drawn effect: not so for a gain change drawn after the training block's end, which
+    no fit on that block can see (the oracle, knowing the deviation, still gets it
+    right on the held-out block). Every other family acts throughout the recording."""
+    return all(
+        t["family"] != "gain_change" or t["params"]["change_fraction"] < 1.0 - held_out_fraction
+        for t in truth
+    )
+
+
 def oracle_rmse(drawn: Drawn, held_out_fraction: float = 0.25) -> float:
     """Held-out RMSE of eq. 1 plus the true deviation's column, fitted on training."""
     data = drawn.data

@@ -49,8 +49,9 @@ class OpenTerm(Effect):
 
     formula: ClassVar[str] = ""
     maps_to: ClassVar[str] = "no named family"
-    look_alike: ClassVar[bool] = True
-    """Whether a tie with a named winner makes the winner ambiguous (`loop.py`)."""
+    look_alike: ClassVar[bool | frozenset[str]] = True
+    """Whether a tie with a named winner makes the winner ambiguous (`loop.py`): always,
+    never, or only for winners of these families."""
 
 
 class LoadFriction(OpenTerm):
@@ -72,8 +73,10 @@ class GainChange(OpenTerm):
     log_search = False
     formula = "drive [t >= change_time_s]"
     # a step placed at the held-out block's one reversal or load change ties with any
-    # effect that acts there: such a tie says nothing about the winner
-    look_alike = False
+    # effect that acts there: such a tie says nothing about the winner. A drift is
+    # another matter: a gain that settles within a fraction of the recording and a
+    # gain that steps there change the force alike
+    look_alike = frozenset({"drift"})
 
     def grid(self, s: Signals) -> Float1D:
         t = s["t"]
@@ -93,12 +96,14 @@ class PreslidingMemory(OpenTerm):
     formula = "-sgn(speed) exp(-distance_since_reversal / memory_length)"
 
     def grid(self, s: Signals) -> Float1D:
-        d = distance_since_turn(s["angle"])
+        # down to a ten-thousandth of the typical stroke: a bristle memory is a small
+        # fraction of a degree at the motor, a stroke tens of radians
+        d = _distance_since_turn(s["angle"])
         top = float(np.percentile(d, 90)) or 1.0
-        return np.geomspace(top / 300.0, top, 20)
+        return np.geomspace(top / 1e4, top, 28)
 
     def columns(self, s: Signals, value: float) -> Float2D:
-        d = distance_since_turn(s["angle"])
+        d = _distance_since_turn(s["angle"])
         return (-_sign(s) * np.exp(-d / value))[:, None]
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
@@ -130,6 +135,21 @@ class Backlash(OpenTerm):
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
         return {f"force_across_gap_{unit}": coef[0] * out, "half_gap": value}
+
+
+_LAST_TURNS: list[tuple[Float1D, Float1D]] = []
+"""The last angle array `_distance_since_turn` was given and its result."""
+
+
+def _distance_since_turn(angle: Float1D) -> Float1D:
+    """`distance_since_turn` of the very array it was last given (the same object, so
+    unchanged: the loop's arrays are never written to) without computing it again: a
+    search calls it for every value tried, on the same angle."""
+    if _LAST_TURNS and _LAST_TURNS[0][0] is angle:
+        return _LAST_TURNS[0][1]
+    d = distance_since_turn(angle)
+    _LAST_TURNS[:] = [(angle, d)]
+    return d
 
 
 def distance_since_turn(angle: Float1D) -> Float1D:

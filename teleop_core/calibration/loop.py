@@ -14,7 +14,10 @@
        ones a gain made in a few bursts is not (the test stops it), and the BIC charges
        for the parameters. `alpha` is per candidate, not divided among them: an effect
        must pass all three, and on clean recordings the minimum gain is what rejects;
-    5. repeat until no candidate passes or `max_effects` are in.
+    5. search the searched value of every effect added before again, the others in
+       the model (`_backfit`: each was searched against a residual that still held
+       the effects found after it);
+    6. repeat until no candidate passes or `max_effects` are in.
 
 A winner that another passing family explains as well on the held-out block (the
 winner's errors not significantly smaller, `_look_alikes`) is kept in the model, since
@@ -23,7 +26,10 @@ its alternatives instead of naming it. A `delay` that wins is also checked again
 what the library has no family for, a first-order lag of the whole force
 (`_lag_alike`, `first_order_lag`): a pure delay and a lag of a few tens of ms shift
 the force alike at the speeds a recording holds, and the recording names the delay
-only where the lag predicts the held-out block significantly worse.
+only where the lag predicts the held-out block significantly worse. A winner that a second term
+of a family already in the model replaces as well (`_refinement_alike`) is reported
+ambiguous with that family: it may be no effect of its own but a correction of the
+first one's shape.
 
 The residual tests (`residual.py`) are reported before and after; they describe the
 residual, while the decision rests on held-out prediction, which they cannot game.
@@ -43,6 +49,7 @@ from statsmodels.stats.stattools import durbin_watson
 from teleop_core._typing import Float1D, Rows
 from teleop_core.calibration.candidates import (
     OPEN,
+    REPEATABLE,
     UNLOCATED_AT,
     Candidate,
     _best,
@@ -61,6 +68,7 @@ from teleop_core.calibration.fitting import (
     one_blas_thread,
     search,
     solve,
+    train_sse,
 )
 from teleop_core.calibration.library import OPEN_TERMS, OpenTerm, term_report
 from teleop_core.calibration.models import BaseModel, CalibrationData
@@ -203,9 +211,10 @@ class Calibrator:
         from its winner: on the held-out block the winner's errors are not
         significantly smaller than theirs (one-sided Diebold-Mariano at `alpha`), and
         on the training block their BIC is within `BIC_DECISIVE` of the winner's.
-        An open term that is no look-alike (`OpenTerm.look_alike`: the gain step) is
-        no alternative. Empty when the winner is identified. Look-alikes this
-        catches: a direction asymmetry and a velocity nonlinearity on a recording
+        An open term that is no look-alike of the winner's family (`OpenTerm.look_alike`:
+        the gain step is one of a drift's only) is no alternative. Empty when the
+        winner is identified. Look-alikes this catches: a drift and a gain step early
+        in the recording, a direction asymmetry and a velocity nonlinearity on a recording
         with few speeds in one direction, pre-sliding memory and a direction
         asymmetry or a Stribeck dip on one with few reversals."""
         out = []
@@ -213,7 +222,8 @@ class Calibrator:
         for cand, effect, _, c_pred, _ in passing:
             if cand is best[0] or cand.bic_change - best[0].bic_change > BIC_DECISIVE:
                 continue
-            if not getattr(effect, "look_alike", True):
+            alike_of = getattr(effect, "look_alike", True)
+            if alike_of is False or (alike_of is not True and best[1].family not in alike_of):
                 continue
             if diebold_mariano(y_test - c_pred[self.test_], e_best) >= self.alpha:
                 out.append(cand.family)
@@ -232,7 +242,41 @@ class Calibrator:
             alike += self._lag_alike(data, chain, (best[1], best[0].searched_value))
         if best[1].family == "current_nonlinearity":
             alike += self._saturation_alike(data, chain, pred, data.y - best[3])
-        return alike
+        return alike + self._refinement_alike(data, chain, best)
+
+    def _refinement_alike(self, data: CalibrationData, chain: Chain, best) -> list[str]:  # type: ignore[no-untyped-def]
+        """The families already in `chain` whose second term (the same family at another
+        searched value, on top of the chain) predicts the held-out block about as well
+        as the round's winner `best`: its held-out RMSE within `min_gain` of the
+        winner's (or below), the winner's errors not significantly smaller (one-sided
+        Diebold-Mariano at `alpha`), and its training BIC not `BIC_DECISIVE` behind.
+
+        A large effect that the model holds only as well as the recorded channels allow
+        (a wide Stribeck dip on a noisy speed, whose mean shape is not the dip's) leaves
+        a residual shaped like it, which a look-alike family then takes: a viscous
+        nonlinearity after a Stribeck dip. Where the first family's own second term does
+        as well, the recording does not say that the winner is another effect rather
+        than a correction of the first, and the winner is reported ambiguous with it."""
+        out: list[str] = []
+        y_test = data.y[self.test_]
+        e_best = y_test - best[3][self.test_]
+        rmse_best = _rmse(e_best)
+        bic_best = self._bic(data, best[3], best[4])
+        for effect, _ in chain:
+            if effect.searched is None or effect.family in REPEATABLE or effect.family in out:
+                continue
+            if type(effect).transform is not Effect.transform:
+                continue
+            value = search(self.base_, data, self.train_, chain, effect)
+            _, c_pred, c_k = self._fit_chain(data, [*chain, (effect, value)])
+            e = y_test - c_pred[self.test_]
+            if _rmse(e) * (1.0 - self.min_gain) > rmse_best:
+                continue
+            if self._bic(data, c_pred, c_k) - bic_best > BIC_DECISIVE:
+                continue
+            if diebold_mariano(e, e_best) >= self.alpha:
+                out.append(effect.family)
+        return out
 
     def _lag_alike(
         self, data: CalibrationData, chain: Chain, delay: tuple[Effect, float]
@@ -371,6 +415,11 @@ class Calibrator:
             chain.append((best[1], best[0].searched_value))
             coef, pred, k = best[2], best[3], best[4]
             rmse = best[0].rmse_held_out_n
+            backfitted = self._backfit(data, chain)
+            if backfitted != chain:
+                chain[:] = backfitted
+                coef, pred, k = self._fit_chain(data, chain)
+                rmse = _rmse(y_test - pred[self.test_])
             refitted = self.model.fitted_to(data, self.train_, chain)
             if refitted != self.base_:
                 # the base model's own assumptions again, now that the effect no longer
@@ -387,6 +436,29 @@ class Calibrator:
         self.chain_ = chain
         self._diagnose(data, pred)
         return self
+
+    def _backfit(self, data: CalibrationData, chain: Chain) -> Chain:
+        """`chain` with each earlier effect's searched value searched again on the
+        training block, every other effect of the chain in the model (one pass, in the
+        order added; a value is replaced only where the training fit improves).
+
+        An effect's value is searched in the round it enters, against a residual that
+        still holds the effects found after it: a hysteresis loop searched beside an
+        unmodelled gain step widens to take part of the step, a Stribeck speed beside
+        a missing ripple shifts. Left frozen, the biased value leaves structure for a
+        wrong family to take and keeps the right one from passing."""
+        current = list(chain)
+        sse = train_sse(self.base_, data, self.train_, current)
+        for i, (effect, _) in enumerate(chain[:-1]):
+            if effect.searched is None:
+                continue
+            others = [*current[:i], *current[i + 1 :]]
+            value = search(self.base_, data, self.train_, others, effect)
+            trial = [*current[:i], (effect, value), *current[i + 1 :]]
+            trial_sse = train_sse(self.base_, data, self.train_, trial)
+            if trial_sse < sse:
+                current, sse = trial, trial_sse
+        return current
 
     def _candidates(
         self,

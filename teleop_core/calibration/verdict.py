@@ -35,6 +35,7 @@ from scipy.ndimage import uniform_filter1d
 from statsmodels.stats.stattools import durbin_watson
 
 from teleop_core._typing import Float1D
+from teleop_core.calibration.library import distance_since_turn
 
 BINS = 20
 """Quantile bins per quantity."""
@@ -59,7 +60,8 @@ def fit_percent(y: Float1D, y_hat: Float1D) -> float:
 
 def distance_since_reversal(position: Float1D, speed: Float1D) -> Float1D:
     """|position - position where the speed last changed sign| (from the start until the
-    first reversal)."""
+    first reversal). For a noise-free speed (the generators' truth); on a measured one
+    `library.distance_since_turn`, from the angle's turns, is the quantity."""
     sign = np.sign(speed)
     # carry the last non-zero sign forward so that rest does not count as a reversal
     nz = np.flatnonzero(sign)
@@ -104,7 +106,10 @@ def _raw_quantities(signals: dict[str, Float1D], prediction: Float1D) -> dict[st
         out["speed band"] = np.abs(speed)
         out["direction"] = np.sign(speed)
         if "angle" in signals:
-            out["distance since reversal"] = distance_since_reversal(signals["angle"], speed)
+            # from the angle's turns, not the speed's sign changes: the speed sensor's
+            # noise flips the sign at every slow stretch, and each flip would restart
+            # the distance there
+            out["distance since reversal"] = distance_since_turn(signals["angle"])
     out["load"] = np.abs(np.asarray(prediction, float))
     return out
 

@@ -183,3 +183,43 @@ def test_count_without_generalise_is_refused(
     assert "--count 2" in err[0]
     assert "--generalise" in err[0]
     assert not (tmp_path / "r.json").exists()
+
+
+def test_a_gain_change_after_the_training_block_is_not_counted_against_the_2x_share() -> None:
+    from teleop_core.calibration.general import general_recording, shown_in_training
+
+    late = [{"family": "gain_change", "params": {"change_fraction": 0.8}}]
+    early = [{"family": "gain_change", "params": {"change_fraction": 0.7}}]
+    other = [{"family": "stribeck", "params": {"stribeck_speed_rad_s": 0.1}}]
+    assert not shown_in_training(late)
+    assert shown_in_training(early)
+    assert shown_in_training(other)
+    assert not shown_in_training(other + late)
+    # a drawn recording: its step is where the truth says, on the held-out block
+    drawn = general_recording(("gain_change",), 12, 30.0, 50.0)
+    fraction = drawn.truth[0]["params"]["change_fraction"]
+    assert fraction > 0.75
+    assert not shown_in_training(drawn.truth)
+    t = drawn.data.signals["t"]
+    step = np.flatnonzero(np.abs(drawn.deviation) > 1e-9)[0]
+    assert (t[step] - t[0]) / (t[-1] - t[0]) == pytest.approx(fraction, abs=0.01)
+    base = {
+        "group": "a",
+        "families": ["a"],
+        "right_first": True,
+        "wrong_named": False,
+        "ambiguous": [],
+        "ratio_to_oracle": 1.0,
+        "seconds": 1.0,
+        "verdict": "structure_remains",
+        "honest": True,
+    }
+    runs = [
+        {**base, "within_2x_oracle": True, "shown_in_training": True},
+        {**base, "within_2x_oracle": False, "shown_in_training": False},
+    ]
+    s = summarise(runs)
+    assert s["per_group"]["a"]["within_2x_oracle"] == 1.0
+    assert s["per_group"]["a"]["within_2x_oracle_all"] == 0.5
+    assert s["per_group"]["a"]["not_shown_in_training"] == 1
+    assert (s["overall"]["within_2x_oracle"], s["overall"]["within_2x_oracle_all"]) == (1.0, 0.5)
