@@ -5,6 +5,7 @@
   `PolynomialFeatures` on the standardised traits;
 - the emulator's statistics with BLAS on one thread (`one_blas_thread`, as the fit runs
   them) against two threads: the same numbers;
+- `holm_flags` against statsmodels' `multipletests(method="holm")`, which it replaced;
 - `worker_pool`: two `simulate_settings` calls on one pool started once, their trials
   those of the same settings simulated in this process.
 """
@@ -19,6 +20,7 @@ from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 from threadpoolctl import threadpool_limits
 
 from study.analysis.participant_fit import simulate
+from study.analysis.participant_fit.checks import holm_flags
 from study.analysis.participant_fit.emulator import (
     MomentEmulator,
     design_box,
@@ -101,3 +103,22 @@ def test_one_worker_pool_serves_several_simulations_with_the_same_trials(
     # outside the pool a call opens its own again
     simulate.simulate_settings("lcca", people[:2], 1, jobs=2, max_s=1.0)
     assert opened == [("lcca", 2), ("lcca", 2)]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_holm_flags_are_statsmodels_multipletests(seed: int) -> None:
+    from statsmodels.stats.multitest import multipletests
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 30))
+    # small p-values near Holm's thresholds, ties, ones and (seed 5) a NaN
+    p = np.where(rng.random(n) < 0.5, rng.random(n) * 0.05, rng.random(n))
+    p[rng.integers(0, n, 3)] = p[0]
+    p[-1] = 0.05 / n if seed % 2 else 1.0
+    if seed == 5:
+        p[n // 2] = np.nan
+    rows = [{"p": float(v)} for v in p]
+    holm_flags(rows, 0.05)
+    reject, p_holm, _, _ = multipletests(p, 0.05, method="holm")
+    assert [r["flagged"] for r in rows] == reject.tolist()
+    np.testing.assert_array_equal([r["p_holm"] for r in rows], p_holm)
