@@ -16,8 +16,8 @@ is found is reported rather than absorbed into the traits:
   against simulated: z = (d_obs - d_sim) / sqrt(se_obs^2 + se_sim^2), normal p.
 - The trend and order tests of every measure are one family, Holm-corrected at
   `ALPHA` (`holm_flags`: statsmodels' `multipletests(method="holm")`'s values and
-  rejections, without the garbage collection it runs on every call, a fifth of a
-  second each in the fit's process).
+  rejections, without the garbage collection it runs on every call, which costs the
+  more the larger the fit's heap).
 - **group means the fitted model does not reproduce** (`summary_misfit`, a posterior
   predictive check): per group, measure and condition (VO, HV and each person's VO - HV),
   the observed people's means against the simulated people's, Welch's t-test, Holm over

@@ -14,8 +14,8 @@ trial noise over the square root of the repeats), while independent seeds let th
 regression average the trial noise over hundreds of trials.
 
 The processes are `concurrent.futures` workers (spawn, as `study run --jobs`), each
-warming up once (its imports, the loop's compiled kernel, the estimator: about a second
-of CPU, as much as a few settings' trials); one job is one setting with all its trials,
+warming up once (its imports, the loop's compiled kernel, the estimator: as much CPU
+as a few settings' trials); one job is one setting with all its trials,
 so the work is coarse enough that the pool costs nothing beyond that start-up. A fit
 simulates twice (the emulator's design, then people drawn from the fit): `worker_pool`
 keeps one pool open across both, so that its workers start once.
