@@ -5,6 +5,8 @@
   `PolynomialFeatures` on the standardised traits;
 - the emulator's statistics with BLAS on one thread (`one_blas_thread`, as the fit runs
   them) against two threads: the same numbers;
+- the LCCA trial's `approaches` (vectorised) against the loop it replaced, and its
+  frame made from the loop's sample array against the frame of the loop's frame;
 - `holm_flags` against statsmodels' `multipletests(method="holm")`, which it replaced;
 - `worker_pool`: two `simulate_settings` calls on one pool started once, their trials
   those of the same settings simulated in this process.
@@ -15,6 +17,7 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
+import pandas as pd
 import pytest
 from sklearn.preprocessing import PolynomialFeatures, StandardScaler
 from threadpoolctl import threadpool_limits
@@ -29,6 +32,7 @@ from study.analysis.participant_fit.emulator import (
     surface_traits,
 )
 from study.protocol.traits import TRAITS
+from study.tasks.lcca.features import OSTIUM_BAND_M, approaches
 from teleop_core.blas import one_blas_thread
 from tests.study.test_participant_fit_validate import MEASURES, synthetic_trials
 
@@ -122,3 +126,47 @@ def test_holm_flags_are_statsmodels_multipletests(seed: int) -> None:
     reject, p_holm, _, _ = multipletests(p, 0.05, method="holm")
     assert [r["flagged"] for r in rows] == reject.tolist()
     np.testing.assert_array_equal([r["p_holm"] for r in rows], p_holm)
+
+
+def _approaches_loop(x: np.ndarray, ostium_m: float) -> int:
+    """The loop `approaches` replaced: armed behind the ostium, counted when near it."""
+    near = x >= ostium_m - OSTIUM_BAND_M
+    behind = x < ostium_m - 1.5 * OSTIUM_BAND_M
+    count, armed = 0, True
+    for k in np.flatnonzero(near | behind):
+        if near[k] and armed:
+            count, armed = count + 1, False
+        elif behind[k]:
+            armed = True
+    return count
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_approaches_count_as_the_loop_did(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    for n in (0, 1, 2, 50, 3000):
+        # a wandering insertion about the ostium, and one that jumps across it
+        walk = 0.2 + np.cumsum(rng.normal(0.0, 0.004, n))
+        jumps = rng.uniform(0.17, 0.23, n)
+        for x in (walk, jumps):
+            assert approaches(x, 0.2) == _approaches_loop(x, 0.2)
+    # by hand: near, behind, the band between (neither), near, near, behind, near
+    x = 0.2 + np.array([0.0, -0.02, -0.01, -0.005, 0.001, -0.02, 0.0])
+    assert approaches(x, 0.2) == 3
+
+
+def test_the_trials_frame_from_the_sample_array_is_the_frame_of_the_loops_frame() -> None:
+    from study.protocol.traits import ParticipantTraits
+    from study.tasks.lcca.simulated_participant import SimulatedParticipant
+    from study.tasks.lcca.trial import lcca_loop, result_frame, trial_frame
+    from teleop_core.phantom.lcca import LccaPhantom
+
+    phantom = LccaPhantom()
+    x = design_settings(2, 0, design_box())
+    traits = ParticipantTraits(group="design", **dict(zip(TRAITS, x[0], strict=True)))
+    result = lcca_loop("HV", 3, None, None, phantom).run(
+        6.0, SimulatedParticipant(traits, phantom, give_up_s=6.0)
+    )
+    assert len(result.samples) > 100
+    new, old = result_frame(result), trial_frame(result.to_frame())
+    pd.testing.assert_frame_equal(new, old, check_exact=True)
