@@ -5,11 +5,11 @@ workers' CPU per step, in one process (no command line, no figure).
         --design 32 --repeats 2 --check 4 --bootstrap 20 [--json OUT]
 
 A step's row runs from the fit's first report of it (`progress`) to the next step's
-first report (the emulator's first report comes when its first setting is simulated,
-so the row before it holds that setting's start); a worker's CPU counts when
-its pool is shut down (with one pool for the whole fit, at its end). DEMO_DB is fitted
-in place: pass a copy. Works on checkouts whose fit has `fit_study` (this one) or
-`fit_participants` (commit 222c262).
+first report (`trials`: reading the study's trials; the emulator's first report comes
+when its first setting is simulated, so the row before it holds that setting's start);
+a worker's CPU counts when its pool is shut down (with one pool for the whole fit, at
+its end). DEMO_DB is fitted in place: pass a copy. Works on checkouts whose fit has
+`fit_study` (this one) or `fit_participants` (commit 222c262).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def main() -> None:
     settings = fit_module.FitSettings(
         design=args.design, repeats=args.repeats, check=args.check, bootstrap=args.bootstrap
     )
-    marks = [("imports", time.monotonic(), *_cpu())]
+    marks = [("trials", time.monotonic(), *_cpu())]
     last: list[str] = []
 
     def progress(step: str, k: int = 0, n: int = 0) -> None:
