@@ -17,10 +17,9 @@ position-periodic disturbance, `scipy.signal.lombscargle` on the residual agains
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, ParamSpec, TypeVar
+from typing import Any
 
 import numpy as np
 from scipy import signal, stats
@@ -40,29 +39,6 @@ BIN_RAD = 1e-3
 """Angle bin of the gridded periodogram, rad (a 300 rad^-1 wave loses < 2 % to it)."""
 K_MIN, K_MAX = 1.0, 300.0
 """Wavenumbers searched, rad^-1: once a turn up to 300 times a turn."""
-
-_P = ParamSpec("_P")
-_R = TypeVar("_R")
-
-
-def one_blas_thread(func: Callable[_P, _R]) -> Callable[_P, _R]:
-    """`func` run with the BLAS libraries (OpenBLAS under numpy and scipy) on one thread.
-
-    The loop's linear algebra is thousands of small products of tall, narrow matrices
-    (tens of thousands of rows, a dozen columns): a second BLAS thread gains little on
-    them, and on a machine whose cores are busy with other work its threads wait for
-    each other in spin loops that cost more CPU time than the products themselves.
-    The limit (`threadpoolctl`) is lifted again when `func` returns.
-    """
-
-    @functools.wraps(func)
-    def limited(*args: _P.args, **kwargs: _P.kwargs) -> _R:
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=1, user_api="blas"):
-            return func(*args, **kwargs)
-
-    return limited
 
 
 def design(model: BaseModel, s: Signals, chain: Chain) -> tuple[Float2D, list[int]]:

@@ -47,6 +47,7 @@ from scipy import signal
 from statsmodels.stats.stattools import durbin_watson
 
 from teleop_core._typing import Float1D, Rows
+from teleop_core.blas import one_blas_thread
 from teleop_core.calibration.candidates import (
     OPEN,
     REPEATABLE,
@@ -65,7 +66,6 @@ from teleop_core.calibration.fitting import (
     best_training_fit,
     confidence,
     design,
-    one_blas_thread,
     search,
     solve,
     train_sse,

@@ -18,8 +18,9 @@ from scipy import stats
 from statsmodels.regression.linear_model import OLS
 from threadpoolctl import threadpool_info
 
+from teleop_core.blas import one_blas_thread
 from teleop_core.calibration.effects import EFFECTS
-from teleop_core.calibration.fitting import SearchCost, one_blas_thread, train_sse
+from teleop_core.calibration.fitting import SearchCost, train_sse
 from teleop_core.calibration.models import (
     SIGN_WIDTHS_RAD_S,
     CalibrationData,

@@ -15,7 +15,9 @@ is found is reported rather than absorbed into the traits:
   mean in VO-first minus HV-first participants (a period effect shows here), observed
   against simulated: z = (d_obs - d_sim) / sqrt(se_obs^2 + se_sim^2), normal p.
 - The trend and order tests of every measure are one family, Holm-corrected at
-  `ALPHA` (`statsmodels.stats.multitest.multipletests`).
+  `ALPHA` (`holm_flags`: statsmodels' `multipletests(method="holm")`'s values and
+  rejections, without the garbage collection it runs on every call, which costs the
+  more the larger the fit's heap).
 - **group means the fitted model does not reproduce** (`summary_misfit`, a posterior
   predictive check): per group, measure and condition (VO, HV and each person's VO - HV),
   the observed people's means against the simulated people's, Welch's t-test, Holm over
@@ -45,7 +47,6 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 from scipy.optimize import minimize
-from statsmodels.stats.multitest import multipletests
 
 from study.analysis.participant_fit.emulator import MomentEmulator, log_moment
 from study.analysis.participant_fit.summaries import condition_values
@@ -56,6 +57,23 @@ OUTLIER_ALPHA = 0.01
 """Family-wise error rate of the outlier rule (Bonferroni over participants)."""
 CALIBRATION_Q = 0.9
 """The quantile at which the simulated people's D^2 calibrates the chi-square scale."""
+
+
+def holm_flags(rows: Sequence[dict[str, Any]], alpha: float) -> None:
+    """Set each row's `p_holm` and `flagged` by Holm's step-down over the rows' `p` at
+    `alpha`: statsmodels' `multipletests(p, alpha, "holm")` line for line (a NaN p is
+    a member of the family, sorted last, as there; `study.analysis.stats.holm` leaves
+    it out)."""
+    p = np.array([r["p"] for r in rows], dtype=float)
+    order = np.argsort(p)
+    steps = np.arange(len(p), 0, -1)
+    above = p[order] > alpha / steps
+    reject = np.ones(len(p), bool)
+    reject[order[np.argmax(above) :] if above.any() else []] = False
+    adjusted = np.empty(len(p))
+    adjusted[order] = np.minimum(np.maximum.accumulate(p[order] * steps), 1.0)
+    for r, flag, ph in zip(rows, reject, adjusted, strict=True):
+        r["p_holm"], r["flagged"] = float(ph), bool(flag)
 
 
 def slopes(trials: pd.DataFrame, measure: str) -> pd.Series:
@@ -118,9 +136,7 @@ def trend_and_order(
                 }
             )
     if rows:
-        reject, p_holm, _, _ = multipletests([r["p"] for r in rows], ALPHA, method="holm")
-        for r, flag, ph in zip(rows, reject, p_holm, strict=True):
-            r["p_holm"], r["flagged"] = float(ph), bool(flag)
+        holm_flags(rows, ALPHA)
     return rows
 
 
@@ -234,9 +250,7 @@ def summary_misfit(
             }
         )
     if rows:
-        reject, p_holm, _, _ = multipletests([r["p"] for r in rows], ALPHA, method="holm")
-        for r, flag, ph in zip(rows, reject, p_holm, strict=True):
-            r["p_holm"], r["flagged"] = float(ph), bool(flag)
+        holm_flags(rows, ALPHA)
     return {"rows": rows, "flagged": [r for r in rows if r["flagged"]], "held": list(held)}
 
 

@@ -61,8 +61,8 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 from scipy.optimize import least_squares
-from statsmodels.stats.multitest import multipletests
 
+from study.analysis.participant_fit.checks import holm_flags
 from study.analysis.participant_fit.emulator import MomentEmulator, floor, log_moment
 from study.analysis.participant_fit.estimate import DRAWS, HIGH, LOW, GroupEstimator, GroupFit
 from study.protocol.participant_effects import (
@@ -261,9 +261,7 @@ def structure_tests(
                 }
             )
     if rows:
-        reject, p_holm, _, _ = multipletests([r["p"] for r in rows], ALPHA, method="holm")
-        for r, flag, ph in zip(rows, reject, p_holm, strict=True):
-            r["p_holm"], r["flagged"] = float(ph), bool(flag)
+        holm_flags(rows, ALPHA)
     return rows
 
 

@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
 import pandas as pd
@@ -231,6 +232,41 @@ def _effective(weights: np.ndarray) -> float:
     return float(weights.sum() ** 2 / (weights**2).sum())
 
 
+def polynomial_terms(z: np.ndarray, powers: np.ndarray) -> np.ndarray:
+    """The monomials `powers` (terms, columns; `PolynomialFeatures.powers_`) of `z`
+    (rows, columns): `np.prod(z[:, None, :] ** powers[None], axis=2)`, bit for bit. Up
+    to degree 2 a term is a product of at most two factors, the others 1 (exact), so it
+    is one product of two gathered columns of [1, z, z ** 2] (the square by numpy's
+    `power`, as there), without the pow of every term's every column."""
+    plan = _term_plan(powers.tobytes(), powers.shape, powers.dtype.str)
+    if plan is None:
+        return np.prod(z[:, None, :] ** powers[None], axis=2)
+    ext = np.concatenate(
+        [np.ones((len(z), 1)), z, z ** np.full(z.shape, 2, dtype=powers.dtype)], axis=1
+    )
+    return ext[:, plan[0]] * ext[:, plan[1]]
+
+
+@lru_cache(maxsize=16)
+def _term_plan(
+    raw: bytes, shape: tuple[int, ...], dtype: str
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """For `polynomial_terms`: each term's two columns of [1, z, z ** 2] (column 0 is
+    1, 1 + j is z_j, 1 + n + j is z_j ** 2), or None above degree 2."""
+    powers = np.frombuffer(raw, dtype=dtype).reshape(shape)
+    if powers.sum(axis=1).max(initial=0) > 2:
+        return None
+    n = shape[1]
+    first, second = np.zeros(len(powers), int), np.zeros(len(powers), int)
+    for k, p in enumerate(powers):
+        used = np.flatnonzero(p)
+        if len(used) == 2:
+            first[k], second[k] = 1 + used[0], 1 + used[1]
+        elif len(used) == 1:
+            first[k] = 1 + used[0] + (n if p[used[0]] == 2 else 0)
+    return first, second
+
+
 class MomentEmulator:
     """Log-moments and measure means of one person as functions of the traits.
 
@@ -408,7 +444,7 @@ class MomentEmulator:
         `PolynomialFeatures(degree)`, in plain numpy, as the estimator calls it thousands
         of times per fit and a pipeline's input checks took half of each call."""
         z = (surface_traits(np.atleast_2d(traits)) - self.centre_) / self.scale_
-        return np.prod(z[:, None, :] ** self.powers_[None], axis=2)
+        return polynomial_terms(z, self.powers_)
 
     def means(self, traits: np.ndarray) -> np.ndarray:
         """Expected measures and features (own units) of people with `traits` ->

@@ -60,7 +60,7 @@ from study.analysis.participant_fit.observed import (
     person_moments,
     with_features,
 )
-from study.analysis.participant_fit.simulate import simulate_settings
+from study.analysis.participant_fit.simulate import simulate_settings, worker_pool
 from study.analysis.participant_fit.summaries import power_effects, summaries
 from study.errors import StudyInputError
 from study.probes.measure import probe_arrays, probe_information, probe_summary
@@ -69,6 +69,7 @@ from study.protocol.participant_effects import ParticipantEffect
 from study.protocol.participant_model import FORMAT
 from study.protocol.tasks import get_task
 from study.protocol.traits import PROFILES, TRAITS, GroupProfile, draw_traits
+from teleop_core.blas import one_blas_thread
 from teleop_core.progress import Progress, as_step, no_progress
 
 
@@ -152,6 +153,7 @@ def simulate_people(
     return frame
 
 
+@one_blas_thread
 def build_emulator(
     task: str, settings: FitSettings, progress: Progress = _no_progress
 ) -> MomentEmulator:
@@ -183,17 +185,20 @@ def fit_study(
     emulator: MomentEmulator | None = None,
 ) -> FitResult:
     """The fit to the database's completed trials of `task`; `emulator`: one built by
-    `build_emulator` with the same `settings` (it depends on them only), else built."""
+    `build_emulator` with the same `settings` (it depends on them only), else built.
+    The simulation workers of the emulator's design and of the check are one pool,
+    started first (`worker_pool`)."""
     trials = observed_trials(engine, task)
     check_fittable(trials, task, db_label)
-    trials, _ = with_features(engine, trials, task, progress)
-    from study.probes.measure import probe_table
-    from study.probes.store import probe_frame
+    with worker_pool(task, settings.jobs):
+        trials, _ = with_features(engine, trials, task, progress)
+        from study.probes.measure import probe_table
+        from study.probes.store import probe_frame
 
-    probe_trials = probe_frame(engine)
-    probes = probe_table(probe_trials) if len(probe_trials) else None
-    emulator = emulator or build_emulator(task, settings, progress)
-    return run_fit(trials, task, settings, emulator, db_label, progress, probes=probes)
+        probe_trials = probe_frame(engine)
+        probes = probe_table(probe_trials) if len(probe_trials) else None
+        emulator = emulator or build_emulator(task, settings, progress)
+        return run_fit(trials, task, settings, emulator, db_label, progress, probes=probes)
 
 
 @dataclass
@@ -635,6 +640,7 @@ class FitResult:
         return model
 
 
+@one_blas_thread
 def run_fit(
     trials: pd.DataFrame,
     task: str,

@@ -14,8 +14,11 @@ trial noise over the square root of the repeats), while independent seeds let th
 regression average the trial noise over hundreds of trials.
 
 The processes are `concurrent.futures` workers (spawn, as `study run --jobs`), each
-warming up once (numba's kernel from its on-disk cache, the estimator); one job is one
-setting with all its trials, so the work is coarse enough that the pool costs nothing.
+warming up once (its imports, the loop's compiled kernel, the estimator: as much CPU
+as a few settings' trials); one job is one setting with all its trials,
+so the work is coarse enough that the pool costs nothing beyond that start-up. A fit
+simulates twice (the emulator's design, then people drawn from the fit): `worker_pool`
+keeps one pool open across both, so that its workers start once.
 Each row also holds the task's `fit_features` of the trial's samples, read off the
 simulated frame as `observed.py` reads them off the stored samples.
 """
@@ -24,8 +27,10 @@ from __future__ import annotations
 
 import multiprocessing
 import zlib
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager, nullcontext
+from contextvars import ContextVar
 from functools import lru_cache
 from typing import Any
 
@@ -109,6 +114,33 @@ def _warm(task: str) -> None:
         _estimator()
 
 
+_POOL: ContextVar[tuple[str, int, ProcessPoolExecutor] | None] = ContextVar("pool", default=None)
+"""The pool `worker_pool` holds open: (task, workers, executor)."""
+
+
+def _new_pool(task: str, jobs: int) -> ProcessPoolExecutor:
+    context = multiprocessing.get_context("spawn")
+    return ProcessPoolExecutor(jobs, mp_context=context, initializer=_warm, initargs=(task,))
+
+
+@contextmanager
+def worker_pool(task: str, jobs: int) -> Iterator[None]:
+    """Within it, `simulate_settings` of `task` with `jobs` workers runs on one pool,
+    started here (its workers start up while the caller goes on) and shut down at the
+    end, instead of a pool of its own per call."""
+    if jobs <= 1:
+        yield
+        return
+    with _new_pool(task, jobs) as pool:
+        for _ in range(jobs):  # start the workers now, beside the caller's own work
+            pool.submit(int)
+        token = _POOL.set((task, jobs, pool))
+        try:
+            yield
+        finally:
+            _POOL.reset(token)
+
+
 def simulate_settings(
     task: str,
     settings: Sequence[dict[str, Any]],
@@ -132,10 +164,13 @@ def simulate_settings(
             ]
             progress("simulating", k + 1, n)
     else:
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(
-            jobs, mp_context=context, initializer=_warm, initargs=(task,)
-        ) as pool:
+        shared = _POOL.get()
+        if shared is not None and shared[:2] == (task, jobs):
+            opened, pool = nullcontext(), shared[2]
+        else:
+            pool = _new_pool(task, jobs)
+            opened = pool
+        with opened:
             futures = {
                 pool.submit(simulate_setting, task, k, s, repeats, max_s, salt, effects): k
                 for k, s in enumerate(settings)

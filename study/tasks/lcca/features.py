@@ -177,16 +177,18 @@ def _approach(
     slow = np.flatnonzero(v[first:] < SLOW_SHARE * (np.median(ref) if len(ref) else speed))
     if len(slow) and x[first + slow[0]] < ostium_m:
         out["approach_m"] = ostium_m - x[first + slow[0]]
+    out["approaches"] = float(max(approaches(x, ostium_m), 1))
+    return out
+
+
+def approaches(x: np.ndarray, ostium_m: float) -> int:
+    """How many times the insertion `x` comes up to the ostium (within `OSTIUM_BAND_M`)
+    from behind it (1.5 bands back) or from the start: of the grid points either near
+    or behind, the near ones whose previous such point is behind (or that have none)."""
     near = x >= ostium_m - OSTIUM_BAND_M
     behind = x < ostium_m - 1.5 * OSTIUM_BAND_M
-    count, armed = 0, True
-    for k in np.flatnonzero(near | behind):
-        if near[k] and armed:
-            count, armed = count + 1, False
-        elif behind[k]:
-            armed = True
-    out["approaches"] = float(max(count, 1))
-    return out
+    events = near[near | behind]  # True: near, False: behind (the two never overlap)
+    return int(np.count_nonzero(events & np.concatenate([[True], ~events[:-1]])))
 
 
 def _first_turn(t: np.ndarray, rot: np.ndarray) -> dict[str, float]:

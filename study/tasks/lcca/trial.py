@@ -20,7 +20,9 @@ from study.protocol.tasks import TrialResult
 from study.protocol.traits import ParticipantTraits
 from study.tasks.lcca.simulated_participant import SimulatedParticipant
 from teleop_core.estimation.estimator import ForceEstimator
+from teleop_core.loop.config import LoopResult
 from teleop_core.loop.core import LoopConfig, TeleopLoop
+from teleop_core.loop.layout import SAMPLE_COLUMNS
 from teleop_core.loop.link import LinkParams
 from teleop_core.master.params import HapticParams
 from teleop_core.phantom.lcca import LccaPhantom
@@ -115,7 +117,7 @@ def run_lcca_trial(
     loop = lcca_loop(condition, seed, estimator, haptic_gain, phantom, link)
     participant = SimulatedParticipant(traits, phantom, give_up_s=max_s)
     result = loop.run(max_s, participant)
-    frame = trial_frame(result.to_frame())
+    frame = result_frame(result)
     summary = {
         "task": "lcca",
         "group": traits.group,
@@ -135,3 +137,19 @@ def run_lcca_trial(
 def trial_frame(raw: pd.DataFrame) -> pd.DataFrame:
     """TRIAL.csv's columns from the loop's sample frame."""
     return raw[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
+
+
+def result_frame(result: LoopResult) -> pd.DataFrame:
+    """`trial_frame(result.to_frame())` straight from the loop's sample array: only
+    TRIAL.csv's columns are made, not a frame of every loop column first (a fit makes
+    one per simulated trial)."""
+    names = np.asarray(result.branches, dtype=object)
+    samples = result.samples
+    return pd.DataFrame(
+        {
+            new: names[samples[:, SAMPLE_COLUMNS.index(old)].astype(int)]
+            if old == "branch"
+            else samples[:, SAMPLE_COLUMNS.index(old)]
+            for old, new in TRIAL_COLUMNS.items()
+        }
+    )
