@@ -16,7 +16,8 @@ every trial of a setting with a capped trial left out; the time's mean as a shar
 its cap through a logit link (a fractional-logit, quasi-binomial, surface of
 time / cap: a mean that cannot pass the cap, so the slow corners need not bend the
 surface), penalties 1e-4 and 1e-3; a cubic log-link surface; two parts (the uncapped
-trials' mean and the cap's chance); the log time as a censored normal regression.
+trials' mean and the cap's chance); the log time as a censored normal regression; the
+quadratic with each trait's cube, or with the log speed squared times each trait.
 """
 
 from __future__ import annotations
@@ -98,6 +99,16 @@ def variants(emu: MomentEmulator, x: np.ndarray, design: pd.DataFrame) -> dict[s
     def cubic(t: np.ndarray) -> np.ndarray:
         z = (surface_traits(np.atleast_2d(t)) - emu.centre_) / emu.scale_
         return np.prod(z[:, None, :] ** powers3[None], axis=2)[:, 1:]
+
+    speed = TRAITS.index("preferred_speed_m_s")
+
+    def pure_cubes(t: np.ndarray) -> np.ndarray:
+        z = (surface_traits(np.atleast_2d(t)) - emu.centre_) / emu.scale_
+        return np.column_stack([quadratic(t), z**3])
+
+    def speed_cubes(t: np.ndarray) -> np.ndarray:
+        z = (surface_traits(np.atleast_2d(t)) - emu.centre_) / emu.scale_
+        return np.column_stack([quadratic(t), z[:, [speed]] ** 2 * z])
 
     def surface(keep: np.ndarray | None = None, terms=quadratic, logit: float = 0.0) -> Predict:
         phi = terms(x[s])
@@ -199,6 +210,8 @@ def variants(emu: MomentEmulator, x: np.ndarray, design: pd.DataFrame) -> dict[s
         "time: logit link on time / cap, penalty 1e-4": surface(logit=1e-4),
         "time: logit link on time / cap, penalty 1e-3": surface(logit=1e-3),
         "cubic log link": surface(terms=cubic),
+        "quadratic + each trait's cube": surface(terms=pure_cubes),
+        "quadratic + the log speed squared times each trait": surface(terms=speed_cubes),
         "time: two parts, uncapped mean and the cap's chance (linear logit, 1e-3)": two_part(
             1e-3, True
         ),
