@@ -58,6 +58,7 @@ def _summary(report: dict[str, Any]) -> dict[str, Any]:
         "vo_hv_intervals_holding_truth": sum(d["within"] for d in report["differences"]),
         "emulator_check": report["emulator_check"],
         "emulator_outside": _outside(report["emulator_check"]),
+        "emulator_outside_people_only": report.get("emulator_check_outside_people_only"),
         "emulator_outside_at_best_fit": report.get("emulator_check_outside_best_fit"),
         "fit_seconds": report["fit_seconds"],
         "targets_met": {

@@ -266,6 +266,13 @@ def test_the_emulator_is_checked_against_the_people_simulated_from_the_fit(fitte
     check = model["emulator_check"]
     assert len(check["rows"]) == 3 * 3 * 3  # groups x measures x (VO, HV, VO-HV)
     assert check["outside"] == sum(not r["inside"] for r in check["rows"])
+    # the interval counts the emulator's own noise beside the simulated people's
+    assert "design noise" in check["interval"]
+    assert all(r["emulator_design_sd"] > 0 for r in check["rows"])
+    assert all(
+        r["interval95"][0] <= r["simulated_ci95"][0] <= r["simulated_ci95"][1] <= r["interval95"][1]
+        for r in check["rows"]
+    )
     # a hand-made table: one prediction inside its interval, one 0.3 above it
     rows = [
         ("novice", "t", "VO", "simulated", 10.0, 9.0, 11.0),
@@ -279,7 +286,8 @@ def test_the_emulator_is_checked_against_the_people_simulated_from_the_fit(fitte
     check = emulator_check(made)
     assert [r["inside"] for r in check["rows"]] == [True, False]
     assert check["outside"] == 1
-    assert "in 1 of 2 summaries (largest gap: expert VO t 8.8 vs 8)" in check["line"]
+    assert "in 1 of 2 summaries (95 % intervals of the people's;" in check["line"]
+    assert "largest gap: expert VO t 8.8 vs 8)" in check["line"]
 
 
 def test_without_samples_only_what_the_measures_tell_is_fitted(emulator, trials) -> None:

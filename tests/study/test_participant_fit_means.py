@@ -4,9 +4,14 @@ the emulator check's comparison (`checks.emulator_check`, `fit.replicate_predict
 The means are held to closed forms: a trial's measure log-normal about a known law, so
 its mean is exp(law + s^2 / 2), with a spread s that follows a trait (as the peak
 forces' does). The Newton solver of the mean surface is held to scikit-learn's
-`PoissonRegressor` on the same objective."""
+`PoissonRegressor` on the same objective.
+The emulator check's interval counts the emulator's own noise (its design's, by refits
+to resampled designs) beside the simulated people's: held to the nominal 5 % on toy
+emulators whose truth is the closed form, and to flagging a biased one."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -19,7 +24,8 @@ from study.analysis.participant_fit.emulator import (
     design_settings,
     poisson_ridge,
 )
-from study.analysis.participant_fit.fit import replicate_prediction
+from study.analysis.participant_fit.fit import replicate_design_sd, replicate_prediction
+from study.analysis.participant_fit.observed import bootstrap_means
 from study.protocol.traits import TRAITS
 from tests.study.test_participant_fit_validate import MEASURES, synthetic_trials
 
@@ -106,4 +112,69 @@ def test_the_check_compares_the_people_simulated_with_the_population_they_came_f
     assert [r["inside"] for r in check["rows"]] == [True, False]
     assert [r["inside_best_fit"] for r in check["rows"]] == [False, True]
     assert (check["outside"], check["outside_best_fit"]) == (1, 1)
-    assert "(largest gap: expert VO t 8.9 vs 8)" in check["line"]
+    assert "largest gap: expert VO t 8.9 vs 8)" in check["line"]
+
+
+SETTINGS = 200
+"""The toy emulators' design: settings, one trial a condition each."""
+
+
+def _toy_check(design_seed: int, bias: float, people: int = 60) -> dict:
+    """The emulator check of one toy emulator (`SETTINGS` design settings, one trial a condition,
+    the log-normal law above) for a group centred in the design's box, against `people`
+    people of that group (3 trials a condition, traits drawn from the same population,
+    trials from the law): the emulator's predictions times `1 + bias`."""
+    rng = np.random.default_rng([design_seed, 7])
+    low, high = design_box()
+    x = design_settings(SETTINGS, design_seed, (low, high))
+    design_logs, design_sds = _law(x)
+    trials = synthetic_trials(design_logs, 1, rng, design_sds)
+    emulator = MomentEmulator().fit(x, trials, MEASURES)
+    mean, sd = (low + high) / 2, (high - low) / 12
+    z = np.random.default_rng(3).standard_normal((2000, len(TRAITS)))
+    est = SimpleNamespace(emulator=emulator, draws=lambda m, s: np.clip(m + s * z, low, high))
+    result = SimpleNamespace(estimator=est, boots=np.array([np.concatenate([mean, sd])]), fit=None)
+    design_sd = replicate_design_sd(result, people, MEASURES)
+    predicted = emulator.means(est.draws(mean, sd)).mean(axis=0) * (1 + bias)
+    pred = dict(zip(emulator.moments_, predicted, strict=True))
+    # the simulated people: their own traits, 3 trials a condition from the law
+    own = np.clip(mean + sd * rng.standard_normal((people, len(TRAITS))), low, high)
+    logs, sds = _law(own)
+    rows, for_simulated, noise = [], {}, {}
+    per = {c: np.zeros((people, len(MEASURES))) for c in ("VO", "HV")}
+    for c in per:
+        per[c] = np.exp(logs[:, None] + sds[:, None] * rng.standard_normal((people, 3, 2))).mean(1)
+    for j, m in enumerate(MEASURES):
+        for label in ("VO", "HV", "VO-HV"):
+            v = per["VO"][:, j] - per["HV"][:, j] if label == "VO-HV" else per[label][:, j]
+            p = pred[f"VO:{m}"] - pred[f"HV:{m}"] if label == "VO-HV" else pred[f"{label}:{m}"]
+            lo, hi = bootstrap_means(v, rng, 400)
+            rows += [
+                ("g", m, label, "simulated", v.mean(), lo, hi),
+                ("g", m, label, "model", p, 0, 0),
+            ]
+            for_simulated[("g", m, label)] = p
+            noise[("g", m, label)] = design_sd[(m, label)]
+    table = pd.DataFrame(
+        rows, columns=["group", "measure", "condition", "source", "mean", "ci_low", "ci_high"]
+    )
+    return emulator_check(table, for_simulated, noise)
+
+
+def test_the_check_counts_the_emulators_own_noise_and_flags_a_bias() -> None:
+    # unbiased toy emulators: their own noise (a quadratic surface on 200 settings) is
+    # larger than 60 people's SE, so the people's interval alone flags them far beyond
+    # 5 % of the time; with the design's noise counted, about 5 % (24 designs x 6
+    # summaries: the count's SD at 5 % is 2.6 of 144)
+    checks = [_toy_check(seed, 0.0) for seed in range(24)]
+    both = sum(c["outside"] for c in checks) / (6 * len(checks))
+    people_only = sum(c["outside_people_only"] for c in checks) / (6 * len(checks))
+    assert 0.01 <= both <= 0.10, both
+    assert people_only > 3 * both, (people_only, both)
+    assert all("design noise" in c["interval"] for c in checks)
+    # an emulator 15 % high: the completion time (5 % spread a trial) is flagged in VO
+    # and HV on every design, its own noise counted
+    for c in [_toy_check(seed, 0.15) for seed in range(6)]:
+        time = {r["condition"]: r["inside"] for r in c["rows"] if r["measure"] == MEASURES[0]}
+        assert not time["VO"], c["rows"]
+        assert not time["HV"], c["rows"]

@@ -53,6 +53,8 @@ from study.analysis.participant_fit.summaries import condition_values
 
 ALPHA = 0.05
 """Family-wise error rate of the trend and order tests."""
+Z95 = float(stats.norm.ppf(0.975))
+"""The two-sided 95 % normal quantile (1.96)."""
 OUTLIER_ALPHA = 0.01
 """Family-wise error rate of the outlier rule (Bonferroni over participants)."""
 CALIBRATION_Q = 0.9
@@ -307,16 +309,25 @@ def lacks_line(
 
 
 def emulator_check(
-    table: pd.DataFrame, for_simulated: dict[tuple[str, str, str], float] | None = None
+    table: pd.DataFrame,
+    for_simulated: dict[tuple[str, str, str], float] | None = None,
+    design_sd: dict[tuple[str, str, str], float] | None = None,
 ) -> dict[str, Any]:
     """The emulator against the people simulated from the fit: the estimates rest on the
     emulator's surface, the `simulated` summaries on the simulator itself. Per group,
     measure and condition (VO, HV, VO-HV): the emulator's mean for the population the
     simulated people were drawn from (`for_simulated`, by (group, measure, condition):
     the fit's replicates, `fit.replicate_prediction`; else the `model` rows' best-fit
-    prediction) and whether it lies inside the simulated people's 95 % interval; each
-    row also holds the best-fit prediction. The printed line says how many lie outside,
-    and the largest relative gap."""
+    prediction) and whether it lies inside a 95 % interval of its difference from the
+    simulated people's mean. Both are noisy: the people's mean by their sampling (the
+    `simulated` row's bootstrap interval) and the emulator's by its finite design
+    (`design_sd`, its SD over refits to resamples of the design,
+    `fit.replicate_design_sd`); the interval adds the two in quadrature on each side
+    (mean -/+ sqrt(half-width^2 + (1.96 design SD)^2)), so an emulator that agrees with
+    the simulator leaves about 5 % outside. Without `design_sd` the people's interval
+    alone. Each row also holds the best-fit prediction and whether the people's
+    interval alone holds it. The printed line says how many lie outside, and the
+    largest relative gap."""
     keys = ["group", "measure", "condition"]
     model = table[table["source"] == "model"].set_index(keys)
     simulated = table[table["source"] == "simulated"].set_index(keys)
@@ -324,38 +335,55 @@ def emulator_check(
     for key, sim in simulated.iterrows():
         best = float(model.loc[key, "mean"])
         predicted = (for_simulated or {}).get(key, best)
+        noise = float((design_sd or {}).get(key, 0.0))
+        mean, low, high = float(sim["mean"]), float(sim["ci_low"]), float(sim["ci_high"])
+        wide = (
+            mean - float(np.hypot(mean - low, Z95 * noise)),
+            mean + float(np.hypot(high - mean, Z95 * noise)),
+        )
         rows.append(
             {
                 **dict(zip(keys, key, strict=True)),
                 "emulator": predicted,
                 "emulator_best_fit": best,
-                "simulated": float(sim["mean"]),
-                "simulated_ci95": [float(sim["ci_low"]), float(sim["ci_high"])],
-                "inside": bool(sim["ci_low"] <= predicted <= sim["ci_high"]),
-                "inside_best_fit": bool(sim["ci_low"] <= best <= sim["ci_high"]),
+                "emulator_design_sd": noise,
+                "simulated": mean,
+                "simulated_ci95": [low, high],
+                "interval95": [wide[0], wide[1]],
+                "inside": bool(wide[0] <= predicted <= wide[1]),
+                "inside_people_only": bool(low <= predicted <= high),
+                "inside_best_fit": bool(low <= best <= high),
             }
         )
     outside = [r for r in rows if not r["inside"]]
+    counted = "the people's and the emulator's design noise" if design_sd else "the people's"
     if not outside:
         line = (
             f"the emulator's predictions lie inside the intervals of people simulated from "
-            f"the fit ({len(rows)} summaries)"
+            f"the fit ({len(rows)} summaries; 95 % intervals of {counted})"
         )
     else:
         worst = max(outside, key=lambda r: abs(r["emulator"] - r["simulated"]))
         line = (
             f"the emulator's prediction lies outside the interval of people simulated from "
-            f"the fit in {len(outside)} of {len(rows)} summaries (largest gap: "
+            f"the fit in {len(outside)} of {len(rows)} summaries (95 % intervals of "
+            f"{counted}; largest gap: "
             f"{worst['group']} {worst['condition']} {worst['measure']} {worst['emulator']:.3g} "
             f"vs {worst['simulated']:.3g}): the trait estimates rest on the emulator"
         )
-    outside_best = sum(not r["inside_best_fit"] for r in rows)
     return {
         "rows": rows,
         "outside": len(outside),
-        "outside_best_fit": outside_best,
+        "outside_people_only": sum(not r["inside_people_only"] for r in rows),
+        "outside_best_fit": sum(not r["inside_best_fit"] for r in rows),
         "compared": "the emulator's mean over the replicates the simulated people were drawn from"
         if for_simulated
         else "the emulator's prediction at the best fit",
+        "interval": "95 % interval of the emulator's prediction minus the simulated people's "
+        "mean: the people's bootstrap interval (their sampling) widened on each side by the "
+        "emulator's design noise in quadrature (its prediction's SD over its mean surfaces "
+        "refitted to bootstrap resamples of the design's settings, no new simulations)"
+        if design_sd
+        else "95 % bootstrap interval of the simulated people's mean (their sampling only)",
         "line": line,
     }

@@ -80,6 +80,9 @@ divided by its mean): a small one, for a well-posed Newton step only. Chosen aga
 fresh simulated people (`benchmarks/emulator_bias.py`): penalties a cross-validation
 of the deviance over the design's whole box prefers draw the groups' means towards the
 box's."""
+DESIGN_REFITS = 20
+"""Refits of the measures' mean surfaces to bootstrap resamples of the design's settings
+(`MomentEmulator.refitted_means`): the emulator's own noise from its finite design."""
 
 
 def poisson_ridge(
@@ -310,6 +313,7 @@ class MomentEmulator:
         statistics (default equal; `local` weights them by a group's prior)."""
         self.measures_ = list(measures)
         self.training_ = (settings, trials, tuple(features))
+        self.setting_weights_ = None if weights is None else np.asarray(weights, float)
         features = [f for f in features if f in trials and trials[f].notna().any()]
         names = [*moment_names(measures), *moment_names(features)]
         wide = trial_matrix(trials, [*measures, *features])[names]
@@ -364,6 +368,48 @@ class MomentEmulator:
         self.mean_coef_ = np.column_stack(coef)
         self.mean_intercept_ = np.array(intercept)
         self.mean_scale_ = np.array(scale)
+
+    def refitted_means(
+        self, traits: np.ndarray, refits: int = DESIGN_REFITS, seed: int = 0
+    ) -> np.ndarray:
+        """The measures' mean surfaces (`mean_moments_`) at `traits` (n, len(TRAITS)) as
+        `refits` surfaces refitted to bootstrap resamples of the design's settings (each
+        setting with its trials, drawn with replacement) would predict them ->
+        (refits, n, len(mean_moments_)): their spread is the emulator's own noise, which
+        a comparison with simulated people must count beside the people's. A resample is
+        the design's trials weighted by how often their setting was drawn (a weight of 2
+        is the trial twice); the terms and the penalty are the emulator's. Refits only,
+        no simulation; kept once made (per `refits`, `seed`)."""
+        names = getattr(self, "mean_moments_", [])
+        if not names:
+            return np.zeros((refits, len(np.atleast_2d(traits)), 0))
+        cache = self.__dict__.setdefault("_refits", {})
+        if (refits, seed) not in cache:
+            settings, trials, _ = self.training_
+            wide = trial_matrix(trials, self.measures_)[names]
+            setting = wide.index.get_level_values("setting").to_numpy()
+            base = getattr(self, "setting_weights_", None)
+            base = np.ones(len(settings)) if base is None else base
+            phi = self.terms(settings[setting])[:, 1:]
+            y = wide.to_numpy(float)
+            rng = np.random.default_rng([seed, 0xDE5])
+            fits = []
+            for _ in range(refits):
+                drawn = np.bincount(
+                    rng.integers(0, len(settings), len(settings)), minlength=len(settings)
+                )
+                w = (base * drawn)[setting]
+                coef, intercept, scale = [], [], []
+                for j in range(len(names)):
+                    ok = np.isfinite(y[:, j]) & (w > 0)
+                    c, i, sc = fit_mean_surface(phi[ok], np.maximum(y[ok, j], 0.0), w[ok])
+                    coef.append(c)
+                    intercept.append(i)
+                    scale.append(sc)
+                fits.append((np.column_stack(coef), np.array(intercept), np.array(scale)))
+            cache[(refits, seed)] = fits
+        terms = self.terms(traits)[:, 1:]
+        return np.stack([np.exp(terms @ c + i) * sc for c, i, sc in cache[(refits, seed)]])
 
     def _residual_statistics(self, resid: np.ndarray, w: np.ndarray, setting: pd.Index) -> None:
         """The trials' noise about the surface, weighted by `w` (each trial's, mean 1)."""

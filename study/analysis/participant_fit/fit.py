@@ -464,6 +464,9 @@ class ModelChecks:
     emulator_for_simulated: dict[tuple[str, str, str], float] = field(default_factory=dict)
     """(group, measure, condition) -> the emulator's mean for the people simulated
     (`replicate_prediction`), which the emulator check compares."""
+    emulator_design_sd: dict[tuple[str, str, str], float] = field(default_factory=dict)
+    """(group, measure, condition) -> that mean's SD over the emulator's refits to its
+    resampled design (`replicate_design_sd`), which the check counts beside the people's."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -519,7 +522,44 @@ def check_model(
         for m in measures
         for label in ("VO", "HV", "VO-HV")
     }
-    return ModelChecks(simulated, table, rows, outlier, misfit, for_simulated)
+    design_sd = {
+        (g, *key): sd
+        for g in groups
+        for key, sd in replicate_design_sd(fits[g], settings.check, measures).items()
+    }
+    return ModelChecks(simulated, table, rows, outlier, misfit, for_simulated, design_sd)
+
+
+def replicate_design_sd(
+    result: GroupResult, people: int, measures: Sequence[str]
+) -> dict[tuple[str, str], float]:
+    """(measure, condition) -> the SD, over the emulator's mean surfaces refitted to
+    resamples of its design (`MomentEmulator.refitted_means`), of the prediction
+    `replicate_prediction` makes for `people` people drawn from the fit's replicates
+    (person i from replicate i % replicates; the best fit without replicates): the
+    emulator's own noise in what the emulator check compares. Empty for an emulator
+    without mean surfaces."""
+    est, n = result.estimator, len(TRAITS)
+    emulator = est.emulator
+    names = list(getattr(emulator, "mean_moments_", []))
+    if not names:
+        return {}
+    reps = [(b[:n], b[n:]) for b in result.boots] or [(result.fit.mean, result.fit.sd)]
+    used = np.bincount(np.arange(people) % len(reps), minlength=len(reps))
+    total = (
+        sum(
+            c * emulator.refitted_means(est.draws(*reps[r])).mean(axis=1)
+            for r, c in enumerate(used)
+            if c
+        )
+        / used.sum()
+    )
+    out = {}
+    for m in measures:
+        vo, hv = total[:, names.index(f"VO:{m}")], total[:, names.index(f"HV:{m}")]
+        for label, v in (("VO", vo), ("HV", hv), ("VO-HV", vo - hv)):
+            out[(m, label)] = float(np.std(v, ddof=1))
+    return out
 
 
 def replicate_prediction(draws: Sequence[float], people: int) -> float:
@@ -621,7 +661,9 @@ class FitResult:
             "so the interval holds the fit's uncertainty and the people's); 'model': the "
             "emulator's prediction with the fit's bootstrap interval",
             "lacks": self.checks.to_dict(),
-            "emulator_check": checks.emulator_check(self.table, self.checks.emulator_for_simulated),
+            "emulator_check": checks.emulator_check(
+                self.table, self.checks.emulator_for_simulated, self.checks.emulator_design_sd
+            ),
             "effects": power_effects(self.checks.simulated, data.measures),
             **(
                 self.search.to_dict(self.checks.outliers["flagged"])
