@@ -16,7 +16,7 @@ nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 5 \
   'study bench lcca --quick --json {tmp}/out.json --out {tmp}'
 nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 3 \
   --out $R/demo_quick_side_by_side.json -- 'study demo --quick --out {tmp}/demo'
-nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 1 \
+nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 3 \
   --out $R/demo_side_by_side.json -- 'study demo --out {tmp}/demo'
 nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 2 \
   --json-key runs.0.units_per_hour --out $R/campaign_side_by_side.json -- \
@@ -29,8 +29,8 @@ nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 2 \
   --out $R/participant_fit_side_by_side.json -- \
   "if [ {checkout} = $B ]; then cp $F/baseline.db {tmp}/demo.db; else cp $F/new.db {tmp}/demo.db; fi && study participants fit --db {tmp}/demo.db --out {tmp}/model.json --design 32 --repeats 2 --check 4 --bootstrap 20"
 # the same with the fit's default settings (320 settings x 2 repeats, 24 checks, 100
-# bootstraps: what a lab waits for), one round
-nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 1 \
+# bootstraps: what a lab waits for), two rounds
+nice -n 10 python benchmarks/command_side_by_side.py "$B" "$N" --rounds 2 \
   --out $R/participant_fit_default_side_by_side.json -- \
   "if [ {checkout} = $B ]; then cp $F/baseline.db {tmp}/demo.db; else cp $F/new.db {tmp}/demo.db; fi && study participants fit --db {tmp}/demo.db --out {tmp}/model.json"
 PYTHONPATH="$N" nice -n 10 python benchmarks/analyze_vs_r.py --db "$DB" --rounds 5 \
