@@ -50,9 +50,19 @@ class Origins(SessionObserver):
     """The trials' clocks as the runner hands them out (the reference for alignment)."""
 
     trials: dict[int, TrialInfo] = field(default_factory=dict)
+    lag_s: dict[int, float] = field(default_factory=dict)
+    """Per trial: the most the loop fell behind its clock at a step, trial seconds (the
+    runner keeps pace within a step; a loaded machine can hold it back longer)."""
 
     def trial_started(self, trial: TrialInfo) -> None:
         self.trials[trial.trial_id] = trial
+        self.lag_s[trial.trial_id] = 0.0
+
+    def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
+        if len(rows):
+            due = (time.monotonic() - trial.clock_origin_s) * trial.clock_rate
+            lag = due - float(rows[-1, 0])
+            self.lag_s[trial.trial_id] = max(self.lag_s[trial.trial_id], lag)
 
 
 def _device(name: str, seconds: float, log: Path) -> subprocess.Popen[str]:
@@ -228,8 +238,13 @@ def test_an_outside_instrument_is_stored_sample_for_sample_on_the_trials_clock(
         # where each sample belongs on the trial's clock, from when the device made it
         expected = (table["made_s"].to_numpy() - trial.clock_origin_s) * trial.clock_rate
         error_s = table["t_s"].to_numpy() - expected
-        assert np.median(np.abs(error_s)) <= 0.002
-        assert np.percentile(np.abs(error_s), 95) <= 0.005
+        # while the loop keeps pace, the trial's clock; where it falls behind (a loaded
+        # machine), the loop's progress: never later than made, earlier by at most the
+        # loop's lag
+        lag_s = origins.lag_s[stream.trial_id]
+        assert np.median(np.abs(error_s)) <= 0.002 + lag_s
+        assert np.percentile(np.abs(error_s), 95) <= 0.005 + lag_s
+        assert error_s.max() <= 0.005
         # the whole trial is covered: from its start to its end, at 1 kHz
         t = table["t_s"].to_numpy()
         # (within a few periods: the device's process may wait for a core at either end)
