@@ -114,8 +114,15 @@ async def test_a_form_opens_with_its_block_and_question_in_view(make_test_app) -
                 await pilot.press("f2", "f4")
             await wait_for(pilot, lambda: pane.loaded_block == ("P002", "lcca", "HV"), 10)
             await wait_for(pilot, lambda: app.focused is app.query_one("#rating-mental"), 10)
-            await pilot.pause()
+            parts = ("#tlx-top", "#question", "#rating-mental")
+
+            def in_view(parts: tuple[str, ...] = parts) -> bool:
+                view = pane.scrollable_content_region
+                return all(view.contains_region(app.query_one(p).region) for p in parts)
+
+            # the scroll to the form's top lands within a few refreshes (more under load)
+            await wait_for(pilot, in_view, 10)
             view = pane.scrollable_content_region
-            for part in ("#tlx-top", "#question", "#rating-mental"):
+            for part in parts:
                 assert view.contains_region(app.query_one(part).region), (how, part)
             assert str(app.query_one("#question", Label).render()) == TLX_SCALES["mental"][1]
