@@ -35,8 +35,10 @@ from sklearn.preprocessing import PolynomialFeatures
 
 from benchmarks.emulator_bias import NAMES, _compare
 from study.analysis.participant_fit.emulator import (
+    LOGIT_LINK,
     MomentEmulator,
     fit_mean_surface,
+    glm_ridge,
     surface_traits,
     trial_matrix,
 )
@@ -51,38 +53,9 @@ def logit_ridge(
     phi: np.ndarray, y: np.ndarray, w: np.ndarray, alpha: float, steps: int = 60
 ) -> tuple[np.ndarray, float]:
     """(coef, intercept) minimising mean_w(Bernoulli deviance of y in [0, 1]) / 2 +
-    alpha / 2 |coef|^2 of a logit-link model (fractional logit), by Newton's method with
-    step halving, as `emulator.poisson_ridge` does for the log link."""
-    w = w / w.mean()
-    n, p = phi.shape
-    x = np.column_stack([np.ones(n), phi])
-    pen = np.full(p + 1, alpha)
-    pen[0] = 0.0
-    beta = np.zeros(p + 1)
-    m = float(np.clip(np.average(y, weights=w), 1e-6, 1 - 1e-6))
-    beta[0] = np.log(m / (1 - m))
-
-    def objective(b: np.ndarray) -> float:
-        eta = x @ b
-        return float(np.mean(w * (np.logaddexp(0.0, eta) - y * eta)) + 0.5 * np.sum(pen * b * b))
-
-    current = objective(beta)
-    for _ in range(steps):
-        pr = 1 / (1 + np.exp(-(x @ beta)))
-        grad = x.T @ (w * (pr - y)) / n + pen * beta
-        hess = (x.T * (w * pr * (1 - pr))) @ x / n + np.diag(pen)
-        step = np.linalg.solve(hess, grad)
-        t = 1.0
-        while t > 1e-8:
-            trial = objective(beta - t * step)
-            if trial <= current:
-                break
-            t /= 2
-        beta, change = beta - t * step, current - trial
-        current = trial
-        if abs(change) <= 1e-12 * max(abs(current), 1.0):
-            break
-    return beta[1:], float(beta[0])
+    alpha / 2 |coef|^2 of a logit-link model (fractional logit), by the emulator's
+    `glm_ridge`, the solver of `poisson_ridge` for the log link."""
+    return glm_ridge(phi, y, w, alpha, LOGIT_LINK, steps)
 
 
 def variants(emu: MomentEmulator, x: np.ndarray, design: pd.DataFrame) -> dict[str, Predict]:

@@ -15,13 +15,17 @@ from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
+import statsmodels.api as sm
 from sklearn.linear_model import PoissonRegressor
 
 from study.analysis.participant_fit.checks import emulator_check
 from study.analysis.participant_fit.emulator import (
+    LOG_LINK,
+    LOGIT_LINK,
     MomentEmulator,
     design_box,
     design_settings,
+    glm_ridge,
     poisson_ridge,
 )
 from study.analysis.participant_fit.fit import replicate_design_sd, replicate_prediction
@@ -90,6 +94,26 @@ def test_the_newton_solver_finds_scikit_learns_poisson_fit() -> None:
     a = poisson_ridge(phi, y, w, 1e-3)
     b = poisson_ridge(phi[twice], y[twice], np.ones(len(twice)), 1e-3)
     np.testing.assert_allclose(a[0], b[0], atol=1e-8)
+
+
+def test_the_newton_solver_with_the_logit_link_finds_statsmodels_logistic_fit() -> None:
+    # unpenalised, unweighted: the maximum-likelihood logistic regression
+    rng = np.random.default_rng(5)
+    phi = rng.normal(size=(400, 4))
+    eta = -0.3 + phi @ [0.8, -0.5, 0.0, 0.3]
+    y = (rng.uniform(size=len(eta)) < 1 / (1 + np.exp(-eta))).astype(float)
+    coef, intercept = glm_ridge(phi, y, np.ones(len(y)), 0.0, LOGIT_LINK)
+    ref = sm.Logit(y, sm.add_constant(phi)).fit(method="newton", tol=1e-12, disp=False)
+    np.testing.assert_allclose(np.r_[intercept, coef], ref.params, atol=1e-6)
+
+
+def test_the_newton_solver_with_the_log_link_finds_the_closed_form_of_one_group() -> None:
+    # one 0/1 term: the unpenalised Poisson fit's means are the two groups' means
+    x = np.repeat([0.0, 1.0], [3, 5])
+    y = np.array([1.0, 2.0, 6.0, 10.0, 20.0, 30.0, 40.0, 50.0])
+    coef, intercept = glm_ridge(x[:, None], y, np.ones(len(y)), 0.0, LOG_LINK)
+    assert abs(intercept - np.log(3.0)) < 1e-9
+    assert abs(coef[0] - np.log(30.0 / 3.0)) < 1e-9
 
 
 def test_the_check_compares_the_people_simulated_with_the_population_they_came_from() -> None:
