@@ -12,6 +12,9 @@ JIT compiles, so it computes what the JIT kernel computes, bit for bit (a test h
 them equal). Where it cannot be built (no C compiler, an unwritable folder) a marker
 file says so, and the kernel runs through numba's cache as before. Its signature is
 fixed (`signature`); a call whose argument types differ runs the JIT kernel instead.
+numba.pycc's wrapper checks little of that itself (a tuple of another length, or an
+array of another dtype, is read as if it were the signature's), so the tuple arguments
+are checked here first (`check_arguments`).
 
 numba.pycc is numba's own ahead-of-time compiler (deprecated in favour of a successor
 that is not released yet); nothing else compiles a numba kernel ahead of time.
@@ -28,6 +31,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from teleop_core.files import replace_durably
 
 SUFFIX = importlib.machinery.EXTENSION_SUFFIXES[0]
@@ -37,16 +42,86 @@ def _name(key: str) -> str:
     return f"_haptic_study_loop_aot_{key}"
 
 
+# `run_ticks`'s argument types (`tick.py`): (dtype, ndim) of a C-contiguous array, ndim 0
+# a scalar, a tuple of them a tuple argument
+_A1, _A2, _F, _I = ("float64", 1), ("float64", 2), ("float64", 0), ("int64", 0)
+_S1, _S2 = ("float32", 1), ("float32", 2)
+ESTIMATOR_ARGS = (_A2, _A1, _A1, _A1, _A2, _A1, _S2, _S2, _S1, _S1, _S1, _F, _A1, _A1, _A1)
+"""`CausalEstimator.kernel_arrays`: buf, st, mean, std, mem, pv, w_ih_t, w_hh_t, b_ih,
+b_hh, w_out (the GRU's weights in float32), b_out, target, ekf_s, ekf_v."""
+LINK_ARGS = (_A2, _A1, _A1, _A2, _A1, _A1, _A1, _A1)
+"""The in-kernel links (`link.kernel_links`): q_m, ls_m, lp_m, q_f, ls_f, lp_f, pool, pos."""
+ARGS: tuple[Any, ...] = (
+    *(_I, _A1, _A1, _A1, _A1, _A1, _A1, _F, _A1, _A1, _A2, _A2),
+    ESTIMATOR_ARGS,
+    *(_A1, _A2),
+    LINK_ARGS,
+)
+_EST, _LINKS = 12, 15
+_TUPLE_NAMES = {_EST: "estimator arrays (CausalEstimator.kernel_arrays)", _LINKS: "link arrays"}
+
+
 def signature(nt: Any) -> Any:
-    """`run_ticks`'s types (`tick.py`), in numba's terms (`nt`: `numba.types`)."""
-    a1, a2, f = nt.float64[::1], nt.float64[:, ::1], nt.float64
-    s1, s2 = nt.float32[::1], nt.float32[:, ::1]
-    # CausalEstimator.kernel_arrays: buf, st, mean, std, mem, pv, w_ih_t, w_hh_t, b_ih, b_hh,
-    # w_out (the GRU's weights in float32), b_out, target, ekf_s, ekf_v
-    est = nt.Tuple((a2, a1, a1, a1, a2, a1, s2, s2, s1, s1, s1, f, a1, a1, a1))
-    # the in-kernel links: q_m, ls_m, lp_m, q_f, ls_f, lp_f, pool, pos
-    links = nt.Tuple((a2, a1, a1, a2, a1, a1, a1, a1))
-    return nt.int64(nt.int64, a1, a1, a1, a1, a1, a1, f, a1, a1, a2, a2, est, a1, a2, links)
+    """`run_ticks`'s types (`ARGS`), in numba's terms (`nt`: `numba.types`)."""
+
+    def of(spec: Any) -> Any:
+        if isinstance(spec[0], tuple):
+            return nt.Tuple(tuple(of(s) for s in spec))
+        dtype, ndim = spec
+        return getattr(nt, dtype) if ndim == 0 else nt.Array(getattr(nt, dtype), ndim, "C")
+
+    return nt.int64(*(of(s) for s in ARGS))
+
+
+def _fits(value: Any, spec: tuple[np.dtype[Any], int]) -> bool:
+    """Whether `value` is what the compiled kernel reads for `spec`: its array with that
+    dtype, ndim and C layout (the extension's wrapper does not check: another array is
+    read as if it were one, out of its bounds), or a number."""
+    dtype, ndim = spec
+    if ndim == 0:
+        return isinstance(value, int | float | np.integer | np.floating)
+    return (
+        isinstance(value, np.ndarray)
+        and value.dtype == dtype
+        and value.ndim == ndim
+        and value.flags.c_contiguous
+    )
+
+
+def _dtypes(spec: Any) -> Any:
+    """`spec` with numpy's dtypes for their names."""
+    if isinstance(spec[0], tuple):
+        return tuple(_dtypes(s) for s in spec)
+    return np.dtype(spec[0]), spec[1]
+
+
+_CHECK = _dtypes(ARGS)
+
+
+def check_arguments(args: tuple[Any, ...], last: list[Any]) -> bool:
+    """Whether the tuple arguments of `args` (the estimator's arrays, which come from a
+    trained estimator's files, and the links') hold `ARGS`'s types: the extension's
+    wrapper reads another tuple or array as if it were its signature's, out of its
+    bounds. A tuple of another length, which no kernel takes, is a ValueError naming
+    both lengths. `last` holds the tuples of the last call that fitted: the loop passes
+    the same ones on every call, checked once. The other arguments are the loop's own
+    arrays (`TeleopLoop`), not checked on every call."""
+    if len(args) != len(_CHECK):
+        return False
+    if last and args[_EST] is last[0] and args[_LINKS] is last[1]:
+        return True
+    for i in _TUPLE_NAMES:
+        value, spec = args[i], _CHECK[i]
+        if not isinstance(value, tuple):
+            return False
+        if len(value) != len(spec):
+            raise ValueError(
+                f"the loop kernel's {_TUPLE_NAMES[i]}: expected {len(spec)}, got {len(value)}"
+            )
+        if not all(_fits(v, s) for v, s in zip(value, spec, strict=True)):
+            return False
+    last[:] = [args[i] for i in _TUPLE_NAMES]
+    return True
 
 
 def load_ahead_of_time(
@@ -113,10 +188,15 @@ def build_ahead_of_time(
 def _with_fallback(
     ahead: Callable[..., int], jit: Callable[[], Callable[..., int]]
 ) -> Callable[..., int]:
-    """`ahead`, or from the first call whose argument types it refuses, `jit()`."""
+    """`ahead`, or from the first call whose argument types it refuses, `jit()`; the
+    types are checked here first (`check_arguments`), since the extension reads an
+    array of another dtype or shape without a word."""
     current: list[Callable[..., int]] = [ahead]
+    last: list[Any] = []
 
     def run_ticks(*args: Any) -> int:
+        if current[0] is ahead and not check_arguments(args, last):
+            current[0] = jit()
         try:
             return current[0](*args)
         except TypeError:

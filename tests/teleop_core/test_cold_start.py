@@ -90,6 +90,60 @@ def test_a_second_process_loads_the_loop_kernel_and_never_imports_numba_or_torch
     np.testing.assert_array_equal(np.load(tmp_path / "second.npy"), run.samples)
 
 
+BAD_ARRAYS = """
+import json, sys
+import numpy as np
+from teleop_core.loop import kernel
+from teleop_core.loop.core import TeleopLoop
+from teleop_core.loop.drivers import SimulatedOperator
+from teleop_core.loop.environments import tube_with_wall
+
+env = tube_with_wall(friction_n_per_m=8.0)
+k = kernel.kernel_for(env.fn)
+
+
+def trial(change):
+    loop = TeleopLoop(environment=env, seed=5)
+    loop._est_arrays = change(loop._est_arrays)
+    try:
+        loop.run(0.05, SimulatedOperator())
+    except ValueError as exc:
+        return str(exc)
+    return "ran"
+
+
+print(json.dumps({
+    "ahead_of_time": getattr(k, "ahead_of_time", False),
+    "short": trial(lambda a: a[:-1]),
+    "long": trial(lambda a: (*a, np.zeros(1))),
+    # the stream state in float32: the JIT kernel compiles for it
+    "float32": trial(lambda a: (a[0], a[1].astype(np.float32), *a[2:])),
+}))
+"""
+
+
+def test_the_compiled_kernel_refuses_estimator_arrays_it_would_misread(tmp_path: Path) -> None:
+    """The extension's own wrapper reads whatever tuple and arrays it is given as its
+    signature's (a tuple one short crashed the process): a tuple of another length is a
+    ValueError naming both lengths, an array of another dtype runs the JIT kernel. In a
+    process of its own, so that a crash fails this test rather than ending the run."""
+    env = {**os.environ, "HAPTIC_STUDY_CACHE": str(tmp_path / "cache")}
+    done = subprocess.run(
+        [sys.executable, "-c", BAD_ARRAYS],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+    assert done.returncode == 0, (done.returncode, done.stderr[-2000:])
+    result = json.loads(done.stdout.splitlines()[-1])
+    assert result["ahead_of_time"] is True
+    assert re.fullmatch(r".*estimator arrays.*: expected 15, got 14", result["short"])
+    assert re.fullmatch(r".*estimator arrays.*: expected 15, got 16", result["long"])
+    assert result["float32"] == "ran"
+
+
 def test_without_a_compiler_the_kernel_runs_through_numbas_cache(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
