@@ -26,6 +26,7 @@ sample, not three, and would not keep the blocks' boundaries at the window's sca
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import TypedDict
 
 import numpy as np
 from scipy.ndimage import maximum_filter1d
@@ -119,6 +120,25 @@ def _block_counts(masks: dict[str, np.ndarray], block_of: np.ndarray, blocks: in
     ).astype(float)
 
 
+class RegimeShares(TypedDict):
+    """A label's share of the samples: of all, of the training windows', of the
+    validation windows' (by their last sample)."""
+
+    all: float
+    train: float
+    validation: float
+
+
+class SplitReport(TypedDict):
+    """`representative_split`'s account of its choice."""
+
+    validation_blocks: list[int]
+    blocks: int
+    share: dict[str, RegimeShares]
+    missing: list[str]
+    """Each label (of at least the minimum share) absent from a part, as `label (part)`."""
+
+
 def representative_split(
     masks: dict[str, np.ndarray],
     n_windows: int,
@@ -128,7 +148,7 @@ def representative_split(
     seed: int,
     candidates: int = 4000,
     min_share: float = 0.01,
-) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
+) -> tuple[np.ndarray, np.ndarray, SplitReport]:
     """Training and validation window indices from contiguous blocks that represent the regimes.
 
     Window i covers samples i .. i + window - 1 and its label is its last sample's.
@@ -167,7 +187,7 @@ def representative_split(
     val_blocks = np.sort(chosen[best])
     train_idx, val_idx = windows_by_block(block_of, val_blocks, window, blocks)
     last = np.arange(window - 1, n_samples)
-    report = {
+    report: SplitReport = {
         "validation_blocks": val_blocks.tolist(),
         "blocks": blocks,
         "share": {

@@ -24,7 +24,7 @@ estimator that learned nothing; the rules here are the ones that prevent it:
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +40,7 @@ from teleop_core.estimation.model import EstimateResult, ForceEstimator, feature
 from teleop_core.estimation.ranges import InputRange
 from teleop_core.estimation.regimes import (
     RegimeRules,
+    SplitReport,
     label_samples,
     regime_rmse,
     representative_split,
@@ -109,13 +110,11 @@ def tune_process_noise(
     best: tuple[float, EkfSettings, float] | None = None
     for scale in r_physics_scales:
         for q in np.logspace(-5, 0, 21):
-            settings = EkfSettings(
-                **{
-                    **base.to_dict(),
-                    "q_physics_n2": float(q),
-                    "q_hybrid_n2": float(q),
-                    "r_physics_model_n2": base.r_physics_model_n2 * scale,
-                }
+            settings = replace(
+                base,
+                q_physics_n2=float(q),
+                q_hybrid_n2=float(q),
+                r_physics_model_n2=base.r_physics_model_n2 * scale,
             )
             final = filter_forces(settings, physics, dt_s, f_physics, f_hybrid, omega)
             lag = lag_samples(final, f_hybrid)
@@ -156,9 +155,7 @@ def _ekf_base(
         r_gru_n2=max(gru_val_rmse**2, 1e-6),
     )
     if rest is not None:
-        base = EkfSettings(
-            **{**base.to_dict(), "r_iq_a2": max(rest[0], 1e-9), "r_omega_rad2_s2": rest[1]}
-        )
+        base = replace(base, r_iq_a2=max(rest[0], 1e-9), r_omega_rad2_s2=rest[1])
     return base, rest is not None
 
 
@@ -254,7 +251,7 @@ def train_estimator(
     result.f_final = _filtered(settings, physics, rate, result, omega)
     ekf_check = _ekf_check(result, val_idx)
     if ekf_check["passthrough"]:
-        settings = EkfSettings(**{**settings.to_dict(), "passthrough": True})
+        settings = replace(settings, passthrough=True)
         result.f_final = result.f_hybrid.copy()
         lag = 0.0
         notes.append(
@@ -289,7 +286,7 @@ def train_estimator(
             hybrid=result.f_hybrid[val_idx],
             final=result.f_final[val_idx],
         ),
-        split=blocks.split,
+        split=dict(blocks.split),
         regime_rules=blocks.rules.to_dict(),
         ekf_check=ekf_check,
         config=asdict(config) | ({"trees": asdict(trees)} if trees is not None else {}),
@@ -325,7 +322,7 @@ class _Blocks:
     """Per sample: it ends a training window."""
     masks: dict[str, np.ndarray]
     """Per regime label (`regimes.label_samples`): the samples in that regime."""
-    split: dict[str, Any]
+    split: SplitReport
     """`representative_split`'s account: the blocks, each regime's shares, those missing."""
     rules: RegimeRules
     """The speed and load thresholds the regimes were labelled with."""
@@ -465,8 +462,7 @@ def _process_noise(
             max_lag_samples=rate_hz / pipeline_rate_hz,
             r_physics_scales=R_PHYSICS_SCALES,
         )
-    q = {"q_physics_n2": ekf_q_n2, "q_hybrid_n2": ekf_q_n2}
-    settings = EkfSettings(**{**base.to_dict(), **q})
+    settings = replace(base, q_physics_n2=ekf_q_n2, q_hybrid_n2=ekf_q_n2)
     filtered = _filtered(settings, physics, rate_hz, result, omega)
     return settings, lag_samples(filtered[train_idx], result.f_hybrid[train_idx])
 
