@@ -119,18 +119,21 @@ class AxisStribeck(Stribeck):
 
 
 class AxisDirection(DirectionAsymmetry):
-    """Direction-dependent friction (Coulomb and viscous) and a direction-dependent
-    gain on the inertial force: the benchmark's direction-dependent inverse model."""
+    """Direction-dependent viscous friction: with the benchmark's direction-dependent
+    Coulomb friction, its direction-dependent inverse model.
+
+    The extra Coulomb friction in reverse has no column of its own: under the sharp
+    sign the base's Fc sgn(q') + offset is already any constant force forwards
+    (Fc + offset) and any other in reverse (offset - Fc), so a reverse step
+    (-min(sgn q', 0) = (1 - sgn q') / 2 wherever q' != 0) is a sum of the base's
+    columns: with it the design would be singular, and the forces split among Fc,
+    offset and the step arbitrarily."""
 
     def columns(self, s: Signals, value: float) -> Float2D:
-        w, sign = s["direction"], s["direction_sign"]
-        return np.column_stack([-np.minimum(sign, 0.0), -np.minimum(w, 0.0)])
+        return -np.minimum(s["direction"], 0.0)[:, None]
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
-        return {
-            f"extra_coulomb_reverse_{unit}": coef[0] * out,
-            f"extra_viscous_reverse_{unit}_s_per_unit": coef[1] * out,
-        }
+        return {f"extra_viscous_reverse_{unit}_s_per_unit": coef[0] * out}
 
 
 @dataclass(frozen=True)

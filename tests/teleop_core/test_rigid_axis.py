@@ -14,9 +14,11 @@ import numpy as np
 import pandas as pd
 import pytest
 from scipy import signal
+from statsmodels.tools.sm_exceptions import SingularMatrixWarning
 
 from study.cli import main
 from teleop_core.calibration import Calibrator
+from teleop_core.calibration.fitting import design
 from teleop_core.calibration.models import FollowerBase
 from teleop_core.calibration.rigid_axis import RigidAxisBase, derivatives, mat_to_frame
 from teleop_core.calibration.synthetic import follower_recording
@@ -121,6 +123,19 @@ def test_direction_dependent_friction_is_found_and_named() -> None:
     assert report["rmse_after"] < 1.05 * 0.3 < report["rmse_before"]
 
 
+def test_the_direction_effect_adds_a_column_the_base_does_not_span() -> None:
+    # the speed is never exactly 0 (no rest sample has sgn 0): a reverse Coulomb step
+    # (1 - sgn q') / 2 would be the base's sign and constant columns again
+    model = RigidAxisBase()
+    data = model.data_from_frame(_axis_recording(3, reverse_viscous_n_s_per_m=40.0))
+    assert np.all(data.signals["speed"] != 0.0)
+    chain = [(model.effect("direction_asymmetry"), float("nan"))]
+    X, sizes = design(model, data.signals, chain)
+    assert sizes[0] == 4
+    assert np.linalg.matrix_rank(X) == X.shape[1]
+
+
+@pytest.mark.filterwarnings(f"error::{SingularMatrixWarning.__module__}.SingularMatrixWarning")
 def test_emps_measured_data_recovers_the_benchmark_and_names_direction(tmp_path: Path) -> None:
     argv = [
         "calibrate",
