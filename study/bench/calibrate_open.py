@@ -160,8 +160,8 @@ def markdown(part: dict[str, Any], duration_s: float, rate_hz: float) -> list[st
         f"Derivative cutoff fitted on training: {e['derivative_cutoff_hz']:.1f} Hz. Base "
         "parameters (95 % CI): "
         + ", ".join(
-            f"{k} = {v:.4g} [{lo:.4g}, {hi:.4g}]"
-            for (k, v), (lo, hi) in zip(
+            f"{k} = {v:.4g} " + ("[no interval]" if ci is None else f"[{ci[0]:.4g}, {ci[1]:.4g}]")
+            for (k, v), ci in zip(
                 e["base_params"]["params"].items(), e["base_params"]["ci"].values(), strict=True
             )
         )

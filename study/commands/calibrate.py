@@ -207,10 +207,8 @@ def calibrate(
     click.echo(_verdict_line(report))
     for effect in report["effects_added"]:
         params = ", ".join(
-            f"{k} = {v:.4g} [{lo:.3g}, {hi:.3g}]"
-            for (k, v), (lo, hi) in zip(
-                effect["params"].items(), effect["ci"].values(), strict=True
-            )
+            f"{k} = {v:.4g} " + ("[no interval]" if ci is None else f"[{ci[0]:.3g}, {ci[1]:.3g}]")
+            for (k, v), ci in zip(effect["params"].items(), effect["ci"].values(), strict=True)
         )
         click.echo(f"  {effect['family']}: {params} -> {effect['rmse_after_step']:.4f} {unit}")
     for effect in report["ambiguous_effects"]:

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 from scipy import signal, stats
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import cho_factor, cho_solve, qr
 from scipy.optimize import minimize_scalar
 from statsmodels.regression.linear_model import OLS
 
@@ -276,12 +276,32 @@ class CalibratedModel:
         return cls(base, chain, coef, settings)
 
 
+def determined_columns(X: Float2D) -> tuple[Float1D, Float1D]:
+    """Of the columns of `X` (scaled to comparable size): a set spanning the same space
+    with none a combination of the others (QR with column pivoting, numpy's rank
+    tolerance), and the mask of the columns whose coefficient the least-squares fit
+    does not determine (those in a combination that gives 0: a zero column, or a term
+    that sums from others)."""
+    _, singular, vt = np.linalg.svd(X, full_matrices=False)
+    tol = singular.max(initial=0.0) * max(X.shape) * np.finfo(float).eps
+    rank = int(np.sum(singular > tol))
+    if rank == X.shape[1]:
+        return np.arange(rank), np.zeros(rank, bool)
+    _, _, pivots = qr(X, mode="economic", pivoting=True)
+    return np.sort(pivots[:rank]), np.linalg.norm(vt[rank:], axis=0) > 1e-8
+
+
 def confidence(
     fitted: CalibratedModel, data: CalibrationData, train: Rows, hac_lags: int = 10
-) -> tuple[dict[str, float], dict[str, list[float]], list[dict[str, Any]]]:
+) -> tuple[dict[str, float], dict[str, list[float] | None], list[dict[str, Any]]]:
     """Physical parameters of the base and of each effect with 95 % intervals.
 
-    Returns (base params, base CIs, [{"params", "ci"} per effect in chain order]).
+    Returns (base params, base CIs, [{"params", "ci"} per effect in chain order]). A
+    parameter the linearised fit does not determine has no interval (None): a searched
+    value the design does not change with at the finite-difference step (a step's time
+    between two samples), or a term that is a sum of others. The covariance comes from
+    the columns that do span the design (`determined_columns`); they leave the same
+    residual, so the other intervals are as with the whole design.
     """
     model, chain, coef = fitted.model, fitted.chain, fitted.coef
     X, sizes = design(model, data.signals, chain)
@@ -296,8 +316,12 @@ def confidence(
         jac.append((d[train] / (2 * h))[:, None])
     J = np.column_stack(jac)
     scale = np.maximum(np.abs(J).max(axis=0), 1e-12)
-    ols = OLS(data.y[train], J / scale).fit(cov_type="HAC", cov_kwds={"maxlags": hac_lags})
-    cov = np.asarray(ols.cov_params()) / np.outer(scale, scale)
+    basis, free = determined_columns(J / scale)
+    ols = OLS(data.y[train], J[:, basis] / scale[basis]).fit(
+        cov_type="HAC", cov_kwds={"maxlags": hac_lags}
+    )
+    cov = np.zeros((J.shape[1], J.shape[1]))
+    cov[np.ix_(basis, basis)] = np.asarray(ols.cov_params()) / np.outer(scale[basis], scale[basis])
     theta = np.concatenate([coef, [chain[i][1] for i in searched]])
 
     def physical(th: Float1D) -> list[dict[str, float]]:
@@ -320,10 +344,14 @@ def confidence(
         th[j] += step
         G[:, j] = (np.array([v for d in physical(th) for v in d.values()]) - flat) / step
     se = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", G, cov, G), 0.0))
+    # a physical parameter that moves with an undetermined one has no interval
+    undetermined = np.any(G[:, free] != 0.0, axis=1)
     results, pos = [], 0
     for d in base_values:
-        ci = {
-            k: [float(val - Z_95 * se[pos + j]), float(val + Z_95 * se[pos + j])]
+        ci: dict[str, list[float] | None] = {
+            k: None
+            if undetermined[pos + j]
+            else [float(val - Z_95 * se[pos + j]), float(val + Z_95 * se[pos + j])]
             for j, (k, val) in enumerate(d.items())
         }
         results.append(({k: float(v) for k, v in d.items()}, ci))

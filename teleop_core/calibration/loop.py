@@ -603,22 +603,35 @@ class Calibrator:
         }
 
     def warnings(self) -> list[str]:
-        """Searched values that ended at an end of their search range.
+        """Searched values that ended at an end of their search range, and parameters
+        without an interval.
 
-        There the effect may stand in for something else (a long lag for a slow
-        dynamic).
+        At an edge the effect may stand in for something else (a long lag for a slow
+        dynamic). A parameter the linearised fit does not determine (`confidence`) has
+        the interval None.
 
         Returns
         -------
         list of str
             One line per selected effect whose fitted value lies at an edge of its
-            search range, naming the family; empty when none does.
+            search range, naming the family, and one per parameter without an
+            interval, naming the model or family and the parameter; empty when none.
         """
         notes = []
         for effect, value in self.chain_:
             edge = _search_edge(effect, value, self.data_.signals)
             if edge is not None:
                 notes.append(f"{effect.family}: {edge[1]}")
+        named = [(self.model.name, self.base_ci_)]
+        named += [
+            (e.family, p["ci"]) for (e, _), p in zip(self.chain_, self.effect_params_, strict=True)
+        ]
+        for name, ci in named:
+            for param in (k for k, v in ci.items() if v is None):
+                notes.append(
+                    f"{name}: {param} has no interval: the linearised fit does not determine "
+                    "it (a step's time between two samples, or a term that is a sum of others)"
+                )
         return notes
 
 

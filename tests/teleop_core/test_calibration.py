@@ -24,6 +24,7 @@ from teleop_core.calibration import (
     NotesBase,
 )
 from teleop_core.calibration.effects import play_operator
+from teleop_core.calibration.fitting import determined_columns
 from teleop_core.calibration.models import CalibrationData
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
 from teleop_core.calibration.synthetic import JND_N, follower_recording, master_recording
@@ -524,3 +525,18 @@ def test_a_gain_step_early_in_the_recording_is_not_named_a_drift() -> None:
     assert report["effects_added"] == []
     assert report["discovered_terms"] == []
     assert [a["families"] for a in report["ambiguous_effects"]] == [["drift", "gain_change"]]
+
+
+def test_the_columns_a_least_squares_fit_cannot_split_are_named() -> None:
+    rng = np.random.default_rng(0)
+    a, b, c = rng.normal(size=(3, 50))
+    # a + b is a sum of two others and a zero column moves nothing: the fit determines
+    # only c's coefficient; three columns span the design
+    basis, free = determined_columns(np.column_stack([a, b, a + b, np.zeros(50), c]))
+    assert free.tolist() == [True, True, True, True, False]
+    assert len(basis) == 3
+    assert 4 in basis
+    assert np.linalg.matrix_rank(np.column_stack([a, b, a + b, np.zeros(50), c])[:, basis]) == 3
+    basis, free = determined_columns(np.column_stack([a, b, c]))
+    assert basis.tolist() == [0, 1, 2]
+    assert not free.any()

@@ -366,6 +366,7 @@ def test_a_positive_loop_is_still_named_on_the_follower() -> None:
     assert report["effects_added"][0]["params"]["half_loop_n_m"] > 0
 
 
+@pytest.mark.filterwarnings(f"error::{SingularMatrixWarning.__module__}.SingularMatrixWarning")
 @pytest.mark.parametrize(
     "kind", ["load_friction", "gain_change", "ripple_harmonics", "presliding_memory"]
 )
@@ -384,6 +385,13 @@ def test_effects_outside_the_families_reach_the_oracle(kind: str) -> None:
     if kind == "gain_change":
         (term,) = report["discovered_terms"]
         assert term["params"]["change_time_s"] == pytest.approx(truth["change_time_s"], abs=1.0)
+        # the fit does not change while the step moves between two samples: the
+        # linearisation gives its time no interval (not one of width 0), and says so
+        assert term["ci"]["change_time_s"] is None
+        (step,) = [k for k in term["params"] if k.startswith("gain_step_")]
+        lo, hi = term["ci"][step]
+        assert lo < term["params"][step] < hi
+        assert [w for w in report["warnings"] if w.startswith("gain_change: change_time_s")]
     if kind == "ripple_harmonics":  # two periods, each found by position_periodic
         periods = sorted(
             e["params"]["period_rad"]
