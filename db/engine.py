@@ -295,7 +295,7 @@ def _watch_sqlite_file(engine: Engine, path: Path) -> None:
 
 
 @contextmanager
-def write_transaction(engine: Engine) -> Iterator[Connection]:
+def write_transaction(engine: Engine, *, lock_wait_ms: int | None = None) -> Iterator[Connection]:
     """A transaction that holds the database's write lock from its first statement.
 
     Use it for read-then-write work that must not interleave with another process
@@ -306,6 +306,10 @@ def write_transaction(engine: Engine) -> Iterator[Connection]:
     ----------
     engine : Engine
         The study database.
+    lock_wait_ms : int, optional
+        SQLite: how long to wait for another program's lock before the `database is
+        locked` error, instead of the busy timeout (`busy_timeout_ms`), for a caller
+        that polls and can do something else meanwhile.
 
     Yields
     ------
@@ -314,12 +318,22 @@ def write_transaction(engine: Engine) -> Iterator[Connection]:
         exception and rolls back otherwise.
     """
     with engine.connect() as conn:
-        if is_sqlite(conn):
-            conn.execution_options(sqlite_begin="IMMEDIATE")
-        with conn.begin():
-            if not is_sqlite(conn):
-                conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({_WRITE_LOCK_KEY})")
-            yield conn
+        sqlite = is_sqlite(conn)
+        # on the driver's connection: through SQLAlchemy the PRAGMA would begin a
+        # transaction of its own
+        driver = conn.connection.driver_connection if sqlite else None
+        if driver is not None and lock_wait_ms is not None:
+            driver.execute(f"PRAGMA busy_timeout={int(lock_wait_ms)}")
+        try:
+            if sqlite:
+                conn.execution_options(sqlite_begin="IMMEDIATE")
+            with conn.begin():
+                if not sqlite:
+                    conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({_WRITE_LOCK_KEY})")
+                yield conn
+        finally:
+            if driver is not None and lock_wait_ms is not None:
+                driver.execute(f"PRAGMA busy_timeout={busy_timeout_ms(engine.url)}")
 
 
 def make_session_factory(engine: Engine) -> sessionmaker[Session]:

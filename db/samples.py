@@ -265,7 +265,7 @@ class SampleWriter:
             # a failed transaction gives its connection back (the next attempt takes a
             # fresh one: nothing of a broken connection is reused)
             self._release()
-            if not isinstance(exc, OperationalError) or wait or not _is_lock(exc):
+            if not isinstance(exc, OperationalError) or wait or not is_lock(exc):
                 raise
             if self.waiting_since is None:
                 self.waiting_since = time.monotonic()
@@ -362,7 +362,7 @@ class _Block:
         return _Block(max(hi - lo, 0), [c.slice(lo, max(hi - lo, 0)) for c in self.columns])
 
 
-def _is_lock(exc: OperationalError) -> bool:
+def is_lock(exc: OperationalError) -> bool:
     """Another program holds the database's lock (not a full disk, not a lost file)."""
     return "locked" in str(exc.orig if exc.orig is not None else exc).lower()
 

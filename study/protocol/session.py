@@ -3,10 +3,11 @@
 For each trial still to do (the participant's blocks in order, practice trials first),
 a `trials` row is committed as `running` before the first sample; samples go through
 `db.samples.SampleWriter`, one committed chunk per second of trial time; the summary
-and `completed` are written in one transaction at the end. If the process dies (kill
--9, power loss), the row stays `running` with its samples up to the last chunk; the
-next run of the same participant marks it `interrupted` (with an audit entry) and
-repeats that trial as a new attempt, keeping the interrupted record.
+and `completed` are written in one transaction at the end (a watched session waits
+out another program's lock there as its sample writer does, `_write_end`). If the
+process dies (kill -9, power loss), the row stays `running` with its samples up to the
+last chunk; the next run of the same participant marks it `interrupted` (with an audit
+entry) and repeats that trial as a new attempt, keeping the interrupted record.
 
 One session per participant (`study.protocol.lease`): the runner holds the
 participant's lease from before it recovers anything until it returns, so a second
@@ -33,7 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from sqlalchemy import Engine, func, insert, select, update
+from sqlalchemy import Connection, Engine, func, insert, select, update
 from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session
 
@@ -42,7 +43,7 @@ from db.engine import write_transaction
 from db.models.audit import AuditEntry
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.trial import SampleChunk, Trial, TrialMeasure
-from db.samples import SampleWriter
+from db.samples import LOCK_POLL_MS, SampleWriter, is_lock
 from study.errors import StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
@@ -357,6 +358,39 @@ def _place(participant: Participant, item: PendingTrial) -> TrialPlace:
     )
 
 
+def _write_end(
+    engine: Engine,
+    write: Callable[[Connection], bool],
+    on_wait: Callable[[float | None, int], None] | None,
+) -> bool:
+    """`write` in a write transaction: the trial's end, after its samples are all stored.
+
+    Watched (`on_wait` given: the session keeps its samples through another program's
+    lock, `HOLD_S`), a lock here is waited out as the sample writer waits at its close:
+    attempts of `LOCK_POLL_MS` each, telling `on_wait` (the seconds waited, no samples
+    held), up to `HOLD_S` of wall time, then one with the busy timeout. Else (and on
+    PostgreSQL) the busy timeout alone: past it the trial stays `running`, as when its
+    samples cannot be stored, for the next session to repeat."""
+    if on_wait is None or engine.dialect.name != "sqlite":
+        with write_transaction(engine) as conn:
+            return write(conn)
+    since: float | None = None
+    while True:
+        last = since is not None and time.monotonic() - since >= HOLD_S
+        try:
+            with write_transaction(engine, lock_wait_ms=None if last else LOCK_POLL_MS) as conn:
+                done = write(conn)
+        except OperationalError as exc:
+            if last or not is_lock(exc):
+                raise
+            since = time.monotonic() if since is None else since
+            on_wait(time.monotonic() - since, 0)
+            continue
+        if since is not None:
+            on_wait(None, 0)
+        return done
+
+
 def _run_trial(
     engine: Engine, participant: Participant, item: PendingTrial, run: TrialSetup
 ) -> int | None:
@@ -459,7 +493,8 @@ def _run_trial(
         **({"participant_model": run.model} if run.model and run.make_driver is None else {}),
     }
     completion_s = task.completion_time_s(samples)
-    with write_transaction(engine) as conn:
+
+    def complete(conn: Connection) -> bool:
         # only while still ours: a session that took the lease over has recovered it
         done = conn.execute(
             update(Trial)
@@ -477,7 +512,9 @@ def _run_trial(
                 insert(TrialMeasure),
                 [{"trial_id": trial_id, "name": k, "value": float(v)} for k, v in values.items()],
             )
-    if done.rowcount == 1:
+        return done.rowcount == 1
+
+    if _write_end(engine, complete, run.on_storage_wait):
         observer.trial_ended(
             info,
             "completed",

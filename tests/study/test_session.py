@@ -291,3 +291,56 @@ def test_a_full_disk_after_a_completed_trial_is_one_line_and_keeps_that_trial(
     after = _trials(db)
     assert after[0] == trials[0]  # the completed trial untouched
     assert sorted(t[2] for t in after) == ["completed"] * 4 + ["interrupted"]
+
+
+def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_completes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Another program takes the write lock between the trial's last samples and its
+    `completed` write, and keeps it longer than the busy timeout. A watched session
+    (`on_storage_wait`, as the terminal app runs it), which keeps its samples through
+    such a lock, waits this one out too, saying so, and completes the trial rather than
+    leave it `running` for the next session to repeat."""
+    import sqlite3
+    from contextlib import closing
+
+    from db.migrate import open_database
+    from study.protocol.default_estimator import load_estimator
+    from study.protocol.session import run_session
+    from study.protocol.tasks import get_task
+
+    db = _study(tmp_path)
+    engine = open_database(f"sqlite:///{db}?timeout=0.2", create=False)
+    with closing(sqlite3.connect(db, isolation_level=None)) as holder:
+        (task,) = {name for (name,) in holder.execute("SELECT task FROM schedule_blocks")}
+        task_class = type(get_task(task))
+        measure = task_class.completion_time_s
+
+        def lock_then_measure(self, samples):  # type: ignore[no-untyped-def]
+            # after the sample writer's last commit, before the trial's final write
+            if not holder.in_transaction:
+                holder.execute("BEGIN IMMEDIATE")
+            return measure(self, samples)
+
+        monkeypatch.setattr(task_class, "completion_time_s", lock_then_measure)
+        waits: list[tuple[float | None, int]] = []
+
+        def on_wait(waited_s: float | None, held: int) -> None:
+            waits.append((waited_s, held))
+            # the other program is done once the runner has said it waits for it
+            if waited_s is not None and len(waits) == 3:
+                holder.execute("ROLLBACK")
+
+        try:
+            ids = run_session(
+                engine, "P001", "simulated", load_estimator(), max_trials=1, on_storage_wait=on_wait
+            )
+        finally:
+            if holder.in_transaction:
+                holder.execute("ROLLBACK")
+            engine.dispose()
+    assert len(ids) == 1
+    assert [t[2] for t in _trials(db)] == ["completed"]
+    assert [w for w, _ in waits[:3]] == sorted(w for w, _ in waits[:3])
+    assert all(w is not None and held == 0 for w, held in waits[:3])
+    assert waits[3:] == [(None, 0)]  # the wait ended, said once
