@@ -43,19 +43,25 @@ print(json.dumps({
 """
 
 
-def _trial_process(tmp_path: Path, name: str) -> dict[str, object]:
+def _process(tmp_path: Path, code: str, *argv: str) -> dict[str, object]:
+    """The JSON last printed by `code` run in a fresh interpreter on the kernel cache
+    in `tmp_path` (a crash, a signal's negative return code, fails the test)."""
     env = {**os.environ, "HAPTIC_STUDY_CACHE": str(tmp_path / "cache")}
     done = subprocess.run(
-        [sys.executable, "-c", TRIAL, str(tmp_path / name)],
+        [sys.executable, "-c", code, *argv],
         env=env,
         capture_output=True,
         text=True,
         timeout=600,
         check=False,
     )
-    assert done.returncode == 0, done.stderr
+    assert done.returncode == 0, (done.returncode, done.stderr[-2000:])
     result: dict[str, object] = json.loads(done.stdout.splitlines()[-1])
     return result
+
+
+def _trial_process(tmp_path: Path, name: str) -> dict[str, object]:
+    return _process(tmp_path, TRIAL, str(tmp_path / name))
 
 
 def test_a_second_process_loads_the_loop_kernel_and_never_imports_numba_or_torch(
@@ -127,20 +133,10 @@ def test_the_compiled_kernel_refuses_estimator_arrays_it_would_misread(tmp_path:
     signature's (a tuple one short crashed the process): a tuple of another length is a
     ValueError naming both lengths, an array of another dtype runs the JIT kernel. In a
     process of its own, so that a crash fails this test rather than ending the run."""
-    env = {**os.environ, "HAPTIC_STUDY_CACHE": str(tmp_path / "cache")}
-    done = subprocess.run(
-        [sys.executable, "-c", BAD_ARRAYS],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-        check=False,
-    )
-    assert done.returncode == 0, (done.returncode, done.stderr[-2000:])
-    result = json.loads(done.stdout.splitlines()[-1])
+    result = _process(tmp_path, BAD_ARRAYS)
     assert result["ahead_of_time"] is True
-    assert re.fullmatch(r".*estimator arrays.*: expected 15, got 14", result["short"])
-    assert re.fullmatch(r".*estimator arrays.*: expected 15, got 16", result["long"])
+    assert re.fullmatch(r".*estimator arrays.*: expected 15, got 14", str(result["short"]))
+    assert re.fullmatch(r".*estimator arrays.*: expected 15, got 16", str(result["long"]))
     assert result["float32"] == "ran"
 
 
