@@ -173,6 +173,7 @@ def markdown(report: dict[str, Any]) -> str:
         f"Interval: {report['interval']}.",
         "",
         f"Run {report['started_utc']}, {report['wall_s']:.0f} s wall, "
+        f"{report['cpu_s']:.0f} CPU s (this process and its workers), "
         f"load average {report['load_average_start'][0]:.2f} at the start, "
         f"{report['load_average_end'][0]:.2f} at the end (1 min).",
         "",
@@ -187,7 +188,7 @@ def markdown(report: dict[str, Any]) -> str:
                 f"{100 * r['relative_change']:+.1f} % | "
                 f"{100 * r['ci95_low']:+.1f} to {100 * r['ci95_high']:+.1f} % |"
             )
-    lines += ["", "Trials that reached the goal: "]
+    lines += ["", "Trials that reached the goal:", ""]
     lines += [
         f"- {group}: VO {100 * g['success_rate']['VO']:.1f} %, "
         f"HV {100 * g['success_rate']['HV']:.1f} %"
