@@ -56,6 +56,9 @@ def _summary(report: dict[str, Any]) -> dict[str, Any]:
         "within_15pct_of_truth": report["recovery_within"],
         "within_15pct_of_study_people": report["recovery_within_study_people"],
         "vo_hv_intervals_holding_truth": sum(d["within"] for d in report["differences"]),
+        "vo_hv_simulated_people_intervals_holding_truth": sum(
+            d.get("simulated_within", d["within"]) for d in report["differences"]
+        ),
         "emulator_check": report["emulator_check"],
         "emulator_outside": _outside(report["emulator_check"]),
         "emulator_outside_people_only": report.get("emulator_check_outside_people_only"),

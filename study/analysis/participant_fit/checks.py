@@ -333,7 +333,9 @@ def emulator_check(
     simulated = table[table["source"] == "simulated"].set_index(keys)
     rows = []
     for key, sim in simulated.iterrows():
-        best = float(model.loc[key, "mean"])
+        # the emulator's own prediction (the `model` row's mean is corrected by the
+        # discrepancy these same simulated people measure)
+        best = float(model.loc[key, "emulator" if "emulator" in model.columns else "mean"])
         predicted = (for_simulated or {}).get(key, best)
         noise = float((design_sd or {}).get(key, 0.0))
         mean, low, high = float(sim["mean"]), float(sim["ci_low"]), float(sim["ci_high"])

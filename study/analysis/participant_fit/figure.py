@@ -22,7 +22,7 @@ from study.protocol.tasks import measure_named
 SOURCES = {
     "observed": ("observed", "#000000", "o"),
     "simulated": ("simulated from the fit", "#0072B2", "s"),
-    "model": ("the emulator's prediction", "#D55E00", "^"),
+    "model": ("the fitted model (emulator + discrepancy)", "#D55E00", "^"),
 }
 COLUMNS = ("VO", "HV", "VO-HV")
 

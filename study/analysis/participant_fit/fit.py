@@ -61,7 +61,12 @@ from study.analysis.participant_fit.observed import (
     with_features,
 )
 from study.analysis.participant_fit.simulate import simulate_settings, worker_pool
-from study.analysis.participant_fit.summaries import power_effects, summaries
+from study.analysis.participant_fit.summaries import (
+    TRAIT_COLUMN,
+    emulator_discrepancy,
+    power_effects,
+    summaries,
+)
 from study.errors import StudyInputError
 from study.probes.measure import probe_arrays, probe_information, probe_summary
 from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
@@ -150,6 +155,9 @@ def simulate_people(
     frame["position"] = block * k + frame["repeat"]
     frame["trial"] = frame["repeat"] + 1
     frame["driver"] = "simulated"
+    traits = np.array([[getattr(t, name) for name in TRAITS] for _, t in people])
+    for j, name in enumerate(TRAITS):
+        frame[f"{TRAIT_COLUMN}{name}"] = traits[frame["setting"].to_numpy(), j]
     return frame
 
 
@@ -512,7 +520,14 @@ def check_model(
     predicted = {g: fits[g].predicted for g in groups}
     table = pd.DataFrame(
         summaries(
-            data.trials, simulated, measures, groups, predicted, rng, max(settings.bootstrap, 200)
+            data.trials,
+            simulated,
+            measures,
+            groups,
+            predicted,
+            rng,
+            max(settings.bootstrap, 200),
+            emulator_discrepancy(simulated, measures, groups, emulator),
         )
     )
     misfit = checks.summary_misfit(data.trials, simulated, measures, groups, plan.fixed)
@@ -655,11 +670,18 @@ class FitResult:
             },
             "fit": group_out,
             "emulator": self.emulator.to_dict(),
-            "summaries": self.table.round(6).to_dict(orient="records"),
+            "summaries": [
+                {k: v for k, v in row.items() if not (isinstance(v, float) and np.isnan(v))}
+                for row in self.table.round(6).to_dict(orient="records")
+            ],
             "simulated_summaries_note": f"'simulated' rows: {settings.check} people per group "
             "SIMULATED from the fitted model (each from one of the fit's bootstrap replicates, "
             "so the interval holds the fit's uncertainty and the people's); 'model': the "
-            "emulator's prediction with the fit's bootstrap interval",
+            "fitted model's mean, the emulator's prediction (`emulator`, with the fit's "
+            "bootstrap interval `emulator_ci`) plus its discrepancy from the simulator "
+            "(`discrepancy`: the simulated people's mean minus the emulator's at their own "
+            "traits, with its SE), the interval the bootstrap's widened by the discrepancy's "
+            "t interval in quadrature",
             "lacks": self.checks.to_dict(),
             "emulator_check": checks.emulator_check(
                 self.table, self.checks.emulator_for_simulated, self.checks.emulator_design_sd

@@ -8,8 +8,15 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from study.analysis.participant_fit.observed import bootstrap_means
+
+TRAIT_COLUMN = "trait:"
+"""Prefix of the columns that carry a simulated person's traits (`fit.simulate_people`)."""
+
+Discrepancy = dict[tuple[str, str, str], tuple[float, float, int]]
+"""(group, measure, condition) -> the emulator's discrepancy: its mean, SE and people."""
 
 
 def condition_values(
@@ -28,6 +35,71 @@ def condition_values(
             yield group, m, "VO-HV", wide["VO"] - wide["HV"]
 
 
+def emulator_discrepancy(
+    simulated: pd.DataFrame,
+    measures: Sequence[str],
+    groups: Sequence[str],
+    emulator: Any,
+) -> Discrepancy:
+    """What the simulator gives beyond the emulator for the people simulated from the fit:
+    per group, measure and condition (and VO - HV), the mean over those people of their
+    mean measure minus the emulator's mean at their own traits (the `TRAIT_COLUMN`
+    columns), its standard error and the number of people (those with both conditions).
+
+    Each person's own traits stand as a control variate: their spread between people,
+    which the emulator follows, drops out of the difference, so its SE is the trials'
+    noise and the emulator's misfit only, far below that of the simulated people's mean
+    itself. The mean surface is a smooth fit to a finite design; where it bends off the
+    simulator (a capped time, a skewed force), this is how far, measured where the
+    fitted people lie."""
+    columns = [c for c in simulated.columns if c.startswith(TRAIT_COLUMN)]
+    keys = ["group", "participant"]
+    people = simulated.groupby(keys)[columns].first()
+    means = simulated.groupby([*keys, "condition"])[list(measures)].mean().unstack("condition")
+    out: Discrepancy = {}
+    for group in groups:
+        if group not in people.index.get_level_values("group"):
+            continue
+        traits = people.xs(group, level="group")
+        own = means.xs(group, level="group").reindex(traits.index)
+        expected = emulator.means(traits.to_numpy(float))
+        for m in measures:
+            residual = {
+                c: own[(m, c)].to_numpy(float) - expected[:, emulator.moments_.index(f"{c}:{m}")]
+                for c in ("VO", "HV")
+            }
+            residual["VO-HV"] = residual["VO"] - residual["HV"]
+            for label, r in residual.items():
+                r = r[np.isfinite(r)]
+                if len(r) >= 2:
+                    se = float(np.std(r, ddof=1) / np.sqrt(len(r)))
+                    out[(group, m, label)] = (float(np.mean(r)), se, len(r))
+    return out
+
+
+def _model_row(draws: np.ndarray, correction: tuple[float, float, int] | None) -> dict[str, Any]:
+    """The model's predicted mean and 95 % interval from the emulator's `draws` (best fit,
+    then the fit's bootstrap replicates) and the emulator's discrepancy (`correction`,
+    `emulator_discrepancy`): the prediction moved by the discrepancy, its percentile
+    interval widened on each side by the discrepancy's t interval in quadrature."""
+    best = float(draws[0])
+    low, high = float(np.percentile(draws[1:], 2.5)), float(np.percentile(draws[1:], 97.5))
+    row: dict[str, Any] = {"emulator": best, "emulator_ci": [low, high]}
+    if correction is None:
+        return {**row, "mean": best, "ci_low": low, "ci_high": high}
+    shift, se, n = correction
+    half = float(stats.t.ppf(0.975, n - 1)) * se
+    centre = best + shift
+    return {
+        **row,
+        "mean": centre,
+        "ci_low": centre - float(np.hypot(max(best - low, 0.0), half)),
+        "ci_high": centre + float(np.hypot(max(high - best, 0.0), half)),
+        "discrepancy": shift,
+        "discrepancy_se": se,
+    }
+
+
 def summaries(
     observed: pd.DataFrame,
     simulated: pd.DataFrame,
@@ -36,10 +108,12 @@ def summaries(
     predicted: dict[str, dict[str, list[float]]],
     rng: np.random.Generator,
     n_boot: int,
+    discrepancy: Discrepancy | None = None,
 ) -> list[dict[str, Any]]:
     """Per group, measure and condition (and VO - HV): the observed and simulated mean of
     participant means with bootstrap 95 % intervals, and the fitted model's predicted
-    mean with its interval from the fit's bootstrap."""
+    mean with its interval from the fit's bootstrap: the emulator's, corrected by its
+    `discrepancy` from the simulated people where given (`_model_row`)."""
     rows = []
     for source, frame in (("observed", observed), ("simulated", simulated)):
         for group, m, label, values in condition_values(frame, measures, groups):
@@ -67,9 +141,7 @@ def summaries(
                         "condition": label,
                         "source": "model",
                         "n": len(draws) - 1,
-                        "mean": float(draws[0]),
-                        "ci_low": float(np.percentile(draws[1:], 2.5)),
-                        "ci_high": float(np.percentile(draws[1:], 97.5)),
+                        **_model_row(draws, (discrepancy or {}).get((group, m, label))),
                     }
                 )
     return rows
