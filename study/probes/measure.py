@@ -112,6 +112,32 @@ def missing_line(
     return missing
 
 
+def _by_lacking(missing: dict[str, list[str]]) -> dict[tuple[str, ...], list[str]]:
+    """The lacking traits -> the codes that lack exactly them (sorted), in the order of
+    their first code."""
+    out: dict[tuple[str, ...], list[str]] = {}
+    for code, lacks in sorted(missing.items()):
+        out.setdefault(tuple(lacks), []).append(code)
+    return out
+
+
+def code_runs(codes: list[str]) -> str:
+    """Sorted participant codes with runs of consecutive numbers under one prefix (and
+    one width) written as a range: P002, P003, P004, P009 -> "P002-P004, P009"."""
+    runs: list[list[str]] = []
+    last: tuple[str, int, int] | None = None
+    for code in codes:
+        head = code.rstrip("0123456789")
+        tail = code[len(head) :]
+        key = (head, len(tail), int(tail)) if tail else None
+        if runs and key and last and key[:2] == last[:2] and key[2] == last[2] + 1:
+            runs[-1].append(code)
+        else:
+            runs.append([code])
+        last = key
+    return ", ".join(r[0] if len(r) == 1 else f"{r[0]}-{r[-1]}" for r in runs)
+
+
 def probe_summary(
     probed: dict[str, np.ndarray], codes: dict[str, list[str]], traits: tuple[str, ...]
 ) -> dict[str, Any]:
@@ -128,7 +154,11 @@ def probe_summary(
     if not measured:
         line = "probes: none stored; the traits the task tells weakly rest on the task alone"
     elif missing:
-        shown = "; ".join(f"{c} lacks {', '.join(t)}" for c, t in sorted(missing.items()))
+        shown = "; ".join(
+            f"{code_runs(cs)} {'lacks' if len(cs) == 1 else f'({len(cs)}) lack'} "
+            f"{', '.join(t) if len(t) < len(measured) else 'every probe'}"
+            for t, cs in _by_lacking(missing).items()
+        )
         line = (
             f"probes: {len(measured)} traits measured; {len(missing)} of {people} "
             f"participants fitted without some: {shown}"
