@@ -336,6 +336,33 @@ def write_transaction(engine: Engine, *, lock_wait_ms: int | None = None) -> Ite
                 driver.execute(f"PRAGMA busy_timeout={busy_timeout_ms(engine.url)}")
 
 
+def checkpoint(engine: Engine, *, wait_ms: int = 1000) -> None:
+    """SQLite: move the write-ahead log's commits into the database file and empty the
+    log, so that the file alone holds every commit (a copy of it taken now, without its
+    `-wal` beside it, misses nothing). Processes that end without closing their
+    connections (a pool's workers) leave the log full; the last connection to close
+    would do this, but those never close. Nothing to do on PostgreSQL.
+
+    Parameters
+    ----------
+    engine : Engine
+        The study database.
+    wait_ms : int
+        How long to wait for another program's write or long read to end (the busy
+        timeout would hold a caller that is only tidying up for 30 s); past it the log
+        keeps what is not yet folded in, and nothing is lost.
+    """
+    if engine.dialect.name != "sqlite":
+        return
+    with engine.connect() as conn:
+        driver = conn.connection.driver_connection
+        driver.execute(f"PRAGMA busy_timeout={int(wait_ms)}")
+        try:
+            driver.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        finally:
+            driver.execute(f"PRAGMA busy_timeout={busy_timeout_ms(engine.url)}")
+
+
 def make_session_factory(engine: Engine) -> sessionmaker[Session]:
     """ORM sessions bound to `engine`.
 

@@ -157,6 +157,7 @@ class Workers:
         durable: bool = True,
     ) -> None:
         self.jobs = jobs
+        self._db_url = db_url
         self._pool: ProcessPoolExecutor | None = None
         if jobs == 1:
             _worker_init(db_url, actor=actor, participants=participants, durable=durable)
@@ -182,6 +183,8 @@ class Workers:
     ) -> None:
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=exc is not None)
+            if self._db_url is not None:
+                _checkpoint(self._db_url)
 
     def run(
         self,
@@ -266,3 +269,21 @@ def run_participants(
     """
     with start_workers(db_url, jobs, actor, participants, notice, durable) as workers:
         yield from workers.run(codes, pace, on_busy)
+
+
+def _checkpoint(db_url: str) -> None:
+    """The workers ended without closing their connections, which leaves an SQLite
+    database's write-ahead log full: fold it into the database file
+    (`db.engine.checkpoint`), so the file alone holds every trial. A database that
+    cannot be opened now (never created, or gone) is left to the error that says so."""
+    from sqlalchemy.exc import OperationalError
+
+    from db.engine import checkpoint, make_engine, resolve_url
+
+    engine = make_engine(resolve_url(db_url))
+    try:
+        checkpoint(engine)
+    except OperationalError:
+        pass
+    finally:
+        engine.dispose()

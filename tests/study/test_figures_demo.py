@@ -8,6 +8,10 @@ from __future__ import annotations
 
 import json
 import shutil
+import sqlite3
+import subprocess
+import sys
+from contextlib import closing
 from pathlib import Path
 
 import pandas as pd
@@ -22,8 +26,32 @@ from tests.study.conftest import init_study
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("quick") / "demo"
-    assert main(["demo", "--quick", "--out", str(out), "--seed", "2"]) == 0
+    # in a process of its own, as a researcher runs it: the process ends right after,
+    # with whatever it left open (in this one, pytest's process lives on)
+    argv = ["demo", "--quick", "--out", str(out), "--seed", "2"]
+    code = f"from study.cli import main; raise SystemExit(main({argv!r}))"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    # the database file alone, as a researcher copies it off the machine
+    alone = out.parent / "alone"
+    alone.mkdir()
+    shutil.copyfile(out / "demo.db", alone / "demo.db")
     return out
+
+
+def _counts(path: Path) -> tuple[int, ...]:
+    with closing(sqlite3.connect(path)) as conn:
+        tables = ("trials", "sample_chunks", "tlx_responses")
+        return tuple(conn.execute(f"SELECT count(*) FROM {t}").fetchone()[0] for t in tables)
+
+
+def test_the_database_file_alone_holds_every_trial(demo: Path) -> None:
+    """The demo's workers end without closing their connections; the write-ahead log
+    they leave is folded into the file at the end, so a copy of demo.db alone (its -wal
+    left behind) holds every trial, sample chunk and questionnaire."""
+    full = _counts(demo / "demo.db")
+    assert full[0] == 6 * 2  # 2/2/2 people, two blocks of one trial each
+    assert _counts(demo.parent / "alone" / "demo.db") == full
 
 
 def _pdf_text(path: Path) -> str:
