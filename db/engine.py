@@ -356,6 +356,8 @@ def checkpoint(engine: Engine, *, wait_ms: int = 1000) -> None:
         return
     with engine.connect() as conn:
         driver = conn.connection.driver_connection
+        if driver is None:  # not a live SQLite connection: nothing to fold in
+            return
         driver.execute(f"PRAGMA busy_timeout={int(wait_ms)}")
         try:
             driver.execute("PRAGMA wal_checkpoint(TRUNCATE)")
