@@ -60,7 +60,7 @@ from study.analysis.participant_fit.observed import person_moments
 from study.analysis.participant_fit.simulate import _new_pool, simulate_setting
 from study.protocol.design import MAX_TRIAL_S
 from study.protocol.tasks import get_task
-from study.protocol.traits import TRAITS, GroupProfile
+from study.protocol.traits import PROFILES, TRAITS, GroupProfile, draw_traits
 
 TASK = "lcca"
 REPEATS = 2
@@ -74,12 +74,24 @@ def _cpu_s() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def simulate(seed: int, n: int, out: str, offset: int = 0) -> None:
+def simulate(seed: int, n: int, out: str, offset: int = 0, profiles: bool = False) -> None:
     """`build_emulator`'s design simulation (`simulate_settings`, salt `fit`: VO and HV
     of a repeat share a seed), with the trial seeds of setting k those of setting
-    offset + k; the rows' `setting` stays 0..n-1."""
-    x = design_settings(n, seed, design_box())
-    people = [{"group": "design", **dict(zip(TRAITS, row, strict=True))} for row in x]
+    offset + k; the rows' `setting` stays 0..n-1. With `profiles`: n people a group
+    drawn from the groups' profiles (`draw_traits`) instead of the design's box."""
+    if profiles:
+        rng = np.random.default_rng([seed, 0x5B1])
+        drawn = [draw_traits(g, rng) for g in PROFILES for _ in range(n)]
+        x = np.array([[getattr(t, name) for name in TRAITS] for t in drawn])
+        groups = [t.group for t in drawn]
+    else:
+        x = design_settings(n, seed, design_box())
+        groups = ["design"] * n
+    people = [
+        {"group": g, **dict(zip(TRAITS, row, strict=True))}
+        for g, row in zip(groups, x, strict=True)
+    ]
+    n = len(people)
     cpu0, wall0 = _cpu_s(), time.perf_counter()
     rows: list[dict[str, Any]] = []
     with _new_pool(TASK, JOBS) as pool:
@@ -97,9 +109,17 @@ def simulate(seed: int, n: int, out: str, offset: int = 0) -> None:
         "wall_s": round(time.perf_counter() - wall0, 1),
         "load_average": os.getloadavg(),
     }
-    meta = {"seed": seed, "settings": n, "repeats": REPEATS, "offset": offset, **cost}
+    meta = {
+        "seed": seed,
+        "settings": n,
+        "drawn_from": "profiles" if profiles else "design box",
+        "repeats": REPEATS,
+        "offset": offset,
+        **cost,
+    }
     with open(out, "wb") as f:
-        pickle.dump({"x": x, "trials": trials.reset_index(drop=True), "meta": meta}, f)
+        block = {"x": x, "groups": groups, "trials": trials.reset_index(drop=True), "meta": meta}
+        pickle.dump(block, f)
     print(json.dumps(meta))
 
 
@@ -187,12 +207,16 @@ def _npe(theta_tr, x_tr, x_te, box, seed, samples, estimator):
     epochs = int(inference.summary["epochs_trained"][-1])
     posterior = inference.build_posterior(net)
     cpu = time.process_time()
-    draws = posterior.sample_batched(
-        (samples,),
-        x=torch.tensor(x_te, dtype=torch.float32),
-        show_progress_bars=False,
-        reject_outside_prior=False,
-    ).detach().numpy()
+    draws = (
+        posterior.sample_batched(
+            (samples,),
+            x=torch.tensor(x_te, dtype=torch.float32),
+            show_progress_bars=False,
+            reject_outside_prior=False,
+        )
+        .detach()
+        .numpy()
+    )
     means, leaked = _truncated_means(draws.astype(float), box)
     return means, train_s, time.process_time() - cpu, epochs, leaked
 
@@ -253,7 +277,12 @@ def _budget(x, trials, n_design, extra, opts) -> dict[str, Any]:
     for f in range(validate.FOLDS):
         test = np.flatnonzero(fold == f)
         train = np.concatenate([np.flatnonzero(fold != f), extra_ids])
-        theta, fit_s, est_s, emulator = _emulator(x, trials, train, test, measures, features, wide)
+        # the settings simulated so far: their range is the emulator's box (the
+        # estimates' bounds), the design's alone at budget 0 as in `validate`
+        x_sim = x[: n_design + extra]
+        theta, fit_s, est_s, emulator = _emulator(
+            x_sim, trials, train, test, measures, features, wide
+        )
         keep("emulator", theta, ("fit_cpu_s", fit_s), ("estimate_cpu_s", est_s))
         people_tr = _people(trials[trials["setting"].isin(train)], measures, emulator)
         people_te = _people(trials[trials["setting"].isin(test)], measures, emulator)
@@ -281,7 +310,12 @@ def _budget(x, trials, n_design, extra, opts) -> dict[str, Any]:
                 )
                 epochs.append(n_ep)
                 leakage.append(leaked)
-        print(f"extra {extra}: fold {f} done", file=sys.stderr, flush=True)
+        print(
+            f"extra {extra}: fold {f} done, CPU s {time.process_time():.0f}, "
+            f"load {os.getloadavg()[0]:.1f}",
+            file=sys.stderr,
+            flush=True,
+        )
     truth_all = np.concatenate(truth)
     n_test = len(truth_all)
     none = _rms(np.concatenate(est["no data (training mean)"]), truth_all)
@@ -335,18 +369,7 @@ def compare(out: str, paths: list[str], opts: dict[str, str]) -> int:
         )
         return 2
     wall0 = time.perf_counter()
-    budgets = []
-    for extra in extras:
-        result = _budget(x, trials, n_design, extra, opts)
-        sims = [m for m in metas]
-        used, cpu = 0, 0.0
-        for m in sims:
-            take = min(m["settings"], n_design + extra - used)
-            cpu += m["cpu_s"] * take / m["settings"]
-            used += take
-        result["simulation_cpu_s"] = round(cpu, 1)
-        budgets.append(result)
-    report = {
+    report: dict[str, Any] = {
         "data_source": "SIMULATED",
         "task": TASK,
         "versions": {"sbi": sbi.__version__, "torch": torch.__version__},
@@ -356,37 +379,198 @@ def compare(out: str, paths: list[str], opts: dict[str, str]) -> int:
         "options": opts,
         "simulations": metas,
         "validate_held_out_errors": None,
-        "load_average_end": os.getloadavg(),
-        "compare_wall_s": round(time.perf_counter() - wall0, 1),
-        "budgets": budgets,
+        "budgets": [],
     }
     if 0 in extras:
         the_task = get_task(TASK)
-        design = trials[trials["setting"] < n_design]
         check = validate.held_out_errors(
             x[:n_design],
-            design,
+            trials[trials["setting"] < n_design],
             list(the_task.analysed_measures),
             list(the_task.fit_features),
             REPEATS,
         )
         report["validate_held_out_errors"] = dict(zip(TRAITS, check.round(6).tolist(), strict=True))
+    for extra in extras:
+        cpu0, start = time.process_time(), time.perf_counter()
+        result = _budget(x, trials, n_design, extra, opts)
+        used, cpu = 0, 0.0
+        for m in metas:
+            take = min(m["settings"], n_design + extra - used)
+            cpu += m["cpu_s"] * take / m["settings"]
+            used += take
+        result["simulation_cpu_s"] = round(cpu, 1)
+        result["budget_cpu_s"] = round(time.process_time() - cpu0, 1)
+        result["budget_wall_s"] = round(time.perf_counter() - start, 1)
+        result["load_average_end"] = os.getloadavg()
+        report["budgets"].append(result)
+        report["compare_wall_s"] = round(time.perf_counter() - wall0, 1)
+        # written after each budget, so that a stopped run keeps what it measured
+        with open(out, "w") as f:
+            json.dump(report, f, indent=1)
+    return 0
+
+
+def _summaries(rms: dict[str, np.ndarray], none: np.ndarray) -> dict[str, Any]:
+    return {
+        name: {
+            "rms_error": dict(zip(TRAITS, r.round(6).tolist(), strict=True)),
+            "rms_error_over_no_data": dict(zip(TRAITS, (r / none).round(3).tolist(), strict=True)),
+        }
+        for name, r in rms.items()
+    }
+
+
+def compare_profiles(out: str, people_path: str, paths: list[str], opts: dict[str, str]) -> int:
+    """The same under the fit's prior: people drawn from the groups' profiles, each
+    estimated by the emulator (fitted to the design and the first `extra` extra
+    settings) under their group's profile (`GroupEstimator`, every trait free), and by
+    NPE trained on the other 3 folds of the profiles' people (their group as an input
+    beside the summaries: the profiles' mixture as its prior)."""
+    import sbi
+    import torch
+
+    torch.set_num_threads(int(opts.get("threads", 2)))
+    the_task = get_task(TASK)
+    measures, features = list(the_task.analysed_measures), list(the_task.fit_features)
+    x, trials, n_design, metas = _load(paths)
+    with open(people_path, "rb") as f:
+        block = pickle.load(f)
+    px, ptrials, groups = block["x"], block["trials"], np.array(block["groups"])
+    lo, hi = design_box()
+    lo, hi = np.minimum(lo, px.min(axis=0)), np.maximum(hi, px.max(axis=0))
+    box = (surface_traits(lo[None])[0], surface_traits(hi[None])[0])
+    fold = np.arange(len(px)) % validate.FOLDS
+    onehot = (groups[:, None] == np.array(list(PROFILES))[None]).astype(float)
+    seeds = int(opts.get("npe-seeds", 1))
+    budgets = []
+    extras = [int(e) for e in opts.get("extra", "0").split(",")]
+    for extra in [0, *(e for e in extras if e != 0)]:
+        cpu = time.process_time()
+        emulator = MomentEmulator(mean_surface=False).fit(
+            x[: n_design + extra], trials[trials["setting"] < n_design + extra], measures, features
+        )
+        fit_s = time.process_time() - cpu
+        people = _people(ptrials, measures, emulator)
+        y = people.to_numpy(float)
+        cpu = time.process_time()
+        theta = np.zeros_like(px)
+        for g, profile in PROFILES.items():
+            idx = np.flatnonzero(groups[people.index] == g)
+            est = GroupEstimator(emulator, profile, list(range(len(TRAITS))), float(REPEATS))
+            mu, sd = est.mu0, est.sd0
+            t, _, _ = est.posteriors(y[idx], mu, sd, np.tile(mu, (len(idx), 1)), validate.STEPS)
+            theta[people.index[idx]] = t
+        est_s = time.process_time() - cpu
+        rms = {"emulator (group's profile as prior)": _rms(theta, px)}
+        costs = {
+            "emulator (group's profile as prior)": {
+                "simulated_settings": n_design + extra,
+                "fit_cpu_s": round(fit_s, 2),
+                "estimate_cpu_ms_per_person": round(1000 * est_s / len(px), 2),
+            }
+        }
+        if extra == 0:
+            none, ridge, npe = np.zeros_like(px), np.zeros_like(px), {}
+            npe_cost: dict[str, list[float]] = {}
+            for f in range(validate.FOLDS):
+                tr, te = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+                x_tr, x_te = _inputs(people.loc[tr], people.loc[te])
+                x_tr, x_te = np.hstack([x_tr, onehot[tr]]), np.hstack([x_te, onehot[te]])
+                theta_tr = surface_traits(px[tr])
+                for g in PROFILES:
+                    none[te[groups[te] == g]] = px[tr[groups[tr] == g]].mean(axis=0)
+                ridge[te] = _ridge(theta_tr, x_tr, x_te)
+                for s in range(seeds):
+                    means, train_s, sample_s, _, leaked = _npe(
+                        theta_tr,
+                        x_tr,
+                        x_te,
+                        box,
+                        1000 * f + s,
+                        int(opts.get("samples", 1000)),
+                        "maf",
+                    )
+                    npe.setdefault(f"npe_maf_seed{s}", np.zeros_like(px))[te] = means
+                    npe_cost.setdefault(f"npe_maf_seed{s}", []).extend([train_s, sample_s, leaked])
+                print(f"profiles: fold {f} done", file=sys.stderr, flush=True)
+            rms["no data (group's training mean)"] = _rms(none, px)
+            rms["ridge on the summaries and the group"] = _rms(ridge, px)
+            for name, m in npe.items():
+                rms[name] = _rms(m, px)
+                c = np.array(npe_cost[name]).reshape(-1, 3)
+                costs[name] = {
+                    "simulated_settings": len(px),
+                    "training_people_per_fold": int(len(px) * 3 / 4),
+                    "fit_cpu_s_per_fold": round(float(c[:, 0].mean()), 2),
+                    "estimate_cpu_ms_per_person": round(1000 * float(c[:, 1].sum()) / len(px), 2),
+                    "share_of_draws_outside_box": c[:, 2].round(4).tolist(),
+                }
+            baseline = rms["no data (group's training mean)"]
+        budgets.append({"extra_settings": extra, "rms": rms, "costs": costs})
+    report = {
+        "data_source": "SIMULATED",
+        "task": TASK,
+        "versions": {"sbi": sbi.__version__, "torch": torch.__version__},
+        "people": {g: int((groups == g).sum()) for g in PROFILES},
+        "repeats": REPEATS,
+        "options": opts,
+        "simulations": [*metas, block["meta"]],
+        "load_average_end": os.getloadavg(),
+        "budgets": [{**b, "methods": _summaries(b.pop("rms"), baseline)} for b in budgets],
+    }
     with open(out, "w") as f:
         json.dump(report, f, indent=1)
     return 0
 
 
+SHORT = {
+    "preferred_speed_m_s": "speed",
+    "reaction_s": "reaction",
+    "steering_error_rad": "steering",
+    "caution": "caution",
+    "haptic_threshold_n_m": "haptic thr.",
+    "visual_stall_s": "visual stall",
+    "comfort_torque_n_m": "comfort torque",
+}
+
+
+def table(path: str) -> int:
+    """Markdown tables of a `compare` or `profiles` JSON: per budget and method, each
+    trait's RMS error as a share of the no-data error (trait units below), and costs."""
+    with open(path) as f:
+        report = json.load(f)
+    head = "| method | " + " | ".join(SHORT[t] for t in TRAITS) + " | fit CPU s | ms/person |"
+    for b in report["budgets"]:
+        size = b.get("settings_simulated", "")
+        print(f"\n{size} settings simulated (extra {b['extra_settings']})\n")
+        print(head)
+        print("|---" * (len(TRAITS) + 3) + "|")
+        for name, m in b["methods"].items():
+            ratio = " | ".join(f"{m['rms_error_over_no_data'][t]:.2f}" for t in TRAITS)
+            c = m if "fit_cpu_s_per_fold" in m else b.get("costs", {}).get(name, {})
+            fit = c.get("fit_cpu_s_per_fold", c.get("fit_cpu_s", ""))
+            print(f"| {name} | {ratio} | {fit} | {c.get('estimate_cpu_ms_per_person', '')} |")
+    return 0
+
+
 def _options(argv: list[str]) -> tuple[list[str], dict[str, str]]:
     args = [a for a in argv if not a.startswith("--")]
-    opts = dict(a[2:].split("=", 1) for a in argv if a.startswith("--"))
+    opts = dict((a[2:] + "=").split("=")[:2] for a in argv if a.startswith("--"))
     return args, opts
 
 
 def main(argv: list[str]) -> int:
     args, opts = _options(argv)
     if args[:1] == ["simulate"] and len(args) == 4:
-        simulate(int(args[1]), int(args[2]), args[3], int(opts.get("offset", 0)))
+        simulate(
+            int(args[1]), int(args[2]), args[3], int(opts.get("offset", 0)), "profiles" in opts
+        )
         return 0
+    if args[:1] == ["table"] and len(args) == 2:
+        return table(args[1])
+    if args[:1] == ["profiles"] and len(args) >= 4:
+        return compare_profiles(args[1], args[2], args[3:], opts)
     if args[:1] == ["compare"] and len(args) >= 3:
         return compare(args[1], args[2:], opts)
     print(__doc__.split("\n\n")[1], file=sys.stderr)
