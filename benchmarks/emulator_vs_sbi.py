@@ -11,7 +11,18 @@ trials. SIMULATED throughout.
     # other 3 folds plus the first N settings of the extra blocks for each N in
     # --extra (default 0), tested on the held-out fold; writes OUT.json
     nice -n 10 python benchmarks/emulator_vs_sbi.py compare OUT.json DESIGN.pkl [EXTRA.pkl ...]
-        [--extra=0,320,960] [--npe-seeds=1] [--samples=1000] [--threads=2]
+        [--extra=0,320,960] [--npe-seeds=1] [--estimators=maf] [--samples=1000] [--threads=2]
+    # under the fit's prior: N people a group drawn from the profiles (--profiles), each
+    # estimated by the emulator (the design and the first N extra settings) under their
+    # group's profile, and by NPE trained on the other 3 folds of those people
+    nice -n 10 python benchmarks/emulator_vs_sbi.py simulate SEED N PEOPLE.pkl --profiles --offset=K
+    nice -n 10 python benchmarks/emulator_vs_sbi.py profiles OUT.json PEOPLE.pkl DESIGN.pkl \
+        [EXTRA.pkl ...] [--extra=0,2240] [--npe-seeds=1] [--threads=1]
+    # markdown tables of either JSON
+    python benchmarks/emulator_vs_sbi.py table OUT.json
+
+torch's threads (--threads): 1 on a machine loaded by others, where 2 threads spin
+against the other processes and a budget's training takes many times as long.
 
 Each held-out setting is one person with the design's trials (2 per condition): their
 summaries are `observed.person_moments`' (per condition, the mean over their trials of
@@ -347,17 +358,26 @@ def _budget(x, trials, n_design, extra, opts) -> dict[str, Any]:
     }
 
 
-def compare(out: str, paths: list[str], opts: dict[str, str]) -> int:
+def _have_sbi(command: str) -> bool:
     try:
-        import sbi
-        import torch
+        import sbi  # noqa: F401
+        import torch  # noqa: F401
     except ImportError:
         print(
-            "compare needs the sbi package (pip install sbi, beside torch); "
+            f"{command} needs the sbi package (pip install sbi, beside torch); "
             "it is not a dependency of the project",
             file=sys.stderr,
         )
+        return False
+    return True
+
+
+def compare(out: str, paths: list[str], opts: dict[str, str]) -> int:
+    if not _have_sbi("compare"):
         return 2
+    import sbi
+    import torch
+
     torch.set_num_threads(int(opts.get("threads", 2)))
     x, trials, n_design, metas = _load(paths)
     extras = [int(e) for e in opts.get("extra", "0").split(",")]
@@ -427,6 +447,8 @@ def compare_profiles(out: str, people_path: str, paths: list[str], opts: dict[st
     settings) under their group's profile (`GroupEstimator`, every trait free), and by
     NPE trained on the other 3 folds of the profiles' people (their group as an input
     beside the summaries: the profiles' mixture as its prior)."""
+    if not _have_sbi("profiles"):
+        return 2
     import sbi
     import torch
 
@@ -517,7 +539,14 @@ def compare_profiles(out: str, people_path: str, paths: list[str], opts: dict[st
         "options": opts,
         "simulations": [*metas, block["meta"]],
         "load_average_end": os.getloadavg(),
-        "budgets": [{**b, "methods": _summaries(b.pop("rms"), baseline)} for b in budgets],
+        "budgets": [
+            {
+                "extra_settings": b["extra_settings"],
+                "methods": _summaries(b["rms"], baseline),
+                "costs": b["costs"],
+            }
+            for b in budgets
+        ],
     }
     with open(out, "w") as f:
         json.dump(report, f, indent=1)
@@ -542,7 +571,7 @@ def table(path: str) -> int:
         report = json.load(f)
     head = "| method | " + " | ".join(SHORT[t] for t in TRAITS) + " | fit CPU s | ms/person |"
     for b in report["budgets"]:
-        size = b.get("settings_simulated", "")
+        size = b.get("settings_simulated", "profiles' people;")
         print(f"\n{size} settings simulated (extra {b['extra_settings']})\n")
         print(head)
         print("|---" * (len(TRAITS) + 3) + "|")
