@@ -195,6 +195,7 @@ SLOW_MODULES = frozenset(
         "tests/study/test_participant_fit_notes.py",
         "tests/study/test_participant_fit_samples.py",
         "tests/study/test_participant_fit_validate.py",
+        "tests/study/test_simulation_workers.py",
         "tests/study/test_probes_fit.py",
         "tests/study/test_figures_demo.py",
         "tests/study/test_figures.py",

@@ -26,6 +26,9 @@ simulated frame as `observed.py` reads them off the stored samples.
 from __future__ import annotations
 
 import multiprocessing
+import os
+import threading
+import time
 import zlib
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -107,7 +110,24 @@ def simulate_setting(
     return rows
 
 
-def _warm(task: str) -> None:
+PARENT_POLL_S = 0.5
+"""How often a simulation worker checks that the process that started it is alive."""
+
+
+def _end_with_parent(parent_pid: int) -> None:
+    """End this worker once its parent is gone (killed, say): the pool's workers share
+    its task queue's pipe, so none of them ever reads an end of file from it, and they
+    would wait on it, each holding a warmed simulator, for good."""
+    while os.getppid() == parent_pid:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
+def _warm(task: str, parent_pid: int | None = None) -> None:
+    if parent_pid is not None:
+        threading.Thread(
+            target=_end_with_parent, args=(parent_pid,), name="parent-watch", daemon=True
+        ).start()
     the_task = get_task(task)
     _context(task)
     if the_task.has_dial:
@@ -120,7 +140,9 @@ _POOL: ContextVar[tuple[str, int, ProcessPoolExecutor] | None] = ContextVar("poo
 
 def _new_pool(task: str, jobs: int) -> ProcessPoolExecutor:
     context = multiprocessing.get_context("spawn")
-    return ProcessPoolExecutor(jobs, mp_context=context, initializer=_warm, initargs=(task,))
+    return ProcessPoolExecutor(
+        jobs, mp_context=context, initializer=_warm, initargs=(task, os.getpid())
+    )
 
 
 @contextmanager
