@@ -181,3 +181,18 @@ def test_model_json_reports_the_effect_and_the_fits_people_carry_it(emulator, st
     # the traits were fitted to the trials with the effect taken out
     assert result.search is not None
     assert result.search.adjusted is not studies["carry_over"]
+    # the emulator check compares the emulator (its people have no effects) with the
+    # simulated people with the effect taken out again: their VO times are lower than
+    # those of the simulated people as the summaries show them (carrying the slowing)
+    check = {
+        (r["group"], r["measure"], r["condition"]): r["simulated"]
+        for r in model["emulator_check"]["rows"]
+    }
+    shown = {
+        (r["group"], r["measure"], r["condition"]): r["mean"]
+        for r in model["summaries"]
+        if r["source"] == "simulated"
+    }
+    for group in ("outsider", "novice", "expert"):
+        key = (group, "completion_time_s", "VO")
+        assert check[key] < shown[key], key

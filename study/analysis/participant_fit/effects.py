@@ -650,11 +650,15 @@ class EffectSearch:
                 for e in self.effects
             )
             b, a = self.error_before, self.error_after
+            noise = (
+                f"beyond the cells' noise {b.excess:.4f} -> {a.excess:.4f}"
+                if b.excess > 0 or a.excess > 0
+                else "within the cells' own noise before and after"
+            )
             return (
                 f"participant effects: added {added}; held-out prediction error "
                 f"{b.error:.4f} -> {a.error:.4f} (log units, {self.reduction():.0%} lower; "
-                f"beyond the cells' noise {b.excess:.4f} -> {a.excess:.4f}); "
-                f"verdict {self.verdict}"
+                f"{noise}); verdict {self.verdict}"
             )
         found = describe(self.before)
         if not found:

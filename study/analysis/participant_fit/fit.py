@@ -475,6 +475,10 @@ class ModelChecks:
     emulator_design_sd: dict[tuple[str, str, str], float] = field(default_factory=dict)
     """(group, measure, condition) -> that mean's SD over the emulator's refits to its
     resampled design (`replicate_design_sd`), which the check counts beside the people's."""
+    check_table: pd.DataFrame | None = None
+    """The summaries the emulator check reads: `table`, or with participant effects
+    added, the simulated people's with the effects taken out (the emulator's people
+    have none)."""
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -518,6 +522,7 @@ def check_model(
         plan.told,
     )
     predicted = {g: fits[g].predicted for g in groups}
+    table_boot = max(settings.bootstrap, 200)
     table = pd.DataFrame(
         summaries(
             data.trials,
@@ -526,7 +531,7 @@ def check_model(
             groups,
             predicted,
             rng,
-            max(settings.bootstrap, 200),
+            table_boot,
             emulator_discrepancy(simulated, measures, groups, emulator),
         )
     )
@@ -542,7 +547,19 @@ def check_model(
         for g in groups
         for key, sd in replicate_design_sd(fits[g], settings.check, measures).items()
     }
-    return ModelChecks(simulated, table, rows, outlier, misfit, for_simulated, design_sd)
+    check_table = table
+    if added:
+        # the emulator knows people without the participant effects: its check compares
+        # the simulated people with the effects taken out again, as the fit took them
+        # out of the observed trials (`effects.without_effects`, at each person's traits)
+        theta = simulated[[f"{TRAIT_COLUMN}{t}" for t in TRAITS]].to_numpy(float)
+        plain = effects.without_effects(simulated, emulator, added, theta)
+        check_table = pd.DataFrame(
+            summaries(data.trials, plain, measures, groups, predicted, rng, table_boot)
+        )
+    return ModelChecks(
+        simulated, table, rows, outlier, misfit, for_simulated, design_sd, check_table
+    )
 
 
 def replicate_design_sd(
@@ -684,7 +701,9 @@ class FitResult:
             "t interval in quadrature",
             "lacks": self.checks.to_dict(),
             "emulator_check": checks.emulator_check(
-                self.table, self.checks.emulator_for_simulated, self.checks.emulator_design_sd
+                self.table if self.checks.check_table is None else self.checks.check_table,
+                self.checks.emulator_for_simulated,
+                self.checks.emulator_design_sd,
             ),
             "effects": power_effects(self.checks.simulated, data.measures),
             **(
