@@ -319,21 +319,30 @@ def write_transaction(engine: Engine, *, lock_wait_ms: int | None = None) -> Ite
     """
     with engine.connect() as conn:
         sqlite = is_sqlite(conn)
-        # on the driver's connection: through SQLAlchemy the PRAGMA would begin a
-        # transaction of its own
-        driver = conn.connection.driver_connection if sqlite else None
-        if driver is not None and lock_wait_ms is not None:
-            driver.execute(f"PRAGMA busy_timeout={int(lock_wait_ms)}")
-        try:
+        with _lock_wait(conn, engine, lock_wait_ms if sqlite else None):
             if sqlite:
                 conn.execution_options(sqlite_begin="IMMEDIATE")
             with conn.begin():
                 if not sqlite:
                     conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({_WRITE_LOCK_KEY})")
                 yield conn
-        finally:
-            if driver is not None and lock_wait_ms is not None:
-                driver.execute(f"PRAGMA busy_timeout={busy_timeout_ms(engine.url)}")
+
+
+@contextmanager
+def _lock_wait(conn: Connection, engine: Engine, wait_ms: int | None) -> Iterator[Any]:
+    """Within it, SQLite's busy timeout on `conn` is `wait_ms` (None: left as it is),
+    then back to the engine's (`busy_timeout_ms`); yields the driver's connection. Set on
+    the driver's connection: through SQLAlchemy the PRAGMA would begin a transaction of
+    its own."""
+    driver = conn.connection.driver_connection
+    if wait_ms is None or driver is None:
+        yield None
+        return
+    driver.execute(f"PRAGMA busy_timeout={int(wait_ms)}")
+    try:
+        yield driver
+    finally:
+        driver.execute(f"PRAGMA busy_timeout={busy_timeout_ms(engine.url)}")
 
 
 def checkpoint(engine: Engine, *, wait_ms: int = 1000) -> None:
@@ -354,15 +363,9 @@ def checkpoint(engine: Engine, *, wait_ms: int = 1000) -> None:
     """
     if engine.dialect.name != "sqlite":
         return
-    with engine.connect() as conn:
-        driver = conn.connection.driver_connection
-        if driver is None:  # not a live SQLite connection: nothing to fold in
-            return
-        driver.execute(f"PRAGMA busy_timeout={int(wait_ms)}")
-        try:
+    with engine.connect() as conn, _lock_wait(conn, engine, wait_ms) as driver:
+        if driver is not None:  # else not a live SQLite connection: nothing to fold in
             driver.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-        finally:
-            driver.execute(f"PRAGMA busy_timeout={busy_timeout_ms(engine.url)}")
 
 
 def make_session_factory(engine: Engine) -> sessionmaker[Session]:
