@@ -32,16 +32,26 @@ STOP_GRACE_S = 10.0
 """How long a worker whose parent died may take to mark its trial and leave."""
 
 
-def _watch_parent(parent_pid: int, stop: threading.Event, idle: threading.Event) -> None:
-    """End this worker when its parent dies (else, after `kill -9` of `study run
-    --all --jobs 2`, the workers would keep running and writing). The session stops at its next
-    step and marks its trial interrupted; a worker stuck longer exits hard, which leaves
-    a lease of a gone process that the next run takes over at once."""
-    while os.getppid() == parent_pid:
-        time.sleep(PARENT_POLL_S)
-    stop.set()
-    idle.wait(STOP_GRACE_S)
-    os._exit(1)
+def watch_parent(
+    parent_pid: int, stop: threading.Event | None = None, idle: threading.Event | None = None
+) -> None:
+    """End this worker process when its parent dies, from a thread started here: else,
+    after `kill -9` of `study run --all --jobs 2`, the workers would keep running and
+    writing, and a pool's idle workers would wait on its task queue for good (they share
+    its pipe, so none reads an end of file). With `stop` and `idle`: `stop` is set and
+    the worker's session (which stops at its next step and marks its trial interrupted)
+    gets until `idle` is set, at most `STOP_GRACE_S`; a worker stuck longer exits hard,
+    which leaves a lease of a gone process that the next run takes over at once."""
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        if stop is not None and idle is not None:
+            stop.set()
+            idle.wait(STOP_GRACE_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
 def _worker_init(
@@ -66,9 +76,7 @@ def _worker_init(
     idle.set()
     _WORKER["stop"], _WORKER["idle"] = stop, idle
     if parent_pid is not None:
-        threading.Thread(
-            target=_watch_parent, args=(parent_pid, stop, idle), name="parent-watch", daemon=True
-        ).start()
+        watch_parent(parent_pid, stop, idle)
 
 
 def _worker_engine() -> Any:

@@ -27,8 +27,6 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import threading
-import time
 import zlib
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -110,24 +108,11 @@ def simulate_setting(
     return rows
 
 
-PARENT_POLL_S = 0.5
-"""How often a simulation worker checks that the process that started it is alive."""
-
-
-def _end_with_parent(parent_pid: int) -> None:
-    """End this worker once its parent is gone (killed, say): the pool's workers share
-    its task queue's pipe, so none of them ever reads an end of file from it, and they
-    would wait on it, each holding a warmed simulator, for good."""
-    while os.getppid() == parent_pid:
-        time.sleep(PARENT_POLL_S)
-    os._exit(1)
-
-
 def _warm(task: str, parent_pid: int | None = None) -> None:
-    if parent_pid is not None:
-        threading.Thread(
-            target=_end_with_parent, args=(parent_pid,), name="parent-watch", daemon=True
-        ).start()
+    if parent_pid is not None:  # else a killed fit's workers wait for tasks for good
+        from study.protocol.parallel import watch_parent
+
+        watch_parent(parent_pid)
     the_task = get_task(task)
     _context(task)
     if the_task.has_dial:
