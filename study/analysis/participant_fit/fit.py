@@ -62,9 +62,10 @@ from study.analysis.participant_fit.observed import (
 )
 from study.analysis.participant_fit.simulate import simulate_settings, worker_pool
 from study.analysis.participant_fit.summaries import (
-    TRAIT_COLUMN,
+    TRAIT_COLUMNS,
     emulator_discrepancy,
     power_effects,
+    source_rows,
     summaries,
 )
 from study.errors import StudyInputError
@@ -156,8 +157,7 @@ def simulate_people(
     frame["trial"] = frame["repeat"] + 1
     frame["driver"] = "simulated"
     traits = np.array([[getattr(t, name) for name in TRAITS] for _, t in people])
-    for j, name in enumerate(TRAITS):
-        frame[f"{TRAIT_COLUMN}{name}"] = traits[frame["setting"].to_numpy(), j]
+    frame[TRAIT_COLUMNS] = traits[frame["setting"].to_numpy()]
     return frame
 
 
@@ -552,10 +552,14 @@ def check_model(
         # the emulator knows people without the participant effects: its check compares
         # the simulated people with the effects taken out again, as the fit took them
         # out of the observed trials (`effects.without_effects`, at each person's traits)
-        theta = simulated[[f"{TRAIT_COLUMN}{t}" for t in TRAITS]].to_numpy(float)
+        theta = simulated[TRAIT_COLUMNS].to_numpy(float)
         plain = effects.without_effects(simulated, emulator, added, theta)
-        check_table = pd.DataFrame(
-            summaries(data.trials, plain, measures, groups, predicted, rng, table_boot)
+        check_table = pd.concat(
+            [
+                table[table["source"] != "simulated"],
+                pd.DataFrame(source_rows("simulated", plain, measures, groups, rng, table_boot)),
+            ],
+            ignore_index=True,
         )
     return ModelChecks(
         simulated, table, rows, outlier, misfit, for_simulated, design_sd, check_table

@@ -11,9 +11,12 @@ import pandas as pd
 from scipy import stats
 
 from study.analysis.participant_fit.observed import bootstrap_means
+from study.protocol.traits import TRAITS
 
 TRAIT_COLUMN = "trait:"
 """Prefix of the columns that carry a simulated person's traits (`fit.simulate_people`)."""
+TRAIT_COLUMNS = [f"{TRAIT_COLUMN}{t}" for t in TRAITS]
+"""Those columns, in the order of `TRAITS` (the emulator's)."""
 
 Discrepancy = dict[tuple[str, str, str], tuple[float, float, int]]
 """(group, measure, condition) -> the emulator's discrepancy: its mean, SE and people."""
@@ -43,7 +46,7 @@ def emulator_discrepancy(
 ) -> Discrepancy:
     """What the simulator gives beyond the emulator for the people simulated from the fit:
     per group, measure and condition (and VO - HV), the mean over those people of their
-    mean measure minus the emulator's mean at their own traits (the `TRAIT_COLUMN`
+    mean measure minus the emulator's mean at their own traits (the `TRAIT_COLUMNS`
     columns), its standard error and the number of people (those with both conditions).
 
     Each person's own traits stand as a control variate: their spread between people,
@@ -52,9 +55,8 @@ def emulator_discrepancy(
     itself. The mean surface is a smooth fit to a finite design; where it bends off the
     simulator (a capped time, a skewed force), this is how far, measured where the
     fitted people lie."""
-    columns = [c for c in simulated.columns if c.startswith(TRAIT_COLUMN)]
     keys = ["group", "participant"]
-    people = simulated.groupby(keys)[columns].first()
+    people = simulated.groupby(keys)[TRAIT_COLUMNS].first()
     means = simulated.groupby([*keys, "condition"])[list(measures)].mean().unstack("condition")
     out: Discrepancy = {}
     for group in groups:
@@ -100,6 +102,35 @@ def _model_row(draws: np.ndarray, correction: tuple[float, float, int] | None) -
     }
 
 
+def source_rows(
+    source: str,
+    frame: pd.DataFrame,
+    measures: Sequence[str],
+    groups: Sequence[str],
+    rng: np.random.Generator,
+    n_boot: int,
+) -> list[dict[str, Any]]:
+    """`summaries`' rows of one source of trials (`observed`, `simulated`): per group,
+    measure and condition (and VO - HV) the mean of the participant means with its
+    bootstrap 95 % interval."""
+    rows = []
+    for group, m, label, values in condition_values(frame, measures, groups):
+        low, high = bootstrap_means(values.to_numpy(float), rng, n_boot)
+        rows.append(
+            {
+                "group": group,
+                "measure": m,
+                "condition": label,
+                "source": source,
+                "n": len(values),
+                "mean": float(values.mean()),
+                "ci_low": low,
+                "ci_high": high,
+            }
+        )
+    return rows
+
+
 def summaries(
     observed: pd.DataFrame,
     simulated: pd.DataFrame,
@@ -114,22 +145,10 @@ def summaries(
     participant means with bootstrap 95 % intervals, and the fitted model's predicted
     mean with its interval from the fit's bootstrap: the emulator's, corrected by its
     `discrepancy` from the simulated people where given (`_model_row`)."""
-    rows = []
-    for source, frame in (("observed", observed), ("simulated", simulated)):
-        for group, m, label, values in condition_values(frame, measures, groups):
-            low, high = bootstrap_means(values.to_numpy(float), rng, n_boot)
-            rows.append(
-                {
-                    "group": group,
-                    "measure": m,
-                    "condition": label,
-                    "source": source,
-                    "n": len(values),
-                    "mean": float(values.mean()),
-                    "ci_low": low,
-                    "ci_high": high,
-                }
-            )
+    rows = [
+        *source_rows("observed", observed, measures, groups, rng, n_boot),
+        *source_rows("simulated", simulated, measures, groups, rng, n_boot),
+    ]
     for group in groups:
         for m in measures:
             for label in ("VO", "HV", "VO-HV"):
