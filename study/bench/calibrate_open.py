@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from teleop_core.calibration import Calibrator, FollowerBase
+from teleop_core.calibration.fitting import params_text
 from teleop_core.calibration.rigid_axis import RigidAxisBase
 from teleop_core.calibration.synthetic import follower_recording
 from teleop_core.calibration.undeclared import (
@@ -159,12 +160,7 @@ def markdown(part: dict[str, Any], duration_s: float, rate_hz: float) -> list[st
         "",
         f"Derivative cutoff fitted on training: {e['derivative_cutoff_hz']:.1f} Hz. Base "
         "parameters (95 % CI): "
-        + ", ".join(
-            f"{k} = {v:.4g} " + ("[no interval]" if ci is None else f"[{ci[0]:.4g}, {ci[1]:.4g}]")
-            for (k, v), ci in zip(
-                e["base_params"]["params"].items(), e["base_params"]["ci"].values(), strict=True
-            )
-        )
+        + params_text(e["base_params"]["params"], e["base_params"]["ci"], 4)
         + ".",
         "",
         "| model | held-out RMSE (N) | fit (%) |",

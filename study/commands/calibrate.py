@@ -205,11 +205,10 @@ def calibrate(
         f"{report['fit_percent_after']:.1f} %); effects added: {added}"
     )
     click.echo(_verdict_line(report))
+    from teleop_core.calibration.fitting import params_text
+
     for effect in report["effects_added"]:
-        params = ", ".join(
-            f"{k} = {v:.4g} " + ("[no interval]" if ci is None else f"[{ci[0]:.3g}, {ci[1]:.3g}]")
-            for (k, v), ci in zip(effect["params"].items(), effect["ci"].values(), strict=True)
-        )
+        params = params_text(effect["params"], effect["ci"], 3)
         click.echo(f"  {effect['family']}: {params} -> {effect['rmse_after_step']:.4f} {unit}")
     for effect in report["ambiguous_effects"]:
         first, *others = effect["families"]

@@ -291,6 +291,16 @@ def determined_columns(X: Float2D) -> tuple[Float1D, Float1D]:
     return np.sort(pivots[:rank]), np.linalg.norm(vt[rank:], axis=0) > 1e-8
 
 
+def params_text(params: dict[str, float], ci: dict[str, list[float] | None], digits: int) -> str:
+    """`name = value [low, high]` per parameter (`confidence`'s values and intervals),
+    `[no interval]` where the fit does not determine it; `digits` significant."""
+    return ", ".join(
+        f"{k} = {v:.4g} "
+        + ("[no interval]" if c is None else f"[{c[0]:.{digits}g}, {c[1]:.{digits}g}]")
+        for (k, v), c in zip(params.items(), ci.values(), strict=True)
+    )
+
+
 def confidence(
     fitted: CalibratedModel, data: CalibrationData, train: Rows, hac_lags: int = 10
 ) -> tuple[dict[str, float], dict[str, list[float] | None], list[dict[str, Any]]]:

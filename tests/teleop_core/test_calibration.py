@@ -540,3 +540,10 @@ def test_the_columns_a_least_squares_fit_cannot_split_are_named() -> None:
     basis, free = determined_columns(np.column_stack([a, b, c]))
     assert basis.tolist() == [0, 1, 2]
     assert not free.any()
+
+
+def test_parameters_print_with_their_intervals_or_none() -> None:
+    from teleop_core.calibration.fitting import params_text
+
+    text = params_text({"fc_n": 21.7, "t_s": 3.25}, {"fc_n": [20.04, 23.36], "t_s": None}, 3)
+    assert text == "fc_n = 21.7 [20, 23.4], t_s = 3.25 [no interval]"
