@@ -184,6 +184,7 @@ SLOW_MODULES = frozenset(
         "tests/study/test_estimator_effects_cli.py",
         "tests/study/test_estimator_calibration_cli.py",
         "tests/study/test_calibrate_cli.py",
+        "tests/study/test_calibrate_validate_cli.py",
         "tests/study/test_calibration_figures.py",
         # whole simulated studies, sessions, campaigns, benches and the participant fit
         "tests/study/test_campaign.py",

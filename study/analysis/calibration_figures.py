@@ -64,13 +64,31 @@ SIGNAL_LABELS: dict[str, dict[str, str]] = {
 """Axis labels, with units, of each base model's signals (its recording contract)."""
 
 
-def quantity_label(name: str, model: str, unit: str = "N") -> str:
+def signal_labels(model: str, position_unit: str | None = None) -> dict[str, str]:
+    """Axis labels, with units, of `model`'s signals; for the rigid axis in the unit of
+    its position (`position_unit`: "m" for a linear axis, "rad" for a rotary one; None:
+    either).
+
+    >>> signal_labels("rigid-axis", "m")["angle"]
+    'position q (m)'
+    """
+    if model != "rigid-axis" or position_unit is None:
+        return SIGNAL_LABELS.get(model, {})
+    u = position_unit
+    return {
+        "speed": f"velocity q' ({u}/s)",
+        "accel": f"acceleration q'' ({u}/s$^2$)",
+        "angle": f"position q ({u})",
+    }
+
+
+def quantity_label(name: str, model: str, unit: str = "N", position_unit: str | None = None) -> str:
     """Axis label with units for a channel or derived quantity of `verdict.quantities`.
 
     >>> quantity_label("speed band", "follower")
     '|wheel speed| (rad/s)'
     """
-    signals = SIGNAL_LABELS.get(model, {})
+    signals = signal_labels(model, position_unit)
     if name == "time window":
         return "time (s)"
     if name == "load":
@@ -150,9 +168,11 @@ def residual_figures(
     against: Sequence[str],
     drive_label: str = "current",
     unit: str = "N",
+    labels: dict[str, str] | None = None,
 ) -> list[Path]:
-    """Write `residual_vs_<signal>.png` for each of `against` and `residual_acf.png`."""
-    labels = {**AXIS_LABELS, "drive": drive_label}
+    """Write `residual_vs_<signal>.png` for each of `against` and `residual_acf.png`;
+    `labels`: the model's signal labels (`signal_labels`) over the follower's."""
+    labels = {**AXIS_LABELS, "drive": drive_label, **(labels or {})}
     paths: list[Path] = []
     with plt.rc_context(CAL_STYLE):
         for key in against:
@@ -349,17 +369,57 @@ def overview_figures(
     unexplained_x: np.ndarray | None,
     model: str,
     unit: str = "N",
+    position_unit: str | None = None,
 ) -> list[Path]:
     """Write `residual_blocks.png`, and with verdict `structure_remains` also
     `residual_vs_unexplained.png` (`unexplained_x`: the named quantity over the
-    held-out rows)."""
+    held-out rows; `position_unit`: the rigid axis's, `signal_labels`)."""
     paths: list[Path] = []
     with plt.rc_context(CAL_STYLE):
         axes = residual_blocks(t, before, after, held_out, unit)
         paths += save(axes[0].figure, out_dir, "residual_blocks", ["png"])
         where = report.get("unexplained")
         if report.get("verdict") == "structure_remains" and where and unexplained_x is not None:
-            label = quantity_label(where["quantity"], model, unit)
+            label = quantity_label(where["quantity"], model, unit, position_unit)
             ax = residual_against_unexplained(unexplained_x, after[held_out], where, label, unit)
             paths += save(ax.figure, out_dir, "residual_vs_unexplained", ["png"])
     return paths
+
+
+def validation_panel(validation: Any, unit: str = "N", ax: plt.Axes | None = None) -> plt.Axes:
+    """One validation recording (`teleop_core.calibration.validation.Validation`): its
+    measured output and the base and calibrated models' predictions over all its
+    samples, as MATLAB's `compare` draws them, the RMSEs and the fit in the title."""
+    if ax is None:
+        _, ax = plt.subplots(figsize=(WIDTHS_IN["double"], 2.0), layout="constrained")
+    v = validation
+    ax.plot(v.t, v.measured, color="black", lw=1.0, label="measured")
+    ax.plot(v.t, v.base, color=COLOURS["before"], lw=0.6, label="base model")
+    ax.plot(v.t, v.final, color=COLOURS["after"], lw=0.6, label="calibrated model")
+    ax.set_title(
+        f"{Path(v.recording).name}: RMSE base {v.rmse_base:.4g} {unit} -> calibrated "
+        f"{v.rmse_final:.4g} {unit}; fit {v.fit_percent:.1f} % ({v.samples} samples)",
+        loc="left",
+    )
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel(f"output ({unit})")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), frameon=False)
+    return ax
+
+
+def validation_figure(out_dir: Path, validations: Sequence[Any], unit: str = "N") -> list[Path]:
+    """Write `validation.png`: a `validation_panel` per validation recording, stacked,
+    for a model calibrated on another recording; nothing when there are none."""
+    if not validations:
+        return []
+    with plt.rc_context(CAL_STYLE):
+        fig, axes = plt.subplots(
+            len(validations),
+            1,
+            figsize=(WIDTHS_IN["double"], 2.0 * len(validations) + 0.3),
+            layout="constrained",
+            squeeze=False,
+        )
+        for v, ax in zip(validations, axes[:, 0], strict=True):
+            validation_panel(v, unit, ax)
+        return save(fig, out_dir, "validation", ["png"])

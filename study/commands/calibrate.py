@@ -9,6 +9,7 @@ run leaves no half-written output.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,27 @@ def _mat_columns(text: str) -> tuple[str, str, str]:
     return pairs["t"].strip(), pairs["q"].strip(), pairs["u"].strip()
 
 
+def _base_model(
+    recording: Path, model_name: str, held_out: float, mat_columns: str, units: str | None
+) -> Any:
+    """The base model of `model_name`; the rigid axis's with its derivative cutoff fitted
+    on the training share and its axis from `units`, else from the recording's unit
+    suffixes, else linear."""
+    from teleop_core.calibration import BASE_MODELS
+    from teleop_core.calibration.rigid_axis import RigidAxisBase, recording_axis
+
+    if model_name != "rigid-axis":
+        if units is not None:
+            raise StudyInputError(
+                f"--units {units} with --model {model_name}; expected --units only with "
+                "--model rigid-axis (the other models' contracts fix their units)"
+            )
+        return BASE_MODELS[model_name]
+    columns = _mat_columns(mat_columns)
+    axis = units or recording_axis(recording, columns) or "linear"
+    return RigidAxisBase(train_fraction=1.0 - held_out, mat_columns=columns, axis=axis)
+
+
 def run_calibration(
     recording: Path,
     model_name: str,
@@ -55,15 +77,18 @@ def run_calibration(
     max_effects: int,
     families: str | None,
     mat_columns: str = "t=t,q=qm,u=gtau*vir",
+    units: str | None = None,
+    validate: Sequence[Path] = (),
 ) -> Any:
-    """Read RECORDING for `model_name` and run the loop with a progress display."""
-    from teleop_core.calibration import BASE_MODELS, Calibrator
-    from teleop_core.calibration.rigid_axis import RigidAxisBase
+    """Read RECORDING for `model_name` (and each recording of `validate`, as RECORDING
+    was read: all are refused before the loop runs) and run the loop with a progress
+    display; the fitted model then predicts each of `validate` in full."""
+    from teleop_core.calibration import Calibrator
 
-    model = BASE_MODELS[model_name]
-    if model_name == "rigid-axis":  # its derivative cutoff is fitted on the training share
-        model = RigidAxisBase(train_fraction=1.0 - held_out, mat_columns=_mat_columns(mat_columns))
+    model = _base_model(recording, model_name, held_out, mat_columns, units)
     data = model.read(recording)
+    reader = model.reader_for(data.preparation)
+    validation = [(str(path), reader.read(path)) for path in validate]
     chosen = [f.strip() for f in families.split(",")] if families else None
     calibrator = Calibrator(
         model, families=chosen, held_out_fraction=held_out, max_effects=max_effects
@@ -80,7 +105,7 @@ def run_calibration(
         def report(step: str, done: int = 0, total: int = 0) -> None:
             progress.update(task, completed=done, total=total or None, what=step)
 
-        calibrator.fit(data, progress=report)
+        calibrator.fit(data, progress=report, validation=validation)
     return calibrator
 
 
@@ -119,6 +144,24 @@ def run_calibration(
     metavar="LIST",
     help="Comma-separated candidate families [default: all that apply to the model].",
 )
+@click.option(
+    "--validate",
+    "validate",
+    multiple=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    metavar="FILE",
+    help="Another recording of the same machine (repeatable): the calibrated model, "
+    "fitted on RECORDING, predicts it in full; the report's `validation` and "
+    "validation.png say how it does.",
+)
+@click.option(
+    "--units",
+    type=click.Choice(["linear", "rotary"]),
+    default=None,
+    help="For --model rigid-axis: a linear axis (q in m, u in N) or a rotary one (q in "
+    "rad, u in N m) [default: from the unit suffixes of the columns (q_m, u_n; q_rad, "
+    "u_n_m), else linear].",
+)
 def calibrate(
     recording: Path,
     model_name: str,
@@ -129,6 +172,8 @@ def calibrate(
     max_effects: int,
     mat_columns: str,
     families: str | None,
+    validate: tuple[Path, ...],
+    units: str | None,
 ) -> None:
     """Fit the base model to RECORDING, find and add the effects it lacks, report.
 
@@ -141,14 +186,20 @@ def calibrate(
     """
     import pandas as pd
 
-    from study.analysis.calibration_figures import held_out_mask, overview_figures, residual_figures
+    from study.analysis.calibration_figures import (
+        held_out_mask,
+        overview_figures,
+        residual_figures,
+        signal_labels,
+        validation_figure,
+    )
     from teleop_core.calibration.verdict import quantities
     from teleop_core.estimation.recording import write_csv_atomically
 
     for path in (json_path, pred_path, out_dir):
         check_parent_folder(path)
     calibrator = run_calibration(
-        recording, model_name, held_out, max_effects, families, mat_columns
+        recording, model_name, held_out, max_effects, families, mat_columns, units, validate
     )
     report = calibrator.report()
     data, test = calibrator.data_, calibrator.test_
@@ -162,7 +213,8 @@ def calibrate(
             "f_final": calibrator.prediction_[test],
         }
     )
-    unit = "N m" if model_name == "notes-rotation" else "N"
+    unit = calibrator.model.output_unit
+    position_unit = calibrator.model.units().get("position")
     held = held_out_mask(len(data), test)
     named = report["unexplained"]["quantity"] if report["unexplained"] else None
     # the quantity as the verdict binned it (smoothed channels), over the held-out rows
@@ -184,6 +236,7 @@ def calibrate(
         x_named,
         model_name,
         unit,
+        position_unit,
     )
     residual_figures(
         out_dir,
@@ -195,7 +248,9 @@ def calibrate(
         calibrator.model.plot_against,
         DRIVE_LABELS.get(model_name, "current"),
         unit,
+        signal_labels(model_name, position_unit),
     )
+    validation_figure(out_dir, calibrator.validation_, unit)
     write_csv_atomically(predictions, pred_path)
     write_json_atomically(report, json_path)
     added = ", ".join(e["family"] for e in report["effects_added"]) or "none"
@@ -205,6 +260,12 @@ def calibrate(
         f"{report['fit_percent_after']:.1f} %); effects added: {added}"
     )
     click.echo(_verdict_line(report))
+    for v in report["validation"]:
+        click.echo(
+            f"validation {v['recording']}: RMSE {v['rmse_base']:.4f} {unit} (base model) -> "
+            f"{v['rmse_final']:.4f} {unit} (calibrated), fit {v['fit_percent']:.1f} % over "
+            f"all {v['samples']} samples"
+        )
     from teleop_core.calibration.fitting import params_text
 
     for effect in report["effects_added"]:

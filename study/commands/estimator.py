@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 from rich.console import Console
@@ -20,7 +20,7 @@ from study.commands.base import (
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
-    from teleop_core.estimation.estimator import EstimateResult
+    from teleop_core.estimation.estimator import EstimateResult, ForceEstimator
     from teleop_core.estimation.recording import FollowerRecording
 
 _err = Console(stderr=True)
@@ -104,6 +104,15 @@ def estimator() -> None:
     "boosted trees on the same windows; runs over recordings, not in the loop), or auto "
     "(both on the same training blocks; the one with the lower validation RMSE is kept).",
 )
+@click.option(
+    "--validate",
+    "validate",
+    multiple=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    metavar="FILE",
+    help="Another follower recording (repeatable): the trained estimator runs over it "
+    "in full; summary.json's `validation` and a line each say how it does.",
+)
 @click.option("--force", is_flag=True, help="Replace an existing model folder.")
 def train_cmd(
     recording: Path,
@@ -122,6 +131,7 @@ def train_cmd(
     calibration: Path | None,
     effects: str,
     residual_stage: str,
+    validate: tuple[Path, ...],
     force: bool,
 ) -> None:
     """Fit eq. 1 to RECORDING, train the GRU (or trees) on its residual, set up the EKF.
@@ -147,6 +157,7 @@ def train_cmd(
         f"recording {recording}",
         TeleopInputError,
     )
+    validation = [(path, FollowerRecording.from_csv(path, min_rows=window)) for path in validate]
     extension = ExtendedPhysics.read(calibration) if calibration is not None else None
     regularisation = {
         k: v
@@ -189,7 +200,8 @@ def train_cmd(
             effects=effects == "auto",
             residual_stage=residual_stage,
         )
-    model.save(out_dir, summary.to_dict())
+    validated = [_validation(model, path, rec) for path, rec in validation]
+    model.save(out_dir, {**summary.to_dict(), "validation": [v[0] for v in validated]})
     v = summary.validation_rmse_n
     with_effects = f"eq. 1 + effects {v['effects']:.4f} N, " if "effects" in v else ""
     chosen = summary.residual["chosen"]
@@ -211,8 +223,36 @@ def train_cmd(
             f"(GRU {stages['gru']:.4f} N, trees {stages['trees']:.4f} N)"
         )
     _echo_regimes("validation RMSE per regime", summary.validation_rmse_by_regime_n)
+    for entry, hybrid in validated:
+        click.echo(
+            f"validation {entry['recording']}: RMSE physics {entry['rmse_base']:.4f} N, "
+            f"{stage} {hybrid:.4f} N, after EKF {entry['rmse_final']:.4f} N, fit "
+            f"{entry['fit_percent']:.1f} % over {entry['samples']} estimates"
+        )
     for note in summary.notes:
         click.echo(f"note: {note}")
+
+
+def _validation(
+    model: ForceEstimator, path: Path, recording: FollowerRecording
+) -> tuple[dict[str, Any], float]:
+    """The trained estimator over all of another recording (resampled to the model's
+    rate where it differs): summary.json's entry (`recording`, `rmse_base`: the physics
+    stage, `rmse_final`: after the EKF, `fit_percent` of the final estimate,
+    `samples`: the estimates, one per sample with a full window) and physics +
+    residual stage's RMSE."""
+    from teleop_core.calibration.verdict import fit_percent
+    from teleop_core.estimation.metrics import rmse
+
+    result = model.predict(model.conform(recording))
+    entry = {
+        "recording": str(path),
+        "rmse_base": rmse(result.f_physics, result.f_ref),
+        "rmse_final": rmse(result.f_final, result.f_ref),
+        "fit_percent": fit_percent(result.f_ref, result.f_final),
+        "samples": len(result.t),
+    }
+    return entry, rmse(result.f_hybrid, result.f_ref)
 
 
 def _echo_regimes(title: str, table: dict[str, dict[str, float]]) -> None:

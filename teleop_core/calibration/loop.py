@@ -74,6 +74,7 @@ from teleop_core.calibration.library import OPEN_TERMS, OpenTerm, term_report
 from teleop_core.calibration.models import BaseModel, CalibrationData
 from teleop_core.calibration.plausibility import effect_coefficients, implausible
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
+from teleop_core.calibration.validation import Validation, validate
 from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
 from teleop_core.progress import Progress, no_progress
@@ -347,7 +348,12 @@ class Calibrator:
         return y[self.test_] - fit[self.test_]
 
     @one_blas_thread
-    def fit(self, data: CalibrationData, progress: Progress = no_progress) -> Calibrator:
+    def fit(
+        self,
+        data: CalibrationData,
+        progress: Progress = no_progress,
+        validation: Sequence[tuple[str, CalibrationData]] = (),
+    ) -> Calibrator:
         """Run the loop on `data`; fitted attributes end in `_`.
 
         Parameters
@@ -357,13 +363,19 @@ class Calibrator:
         progress : Progress, optional
             Told each candidate of each round (``"round 2: stribeck"``, k of n) and
             each round's end.
+        validation : sequence of (str, CalibrationData), optional
+            Other recordings of the same machine, each with its name in the report,
+            read as `data` was (`BaseModel.reader_for`): the fitted model predicts each
+            in full (`validate`; `validation_`, the report's `validation`).
 
         Returns
         -------
         Calibrator
-            Itself, fitted: `model_` (the calibrated model), `chain_` (the effects
-            added), `candidates_`, `rmse_before_` / `rmse_after_` on the held-out block,
-            the residual tests and the verdict.
+            Itself, fitted: `model_` (the calibrated model), `base_model_` (the base
+            model alone, fitted on the training block), `chain_` (the effects added),
+            `candidates_`, `rmse_before_` / `rmse_after_` on the held-out block, the
+            residual tests, the verdict and `validation_` (one `Validation` per
+            recording of `validation`).
 
         Raises
         ------
@@ -389,6 +401,7 @@ class Calibrator:
         chain: Chain = []
         coef, pred, k = self._fit_chain(data, chain)
         self.base_prediction_ = pred
+        self.base_model_ = CalibratedModel(self.base_, [], coef, _settings(self.base_))
         rmse = _rmse(y_test - pred[self.test_])
         self.rmse_before_ = rmse
         self.step_rmse_: list[float] = []
@@ -435,7 +448,18 @@ class Calibrator:
         self.prediction_ = pred
         self.chain_ = chain
         self._diagnose(data, pred)
+        self.validation_ = self._validations(validation)
         return self
+
+    def _validations(self, recordings: Sequence[tuple[str, CalibrationData]]) -> list[Validation]:
+        """`validate` on each (name, recording) of `recordings`."""
+        return [self.validate(data, name) for name, data in recordings]
+
+    def validate(self, data: CalibrationData, recording: str) -> Validation:
+        """The fitted base and calibrated models over every sample of another recording
+        (`validation.validate`); `data` read as the training recording was
+        (`BaseModel.reader_for`)."""
+        return validate(self.base_model_, self.model_, data, recording)
 
     def _backfit(self, data: CalibrationData, chain: Chain) -> Chain:
         """`chain` with each earlier effect's searched value searched again on the
@@ -580,6 +604,7 @@ class Calibrator:
             "fit_percent_before": self.fit_percent_[0],
             "fit_percent_after": self.fit_percent_[1],
             "model": self.model.name,
+            "units": self.model.units(),
             "recording": self.data_.name,
             "base_params": {"params": self.base_params_, "ci": self.base_ci_},
             "preparation": {**(self.data_.preparation or {}), **_fitted_settings(self)} or None,
@@ -597,6 +622,7 @@ class Calibrator:
                 "max_effects": self.max_effects,
                 "ci_level": 0.95,
             },
+            "validation": [v.to_dict() for v in self.validation_],
             "warnings": self.warnings(),
             "candidates": [_candidate_dict(c) for c in self.candidates_],
             "calibrated_model": self.model_.to_dict(),

@@ -111,6 +111,20 @@ class BaseModel:
     passive_loop_sign: int | None = None
     """Sign of a physical `hysteresis` loop's half height in this model's convention
     (`plausibility.py`): +1, -1, or None where the sign is not checked."""
+    output_unit: str = "N"
+    """Unit of the output the model predicts, as reports print it ("N" or "N m")."""
+
+    def units(self) -> dict[str, str]:
+        """The units the recording contract gives this model's output and signals (the
+        report's `units`)."""
+        return {"output": self.output_unit}
+
+    def reader_for(self, preparation: dict[str, float] | None) -> BaseModel:
+        """This model as it reads another recording of the same machine (a validation
+        recording): with what reading the training recording fitted
+        (`CalibrationData.preparation`) fixed, so that both recordings' signals are
+        derived alike; the model itself where reading fits nothing."""
+        return self
 
     def fitted_to(
         self, data: CalibrationData, train: slice | np.ndarray, chain: Sequence = ()

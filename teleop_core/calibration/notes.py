@@ -65,6 +65,10 @@ class NotesBase(BaseModel):
     def unit(self) -> str:  # type: ignore[override]
         return "n" if self.dof == "translation" else "n_m"
 
+    @property
+    def output_unit(self) -> str:  # type: ignore[override]
+        return "N" if self.dof == "translation" else "N m"
+
     def columns(self, s: Signals) -> Float2D:
         # f_ee = g F_lin(f_des) + c
         return np.column_stack([s["linear"], np.ones_like(s["linear"])])

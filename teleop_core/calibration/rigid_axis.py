@@ -25,6 +25,12 @@ M, Fv, Fc and offset come within 1 % of the benchmark's reference values.
 sgn(q') is the sharp sign of the filtered velocity, not eq. 1's tanh(w / 0.3): a real
 drive's Coulomb step is as sharp as the data show it.
 
+The axis is linear (`q` in m, `u` in N) or rotary (`q` in rad, `u` in N m): the
+parameters' names and the reports' units follow it. A recording may say which in its
+column names, by the unit suffix of `q` and `u` (`q_m`, `u_n`; `q_rad`, `u_n_m`, as the
+project names quantities); without one the axis is the one the model is given
+(`axis`, linear by default).
+
 `mat_to_frame` brings a MATLAB v5 `.mat` recording (the EMPS benchmark's, say) into the
 contract: variables named for `q` and `u` (products of variables, `gtau*vir`, are
 allowed), every other vector of the same length as an extra channel.
@@ -33,7 +39,8 @@ allowed), every other vector of the same length as an extra channel.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +56,19 @@ from teleop_core.recording_checks import check_time, numbers, read_cells
 
 RIGID_COLUMNS = ("t", "q", "u")
 """The rigid-axis recording contract: time [s], position [m or rad], force [N or N m]."""
+AXES = ("linear", "rotary")
+"""Kinds of axis: linear (q in m, u in N) or rotary (q in rad, u in N m)."""
+UNIT_SUFFIXES: dict[str, dict[str, str]] = {
+    "q": {"_rad": "rotary", "_m": "linear"},
+    "u": {"_n_m": "rotary", "_n": "linear"},
+}
+"""Unit suffixes of the contract's `q` and `u` columns, and the axis each says (the
+longer suffix is tried first: `u_n_m` is no `u_n`)."""
+AXIS_UNITS = {
+    "linear": {"output": "N", "position": "m"},
+    "rotary": {"output": "N m", "position": "rad"},
+}
+"""Units of the output and of the position of each kind of axis."""
 MIN_ROWS = 200
 """Fewest samples of a rigid-axis recording."""
 CUTOFF_FRACTION = 1.0 / 40.0
@@ -144,9 +164,10 @@ class RigidAxisBase(BaseModel):
     """Low-pass cutoff for the derivatives [default: fitted on the training block]."""
     train_fraction: float = 0.75
     """The loop's training share (the start of the recording), where the cutoff is fitted."""
+    axis: str = "linear"
+    """"linear" (q in m, u in N) or "rotary" (q in rad, u in N m)."""
 
     name = "rigid-axis"
-    unit = "n"
     families = ("direction_asymmetry", "stribeck", "viscous_nonlinear", "position_periodic")
     plot_against = ("t", "speed", "angle")
     overrides = {  # noqa: RUF012 - read only
@@ -154,20 +175,45 @@ class RigidAxisBase(BaseModel):
         "direction_asymmetry": AxisDirection(),
     }
 
+    def __post_init__(self) -> None:
+        if self.axis not in AXES:
+            raise TeleopInputError(f"axis {self.axis!r}; expected one of {', '.join(AXES)}")
+
+    @property
+    def unit(self) -> str:  # type: ignore[override]
+        return "n" if self.axis == "linear" else "n_m"
+
+    @property
+    def output_unit(self) -> str:  # type: ignore[override]
+        return AXIS_UNITS[self.axis]["output"]
+
+    def units(self) -> dict[str, str]:
+        return {"axis": self.axis, **AXIS_UNITS[self.axis]}
+
+    def reader_for(self, preparation: dict[str, float] | None) -> RigidAxisBase:
+        """With the training recording's derivative cutoff: the validation recording's
+        velocity and acceleration filtered alike (its own fitted cutoff would fit the
+        base model to it)."""
+        cutoff = (preparation or {}).get("derivative_cutoff_hz")
+        return self if cutoff is None else replace(self, cutoff_hz=float(cutoff))
+
     def columns(self, s: Signals) -> Float2D:
         # u = M q'' + Fv q' + Fc sgn(q') + offset
         w = s["speed"]
         return np.column_stack([s["accel"], w, s["direction_sign"], np.ones_like(w)])
 
     def physical(self, coef: Float1D) -> dict[str, float]:
-        # named for a linear axis (q in m, u in N); for a rotary one (q in rad, u in
-        # N m) read kg m^2, N m s/rad and N m
-        return {
-            "mass_kg": float(coef[0]),
-            "viscous_friction_n_s_per_m": float(coef[1]),
-            "coulomb_friction_n": float(coef[2]),
-            "offset_n": float(coef[3]),
-        }
+        names = (
+            ("mass_kg", "viscous_friction_n_s_per_m", "coulomb_friction_n", "offset_n")
+            if self.axis == "linear"
+            else (
+                "inertia_kg_m2",
+                "viscous_friction_n_m_s_per_rad",
+                "coulomb_friction_n_m",
+                "offset_n_m",
+            )
+        )
+        return {name: float(c) for name, c in zip(names, coef[:4], strict=True)}
 
     def data_from_frame(self, frame: pd.DataFrame, name: str = "recording") -> CalibrationData:
         t, q, u = (frame[c].to_numpy(float) for c in RIGID_COLUMNS)
@@ -198,9 +244,18 @@ class RigidAxisBase(BaseModel):
         path = Path(path)
         if path.suffix.lower() == ".mat":
             t, q, u = self.mat_columns
+            said = {"q": q, "u": u}
             frame = mat_to_frame(path, q=q, u=u, t=t)
         else:
-            frame = read_numeric_csv(path, RIGID_COLUMNS)
+            said: dict[str, str] = {}
+            frame = read_numeric_csv(path, RIGID_COLUMNS, said)
+        axis = axis_of(said, path)
+        if axis is not None and axis != self.axis:
+            named = " and ".join(f"{v!r}" for v in said.values() if _suffix_axis(v, said))
+            raise RecordingError(
+                f"recording {path}: {named} name a {axis} axis; expected the "
+                f"{self.axis} axis the calibration is of"
+            )
         return self.data_from_frame(frame, path.name)
 
 
@@ -220,11 +275,85 @@ def fit_cutoff(t: Float1D, q: Float1D, u: Float1D, columns, n_train: int) -> flo
     return float(cutoffs[near[-1]])
 
 
-def read_numeric_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
+def contract_columns(header: Sequence[str], path: str | Path) -> dict[str, str]:
+    """The column that holds `q` and the one that holds `u` in a CSV `header`: the
+    contract's name or the name with a unit suffix (`UNIT_SUFFIXES`); the names
+    themselves where neither is there (the contract check names what is missing).
+
+    Raises
+    ------
+    RecordingError
+        Two columns hold the same quantity (`q` and `q_m`, say).
+    """
+    out = {}
+    for name, suffixes in UNIT_SUFFIXES.items():
+        found = [c for c in header if c == name or c in {name + s for s in suffixes}]
+        if len(found) > 1:
+            raise RecordingError(
+                f"recording {path}: columns {' and '.join(map(repr, found))} both hold "
+                f"{name!r}; expected one of them"
+            )
+        out[name] = found[0] if found else name
+    return out
+
+
+def _suffix_axis(column: str, said: dict[str, str]) -> str | None:
+    """The axis the unit suffix of `column` (the name given for q or u) says, or None."""
+    quantity = next(k for k, v in said.items() if v == column)
+    for suffix, axis in UNIT_SUFFIXES[quantity].items():
+        if column.endswith(suffix) and column != quantity:
+            return axis
+    return None
+
+
+def axis_of(said: dict[str, str], path: str | Path) -> str | None:
+    """The axis the unit suffixes of the names given for `q` and `u` say (`said`:
+    quantity -> column or variable name), or None where neither has one.
+
+    Raises
+    ------
+    RecordingError
+        The two suffixes say different axes (`q_rad` with `u_n`).
+    """
+    axes = {a for a in (_suffix_axis(v, said) for v in said.values()) if a is not None}
+    if len(axes) > 1:
+        raise RecordingError(
+            f"recording {path}: {said['q']!r} and {said['u']!r} name different units "
+            "(one a linear axis, the other a rotary one); expected q_m with u_n or q_rad "
+            "with u_n_m"
+        )
+    return axes.pop() if axes else None
+
+
+def recording_axis(
+    path: str | Path, mat_columns: tuple[str, str, str] = ("t", "qm", "gtau*vir")
+) -> str | None:
+    """The axis a rigid-axis recording's unit suffixes say, from its header alone (or,
+    for a `.mat` file, from the variable names given for q and u); None where none says,
+    or where the file cannot be read (reading it reports why)."""
+    path = Path(path)
+    if path.suffix.lower() == ".mat":
+        return axis_of({"q": mat_columns[1], "u": mat_columns[2]}, path)
+    try:
+        header = pd.read_csv(path, nrows=0).columns
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    return axis_of(contract_columns([str(c).strip() for c in header], path), path)
+
+
+def read_numeric_csv(
+    path: Path, required: tuple[str, ...], names: dict[str, str] | None = None
+) -> pd.DataFrame:
     """A CSV whose every column is numeric and finite, `t` strictly increasing at a
     plausible rate (`teleop_core.recording_checks`); one line naming the first problem
-    otherwise."""
+    otherwise. `names` receives, per quantity of `UNIT_SUFFIXES`, the column that holds
+    it (`contract_columns`: `q_rad` for `q`); the frame has it under the contract's
+    name."""
     frame = read_cells(path, RecordingError)
+    said = contract_columns(list(frame.columns), path)
+    if names is not None:
+        names.update(said)
+    frame = frame.rename(columns={v: k for k, v in said.items() if v != k})
     missing = [c for c in required if c not in frame.columns]
     if missing:
         raise RecordingError(
