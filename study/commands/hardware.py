@@ -67,7 +67,8 @@ def check(
     if spin_rad_s and role != "drive":
         raise StudyInputError(f"--spin {spin_rad_s:g} needs --role drive; a dial is not spun")
     live = _LiveLine(sys.stderr.isatty())
-    click.echo(f"unit on {port}: greeting it ...", err=True)
+    if live.tty:
+        click.echo(f"unit on {port}: greeting it; turn the dial and the joystick", err=True)
     try:
         result = check_unit(port, role, seconds, spin_rad_s, on_state=live)
     except HardwareError as exc:
