@@ -31,6 +31,7 @@ COMMANDS = {
     "estimator": "study.commands.estimator:estimator",
     "export": "study.commands.exchange:export_cmd",
     "figures": "study.commands.figures:figures",
+    "hardware": "study.commands.hardware:hardware",
     "identify": "study.commands.identify:identify",
     "import": "study.commands.exchange:import_cmd",
     "import-xdf": "study.commands.lsl:import_xdf",

@@ -166,6 +166,8 @@ def pytest_terminal_summary(terminalreporter) -> None:  # type: ignore[no-untype
 SLOW_MODULES = frozenset(
     {
         # train a GRU, calibrate, or compile the loop
+        "tests/teleop_core/test_firmware.py",  # builds the firmware's host build
+        "tests/study/test_hardware_session.py",  # the same, and sessions in real time
         "tests/teleop_core/test_gru.py",
         "tests/teleop_core/test_estimator.py",
         "tests/teleop_core/test_calibration.py",

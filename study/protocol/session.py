@@ -25,6 +25,7 @@ drawn from its distributions instead, and each trial's summary names the model.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
@@ -66,7 +67,7 @@ from study.protocol.roster import find_participant, load_study
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
 from study.protocol.traits import ParticipantTraits, draw_traits
 from teleop_core.estimation.estimator import ForceEstimator
-from teleop_core.loop.drivers import Driver
+from teleop_core.loop.drivers import Driver, DriverFailure
 
 STEP_S = 1.0
 """Simulated time advanced between writes to the sample writer: the writer's chunk
@@ -237,6 +238,13 @@ def run_session(
             except SessionStopped:
                 recover_interrupted(engine, participant_id, STOPPED_WITH_PARENT, actor)
                 break
+            except DriverFailure as exc:
+                # the device went away mid-trial: what it measured is kept, the trial
+                # is interrupted now (not left running for the next session to find)
+                recover_interrupted(engine, participant_id, f"the driver failed: {exc}", actor)
+                raise SessionDriverError(
+                    _driver_failure(engine, code, participant_id, item, exc)
+                ) from None
             except (OperationalError, engine.dialect.loaded_dbapi.OperationalError) as exc:
                 # a full disk, the server gone (the sample writer uses the driver's cursor)
                 raise SessionStorageError(
@@ -261,6 +269,34 @@ def _session_start(engine: Engine, code: str, pace: float | None) -> tuple[Study
                 "expected a participant still in the study"
             )
         return study, design, participant.id
+
+
+class SessionDriverError(StudyInputError):
+    """The trial's device failed (a unit unplugged or silent); the trial is interrupted."""
+
+
+def _driver_failure(
+    engine: Engine, code: str, participant_id: int, item: PendingTrial, exc: Exception
+) -> str:
+    kind = "practice trial" if item.practice else "trial"
+    slot = f"{item.block.task}/{item.block.condition} {kind} {item.trial_index + 1}"
+    with Session(engine) as session:
+        kept_s = session.scalar(
+            select(func.max(SampleChunk.t_last_s))
+            .join(Trial, SampleChunk.trial_id == Trial.id)
+            .where(
+                Trial.id
+                == select(func.max(Trial.id))
+                .where(Trial.participant_id == participant_id)
+                .scalar_subquery()
+            )
+        )
+    upto = "no samples" if kept_s is None else f"its samples up to t = {kept_s:.2f} s"
+    return (
+        f"{code}'s {slot} interrupted: {exc}; kept {upto}; expected a unit that answers "
+        f"(check its cable and power, `study hardware check`), then `study run "
+        f"--participant {code}` repeats the trial"
+    )
 
 
 class SessionStorageError(StudyInputError):
@@ -442,7 +478,10 @@ def _run_trial(
         driver = task.simulated_driver(traits, MAX_TRIAL_S, run.context)
     loop.start(driver)
     chunks = []
-    step_s = STEP_S if run.pace is None else PACED_STEP_S
+    realtime = bool(getattr(driver, "realtime", False))
+    # paced or at a real device: short steps, so a watcher sees it live and a failing
+    # device loses no more than a step of samples
+    step_s = STEP_S if run.pace is None and not realtime else PACED_STEP_S
     wall0 = time.monotonic()
     info = TrialInfo(
         trial_id,
@@ -454,7 +493,7 @@ def _run_trial(
         attempt,
         clock_origin_s=wall0,
         clock_rate=run.pace or 1.0,
-        realtime=run.pace is not None or bool(getattr(driver, "realtime", False)),
+        realtime=run.pace is not None or realtime,
     )
     observer = run.observer
     observer.trial_started(info)
@@ -468,7 +507,7 @@ def _run_trial(
         hold_s=hold_s,
         on_wait=run.on_storage_wait,
     )
-    with writer_at as writer, ending:
+    with writer_at as writer, ending, contextlib.closing(driver):
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
@@ -490,6 +529,7 @@ def _run_trial(
         "seed": seed,
         "samples": writer.rows_committed,
         **task.driver_counts(driver),
+        **driver.record(),
         **({"participant_model": run.model} if run.model and run.make_driver is None else {}),
     }
     completion_s = task.completion_time_s(samples)

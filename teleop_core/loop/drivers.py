@@ -102,6 +102,11 @@ GRIP_DAMPING_N_M_S_PER_RAD = 3.0e-3
 """Assumption, near-critical damping of the grip on the dial's inertia."""
 
 
+class DriverFailure(RuntimeError):
+    """The driver's device failed in the middle of a trial (it stopped answering, was
+    unplugged, or answered twice what the protocol does not allow): the trial cannot go on."""
+
+
 class Driver(ABC):
     """Whoever turns the dial and the joystick."""
 
@@ -118,6 +123,14 @@ class Driver(ABC):
     @abstractmethod
     def act(self, view: OperatorView) -> HandAction:
         """The hand's action until the next update."""
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Called once when the trial ends, however it ends (a device is let go)."""
+
+    def record(self) -> dict[str, str | int]:
+        """What the trial's summary keeps of this driver (a device's firmware, the
+        lines it garbled); empty by default."""
+        return {}
 
 
 @dataclass

@@ -5,7 +5,8 @@ opens a pty pair, serves the protocol from a thread on the master end, and expos
 slave end's path as `port`, which `HardwareDriver.open(port)` opens like a USB serial
 device. The dial's angle follows a script (a function of the unit's clock) as if a
 person turned it; every current command is recorded. Faults can be switched on to
-check the host's handling: a corrupt checksum or silence.
+check the host's handling: a corrupt checksum (`corrupt_next`: True, or how many
+replies in a row) or silence.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ class EmulatedDialUnit:
         self.period_ms = period_ms
         self.t_ms = 0.0
         self.commands_ma: list[float] = []
-        self.corrupt_next = False
+        self.corrupt_next: bool | int = False
         self.silent = False
         self._master, slave = os.openpty()
         tty.setraw(slave)
@@ -105,7 +106,7 @@ class EmulatedDialUnit:
                 if self.silent:
                     continue
                 line = encode(reply)
-                if self.corrupt_next:
+                if self.corrupt_next:  # True, or how many lines in a row
                     line = line[:-3] + b"00\n"
-                    self.corrupt_next = False
+                    self.corrupt_next = int(self.corrupt_next) - 1
                 os.write(self._master, line)

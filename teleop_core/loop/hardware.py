@@ -24,23 +24,63 @@ clock in ms, the unwrapped AS5600 angle, the firmware's speed estimate, the meas
 q-axis current and (dial unit) the rotation joystick's axis in [-1, 1] (0 on a drive).
 
 The host sends one command per driver update (100 Hz) and waits for the reply, so a
-unit that stops answering is noticed within `timeout_s`.
+unit that stops answering is noticed within `timeout_s` (two update periods by default:
+with the wait for the next update, within three periods of its last answer). A reply
+that fails its checksum or does not parse is never used: the host drops what it has
+read and sends the command once more (`corrupt_lines` counts these); a second bad reply
+in a row, a unit that does not answer, or a port that goes away (the cable pulled) is a
+`HardwareError`, which ends the trial (the session marks it interrupted).
+
+The unit zeroes its command when the host goes quiet (its watchdog, 100 ms in the
+firmware under `firmware/`, whose host build runs this protocol on a simulated motor).
 """
 
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import serial
 
-from teleop_core.loop.drivers import Driver, HandAction, OperatorView
+from teleop_core.loop.drivers import Driver, DriverFailure, HandAction, OperatorView
+
+T = TypeVar("T")
 
 PROTOCOL_VERSION = 1
+UPDATE_PERIOD_S = 0.01
+"""The host's driver updates, one command each (100 Hz)."""
+TIMEOUT_S = 2 * UPDATE_PERIOD_S
+"""How long the host waits for a reply before it calls the unit silent."""
+MAX_SHAFT_SPEED_RAD_S = 50.0
+"""Faster than any shaft of a unit turns (a hand on the dial, the drive's 20 rad/s
+limit): a state line whose angle moved faster since the last, or whose clock went
+back, is treated as corrupt (the XOR checksum misses errors that flip the same bit in
+two bytes)."""
+GREETING_S = 2.0
+"""How long the host greets a unit it has just opened before it gives up on it."""
 
 
-class HardwareError(RuntimeError):
+class HardwareError(DriverFailure):
     """The unit did not answer, or answered something the protocol does not allow."""
+
+
+class CorruptLine(HardwareError):
+    """A reply that failed its checksum or did not parse."""
+
+
+class UnitSilent(HardwareError):
+    """No reply within the timeout."""
+
+
+class UnitRefused(HardwareError):
+    """The unit answered `E <message>`."""
+
+
+class UnitGone(HardwareError):
+    """The port went away (the cable pulled, the unit powered off)."""
 
 
 def checksum(payload: str) -> str:
@@ -65,12 +105,12 @@ def decode(line: bytes) -> str:
     try:
         text = line.decode("ascii").rstrip("\r\n")
     except UnicodeDecodeError:
-        raise HardwareError(f"non-ASCII line from the unit: {line!r}") from None
+        raise CorruptLine(f"non-ASCII line from the unit: {line!r}") from None
     payload, sep, received = text.rpartition("*")
     if not sep or len(received) != 2:
-        raise HardwareError(f"line without a checksum from the unit: {text!r}")
+        raise CorruptLine(f"line without a checksum from the unit: {text!r}")
     if checksum(payload) != received.upper():
-        raise HardwareError(
+        raise CorruptLine(
             f"checksum mismatch in {text!r}: expected {checksum(payload)}, got {received}"
         )
     return payload
@@ -90,15 +130,15 @@ class UnitState:
     def parse(cls, payload: str) -> UnitState:
         fields = payload.split()
         if len(fields) != 6 or fields[0] != "S":
-            raise HardwareError(
+            raise CorruptLine(
                 f"expected a state line 'S t angle speed iq joystick', got {payload!r}"
             )
         try:
             values = [float(f) for f in fields[1:]]
         except ValueError:
-            raise HardwareError(f"non-numeric field in state line {payload!r}") from None
+            raise CorruptLine(f"non-numeric field in state line {payload!r}") from None
         if not all(math.isfinite(v) for v in values):
-            raise HardwareError(f"non-finite value in state line {payload!r}")
+            raise CorruptLine(f"non-finite value in state line {payload!r}")
         return cls(*values)
 
 
@@ -108,48 +148,124 @@ class Esp32Unit:
     def __init__(
         self,
         port: str,
-        role: str,
+        role: str | None,
         baudrate: int = 115200,
-        timeout_s: float = 0.05,
+        timeout_s: float = TIMEOUT_S,
+        greeting_s: float = GREETING_S,
     ) -> None:
         self.port = port
         self.timeout_s = timeout_s
+        self.corrupt_lines = 0
+        """Replies dropped for a failed checksum, an unparsable field or an implausible
+        state (each re-sent)."""
+        self.last_state: UnitState | None = None
         try:
             self._serial = serial.serial_for_url(port, baudrate=baudrate, timeout=timeout_s)
         except (serial.SerialException, ValueError) as exc:
             raise HardwareError(f"cannot open serial port {port}: {exc}") from None
-        self.firmware = self.hello(role)
+        try:
+            self.role, self.firmware = self._greet(greeting_s)
+            if role is not None and self.role != role:
+                raise HardwareError(
+                    f"the unit on {self.port} is a {self.role!r}; expected {role!r}"
+                )
+        except HardwareError:
+            self._serial.close()
+            raise
 
-    def _request(self, payload: str) -> str:
-        self._serial.write(encode(payload))
-        line = self._serial.readline()
+    def _exchange(self, payload: str) -> bytes:
+        """Send one line and read one back; HardwareError when the port is gone or the
+        unit is silent."""
+        try:
+            self._serial.write(encode(payload))
+            line = self._serial.readline()
+        except (serial.SerialException, OSError) as exc:
+            raise UnitGone(
+                f"the unit on {self.port} is gone (unplugged or powered off?): {exc}"
+            ) from None
         if not line.endswith(b"\n"):
-            raise HardwareError(
+            raise UnitSilent(
                 f"no answer from the unit on {self.port} within {self.timeout_s * 1000:.0f} ms "
                 f"to {payload!r}"
             )
+        return line
+
+    def _request(self, payload: str) -> str:
+        """The unit's reply to `payload` (checked, not an `E`)."""
+        return self._retrying(payload, str)
+
+    def _retrying(self, payload: str, parse: Callable[[str], T]) -> T:
+        """The unit's reply to `payload`, parsed; a corrupt reply is dropped and the
+        line sent once more."""
+        try:
+            return self._parsed(self._exchange(payload), payload, parse)
+        except CorruptLine:
+            self.corrupt_lines += 1
+            self._drain()
+        try:
+            return self._parsed(self._exchange(payload), payload, parse)
+        except CorruptLine as exc:
+            self.corrupt_lines += 1
+            raise HardwareError(
+                f"two corrupt replies in a row from the unit on {self.port}: {exc}"
+            ) from None
+
+    def _parsed(self, line: bytes, payload: str, parse: Callable[[str], T]) -> T:
         reply = decode(line)
         if reply.startswith("E "):
-            raise HardwareError(f"the unit on {self.port} refused {payload!r}: {reply[2:]}")
-        return reply
+            raise UnitRefused(f"the unit on {self.port} refused {payload!r}: {reply[2:]}")
+        return parse(reply)
 
-    def hello(self, role: str) -> str:
-        reply = self._request("HELLO").split()
-        if len(reply) < 3 or reply[0] != "OK":
+    def _drain(self) -> None:
+        """Drop whatever else is on the line (the rest of a garbled reply)."""
+        try:
+            self._serial.reset_input_buffer()
+        except (serial.SerialException, OSError):
+            pass  # the next exchange reports a port that has gone
+
+    def _greet(self, wait_s: float) -> tuple[str, str]:
+        """HELLO until the unit answers (an ESP32 that the port's opening reset boots
+        for about a second, and prints its boot log first); its (role, firmware)."""
+        deadline = time.monotonic() + wait_s
+        while True:
+            self._drain()  # what the unit sent before we listened
+            try:
+                reply = self._parsed(self._exchange("HELLO"), "HELLO", str).split()
+                break
+            except (UnitSilent, CorruptLine) as exc:
+                if time.monotonic() >= deadline:
+                    raise UnitSilent(
+                        f"no greeting from the unit on {self.port} within {wait_s:.1f} s ({exc})"
+                    ) from None
+        if len(reply) != 3 or reply[0] != "OK" or reply[1] not in ("dial", "drive"):
             raise HardwareError(f"unexpected greeting from {self.port}: {' '.join(reply)!r}")
-        if reply[1] != role:
-            raise HardwareError(f"the unit on {self.port} is a {reply[1]!r}; expected {role!r}")
-        return reply[2]
+        return reply[1], reply[2]
+
+    def _state(self, payload: str) -> UnitState:
+        """A state line, checked against the last one (`MAX_SHAFT_SPEED_RAD_S`)."""
+        state = UnitState.parse(payload)
+        last = self.last_state
+        if last is not None:
+            dt_s = (state.t_ms - last.t_ms) / 1000.0
+            reach = MAX_SHAFT_SPEED_RAD_S * max(dt_s, UPDATE_PERIOD_S)
+            if dt_s < 0 or abs(state.angle_rad - last.angle_rad) > reach:
+                raise CorruptLine(
+                    f"implausible state line {payload!r} after t = {last.t_ms:.0f} ms, "
+                    f"angle {last.angle_rad:.4f} rad"
+                )
+        self.last_state = state
+        return state
 
     def set_current(self, current_a: float) -> UnitState:
         """Command the q-axis current (A); the unit answers with its state."""
-        return UnitState.parse(self._request(f"I {current_a * 1000.0:.4f}"))  # A -> mA
+        return self._retrying(f"I {current_a * 1000.0:.4f}", self._state)  # A -> mA
 
     def set_speed(self, speed_rad_s: float) -> UnitState:
-        return UnitState.parse(self._request(f"W {speed_rad_s:.5f}"))
+        """Command the shaft speed (rad/s) of a drive unit; it answers with its state."""
+        return self._retrying(f"W {speed_rad_s:.5f}", self._state)
 
     def query(self) -> UnitState:
-        return UnitState.parse(self._request("Q"))
+        return self._retrying("Q", self._state)
 
     def stop(self) -> None:
         self._request("STOP")
@@ -159,7 +275,10 @@ class Esp32Unit:
             self.stop()
         except HardwareError:
             pass  # closing anyway: the unit zeroes its command when the host goes quiet
-        self._serial.close()
+        try:
+            self._serial.close()
+        except (serial.SerialException, OSError):
+            pass  # an unplugged port
 
 
 class HardwareDriver(Driver):
@@ -189,6 +308,12 @@ class HardwareDriver(Driver):
     def act(self, view: OperatorView) -> HandAction:
         joystick = 0.0 if self.last is None else max(min(self.last.joystick, 1.0), -1.0)
         return HandAction(rotation_rate_rad_s=joystick * self.max_rotation_rate_rad_s)
+
+    def record(self) -> dict[str, str | int]:
+        return {
+            "dial_firmware": self.unit.firmware,
+            "dial_corrupt_lines": self.unit.corrupt_lines,
+        }
 
     def close(self) -> None:
         self.unit.close()

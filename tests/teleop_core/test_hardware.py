@@ -79,13 +79,18 @@ def test_a_silent_unit_is_noticed_within_the_timeout() -> None:
             esp.query()
 
 
-def test_a_corrupted_reply_is_an_error_not_a_value() -> None:
+def test_a_corrupted_reply_is_dropped_and_the_command_sent_again() -> None:
     with EmulatedDialUnit() as unit:
         esp = Esp32Unit(unit.port, "dial")
         unit.corrupt_next = True
-        with pytest.raises(HardwareError, match="checksum mismatch"):
-            esp.set_current(0.001)
+        # the garbled reply is never a value: the retry's is
         assert esp.set_current(0.001).iq_ma == pytest.approx(1.0)
+        assert esp.corrupt_lines == 1
+        assert unit.commands_ma == [1.0, 1.0]  # the command went twice
+        unit.corrupt_next = 2
+        with pytest.raises(HardwareError, match=r"two corrupt replies in a row.*checksum mismatch"):
+            esp.set_current(0.002)
+        assert esp.corrupt_lines == 3
 
 
 def test_a_missing_port_is_one_clear_error() -> None:
