@@ -11,7 +11,9 @@ or `study identify` writes anything:
 - a readable UTF-8 CSV file with a header of distinct column names;
 - every cell a finite plain number (`pandas.to_numeric`: no `nan`, `inf`, `1e400`,
   `3_0`, `0x10`) of magnitude at most `MAX_ABS_VALUE` (SI units: `1e300` is corruption,
-  not a measurement, and would overflow the fits' squares);
+  not a measurement, and would overflow the fits' squares) and, unless 0, at least
+  `MIN_ABS_VALUE` (a recording scaled by 1e-300 would underflow them to 0);
+- a first line of at most `MAX_LINE_BYTES` (a file of one endless line is no CSV);
 - time strictly increasing (a repeated time is named as such), at least the contract's
   minimum number of rows, and a median sampling rate from `MIN_RATE_HZ` to
   `MAX_RATE_HZ` (a time column in ms or in µs read as seconds lands outside it);
@@ -43,12 +45,21 @@ MAX_RATE_HZ = 1e6
 """Fastest median sampling rate, Hz: beyond any bench's data logger (time in µs read as
 seconds gives 1e6 times the true rate)."""
 
+MIN_ABS_VALUE = 1e-100
+"""Smallest magnitude of a cell other than 0, SI units: far below any bench signal, far
+above where the fits' squares underflow to 0 (a recording scaled by 1e-300 divided by
+a zero RMSE)."""
+MAX_LINE_BYTES = 65_536
+"""Longest header line: a few hundred columns at most; a file of one endless line is no
+recording (pandas would split it into millions of columns)."""
+
 ErrorType = type[TeleopInputError]
 
 
 def read_cells(path: str | Path, error: ErrorType) -> pd.DataFrame:
     """The CSV at `path` as text cells with stripped, distinct column names."""
     path = Path(path)
+    _check_header_length(path, error)
     try:
         frame = pd.read_csv(
             path, dtype=str, keep_default_na=False, skipinitialspace=True, encoding="utf-8"
@@ -78,6 +89,27 @@ def read_cells(path: str | Path, error: ErrorType) -> pd.DataFrame:
     return frame
 
 
+def _check_header_length(path: Path, error: ErrorType) -> None:
+    """Refuse a file that is not a regular file (a named pipe never ends), or whose
+    first line runs past `MAX_LINE_BYTES`, before pandas reads it."""
+    import stat
+
+    try:
+        if not stat.S_ISREG(path.stat().st_mode):
+            raise error(f"recording {path} is not a regular file; expected a CSV file")
+        with path.open("rb") as f:
+            head = f.read(MAX_LINE_BYTES + 1)
+    except FileNotFoundError:
+        raise error(f"recording {path} does not exist; expected a CSV file") from None
+    except OSError as exc:
+        raise error(f"recording {path} cannot be read ({exc.strerror or exc})") from None
+    if len(head) > MAX_LINE_BYTES and b"\n" not in head and b"\r" not in head:
+        raise error(
+            f"recording {path}, line 1: longer than {MAX_LINE_BYTES} bytes; expected a "
+            "header of column names and one line per sample"
+        )
+
+
 def _header(path: Path) -> list[str]:
     """The header's names as written (pandas renames a repeated `t` to `t.1`)."""
     with open(path, newline="", encoding="utf-8") as f:
@@ -99,16 +131,21 @@ def numbers(
     raw = frame[column]
     values = pd.to_numeric(raw.astype(str).str.strip(), errors="coerce").to_numpy(float)
     with np.errstate(invalid="ignore"):
-        bad = np.flatnonzero(~np.isfinite(values) | (np.abs(values) > MAX_ABS_VALUE))
+        size = np.abs(values)
+        bad = np.flatnonzero(
+            ~np.isfinite(values) | (size > MAX_ABS_VALUE) | ((size < MIN_ABS_VALUE) & (size > 0))
+        )
     if bad.size:
         row = int(bad[0])
         cell = raw.iloc[row] if isinstance(raw.iloc[row], str) else str(raw.iloc[row])
         if pd.isna(raw.iloc[row]):
             cell = ""  # a short row: the cell is missing
         what = (
-            f"is beyond ±{MAX_ABS_VALUE:g}; expected a value in SI units"
-            if np.isfinite(values[row])
-            else "is not a finite number; expected a plain decimal number"
+            "is not a finite number; expected a plain decimal number"
+            if not np.isfinite(values[row])
+            else f"is beyond ±{MAX_ABS_VALUE:g}; expected a value in SI units"
+            if abs(values[row]) > MAX_ABS_VALUE
+            else f"is nearer 0 than ±{MIN_ABS_VALUE:g}; expected a value in SI units (or 0)"
         )
         raise error(f"{source}, {row_word} {row + first_row}, column {column!r}: {cell!r} {what}")
     return values

@@ -85,7 +85,7 @@ def test_quick_demo_writes_analysis_and_figures(
     assert (
         main(["figures", "--db", str(demo / "demo.db"), "--out", str(figs), "--format", "gif"]) == 2
     )
-    assert "expected some of pdf,svg,png" in capsys.readouterr().err
+    assert "expected a comma-separated list of pdf,svg,png" in capsys.readouterr().err
     assert main(["demo", "--quick", "--out", str(demo)]) == 2  # never overwrites a demo
 
 
