@@ -137,6 +137,12 @@ def describe(url: URL | Engine) -> str:
     """
     if isinstance(url, Engine):
         url = url.url
+    database = url.database or ""
+    if url.get_backend_name() == "sqlite" and database.startswith("file:"):
+        from urllib.parse import unquote
+
+        read_only = " (read-only)" if url.query.get("mode") == "ro" else ""
+        return f"sqlite:///{unquote(database.removeprefix('file:'))}{read_only}"
     return url.render_as_string(hide_password=True)
 
 

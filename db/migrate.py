@@ -41,7 +41,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.exc import DBAPIError
 
-from db.engine import describe, make_engine, resolve_url, write_transaction
+from db.engine import busy_timeout_ms, describe, make_engine, resolve_url, write_transaction
 from db.errors import (
     DatabaseVersionError,
     DbInputError,
@@ -172,15 +172,32 @@ def _cannot_open(shown: str, exc: DBAPIError) -> DbInputError:
 
 @contextmanager
 def _reading_connection(url: URL) -> Iterator[Connection]:
-    """A connection that changes nothing: an SQLite file is opened read-only, so that a
-    file which turns out not to be a study database is left exactly as it was."""
+    """A connection that changes nothing: an SQLite file is opened without the settings
+    of `make_engine` (no switch to WAL, which would rewrite the header of a file that
+    turns out not to be a study database) and never created (`mode=rw`); one that cannot
+    be written is opened read-only and immutable (`readonly_url`). Not `mode=ro` on a
+    writable file: a read-only connection to a WAL database leaves its `-wal` and `-shm`
+    files behind (it may not delete them), where the last read-write connection removes
+    them, so a refused command leaves the folder as it found it."""
+    from urllib.parse import quote
+
+    from sqlalchemy import create_engine
+    from sqlalchemy.pool import NullPool
+
     path = _sqlite_path(url)
     shown = describe(url)
     if path is not None and not _writable(path):
-        url = readonly_url(path)
+        engine = make_engine(readonly_url(path))
     elif path is not None:
-        url = url.set(database=f"file:{path}", query={"mode": "ro", "uri": "true"})
-    engine = make_engine(url)
+        plain = URL.create(
+            "sqlite",
+            database=f"file:{quote(str(path.absolute()))}",
+            query={"mode": "rw", "uri": "true"},
+        )
+        timeout_s = busy_timeout_ms(url) / 1000
+        engine = create_engine(plain, poolclass=NullPool, connect_args={"timeout": timeout_s})
+    else:
+        engine = make_engine(url)
     try:
         with engine.connect() as conn:
             yield conn
