@@ -56,6 +56,14 @@ def read_csv(
     `text_columns` unescaped as an export escaped them."""
     if not path.is_file():
         raise StudyInputError(f"{path} does not exist")
+    from teleop_core.recording_checks import MAX_LINE_BYTES, longest_line_over
+
+    long_line = longest_line_over(path, MAX_LINE_BYTES)
+    if long_line is not None:
+        raise StudyInputError(
+            f"{path} row {long_line}: longer than {MAX_LINE_BYTES} bytes; expected a CSV "
+            "of one short row per record"
+        )
     try:
         frame = pd.read_csv(path, dtype=str, keep_default_na=False, encoding="utf-8")
     except pd.errors.EmptyDataError:
