@@ -98,7 +98,7 @@ def _check_header_length(path: Path, error: ErrorType) -> None:
 
     try:
         if not stat.S_ISREG(path.stat().st_mode):
-            raise error(f"recording {path} is not a regular file; expected a CSV file")
+            raise error(f"recording {path} is not a readable CSV file: not a regular file")
         line = longest_line_over(path, MAX_LINE_BYTES)
     except FileNotFoundError:
         raise error(f"recording {path} does not exist; expected a CSV file") from None

@@ -37,10 +37,10 @@ from teleop_core.calibration.effects import (
     smooth_sign,
 )
 from teleop_core.errors import TeleopInputError
-from teleop_core.recording_checks import MIN_SPREAD
 from teleop_core.follower.params import FollowerPlantParams
 from teleop_core.follower.physics import RC_B, RC_F0, RC_J, RC_KT, RC_TC
 from teleop_core.follower.recording import FollowerRecording, read_checked_csv
+from teleop_core.recording_checks import MIN_SPREAD
 
 MASTER_COLUMNS = ("t", "current_ma", "f_ref")
 """The master's current-force calibration recording: time, commanded current, gauge force."""
