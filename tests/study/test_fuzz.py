@@ -377,7 +377,7 @@ def test_trial_csvs(small_study: Path, rows: list[dict[str, str]], extra: str) -
     with workdir() as where:
         shutil.copy(small_study, where / "s.db")
         (where / "f.csv").write_text(header + "\n" + body + "\n")
-        code, err = run(["import", "--trials", "f.csv", "--db", "s.db"], where)
+        code, err = run(["import", "--enrol-new", "--trials", "f.csv", "--db", "s.db"], where)
         assert code in (0, 2), (header, body, err)
         if code == 2:
             assert_one_line_refusal(code, err, [header, body])
