@@ -83,6 +83,7 @@ def resolve_url(db: str | URL | None = None) -> URL:
 SQLITE_QUERY = {
     "timeout": "seconds from 0 to 86400",
     "mode": "ro, rw, rwc or memory",
+    "immutable": "1",
     "uri": "true",
 }
 """The SQLite URL parameters `study` understands (pysqlite's); any other is a typo."""
@@ -100,6 +101,7 @@ def _check_sqlite_query(url: URL) -> None:
         ok = {
             "timeout": lambda t: _seconds(t) is not None,
             "mode": lambda t: t in ("ro", "rw", "rwc", "memory"),
+            "immutable": lambda t: t == "1",
             "uri": lambda t: t == "true",
         }[key](text)
         if not ok:
@@ -135,6 +137,12 @@ def describe(url: URL | Engine) -> str:
     """
     if isinstance(url, Engine):
         url = url.url
+    database = url.database or ""
+    if url.get_backend_name() == "sqlite" and database.startswith("file:"):
+        from urllib.parse import unquote
+
+        read_only = " (read-only)" if url.query.get("mode") == "ro" else ""
+        return f"sqlite:///{unquote(database.removeprefix('file:'))}{read_only}"
     return url.render_as_string(hide_password=True)
 
 

@@ -28,3 +28,7 @@ class DatabaseGoneError(OSError):
     Not a `DbInputError`: nothing the user typed was wrong, and code that turns a
     `ValueError` into "refused: ..." must not mistake it for a bad value. `study`
     commands print it as one line all the same (it is among their user errors)."""
+
+
+class OutdatedDatabaseError(DbInputError):
+    """The database is at an older schema revision; only `study db upgrade` upgrades it."""

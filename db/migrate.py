@@ -41,12 +41,13 @@ from sqlalchemy import (
 )
 from sqlalchemy.exc import DBAPIError
 
-from db.engine import describe, make_engine, resolve_url, write_transaction
+from db.engine import busy_timeout_ms, describe, make_engine, resolve_url, write_transaction
 from db.errors import (
     DatabaseVersionError,
     DbInputError,
     MissingDatabaseError,
     NotAStudyDatabaseError,
+    OutdatedDatabaseError,
 )
 from db.revision import HEAD_REVISION
 
@@ -127,7 +128,7 @@ def schema_state(conn: Connection, version_locations: Sequence[Path] = ()) -> Sc
     return SchemaState.OLDER if revision in known else SchemaState.NEWER
 
 
-def upgrade(
+def upgrade_schema(
     engine: Engine, revision: str = "head", version_locations: Sequence[Path] = ()
 ) -> tuple[str | None, str]:
     """Upgrade the schema to `revision` under the write lock; return (before, after)."""
@@ -171,13 +172,32 @@ def _cannot_open(shown: str, exc: DBAPIError) -> DbInputError:
 
 @contextmanager
 def _reading_connection(url: URL) -> Iterator[Connection]:
-    """A connection that changes nothing: an SQLite file is opened read-only, so that a
-    file which turns out not to be a study database is left exactly as it was."""
+    """A connection that changes nothing: an SQLite file is opened without the settings
+    of `make_engine` (no switch to WAL, which would rewrite the header of a file that
+    turns out not to be a study database) and never created (`mode=rw`); one that cannot
+    be written is opened read-only and immutable (`readonly_url`). Not `mode=ro` on a
+    writable file: a read-only connection to a WAL database leaves its `-wal` and `-shm`
+    files behind (it may not delete them), where the last read-write connection removes
+    them, so a refused command leaves the folder as it found it."""
+    from urllib.parse import quote
+
+    from sqlalchemy import create_engine
+    from sqlalchemy.pool import NullPool
+
     path = _sqlite_path(url)
     shown = describe(url)
-    if path is not None:
-        url = url.set(database=f"file:{path}", query={"mode": "ro", "uri": "true"})
-    engine = make_engine(url)
+    if path is not None and not _writable(path):
+        engine = make_engine(readonly_url(path))
+    elif path is not None:
+        plain = URL.create(
+            "sqlite",
+            database=f"file:{quote(str(path.absolute()))}",
+            query={"mode": "rw", "uri": "true"},
+        )
+        timeout_s = busy_timeout_ms(url) / 1000
+        engine = create_engine(plain, poolclass=NullPool, connect_args={"timeout": timeout_s})
+    else:
+        engine = make_engine(url)
     try:
         with engine.connect() as conn:
             yield conn
@@ -198,27 +218,29 @@ def open_database(
     db: str | URL | None = None,
     *,
     create: bool = True,
+    upgrade: bool = False,
     version_locations: Sequence[Path] = (),
     on_upgrade: Callable[[str | None, str, Path | None], None] | None = None,
     durable: bool = True,
 ) -> Engine:
     """Open the study database at `db` (URL or SQLite path; see `resolve_url`).
 
-    Creates the schema in an empty database when `create`; upgrades an older one (an
-    SQLite file is backed up first) and reports it through `on_upgrade(before, after,
-    backup_path)`; refuses unknown or foreign schemas with a `DbInputError` before
-    anything is written. `durable=False`: commits are not synced to the disk one by one
+    Creates the schema in an empty database when `create`; upgrades an older one only
+    when `upgrade` (`study db upgrade`: an SQLite file is backed up first, and the
+    upgrade is reported through `on_upgrade(before, after, backup_path)`), and otherwise
+    refuses it with one line naming its revision, so that a command which then fails has
+    changed nothing; refuses unknown or foreign schemas with a `DbInputError` before
+    anything is written. An SQLite file that cannot be written (read-only media, a
+    read-only file or folder) is opened read-only and immutable (`readonly_url`): what
+    only reads works, a write fails with a line saying the database is read-only.
+    `durable=False`: commits are not synced to the disk one by one
     (`db.engine.make_engine`), for a database thrown away when it is not finished.
     """
     url = resolve_url(db)
     shown = describe(url)
     path = _sqlite_path(url)
-    if path is not None and not path.parent.is_dir():
-        raise DbInputError(f"folder {path.parent} for database {path} does not exist")
-    if path is not None and not path.exists() and not create:
-        raise MissingDatabaseError(
-            f"no study database at {path}; expected an existing file (run `study init` first)"
-        )
+    if path is not None:
+        check_sqlite_file(path, must_exist=not create)
     state, revision = SchemaState.EMPTY, None
     if path is None or path.exists():
         with _reading_connection(url) as conn:
@@ -229,12 +251,25 @@ def open_database(
         raise MissingDatabaseError(
             f"database {shown} is empty; expected a study database (run `study init` first)"
         )
+    if state is SchemaState.OLDER and not upgrade:
+        raise OutdatedDatabaseError(
+            f"database {shown} is at schema revision {revision!r}, older than this "
+            f"haptic-study's {head_revision(version_locations)!r}; expected the newest: run "
+            f"`study db upgrade --db {shown}` first (nothing was changed)"
+        )
+    if path is not None and path.exists() and not _writable(path):
+        if state is not SchemaState.CURRENT:
+            raise DbInputError(
+                f"database {shown} is read-only and at schema revision {revision!r}; "
+                "expected a writable file to create or upgrade its schema"
+            )
+        return make_engine(readonly_url(path))
     engine = make_engine(url, durable=durable)
     try:
         if state in (SchemaState.EMPTY, SchemaState.OLDER):
             older = state is SchemaState.OLDER
             backup = _backup_sqlite(path, revision) if older and path is not None else None
-            before, after = upgrade(engine, version_locations=version_locations)
+            before, after = upgrade_schema(engine, version_locations=version_locations)
             if on_upgrade is not None and older:
                 on_upgrade(before, after, backup)
     except DBAPIError as exc:
@@ -244,6 +279,76 @@ def open_database(
         engine.dispose()
         raise
     return engine
+
+
+def check_sqlite_file(path: Path, *, must_exist: bool) -> None:
+    """DbInputError unless `path` can be an SQLite study database: its folder exists, and
+    the path is a regular file (a named pipe or a device would block the open or read
+    as an empty database), or is missing where `must_exist` is False."""
+    import stat
+
+    if not path.parent.is_dir():
+        raise DbInputError(f"folder {path.parent} for database {path} does not exist")
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        if must_exist:
+            raise MissingDatabaseError(
+                f"no study database at {path}; expected an existing file (run `study init` first)"
+            ) from None
+        return
+    except OSError as exc:
+        raise DbInputError(
+            f"database {path} cannot be read ({exc.strerror or exc}); expected a readable file"
+        ) from None
+    if not stat.S_ISREG(mode):
+        kind = (
+            "a folder"
+            if stat.S_ISDIR(mode)
+            else "a named pipe"
+            if stat.S_ISFIFO(mode)
+            else "a device"
+            if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "a socket"
+            if stat.S_ISSOCK(mode)
+            else "no regular file"
+        )
+        raise DbInputError(f"database {path} is {kind}; expected an SQLite file")
+
+
+def _writable(path: Path) -> bool:
+    """Whether SQLite can write `path` (and its journal and WAL files beside it)."""
+    import errno
+
+    if not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK)):
+        return False
+    try:  # a read-only mount lets access() say yes to root
+        st = os.statvfs(path)
+    except OSError as exc:
+        return exc.errno != errno.EROFS
+    return not st.f_flag & os.ST_RDONLY
+
+
+def readonly_url(path: Path) -> URL:
+    """SQLite's read-only, immutable open of `path` (`file:PATH?mode=ro&immutable=1`): no
+    journal, lock or shared-memory file is made beside it, so a database on read-only
+    media opens. Immutable means SQLite assumes no one changes the file meanwhile, true
+    of read-only media; a write-ahead log left beside it is not read, so a file whose
+    log holds commits is refused instead of shown without them."""
+    wal = Path(f"{path}-wal")
+    if wal.exists() and wal.stat().st_size > 0:
+        raise DbInputError(
+            f"database {path} is read-only and its write-ahead log {wal.name} holds commits "
+            "not yet in the file; expected a checkpointed file (open it once where it can be "
+            "written, or copy it with `study db backup`)"
+        )
+    from urllib.parse import quote
+
+    return URL.create(
+        "sqlite",
+        database=f"file:{quote(str(path.absolute()))}",
+        query={"mode": "ro", "immutable": "1", "uri": "true"},
+    )
 
 
 @dataclass(frozen=True)
@@ -267,8 +372,8 @@ def inspect_database(db: str | URL | None = None) -> DatabaseInfo:
     """Describe the database at `db` without creating, upgrading or changing it."""
     url = resolve_url(db)
     path = _sqlite_path(url)
-    if path is not None and not path.exists():
-        raise MissingDatabaseError(f"no study database at {path}; expected an existing file")
+    if path is not None:
+        check_sqlite_file(path, must_exist=True)
     with _reading_connection(url) as conn:
         state = schema_state(conn)
         revision = current_revision(conn)
@@ -304,7 +409,7 @@ def autogenerate_revision(message: str, rev_id: str) -> None:
     scratch.unlink(missing_ok=True)
     engine = make_engine(f"sqlite:///{scratch}")
     try:
-        upgrade(engine)
+        upgrade_schema(engine)
         from alembic import command
 
         with engine.begin() as conn:

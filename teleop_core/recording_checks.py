@@ -12,11 +12,13 @@ or `study identify` writes anything:
 - every cell a finite plain number (`pandas.to_numeric`: no `nan`, `inf`, `1e400`,
   `3_0`, `0x10`) of magnitude at most `MAX_ABS_VALUE` (SI units: `1e300` is corruption,
   not a measurement, and would overflow the fits' squares);
+- lines of at most `MAX_LINE_BYTES` (a file of one endless line is no CSV);
 - time strictly increasing (a repeated time is named as such), at least the contract's
   minimum number of rows, and a median sampling rate from `MIN_RATE_HZ` to
   `MAX_RATE_HZ` (a time column in ms or in µs read as seconds lands outside it);
 - for a recording a model is fitted to (`calibrate`, `estimator train`, `identify`),
-  signals that vary (`check_varies`: an all-zero file has nothing to fit). Not for
+  signals that vary, by at least `MIN_SPREAD` (`check_varies`: an all-zero file has
+  nothing to fit, a file scaled by 1e-300 underflows the fits' squares). Not for
   `estimator run`, whose load cell may well read a constant.
 
 The contract modules keep their own error classes (each a `TeleopInputError`) and
@@ -43,12 +45,22 @@ MAX_RATE_HZ = 1e6
 """Fastest median sampling rate, Hz: beyond any bench's data logger (time in µs read as
 seconds gives 1e6 times the true rate)."""
 
+MIN_SPREAD = 1e-100
+"""Smallest range (max - min) of a signal a model is fitted to, SI units: far below any
+bench signal, far above where the fits' squares underflow to 0 (a recording scaled by
+1e-300 gave a zero RMSE to divide by). A single cell may be nearer 0: a simulated speed
+decays to 1e-102."""
+MAX_LINE_BYTES = 65_536
+"""Longest line: a few hundred columns at most; a file of one endless line is no
+recording (pandas would split it into millions of fields)."""
+
 ErrorType = type[TeleopInputError]
 
 
 def read_cells(path: str | Path, error: ErrorType) -> pd.DataFrame:
     """The CSV at `path` as text cells with stripped, distinct column names."""
     path = Path(path)
+    _check_header_length(path, error)
     try:
         frame = pd.read_csv(
             path, dtype=str, keep_default_na=False, skipinitialspace=True, encoding="utf-8"
@@ -76,6 +88,50 @@ def read_cells(path: str | Path, error: ErrorType) -> pd.DataFrame:
         seen.add(name)
     frame.columns = [str(c).strip() for c in frame.columns]
     return frame
+
+
+def _check_header_length(path: Path, error: ErrorType) -> None:
+    """Refuse a file that is not a regular file (a named pipe never ends), or with a
+    line longer than `MAX_LINE_BYTES`, before pandas reads it (pandas would spend minutes
+    splitting one endless line into millions of fields)."""
+    import stat
+
+    try:
+        if not stat.S_ISREG(path.stat().st_mode):
+            raise error(f"recording {path} is not a readable CSV file: not a regular file")
+        line = longest_line_over(path, MAX_LINE_BYTES)
+    except FileNotFoundError:
+        raise error(f"recording {path} does not exist; expected a CSV file") from None
+    except OSError as exc:
+        raise error(f"recording {path} cannot be read ({exc.strerror or exc})") from None
+    if line is not None:
+        raise error(
+            f"recording {path}, line {line}: longer than {MAX_LINE_BYTES} bytes; expected a "
+            "header of column names and one line per sample"
+        )
+
+
+def longest_line_over(path: Path, limit: int, block_bytes: int = 1 << 22) -> int | None:
+    """The number (from 1) of the first line of `path` longer than `limit` bytes, or
+    None. Read in blocks, the line breaks found by numpy: a few ms per 10 MB."""
+    run, line = 0, 1  # bytes of the current line so far, its number
+    with path.open("rb") as f:
+        while block := f.read(block_bytes):
+            data = np.frombuffer(block, np.uint8)
+            breaks = np.flatnonzero((data == 10) | (data == 13))
+            if not len(breaks):
+                run += len(block)
+                if run > limit:
+                    return line
+                continue
+            # the lengths of the lines that end in this block (the first one started before)
+            ends = np.concatenate(([breaks[0] + run], np.diff(breaks) - 1))
+            over = np.flatnonzero(ends > limit)
+            if len(over):
+                return line + int(np.count_nonzero(data[breaks[: over[0]]] == 10))
+            line += int(np.count_nonzero(data[breaks] == 10))
+            run = len(block) - int(breaks[-1]) - 1
+    return line if run > limit else None
 
 
 def _header(path: Path) -> list[str]:
@@ -152,4 +208,10 @@ def check_varies(
             raise error(
                 f"{source}, column {column!r}: {float(v[0])!r} on every line; expected a "
                 "signal that varies (a recording that excites the model)"
+            )
+        spread = float(np.max(v) - np.min(v)) if len(v) else 0.0
+        if len(v) and spread < MIN_SPREAD:
+            raise error(
+                f"{source}, column {column!r}: varies by only {spread:.3g}; expected a signal "
+                f"in SI units varying by at least {MIN_SPREAD:g} (its squares underflow to 0)"
             )

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,24 @@ from study.protocol.cells import escape_cell
 
 if TYPE_CHECKING:  # `Table.display` as a frame, for callers that want one
     import pandas as pd
+
+
+_MARKDOWN_SPECIAL = re.compile(r"[\\|`]|<(?=[A-Za-z/!?])|&(?=#?\w+;)")
+"""What a Markdown table cell escapes: the column separator, the backslash that would
+escape it, inline code, and a `<` or `&` that would start raw HTML or an entity (`p <
+.001` stays as it is)."""
+
+
+def markdown_escape(value: object) -> str:
+    r"""A table cell's text as Markdown shows it literally, on one line.
+
+    >>> markdown_escape("a|b<i>")
+    'a\\|b&lt;i>'
+    """
+    text = " ".join(str(value).split())
+    return _MARKDOWN_SPECIAL.sub(
+        lambda m: {"<": "&lt;", "&": "&amp;"}.get(m.group(0), "\\" + m.group(0)), text
+    )
 
 
 @dataclass(frozen=True)
@@ -52,12 +71,15 @@ class Table:
         return pd.DataFrame(self.cells, columns=list(self.header))
 
     def markdown(self) -> str:
-        header = "| " + " | ".join(self.header) + " |"
+        """A pipe table, every cell escaped (`markdown_escape`: a group named `a|b<i>`
+        neither splits a column nor passes raw HTML)."""
+        header = "| " + " | ".join(map(markdown_escape, self.header)) + " |"
         rule = "|" + "---|" * len(self.header)
-        body = ["| " + " | ".join(map(str, r)) + " |" for r in self.cells]
+        body = ["| " + " | ".join(map(markdown_escape, r)) + " |" for r in self.cells]
         if not body:
             body = ["| " + " | ".join(["-"] * len(self.header)) + " |"]
-        lines = [f"**Table: {self.name}.** {self.caption}", "", header, rule, *body]
+        caption = markdown_escape(self.caption)
+        lines = [f"**Table: {markdown_escape(self.name)}.** {caption}", "", header, rule, *body]
         return "\n".join(lines) + "\n"
 
     def latex(self) -> str:

@@ -37,49 +37,46 @@ class InputError(click.ClickException):
 
 
 def database_failure(exc: BaseException, db_url: str | None = None) -> str | None:
-    """One line for a database that cannot be used (corrupted file, full disk, server
-    gone, permission), or None for anything else.
+    """One line for a database that cannot be used, naming its cause (`db.failures`:
+    full, read-only, locked, disconnected, corrupt), or None for anything else.
 
     Integrity and programming errors are not here: they are bugs and keep their
     traceback. SQLAlchemy is imported only when a command has failed.
     """
     module = type(exc).__module__.split(".")[0]
     if module == "sqlalchemy":
-        from sqlalchemy.exc import DatabaseError, IntegrityError, ProgrammingError
+        from sqlalchemy.exc import DatabaseError, IntegrityError, InterfaceError, ProgrammingError
 
-        if not isinstance(exc, DatabaseError) or isinstance(exc, IntegrityError | ProgrammingError):
+        if not isinstance(exc, DatabaseError | InterfaceError) or isinstance(
+            exc, IntegrityError | ProgrammingError
+        ):
             return None
         orig: BaseException | None = exc.orig
-    elif module in ("sqlite3", "psycopg") and type(exc).__name__ in (
-        "OperationalError",
-        "DatabaseError",
-        "DiskFull",
-    ):  # raised through a driver cursor (the sample writer's bulk path)
+    elif _driver_fault(exc, module):  # raised through a driver cursor (the sample writer's)
         orig = exc
     else:
         return None
     from db.engine import describe, resolve_url
+    from db.failures import classify
 
     try:
         shown = describe(resolve_url(db_url))
     except ValueError:
         shown = "the study database"
-    text = str(orig).strip() if orig is not None else ""
-    reason = text.splitlines()[0] if text else type(exc).__name__
-    if "full" in reason.lower():
-        return (
-            f"database {shown} is full ({reason}); expected free space: what was committed "
-            "before stays, the command's own change was not stored"
-        )
-    if "locked" in reason.lower():
-        return (
-            f"database {shown} is locked by another program ({reason}); expected it free: "
-            "retry when that program is done, or wait longer with ?timeout=SECONDS in the "
-            "URL; nothing of this command was stored"
-        )
-    return (
-        f"database {shown} cannot be used: {reason}; expected an intact, reachable study "
-        "database (restore a corrupted file from its backup)"
+    return classify(orig if orig is not None else exc).line(shown)
+
+
+def _driver_fault(exc: BaseException, module: str) -> bool:
+    """Whether `exc` is SQLite's or psycopg's own error for a database that cannot be
+    used (not a constraint or a programming error)."""
+    if module == "sqlite3":
+        import sqlite3 as driver
+    elif module == "psycopg":
+        import psycopg as driver  # type: ignore[no-redef]
+    else:
+        return False
+    return isinstance(exc, driver.OperationalError | driver.DatabaseError) and not isinstance(
+        exc, driver.IntegrityError | driver.ProgrammingError
     )
 
 
@@ -124,9 +121,44 @@ def refuse_linked_out(ctx: click.Context) -> None:
             )
 
 
+FREE_TEXT_PARAMS = ("text", "reason")
+"""The parameters that hold a note or a reason (`study.protocol.free_text`)."""
+
+
+def keep_lookalike_text(ctx: click.Context) -> None:
+    """With `--not-personal`, the command's note or reason is marked as one that only
+    looks like contact details (`NotPersonal`), which the free-text check keeps."""
+    if not ctx.params.pop("not_personal", False):
+        return
+    from study.protocol.free_text import NotPersonal
+
+    for name in FREE_TEXT_PARAMS:
+        if isinstance(ctx.params.get(name), str):
+            ctx.params[name] = NotPersonal(ctx.params[name])
+
+
+not_personal_option = click.option(
+    "--not-personal",
+    "not_personal",
+    is_flag=True,
+    help="Keep a note or reason that only looks like an e-mail address or a phone number "
+    "(a serial or lot number); the database holds no personal data.",
+)
+
+
 class StudyCommand(click.Command):
+    """A `study` command: its options read what a person types strictly
+    (`study.commands.typed`), and its packages' input errors end as one line."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        from study.commands.typed import strict_params
+
+        strict_params(self.params)
+
     def invoke(self, ctx: click.Context) -> Any:
         try:
+            keep_lookalike_text(ctx)
             refuse_non_finite(ctx)
             refuse_linked_out(ctx)
             return super().invoke(ctx)

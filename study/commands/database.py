@@ -31,7 +31,7 @@ def upgrade_cmd(db_url: str | None) -> None:
         saved = f"; the old file is kept as {backup}" if backup else ""
         upgraded.append(f"upgraded from revision {before} to {after}{saved}")
 
-    engine = open_database(db_url, on_upgrade=report)
+    engine = open_database(db_url, upgrade=True, on_upgrade=report)
     where = describe(engine)
     engine.dispose()
     click.echo(f"{where}: {upgraded[0] if upgraded else f'at revision {head_revision()} (newest)'}")

@@ -28,12 +28,19 @@ from study.errors import StudyInputError
     type=click.Path(dir_okay=False, path_type=Path),
     help="Probe trials (probe_trials.csv of `study export`).",
 )
+@click.option(
+    "--enrol-new",
+    is_flag=True,
+    help="Enrol the participants the file is the first to name (without it, a code the "
+    "study does not have is refused).",
+)
 @actor_option
 @db_option
 def import_cmd(
     trials_csv: Path,
     tlx_csv: Path | None,
     probes_csv: Path | None,
+    enrol_new: bool,
     actor: str | None,
     db_url: str | None,
 ) -> None:
@@ -56,7 +63,7 @@ def import_cmd(
             probes = read_probe_file(probes_csv)
             check_participants(probes, known_codes(engine, trials_csv), probes_csv)
             check_not_stored(engine, probes, probes_csv)
-        n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv, actor)
+        n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv, actor, enrol_new=enrol_new)
         n_probes = 0
         if probes is not None:
             from study.probes.exchange import import_probes

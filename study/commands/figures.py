@@ -28,11 +28,9 @@ FORMATS = ("pdf", "svg", "png")
 
 
 def _formats(text: str) -> list[str]:
-    chosen = [f.strip() for f in text.split(",") if f.strip()]
-    bad = [f for f in chosen if f not in FORMATS]
-    if bad or not chosen:
-        raise StudyInputError(f"format {bad[0] if bad else text!r}; expected some of pdf,svg,png")
-    return chosen
+    from study.commands.typed import comma_list
+
+    return comma_list("--format", text, tuple(FORMATS))
 
 
 @click.command("figures", cls=StudyCommand)
@@ -108,6 +106,25 @@ def _analyse_demo(db_url: str, out_dir: Path, workers: Workers) -> None:
     single.result()
 
 
+def _check_resumable(db_url: str, seed: int, quick: bool) -> bool:
+    """Whether `db_url` holds an incomplete demo that this run continues (False: a new
+    database); StudyInputError for anything else there (`check_resumable`)."""
+    from db.errors import MissingDatabaseError
+    from study.protocol.demo import check_resumable
+
+    try:
+        engine = open_database(db_url, create=False)
+    except MissingDatabaseError:
+        return False
+    try:
+        check_resumable(engine, seed, quick)
+    except StudyInputError as exc:
+        raise StudyInputError(f"{db_url}: {exc}") from None
+    finally:
+        engine.dispose()
+    return True
+
+
 @click.command("demo", cls=StudyCommand)
 @click.option(
     "--out",
@@ -135,17 +152,21 @@ def demo(
     quick: bool,
     participants_path: Path | None,
 ) -> None:
-    """Simulate the paper's whole study (20/8/8, VO and HV, NASA-TLX) and analyse it."""
+    """Simulate the paper's whole study (20/8/8, VO and HV, NASA-TLX) and analyse it.
+
+    A demo stopped halfway (killed, a power cut) is continued by the same command in the
+    same folder: its sessions go on where they stopped. Until it completes, its
+    database says it is an incomplete demo (`study schedule`)."""
     from study.protocol.parallel import start_workers
 
     start = time.monotonic()
     model = load_participants(participants_path)
     if db_url is None:
         out_dir.mkdir(parents=True, exist_ok=True)
-        db_path = out_dir / "demo.db"
-        if db_path.exists():
-            raise StudyInputError(f"{db_path} already exists; expected a new --out folder or --db")
-        db_url = str(db_path)
+        db_url = str(out_dir / "demo.db")
+    resumed = _check_resumable(db_url, seed, quick)
+    if resumed:
+        click.echo(f"continuing the incomplete demo in {db_url}", err=True)
     with Console(stderr=True).status("demo study") as status:
 
         def notice(message: str) -> None:

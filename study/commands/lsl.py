@@ -7,7 +7,13 @@ from pathlib import Path
 import click
 
 from db.migrate import open_database
-from study.commands.base import StudyCommand, bar_progress, db_option, progress_bar
+from study.commands.base import (
+    StudyCommand,
+    bar_progress,
+    check_parent_folder,
+    db_option,
+    progress_bar,
+)
 from study.errors import StudyInputError
 
 
@@ -49,7 +55,13 @@ def lsl_config(path: Path) -> None:
     """
     from study.lsl.config import write_loopback_config
 
-    if path.exists():
+    if path.exists() or path.is_symlink():
         raise StudyInputError(f"{path} exists; expected a new file name")
-    write_loopback_config(path)
+    check_parent_folder(path)
+    try:
+        write_loopback_config(path)
+    except OSError as exc:
+        raise StudyInputError(
+            f"{path} cannot be written ({exc.strerror or exc}); expected a writable folder"
+        ) from None
     click.echo(f"{path}: liblsl stays on loopback; export LSLAPICFG={path.resolve()}")

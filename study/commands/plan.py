@@ -14,9 +14,10 @@ from study.commands.base import (
     actor_option,
     db_option,
     file_option,
+    not_personal_option,
     opened_database,
 )
-from study.errors import StudyInputError
+from study.protocol.csv_input import read_text_file
 from study.protocol.design import TEMPLATE, parse_design
 from study.protocol.roster import create_study, enrol, schedule
 
@@ -30,16 +31,7 @@ def init(design_path: Path, db_url: str | None) -> None:
     """Create the study database from a design file."""
     from db.engine import resolve_url
 
-    if not design_path.is_file():
-        raise StudyInputError(f"design file {design_path} does not exist")
-    raw = design_path.read_bytes()
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise StudyInputError(
-            f"design file {design_path} is not UTF-8 text (byte {raw[exc.start]:#04x} at "
-            f"offset {exc.start}); expected a UTF-8 TOML file"
-        ) from None
+    text = read_text_file(design_path, "design file", "a UTF-8 TOML file")
     design = parse_design(text, str(design_path))  # all checks before anything is written
     url = resolve_url(db_url)
     new_file = (
@@ -117,6 +109,7 @@ def participant_add(
 @click.argument("code")
 @click.option("--reason", required=True, help="Why (kept in the audit log and the analysis).")
 @click.option("--actor", default=None, help="Who records it [default: $STUDY_ACTOR or user@host].")
+@not_personal_option
 @db_option
 def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str | None) -> None:
     """Withdraw a participant: kept and marked, no more sessions, left out of the analysis."""
@@ -131,6 +124,7 @@ def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str 
 @click.argument("code")
 @click.option("--reason", required=True, help="Why the withdrawal is undone (audit log).")
 @actor_option
+@not_personal_option
 @db_option
 def participant_reinstate(code: str, reason: str, actor: str | None, db_url: str | None) -> None:
     """Undo a withdrawal (audited): the participant continues where they stopped and the
@@ -150,6 +144,7 @@ def participant_reinstate(code: str, reason: str, actor: str | None, db_url: str
     "--beyond-target", is_flag=True, help="Move past the new group's target in the design."
 )
 @actor_option
+@not_personal_option
 @db_option
 def participant_correct_group(
     code: str,
@@ -178,6 +173,7 @@ def participant_correct_group(
     help="A note on today's session, kept beside the others (audit log).",
 )
 @click.option("--actor", default=None, help="Who records it [default: $STUDY_ACTOR or user@host].")
+@not_personal_option
 @db_option
 def participant_note(
     code: str, text: str, on_session: bool, actor: str | None, db_url: str | None
@@ -196,12 +192,21 @@ def participant_note(
 @db_option
 def schedule_cmd(as_json: bool, db_url: str | None) -> None:
     """The plan and progress: groups filling up, each participant's blocks."""
+    from study.protocol.demo_marks import STARTED, demo_state
+
     with opened_database(db_url) as engine:
         plan = schedule(engine)
+        demo = demo_state(engine)
+    incomplete = demo is not None and demo[0] == STARTED
     if as_json:
-        click.echo(json.dumps(plan, indent=2))
+        click.echo(json.dumps({**plan, "incomplete_demo": incomplete}, indent=2))
         return
     click.echo(f"study: {plan['study']}")
+    if incomplete:
+        click.echo(
+            "  an INCOMPLETE demo (stopped halfway): `study demo` with the same options "
+            "and folder finishes it"
+        )
     for g, fill in plan["groups"].items():
         click.echo(f"  {g:<10} {fill['enrolled']:>3} of {fill['target']}")
     for p in plan["participants"]:

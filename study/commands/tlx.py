@@ -9,7 +9,13 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from db.models.study import Participant
-from study.commands.base import StudyGroup, actor_option, db_option, opened_database
+from study.commands.base import (
+    StudyGroup,
+    actor_option,
+    db_option,
+    not_personal_option,
+    opened_database,
+)
 from study.errors import StudyInputError
 from study.protocol.roster import load_study
 from study.protocol.tlx import pair_order, response_scores, scored_tlx, store_tlx
@@ -62,6 +68,7 @@ def _rating(name: str):
     "trial gets one (required for both; kept in the audit log).",
 )
 @actor_option
+@not_personal_option
 @db_option
 def enter_cmd(
     code: str,
@@ -74,7 +81,9 @@ def enter_cmd(
     **ratings: int,
 ) -> None:
     """Store a questionnaire for one task x condition block (or edit the stored one)."""
-    chosen = [c.strip() for c in choices.split(",")] if choices else None
+    from study.commands.typed import comma_list
+
+    chosen = comma_list("--choices", choices, unique=False) if choices is not None else None
     with opened_database(db_url) as engine:
         response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
     _, raw, weighted = response_scores(response)

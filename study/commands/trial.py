@@ -5,7 +5,13 @@ from __future__ import annotations
 
 import click
 
-from study.commands.base import StudyGroup, actor_option, db_option, opened_database
+from study.commands.base import (
+    StudyGroup,
+    actor_option,
+    db_option,
+    not_personal_option,
+    opened_database,
+)
 
 REASON_HELP = "Why (kept in the audit log; an invalid trial's reason is listed by the analysis)."
 
@@ -57,6 +63,7 @@ def _mark(trial_id: int, valid: bool, reason: str, actor: str | None, db_url: st
 @click.argument("trial_id", metavar="ID", type=click.IntRange(min=1))
 @click.option("--reason", required=True, help=REASON_HELP)
 @actor_option
+@not_personal_option
 @db_option
 def trial_invalidate(trial_id: int, reason: str, actor: str | None, db_url: str | None) -> None:
     """Mark completed measured trial ID invalid: kept with its samples, audited, left out
@@ -68,6 +75,7 @@ def trial_invalidate(trial_id: int, reason: str, actor: str | None, db_url: str 
 @click.argument("trial_id", metavar="ID", type=click.IntRange(min=1))
 @click.option("--reason", required=True, help=REASON_HELP)
 @actor_option
+@not_personal_option
 @db_option
 def trial_revalidate(trial_id: int, reason: str, actor: str | None, db_url: str | None) -> None:
     """Mark trial ID, marked invalid earlier, valid again (audited)."""

@@ -21,6 +21,7 @@ for that reason.
 from __future__ import annotations
 
 import logging
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -94,9 +95,16 @@ def _truncated(path: Path, k: int, at: int, size: int) -> XdfInputError:
     )
 
 
+MAX_INDEX = 1_000_000
+"""Above any block, trial or attempt number a study reaches (and within SQLite's integers)."""
+MAX_CLOCK_RATE = 1e6
+"""Trial seconds per wall second: `study run --pace` is far below."""
+
+
 @dataclass(frozen=True)
 class MarkedTrial:
-    """A trial as the markers give it: its keys, and its start and end on the recording's clock."""
+    """A trial as the markers give it: its keys, and its start and end on the recording's
+    clock. Built by `marked_trials` only from markers whose fields were all checked."""
 
     start: dict[str, Any]
     start_s: float
@@ -105,24 +113,83 @@ class MarkedTrial:
     @property
     def key(self) -> tuple[str, int, bool, int, int]:
         m = self.start
-        return (
-            m["participant"],
-            int(m["block"]),
-            bool(m["practice"]),
-            int(m["trial"]),
-            int(m["attempt"]),
-        )
+        return (m["participant"], m["block"], m["practice"], m["trial"], m["attempt"])
+
+    @property
+    def clock_rate(self) -> float:
+        return float(self.start["clock_rate"])
 
 
-def marked_trials(streams: list[dict[str, Any]]) -> tuple[list[MarkedTrial], set[int]]:
-    """The trials the project's markers delimit, and the indices of the marker streams."""
+def _whole(value: Any, low: int, high: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and low <= value <= high
+
+
+TRIAL_FIELDS: dict[str, tuple[str, Any]] = {
+    "study": ("a study name", lambda v: isinstance(v, str) and 0 < len(v) <= 200),
+    "participant": (
+        "a participant code",
+        lambda v: isinstance(v, str) and 0 < len(v) <= 32 and v.isprintable(),
+    ),
+    "trial_id": (f"a whole number from 1 to {2**63 - 1}", lambda v: _whole(v, 1, 2**63 - 1)),
+    "block": (f"a whole number from 0 to {MAX_INDEX}", lambda v: _whole(v, 0, MAX_INDEX)),
+    "trial": (f"a whole number from 0 to {MAX_INDEX}", lambda v: _whole(v, 0, MAX_INDEX)),
+    "attempt": (f"a whole number from 0 to {MAX_INDEX}", lambda v: _whole(v, 0, MAX_INDEX)),
+    "practice": ("true or false", lambda v: isinstance(v, bool)),
+    "clock_rate": (
+        f"a number above 0 and at most {MAX_CLOCK_RATE:g}",
+        lambda v: (
+            isinstance(v, int | float)
+            and not isinstance(v, bool)
+            and math.isfinite(v)
+            and 0 < v <= MAX_CLOCK_RATE
+        ),
+    ),
+}
+"""A `trial_start` marker's fields that the import reads, each with what it must be
+(JSON's own types: `"practice": "no"` or `"trial": 1.5` is refused, not read as
+something else)."""
+
+
+def _check_fields(path: Path, t: float, marker: dict[str, Any]) -> None:
+    event = marker["event"]
+    fields = TRIAL_FIELDS if event == "trial_start" else {"trial_id": TRIAL_FIELDS["trial_id"]}
+    for name, (expected, ok) in fields.items():
+        if name not in marker:
+            raise XdfInputError(
+                f"{path}: the {event} marker at {t:.3f} s has no field {name!r}; expected "
+                f"{expected} (a marker `study run` publishes)"
+            )
+        if not ok(marker[name]):
+            raise XdfInputError(
+                f"{path}: the {event} marker at {t:.3f} s has {name} = "
+                f"{_shown(marker[name])}; expected {expected}"
+            )
+
+
+def _shown(value: Any) -> str:
+    import json
+
+    text = json.dumps(value, ensure_ascii=True)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def marked_trials(
+    streams: list[dict[str, Any]], path: Path = Path("recording")
+) -> tuple[list[MarkedTrial], set[int]]:
+    """The trials the project's markers delimit, and the indices of the marker streams.
+
+    Every `trial_start` and `trial_end` is checked before any is used (`TRIAL_FIELDS`);
+    a trial started or ended twice, or ended without its start, makes the recording
+    inconsistent and is refused. A start without an end is a trial the session did not
+    finish (a crash): it has no span to store samples of, and is left out.
+    """
     found: list[tuple[float, dict[str, Any]]] = []
     marker_streams: set[int] = set()
     for i, stream in enumerate(streams):
         if _info(stream, "channel_format") != "string":
             continue
         ours = [
-            (float(t), parse(str(v[0])))
+            (float(t), parse(str(v[0]) if len(v) else ""))
             for t, v in zip(stream["time_stamps"], stream["time_series"], strict=True)
         ]
         ours = [(t, m) for t, m in ours if m is not None]
@@ -130,18 +197,32 @@ def marked_trials(streams: list[dict[str, Any]]) -> tuple[list[MarkedTrial], set
             marker_streams.add(i)
             found += ours
     found.sort(key=lambda tm: tm[0])
-    trials, open_start = [], None
+    trials, starts, ended = [], {}, set()
     for t, m in found:
+        if m["event"] not in ("trial_start", "trial_end"):
+            continue
+        _check_fields(path, t, m)
+        tid = m["trial_id"]
         if m["event"] == "trial_start":
-            open_start = (t, m)
-        elif (
-            m["event"] == "trial_end"
-            and open_start
-            and m.get("trial_id") == open_start[1].get("trial_id")
-        ):
-            trials.append(MarkedTrial(open_start[1], open_start[0], t))
-            open_start = None
+            if tid in starts:
+                raise _inconsistent(path, t, f"a second trial_start of trial_id {tid}")
+            starts[tid] = (t, m)
+            continue
+        if tid not in starts:
+            raise _inconsistent(path, t, f"a trial_end of trial_id {tid} without its start")
+        if tid in ended:
+            raise _inconsistent(path, t, f"a second trial_end of trial_id {tid}")
+        ended.add(tid)
+        start_t, start = starts[tid]
+        trials.append(MarkedTrial(start, start_t, t))
     return trials, marker_streams
+
+
+def _inconsistent(path: Path, t: float, what: str) -> XdfInputError:
+    return XdfInputError(
+        f"{path} is inconsistent: {what} at {t:.3f} s; expected each trial's start and end "
+        "marker once, in that order"
+    )
 
 
 def _info(stream: dict[str, Any], key: str, default: str = "") -> str:
@@ -166,6 +247,73 @@ def _channels(stream: dict[str, Any], n: int) -> list[dict[str, str]]:
     return [{"name": names[k], "unit": units[k], "type": types[k]} for k in range(n)]
 
 
+class _Collected(logging.Handler):
+    """pyxdf's log records, kept instead of printed (it logs the errors of a stream it
+    cannot parse, traceback and all, and goes on with what it read)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+
+def _load(path: Path) -> list[dict[str, Any]]:
+    """The recording's streams as pyxdf reads them, or one line if pyxdf could read only
+    part of it: an error it logged (a stream whose data do not fit its header), or a
+    stream with fewer samples than its footer counts."""
+    import pyxdf
+
+    logger = logging.getLogger("pyxdf")
+    collected = _Collected()
+    level, propagate = logger.level, logger.propagate
+    logger.addHandler(collected)
+    logger.setLevel(logging.WARNING)
+    logger.propagate = False
+    try:
+        streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
+    except Exception as exc:  # pyxdf raises what its parsers raise
+        raise XdfInputError(
+            f"{path} could not be read as XDF ({_first_line(exc)}); expected a LabRecorder "
+            "recording"
+        ) from None
+    finally:
+        logger.removeHandler(collected)
+        logger.setLevel(level)
+        logger.propagate = propagate
+    errors = [r for r in collected.records if r.levelno >= logging.ERROR]
+    if errors:
+        raise XdfInputError(
+            f"{path} could be read only in part (pyxdf: {_first_line(errors[0].getMessage())}); "
+            "expected a consistent recording, each stream's data as its header declares "
+            "(nothing was stored)"
+        )
+    for stream in streams:
+        counted = _footer_count(stream)
+        read = len(stream.get("time_stamps", ()))
+        if counted is not None and counted != read:
+            raise XdfInputError(
+                f"{path}: stream {_info(stream, 'name')!r} has {read} samples where its "
+                f"footer counts {counted}; expected a complete, consistent recording "
+                "(nothing was stored)"
+            )
+    return list(streams)
+
+
+def _footer_count(stream: dict[str, Any]) -> int | None:
+    try:
+        text = stream["footer"]["info"]["sample_count"][0]
+    except (KeyError, IndexError, TypeError):
+        return None
+    return int(text) if isinstance(text, str) and text.strip().isdigit() else None
+
+
+def _first_line(value: object) -> str:
+    text = str(value).strip()
+    return text.splitlines()[0] if text else type(value).__name__
+
+
 @dataclass
 class ImportResult:
     trials: int
@@ -175,18 +323,10 @@ class ImportResult:
 
 def import_xdf(engine: Engine, path: Path, progress: Progress = no_progress) -> ImportResult:
     """Store the recording's streams with the trials its markers name (module docstring)."""
-    import pyxdf
-
     check_structure(path)
     progress(f"reading {path.name}")
-    logging.getLogger("pyxdf").setLevel(logging.ERROR)
-    try:
-        streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
-    except Exception as exc:  # pyxdf raises what its parsers raise
-        raise XdfInputError(
-            f"{path} could not be read as XDF ({exc}); expected a LabRecorder recording"
-        ) from None
-    trials, marker_streams = marked_trials(streams)
+    streams = _load(path)
+    trials, marker_streams = marked_trials(streams, path)
     if not trials:
         raise XdfInputError(
             f"{path} has no haptic-study trial markers; expected a recording made while "
@@ -199,9 +339,7 @@ def import_xdf(engine: Engine, path: Path, progress: Progress = no_progress) -> 
     ]
     with Session(engine) as session:
         study, _ = load_study(session)
-        other = next(
-            (t.start.get("study") for t in trials if t.start.get("study") != study.name), None
-        )
+        other = next((t.start["study"] for t in trials if t.start["study"] != study.name), None)
         if other is not None:
             raise XdfInputError(
                 f"{path}: the markers are of study {other!r}; expected this database's "
@@ -256,7 +394,7 @@ def _store(conn: Any, stream: dict[str, Any], trial: MarkedTrial, trial_id: int)
     inside = np.flatnonzero((stamps >= trial.start_s) & (stamps <= trial.end_s))
     fmt = _info(stream, "channel_format")
     n_channels = int(_info(stream, "channel_count", "0"))
-    rate = float(trial.start.get("clock_rate") or 1.0)
+    rate = trial.clock_rate
     offsets = np.asarray(stream.get("clock_values", []), dtype=np.float64)
     correction = float(np.median(offsets)) if len(offsets) else 0.0
     meta = StreamMeta(

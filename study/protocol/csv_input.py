@@ -15,6 +15,14 @@ from study.errors import StudyInputError
 from study.protocol.export_files import unescape_cell
 
 DECIMAL = re.compile(r"^[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?$")
+WHOLE = re.compile(r"^[+-]?[0-9]+$")
+
+
+def whole_number(text: str) -> int | None:
+    """The whole number `text` spells in ASCII digits (an optional sign), else None:
+    Python's `int()` also takes `5_0` and other scripts' digits, which no person means."""
+    stripped = text.strip()
+    return int(stripped) if WHOLE.match(stripped) else None
 
 
 @dataclass
@@ -48,6 +56,14 @@ def read_csv(
     `text_columns` unescaped as an export escaped them."""
     if not path.is_file():
         raise StudyInputError(f"{path} does not exist")
+    from teleop_core.recording_checks import MAX_LINE_BYTES, longest_line_over
+
+    long_line = longest_line_over(path, MAX_LINE_BYTES)
+    if long_line is not None:
+        raise StudyInputError(
+            f"{path} row {long_line}: longer than {MAX_LINE_BYTES} bytes; expected a CSV "
+            "of one short row per record"
+        )
     try:
         frame = pd.read_csv(path, dtype=str, keep_default_na=False, encoding="utf-8")
     except pd.errors.EmptyDataError:
@@ -123,3 +139,39 @@ def number(
 
 
 BOOL = {"true": True, "1": True, "yes": True, "false": False, "0": False, "no": False}
+
+
+MAX_TEXT_FILE_BYTES = 10_000_000
+"""A design, campaign or model file is a few kB; far past this it is the wrong file."""
+
+
+def read_text_file(
+    path: Path, what: str, expected: str, max_bytes: int = MAX_TEXT_FILE_BYTES
+) -> str:
+    """The UTF-8 text of the regular file at `path`, read at most `max_bytes` far (a
+    device or a named pipe would block or never end), or one line naming the file."""
+    import stat
+
+    try:
+        mode = path.stat().st_mode
+        if not stat.S_ISREG(mode):
+            raise StudyInputError(f"{what} {path} is not a regular file; expected {expected}")
+        with path.open("rb") as f:
+            raw = f.read(max_bytes + 1)
+    except FileNotFoundError:
+        raise StudyInputError(f"{what} {path} does not exist; expected {expected}") from None
+    except OSError as exc:
+        raise StudyInputError(
+            f"{what} {path} cannot be read ({exc.strerror or exc}); expected {expected}"
+        ) from None
+    if len(raw) > max_bytes:
+        raise StudyInputError(
+            f"{what} {path} is larger than {max_bytes / 1e6:g} MB; expected {expected}"
+        )
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise StudyInputError(
+            f"{what} {path} is not UTF-8 text (byte {raw[exc.start]:#04x} at offset "
+            f"{exc.start}); expected {expected}"
+        ) from None

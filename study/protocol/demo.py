@@ -14,13 +14,15 @@ from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
-from sqlalchemy import select
+from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
 from db.migrate import open_database
 from db.models.study import Participant
+from db.models.tlx import TlxResponse
 from db.models.trial import Trial
-from study.protocol.design import TEMPLATE, parse_design
+from study.protocol.demo_marks import COMPLETE, STARTED, demo_state, mark_demo
+from study.protocol.design import TEMPLATE, StudyDesign, parse_design
 from study.protocol.parallel import Workers, start_workers
 from study.protocol.roster import add_participant, create_study
 from study.protocol.simulated_tlx import (
@@ -35,7 +37,8 @@ from teleop_core.progress import Progress, no_progress
 
 
 def fill_tlx(db_url: str, study_seed: int, durable: bool = True) -> int:
-    """A questionnaire for every block of every participant; returns how many.
+    """A questionnaire for every block of every participant that has none; returns how
+    many were stored.
     `durable=False`: commits not synced one by one (`db.engine.make_engine`)."""
     engine = open_database(db_url, create=False, durable=durable)
     stored = 0
@@ -61,6 +64,11 @@ def fill_tlx(db_url: str, study_seed: int, durable: bool = True) -> int:
                 columns=["pid", "task", "condition", "time", "contacts", "success", "seen", "felt"],
             )
             plan = [(p.id, p.code, [(b.task, b.condition) for b in p.blocks]) for p in people]
+            filled = set(
+                session.execute(
+                    select(TlxResponse.participant_id, TlxResponse.task, TlxResponse.condition)
+                ).all()
+            )
         # each block's trials, in stored order (one pass, not a filter per block)
         by_block = {key: rows for key, rows in trials.groupby(["pid", "task", "condition"])}
         empty = trials.iloc[:0]
@@ -80,6 +88,8 @@ def fill_tlx(db_url: str, study_seed: int, durable: bool = True) -> int:
                     int(block["seen"].sum()),
                     int(block["felt"].sum()),
                 )
+                if (pid, task, condition) in filled:  # a demo continued: drawn, not stored
+                    continue
                 store_tlx(engine, code, task, condition, ratings, chosen)
                 stored += 1
     finally:
@@ -124,11 +134,14 @@ def run_demo(
     participants=..., durable=False)`, started by the caller before this), else
     `jobs` processes started here.
 
-    The study is new (`create_study` refuses a database that holds one) and a demo
-    stopped halfway is run again rather than continued, so its commits are not synced
-    to the disk one by one (`durable=False` of `db.engine.make_engine`): a power cut
-    can lose its last commits, which the run that replaces it writes again. Its
-    samples, one commit per second of trial time, each waited for a sync before."""
+    The database is new, or holds a demo stopped halfway (`check_resumable`), which is
+    continued: the participants it had not enrolled are, each session goes on where it
+    stopped (an interrupted trial is repeated), the questionnaires not yet filled in
+    are. Audit rows mark the demo started (with its options) and complete, so a
+    half-finished demo says so (`demo_state`). Its commits are not synced to the disk
+    one by one (`durable=False` of `db.engine.make_engine`): a power cut can lose its
+    last commits, which the run that continues it writes again. Its samples, one commit
+    per second of trial time, each waited for a sync before."""
     text = TEMPLATE.replace("seed = 1 ", f"seed = {seed} ")
     for old, new in QUICK.items() if quick else ():
         text = text.replace(old, new)
@@ -145,12 +158,10 @@ def run_demo(
     design = parse_design(text)
     engine = open_database(db_url, create=True, durable=False)
     try:
-        create_study(engine, design, text)
-        codes = [
-            add_participant(engine, group).code
-            for group, n in design.groups.items()
-            for _ in range(n)
-        ]
+        if demo_state(engine) is None:
+            create_study(engine, design, text)
+            mark_demo(engine, STARTED, _options(seed, quick, sizes, trials_per_condition))
+        codes = _enrolled(engine, design)
     finally:
         engine.dispose()
     if workers is None:
@@ -162,3 +173,63 @@ def run_demo(
         _run_sessions(workers, codes, progress)
     progress("NASA-TLX")
     fill_tlx(db_url, design.seed, durable=False)
+    engine = open_database(db_url, create=False, durable=False)
+    try:
+        mark_demo(engine, COMPLETE, "every session run and every questionnaire filled in")
+    finally:
+        engine.dispose()
+
+
+def _options(
+    seed: int, quick: bool, sizes: dict[str, int] | None, trials_per_condition: int | None
+) -> str:
+    import json
+
+    return json.dumps(
+        {"seed": seed, "quick": quick, "sizes": sizes, "trials_per_condition": trials_per_condition}
+    )
+
+
+def check_resumable(
+    engine: Engine,
+    seed: int,
+    quick: bool,
+    sizes: dict[str, int] | None = None,
+    trials_per_condition: int | None = None,
+) -> None:
+    """StudyInputError unless the database is new, or holds an incomplete demo started
+    with these options (then `run_demo` goes on with it)."""
+    from db.models.study import Study
+    from study.errors import StudyInputError
+
+    state = demo_state(engine)
+    if state is None:
+        with Session(engine) as session:
+            other = session.scalar(select(Study.name).limit(1))
+        if other is not None:
+            raise StudyInputError(
+                f"the database holds study {other!r}, not a demo; expected a new --out folder "
+                "or --db"
+            )
+        return
+    if state[0] == COMPLETE:
+        raise StudyInputError(
+            "the database holds a complete demo already; expected a new --out folder or --db"
+        )
+    given = _options(seed, quick, sizes, trials_per_condition)
+    if state[1] != given:
+        raise StudyInputError(
+            f"the incomplete demo there was started with {state[1]}; expected the same "
+            f"options to finish it, got {given}"
+        )
+
+
+def _enrolled(engine: Engine, design: StudyDesign) -> list[str]:
+    """The demo's participant codes, enrolling those a stopped demo had not yet."""
+    with Session(engine) as session:
+        have = session.execute(select(Participant.group, Participant.code)).all()
+    codes = [c for _, c in have]
+    for group, n in design.groups.items():
+        missing = n - sum(g == group for g, _ in have)
+        codes += [add_participant(engine, group).code for _ in range(missing)]
+    return codes

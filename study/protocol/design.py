@@ -91,6 +91,13 @@ _KEYS: dict[str, type | tuple[type, ...]] = {
     "lsl": dict,
     "probes": dict,
 }
+_KIND_WORDS: dict[type | tuple[type, ...], str] = {
+    bool: "true or false",
+    int: "a whole number",
+    str: 'text in quotes, e.g. "x"',
+    list: "a list, e.g. [...]",
+    dict: "a table",
+}
 MAX_LSL_STREAMS = 16
 MAX_PREDICATE_CHARS = 500
 MAX_PROBE_TRIALS = 200
@@ -224,10 +231,11 @@ def _check_keys(data: dict[str, Any], source: str) -> None:
             f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(sorted(_KEYS))}"
         )
     for key, kind in _KEYS.items():
+        # TOML's true is a Python bool, which is an int too: only a key of kind bool takes it
         if key in data and (
-            not isinstance(data[key], kind) or (kind is int and isinstance(data[key], bool))
+            not isinstance(data[key], kind) or (kind is not bool and isinstance(data[key], bool))
         ):
-            expected = kind.__name__ if isinstance(kind, type) else "a number"
+            expected = _KIND_WORDS.get(kind, "a number")
             raise StudyInputError(f"{source}: {key} = {data[key]!r}; expected {expected}")
 
 
@@ -262,7 +270,14 @@ def _check_groups(groups: dict[str, Any], source: str) -> None:
         raise StudyInputError(
             f"{source}: [groups] has {len(groups)} groups; expected 1 to {MAX_GROUPS}"
         )
+    seen: dict[str, str] = {}
     for g, n in groups.items():
+        other = seen.setdefault(g.casefold(), g)
+        if other != g:
+            raise StudyInputError(
+                f"{source}: groups {other!r} and {g!r} differ only in case; expected each "
+                "group once (one name, one group in every table and figure)"
+            )
         if not (0 < len(g) <= MAX_GROUP_CHARS and g.isprintable() and g.strip() == g):
             raise StudyInputError(
                 f"{source}: group name {g!r}; expected 1-{MAX_GROUP_CHARS} printable "
@@ -350,7 +365,36 @@ def _lsl_settings(table: dict[str, Any], source: str) -> LslSettings:
                 f"{MAX_LSL_STREAMS} non-empty strings, e.g. {example}"
             )
         lists[key] = tuple(value)
+    for query in lists["record"]:
+        problem = _predicate_problem(query)
+        if problem:
+            raise StudyInputError(
+                f"{source}: lsl.record query {query!r} has {problem}; expected an LSL "
+                "predicate such as type='EMG' or name='Glove' and type='Force'"
+            )
     return LslSettings(publish, lists["record"], lists["plot"])
+
+
+def _predicate_problem(query: str) -> str | None:
+    """What is unbalanced in an LSL stream query (liblsl's XPath 1.0 predicate, which
+    would fail only when the session starts recording), or None."""
+    depth, quote = 0, None
+    for c in query:
+        if quote:
+            quote = None if c == quote else quote
+        elif c in "'\"":
+            quote = c
+        elif c in "([":
+            depth += 1
+        elif c in ")]":
+            depth -= 1
+            if depth < 0:
+                return f"a {c!r} without its opening bracket"
+    if quote:
+        return f"an unclosed {quote} quote"
+    if depth:
+        return "an unclosed bracket"
+    return None
 
 
 def _probes(table: dict[str, Any], blocks: int, source: str) -> tuple[dict[str, int], int]:

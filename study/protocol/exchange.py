@@ -316,6 +316,21 @@ def _check_codes(rows: list[dict[str, Any]], existing: Iterable[str], source: st
     p.raise_if_any()
 
 
+def _check_enrolled(rows: list[dict[str, Any]], existing: Iterable[str], source: str) -> None:
+    """Refuse a code the study has not enrolled (the import enrols only when asked)."""
+    p = Problems(source, [])
+    known = set(existing)
+    for r in rows:
+        if r["code"] not in known:
+            p.add(
+                r["row"],
+                "participant",
+                f"{r['code']!r} is not enrolled in this study; expected an enrolled code "
+                "(give --enrol-new to enrol the participants the file is the first to name)",
+            )
+    p.raise_if_any()
+
+
 def _file_hash(path: Path) -> str:
     import hashlib
 
@@ -327,12 +342,19 @@ def _file_hash(path: Path) -> str:
 
 
 def import_data(
-    engine: Engine, trials_csv: Path, tlx_csv: Path | None = None, actor: str | None = None
+    engine: Engine,
+    trials_csv: Path,
+    tlx_csv: Path | None = None,
+    actor: str | None = None,
+    *,
+    enrol_new: bool = False,
 ) -> tuple[int, int]:
     """Check both files completely, then write them in one transaction, with an audit row
-    per file (who, when, the file's name and SHA-256, its rows). A participant first seen
-    here is enrolled with the design's schedule (conditions in the design's order), so
-    `study run` runs the blocks and trials the file did not hold."""
+    per file (who, when, the file's name and SHA-256, its rows). A participant the study
+    does not have is refused (a typo'd code would be a new person with a schedule) unless
+    `enrol_new`: then one first seen here is enrolled with the design's schedule
+    (conditions in the design's order), so `study run` runs the blocks and trials the
+    file did not hold."""
     from study.protocol.actor import current_actor
 
     who = current_actor(actor)
@@ -356,6 +378,8 @@ def import_data(
         known = {code: p.group for code, p in existing.items()}
         trials = _check_trials(trials_frame, design, str(trials_csv), known)
         _check_codes(trials, existing, str(trials_csv))
+        if not enrol_new:
+            _check_enrolled(trials, existing, str(trials_csv))
         _file_trials(session, trials, design, existing, str(trials_csv))
         stored_tlx = {
             (code, task, condition)

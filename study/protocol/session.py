@@ -327,17 +327,14 @@ def _storage_failure(
     return (
         f"storing {code}'s {slot} failed ({reason}): kept {n_completed} trial(s) of {code} "
         f"completed in this session and {upto} of {slot}, which the next `study run` marks "
-        f"interrupted and repeats; expected {_expected_storage(reason)}"
+        f"interrupted and repeats; expected {_expected_storage(exc)}"
     )
 
 
-def _expected_storage(reason: str) -> str:
-    if "locked" in reason.lower() or "busy" in reason.lower():
-        return (
-            "the database free of another program's lock (retry when it is done, or "
-            "wait longer with ?timeout=SECONDS in the URL)"
-        )
-    return "a database with free space"
+def _expected_storage(exc: BaseException) -> str:
+    from db.failures import EXPECTED, classify
+
+    return EXPECTED[classify(exc).kind]
 
 
 def _check_stop(lease: LeaseHandle, stop: threading.Event | None) -> None:

@@ -31,6 +31,7 @@ from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import Trial
 from study.errors import StudyInputError
 from study.protocol.actor import current_actor
+from study.protocol.free_text import check_free_text
 from study.protocol.observer import SessionObserver
 from study.protocol.roster import find_participant, load_study
 from study.protocol.study_rows import raw_tlx, weighted_tlx
@@ -335,7 +336,7 @@ def _store_tlx(
 ) -> tuple[TlxResponse, bool]:
     ratings = check_ratings(ratings)
     who = current_actor(actor)
-    reason = reason.strip() if reason is not None else None
+    reason = check_free_text("reason", reason) if reason is not None else None
     with Session(engine) as session, session.begin():
         study, _ = load_study(session)
         participant = find_participant(session, study, code)
@@ -359,6 +360,12 @@ def _store_tlx(
             )
         ).first()
         values: dict[str, Any] = {**ratings, **{f"w_{s}": weights[s] for s in TLX_SUBSCALES}}
+        if existing is None and participant.withdrawn_at is not None:
+            raise StudyInputError(
+                f"participant {code} withdrew on {participant.withdrawn_at:%Y-%m-%d}; expected "
+                "an enrolled participant for a new questionnaire (`study participant "
+                "reinstate` first if the withdrawal was a mistake)"
+            )
         if existing is None:
             ran = session.scalar(
                 select(func.count())

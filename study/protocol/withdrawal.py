@@ -21,23 +21,15 @@ from db.models.audit import AuditEntry
 from db.models.study import Participant
 from study.errors import StudyInputError
 from study.protocol.actor import current_actor
+from study.protocol.free_text import check_free_text
 from study.protocol.roster import find_participant, load_study
 
-MAX_TEXT_CHARS = 500
 Change = tuple[Participant, Callable[[str, "str | None", str, str], None]]
 """A participant being changed and audit(field, old, new, reason), which logs a change."""
 
 
 def _check_text(what: str, text: str) -> str:
-    if not text.isprintable():  # a newline, a tab, a terminal's escape sequence
-        raise StudyInputError(
-            f"{what} {text!r} holds control characters; expected 1-{MAX_TEXT_CHARS} "
-            "printable characters on one line"
-        )
-    value = " ".join(text.split())
-    if not value or len(value) > MAX_TEXT_CHARS:
-        raise StudyInputError(f"{what} {text!r}; expected 1-{MAX_TEXT_CHARS} characters of text")
-    return value
+    return check_free_text(what, text)
 
 
 @contextmanager

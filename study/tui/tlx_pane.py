@@ -107,10 +107,10 @@ class PairChoice(Widget, can_focus=True):
 
 def _rating_value(text: str) -> object:
     """The typed rating as a number when it is one (check_rating then judges the scale)."""
-    try:
-        return int(text)
-    except ValueError:
-        return text
+    from study.protocol.csv_input import whole_number
+
+    value = whole_number(text)
+    return text if value is None else value
 
 
 Block = tuple[str, str, str]

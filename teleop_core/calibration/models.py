@@ -40,6 +40,7 @@ from teleop_core.errors import TeleopInputError
 from teleop_core.follower.params import FollowerPlantParams
 from teleop_core.follower.physics import RC_B, RC_F0, RC_J, RC_KT, RC_TC
 from teleop_core.follower.recording import FollowerRecording, read_checked_csv
+from teleop_core.recording_checks import MIN_SPREAD
 
 MASTER_COLUMNS = ("t", "current_ma", "f_ref")
 """The master's current-force calibration recording: time, commanded current, gauge force."""
@@ -77,6 +78,12 @@ class CalibrationData:
             )
         # an all-zero recording has nothing to fit: one line, not a traceback
         y = np.asarray(self.y, float)
+        if n and 0.0 < float(np.ptp(y)) < MIN_SPREAD:
+            raise TeleopInputError(
+                f"calibration data {self.name}: the reference force (or torque) varies by "
+                f"only {float(np.ptp(y)):.3g}; expected a force in SI units varying by at "
+                f"least {MIN_SPREAD:g} (the fit's squares would underflow to 0)"
+            )
         if n and float(np.ptp(y)) == 0.0:
             raise TeleopInputError(
                 f"calibration data {self.name}: the reference force (or torque) is "

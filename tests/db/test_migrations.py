@@ -78,6 +78,7 @@ def test_older_database_is_upgraded_in_place_keeping_its_data(
     reports: list[tuple[str | None, str, Path | None]] = []
     engine = open_database(
         db_url,
+        upgrade=True,
         version_locations=[later_revision],
         on_upgrade=lambda *r: reports.append(r),
     )

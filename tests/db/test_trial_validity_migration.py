@@ -6,12 +6,12 @@ from __future__ import annotations
 from sqlalchemy import inspect, text
 
 from db.engine import make_engine
-from db.migrate import open_database, upgrade
+from db.migrate import open_database, upgrade_schema
 
 
 def test_a_database_at_0008_opens_with_its_trials_valid(db_url: str) -> None:
     engine = make_engine(db_url)
-    upgrade(engine, "0008_probe_trials")
+    upgrade_schema(engine, "0008_probe_trials")
     with engine.begin() as conn:
         assert "invalid_reason" not in {c["name"] for c in inspect(conn).get_columns("trials")}
         conn.execute(
@@ -36,7 +36,7 @@ def test_a_database_at_0008_opens_with_its_trials_valid(db_url: str) -> None:
             )
         )
     engine.dispose()
-    engine = open_database(db_url, create=False)
+    engine = open_database(db_url, create=False, upgrade=True)
     with engine.begin() as conn:
         rows = conn.execute(text("SELECT id, status, invalid_reason FROM trials")).all()
         assert rows == [(1, "completed", None)]

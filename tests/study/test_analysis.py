@@ -211,7 +211,14 @@ def test_study_analyze_writes_the_json_contract(
     pd.DataFrame(tlx, columns=TLX_COLUMNS + TLX_WEIGHT_COLUMNS).to_csv(
         tmp_path / "x.csv", index=False
     )
-    argv = ["import", "--trials", str(tmp_path / "t.csv"), "--tlx", str(tmp_path / "x.csv")]
+    argv = [
+        "import",
+        "--enrol-new",
+        "--trials",
+        str(tmp_path / "t.csv"),
+        "--tlx",
+        str(tmp_path / "x.csv"),
+    ]
     assert main([*argv, "--db", db]) == 0
     out = tmp_path / "analysis"
     assert main(["analyze", "--out", str(out), "--json", str(tmp_path / "a.json"), "--db", db]) == 0
@@ -808,7 +815,14 @@ def _import_small_study(folder: Path, db: str) -> None:
     pd.DataFrame(tlx, columns=TLX_COLUMNS + TLX_WEIGHT_COLUMNS).to_csv(
         folder / "x.csv", index=False
     )
-    argv = ["import", "--trials", str(folder / "t.csv"), "--tlx", str(folder / "x.csv")]
+    argv = [
+        "import",
+        "--enrol-new",
+        "--trials",
+        str(folder / "t.csv"),
+        "--tlx",
+        str(folder / "x.csv"),
+    ]
     assert main([*argv, "--db", db]) == 0
 
 

@@ -46,7 +46,7 @@ def test_a_participant_created_by_an_import_gets_its_schedule(
 ) -> None:
     db = _init(tmp_path)
     (tmp_path / "one.csv").write_text(ONE_VO_TRIAL)
-    assert main(["import", "--trials", str(tmp_path / "one.csv"), "--db", db]) == 0
+    assert main(["import", "--enrol-new", "--trials", str(tmp_path / "one.csv"), "--db", db]) == 0
     capsys.readouterr()
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     out, err = capsys.readouterr()
@@ -73,7 +73,9 @@ def test_enrolment_and_imports_are_audited(tmp_path: Path) -> None:
     }
     csv = tmp_path / "one.csv"
     csv.write_text(ONE_VO_TRIAL.replace("P001,novice", "P003,novice"))
-    assert main(["import", "--trials", str(csv), "--actor", "EXP02", "--db", db]) == 0
+    assert (
+        main(["import", "--enrol-new", "--trials", str(csv), "--actor", "EXP02", "--db", db]) == 0
+    )
     (imported,) = _audit(db, "import")
     record = json.loads(imported.new_value)
     assert record == {

@@ -31,7 +31,10 @@ def test_the_template_is_the_papers_design() -> None:
     "text, message",
     [
         ("colour = 'red'", "unknown key 'colour'"),
-        ("trials_per_condition = 'three'", "trials_per_condition = 'three'; expected int"),
+        (
+            "trials_per_condition = 'three'",
+            "trials_per_condition = 'three'; expected a whole number",
+        ),
         ("conditions = ['VO', 'XX']", "condition 'XX'"),
         ("[groups]\nnovice = 0", "groups.novice = 0; expected a whole number from 1 to 1000"),
         ("counterbalancing = 'latin-square'\nconditions = ['VO']", "expected at least two"),

@@ -52,7 +52,14 @@ def test_import_then_export_round_trips_the_contract(db_url: str, tmp_path: Path
     assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db]) == 0
     (tmp_path / "t.csv").write_text(TRIALS)
     (tmp_path / "x.csv").write_text(TLX)
-    argv = ["import", "--trials", str(tmp_path / "t.csv"), "--tlx", str(tmp_path / "x.csv")]
+    argv = [
+        "import",
+        "--enrol-new",
+        "--trials",
+        str(tmp_path / "t.csv"),
+        "--tlx",
+        str(tmp_path / "x.csv"),
+    ]
     assert main([*argv, "--db", db]) == 0
     assert main(["export", "--out", str(tmp_path / "out"), "--db", db]) == 0
     trials = pd.read_csv(tmp_path / "out" / "trials.csv")
@@ -89,7 +96,7 @@ def test_a_bad_row_is_named_and_nothing_is_written(
     db = _init(tmp_path, "b.db")
     (tmp_path / "t.csv").write_text(TRIALS + row + "\n")
     capsys.readouterr()
-    assert main(["import", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 2
+    assert main(["import", "--enrol-new", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert message in err[0]
@@ -103,7 +110,14 @@ def test_an_off_scale_tlx_row_refuses_the_whole_import(
     (tmp_path / "t.csv").write_text(TRIALS)
     (tmp_path / "x.csv").write_text(TLX.replace("70,20,50", "70,22,50"))
     capsys.readouterr()
-    argv = ["import", "--trials", str(tmp_path / "t.csv"), "--tlx", str(tmp_path / "x.csv")]
+    argv = [
+        "import",
+        "--enrol-new",
+        "--trials",
+        str(tmp_path / "t.csv"),
+        "--tlx",
+        str(tmp_path / "x.csv"),
+    ]
     assert main([*argv, "--db", db]) == 2
     assert (
         "row 2, column physical: physical rating 22.0 is off the scale" in capsys.readouterr().err
@@ -115,14 +129,14 @@ def test_a_missing_column_is_named(tmp_path: Path, capsys: pytest.CaptureFixture
     db = _init(tmp_path, "d.db")
     (tmp_path / "t.csv").write_text(TRIALS.replace(",success", ",ok"))
     capsys.readouterr()
-    assert main(["import", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 2
+    assert main(["import", "--enrol-new", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 2
     assert "lacks column 'success'" in capsys.readouterr().err
 
 
 def test_parquet_export_has_the_same_columns(tmp_path: Path) -> None:
     db = _init(tmp_path, "e.db")
     (tmp_path / "t.csv").write_text(TRIALS)
-    assert main(["import", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 0
+    assert main(["import", "--enrol-new", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 0
     assert main(["export", "--out", str(tmp_path / "pq"), "--format", "parquet", "--db", db]) == 0
     assert tuple(pd.read_parquet(tmp_path / "pq" / "trials.parquet").columns) == TRIAL_COLUMNS
 

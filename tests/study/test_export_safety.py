@@ -36,7 +36,7 @@ def _design(tmp_path: Path) -> Path:
 def _study(tmp_path: Path, db: str) -> None:
     assert main(["init", "--design", str(_design(tmp_path)), "--db", db]) == 0
     (tmp_path / "t.csv").write_text(TRIALS)
-    assert main(["import", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 0
+    assert main(["import", "--enrol-new", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 0
 
 
 @pytest.mark.parametrize(
@@ -78,7 +78,7 @@ def test_an_imported_formula_comes_out_escaped_and_imports_back(
     again.mkdir()
     db2 = str(tmp_path / "again.db")
     assert main(["init", "--design", str(_design(again)), "--db", db2]) == 0
-    assert main(["import", "--trials", str(out / "trials.csv"), "--db", db2]) == 0
+    assert main(["import", "--enrol-new", "--trials", str(out / "trials.csv"), "--db", db2]) == 0
     assert main(["export", "--out", str(again / "out"), "--db", db2]) == 0
     assert (again / "out" / "trials.csv").read_bytes() == (out / "trials.csv").read_bytes()
 
@@ -116,7 +116,9 @@ def test_an_interrupted_export_leaves_the_previous_files(
     (tmp_path / "t2.csv").write_text(
         ",".join(TRIAL_COLUMNS) + "\nP002,expert,lcca,VO,2,25.0,0.5,0.2,true\n"
     )
-    assert main(["import", "--trials", str(tmp_path / "t2.csv"), "--db", db_url]) == 0
+    assert (
+        main(["import", "--enrol-new", "--trials", str(tmp_path / "t2.csv"), "--db", db_url]) == 0
+    )
     real = pd.DataFrame.to_csv
     calls = []
 

@@ -109,7 +109,14 @@ def study_db(tmp_path_factory: pytest.TempPathFactory) -> str:
     columns = trial_columns(["lcca", "notes"])
     pd.DataFrame(_trial_rows(rng), columns=columns).to_csv(folder / "t.csv", index=False)
     pd.DataFrame(_tlx_rows(rng), columns=TLX_COLUMNS).to_csv(folder / "x.csv", index=False)
-    argv = ["import", "--trials", str(folder / "t.csv"), "--tlx", str(folder / "x.csv")]
+    argv = [
+        "import",
+        "--enrol-new",
+        "--trials",
+        str(folder / "t.csv"),
+        "--tlx",
+        str(folder / "x.csv"),
+    ]
     assert main([*argv, "--db", db]) == 0
     engine = open_database(db, create=False)
     try:

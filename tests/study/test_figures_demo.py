@@ -85,7 +85,7 @@ def test_quick_demo_writes_analysis_and_figures(
     assert (
         main(["figures", "--db", str(demo / "demo.db"), "--out", str(figs), "--format", "gif"]) == 2
     )
-    assert "expected some of pdf,svg,png" in capsys.readouterr().err
+    assert "expected a comma-separated list of pdf,svg,png" in capsys.readouterr().err
     assert main(["demo", "--quick", "--out", str(demo)]) == 2  # never overwrites a demo
 
 
@@ -127,7 +127,7 @@ def test_mixed_database_reports_the_mix_and_driver_restricts(
     db = tmp_path / "mixed.db"
     shutil.copy(demo / "demo.db", db)
     csv = _measured_csv(tmp_path / "t.csv", ["M01", "M02", "M03"])
-    assert main(["import", "--trials", str(csv), "--db", str(db)]) == 0
+    assert main(["import", "--enrol-new", "--trials", str(csv), "--db", str(db)]) == 0
     out = tmp_path / "all"
     assert main(["analyze", "--out", str(out), "--db", str(db)]) == 0
     source = json.loads((out / "analysis.json").read_text())["data_source"]
@@ -166,7 +166,17 @@ def test_imported_database_carries_no_simulated_label(
     db = init_study(tmp_path)
     codes = [f"M{k:02d}" for k in range(9)]
     assert (
-        main(["import", "--trials", str(_measured_csv(tmp_path / "t.csv", codes)), "--db", db]) == 0
+        main(
+            [
+                "import",
+                "--enrol-new",
+                "--trials",
+                str(_measured_csv(tmp_path / "t.csv", codes)),
+                "--db",
+                db,
+            ]
+        )
+        == 0
     )
     out = tmp_path / "a"
     assert main(["analyze", "--out", str(out), "--db", db]) == 0

@@ -9,8 +9,15 @@
 - Trial CSVs and design TOML files built from valid and nonsense cells: an import or
   init that succeeds stored only plausible values; nonsense is refused.
 
-The CI budget (at least 1,000 cases): 300 + 300 + 250 + 200; `@pytest.mark.slow` runs
-more of each.
+- Each class of bad input on its own (numbers typed in other scripts' digits or with
+  underscores, empty and control-character text, pipes and devices as files, a database
+  at an older revision under every command that reads it, notes that look like an
+  e-mail address or a phone number): exit 2, one line, no traceback, and the folder's
+  files, the database among them, byte for byte as they were.
+
+The CI budget (at least 1,000 cases): 300 + 300 + 250 + 200, and a few dozen per class;
+`@pytest.mark.slow` runs more of each, `STUDY_FUZZ_EXAMPLES=2000` sets the examples per
+class for a longer run.
 """
 
 from __future__ import annotations
@@ -18,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import os
 import shutil
 import signal
 import sqlite3
@@ -377,7 +385,7 @@ def test_trial_csvs(small_study: Path, rows: list[dict[str, str]], extra: str) -
     with workdir() as where:
         shutil.copy(small_study, where / "s.db")
         (where / "f.csv").write_text(header + "\n" + body + "\n")
-        code, err = run(["import", "--trials", "f.csv", "--db", "s.db"], where)
+        code, err = run(["import", "--enrol-new", "--trials", "f.csv", "--db", "s.db"], where)
         assert code in (0, 2), (header, body, err)
         if code == 2:
             assert_one_line_refusal(code, err, [header, body])
@@ -453,3 +461,191 @@ def test_design_tomls(top: dict[str, object], groups: dict[str, object]) -> None
 @pytest.mark.parametrize("case", NUMBER_CASES, ids=lambda c: " ".join(map(str, c[0])))
 def test_every_bad_number_of_every_command(case: tuple) -> None:
     _refused(case)
+
+
+# -- the classes of bad input, each: exit 2, one line, no traceback, nothing written ----
+
+EXAMPLES = int(os.environ.get("STUDY_FUZZ_EXAMPLES", "0") or 0)
+"""Examples per class below: a few dozen in CI; `STUDY_FUZZ_EXAMPLES=2000` for a long run."""
+
+
+def _examples(ci: int) -> int:
+    return EXAMPLES or ci
+
+
+def _files(where: Path) -> dict[str, bytes]:
+    """Every regular file in the folder, by name: what a command could have written."""
+    return {p.name: p.read_bytes() for p in sorted(where.iterdir()) if p.is_file()}
+
+
+def refused_untouched(argv: list[str], where: Path) -> str:
+    """`study ARGV` in `where` is refused (exit 2, one line, no traceback) and leaves the
+    folder's files (the database among them) byte for byte as they were."""
+    before = _files(where)
+    code, err = run(argv, where)
+    assert "Traceback" not in err, (argv, err)
+    assert_one_line_refusal(code, err, argv)
+    assert _files(where) == before, (argv, "a refused command wrote")
+    return err
+
+
+@contextlib.contextmanager
+def study_copy(small_study: Path) -> Iterator[Path]:
+    with workdir() as where:
+        shutil.copy(small_study, where / "s.db")
+        yield where
+
+
+# numbers written with what Python's int() takes and a person does not type: other
+# scripts' digits (Devanagari, Arabic-Indic, full-width, superscript), underscores,
+# signs, spaces inside, hexadecimal
+ODD_DIGITS = st.text(
+    alphabet=st.characters(categories=["Nd", "No"], exclude_characters="0123456789"),
+    min_size=1,
+    max_size=3,
+)
+ODD_NUMBER = st.one_of(
+    ODD_DIGITS,
+    st.tuples(st.integers(1, 9), st.integers(0, 9)).map(lambda t: f"{t[0]}_{t[1]}"),
+    st.integers(1, 99).map(lambda n: f"{n} 0"),
+    st.integers(1, 99).map(hex),
+    st.tuples(st.integers(1, 9), ODD_DIGITS).map(lambda t: f"{t[0]}{t[1]}"),
+)
+RATING_OPTIONS = ["--mental", "--physical", "--temporal", "--performance", "--effort"]
+
+
+@settings(FAST, max_examples=_examples(40))
+@given(value=ODD_NUMBER, option=st.sampled_from([*RATING_OPTIONS, "--count"]))
+def test_numbers_typed_oddly(small_study: Path, value: str, option: str) -> None:
+    with study_copy(small_study) as where:
+        if option == "--count":
+            argv = ["participant", "add", "--group", "novice", f"--count={value}"]
+        else:
+            ratings = [f"{o}=50" for o in RATING_OPTIONS if o != option]
+            argv = ["tlx", "enter", "--participant", "P001", "--task", "lcca"]
+            argv += ["--condition", "VO", "--frustration=50", *ratings, f"{option}={value}"]
+        refused_untouched([*argv, "--db", "s.db"], where)
+
+
+CONTROL = st.characters(categories=["Cc", "Cf", "Zl", "Zp"], exclude_characters="\x00")
+BAD_TEXT = st.one_of(
+    st.sampled_from(["", " ", "\t", "\u3000"]),
+    st.tuples(st.text(max_size=6), CONTROL, st.text(max_size=6)).map("".join),
+    st.integers(501, 5000).map(lambda n: "x" * n),
+)
+TEXT_COMMANDS = [
+    (["participant", "note", "P001"], None),
+    (["participant", "withdraw", "P001"], "--reason"),
+    (["participant", "add", "--group", "novice"], "--site"),
+    (["tlx", "show"], "--participant"),
+    (["tlx", "pairs"], "--participant"),
+    (["export", "--out", "o"], "--participant"),
+]
+
+
+@settings(FAST, max_examples=_examples(40))
+@given(text=BAD_TEXT, command=st.sampled_from(TEXT_COMMANDS))
+def test_empty_and_control_text(small_study: Path, text: str, command: tuple) -> None:
+    argv, option = command
+    value = [text] if option is None else [f"{option}={text}"]
+    with study_copy(small_study) as where:
+        refused_untouched([*argv, *value, "--db", "s.db"], where)
+        assert not (where / "o").exists()
+
+
+@pytest.fixture(scope="module")
+def special_files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    folder = tmp_path_factory.mktemp("special")
+    os.mkfifo(folder / "fifo")
+    return {"fifo": str(folder / "fifo"), "zero": "/dev/zero", "null": "/dev/null"}
+
+
+FILE_COMMANDS = [
+    ["import", "--trials", "{f}"],
+    ["import", "--trials", "t.csv", "--tlx", "{f}"],
+    ["import-xdf", "{f}"],
+    ["calibrate", "{f}"],
+    ["init", "--design", "{f}", "--db", "n.db"],
+    ["db", "info", "--db", "{f}"],
+    ["schedule", "--db", "{f}"],
+    ["participant", "add", "--group", "novice", "--db", "{f}"],
+]
+
+
+@settings(FAST, max_examples=_examples(24))
+@given(command=st.sampled_from(FILE_COMMANDS), kind=st.sampled_from(["fifo", "zero", "null"]))
+def test_pipes_and_devices_as_files(
+    small_study: Path, special_files: dict[str, str], command: list[str], kind: str
+) -> None:
+    argv = [a.replace("{f}", special_files[kind]) for a in command]
+    if "--db" not in argv and argv[0] != "calibrate":
+        argv += ["--db", "s.db"]
+    with study_copy(small_study) as where:
+        err = refused_untouched(argv, where)
+        assert special_files[kind] in err, err  # the file is named
+
+
+@pytest.fixture(scope="module")
+def old_revision(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A database at an older revision, as an earlier `study` left it."""
+    from db.engine import make_engine
+    from db.migrate import upgrade_schema
+
+    path = tmp_path_factory.mktemp("old") / "s.db"
+    engine = make_engine(f"sqlite:///{path}")
+    upgrade_schema(engine, "0008_probe_trials")
+    engine.dispose()
+    return path
+
+
+READ_COMMANDS = [
+    ["schedule"],
+    ["tlx", "show"],
+    ["tlx", "pairs", "--participant", "P001"],
+    ["export", "--out", "o"],
+    ["analyze", "--out", "o"],
+    ["figures", "--out", "o"],
+    ["participant", "add", "--group", "novice"],
+    ["run", "--participant", "P001"],
+]
+
+
+@settings(FAST, max_examples=_examples(16))
+@given(command=st.sampled_from(READ_COMMANDS))
+def test_an_old_revision_is_left_as_it_was(old_revision: Path, command: list[str]) -> None:
+    with workdir() as where:
+        shutil.copy(old_revision, where / "s.db")
+        err = refused_untouched([*command, "--db", "s.db"], where)
+        assert "study db upgrade" in err, err
+        assert not (where / "o").exists()
+
+
+PERSONAL = st.one_of(
+    # the addresses people write (st.emails() also draws RFC 5322's rarer local parts,
+    # such as `{@a.ag`, which the check does not look for)
+    st.from_regex(r"[a-z][a-z0-9._]{0,8}@[a-z]{2,8}(\.[a-z]{2,6}){1,2}", fullmatch=True),
+    st.tuples(
+        st.sampled_from(["+41 ", "+1 (", "0", "(0", ""]),
+        st.lists(st.integers(10, 999).map(str), min_size=3, max_size=4),
+        st.sampled_from([" ", "-", ".", "/"]),
+    ).map(lambda t: t[0] + t[2].join(t[1])),
+)
+NOTE_COMMANDS = [
+    ["participant", "note", "P001"],
+    ["participant", "note", "P001", "--session"],
+    ["participant", "withdraw", "P001", "--reason"],
+]
+
+
+@settings(FAST, max_examples=_examples(40))
+@given(
+    contact=PERSONAL,
+    before=st.sampled_from(["", "call ", "wrote from ", "reach at: "]),
+    command=st.sampled_from(NOTE_COMMANDS),
+)
+def test_notes_that_look_like_contact_details(
+    small_study: Path, contact: str, before: str, command: list[str]
+) -> None:
+    with study_copy(small_study) as where:
+        err = refused_untouched([*command, before + contact, "--db", "s.db"], where)
+        assert "--not-personal" in err, err

@@ -39,7 +39,7 @@ def _init(tmp_path: Path, db: str, enrol: int = 2) -> None:
 
 def _import(tmp_path: Path, db: str, rows: str, name: str = "t.csv") -> int:
     (tmp_path / name).write_text(HEADER + "\n" + rows)
-    return main(["import", "--trials", str(tmp_path / name), "--db", db])
+    return main(["import", "--enrol-new", "--trials", str(tmp_path / name), "--db", db])
 
 
 def test_an_imported_code_does_not_collide_with_enrolment(

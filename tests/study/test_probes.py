@@ -222,6 +222,7 @@ def test_probe_run_stores_export_import_and_covariate(tmp_path, capsys) -> None:
         main(
             [
                 "import",
+                "--enrol-new",
                 "--trials",
                 str(ex / "trials.csv"),
                 "--probes",
@@ -246,6 +247,7 @@ def test_probe_run_stores_export_import_and_covariate(tmp_path, capsys) -> None:
         capsys,
         [
             "import",
+            "--enrol-new",
             "--trials",
             str(ex / "trials.csv"),
             "--probes",
@@ -330,7 +332,7 @@ def test_bad_probe_input_is_one_line(tmp_path, capsys) -> None:
         "P001,outsider,lcca,VO,1,30,1.0,0.5,true\n"
     )
     line = one_error_line(
-        capsys, ["import", "--trials", str(trials), "--probes", str(bad), "--db", db]
+        capsys, ["import", "--enrol-new", "--trials", str(trials), "--probes", str(bad), "--db", db]
     )
     assert "p.csv row 2, column response: 'inf'; expected a plain decimal number" in line
     # nothing half-written: the trials file was not imported either

@@ -147,7 +147,7 @@ def test_an_import_is_accepted_and_round_trips_or_refused_with_one_line(
     with path.open("w", newline="", encoding="utf-8") as f:
         csv.writer(f).writerows([TRIAL_COLUMNS, *rows])
     before = _counts(db)
-    rc, err = _run(["import", "--trials", str(path), "--db", str(db)])
+    rc, err = _run(["import", "--enrol-new", "--trials", str(path), "--db", str(db)])
     if rc == 2:
         assert len(err) == 1, err
         assert err[0].startswith("study import: error: "), err

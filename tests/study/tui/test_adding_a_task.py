@@ -174,7 +174,12 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
     # the exported file imports back into a fresh study of the same design
     db2 = str(tmp_path / "again.db")
     assert main(["init", "--design", str(tmp_path / "d.toml"), "--db", db2]) == 0
-    assert main(["import", "--trials", str(tmp_path / "out" / "trials.csv"), "--db", db2]) == 0
+    assert (
+        main(
+            ["import", "--enrol-new", "--trials", str(tmp_path / "out" / "trials.csv"), "--db", db2]
+        )
+        == 0
+    )
     # analysis: the task's measures per group and condition
     out = tmp_path / "a.json"
     assert main(["analyze", "--out", str(tmp_path / "res"), "--json", str(out), "--db", db]) == 0

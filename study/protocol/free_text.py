@@ -1,0 +1,102 @@
+"""The free text a person types into the study: notes, session notes and reasons.
+
+Each is one line of at most `MAX_TEXT_CHARS` printable characters (a newline, a tab or a
+terminal's escape sequence would garble every listing and the audit log), with its runs
+of spaces collapsed. The database holds pseudonymous codes and no personal data, so a
+text that looks like contact details is refused with a line saying why: an e-mail
+address (`name@host.tld`) or a phone number (seven or more digits, written with the
+spaces, dots, dashes, slashes, brackets and leading `+` people put in them). A text that
+only looks like one (a device's serial number, a lot number, a time written
+20251202-1030) is kept when the caller says so (`keep_lookalike`, or a `NotPersonal` text; on the
+command line `--not-personal`), and the audit log then shows it as the person typed it.
+
+Names cannot be told from other words without a list of names, and are not looked for:
+the rule "codes only" is the experimenter's, and `study` states it in its help.
+"""
+
+from __future__ import annotations
+
+import re
+
+from study.errors import StudyInputError
+
+MAX_TEXT_CHARS = 500
+
+EMAIL = re.compile(r"[A-Za-z0-9._%+-]+@[A-Za-z0-9-]+(\.[A-Za-z0-9-]+)*\.[A-Za-z]{2,}")
+PHONE = re.compile(r"(?<![\w.])\+?(\(?\d[\d ()./-]{5,}\d)(?![\w])")
+NOT_PHONE = re.compile(r"\d{4}-\d{2}-\d{2}|\d+\.\d+|\d{4}-\d{2}-\d{2} \d{2}")
+"""A date (2025-12-02) or a decimal number (0.8123456): many digits, no phone number."""
+MIN_PHONE_DIGITS = 7
+"""Fewer digits than any phone number with its area code (a trial count, a year)."""
+
+OPT_OUT = "--not-personal"
+"""The command-line flag that keeps a text which only looks like contact details."""
+
+
+class NotPersonal(str):
+    """A text the person confirmed only looks like contact details (`--not-personal`):
+    `check_free_text` keeps it."""
+
+
+class PersonalDataError(StudyInputError):
+    """A free text that looks like personal data (an e-mail address, a phone number)."""
+
+
+def looks_personal(text: str) -> str | None:
+    """What in `text` looks like contact details ("an e-mail address 'a@b.org'"), or None."""
+    email = EMAIL.search(text)
+    if email:
+        return f"an e-mail address {email.group(0)!r}"
+    for match in PHONE.finditer(text):
+        digits = sum(c.isdigit() for c in match.group(0))
+        if digits >= MIN_PHONE_DIGITS and not NOT_PHONE.fullmatch(match.group(0).strip()):
+            return f"a phone number {match.group(0).strip()!r}"
+    return None
+
+
+def check_free_text(what: str, text: str, *, keep_lookalike: bool = False) -> str:
+    """`text` as it is stored: one printable line of 1 to `MAX_TEXT_CHARS` characters,
+    its spaces collapsed, with nothing that looks like contact details (unless
+    `keep_lookalike`); else StudyInputError naming it.
+
+    Parameters
+    ----------
+    what : str
+        What the text is, for the message ("note", "withdrawal reason").
+    text : str
+        What was typed.
+    keep_lookalike : bool, optional
+        Keep a text that only looks like an e-mail address or a phone number (so is a
+        `NotPersonal` text).
+
+    Returns
+    -------
+    str
+        The text to store.
+
+    Raises
+    ------
+    StudyInputError
+        Control characters, empty, too long; `PersonalDataError` for contact details.
+    """
+    shown = text if len(text) <= 60 else text[:57] + "..."
+    if not text.isprintable():  # a newline, a tab, a terminal's escape sequence
+        raise StudyInputError(
+            f"{what} {shown!r} holds control characters; expected 1-{MAX_TEXT_CHARS} "
+            "printable characters on one line"
+        )
+    value = " ".join(text.split())
+    if not value or len(value) > MAX_TEXT_CHARS:
+        raise StudyInputError(
+            f"{what} {shown!r} ({len(value)} characters); expected 1-{MAX_TEXT_CHARS} "
+            "characters of text"
+        )
+    kept = keep_lookalike or isinstance(text, NotPersonal)
+    found = None if kept else looks_personal(value)
+    if found is not None:
+        raise PersonalDataError(
+            f"{what} holds what looks like {found}; expected no personal data (participants "
+            f"are pseudonymous codes): leave contact details out, or give {OPT_OUT} if it "
+            "only looks like one"
+        )
+    return value
