@@ -61,7 +61,7 @@ def test_unknown_command_names_it(capsys: pytest.CaptureFixture[str]) -> None:
 def test_bad_option_value_names_value_and_expectation(capsys: pytest.CaptureFixture[str]) -> None:
     line = _error(capsys, "bench", "db", "--rows", "lots")
     assert "'lots'" in line
-    assert "integer" in line
+    assert "whole number" in line
     assert line.startswith("study bench db: error:")
 
 
