@@ -242,6 +242,7 @@ terminal app or simulate whole studies; the full suite runs everything."""
 SLOW_TESTS = (
     "tests/study/test_sample_export.py::test_export_memory_does_not_grow_with_the_samples",
     "tests/study/test_analysis.py::test_study_analyze_",
+    "tests/study/test_export_roundtrip.py::test_an_export_imports_back_",
     "tests/study/test_participant_fit_coverage.py::test_the_intervals_of_a_fit_whose_model_holds_",
     "tests/study/test_probes.py::test_probe_run_stores_export_import_and_covariate",
     "tests/study/test_fuzz.py::test_trial_csvs",

@@ -12,12 +12,14 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
 
+from study.analysis.crossover_text import design_checks_json, design_checks_paragraph
+from study.analysis.mixed_model import DEFAULT_DDF
 from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE, EXACT_MAX_N, RESOLUTION_REL
 
 if TYPE_CHECKING:
     from study.analysis.stats import Analysis
 
-PACKAGES = ("haptic-study", "numpy", "pandas", "matplotlib")
+PACKAGES = ("haptic-study", "numpy", "scipy", "statsmodels", "pandas", "matplotlib")
 """The packages that compute or draw the results (`COMPUTED_BY` says which does what)."""
 
 COMPUTED_BY = (
@@ -25,9 +27,10 @@ COMPUTED_BY = (
     "p-values (exact or normal approximation, as R's wilcox.test) and the F, t and normal "
     "distributions (the regularized incomplete beta function and the normal integral), "
     "Hedges' g_av, the rank-biserial correlation, Holm's correction, the mixed ANOVA's "
-    "sums of squares (closed form, two conditions) and the mixed model's REML fit "
-    "(profiled criterion, exact optimum): haptic-study's own code with numpy, checked in "
-    "its tests against R (afex, lme4, stats), scipy and pingouin"
+    "sums of squares (closed form, two conditions): haptic-study's own code with numpy, "
+    "checked in its tests against R (afex, stats), scipy and pingouin; the mixed model: "
+    "statsmodels' MixedLM (REML), its Satterthwaite and Kenward-Roger df haptic-study's "
+    "own code, checked against R's lme4, lmerTest, pbkrtest and emmeans"
 )
 
 WILCOXON_RULE = (
@@ -70,15 +73,25 @@ def anova_method(ss_type: int) -> str:
     )
 
 
-def lmm_method() -> str:
+def lmm_method(ddf: str = DEFAULT_DDF, references: list[str] | None = None) -> str:
+    refs = "; ".join(references or []) or "condition VO, the alphabetically first group"
     return (
         "Linear mixed model over all measured trials, value ~ condition * group + "
-        "(1 | participant), fitted by REML at the exact optimum of the profiled criterion "
-        "(lme4's estimates); treatment coding with VO and the alphabetically first group as "
-        "reference. p from Wald z tests (no Satterthwaite or Kenward-Roger df). A fit whose "
-        "participant-intercept SD is below 1e-4 of the residual SD is reported as singular "
-        "(lme4's isSingular)."
+        "(1 | participant), fitted by REML (lme4's optimum). "
+        f"Treatment coding, reference levels: {refs}; the condition coefficient is the "
+        "HV - VO difference in the reference group. The condition effect is reported as "
+        "the marginal means of the conditions averaged over the groups with equal weights "
+        "and their difference (as emmeans). "
+        f"t tests with {ddf} degrees of freedom (as lmerTest"
+        + (" and pbkrtest" if ddf == "Kenward-Roger" else "")
+        + "), 95 % confidence intervals from the same df. A fit whose participant-intercept "
+        "SD is below 1e-4 of the residual SD is reported as singular (lme4's isSingular)."
     )
+
+
+def _lmm_references(analysis: Analysis) -> list[str]:
+    rows = analysis.lmm_rows
+    return list(dict.fromkeys(r["reference"] for r in rows if r.get("kind") == "coefficient"))
 
 
 def software_versions() -> dict[str, str]:
@@ -114,11 +127,15 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
         },
         "lmm": {
             "estimation": "REML",
-            "p": "Wald z",
-            "df": "none (z tests)",
+            "p": f"t tests with {analysis.ddf} df",
+            "df": analysis.ddf,
             "formula": "value ~ condition * group + (1 | participant)",
+            "reference": _lmm_references(analysis),
+            "condition_effect": "marginal means averaged over the groups with equal "
+            "weights, and their difference (emmeans)",
             "singular": "participant-intercept SD below 1e-4 of the residual SD",
         },
+        "design_checks": design_checks_json(),
         "computed_by": COMPUTED_BY,
         "software": software_versions(),
     }
@@ -167,7 +184,8 @@ def methods_markdown(analysis: Analysis) -> str:
         f"({len(analysis.exclusions)} exclusions, listed with the tables).{_invalid(analysis)}\n\n"
         f"{comparison_method()}\n\n"
         f"{anova_method(analysis.ss_type)}\n\n"
-        f"{lmm_method()}\n\n"
+        f"{lmm_method(analysis.ddf, _lmm_references(analysis))}\n\n"
+        f"{design_checks_paragraph(analysis)}\n\n"
         f"Computed by: {COMPUTED_BY}.\n\n"
         f"Software: {software}.\n"
     )

@@ -14,12 +14,13 @@ import math
 from pathlib import Path
 from typing import Any
 
+from study.analysis.crossover import CHECK_COLUMNS, FIT_COLUMNS
 from study.analysis.methods import methods_json, methods_markdown
+from study.analysis.mixed_model import LMM_COLUMNS
 from study.analysis.stats import (
     ANOVA_COLUMNS,
     COMPARISON_COLUMNS,
     DESCRIPTIVE_COLUMNS,
-    LMM_COLUMNS,
     Analysis,
     Row,
 )
@@ -46,15 +47,20 @@ COMPARISON_KEYS = (
 ANOVA_KEYS, LMM_KEYS, DESCRIPTIVE_KEYS = ANOVA_COLUMNS, LMM_COLUMNS, DESCRIPTIVE_COLUMNS
 
 
+def _strict(v: Any) -> Any:
+    """NaN and infinities as null (strict JSON), inside lists and dicts too."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: _strict(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_strict(x) for x in v]
+    return v
+
+
 def _records(rows: list[Row], keys: tuple[str, ...]) -> list[dict[str, Any]]:
     # NaN, and the infinite F of a residual that is exactly zero: null (strict JSON)
-    return [
-        {
-            k: None if isinstance(v, float) and not math.isfinite(v) else v
-            for k, v in ((k, row[k]) for k in keys)
-        }
-        for row in rows
-    ]
+    return [{k: _strict(row[k]) for k in keys} for row in rows]
 
 
 def to_json(analysis: Analysis) -> dict[str, Any]:
@@ -67,6 +73,8 @@ def to_json(analysis: Analysis) -> dict[str, Any]:
         "descriptives": _records(analysis.descriptive_rows, DESCRIPTIVE_KEYS),
         "exclusions": analysis.exclusions,
         "warnings": analysis.warnings,
+        "design_checks": _records(analysis.design_checks, CHECK_COLUMNS),
+        "design_fit": _records(analysis.design_fit, FIT_COLUMNS),
     }
 
 

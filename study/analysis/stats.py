@@ -16,10 +16,13 @@
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
   pingouin's `mixed_anova` has Type II only, so both come from two one-way models in
   closed form (`anova.py` says how); unequal group sizes are stated.
-- `mixed_model`: a linear mixed model over all trials, value ~ condition * group with a
-  random intercept per participant, REML at the exact optimum (`stats_lmm`, equal to
-  lme4); its p-values are Wald z tests (no Satterthwaite df; lmerTest's are a little
-  larger on small samples). A singular fit (lme4's `isSingular`) is noted with the table.
+- `mixed_model` (`study.analysis.mixed_model`): a linear mixed model over all trials,
+  value ~ condition * group with a random intercept per participant, REML at lme4's
+  optimum, t tests with Satterthwaite df (lmerTest) or Kenward-Roger's, and the
+  condition effect as marginal means over the groups (emmeans). A singular fit (lme4's
+  `isSingular`) is noted with the table.
+- `design_checks` (`study.analysis.crossover`): the crossover's period, carry-over and
+  trial-position effects, added to the model where the data call for them.
 
 Participants without both conditions of a comparison are excluded from it, and each
 exclusion is stated.
@@ -43,7 +46,6 @@ import numpy as np
 
 from study.analysis.anova import anova_rows
 from study.analysis.distributions import (
-    norm_sf,
     rank_average,
     shapiro_wilk,
     signed_rank_exact_p,
@@ -51,6 +53,7 @@ from study.analysis.distributions import (
     t_ppf,
     t_two_sided,
 )
+from study.analysis.mixed_model import DEFAULT_DDF, LMM_COLUMNS, mixed_model_rows
 from study.analysis.source import DRIVERS, DataSource
 from study.errors import StudyInputError
 
@@ -79,7 +82,6 @@ COMPARISON_COLUMNS = (
 EXACT_MAX_N = 50
 """The Wilcoxon p is exact below this many non-zero differences (R's `wilcox.test`)."""
 ANOVA_COLUMNS = ("task", "measure", "source", "F", "df1", "df2", "p", "np2", "ss_type")
-LMM_COLUMNS = ("task", "measure", "term", "estimate", "se", "p", "p_method")
 DESCRIPTIVE_COLUMNS = (
     "task",
     "measure",
@@ -177,6 +179,12 @@ class Analysis:
     """The analysed trials by driver; every output says when they are simulated."""
     ss_type: int = 2
     """Sums-of-squares type of the mixed ANOVA."""
+    ddf: str = DEFAULT_DDF
+    """Degrees of freedom of the mixed model's t tests (Satterthwaite or Kenward-Roger)."""
+    design_checks: list[Row] = field(default_factory=list)
+    """The crossover's checks (`crossover.CHECK_COLUMNS`), one per task, measure, effect."""
+    design_fit: list[Row] = field(default_factory=list)
+    """The model before and after the checks (`crossover.FIT_COLUMNS`)."""
 
     @cached_property
     def descriptives(self) -> pd.DataFrame:
@@ -276,6 +284,9 @@ class Analysis:
             warnings=[w for w in self.warnings if w.startswith(f"{task}/")],
             source=self.source,
             ss_type=self.ss_type,
+            ddf=self.ddf,
+            design_checks=keep(self.design_checks),
+            design_fit=keep(self.design_fit),
         )
 
 
@@ -794,150 +805,6 @@ def _anova_of(
     return anova_rows(group, va, vb, ss_type), notes
 
 
-CONDITION_TERM = "C(condition, Treatment('VO'))"
-
-
-def lmm_design(data: Any) -> tuple[np.ndarray, list[str]]:
-    """The fixed-effects design of value ~ condition * group.
-
-    Treatment coding with VO and the alphabetically first group as reference.
-
-    Parameters
-    ----------
-    data : Any
-        Anything with ``data["condition"]`` and ``data["group"]`` (a frame's columns,
-        arrays or lists), one entry per trial.
-
-    Returns
-    -------
-    X : numpy.ndarray
-        The design matrix, one row per trial: intercept, condition, group and
-        condition x group indicator columns.
-    names : list of str
-        The columns' names as patsy names them (``Intercept``,
-        ``C(condition, Treatment('VO'))[T.HV]``, ...).
-    """
-    condition = np.asarray(data["condition"], dtype=object)
-    group_of = np.asarray(data["group"], dtype=object)
-    conditions = [c for c in sorted(set(condition)) if c != "VO"]
-    groups = sorted(set(group_of))[1:]
-    cond = {c: (condition == c).astype(float) for c in conditions}
-    grp = {g: (group_of == g).astype(float) for g in groups}
-    columns, names = [np.ones(len(condition))], ["Intercept"]
-    for c in conditions:
-        columns.append(cond[c])
-        names.append(f"{CONDITION_TERM}[T.{c}]")
-    for g in groups:
-        columns.append(grp[g])
-        names.append(f"C(group)[T.{g}]")
-    for g in groups:
-        for c in conditions:
-            columns.append(cond[c] * grp[g])
-            names.append(f"{CONDITION_TERM}[T.{c}]:C(group)[T.{g}]")
-    return np.column_stack(columns), names
-
-
-def mixed_model(
-    trials: pd.DataFrame, measures: tuple[str, ...] | None = None
-) -> tuple[pd.DataFrame, list[str]]:
-    """The linear mixed model of every trial measure, per task.
-
-    REML with a random intercept per participant (`stats_lmm`, lme4's optimum); p from
-    Wald z tests.
-
-    Parameters
-    ----------
-    trials : pandas.DataFrame
-        One row per measured trial (participant, group, task, condition, measures).
-    measures : tuple of str or None, optional
-        The measures to model; default each task's analysed measures
-        (`study.protocol.tasks`).
-
-    Returns
-    -------
-    tuple of (pandas.DataFrame, list of str)
-        The fixed effects (`LMM_COLUMNS`) and notes (skipped fits, a fit on the
-        boundary as lme4's `isSingular` says).
-
-    Raises
-    ------
-    StudyInputError
-        A trial names a task that is not known (with `measures` None).
-    """
-    rows, notes = mixed_model_rows(trials.to_dict("records"), measures)
-    return frame(rows, LMM_COLUMNS), notes
-
-
-def mixed_model_rows(
-    trials: list[Row], measures: tuple[str, ...] | None = None
-) -> tuple[list[Row], list[str]]:
-    """`mixed_model` on trial rows.
-
-    Parameters
-    ----------
-    trials : list of dict of str to Any
-        One row per measured trial: participant, group, task, condition and the
-        measures by name.
-    measures : tuple of str or None, optional
-        The measures to model; None: each task's analysed measures
-        (`study.protocol.tasks`).
-
-    Returns
-    -------
-    rows : list of dict of str to Any
-        The fixed effects of each task x measure, keyed by `LMM_COLUMNS`.
-    notes : list of str
-        One line per skipped or failed fit and per singular fit.
-
-    Raises
-    ------
-    StudyInputError
-        A trial names a task that is not known (with `measures` None).
-    """
-    from study.analysis.stats_lmm import SINGULAR_TOL, fit_random_intercept
-    from study.protocol.tasks import get_task
-
-    rows, notes = [], []
-    keys = ("participant", "group", "condition")
-    for task, g in _groups((t["task"], t) for t in trials).items():
-        for measure in measures or get_task(task).analysed_measures:
-            data = [t for t in g if _finite(t.get(measure)) and all(_finite(t[k]) for k in keys)]
-            participants = np.array([t["participant"] for t in data], dtype=object)
-            if len(set(participants)) < 3:
-                notes.append(f"{task}/{measure}: mixed model skipped (fewer than 3 participants)")
-                continue
-            design = {k: [t[k] for t in data] for k in ("condition", "group")}
-            X, names = lmm_design(design)
-            try:
-                if np.linalg.matrix_rank(X) < X.shape[1]:
-                    raise ValueError("a condition x group cell has no trials")
-                fit = fit_random_intercept(
-                    X, np.array([t[measure] for t in data], dtype=float), participants
-                )
-            except (np.linalg.LinAlgError, ValueError) as exc:
-                notes.append(f"{task}/{measure}: mixed model could not be fitted: {exc}")
-                continue
-            if fit.singular:
-                notes.append(
-                    f"{task}/{measure}: mixed model warning: singular fit, the participant "
-                    f"intercept SD is {fit.theta:.2g} of the residual SD (below lme4's "
-                    f"isSingular tolerance {SINGULAR_TOL:g})"
-                )
-            for term, est, se in zip(names, fit.beta, fit.se, strict=True):
-                rows.append(
-                    {
-                        "task": task,
-                        "measure": measure,
-                        "term": term,
-                        "estimate": float(est),
-                        "se": float(se),
-                        "p": 2 * norm_sf(abs(float(est / se))),
-                        "p_method": "Wald z",
-                    }
-                )
-    return rows, notes
-
-
 def _missing_questionnaires(trials: list[Row], long: Long) -> list[str]:
     notes = []
     answered: dict[Any, set[Any]] = {}
@@ -983,11 +850,24 @@ def analyze(
     return analyze_rows(trials.to_dict("records"), long_records(long), ss_type, withdrawn)
 
 
+def _design_checks(trials: list[Row]) -> Any:
+    """The crossover's checks (`crossover.design_checks`) when the trials carry their
+    block; none (and a note) when they do not."""
+    from study.analysis.crossover import CrossoverResult, design_checks
+
+    if not trials or not all("block" in t or "period" in t for t in trials):
+        return CrossoverResult(
+            notes=["design checks skipped: the trials carry no block order"] if trials else []
+        )
+    return design_checks(trials)
+
+
 def analyze_rows(
     trials: list[Row],
     long: Long,
     ss_type: int = DEFAULT_SS_TYPE,
     withdrawn: Sequence[str] = (),
+    ddf: str = DEFAULT_DDF,
 ) -> Analysis:
     """`analyze` on rows: what `study analyze` runs, without pandas.
 
@@ -1001,6 +881,8 @@ def analyze_rows(
         Sums-of-squares type of the mixed ANOVA, 2 or 3.
     withdrawn : Sequence of str, optional
         Exclusion lines for withdrawn participants, stated first.
+    ddf : str, optional
+        The mixed model's df: Satterthwaite (default) or Kenward-Roger.
 
     Returns
     -------
@@ -1015,14 +897,18 @@ def analyze_rows(
     comparisons, excluded = comparison_rows(long)
     excluded = [*withdrawn, *_missing_questionnaires(trials, long), *excluded]
     anova, anova_notes = mixed_anova_rows(long, ss_type=ss_type)
-    lmm, lmm_notes = mixed_model_rows(trials)
+    lmm, lmm_notes = mixed_model_rows(trials, ddf=ddf)
+    checks = _design_checks(trials)
     return Analysis(
         descriptive_rows=descriptive_rows(long),
         comparison_rows=comparisons,
         anova_rows=anova,
         lmm_rows=lmm,
         exclusions=excluded,
-        warnings=anova_notes + lmm_notes,
+        warnings=anova_notes + lmm_notes + checks.notes,
         source=DataSource.of_drivers([t["driver"] for t in trials if "driver" in t]),
         ss_type=ss_type,
+        ddf=ddf,
+        design_checks=checks.checks,
+        design_fit=checks.fits,
     )

@@ -17,12 +17,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from study.analysis.apa import bounded_text, p_text
+from study.analysis.crossover_text import design_checks_cells, design_checks_method
 from study.analysis.methods import anova_method, comparison_method, lmm_method
+from study.analysis.mixed_model import LMM_COLUMNS
 from study.analysis.stats import (
     ANOVA_COLUMNS,
     COMPARISON_COLUMNS,
     DESCRIPTIVE_COLUMNS,
-    LMM_COLUMNS,
     Analysis,
     Row,
 )
@@ -306,23 +307,50 @@ def anova_table(analysis: Analysis) -> Table:
     )
 
 
+def lmm_label(row: Row) -> str:
+    """A mixed-model row as a reader names it: the coefficient with its reference level
+    ('HV (in expert)'), or the marginal mean or contrast over the groups."""
+    if row.get("kind") == "marginal mean":
+        return f"{row['term'].removeprefix('mean ')} (mean over groups)"
+    if row.get("kind") == "marginal contrast":
+        return f"{row['term']} (mean over groups)"
+    label = term_label(row["term"])
+    reference = row.get("reference") or ""
+    group = reference.rsplit("group ", 1)[-1] if "group " in reference else ""
+    is_condition = "[T." in row["term"] and row["term"].startswith("C(condition")
+    if is_condition and ":" not in row["term"] and group:
+        return f"{label} (in {group})"
+    return label
+
+
 def lmm_table(analysis: Analysis) -> Table:
     m = analysis.lmm_rows
-    header = ("task", "measure", "term", "estimate", "SE", "p (Wald z)")
+    ddf = analysis.ddf
+    header = ("task", "measure", "term", "estimate", "SE", "df", "95 % CI", f"p ({ddf})")
     cells = [
         [
             r["task"],
             r["measure"],
-            term_label(r["term"]),
+            lmm_label(r),
             _num(r["estimate"], 4),
             _num(r["se"], 4),
-            p_text(r["p"]),
+            _num(r.get("df"), 1),
+            f"[{_num(r.get('ci_low'), 4)}, {_num(r.get('ci_high'), 4)}]",
+            p_text(r["p"]) if r["p"] is not None else "",
         ]
         for r in m
     ]
     return _model_table(
-        analysis, "lmm", (LMM_COLUMNS, m, header, cells), lmm_method(), "mixed model"
+        analysis,
+        "lmm",
+        (LMM_COLUMNS, m, header, cells),
+        lmm_method(ddf, _references(m)),
+        "mixed model",
     )
+
+
+def _references(rows: list[Row]) -> list[str]:
+    return list(dict.fromkeys(r["reference"] for r in rows if r.get("kind") == "coefficient"))
 
 
 def _model_table(
@@ -380,4 +408,14 @@ def all_tables(analysis: Analysis) -> list[Table]:
         comparisons_table(analysis),
         anova_table(analysis),
         lmm_table(analysis),
+        design_checks_table(analysis),
     ]
+
+
+def design_checks_table(analysis: Analysis) -> Table:
+    """The crossover's checks (`crossover`): one row per task, measure and effect."""
+    from study.analysis.crossover import CHECK_COLUMNS
+
+    header, cells = design_checks_cells(analysis.design_checks)
+    caption = f"{_preamble(analysis)}{design_checks_method()}"
+    return Table("design_checks", CHECK_COLUMNS, analysis.design_checks, header, cells, caption)

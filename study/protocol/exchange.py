@@ -10,7 +10,9 @@ The column contracts (other tools rely on them; keep them exactly):
   other measures (LCCA's wall_contacts, NOTES's peak_force_rendered_n, ...).
 - tlx: participant, task, condition, mental, physical, temporal, performance, effort,
   frustration, and optionally w_mental ... w_frustration (tallies of the 15 choices,
-  summing to 15)
+  summing to 15; all empty for a questionnaire without them)
+- both files as `study export` writes them also carry `PROVENANCE_COLUMNS` (trials) and
+  `TLX_PROVENANCE_COLUMNS` (tlx), optional on import
 
 An import is checked row by row before anything is written, and written in one
 transaction: all or nothing. Errors name the file, the row (as a spreadsheet numbers
@@ -70,6 +72,23 @@ two peaks under their own names (`trial_columns`)."""
 TLX_COLUMNS = ("participant", "task", "condition", *TLX_SUBSCALES)
 TLX_WEIGHT_COLUMNS = tuple(f"w_{s}" for s in TLX_SUBSCALES)
 _TEXT_COLUMNS = ("participant", "group", "task", "condition")
+PROVENANCE_COLUMNS = (
+    "block",
+    "data_source",
+    "driver",
+    "withdrawn",
+    "valid",
+    "invalid_reason",
+    "included",
+)
+"""What an export adds to each trial row so that the analysis can be redone from the
+file alone: the block's place in the participant's order (from 1), whether the trial was
+simulated or measured, who drove it, whether the participant withdrew, whether the trial
+was marked invalid (and why), and whether the analysis includes it (`yes`, or why not).
+An import takes the block order, the simulated label and the invalid marks back; a file
+without these columns (an export from before them) imports with the design's order,
+as measured (`imported`) and valid."""
+TLX_PROVENANCE_COLUMNS = ("block", "data_source", "withdrawn", "included")
 
 
 def _check_trials(
@@ -101,6 +120,7 @@ def _check_trials(
         success = BOOL.get(r["success"].strip().lower())
         if success is None:
             p.add(row, "success", f"{r['success']!r}; expected true or false")
+        provenance = _provenance(p, row, r)
         key = (code, r["task"], r["condition"], trial)
         if key in seen:
             p.add(
@@ -118,11 +138,41 @@ def _check_trials(
                 "trial": int(trial),
                 "success": success,
                 "row": row,
+                **provenance,
                 **values,
             }
         )
     p.raise_if_any()
     return rows
+
+
+def _provenance(p: Problems, row: int, r: dict[str, str]) -> dict[str, Any]:
+    """The row's `PROVENANCE_COLUMNS` an import keeps: its block (None without the
+    column), its driver (`simulated` stays simulated, anything else is `imported`), its
+    invalid mark, and whether its participant withdrew."""
+    block: int | None = None
+    text = r.get("block", "").strip()
+    if text:
+        if _TRIAL_NUMBER.match(text) and int(text) >= 1:
+            block = int(text)
+        else:
+            p.add(row, "block", f"{text!r}; expected a whole number from 1")
+    source = (r.get("driver", "") or r.get("data_source", "")).strip().lower()
+    reason = r.get("invalid_reason", "").strip()
+    valid = BOOL.get(r.get("valid", "true").strip().lower() or "true")
+    if valid is None:
+        p.add(row, "valid", f"{r['valid']!r}; expected true or false")
+    if valid is False and not reason:
+        reason = "marked invalid in the imported file"
+    withdrawn = BOOL.get(r.get("withdrawn", "false").strip().lower() or "false")
+    if withdrawn is None:
+        p.add(row, "withdrawn", f"{r['withdrawn']!r}; expected true or false")
+    return {
+        "block": block,
+        "driver": "simulated" if source == "simulated" else "imported",
+        "invalid_reason": reason or None,
+        "withdrawn": bool(withdrawn),
+    }
 
 
 def _measures(
@@ -136,7 +186,7 @@ def _measures(
     own = {m.name for m in task.measures}
     out: dict[str, float | None] = {}
     for column in columns:
-        if column in TRIAL_KEYS or column == "success" or column in own:
+        if column in TRIAL_KEYS or column in PROVENANCE_COLUMNS or column in ("success", *own):
             continue
         if r[column].strip():
             p.add(
@@ -187,7 +237,12 @@ def _file_trials(
                 (b.block_index, b.id, b.task, b.condition, b.n_trials) for b in participant.blocks
             ]
         else:
-            order = participant.condition_order if participant is not None else design.conditions
+            order = (
+                participant.condition_order
+                if participant is not None
+                else _imported_order(rows, r["code"], design)
+            )
+            r["order"] = tuple(order)
             blocks = [
                 (b["block_index"], None, b["task"], b["condition"], b["n_trials"])
                 for b in plan_blocks(design, tuple(order))
@@ -215,6 +270,18 @@ def _file_trials(
             )
         r["attempt"] = max((a for a, _ in before), default=0) + 1
     p.raise_if_any()
+
+
+def _imported_order(rows: list[dict[str, Any]], code: str, design: StudyDesign) -> list[str]:
+    """The condition order of a participant first seen in the file: as its `block`
+    column says (conditions by their first block), else the design's."""
+    first: dict[str, int] = {}
+    for r in rows:
+        if r["code"] == code and r["block"] is not None:
+            first[r["condition"]] = min(first.get(r["condition"], r["block"]), r["block"])
+    if not first:
+        return list(design.conditions)
+    return sorted(design.conditions, key=lambda c: (first.get(c, 1 << 30), c))
 
 
 def _check_tlx(
@@ -264,21 +331,7 @@ def _check_tlx(
                 ratings[s] = check_rating(s, float(text))
             except StudyInputError as exc:
                 p.add(row, s, str(exc))
-        weights: Mapping[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
-        if weighted:
-            texts = {s: r[f"w_{s}"].strip() for s in TLX_SUBSCALES}
-            bad = [s for s in TLX_SUBSCALES if not DECIMAL.match(texts[s])]
-            if bad:
-                p.add(
-                    row,
-                    f"w_{bad[0]}",
-                    f"{texts[bad[0]]!r} is not a plain decimal number; expected 0-5 choices",
-                )
-            else:
-                try:
-                    weights = check_weights({s: float(texts[s]) for s in TLX_SUBSCALES})
-                except StudyInputError as exc:
-                    p.add(row, "w_*", str(exc))
+        weights = _tlx_weights(p, row, r) if weighted else dict.fromkeys(TLX_SUBSCALES)
         rows.append(
             {
                 "code": r["participant"],
@@ -290,6 +343,26 @@ def _check_tlx(
         )
     p.raise_if_any()
     return rows
+
+
+def _tlx_weights(p: Problems, row: int, r: dict[str, str]) -> Mapping[str, int | None]:
+    """The row's tallies of the 15 choices; all empty: a questionnaire without them."""
+    weights: Mapping[str, int | None] = dict.fromkeys(TLX_SUBSCALES)
+    texts = {s: r[f"w_{s}"].strip() for s in TLX_SUBSCALES}
+    if any(texts.values()):  # a questionnaire without the choices leaves them all empty
+        bad = [s for s in TLX_SUBSCALES if not DECIMAL.match(texts[s])]
+        if bad:
+            p.add(
+                row,
+                f"w_{bad[0]}",
+                f"{texts[bad[0]]!r} is not a plain decimal number; expected 0-5 choices",
+            )
+        else:
+            try:
+                weights = check_weights({s: float(texts[s]) for s in TLX_SUBSCALES})
+            except StudyInputError as exc:
+                p.add(row, "w_*", str(exc))
+    return weights
 
 
 def _code_number(code: str) -> tuple[str, int]:
@@ -361,9 +434,18 @@ def import_data(
     with Session(engine) as session:
         _, design = load_study(session)
     measures = tuple(m for m in measure_columns(design.tasks) if m != COMPLETION_TIME)
-    trials_frame = read_csv(trials_csv, (*TRIAL_KEYS, "success"), measures, _TEXT_COLUMNS)
+    trials_frame = read_csv(
+        trials_csv, (*TRIAL_KEYS, "success"), (*measures, *PROVENANCE_COLUMNS), _TEXT_COLUMNS
+    )
     tlx_frame = (
-        read_csv(tlx_csv, TLX_COLUMNS, TLX_WEIGHT_COLUMNS, _TEXT_COLUMNS) if tlx_csv else None
+        read_csv(
+            tlx_csv,
+            TLX_COLUMNS,
+            (*TLX_WEIGHT_COLUMNS, *TLX_PROVENANCE_COLUMNS),
+            _TEXT_COLUMNS,
+        )
+        if tlx_csv
+        else None
     )
     with write_transaction(engine) as conn, Session(bind=conn) as session:
         study, design = load_study(session)
@@ -437,12 +519,17 @@ def _participant_of(
             study_id=study_id,
             code=t["code"],
             group=t["group"],
-            condition_order=list(design.conditions),
+            condition_order=list(t.get("order") or design.conditions),
             site="imported",
         )
         session.add(participant)
         session.flush()
         existing[t["code"]] = participant
+        if t["withdrawn"]:
+            from datetime import UTC, datetime
+
+            participant.withdrawn_at = datetime.now(UTC)
+            participant.withdrawal_reason = f"withdrawn in {trials_csv.name}"
         session.add(
             AuditEntry(
                 entity="participant",
@@ -474,8 +561,9 @@ def _imported_trial(t: dict[str, Any], participant_id: int) -> Trial:
         trial_index=t["trial"] - 1,
         practice=False,
         attempt=t["attempt"],
-        driver="imported",
+        driver=t["driver"],
         status="completed",
+        invalid_reason=t["invalid_reason"],
         completion_time_s=t[COMPLETION_TIME],
         success=t["success"],
     )

@@ -21,7 +21,13 @@ from sqlalchemy.orm import Session
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from study.errors import StudyInputError
-from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_KEYS
+from study.protocol.exchange import (
+    PROVENANCE_COLUMNS,
+    TLX_COLUMNS,
+    TLX_PROVENANCE_COLUMNS,
+    TLX_WEIGHT_COLUMNS,
+    TRIAL_KEYS,
+)
 from study.protocol.export_files import AtomicFile, escape_frame, refuse_symlink
 from study.protocol.roster import load_study
 from study.protocol.stream_export import (
@@ -50,6 +56,13 @@ CODEBOOK = {
         f"w_{s}": ("count", f"times {s} was chosen in the 15 pairwise comparisons")
         for s in TLX_SUBSCALES
     },
+    "block": ("", "the block's place in the participant's order of blocks, from 1"),
+    "data_source": ("", "simulated or measured (a questionnaire: its participant's trials)"),
+    "driver": ("", "who drove the trial: simulated, keyboard, hardware or imported"),
+    "withdrawn": ("", "true if the participant withdrew (their data are not analysed)"),
+    "valid": ("", "false if the trial was marked invalid (kept, not analysed)"),
+    "invalid_reason": ("", "why the trial was marked invalid; empty while it is valid"),
+    "included": ("", "yes if `study analyze` uses the row, otherwise why not"),
     "seq": ("", "sample number within the trial"),
 }
 """The columns every study has; each task's measures and sample columns are described
@@ -187,13 +200,67 @@ def _frames(
     from study.probes.store import probe_frame
 
     trials = trial_frame(engine, tasks)
-    trials = trials[list(trial_columns(dict.fromkeys([*tasks, *trials["task"]])))]
-    tlx = pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
+    columns = list(trial_columns(dict.fromkeys([*tasks, *trials["task"]])))
+    trials, tlx = _provenance(
+        engine, trials, pd.DataFrame(tlx_rows, columns=list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS))
+    )
+    trials = trials[columns + list(PROVENANCE_COLUMNS)]
+    tlx = tlx[list(TLX_COLUMNS + TLX_WEIGHT_COLUMNS + TLX_PROVENANCE_COLUMNS)]
     frames = {"trials": trials, "tlx": tlx}
     probe_trials = probe_frame(engine)
     if len(probe_trials):  # a study that ran probes: their trials too
         frames["probe_trials"] = export_frame(probe_trials)
     return frames
+
+
+def _provenance(
+    engine: Engine, trials: pd.DataFrame, tlx: pd.DataFrame
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The trials and questionnaires with `PROVENANCE_COLUMNS` (and the questionnaires'
+    `TLX_PROVENANCE_COLUMNS`): what the analysis needs besides the numbers."""
+    from study.protocol.study_rows import invalid_rows, withdrawn_rows
+    from study.protocol.trial_table import driver_connection
+
+    with driver_connection(engine) as conn:
+        withdrawn = withdrawn_rows(conn)
+        invalid = invalid_rows(conn)
+    trials = trials.copy()
+    keys = zip(
+        trials["participant"], trials["task"], trials["condition"], trials["trial"], strict=True
+    )
+    reasons = [invalid.get((c, t, k, int(n))) for c, t, k, n in keys]
+    trials["data_source"] = [
+        "simulated" if d == "simulated" else "measured" for d in trials["driver"]
+    ]
+    trials["withdrawn"] = trials["participant"].isin(list(withdrawn))
+    trials["valid"] = [r is None for r in reasons]
+    trials["invalid_reason"] = [r or "" for r in reasons]
+    trials["included"] = [
+        _included(withdrawn.get(c), w, r)
+        for c, w, r in zip(trials["participant"], trials["withdrawn"], reasons, strict=True)
+    ]
+    tlx = tlx.copy()
+    sources = trials.groupby("participant")["data_source"].agg(
+        lambda s: s.iloc[0] if s.nunique() == 1 else "mixed"
+    )
+    blocks = trials.groupby(["participant", "task", "condition"])["block"].first()
+    tlx_keys = list(zip(tlx["participant"], tlx["task"], tlx["condition"], strict=True))
+    tlx["block"] = pd.array([blocks.get(k) for k in tlx_keys], dtype="Int64")
+    tlx["data_source"] = [sources.get(c, "measured") for c in tlx["participant"]]
+    tlx["withdrawn"] = tlx["participant"].isin(list(withdrawn))
+    tlx["included"] = [
+        _included(withdrawn.get(c), w, None)
+        for c, w in zip(tlx["participant"], tlx["withdrawn"], strict=True)
+    ]
+    return trials, tlx
+
+
+def _included(withdrawal: str | None, withdrawn: bool, invalid: str | None) -> str:
+    if withdrawn:
+        return f"no: participant withdrawn ({withdrawal})" if withdrawal else "no: withdrawn"
+    if invalid is not None:
+        return f"no: trial marked invalid ({invalid})"
+    return "yes"
 
 
 def _codebook_frame(

@@ -4,8 +4,9 @@ no ORM and no pandas, so that `study analyze` loads neither. `trial_table.trial_
 and `analysis.frames` build their frames from these rows.
 
 - `trial_rows`: one dict per measured trial (completed, not practice, the latest attempt
-  of each slot): participant, group, task, condition, trial (1-based), completion_time_s,
-  the trial's measures under their names, success, driver.
+  of each slot): participant, group, task, condition, trial (1-based), block (the
+  block's place in the participant's schedule, 1-based), completion_time_s, the trial's
+  measures under their names, success, driver.
 - `tlx_rows`: one dict per questionnaire in the order stored: participant, group, task,
   condition, the six ratings, tlx_raw, tlx_weighted (None without the pairwise
   comparisons).
@@ -35,7 +36,7 @@ def measure_columns(tasks: Iterable[str], analysed_only: bool = False) -> list[s
 
 
 TRIALS_SQL = (
-    'SELECT p.code, p."group", t.id, t.task, t.condition, t.trial_index, '
+    'SELECT p.code, p."group", t.id, t.task, t.condition, t.block_index, t.trial_index, '
     "t.completion_time_s, t.success, t.driver "
     "FROM participants p JOIN trials t ON t.participant_id = p.id "
     "WHERE t.status = 'completed' AND NOT t.practice "
@@ -75,7 +76,7 @@ def trial_rows(conn: Any) -> list[dict[str, Any]]:
     for trial_id, name, value in _query(conn, MEASURES_SQL):
         measures.setdefault(trial_id, {})[name] = value
     latest: dict[tuple[Any, ...], dict[str, Any]] = {}
-    for code, group, trial_id, task, condition, index, time_s, success, driver in _query(
+    for code, group, trial_id, task, condition, block, index, time_s, success, driver in _query(
         conn, TRIALS_SQL
     ):
         latest[(code, task, condition, index)] = {
@@ -84,6 +85,7 @@ def trial_rows(conn: Any) -> list[dict[str, Any]]:
             "task": task,
             "condition": condition,
             "trial": index + 1,
+            "block": block + 1,
             COMPLETION_TIME: time_s,
             **measures.get(trial_id, {}),
             "success": bool(success),

@@ -30,7 +30,7 @@ def trial_frame(engine: Engine, tasks: Iterable[str] = ()) -> pd.DataFrame:
 def trial_table(rows: list[dict[str, Any]], tasks: Iterable[str] = ()) -> pd.DataFrame:
     """`trial_rows` as a frame with the columns of `trial_frame`."""
     names = list(dict.fromkeys([*tasks, *(r["task"] for r in rows)]))
-    columns = [*TRIAL_KEYS, *measure_columns(names), "success", "driver"]
+    columns = [*TRIAL_KEYS, "block", *measure_columns(names), "success", "driver"]
     return pd.DataFrame(rows, columns=columns)
 
 

@@ -12,7 +12,13 @@ from sqlalchemy.orm import Session
 from db.models.trial import Trial
 from study.cli import main
 from study.protocol.design import TEMPLATE
-from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_COLUMNS
+from study.protocol.exchange import (
+    PROVENANCE_COLUMNS,
+    TLX_COLUMNS,
+    TLX_PROVENANCE_COLUMNS,
+    TLX_WEIGHT_COLUMNS,
+    TRIAL_COLUMNS,
+)
 
 TRIALS = (
     ",".join(TRIAL_COLUMNS)
@@ -63,15 +69,19 @@ def test_import_then_export_round_trips_the_contract(db_url: str, tmp_path: Path
     assert main([*argv, "--db", db]) == 0
     assert main(["export", "--out", str(tmp_path / "out"), "--db", db]) == 0
     trials = pd.read_csv(tmp_path / "out" / "trials.csv")
-    assert tuple(trials.columns) == TRIAL_COLUMNS
+    assert tuple(trials.columns) == TRIAL_COLUMNS + PROVENANCE_COLUMNS
+    assert set(trials["driver"]) == {"imported"}
+    assert set(trials["data_source"]) == {"measured"}
     pd.testing.assert_frame_equal(
-        trials.sort_values(["participant", "condition"]).reset_index(drop=True),
+        trials[list(TRIAL_COLUMNS)]
+        .sort_values(["participant", "condition"])
+        .reset_index(drop=True),
         pd.read_csv(tmp_path / "t.csv")
         .sort_values(["participant", "condition"])
         .reset_index(drop=True),
     )
     tlx = pd.read_csv(tmp_path / "out" / "tlx.csv")
-    assert tuple(tlx.columns) == TLX_COLUMNS + TLX_WEIGHT_COLUMNS
+    assert tuple(tlx.columns) == TLX_COLUMNS + TLX_WEIGHT_COLUMNS + TLX_PROVENANCE_COLUMNS
     assert tlx["w_mental"].tolist() == [5, 5]
     codebook = pd.read_csv(tmp_path / "out" / "codebook.csv")
     assert set(trials.columns) | set(tlx.columns) <= set(codebook["column"])
@@ -138,7 +148,8 @@ def test_parquet_export_has_the_same_columns(tmp_path: Path) -> None:
     (tmp_path / "t.csv").write_text(TRIALS)
     assert main(["import", "--enrol-new", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 0
     assert main(["export", "--out", str(tmp_path / "pq"), "--format", "parquet", "--db", db]) == 0
-    assert tuple(pd.read_parquet(tmp_path / "pq" / "trials.parquet").columns) == TRIAL_COLUMNS
+    columns = tuple(pd.read_parquet(tmp_path / "pq" / "trials.parquet").columns)
+    assert columns == TRIAL_COLUMNS + PROVENANCE_COLUMNS
 
 
 def test_the_column_contracts_are_the_issues() -> None:

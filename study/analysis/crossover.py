@@ -1,0 +1,348 @@
+"""The crossover's own effects on the measured people: period, carry-over and trial
+position, looked for in the mixed model's residual and added where the data call for
+them (Grizzle 1965; Jones and Kenward, Design and Analysis of Cross-Over Trials; Senn,
+Cross-over Trials in Clinical Research).
+
+Tidy in, tidy out: `design_checks` takes one row per trial (participant, group, task,
+condition, trial, and block or period) and returns one row per task, measure and
+effect, plus one row per task and measure on the model before and after
+(`CrossoverResult`). It needs no study database.
+
+The base model is the analysis' own (`mixed_model`): value ~ condition * group +
+(1 | participant), REML, with Satterthwaite df. Each participant's blocks of a task are
+its periods (1, 2, ...) in the order they were run; the participant's condition order
+is the condition of the first period. The checks are terms added to the base model
+together, each tested by its Satterthwaite t:
+
+- `period`: the second block minus the first (practice or fatigue between blocks). In
+  a two-period crossover it is the within-participant interaction of condition and
+  condition order: half the difference between the HV - VO differences of the two
+  orders.
+- `carry_over`: the differential carry-over, VO after HV minus HV after VO (the
+  one-direction term "VO in a later block than HV", whose coefficient with the period in
+  the model is that difference). In two periods it is aliased with the condition
+  order, so it is estimated between participants only (from the participants' totals,
+  Grizzle's test), which is why it costs the condition effect its within-participant
+  precision once added.
+- `trial_position`: the slope per trial over the trial's place within its block
+  (centred), when a block has several trials.
+
+Not testable (and then reported with no estimate): a period or carry-over when every
+participant of the task had the same condition order (they are then aliased with the
+condition), a trial position when no block has two trials.
+
+All the checks of a study are one family, Holm-corrected (statsmodels'
+`multipletests(method="holm")`); a check with p_holm below `ALPHA` is added to the model
+of its task and measure, and the HV - VO marginal contrast (averaged over the groups, as
+emmeans) is reported before and after, with the residual and participant SDs. Where a
+carry-over is added, the first-period comparison is reported too: HV against VO in the
+first block only, between participants (value ~ condition + group + (1 | participant)),
+the estimate the crossover literature falls back on when carry-over is present.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from study.analysis.mixed_model import (
+    lmm_design,
+    marginal_weights,
+    reference_condition,
+)
+from study.analysis.stats_lmm import Contrast, Fit, fit_random_intercept
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+Row = dict[str, Any]
+ALPHA = 0.05
+"""Family-wise error rate of the checks (Holm)."""
+EFFECTS = ("period", "carry_over", "trial_position")
+CHECK_COLUMNS = (
+    "task",
+    "measure",
+    "effect",
+    "estimate",
+    "ci",
+    "p",
+    "p_holm",
+    "added",
+    "condition_before",
+    "condition_after",
+)
+"""`analysis.json`'s `design_checks` entries: exactly these keys."""
+FIT_COLUMNS = ("task", "measure", "added", "fit_before", "fit_after", "first_period")
+"""`analysis.json`'s `design_fit` entries: the model before and after, per task x measure."""
+
+
+@dataclass
+class CrossoverResult:
+    """The checks (`CHECK_COLUMNS`), the fits before and after (`FIT_COLUMNS`), notes."""
+
+    checks: list[Row] = field(default_factory=list)
+    fits: list[Row] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def to_frames(self) -> tuple[pd.DataFrame, pd.DataFrame]:
+        import pandas as pd
+
+        return (
+            pd.DataFrame(self.checks, columns=list(CHECK_COLUMNS)),
+            pd.DataFrame(self.fits, columns=list(FIT_COLUMNS)),
+        )
+
+
+def _finite(value: Any) -> bool:
+    return value is not None and not (isinstance(value, float) and np.isnan(value))
+
+
+def with_periods(trials: list[Row]) -> list[Row]:
+    """`trials` with `period` (the block's place among the participant's blocks of its
+    task, from 1) and `order` (the condition of the participant's first block of the
+    task); rows that already carry `period` keep it."""
+    blocks: dict[tuple[Any, Any], dict[Any, Any]] = {}
+    for t in trials:
+        if "period" not in t:
+            blocks.setdefault((t["participant"], t["task"]), {})[t["block"]] = t["condition"]
+    rank = {key: {b: i + 1 for i, b in enumerate(sorted(bs))} for key, bs in blocks.items()}
+    out = [
+        {
+            **t,
+            "period": t["period"]
+            if "period" in t
+            else rank[(t["participant"], t["task"])][t["block"]],
+        }
+        for t in trials
+    ]
+    first: dict[tuple[Any, Any], tuple[Any, Any]] = {}
+    for t in out:
+        key = (t["participant"], t["task"])
+        if key not in first or t["period"] < first[key][0]:
+            first[key] = (t["period"], t["condition"])
+    return [{**t, "order": first[(t["participant"], t["task"])][1]} for t in out]
+
+
+@dataclass(frozen=True)
+class _Cell:
+    """One task x measure: its trials as arrays and the base design."""
+
+    X: np.ndarray
+    names: list[str]
+    y: np.ndarray
+    participant: np.ndarray
+    condition: np.ndarray
+    period: np.ndarray
+    position: np.ndarray
+    conditions: list[Any]
+    groups: list[Any]
+    group: np.ndarray
+
+    @classmethod
+    def of(cls, data: list[Row], measure: str) -> _Cell:
+        X, names = lmm_design({k: [t[k] for t in data] for k in ("condition", "group")})
+        condition = np.array([t["condition"] for t in data], dtype=object)
+        ref = reference_condition(condition)
+        return cls(
+            X=X,
+            names=names,
+            y=np.array([t[measure] for t in data], float),
+            participant=np.array([t["participant"] for t in data], dtype=object),
+            condition=condition,
+            period=np.array([t["period"] for t in data], float),
+            position=np.array([t["trial"] for t in data], float),
+            conditions=[ref, *sorted(set(condition) - {ref})],
+            groups=sorted({t["group"] for t in data}),
+            group=np.array([t["group"] for t in data], dtype=object),
+        )
+
+    def column(self, effect: str) -> np.ndarray | None:
+        """The effect's design column, or None when it is not testable here."""
+        if effect == "trial_position":
+            if self.position.max(initial=0) < 2:
+                return None
+            keys = list(zip(self.participant, self.period, strict=True))
+            mean: dict[Any, list[float]] = {}
+            for k, x in zip(keys, self.position, strict=True):
+                mean.setdefault(k, []).append(x)
+            return self.position - np.array([np.mean(mean[k]) for k in keys])
+        later = (self.period > 1).astype(float)
+        if effect == "period":
+            column = later
+        else:  # VO in a later block than HV
+            column = later * (self.condition == self.conditions[0])
+        full = (
+            np.column_stack([self.X, later, column])
+            if effect != "period"
+            else np.column_stack([self.X, column])
+        )
+        if np.linalg.matrix_rank(full) < full.shape[1]:
+            return None
+        return column
+
+
+def _condition(fit: Fit, names: list[str], cell: _Cell) -> dict[str, Any]:
+    """The HV - VO marginal contrast of `fit` (the extra terms weighted 0)."""
+    w = marginal_weights(cell.names, cell.conditions, cell.groups)
+    L = np.zeros(len(names))
+    L[: len(cell.names)] = w[cell.conditions[1]] - w[cell.conditions[0]]
+    c = fit.contrast(L)
+    return _summary(c)
+
+
+def _summary(c: Contrast) -> dict[str, Any]:
+    return {"estimate": c.estimate, "ci": [c.ci_low, c.ci_high], "p": c.p, "df": c.df}
+
+
+def _fit_summary(fit: Fit) -> dict[str, Any]:
+    return {
+        "residual_sd": fit.sigma,
+        "participant_sd": fit.theta * fit.sigma,
+        "reml_criterion": fit.reml_crit,
+    }
+
+
+def _fit(cell: _Cell, effects: list[str]) -> tuple[Fit, list[str]]:
+    columns = [cell.column(e) for e in effects]
+    X = np.column_stack([cell.X, *columns]) if effects else cell.X
+    return fit_random_intercept(X, cell.y, cell.participant), [*cell.names, *effects]
+
+
+def _first_period(cell: _Cell) -> dict[str, Any] | None:
+    """HV against VO in the first block only, between participants."""
+    keep = cell.period == 1
+    condition, group = cell.condition[keep], cell.group[keep]
+    hv = (condition != cell.conditions[0]).astype(float)
+    groups = sorted(set(group))
+    X = np.column_stack(
+        [np.ones(keep.sum()), hv, *[(group == g).astype(float) for g in groups[1:]]]
+    )
+    if len(set(condition)) < 2 or np.linalg.matrix_rank(X) < X.shape[1]:
+        return None
+    fit = fit_random_intercept(X, cell.y[keep], cell.participant[keep])
+    return {
+        **_summary(fit.contrast(np.eye(X.shape[1])[1])),
+        "participants": len(set(cell.participant[keep])),
+    }
+
+
+def _holm(p: list[float]) -> list[float]:
+    if not p:
+        return []
+    from statsmodels.stats.multitest import multipletests
+
+    return [float(x) for x in multipletests(p, method="holm")[1]]
+
+
+def design_checks(
+    trials: pd.DataFrame | list[Row], measures: tuple[str, ...] | None = None
+) -> CrossoverResult:
+    """The period, carry-over and trial-position checks of every task and measure.
+
+    Parameters
+    ----------
+    trials : pandas.DataFrame or list of dict
+        One row per measured trial: participant, group, task, condition, trial (its
+        number within the block, from 1), block (any increasing number in the order the
+        participant's blocks were run) or period (from 1), and the measures by name.
+    measures : tuple of str or None, optional
+        The measures to check; None: each task's analysed measures.
+
+    Returns
+    -------
+    CrossoverResult
+        `checks`: one row per task, measure and effect (`CHECK_COLUMNS`: estimate,
+        ci as [low, high], p, p_holm, added, and the HV - VO marginal contrast before
+        and after as {estimate, ci, p, df}); `fits`: one row per task and measure
+        (`FIT_COLUMNS`: the effects added, the residual and participant SDs and REML
+        criterion before and after, the first-period comparison where a carry-over is
+        added); `notes`: the checks that could not be made, and why.
+    """
+    from study.protocol.tasks import get_task
+
+    rows = trials if isinstance(trials, list) else trials.to_dict("records")
+    rows = with_periods(rows)
+    result = CrossoverResult()
+    cells: dict[tuple[Any, Any], tuple[_Cell, Fit]] = {}
+    tasks: dict[Any, list[Row]] = {}
+    for t in rows:
+        tasks.setdefault(t["task"], []).append(t)
+    for task, task_rows in tasks.items():
+        for measure in measures or get_task(task).analysed_measures:
+            data = [t for t in task_rows if _finite(t.get(measure))]
+            _check_cell(task, measure, data, result, cells)
+    _decide(result, cells)
+    return result
+
+
+def _check_cell(
+    task: Any,
+    measure: str,
+    data: list[Row],
+    result: CrossoverResult,
+    cells: dict[tuple[Any, Any], tuple[_Cell, Fit]],
+) -> None:
+    """Fit the base model and the model with every testable check; record the checks."""
+    label = f"{task}/{measure}"
+    if len({t["participant"] for t in data}) < 3:
+        result.notes.append(f"{label}: design checks skipped (fewer than 3 participants)")
+        return
+    cell = _Cell.of(data, measure)
+    try:
+        if np.linalg.matrix_rank(cell.X) < cell.X.shape[1]:
+            raise ValueError("a condition x group cell has no trials")
+        base = fit_random_intercept(cell.X, cell.y, cell.participant)
+        testable = [e for e in EFFECTS if cell.column(e) is not None]
+        full, names = _fit(cell, testable)
+    except (np.linalg.LinAlgError, ValueError) as exc:
+        result.notes.append(f"{label}: design checks could not be fitted: {exc}")
+        return
+    cells[(task, measure)] = (cell, base)
+    for effect in EFFECTS:
+        if effect not in testable:
+            if effect != "trial_position" or cell.position.max(initial=0) >= 2:
+                result.notes.append(
+                    f"{label}: {effect} not testable "
+                    "(every participant had the same condition order)"
+                )
+            continue
+        c = full.contrast(np.eye(len(names))[names.index(effect)])
+        result.checks.append(
+            {
+                "task": task,
+                "measure": measure,
+                "effect": effect,
+                "estimate": c.estimate,
+                "ci": [c.ci_low, c.ci_high],
+                "p": c.p,
+            }
+        )
+
+
+def _decide(result: CrossoverResult, cells: dict[tuple[Any, Any], tuple[_Cell, Fit]]) -> None:
+    """Holm over every check; the model after, per task and measure, with what it added."""
+    for row, adjusted in zip(result.checks, _holm([r["p"] for r in result.checks]), strict=True):
+        row["p_holm"] = adjusted
+        row["added"] = bool(adjusted < ALPHA)
+    for (task, measure), (cell, base) in cells.items():
+        mine = [r for r in result.checks if (r["task"], r["measure"]) == (task, measure)]
+        added = [r["effect"] for r in mine if r["added"]]
+        if "carry_over" in added and "period" not in added:
+            added.insert(0, "period")  # the carry-over term is defined beside the period
+        before = _condition(base, cell.names, cell)
+        after_fit, names = _fit(cell, added)
+        after = _condition(after_fit, names, cell)
+        for r in mine:
+            r["condition_before"], r["condition_after"] = before, after
+        result.fits.append(
+            {
+                "task": task,
+                "measure": measure,
+                "added": added,
+                "fit_before": _fit_summary(base),
+                "fit_after": _fit_summary(after_fit),
+                "first_period": _first_period(cell) if "carry_over" in added else None,
+            }
+        )
