@@ -55,7 +55,7 @@ def test_an_export_imports_back_with_the_same_analysis(tmp_path: Path) -> None:
     _tlx(source).to_csv(tmp_path / "x.csv", index=False)
     first = _init(tmp_path, "first.db")
     files = ["--trials", str(tmp_path / "t.csv"), "--tlx", str(tmp_path / "x.csv")]
-    assert main(["import", *files, "--db", first]) == 0
+    assert main(["import", *files, "--enrol-new", "--db", first]) == 0
     out = tmp_path / "exp"
     assert main(["export", "--out", str(out), "--db", first]) == 0
     exported = pd.read_csv(out / "trials.csv", dtype=str, keep_default_na=False)
@@ -67,7 +67,7 @@ def test_an_export_imports_back_with_the_same_analysis(tmp_path: Path) -> None:
 
     second = _init(tmp_path, "second.db")
     files = ["--trials", str(out / "trials.csv"), "--tlx", str(out / "tlx.csv")]
-    assert main(["import", *files, "--db", second]) == 0
+    assert main(["import", *files, "--enrol-new", "--db", second]) == 0
     orders = _orders(second)
     assert orders == _orders(first)
     assert orders["P002"] == ["HV", "VO"]
@@ -94,7 +94,7 @@ def test_an_export_from_before_the_provenance_columns_imports_as_measured(
     old = crossover_trials(seed=4)[list(TRIAL_COLUMNS)].head(12)
     old.to_csv(tmp_path / "t.csv", index=False)
     db = _init(tmp_path, "old.db")
-    assert main(["import", "--trials", str(tmp_path / "t.csv"), "--db", db]) == 0
+    assert main(["import", "--trials", str(tmp_path / "t.csv"), "--enrol-new", "--db", db]) == 0
     orders = _orders(db)
     # no block column: the design's order; no driver column: imported (measured)
     assert orders["P001"] == ["VO", "HV"]
