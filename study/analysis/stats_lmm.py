@@ -26,8 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from study.analysis.distributions import brentq
-
 SINGULAR_TOL = 1e-4
 """lme4's `isSingular(tol = 1e-4)`: a random-effect SD ratio theta below it is a boundary fit."""
 
@@ -97,6 +95,8 @@ def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fi
             hi *= 4
             if hi > 1e12:
                 raise ValueError("the random-intercept variance does not converge")
+        from scipy.optimize import brentq
+
         lam = brentq(lambda x: _gradient(x, *args), 0.0, hi, xtol=1e-300, rtol=1e-15, maxiter=500)
     A, beta, q, _, _ = _parts(lam, *args)
     sigma2 = q / (n - p)

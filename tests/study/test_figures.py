@@ -340,9 +340,9 @@ DEMO_MEANS = Path(__file__).parent.parent / "data" / "demo_seed1_means.csv"
 
 @pytest.mark.parametrize("width", ["single", "double"])
 def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
+    from study.analysis.comparisons import compare_conditions
     from study.analysis.figures import fig12, label_source
     from study.analysis.paper import _marks
-    from study.analysis.stats import compare_conditions
 
     long = pd.read_csv(DEMO_MEANS)
     comparisons, _ = compare_conditions(long)
