@@ -58,7 +58,7 @@ def comparison_sentence(r: Row) -> str:
     head = f"{r['task']}, {r['measure']}, {r['group']} (n = {r['n']})"
     if r["test"] == "none":
         return f"{head}: not testable: {r['not_testable']} (outside the Holm family)."
-    holm = f"p(Holm) = {p_text(r['p_holm'])}" if _finite(r["p_holm"]) else ""
+    holm = p_eq(r["p_holm"]).replace("p", "p(Holm)", 1) if _finite(r["p_holm"]) else ""
     if r["test"] == "paired_t":
         test = f"t({int(r['n']) - 1}) = {_num(r['statistic'])}, {p_eq(r['p'])}"
     else:
@@ -79,7 +79,7 @@ def success_sentence(r: Row) -> str:
     return (
         f"{r['task']}, success, {r['group']} (n = {r['n']}): {r['success_vo']} succeeded in "
         f"VO, {r['success_hv']} in HV; {r['vo_only']} in VO only, {r['hv_only']} in HV "
-        f"only; exact McNemar {p_eq(r['p'])}, p(Holm) = {p_text(r['p_holm'])}."
+        f"only; exact McNemar {p_eq(r['p'])}, {p_eq(r['p_holm']).replace('p', 'p(Holm)', 1)}."
     )
 
 

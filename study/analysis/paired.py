@@ -172,11 +172,18 @@ def dz_interval(t: float, n: int, level: float = 0.95) -> tuple[float, float]:
             return float(nct.cdf(t, df, ncp)) - q
 
         lo, hi = t - 10.0, t + 10.0
-        while f(lo) < 0:
+        for _ in range(50):
+            if not f(lo) < 0:
+                break
             lo -= 10.0
-        while f(hi) > 0:
+        for _ in range(50):
+            if not f(hi) > 0:
+                break
             hi += 10.0
-        return float(brentq(f, lo, hi, xtol=1e-12))
+        try:
+            return float(brentq(f, lo, hi, xtol=1e-12))
+        except ValueError:  # scipy's nct has no finite cdf this far out: no interval
+            return float("nan")
 
     root_n = math.sqrt(n)
     return ncp_at(1 - tail) / root_n, ncp_at(tail) / root_n

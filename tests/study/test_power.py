@@ -31,7 +31,6 @@ def test_no_effect_rejects_at_the_nominal_rate() -> None:
         assert abs(p - 0.0375) < 0.028  # between .025 and .05 at the null
 
 
-
 def test_power_matches_the_analytic_paired_t_test() -> None:
     n, delta, rho = 10, 0.8, 0.5
     result = simulate_power({"g": n}, {"g": delta}, rho, 2000, np.random.default_rng(2))
