@@ -1,7 +1,7 @@
 """Every participant of a study pooled over the groups: each LCCA measure's VO and HV
-mean over participants and a two-sided paired t test (the analysis' own `paired_t` and
-t distribution), which `study analyze` gives per group only. For the README's figures
-of the SIMULATED demo study:
+mean over participants and a two-sided paired t test (scipy.stats.ttest_rel), which
+`study analyze` gives per group only. For the README's figures of the SIMULATED demo
+study:
 
     study demo --seed 1 --out demo/ && python benchmarks/demo_pooled.py demo/demo.db
 """
@@ -24,10 +24,10 @@ def main(argv: list[str] | None = None) -> None:
     if not args.db.is_file():
         parser.exit(2, f"database {args.db}; expected an existing SQLite file\n")
 
+    from scipy import stats
+
     from db.migrate import open_database
-    from study.analysis.distributions import t_sf
     from study.analysis.frames import participant_means, tlx_frame, trial_frame
-    from study.analysis.stats import paired_t
 
     engine = open_database(str(args.db), create=False)
     try:
@@ -41,8 +41,7 @@ def main(argv: list[str] | None = None) -> None:
         )
         m = m.dropna()
         n = len(m)
-        t = paired_t(m["HV"].to_numpy(), m["VO"].to_numpy())
-        p = 2 * t_sf(abs(t), n - 1)
+        t, p = stats.ttest_rel(m["HV"].to_numpy(), m["VO"].to_numpy())
         print(
             f"{measure}: {n} participants, VO {m['VO'].mean():.3f}, HV {m['HV'].mean():.3f}, "
             f"HV / VO - 1 = {m['HV'].mean() / m['VO'].mean() - 1:+.3f}, "

@@ -14,8 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from study.analysis.distributions import f_sf
-
 
 def one_way(y: np.ndarray, group: np.ndarray) -> dict[str, Any]:
     """The sums of squares of the one-way model y ~ C(group, Sum), in closed form (what
@@ -57,6 +55,8 @@ def anova_rows(
     (`one_way`): Type III condition is the sum-coded intercept's SS, Type II the
     intercept's alone, N mean(d)^2.
     """
+    from scipy.stats import f as f_dist
+
     between = one_way((a + b) / math.sqrt(2), group)
     within = one_way((b - a) / math.sqrt(2), group)
     # Type II: SS(condition) = N dbar^2; Type III: the sum-coded intercept's SS
@@ -81,7 +81,7 @@ def anova_rows(
                 "F": float(f),
                 "df1": float(effect["df"]),
                 "df2": float(error["df"]),
-                "p": f_sf(float(f), float(effect["df"]), float(error["df"])),
+                "p": float(f_dist.sf(float(f), float(effect["df"]), float(error["df"]))),
                 "np2": float(np2),
                 "ss_type": ss_type,
             }

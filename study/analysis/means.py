@@ -81,6 +81,17 @@ def withdrawal_notes(withdrawn: dict[str, str], trials: list[Row], tlx: list[Row
     return notes
 
 
+def choiceless_notes(tlx: list[Row]) -> list[str]:
+    """One exclusion note per questionnaire with ratings but no pairwise choices: it
+    counts in the raw TLX and the subscales, not in the weighted TLX."""
+    return [
+        f"{r['task']}/tlx_weighted: excluded {r['participant']} {r['condition']} "
+        "(questionnaire without pairwise choices; in the raw TLX and the subscales)"
+        for r in tlx
+        if r.get("tlx_weighted") is None
+    ]
+
+
 def without_withdrawn_rows(
     withdrawn: dict[str, str], trials: list[Row], tlx: list[Row]
 ) -> tuple[list[Row], list[Row], list[str]]:

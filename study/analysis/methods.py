@@ -1,9 +1,11 @@
-"""The methods as a reviewer reads them: one sentence per analysis for table captions, and
-`methods.md`, a paragraph a paper can start from, with the software versions.
+"""The methods as a paper takes them: one sentence per analysis for table captions, and
+`methods.md`, short paragraphs in APA style (the data and exclusions, the tests, the
+results as APA sentences, the software).
 
-The sentences state what `study.analysis.stats` does (test, correction, sums-of-squares
-type, df or p method, exact or asymptotic) and nothing it does not; they live beside
-the numbers' code so that a change of method is a change of text in one place.
+The sentences state what the analysis does (test, correction, sums-of-squares type,
+exact or asymptotic p) and nothing of how it is programmed; they live beside the
+numbers' code so that a change of method is a change of text in one place. The APA
+numbers (`t(7) = 2.41, p = .047`) are `apa_results`'.
 """
 
 from __future__ import annotations
@@ -12,48 +14,88 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
 
+from study.analysis.apa_results import comparison_sentence, exclusion_sentences, success_sentence
 from study.analysis.crossover_text import design_checks_json, design_checks_paragraph
 from study.analysis.mixed_model import DEFAULT_DDF
-from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE, EXACT_MAX_N, RESOLUTION_REL
+from study.analysis.paired import RESOLUTION_DIGITS
+from study.analysis.signed_rank import EXACT_MAX_N
+from study.analysis.stats import ALPHA, DEFAULT_SS_TYPE
 
 if TYPE_CHECKING:
     from study.analysis.stats import Analysis
 
-PACKAGES = ("haptic-study", "numpy", "scipy", "statsmodels", "pandas", "matplotlib")
+PACKAGES = (
+    "haptic-study",
+    "numpy",
+    "scipy",
+    "pandas",
+    "pingouin",
+    "statsmodels",
+    "matplotlib",
+)
 """The packages that compute or draw the results (`COMPUTED_BY` says which does what)."""
 
 COMPUTED_BY = (
-    "Shapiro-Wilk (Royston's AS R94, as R's shapiro.test), paired t, Wilcoxon signed-rank "
-    "p-values (exact or normal approximation, as R's wilcox.test) and the F, t and normal "
-    "distributions (the regularized incomplete beta function and the normal integral), "
-    "Hedges' g_av, the rank-biserial correlation, Holm's correction, the mixed ANOVA's "
-    "sums of squares (closed form, two conditions): haptic-study's own code with numpy, "
-    "checked in its tests against R (afex, stats), scipy and pingouin; the mixed model: "
-    "statsmodels' MixedLM (REML), its Satterthwaite and Kenward-Roger df haptic-study's "
-    "own code, checked against R's lme4, lmerTest, pbkrtest and emmeans"
+    "scipy.stats: Shapiro-Wilk, paired t, TOST, t and F distributions, the noncentral t "
+    "interval of d_z; pingouin: Holm's correction and the JZS Bayes factor; statsmodels: "
+    "the exact McNemar test and the mixed model's REML fit (MixedLM); haptic-study: the "
+    "exact conditional signed-rank distribution, the mixed ANOVA's sums of squares and the "
+    "mixed model's Satterthwaite and Kenward-Roger df, checked against R's coin, afex, "
+    "lme4, lmerTest, pbkrtest and emmeans"
 )
 
 WILCOXON_RULE = (
-    "differences equal to within "
-    f"{RESOLUTION_REL:g} of the data's magnitude are treated as equal (and as zero when that "
-    "close to zero), so ties come from the data's resolution and not from rounding noise; "
-    f"exact p when there are fewer than {EXACT_MAX_N} differences, none zero and none tied "
-    "in absolute value; otherwise zero differences are dropped and p is the normal "
-    "approximation with tie-corrected variance and continuity correction (the rule of R's "
-    "wilcox.test)"
+    f"below {EXACT_MAX_N} pairs its p is exact: the permutation distribution of the "
+    "observed ranks, ties and zeros included (zeros are ranked and carry no sign, "
+    f"Pratt 1959); from {EXACT_MAX_N} pairs on, the normal approximation of that "
+    "distribution"
 )
 
 
 def comparison_method() -> str:
+    """The paired comparisons in short sentences (captions and methods.md)."""
     return (
-        "VO vs HV within each group on participant means. Shapiro-Wilk on the paired "
-        f"differences (alpha = {ALPHA:g}) chooses the test: a two-sided paired t-test (effect "
-        "size Hedges' g_av, Lakens 2013) when they look normal, otherwise a two-sided "
-        f"Wilcoxon signed-rank test ({WILCOXON_RULE}; statistic V, the sum of the ranks of the "
-        "positive HV - VO differences, as R reports it; effect size the matched-pairs "
-        "rank-biserial correlation, Kerby 2014). Paired t-tests are reported with their df "
-        "(pairs - 1). p (Holm): Holm-corrected across the groups "
-        "of each task and measure."
+        "HV was compared with VO within each group on the participant means. "
+        "Differences were compared at the resolution of the data (to "
+        f"{RESOLUTION_DIGITS} significant digits), so rounding error decides no test. "
+        f"A Shapiro-Wilk test (alpha = {ALPHA:g}) on the differences chose the test: a "
+        "two-sided paired t-test when they did not depart from normality, otherwise a "
+        "two-sided Wilcoxon signed-rank test. "
+        "When every difference was the same, no t statistic exists and the signed-rank "
+        "test was used. When every difference was zero, the comparison was not testable "
+        "and is reported so, outside the Holm family. "
+        f"For the signed-rank test, {WILCOXON_RULE}; V is the sum of the ranks of the "
+        "positive differences. "
+        "Effect sizes: the mean difference (HV - VO) with its 95 % CI, Cohen's d_z with "
+        "its 95 % CI (noncentral t), Hedges' g_av (Lakens 2013, corrected with n - 1 df), "
+        "and for the signed-rank test the matched-pairs rank-biserial correlation "
+        "(Kerby 2014). "
+        "p values were Holm-corrected across the testable groups of each task and "
+        "measure; each row names its family."
+    )
+
+
+def evidence_method(bounds_text: str) -> str:
+    """The equivalence test and the Bayes factor."""
+    tost = (
+        "Equivalence was tested with two one-sided paired t-tests (TOST, Schuirmann 1987) "
+        f"against the design's bounds ({bounds_text}); equivalence is shown when the "
+        "TOST p is below .05."
+        if bounds_text
+        else "The design sets no equivalence bounds, so no equivalence test was run."
+    )
+    return (
+        f"{tost} BF10 is the JZS Bayes factor of the paired t-test, with a Cauchy prior "
+        "of scale sqrt(2)/2 on the standardised effect (Rouder et al. 2009); BF10 below "
+        "1/3 favours no difference, above 3 a difference."
+    )
+
+
+def success_method() -> str:
+    return (
+        "A participant succeeded in a condition when every measured trial of the block "
+        "succeeded. Success in VO and HV was compared within each group with an exact "
+        "McNemar test, Holm-corrected across the groups."
     )
 
 
@@ -110,14 +152,28 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
             "unit": "participant means per task x condition",
             "normality": f"Shapiro-Wilk on the paired differences, alpha {ALPHA:g}",
             "tests": {
-                "paired_t": "two-sided paired t-test (df = pairs - 1), effect size Hedges' g_av",
+                "paired_t": "two-sided paired t-test (df = pairs - 1), effect size Hedges' "
+                "g_av (correction with n - 1 df) beside Cohen's d_z with its CI",
                 "wilcoxon": "two-sided Wilcoxon signed-rank test, statistic V (sum of "
-                "the ranks of the positive HV - VO differences, R's V), "
+                "the ranks of the positive HV - VO differences), "
                 "effect size matched-pairs rank-biserial correlation",
+                "none": "not testable: every difference is zero",
             },
             "wilcoxon_p": WILCOXON_RULE,
-            "correction": "Holm across the groups of each task x measure",
+            "constant_differences": "no t statistic: the exact signed-rank test; all "
+            "zero: not testable, outside the Holm family",
+            "resolution": f"differences compared to {RESOLUTION_DIGITS} significant digits "
+            "of the data's magnitude",
+            "correction": "Holm across the testable groups of each task x measure "
+            "(holm_family names them)",
+            "equivalence": {
+                "test": "TOST, two one-sided paired t-tests",
+                "fraction_of_vo_mean": analysis.bounds.fraction,
+                "absolute": dict(analysis.bounds.absolute),
+            },
+            "bayes_factor": "JZS BF10, Cauchy prior scale sqrt(2)/2 (Rouder et al. 2009)",
         },
+        "success": success_method(),
         "mixed_anova": {
             "ss_type": analysis.ss_type,
             "default_ss_type": DEFAULT_SS_TYPE,
@@ -150,23 +206,31 @@ def _groups(analysis: Analysis) -> str:
     return ", ".join(f"{n} {g}" for g, n in sizes.items())
 
 
-def _invalid(analysis: Analysis) -> str:
-    """The sentence naming the trials the experimenter marked invalid, with the reasons."""
-    marked = [e.split(": excluded ", 1)[1] for e in analysis.exclusions if "(marked invalid: " in e]
-    if not marked:
-        return ""
-    return (
-        f" {len(marked)} measured trial{'s' if len(marked) > 1 else ''} marked invalid by "
-        f"the experimenter {'were' if len(marked) > 1 else 'was'} left out: "
-        + "; ".join(m.replace("(marked invalid: ", "(") for m in marked)
-        + "."
-    )
+def _data(analysis: Analysis) -> str:
+    """The data paragraph: the trials by driver, the groups, the measures, who was left out."""
+    total = sum(analysis.source.trials_by_driver.values())
+    drivers = ", ".join(f"{n} {d}" for d, n in analysis.source.trials_by_driver.items() if n)
+    tasks = ", ".join(analysis.tasks) or "no task"
+    measures = ", ".join(dict.fromkeys(r["measure"] for r in analysis.descriptive_rows))
+    sentences = [
+        f"The analysis used {total} measured trials of {tasks} ({drivers or 'none'}).",
+        f"Participants per group: at most {_groups(analysis)}.",
+        f"Measures: {measures or 'none'}.",
+        "Each participant's trials of a block were averaged; participant means were the "
+        "unit of analysis.",
+        *exclusion_sentences(analysis.exclusions),
+    ]
+    return " ".join(sentences)
+
+
+def _results(analysis: Analysis) -> str:
+    lines = [f"- {comparison_sentence(r)}" for r in analysis.comparison_rows]
+    lines += [f"- {success_sentence(r)}" for r in analysis.success_rows]
+    return "\n".join(lines) or "No comparison could be tested."
 
 
 def methods_markdown(analysis: Analysis) -> str:
-    """`methods.md`: the statistics paragraph, the data source and the software."""
-    counts = ", ".join(f"{n} {d}" for d, n in analysis.source.trials_by_driver.items() if n)
-    measures = ", ".join(dict.fromkeys(r["measure"] for r in analysis.descriptive_rows))
+    """`methods.md`: the data, the methods, the results in APA style, every exclusion."""
     source = (
         f"**{analysis.source.note}.** These results describe simulated participants and "
         "are not evidence about people.\n\n"
@@ -174,18 +238,20 @@ def methods_markdown(analysis: Analysis) -> str:
         else ""
     )
     software = ", ".join(f"{k} {v}" for k, v in software_versions().items())
+    exclusions = "\n".join(f"- {e}" for e in analysis.exclusions) or "None."
     return (
         "# Statistical methods\n\n"
         f"{source}"
-        f"Data: {counts or 'no trials'} (trials by driver); participants per group at most "
-        f"{_groups(analysis)}. Measures: {measures or 'none'}. Each participant's trials of "
-        "a block were averaged, and participant means were the unit of analysis; "
-        "participants without both conditions of a comparison were excluded from it "
-        f"({len(analysis.exclusions)} exclusions, listed with the tables).{_invalid(analysis)}\n\n"
+        f"{_data(analysis)}\n\n"
         f"{comparison_method()}\n\n"
+        f"{evidence_method(analysis.bounds.describe())}\n\n"
+        f"{success_method()}\n\n"
         f"{anova_method(analysis.ss_type)}\n\n"
         f"{lmm_method(analysis.ddf, _lmm_references(analysis))}\n\n"
         f"{design_checks_paragraph(analysis)}\n\n"
-        f"Computed by: {COMPUTED_BY}.\n\n"
+        "## Results of the paired comparisons\n\n"
+        f"{_results(analysis)}\n\n"
+        "## Exclusions\n\n"
+        f"{exclusions}\n\n"
         f"Software: {software}.\n"
     )

@@ -23,11 +23,11 @@ from sqlalchemy.orm import Session
 from db.models.study import Participant
 from db.models.trial import SampleChunk, Trial, TrialMeasure
 from db.sample_reader import SampleReader
+from study.analysis.comparisons import compare_conditions
 from study.analysis.figcheck import FigureCheckError, check_figure
 from study.analysis.figures import fig12, fig12_labels, label_source, save
 from study.analysis.frames import participant_means, tlx_frame, trial_frame, without_withdrawn
 from study.analysis.source import DataSource, restrict
-from study.analysis.stats import compare_conditions
 from study.analysis.stream_figure import DrawnStream, trial_streams_figure
 from study.analysis.tlx_figure import tlx_profile
 from study.analysis.trace_figure import force_traces

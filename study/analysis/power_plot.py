@@ -38,13 +38,17 @@ def monte_carlo_band(rates: list[float], n_sim: int) -> tuple[np.ndarray, np.nda
     return np.asarray(low), np.asarray(high)
 
 
-def assumptions(effects: dict[str, float], rho: float, n_sim: int) -> str:
+def assumptions(
+    effects: dict[str, float], rho: float, n_sim: int, measure: str | None = None
+) -> str:
     """What the simulation assumed, as the figure states it."""
     shown = ", ".join(f"{g} {d:g}" for g, d in effects.items())
     return (
-        f"Simulated studies. Assumed standardised HV-VO effects: {shown}; VO-HV "
-        f"correlation {rho:g}; alpha {ALPHA:g}; {n_sim} simulated studies per size. "
-        "Bands: 95 % Monte-Carlo intervals (Wilson). Dotted: power 0.8."
+        f"Simulated studies of {measure or 'a standardised measure'}. Assumed HV-VO "
+        f"effects in per-condition SDs: {shown}; VO-HV correlation {rho:g}; alpha "
+        f"{ALPHA:g}, group power with Holm's correction across the groups; {n_sim} "
+        "simulated studies per size. Bands: 95 % Monte-Carlo intervals (Wilson). "
+        "Dotted: power 0.8."
     )
 
 
@@ -55,6 +59,7 @@ def plot_power_curve(
     effects: dict[str, float],
     rho: float,
     n_sim: int,
+    measure: str | None = None,
 ) -> plt.Figure:
     """Per-group power against the group's n; the interaction against total N; each with
     its Monte-Carlo interval, and the assumptions in the key."""
@@ -64,7 +69,7 @@ def plot_power_curve(
         ncols = 2 if has_interaction else 1
         rows = 2 if (width == "single" and has_interaction) else 1
         cols = 1 if rows == 2 else ncols
-        note = assumptions(effects, rho, n_sim)
+        note = assumptions(effects, rho, n_sim, measure)
         key_in = 0.14 * len(wrap(note, WIDTHS_IN[width]).splitlines()) + 0.1  # 8 pt lines
         fig, axes = plt.subplots(
             rows,
@@ -90,7 +95,7 @@ def plot_power_curve(
             )
         ax.axhline(0.8, color="#999999", lw=0.6, ls=":")
         ax.set_xlabel("participants in the group")
-        ax.set_ylabel("power, VO vs HV in the group")
+        ax.set_ylabel("power, VO vs HV in the group\n(Holm across groups)")
         ax.set_ylim(0, 1.02)
         ax.legend(loc="lower right")
         if has_interaction:

@@ -24,6 +24,7 @@ from study.analysis.stats import (
     Analysis,
     Row,
 )
+from study.analysis.success import SUCCESS_COLUMNS
 from study.analysis.tables import all_tables, write_csv
 
 COMPARISON_KEYS = (
@@ -42,6 +43,21 @@ COMPARISON_KEYS = (
     "effect_size",
     "effect_size_kind",
     "p_method",
+    # added beside the keys above: the interval, d_z, TOST, BF10 and the edges
+    "df",
+    "mean_diff",
+    "diff_ci_low",
+    "diff_ci_high",
+    "dz",
+    "dz_ci_low",
+    "dz_ci_high",
+    "g_av",
+    "tost_bound",
+    "tost_p",
+    "bf10",
+    "constant_diff",
+    "not_testable",
+    "holm_family",
 )
 # the JSON's keys of the other three tables are their columns, in their order
 ANOVA_KEYS, LMM_KEYS, DESCRIPTIVE_KEYS = ANOVA_COLUMNS, LMM_COLUMNS, DESCRIPTIVE_COLUMNS
@@ -75,6 +91,7 @@ def to_json(analysis: Analysis) -> dict[str, Any]:
         "warnings": analysis.warnings,
         "design_checks": _records(analysis.design_checks, CHECK_COLUMNS),
         "design_fit": _records(analysis.design_fit, FIT_COLUMNS),
+        "success": _records(analysis.success_rows, SUCCESS_COLUMNS),
     }
 
 

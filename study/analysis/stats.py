@@ -2,16 +2,14 @@
 
 - `descriptives`: per task, measure, group and condition: n, mean, SD, median, IQR and
   the t-based 95 % confidence interval of the mean.
-- `compare_conditions`: VO against HV within each group on paired participant means.
-  Shapiro-Wilk on the differences (alpha .05) picks a paired t-test (effect size Hedges'
-  g_av, Lakens 2013: d_av = mean difference / mean of the two SDs, times Hedges'
-  correction 1 - 3 / (4 (2n) - 9)) or the Wilcoxon signed-rank test (effect size the
-  matched-pairs rank-biserial correlation, Kerby 2014; exact or asymptotic p by R's
-  `wilcox.test` rule on the differences at the data's resolution,
-  `wilcoxon_signed_rank`). Holm's correction runs across the groups of one task x
-  measure (`holm`, pingouin's `multicomp(method="holm")` line for line: importing
-  pingouin for it would slow `study analyze`'s start; statsmodels' `multipletests`
-  gives the same values but runs a garbage collection on every call).
+- `compare_conditions` (`study.analysis.comparisons`): VO against HV within each group
+  on paired participant means, decided on the differences at the data's resolution.
+  Shapiro-Wilk (scipy.stats) picks a paired t-test (mean difference and Cohen's d_z with
+  their 95 % CIs, Hedges' g_av with the n - 1 correction, TOST against the design's
+  bounds, the JZS Bayes factor of pingouin) or the signed-rank test with its exact
+  conditional p below 50 pairs (`signed_rank`); constant differences get no t statistic
+  and all-zero differences are not testable. Holm's correction runs across the groups of
+  one task x measure, and each row names its family.
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
   pingouin's `mixed_anova` has Type II only, so both come from two one-way models in
@@ -29,9 +27,8 @@ exclusion is stated.
 
 Each analysis runs on rows: participant means as `Long` tuples and trials as dicts
 (`descriptive_rows`, `comparison_rows`, `mixed_anova_rows`, `mixed_model_rows`,
-`analyze_rows`), which is what `study analyze` calls, so that it loads no pandas; the
-functions above take and return pandas frames around them. The distributions and the
-Shapiro-Wilk and Wilcoxon p-values are `study.analysis.distributions` (no scipy).
+`analyze_rows`), which is what `study analyze` calls; the functions above take and
+return pandas frames around them.
 """
 
 from __future__ import annotations
@@ -45,15 +42,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from study.analysis.anova import anova_rows
-from study.analysis.distributions import (
-    rank_average,
-    shapiro_wilk,
-    signed_rank_exact_p,
-    signed_rank_normal_p,
-    t_ppf,
-    t_two_sided,
+from study.analysis.comparisons import (
+    COMPARISON_COLUMNS,
+    comparison_rows,
 )
 from study.analysis.mixed_model import DEFAULT_DDF, LMM_COLUMNS, mixed_model_rows
+from study.analysis.paired import EquivalenceBounds
 from study.analysis.source import DRIVERS, DataSource
 from study.errors import StudyInputError
 
@@ -61,26 +55,6 @@ if TYPE_CHECKING:  # the command's path builds no frame: pandas only for the fra
     import pandas as pd
 
 ALPHA = 0.05
-COMPARISON_COLUMNS = (
-    "task",
-    "measure",
-    "group",
-    "n",
-    "mean_vo",
-    "mean_hv",
-    "sd_vo",
-    "sd_hv",
-    "shapiro_p",
-    "test",
-    "statistic",
-    "p",
-    "effect_size",
-    "effect_size_kind",
-    "p_holm",
-    "p_method",
-)
-EXACT_MAX_N = 50
-"""The Wilcoxon p is exact below this many non-zero differences (R's `wilcox.test`)."""
 ANOVA_COLUMNS = ("task", "measure", "source", "F", "df1", "df2", "p", "np2", "ss_type")
 DESCRIPTIVE_COLUMNS = (
     "task",
@@ -185,6 +159,12 @@ class Analysis:
     """The crossover's checks (`crossover.CHECK_COLUMNS`), one per task, measure, effect."""
     design_fit: list[Row] = field(default_factory=list)
     """The model before and after the checks (`crossover.FIT_COLUMNS`)."""
+    success_rows: list[Row] = field(default_factory=list)
+    """The exact McNemar test of success per task and group (`success.SUCCESS_COLUMNS`)."""
+    bounds: EquivalenceBounds = field(default_factory=EquivalenceBounds)
+    """The TOST bounds the comparisons used."""
+    task_sources: dict[str, DataSource] = field(default_factory=dict)
+    """Each task's analysed trials by driver."""
 
     @cached_property
     def descriptives(self) -> pd.DataFrame:
@@ -268,25 +248,31 @@ class Analysis:
         Returns
         -------
         Analysis
-            The task's rows of the four tables, its notes and exclusions; the same
-            `source` and `ss_type`.
+            The task's rows of the tables, its notes and exclusions (and those of every
+            task), its own trials' `source`; the same `ss_type` and `bounds`.
         """
 
         def keep(rows: list[Row]) -> list[Row]:
             return [r for r in rows if r["task"] == task]
+
+        def mine(notes: list[str]) -> list[str]:
+            return [e for e in notes if e.startswith((f"{task}/", "all tasks"))]
 
         return Analysis(
             descriptive_rows=keep(self.descriptive_rows),
             comparison_rows=keep(self.comparison_rows),
             anova_rows=keep(self.anova_rows),
             lmm_rows=keep(self.lmm_rows),
-            exclusions=[e for e in self.exclusions if e.startswith(f"{task}/")],
+            exclusions=mine(self.exclusions),
             warnings=[w for w in self.warnings if w.startswith(f"{task}/")],
-            source=self.source,
+            source=self.task_sources.get(task, self.source),
             ss_type=self.ss_type,
             ddf=self.ddf,
             design_checks=keep(self.design_checks),
             design_fit=keep(self.design_fit),
+            success_rows=keep(self.success_rows),
+            bounds=self.bounds,
+            task_sources={task: self.task_sources[task]} if task in self.task_sources else {},
         )
 
 
@@ -323,6 +309,8 @@ def descriptive_rows(long: Long) -> list[Row]:
         appearance), keyed by `DESCRIPTIVE_COLUMNS`; sd and the interval are NaN
         where n = 1.
     """
+    from scipy.stats import t as t_dist
+
     rows = []
     cells = _groups(((t, m, g, c), v) for _, g, t, c, m, v in long)
     for (task, measure, group, condition), values in cells.items():
@@ -330,7 +318,7 @@ def descriptive_rows(long: Long) -> list[Row]:
         n = len(x)
         mean = float(np.mean(x))
         sd = float(np.std(x, ddof=1)) if n > 1 else float("nan")
-        half = float(t_ppf(0.975, n - 1) * sd / math.sqrt(n)) if n > 1 else float("nan")
+        half = float(t_dist.ppf(0.975, n - 1) * sd / math.sqrt(n)) if n > 1 else float("nan")
         q1, q3 = np.percentile(x, [25, 75])
         rows.append(
             {
@@ -348,327 +336,6 @@ def descriptive_rows(long: Long) -> list[Row]:
             }
         )
     return rows
-
-
-def hedges_g_av(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Hedges' g_av of paired samples [lakens2013].
-
-    Parameters
-    ----------
-    vo, hv : numpy.ndarray
-        The participants' values in the two conditions, paired by position.
-
-    Returns
-    -------
-    float
-        Lakens' eq. 10 with Hedges' correction, d_av (1 - 3 / (4 (n1 + n2) - 9)), of
-        HV - VO; NaN when neither condition has any spread.
-    """
-    n = len(vo)
-    sd_av = (np.std(vo, ddof=1) + np.std(hv, ddof=1)) / 2
-    if sd_av == 0:
-        return float("nan")  # no spread: no standardised effect
-    d_av = (np.mean(hv) - np.mean(vo)) / sd_av
-    return float(d_av * (1 - 3 / (4 * (2 * n) - 9)))
-
-
-def paired_t(b: np.ndarray, a: np.ndarray) -> float:
-    """The paired t statistic of b - a (scipy's `ttest_rel`).
-
-    Parameters
-    ----------
-    b, a : numpy.ndarray
-        The two samples, paired by position, in the measure's unit.
-
-    Returns
-    -------
-    float
-        The mean difference over its standard error; infinite or NaN when the
-        differences have no spread.
-    """
-    d = b - a
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return float(np.mean(d) / np.sqrt(np.var(d, ddof=1) / len(d)))
-
-
-def holm(p: np.ndarray) -> np.ndarray:
-    """Holm's step-down adjusted p-values of one family; NaN stays NaN and is no member.
-
-    Parameters
-    ----------
-    p : Float1D
-        Unadjusted p-values, NaN for a test that could not be run.
-
-    Returns
-    -------
-    Float1D
-        Adjusted p-values, same order, at most 1: the running maximum of the sorted
-        finite p-values times m, m - 1, ..., 1 (pingouin's `multicomp(method="holm")`).
-
-    >>> holm(np.array([0.01, np.nan, 0.04, 0.03])).tolist()
-    [0.03, nan, 0.06, 0.06]
-    """
-    p = np.asarray(p, dtype=float)
-    valid = ~np.isnan(p)
-    adjusted = np.full(p.shape, np.nan)
-    finite = p[valid]
-    order = np.argsort(finite)
-    corrected = np.empty(finite.size)
-    # p_(i) (m - i + 1), then a running maximum so that adjusted p-values keep the order
-    corrected[order] = np.maximum.accumulate(finite[order] * np.arange(finite.size, 0, -1))
-    adjusted[valid] = np.clip(corrected, None, 1)
-    return adjusted
-
-
-RESOLUTION_REL = 1e-9
-"""Two differences closer than this times the data's magnitude are equal (and a difference
-that small is zero): measures on a grid (0.01 s) differ by rounding noise (1.2 s comes out
-as 1.1999999999999957 and 1.1999999999999993), which must not decide zeros, ties, ranks
-and so whether the Wilcoxon p is exact."""
-
-
-def at_resolution(diff: np.ndarray, scale: float | None = None) -> np.ndarray:
-    """`diff` with rounding noise removed.
-
-    Values within `RESOLUTION_REL` x `scale` of zero become 0, and runs of |values| that
-    close become one value (the run's first), so that ties and zeros are those of the
-    data's resolution.
-
-    Parameters
-    ----------
-    diff : numpy.ndarray
-        Differences of paired values, in the measure's unit.
-    scale : float or None, optional
-        The magnitude of the data the differences came from, in the same unit;
-        None: the largest |diff|.
-
-    Returns
-    -------
-    numpy.ndarray
-        A new float array of `diff`'s shape, signs kept.
-
-    Examples
-    --------
-    >>> d = at_resolution(np.array([1.1999999999999993, -1.1999999999999957, 1e-15]), 30.0)
-    >>> bool(d[0] == -d[1]), float(d[2])
-    (True, 0.0)
-    """
-    d = np.asarray(diff, dtype=float)
-    if not d.size:
-        return d.copy()
-    size = np.abs(d)
-    tol = RESOLUTION_REL * (float(size.max()) if scale is None else float(scale))
-    order = np.argsort(size, kind="stable")
-    snapped = size[order].copy()
-    anchor = 0.0  # the run's value; zero first, so that tiny differences are zeros
-    for i, v in enumerate(snapped):
-        if v - anchor > tol:
-            anchor = v
-        snapped[i] = anchor
-    out = np.empty_like(d)
-    out[order] = snapped
-    return np.sign(d) * out
-
-
-def rank_biserial(vo: np.ndarray, hv: np.ndarray) -> float:
-    """Matched-pairs rank-biserial correlation of HV - VO [kerby2014].
-
-    Parameters
-    ----------
-    vo, hv : numpy.ndarray
-        The participants' values in the two conditions, paired by position.
-
-    Returns
-    -------
-    float
-        (R+ - R-) / total over the ranks of the non-zero differences, taken at the
-        data's resolution (`at_resolution`); 0 when every difference is zero.
-    """
-    d = at_resolution(hv - vo, _magnitude(vo, hv))
-    d = d[d != 0]
-    ranks = rank_average(np.abs(d))
-    total = ranks.sum()
-    return float((ranks[d > 0].sum() - ranks[d < 0].sum()) / total) if total else 0.0
-
-
-def _magnitude(vo: np.ndarray, hv: np.ndarray) -> float:
-    return float(max(np.abs(vo).max(initial=0.0), np.abs(hv).max(initial=0.0)))
-
-
-def wilcoxon_signed_rank(diff: np.ndarray, scale: float | None = None) -> tuple[float, float, str]:
-    """Two-sided Wilcoxon signed-rank test of paired differences: (V, p, method).
-
-    The differences are first taken at the data's resolution (`at_resolution`, `scale`
-    the magnitude of the measured values), so zeros and ties are those of the data, not
-    of floating-point noise. The rule is R's `wilcox.test` default, written out so that it
-    does not depend on the scipy version (scipy's `method="auto"` changed between
-    releases): the p-value is exact when there are fewer than 50 differences, none zero
-    and no two of equal size; otherwise zero differences are dropped (Wilcoxon's
-    convention) and p is the normal approximation with the tie-corrected variance and a
-    continuity correction ("asymptotic"). V is R's statistic: the sum of the ranks of the
-    positive differences (scipy reports min(R+, R-) instead).
-
-    Parameters
-    ----------
-    diff : numpy.ndarray
-        The paired differences (HV - VO).
-    scale : float or None, optional
-        The magnitude of the measured values (default the largest |diff|).
-
-    Returns
-    -------
-    tuple of (float, float, str)
-        V, the two-sided p-value, and the method, ``"exact"`` or ``"asymptotic"``.
-    """
-    full = at_resolution(diff, scale)
-    d = full[full != 0]
-    if not len(d):
-        return 0.0, 1.0, "exact"
-    ties = len(np.unique(np.abs(d))) < len(d)
-    exact = len(d) == len(full) and len(d) < EXACT_MAX_N and not ties
-    method = "exact" if exact else "asymptotic"
-    ranks = rank_average(np.abs(d))
-    v = float(ranks[d > 0].sum())
-    p = signed_rank_exact_p(v, len(d)) if exact else signed_rank_normal_p(ranks, v)
-    return v, p, method
-
-
-def compare_conditions(
-    long: pd.DataFrame, a: str = "VO", b: str = "HV"
-) -> tuple[pd.DataFrame, list[str]]:
-    """Condition `b` against `a` per task, measure and group, on participant means.
-
-    A paired t test with Hedges' g_av where the differences pass Shapiro-Wilk at
-    `ALPHA`, else the Wilcoxon signed-rank test with the rank-biserial correlation; the
-    p-values of the groups of one task and measure are Holm-adjusted together.
-
-    Parameters
-    ----------
-    long : pandas.DataFrame
-        One row per participant, task, measure and condition (columns task, measure,
-        group, condition, participant, value).
-    a : str, optional
-        The baseline condition.
-    b : str, optional
-        The condition compared against `a`.
-
-    Returns
-    -------
-    tuple of (pandas.DataFrame, list of str)
-        The tests (`COMPARISON_COLUMNS`) and notes: participants left out of a test for
-        lacking one of the conditions, and tests skipped for too few pairs.
-    """
-    rows, excluded = comparison_rows(long_records(long), a, b)
-    return frame(rows, COMPARISON_COLUMNS), excluded
-
-
-def _pairs(long: Long, a: str, b: str) -> dict[tuple[Any, ...], dict[Any, dict[str, float]]]:
-    """(task, measure, group) -> participant -> condition -> mean value (duplicates
-    averaged, as a pivot table does), in order of first appearance."""
-    cells: dict[tuple[Any, ...], dict[Any, dict[str, list[float]]]] = {}
-    for participant, group, task, condition, measure, value in long:
-        block = cells.setdefault((task, measure, group), {}).setdefault(participant, {})
-        if _finite(value):
-            block.setdefault(condition, []).append(float(value))
-    return {
-        key: {p: {c: float(np.mean(v)) for c, v in conds.items()} for p, conds in people.items()}
-        for key, people in cells.items()
-    }
-
-
-def comparison_rows(long: Long, a: str = "VO", b: str = "HV") -> tuple[list[Row], list[str]]:
-    """`compare_conditions` on `Long` tuples.
-
-    Parameters
-    ----------
-    long : Long
-        The participant means as tuples in the order of `LONG_COLUMNS`.
-    a : str, optional
-        The baseline condition.
-    b : str, optional
-        The condition compared against `a`.
-
-    Returns
-    -------
-    rows : list of dict of str to Any
-        One row per task, measure and group with at least three complete pairs, keyed
-        by `COMPARISON_COLUMNS`.
-    excluded : list of str
-        One line per exclusion (participants missing a condition, too few pairs).
-    """
-    rows, excluded = [], []
-    for (task, measure, group), people in _pairs(long, a, b).items():
-        label = f"{task}/{measure}/{group}"
-        complete, missing_note = _complete_pairs(people, a, b, label)
-        excluded += missing_note
-        n = len(complete)
-        if n < 3:
-            excluded.append(f"{label}: n = {n} pairs, too few to test")
-            continue
-        vo = np.array([c[a] for c in complete])
-        hv = np.array([c[b] for c in complete])
-        row: Row = {"task": task, "measure": measure, "group": group, "n": n}
-        row.update(_paired_test(vo, hv))
-        rows.append({c: row.get(c, float("nan")) for c in COMPARISON_COLUMNS})
-    _holm_within_families(rows)
-    return rows, excluded
-
-
-def _complete_pairs(
-    people: dict[Any, dict[str, float]], a: str, b: str, label: str
-) -> tuple[list[dict[str, float]], list[str]]:
-    """The condition means of the participants with both `a` and `b`, and the note
-    (none or one) naming those without one of them."""
-    people = {p: c for p, c in people.items() if c}  # a pivot drops all-empty rows
-    missing = [p for p, c in people.items() if a not in c or b not in c]
-    complete = [c for c in people.values() if a in c and b in c]
-    if not missing:
-        return complete, []
-    return complete, [f"{label}: excluded {', '.join(map(str, missing))} (missing {a} or {b})"]
-
-
-def _paired_test(vo: np.ndarray, hv: np.ndarray) -> Row:
-    """Both conditions' means and SDs, Shapiro-Wilk on the differences, and the test it
-    picks: the paired t-test with Hedges' g_av, or the Wilcoxon signed-rank test with
-    the rank-biserial correlation."""
-    diff = hv - vo
-    normal_p = shapiro_wilk(diff)[1] if np.ptp(diff) > 0 else 1.0
-    row: Row = {
-        "mean_vo": float(vo.mean()),
-        "mean_hv": float(hv.mean()),
-        "sd_vo": float(vo.std(ddof=1)),
-        "sd_hv": float(hv.std(ddof=1)),
-        "shapiro_p": normal_p,
-    }
-    if normal_p >= ALPHA:
-        t = paired_t(hv, vo)
-        row.update(
-            test="paired_t",
-            statistic=t,
-            p=t_two_sided(t, len(vo) - 1),
-            effect_size=hedges_g_av(vo, hv),
-            effect_size_kind="hedges_g_av",
-            p_method="t distribution",
-        )
-    else:
-        w_stat, w_p, method = wilcoxon_signed_rank(diff, _magnitude(vo, hv))
-        row.update(
-            test="wilcoxon",
-            statistic=w_stat,
-            p=w_p,
-            effect_size=rank_biserial(vo, hv),
-            effect_size_kind="rank_biserial",
-            p_method=method,
-        )
-    return row
-
-
-def _holm_within_families(rows: list[Row]) -> None:
-    """Set each row's `p_holm`: Holm's correction across the groups of one task x measure."""
-    families = _groups(((r["task"], r["measure"]), r) for r in rows)
-    for family in families.values():
-        for r, adjusted in zip(family, holm(np.array([r["p"] for r in family])), strict=True):
-            r["p_holm"] = float(adjusted)
 
 
 def _sizes(counts: dict[Any, int]) -> str:
@@ -823,6 +490,7 @@ def analyze(
     long: pd.DataFrame,
     ss_type: int = DEFAULT_SS_TYPE,
     withdrawn: Sequence[str] = (),
+    bounds: EquivalenceBounds | None = None,
 ) -> Analysis:
     """The study's analysis: descriptives, condition tests, mixed ANOVA, mixed model.
 
@@ -836,6 +504,8 @@ def analyze(
         Sums of squares of the mixed ANOVA, 2 or 3.
     withdrawn : Sequence of str, optional
         Exclusion notes of what was already left out (`frames.without_withdrawn`).
+    bounds : EquivalenceBounds or None, optional
+        The TOST bounds of the comparisons (None: no TOST).
 
     Returns
     -------
@@ -847,7 +517,9 @@ def analyze(
     StudyInputError
         `ss_type` is neither 2 nor 3, or a trial names a task that is not known.
     """
-    return analyze_rows(trials.to_dict("records"), long_records(long), ss_type, withdrawn)
+    return analyze_rows(
+        trials.to_dict("records"), long_records(long), ss_type, withdrawn, bounds=bounds
+    )
 
 
 def _design_checks(trials: list[Row]) -> Any:
@@ -868,6 +540,7 @@ def analyze_rows(
     ss_type: int = DEFAULT_SS_TYPE,
     withdrawn: Sequence[str] = (),
     ddf: str = DEFAULT_DDF,
+    bounds: EquivalenceBounds | None = None,
 ) -> Analysis:
     """`analyze` on rows: what `study analyze` runs, without pandas.
 
@@ -880,9 +553,12 @@ def analyze_rows(
     ss_type : int, optional
         Sums-of-squares type of the mixed ANOVA, 2 or 3.
     withdrawn : Sequence of str, optional
-        Exclusion lines for withdrawn participants, stated first.
+        Exclusion lines of what was left out before (withdrawn participants, invalid
+        trials, questionnaires without pairwise choices), stated first.
     ddf : str, optional
         The mixed model's df: Satterthwaite (default) or Kenward-Roger.
+    bounds : EquivalenceBounds or None, optional
+        The TOST bounds of the comparisons (None: no TOST).
 
     Returns
     -------
@@ -894,11 +570,15 @@ def analyze_rows(
     StudyInputError
         `ss_type` is neither 2 nor 3, or a trial names a task that is not known.
     """
-    comparisons, excluded = comparison_rows(long)
+    from study.analysis.success import success_rows
+
+    comparisons, excluded = comparison_rows(long, bounds=bounds)
     excluded = [*withdrawn, *_missing_questionnaires(trials, long), *excluded]
     anova, anova_notes = mixed_anova_rows(long, ss_type=ss_type)
     lmm, lmm_notes = mixed_model_rows(trials, ddf=ddf)
     checks = _design_checks(trials)
+    success, success_notes = success_rows(trials)
+    excluded += success_notes
     return Analysis(
         descriptive_rows=descriptive_rows(long),
         comparison_rows=comparisons,
@@ -911,4 +591,10 @@ def analyze_rows(
         ddf=ddf,
         design_checks=checks.checks,
         design_fit=checks.fits,
+        success_rows=success,
+        bounds=bounds or EquivalenceBounds(),
+        task_sources={
+            task: DataSource.of_drivers([t["driver"] for t in rows if "driver" in t])
+            for task, rows in _groups((t["task"], t) for t in trials).items()
+        },
     )

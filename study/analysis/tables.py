@@ -18,7 +18,13 @@ from typing import TYPE_CHECKING, Any
 
 from study.analysis.apa import bounded_text, p_text
 from study.analysis.crossover_text import design_checks_cells, design_checks_method
-from study.analysis.methods import anova_method, comparison_method, lmm_method
+from study.analysis.methods import (
+    anova_method,
+    comparison_method,
+    evidence_method,
+    lmm_method,
+    success_method,
+)
 from study.analysis.mixed_model import LMM_COLUMNS
 from study.analysis.stats import (
     ANOVA_COLUMNS,
@@ -27,6 +33,7 @@ from study.analysis.stats import (
     Analysis,
     Row,
 )
+from study.analysis.success import SUCCESS_COLUMNS
 from study.protocol.cells import escape_cell
 
 if TYPE_CHECKING:  # `Table.display` as a frame, for callers that want one
@@ -63,6 +70,8 @@ class Table:
     cells: list[list[Any]]
     """The formatted cells, one list per row in the order of `header`."""
     caption: str
+    footer: str = ""
+    """Printed under the table (the exclusions)."""
 
     @property
     def display(self) -> pd.DataFrame:
@@ -81,6 +90,8 @@ class Table:
             body = ["| " + " | ".join(["-"] * len(self.header)) + " |"]
         caption = markdown_escape(self.caption)
         lines = [f"**Table: {markdown_escape(self.name)}.** {caption}", "", header, rule, *body]
+        if self.footer:
+            lines += ["", markdown_escape(self.footer)]
         return "\n".join(lines) + "\n"
 
     def latex(self) -> str:
@@ -103,6 +114,11 @@ class Table:
             *(" & ".join(_latex_cell(v) for v in r) + " \\\\" for r in self.cells),
             "\\bottomrule",
             "\\end{tabular}",
+            *(
+                [f"\\par\\smallskip{{\\footnotesize {tex_escape(self.footer)}}}"]
+                if self.footer
+                else []
+            ),
             "\\end{table}",
         ]
         text = "\n".join(lines) + "\n"
@@ -213,22 +229,33 @@ def _preamble(analysis: Analysis) -> str:
     return f"{analysis.source.note}. " if analysis.source.note else ""
 
 
-TEST_LABELS = {"paired_t": "paired t", "wilcoxon": "Wilcoxon signed-rank"}
+TEST_LABELS = {"paired_t": "paired t", "wilcoxon": "Wilcoxon signed-rank", "none": "none"}
 EFFECT_LABELS = {"hedges_g_av": "Hedges' g_av", "rank_biserial": "rank-biserial r"}
 TERM_LABELS = {"Intercept": "intercept", "C(condition, Treatment('VO'))[T.HV]": "HV"}
 
 
-def _statistic(test: str, value: float, n: int) -> str:
-    """t with its df (n - 1 pairs); V, the Wilcoxon statistic as R reports it."""
+def _statistic(row: Row) -> str:
+    """t with its df (n - 1 pairs); V, the signed-rank statistic; or why there is none."""
+    test, value, n = row["test"], row["statistic"], row["n"]
+    if test == "none":
+        return f"not testable: {row['not_testable']}"
     if test == "paired_t":
         return f"t({int(n) - 1}) = {_num(value, 2)}"
     return f"V = {_num(value, 1)}" if test == "wilcoxon" else _num(value)
 
 
 def _effect(value: float, kind: str) -> str:
+    if not isinstance(kind, str):
+        return "n/a"
     label = EFFECT_LABELS.get(kind, kind)
     text = bounded_text(value) if kind == "rank_biserial" else _num(value, 2)
     return f"{label} = {text}"
+
+
+def _interval(x: float, low: float, high: float, digits: int) -> str:
+    if not math.isfinite(x):
+        return "n/a"
+    return f"{_num(x, digits)} [{_num(low, digits)}, {_num(high, digits)}]"
 
 
 def term_label(term: str) -> str:
@@ -242,6 +269,10 @@ def term_label(term: str) -> str:
         else:
             parts.append(part)
     return " x ".join(parts)
+
+
+def _exclusions_footer(analysis: Analysis) -> str:
+    return "Exclusions: " + ("; ".join(analysis.exclusions) or "none") + "."
 
 
 def comparisons_table(analysis: Analysis) -> Table:
@@ -259,6 +290,10 @@ def comparisons_table(analysis: Analysis) -> Table:
         "p from",
         "p (Holm)",
         "effect size",
+        "M diff [95 % CI]",
+        "d_z [95 % CI]",
+        "BF10",
+        "TOST p",
     )
     cells = [
         [
@@ -269,17 +304,57 @@ def comparisons_table(analysis: Analysis) -> Table:
             f"{_num(r['mean_vo'])} ({_num(r['sd_vo'])})",
             f"{_num(r['mean_hv'])} ({_num(r['sd_hv'])})",
             TEST_LABELS.get(r["test"], "nan"),
-            _statistic(r["test"], r["statistic"], r["n"]),
+            _statistic(r),
             p_text(r["p"]),
-            r["p_method"],
+            r["p_method"] if isinstance(r["p_method"], str) else "n/a",
             p_text(r["p_holm"]),
             _effect(r["effect_size"], r["effect_size_kind"]),
+            _interval(r["mean_diff"], r["diff_ci_low"], r["diff_ci_high"], 3),
+            _interval(r["dz"], r["dz_ci_low"], r["dz_ci_high"], 2),
+            _num(r["bf10"], 2),
+            p_text(r["tost_p"]),
         ]
         for r in c
     ]
-    exclusions = "; ".join(analysis.exclusions) or "none"
-    caption = f"{_preamble(analysis)}{comparison_method()} Exclusions: {exclusions}."
-    return Table("comparisons", COMPARISON_COLUMNS, c, header, cells, caption)
+    caption = (
+        f"{_preamble(analysis)}{comparison_method()} {evidence_method(analysis.bounds.describe())}"
+    )
+    return Table(
+        "comparisons", COMPARISON_COLUMNS, c, header, cells, caption, _exclusions_footer(analysis)
+    )
+
+
+def success_table(analysis: Analysis) -> Table:
+    s = analysis.success_rows
+    header = (
+        "task",
+        "group",
+        "n",
+        "VO success",
+        "HV success",
+        "VO only",
+        "HV only",
+        "p",
+        "p (Holm)",
+    )
+    cells = [
+        [
+            r["task"],
+            r["group"],
+            r["n"],
+            r["success_vo"],
+            r["success_hv"],
+            r["vo_only"],
+            r["hv_only"],
+            p_text(r["p"]),
+            p_text(r["p_holm"]),
+        ]
+        for r in s
+    ]
+    caption = f"{_preamble(analysis)}{success_method()}"
+    return Table(
+        "success", SUCCESS_COLUMNS, s, header, cells, caption, _exclusions_footer(analysis)
+    )
 
 
 def anova_table(analysis: Analysis) -> Table:
@@ -362,7 +437,8 @@ def _model_table(
 ) -> Table:
     """A model's table, its caption noting the warnings the fit of `model` raised."""
     notes = "; ".join(analysis.warnings_about(model)) or "none"
-    return Table(name, *parts, f"{_preamble(analysis)}{method} Notes: {notes}.")
+    caption = f"{_preamble(analysis)}{method} Notes: {notes}."
+    return Table(name, *parts, caption, _exclusions_footer(analysis))
 
 
 def descriptives_table(analysis: Analysis) -> Table:
@@ -399,7 +475,9 @@ def descriptives_table(analysis: Analysis) -> Table:
         "NASA-TLX as rated): n, mean, SD, median, interquartile range and the t-based 95 % "
         "confidence interval of the mean."
     )
-    return Table("descriptives", DESCRIPTIVE_COLUMNS, d, header, cells, caption)
+    return Table(
+        "descriptives", DESCRIPTIVE_COLUMNS, d, header, cells, caption, _exclusions_footer(analysis)
+    )
 
 
 def all_tables(analysis: Analysis) -> list[Table]:
@@ -409,6 +487,7 @@ def all_tables(analysis: Analysis) -> list[Table]:
         anova_table(analysis),
         lmm_table(analysis),
         design_checks_table(analysis),
+        success_table(analysis),
     ]
 
 

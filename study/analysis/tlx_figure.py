@@ -15,9 +15,9 @@ import math
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from scipy.stats import t as t_dist
 
 from db.models.tlx import TLX_SUBSCALES
-from study.analysis.distributions import t_ppf
 from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_key
 
 CONDITIONS = ("VO", "HV")
@@ -52,7 +52,7 @@ def cousineau_morey(wide: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
         half = pd.Series(np.nan, index=wide.columns)
     else:
         # half = t(1 - alpha/2, n - 1) * SD(y') / sqrt(n) * sqrt(J / (J - 1)) (Morey 2008)
-        t = t_ppf(0.5 + level / 2, n - 1)
+        t = float(t_dist.ppf(0.5 + level / 2, n - 1))
         half = t * centred.std(ddof=1) / math.sqrt(n) * math.sqrt(j / (j - 1))
     return pd.DataFrame({"mean": wide.mean(), "half": half, "n": n})
 

@@ -26,7 +26,9 @@ from functools import lru_cache
 import numpy as np
 import pandas as pd
 
-from study.analysis.stats import ALPHA, compare_conditions, hedges_g_av
+from study.analysis.comparisons import compare_conditions
+from study.analysis.paired import hedges_g_av
+from study.analysis.stats import ALPHA
 from study.campaign.spec import CampaignSpec, Cell, study_seed
 from study.protocol.design import KNOWN_CONDITIONS, StudyDesign, next_order
 from study.protocol.participant_effects import apply_effects, session_place

@@ -15,6 +15,8 @@ from study.errors import StudyInputError
 if TYPE_CHECKING:  # pandas only where the covariate needs it
     import pandas as pd
 
+    from study.analysis.paired import EquivalenceBounds
+
 Row = dict[str, Any]
 
 
@@ -66,14 +68,19 @@ def analyze(
     Every output counts the trials by driver (simulated, keyboard, hardware, imported) and
     says so when any is simulated.
     """
-    from study.analysis.means import participant_mean_rows, restrict_rows, tlx_measure_rows
+    from study.analysis.means import (
+        choiceless_notes,
+        participant_mean_rows,
+        restrict_rows,
+        tlx_measure_rows,
+    )
     from study.analysis.report import write
     from study.analysis.stats import analyze_rows
 
     if json_path is not None:
         check_parent_folder(json_path)
     start = time.monotonic()
-    trials, tlx, withdrawn = _usable_rows(db_url)
+    trials, tlx, withdrawn, bounds = _usable_rows(db_url)
     if covariate is not None:
         probe_trials, trait, values = _probe_covariate(db_url, covariate)
     if task is not None:
@@ -81,9 +88,11 @@ def analyze(
     if not trials and not tlx:
         raise StudyInputError("the database holds no completed trials or questionnaires to analyse")
     trials, tlx = restrict_rows(trials, tlx, driver)
-    withdrawn = [n for n in withdrawn if task is None or n.startswith(f"{task}/")]
+    withdrawn = [
+        n for n in [*withdrawn, *choiceless_notes(tlx)] if task is None or n.startswith(f"{task}/")
+    ]
     long = participant_mean_rows(trials, tlx_measure_rows(tlx))
-    result = analyze_rows(trials, long, ss_type=int(ss_type), withdrawn=withdrawn)
+    result = analyze_rows(trials, long, ss_type=int(ss_type), withdrawn=withdrawn, bounds=bounds)
     written = write(result, out_dir, json_path)
     for path in written:
         click.echo(str(path))
@@ -100,17 +109,23 @@ def analyze(
     )
 
 
-def _usable_rows(db_url: str | None) -> tuple[list[Row], list[Row], list[str]]:
+def _usable_rows(
+    db_url: str | None,
+) -> tuple[list[Row], list[Row], list[str], EquivalenceBounds]:
     """The trials and questionnaires to analyse (`_read`) without the withdrawn
-    participants and the trials marked invalid, and the notes saying who and which
-    were left out."""
+    participants and the trials marked invalid, the notes saying who and which were
+    left out, and the design's equivalence bounds."""
     from study.analysis.means import without_invalid_rows, without_withdrawn_rows
+    from study.analysis.paired import EquivalenceBounds
 
-    trials, tlx, withdrawn_codes, invalid = _read(db_url)
+    trials, tlx, withdrawn_codes, invalid, analysis = _read(db_url)
     trials, tlx, withdrawn = without_withdrawn_rows(withdrawn_codes, trials, tlx)
     trials, invalid_notes = without_invalid_rows(invalid, trials)
     withdrawn += invalid_notes
-    return trials, tlx, withdrawn
+    bounds = EquivalenceBounds(
+        analysis.get("equivalence_fraction"), analysis.get("equivalence_bounds", {})
+    )
+    return trials, tlx, withdrawn, bounds
 
 
 def _probe_covariate(db_url: str | None, covariate: str) -> tuple[pd.DataFrame, str, pd.Series]:
@@ -150,18 +165,33 @@ def _echo_probe_drivers(covariate: str, probe_trials: pd.DataFrame) -> None:
     )
 
 
-def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], dict]:  # type: ignore[type-arg]
+def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:  # type: ignore[type-arg]
     """The trials, questionnaires, withdrawn participants and trials marked invalid
     (`study_rows`): from an
     SQLite file at the current schema through `sqlite3` alone (`db.plain`), otherwise
     through `open_database` (which upgrades an older schema and serves PostgreSQL)."""
     from db.plain import plain_sqlite
-    from study.protocol.study_rows import invalid_rows, tlx_rows, trial_rows, withdrawn_rows
+    from study.protocol.study_rows import (
+        design_analysis,
+        invalid_rows,
+        tlx_rows,
+        trial_rows,
+        withdrawn_rows,
+    )
+
+    def rows(conn: Any) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:  # type: ignore[type-arg]
+        return (
+            trial_rows(conn),
+            tlx_rows(conn),
+            withdrawn_rows(conn),
+            invalid_rows(conn),
+            design_analysis(conn),
+        )
 
     conn = plain_sqlite(db_url)
     if conn is not None:
         try:
-            return trial_rows(conn), tlx_rows(conn), withdrawn_rows(conn), invalid_rows(conn)
+            return rows(conn)
         finally:
             conn.close()
     from db.migrate import open_database
@@ -170,7 +200,7 @@ def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], d
     engine = open_database(db_url, create=False)
     try:
         with driver_connection(engine) as conn:
-            return trial_rows(conn), tlx_rows(conn), withdrawn_rows(conn), invalid_rows(conn)
+            return rows(conn)
     finally:
         engine.dispose()
 

@@ -99,7 +99,9 @@ def _model_effects(
     "--effect",
     default="0.8",
     show_default=True,
-    help="Standardised HV-VO effect: one number, or group=number for each group.",
+    help="HV-VO effect in per-condition SDs (the mean difference over the SD of one "
+    "condition; Cohen's d_z = effect / sqrt(2 (1 - correlation)), equal only at 0.5): "
+    "one number, or group=number for each group.",
 )
 @click.option(
     "--correlation",
@@ -117,7 +119,8 @@ def _model_effects(
     "--measure",
     default=None,
     help="With --participants: the measure whose fitted effect is used "
-    "[default: the task's last analysed one].",
+    "[default: the task's last analysed one]; without: the measure --effect is of, "
+    "named in the output [default: none named].",
 )
 @click.pass_context
 def power(
@@ -149,9 +152,20 @@ def power(
         task = bar.add_task("simulated studies", total=n_sim * len(SCALES))
         told = bar_progress(bar, task, describe=False)
         curve = power_curve(design.groups, effects, rho, n_sim, seed, told)
+    from study.analysis.power import CORRECTION, dz_of
+
     at_design = next(r for s, r in curve if s == 1.0)
+    named = measure or (model_measure(model) if model else None)
+    click.echo(
+        f"measure: {named or 'none named (a standardised effect)'}; effect in per-condition "
+        f"SDs, d_z at correlation {rho:g} in brackets; power with {CORRECTION}"
+    )
     for group, p in at_design.groups.items():
-        click.echo(f"{group:<10} n = {at_design.sizes[group]:>3}  power {p:.3f}")
+        click.echo(
+            f"{group:<10} n = {at_design.sizes[group]:>3}  effect {effects[group]:g} "
+            f"(d_z {dz_of(effects[group], rho):.3g})  power {p:.3f} "
+            f"(uncorrected {at_design.groups_uncorrected[group]:.3f})"
+        )
     if at_design.interaction is not None:
         what = "power" if at_design.interaction_is_power else "type I error rate (equal effects)"
         click.echo(f"group x condition interaction: {what} {at_design.interaction:.3f}")
@@ -162,7 +176,12 @@ def power(
         out_dir.mkdir(parents=True, exist_ok=True)
         report = {
             "design": design.groups,
+            "measure": named,
             "effects": effects,
+            "effect_units": "per-condition SD (mean HV - VO over the SD of one condition)",
+            "effects_dz": {g: dz_of(e, rho) for g, e in effects.items()},
+            "correction": CORRECTION,
+            "groups_uncorrected": at_design.groups_uncorrected,
             "correlation": rho,
             "n_sim": n_sim,
             **(
@@ -187,6 +206,6 @@ def power(
             ],
         }
         (out_dir / "power.json").write_text(json.dumps(report, indent=2) + "\n")
-        fig = plot_power_curve(curve, effects=effects, rho=rho, n_sim=n_sim)
+        fig = plot_power_curve(curve, effects=effects, rho=rho, n_sim=n_sim, measure=named)
         for path in save(fig, out_dir, "power_curve", ("pdf", "png")):
             click.echo(str(path))

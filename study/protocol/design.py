@@ -90,6 +90,7 @@ _KEYS: dict[str, type | tuple[type, ...]] = {
     "haptic_gain_n_m_per_n": dict,
     "lsl": dict,
     "probes": dict,
+    "analysis": dict,
 }
 _KIND_WORDS: dict[type | tuple[type, ...], str] = {
     bool: "true or false",
@@ -121,6 +122,25 @@ class LslSettings:
 
 
 @dataclass(frozen=True)
+class AnalysisSettings:
+    """The design's `[analysis]` table: the equivalence bounds of the TOST."""
+
+    equivalence_fraction: float | None = None
+    """Bound as a fraction of each group's VO mean, for every measure not in
+    `equivalence_bounds`; None: only those."""
+    equivalence_bounds: dict[str, float] = field(default_factory=dict)
+    """Measure name -> bound in the measure's unit."""
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.equivalence_fraction is not None:
+            out["equivalence_fraction"] = self.equivalence_fraction
+        if self.equivalence_bounds:
+            out["equivalence_bounds"] = dict(self.equivalence_bounds)
+        return out
+
+
+@dataclass(frozen=True)
 class StudyDesign:
     name: str = "LCCA navigation, VO vs HV"
     seed: int = 1
@@ -147,6 +167,8 @@ class StudyDesign:
 
     lsl: LslSettings = field(default_factory=LslSettings)
     """The `[lsl]` table (streams published and recorded); off by default."""
+    analysis: AnalysisSettings = field(default_factory=AnalysisSettings)
+    """The `[analysis]` table (equivalence bounds); none by default."""
 
     def haptic_gain_for(self, condition: str) -> float | None:
         """The dial's gain in `condition`; None: the task's default (the paper's)."""
@@ -160,6 +182,9 @@ class StudyDesign:
         data["lsl"] = self.lsl.to_dict()
         if self.lsl == LslSettings():  # designs without the table read as before
             del data["lsl"]
+        data["analysis"] = self.analysis.to_dict()
+        if not data["analysis"]:
+            del data["analysis"]
         data["probes"] = {"before_block": self.probes_before_block, **self.probes}
         del data["probes_before_block"]
         return data
@@ -214,6 +239,7 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         lsl=_lsl_settings(data.get("lsl", {}), source),
         probes=probes,
         probes_before_block=before,
+        analysis=_analysis_settings(data.get("analysis", {}), tasks, source),
     )
     condition_orders(conditions, scheme, source)  # refuses a scheme that does not fit
     return design
@@ -395,6 +421,65 @@ def _predicate_problem(query: str) -> str | None:
     if depth:
         return "an unclosed bracket"
     return None
+
+
+MAX_EQUIVALENCE_FRACTION = 1.0
+"""An equivalence bound above the VO mean itself would call any difference equivalent."""
+
+
+def _analysis_settings(
+    table: dict[str, Any], tasks: tuple[str, ...], source: str
+) -> AnalysisSettings:
+    """[analysis]: the TOST bounds, or one line naming the value out of place."""
+    known = ("equivalence_fraction", "equivalence_bounds")
+    for key in table:
+        if key not in known:
+            raise StudyInputError(
+                f"{source}: unknown key analysis.{key}; expected one of {', '.join(known)}"
+            )
+    fraction = table.get("equivalence_fraction")
+    if fraction is not None and not (
+        isinstance(fraction, int | float)
+        and not isinstance(fraction, bool)
+        and 0 < fraction <= MAX_EQUIVALENCE_FRACTION
+    ):
+        raise StudyInputError(
+            f"{source}: analysis.equivalence_fraction = {fraction!r}; expected a number "
+            f"above 0 and at most {MAX_EQUIVALENCE_FRACTION:g} (of the VO mean)"
+        )
+    bounds = table.get("equivalence_bounds", {})
+    if not isinstance(bounds, dict):
+        raise StudyInputError(
+            f"{source}: analysis.equivalence_bounds = {bounds!r}; expected a table "
+            "of measure = bound, e.g. completion_time_s = 10.0"
+        )
+    measures = _bounded_measures(tasks)
+    out = {}
+    for measure, bound in bounds.items():
+        key = f"{source}: analysis.equivalence_bounds.{measure}"
+        if measure not in measures:
+            raise StudyInputError(
+                f"{key} names no analysed measure; expected one of {', '.join(measures)}"
+            )
+        if (
+            isinstance(bound, bool)
+            or not isinstance(bound, int | float)
+            or not (math.isfinite(bound) and bound > 0)
+        ):
+            raise StudyInputError(
+                f"{key} = {bound!r}; expected a number above 0 (the measure's unit)"
+            )
+        out[measure] = float(bound)
+    return AnalysisSettings(None if fraction is None else float(fraction), out)
+
+
+def _bounded_measures(tasks: tuple[str, ...]) -> list[str]:
+    """The measures a design's TOST may bound: its tasks' analysed ones and the TLX."""
+    from db.tlx_subscales import TLX_SUBSCALES
+    from study.protocol.study_rows import measure_columns
+
+    tlx = ["tlx_raw", "tlx_weighted", *(f"tlx_{s}" for s in TLX_SUBSCALES)]
+    return [*measure_columns(tasks, analysed_only=True), *tlx]
 
 
 def _probes(table: dict[str, Any], blocks: int, source: str) -> tuple[dict[str, int], int]:

@@ -60,6 +60,7 @@ INVALID_SQL = (
     "ORDER BY p.code, t.block_index, t.trial_index, t.attempt"
 )
 WITHDRAWN_SQL = "SELECT code, withdrawal_reason FROM participants WHERE withdrawn_at IS NOT NULL"
+DESIGN_SQL = "SELECT design FROM studies ORDER BY id"
 
 
 def _query(conn: Any, sql: str) -> list[tuple[Any, ...]]:
@@ -123,6 +124,18 @@ def tlx_rows(conn: Any) -> list[dict[str, Any]]:
             }
         )
     return rows
+
+
+def design_analysis(conn: Any) -> dict[str, Any]:
+    """The stored design's `[analysis]` table ({} when it has none)."""
+    import json
+
+    rows = _query(conn, DESIGN_SQL)
+    if not rows:
+        return {}
+    design = rows[0][0]
+    design = json.loads(design) if isinstance(design, str) else design
+    return dict(design.get("analysis", {}))
 
 
 def withdrawn_rows(conn: Any) -> dict[str, str]:

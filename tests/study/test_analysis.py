@@ -13,17 +13,21 @@ import pingouin as pg
 import pytest
 from scipy import stats
 
+from study.analysis.comparisons import compare_conditions, holm
 from study.analysis.mixed_model import mixed_model
-from study.analysis.stats import (
-    compare_conditions,
-    hedges_g_av,
-    holm,
-    mixed_anova,
-    wilcoxon_signed_rank,
-)
+from study.analysis.paired import hedges_g_av
+from study.analysis.signed_rank import signed_rank
+from study.analysis.stats import mixed_anova
 from study.cli import main
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS, TRIAL_COLUMNS
 from tests.study.conftest import init_study, modules_loaded
+
+
+def report_keys_added() -> list[str]:
+    """The comparison keys added after the first eleven (`report.COMPARISON_KEYS`)."""
+    from study.analysis.report import COMPARISON_KEYS
+
+    return list(COMPARISON_KEYS[15:])
 
 
 def _long(values: dict[str, tuple[list[float], list[float]]], measure: str = "m") -> pd.DataFrame:
@@ -68,7 +72,7 @@ def test_paired_t_and_hedges_g_av_by_hand() -> None:
     assert row["p"] == pytest.approx(2 * stats.t.sf(abs(t), 5))
     # Lakens (2013): d_av = mean diff / mean SD; Hedges' J = 1 - 3 / (4 (n1 + n2) - 9)
     d_av = -1.5 / ((np.std(VO, ddof=1) + np.std(HV, ddof=1)) / 2)
-    assert row["effect_size"] == pytest.approx(d_av * (1 - 3 / 39))
+    assert row["effect_size"] == pytest.approx(d_av * (1 - 3 / 19))
     # pingouin.compute_effsize(HV, VO, paired=True, eftype="hedges") standardises by the
     # root mean square of the SDs, sqrt((SD1^2 + SD2^2) / 2), not Lakens' d_av; the same
     # correction on that denominator reproduces it
@@ -76,7 +80,7 @@ def test_paired_t_and_hedges_g_av_by_hand() -> None:
     assert pg.compute_effsize(HV, VO, paired=True, eftype="hedges") == pytest.approx(
         -1.5 / rms * (1 - 3 / 39)
     )
-    assert hedges_g_av(np.array(VO), np.array(HV)) == pytest.approx(d_av * (1 - 3 / 39))
+    assert hedges_g_av(np.array(VO), np.array(HV)) == pytest.approx(d_av * (1 - 3 / 19))
 
 
 def test_non_normal_differences_go_to_wilcoxon_with_exact_p() -> None:
@@ -140,7 +144,7 @@ def test_participants_missing_a_condition_are_excluded_and_said_so() -> None:
     long = long[~((long["participant"] == "N02") & (long["condition"] == "HV"))]
     result, excluded = compare_conditions(long)
     assert result.iloc[0]["n"] == 5
-    assert excluded == ["lcca/m/novice: excluded N02 (missing VO or HV)"]
+    assert excluded == ["lcca/m/novice: excluded N02 (one condition missing: no HV)"]
 
 
 def test_mixed_anova_condition_f_by_hand() -> None:
@@ -241,6 +245,7 @@ def test_study_analyze_writes_the_json_contract(
         "effect_size",
         "effect_size_kind",
         "p_method",
+        *report_keys_added(),
     ]
     measures = {c["measure"] for c in report["comparisons"]}
     assert {
@@ -284,7 +289,7 @@ def test_study_analyze_writes_the_json_contract(
         "Satterthwaite",
         "REML",
         "Shapiro-Wilk",
-        "exact p when",
+        "its p is exact",
         "numpy ",
     ):
         assert phrase in methods
@@ -390,24 +395,25 @@ def test_mixed_anova_refuses_an_unknown_ss_type() -> None:
         mixed_anova(pd.read_csv(DEMO_MEANS), ss_type=1)
 
 
-# R 4.2.2: wilcox.test(d)$p.value (exact = NULL, correct = TRUE: the defaults)
-#   d1 four zeros -> 0.100348246462291 ("cannot compute exact p-value with zeroes")
-#   d2 a tie      -> 0.0420627333567661 ("cannot compute exact p-value with ties")
-#   d3 distinct   -> 0.0546875, V = 32
-#   V: d1 10, d2 33, d3 32 (wilcox.test(d)$statistic, the sum of the positive ranks)
+# R, coin 1.4: the exact conditional p (zeros ranked, Pratt: coin's default)
+#   df <- data.frame(y = d, x = 0)
+#   pvalue(wilcoxsign_test(y ~ x, data = df, distribution = "exact"))
+#   d1 four zeros -> 0.125     (wilcox.test's normal approximation: 0.100348246462291)
+#   d2 a tie      -> 0.0390625 (wilcox.test: 0.0420627333567661)
+#   d3 distinct   -> 0.0546875 (wilcox.test's exact p, the same)
+#   V: r <- rank(abs(d)); sum(r[d > 0]) -> d1 26, d2 33, d3 32
 @pytest.mark.parametrize(
-    ("diff", "p", "w", "method"),
+    ("diff", "p", "v"),
     [
-        ([0, 0, 0, 0, 0.05, 0.12, 0.03, 0.2], 0.100348246462291, 10.0, "asymptotic"),
-        ([0.1, 0.1, 0.3, -0.2, 0.5, 0.6, 0.7, 0.9], 0.0420627333567661, 33.0, "asymptotic"),
-        ([0.11, 0.32, -0.25, 0.54, 0.61, 0.73, 0.95, -0.05], 0.0546875, 32.0, "exact"),
+        ([0, 0, 0, 0, 0.05, 0.12, 0.03, 0.2], 0.125, 26.0),
+        ([0.1, 0.1, 0.3, -0.2, 0.5, 0.6, 0.7, 0.9], 0.0390625, 33.0),
+        ([0.11, 0.32, -0.25, 0.54, 0.61, 0.73, 0.95, -0.05], 0.0546875, 32.0),
     ],
 )
-def test_wilcoxon_rule_is_r_wilcox_test(diff: list[float], p: float, w: float, method: str) -> None:
-    got = wilcoxon_signed_rank(np.array(diff))
-    assert got[0] == w
-    assert got[2] == method
-    assert got[1] == pytest.approx(p, abs=1e-12)
+def test_signed_rank_is_coin_exact(diff: list[float], p: float, v: float) -> None:
+    got = signed_rank(np.array(diff))
+    assert (got.v, got.method) == (v, "exact")
+    assert got.p == pytest.approx(p, abs=1e-12)
 
 
 def test_a_residual_of_exactly_zero_gives_an_infinite_f_and_null_in_the_json() -> None:
@@ -473,7 +479,10 @@ def test_identical_answers_give_an_undefined_f_without_a_warning() -> None:
 # A study on a 0.01 s grid whose HV - VO differences hold a tie (1.20 twice, computed as
 # 1.1999999999999993 and 1.1999999999999957), a near tie at the resolution (0.80, 0.81)
 # and a noise zero (10.1 + 0.2 - 10.3 = -1.8e-15). R 4.2.2 on the differences at their
-# resolution:
+# resolution (coin 1.4, the exact conditional p; wilcox.test for what it gave before):
+#   d <- round(hv - vo, 2); df <- data.frame(y = d, x = 0)
+#   pvalue(wilcoxsign_test(y ~ x, data = df, distribution = "exact"))  # 0.0283203125
+#   r <- rank(abs(d)); sum(r[d > 0]); sum(r[d < 0])  # 76, 14 (the zero ranked 1)
 #   vo <- c(20.00, 30.85, 25.13, 27.40, 22.75, 33.10, 29.95, 24.60, 31.20, 26.05, 28.33,
 #           23.47, 10.3)
 #   hv <- c(21.2, 32.05, 24.78, 29.5, 23.55, 31.55, 33.35, 25.41, 44.1, 27.8, 27.73,
@@ -502,22 +511,24 @@ TIED_HV = [
 
 
 def test_wilcoxon_ties_and_zeros_at_the_data_resolution_equal_r() -> None:
+    from study.analysis.paired import at_resolution
+
     vo, hv = np.array(TIED_VO), np.array(TIED_HV)
     assert len(set(np.abs(hv - vo))) == 13  # the raw floats: no tie, no zero
-    v, p, method = wilcoxon_signed_rank(hv - vo, 44.1)
-    assert (v, method) == (67.0, "asymptotic")
-    assert p == pytest.approx(0.0309194601975077, abs=1e-12)
+    got = signed_rank(at_resolution(hv - vo, 44.1))
+    assert (got.v, got.method, got.n_zero) == (76.0, "exact", 1)
+    assert got.p == pytest.approx(0.0283203125, abs=1e-12)
     # through the analysis: non-normal differences (the 12.9 s outlier) go to Wilcoxon
     result, _ = compare_conditions(_long({"novice": (list(vo), list(hv))}))
     row = result.iloc[0]
-    assert (row["test"], row["statistic"], row["p_method"]) == ("wilcoxon", 67.0, "asymptotic")
-    assert row["p"] == pytest.approx(0.0309194601975077, abs=1e-12)
-    # rank-biserial on the same ranks: (R+ - R-) / total with R+ = 67 of 78 (12 non-zero)
-    assert row["effect_size"] == pytest.approx((67 - 11) / 78, abs=1e-12)
+    assert (row["test"], row["statistic"], row["p_method"]) == ("wilcoxon", 76.0, "exact")
+    assert row["p"] == pytest.approx(0.0283203125, abs=1e-12)
+    # rank-biserial on the same ranks: (R+ - R-) / (R+ + R-) = (76 - 14) / 90
+    assert row["effect_size"] == pytest.approx((76 - 14) / 90, abs=1e-12)
 
 
 def test_near_ties_stay_distinct() -> None:
-    from study.analysis.stats import at_resolution
+    from study.analysis.paired import at_resolution
 
     d = at_resolution(np.array([0.8000000000000007, 0.8099999999999987, 1.2]), 40.0)
     assert len(set(d)) == 3  # 0.80 and 0.81 differ by far more than the resolution
@@ -668,8 +679,8 @@ def test_tables_give_t_df_v_and_human_labels() -> None:
     analysis = analyze(trials, normal)
     c = comparisons_table(analysis).display.set_index("group")
     assert c.loc["novice", "statistic"].startswith("t(5) = ")  # 6 pairs, df 5
-    assert c.loc["expert", "statistic"] == "V = 67.0"
-    assert c.loc["expert", "effect size"] == "rank-biserial r = .72"  # 56 / 78
+    assert c.loc["expert", "statistic"] == "V = 76.0"  # Pratt ranks: the zero ranked 1
+    assert c.loc["expert", "effect size"] == "rank-biserial r = .69"  # (76 - 14) / 90, Pratt ranks
     assert c.loc["novice", "effect size"].startswith("Hedges' g_av = -")
     assert c.loc["expert", "test"] == "Wilcoxon signed-rank"
     anova = anova_table(analysis).display
@@ -699,16 +710,20 @@ def test_a_mixed_model_without_residual_df_is_a_note_not_an_error() -> None:
 #   w <- reshape(s[, c("participant", "condition", "value")], idvar = "participant",
 #                timevar = "condition", direction = "wide"); d <- w$value.HV - w$value.VO
 #   t.test(w$value.HV, w$value.VO, paired = TRUE)   # t, p
-#   wilcox.test(signif(d, 12))                       # V, p: d at the data's resolution
+#   x <- round(d, 9)                                 # d at the data's resolution
+#   pvalue(wilcoxsign_test(y ~ z, data = data.frame(y = x, z = 0),
+#                          distribution = "exact"))  # coin 1.4: the exact conditional p
+#   r <- rank(abs(x)); sum(r[x > 0])                 # V
 #   shapiro.test(d)$p.value
 # (t, p_t, V, p_W, shapiro p); the outsiders' completion time holds a tie that floating-
-# point noise had split (then "exact" p = .189; R on the tie: asymptotic .191)
+# point noise had split (then "exact" p = .189; wilcox.test on the tie: asymptotic .191;
+# coin's exact conditional p on the tie: .1925)
 R_DEMO = {
     ("completion_time_s", "outsider"): (
         1.98398848224652,
         0.0618942430020153,
         140.5,
-        0.191295160961024,
+        0.192543029785156,
         0.0151792852311702,
     ),
     ("completion_time_s", "novice"): (
@@ -735,8 +750,8 @@ R_DEMO = {
     ("peak_distal_force_n", "expert"): (
         -1.28628418260779,
         0.239250924916312,
-        2,
-        0.361310428526179,
+        6,  # four zeros ranked 1-4 (Pratt); wilcox.test drops them: V = 2, p = .361
+        0.375,
         0.00635893776220218,
     ),
     ("tlx_raw", "outsider"): (
@@ -762,7 +777,7 @@ def test_comparisons_equal_r_on_the_demo_study() -> None:
             assert row["statistic"] == v, key
             assert row["p"] == pytest.approx(p_w, rel=1e-8), key
     outsider = rows.loc[("completion_time_s", "outsider")]
-    assert (outsider["test"], outsider["p_method"]) == ("wilcoxon", "asymptotic")
+    assert (outsider["test"], outsider["p_method"]) == ("wilcoxon", "exact")
 
 
 def test_latex_and_csv_are_pandas_layout() -> None:
@@ -858,9 +873,9 @@ def test_study_analyze_reads_sqlite_alone_and_equals_the_sqlalchemy_path(
     tmp_path: Path,
 ) -> None:
     """The command on an SQLite file does not load SQLAlchemy (a fresh process; pandas,
-    and with it pyarrow, and scipy come with statsmodels' mixed model), and writes what
-    the SQLAlchemy path writes (a URL with a parameter takes that path) and the frame
-    API computes."""
+    pyarrow, scipy and matplotlib come with statsmodels' mixed model and pingouin), and
+    writes what the SQLAlchemy path writes (a URL with a parameter takes that path) and the
+    frame API computes."""
     import subprocess
     import sys
 
@@ -873,7 +888,7 @@ def test_study_analyze_reads_sqlite_alone_and_equals_the_sqlalchemy_path(
     probe = (
         "import sys\nfrom study.cli import main\n"
         f"assert main(['analyze', '--out', {str(tmp_path / 'plain')!r}, '--db', {db!r}]) == 0\n"
-        "heavy = ('sqlalchemy', 'jinja2', 'matplotlib')\n"
+        "heavy = ('sqlalchemy', 'jinja2')\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy))\n"
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)

@@ -347,9 +347,9 @@ DEMO_MEANS = Path(__file__).parent.parent / "data" / "demo_seed1_means.csv"
 
 @pytest.mark.parametrize("width", ["single", "double"])
 def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
+    from study.analysis.comparisons import compare_conditions
     from study.analysis.figures import fig12, label_source
     from study.analysis.paper import _marks
-    from study.analysis.stats import compare_conditions
 
     long = pd.read_csv(DEMO_MEANS)
     comparisons, _ = compare_conditions(long)
@@ -358,10 +358,12 @@ def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
     marks = _marks(long, comparisons, "lcca")
     assert len(marks) == 12
     assert check_figure(fig, marks) == []
-    # the expert distal force: 4 of 8 zero differences, R's asymptotic p .361 -> n.s.
-    assert marks["peak_distal_force_n/expert"] == pytest.approx(0.36131, abs=1e-5)
+    # the expert distal force: 4 of 8 zero differences, the exact conditional p -> n.s.;
+    # R: d <- (the 8 expert pairs); coin::pvalue(wilcoxsign_test(d$HV ~ d$VO,
+    #   distribution = "exact")) -> 0.375 (zero.method "Pratt" and "Wilcoxon" alike)
+    assert marks["peak_distal_force_n/expert"] == pytest.approx(0.375, abs=1e-12)
     ax = fig.axes[2]
-    expected = "expert\nW (as.)" if width == "single" else "expert\nWilcoxon\n(asymptotic)"
+    expected = "expert\nW (ex.)" if width == "single" else "expert\nWilcoxon\n(exact)"
     assert expected in [t.get_text() for t in ax.get_xticklabels()]
     if width == "single":  # a column's upper part at most, the abbreviations spelled out
         assert fig.get_size_inches().tolist() == [3.5, 4.0]

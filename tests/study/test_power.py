@@ -22,8 +22,13 @@ def test_no_effect_rejects_at_the_nominal_rate() -> None:
         {"a": 12, "b": 12}, {"a": 0.0, "b": 0.0}, 0.5, 1000, np.random.default_rng(1)
     )
     # binomial(1000, .05): sd = 0.0069; 4 sd either way
-    for p in (*result.groups.values(), result.interaction):
+    for p in (*result.groups_uncorrected.values(), result.interaction):
         assert abs(p - 0.05) < 0.028
+    # Holm across the two groups, as the analysis: each group's rate at most the
+    # uncorrected one and at least that at alpha / 2 (Bonferroni's bound)
+    for group, p in result.groups.items():
+        assert p <= result.groups_uncorrected[group]
+        assert abs(p - 0.0375) < 0.028  # between .025 and .05 at the null
 
 
 def test_power_matches_the_analytic_paired_t_test() -> None:
