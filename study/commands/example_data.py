@@ -19,7 +19,9 @@ def example_data(folder: Path) -> None:
     a lab's own task, a package to install with pip. An existing `emps/` or
     `probe_task/` in FOLDER is left alone and nothing is written.
 
-    Example: study example-data data/ && pip install data/probe_task
+    \b
+    Example:
+      study example-data data/ && pip install data/probe_task
     """
     from study.example_data import copy_to
 

@@ -17,14 +17,24 @@ from study.protocol.tlx import pair_order, response_scores, scored_tlx, store_tl
 
 @click.group("tlx", cls=StudyGroup)
 def tlx() -> None:
-    """NASA-TLX: six ratings (0-100, steps of 5) and 15 pairwise comparisons per block."""
+    """NASA-TLX: six ratings (0-100, steps of 5) and 15 pairwise comparisons per block.
+
+    \b
+    Example:
+      study tlx enter --participant P001 --task lcca --condition HV --mental 55 ...
+    """
 
 
 @tlx.command("pairs")
-@click.option("--participant", "code", required=True)
+@click.option("--participant", "code", required=True, help="The participant's code, e.g. P001.")
 @db_option
 def pairs_cmd(code: str, db_url: str | None) -> None:
-    """The 15 comparisons in the order this participant is shown them."""
+    """The 15 comparisons in the order this participant is shown them.
+
+    \b
+    Example:
+      study tlx pairs --participant P001
+    """
     with opened_database(db_url) as engine:
         with Session(engine) as session:
             study, _ = load_study(session)
@@ -43,9 +53,9 @@ def _rating(name: str):
 
 
 @tlx.command("enter")
-@click.option("--participant", "code", required=True)
-@click.option("--task", required=True)
-@click.option("--condition", required=True)
+@click.option("--participant", "code", required=True, help="The participant's code, e.g. P001.")
+@click.option("--task", required=True, help="The block's task, e.g. lcca.")
+@click.option("--condition", required=True, help="The block's condition, VO or HV.")
 @_rating("mental")
 @_rating("physical")
 @_rating("temporal")
@@ -73,7 +83,13 @@ def enter_cmd(
     db_url: str | None,
     **ratings: int,
 ) -> None:
-    """Store a questionnaire for one task x condition block (or edit the stored one)."""
+    """Store a questionnaire for one task x condition block (or edit the stored one).
+
+    \b
+    Example:
+      study tlx enter --participant P001 --task lcca --condition HV --mental 55 \
+          --physical 30 --temporal 40 --performance 25 --effort 50 --frustration 20
+    """
     chosen = [c.strip() for c in choices.split(",")] if choices else None
     with opened_database(db_url) as engine:
         response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
@@ -86,10 +102,17 @@ def enter_cmd(
 
 @tlx.command("show")
 @click.option("--participant", "code", default=None, help="One participant [default: all].")
-@click.option("--json", "as_json", is_flag=True)
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print the scores as JSON instead of a table."
+)
 @db_option
 def show_cmd(code: str | None, as_json: bool, db_url: str | None) -> None:
-    """Stored questionnaires with their raw and weighted scores."""
+    """Stored questionnaires with their raw and weighted scores.
+
+    \b
+    Example:
+      study tlx show --json
+    """
     with opened_database(db_url) as engine:
         scored = scored_tlx(engine, code)
     rows = [
