@@ -38,9 +38,7 @@ from teleop_core.calibration import Calibrator
 from teleop_core.calibration.fitting import design
 from teleop_core.calibration.rigid_axis import RigidAxisBase
 
-EMPS = Path("/work/shared/data/emps/DATA_EMPS.mat")
-if not EMPS.exists():
-    EMPS = Path(__file__).parent.parent / "tests" / "data" / "emps" / "DATA_EMPS.mat"
+EMPS = Path(__file__).parent.parent / "study" / "example_data" / "emps" / "DATA_EMPS.mat"
 
 
 def plain_idim(t, q, u, cutoff_hz, per_direction, cut):  # type: ignore[no-untyped-def]
@@ -109,7 +107,7 @@ def main() -> None:
         plain[f"{cutoff:g}"] = {"base_rmse_n": r1, "per_direction_rmse_n": r2}
     out["plain_idim_ls"] = plain
     # the loop
-    model = RigidAxisBase()
+    model = RigidAxisBase(mat_columns=("t", "qm", "gtau*vir"))
     data = model.read(EMPS)
     t0 = time.perf_counter()
     cal = Calibrator(model).fit(data)

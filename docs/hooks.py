@@ -1,4 +1,6 @@
-"""MkDocs hooks: the benchmarks page drawn from `benchmarks/results/*.json`.
+"""MkDocs hooks: the benchmarks page drawn from `benchmarks/results/*.json`, the database
+schema from `db.models` and the command-line reference from the `study` command
+(`study.commands.reference`).
 
 `docs/benchmarks.md` holds a marker; at build time it is replaced by a table with one
 row per `[[figure]]` of `benchmarks/index.toml`: the value read from its JSON file at
@@ -19,6 +21,7 @@ INDEX = ROOT / "benchmarks" / "index.toml"
 RESULTS = ROOT / "benchmarks" / "results"
 MARKER = "<!-- benchmarks-table -->"
 SCHEMA_MARKER = "<!-- database-schema -->"
+CLI_MARKER = "<!-- cli-reference -->"
 
 
 def lookup(data: Any, key: str) -> Any:
@@ -97,9 +100,15 @@ def schema_tables() -> str:
 
 
 def on_page_markdown(markdown: str, page: Any, **_: Any) -> str:
-    """Replace the markers of the benchmarks and database pages with generated tables."""
+    """Replace the markers of the benchmarks, database and command-line pages with what
+    they stand for."""
     if MARKER in markdown:
         markdown = markdown.replace(MARKER, table(figure_rows()))
     if SCHEMA_MARKER in markdown:
         markdown = markdown.replace(SCHEMA_MARKER, schema_tables())
+    if CLI_MARKER in markdown:
+        from study.cli import cli
+        from study.commands.reference import cli_reference
+
+        markdown = markdown.replace(CLI_MARKER, cli_reference(cli))
     return markdown

@@ -29,6 +29,7 @@ COMMANDS = {
     "demo": "study.commands.figures:demo",
     "design": "study.commands.plan:design_group",
     "estimator": "study.commands.estimator:estimator",
+    "example-data": "study.commands.example_data:example_data",
     "export": "study.commands.exchange:export_cmd",
     "figures": "study.commands.figures:figures",
     "hardware": "study.commands.hardware:hardware",
@@ -49,6 +50,27 @@ COMMANDS = {
     "tui": "study.commands.tui:tui",
 }
 """Every subcommand: its name -> "module:attribute", imported when it is called."""
+
+
+SECTIONS = (
+    ("Plan the study", ("design", "init", "participant", "schedule", "power")),
+    (
+        "Run the sessions",
+        ("tui", "run", "hardware", "probe", "tlx", "trial", "import-xdf", "lsl-config"),
+    ),
+    ("Analyse", ("analyze", "figures", "export", "import")),
+    ("Calibrate the robot", ("calibrate", "estimator", "characterize", "identify")),
+    ("Simulate", ("demo", "simulate", "participants", "campaign")),
+    ("Maintain", ("db", "bench", "example-data")),
+)
+"""`study --help` lists the commands by the part of the lab's work they belong to, in
+the order of a study; a command in no section is listed under "Other"."""
+
+START_HERE = (
+    "Start here: `study demo --out demo/` runs a whole simulated study (database, "
+    "statistics, figures); `study design template > design.toml` begins a real one. "
+    "`study COMMAND --help` shows a command's options and an example."
+)
 
 
 class LazyStudyGroup(StudyGroup):
@@ -77,6 +99,26 @@ class LazyStudyGroup(StudyGroup):
             self.add_command(command)
         return self.commands.get(cmd_name)
 
+    start_here = START_HERE
+
+    def sections(self, ctx: click.Context) -> list[tuple[str, list[click.Command]]]:
+        """The commands by the part of the lab's work they belong to (`SECTIONS`)."""
+        listed = {name for _, names in SECTIONS for name in names}
+        others = tuple(n for n in self.list_commands(ctx) if n not in listed)
+        out = []
+        for title, names in (*SECTIONS, ("Other", others)):
+            commands = [self.get_command(ctx, name) for name in names]
+            shown = [c for c in commands if c is not None and not c.hidden]
+            if shown:
+                out.append((title, shown))
+        return out
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """A "start here" line, then the commands by section."""
+        formatter.write_paragraph()
+        formatter.write_text(self.start_here)
+        super().format_commands(ctx, formatter)
+
 
 @click.group(
     cls=LazyStudyGroup,
@@ -98,6 +140,11 @@ def cli() -> None:
     The database is ./study.db unless --db URL or the STUDY_DB environment variable
     names another (an SQLite path or URL, or postgresql+psycopg://... for multi-site
     studies).
+
+    \b
+    Example:
+      study demo --out demo/
+      study design template > design.toml
     """
 
 

@@ -66,7 +66,7 @@ def read_cells(path: str | Path, error: ErrorType) -> pd.DataFrame:
             path, dtype=str, keep_default_na=False, skipinitialspace=True, encoding="utf-8"
         )
     except FileNotFoundError:
-        raise error(f"recording {path} does not exist; expected a CSV file") from None
+        raise error(f"recording {path}: no such file; expected a CSV file") from None
     except pd.errors.EmptyDataError:
         raise error(f"recording {path} is empty; expected a header row and data") from None
     except UnicodeDecodeError as exc:

@@ -251,11 +251,12 @@ SLOW_TESTS = (
     "tests/study/test_notes_cli.py::test_characterize_",
     "tests/db/test_migrations.py::test_two_processes_",
     "tests/db/test_samples.py::test_kill_9_",
+    "tests/study/test_progress_lines.py::test_a_demo_into_a_log_file_",
 )
 """Single tests (node id prefixes) marked `slow` in modules that are otherwise fast:
 subprocesses, kill -9, memory measured over a large export, many simulated fits, a whole
 probe session stored, exported and imported, hundreds of generated trial files, a GRU
-trained for the loop to run."""
+trained for the loop to run, a demo run into a log file."""
 FAST_LANE = "not slow"
 """The fast lane's mark expression (README): given exactly, the modules of
 `SLOW_MODULES` are not even imported (PyTorch, the fit), which would all be deselected."""

@@ -12,7 +12,7 @@
 - Clean recordings over 10 seeds (target: nothing added, verdict `white`, 10 of 10).
 
 A. Janot, M. Gautier, M. Brunot, "Data Set and Reference Models of EMPS", Workshop
-on Nonlinear System Identification Benchmarks, 2019 (tests/data/emps/).
+on Nonlinear System Identification Benchmarks, 2019 (study/example_data/emps/).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from study import example_data
 from teleop_core.calibration import Calibrator, FollowerBase
 from teleop_core.calibration.fitting import params_text
 from teleop_core.calibration.rigid_axis import RigidAxisBase
@@ -36,11 +37,11 @@ from teleop_core.calibration.undeclared import (
 from teleop_core.calibration.verdict import fit_percent
 from teleop_core.progress import Progress
 
-EMPS_FILE = Path(__file__).resolve().parents[2] / "tests" / "data" / "emps" / "DATA_EMPS.mat"
+EMPS_FILE = example_data.path(example_data.EMPS_FILE)
 
 
 def emps_run(path: Path = EMPS_FILE) -> dict[str, Any]:
-    model = RigidAxisBase()
+    model = RigidAxisBase(mat_columns=("t", "qm", "gtau*vir"))  # EMPS's variable names
     start = time.perf_counter()
     data = model.read(path)
     cal = Calibrator(model).fit(data)

@@ -21,7 +21,13 @@ Row = dict[str, Any]
 
 
 @click.command("analyze", cls=StudyCommand)
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for methods.md, the tables and analysis.json (created if its parent exists).",
+)
 @click.option("--task", default=None, help="Only this task (e.g. lcca) [default: all].")
 @click.option(
     "--json",
@@ -67,6 +73,10 @@ def analyze(
 
     Every output counts the trials by driver (simulated, keyboard, hardware, imported) and
     says so when any is simulated.
+
+    \b
+    Example:
+      study analyze --out results/
     """
     from study.analysis.means import (
         choiceless_notes,

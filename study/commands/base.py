@@ -3,6 +3,7 @@ input errors into one-line usage errors, and the common `--db` option."""
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -20,6 +21,7 @@ if TYPE_CHECKING:
     from rich.status import Status
     from sqlalchemy import Engine
 
+    from study.commands.progress_lines import LineStatus
     from study.protocol.participant_model import ParticipantModel
     from teleop_core import progress
 
@@ -171,9 +173,33 @@ class StudyCommand(click.Command):
             raise InputError(message, ctx) from exc
 
 
+def summary(command: click.Command) -> str:
+    """A command's first sentence, whole: up to the first full stop that ends its first
+    paragraph or comes before a capital (click's own short help cuts at a width, and at
+    the stop of "Fig. 8" or "eq. 1")."""
+    if command.short_help:
+        return command.short_help
+    paragraph = (command.help or "").strip().split("\n\n")[0]
+    text = " ".join(paragraph.split())
+    end = re.search(r"[.!?](?=\s+[A-Z`(]|$)", text)
+    return text[: end.end()] if end else text
+
+
 class StudyGroup(click.Group):
     command_class = StudyCommand
     group_class = type  # subgroups are StudyGroups too
+
+    def sections(self, ctx: click.Context) -> list[tuple[str, list[click.Command]]]:
+        """The subcommands under their headings, as `--help` and the reference list them."""
+        commands = [self.get_command(ctx, name) for name in self.list_commands(ctx)]
+        return [("Commands", [c for c in commands if c is not None and not c.hidden])]
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The subcommands with their whole first sentence (click cuts it to the width)."""
+        for title, commands in self.sections(ctx):
+            if commands:
+                with formatter.section(title):
+                    formatter.write_dl([(c.name or "", summary(c)) for c in commands])
 
 
 db_option = click.option(
@@ -216,12 +242,14 @@ actor_option = click.option(
 )
 
 
-def json_option(help: str | None = None) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """`--json FILE` (required, as `json_path`): where a command writes its numbers."""
+def json_option(
+    help: str | None = None, *, required: bool = True
+) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """`--json FILE` (as `json_path`): where a command writes its numbers."""
     return click.option(
         "--json",
         "json_path",
-        required=True,
+        required=required,
         type=click.Path(dir_okay=False, path_type=Path),
         help=help,
     )
@@ -281,8 +309,25 @@ def progress_bar(*columns: Any, transient: bool = True, console: Console | None 
             TimeRemainingColumn(),
         )
     console = console or Console(stderr=True)
-    # off where stderr is no terminal: rich draws nothing there but a lone newline
-    return Progress(*columns, transient=transient, console=console, disable=not console.is_terminal)
+    if console.is_terminal:
+        return Progress(*columns, transient=transient, console=console)
+    # a bar draws nothing on a pipe or a log file: a line every ten seconds there
+    from study.commands.progress_lines import LineProgress
+
+    return LineProgress(*columns, console=console)
+
+
+def progress_status(text: str, console: Console | None = None) -> Status | LineStatus:
+    """The spinner long commands show on stderr with the step `text`; where stderr is no
+    terminal, a line every ten seconds with the latest step instead."""
+    from rich.console import Console
+
+    console = console or Console(stderr=True)
+    if console.is_terminal:
+        return console.status(text)
+    from study.commands.progress_lines import LineStatus
+
+    return LineStatus(text, console)
 
 
 def bar_progress(bar: Progress, task: TaskID, *, describe: bool = True) -> progress.Progress:
@@ -299,13 +344,25 @@ def bar_progress(bar: Progress, task: TaskID, *, describe: bool = True) -> progr
     return told
 
 
-def status_progress(status: Status, prefix: str = "") -> progress.Progress:
+def status_progress(status: Status | LineStatus, prefix: str = "") -> progress.Progress:
     """The `teleop_core.progress.Progress` that shows each step on a Rich status line
-    (`prefix`, then the step and its count)."""
-    from teleop_core.progress import describe
+    (`prefix`, then the step and its count), or that a `LineStatus` writes."""
+    from teleop_core.progress import Heartbeat, describe
+
+    if isinstance(status, Heartbeat):
+        return as_prefixed(status, prefix)
 
     def told(step: str, done: int = 0, total: int = 0) -> None:
         status.update(prefix + describe(step, done, total))
+
+    return told
+
+
+def as_prefixed(heartbeat: progress.Progress, prefix: str) -> progress.Progress:
+    """`heartbeat` told every step with `prefix` before it."""
+
+    def told(step: str, done: int = 0, total: int = 0) -> None:
+        heartbeat(prefix + step, done, total)
 
     return told
 

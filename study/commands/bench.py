@@ -34,12 +34,22 @@ _db_option = click.option(
     help="Benchmark against this server (PostgreSQL gets a private scratch schema) "
     "[default: a temporary SQLite file].",
 )
-_json_option = click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path))
+_json_option = click.option(
+    "--json",
+    "json_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the figures as JSON to this file [default: print only].",
+)
 
 
 @click.group("bench", cls=StudyGroup)
 def bench() -> None:
-    """Benchmarks: speed figures measured on this machine."""
+    """Benchmarks: speed figures measured on this machine.
+
+    \b
+    Example:
+      study bench db --rows 100000
+    """
 
 
 for _command in PAPER_BENCHES:
@@ -48,13 +58,24 @@ for _command in PAPER_BENCHES:
 
 @bench.command("db")
 @_db_option
-@click.option("--rows", type=click.IntRange(min=1), default=1_000_000, show_default=True)
+@click.option(
+    "--rows",
+    type=click.IntRange(min=1),
+    default=1_000_000,
+    show_default=True,
+    help="Sample rows written and read back.",
+)
 @positive_option(
     "--rate-hz", 1000.0, "Sample rate of the synthetic trial; one chunk committed per second of it."
 )
 @_json_option
 def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | None) -> None:
-    """Write one trial's samples through the session writer and report rows/s."""
+    """Write one trial's samples through the session writer and report rows/s.
+
+    \b
+    Example:
+      study bench db --rows 100000 --json db.json
+    """
     from study.bench.db_write import bench_sample_write
 
     with progress_bar() as progress:
@@ -70,8 +91,20 @@ def bench_db(db_url: str | None, rows: int, rate_hz: float, json_path: Path | No
 
 @bench.command("export")
 @_db_option
-@click.option("--samples", type=click.IntRange(min=1), default=10_000_000, show_default=True)
-@click.option("--participants", type=click.IntRange(min=1), default=360, show_default=True)
+@click.option(
+    "--samples",
+    type=click.IntRange(min=1),
+    default=10_000_000,
+    show_default=True,
+    help="Samples of the study that is exported.",
+)
+@click.option(
+    "--participants",
+    type=click.IntRange(min=1),
+    default=360,
+    show_default=True,
+    help="Participants the samples are spread over.",
+)
 @click.option(
     "--jobs",
     type=click.IntRange(min=1),
@@ -83,7 +116,12 @@ def bench_export(
     db_url: str | None, samples: int, participants: int, jobs: int | None, json_path: Path | None
 ) -> None:
     """Build a study of SAMPLES samples, export them to Parquet and CSV (time, memory,
-    size), then draw its figures with `study figures` and the app's analysis screen."""
+    size), then draw its figures with `study figures` and the app's analysis screen.
+
+    \b
+    Example:
+      study bench export --samples 1000000 --participants 36
+    """
     from study.bench.export import bench_export as run_bench
 
     if json_path is not None:
@@ -132,10 +170,21 @@ def bench_export(
     show_default=True,
     help="Participants per group in each simulated study.",
 )
-@click.option("--workers", type=click.IntRange(min=2), default=2, show_default=True)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=2),
+    default=2,
+    show_default=True,
+    help="Dask workers of the local cluster.",
+)
 @_json_option
 def bench_campaign(replicates: int, group_size: int, workers: int, json_path: Path | None) -> None:
-    """A campaign on 1 and on N Dask workers: units per hour, speed-up, overhead per unit."""
+    """A campaign on 1 and on N Dask workers: units per hour, speed-up, overhead per unit.
+
+    \b
+    Example:
+      study bench campaign --workers 2 --json campaign.json
+    """
     from study.bench.campaign import run_campaign_bench
 
     if json_path is not None:
@@ -167,10 +216,21 @@ def bench_campaign(replicates: int, group_size: int, workers: int, json_path: Pa
     help="A study database, e.g. made by `study demo` [default: build the "
     "full 36-participant demo study in a temporary folder first, minutes].",
 )
-@click.option("--runs", type=click.IntRange(min=1), default=5, show_default=True)
+@click.option(
+    "--runs",
+    type=click.IntRange(min=1),
+    default=5,
+    show_default=True,
+    help="Timed runs; the median is reported.",
+)
 @_json_option
 def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
-    """Time from starting `study tui` to the overview on the terminal (target 1.5 s)."""
+    """Time from starting `study tui` to the overview on the terminal (target 1.5 s).
+
+    \b
+    Example:
+      study bench tui --runs 3
+    """
     import tempfile
 
     from study.bench.tui import bench_tui as run_bench
@@ -235,7 +295,12 @@ def bench_tui(db_url: str | None, runs: int, json_path: Path | None) -> None:
 def bench_startup(
     db_url: str | None, runs: int, rows: int, demo_runs: int, json_path: Path | None
 ) -> None:
-    """From a cold process: simulate, the run screen, analyze, the writer, the demo."""
+    """From a cold process: simulate, the run screen, analyze, the writer, the demo.
+
+    \b
+    Example:
+      study bench startup --json startup.json
+    """
     from study.bench.startup import bench_startup as run_bench
 
     if json_path is not None:
@@ -325,8 +390,16 @@ def bench_startup(
     show_default=True,
     help="As `study participants fit --bootstrap` (also the coverage's).",
 )
-@click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
-@click.option("--seed", type=SEED, default=11, show_default=True)
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=2,
+    show_default=True,
+    help="Processes that run the simulations side by side.",
+)
+@click.option(
+    "--seed", type=SEED, default=11, show_default=True, help="Seed of the simulated studies."
+)
 @_json_option
 def bench_participants(
     out_dir: Path | None,
@@ -341,7 +414,12 @@ def bench_participants(
     seed: int,
     json_path: Path | None,
 ) -> None:
-    """Recovery of known trait distributions from a simulated 20/8/8 study, and the fit's time."""
+    """Recovery of known trait distributions from a simulated 20/8/8 study, and the fit's time.
+
+    \b
+    Example:
+      study bench participants --json participants.json
+    """
     from study.analysis.participant_fit.fit import FitSettings
     from study.bench.participants import markdown, run_participants_bench
 
@@ -379,7 +457,12 @@ def bench_participants(
 @click.option("--quick", is_flag=True, help="Two trials of 2 s (a few seconds in all).")
 def bench_lsl(json_path: Path | None, out_dir: Path, quick: bool) -> None:
     """Recorded LSL streams against the trial's clock: the alignment error of a simulated
-    1 kHz instrument during a paced session (needs LSLAPICFG, see `study lsl-config`)."""
+    1 kHz instrument during a paced session (needs LSLAPICFG, see `study lsl-config`).
+
+    \b
+    Example:
+      study bench lsl --out lsl/
+    """
     from study.bench.lsl import LslBenchConfig, run_lsl_bench
     from study.lsl.config import load_pylsl
 

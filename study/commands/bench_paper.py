@@ -28,7 +28,9 @@ from teleop_core.progress import Progress
 
 _json_option = json_option("Write every table as JSON here.")
 _out_option = out_dir_option("Folder for the Markdown tables, the figures and any data files.")
-_seed_option = click.option("--seed", type=SEED, default=0, show_default=True)
+_seed_option = click.option(
+    "--seed", type=SEED, default=0, show_default=True, help="Seed of the simulated recordings."
+)
 
 
 def write_json(json_path: Path | None, data: dict[str, Any]) -> None:
@@ -127,9 +129,14 @@ def bench_follower(
     only: str | None,
     generalisation_seeds: str | None,
 ) -> None:
-    """Tables I-III and Fig. 8 of [endovascular] on the simulated follower, and the estimator on
-    recordings it never saw, and the training time of `study estimator train` (about 30 min,
-    several hours and 10 min)."""
+    """Tables I-III and Fig. 8 of the endovascular haptics paper on the simulated follower,
+    and the estimator on recordings it never saw, and the training time of `study
+    estimator train` (about 30 min, several hours and 10 min).
+
+    \b
+    Example:
+      study bench follower --json follower.json --out follower/
+    """
     from study.bench.follower import PARTS, FollowerBenchConfig, run_follower_bench
 
     check_parent_folder(json_path)
@@ -160,7 +167,13 @@ def bench_follower(
 def bench_master(
     json_path: Path, out_dir: Path, model_dir: Path | None, seed: int, quick: bool
 ) -> None:
-    """Figs. 10-11 of [endovascular] on the simulated dial, latency, and the loop's speed."""
+    """Figs. 10-11 of the endovascular haptics paper on the simulated dial, latency, and the
+    loop's speed.
+
+    \b
+    Example:
+      study bench master --json master.json --out master/
+    """
     from study.bench.master import MasterBenchConfig, run_master_bench
 
     config = replace(MasterBenchConfig.quick() if quick else MasterBenchConfig(), seed=seed)
@@ -194,7 +207,12 @@ def bench_lcca(
     quick: bool,
     lsl: bool = False,
 ) -> None:
-    """The paper's 20/8/8 user study with simulated participants, and its speed."""
+    """The paper's 20/8/8 user study with simulated participants, and its speed.
+
+    \b
+    Example:
+      study bench lcca --json lcca.json --out lcca/
+    """
     from study.bench.lcca import LccaBenchConfig, run_lcca_bench
 
     config = replace(
@@ -264,7 +282,12 @@ def bench_calibrate(
     timing: bool,
     only: tuple[str, ...],
 ) -> None:
-    """Calibration loop: every family, the clean recording, speed, estimator."""
+    """Calibration loop: every family, the clean recording, speed, estimator.
+
+    \b
+    Example:
+      study bench calibrate --json calibrate.json
+    """
     from study.bench.calibrate import CalibrateBenchConfig, run_calibrate_bench
 
     check_parent_folder(json_path)
@@ -344,14 +367,22 @@ def _bench_calibrate_time(
 @count_option("--draws", 10, "Seeded parameter draws per axis for the identification round trip.")
 @count_option("--trials", 4, "Simulated NOTES trials per group and condition.")
 @count_option(
-    "--surgeons", 10, "Simulated experts for the surgeons' benchmark ([notes] had 10).", minimum=2
+    "--surgeons",
+    10,
+    "Simulated experts for the surgeons' benchmark (the NOTES paper had 10).",
+    minimum=2,
 )
 @_seed_option
 def bench_notes(
     json_path: Path, out_dir: Path, draws: int, trials: int, surgeons: int, seed: int
 ) -> None:
-    """The NOTES device of [notes]: bandwidth, settling, limits, identification round trip,
-    and the surgeons' benchmark on simulated experts."""
+    """The NOTES device of the NOTES haptics paper: bandwidth, settling, limits,
+    identification round trip, and the surgeons' benchmark on simulated experts.
+
+    \b
+    Example:
+      study bench notes --json notes.json --out notes/
+    """
     from study.bench.notes import NotesBenchConfig, run_notes_bench
 
     check_parent_folder(json_path)

@@ -50,7 +50,7 @@ def _mat_columns(text: str) -> tuple[str, str, str]:
 
 
 def _base_model(
-    recording: Path, model_name: str, held_out: float, mat_columns: str, units: str | None
+    recording: Path, model_name: str, held_out: float, mat_columns: str | None, units: str | None
 ) -> Any:
     """The base model of `model_name`; the rigid axis's with its derivative cutoff fitted
     on the training share and its axis from `units`, else from the recording's unit
@@ -58,6 +58,11 @@ def _base_model(
     from teleop_core.calibration import BASE_MODELS
     from teleop_core.calibration.rigid_axis import RigidAxisBase, recording_axis
 
+    if recording.suffix.lower() == ".mat" and (model_name != "rigid-axis" or not mat_columns):
+        raise StudyInputError(
+            f"{recording} is a MATLAB file; expected --model rigid-axis with --mat-columns "
+            "t=NAME,q=NAME,u=NAME naming its variables (products allowed: u=gain*volt)"
+        )
     if model_name != "rigid-axis":
         if units is not None:
             raise StudyInputError(
@@ -65,8 +70,9 @@ def _base_model(
                 "--model rigid-axis (the other models' contracts fix their units)"
             )
         return BASE_MODELS[model_name]
-    columns = _mat_columns(mat_columns)
-    axis = units or recording_axis(recording, columns) or "linear"
+    columns = _mat_columns(mat_columns) if mat_columns else None
+    said = recording_axis(recording, columns) if columns else recording_axis(recording)
+    axis = units or said or "linear"
     return RigidAxisBase(train_fraction=1.0 - held_out, mat_columns=columns, axis=axis)
 
 
@@ -76,7 +82,7 @@ def run_calibration(
     held_out: float,
     max_effects: int,
     families: str | None,
-    mat_columns: str = "t=t,q=qm,u=gtau*vir",
+    mat_columns: str | None = None,
     units: str | None = None,
     validate: Sequence[Path] = (),
 ) -> Any:
@@ -100,7 +106,7 @@ def run_calibration(
         TimeElapsedColumn(),
         console=_err,
     ) as progress:
-        task = progress.add_task("loop", total=None, what="")
+        task = progress.add_task("calibration", total=None, what="", unit="families")
 
         def report(step: str, done: int = 0, total: int = 0) -> None:
             progress.update(task, completed=done, total=total or None, what=step)
@@ -119,9 +125,24 @@ def run_calibration(
     show_default=True,
     help="Base model and recording contract.",
 )
-@json_option("Report: RMSE before/after, effects added, candidates rejected, residual tests.")
-@file_option("--predictions", "pred_path", "Held-out predictions CSV: t, f_ref, f_base, f_final.")
-@out_dir_option("Folder for the residual figures (created if its parent exists).")
+@json_option(
+    "Report: RMSE before/after, effects added, candidates rejected, residual tests "
+    "[default: report.json in the --out folder].",
+    required=False,
+)
+@file_option(
+    "--predictions",
+    "pred_path",
+    "Held-out predictions CSV: t, f_ref, f_base, f_final [default: predictions.csv in "
+    "the --out folder].",
+    required=False,
+)
+@out_dir_option(
+    "Folder for the residual figures, and the report and predictions unless named "
+    "(created if its parent exists) [default: RECORDING's name with -calibration, in the "
+    "current folder].",
+    required=False,
+)
 @click.option(
     "--held-out",
     type=click.FloatRange(0.05, 0.5),
@@ -130,13 +151,20 @@ def run_calibration(
     help="Share of the recording held out for testing: at its end, or for a NOTES chirp at "
     "the end of each of 8 segments of the sweep.",
 )
-@click.option("--max-effects", type=click.IntRange(min=0), default=4, show_default=True)
+@click.option(
+    "--max-effects",
+    type=click.IntRange(min=0),
+    default=4,
+    show_default=True,
+    help="Most effects the loop adds to the base model (0: fit and report the base model).",
+)
 @click.option(
     "--mat-columns",
-    default="t=t,q=qm,u=gtau*vir",
-    show_default=True,
-    help="For a MATLAB .mat RECORDING (--model rigid-axis): the variables, or products of "
-    "them, that give t, q and u; every other vector of the same length is an extra channel.",
+    default=None,
+    metavar="t=NAME,q=NAME,u=NAME",
+    help="For a MATLAB .mat RECORDING (--model rigid-axis, required then): the variables, "
+    "or products of them, that give t, q and u (e.g. t=time,q=pos,u=gain*volt); every "
+    "other vector of the same length is an extra channel.",
 )
 @click.option(
     "--families",
@@ -165,12 +193,12 @@ def run_calibration(
 def calibrate(
     recording: Path,
     model_name: str,
-    json_path: Path,
-    pred_path: Path,
-    out_dir: Path,
+    json_path: Path | None,
+    pred_path: Path | None,
+    out_dir: Path | None,
     held_out: float,
     max_effects: int,
-    mat_columns: str,
+    mat_columns: str | None,
     families: str | None,
     validate: tuple[Path, ...],
     units: str | None,
@@ -183,6 +211,10 @@ def calibrate(
     notes-translation or notes-rotation, or any drive's recording (t, q, u: position
     in m or rad, force in N or N m; other numeric columns are extra channels) for
     --model rigid-axis, which also reads a MATLAB v5 .mat file (see --mat-columns).
+
+    \b
+    Example:
+      study calibrate bench.csv --model follower     # writes bench-calibration/
     """
     import pandas as pd
 
@@ -196,8 +228,7 @@ def calibrate(
     from teleop_core.calibration.verdict import quantities
     from teleop_core.estimation.recording import write_csv_atomically
 
-    for path in (json_path, pred_path, out_dir):
-        check_parent_folder(path)
+    out_dir, json_path, pred_path = output_paths(recording, out_dir, json_path, pred_path)
     calibrator = run_calibration(
         recording, model_name, held_out, max_effects, families, mat_columns, units, validate
     )
@@ -279,6 +310,23 @@ def calibrate(
         )
     for warning in report["warnings"]:
         click.echo(f"note: {warning}")
+
+
+def output_paths(
+    recording: Path, out_dir: Path | None, json_path: Path | None, pred_path: Path | None
+) -> tuple[Path, Path, Path]:
+    """The figures' folder, the report and the predictions: as given, or the defaults
+    (`RECORDING-calibration/` in the current folder, holding `report.json` and
+    `predictions.csv`); each given one's folder must exist."""
+    for given in (json_path, pred_path, out_dir):
+        if given is not None:
+            check_parent_folder(given)
+    folder = out_dir if out_dir is not None else Path(f"{recording.stem}-calibration")
+    return (
+        folder,
+        json_path if json_path is not None else folder / "report.json",
+        pred_path if pred_path is not None else folder / "predictions.csv",
+    )
 
 
 def _verdict_line(report: dict[str, Any]) -> str:

@@ -17,12 +17,22 @@ if TYPE_CHECKING:
 
 @click.group("campaign", cls=StudyGroup)
 def campaign() -> None:
-    """Simulation campaigns: power and parameter sweeps of simulated studies on Dask."""
+    """Simulation campaigns: power and parameter sweeps of simulated studies on Dask.
+
+    \b
+    Example:
+      study campaign template > campaign.toml && study campaign run campaign.toml --out sweep/
+    """
 
 
 @campaign.command("template")
 def template() -> None:
-    """Print a commented campaign file (TOML) to start from."""
+    """Print a commented campaign file (TOML) to start from.
+
+    \b
+    Example:
+      study campaign template > campaign.toml
+    """
     from study.campaign.spec import TEMPLATE
 
     click.echo(TEMPLATE, nl=False)
@@ -52,7 +62,12 @@ def template() -> None:
     help="Run on this Dask scheduler's workers instead of a LocalCluster.",
 )
 def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str | None) -> None:
-    """Run CAMPAIGN.toml's units (skipping those already in --out) and write the results."""
+    """Run CAMPAIGN.toml's units (skipping those already in --out) and write the results.
+
+    \b
+    Example:
+      study campaign run campaign.toml --out sweep/
+    """
     from study.campaign.engine import close_client, open_client, run_pending
     from study.campaign.spec import parse_campaign
     from study.campaign.store import CampaignDir
@@ -98,7 +113,12 @@ def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str 
 @campaign.command("report")
 @click.argument("out_dir", metavar="DIR", type=click.Path(file_okay=False, path_type=Path))
 def report(out_dir: Path) -> None:
-    """Rebuild DIR's tables from its finished units and redraw the figures."""
+    """Rebuild DIR's tables from its finished units and redraw the figures.
+
+    \b
+    Example:
+      study campaign report sweep/
+    """
     from study.campaign.store import CampaignDir
 
     if not out_dir.is_dir():

@@ -22,7 +22,12 @@ from study.errors import StudyInputError
 
 @click.group("characterize", cls=StudyGroup)
 def characterize() -> None:
-    """Characterise a haptic device: static ramps, chirps, grey-box fit, compensation."""
+    """Characterise a haptic device: static ramps, chirps, grey-box fit, compensation.
+
+    \b
+    Example:
+      study characterize notes --json notes.json --out notes/
+    """
 
 
 @characterize.command("notes", cls=StudyCommand)
@@ -38,7 +43,12 @@ def characterize() -> None:
 @click.option("--seed", type=SEED, default=0, show_default=True, help="Seeds the noise.")
 def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
     """Run the paper's ramps and 1-30 Hz chirps on the simulated NOTES device, fit Fig. 8's
-    model, and compare the ramps with and without the friction/direction compensator."""
+    model, and compare the ramps with and without the friction/direction compensator.
+
+    \b
+    Example:
+      study characterize notes --json notes.json --out notes/
+    """
     from study.analysis.figures import save
     from study.analysis.notes_figures import bode, compensation_table, ramp_hysteresis
     from teleop_core.estimation.recording import write_csv_atomically

@@ -15,7 +15,12 @@ from study.errors import StudyInputError
 
 @click.group("db", cls=StudyGroup)
 def database() -> None:
-    """Create, upgrade, describe, check and back up the study database."""
+    """Create, upgrade, describe, check and back up the study database.
+
+    \b
+    Example:
+      study db info
+    """
 
 
 @database.command("upgrade")
@@ -24,6 +29,10 @@ def upgrade_cmd(db_url: str | None) -> None:
     """Bring the database to the newest schema (creating it if it is empty).
 
     An SQLite file is copied to NAME.before-REVISION.bak before it is upgraded.
+
+    \b
+    Example:
+      study db upgrade --db old-study.db
     """
     upgraded: list[str] = []
 
@@ -41,7 +50,12 @@ def upgrade_cmd(db_url: str | None) -> None:
 @db_option
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
 def info_cmd(db_url: str | None, as_json: bool) -> None:
-    """Describe the database without changing it: schema revision and rows per table."""
+    """Describe the database without changing it: schema revision and rows per table.
+
+    \b
+    Example:
+      study db info --db lab.db
+    """
     info = inspect_database(db_url)
     if as_json:
         click.echo(json.dumps(info.to_dict(), indent=2))
@@ -61,6 +75,10 @@ def check_cmd(db_url: str | None) -> None:
     SQLite: PRAGMA integrity_check and foreign_key_check; PostgreSQL: every table's
     rows counted and no row pointing at a missing one. Both: the schema at the newest
     revision. Exit status 1 when problems are found.
+
+    \b
+    Example:
+      study db check --db lab.db
     """
     from db.maintenance import check_database
 
@@ -91,6 +109,10 @@ def backup_cmd(out_dir: Path, db_url: str | None) -> None:
     PostgreSQL: every table in one REPEATABLE READ transaction, no pg_dump needed) and
     opens with `study tui --db COPY`. One line: the check, the copy, its size and
     SHA-256. Exit status 1 (and no copy) when the database has problems.
+
+    \b
+    Example:
+      study db backup --out backups/
     """
     from db.maintenance import backup_database
     from teleop_core.files import replace_durably

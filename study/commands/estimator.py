@@ -28,7 +28,12 @@ _err = Console(stderr=True)
 
 @click.group("estimator", cls=StudyGroup)
 def estimator() -> None:
-    """Follower force estimator: physics model + GRU residual + EKF ([endovascular])."""
+    """Follower force estimator: physics model + GRU residual + EKF, after the endovascular paper.
+
+    \b
+    Example:
+      study estimator train bench.csv --out model/
+    """
 
 
 @estimator.command("train")
@@ -36,10 +41,22 @@ def estimator() -> None:
 @out_dir_option("Model folder to write (weights, standardisation, physics, EKF, summary.json).")
 @count_option("--window", 20, "GRU input window T, samples.")
 @count_option("--epochs", 100, "Most training epochs (the best validation epoch is kept).")
-@click.option("--seed", type=SEED, default=0, show_default=True)
-@click.option("--hidden-size", type=click.IntRange(min=1), default=32, show_default=True)
 @click.option(
-    "--learning-rate", type=click.FloatRange(min=0, min_open=True), default=1e-4, show_default=True
+    "--seed", type=SEED, default=0, show_default=True, help="Seed of the split and the training."
+)
+@click.option(
+    "--hidden-size",
+    type=click.IntRange(min=1),
+    default=32,
+    show_default=True,
+    help="Units of the GRU's hidden state.",
+)
+@click.option(
+    "--learning-rate",
+    type=click.FloatRange(min=0, min_open=True),
+    default=1e-4,
+    show_default=True,
+    help="Adam's learning rate.",
 )
 @count_option("--patience", 10, "Stop after this many epochs without a better validation RMSE.")
 @click.option(
@@ -137,6 +154,10 @@ def train_cmd(
     """Fit eq. 1 to RECORDING, train the GRU (or trees) on its residual, set up the EKF.
 
     RECORDING is a follower CSV (t, iq, theta, omega, f_ref; alpha optional).
+
+    \b
+    Example:
+      study estimator train bench.csv --out model/
     """
     from teleop_core.errors import TeleopInputError
     from teleop_core.estimation.estimator import train_estimator
@@ -279,7 +300,12 @@ def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
 
     `in_range` is 1 where the sample's inputs (iq, omega, alpha) lie inside the range
     the model was trained on, 0 where one leaves it (empty for a model saved before the
-    range was kept)."""
+    range was kept).
+
+    \b
+    Example:
+      study estimator run model/ bench.csv --out forces.csv
+    """
     from teleop_core.estimation.estimator import ForceEstimator
     from teleop_core.estimation.metrics import rmse
     from teleop_core.estimation.recording import FollowerRecording, write_csv_atomically

@@ -20,8 +20,15 @@ from study.errors import StudyInputError
 
 
 @click.command("import", cls=StudyCommand)
-@file_option("--trials", "trials_csv")
-@click.option("--tlx", "tlx_csv", type=click.Path(dir_okay=False, path_type=Path))
+@file_option(
+    "--trials", "trials_csv", "Trial summaries CSV (the columns of `study export`'s trials.csv)."
+)
+@click.option(
+    "--tlx",
+    "tlx_csv",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="NASA-TLX CSV (the columns of `study export`'s tlx.csv) [default: none].",
+)
 @click.option(
     "--probes",
     "probes_csv",
@@ -45,7 +52,12 @@ def import_cmd(
     db_url: str | None,
 ) -> None:
     """Import trial summaries (and NASA-TLX, probe trials) collected elsewhere: all rows or
-    none."""
+    none.
+
+    \b
+    Example:
+      study import --trials trials.csv --tlx tlx.csv
+    """
     from study.protocol.exchange import import_data  # pandas: only when a command runs
 
     with opened_database(db_url) as engine:
@@ -76,9 +88,20 @@ def import_cmd(
 
 
 @click.command("export", cls=StudyCommand)
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option(
-    "--format", "fmt", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the exported files and codebook.csv (created if its parent exists).",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["csv", "parquet"]),
+    default="csv",
+    show_default=True,
+    help="File format of the tables.",
 )
 @click.option("--samples", is_flag=True, help="Also write every sample of every measured trial.")
 @click.option(
@@ -149,6 +172,10 @@ def export_cmd(
 
     Samples stream in bounded memory; --participant, --task, --condition, --trial,
     --from-s and --to-s restrict the samples (not the trials and TLX files).
+
+    \b
+    Example:
+      study export --out export/ --samples
     """
     from study.protocol.export import export_data
     from study.protocol.sample_export import SampleSelection

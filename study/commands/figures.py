@@ -7,7 +7,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
-from rich.console import Console
 
 from db.migrate import open_database
 from study.analysis.source import DRIVERS
@@ -17,6 +16,7 @@ from study.commands.base import (
     db_option,
     load_participants,
     participants_option,
+    progress_status,
     status_progress,
 )
 from study.errors import StudyInputError
@@ -34,7 +34,13 @@ def _formats(text: str) -> list[str]:
 
 
 @click.command("figures", cls=StudyCommand)
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the figures (created if its parent exists).",
+)
 @click.option(
     "--format",
     "formats",
@@ -74,6 +80,10 @@ def figures(
     (a VO and an HV trial's forces) and the TLX profile per group. Every figure passes
     the figure check (text >= 8 pt, no overlapping text, marks equal to the reported p)
     before any is written.
+
+    \b
+    Example:
+      study figures --out figures/ --width single
     """
     from study.analysis.paper import write_figures
 
@@ -132,6 +142,7 @@ def _check_resumable(db_url: str, seed: int, quick: bool) -> bool:
     default=Path("demo"),
     show_default=True,
     type=click.Path(file_okay=False, path_type=Path),
+    help="Folder for the demo's database, analysis/ and figures/ (a new one).",
 )
 @click.option(
     "--db",
@@ -140,8 +151,20 @@ def _check_resumable(db_url: str, seed: int, quick: bool) -> bool:
     metavar="URL",
     help="Database for the demo study [default: OUT/demo.db].",
 )
-@click.option("--seed", type=SEED, default=1, show_default=True)
-@click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
+@click.option(
+    "--seed",
+    type=SEED,
+    default=1,
+    show_default=True,
+    help="Seed of the simulated people and trials.",
+)
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=2,
+    show_default=True,
+    help="Processes that run the sessions side by side.",
+)
 @click.option("--quick", is_flag=True, help="2 participants per group, one trial per block.")
 @participants_option
 def demo(
@@ -156,7 +179,12 @@ def demo(
 
     A demo stopped halfway (killed, a power cut) is continued by the same command in the
     same folder: its sessions go on where they stopped. Until it completes, its
-    database says it is an incomplete demo (`study schedule`)."""
+    database says it is an incomplete demo (`study schedule`).
+
+    \b
+    Example:
+      study demo --out demo/ --seed 1
+    """
     from study.protocol.parallel import start_workers
 
     start = time.monotonic()
@@ -167,7 +195,7 @@ def demo(
     resumed = _check_resumable(db_url, seed, quick)
     if resumed:
         click.echo(f"continuing the incomplete demo in {db_url}", err=True)
-    with Console(stderr=True).status("demo study") as status:
+    with progress_status("demo study") as status:
 
         def notice(message: str) -> None:
             status.console.print(f"study demo: {message}", markup=False)

@@ -19,7 +19,12 @@ if TYPE_CHECKING:
 
 @click.group("hardware", cls=StudyGroup)
 def hardware() -> None:
-    """The motor units on their serial ports: check one before a session."""
+    """The motor units on their serial ports: check one before a session.
+
+    \b
+    Example:
+      study hardware check --port /dev/ttyUSB0 --role dial
+    """
 
 
 @hardware.command("check")
@@ -59,7 +64,9 @@ def check(
     --seconds (round-trip time, state line rate, the unit's clock, encoder, current and
     joystick readings) and say whether it is fit for a session; exit status 2 if not.
 
-    Example: study hardware check --port /dev/ttyUSB0 --role dial
+    \b
+    Example:
+      study hardware check --port /dev/ttyUSB0 --role dial
     """
     from teleop_core.loop.hardware import HardwareError
     from teleop_core.loop.unit_check import check_unit

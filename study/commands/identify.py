@@ -19,18 +19,32 @@ from study.errors import StudyInputError
 
 @click.group("identify", cls=StudyGroup)
 def identify() -> None:
-    """Identify a haptic device's model from recorded bench data."""
+    """Identify a haptic device's model from recorded bench data.
+
+    \b
+    Example:
+      study identify notes chirp.csv --dof translation --json fit.json
+    """
 
 
 @identify.command("notes", cls=StudyCommand)
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--dof", type=click.Choice(["translation", "rotation"]), required=True)
-@json_option()
+@click.option(
+    "--dof",
+    type=click.Choice(["translation", "rotation"]),
+    required=True,
+    help="Which degree of freedom the recording is of.",
+)
+@json_option("The identified parameters, or the ramp's measures, as JSON.")
 @out_dir_option("Also draw the fit: a chirp's Bode plot (notes_identify_bode.png).", required=False)
 def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> None:
     """Fit Fig. 8's model to a chirp, or measure a clamped ramp, from RECORDING.csv.
 
     Columns t, f_des and x (open end) or f_ee (clamped), SI units (rotation: N m, rad).
+
+    \b
+    Example:
+      study identify notes chirp.csv --dof translation --json fit.json
     """
     from teleop_core.files import write_atomically
     from teleop_core.notes.characterize import identify_recording

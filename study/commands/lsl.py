@@ -28,6 +28,10 @@ def import_xdf(xdf: Path, db_url: str | None) -> None:
     markers are stored with that trial, on its clock. A file without the markers, a
     truncated file, or markers of trials this database does not have: one line, nothing
     stored.
+
+    \b
+    Example:
+      study import-xdf session.xdf
     """
     from study.lsl.xdf import import_xdf as run_import
 
@@ -52,6 +56,10 @@ def lsl_config(path: Path) -> None:
     Point liblsl at it with `export LSLAPICFG=PATH` before `study run --lsl` (a demo on
     one computer, tests, benches). In a lab, write your network's own (liblsl's
     lsl_api.cfg) and name it the same way: `study` loads LSL only with LSLAPICFG set.
+
+    \b
+    Example:
+      study lsl-config lsl_api.cfg && export LSLAPICFG=$PWD/lsl_api.cfg
     """
     from study.lsl.config import write_loopback_config
 

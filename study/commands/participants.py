@@ -29,7 +29,12 @@ if TYPE_CHECKING:
 
 @click.group("participants", cls=StudyGroup)
 def participants() -> None:
-    """Simulated participants: fit their trait distributions to a study's trials."""
+    """Simulated participants: fit their trait distributions to a study's trials.
+
+    \b
+    Example:
+      study participants fit --out MODEL.json
+    """
 
 
 @participants.command("fit")
@@ -52,7 +57,13 @@ def participants() -> None:
     minimum=4,
     dest="n_check",
 )
-@click.option("--bootstrap", type=click.IntRange(min=20), default=100, show_default=True)
+@click.option(
+    "--bootstrap",
+    type=click.IntRange(min=20),
+    default=100,
+    show_default=True,
+    help="Bootstrap resamples of the people for the intervals.",
+)
 @click.option(
     "--weak-traits",
     type=click.Choice(WEAK_TRAITS),
@@ -61,8 +72,16 @@ def participants() -> None:
     help="The traits the data tell weakly: held at the hand-set "
     "profile, or fitted with their group mean under the profile's prior.",
 )
-@click.option("--jobs", type=click.IntRange(min=1), default=2, show_default=True)
-@click.option("--seed", type=SEED, default=0, show_default=True)
+@click.option(
+    "--jobs",
+    type=click.IntRange(min=1),
+    default=2,
+    show_default=True,
+    help="Processes that run the simulations side by side.",
+)
+@click.option(
+    "--seed", type=SEED, default=0, show_default=True, help="Seed of the simulations and resamples."
+)
 def fit(
     db_url: str | None,
     task: str,
@@ -78,7 +97,12 @@ def fit(
     """Fit each experience group's trait distributions to the database's completed trials
     (a hierarchical model on an emulator of the measures and the samples' behavioural
     features); write MODEL.json and MODEL.png, print the
-    observed vs simulated summaries and one line on what the participants lack."""
+    observed vs simulated summaries and one line on what the participants lack.
+
+    \b
+    Example:
+      study participants fit --out MODEL.json
+    """
     from db.engine import describe, resolve_url
     from study.analysis.participant_fit.fit import FitSettings, fit_study
     from study.commands.base import opened_database

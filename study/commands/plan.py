@@ -28,7 +28,12 @@ from study.protocol.roster import create_study, enrol, schedule
 )
 @db_option
 def init(design_path: Path, db_url: str | None) -> None:
-    """Create the study database from a design file."""
+    """Create the study database from a design file.
+
+    \b
+    Example:
+      study init --design design.toml --db lab.db
+    """
     from db.engine import resolve_url
 
     text = read_text_file(design_path, "design file", "a UTF-8 TOML file")
@@ -64,24 +69,45 @@ def init(design_path: Path, db_url: str | None) -> None:
 
 @click.group("design", cls=StudyGroup)
 def design_group() -> None:
-    """Study design files."""
+    """Study design files.
+
+    \b
+    Example:
+      study design template > design.toml
+    """
 
 
 @design_group.command("template")
 def template() -> None:
-    """Print a commented default design (the paper's 20/8/8 study)."""
+    """Print a commented default design (the paper's 20/8/8 study).
+
+    \b
+    Example:
+      study design template > design.toml
+    """
     click.echo(TEMPLATE, nl=False)
 
 
 @click.group("participant", cls=StudyGroup)
 def participant() -> None:
-    """Enrol participants (pseudonymous codes only); withdraw, reinstate, correct a group."""
+    """Enrol participants (pseudonymous codes only); withdraw, reinstate, correct a group.
+
+    \b
+    Example:
+      study participant add --group novice --count 8
+    """
 
 
 @participant.command("add")
 @click.option("--group", required=True, help="Experience group, by its name in the design.")
 @click.option("--site", default=None, help="Lab enrolling the participant (multi-site studies).")
-@click.option("--count", type=click.IntRange(min=1), default=1, show_default=True)
+@click.option(
+    "--count",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="How many participants to enrol in the group, each with the next code.",
+)
 @click.option(
     "--beyond-target",
     is_flag=True,
@@ -98,7 +124,12 @@ def participant_add(
     db_url: str | None,
 ) -> None:
     """Enrol the next participant(s) of a group: code, condition order and schedule (all
-    of them or none; at most the group's target unless --beyond-target)."""
+    of them or none; at most the group's target unless --beyond-target).
+
+    \b
+    Example:
+      study participant add --group novice --count 8
+    """
     with opened_database(db_url) as engine:
         added = enrol(engine, group, site, count, beyond_target=beyond_target, actor=actor)
     for p in added:
@@ -112,7 +143,12 @@ def participant_add(
 @not_personal_option
 @db_option
 def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str | None) -> None:
-    """Withdraw a participant: kept and marked, no more sessions, left out of the analysis."""
+    """Withdraw a participant: kept and marked, no more sessions, left out of the analysis.
+
+    \b
+    Example:
+      study participant withdraw P004 --reason "felt unwell"
+    """
     from study.protocol.withdrawal import withdraw
 
     with opened_database(db_url) as engine:
@@ -128,7 +164,12 @@ def participant_withdraw(code: str, reason: str, actor: str | None, db_url: str 
 @db_option
 def participant_reinstate(code: str, reason: str, actor: str | None, db_url: str | None) -> None:
     """Undo a withdrawal (audited): the participant continues where they stopped and the
-    analysis counts them again."""
+    analysis counts them again.
+
+    \b
+    Example:
+      study participant reinstate P004 --reason "withdrawn by mistake"
+    """
     from study.protocol.corrections import reinstate
 
     with opened_database(db_url) as engine:
@@ -155,7 +196,12 @@ def participant_correct_group(
     db_url: str | None,
 ) -> None:
     """Correct a participant's group before their first trial (audited): they take the
-    new group's next counterbalanced condition order; refused once a trial is stored."""
+    new group's next counterbalanced condition order; refused once a trial is stored.
+
+    \b
+    Example:
+      study participant correct-group P004 --group expert --reason "registered in the wrong group"
+    """
     from study.protocol.corrections import correct_group
 
     with opened_database(db_url) as engine:
@@ -179,7 +225,12 @@ def participant_note(
     code: str, text: str, on_session: bool, actor: str | None, db_url: str | None
 ) -> None:
     """Set a participant's note, or add a note on their session (pseudonymous: no names
-    or contact details)."""
+    or contact details).
+
+    \b
+    Example:
+      study participant note P004 "wore glasses"
+    """
     from study.protocol.withdrawal import add_session_note, set_note
 
     with opened_database(db_url) as engine:
@@ -191,7 +242,12 @@ def participant_note(
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of a table.")
 @db_option
 def schedule_cmd(as_json: bool, db_url: str | None) -> None:
-    """The plan and progress: groups filling up, each participant's blocks."""
+    """The plan and progress: groups filling up, each participant's blocks.
+
+    \b
+    Example:
+      study schedule --db lab.db
+    """
     from study.protocol.demo_marks import STARTED, demo_state
 
     with opened_database(db_url) as engine:

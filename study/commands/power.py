@@ -94,7 +94,11 @@ def _model_effects(
 
 
 @click.command("power", cls=StudyCommand)
-@file_option("--design", "design_path")
+@file_option(
+    "--design",
+    "design_path",
+    "The study design (TOML) whose groups, trials and tasks are simulated.",
+)
 @click.option(
     "--effect",
     default="0.8",
@@ -111,8 +115,16 @@ def _model_effects(
     show_default=True,
     help="Correlation of a participant's VO and HV outcomes.",
 )
-@click.option("--n-sim", type=click.IntRange(min=10, max=MAX_N_SIM), default=500, show_default=True)
-@click.option("--seed", type=SEED, default=0, show_default=True)
+@click.option(
+    "--n-sim",
+    type=click.IntRange(min=10, max=MAX_N_SIM),
+    default=500,
+    show_default=True,
+    help="Simulated studies per sample size.",
+)
+@click.option(
+    "--seed", type=SEED, default=0, show_default=True, help="Seed of the simulated studies."
+)
 @out_dir_option("Write power.json and the power curve (PDF, PNG) here.", required=False)
 @participants_option
 @click.option(
@@ -137,7 +149,12 @@ def power(
     """Power of VO vs HV in each group and of the group x condition interaction.
 
     With --participants MODEL.json the effects and the correlation are those the fitted
-    participant model simulates (its `effects`), instead of --effect and --correlation."""
+    participant model simulates (its `effects`), instead of --effect and --correlation.
+
+    \b
+    Example:
+      study power --design design.toml --n-sim 200
+    """
     from study.analysis.power import SCALES, power_curve
 
     if not design_path.is_file():

@@ -21,7 +21,12 @@ DRIVERS = ("simulated", "keyboard", "hardware")
 
 @click.group("probe", cls=StudyGroup)
 def probe() -> None:
-    """Probes: short measurements before a task (force threshold, reaction time, ...)."""
+    """Probes: short measurements before a task (force threshold, reaction time, ...).
+
+    \b
+    Example:
+      study probe run --participant P001
+    """
 
 
 @probe.command("run")
@@ -57,7 +62,12 @@ def run(
     db_url: str | None,
 ) -> None:
     """Run the design's probes for a participant (those not yet stored) and store each
-    probe's trials; print each probe's estimate of the trait it tells."""
+    probe's trials; print each probe's estimate of the trait it tells.
+
+    \b
+    Example:
+      study probe run --participant P001
+    """
     from study.probes import get_probe
     from study.probes.measure import trait_estimates
     from study.probes.store import probe_frame, run_participant_probes
@@ -148,7 +158,12 @@ def _trials(frame):  # type: ignore[no-untyped-def]
 
 @probe.command("list")
 def list_cmd() -> None:
-    """The registered probes: name, the trait each tells, default trials."""
+    """The registered probes: name, the trait each tells, default trials.
+
+    \b
+    Example:
+      study probe list
+    """
     from study.probes import probes
 
     for p in probes():

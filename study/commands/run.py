@@ -50,6 +50,8 @@ if TYPE_CHECKING:
     type=click.Choice(["simulated", "keyboard", "hardware"]),
     default="simulated",
     show_default=True,
+    help="Who drives the trials: a simulated participant, a person on the keyboard, or a "
+    "person on the dial (--port).",
 )
 @click.option("--port", help="Serial port of the dial's ESP32 (hardware driver).")
 @click.option(
@@ -82,6 +84,11 @@ def run(
 
     One session per participant: while one runs (here or on another machine sharing the
     database), a second is refused; one whose process died is taken over.
+
+    \b
+    Example:
+      study run --participant P001 --driver hardware --port /dev/ttyUSB0
+      study run --all     # every participant, simulated
     """
     from study.protocol.actor import current_actor
     from study.protocol.default_estimator import load_estimator

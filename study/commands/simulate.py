@@ -18,9 +18,25 @@ MAX_TRIAL_S = 3600.0
 
 
 @click.command("simulate", cls=StudyCommand)
-@click.option("--task", type=click.Choice(task_names()), default="lcca", show_default=True)
-@click.option("--group", type=click.Choice(DEFAULT_GROUPS), required=True)
-@click.option("--condition", type=click.Choice(KNOWN_CONDITIONS), required=True)
+@click.option(
+    "--task",
+    type=click.Choice(task_names()),
+    default="lcca",
+    show_default=True,
+    help="The task of the trial.",
+)
+@click.option(
+    "--group",
+    type=click.Choice(DEFAULT_GROUPS),
+    required=True,
+    help="The simulated participant's group (its trait profile).",
+)
+@click.option(
+    "--condition",
+    type=click.Choice(KNOWN_CONDITIONS),
+    required=True,
+    help="VO (visual only: no haptic torque) or HV (haptic and visual).",
+)
 @click.option(
     "--haptic-gain",
     type=float,
@@ -31,8 +47,19 @@ MAX_TRIAL_S = 3600.0
 @click.option(
     "--seed", type=SEED, default=0, show_default=True, help="Seeds the participant and the run."
 )
-@click.option("--out", "out_csv", required=True, type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--plot", "plot_path", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    "out_csv",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="The trial's samples CSV (its summary goes beside it, as .json).",
+)
+@click.option(
+    "--plot",
+    "plot_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also draw the force traces to this file (.pdf, .svg or .png) [default: none].",
+)
 @click.option(
     "--estimator",
     "model_dir",
@@ -40,7 +67,11 @@ MAX_TRIAL_S = 3600.0
     help="Force estimator folder [default: the model shipped with haptic-study].",
 )
 @click.option(
-    "--max-seconds", type=click.FloatRange(min=1, max=MAX_TRIAL_S), default=180.0, show_default=True
+    "--max-seconds",
+    type=click.FloatRange(min=1, max=MAX_TRIAL_S),
+    default=180.0,
+    show_default=True,
+    help="Stop the trial, unfinished, after this many simulated seconds.",
 )
 @participants_option
 def simulate(
@@ -55,7 +86,12 @@ def simulate(
     max_seconds: float,
     participants_path: Path | None,
 ) -> None:
-    """Run one simulated trial headless and write TRIAL.csv, TRIAL.json and a figure."""
+    """Run one simulated trial headless and write TRIAL.csv, TRIAL.json and a figure.
+
+    \b
+    Example:
+      study simulate --group novice --condition HV --out trial.csv --plot trial.png
+    """
     from study.protocol.default_estimator import load_estimator
     from study.protocol.traits import simulated_participant
     from teleop_core.estimation.recording import write_csv_atomically

@@ -23,14 +23,24 @@ from study.protocol.tlx import pair_order, response_scores, scored_tlx, store_tl
 
 @click.group("tlx", cls=StudyGroup)
 def tlx() -> None:
-    """NASA-TLX: six ratings (0-100, steps of 5) and 15 pairwise comparisons per block."""
+    """NASA-TLX: six ratings (0-100, steps of 5) and 15 pairwise comparisons per block.
+
+    \b
+    Example:
+      study tlx enter --participant P001 --task lcca --condition HV --mental 55 ...
+    """
 
 
 @tlx.command("pairs")
-@click.option("--participant", "code", required=True)
+@click.option("--participant", "code", required=True, help="The participant's code, e.g. P001.")
 @db_option
 def pairs_cmd(code: str, db_url: str | None) -> None:
-    """The 15 comparisons in the order this participant is shown them."""
+    """The 15 comparisons in the order this participant is shown them.
+
+    \b
+    Example:
+      study tlx pairs --participant P001
+    """
     with opened_database(db_url) as engine:
         with Session(engine) as session:
             study, _ = load_study(session)
@@ -49,9 +59,9 @@ def _rating(name: str):
 
 
 @tlx.command("enter")
-@click.option("--participant", "code", required=True)
-@click.option("--task", required=True)
-@click.option("--condition", required=True)
+@click.option("--participant", "code", required=True, help="The participant's code, e.g. P001.")
+@click.option("--task", required=True, help="The block's task, e.g. lcca.")
+@click.option("--condition", required=True, help="The block's condition, VO or HV.")
 @_rating("mental")
 @_rating("physical")
 @_rating("temporal")
@@ -80,7 +90,13 @@ def enter_cmd(
     db_url: str | None,
     **ratings: int,
 ) -> None:
-    """Store a questionnaire for one task x condition block (or edit the stored one)."""
+    """Store a questionnaire for one task x condition block (or edit the stored one).
+
+    \b
+    Example:
+      study tlx enter --participant P001 --task lcca --condition HV --mental 55 \
+          --physical 30 --temporal 40 --performance 25 --effort 50 --frustration 20
+    """
     from study.commands.typed import comma_list
 
     chosen = comma_list("--choices", choices, unique=False) if choices is not None else None
@@ -95,10 +111,17 @@ def enter_cmd(
 
 @tlx.command("show")
 @click.option("--participant", "code", default=None, help="One participant [default: all].")
-@click.option("--json", "as_json", is_flag=True)
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print the scores as JSON instead of a table."
+)
 @db_option
 def show_cmd(code: str | None, as_json: bool, db_url: str | None) -> None:
-    """Stored questionnaires with their raw and weighted scores."""
+    """Stored questionnaires with their raw and weighted scores.
+
+    \b
+    Example:
+      study tlx show --json
+    """
     with opened_database(db_url) as engine:
         scored = scored_tlx(engine, code)
     rows = [

@@ -12,22 +12,42 @@ from study.commands.base import (
     not_personal_option,
     opened_database,
 )
+from study.errors import StudyInputError
 
 REASON_HELP = "Why (kept in the audit log; an invalid trial's reason is listed by the analysis)."
 
 
 @click.group("trial", cls=StudyGroup)
 def trial() -> None:
-    """A participant's trials; mark a measured trial invalid or valid again (audited)."""
+    """A participant's trials; mark a measured trial invalid or valid again (audited).
+
+    \b
+    Example:
+      study trial list --participant P001
+    """
 
 
 @trial.command("list")
-@click.argument("code")
+@click.argument("old_code", metavar="[CODE]", required=False, default=None)
+@click.option(
+    "--participant",
+    "code",
+    default=None,
+    help="The participant's code, e.g. P001 (a code given as the argument, the older "
+    "form, still works for this release and warns).",
+)
 @db_option
-def trial_list(code: str, db_url: str | None) -> None:
-    """Every trial row of participant CODE (attempts and interrupted trials included),
-    with its id, status, completion time, success, measures and validity."""
+def trial_list(old_code: str | None, code: str | None, db_url: str | None) -> None:
+    """Every trial row of a participant (attempts and interrupted trials included),
+    with its id, status, completion time, success, measures and validity.
+
+    \b
+    Example:
+      study trial list --participant P001
+    """
     from study.protocol.participant_record import participant_record
+
+    code = _participant(old_code, code)
 
     with opened_database(db_url) as engine:
         record = participant_record(engine, code)
@@ -43,6 +63,24 @@ def trial_list(code: str, db_url: str | None) -> None:
             f"{t.id:>6} {t.task}/{t.condition} {t.label()} attempt {t.attempt}: "
             f"{t.status}{why}{time_s}{success}{measures}{state}"
         )
+
+
+def _participant(old_code: str | None, code: str | None) -> str:
+    """The participant of `study trial list`: `--participant`, or the positional code of
+    the older form with a deprecation warning on stderr."""
+    if old_code is not None and code is not None and old_code != code:
+        raise StudyInputError(
+            f"participant {old_code!r} and --participant {code!r}; expected one code"
+        )
+    if code is None and old_code is None:
+        raise StudyInputError("no participant; expected --participant CODE")
+    if code is None:
+        click.echo(
+            "study trial list: warning: the positional CODE is deprecated and goes in the "
+            f"next release; use --participant {old_code}",
+            err=True,
+        )
+    return code or str(old_code)
 
 
 def _mark(trial_id: int, valid: bool, reason: str, actor: str | None, db_url: str | None) -> None:
@@ -67,7 +105,12 @@ def _mark(trial_id: int, valid: bool, reason: str, actor: str | None, db_url: st
 @db_option
 def trial_invalidate(trial_id: int, reason: str, actor: str | None, db_url: str | None) -> None:
     """Mark completed measured trial ID invalid: kept with its samples, audited, left out
-    of `study analyze` and listed among its exclusions with the reason."""
+    of `study analyze` and listed among its exclusions with the reason.
+
+    \b
+    Example:
+      study trial invalidate 17 --reason "dial came loose"
+    """
     _mark(trial_id, False, reason, actor, db_url)
 
 
@@ -78,5 +121,10 @@ def trial_invalidate(trial_id: int, reason: str, actor: str | None, db_url: str 
 @not_personal_option
 @db_option
 def trial_revalidate(trial_id: int, reason: str, actor: str | None, db_url: str | None) -> None:
-    """Mark trial ID, marked invalid earlier, valid again (audited)."""
+    """Mark trial ID, marked invalid earlier, valid again (audited).
+
+    \b
+    Example:
+      study trial revalidate 17 --reason "marked by mistake"
+    """
     _mark(trial_id, True, reason, actor, db_url)

@@ -32,7 +32,12 @@ from study.commands.base import StudyCommand, db_option, positive_option
 )
 @db_option
 def tui(figures_dir: Path, pace: float | None, light: bool, lsl: bool, db_url: str | None) -> None:
-    """The terminal app: overview, participants, sessions, NASA-TLX, analysis, calibration."""
+    """The terminal app: overview, participants, sessions, NASA-TLX, analysis, calibration.
+
+    \b
+    Example:
+      study tui --db lab.db
+    """
     from db.migrate import open_database
     from study.tui import StudyServices, TuiSettings, make_app
     from study.tui.preferences import RunChoices, load_run_choices, preferences_path

@@ -58,7 +58,8 @@ def mark_trial(
         trial = session.get(Trial, trial_id)
         if trial is None:
             raise StudyInputError(
-                f"unknown trial id {trial_id}; expected an id from `study trial list CODE`"
+                f"unknown trial id {trial_id}; expected an id from "
+                "`study trial list --participant CODE`"
             )
         code = session.get_one(Participant, trial.participant_id).code
         what = describe_trial(trial, code)

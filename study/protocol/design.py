@@ -278,13 +278,11 @@ def _check_conditions(conditions: tuple[str, ...], source: str) -> None:
 
 
 def _check_tasks(tasks: tuple[str, ...], source: str) -> None:
-    from study.protocol.tasks import is_task, task_names
+    from study.protocol.tasks import is_task, not_installed
 
     for t in tasks:
         if not is_task(t):
-            raise StudyInputError(
-                f"{source}: task {t!r}; expected one of {', '.join(task_names())}"
-            )
+            raise StudyInputError(f"{source}: {not_installed(t)}")
     if not tasks or len(set(tasks)) != len(tasks):
         raise StudyInputError(f"{source}: tasks = {list(tasks)}; expected at least one, each once")
 

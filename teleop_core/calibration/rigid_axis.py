@@ -237,12 +237,18 @@ class RigidAxisBase(BaseModel):
     def columns_of(self, qd: Float1D, qdd: Float1D) -> Float2D:
         return self.columns({"speed": qd, "accel": qdd, "direction_sign": np.sign(qd)})
 
-    mat_columns: tuple[str, str, str] = ("t", "qm", "gtau*vir")
-    """Variables (or products) of a `.mat` recording for t, q and u (EMPS's names)."""
+    mat_columns: tuple[str, str, str] | None = None
+    """Variables (or products) of a `.mat` recording for t, q and u, e.g. EMPS's
+    `("t", "qm", "gtau*vir")`; a `.mat` recording cannot be read without them."""
 
     def read(self, path: str | Path) -> CalibrationData:
         path = Path(path)
         if path.suffix.lower() == ".mat":
+            if self.mat_columns is None:
+                raise RecordingError(
+                    f"recording {path} is a MATLAB file; expected the names of its "
+                    "variables for t, q and u (mat_columns, e.g. t, qm, gtau*vir)"
+                )
             t, q, u = self.mat_columns
             said = {"q": q, "u": u}
             frame = mat_to_frame(path, q=q, u=u, t=t)
@@ -375,9 +381,7 @@ def _check_time(t: Float1D, name: str) -> None:
 _PRODUCT = re.compile(r"^\s*[A-Za-z_]\w*(\s*\*\s*[A-Za-z_]\w*)*\s*$")
 
 
-def mat_to_frame(
-    path: str | Path, q: str = "qm", u: str = "gtau*vir", t: str = "t"
-) -> pd.DataFrame:
+def mat_to_frame(path: str | Path, *, q: str, u: str, t: str) -> pd.DataFrame:
     """A MATLAB v5 `.mat` recording in the rigid-axis contract.
 
     `q`, `u` and `t` name variables of the file, or products of them (`gtau*vir`: a
@@ -387,10 +391,10 @@ def mat_to_frame(
     from scipy.io import loadmat
 
     path = Path(path)
+    if not path.is_file():  # loadmat's own message for a missing file is a format error
+        raise RecordingError(f"recording {path}: no such file; expected a .mat file")
     try:
         raw = loadmat(path)
-    except FileNotFoundError:
-        raise RecordingError(f"recording {path} does not exist; expected a .mat file") from None
     except (ValueError, TypeError, OSError) as exc:
         raise RecordingError(f"recording {path} is not a readable MATLAB v5 file: {exc}") from None
     variables = {k: np.asarray(v) for k, v in raw.items() if not k.startswith("__")}

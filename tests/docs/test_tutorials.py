@@ -1,11 +1,13 @@
 """Every tutorial of the documentation runs, as written, and leaves what it promises.
 
 Each page under `docs/tutorials/` is a sequence of fenced blocks; the blocks marked
-`bash` are what a reader types, and this test runs them in order, in one shell, in a
-fresh folder that holds what a clone holds at its root (`tests/data`, `examples`). Blocks marked
-`console` are shown only: they need a device, a cluster or a server this test does not
-have. A page names what it leaves with an `<!-- expects: PATH ... -->` comment, and the
-test checks those files exist after its blocks ran.
+`bash` are what a reader types, and this test runs them in order, in one shell, in an
+empty temporary folder outside the clone, as a reader who installed haptic-study runs
+them anywhere: whatever data a page needs, its own commands fetch (`study example-data`).
+Blocks marked `console` are shown only: they need a device, a cluster or a server this
+test does not have. A page names what it leaves with an `<!-- expects: PATH ... -->`
+comment, and the test checks those files exist after its blocks ran, and that the
+clone holds nothing more than before (no build folder left beside the example task).
 """
 
 from __future__ import annotations
@@ -51,9 +53,8 @@ def test_tutorial_runs_as_written(page: Path, tmp_path: Path) -> None:
     blocks = bash_blocks(markdown)
     if not blocks:
         pytest.skip(f"{page.name} has no commands to run")
-    (tmp_path / "tests").mkdir()
-    (tmp_path / "tests" / "data").symlink_to(ROOT / "tests" / "data")
-    shutil.copytree(ROOT / "examples", tmp_path / "examples")  # a lab's task to install
+    assert not tmp_path.resolve().is_relative_to(ROOT), "the folder must be outside the clone"
+    before = clone_state()
     script = "set -euo pipefail\n" + "\n".join(blocks)
     env = dict(os.environ)
     env.pop("STUDY_DB", None)
@@ -73,3 +74,18 @@ def test_tutorial_runs_as_written(page: Path, tmp_path: Path) -> None:
     )
     missing = [p for p in expected_paths(markdown) if not (tmp_path / p).exists()]
     assert not missing, f"{page.name} promises {missing}, which its commands did not write"
+    assert clone_state() == before, f"{page.name} wrote into the clone"
+
+
+def clone_state() -> str:
+    """What git sees of the example task and the package data, ignored files included
+    (an install from the clone's folder leaves build/ and *.egg-info there), but for the
+    bytecode caches that importing the example from the checkout writes (other tests)."""
+    result = subprocess.run(
+        ["git", "status", "--porcelain", "--ignored", "--", "examples", "study/example_data"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return "\n".join(line for line in result.stdout.splitlines() if "__pycache__" not in line)

@@ -118,10 +118,18 @@ def test_an_invalid_trial_is_kept_audited_left_out_and_listed_then_valid_again(
     assert ((trials["participant"] == code) & (trials["condition"] == "VO")).sum() == 1
     # the trial list shows it
     capsys.readouterr()
-    assert main(["trial", "list", code, "--db", db]) == 0
-    listing = capsys.readouterr().out
+    assert main(["trial", "list", "--participant", code, "--db", db]) == 0
+    listed = capsys.readouterr()
+    listing = listed.out
     assert f"{trial_id:>6} lcca/VO trial 1 attempt 1: completed" in listing
     assert "INVALID (dial slipped)" in listing
+    assert listed.err == ""
+    # the older positional form lists the same, with a deprecation warning
+    assert main(["trial", "list", code, "--db", db]) == 0
+    old_form = capsys.readouterr()
+    assert old_form.out == listing
+    assert "deprecated" in old_form.err
+    assert f"--participant {code}" in old_form.err
     # twice: one line, nothing changed
     line = one_error_line(capsys, argv)
     assert line.endswith(
@@ -148,7 +156,7 @@ def test_an_invalid_trial_is_kept_audited_left_out_and_listed_then_valid_again(
 def test_trial_corrections_refused_in_one_line(db: str, capsys: pytest.CaptureFixture[str]) -> None:
     assert one_error_line(
         capsys, ["trial", "invalidate", "9999", "--reason", "x", "--db", db]
-    ).endswith("unknown trial id 9999; expected an id from `study trial list CODE`")
+    ).endswith("unknown trial id 9999; expected an id from `study trial list --participant CODE`")
     assert "expected 1-500 characters" in one_error_line(
         capsys, ["trial", "invalidate", "1", "--reason", " ", "--db", db]
     )

@@ -214,7 +214,7 @@ def test_an_unknown_task_is_refused(tmp_path: Path, capsys: pytest.CaptureFixtur
         str(tmp_path / "m.json"),
     ]
     line = one_error_line(capsys, argv)
-    assert line.startswith("study participants fit: error: task 'suturing'; expected one of lcca")
+    assert line.startswith("study participants fit: error: task 'suturing' is not installed")
 
 
 @pytest.mark.parametrize("content", ["{not json", json.dumps({"format": "other"}), "MEAN"])

@@ -14,8 +14,19 @@ from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS
 
 def test_the_builtin_tasks_are_known_and_an_unknown_one_gets_one_line() -> None:
     assert task_names()[:2] == ("lcca", "notes")
-    with pytest.raises(StudyInputError, match=r"^task 'endo'; expected one of lcca, notes"):
+    with pytest.raises(
+        StudyInputError,
+        match=r"^task 'endo' is not installed: pip install the package whose "
+        r"haptic_study.tasks entry point is 'endo'; installed: lcca, notes",
+    ):
         get_task("endo")
+    # the worked example's package ships with haptic-study: the line says how to install it
+    with pytest.raises(
+        StudyInputError,
+        match=r"^task 'probe' is not installed: study example-data DIR && pip install "
+        r"DIR/probe_task;",
+    ):
+        get_task("probe")
 
 
 def test_the_lcca_task_stores_the_loops_columns_in_order() -> None:

@@ -93,3 +93,74 @@ def test_the_status_line_shows_the_step_and_its_count(done: int, total: int, lin
     status = Status()
     status_progress(status, "demo: ")("trials", done, total)  # type: ignore[arg-type]
     assert status.text == line
+
+
+class FakeClock:
+    """Monotonic seconds that move only when told."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_a_heartbeat_writes_what_is_done_and_what_remains_every_interval() -> None:
+    from teleop_core.progress import Heartbeat
+
+    clock, lines = FakeClock(), []
+    beat = Heartbeat(lines.append, "study demo", 10.0, clock)
+    beat("sessions", 0, 36)
+    clock.now += 9.9
+    assert not beat.poll()
+    clock.now += 0.1  # 10 s after the start
+    assert beat.poll()
+    beat("sessions", 12, 36)
+    clock.now += 10.0  # 20 s: 12 done in 20 s, so 24 more take about 40 s
+    assert beat.poll()
+    assert lines == [
+        "study demo: sessions: 0/36 done, 36 to go; 10 s elapsed",
+        "study demo: sessions: 12/36 done, 24 to go; 20 s elapsed, about 40 s left",
+    ]
+    # a step without a count: what runs and the time; nothing twice within the interval
+    beat.update("analysis and figures")
+    clock.now += 65.0
+    assert beat.poll()
+    assert not beat.poll()
+    assert lines[-1] == "study demo: analysis and figures; 1 min 25 s elapsed"
+
+
+def test_a_heartbeats_thread_beats_while_the_work_reports_nothing() -> None:
+    import time
+
+    from teleop_core.progress import Heartbeat
+
+    lines: list[str] = []
+    with Heartbeat(lines.append, "work", interval_s=0.05) as beat:
+        beat("one long step")
+        time.sleep(0.6)
+    written = len(lines)
+    time.sleep(0.2)
+    assert written >= 3  # about 12 at 0.05 s; a loaded machine may give fewer
+    assert len(lines) == written  # none after the block
+    assert all(line.startswith("work: one long step; ") for line in lines)
+
+
+def test_a_bar_off_the_terminal_writes_its_tasks_counts() -> None:
+    from io import StringIO
+
+    from rich.console import Console
+
+    from study.commands.progress_lines import LineProgress
+
+    out = StringIO()
+    console = Console(file=out, force_terminal=False)
+    with LineProgress(console=console, interval_s=3600.0) as bar:
+        task = bar.add_task("calibration", total=None, what="", unit="families")
+        bar.update(task, completed=3, total=8, what="round 1: stribeck")
+        clock = FakeClock()
+        bar.heartbeat.clock, bar.heartbeat.last_s = clock, clock.now - 3600.0
+        assert bar.heartbeat.poll()
+    line = out.getvalue().strip()
+    assert line.startswith("study: calibration (round 1: stribeck): 3/8 families, 5 to go")
+    assert "\x1b" not in line  # plain text for a log file

@@ -2,7 +2,8 @@
 the loop's verdict on what it leaves.
 
 EMPS: A. Janot, M. Gautier, M. Brunot, "Data Set and Reference Models of EMPS",
-Workshop on Nonlinear System Identification Benchmarks, 2019 (tests/data/emps/).
+Workshop on Nonlinear System Identification Benchmarks, 2019 (shipped in
+study/example_data/emps/).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import pytest
 from scipy import signal
 from statsmodels.tools.sm_exceptions import SingularMatrixWarning
 
+from study import example_data
 from study.cli import main
 from teleop_core.calibration import Calibrator
 from teleop_core.calibration.fitting import design
@@ -30,7 +32,9 @@ from teleop_core.calibration.verdict import (
     unexplained,
 )
 
-EMPS = Path(__file__).parent.parent / "data" / "emps" / "DATA_EMPS.mat"
+EMPS = example_data.path(example_data.EMPS_FILE)
+EMPS_COLUMNS = {"t": "t", "q": "qm", "u": "gtau*vir"}
+"""The EMPS file's variables for the rigid-axis contract (its README)."""
 EMPS_REFERENCE = {
     "mass_kg": 95.1089,
     "viscous_friction_n_s_per_m": 203.5034,
@@ -136,23 +140,19 @@ def test_the_direction_effect_adds_a_column_the_base_does_not_span() -> None:
 
 
 @pytest.mark.filterwarnings(f"error::{SingularMatrixWarning.__module__}.SingularMatrixWarning")
-def test_emps_measured_data_recovers_the_benchmark_and_names_direction(tmp_path: Path) -> None:
-    argv = [
-        "calibrate",
-        str(EMPS),
-        "--model",
-        "rigid-axis",
-        "--json",
-        str(tmp_path / "r.json"),
-        "--predictions",
-        str(tmp_path / "p.csv"),
-        "--out",
-        str(tmp_path / "f"),
-    ]
-    assert main(argv) == 0
-    report = json.loads((tmp_path / "r.json").read_text())
+def test_emps_measured_data_recovers_the_benchmark_and_names_direction(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # no --json, --predictions or --out: all three land in DATA_EMPS-calibration/ here
+    monkeypatch.chdir(tmp_path)
+    argv = ["calibrate", str(EMPS), "--model", "rigid-axis"]
+    assert main([*argv, "--mat-columns", example_data.EMPS_MAT_COLUMNS]) == 0
+    written = tmp_path / "DATA_EMPS-calibration"
+    assert (written / "predictions.csv").is_file()
+    assert list(written.glob("*.png"))
+    report = json.loads((written / "report.json").read_text())
     # the base fit before any effect, with the fitted cutoff, is the benchmark's model
-    model = RigidAxisBase()
+    model = RigidAxisBase(mat_columns=("t", "qm", "gtau*vir"))
     data = model.read(EMPS)
     n_train = int(0.75 * len(data))
     X = model.columns(data.signals)
@@ -174,7 +174,7 @@ def test_emps_measured_data_recovers_the_benchmark_and_names_direction(tmp_path:
     # central differences, the same 75/25 chronological split (2.20 N)
     b, a = signal.butter(4, 100.0 / 500.0)
     t = s["t"]
-    qd_p = np.gradient(signal.filtfilt(b, a, mat_to_frame(EMPS)["q"].to_numpy()), t)
+    qd_p = np.gradient(signal.filtfilt(b, a, mat_to_frame(EMPS, **EMPS_COLUMNS)["q"].to_numpy()), t)
     qdd_p = np.gradient(qd_p, t)
     plain = np.column_stack(
         [qdd_p, qd_p * (qd_p > 0), qd_p * (qd_p < 0), qd_p > 0, qd_p < 0, np.ones(len(t))]
@@ -212,8 +212,26 @@ def test_a_bad_mat_mapping_is_one_line_and_nothing_written(
     assert not (tmp_path / "f").exists()
 
 
+def test_a_missing_or_unnamed_mat_file_is_one_line_saying_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    absent = tmp_path / "absent.mat"
+    argv = ["calibrate", str(absent), "--model", "rigid-axis", "--out", str(tmp_path / "c")]
+    assert main([*argv, "--mat-columns", example_data.EMPS_MAT_COLUMNS]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert f"recording {absent}: no such file" in err[0]
+    # the variables' names are the file's own: no default stands in for them
+    argv[1] = str(EMPS)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert "expected --model rigid-axis with --mat-columns t=NAME,q=NAME,u=NAME" in err[0]
+    assert not (tmp_path / "c").exists()
+
+
 def test_mat_to_frame_keeps_other_vectors_as_channels() -> None:
-    frame = mat_to_frame(EMPS)
+    frame = mat_to_frame(EMPS, **EMPS_COLUMNS)
     assert list(frame.columns) == ["t", "q", "u", "qg"]  # kp, kv, gtau are scalars
     assert frame["u"].abs().max() > 100  # gtau (35.15 N/V) times the voltage
 

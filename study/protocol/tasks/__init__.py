@@ -709,8 +709,21 @@ def get_task(name: str) -> Task:
         No task has that name; the one-line message lists the known ones.
     """
     if not is_task(name):
-        raise StudyInputError(f"task {name!r}; expected one of {', '.join(task_names())}")
+        raise StudyInputError(not_installed(name))
     return _REGISTRY[name]
+
+
+INSTALL_HINTS = {"probe": "study example-data DIR && pip install DIR/probe_task"}
+"""How to install the tasks whose packages ship with haptic-study as examples."""
+
+
+def not_installed(name: str) -> str:
+    """The one line for a task name no built-in task or installed package has: the task
+    is named as not installed, with how to install it where that is known."""
+    how = INSTALL_HINTS.get(
+        name, f"pip install the package whose {ENTRY_POINT_GROUP} entry point is {name!r}"
+    )
+    return f"task {name!r} is not installed: {how}; installed: {', '.join(task_names())}"
 
 
 def measure_named(name: str) -> Measure | None:
