@@ -2,7 +2,8 @@
 
 Each page under `docs/tutorials/` is a sequence of fenced blocks; the blocks marked
 `bash` are what a reader types, and this test runs them in order, in one shell, in a
-fresh folder that holds what a clone holds at its root (`tests/data`, `examples`). Blocks marked
+fresh folder that holds what a clone holds at its root (`tests/data`, `examples`,
+`firmware`). Blocks marked
 `console` are shown only: they need a device, a cluster or a server this test does not
 have. A page names what it leaves with an `<!-- expects: PATH ... -->` comment, and the
 test checks those files exist after its blocks ran.
@@ -54,6 +55,7 @@ def test_tutorial_runs_as_written(page: Path, tmp_path: Path) -> None:
     (tmp_path / "tests").mkdir()
     (tmp_path / "tests" / "data").symlink_to(ROOT / "tests" / "data")
     shutil.copytree(ROOT / "examples", tmp_path / "examples")  # a lab's task to install
+    (tmp_path / "firmware").symlink_to(ROOT / "firmware")  # the units' source, built in place
     script = "set -euo pipefail\n" + "\n".join(blocks)
     env = dict(os.environ)
     env.pop("STUDY_DB", None)
