@@ -4,7 +4,8 @@ questionnaires per block, the probes, the notes and the audited changes.
 
 `participant_record` reads it in one session (a handful of queries); the terminal app's
 participant page and `study trial list` show it. Read-only: the changes are
-`study.protocol.corrections` and `study.protocol.withdrawal`.
+`study.protocol.corrections` and `study.protocol.withdrawal`; a trial left `running` by
+a session that is gone is shown `interrupted` (`study.protocol.orphans`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from db.models.audit import AuditEntry
 from db.models.probe import ProbeTrial
 from db.models.tlx import TlxResponse
 from db.models.trial import Trial
+from study.protocol.orphans import gone_sessions
 from study.protocol.roster import find_participant, load_study
 
 __all__ = ["BlockRow", "NoteRow", "ParticipantRecord", "TrialRow", "participant_record"]
@@ -111,6 +113,9 @@ def participant_record(engine: Engine, code: str) -> ParticipantRecord:
         trials = session.scalars(
             select(Trial).where(Trial.participant_id == p.id).order_by(Trial.id)
         ).all()
+        # a running trial whose session is gone (kill -9) shows as what it is; nothing is
+        # written (the next session marks it)
+        gone = gone_sessions(session, [p.id]) if any(t.status == "running" for t in trials) else {}
         why = {
             e.entity_id: e.reason
             for e in session.scalars(
@@ -162,13 +167,13 @@ def participant_record(engine: Engine, code: str) -> ParticipantRecord:
                 practice=t.practice,
                 number=t.trial_index + 1,
                 attempt=t.attempt,
-                status=t.status,
+                status="interrupted" if t.status == "running" and gone else t.status,
                 driver=t.driver,
                 completion_time_s=t.completion_time_s,
                 success=t.success,
                 measures=_in_task_order(t.task, dict(t.measure_values)),
                 invalid_reason=t.invalid_reason,
-                why=why.get(t.id),
+                why=gone[p.id] if t.status == "running" and gone else why.get(t.id),
             )
             for t in trials
         ]
