@@ -32,6 +32,8 @@ if TYPE_CHECKING:
 
     from study.protocol.design import StudyDesign
     from study.protocol.observer import SessionObserver
+    from study.protocol.session import PendingTrial
+    from study.protocol.stop_signals import SignalStop
 
 
 @click.command("run", cls=StudyCommand)
@@ -93,6 +95,7 @@ def run(
     from study.protocol.actor import current_actor
     from study.protocol.default_estimator import load_estimator
     from study.protocol.session import run_session
+    from study.protocol.stop_signals import stop_on_signals
 
     if (code is None) == (not run_all):
         raise StudyInputError("give --participant CODE or --all; expected exactly one")
@@ -140,8 +143,9 @@ def run(
 
     estimator = load_estimator()
     engine = open_database(db_url, create=False)
+    started: list[PendingTrial] = []
     try:
-        with _progress() as progress:
+        with stop_on_signals() as stop, _progress() as progress:
             bar = progress.add_task(f"session {code}", total=None)
             from teleop_core.loop import kernel
 
@@ -150,6 +154,7 @@ def run(
             )
 
             def report(item, k, n) -> None:
+                started.append(item)
                 kind = "practice" if item.practice else "trial"
                 progress.update(
                     bar,
@@ -171,10 +176,30 @@ def run(
                 actor=who,
                 participants=model,
                 observer=observer,
+                stop=stop,
             )
     finally:
         engine.dispose()
+    if stop.is_set():
+        click.echo(_stopped_line(code, stop, started, len(done)), err=True)
+        raise click.exceptions.Exit(stop.exit_status)
     click.echo(f"{code}: {len(done)} trials completed and stored")
+
+
+def _stopped_line(code: str, stop: SignalStop, started: list[PendingTrial], done: int) -> str:
+    """What a session a signal stopped did: the trial it interrupted, what it kept."""
+    kept = f"{done} trial(s) completed and stored"
+    if len(started) > done:
+        item = started[-1]
+        kind = "practice" if item.practice else "trial"
+        kept += (
+            f"; {code}'s {item.block.task}/{item.block.condition} {kind} "
+            f"{item.trial_index + 1} marked interrupted, its samples kept"
+        )
+    return (
+        f"study run: {code}: {stop.reason}; {kept}; `study run --participant {code}` "
+        "goes on from there"
+    )
 
 
 def _lsl_observers(engine: Engine, publish: bool, progress: Progress) -> SessionObserver | None:

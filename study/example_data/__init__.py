@@ -7,6 +7,8 @@
 - `probe_task/`: the worked example of a lab's own task, a package to `pip install`. In
   the repository it is a link to `examples/probe_task/`, so there is one copy of its
   source; a built wheel holds the files themselves.
+- `firmware/`: the dial and drive units' firmware (PlatformIO for the ESP32, and the host
+  build that runs it against a simulated motor), linked to `firmware/` the same way.
 
 `copy_to(folder)` writes them into a folder of the user's (`study example-data DIR`);
 `path(name)` is a file of them inside the installed package (`importlib.resources`).
@@ -22,8 +24,9 @@ from pathlib import Path
 
 from study.errors import StudyInputError
 
-ENTRIES = ("emps", "probe_task")
-"""What `copy_to` writes, each a folder: the EMPS recording and the worked task."""
+ENTRIES = ("emps", "probe_task", "firmware")
+"""What `copy_to` writes, each a folder: the EMPS recording, the worked task and the
+units' firmware."""
 
 EMPS_FILE = "emps/DATA_EMPS.mat"
 """The EMPS recording, relative to the example data."""

@@ -4,7 +4,8 @@ questionnaires per block, the probes, the notes and the audited changes.
 
 `participant_record` reads it in one session (a handful of queries); the terminal app's
 participant page and `study trial list` show it. Read-only: the changes are
-`study.protocol.corrections` and `study.protocol.withdrawal`.
+`study.protocol.corrections` and `study.protocol.withdrawal`; a trial left `running` by
+a session that is gone is shown `interrupted` (`study.protocol.orphans`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from db.models.audit import AuditEntry
 from db.models.probe import ProbeTrial
 from db.models.tlx import TlxResponse
 from db.models.trial import Trial
+from study.protocol.orphans import gone_sessions
 from study.protocol.roster import find_participant, load_study
 
 __all__ = ["BlockRow", "NoteRow", "ParticipantRecord", "TrialRow", "participant_record"]
@@ -103,6 +105,28 @@ def _in_task_order(task: str, values: dict[str, float]) -> dict[str, float]:
     return first | {n: v for n, v in values.items() if n not in first}
 
 
+def _trial_row(t: Trial, why: str | None, session_gone: str | None) -> TrialRow:
+    """One trial as shown: a `running` one whose session is gone (`session_gone`, why)
+    as `interrupted`, nothing written (the next session marks it)."""
+    shown_gone = t.status == "running" and session_gone is not None
+    return TrialRow(
+        id=t.id,
+        block_index=t.block_index,
+        task=t.task,
+        condition=t.condition,
+        practice=t.practice,
+        number=t.trial_index + 1,
+        attempt=t.attempt,
+        status="interrupted" if shown_gone else t.status,
+        driver=t.driver,
+        completion_time_s=t.completion_time_s,
+        success=t.success,
+        measures=_in_task_order(t.task, dict(t.measure_values)),
+        invalid_reason=t.invalid_reason,
+        why=session_gone if shown_gone else why,
+    )
+
+
 def participant_record(engine: Engine, code: str) -> ParticipantRecord:
     """What is stored about `code` (a one-line error for an unknown code)."""
     with Session(engine) as session:
@@ -111,6 +135,8 @@ def participant_record(engine: Engine, code: str) -> ParticipantRecord:
         trials = session.scalars(
             select(Trial).where(Trial.participant_id == p.id).order_by(Trial.id)
         ).all()
+        # a running trial whose session is gone (kill -9) shows as interrupted
+        gone = gone_sessions(session, [p.id]) if any(t.status == "running" for t in trials) else {}
         why = {
             e.entity_id: e.reason
             for e in session.scalars(
@@ -153,25 +179,7 @@ def participant_record(engine: Engine, code: str) -> ParticipantRecord:
                 .order_by(AuditEntry.id)
             )
         ]
-        rows = [
-            TrialRow(
-                id=t.id,
-                block_index=t.block_index,
-                task=t.task,
-                condition=t.condition,
-                practice=t.practice,
-                number=t.trial_index + 1,
-                attempt=t.attempt,
-                status=t.status,
-                driver=t.driver,
-                completion_time_s=t.completion_time_s,
-                success=t.success,
-                measures=_in_task_order(t.task, dict(t.measure_values)),
-                invalid_reason=t.invalid_reason,
-                why=why.get(t.id),
-            )
-            for t in trials
-        ]
+        rows = [_trial_row(t, why.get(t.id), gone.get(p.id)) for t in trials]
         blocks = []
         for b in p.blocks:
             done = sum(

@@ -21,6 +21,7 @@ from db.models.study import CODE_PATTERN, Participant, ScheduleBlock, Study
 from db.models.trial import Trial
 from study.errors import StudyInputError
 from study.protocol.design import StudyDesign, next_order
+from study.protocol.orphans import gone_sessions
 
 CODE_DIGITS = 3
 MAX_SITE_CHARS = 64
@@ -223,7 +224,12 @@ def schedule(engine: Engine) -> dict[str, Any]:
             .where(Participant.study_id == study.id)
             .group_by(Trial.participant_id, Trial.block_index, Trial.status)
         ).all()
-        done = {(pid, b, st): n for pid, b, st, n in counts}
+        # a running trial whose session is gone (kill -9) counts as interrupted
+        gone = gone_sessions(session, {pid for pid, _, st, _ in counts if st == "running"})
+        done: dict[tuple[int, int, str], int] = {}
+        for pid, b, st, n in counts:
+            key = (pid, b, "interrupted" if st == "running" and pid in gone else st)
+            done[key] = done.get(key, 0) + n
         rows = []
         for p in participants:
             blocks = [

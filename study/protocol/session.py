@@ -64,6 +64,7 @@ from study.protocol.participant_effects import (
 )
 from study.protocol.participant_model import ParticipantModel
 from study.protocol.roster import find_participant, load_study
+from study.protocol.stop_signals import stop_reason
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
 from study.protocol.traits import ParticipantTraits, draw_traits
 from teleop_core.estimation.estimator import ForceEstimator
@@ -236,7 +237,9 @@ def run_session(
             try:
                 trial_id = _run_trial(engine, participant, item, run)
             except SessionStopped:
-                recover_interrupted(engine, participant_id, STOPPED_WITH_PARENT, actor)
+                recover_interrupted(
+                    engine, participant_id, stop_reason(stop, STOPPED_WITH_PARENT), actor
+                )
                 break
             except DriverFailure as exc:
                 # the device went away mid-trial: what it measured is kept, the trial
