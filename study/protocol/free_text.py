@@ -25,7 +25,7 @@ MAX_TEXT_CHARS = 500
 EMAIL = re.compile(r"[A-Za-z0-9._%+-]+@[A-Za-z0-9-]+(\.[A-Za-z0-9-]+)*\.[A-Za-z]{2,}")
 PHONE = re.compile(r"(?<![\w.])\+?(\(?\d[\d ()./-]{5,}\d)(?![\w])")
 NOT_PHONE = re.compile(r"\d{4}-\d{2}-\d{2}|\d+\.\d+|\d{4}-\d{2}-\d{2} \d{2}")
-"""A date (2025-12-02) or a decimal number (0.8123456): many digits, no phone number."""
+"""A date written with dashes, or a decimal number: many digits, no phone number."""
 MIN_PHONE_DIGITS = 7
 """Fewer digits than any phone number with its area code (a trial count, a year)."""
 

@@ -101,7 +101,7 @@ def _read_back(engine: Engine, trial_id: int) -> list[tuple]:
 def test_old_sample_rows_move_into_chunks_and_back(db_url: str) -> None:
     _old_database(db_url)
     assert inspect_database(db_url).samples == 2750  # `study db info`: the rows
-    engine = open_database(db_url)  # upgrades to the head
+    engine = open_database(db_url, upgrade=True)  # upgrades to the head
     assert inspect_database(db_url).samples == 2750  # and now the chunks' samples
     try:
         with engine.connect() as conn:

@@ -175,7 +175,7 @@ def _old_values(engine: Engine, trial_id: int) -> list[dict]:
 
 def test_old_chunks_move_to_their_tasks_own_schemas_and_back(db_url: str) -> None:
     written = _old_database(db_url)
-    engine = open_database(db_url)  # upgrades to the head
+    engine = open_database(db_url, upgrade=True)  # upgrades to the head
     try:
         notes = _stored(engine, 2)
         assert [b.schema.names for b in notes] == [list(NOTES_NAMES)] * 2

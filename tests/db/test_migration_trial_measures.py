@@ -70,7 +70,7 @@ def _old_database(url: str) -> None:
 
 def test_old_measures_move_to_their_tasks_names_and_back(db_url: str) -> None:
     _old_database(db_url)
-    engine = open_database(db_url)  # upgrades to the head
+    engine = open_database(db_url, upgrade=True)  # upgrades to the head
     with engine.connect() as conn:
         rows = conn.execute(
             text("SELECT trial_id, name, value FROM trial_measures ORDER BY trial_id, name")
