@@ -83,7 +83,7 @@ def test_too_little_data_is_refused(tmp_path: Path) -> None:
 
 
 def test_missing_and_empty_files_are_refused(tmp_path: Path) -> None:
-    with pytest.raises(RecordingError, match="no such file"):
+    with pytest.raises(RecordingError, match="does not exist; expected a CSV file"):
         FollowerRecording.from_csv(tmp_path / "absent.csv")
     (tmp_path / "empty.csv").write_text("")
     with pytest.raises(RecordingError, match="is empty"):

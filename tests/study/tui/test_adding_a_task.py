@@ -140,6 +140,14 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
         "completion_time_s",
         "peak_push_force_n",
         "success",
+        # the provenance an analysis re-run from the export needs
+        "block",
+        "data_source",
+        "driver",
+        "withdrawn",
+        "valid",
+        "invalid_reason",
+        "included",
     ]
     assert len(exported) == 24
     assert (exported["task"] == "probe").all()
