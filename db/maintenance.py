@@ -26,9 +26,10 @@ counts equal to the snapshot's, and only then renamed; it is never left half-wri
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -169,7 +170,7 @@ def _check(conn: Connection, shown: str) -> CheckResult:
     return CheckResult(shown, rows, problems)
 
 
-@contextmanager
+@contextlib.contextmanager
 def _snapshot(engine: Engine) -> Iterator[Connection]:
     """A connection whose reads all see one snapshot (PostgreSQL: REPEATABLE READ)."""
     with engine.connect() as conn:
@@ -213,6 +214,32 @@ def _copy_postgresql(source: Connection, target: Engine) -> dict[str, int]:
     return counts
 
 
+def _make_folders(out_dir: Path) -> list[Path]:
+    """Make `out_dir` and its missing parents; return the folders made, deepest first."""
+    made = [p for p in (out_dir, *out_dir.parents) if not p.exists()]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return made
+
+
+def _copy_failure(exc: BaseException, part: Path) -> OSError | None:
+    """The OSError a failed write of the copy means, or None for any other failure.
+
+    SQLite reports a full or failing target of `VACUUM INTO` (and of the PostgreSQL
+    copy's SQLite file) as a database error; it is the copy's folder that is full, not
+    the study database, so the caller's message must name the folder."""
+    import sqlite3
+
+    cause = getattr(exc, "orig", exc)  # SQLAlchemy wraps the driver's error
+    if not isinstance(cause, sqlite3.Error):
+        return None
+    text = str(cause)
+    if "full" in text:
+        return OSError(errno.ENOSPC, f"no space left for the copy ({text})", str(part))
+    if "disk I/O" in text or "unable to open" in text:
+        return OSError(errno.EIO, f"the copy could not be written ({text})", str(part))
+    return None
+
+
 def backup_database(
     engine: Engine,
     out_dir: Path,
@@ -252,7 +279,7 @@ def backup_database(
     path = out_dir / _copy_name(engine, now)
     if not source_check.ok:
         return BackupResult(source_check, path, 0, "", CheckResult(str(path)))
-    out_dir.mkdir(parents=True, exist_ok=True)
+    made = _make_folders(out_dir)
     part = out_dir / f".{path.name}.part"
     part.unlink(missing_ok=True)
     try:
@@ -284,9 +311,15 @@ def backup_database(
             raise OSError(f"the copy {part} kept a write-ahead log; expected it folded in")
         Path(f"{part}-shm").unlink(missing_ok=True)
         replace_file(part, path)
-    except BaseException:
+    except BaseException as exc:
         for suffix in ("", "-wal", "-shm"):
             Path(f"{part}{suffix}").unlink(missing_ok=True)
+        for folder in made:  # the folders this call made, deepest first, if left empty
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        copy_failure = _copy_failure(exc, part)
+        if copy_failure is not None:
+            raise copy_failure from exc
         raise
     digest = hashlib.sha256()
     with path.open("rb") as f:

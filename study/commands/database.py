@@ -123,7 +123,7 @@ def backup_cmd(out_dir: Path, db_url: str | None) -> None:
     except OSError as exc:
         raise StudyInputError(
             f"backup to {out_dir} failed: {exc.strerror or exc}; expected a writable folder "
-            "with free space"
+            "with free space (the database is unchanged and no copy was kept)"
         ) from exc
     finally:
         engine.dispose()

@@ -121,6 +121,24 @@ def test_a_full_disk_names_the_participant_trial_and_time_kept(
     assert statuses == {"completed": 8, "interrupted": 1}  # 2 blocks x (1 practice + 3)
 
 
+def test_a_backup_to_a_full_disk_names_the_folder_and_leaves_nothing(
+    small_tmpfs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    db = _study(tmp_path)  # the database on a disk with room, the copy's folder full
+    before = Path(db).read_bytes()
+    _fill(small_tmpfs, 20)
+    capsys.readouterr()
+    out = small_tmpfs / "backups" / "today"
+    assert main(["db", "backup", "--out", str(out), "--db", db]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert f"backup to {out} failed: no space left for the copy" in err[0], err
+    assert "expected a writable folder with free space" in err[0]
+    assert "is full" not in err[0].split("(")[0]  # the study database is not blamed
+    assert sorted(p.name for p in small_tmpfs.iterdir()) == ["filler"]  # no empty folders
+    assert Path(db).read_bytes() == before
+
+
 def test_a_locked_database_is_named_as_locked(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
