@@ -65,6 +65,16 @@ def init(design_path: Path, db_url: str | None) -> None:
         f"{', '.join(design.tasks)}; {design.practice_trials} practice + "
         f"{design.trials_per_condition} trials per block"
     )
+    from study.protocol.traits import PROFILES
+
+    unsimulated = [g for g in design.groups if g not in PROFILES]
+    if unsimulated:
+        click.echo(
+            f"note: no simulated participant profile for group(s) {', '.join(unsimulated)} "
+            f"(profiles: {', '.join(PROFILES)}): their sessions are run by a person "
+            "(--driver keyboard or hardware) or drawn from a participant model fitted to "
+            "them (study run --participants MODEL)"
+        )
 
 
 @click.group("design", cls=StudyGroup)

@@ -137,7 +137,11 @@ def draw_traits(
     `study.protocol.participant_model.ParticipantModel`'s), else `PROFILES`."""
     profiles = PROFILES if profiles is None else profiles
     if group not in profiles:
-        raise StudyInputError(f"unknown group {group!r}; expected one of {', '.join(profiles)}")
+        raise StudyInputError(
+            f"no simulated participant profile for group {group!r}; expected one of "
+            f"{', '.join(profiles)} (a group of the design's own is run by a person at the "
+            "keyboard or on the hardware, or drawn from a participant model fitted to it)"
+        )
     p = profiles[group]
     values = {
         name: float(np.clip(rng.normal(*getattr(p, name)), lo, hi))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,7 +31,9 @@ def test_traits_are_reproducible_per_seed_and_differ_by_group() -> None:
 
 
 def test_an_unknown_group_is_refused() -> None:
-    with pytest.raises(StudyInputError, match="unknown group 'surgeon'"):
+    with pytest.raises(
+        StudyInputError, match="no simulated participant profile for group 'surgeon'"
+    ):
         draw_traits("surgeon", np.random.default_rng(0))
 
 
@@ -90,3 +93,33 @@ def test_felt_torque_lowers_peak_forces(phantom: LccaPhantom) -> None:
     )
     assert sum(s["obstacles_felt"] for s in hv) > 0
     assert sum(s["obstacles_felt"] for s in vo) == 0  # nothing to feel without haptics
+
+
+def test_a_group_of_the_designs_own_is_noted_at_init_and_named_by_a_simulated_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from study.cli import main
+    from study.protocol.design import TEMPLATE
+    from tests.study.conftest import one_error_line
+
+    design = tmp_path / "d.toml"
+    design.write_text(TEMPLATE.replace("outsider = 20", '"a|b<i>" = 20', 1))
+    db = str(tmp_path / "s.db")
+    assert main(["init", "--design", str(design), "--db", db]) == 0
+    out = capsys.readouterr().out
+    assert "note: no simulated participant profile for group(s) a|b<i>" in out
+    assert main(["participant", "add", "--group", "a|b<i>", "--db", db]) == 0
+    capsys.readouterr()
+    before = _dump(db)
+    line = one_error_line(capsys, ["run", "--participant", "P001", "--db", db])
+    assert "no simulated participant profile for group 'a|b<i>'" in line
+    assert "expected one of outsider, novice, expert" in line
+    assert _dump(db) == before
+
+
+def _dump(db: str) -> list[str]:
+    import sqlite3
+    from contextlib import closing
+
+    with closing(sqlite3.connect(db)) as conn:
+        return list(conn.iterdump())
