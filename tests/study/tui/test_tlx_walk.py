@@ -40,7 +40,7 @@ from study.tui.run_pane import RunPane
 from study.tui.tlx_pane import PairChoice, TlxPane
 from tests.study.tui.conftest import loaded, wait_for
 
-EXAMPLES = int(os.environ.get("STUDY_TUI_WALK_EXAMPLES", "20"))
+EXAMPLES = int(os.environ.get("STUDY_TUI_WALK_EXAMPLES", "6"))
 STEPS = int(os.environ.get("STUDY_TUI_WALK_STEPS", "50"))
 SEED = 3  # conftest.DESIGN's study seed: the pairs' order follows from it
 TASK_BLOCKS = ("lcca/VO", "lcca/HV")
