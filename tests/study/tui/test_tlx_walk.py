@@ -17,7 +17,7 @@ A seeded walk rather than hypothesis' RuleBasedStateMachine: every step needs th
 event loop (`await pilot.press`), which hypothesis' synchronous rules do not run in, and
 a failing seed is replayed exactly with `-k "walk[SEED]"`.
 
-`STUDY_TUI_WALK_EXAMPLES` (default 20) and `STUDY_TUI_WALK_STEPS` (default 50) make the
+`STUDY_TUI_WALK_EXAMPLES` (default 6) and `STUDY_TUI_WALK_STEPS` (default 50) make the
 walk longer for a nightly run.
 """
 
