@@ -18,15 +18,17 @@ import pandas as pd
 from scipy.stats import t as t_dist
 
 from db.models.tlx import TLX_SUBSCALES
-from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_key
+from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_legend
 
 CONDITIONS = ("VO", "HV")
 SINGLE_MAX_IN = 4.0
 """The tallest a single-column figure may be (a column's upper part)."""
 NOTE = (
-    "Bars: mean; whiskers: 95 % within-subject CI (Cousineau-Morey). Lower is better "
-    "on every subscale: performance reads 0 = perfect."
+    "Raw ratings of the six NASA-TLX subscales. Bars: mean; whiskers: 95 % "
+    "within-subject CI (Cousineau-Morey). Lower is better on every subscale: "
+    "performance reads 0 = perfect."
 )
+"""The caption (`captions.md`; the figure holds none)."""
 
 
 def cousineau_morey(wide: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
@@ -110,5 +112,5 @@ def tlx_profile(tlx: pd.DataFrame, width: str = "double") -> plt.Figure:
             ax.set_xticks(x, list(TLX_SUBSCALES), rotation=90)
             ax.set_xlabel("NASA-TLX subscale")
         handles, _ = axes.ravel()[0].get_legend_handles_labels()
-        figure_key(fig, handles, NOTE, ncols=2)
+        figure_legend(fig, handles, ncols=2)
     return fig
