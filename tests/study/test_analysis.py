@@ -923,3 +923,25 @@ def test_study_analyze_reads_sqlite_alone_and_equals_the_sqlalchemy_path(
     expected = to_json(analyze(frames_trials, participant_means(frames_trials, frames_tlx)))
     got = json.loads((tmp_path / "plain" / "analysis.json").read_text())
     assert got == json.loads(json.dumps(expected))
+
+
+def test_type_ii_mixed_anova_equals_pingouin_on_unequal_groups() -> None:
+    """pingouin.mixed_anova (Type II) as an independent reference on the 20/8/8 demo."""
+    import pingouin
+
+    from study.analysis.stats import mixed_anova_rows
+
+    long = pd.read_csv(Path(__file__).parent.parent / "data" / "demo_seed1_means.csv")
+    keys = ["participant", "group", "task", "condition", "measure", "value"]
+    rows, _ = mixed_anova_rows(list(long[keys].itertuples(index=False, name=None)), ss_type=2)
+    names = {"group": "group", "condition": "condition", "interaction": "Interaction"}
+    for measure, data in long.groupby("measure"):
+        ref = pingouin.mixed_anova(
+            data, dv="value", within="condition", subject="participant", between="group"
+        ).set_index("Source")
+        for r in (r for r in rows if r["measure"] == measure):
+            expected = ref.loc[names[r["source"]]]
+            assert r["F"] == pytest.approx(expected["F"], rel=1e-10), (measure, r["source"])
+            assert r["p"] == pytest.approx(expected["p_unc"], rel=1e-9)
+            assert r["np2"] == pytest.approx(expected["np2"], rel=1e-10)
+            assert (r["df1"], r["df2"]) == (expected["DF1"], expected["DF2"])
