@@ -80,7 +80,7 @@ def comparison_method() -> str:
 def evidence_method(bounds_text: str) -> str:
     """The equivalence test and the Bayes factor."""
     tost = (
-        "Equivalence was tested with two one-sided paired t-tests (TOST, Schuirmann 1987) "
+        "Equivalence was tested with two one-sided paired t-tests (TOST; Schuirmann, 1987) "
         f"against the design's bounds ({bounds_text}); equivalence is shown when the "
         "TOST p is below .05."
         if bounds_text
@@ -88,7 +88,7 @@ def evidence_method(bounds_text: str) -> str:
     )
     return (
         f"{tost} BF10 is the JZS Bayes factor of the paired t-test, with a Cauchy prior "
-        "of scale √2/2 on the standardised effect (Rouder et al. 2009); BF10 below "
+        "of scale √2/2 on the standardised effect (Rouder et al., 2009); BF10 below "
         "1/3 favours no difference, above 3 a difference."
     )
 
