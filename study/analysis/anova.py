@@ -4,7 +4,10 @@ one-way between-subject models, computed here in closed form.
 Written by hand rather than through statsmodels' `anova_lm(OLS.from_formula(...))`:
 the sums of squares of a one-way model are a few lines, and the formula parser and two
 model fits per measure were most of `study analyze`'s time. The values equal R's
-afex `aov_ez(type = 2|3)` (tests/study/test_analysis.py quotes them).
+afex `aov_ez(type = 2|3)` (tests/study/test_analysis.py quotes them). Not
+`pingouin.mixed_anova` either: it gives Type II only (equal to this one on unequal groups,
+which the tests check), and `study analyze --ss-type 3` (afex's default) needs Type III,
+so one closed form serves both types.
 """
 
 from __future__ import annotations

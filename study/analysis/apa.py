@@ -17,11 +17,12 @@ one of them, so the text and the figure's stars agree."""
 def p_text(p: float | None) -> str:
     """p as APA prints it: three decimals and no leading zero; "< .001" below that,
     "> .999" above; "n/a" if unknown. Where three decimals would round p onto or across
-    a significance threshold (.04996 -> ".050" beside a "*"), more decimals are printed
-    until the text is on the same side as p (".04996").
+    a significance threshold (.04996 -> ".050" beside a "*"), the threshold itself is
+    printed as the bound ("< .05"): never more than three decimals, and the text stays on
+    the same side of every threshold as p (and as the figure's stars).
 
     >>> p_text(0.0456), p_text(0.0002), p_text(float("nan")), p_text(1.0), p_text(0.04996)
-    ('.046', '< .001', 'n/a', '> .999', '.04996')
+    ('.046', '< .001', 'n/a', '> .999', '< .05')
     """
     if p is None or not math.isfinite(p):
         return "n/a"
@@ -29,11 +30,30 @@ def p_text(p: float | None) -> str:
         return "< .001"
     if p > 0.999:
         return "> .999"
-    for digits in range(3, 10):
-        shown = round(p, digits)
-        if all((shown < level) == (p < level) for level in STAR_LEVELS):
-            return f"{p:.{digits}f}".lstrip("0")
-    return f"{p:.10f}".lstrip("0")
+    shown = round(p, 3)
+    crossed = [level for level in STAR_LEVELS if p < level <= shown]
+    if crossed:
+        return "< " + f"{min(crossed):g}".lstrip("0")
+    return f"{p:.3f}".lstrip("0")
+
+
+def p_eq(p: float | None) -> str:
+    """'p = .047', 'p < .001', 'p > .999' or 'p = n/a'."""
+    text = p_text(p)
+    return f"p {text}" if text.startswith(("<", ">")) else f"p = {text}"
+
+
+ALPHA_SIGN = "\N{GREEK SMALL LETTER ALPHA}"
+"""The significance level's symbol, as APA writes it."""
+
+
+def alpha_text(alpha: float) -> str:
+    """A significance level as APA prints it: no leading zero.
+
+    >>> alpha_text(0.05)
+    '.05'
+    """
+    return f"{alpha:g}".lstrip("0")
 
 
 def bounded_text(x: float | None, digits: int = 2) -> str:

@@ -13,15 +13,9 @@ import math
 import re
 from typing import Any
 
-from study.analysis.apa import bounded_text, p_text
+from study.analysis.apa import bounded_text, p_eq
 
 Row = dict[str, Any]
-
-
-def p_eq(p: float | None) -> str:
-    """'p = .047', 'p < .001', 'p > .999' or 'p = n/a'."""
-    text = p_text(p)
-    return f"p {text}" if text.startswith(("<", ">")) else f"p = {text}"
 
 
 def _num(x: float | None, digits: int = 2) -> str:
@@ -49,7 +43,7 @@ def _t_numbers(r: Row) -> list[str]:
     if _finite(r.get("bf10")):
         parts.append(f"BF10 = {_num(r['bf10'])}")
     if _finite(r.get("tost_p")):
-        parts.append(f"TOST {p_eq(r['tost_p'])} (bounds +/- {_sig(r['tost_bound'])})")
+        parts.append(f"TOST {p_eq(r['tost_p'])}, bounds ±{_sig(r['tost_bound'])}")
     return parts
 
 

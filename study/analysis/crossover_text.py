@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from study.analysis.apa import p_text
+from study.analysis.apa import p_eq, p_text
 
 if TYPE_CHECKING:
     from study.analysis.stats import Analysis
@@ -25,12 +25,13 @@ ALPHA_TEXT = ".05"
 def design_checks_method() -> str:
     """The checks' method, one paragraph (captions and methods.md)."""
     return (
-        "Crossover checks: for each task and measure, the mixed model (value ~ condition * "
-        "group + (1 | participant)) was extended by the period effect (each participant's "
-        "second block of the task minus the first), the differential carry-over (VO after "
-        "HV minus HV after VO, estimable between participants only) and, when a block held "
-        "several trials, the trial position within the block (centred, slope per trial), "
-        "each tested by its t with Satterthwaite df. All checks of the study were one "
+        "Crossover checks: for each task and measure, the mixed model value ~ condition * "
+        "group + (1 | participant) was extended by three terms. The period effect is each "
+        "participant's second block of the task minus the first. The differential "
+        "carry-over is VO after HV minus HV after VO, estimable between participants only. "
+        "When a block held several trials, the trial position within the block entered "
+        "too, centred, as a slope per trial. Each term was tested by its t with "
+        "Satterthwaite df. All checks of the study were one "
         f"family, Holm-corrected; a check with a corrected p below {ALPHA_TEXT} was added "
         "to the model, and the HV - VO effect (marginal means over the groups) is reported "
         "before and after. Where a carry-over was added, the first-period comparison "
@@ -64,9 +65,10 @@ def _found(analysis: Analysis) -> str:
     if not added:
         low = min(checks, key=lambda r: r["p_holm"])
         return (
-            f"None of the {len(checks)} checks called for a term (smallest corrected p "
-            f"{p_text(low['p_holm'])}, {EFFECT_WORDS[low['effect']].split(' (')[0]} of "
-            f"{low['task']}/{low['measure']}); the model was kept as it was."
+            f"None of the {len(checks)} checks called for a term; the model was kept as it "
+            f"was. The smallest corrected p was that of the "
+            f"{EFFECT_WORDS[low['effect']].split(' (')[0]} of {low['task']}/{low['measure']}, "
+            f"{p_eq(low['p_holm'])}."
         )
     parts = []
     for r in added:
@@ -74,9 +76,9 @@ def _found(analysis: Analysis) -> str:
         parts.append(
             f"{r['task']}/{r['measure']}: a {EFFECT_WORDS[r['effect']]} of "
             f"{_estimate(r['estimate'])} (95 % CI {_estimate(r['ci'][0])} to "
-            f"{_estimate(r['ci'][1])}, corrected p {p_text(r['p_holm'])}) was added; the "
-            f"HV - VO effect was {_estimate(before['estimate'])} (p {p_text(before['p'])}) "
-            f"before and {_estimate(after['estimate'])} (p {p_text(after['p'])}) after"
+            f"{_estimate(r['ci'][1])}, corrected {p_eq(r['p_holm'])}) was added; the "
+            f"HV - VO effect was {_estimate(before['estimate'])} ({p_eq(before['p'])}) "
+            f"before and {_estimate(after['estimate'])} ({p_eq(after['p'])}) after"
         )
     first = [f for f in analysis.design_fit if f.get("first_period")]
     for f in first:
@@ -84,8 +86,8 @@ def _found(analysis: Analysis) -> str:
         parts.append(
             f"{f['task']}/{f['measure']}, first period only ({fp['participants']} "
             f"participants, between participants): HV - VO {_estimate(fp['estimate'])} "
-            f"(95 % CI {_estimate(fp['ci'][0])} to {_estimate(fp['ci'][1])}, p "
-            f"{p_text(fp['p'])})"
+            f"(95 % CI {_estimate(fp['ci'][0])} to {_estimate(fp['ci'][1])}, "
+            f"{p_eq(fp['p'])})"
         )
     return f"Of {len(checks)} checks, {len(added)} called for a term. " + "; ".join(parts) + "."
 
@@ -96,7 +98,7 @@ def design_checks_paragraph(analysis: Analysis) -> str:
 
 
 def _effect_text(c: dict[str, Any]) -> str:
-    return f"{_estimate(c['estimate'])} (p {p_text(c['p'])})"
+    return f"{_estimate(c['estimate'])} ({p_eq(c['p'])})"
 
 
 def design_checks_cells(checks: list[dict[str, Any]]) -> tuple[tuple[str, ...], list[list[Any]]]:

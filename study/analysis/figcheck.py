@@ -7,7 +7,8 @@ outside the view limits is never drawn and is not checked):
 - no two texts' bounding boxes overlap (`get_window_extent` on the figure's renderer),
   and none reaches outside the figure;
 - on Fig. 12, the significance marks drawn (texts whose gid is `mark:<measure>/<group>`,
-  set by `figures.fig12`) are exactly the stars of the p values the analysis reports.
+  set by `figures.fig12`) are exactly the stars of the p values the analysis reports,
+  and no mark is drawn where the analysis ran no test (too few pairs, not testable).
 
 `check_figure` returns the problems as sentences (empty: the figure passes);
 `require_legible` raises `FigureCheckError` with all of them. `study figures` and
@@ -93,7 +94,8 @@ def check_figure(
         The figure, at the size it is printed.
     expected_marks
         For Fig. 12: `"<measure>/<group>" -> p` (Holm-corrected; None where no test was
-        run). Every mark drawn must be `stars(p)` and every expected mark drawn.
+        run). Every mark drawn must be `stars(p)`, every expected mark drawn, and none
+        drawn where p is None.
     min_font_pt
         Smallest font size allowed, pt.
     """
@@ -130,6 +132,10 @@ def _check_marks(texts: list[Text], expected: Mapping[str, float | None]) -> lis
             drawn[gid[len(MARK_GID) :]] = t.get_text()
     problems = []
     for key, p in expected.items():
+        if p is None:
+            if key in drawn:
+                problems.append(f"mark of {key} ({drawn[key]!r}) drawn where no test was run")
+            continue
         want = stars(p)
         if key not in drawn:
             problems.append(f"mark of {key} missing (expected {want!r})")

@@ -5,14 +5,19 @@ project: IEEE single (3.5 in) and double (7.16 in) column widths, every text at 
 (IEEE's minimum at column width; `figcheck` verifies it on the drawn figure), Type 42
 (TrueType) fonts in PDF so text stays text, colour-blind-safe colours (Okabe & Ito
 2008). Helpers every figure uses: `label_source` (the simulated-data note),
-`figure_key` (the legend under the panels, its title the caption: sign convention,
-interval method), `jitter`
-(seeded, so a figure is the same on every run) and `save`.
+`figure_legend` (the legend under the panels), `figure_key` (the same with a caption
+as its title, for figures drawn outside the paper set), `jitter` (seeded, so a figure
+is the same on every run) and `save`. The paper's figures (`paper.write_figures`) carry
+no caption inside: each has its caption text (`fig12_caption`, ...) and
+`paper.write_figures` writes them to `captions.md` beside the figures, where a paper
+takes them from; the figure keeps its panels legible at column width.
 
 - `fig12`: one task's Fig. 12: per measure, per group, VO and HV participant means
   (jittered), paired lines, group means, the Holm-corrected mark of the within-group
-  test, and the test under each group. Other figures: `trace_figure` (Fig. 9) and
-  `tlx_figure` (NASA-TLX profile).
+  test (no mark where no test was run: fewer than 3 pairs, or not testable), and the
+  test under each group. Its NASA-TLX panel is the weighted score by default (the raw
+  one on request), and its y-label says which. Other figures: `trace_figure` (Fig. 9)
+  and `tlx_figure` (NASA-TLX profile).
 """
 
 from __future__ import annotations
@@ -58,15 +63,19 @@ LABELS = {
     "completion_time_s": "completion\ntime (s)",
     "peak_proximal_force_n": "peak proximal\nforce (N)",
     "peak_distal_force_n": "peak distal\nforce (N)",
-    "tlx_raw": "raw NASA-TLX\n(0-100)",
+    "tlx_weighted": "weighted NASA-TLX\n(0-100)",
 }
 """Fig. 12's measures of the LCCA task and their y-labels, on two lines so that they
 stay shorter than a panel is tall; other tasks' from `fig12_labels`."""
+TLX_LABELS = {"weighted": LABELS["tlx_weighted"], "raw": "raw NASA-TLX\n(0-100)"}
+"""The NASA-TLX panel's y-label of each score (`tlx_score`)."""
+TLX_SCORES = tuple(TLX_LABELS)
+"""The NASA-TLX scores Fig. 12 can show; the first is the default."""
 
 
-def fig12_labels(task: str) -> dict[str, str]:
-    """Fig. 12's measures of `task` (its analysed measures and the raw NASA-TLX), each
-    with its y-label on two lines."""
+def fig12_labels(task: str, tlx_score: str = "weighted") -> dict[str, str]:
+    """Fig. 12's measures of `task` (its analysed measures and the NASA-TLX score
+    `tlx_score`, weighted or raw), each with its y-label on two lines."""
     from study.protocol.tasks import get_task
 
     out = {}
@@ -77,7 +86,7 @@ def fig12_labels(task: str) -> dict[str, str]:
             first, second = " ".join(words[:cut]), " ".join(words[cut:])
             unit = f" ({m.unit})" if m.unit else ""
             out[m.name] = LABELS.get(m.name, f"{first}\n{second}{unit}".strip())
-    return {**out, "tlx_raw": LABELS["tlx_raw"]}
+    return {**out, f"tlx_{tlx_score}": TLX_LABELS[tlx_score]}
 
 
 CHARS_PER_IN = 13.0
@@ -107,10 +116,23 @@ def label_source(fig: plt.Figure, note: str) -> plt.Figure:
     return fig
 
 
+def figure_legend(fig: plt.Figure, handles: Sequence[Artist], ncols: int) -> plt.Figure:
+    """The figure's legend under the panels, without a caption (the paper figures'
+    captions go to `captions.md`)."""
+    fig.legend(
+        handles=list(handles),
+        loc="outside lower center",
+        ncols=ncols,
+        handlelength=1.5,
+        columnspacing=1.0,
+    )
+    return fig
+
+
 def figure_key(fig: plt.Figure, handles: Sequence[Artist], caption: str, ncols: int) -> plt.Figure:
-    """The figure's legend under the panels, with `caption` (sign convention, what the
-    marks and bars are) as its title, wrapped to fit: one artist, so the layout keeps it
-    clear of the data-source note above the panels."""
+    """The figure's legend under the panels, with `caption` (what the marks and bands
+    are, the assumptions) as its title, wrapped to fit: for figures that travel without
+    a captions file (`study power`)."""
     fig.legend(
         handles=list(handles),
         loc="outside lower center",
@@ -129,13 +151,23 @@ def jitter(n: int, key: str, half_width: float = JITTER) -> np.ndarray:
     return rng.uniform(-half_width, half_width, n)
 
 
+def tested(row: pd.Series | None) -> bool:
+    """Whether a comparisons row holds a test with a p (not: no row, or not testable)."""
+    if row is None or str(row.get("not_testable") or "") or row["test"] == "none":
+        return False
+    p = row.get("p_holm")
+    return p is not None and bool(np.isfinite(float(p)))
+
+
 def method_label(row: pd.Series | None, short: bool = False) -> str:
     """What `compare_conditions` ran, as the figure says it under the group: 'paired t',
     or 'Wilcoxon' and '(exact)' or '(asymptotic)' on two lines (narrow enough that the
     first group's label clears the y-axis); `short` (single column): 't', 'W (ex.)' or
-    'W (as.)', spelled out in the caption (`SHORT_CAPTION`)."""
-    if row is None:
+    'W (as.)', spelled out in the caption (`SHORT_CAPTION`); 'no test' where none was
+    run (too few pairs, or not testable)."""
+    if not tested(row):
         return "no test"
+    assert row is not None
     if row["test"] == "paired_t":
         return "t" if short else "paired t"
     if short:
@@ -149,6 +181,9 @@ SHORT_CAPTION = (
 )
 SINGLE_MAX_IN = 4.0
 """The tallest a single-column figure may be."""
+PANEL_TITLE_CHARS = 20
+"""The longest one-line panel title of the single column (a panel is 1.5 in wide);
+longer labels keep their two lines."""
 
 
 def _legend_handles() -> list[Line2D]:
@@ -161,13 +196,53 @@ def _legend_handles() -> list[Line2D]:
     ]
 
 
-_NB = "\u00a0"  # no line break inside a mark's threshold
 MARKS_CAPTION = (
-    "Points: participant means (jittered). Marks: Holm-corrected p of the test named "
-    "under each group; "
-    + ", ".join(f"{m}{_NB}<{_NB}{t}" for m, t in (("*", ".05"), ("**", ".01"), ("***", ".001")))
-    + f", n.s.{_NB}≥{_NB}.05."
+    "Points: participant means (jittered); grey lines join a participant's two means; "
+    "black bars: group means. Marks: Holm-corrected p of the test named under each "
+    "group; * p < .05, ** p < .01, *** p < .001, n.s. p >= .05."
 )
+
+
+def _row_of(comparisons: pd.DataFrame, measure: str, group: str) -> pd.Series | None:
+    rows = comparisons[(comparisons["measure"] == measure) & (comparisons["group"] == group)]
+    return rows.iloc[0] if len(rows) else None
+
+
+def _panel_measures(long: pd.DataFrame, measures: Sequence[str] | Mapping[str, str]) -> list[str]:
+    return [m for m in measures if m in set(long["measure"])]
+
+
+def fig12_caption(
+    long: pd.DataFrame,
+    comparisons: pd.DataFrame,
+    width: str = "double",
+    measures: Sequence[str] | Mapping[str, str] = tuple(LABELS),
+) -> str:
+    """Fig. 12's caption, for `captions.md` (the figure holds none): what the points,
+    lines and marks are, the abbreviations of the single column, which NASA-TLX score
+    the TLX panel shows, and each group drawn without a test and why."""
+    labels = {**LABELS, **measures} if isinstance(measures, Mapping) else LABELS
+    shown = _panel_measures(long, measures)
+    parts = [
+        "VO and HV per group and measure (HV - VO compared within each group).",
+        MARKS_CAPTION + (SHORT_CAPTION if width == "single" else ""),
+    ]
+    for score in TLX_SCORES:
+        if f"tlx_{score}" in shown:
+            parts.append(f"NASA-TLX panel: the {score} score (0-100).")
+    untested = []
+    for measure in shown:
+        name = labels.get(measure, measure).replace("\n", " ")
+        for group in dict.fromkeys(long["group"]):
+            row = _row_of(comparisons, measure, group)
+            if row is None:
+                untested.append(f"{name}, {group}: fewer than 3 complete pairs")
+            elif not tested(row):
+                reason = str(row.get("not_testable") or "no p")
+                untested.append(f"{name}, {group}: not testable ({reason})")
+    if untested:
+        parts.append("No test and no mark: " + "; ".join(untested) + ".")
+    return " ".join(parts)
 
 
 def fig12(
@@ -185,48 +260,41 @@ def fig12(
         condition, measure, value.
     comparisons
         `stats.compare_conditions` rows of the same task; each group's mark is the
-        star of its `p_holm`, the test under it is its `test` (and `p_method`).
+        star of its `p_holm`, the test under it is its `test` (and `p_method`); a group
+        without a test (no row, or not testable) gets no mark.
     width
-        'single' (3.5 in, panels stacked) or 'double' (7.16 in, two columns).
+        'single' (3.5 in, one column of panels) or 'double' (7.16 in, two columns).
     measures
         The panels' measures, or measure -> y-label (`fig12_labels(task)`).
 
     Each mark is a text with gid `mark:<measure>/<group>` (`figcheck` reads them back).
+    The caption is `fig12_caption`'s, written beside the figure, not in it.
     """
     if long["task"].nunique() > 1:
         raise ValueError("fig12 draws one task; select it first (paper.draw_figures does)")
     labels = {**LABELS, **measures} if isinstance(measures, Mapping) else LABELS
-    measures = [m for m in measures if m in set(long["measure"])]
+    measures = _panel_measures(long, measures)
     groups = list(dict.fromkeys(long["group"]))
     single = width == "single"
     with plt.rc_context(STYLE):
-        ncol = 2  # single column too: four stacked panels were 7.2 in tall
+        ncol = 2
         nrow = int(np.ceil(len(measures) / ncol))
-        height = min(1.6 + 1.2 * nrow, SINGLE_MAX_IN) if single else 1.2 + 1.5 * nrow
+        height = min(0.8 + 1.5 * nrow, SINGLE_MAX_IN) if single else 0.8 + 1.6 * nrow
         fig, axes = plt.subplots(
             nrow, ncol, figsize=(WIDTHS_IN[width], height), layout="constrained", squeeze=False
         )
         for ax, measure in zip(axes.ravel(), measures, strict=False):
             _panel(ax, long[long["measure"] == measure], comparisons, measure, groups, single)
             label = labels.get(measure, measure)
-            if single:  # lines of at most 10 characters: no taller than the short panels
-                label = "\n".join(
-                    textwrap.wrap(label.replace("\n", " "), 10, break_on_hyphens=False)
-                )
-            ax.set_ylabel(label)
+            if single:  # the label as the panel's title: the y-axis keeps its width
+                one_line = label.replace("\n", " ")
+                fits = len(one_line) <= PANEL_TITLE_CHARS
+                ax.set_title(one_line if fits else label, pad=2)
+            else:
+                ax.set_ylabel(label)
         for ax in axes.ravel()[len(measures) :]:
             ax.set_visible(False)
-        untested = any(
-            not len(comparisons[(comparisons["measure"] == m) & (comparisons["group"] == g)])
-            for m in measures
-            for g in groups
-        )
-        caption = (
-            MARKS_CAPTION
-            + (SHORT_CAPTION if single else "")
-            + (" n/a: no test (fewer than 3 complete pairs)." if untested else "")
-        )
-        figure_key(fig, _legend_handles(), caption, ncols=2 if single else 4)
+        figure_legend(fig, _legend_handles(), ncols=2 if single else 4)
     return fig
 
 
@@ -269,23 +337,22 @@ def _panel(
                     lw=1.4,
                     zorder=3,
                 )
-        rows = comparisons[(comparisons["measure"] == measure) & (comparisons["group"] == group)]
-        row = rows.iloc[0] if len(rows) else None
-        p = float(row["p_holm"]) if row is not None else None
+        row = _row_of(comparisons, measure, group)
         high = float(np.nanmax(wide.to_numpy())) if len(wide) else 0.0
         top = max(top, high)
-        ax.annotate(
-            stars(p),
-            (x0 + 0.5, high),
-            xytext=(0, 3),
-            textcoords="offset points",
-            ha="center",
-            va="bottom",
-            gid=f"{MARK_GID}{measure}/{group}",
-        )
+        if tested(row):  # no mark where no test was run
+            assert row is not None
+            ax.annotate(
+                stars(float(row["p_holm"])),
+                (x0 + 0.5, high),
+                xytext=(0, 3),
+                textcoords="offset points",
+                ha="center",
+                va="bottom",
+                gid=f"{MARK_GID}{measure}/{group}",
+            )
         ticks.append((x0 + 0.5, f"{group}\n{method_label(row, short)}"))
-    # single column: the panels are too narrow for the labels side by side; upright
-    ax.set_xticks([t for t, _ in ticks], [label for _, label in ticks], rotation=90 if short else 0)
+    ax.set_xticks([t for t, _ in ticks], [label for _, label in ticks], rotation=0)
     ax.tick_params(axis="x", length=0)
     ax.set_xlim(-0.6, 3.0 * len(groups) - 1.4)
     ax.set_ylim(0, (top or 1.0) * 1.3)

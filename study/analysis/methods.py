@@ -14,6 +14,7 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
 
+from study.analysis.apa import ALPHA_SIGN, alpha_text
 from study.analysis.apa_results import comparison_sentence, exclusion_sentences, success_sentence
 from study.analysis.crossover_text import design_checks_json, design_checks_paragraph
 from study.analysis.mixed_model import DEFAULT_DDF
@@ -46,8 +47,8 @@ COMPUTED_BY = (
 
 WILCOXON_RULE = (
     f"below {EXACT_MAX_N} pairs its p is exact: the permutation distribution of the "
-    "observed ranks, ties and zeros included (zeros are ranked and carry no sign, "
-    f"Pratt 1959); from {EXACT_MAX_N} pairs on, the normal approximation of that "
+    "observed ranks, ties and zeros included; zeros are ranked and carry no sign "
+    f"(Pratt, 1959). From {EXACT_MAX_N} pairs on, p is the normal approximation of that "
     "distribution"
 )
 
@@ -58,7 +59,8 @@ def comparison_method() -> str:
         "HV was compared with VO within each group on the participant means. "
         "Differences were compared at the resolution of the data (to "
         f"{RESOLUTION_DIGITS} significant digits), so rounding error decides no test. "
-        f"A Shapiro-Wilk test (alpha = {ALPHA:g}) on the differences chose the test: a "
+        f"A Shapiro-Wilk test ({ALPHA_SIGN} = {alpha_text(ALPHA)}) on the differences "
+        "chose the test: a "
         "two-sided paired t-test when they did not depart from normality, otherwise a "
         "two-sided Wilcoxon signed-rank test. "
         "When every difference was the same, no t statistic exists and the signed-rank "
@@ -66,10 +68,10 @@ def comparison_method() -> str:
         "and is reported so, outside the Holm family. "
         f"For the signed-rank test, {WILCOXON_RULE}; V is the sum of the ranks of the "
         "positive differences. "
-        "Effect sizes: the mean difference (HV - VO) with its 95 % CI, Cohen's d_z with "
-        "its 95 % CI (noncentral t), Hedges' g_av (Lakens 2013, corrected with n - 1 df), "
-        "and for the signed-rank test the matched-pairs rank-biserial correlation "
-        "(Kerby 2014). "
+        "Effect sizes: the mean difference HV - VO with its 95 % CI; Cohen's d_z with "
+        "its 95 % CI from the noncentral t distribution; Hedges' g_av, corrected with "
+        "n - 1 df (Lakens, 2013); and for the signed-rank test the matched-pairs "
+        "rank-biserial correlation (Kerby, 2014). "
         "p values were Holm-corrected across the testable groups of each task and "
         "measure; each row names its family."
     )
@@ -78,7 +80,7 @@ def comparison_method() -> str:
 def evidence_method(bounds_text: str) -> str:
     """The equivalence test and the Bayes factor."""
     tost = (
-        "Equivalence was tested with two one-sided paired t-tests (TOST, Schuirmann 1987) "
+        "Equivalence was tested with two one-sided paired t-tests (TOST; Schuirmann, 1987) "
         f"against the design's bounds ({bounds_text}); equivalence is shown when the "
         "TOST p is below .05."
         if bounds_text
@@ -86,7 +88,7 @@ def evidence_method(bounds_text: str) -> str:
     )
     return (
         f"{tost} BF10 is the JZS Bayes factor of the paired t-test, with a Cauchy prior "
-        "of scale sqrt(2)/2 on the standardised effect (Rouder et al. 2009); BF10 below "
+        "of scale √2/2 on the standardised effect (Rouder et al., 2009); BF10 below "
         "1/3 favours no difference, above 3 a difference."
     )
 
@@ -119,15 +121,15 @@ def lmm_method(ddf: str = DEFAULT_DDF, references: list[str] | None = None) -> s
     refs = "; ".join(references or []) or "condition VO, the alphabetically first group"
     return (
         "Linear mixed model over all measured trials, value ~ condition * group + "
-        "(1 | participant), fitted by REML (lme4's optimum). "
+        "(1 | participant), fitted by REML. "
         f"Treatment coding, reference levels: {refs}; the condition coefficient is the "
         "HV - VO difference in the reference group. The condition effect is reported as "
         "the marginal means of the conditions averaged over the groups with equal weights "
         "and their difference (as emmeans). "
-        f"t tests with {ddf} degrees of freedom (as lmerTest"
+        f"t tests with {ddf} degrees of freedom, as in lmerTest"
         + (" and pbkrtest" if ddf == "Kenward-Roger" else "")
-        + "), 95 % confidence intervals from the same df. A fit whose participant-intercept "
-        "SD is below 1e-4 of the residual SD is reported as singular (lme4's isSingular)."
+        + "; 95 % confidence intervals from the same df. A fit whose participant-intercept "
+        "SD is below 0.0001 times the residual SD is reported as singular."
     )
 
 
@@ -150,7 +152,8 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
     return {
         "comparisons": {
             "unit": "participant means per task x condition",
-            "normality": f"Shapiro-Wilk on the paired differences, alpha {ALPHA:g}",
+            "normality": "Shapiro-Wilk on the paired differences, "
+            f"{ALPHA_SIGN} = {alpha_text(ALPHA)}",
             "tests": {
                 "paired_t": "two-sided paired t-test (df = pairs - 1), effect size Hedges' "
                 "g_av (correction with n - 1 df) beside Cohen's d_z with its CI",
@@ -171,7 +174,7 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
                 "fraction_of_vo_mean": analysis.bounds.fraction,
                 "absolute": dict(analysis.bounds.absolute),
             },
-            "bayes_factor": "JZS BF10, Cauchy prior scale sqrt(2)/2 (Rouder et al. 2009)",
+            "bayes_factor": "JZS BF10, Cauchy prior scale √2/2 (Rouder et al. 2009)",
         },
         "success": success_method(),
         "mixed_anova": {
@@ -189,7 +192,7 @@ def methods_json(analysis: Analysis) -> dict[str, Any]:
             "reference": _lmm_references(analysis),
             "condition_effect": "marginal means averaged over the groups with equal "
             "weights, and their difference (emmeans)",
-            "singular": "participant-intercept SD below 1e-4 of the residual SD",
+            "singular": "participant-intercept SD below 0.0001 times the residual SD",
         },
         "design_checks": design_checks_json(),
         "computed_by": COMPUTED_BY,

@@ -159,34 +159,61 @@ def rank_biserial(d: np.ndarray) -> float:
 def dz_interval(t: float, n: int, level: float = 0.95) -> tuple[float, float]:
     """The confidence interval of Cohen's d_z = t / sqrt(n), by inverting the noncentral
     t distribution of t with n - 1 df in its noncentrality (the pivot of `MBESS::ci.smd`).
+
+    Each limit is the root of cdf(t; df, ncp) = q (scipy.optimize.brentq) in a bracket
+    that starts at ncp = t and widens, doubling, until it straddles the root. A fixed
+    bracket of t +/- 10 failed for t(19) = -3.71: scipy's nct gives NaN far in a tail
+    (there cdf(-3.71; 19, 6.29)), and brentq cannot start from NaN.
+
+    Parameters
+    ----------
+    t : float
+        The paired t statistic.
+    n : int
+        The number of pairs (df = n - 1).
+    level : float, optional
+        The confidence level.
+
+    Returns
+    -------
+    tuple of (float, float)
+        The lower and upper limit of d_z; NaN where t is not finite.
     """
-    from scipy.optimize import brentq
+    if not math.isfinite(t) or n < 2:
+        return float("nan"), float("nan")
+    root_n = math.sqrt(n)
+    tail = (1 - level) / 2
+    return _ncp_root(t, n - 1, 1 - tail) / root_n, _ncp_root(t, n - 1, tail) / root_n
+
+
+def _nct_cdf(t: float, df: int, ncp: float) -> float:
+    """cdf(t; df, ncp) of the noncentral t, falling from 1 to 0 as ncp grows; where
+    scipy's value is NaN (far in a tail) the limit on that side."""
     from scipy.stats import nct
 
-    df = n - 1
-    tail = (1 - level) / 2
+    p = float(nct.cdf(t, df, ncp))
+    if math.isfinite(p):
+        return p
+    return 0.0 if ncp > t else 1.0
 
-    def ncp_at(q: float) -> float:
-        # the noncentrality whose distribution has t at its q quantile: cdf falls with ncp
-        def f(ncp: float) -> float:
-            return float(nct.cdf(t, df, ncp)) - q
 
-        lo, hi = t - 10.0, t + 10.0
-        for _ in range(50):
-            if not f(lo) < 0:
-                break
-            lo -= 10.0
-        for _ in range(50):
-            if not f(hi) > 0:
-                break
-            hi += 10.0
-        try:
-            return float(brentq(f, lo, hi, xtol=1e-12))
-        except ValueError:  # scipy's nct has no finite cdf this far out: no interval
-            return float("nan")
+def _ncp_root(t: float, df: int, q: float) -> float:
+    """The noncentrality whose distribution has `t` at its `q` quantile."""
+    from scipy.optimize import brentq
 
-    root_n = math.sqrt(n)
-    return ncp_at(1 - tail) / root_n, ncp_at(tail) / root_n
+    def f(ncp: float) -> float:
+        return _nct_cdf(t, df, ncp) - q
+
+    # the cdf falls with ncp: the root lies above t where f(t) > 0, else below
+    direction = 1.0 if f(t) > 0 else -1.0
+    near, step = t, 1.0
+    for _ in range(64):
+        far = t + direction * step
+        if (f(far) > 0) != (f(near) > 0):
+            lo, hi = sorted((near, far))
+            return float(brentq(f, lo, hi, xtol=1e-12, rtol=1e-14))
+        near, step = far, step * 2
+    return float("nan")
 
 
 def _constant_row(d: np.ndarray) -> Row:

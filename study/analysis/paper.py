@@ -4,8 +4,10 @@ One set per task (`--task`, all tasks by default): Fig. 12 (`fig12_groups_<task>
 Fig. 9 (`fig9_forces_<task>`, when the task's trials have samples) and the NASA-TLX
 profile (`tlx_profile_<task>`). A task's Fig. 12 takes its marks from that task's own
 comparisons (`compare_conditions`, Holm within task x measure: the p values `study
-analyze` reports). `draw_figures` draws them; `write_figures` checks every one
-(`figcheck`) before writing any.
+analyze` reports); its NASA-TLX panel is the weighted score unless the raw one is asked
+for (`tlx_score`). `draw_figures` draws them; `write_figures` checks every one
+(`figcheck`) before writing any, and writes their captions to `captions.md` beside
+them (`CAPTIONS`): a caption inside a single-column figure took a third of its height.
 """
 
 from __future__ import annotations
@@ -25,14 +27,26 @@ from db.models.trial import SampleChunk, Trial, TrialMeasure
 from db.sample_reader import SampleReader
 from study.analysis.comparisons import compare_conditions
 from study.analysis.figcheck import FigureCheckError, check_figure
-from study.analysis.figures import fig12, fig12_labels, label_source, save
+from study.analysis.figures import (
+    TLX_SCORES,
+    fig12,
+    fig12_caption,
+    fig12_labels,
+    label_source,
+    save,
+    tested,
+)
 from study.analysis.frames import participant_means, tlx_frame, trial_frame, without_withdrawn
 from study.analysis.source import DataSource, restrict
 from study.analysis.stream_figure import DrawnStream, trial_streams_figure
+from study.analysis.tlx_figure import NOTE as TLX_PROFILE_CAPTION
 from study.analysis.tlx_figure import tlx_profile
 from study.analysis.trace_figure import force_traces
 from study.errors import StudyInputError
 from study.protocol.tasks import get_task
+
+CAPTIONS = "captions.md"
+"""The file of the figures' captions, written beside them."""
 
 
 def _samples(engine: Engine, trial_id: int, task: str, columns: Sequence[str]) -> pd.DataFrame:
@@ -102,6 +116,8 @@ class DrawnFigure:
     figure: plt.Figure
     expected_marks: dict[str, float | None] | None = None
     """Fig. 12: measure/group -> the reported Holm p (None: no test); else None."""
+    caption: str = ""
+    """The caption, for `captions.md` (the figure holds none)."""
 
     def problems(self) -> list[str]:
         """The figure check's findings (`figcheck.check_figure`); [] when legible."""
@@ -111,14 +127,29 @@ class DrawnFigure:
 def _marks(long: pd.DataFrame, comparisons: pd.DataFrame, task: str) -> dict[str, float | None]:
     """The mark each measure x group of Fig. 12 must show, from the reported p_holm."""
     out: dict[str, float | None] = {}
-    measures = [m for m in fig12_labels(task) if m in set(long["measure"])]
-    for measure in measures:
+    shown = {m for score in TLX_SCORES for m in fig12_labels(task, score)}
+    measures = [m for m in shown if m in set(long["measure"])]
+    for measure in sorted(measures):
         for group in dict.fromkeys(long["group"]):
             rows = comparisons[
                 (comparisons["measure"] == measure) & (comparisons["group"] == group)
             ]
-            out[f"{measure}/{group}"] = float(rows["p_holm"].iloc[0]) if len(rows) else None
+            row = rows.iloc[0] if len(rows) else None
+            out[f"{measure}/{group}"] = float(row["p_holm"]) if tested(row) else None
     return out
+
+
+def tlx_score_of(long: pd.DataFrame, tlx_score: str) -> str:
+    """The NASA-TLX score Fig. 12 shows: `tlx_score`, or raw when no questionnaire of
+    the task has the pairwise choices a weighted score needs."""
+    if tlx_score not in TLX_SCORES:
+        raise StudyInputError(
+            f"NASA-TLX score {tlx_score!r}; expected one of {', '.join(TLX_SCORES)}"
+        )
+    weighted = long[long["measure"] == "tlx_weighted"]["value"]
+    if tlx_score == "weighted" and not weighted.notna().any():
+        return "raw"
+    return tlx_score
 
 
 def _with_streams(
@@ -173,10 +204,15 @@ def tasks_of(trials: pd.DataFrame, tlx: pd.DataFrame, task: str | None) -> list[
 
 
 def draw_figures(
-    engine: Engine, width: str = "double", driver: str | None = None, task: str | None = None
+    engine: Engine,
+    width: str = "double",
+    driver: str | None = None,
+    task: str | None = None,
+    tlx_score: str = TLX_SCORES[0],
 ) -> list[DrawnFigure]:
     """Every figure of every task (or of `task`), each with the data-source note of the
-    trials it draws."""
+    trials it draws and its caption; Fig. 12's NASA-TLX panel shows `tlx_score`
+    (weighted or raw; raw where no questionnaire has the pairwise choices)."""
     trials, tlx, _ = without_withdrawn(engine, trial_frame(engine), tlx_frame(engine))
     if not len(trials):
         raise StudyInputError("the database holds no completed trials to draw")
@@ -189,24 +225,42 @@ def draw_figures(
         note = DataSource.of(t_trials).note
         t_long = long[long["task"] == name]
         t_comp = comparisons[comparisons["task"] == name] if len(comparisons) else comparisons
-        marks = _marks(t_long, t_comp, name)
+        labels = fig12_labels(name, tlx_score_of(t_long, tlx_score))
+        shown = t_long[t_long["measure"].isin(list(labels))]
+        marks = _marks(shown, t_comp, name)
         if marks:  # else none of Fig. 12's measures was recorded in this task
-            fig = label_source(fig12(t_long, t_comp, width, fig12_labels(name)), note)
-            drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks))
+            fig = label_source(fig12(shown, t_comp, width, labels), note)
+            caption = fig12_caption(shown, t_comp, width, labels)
+            drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks, _captioned(note, caption)))
         drawn_columns = ["t_s", *get_task(name).trace_names]
         traced = _trace_trials(engine, name, driver)
         panels = [(_samples(engine, i, name, drawn_columns), title) for i, title in traced]
         if panels:
             fig = label_source(force_traces(panels, name, width), note)
-            drawn.append(DrawnFigure(f"fig9_forces_{name}", fig))
+            caption = _captioned(note, get_task(name).sign_note)
+            drawn.append(DrawnFigure(f"fig9_forces_{name}", fig, caption=caption))
         with_streams = _with_streams(engine, [i for i, _ in traced], panels)
         if with_streams:
             fig = label_source(trial_streams_figure(name, with_streams, width), note)
             drawn.append(DrawnFigure(f"fig9_streams_{name}", fig))
         if len(t_tlx):
             fig = label_source(tlx_profile(t_tlx, width), note)
-            drawn.append(DrawnFigure(f"tlx_profile_{name}", fig))
+            caption = _captioned(note, TLX_PROFILE_CAPTION)
+            drawn.append(DrawnFigure(f"tlx_profile_{name}", fig, caption=caption))
     return drawn
+
+
+def _captioned(note: str, caption: str) -> str:
+    """The caption, after the data-source note when there is one (simulated data)."""
+    return f"{note}. {caption}" if note else caption
+
+
+def captions_markdown(drawn: Sequence[DrawnFigure]) -> str:
+    """`captions.md`: one section per figure, its file name and its caption."""
+    parts = ["# Figure captions\n"]
+    for d in drawn:
+        parts.append(f"## {d.name}\n\n{d.caption or '(no caption)'}\n")
+    return "\n".join(parts)
 
 
 def write_figures(
@@ -216,9 +270,11 @@ def write_figures(
     width: str = "double",
     driver: str | None = None,
     task: str | None = None,
+    tlx_score: str = TLX_SCORES[0],
 ) -> list[Path]:
-    """Draw, check and write every figure; nothing is written when one fails the check."""
-    drawn = draw_figures(engine, width, driver, task)
+    """Draw, check and write every figure and `captions.md`; nothing is written when one
+    fails the check."""
+    drawn = draw_figures(engine, width, driver, task, tlx_score)
     problems = [f"{d.name}: {p}" for d in drawn for p in d.problems()]
     if problems:
         for d in drawn:
@@ -230,7 +286,9 @@ def write_figures(
     paths = []
     for d in drawn:
         paths += save(d.figure, out_dir, d.name, formats)
-    return paths
+    captions = out_dir / CAPTIONS
+    captions.write_text(captions_markdown(drawn), encoding="utf-8")
+    return [*paths, captions]
 
 
 def write_figures_at(db_url: str, out_dir: Path, width: str = "double") -> list[Path]:

@@ -18,15 +18,28 @@ import pandas as pd
 from scipy.stats import t as t_dist
 
 from db.models.tlx import TLX_SUBSCALES
-from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_key
+from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_legend
 
 CONDITIONS = ("VO", "HV")
 SINGLE_MAX_IN = 4.0
 """The tallest a single-column figure may be (a column's upper part)."""
+ABBREVIATIONS = {
+    "mental": "MD",
+    "physical": "PD",
+    "temporal": "TD",
+    "performance": "OP",
+    "effort": "EF",
+    "frustration": "FR",
+}
+"""The subscales' usual abbreviations (mental, physical and temporal demand, own
+performance, effort, frustration): upright tick labels that fit a single column."""
 NOTE = (
-    "Bars: mean; whiskers: 95 % within-subject CI (Cousineau-Morey). Lower is better "
-    "on every subscale: performance reads 0 = perfect."
+    "Raw ratings of the six NASA-TLX subscales: MD mental, PD physical and TD temporal "
+    "demand, OP own performance, EF effort, FR frustration. Bars: mean; whiskers: 95 % "
+    "within-subject CI (Cousineau-Morey). Lower is better on every subscale: "
+    "performance reads 0 = perfect."
 )
+"""The caption (`captions.md`; the figure holds none)."""
 
 
 def cousineau_morey(wide: pd.DataFrame, level: float = 0.95) -> pd.DataFrame:
@@ -107,8 +120,8 @@ def tlx_profile(tlx: pd.DataFrame, width: str = "double") -> plt.Figure:
             for ax in axes[:, 0]:
                 ax.set_ylabel("rating (0-100)")
         for ax in axes[-1, :]:
-            ax.set_xticks(x, list(TLX_SUBSCALES), rotation=90)
+            ax.set_xticks(x, [ABBREVIATIONS[s] for s in TLX_SUBSCALES], rotation=0)
             ax.set_xlabel("NASA-TLX subscale")
         handles, _ = axes.ravel()[0].get_legend_handles_labels()
-        figure_key(fig, handles, NOTE, ncols=2)
+        figure_legend(fig, handles, ncols=2)
     return fig

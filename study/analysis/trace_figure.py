@@ -2,7 +2,7 @@
 
 VO and HV panels share the time axis and the y-axis so that the forces compare at a glance; the
 reference force is drawn above (zorder) the estimate it is compared with; the caption
-states the sign convention of the task's model:
+(`captions.md`, from `Task.sign_note`) states the sign convention of the task's model:
 
 - lcca (`teleop_core.phantom.lcca`): the proximal force is what the drive feels, the
   wall and sliding friction resisting the wire; positive while inserting, negative
@@ -23,7 +23,7 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import pandas as pd
 
-from study.analysis.figures import STYLE, WIDTHS_IN, figure_key
+from study.analysis.figures import STYLE, WIDTHS_IN, figure_legend
 from study.protocol.tasks import get_task
 
 STYLES = (
@@ -78,5 +78,5 @@ def force_traces(
         for ax in axes[:, 0]:
             ax.set_ylabel("force (N)")
         handles, _ = axes.ravel()[0].get_legend_handles_labels()
-        figure_key(fig, handles, the_task.sign_note, 3 if width == "double" else 2)
+        figure_legend(fig, handles, 3 if width == "double" else 2)
     return fig

@@ -18,6 +18,8 @@ if TYPE_CHECKING:  # pandas only where the covariate needs it
     from study.analysis.paired import EquivalenceBounds
 
 Row = dict[str, Any]
+DDF_NAMES = {"satterthwaite": "Satterthwaite", "kenward-roger": "Kenward-Roger"}
+"""`--ddf`'s values and the mixed model's names of them (`stats_lmm.DDF_METHODS`)."""
 
 
 @click.command("analyze", cls=StudyCommand)
@@ -51,6 +53,14 @@ Row = dict[str, Any]
     "condition effect) or Type III (afex's default).",
 )
 @click.option(
+    "--ddf",
+    type=click.Choice(["satterthwaite", "kenward-roger"]),
+    default="satterthwaite",
+    show_default=True,
+    help="Degrees of freedom of the mixed model's t tests (as lmerTest's ddf); "
+    "analysis.json and methods.md name the one used.",
+)
+@click.option(
     "--covariate",
     default=None,
     metavar="NAME",
@@ -65,6 +75,7 @@ def analyze(
     json_path: Path | None,
     driver: str | None,
     ss_type: str,
+    ddf: str,
     covariate: str | None,
     db_url: str | None,
 ) -> None:
@@ -102,7 +113,14 @@ def analyze(
         n for n in [*withdrawn, *choiceless_notes(tlx)] if task is None or n.startswith(f"{task}/")
     ]
     long = participant_mean_rows(trials, tlx_measure_rows(tlx))
-    result = analyze_rows(trials, long, ss_type=int(ss_type), withdrawn=withdrawn, bounds=bounds)
+    result = analyze_rows(
+        trials,
+        long,
+        ss_type=int(ss_type),
+        withdrawn=withdrawn,
+        ddf=DDF_NAMES[ddf],
+        bounds=bounds,
+    )
     written = write(result, out_dir, json_path)
     for path in written:
         click.echo(str(path))

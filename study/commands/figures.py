@@ -64,6 +64,14 @@ def _formats(text: str) -> list[str]:
 @click.option(
     "--task", default=None, help="Only this task's figures (e.g. lcca) [default: one set per task]."
 )
+@click.option(
+    "--tlx-score",
+    type=click.Choice(["weighted", "raw"]),
+    default="weighted",
+    show_default=True,
+    help="The NASA-TLX score of Fig. 12's TLX panel (raw where no questionnaire has the "
+    "pairwise choices); its y-label names it.",
+)
 @db_option
 def figures(
     out_dir: Path,
@@ -71,15 +79,17 @@ def figures(
     width: str,
     driver: str | None,
     task: str | None,
+    tlx_score: str,
     db_url: str | None,
 ) -> None:
     """Draw the paper's figures, one set per task: group comparison, force traces,
-    NASA-TLX profile (FIGURE_TASK.pdf, e.g. fig12_groups_lcca.pdf).
+    NASA-TLX profile (FIGURE_TASK.pdf, e.g. fig12_groups_lcca.pdf), and their captions
+    in captions.md beside them.
 
-    Fig. 12 (per group, VO vs HV, marks from that task's Holm-corrected tests), Fig. 9
-    (a VO and an HV trial's forces) and the TLX profile per group. Every figure passes
-    the figure check (text >= 8 pt, no overlapping text, marks equal to the reported p)
-    before any is written.
+    Fig. 12 (per group, VO vs HV, marks from that task's Holm-corrected tests, no mark
+    where no test was run), Fig. 9 (a VO and an HV trial's forces) and the TLX profile
+    per group. Every figure passes the figure check (text >= 8 pt, no overlapping text,
+    marks equal to the reported p) before any is written.
 
     \b
     Example:
@@ -90,7 +100,7 @@ def figures(
     chosen = _formats(formats)
     engine = open_database(db_url, create=False)
     try:
-        for path in write_figures(engine, out_dir, chosen, width, driver, task):
+        for path in write_figures(engine, out_dir, chosen, width, driver, task, tlx_score):
             click.echo(str(path))
     finally:
         engine.dispose()

@@ -201,7 +201,8 @@ class AnalysisPane(SafeWorkers, Vertical):
     def _exported(self, event: Exported) -> None:
         self.exported = event.paths
         folder = event.paths[0].parent if event.paths else self.figures_dir
-        self._status(f"{len(event.paths)} figure files written to {folder}")
+        figures = [p for p in event.paths if p.suffix != ".md"]
+        self._status(f"{len(figures)} figure files and their captions written to {folder}")
 
     def _status(self, text: str) -> None:
         self.query_one("#analysis-status", Static).update(text)

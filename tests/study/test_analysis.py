@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from pathlib import Path
 
@@ -291,8 +292,17 @@ def test_study_analyze_writes_the_json_contract(
         "Shapiro-Wilk",
         "its p is exact",
         "numpy ",
+        "(\N{GREEK SMALL LETTER ALPHA} = .05)",
     ):
         assert phrase in methods
+    # what a paper can take: APA numbers, nothing of the implementation (the software
+    # versions, on their own last line, aside)
+    body = methods.split("\nSoftware:")[0]
+    for word in ("alpha", "0.05", "1e-", "sqrt(", "scipy", "pingouin", "statsmodels",
+                 "lme4's", "isSingular", "+/-"):  # fmt: skip
+        assert word not in body, word
+    assert re.findall(r"\bp(?:\(Holm\))? = \.\d{4,}", body) == []  # at most 3 decimals
+    assert re.findall(r"\bp(?:\(Holm\))? = 0\.", body) == []  # no leading zero
     assert "Type II sums of squares (the default)" in (out / "mixed_anova.tex").read_text()
     assert "p (Satterthwaite)" in (out / "lmm.md").read_text()
     assert "reference levels: condition VO, group expert" in (out / "lmm.md").read_text()
@@ -656,9 +666,14 @@ def test_apa_text() -> None:
     assert p_text(0.00099) == "< .001"
     # never rounded across a star threshold: the text and the figure's mark agree
     for p in (0.04996, 0.0500001, 0.0099996, 0.010004, 0.0010004, 0.049, 0.051):
-        shown = float(p_text(p))
+        text = p_text(p)
+        shown = float(text.lstrip("< ")) - (1e-9 if text.startswith("<") else 0.0)
         assert stars(shown) == stars(p), p
-    assert p_text(0.04996) == ".04996"
+        assert len(text.split(".")[1]) <= 3, text
+    # three decimals at most: where they would cross a threshold, the threshold is the bound
+    assert p_text(0.04996) == "< .05"
+    assert p_text(0.0099996) == "< .01"
+    assert p_text(0.0500001) == ".050"
     assert bounded_text(0.6532) == ".65"
     assert bounded_text(-0.25) == "-.25"
     assert bounded_text(0.6532, 3) == ".653"
@@ -908,3 +923,25 @@ def test_study_analyze_reads_sqlite_alone_and_equals_the_sqlalchemy_path(
     expected = to_json(analyze(frames_trials, participant_means(frames_trials, frames_tlx)))
     got = json.loads((tmp_path / "plain" / "analysis.json").read_text())
     assert got == json.loads(json.dumps(expected))
+
+
+def test_type_ii_mixed_anova_equals_pingouin_on_unequal_groups() -> None:
+    """pingouin.mixed_anova (Type II) as an independent reference on the 20/8/8 demo."""
+    import pingouin
+
+    from study.analysis.stats import mixed_anova_rows
+
+    long = pd.read_csv(Path(__file__).parent.parent / "data" / "demo_seed1_means.csv")
+    keys = ["participant", "group", "task", "condition", "measure", "value"]
+    rows, _ = mixed_anova_rows(list(long[keys].itertuples(index=False, name=None)), ss_type=2)
+    names = {"group": "group", "condition": "condition", "interaction": "Interaction"}
+    for measure, data in long.groupby("measure"):
+        ref = pingouin.mixed_anova(
+            data, dv="value", within="condition", subject="participant", between="group"
+        ).set_index("Source")
+        for r in (r for r in rows if r["measure"] == measure):
+            expected = ref.loc[names[r["source"]]]
+            assert r["F"] == pytest.approx(expected["F"], rel=1e-10), (measure, r["source"])
+            assert r["p"] == pytest.approx(expected["p_unc"], rel=1e-9)
+            assert r["np2"] == pytest.approx(expected["np2"], rel=1e-10)
+            assert (r["df1"], r["df2"]) == (expected["DF1"], expected["DF2"])

@@ -32,7 +32,7 @@ from study.analysis.stats import analyze
 from study.analysis.tlx_figure import cousineau_morey
 from study.cli import main
 from study.protocol.design import TEMPLATE
-from study.protocol.exchange import TLX_COLUMNS
+from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS
 from study.protocol.export import trial_columns
 
 GROUPS = {"outsider": 6, "novice": 5, "expert": 5}
@@ -61,13 +61,17 @@ def _trial_rows(rng: np.random.Generator) -> list[list[object]]:
     return rows
 
 
+WEIGHTS = [5, 4, 3, 2, 1, 0]
+"""Tallies of the 15 pairwise choices (every questionnaire the same): a weighted score."""
+
+
 def _tlx_rows(rng: np.random.Generator) -> list[list[object]]:
     rows = []
     for k in range(1, sum(GROUPS.values()) + 1):
         for task in ("lcca", "notes"):
             for cond in ("VO", "HV"):
                 ratings = [int(v) for v in rng.integers(4, 16, 6) * 5]
-                rows.append([f"P{k:03d}", task, cond, *ratings])
+                rows.append([f"P{k:03d}", task, cond, *ratings, *WEIGHTS])
     return rows
 
 
@@ -108,7 +112,8 @@ def study_db(tmp_path_factory: pytest.TempPathFactory) -> str:
     rng = np.random.default_rng(7)
     columns = trial_columns(["lcca", "notes"])
     pd.DataFrame(_trial_rows(rng), columns=columns).to_csv(folder / "t.csv", index=False)
-    pd.DataFrame(_tlx_rows(rng), columns=TLX_COLUMNS).to_csv(folder / "x.csv", index=False)
+    tlx_columns = [*TLX_COLUMNS, *TLX_WEIGHT_COLUMNS]
+    pd.DataFrame(_tlx_rows(rng), columns=tlx_columns).to_csv(folder / "x.csv", index=False)
     argv = [
         "import",
         "--enrol-new",
@@ -150,6 +155,15 @@ def test_every_figure_passes_the_check_at_both_widths(engine: Engine, width: str
         assert d.figure.get_figwidth() == {"single": 3.5, "double": 7.16}[width]
         if width == "single" and not d.name.startswith("fig9"):  # Fig. 12, TLX profile
             assert d.figure.get_figheight() <= 4.0, d.name
+        # the caption is beside the figure (captions.md), not in it: no legend title
+        assert d.caption
+        assert all(not leg.get_title().get_text() for leg in d.figure.legends), d.name
+        # group and subscale labels upright at both widths
+        labels = [t for ax in d.figure.axes for t in ax.get_xticklabels() if t.get_text()]
+        assert labels
+        assert {t.get_rotation() for t in labels} == {0.0}, d.name
+        if d.name.startswith("tlx_profile"):  # abbreviated, spelled out in the caption
+            assert "OP own performance" in d.caption
 
 
 def test_each_task_gets_its_own_fig12_with_its_own_marks(engine: Engine) -> None:
@@ -164,7 +178,9 @@ def test_each_task_gets_its_own_fig12_with_its_own_marks(engine: Engine) -> None
         d = drawn[f"fig12_groups_{task}"]
         rows = reported[
             (reported["task"] == task)
-            & reported["measure"].isin(["completion_time_s", force[task], tip[task], "tlx_raw"])
+            & reported["measure"].isin(
+                ["completion_time_s", force[task], tip[task], "tlx_weighted"]
+            )
         ]
         expected = {f"{r.measure}/{r.group}": r.p_holm for r in rows.itertuples()}
         assert d.expected_marks == pytest.approx(expected)  # the p values analyze reports
@@ -207,8 +223,10 @@ def test_the_check_catches_small_text_overlaps_and_wrong_marks() -> None:
     assert check_figure(fig, {"m/novice": 0.2}) == [
         "mark of m/novice is '*'; the reported p gives 'n.s.'"
     ]
-    assert check_figure(fig, {"m/novice": 0.03, "m/expert": None}) == [
-        "mark of m/expert missing (expected 'n/a')"
+    # no test reported (None): no mark expected, and one drawn is a problem
+    assert check_figure(fig, {"m/novice": 0.03, "m/expert": None}) == []
+    assert check_figure(fig, {"m/novice": None}) == [
+        "mark of m/novice ('*') drawn where no test was run"
     ]
     ax.text(1.5, 0.5, "outside", fontsize=8)
     assert check_figure(fig, {"m/novice": 0.03}) == ["text 'outside' reaches outside the figure"]
@@ -238,11 +256,8 @@ def test_cousineau_morey_interval_by_hand() -> None:
 
 
 def test_fig9_one_figure_shared_axis_reference_above_estimate(engine: Engine) -> None:
-    fig = next(
-        d.figure
-        for d in draw_figures(engine, "double", task="lcca")
-        if d.name == "fig9_forces_lcca"
-    )
+    fig_name = "fig9_forces_lcca"
+    fig = next(d.figure for d in draw_figures(engine, "double", task="lcca") if d.name == fig_name)
     vo, hv = [ax for ax in fig.axes if ax.get_title()]
     assert vo.get_title().split(", ")[1] == "VO"
     assert hv.get_title().split(", ")[1] == "HV"
@@ -251,7 +266,9 @@ def test_fig9_one_figure_shared_axis_reference_above_estimate(engine: Engine) ->
     assert vo.get_shared_x_axes().joined(vo, hv)
     lines = {line.get_label(): line for line in vo.get_lines()}
     assert lines["proximal, reference"].get_zorder() > lines["proximal, estimated"].get_zorder()
-    caption = fig.legends[0].get_title().get_text().replace("\n", " ")
+    caption = next(
+        d.caption for d in draw_figures(engine, "double", task="lcca") if d.name == fig_name
+    )
     assert "positive resists insertion" in caption
     assert "negative resists withdrawal" in caption
 
@@ -332,10 +349,22 @@ def test_study_figures_task_option(
     argv = ["figures", "--db", study_db, "--out", str(out), "--format", "png"]
     assert main([*argv, "--task", "notes", "--width", "single"]) == 0
     assert sorted(p.name for p in out.iterdir()) == [
+        "captions.md",
         "fig12_groups_notes.png",
         "fig9_forces_notes.png",
         "tlx_profile_notes.png",
     ]
+    captions = (out / "captions.md").read_text()
+    for name in ("fig12_groups_notes", "fig9_forces_notes", "tlx_profile_notes"):
+        assert f"## {name}\n" in captions
+    assert "Marks: Holm-corrected p of the test named under each group" in captions
+    assert "W, Wilcoxon signed-rank test" in captions  # the single column's abbreviations
+    assert "Simulated participants" in captions
+    capsys.readouterr()
+    assert main([*argv, "--tlx-score", "adjusted"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "adjusted" in err
+    assert "weighted" in err
     capsys.readouterr()
     assert main([*argv, "--task", "knee"]) == 2
     assert "no data for task 'knee'; expected one of lcca, notes" in capsys.readouterr().err
@@ -348,13 +377,14 @@ DEMO_MEANS = Path(__file__).parent.parent / "data" / "demo_seed1_means.csv"
 @pytest.mark.parametrize("width", ["single", "double"])
 def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
     from study.analysis.comparisons import compare_conditions
-    from study.analysis.figures import fig12, label_source
+    from study.analysis.figures import fig12, fig12_caption, fig12_labels, label_source
     from study.analysis.paper import _marks
 
-    long = pd.read_csv(DEMO_MEANS)
+    long = pd.read_csv(DEMO_MEANS)  # the raw NASA-TLX only
     comparisons, _ = compare_conditions(long)
     note = "Simulated participants: all 288 trials simulated, none measured"
-    fig = label_source(fig12(long, comparisons, width), note)
+    labels = fig12_labels("lcca", "raw")
+    fig = label_source(fig12(long, comparisons, width, labels), note)
     marks = _marks(long, comparisons, "lcca")
     assert len(marks) == 12
     assert check_figure(fig, marks) == []
@@ -365,17 +395,86 @@ def test_fig12_of_the_full_demo_study_passes_the_check(width: str) -> None:
     ax = fig.axes[2]
     expected = "expert\nW (ex.)" if width == "single" else "expert\nWilcoxon\n(exact)"
     assert expected in [t.get_text() for t in ax.get_xticklabels()]
+    tlx_label = fig.axes[3].get_title() if width == "single" else fig.axes[3].get_ylabel()
+    assert tlx_label.replace("\n", " ") == "raw NASA-TLX (0-100)"
     if width == "single":  # a column's upper part at most, the abbreviations spelled out
-        assert fig.get_size_inches().tolist() == [3.5, 4.0]
-        key = fig.legends[0].get_title().get_text().replace("\n", " ")
+        assert fig.get_figwidth() == 3.5
+        assert fig.get_figheight() <= 4.0
+        key = fig12_caption(long, comparisons, width, labels)
         assert "W, Wilcoxon signed-rank test, ex. exact or as. asymptotic p" in key
+        assert "NASA-TLX panel: the raw score" in key
     # five expert VO values of 0.112 N: jittered apart, not one dot
     expert_vo = ax.collections[4].get_offsets()  # scatter order: group x (VO, HV)
     tied = expert_vo[np.isclose(expert_vo[:, 1], 0.112, atol=5e-4)]
     assert len(tied) == 5
     assert len(np.unique(np.round(tied[:, 0], 3))) == 5
-    again = fig12(long, comparisons, width).axes[2].collections[4].get_offsets()
+    again = fig12(long, comparisons, width, labels).axes[2].collections[4].get_offsets()
     assert np.array_equal(again, expert_vo)  # seeded: the same figure on every run
+    plt.close("all")
+
+
+def _not_testable_long() -> pd.DataFrame:
+    """The demo's means with every expert completion-time difference zero."""
+    long = pd.read_csv(DEMO_MEANS)
+    cell = (long["measure"] == "completion_time_s") & (long["group"] == "expert")
+    vo = long[cell & (long["condition"] == "VO")].set_index("participant")["value"]
+    hv = cell & (long["condition"] == "HV")
+    long.loc[hv, "value"] = long.loc[hv, "participant"].map(vo).to_numpy()
+    return long
+
+
+@pytest.mark.parametrize("width", ["single", "double"])
+def test_an_untestable_group_gets_no_mark_and_the_caption_says_why(width: str) -> None:
+    from study.analysis.comparisons import compare_conditions
+    from study.analysis.figures import fig12, fig12_caption, fig12_labels
+    from study.analysis.paper import _marks
+
+    long = _not_testable_long()
+    comparisons, _ = compare_conditions(long)
+    row = comparisons[
+        (comparisons["measure"] == "completion_time_s") & (comparisons["group"] == "expert")
+    ].iloc[0]
+    assert row["not_testable"] == "every difference is 0"
+    labels = fig12_labels("lcca", "raw")
+    fig = fig12(long, comparisons, width, labels)
+    marks = _marks(long, comparisons, "lcca")
+    assert marks["completion_time_s/expert"] is None
+    assert check_figure(fig, marks) == []
+    gids = {t.get_gid(): t.get_text() for t in fig.findobj(plt.Text) if t.get_gid()}
+    assert "mark:completion_time_s/expert" not in gids  # no star, no n/a: nothing
+    assert gids["mark:completion_time_s/novice"] == "n.s."
+    star_texts = {"*", "**", "***", "n.s.", "n/a"}
+    panel = fig.axes[0]  # completion time
+    expert_x = 2 * 3.0 + 0.5
+    near = [
+        t
+        for t in panel.texts
+        if t.get_text() in star_texts and abs(t.xy[0] - expert_x) < 1  # type: ignore[attr-defined]
+    ]
+    assert near == []
+    assert "expert\nno test" in [t.get_text() for t in panel.get_xticklabels()]
+    caption = fig12_caption(long, comparisons, width, labels)
+    assert "completion time (s), expert: not testable (every difference is 0)" in caption
+    plt.close(fig)
+
+
+def test_fig12_tlx_panel_is_the_weighted_score_by_default(engine: Engine) -> None:
+    drawn = {d.name: d for d in draw_figures(engine, "double", task="lcca")}
+    fig12_drawn = drawn["fig12_groups_lcca"]
+    ylabels = [ax.get_ylabel().replace("\n", " ") for ax in fig12_drawn.figure.axes]
+    assert "weighted NASA-TLX (0-100)" in ylabels
+    assert not any("raw" in y for y in ylabels)
+    assert any(k.startswith("tlx_weighted/") for k in fig12_drawn.expected_marks or {})
+    assert "NASA-TLX panel: the weighted score" in fig12_drawn.caption
+    raw = next(
+        d
+        for d in draw_figures(engine, "single", task="lcca", tlx_score="raw")
+        if d.name == "fig12_groups_lcca"
+    )
+    titles = [ax.get_title() for ax in raw.figure.axes]
+    assert "raw NASA-TLX (0-100)" in titles
+    assert any(k.startswith("tlx_raw/") for k in raw.expected_marks or {})
+    assert raw.problems() == []
     plt.close("all")
 
 

@@ -71,7 +71,9 @@ def test_quick_demo_writes_analysis_and_figures(
             assert (demo / "figures" / f"{name}.{fmt}").stat().st_size > 5_000
             # both IEEE widths: single column beside the double-column figures
             assert (demo / "figures" / "single" / f"{name}.{fmt}").stat().st_size > 5_000
-    single = PdfReader(demo / "figures" / "single" / "fig12_groups_lcca.pdf").pages[0]
+    single_pdf = demo / "figures" / "single" / "fig12_groups_lcca.pdf"
+    assert "Holm-corrected" not in _pdf_text(single_pdf)  # the caption is in captions.md
+    single = PdfReader(single_pdf).pages[0]
     assert float(single.mediabox.width) == pytest.approx(3.5 * 72)
     assert float(single.mediabox.height) <= 4.0 * 72
     pdf = (demo / "figures" / "fig12_groups_lcca.pdf").read_bytes()
@@ -80,7 +82,12 @@ def test_quick_demo_writes_analysis_and_figures(
     figs = tmp_path / "single"
     argv = ["figures", "--db", str(demo / "demo.db"), "--out", str(figs), "--width", "single"]
     assert main([*argv, "--format", "png"]) == 0
-    assert sorted(p.suffix for p in figs.iterdir()) == [".png"] * 3
+    assert sorted(p.suffix for p in figs.iterdir()) == [".md", *[".png"] * 3]
+    # the captions beside the figures, not inside them
+    for folder in (demo / "figures", demo / "figures" / "single", figs):
+        captions = (folder / "captions.md").read_text()
+        assert "## fig12_groups_lcca\n" in captions
+        assert "Simulated participants" in captions
     capsys.readouterr()
     assert (
         main(["figures", "--db", str(demo / "demo.db"), "--out", str(figs), "--format", "gif"]) == 2

@@ -216,3 +216,69 @@ def test_an_unknown_df_method_is_refused() -> None:
     trials = pd.read_csv(DATA / "demo_seed1_trials.csv")
     with pytest.raises(StudyInputError, match="'Wald'; expected one of Satterthwaite"):
         mixed_model(trials, ("completion_time_s",), ddf="Wald")
+
+
+def _unequal_study(folder: Path) -> str:
+    """An imported LCCA study of 4/3/2 people, one HV trial missing for some: unequal
+    groups and cells, where Kenward-Roger's df differ from Satterthwaite's."""
+    from study.cli import main
+    from study.protocol.exchange import TRIAL_COLUMNS
+    from tests.study.conftest import init_study
+
+    db = init_study(folder)
+    rng = np.random.default_rng(11)
+    rows, k = [], 0
+    for group, n in (("outsider", 4), ("novice", 3), ("expert", 2)):
+        for _ in range(n):
+            k += 1
+            person = rng.normal(0, 4)
+            for cond, shift in (("VO", 0.0), ("HV", -2.0)):
+                for trial in (1, 2) if cond == "VO" or k % 2 else (1,):
+                    time_s = 30 + person + shift + rng.normal(0, 2)
+                    force = 0.8 + shift / 10 + rng.normal(0, 0.05)
+                    rows.append(
+                        [f"U{k:02d}", group, "lcca", cond, trial, time_s, force, 0.4, "true"]
+                    )
+    csv = folder / "t.csv"
+    pd.DataFrame(rows, columns=TRIAL_COLUMNS).to_csv(csv, index=False)
+    assert main(["import", "--enrol-new", "--trials", str(csv), "--db", db]) == 0
+    return db
+
+
+def test_analyze_ddf_option_reaches_the_mixed_model(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    from study.cli import main
+
+    db = _unequal_study(tmp_path)
+    reports = {}
+    for ddf in ("satterthwaite", "kenward-roger", None):
+        out = tmp_path / str(ddf)
+        argv = ["analyze", "--out", str(out), "--db", db]
+        assert main([*argv, "--ddf", ddf] if ddf else argv) == 0
+        reports[ddf] = (
+            json.loads((out / "analysis.json").read_text()),
+            (out / "methods.md").read_text(),
+        )
+    names = {"satterthwaite": "Satterthwaite", "kenward-roger": "Kenward-Roger"}
+    for ddf, name in names.items():
+        report, methods = reports[ddf]
+        assert report["methods"]["lmm"]["df"] == name
+        assert f"t tests with {name} degrees of freedom" in methods
+    assert reports[None][0]["lmm"] == reports["satterthwaite"][0]["lmm"]  # the default
+
+    def df_of(report: dict) -> dict[tuple[str, str], float]:
+        return {(r["measure"], r["term"]): r["df"] for r in report["lmm"]}
+
+    sat, kr = df_of(reports["satterthwaite"][0]), df_of(reports["kenward-roger"][0])
+    assert sat.keys() == kr.keys()
+    assert any(abs(sat[k] - kr[k]) > 1e-3 for k in sat)  # the option changes the df
+    capsys.readouterr()
+    assert main(["analyze", "--out", str(tmp_path / "bad"), "--db", db, "--ddf", "wald"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    for word in ("'wald'", "satterthwaite", "kenward-roger"):
+        assert word in err
+    assert not (tmp_path / "bad").exists()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from study.analysis.comparisons import comparison_rows
-from study.analysis.paired import paired_comparison
+from study.analysis.paired import dz_interval, paired_comparison
 from study.analysis.signed_rank import signed_rank
 from study.analysis.success import success_rows
 
@@ -134,6 +134,28 @@ def test_t_interval_dz_tost_and_bf10_equal_r() -> None:
     assert row["tost_p"] == pytest.approx(0.85222067763273579, rel=1e-10)
     assert row["dz_ci_low"] == pytest.approx(-2.575967474918991, rel=1e-8)
     assert row["dz_ci_high"] == pytest.approx(-0.226375318729105, rel=1e-8)
+
+
+@pytest.mark.parametrize(
+    ("t", "n", "low", "high"),
+    [
+        # R 4.2: ci <- function(t, n) { f <- function(q) uniroot(function(ncp)
+        #   pt(t, n - 1, ncp) - q, c(t - 8, t + 8), tol = 1e-13)$root
+        #   c(f(0.975), f(0.025)) / sqrt(n) }
+        # print(ci(-3.71, 20), digits = 12) -> -1.33211605237 -0.31096321875
+        (-3.71, 20, -1.33211605237, -0.31096321875),
+        # print(ci(12, 20), digits = 12) -> 1.72241777221 3.62846102590
+        (12.0, 20, 1.72241777221, 3.62846102590),
+        # by symmetry of the noncentral t: ci(-t) = -rev(ci(t))
+        (-12.0, 20, -3.62846102590, -1.72241777221),
+    ],
+)
+def test_dz_interval_where_a_fixed_bracket_met_nan(
+    t: float, n: int, low: float, high: float
+) -> None:
+    """scipy's nct.cdf(-3.71, 19, 6.29) is NaN: the old bracket t +/- 10 gave n/a."""
+    got = dz_interval(t, n)
+    assert got == pytest.approx((low, high), rel=1e-9)
 
 
 def test_all_zero_differences_are_not_testable_and_leave_the_family_saying_so() -> None:

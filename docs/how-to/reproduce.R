@@ -1,0 +1,158 @@
+# Reproduce `study analyze`'s main tables from `study export` output alone.
+#
+#   Rscript reproduce.R export/ [out/]
+#
+# reads export/trials.csv and export/tlx.csv and writes to out/ (default: export/r/):
+#   comparisons.csv  HV vs VO within each group, Holm within task x measure
+#   anova.csv        the mixed ANOVA on participant means (afex, Type II as study's default)
+#   lmm.csv          the mixed model over all trials (lmerTest, Satterthwaite df)
+#   emmeans.csv      the condition's marginal means over the groups and HV - VO (emmeans)
+# Needs R >= 4.2 with afex, lmerTest, emmeans and coin (Debian: r-cran-afex,
+# r-cran-lmertest, r-cran-emmeans, r-cran-coin).
+suppressPackageStartupMessages({
+  library(afex)
+  library(lmerTest)
+  library(emmeans)
+  library(coin)
+})
+
+args <- commandArgs(trailingOnly = TRUE)
+dir <- if (length(args) >= 1) args[1] else "export"
+out <- if (length(args) >= 2) args[2] else file.path(dir, "r")
+dir.create(out, showWarnings = FALSE, recursive = TRUE)
+
+trials <- read.csv(file.path(dir, "trials.csv"), stringsAsFactors = FALSE)
+tlx <- read.csv(file.path(dir, "tlx.csv"), stringsAsFactors = FALSE)
+# `included` is "yes" for what the analysis used, else the reason it was left out
+trials <- trials[trials$included == "yes", ]
+tlx <- tlx[tlx$included == "yes", ]
+
+keys <- c("participant", "group", "task", "condition", "trial")
+provenance <- c("block", "data_source", "driver", "withdrawn", "valid",
+                "invalid_reason", "included", "success")
+measures <- setdiff(names(trials), c(keys, provenance))
+
+# long format: one row per trial and measure
+long_trials <- do.call(rbind, lapply(measures, function(m) {
+  d <- trials[!is.na(trials[[m]]), c(keys, "block")]
+  if (!nrow(d)) return(NULL)
+  d$measure <- m
+  d$value <- trials[!is.na(trials[[m]]), m]
+  d
+}))
+
+# NASA-TLX: raw = mean of the six ratings; weighted = sum(tally x rating) / 15
+subs <- c("mental", "physical", "temporal", "performance", "effort", "frustration")
+ratings <- as.matrix(tlx[, subs])
+tallies <- as.matrix(tlx[, paste0("w_", subs)])
+# tlx.csv has no group column: the participant's group comes from trials.csv
+groups <- unique(trials[, c("participant", "group")])
+tlx$group <- groups$group[match(tlx$participant, groups$participant)]
+tlx_scores <- data.frame(tlx[, c("participant", "group", "task", "condition")],
+                         tlx_raw = rowMeans(ratings),
+                         tlx_weighted = rowSums(ratings * tallies) / 15,
+                         setNames(as.data.frame(ratings), paste0("tlx_", subs)))
+long_tlx <- do.call(rbind, lapply(setdiff(names(tlx_scores), keys), function(m) {
+  d <- tlx_scores[!is.na(tlx_scores[[m]]), c("participant", "group", "task", "condition")]
+  d$measure <- m
+  d$value <- tlx_scores[!is.na(tlx_scores[[m]]), m]
+  d
+}))
+
+# participant means: the unit of the comparisons and of the ANOVA
+means <- rbind(
+  aggregate(value ~ participant + group + task + condition + measure, long_trials, mean),
+  aggregate(value ~ participant + group + task + condition + measure, long_tlx, mean)
+)
+
+# differences at the data's resolution (9 significant digits of its magnitude):
+# values closer than that to zero are zero, runs closer than that are one value
+at_resolution <- function(d, scale) {
+  tol <- 1e-9 * scale
+  size <- abs(d)
+  o <- order(size)
+  anchor <- 0
+  snapped <- size[o]
+  for (i in seq_along(snapped)) {
+    if (snapped[i] - anchor > tol) anchor <- snapped[i]
+    snapped[i] <- anchor
+  }
+  size[o] <- snapped
+  sign(d) * size
+}
+
+signed_rank_p <- function(d) {
+  dist <- if (length(d) < 50) "exact" else "asymptotic"
+  pvalue(wilcoxsign_test(y ~ x, data = data.frame(y = d, x = 0), distribution = dist))
+}
+
+compare <- function(vo, hv) {
+  d <- at_resolution(hv - vo, max(abs(c(vo, hv))))
+  if (all(d == d[1])) {
+    if (d[1] == 0) return(list(test = "none", statistic = NA, p = NA))
+    return(list(test = "wilcoxon", statistic = sum(rank(abs(d))[d > 0]),
+                p = signed_rank_p(d)))
+  }
+  if (shapiro.test(d)$p.value >= 0.05) {
+    t <- t.test(hv, vo, paired = TRUE)
+    return(list(test = "paired_t", statistic = unname(t$statistic), p = t$p.value))
+  }
+  list(test = "wilcoxon", statistic = sum(rank(abs(d))[d > 0]), p = signed_rank_p(d))
+}
+
+rows <- list()
+for (cell in split(means, list(means$task, means$measure, means$group), drop = TRUE)) {
+  wide <- reshape(cell[, c("participant", "condition", "value")], idvar = "participant",
+                  timevar = "condition", direction = "wide")
+  wide <- wide[complete.cases(wide), ]
+  if (nrow(wide) < 3 || !all(c("value.VO", "value.HV") %in% names(wide))) next
+  r <- compare(wide$value.VO, wide$value.HV)
+  rows[[length(rows) + 1]] <- data.frame(
+    task = cell$task[1], measure = cell$measure[1], group = cell$group[1],
+    n = nrow(wide), test = r$test, statistic = r$statistic, p = r$p)
+}
+comparisons <- do.call(rbind, rows)
+# Holm within task x measure, across the testable groups
+comparisons$p_holm <- ave(comparisons$p, comparisons$task, comparisons$measure,
+                          FUN = function(p) { p[!is.na(p)] <- p.adjust(p[!is.na(p)], "holm"); p })
+write.csv(comparisons, file.path(out, "comparisons.csv"), row.names = FALSE)
+
+# mixed ANOVA on participant means: group between, condition within, Type II
+# (`study analyze --ss-type 3`: type = 3)
+anova_rows <- list()
+for (cell in split(means, list(means$task, means$measure), drop = TRUE)) {
+  fit <- suppressWarnings(suppressMessages(aov_ez(
+    "participant", "value", cell, between = "group", within = "condition", type = 2,
+    anova_table = list(es = "pes", correction = "none"))))
+  a <- as.data.frame(fit$anova_table)
+  anova_rows[[length(anova_rows) + 1]] <- data.frame(
+    task = cell$task[1], measure = cell$measure[1], source = rownames(a),
+    F = a$F, df1 = a$`num Df`, df2 = a$`den Df`, p = a$`Pr(>F)`, np2 = a$pes)
+}
+write.csv(do.call(rbind, anova_rows), file.path(out, "anova.csv"), row.names = FALSE)
+
+# the mixed model over all trials, condition VO and the first group (alphabetically)
+# as references, Satterthwaite df; the condition effect as emmeans's marginal means
+lmm_rows <- list()
+emm_rows <- list()
+for (cell in split(long_trials, list(long_trials$task, long_trials$measure), drop = TRUE)) {
+  cell$condition <- relevel(factor(cell$condition), ref = "VO")
+  cell$group <- factor(cell$group)
+  fit <- lmer(value ~ condition * group + (1 | participant), cell, REML = TRUE)
+  co <- summary(fit, ddf = "Satterthwaite")$coefficients
+  lmm_rows[[length(lmm_rows) + 1]] <- data.frame(
+    task = cell$task[1], measure = cell$measure[1], term = rownames(co),
+    estimate = co[, "Estimate"], se = co[, "Std. Error"], df = co[, "df"],
+    t = co[, "t value"], p = co[, "Pr(>|t|)"])
+  e <- suppressMessages(emmeans(fit, ~ condition, lmer.df = "satterthwaite"))
+  m <- summary(e, infer = TRUE)
+  pr <- summary(pairs(e, reverse = TRUE), infer = TRUE)
+  emm_rows[[length(emm_rows) + 1]] <- data.frame(
+    task = cell$task[1], measure = cell$measure[1],
+    term = c(paste("mean", m$condition), "HV - VO"),
+    estimate = c(m$emmean, pr$estimate), se = c(m$SE, pr$SE), df = c(m$df, pr$df),
+    p = c(NA, NA, pr$p.value))
+}
+write.csv(do.call(rbind, lmm_rows), file.path(out, "lmm.csv"), row.names = FALSE)
+write.csv(do.call(rbind, emm_rows), file.path(out, "emmeans.csv"), row.names = FALSE)
+cat("written to", out, "\n")
