@@ -92,7 +92,8 @@ def test_connections_ended_mid_trial_read_as_disconnected(
     assert len(lines) == 1, lines
     assert "terminating connection due to administrator command" in lines[0]
     assert "expected a connection that stays up" in lines[0]
-    assert "free space" not in lines[0] and "full" not in lines[0]
+    assert "free space" not in lines[0]
+    assert "full" not in lines[0]
     kept = re.search(r"its samples up to t = ([0-9.]+) s", lines[0])
     assert kept, lines[0]
     with watcher.connect() as conn:
