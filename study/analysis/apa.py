@@ -8,6 +8,7 @@ would otherwise load while its screens are mounted, before the run screen is rea
 from __future__ import annotations
 
 import math
+import re
 
 STAR_LEVELS = (0.05, 0.01, 0.001)
 """The significance marks' thresholds (`figcheck.stars`): a printed p never rounds across
@@ -67,3 +68,21 @@ def bounded_text(x: float | None, digits: int = 2) -> str:
         return "n/a"
     text = f"{x:.{digits}f}"
     return text.replace("0.", ".", 1) if text.lstrip("-").startswith("0.") else text
+
+
+_MARKDOWN_SPECIAL = re.compile(r"[\\|`]|<(?=[A-Za-z/!?])|&(?=#?\w+;)")
+"""What a Markdown table cell escapes: the column separator, the backslash that would
+escape it, inline code, and a `<` or `&` that would start raw HTML or an entity (`p <
+.001` stays as it is)."""
+
+
+def markdown_escape(value: object) -> str:
+    r"""A table cell's text as Markdown shows it literally, on one line.
+
+    >>> markdown_escape("a|b<i>")
+    'a\\|b&lt;i>'
+    """
+    text = " ".join(str(value).split())
+    return _MARKDOWN_SPECIAL.sub(
+        lambda m: {"<": "&lt;", "&": "&amp;"}.get(m.group(0), "\\" + m.group(0)), text
+    )

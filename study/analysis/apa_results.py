@@ -13,7 +13,7 @@ import math
 import re
 from typing import Any
 
-from study.analysis.apa import bounded_text, p_eq
+from study.analysis.apa import bounded_text, markdown_escape, p_eq
 
 Row = dict[str, Any]
 
@@ -49,7 +49,7 @@ def _t_numbers(r: Row) -> list[str]:
 
 def comparison_sentence(r: Row) -> str:
     """One comparison row (`comparisons.COMPARISON_COLUMNS`) as an APA sentence."""
-    head = f"{r['task']}, {r['measure']}, {r['group']} (n = {r['n']})"
+    head = f"{r['task']}, {r['measure']}, {markdown_escape(r['group'])} (n = {r['n']})"
     if r["test"] == "none":
         return f"{head}: not testable: {r['not_testable']} (outside the Holm family)."
     holm = p_eq(r["p_holm"]).replace("p", "p(Holm)", 1) if _finite(r["p_holm"]) else ""
@@ -71,7 +71,8 @@ def comparison_sentence(r: Row) -> str:
 def success_sentence(r: Row) -> str:
     """One exact McNemar row (`success.SUCCESS_COLUMNS`) as a sentence."""
     return (
-        f"{r['task']}, success, {r['group']} (n = {r['n']}): {r['success_vo']} succeeded in "
+        f"{r['task']}, success, {markdown_escape(r['group'])} (n = {r['n']}): "
+        f"{r['success_vo']} succeeded in "
         f"VO, {r['success_hv']} in HV; {r['vo_only']} in VO only, {r['hv_only']} in HV "
         f"only; exact McNemar {p_eq(r['p'])}, {p_eq(r['p_holm']).replace('p', 'p(Holm)', 1)}."
     )
@@ -113,7 +114,7 @@ def _invalid(lines: list[str]) -> list[str]:
     for task, trials in by_task.items():
         n = len(trials)
         out.append(
-            f"{_plural(n, 'measured trial')} of the {task} task marked invalid by the "
+            f"{_plural(n, 'trial')} of the {task} task marked invalid by the "
             f"experimenter {'was' if n == 1 else 'were'} left out: " + "; ".join(trials) + "."
         )
     return out

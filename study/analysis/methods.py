@@ -14,7 +14,7 @@ import platform
 from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any
 
-from study.analysis.apa import ALPHA_SIGN, alpha_text
+from study.analysis.apa import ALPHA_SIGN, alpha_text, markdown_escape
 from study.analysis.apa_results import comparison_sentence, exclusion_sentences, success_sentence
 from study.analysis.crossover_text import design_checks_json, design_checks_paragraph
 from study.analysis.mixed_model import DEFAULT_DDF
@@ -118,9 +118,12 @@ def anova_method(ss_type: int) -> str:
 
 
 def lmm_method(ddf: str = DEFAULT_DDF, references: list[str] | None = None) -> str:
-    refs = "; ".join(references or []) or "condition VO, the alphabetically first group"
+    refs = (
+        "; ".join(map(markdown_escape, references or []))
+        or "condition VO, the alphabetically first group"
+    )
     return (
-        "Linear mixed model over all measured trials, value ~ condition * group + "
+        "Linear mixed model over all trials, value ~ condition * group + "
         "(1 | participant), fitted by REML. "
         f"Treatment coding, reference levels: {refs}; the condition coefficient is the "
         "HV - VO difference in the reference group. The condition effect is reported as "
@@ -206,7 +209,7 @@ def _groups(analysis: Analysis) -> str:
         sizes[r["group"]] = max(sizes.get(r["group"], 0), r["n"])
     if not sizes:
         return "no participants"
-    return ", ".join(f"{n} {g}" for g, n in sizes.items())
+    return ", ".join(f"{n} {markdown_escape(g)}" for g, n in sizes.items())
 
 
 def _data(analysis: Analysis) -> str:
@@ -216,7 +219,7 @@ def _data(analysis: Analysis) -> str:
     tasks = ", ".join(analysis.tasks) or "no task"
     measures = ", ".join(dict.fromkeys(r["measure"] for r in analysis.descriptive_rows))
     sentences = [
-        f"The analysis used {total} measured trials of {tasks} ({drivers or 'none'}).",
+        f"The analysis used {total} trials of {tasks} ({drivers or 'none'}).",
         f"Participants per group: at most {_groups(analysis)}.",
         f"Measures: {measures or 'none'}.",
         "Each participant's trials of a block were averaged; participant means were the "

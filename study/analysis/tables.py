@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import csv
 import math
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from study.analysis.apa import bounded_text, p_text
+from study.analysis.apa import bounded_text, markdown_escape, p_text
 from study.analysis.crossover_text import design_checks_cells, design_checks_method
 from study.analysis.methods import (
     anova_method,
@@ -38,24 +37,6 @@ from study.protocol.cells import escape_cell
 
 if TYPE_CHECKING:  # `Table.display` as a frame, for callers that want one
     import pandas as pd
-
-
-_MARKDOWN_SPECIAL = re.compile(r"[\\|`]|<(?=[A-Za-z/!?])|&(?=#?\w+;)")
-"""What a Markdown table cell escapes: the column separator, the backslash that would
-escape it, inline code, and a `<` or `&` that would start raw HTML or an entity (`p <
-.001` stays as it is)."""
-
-
-def markdown_escape(value: object) -> str:
-    r"""A table cell's text as Markdown shows it literally, on one line.
-
-    >>> markdown_escape("a|b<i>")
-    'a\\|b&lt;i>'
-    """
-    text = " ".join(str(value).split())
-    return _MARKDOWN_SPECIAL.sub(
-        lambda m: {"<": "&lt;", "&": "&amp;"}.get(m.group(0), "\\" + m.group(0)), text
-    )
 
 
 @dataclass(frozen=True)
