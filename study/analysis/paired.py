@@ -64,9 +64,10 @@ class EquivalenceBounds:
 
     def describe(self) -> str:
         """The bounds as methods.md states them ('' when there are none)."""
-        parts = [f"{m} +/- {b:g}" for m, b in self.absolute.items()]
+        parts = [f"{m} ±{b:g}" for m, b in self.absolute.items()]
         if self.fraction is not None:
-            parts.append(f"+/- {self.fraction:g} of the VO mean for the other measures")
+            share = f"{self.fraction * 100:g} %"
+            parts.append(f"±{share} of the VO mean for the other measures")
         return "; ".join(parts)
 
     @property

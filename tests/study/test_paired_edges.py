@@ -190,3 +190,14 @@ def test_success_takes_the_exact_mcnemar_test() -> None:
     assert (row["vo_only"], row["hv_only"], row["n"]) == (1, 6, 10)
     assert row["p"] == pytest.approx(0.125, rel=1e-12)
     assert excluded == []
+
+
+def test_equivalence_bounds_are_stated_as_a_paper_writes_them() -> None:
+    from study.analysis.paired import EquivalenceBounds
+
+    bounds = EquivalenceBounds(fraction=0.1, absolute={"peak_distal_force_n": 0.05})
+    assert bounds.describe() == (
+        "peak_distal_force_n ±0.05; ±10 % of the VO mean for the other measures"
+    )
+    assert bounds.bound("completion_time_s", -30.0) == 3.0  # a tenth of |mean|, by hand
+    assert EquivalenceBounds().describe() == ""
