@@ -11,33 +11,43 @@ effect, plus one row per task and measure on the model before and after
 The base model is the analysis' own (`mixed_model`): value ~ condition * group +
 (1 | participant), REML, with Satterthwaite df. Each participant's blocks of a task are
 its periods (1, 2, ...) in the order they were run; the participant's condition order
-is the condition of the first period. The checks are terms added to the base model
-together, each tested by its Satterthwaite t:
+is the condition of the first period. Each check is the t test (Satterthwaite df) of a
+term added to the base model, in the model the crossover literature tests it in
+(Grizzle's two stages; Jones and Kenward, ch. 2):
 
-- `period`: the second block minus the first (practice or fatigue between blocks). In
-  a two-period crossover it is the within-participant interaction of condition and
-  condition order: half the difference between the HV - VO differences of the two
-  orders.
+- `period`: the second block minus the first (practice or fatigue between blocks),
+  in base + period (+ trial position), that is within participants and assuming no
+  carry-over. In a two-period crossover it is the within-participant interaction of
+  condition and condition order: half the sum of the second-minus-first differences of
+  the two orders. A differential carry-over, if there is one, adds half of itself to
+  it (in two periods no within-participant contrast separates the two).
 - `carry_over`: the differential carry-over, VO after HV minus HV after VO (the
   one-direction term "VO in a later block than HV", whose coefficient with the period in
-  the model is that difference). In two periods it is aliased with the condition
-  order, so it is estimated between participants only (from the participants' totals,
-  Grizzle's test), which is why it costs the condition effect its within-participant
-  precision once added.
+  the model is that difference), in base + period + carry-over (+ trial position). In
+  two periods it is aliased with the condition order, so it is estimated between
+  participants only (from the participants' totals, Grizzle's test), which is why it
+  costs the condition effect its within-participant precision once added.
 - `trial_position`: the slope per trial over the trial's place within its block
-  (centred), when a block has several trials.
+  (centred within the block, so orthogonal to the block-level terms), in the period's
+  model, when a block has several trials.
 
-Not testable (and then reported with no estimate): a period or carry-over when every
+Not testable (and then not reported, with a note): a period or carry-over when every
 participant of the task had the same condition order (they are then aliased with the
 condition), a trial position when no block has two trials.
 
 All the checks of a study are one family, Holm-corrected (statsmodels'
-`multipletests(method="holm")`); a check with p_holm below `ALPHA` is added to the model
-of its task and measure, and the HV - VO marginal contrast (averaged over the groups, as
-emmeans) is reported before and after, with the residual and participant SDs. Where a
-carry-over is added, the first-period comparison is reported too: HV against VO in the
-first block only, between participants (value ~ condition + group + (1 | participant)),
-the estimate the crossover literature falls back on when carry-over is present.
+`multipletests(method="holm")`), so that a study without these effects has a term added
+in at most `ALPHA` of studies; a check with p_holm below `ALPHA` is added to the model
+of its task and measure (a carry-over with the period beside it, which defines it), and
+the HV - VO marginal contrast (averaged over the groups, as emmeans) is reported before
+and after, with the residual and participant SDs. Where a carry-over is added, the
+first-period comparison is reported too: HV against VO in the first block only, between
+participants (value ~ condition + group + (1 | participant)), the estimate the
+crossover literature falls back on when carry-over is present.
+
+A model is fitted once per task and measure and set of terms (`_Cell.fit`); the base
+model is the one `mixed_model` fits, which `stats_lmm.fit_random_intercept` returns
+from its cache.
 """
 
 from __future__ import annotations
@@ -139,6 +149,8 @@ class _Cell:
     conditions: list[Any]
     groups: list[Any]
     group: np.ndarray
+    fits: dict[tuple[str, ...], tuple[Fit, list[str]]] = field(default_factory=dict)
+    """The models fitted so far, by their added terms (in `EFFECTS` order)."""
 
     @classmethod
     def of(cls, data: list[Row], measure: str) -> _Cell:
@@ -205,9 +217,24 @@ def _fit_summary(fit: Fit) -> dict[str, Any]:
 
 
 def _fit(cell: _Cell, effects: list[str]) -> tuple[Fit, list[str]]:
-    columns = [cell.column(e) for e in effects]
-    X = np.column_stack([cell.X, *columns]) if effects else cell.X
-    return fit_random_intercept(X, cell.y, cell.participant), [*cell.names, *effects]
+    """The base model of `cell` plus `effects`, fitted once per set of terms."""
+    terms = tuple(e for e in EFFECTS if e in effects)
+    if terms not in cell.fits:
+        columns = [cell.column(e) for e in terms]
+        X = np.column_stack([cell.X, *columns]) if terms else cell.X
+        cell.fits[terms] = (
+            fit_random_intercept(X, cell.y, cell.participant),
+            [*cell.names, *terms],
+        )
+    return cell.fits[terms]
+
+
+def _test_model(effect: str, testable: list[str]) -> list[str]:
+    """The terms of the model `effect` is tested in (module docstring): the period and
+    the trial position without the carry-over, the carry-over beside both."""
+    if effect == "carry_over":
+        return testable
+    return [e for e in testable if e != "carry_over"]
 
 
 def _first_period(cell: _Cell) -> dict[str, Any] | None:
@@ -293,9 +320,8 @@ def _check_cell(
     try:
         if np.linalg.matrix_rank(cell.X) < cell.X.shape[1]:
             raise ValueError("a condition x group cell has no trials")
-        base = fit_random_intercept(cell.X, cell.y, cell.participant)
+        base, _ = _fit(cell, [])
         testable = [e for e in EFFECTS if cell.column(e) is not None]
-        full, names = _fit(cell, testable)
     except (np.linalg.LinAlgError, ValueError) as exc:
         result.notes.append(f"{label}: design checks could not be fitted: {exc}")
         return
@@ -308,7 +334,12 @@ def _check_cell(
                     "(every participant had the same condition order)"
                 )
             continue
-        c = full.contrast(np.eye(len(names))[names.index(effect)])
+        try:
+            fit, names = _fit(cell, _test_model(effect, testable))
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            result.notes.append(f"{label}: {effect} could not be fitted: {exc}")
+            continue
+        c = fit.contrast(np.eye(len(names))[names.index(effect)])
         result.checks.append(
             {
                 "task": task,
@@ -323,14 +354,18 @@ def _check_cell(
 
 def _decide(result: CrossoverResult, cells: dict[tuple[Any, Any], tuple[_Cell, Fit]]) -> None:
     """Holm over every check; the model after, per task and measure, with what it added."""
-    for row, adjusted in zip(result.checks, _holm([r["p"] for r in result.checks]), strict=True):
+    tested = [r for r in result.checks if np.isfinite(r["p"])]
+    for row in result.checks:
+        row["p_holm"], row["added"] = float("nan"), False
+    for row, adjusted in zip(tested, _holm([r["p"] for r in tested]), strict=True):
         row["p_holm"] = adjusted
         row["added"] = bool(adjusted < ALPHA)
     for (task, measure), (cell, base) in cells.items():
         mine = [r for r in result.checks if (r["task"], r["measure"]) == (task, measure)]
-        added = [r["effect"] for r in mine if r["added"]]
-        if "carry_over" in added and "period" not in added:
-            added.insert(0, "period")  # the carry-over term is defined beside the period
+        chosen = {r["effect"] for r in mine if r["added"]}
+        if "carry_over" in chosen:
+            chosen.add("period")  # the carry-over term is defined beside the period
+        added = [e for e in EFFECTS if e in chosen]
         before = _condition(base, cell.names, cell)
         after_fit, names = _fit(cell, added)
         after = _condition(after_fit, names, cell)

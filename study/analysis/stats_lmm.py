@@ -173,25 +173,28 @@ class Contrast:
         return cls(estimate, se, float(df), float(t), p, estimate - half, estimate + half)
 
 
-def _polished_theta(model, start: float) -> float:  # type: ignore[no-untyped-def]
+def _polished_theta(  # type: ignore[no-untyped-def]
+    model, start: float, width: float = 0.5, rtol: float = 4 * np.finfo(float).eps
+) -> float:
     """The root of statsmodels' profiled REML score in theta, bracketed from `start`
-    (0 when the log-likelihood falls from the boundary)."""
+    (start x (1 -/+ width), widened until the score changes sign; 0 when the
+    log-likelihood falls from the boundary), to `rtol` relative."""
     from scipy.optimize import brentq
 
     def score(theta: float) -> float:
         return float(model.score(np.array([theta]), profile_fe=True)[0])
 
-    lo = max(start, 1e-3) / 2
+    lo = max(start, 1e-3) * (1 - width)
     while score(lo) <= 0:  # the log-likelihood falls already here: the optimum is lower
         lo /= 4
         if lo < SINGULAR_TOL * 1e-4:
             return 0.0
-    hi = max(start, 1e-3) * 2
+    hi = max(start, 1e-3) * (1 + width)
     while score(hi) > 0:
         hi *= 4
         if hi > 1e8:
             raise ValueError("the random-intercept variance does not converge")
-    return float(brentq(score, lo, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500))
+    return float(brentq(score, lo, hi, xtol=1e-300, rtol=rtol, maxiter=500))
 
 
 def _start(model) -> float:  # type: ignore[no-untyped-def]
@@ -204,6 +207,58 @@ def _start(model) -> float:  # type: ignore[no-untyped-def]
             continue
         return float(np.sqrt(max(float(np.asarray(fit.cov_re)[0, 0]), 0.0) / fit.scale))
     return 1.0
+
+
+def _theta(model, design: Design) -> float:  # type: ignore[no-untyped-def]
+    """The REML theta: statsmodels' score's root (or the boundary where statsmodels'
+    score falls from it), started from `_bracket`, or from statsmodels' own fit where
+    `_bracket` has no start."""
+    start = _bracket(design)
+    if start is None:
+        return _polished_theta(model, _start(model))
+    model = _unfitted(model)
+    if start == 0.0:  # at or near the boundary: the polish from statsmodels' smallest start
+        return _polished_theta(model, 0.0)
+    return _polished_theta(model, start, width=1e-6, rtol=1e-13)
+
+
+def _unfitted(model):  # type: ignore[no-untyped-def]
+    """`model` set up for its REML score as `MixedLM.fit` sets it (no penalties, every
+    parameter free), without the fit."""
+    model.reml, model.cov_pen, model.fe_pen, model._cov_sing, model._freepat = (
+        True, None, None, 0, None
+    )  # fmt: skip
+    return model
+
+
+def _bracket(d: Design) -> float | None:
+    """Where the profiled REML deviance's closed-form derivative in theta (the one
+    Satterthwaite's df use, `_theta_derivatives`) vanishes: only the start of the
+    polish on statsmodels' score, which decides the optimum, so that the model is not
+    fitted twice (statsmodels' BFGS, then the polish). None when it has no root in
+    (1e-6, 1e6) (a boundary fit or a flat criterion: statsmodels' own fit starts)."""
+    from scipy.optimize import brentq
+
+    n, p = d.X.shape
+
+    def slope(theta: float) -> float:
+        dlogdet, dq, _, _ = _theta_derivatives(d, theta)
+        return dlogdet + (n - p) * dq / d.sums(theta)[2]
+
+    try:
+        lo, hi = 1e-6, 1e6
+        if slope(lo) >= 0:
+            return 0.0  # the deviance rises from the boundary
+        if not slope(hi) > 0:
+            return None
+        return float(brentq(slope, lo, hi, rtol=1e-12))
+    except (np.linalg.LinAlgError, ValueError, ZeroDivisionError):
+        return None
+
+
+_FITS: dict[tuple[object, ...], Fit] = {}
+"""The fits made so far in this process, by their data (`fit_random_intercept`)."""
+_FITS_KEPT = 64
 
 
 def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fit:
@@ -229,6 +284,16 @@ def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fi
         No residual degrees of freedom, no residual variance, or a variance that does not
         converge.
     """
+    X, y = np.ascontiguousarray(X, float), np.ascontiguousarray(y, float)
+    key = (X.shape, X.tobytes(), y.tobytes(), tuple(map(str, groups)))
+    if key not in _FITS:  # the same model of the same data is fitted once per process
+        if len(_FITS) >= _FITS_KEPT:
+            _FITS.pop(next(iter(_FITS)))
+        _FITS[key] = _fit_random_intercept(X, y, groups)
+    return _FITS[key]
+
+
+def _fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fit:
     # the one module, not statsmodels.api (which imports every model and data set)
     from statsmodels.regression.mixed_linear_model import MixedLM
     from statsmodels.tools.sm_exceptions import ConvergenceWarning
@@ -244,7 +309,7 @@ def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fi
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.simplefilter("ignore", RuntimeWarning)
         warnings.simplefilter("ignore", UserWarning)
-        theta = _polished_theta(model, _start(model))
+        theta = _theta(model, design)
         if 0 < theta < SINGULAR_TOL and model.loglike(np.array([0.0]), profile_fe=True) >= (
             model.loglike(np.array([theta]), profile_fe=True) - BOUNDARY_TOL
         ):
