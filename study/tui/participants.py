@@ -5,7 +5,7 @@ lock, which another lab machine may hold for a moment); the new code comes back 
 message and the app reloads the roster.
 
 Typing searches: a letter typed with the list focused goes into the Find field (the
-focus moves there, so the rest of the word follows it), and Enter or the down arrow
+focus moves there, so the rest of the word follows it), and Enter
 there comes back to the list. So the actions that change a participant are on ctrl
 keys (ctrl+a enrol, ctrl+w withdraw, ctrl+n note, ctrl+o session note), which no
 word typed can press, and each asks before it acts.
@@ -125,12 +125,6 @@ class ParticipantsPane(SafeWorkers, Vertical):
         """Enter in the Find field: back to the (filtered) list."""
         event.stop()
         self.query_one("#people", DataTable).focus()
-
-    def key_down(self, event: events.Key) -> None:
-        """The down arrow in the Find field goes to the list."""
-        if isinstance(self.app.focused, Input) and self.app.focused.id == "filter":
-            event.stop()
-            self.query_one("#people", DataTable).focus()
 
     def show(self, roster: Roster) -> None:
         self._roster = roster
