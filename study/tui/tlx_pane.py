@@ -206,6 +206,8 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
         """The block whose answers the form holds, once loaded (None while loading)."""
         self._baseline: FormState | None = None
         """The form as filled from the database (what counts as nothing typed)."""
+        self._raw_only_ok: set[Block] = set()
+        """Blocks whose raw-only save the operator said yes to (not asked again)."""
         self.drafts: dict[Block, Draft] = {}
         """What was typed for a block and not saved, kept when another block is shown."""
 
@@ -536,13 +538,15 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
         if state.choices[0] is not None:
             self._store(block, ratings, [str(c) for c in state.choices], reason)
             return
-        if baseline is not None and self.editing_id is not None and baseline.choices[0] is None:
-            self._store(block, ratings, None, reason)  # stored raw-only before: asked then
+        raw_before = self.editing_id is not None and baseline is not None
+        if (raw_before and baseline.choices[0] is None) or block in self._raw_only_ok:
+            self._store(block, ratings, None, reason)  # asked already: once is enough
             return
         from study.tui.confirm import Confirm
 
         def answered(yes: bool | None) -> None:
             if yes and self.loaded_block == block and self.form_state() == state:
+                self._raw_only_ok.add(block)
                 self._store(block, ratings, None, reason)
             elif not yes:
                 self._set_status("not stored: pick a side of each pair (left / right)")
