@@ -62,8 +62,6 @@ from study.analysis.participant_fit.observed import (
 )
 from study.analysis.participant_fit.simulate import simulate_settings, worker_pool
 from study.analysis.participant_fit.summaries import (
-    CONDITIONS,
-    DIFFERENCE,
     TRAIT_COLUMNS,
     emulator_discrepancy,
     power_effects,
@@ -98,7 +96,7 @@ class FitSettings:
     """What becomes of the traits the data tell weakly: `prior` holds them at the hand-set
     profile; `shrink` fits them with their group mean under the profile's prior. On three
     seeds of `study bench participants`, shrink put 18-20 of 21 group means
-    within 15 % of the truth (prior: 16-17), but its HV - VO peak-force intervals held
+    within 15 % of the truth (prior: 16-17), but its VO - HV peak-force intervals held
     the truth in 3-6 of 6 (prior: 6 of 6): a weak trait absorbs the emulator's local
     bias (the outsiders' comfort torque came out 25 % low with a narrow interval), and
     the predicted forces follow it. So the default holds them."""
@@ -293,11 +291,6 @@ class TraitPlan:
     sources: dict[str, str]
     """trait -> the source that tells its value instead (e.g. a measurement before the
     task); such a trait is neither fitted from the task's data nor held at its prior."""
-    probe_info: dict[str, np.ndarray] = field(default_factory=dict)
-    """group -> per trait, a person's mean information from the probes in prior SDs
-    (`study.probes.measure.probe_information`; 0 where no probe told it)."""
-    people: dict[str, int] = field(default_factory=dict)
-    """group -> the people whose moments the rule counted."""
 
     def role(self, trait: str) -> str:
         """`fitted`, `prior`, or the name of the source that tells the trait."""
@@ -309,52 +302,6 @@ class TraitPlan:
     def fixed(self) -> list[str]:
         """Traits held at their hand-set profile."""
         return [t for t in TRAITS if self.role(t) == "prior"]
-
-    def probed_but_held(self) -> dict[str, dict[str, Any]]:
-        """Per trait a probe measured but the fit holds at its prior: why. The rule asks
-        a group mean's posterior SD below `IDENTIFIED_RATIO` of its prior SD; a person's
-        probe gives the information I = (prior SD / SE)^2, so n people alone tell the
-        mean to 1 / sqrt(1 + n I / (1 + I)) of it (`estimate.identifiable`, the task's
-        trials adding theirs). Reported in the worst group: that ratio, the probes'
-        typical SE in prior SDs, and the people a group would need at that SE."""
-        out: dict[str, dict[str, Any]] = {}
-        need = 1.0 / IDENTIFIED_RATIO**2 - 1.0  # n I / (1 + I) must pass this
-        for trait in self.fixed:
-            j = TRAITS.index(trait)
-            infos = {g: float(info[j]) for g, info in self.probe_info.items() if info[j] > 0}
-            if not infos:
-                continue
-            ratio = {
-                g: 1.0 / np.sqrt(1.0 + self.people[g] * i / (1.0 + i)) for g, i in infos.items()
-            }
-            worst = max(ratio, key=lambda g: ratio[g])
-            info = infos[worst]
-            out[trait] = {
-                "group": worst,
-                "people": self.people[worst],
-                "probe_se_in_prior_sd": round(float(1.0 / np.sqrt(info)), 3),
-                "probe_ratio": round(float(ratio[worst]), 3),
-                "ratio": round(float(self.ratios.get(trait, float("nan"))), 3),
-                "people_needed": int(np.ceil(need * (1.0 + info) / info)),
-            }
-        return out
-
-    def held_line(self) -> str:
-        """Why each probed trait held at its prior is held, in words."""
-        why = self.probed_but_held()
-        if not why:
-            return ""
-        return (
-            "probed but too weakly to fit, so held at their priors (the rule: a group "
-            f"mean told to below {IDENTIFIED_RATIO:g} of its prior SD): "
-            + "; ".join(
-                f"{t} (probe SE {w['probe_se_in_prior_sd']:.2g} prior SDs; the {w['people']} "
-                f"people of group {w['group']} tell its mean to {w['ratio']:.2f} of it; the "
-                f"probes alone would with about {w['people_needed']} a group, or with more "
-                "probe trials)"
-                for t, w in why.items()
-            )
-        )
 
 
 def plan_traits(
@@ -399,8 +346,7 @@ def plan_traits(
     candidates = [j for j in range(len(TRAITS)) if TRAITS[j] not in sources]
     free = candidates if settings.weak_traits == "shrink" else told
     weak = [j for j in free if j not in told]
-    people = {g: int(np.max(data.sizes[g])) for g in data.groups}
-    return TraitPlan(told, free, weak, ratios, held_out, sources, probe_info or {}, people)
+    return TraitPlan(told, free, weak, ratios, held_out, sources)
 
 
 @dataclass
@@ -412,7 +358,7 @@ class GroupResult:
     boots: np.ndarray
     """(bootstrap, 2 * len(TRAITS)) each replicate's trait means then SDs."""
     predicted: dict[str, list[float]]
-    """moment (and `HV-VO:measure`) -> the model's group mean at the fit, then per
+    """moment (and `VO-HV:measure`) -> the model's group mean at the fit, then per
     replicate, on the measures' own scale."""
     fixed_cov: np.ndarray
     """The moments' covariance that the traits not told add to a person's."""
@@ -442,13 +388,8 @@ class GroupResult:
                 "identifiable": j in plan.told,
             }
             if j in plan.free:
-                # a trait and its spread are positive: their intervals on the log scale
-                out["mean_ci95"] = expanded_interval(
-                    self.boots[:, j], len(self.y), positive=True
-                ).tolist()
-                out["sd_ci95"] = expanded_interval(
-                    self.boots[:, n + j], len(self.y), positive=True
-                ).tolist()
+                out["mean_ci95"] = expanded_interval(self.boots[:, j], len(self.y)).tolist()
+                out["sd_ci95"] = expanded_interval(self.boots[:, n + j], len(self.y)).tolist()
             if j not in plan.told:
                 out["prior"] = list(getattr(PROFILES[group], t))
             return out
@@ -534,8 +475,6 @@ class ModelChecks:
     emulator_design_sd: dict[tuple[str, str, str], float] = field(default_factory=dict)
     """(group, measure, condition) -> that mean's SD over the emulator's refits to its
     resampled design (`replicate_design_sd`), which the check counts beside the people's."""
-    gaps: dict[str, Any] | None = None
-    """`checks.summary_gaps` of `table`: observed means beyond their gap's interval."""
     check_table: pd.DataFrame | None = None
     """The summaries the emulator check reads: `table`, or with participant effects
     added, the simulated people's with the effects taken out (the emulator's people
@@ -543,11 +482,10 @@ class ModelChecks:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "line": checks.lacks_line(self.rows, self.outliers, self.misfit, self.gaps),
+            "line": checks.lacks_line(self.rows, self.outliers, self.misfit),
             "tests": self.rows,
             "outliers": self.outliers,
             "group_means": self.misfit,
-            "gaps": self.gaps,
         }
 
 
@@ -602,7 +540,7 @@ def check_model(
         (g, m, label): replicate_prediction(predicted[g][f"{label}:{m}"], settings.check)
         for g in groups
         for m in measures
-        for label in CONDITIONS
+        for label in ("VO", "HV", "VO-HV")
     }
     design_sd = {
         (g, *key): sd
@@ -623,9 +561,8 @@ def check_model(
             ],
             ignore_index=True,
         )
-    gaps = checks.summary_gaps(table, DIFFERENCE)
     return ModelChecks(
-        simulated, table, rows, outlier, misfit, for_simulated, design_sd, gaps, check_table
+        simulated, table, rows, outlier, misfit, for_simulated, design_sd, check_table
     )
 
 
@@ -656,7 +593,7 @@ def replicate_design_sd(
     out = {}
     for m in measures:
         vo, hv = total[:, names.index(f"VO:{m}")], total[:, names.index(f"HV:{m}")]
-        for label, v in (("VO", vo), ("HV", hv), (DIFFERENCE, hv - vo)):
+        for label, v in (("VO", vo), ("HV", hv), ("VO-HV", vo - hv)):
             out[(m, label)] = float(np.std(v, ddof=1))
     return out
 
@@ -738,8 +675,6 @@ class FitResult:
             else dict(zip(TRAITS, np.round(plan.held_out, 6).tolist(), strict=True)),
             "weak_traits": settings.weak_traits,
             "fixed_at_prior": plan.fixed,
-            "probed_but_held": plan.probed_but_held(),
-            "probed_but_held_line": plan.held_line(),
             "shrunk_to_prior": [TRAITS[j] for j in plan.weak],
             "trait_roles": {t: plan.role(t) for t in TRAITS},
             "weak_traits_note": "traits the data tell weakly: held at the hand-set profile "
@@ -855,9 +790,9 @@ def fit_trials(
 
 
 def _predict(est: GroupEstimator, mean: np.ndarray, sd: np.ndarray) -> dict[str, float]:
-    """The model's group means on the measures' own scale (and HV - VO), by the emulator."""
+    """The model's group means on the measures' own scale (and VO - HV), by the emulator."""
     draws = est.emulator.means(est.draws(mean, sd)).mean(axis=0)
     out = dict(zip(est.emulator.moments_, draws.tolist(), strict=True))
     for m in est.emulator.measures_:
-        out[f"{DIFFERENCE}:{m}"] = out[f"HV:{m}"] - out[f"VO:{m}"]
+        out[f"VO-HV:{m}"] = out[f"VO:{m}"] - out[f"HV:{m}"]
     return out
