@@ -66,8 +66,6 @@ class Model:
     typed: dict[Block, Form] = field(default_factory=dict)
     shown: Block | None = None
     on_participant: str | None = None
-    raw_ok: set[Block] = field(default_factory=set)
-    """Blocks whose raw-only save was said yes to in the app running (not asked again)."""
 
     def stored_form(self, block: Block) -> Form:
         return self.stored.get(block, EMPTY)
@@ -310,25 +308,13 @@ class Walk:
         if m.shown in m.stored and m.stored[m.shown][:2] == (ratings, choices):
             assert self.pane.status.startswith(f"{code} {task}/{condition}: unchanged")
             return
-        reason = m.form(m.shown)[2]
-        partial = any(c is None for c in choices) and any(c is not None for c in choices)
-        # refused by the form itself, before anything is asked
-        if (
-            not all(_valid(r) for r in ratings)
-            or partial
-            or (m.shown in m.stored and not reason.strip())
-        ):
+        if m.refusals(m.shown):
             assert self.pane.status.startswith("refused"), (m.form(m.shown), self.pane.status)
             return
         raw_before = m.shown in m.stored and m.stored[m.shown][1][0] is None
-        if choices[0] is None and not raw_before and m.shown not in m.raw_ok:
-            # asked once: raw score only?
+        if choices[0] is None and not raw_before:  # asked once: raw score only?
             await wait_for(self.pilot, lambda: isinstance(self.app.screen, Confirm), 10)
             await self.pilot.press("y")
-            m.raw_ok.add(m.shown)
-        if m.refusals(m.shown):  # refused on storing: a block not run needs a reason
-            await wait_for(self.pilot, lambda: self.pane.status.startswith("refused"), 20)
-            return
         done = (f"{code} {task}/{condition}: stored", f"{code} {task}/{condition}: updated")
         await wait_for(
             self.pilot,
@@ -347,7 +333,6 @@ class Walk:
         if not unsaved:
             await wait_for(self.pilot, lambda: not self.app.is_running, 20)
             m.shown = m.on_participant = None
-            m.raw_ok.clear()
             return True
         await wait_for(self.pilot, lambda: isinstance(self.app.screen, Confirm), 10)
         question = str(self.app.screen.query_one("#question").render())
@@ -361,7 +346,6 @@ class Walk:
         await wait_for(self.pilot, lambda: not self.app.is_running, 20)
         m.typed.clear()
         m.shown = m.on_participant = None
-        m.raw_ok.clear()
         return True
 
     # -- the invariants ---------------------------------------------------------------
@@ -435,7 +419,6 @@ async def test_walk(seed: int, make_test_app, study_engine, shared_estimator) ->
                 walk.check()
                 if left:
                     break
-            walk.model.raw_ok.clear()
             if app.is_running:
                 walk.model.typed.clear()
                 await pilot.press("ctrl+q")
