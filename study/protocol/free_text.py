@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import re
 
-from study.errors import StudyInputError, quoted
+from study.errors import StudyInputError
 
 MAX_TEXT_CHARS = 500
 
@@ -46,11 +46,11 @@ def looks_personal(text: str) -> str | None:
     """What in `text` looks like contact details ("an e-mail address 'a@b.org'"), or None."""
     email = EMAIL.search(text)
     if email:
-        return f"an e-mail address {quoted(email.group(0))}"
+        return f"an e-mail address {email.group(0)!r}"
     for match in PHONE.finditer(text):
         digits = sum(c.isdigit() for c in match.group(0))
         if digits >= MIN_PHONE_DIGITS and not NOT_PHONE.fullmatch(match.group(0).strip()):
-            return f"a phone number {quoted(match.group(0).strip())}"
+            return f"a phone number {match.group(0).strip()!r}"
     return None
 
 
@@ -79,16 +79,16 @@ def check_free_text(what: str, text: str, *, keep_lookalike: bool = False) -> st
     StudyInputError
         Control characters, empty, too long; `PersonalDataError` for contact details.
     """
-    shown = quoted(text)
+    shown = text if len(text) <= 60 else text[:57] + "..."
     if not text.isprintable():  # a newline, a tab, a terminal's escape sequence
         raise StudyInputError(
-            f"{what} {shown} holds control characters; expected 1-{MAX_TEXT_CHARS} "
+            f"{what} {shown!r} holds control characters; expected 1-{MAX_TEXT_CHARS} "
             "printable characters on one line"
         )
     value = " ".join(text.split())
     if not value or len(value) > MAX_TEXT_CHARS:
         raise StudyInputError(
-            f"{what} {shown} ({len(value)} characters); expected 1-{MAX_TEXT_CHARS} "
+            f"{what} {shown!r} ({len(value)} characters); expected 1-{MAX_TEXT_CHARS} "
             "characters of text"
         )
     kept = keep_lookalike or isinstance(text, NotPersonal)

@@ -5,23 +5,11 @@ The tables are `study.analysis.stats.analyze` on what is stored (the same number
 the terminal; export writes the paper's figures (`study.analysis.paper.write_figures`,
 as `study figures`) to a folder. Everything runs in a worker: the statistics import
 pandas, pingouin and statsmodels on first use.
-
-The first analysis of a fresh app used to pay for those imports (and pingouin's
-matplotlib, whose font cache is built on a machine's first import) on top of the
-statistics, in a worker that shares the interpreter with the screens: `warm_up` imports
-them in a worker of their own as soon as the screen is mounted, so the first `r` takes
-as long as the later ones.
-
-At 80 columns the table holds every column whole: task, measure (its unit suffix
-dropped and long names broken over two lines), group, n, the two means, the test ("t"
-for the paired t, "W" for the Wilcoxon signed-rank), p (Holm) and the effect size with
-its kind ("g_av -0.52").
 """
 
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -75,7 +63,7 @@ class AnalysisPane(SafeWorkers, Vertical):
     AnalysisPane .row { height: 1; }
     AnalysisPane #measure { width: 28; }
     AnalysisPane #out-dir { width: 1fr; }
-    AnalysisPane #comparisons { height: 1fr; min-height: 5; scrollbar-size-vertical: 1; }
+    AnalysisPane #comparisons { height: 1fr; min-height: 5; }
     AnalysisPane #chart { height: auto; max-height: 9; }
     AnalysisPane #analysis-status { height: auto; }
     """
@@ -108,8 +96,6 @@ class AnalysisPane(SafeWorkers, Vertical):
         self.formats = formats
         self.result: Any = None
         self.exported: list[Path] = []
-        self.warmed = threading.Event()
-        """Set once the statistics' libraries are imported (`warm_up`)."""
 
     def compose(self) -> ComposeResult:
         with Horizontal(classes="row"):
@@ -119,33 +105,12 @@ class AnalysisPane(SafeWorkers, Vertical):
             # select_on_focus off: Tab into the field and a key no longer replaces the path
             yield Input(str(self.figures_dir), id="out-dir", compact=True, select_on_focus=False)
         table = DataTable(id="comparisons", zebra_stripes=True, cursor_type="row")
-        table.add_columns("task", "measure", "group", "n", "VO", "HV", "test", "p Holm", "effect")
+        table.add_columns("measure", "group", "n", "VO", "HV", "test", "p (Holm)", "effect size")
         yield table
         yield Static("", id="chart")
         yield Static(
             "r: run the analysis; ctrl+e: export the paper's figures", id="analysis-status"
         )
-
-    def on_mount(self) -> None:
-        self.warm_up()
-
-    @work(thread=True, exclusive=True, group="warm-up", exit_on_error=False)
-    def warm_up(self) -> None:
-        """Import what the first analysis needs, before anyone asks for it."""
-        try:
-            import matplotlib.font_manager  # noqa: F401  (builds the font cache once)
-            import pingouin  # noqa: F401
-            import statsmodels.formula.api
-            import statsmodels.stats.contingency_tables  # noqa: F401
-
-            import study.analysis.crossover
-            import study.analysis.frames
-            import study.analysis.stats
-            import study.analysis.success  # noqa: F401
-        except Exception:  # the analysis itself then says what fails
-            pass
-        finally:
-            self.warmed.set()
 
     def action_analyze(self) -> None:
         self._status("analysing...")
@@ -167,18 +132,15 @@ class AnalysisPane(SafeWorkers, Vertical):
         table = self.query_one("#comparisons", DataTable)
         table.clear()
         for _, r in comparisons.iterrows():
-            measure = _measure_cell(str(r["measure"]))
             table.add_row(
-                str(r.get("task", "")),
-                measure,
+                r["measure"],
                 r["group"],
                 str(r["n"]),
                 f"{r['mean_vo']:.3g}",
                 f"{r['mean_hv']:.3g}",
-                TEST_LABELS.get(str(r["test"]), str(r["test"])),
+                r["test"],
                 p_text(r["p_holm"]),
                 _effect(r["effect_size"], r["effect_size_kind"]),
-                height=measure.count("\n") + 1,
             )
         measures = list(dict.fromkeys(comparisons["measure"]))
         select = self.query_one("#measure", Select)
@@ -254,28 +216,6 @@ class AnalysisPane(SafeWorkers, Vertical):
 EFFECT_LABELS = {"hedges_g_av": "g_av", "rank_biserial": "r_rb"}
 """Hedges' g_av (after a paired t) and the matched-pairs rank-biserial r (after a
 Wilcoxon), named in each cell so that the two are never read as one scale."""
-
-
-TEST_LABELS = {"paired_t": "t", "wilcoxon": "W"}
-"""The test column's short names (the status line and `n` name them in full)."""
-
-MEASURE_CHARS = 16
-"""The measure column's width at 80 columns; longer names take two lines."""
-
-
-def _measure_cell(name: str) -> str:
-    """`name` without its unit suffix (the chart names the unit), broken at underscores
-    over two lines when it is longer than `MEASURE_CHARS`."""
-    for unit in ("_n_m", "_n", "_s", "_fraction"):
-        if name.endswith(unit) and len(name) > MEASURE_CHARS:
-            name = name.removesuffix(unit)
-            break
-    if len(name) <= MEASURE_CHARS:
-        return name
-    cut = name.rfind("_", 0, MEASURE_CHARS)
-    if cut <= 0:
-        return name[:MEASURE_CHARS] + "\n" + name[MEASURE_CHARS:]
-    return name[:cut] + "\n" + name[cut:]
 
 
 def _effect(value: float, kind: str) -> str:

@@ -328,25 +328,12 @@ class StudyApp(SafeWorkers, App[None]):
         self.query_one("#tabs", TabbedContent).active = tab
         # focus inside the screen, so its key bindings work at once
         pane = self.query_one(f"#{tab}").children[0]
-        if tab == "tlx":  # the questionnaire the run screen says is due, by default
-            pane.focus_first(self._tlx_due_first())  # type: ignore[attr-defined]
-            return
         if hasattr(pane, "focus_first"):  # the screen knows which field comes first
             pane.focus_first()
             return
         target = pane if pane.focusable else next((w for w in pane.query("*") if w.focusable), None)
         if target is not None:
             target.focus()
-
-    def _tlx_due_first(self) -> tuple[str, str, str] | None:
-        """The questionnaire F4 opens on: the run screen's participant's due one (its
-        notice says "... is due first (F4)"), else the first due, else None."""
-        if self.roster is None:
-            return None
-        due = self.roster.tlx_due()
-        code = getattr(self._pane("run"), "code", None)
-        mine = [b for b in due if b[0] == code]
-        return (mine or due or [None])[0]
 
     def action_digit_tab(self, tab: str) -> None:
         """1-6 switch screens only where no form field has the focus: in a form the digit

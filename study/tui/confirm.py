@@ -71,24 +71,8 @@ class TextScreen(ModalScreen[None]):
         self.dismiss(None)
 
 
-class LimitedInput(Input):
-    """An Input whose typing or paste past `max_length` keeps what fits (Textual's own
-    refuses the whole paste, so 530 pasted characters left the field empty)."""
-
-    def replace(self, text: str, start: int, end: int) -> None:
-        if self.max_length:
-            room = self.max_length - (len(self.value) - (end - start))
-            text = text[: max(room, 0)]
-        super().replace(text, start, end)
-
-
 class ReasonScreen(ModalScreen[str | None]):
-    """A question answered with a line of text: Enter gives it (not empty), Esc cancels.
-
-    The field takes at most `max_length` characters (the notes' and reasons' limit,
-    `study.protocol.free_text.MAX_TEXT_CHARS`, unless told; 0: no limit) and the line
-    under it counts them against the limit, so a pasted text is cut where it is seen,
-    not refused after it is typed."""
+    """A question answered with a line of text: Enter gives it (not empty), Esc cancels."""
 
     DEFAULT_CSS = """
     ReasonScreen { align: center middle; }
@@ -105,41 +89,23 @@ class ReasonScreen(ModalScreen[str | None]):
         placeholder: str = "reason",
         value: str = "",
         keys: str = "Enter: record it    Esc: cancel",
-        max_length: int | None = None,
     ) -> None:
-        from study.protocol.free_text import MAX_TEXT_CHARS
-
         super().__init__()
         self.question = question
         self.placeholder = placeholder
         self.keys = keys
         """The keys line under the field (what Enter does here)."""
-        self.max_length = MAX_TEXT_CHARS if max_length is None else max_length
-        self.value = value[: self.max_length] if self.max_length else value
+        self.value = value
         """The text the field opens with (a note to read and add to, or one not kept)."""
 
     def compose(self) -> ComposeResult:
         with Vertical(id="reason-box"):
             yield Label(self.question, id="question")
             # the cursor after the text, none of it selected: typing adds to it
-            yield LimitedInput(
-                self.value,
-                id="reason-text",
-                placeholder=self.placeholder,
-                select_on_focus=False,
-                max_length=self.max_length,
+            yield Input(
+                self.value, id="reason-text", placeholder=self.placeholder, select_on_focus=False
             )
-            yield Label(self._keys(self.value), id="reason-keys")
-
-    def _keys(self, text: str) -> str:
-        keys = self.keys
-        if self.max_length:
-            keys += f"    {len(text)}/{self.max_length} characters"
-        return keys
-
-    def on_input_changed(self, event: Input.Changed) -> None:
-        event.stop()
-        self.query_one("#reason-keys", Label).update(self._keys(event.value))
+            yield Label(self.keys, id="reason-keys")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()

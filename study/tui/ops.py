@@ -39,9 +39,7 @@ class OpsMixin(SafeWorkers):
             if text:
                 then(Path(text).expanduser())
 
-        screen = ReasonScreen(
-            question, "folder", str(default), f"Enter: {doing}    Esc: cancel", max_length=0
-        )
+        screen = ReasonScreen(question, "folder", str(default), f"Enter: {doing}    Esc: cancel")
         self.app.push_screen(screen, answered)  # type: ignore[attr-defined]
 
     def action_export_data(self) -> None:

@@ -6,7 +6,7 @@ lists in `StudyApp.COMMANDS` beside Textual's own (theme, keys, quit). It offers
 - the screens (F1-F6), each by its title;
 - enrolling a participant in each group, with the group's fill;
 - per participant: their page, the next trial (started as `s` starts it, checklist and
-  all), a note, a withdrawal; each NASA-TLX due, and each one stored (to read or edit);
+  all), a note, a withdrawal; each NASA-TLX due;
 - every key the screens show in their footers (analyse, export figures, calibrate,
   whatever a screen binds), run on its screen as the key would.
 
@@ -54,15 +54,6 @@ def study_commands(app: StudyApp) -> list[Command]:
             (
                 f"NASA-TLX of {code} {task}/{condition}",
                 "the block is done; its questionnaire is due (F4)",
-                partial(app._open_tlx, code, task, condition),
-            )
-        )
-    order = {r["code"]: k for k, r in enumerate(roster.participants)}
-    for code, task, condition in sorted(roster.answered, key=lambda b: (order.get(b[0], -1), b)):
-        out.append(
-            (
-                f"NASA-TLX of {code} {task}/{condition} (stored)",
-                "read or edit it; an edit asks for a reason (F4)",
                 partial(app._open_tlx, code, task, condition),
             )
         )

@@ -35,27 +35,19 @@ NOTES_SHOWN = 4
 
 
 def trial_cells(t: TrialRow) -> tuple[str, ...]:
-    """One row of the page's trial table, in short cells so that 80 columns hold all nine
-    (`valid` last: an invalid trial says NO): the peaks are the task's two headline
-    peaks (`Task.live_peaks`, in N; every measure is on the line under the table), a
-    practice trial is "pract N" and success is under "ok"."""
-    from study.protocol.tasks import get_task
-
-    try:
-        headline = [f"peak_{trace.column}" for trace in get_task(t.task).live_peaks]
-    except (KeyError, ValueError):  # a task this version does not know: its first two
-        headline = [n for n in t.measures if n.startswith("peak_") and n.endswith("_n")][:2]
-    forces = [n for n in headline if n in t.measures]
+    """One row of the page's trial table (short cells: 80 columns hold them all; the
+    reasons are on the line under the table)."""
+    forces = [n for n in t.measures if n.startswith("peak_") and n.endswith("_n")]
     measured = t.status == "completed" and not t.practice
     return (
         str(t.id),
         f"{t.block_index + 1} {t.task}/{t.condition}",
-        f"pract {t.number}" if t.practice else f"trial {t.number}",
+        t.label(),
         str(t.attempt),
         t.status,
         "-" if t.completion_time_s is None else f"{t.completion_time_s:.1f}",
         "-" if t.success is None else ("yes" if t.success else "no"),
-        "/".join(f"{t.measures[n]:.2f}" for n in forces) or "-",
+        "/".join(f"{t.measures[n]:.2f}" for n in forces) + (" N" if forces else "-"),
         ("NO" if t.invalid_reason else "yes") if measured else "-",
     )
 
@@ -134,9 +126,9 @@ class ParticipantPage(SafeWorkers, Screen[None]):
     ParticipantPage #who { height: auto; text-style: bold; padding: 0 1; }
     ParticipantPage #schedule, ParticipantPage #probes { height: auto; padding: 0 1; }
     ParticipantPage #trials { height: 1fr; }
-    ParticipantPage #trial-detail { height: auto; max-height: 6; padding: 0 1; }
+    ParticipantPage #trial-detail { height: auto; max-height: 3; padding: 0 1; }
     ParticipantPage #notes { height: auto; max-height: 6; padding: 0 1; color: $text-muted; }
-    ParticipantPage #page-status { width: 1fr; height: auto; max-height: 3; padding: 0 1; }
+    ParticipantPage #page-status { height: auto; padding: 0 1; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("escape", "back", "Back"),
@@ -161,12 +153,12 @@ class ParticipantPage(SafeWorkers, Screen[None]):
         yield Static("", id="probes", markup=False)
         table = DataTable(id="trials", cursor_type="row", zebra_stripes=True)
         table.add_columns(
-            "id", "block", "trial", "att", "status", "time s", "ok", "peaks N", "valid"
+            "id", "block", "trial", "att", "status", "time s", "success", "peaks", "valid"
         )
         yield table
         yield Static("", id="trial-detail", markup=False)
         yield Static("", id="notes", markup=False)
-        yield Static("", id="page-status", markup=False)  # wraps: a long reason is not cut
+        yield Label("", id="page-status")
         yield Footer(compact=True, show_command_palette=False)  # every key fits at 80
 
     def on_mount(self) -> None:
@@ -225,7 +217,7 @@ class ParticipantPage(SafeWorkers, Screen[None]):
 
     def _status(self, text: str) -> None:
         self.last_message = text
-        self.query_one("#page-status", Static).update(text)
+        self.query_one("#page-status", Label).update(text)
 
     def highlighted_trial(self) -> TrialRow | None:
         table = self.query_one("#trials", DataTable)

@@ -607,10 +607,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 )
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
             if event.report is not None:
-                # below the readout's status line, inside the live view's box
-                room = self.query_one(LiveReadout).content_size.height - 1
-                lines = report_lines(outcome.code, event.report, max(room, 3))
-                text = "\n".join(lines)
+                text = "\n".join(report_lines(outcome.code, event.report))
         elif outcome.error:
             self.status = "failed"
             text = (

@@ -7,14 +7,7 @@ right keys. Saving goes through `study.protocol.tlx.store_tlx`, the same checks 
 `study tlx enter`: an off-scale rating or a missing choice is refused with a message
 and nothing is stored. A block that already has its questionnaire opens filled in;
 saving it again is an edit, which needs a reason and is written to the audit log
-(shown below the form); saving it unchanged stores nothing and says so. Ratings without
-any pairwise choice (a raw TLX, which has no weighted score) are stored only once the
-operator says yes to that.
-
-The participant and block lists and the focused field's question are a header docked
-at the top, so they stay in view while the form scrolls under them (at 80 x 24 it is
-twice the screen's height). Tab and shift+Tab go round the form's own fields (the first
-after the last), so the focus is never on something that shows no focus.
+(shown below the form).
 """
 
 from __future__ import annotations
@@ -26,15 +19,13 @@ from textual import events, on, work
 from textual.actions import SkipAction
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
-from textual.containers import Horizontal, Vertical, VerticalScroll
+from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widget import Widget
 from textual.widgets import Button, Input, Label, Select, Static
-from textual.widgets._select import SelectOverlay
 
 from db.models.tlx import TLX_SUBSCALES
 from study.errors import StudyInputError
-from study.protocol.free_text import MAX_TEXT_CHARS
 from study.protocol.tlx import check_rating, pair_order
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import Roster, StudyServices
@@ -148,12 +139,11 @@ class Draft:
     over: FormState
 
 
-class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
+class TlxPane(SafeWorkers, VerticalScroll):
     """Enter or edit the questionnaire of one participant's block."""
 
     DEFAULT_CSS = """
     TlxPane { height: 1fr; }
-    TlxPane #tlx-header { dock: top; height: 2; background: $surface; }
     TlxPane .row { height: 1; }
     TlxPane .title { width: 17; }
     TlxPane .anchor { width: 10; color: $text-muted; }
@@ -173,14 +163,7 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
         # key typed right after one of them then goes to the new field, not the old one
         *(
             Binding(key, f"move_focus({step})", "Next field", show=False, priority=True)
-            for key, step in (("down", 1), ("up", -1))
-        ),
-        # tab and shift+tab go round the form's own fields, the participant and block
-        # lists included: through the whole screen they reached the tab bar and the
-        # scrolling form itself, where nothing showed the focus and keys did nothing
-        *(
-            Binding(key, f"cycle_focus({step})", "Next field", show=False, priority=True)
-            for key, step in (("tab", 1), ("shift+tab", -1))
+            for key, step in (("down", 1), ("up", -1), ("tab", 1), ("shift+tab", -1))
         ),
     ]
 
@@ -206,31 +189,22 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
         """The block whose answers the form holds, once loaded (None while loading)."""
         self._baseline: FormState | None = None
         """The form as filled from the database (what counts as nothing typed)."""
-        self._raw_only_ok: set[Block] = set()
-        """Blocks whose raw-only save the operator said yes to (not asked again)."""
         self.drafts: dict[Block, Draft] = {}
         """What was typed for a block and not saved, kept when another block is shown."""
 
     def compose(self) -> ComposeResult:
-        with Vertical(id="tlx-header"):  # docked: in view however far the form scrolls
-            with Horizontal(id="tlx-top", classes="row"):
-                yield Label("Participant ")
-                yield Select[str]([], id="tlx-participant", compact=True, prompt="pick")
-                yield Label(" Block ")
-                yield Select[str]([], id="tlx-block", compact=True, prompt="pick")
-            yield Label("", id="question")
+        with Horizontal(id="tlx-top", classes="row"):
+            yield Label("Participant ")
+            yield Select[str]([], id="tlx-participant", compact=True, prompt="pick")
+            yield Label(" Block ")
+            yield Select[str]([], id="tlx-block", compact=True, prompt="pick")
+        yield Label("", id="question")
         for s in TLX_SUBSCALES:
             title, _, low, high = TLX_SCALES[s]
             with Horizontal(classes="row"):
                 yield Label(title, classes="title")
                 yield Label(f"{low:>9} ", classes="anchor")
-                yield Input(
-                    id=f"rating-{s}",
-                    type="integer",
-                    placeholder="0-100",
-                    compact=True,
-                    max_length=3,
-                )
+                yield Input(id=f"rating-{s}", type="integer", placeholder="0-100", compact=True)
                 yield Label(f" {high}", classes="anchor-high")
         yield Label("Which contributed more to the workload? (left / right)")
         for k in range(15):
@@ -238,10 +212,7 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
         with Horizontal(classes="row"):
             yield Label("Reason ")
             yield Input(
-                id="reason",
-                placeholder="for an edit, or a block not run yet",
-                compact=True,
-                max_length=MAX_TEXT_CHARS,
+                id="reason", placeholder="for an edit, or a block not run yet", compact=True
             )
         yield Button("Save (ctrl+s)", id="save", compact=True)
         yield Static("", id="tlx-status")
@@ -284,21 +255,17 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
         if code == self._blocks_code:  # already shown (open_block, then Select.Changed)
             return
         self._blocks_code = code
-        blocks = self._block_options(code)
+        row = next(
+            (r for r in (self.roster.participants if self.roster else ()) if r["code"] == code),
+            None,
+        )
+        blocks = [f"{b['task']}/{b['condition']}" for b in row["blocks"]] if row else []
         self.query_one("#tlx-block", Select).set_options([(b, b) for b in blocks])
         seed = self.roster.seed if self.roster else 0
         for k, pair in enumerate(pair_order(seed, code)):
             widget = self.query_one(f"#pair-{k}", PairChoice)
             widget.pair = pair
             widget.refresh()
-
-    def _block_options(self, code: str) -> list[str]:
-        """`code`'s blocks as the block list names them ("task/condition")."""
-        row = next(
-            (r for r in (self.roster.participants if self.roster else ()) if r["code"] == code),
-            None,
-        )
-        return [f"{b['task']}/{b['condition']}" for b in row["blocks"]] if row else []
 
     @on(Select.Changed, "#tlx-participant")
     def _participant_changed(self, event: Select.Changed) -> None:
@@ -308,16 +275,8 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
             return
         code = str(event.value)
         if code != self._blocks_code:
-            # the same task and condition of the new participant, where they have it
-            # (the next participant's form of the block just filled in), else none yet
-            kept = None if self._shown is None else f"{self._shown[1]}/{self._shown[2]}"
+            self._switch(None)  # no block of the new participant picked yet
             self._set_blocks(code)
-            if kept is not None and kept in self._block_options(code):
-                task, condition = kept.split("/")
-                self._switch((code, task, condition))
-                self.query_one("#tlx-block", Select).value = kept
-            else:
-                self._switch(None)
 
     @on(Select.Changed, "#tlx-block")
     def _block_changed(self, event: Select.Changed) -> None:
@@ -355,29 +314,9 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
         else:
             self.screen.focus_previous()
 
-    def action_cycle_focus(self, step: int) -> None:
-        """Tab (1) and shift+Tab (-1): the next or previous of the form's own fields, the
-        last leading to the first. In an open list the keys are the list's own."""
-        focused = self.screen.focused
-        if focused is not None and any(
-            isinstance(w, SelectOverlay) for w in (focused, *focused.ancestors)
-        ):
-            raise SkipAction()
-        fields = [w for w in self.screen.focus_chain if self in w.ancestors]
-        if not fields:
-            raise SkipAction()
-        k = fields.index(focused) if focused in fields else (-1 if step > 0 else 0)
-        # at once (Widget.focus waits for the next idle): a key typed right after the
-        # Tab goes to the new field
-        self.screen.set_focus(fields[(k + step) % len(fields)])
-
-    def focus_first(self, due: Block | None = None) -> None:
-        """F4: the questionnaire `due` (the one the run screen says comes first) unless
-        answers typed on the block shown are not saved yet; else the first rating of
-        the block shown, else the participant list."""
-        if due is not None and due != self._shown and not self.is_dirty():
-            self.open_block(*due)
-        elif self._shown is not None:
+    def focus_first(self) -> None:
+        """F4: the first rating of the block shown, else the participant list."""
+        if self._shown is not None:
             self._to_first_rating()
         else:
             self.query_one("#tlx-participant", Select).focus()
@@ -519,44 +458,14 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
             self._set_status(f"refused: {why}", notify=True)
             return
         state = self.form_state()
-        baseline = self._baseline
-        if self.editing_id is not None and baseline is not None:
-            if (state.ratings, state.choices) == (baseline.ratings, baseline.choices):
-                code, task, condition = block
-                self._set_status(
-                    f"{code} {task}/{condition}: unchanged (the stored answers stand; "
-                    "nothing written)",
-                    notify=True,
-                )
-                return
         ratings = {s: _rating_value(v) for s, v in zip(TLX_SUBSCALES, state.ratings, strict=True)}
         reason = state.reason.strip() or None
         errors = self._errors(ratings, state.choices, reason)
         if errors:  # every error at once, not only the first
             self._set_status("refused: " + "; ".join(errors), notify=True)
             return
-        if state.choices[0] is not None:
-            self._store(block, ratings, [str(c) for c in state.choices], reason)
-            return
-        raw_before = self.editing_id is not None and baseline is not None
-        if (raw_before and baseline.choices[0] is None) or block in self._raw_only_ok:
-            self._store(block, ratings, None, reason)  # asked already: once is enough
-            return
-        from study.tui.confirm import Confirm
-
-        def answered(yes: bool | None) -> None:
-            if yes and self.loaded_block == block and self.form_state() == state:
-                self._raw_only_ok.add(block)
-                self._store(block, ratings, None, reason)
-            elif not yes:
-                self._set_status("not stored: pick a side of each pair (left / right)")
-
-        self.app.push_screen(
-            Confirm(
-                "no pairwise choices: store the raw score only? (a raw TLX has no weighted score)"
-            ),
-            answered,
-        )
+        picks = None if state.choices[0] is None else [str(c) for c in state.choices]
+        self._store(block, ratings, picks, reason)
 
     def _errors(
         self, ratings: dict[str, object], choices: tuple[str | None, ...], reason: str | None

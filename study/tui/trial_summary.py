@@ -112,31 +112,15 @@ def _number(value: float, unit: str) -> str:
     return f"{text} {unit}" if unit else text
 
 
-def report_lines(code: str, report: TrialReport, max_lines: int | None = None) -> list[str]:
-    """The readout's lines: the trial, then (at a block's end) the block's summary.
-
-    With `max_lines`, a block's end whose trial and block lines do not both fit (a task
-    of many measures, such as NOTES, at 80 x 24) keeps the block's summary whole and
-    leaves out the trial's own measures (the participant page lists them)."""
+def report_lines(code: str, report: TrialReport) -> list[str]:
+    """The readout's lines: the trial, then (at a block's end) the block's summary."""
     kind = "practice" if report.practice else "trial"
     success = {True: "yes", False: "no", None: "not recorded"}[report.success]
-    head = [
+    lines = [
         f"{code}: {report.task}/{report.condition} {kind} {report.trial_index + 1} stored",
         f"  success {success}",
+        *(f"  {label} {_number(value, unit)}" for label, unit, value in report.measures),
     ]
-    own = [f"  {label} {_number(value, unit)}" for label, unit, value in report.measures]
-    lines = head + own
-    if report.block is not None:
-        summary = _block_lines(report)
-        if max_lines is not None and len(lines) + len(summary) > max_lines:
-            head[1] += " (measures: page, v)"
-            lines = head
-        lines += summary
-    return lines
-
-
-def _block_lines(report: TrialReport) -> list[str]:
-    lines: list[str] = []
     if report.block is not None:
         n = max(s.n for s in report.block) if report.block else 0
         lines.append(f"block {report.task}/{report.condition} done:")

@@ -114,7 +114,7 @@ async def test_the_page_shows_what_is_stored_and_makes_audited_corrections(
                 "completed",
                 "31.5",
                 "yes",
-                "1.25/0.50",
+                "1.25/0.50 N",
                 "yes",
             ],
         ]

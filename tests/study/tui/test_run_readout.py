@@ -126,25 +126,3 @@ def test_the_block_summary_is_the_mean_and_sd_of_its_measured_trials(tmp_path) -
     assert "  wall contacts 4" in lines  # the trial's count, a whole number
     assert "  wall contacts 2.00 ± 2.00" in lines  # the block's mean and SD
     assert all(len(line) <= 38 for line in lines)  # the readout's width
-
-
-def test_a_notes_block_summary_keeps_every_measure_within_the_readout() -> None:
-    # NOTES has eleven measures: at 80 x 24 the readout holds about 17 lines below its
-    # status line, so the block's summary stays whole and the trial's own values go
-    from study.protocol.tasks import get_task
-    from study.tui.trial_summary import BlockStat, TrialReport, report_lines
-
-    task = get_task("notes")
-    measures = [(m.label, m.unit, 1.25) for m in task.all_measures]
-    block = [BlockStat(m.label, m.unit, 3, 1.5, 0.25) for m in task.all_measures]
-    report = TrialReport(7, "notes", "HV", False, 2, True, measures, block)
-    full = report_lines("P001", report)
-    assert len(full) == 2 + 11 + 2 + 11  # the trial's and the block's, uncut
-    lines = report_lines("P001", report, max_lines=17)
-    assert len(lines) <= 17
-    assert lines[:2] == ["P001: notes/HV trial 3 stored", "  success yes (measures: page, v)"]
-    for m in task.all_measures:  # every measure of the block, with its mean and SD
-        assert f"  {m.label} 1.50 ± 0.25 {m.unit}".rstrip() in lines
-    assert all(len(line) <= 38 for line in lines)  # the readout's width
-    # room enough: nothing left out
-    assert report_lines("P001", report, max_lines=40) == full

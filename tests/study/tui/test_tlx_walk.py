@@ -103,17 +103,7 @@ class Walk:
 
     async def to_form(self) -> None:
         if self.app.query_one("#tabs").active != "tlx":
-            m = self.model
-            # F4 opens the questionnaire due (the run screen's participant's first), unless
-            # answers typed on the block shown are not saved
-            due = self.app.roster.tlx_due()
-            mine = [b for b in due if b[0] == self.app.query_one(RunPane).code]
-            first = (mine or due or [None])[0]
-            dirty = m.shown is not None and m.form(m.shown) != m.stored_form(m.shown)
             await self.pilot.press("f4")
-            if first is not None and first != m.shown and not dirty:
-                m.shown, m.on_participant = first, first[0]
-                await self.settled()
 
     async def settled(self) -> None:
         """Wait until the form holds the block the model says it shows."""
@@ -193,15 +183,12 @@ class Walk:
         await self.settled()
 
     async def pick_participant(self) -> None:
-        """The participant list: their form of the block shown, else none until a block
-        is picked."""
+        """The participant list: the form is left empty until a block is picked."""
         code = self.rng.choice(self.model.codes)
         await self.to_form()
         self.app.query_one("#tlx-participant", Select).value = code
-        if code != self.model.on_participant:  # the same block of theirs
-            shown = self.model.shown
-            self.model.shown = None if shown is None else (code, *shown[1:])
-            self.model.on_participant = code
+        if code != self.model.on_participant:
+            self.model.shown, self.model.on_participant = None, code
         await self.pilot.pause()
         await self.settled()
 
@@ -303,18 +290,10 @@ class Walk:
         if m.shown is None:
             assert self.pane.status.startswith("refused: pick a participant")
             return
-        code, task, condition = m.shown
-        ratings, choices, _ = m.form(m.shown)
-        if m.shown in m.stored and m.stored[m.shown][:2] == (ratings, choices):
-            assert self.pane.status.startswith(f"{code} {task}/{condition}: unchanged")
-            return
         if m.refusals(m.shown):
             assert self.pane.status.startswith("refused"), (m.form(m.shown), self.pane.status)
             return
-        raw_before = m.shown in m.stored and m.stored[m.shown][1][0] is None
-        if choices[0] is None and not raw_before:  # asked once: raw score only?
-            await wait_for(self.pilot, lambda: isinstance(self.app.screen, Confirm), 10)
-            await self.pilot.press("y")
+        code, task, condition = m.shown
         done = (f"{code} {task}/{condition}: stored", f"{code} {task}/{condition}: updated")
         await wait_for(
             self.pilot,
@@ -322,6 +301,7 @@ class Walk:
             20,
         )
         assert self.pane.status != before or before.startswith(done)
+        ratings, choices, _ = m.form(m.shown)
         m.stored[m.shown] = (ratings, choices, "")
         m.typed.pop(m.shown)
 
@@ -409,7 +389,7 @@ async def test_walk(seed: int, make_test_app, study_engine, shared_estimator) ->
         async with app.run_test(size=(80, 24)) as pilot:
             walk.pilot = pilot
             await loaded(pilot)
-            await walk.to_form()  # F4: the questionnaire due, if any
+            await pilot.press("f4")
             while steps < STEPS:
                 name = rng.choices(names, weights=list(STEP_WEIGHTS.values()))[0]
                 if walk.model.groups["novice"] >= 4 and name == "enrol":
