@@ -29,7 +29,6 @@ from __future__ import annotations
 import contextlib
 import errno
 import hashlib
-import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -283,9 +282,6 @@ def backup_database(
     made = _make_folders(out_dir)
     part = out_dir / f".{path.name}.part"
     part.unlink(missing_ok=True)
-    # readable by its owner only, as the exports are: made empty with that mode before
-    # SQLite writes into it (VACUUM INTO takes an empty file)
-    os.close(os.open(part, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
     try:
         notice(f"copying to {path}")
         with _snapshot(engine) as conn:
@@ -314,7 +310,6 @@ def backup_database(
         if Path(f"{part}-wal").exists():  # closed without a checkpoint: not a whole file
             raise OSError(f"the copy {part} kept a write-ahead log; expected it folded in")
         Path(f"{part}-shm").unlink(missing_ok=True)
-        part.chmod(0o600)
         replace_file(part, path)
     except BaseException as exc:
         for suffix in ("", "-wal", "-shm"):

@@ -82,52 +82,11 @@ HOLD_S = 300.0
 """Trial time, in s, of samples a watched session keeps in memory while another program
 holds the database's lock (about 30 000 samples at 100 Hz: a few MB)."""
 INTERRUPTED_BY_CRASH = "found running when a new session started (the process had died)"
-TAKEN_OVER = "found running when a new session took the lease over ({})"
 STOPPED_WITH_PARENT = "the session stopped because its parent `study run` process ended"
 
 
 class SessionStopped(Exception):
     """Raised inside a trial when the session's `stop` event is set."""
-
-
-class TrialHold:
-    """A running trial held between two steps while someone decides (the terminal app's
-    stop dialog), then let go on.
-
-    `hold()` (any thread): at its next step the trial commits the samples it has and
-    waits until `resume()`. The held time is not trial time: the loop's clock (`t_s`,
-    so the completion time and the samples' times) stands still, and a paced trial goes
-    on from where it stood (its pacing does not catch up). `resumed`, called in the
-    trial's thread as it goes on, may raise to end the trial there (the stop chosen)."""
-
-    def __init__(self, resumed: Callable[[], None] = lambda: None) -> None:
-        self._go = threading.Event()
-        self._go.set()
-        self._resumed = resumed
-        self.waiting = threading.Event()
-        """Set while the trial's loop waits (its samples so far committed)."""
-
-    @property
-    def held(self) -> bool:
-        return not self._go.is_set()
-
-    def hold(self) -> None:
-        self._go.clear()
-
-    def resume(self) -> None:
-        self._go.set()
-
-    def wait(self) -> float:
-        """In the trial's thread: wait while held; the seconds waited."""
-        start = time.monotonic()
-        self.waiting.set()
-        try:
-            self._go.wait()
-        finally:
-            self.waiting.clear()
-        waited = time.monotonic() - start
-        self._resumed()
-        return waited
 
 
 @dataclass(frozen=True)
@@ -179,36 +138,6 @@ def recover_interrupted(
     return len(stale)
 
 
-def recover_dead_sessions(engine: Engine, actor: str | None = None) -> list[tuple[str, int]]:
-    """Trials left `running` by a session that has ended without ending them (its
-    process killed, its machine off: its lease's holder dead, `hold_lease`) marked
-    interrupted now, as that participant's next session would at its start; (code, how
-    many) per participant. A participant whose session is alive, on this machine or
-    another, is left alone."""
-    from study.protocol.lease import SessionBusyError
-
-    with Session(engine) as session:
-        rows = session.execute(
-            select(Participant.id, Participant.code)
-            .join(Trial, Trial.participant_id == Participant.id)
-            .where(Trial.status == "running")
-            .distinct()
-        ).all()
-    found: list[tuple[str, int]] = []
-    for participant_id, code in rows:
-        try:
-            with hold_lease(engine, participant_id, code, actor) as lease:
-                reason = INTERRUPTED_BY_CRASH
-                if lease.taken_over is not None:
-                    reason = TAKEN_OVER.format(lease.taken_over)
-                n = recover_interrupted(engine, participant_id, reason, actor)
-        except SessionBusyError:  # running now, elsewhere: not ours to end
-            continue
-        if n:
-            found.append((code, n))
-    return found
-
-
 def pending_trials(session: Session, participant: Participant) -> list[PendingTrial]:
     done = {
         (t.block_index, t.practice, t.trial_index)
@@ -240,7 +169,6 @@ def run_session(
     participants: ParticipantModel | None = None,
     observer: SessionObserver | None = None,
     on_storage_wait: Callable[[float | None, int], None] | None = None,
-    hold: TrialHold | None = None,
 ) -> list[int]:
     """Run the participant's remaining trials; return the ids of the trials completed.
 
@@ -258,7 +186,6 @@ def run_session(
     `on_storage_wait(waited_s, held)`: given, a lock held by another program does not
     stop the trial: up to `HOLD_S` of its samples wait in memory (`SampleWriter`'s
     `hold_s`) and this is called while they do (None, 0 when they are committed).
-    `hold` (`TrialHold`) lets another thread hold the running trial between steps.
     """
     study, design, participant_id = _session_start(engine, code, pace)
     observer = observer or SessionObserver()
@@ -271,7 +198,7 @@ def run_session(
             session.expunge_all()
         reason = INTERRUPTED_BY_CRASH
         if lease.taken_over is not None:
-            reason = TAKEN_OVER.format(lease.taken_over)
+            reason = f"found running when a new session took the lease over ({lease.taken_over})"
         recover_interrupted(engine, participant_id, reason, actor)
         tasks = {name: get_task(name) for name in sorted({p.block.task for p in todo})}
         first = tuple(tasks[name] for name in dict.fromkeys(p.block.task for p in todo))
@@ -306,7 +233,6 @@ def run_session(
                 model=participants.digest if participants is not None else None,
                 observer=observer,
                 effects=participants.participant_effects if participants is not None else (),
-                hold=hold,
             )
             try:
                 trial_id = _run_trial(engine, participant, item, run)
@@ -442,8 +368,6 @@ class TrialSetup:
     observer: SessionObserver = field(default_factory=SessionObserver)
     effects: tuple[ParticipantEffect, ...] = ()
     """The model's participant effects, applied to the simulated person per trial."""
-    hold: TrialHold | None = None
-    """Holds the trial between steps (`TrialHold`), if given."""
 
 
 def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
@@ -585,9 +509,6 @@ def _run_trial(
     )
     with writer_at as writer, ending, contextlib.closing(driver):
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
-            if run.hold is not None and run.hold.held:
-                writer.flush()  # what the trial measured so far is stored while it stands
-                wall0 += run.hold.wait()  # held time is not trial time: pacing goes on
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
             if len(samples):

@@ -40,15 +40,6 @@ PAIRS = tuple(itertools.combinations(TLX_SUBSCALES, 2))
 """The 15 pairs of subscales."""
 
 
-class ReasonNeeded(StudyInputError):
-    """A questionnaire refused for want of a reason (an edit, a block not yet run); the
-    line names no command-line flag (the terminal app shows it too): `with_flag` adds
-    one."""
-
-    def with_flag(self, flag: str) -> str:
-        return str(self).replace("needs a reason", f"needs a reason ({flag})", 1)
-
-
 def _whole_number(value: object, top: int) -> TypeGuard[int | float]:
     """Whether `value` is a finite whole number from 0 to `top` (a bool is not one)."""
     return (
@@ -387,9 +378,10 @@ def _store_tlx(
                 )
             )
             if not ran and not reason:
-                raise ReasonNeeded(
+                raise StudyInputError(
                     f"{code} {task}/{condition} has no completed trial yet; a questionnaire "
-                    "for a block that has not run needs a reason, kept in the audit log"
+                    "for a block that has not run needs a reason (--reason TEXT), kept in "
+                    "the audit log"
                 )
             response = TlxResponse(
                 participant_id=participant.id,
@@ -435,9 +427,9 @@ def _store_tlx(
             session.expunge(response)
             return response, True
         if not reason:
-            raise ReasonNeeded(
+            raise StudyInputError(
                 f"{code} {task}/{condition} already has a questionnaire; an edit needs a "
-                "reason, kept in the audit log"
+                "reason (--reason TEXT), kept in the audit log"
             )
         if chosen is None:  # keep the stored comparisons when only ratings are edited
             values.update({f"w_{s}": getattr(existing, f"w_{s}") for s in TLX_SUBSCALES})

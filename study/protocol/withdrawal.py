@@ -105,15 +105,3 @@ def withdrawn_participants(engine: Engine) -> dict[str, str]:
             )
         ).all()
     return {code: reason or "" for code, reason in rows}
-
-
-def checklist_confirmed(engine: Engine) -> set[str]:
-    """The codes of the participants whose session checklist is recorded."""
-    with Session(engine) as session:
-        rows = session.scalars(
-            select(Participant.code)
-            .join(AuditEntry, AuditEntry.entity_id == Participant.id)
-            .where(AuditEntry.entity == "participant", AuditEntry.field == "session_checklist")
-            .distinct()
-        ).all()
-    return set(rows)

@@ -3,11 +3,9 @@
 `make_app(services, settings)` builds the app from its dependencies (the database
 engine, the estimator loader, the calibration loop), so `study tui` and the tests build
 it the same way and nothing inside reads global configuration. The app owns only the
-wiring between the screens: it loads the `Roster` (in a worker) at start, every `POLL_S`, on
-every screen switch and whenever a screen reports a change (a participant enrolled, a
-trial ended, a questionnaire saved), hands it to every screen when it differs from the
-one they show (so a change from the command line or another machine shows within about
-a second), and opens the NASA-TLX form when a trial finishes a block.
+wiring between the screens: it loads the `Roster` (in a worker) at start and whenever a
+screen reports a change (a participant enrolled, a trial ended, a questionnaire saved),
+hands it to every screen, and opens the NASA-TLX form when a trial finishes a block.
 Quitting in the middle of a trial stops it first, so it is marked interrupted and
 every committed sample stays; closing the terminal (SIGHUP) or SIGTERM quits the same way.
 """
@@ -47,9 +45,6 @@ __all__ = ["TABS", "StudyApp", "TuiSettings", "make_app"]
 SHORT_TITLES = ("Home", "People", "Run", "TLX", "Stats", "Calib")
 """The tab labels below `WIDE_COLUMNS` columns, so that all six stay on the bar."""
 WIDE_COLUMNS = 80
-POLL_S = 1.0
-"""Seconds between two reads of the roster: what another program (`study participant
-add`, `study run`, another lab machine) changed shows within about this long."""
 
 
 @dataclass(frozen=True)
@@ -187,7 +182,6 @@ class StudyApp(SafeWorkers, App[None]):
             self.ready = True
             if self.roster is not None:
                 self._show(self.roster)
-            self._recover_dead()
         except NoMatches:  # the app closed while the screens were being mounted
             self.ready = False
         finally:
@@ -196,7 +190,6 @@ class StudyApp(SafeWorkers, App[None]):
     def on_mount(self) -> None:
         self.theme = self.settings.theme
         self.reload()
-        self.set_interval(POLL_S, self._poll)
         # closing the terminal window (SIGHUP) or `kill` (SIGTERM) quits as ctrl+q does:
         # a running trial is stopped and marked interrupted, not left `running`
         loop = asyncio.get_running_loop()
@@ -219,36 +212,10 @@ class StudyApp(SafeWorkers, App[None]):
         await self.stop_trial()
         os._exit(128 + signal.SIGHUP)
 
-    @work(thread=True, exclusive=True, group="recover", exit_on_error=False)
-    def _recover_dead(self) -> None:
-        """Trials a killed app or `study run` left running: marked interrupted, and said."""
-        from study.protocol.session import recover_dead_sessions
-
-        for code, n in recover_dead_sessions(self.services.engine):
-            what = "a trial was" if n == 1 else f"{n} trials were"
-            self.call_from_thread(
-                self.notify,
-                f"{code}: {what} found running (the program running it had ended) and "
-                "marked interrupted; it is repeated at the next start",
-                severity="warning",
-                timeout=30,
-            )
-        self.call_from_thread(self.reload)
-
     # -- the roster -----------------------------------------------------------------------
 
     def reload(self) -> None:
         self._load_roster()
-
-    def _poll(self) -> None:
-        """The roster again, unless a read of it is still under way."""
-        from textual.worker import WorkerState
-
-        if not any(
-            w.group == "roster" and w.state in (WorkerState.PENDING, WorkerState.RUNNING)
-            for w in self.workers
-        ):
-            self._load_roster()
 
     @work(thread=True, exclusive=True, group="roster", exit_on_error=False)
     def _load_roster(self) -> None:
@@ -256,8 +223,6 @@ class StudyApp(SafeWorkers, App[None]):
 
     @on(RosterLoaded)
     def _roster_loaded(self, event: RosterLoaded) -> None:
-        if event.roster == self.roster:  # nothing changed: the screens stay as they are
-            return
         self.roster = event.roster
         self._show(event.roster)
         if self.overview_shown_s is None:
@@ -324,7 +289,6 @@ class StudyApp(SafeWorkers, App[None]):
     def action_tab(self, tab: str) -> None:
         if not self.ready:
             return
-        self.reload()  # each screen shows what the database holds now
         self.query_one("#tabs", TabbedContent).active = tab
         # focus inside the screen, so its key bindings work at once
         pane = self.query_one(f"#{tab}").children[0]

@@ -83,18 +83,10 @@ class ReasonScreen(ModalScreen[str | None]):
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(
-        self,
-        question: str,
-        placeholder: str = "reason",
-        value: str = "",
-        keys: str = "Enter: record it    Esc: cancel",
-    ) -> None:
+    def __init__(self, question: str, placeholder: str = "reason", value: str = "") -> None:
         super().__init__()
         self.question = question
         self.placeholder = placeholder
-        self.keys = keys
-        """The keys line under the field (what Enter does here)."""
         self.value = value
         """The text the field opens with (a note to read and add to, or one not kept)."""
 
@@ -105,16 +97,12 @@ class ReasonScreen(ModalScreen[str | None]):
             yield Input(
                 self.value, id="reason-text", placeholder=self.placeholder, select_on_focus=False
             )
-            yield Label(self.keys, id="reason-keys")
+            yield Label("Enter: record it    Esc: cancel", id="reason-keys")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()
         if event.value.strip():
             self.dismiss(event.value.strip())
-        else:  # not silent: what Enter needs
-            self.query_one("#reason-keys", Label).update(
-                f"nothing typed: a {self.placeholder} is needed    Esc: cancel"
-            )
 
     def action_cancel(self) -> None:
         self.dismiss(None)

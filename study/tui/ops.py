@@ -32,15 +32,14 @@ class OpsMixin(SafeWorkers):
 
     last_ops_line = ""
 
-    def _ask_folder(self, question: str, default: Path, then: Any, doing: str) -> None:
+    def _ask_folder(self, question: str, default: Path, then: Any) -> None:
         from study.tui.confirm import ReasonScreen
 
         def answered(text: str | None) -> None:
             if text:
                 then(Path(text).expanduser())
 
-        screen = ReasonScreen(question, "folder", str(default), f"Enter: {doing}    Esc: cancel")
-        self.app.push_screen(screen, answered)  # type: ignore[attr-defined]
+        self.app.push_screen(ReasonScreen(question, "folder", str(default)), answered)  # type: ignore[attr-defined]
 
     def action_export_data(self) -> None:
         """e: trials, NASA-TLX and the codebook, as `study export --out FOLDER` writes them."""
@@ -49,7 +48,6 @@ class OpsMixin(SafeWorkers):
             "Export the trials, NASA-TLX and codebook (CSV) to the folder:",
             export_folder(settings.exports_dir),
             self._start_export,
-            "export there",
         )
 
     def _start_export(self, folder: Path) -> None:
@@ -78,7 +76,6 @@ class OpsMixin(SafeWorkers):
             "End of day: check the database, then copy it (one SQLite file) to the folder:",
             settings.backups_dir,
             self._start_backup,
-            "check and back up there",
         )
 
     def _start_backup(self, folder: Path) -> None:

@@ -21,16 +21,8 @@ __all__ = ["OverviewPane"]
 
 
 def _bar(done: int, total: int, width: int = 20) -> str:
-    """`width` cells, filled in proportion to done of total (never more than `width`)."""
-    filled = min(width, round(width * done / total)) if total else 0
+    filled = round(width * done / total) if total else 0
     return "█" * filled + "░" * (width - filled)
-
-
-def fill_text(enrolled: int, target: int) -> str:
-    """A group's fill: its bar, and past the target how far ("4 of 3 (over target)")."""
-    if enrolled > target:
-        return f"{_bar(enrolled, target, 16)} {enrolled} of {target} (over target)"
-    return _bar(enrolled, target, 16)
 
 
 class OverviewPane(OpsMixin, Vertical, can_focus=True):
@@ -77,7 +69,7 @@ class OverviewPane(OpsMixin, Vertical, can_focus=True):
                 group,
                 str(fill["enrolled"]),
                 str(fill["target"]),
-                fill_text(fill["enrolled"], fill["target"]),
+                _bar(fill["enrolled"], fill["target"], 16),
                 key=group,
             )
         planned = sum(r["trials_planned"] for r in roster.participants)

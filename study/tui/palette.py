@@ -45,7 +45,7 @@ def study_commands(app: StudyApp) -> list[Command]:
         out.append(
             (
                 f"Enrol a participant in {group}",
-                f"{fill['enrolled']} of {fill['target']} enrolled (F2, ctrl+a)",
+                f"{fill['enrolled']} of {fill['target']} enrolled (F2, a)",
                 partial(enrol, app, group),
             )
         )
@@ -114,7 +114,7 @@ async def _run_key(app: StudyApp, tab: str, action: str) -> None:
 
 
 def enrol(app: StudyApp, group: str) -> None:
-    """Enrol one more participant in `group`, as F2 then ctrl+a does (asked past its target)."""
+    """Enrol one more participant in `group`, as F2 then `a` does (asked past its target)."""
     from textual.widgets import Select
 
     app.action_tab("participants")

@@ -3,12 +3,6 @@
 Enrolment is `study.protocol.roster.add_participant` in a worker (it takes the write
 lock, which another lab machine may hold for a moment); the new code comes back as a
 message and the app reloads the roster.
-
-Typing searches: a letter typed with the list focused goes into the Find field (the
-focus moves there, so the rest of the word follows it), and Enter
-there comes back to the list. So the actions that change a participant are on ctrl
-keys (ctrl+a enrol, ctrl+w withdraw, ctrl+n note, ctrl+o session note), which no
-word typed can press, and each asks before it acts.
 """
 
 from __future__ import annotations
@@ -16,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from textual import events, on, work
+from textual import on, work
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
@@ -27,12 +21,6 @@ from study.tui.db_errors import SafeWorkers
 from study.tui.services import Roster, StudyServices
 
 __all__ = ["ParticipantsPane"]
-
-
-def _of(fill: dict[str, int]) -> str:
-    """'3 of 3', or '4 of 3 (over target)'."""
-    over = " (over target)" if fill["enrolled"] > fill["target"] else ""
-    return f"{fill['enrolled']} of {fill['target']}{over}"
 
 
 class ParticipantsPane(SafeWorkers, Vertical):
@@ -50,10 +38,10 @@ class ParticipantsPane(SafeWorkers, Vertical):
     ParticipantsPane #detail { height: auto; max-height: 4; color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("ctrl+a", "add", "Enrol"),
-        Binding("ctrl+w", "withdraw", "Withdraw"),
-        Binding("ctrl+n", "note", "Note"),
-        Binding("ctrl+o", "session_note", "Session note"),
+        Binding("a", "add", "Enrol"),
+        Binding("w", "withdraw", "Withdraw"),
+        Binding("n", "note", "Note"),
+        Binding("o", "session_note", "Session note"),
     ]
 
     @dataclass
@@ -89,7 +77,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         with Horizontal(id="add-row"):
             yield Label("Group")
             yield Select[str]([], id="group", compact=True, prompt="group")
-            yield Button("Add (^a)", id="add", compact=True)
+            yield Button("Add (a)", id="add", compact=True)
             yield Label("", id="add-status")
         with Horizontal(id="filter-row"):
             yield Label("Find ")
@@ -97,7 +85,6 @@ class ParticipantsPane(SafeWorkers, Vertical):
                 id="filter",
                 placeholder="code, group or state (e.g. P01, expert, withdrawn, done)",
                 compact=True,
-                select_on_focus=False,  # a letter typed on the list is not replaced
             )
         table = DataTable(id="people", cursor_type="row", zebra_stripes=True)
         table.add_columns("code", "group", "order", "progress", "next")
@@ -105,25 +92,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         yield Static("", id="detail")
 
     def focus_first(self) -> None:
-        """F2: the list, so that the arrows and Enter act at once (a letter typed goes
-        into the Find field)."""
-        self.query_one("#people", DataTable).focus()
-
-    def on_key(self, event: events.Key) -> None:
-        """A letter typed on the list searches: the Find field takes it (and the focus,
-        so the rest of the word follows); no letter acts on a participant."""
-        table = self.query_one("#people", DataTable)
-        if self.app.focused is table and event.character and event.character.isalpha():
-            event.stop()
-            event.prevent_default()
-            field = self.query_one("#filter", Input)
-            field.focus()
-            field.insert_text_at_cursor(event.character)
-
-    @on(Input.Submitted, "#filter")
-    def _filter_done(self, event: Input.Submitted) -> None:
-        """Enter in the Find field: back to the (filtered) list."""
-        event.stop()
+        """F2: the list, so that its keys (a, w, n, o) and the arrows act at once."""
         self.query_one("#people", DataTable).focus()
 
     def show(self, roster: Roster) -> None:
@@ -221,23 +190,10 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.action_add()
 
     def action_add(self) -> None:
-        """Enrol one more of the chosen group; past its target (counted on the database
-        as it is now, enrolments elsewhere included) asked first."""
         group = self.query_one("#group", Select).value
         if group is Select.NULL:
             return
-        self._status(f"checking the {group} group...")
-        self._fresh_fill(str(group))
-
-    @work(thread=True, exclusive=True, group="enrol-check", exit_on_error=False)
-    def _fresh_fill(self, group: str) -> None:
-        roster = self.services.roster()
-        self.app.call_from_thread(self._add_on, group, roster)
-
-    def _add_on(self, group: str, roster: Roster) -> None:
-        self.app.post_message(self.app.RosterLoaded(roster))  # type: ignore[attr-defined]
-        self.show(roster)
-        fill = roster.groups.get(group)
+        fill = self._fill.get(str(group))
         if fill is not None and fill["enrolled"] >= fill["target"]:
             from study.tui.confirm import Confirm
 
@@ -249,7 +205,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
 
             self.app.push_screen(
                 Confirm(
-                    f"The {group} group has {_of(fill)} participants. "
+                    f"The {group} group has its {fill['target']} participants. "
                     f"Enrol one more {group} all the same?"
                 ),
                 answered,
@@ -361,11 +317,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.post_message(self.Added(code, group))
 
     def worker_failed(self, group: str, line: str) -> None:
-        failed = {
-            "enrol": "not enrolled",
-            "enrol-check": "not enrolled",
-            "withdraw": "not withdrawn",
-        }
+        failed = {"enrol": "not enrolled", "withdraw": "not withdrawn"}
         if group == "note":  # the dialog comes back with what was typed
             line = f"note not kept: {line}; it is open again as typed (Esc: keep it for later)"
             code, session = self._note_sent

@@ -25,7 +25,6 @@ if TYPE_CHECKING:
 
 __all__ = ["ParticipantPicker", "ParticipantSelect", "picker_rows"]
 
-KEYS = "type to search  Up/Down: move  Enter: pick  Esc: cancel"
 KEEP = "-keep-"
 """The row key of the picker's first row, which leaves the choice as it is."""
 
@@ -73,7 +72,7 @@ class ParticipantPicker(ModalScreen[str | None]):
             table = DataTable(id="picker-table", cursor_type="row", zebra_stripes=True)
             table.add_columns("code", "group", "done", "next trial")
             yield table
-            yield Label(KEYS, id="picker-keys")
+            yield Label("type to search  Up/Down: move  Enter: pick  Esc: cancel", id="picker-keys")
 
     def on_mount(self) -> None:
         self._fill("")
@@ -103,11 +102,6 @@ class ParticipantPicker(ModalScreen[str | None]):
             table.add_row(*row, key=row[0])
         if table.row_count:
             table.move_cursor(row=0)
-        keys = KEYS
-        if not table.row_count:  # not an empty list with no word
-            known = f" (codes {self.rows[0][0]}...{self.rows[-1][0]})" if self.rows else ""
-            keys = f"no participant {text.strip()[:40]}{known}  Esc: cancel"
-        self.query_one("#picker-keys", Label).update(keys)
 
     @on(Input.Changed, "#picker-search")
     def _searched(self, event: Input.Changed) -> None:

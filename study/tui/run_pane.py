@@ -7,9 +7,9 @@ trial does. Drivers: the participant's simulated person (paced at 1x, 4x or as f
 it goes) or the keyboard, paced at real time: up/down aim the dial forward/back (the
 hand holds it there; in HV the felt torque deflects the dial from the aim, which slows
 the guidewire), left/right turn the rotation joystick, space lets go of the dial, `e`
-ends the trial (`KeyboardDriver.press`). `x` holds the trial at once and asks why it stops
-(`study.tui.stop_dialog`): with a reason its samples stay, it is marked interrupted (the
-reason audited) and repeated as a new attempt; Esc lets it go on.
+ends the trial (`KeyboardDriver.press`). `x` stops a trial in the middle, with a reason: its
+samples stay, it is marked interrupted (the reason audited), and it is repeated as a new
+attempt.
 
 After a block the design's break is counted down on the status line; its clock stands
 while the NASA-TLX screen is open on the participant's questionnaire still to fill in
@@ -125,8 +125,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._redraws: deque[float] = deque(maxlen=50)
         self._next: NextTrial | None = None
         self._checked: set[str] = set()
-        """Participants whose session checklist was confirmed in this app (the roster's
-        `checked` holds those recorded before)."""
+        """Participants whose session checklist was confirmed in this app."""
         self._breaks: dict[str, float] = {}
         """Participant -> time.monotonic() when their last finished block ended."""
         self._paused_s: dict[str, float] = {}
@@ -339,26 +338,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         )
 
     def action_start(self) -> None:
-        """`s`: the participant's next trial, decided on the database as it is now (a
-        session run meanwhile from the command line or another machine counts)."""
-        code = self.code
-        if self.run is not None or code is None:
-            return
-        self._fresh_start(code)
-
-    @work(thread=True, exclusive=True, group="fresh-start", exit_on_error=False)
-    def _fresh_start(self, code: str) -> None:
-        roster = self.services.roster()
-        self.app.call_from_thread(self._start_on, code, roster)
-
-    def _start_on(self, code: str, roster: Roster) -> None:
-        self.app.post_message(self.app.RosterLoaded(roster))  # type: ignore[attr-defined]
-        self.show(roster)
-        nxt = self._next
-        if self.run is not None or code != self.code:
-            return
-        if nxt is None:
-            self.app.notify(f"{code}: nothing left to run", severity="warning")
+        code, nxt = self.code, self._next
+        if self.run is not None or code is None or nxt is None:
             return
         due = self._tlx_due(code)
         if due:  # the session flow: a finished block's questionnaire before the next block
@@ -389,13 +370,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 answered,
             )
             return
-        if code not in self._checked and code not in roster.checked:  # once per participant
+        if code not in self._checked:  # the session checklist, once per participant
             from study.tui.confirm import Confirm
 
             def confirmed(yes: bool | None) -> None:
-                if not yes:
-                    self.app.notify(f"{code}'s trial not started: the checklist comes first")
-                elif self._next == nxt and self.run is None:
+                if yes and self._next == nxt and self.run is None:
                     self._checked.add(code)
                     self._start(code, nxt, checklist=True)
 
@@ -473,37 +452,25 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._run_trial(self.run, (code, nxt.task, nxt.condition), checklist)
 
     def action_stop(self) -> None:
-        """Hold the running trial at once and ask why it stops (`study.tui.stop_dialog`):
-        a reason stops it (kept as interrupted, the reason in its audit row), Esc lets
-        it go on where it stood."""
-        run = self.run
-        if run is None:
+        """Stop the running trial, once the operator gives a reason (it is kept as
+        interrupted, the reason in its audit row); Esc leaves it running."""
+        if self.run is None:
             return
-        from study.tui.stop_dialog import StopTrial
+        run = self.run
 
-        run.hold()
-        self.status = "held"
-        dialog = StopTrial(run.code)
-
-        def answered(answer: tuple[str, str] | None) -> None:
-            if answer is None:
-                if self.run is run:
-                    run.resume()
-                    self.status = "running"
-            elif answer[0] == "stop" and self.run is run:
+        def answered(reason: str | None) -> None:
+            if reason and self.run is run:
                 self.status = "stopping"
-                run.stop(answer[1])
-            elif answer[0] == "invalidate" and dialog.trial_id is not None:
-                self._invalidate(dialog.trial_id, answer[1])
+                run.stop(reason)
 
-        self.app.push_screen(dialog, answered)
+        from study.tui.confirm import ReasonScreen
 
-    @work(thread=True, group="invalidate", exit_on_error=False)
-    def _invalidate(self, trial_id: int, reason: str) -> None:
-        """The trial that ended before it could be stopped, marked invalid instead."""
-        what = self.services.mark_trial(trial_id, False, reason)
-        self.app.call_from_thread(
-            self.app.notify, f"trial {trial_id} ({what}) marked invalid ({reason})"
+        self.app.push_screen(
+            ReasonScreen(
+                f"Stop {run.code}'s running trial? It is kept as interrupted and repeated "
+                "later. Why (Esc: keep it running)?"
+            ),
+            answered,
         )
 
     # -- the workers ----------------------------------------------------------------------
@@ -589,11 +556,6 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         outcome, run = event.outcome, self.run
         self.run = None
         self.refresh_bindings()
-        from study.tui.stop_dialog import StopTrial
-
-        for screen in self.app.screen_stack:  # a stop asked too late: the dialog says so
-            if isinstance(screen, StopTrial) and run is not None and screen.code == run.code:
-                screen.trial_ended(outcome, self._practice)
         if outcome.trial_ids:  # the break starts if this trial finished its block
             self._ended_at = (event.block, time.monotonic())
         if outcome.trial_ids:

@@ -66,8 +66,6 @@ class Roster:
     tlx_first: bool = True
     """The design's `tlx_before_next_block`: a finished block's questionnaire is due
     before the next block starts."""
-    checked: set[str] = field(default_factory=set)
-    """Codes of the participants whose session checklist is recorded (asked once)."""
 
     def withdrawn(self, code: str) -> str | None:
         """The withdrawal reason of `code`, or None while they are in the study."""
@@ -166,7 +164,6 @@ class StudyServices:
 
     def roster(self) -> Roster:
         from study.protocol.tlx import answered_blocks
-        from study.protocol.withdrawal import checklist_confirmed
 
         with Session(self.engine) as session:
             study, design = load_study(session)
@@ -180,7 +177,6 @@ class StudyServices:
             answered=answered_blocks(self.engine),
             break_s=design.break_s,
             tlx_first=design.tlx_before_next_block,
-            checked=checklist_confirmed(self.engine),
         )
 
     def record_checklist(self, code: str) -> None:

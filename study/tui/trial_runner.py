@@ -6,14 +6,10 @@ This module adds what a terminal needs around it:
 
 - `LiveState`: the newest samples, written by the worker (`on_samples`) and read by the
   live view's timer; a lock guards the hand-over, so the UI never waits on the trial.
-- holding: `TrialRun.hold()` holds the trial at its next step (`TrialHold`: the samples
-  so far committed, the trial's clock standing, so the held time is not trial time),
-  while the operator is asked why it stops; `resume()` lets it go on.
-- stopping: `TrialRun.stop()` sets an event (and lets a held trial go on to see it);
-  the trial's next step (or the next batch of samples, 50 ms of trial time when paced)
-  raises `TrialStopped` inside the runner, the sample writer commits what it holds, and
-  the trial is marked `interrupted` with `recover_interrupted` (an audit entry says
-  why). Closing the app mid-trial goes the same way.
+- stopping: `TrialRun.stop()` sets an event; the next batch of samples (50 ms of trial
+  time when paced) raises `TrialStopped` inside the runner, the sample writer commits
+  what it holds, and the trial is marked `interrupted` with `recover_interrupted` (an
+  audit entry says why). Closing the app mid-trial goes the same way.
 - `TuiKeyboardDriver`: `teleop_core`'s `KeyboardDriver`, ending the trial when the tip
   reaches the target (a person at the keys sees it on the screen). It drives NOTES
   blocks too: the NOTES loop reads the same `Driver` (the dial's aim sets the scope's
@@ -259,36 +255,16 @@ class TrialRun:
         self.finished = threading.Event()
         self.participant_id: int | None = None
         self.probe_line: str | None = None
-        """What the probe step did before the trial (`study.tui.probe_step`), if anything."""
         self.stop_reason = STOPPED_REASON
         """Why the trial was stopped, for the audit log (`stop`)."""
-        from study.protocol.session import TrialHold  # the runner's imports, when run
-
-        self.holder = TrialHold(self._resumed)
-
-    def hold(self) -> None:
-        """Hold the trial at its next step (while the operator is asked), until `resume`
-        or `stop`."""
-        self.holder.hold()
-
-    def resume(self) -> None:
-        self.holder.resume()
-
-    @property
-    def held(self) -> bool:
-        return self.holder.held
+        """What the probe step did before the trial (`study.tui.probe_step`), if anything."""
 
     def stop(self, reason: str | None = None) -> None:
-        """Ask the trial to stop at its next step; `reason` (the operator's) goes into
-        the audit row that marks it interrupted."""
+        """Ask the trial to stop at its next batch of samples; `reason` (the operator's)
+        goes into the audit row that marks it interrupted."""
         if reason:
             self.stop_reason = f"{STOPPED_REASON}: {reason}"
         self._stop.set()
-        self.holder.resume()
-
-    def _resumed(self) -> None:
-        if self._stop.is_set():
-            raise TrialStopped
 
     def _on_samples(self, samples: np.ndarray) -> None:
         self.live.push(samples)
@@ -331,7 +307,6 @@ class TrialRun:
                 on_samples=self._on_samples,
                 on_storage_wait=self._on_storage_wait,
                 observer=self.observer,
-                hold=self.holder,
             )
             return TrialOutcome(self.code, ids, 0, time.monotonic() - start)
         except TrialStopped:

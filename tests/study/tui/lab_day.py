@@ -250,7 +250,7 @@ class LabDay:
         # right after start the first `a` is now and then ignored (not diagnosed; a
         # second press enrols): pressed again only while the list shows no `code`
         for _ in range(3):
-            term.keys("C-a")
+            term.keys("a")
             try:
                 term.wait(rf"enrolled {code} \({group}\)", 5)
                 break
@@ -277,7 +277,7 @@ class LabDay:
             term.wait_until(lambda u=under: _under_cursor(term.screen()) != u, "the cursor")
         else:
             raise Timeout(f"the list's cursor never reached {code}")
-        term.keys("C-n")
+        term.keys("n")
         term.wait(r"contact details", 10)
         term.text(text)
         term.keys("Enter")

@@ -73,10 +73,10 @@ class App:
         self.child.expect("next trial: P001")
 
     def enrol(self) -> None:
-        """The participants screen (F2) and its add key (ctrl+a)."""
+        """The participants screen (F2) and its add key."""
         self.child.send(F2)
         self.child.expect("Enrol")  # its footer
-        self.child.send("\x01")  # ctrl+a
+        self.child.send("a")
 
     def refused(self, *cause: str) -> None:
         """The enrolment fails with a status line and a notification naming `cause`
