@@ -5,9 +5,8 @@ project: IEEE single (3.5 in) and double (7.16 in) column widths, every text at 
 (IEEE's minimum at column width; `figcheck` verifies it on the drawn figure), Type 42
 (TrueType) fonts in PDF so text stays text, colour-blind-safe colours (Okabe & Ito
 2008). Helpers every figure uses: `label_source` (the simulated-data note),
-`figure_legend` (the legend under the panels), `figure_key` (the same with a caption
-as its title, for figures drawn outside the paper set), `jitter` (seeded, so a figure
-is the same on every run) and `save`. The paper's figures (`paper.write_figures`) carry
+`figure_legend` (the legend under the panels), `jitter` (seeded, so a figure is the
+same on every run) and `save`. The paper's figures (`paper.write_figures`) carry
 no caption inside: each has its caption text (`fig12_caption`, ...) and
 `paper.write_figures` writes them to `captions.md` beside the figures, where a paper
 takes them from; the figure keeps its panels legible at column width.
@@ -123,22 +122,6 @@ def figure_legend(fig: plt.Figure, handles: Sequence[Artist], ncols: int) -> plt
         handles=list(handles),
         loc="outside lower center",
         ncols=ncols,
-        handlelength=1.5,
-        columnspacing=1.0,
-    )
-    return fig
-
-
-def figure_key(fig: plt.Figure, handles: Sequence[Artist], caption: str, ncols: int) -> plt.Figure:
-    """The figure's legend under the panels, with `caption` (what the marks and bands
-    are, the assumptions) as its title, wrapped to fit: for figures that travel without
-    a captions file (`study power`)."""
-    fig.legend(
-        handles=list(handles),
-        loc="outside lower center",
-        ncols=ncols,
-        title=wrap(caption, fig.get_figwidth()),
-        title_fontsize=FONT_PT,
         handlelength=1.5,
         columnspacing=1.0,
     )

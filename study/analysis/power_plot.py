@@ -7,9 +7,10 @@ test against the total N, labelled as what it is: power when the simulated effec
 differ, a type I error rate (with alpha drawn) when they are equal.
 
 Each estimate is a share of `n_sim` simulated studies, drawn with its 95 % Monte-Carlo
-interval (Wilson score, statsmodels' `proportion_confint`), and the key under the
-panels states what was assumed: the effects, the VO-HV correlation, alpha and the
-number of simulated studies per size.
+interval (Wilson score, statsmodels' `proportion_confint`). The figure holds no
+caption: `power_caption` states what was assumed (the effects, the VO-HV correlation,
+alpha, the correction and the number of simulated studies per size), and `study power`
+writes it to `captions.md` beside the figure, as the paper figures' captions are.
 """
 
 from __future__ import annotations
@@ -20,7 +21,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from study.analysis.figures import STYLE, WIDTHS_IN, figure_key, wrap
+from study.analysis.apa import ALPHA_SIGN, alpha_text
+from study.analysis.figures import STYLE, WIDTHS_IN
 from study.analysis.power import PowerResult
 from study.analysis.stats import ALPHA
 
@@ -38,17 +40,18 @@ def monte_carlo_band(rates: list[float], n_sim: int) -> tuple[np.ndarray, np.nda
     return np.asarray(low), np.asarray(high)
 
 
-def assumptions(
+def power_caption(
     effects: dict[str, float], rho: float, n_sim: int, measure: str | None = None
 ) -> str:
-    """What the simulation assumed, as the figure states it."""
+    """The figure's caption, for `captions.md`: what the simulation assumed and what the
+    marks and bands are."""
     shown = ", ".join(f"{g} {d:g}" for g, d in effects.items())
     return (
-        f"Simulated studies of {measure or 'a standardised measure'}. Assumed HV-VO "
-        f"effects in per-condition SDs: {shown}; VO-HV correlation {rho:g}; alpha "
-        f"{ALPHA:g}, group power with Holm's correction across the groups; {n_sim} "
-        "simulated studies per size. Bands: 95 % Monte-Carlo intervals (Wilson). "
-        "Dotted: power 0.8."
+        f"Power of simulated studies of {measure or 'a standardised measure'}. Assumed "
+        f"HV - VO effects, in standard deviations of one condition: {shown}. VO-HV "
+        f"correlation {rho:g}. {ALPHA_SIGN} = {alpha_text(ALPHA)}; each group's power "
+        f"with Holm's correction across the groups. {n_sim} simulated studies per size. "
+        "Bands: 95 % Monte-Carlo intervals (Wilson). Dotted: power 0.8."
     )
 
 
@@ -56,25 +59,20 @@ def plot_power_curve(
     curve: list[tuple[float, PowerResult]],
     width: str = "single",
     *,
-    effects: dict[str, float],
-    rho: float,
     n_sim: int,
-    measure: str | None = None,
 ) -> plt.Figure:
     """Per-group power against the group's n; the interaction against total N; each with
-    its Monte-Carlo interval, and the assumptions in the key."""
+    its Monte-Carlo interval (the assumptions go to the caption, `power_caption`)."""
     first = curve[0][1]
     has_interaction = first.interaction is not None
     with plt.rc_context(STYLE):
         ncols = 2 if has_interaction else 1
         rows = 2 if (width == "single" and has_interaction) else 1
         cols = 1 if rows == 2 else ncols
-        note = assumptions(effects, rho, n_sim, measure)
-        key_in = 0.14 * len(wrap(note, WIDTHS_IN[width]).splitlines()) + 0.1  # 8 pt lines
         fig, axes = plt.subplots(
             rows,
             cols,
-            figsize=(WIDTHS_IN[width], 2.2 * rows + 0.2 + key_in),
+            figsize=(WIDTHS_IN[width], 2.2 * rows + 0.2),
             layout="constrained",
             squeeze=False,
         )
@@ -111,10 +109,9 @@ def plot_power_curve(
                 ax.set_ylim(0, 1.02)
             else:
                 ax.plot(totals, rates, "s--", ms=3.5, color="black", label="rejection rate")
-                ax.axhline(ALPHA, color="#999999", lw=0.6, ls=":", label=f"alpha = {ALPHA:g}")
+                ax.axhline(ALPHA, color="#999999", lw=0.6, ls=":", label=f"{ALPHA_SIGN} = {alpha_text(ALPHA)}")
                 ax.set_ylabel("type I error rate,\ngroup x condition (equal effects)")
                 ax.set_ylim(0, max(0.2, *rates) * 1.1)
                 ax.legend(loc="upper right")
             ax.set_xlabel("participants in all groups")
-        figure_key(fig, [], note, ncols=1)
     return fig

@@ -188,7 +188,8 @@ def power(
         click.echo(f"group x condition interaction: {what} {at_design.interaction:.3f}")
     if out_dir is not None:
         from study.analysis.figures import save
-        from study.analysis.power_plot import plot_power_curve
+        from study.analysis.paper import CAPTIONS
+        from study.analysis.power_plot import plot_power_curve, power_caption
 
         out_dir.mkdir(parents=True, exist_ok=True)
         report = {
@@ -223,6 +224,11 @@ def power(
             ],
         }
         (out_dir / "power.json").write_text(json.dumps(report, indent=2) + "\n")
-        fig = plot_power_curve(curve, effects=effects, rho=rho, n_sim=n_sim, measure=named)
-        for path in save(fig, out_dir, "power_curve", ("pdf", "png")):
+        fig = plot_power_curve(curve, n_sim=n_sim)
+        paths = save(fig, out_dir, "power_curve", ("pdf", "png"))
+        captions = out_dir / CAPTIONS
+        caption = power_caption(effects, rho, n_sim, named)
+        names = ", ".join(path.name for path in paths)
+        captions.write_text(f"# Figure captions\n\n## {names}\n\n{caption}\n", encoding="utf-8")
+        for path in [*paths, captions]:
             click.echo(str(path))

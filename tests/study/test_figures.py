@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import matplotlib.pyplot as plt
+import matplotlib.text
 import numpy as np
 import pandas as pd
 import pytest
@@ -27,7 +28,7 @@ from study.analysis.figcheck import FigureCheckError, check_figure, require_legi
 from study.analysis.frames import participant_means, tlx_frame, trial_frame
 from study.analysis.paper import draw_figures
 from study.analysis.power import power_curve
-from study.analysis.power_plot import plot_power_curve
+from study.analysis.power_plot import plot_power_curve, power_caption
 from study.analysis.stats import analyze
 from study.analysis.tlx_figure import cousineau_morey
 from study.cli import main
@@ -297,9 +298,8 @@ def test_fig9_draws_every_stored_sample_of_the_two_trials(engine: Engine) -> Non
 def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> None:
     sizes = {"outsider": 20, "novice": 8, "expert": 8}
     equal = power_curve(sizes, dict.fromkeys(sizes, 0.8), 0.5, 20, 0, scales=(0.5, 1.0))
-    assumed = {"effects": dict.fromkeys(sizes, 0.8), "rho": 0.5, "n_sim": 20}
     for width in ("single", "double"):
-        fig = plot_power_curve(equal, width, **assumed)
+        fig = plot_power_curve(equal, width, n_sim=20)
         assert check_figure(fig) == []
         ax_groups, ax_inter = fig.axes
         lines = {
@@ -317,19 +317,25 @@ def test_power_curve_per_group_n_and_the_interaction_named(tmp_path: Path) -> No
         sizes, {"outsider": 0.2, "novice": 0.8, "expert": 1.2}, 0.5, 20, 0, scales=(1.0,)
     )
     effects = {"outsider": 0.2, "novice": 0.8, "expert": 1.2}
-    fig = plot_power_curve(unequal, "single", effects=effects, rho=0.5, n_sim=20)
+    fig = plot_power_curve(unequal, "single", n_sim=20)
     assert "power" in fig.axes[1].get_ylabel()
     assert "type I" not in fig.axes[1].get_ylabel()
-    # the assumptions stated in the figure
-    key = fig.legends[0].get_title().get_text().replace("\n", " ")
+    # no caption inside the figure: every text on it is a label, a tick or a legend entry
+    texts = [t.get_text() for t in fig.findobj(matplotlib.text.Text) if t.get_text()]
+    assert not [t for t in texts if len(t) > 60], texts
+    # the assumptions stated in the caption, APA's way
+    caption = power_caption(effects, 0.5, 20, "completion time")
     for phrase in (
+        "completion time",
         "outsider 0.2, novice 0.8, expert 1.2",
+        "standard deviations of one condition",
         "correlation 0.5",
-        "alpha 0.05",
+        "\N{GREEK SMALL LETTER ALPHA} = .05",
+        "Holm",
         "20 simulated studies per size",
         "Monte-Carlo",
     ):
-        assert phrase in key, key
+        assert phrase in caption, caption
     # each estimate's 95 % Monte-Carlo (Wilson) band, drawn around it: novice's power p of
     # 20 studies, by hand: (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)
     novice = unequal[0][1].groups["novice"]

@@ -71,6 +71,10 @@ def test_power_command_writes_json_and_curve(
     assert 0 <= report["interaction"] <= 1
     assert [c["scale"] for c in report["curve"]] == [0.5, 0.75, 1.0, 1.5, 2.0, 3.0]
     assert (tmp_path / "p" / "power_curve.png").stat().st_size > 10_000
+    # the caption beside the figure, naming the files it belongs to and the correction
+    caption = (tmp_path / "p" / "captions.md").read_text()
+    assert "## power_curve.pdf, power_curve.png" in caption
+    assert "Holm's correction" in caption and "\N{GREEK SMALL LETTER ALPHA} = .05" in caption
     capsys.readouterr()
     assert main(["power", "--design", str(design), "--effect", "novice=0.8"]) == 2
     assert "lacks expert" in capsys.readouterr().err
