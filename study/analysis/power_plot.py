@@ -109,7 +109,13 @@ def plot_power_curve(
                 ax.set_ylim(0, 1.02)
             else:
                 ax.plot(totals, rates, "s--", ms=3.5, color="black", label="rejection rate")
-                ax.axhline(ALPHA, color="#999999", lw=0.6, ls=":", label=f"{ALPHA_SIGN} = {alpha_text(ALPHA)}")
+                ax.axhline(
+                    ALPHA,
+                    color="#999999",
+                    lw=0.6,
+                    ls=":",
+                    label=f"{ALPHA_SIGN} = {alpha_text(ALPHA)}",
+                )
                 ax.set_ylabel("type I error rate,\ngroup x condition (equal effects)")
                 ax.set_ylim(0, max(0.2, *rates) * 1.1)
                 ax.legend(loc="upper right")

@@ -74,7 +74,8 @@ def test_power_command_writes_json_and_curve(
     # the caption beside the figure, naming the files it belongs to and the correction
     caption = (tmp_path / "p" / "captions.md").read_text()
     assert "## power_curve.pdf, power_curve.png" in caption
-    assert "Holm's correction" in caption and "\N{GREEK SMALL LETTER ALPHA} = .05" in caption
+    assert "Holm's correction" in caption
+    assert "\N{GREEK SMALL LETTER ALPHA} = .05" in caption
     capsys.readouterr()
     assert main(["power", "--design", str(design), "--effect", "novice=0.8"]) == 2
     assert "lacks expert" in capsys.readouterr().err
