@@ -1,0 +1,137 @@
+"""How often the crossover's checks (`study.analysis.crossover.design_checks`, the
+`design_checks` of `analysis.json`) add a term to a study that has none, and how often
+they find a planted period effect and carry-over: SIMULATED studies, drawn here.
+
+Each scenario is an AB/BA crossover of one task (LCCA: completion time and the two peak
+forces), condition orders alternating within each group, drawn with numpy:
+
+- `normal`: 20/8/8, three trials a block, completion time = 30 s + group + HV (-2 s) +
+  participant (sd 3 s) + noise (sd 3 s); forces normal around their means;
+- `lognormal`: 11/5/3, two trials a block, every measure log-normal (a participant's
+  log factor sd 0.25, a trial's 0.2), as completion times and peak forces are;
+- `one_trial`: 20/8/8, one trial a block (no trial position to test), normal.
+
+Without planted effects, the share of studies with any term added is the checks'
+family-wise error rate (Holm over every check of the study, target at most 5 %). With
+`--period 0.1 --carry-over 0.2` (shares of the mean completion time, planted in the
+completion time only), the share where both are added is the checks' power.
+
+    python benchmarks/crossover_checks.py OUT.json [--seeds 200]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from study.analysis.crossover import design_checks
+
+MEAN_S = 30.0
+SHIFT_S = {"outsider": 4.0, "novice": 0.0, "expert": -4.0}
+SCENARIOS: dict[str, dict[str, Any]] = {
+    "normal": {"groups": {"outsider": 20, "novice": 8, "expert": 8}, "trials": 3, "log": False},
+    "lognormal": {"groups": {"outsider": 11, "novice": 5, "expert": 3}, "trials": 2, "log": True},
+    "one_trial": {"groups": {"outsider": 20, "novice": 8, "expert": 8}, "trials": 1, "log": False},
+}
+
+
+def draw(scenario: dict[str, Any], seed: int, period: float, carry_over: float) -> list[dict]:
+    """One study's trials, tidy (one row per trial)."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    number = 0
+    for group, n in scenario["groups"].items():
+        for i in range(n):
+            number += 1
+            order = ("VO", "HV") if i % 2 == 0 else ("HV", "VO")
+            person = rng.normal(0.0, 0.25 if scenario["log"] else 3.0)
+            for block, condition in enumerate(order, start=1):
+                for trial in range(1, scenario["trials"] + 1):
+                    base = MEAN_S + SHIFT_S[group] - (2.0 if condition == "HV" else 0.0)
+                    if scenario["log"]:
+                        time_s = base * np.exp(person + rng.normal(0.0, 0.2))
+                        proximal = 0.8 * np.exp(person + rng.normal(0.0, 0.2))
+                        distal = 0.3 * np.exp(person + rng.normal(0.0, 0.2))
+                    else:
+                        time_s = base + person + rng.normal(0.0, 3.0)
+                        proximal = abs(rng.normal(0.8, 0.2))
+                        distal = abs(rng.normal(0.3, 0.1))
+                    time_s += period * MEAN_S if block == 2 else 0.0
+                    time_s += carry_over * MEAN_S if (block, condition) == (2, "VO") else 0.0
+                    rows.append(
+                        {
+                            "participant": f"P{number:03d}",
+                            "group": group,
+                            "task": "lcca",
+                            "condition": condition,
+                            "block": block,
+                            "trial": trial,
+                            "completion_time_s": float(time_s),
+                            "peak_proximal_force_n": float(proximal),
+                            "peak_distal_force_n": float(distal),
+                        }
+                    )
+    return rows
+
+
+def run(name: str, seeds: int, period: float, carry_over: float, start: float) -> dict:
+    """The share of `seeds` studies with any term added, and with period and carry-over
+    both added to the completion time."""
+    any_added = both_added = 0
+    checks = 0
+    for seed in range(seeds):
+        result = design_checks(draw(SCENARIOS[name], seed, period, carry_over))
+        checks = len(result.checks)
+        added = {(c["measure"], c["effect"]) for c in result.checks if c["added"]}
+        any_added += bool(added)
+        both_added += {("completion_time_s", "period"), ("completion_time_s", "carry_over")} <= (
+            added
+        )
+        if (seed + 1) % 25 == 0:
+            print(
+                f"crossover_checks: {name} period {period:g} carry-over {carry_over:g}: "
+                f"{seed + 1}/{seeds} studies; {time.monotonic() - start:.0f} s elapsed",
+                flush=True,
+            )
+    return {
+        "scenario": name,
+        "planted": {"period": period, "carry_over": carry_over},
+        "checks_per_study": checks,
+        "studies": seeds,
+        "share_any_added": any_added / seeds,
+        "share_period_and_carry_over_added": both_added / seeds,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--seeds", type=int, default=200)
+    args = parser.parse_args()
+    start = time.monotonic()
+    null = [run(name, args.seeds, 0.0, 0.0, start) for name in SCENARIOS]
+    planted = [run(name, args.seeds // 2, 0.1, 0.2, start) for name in SCENARIOS]
+    report = {
+        "data": "SIMULATED studies drawn by benchmarks/crossover_checks.py",
+        "alpha": 0.05,
+        "without_effects": {r["scenario"]: r for r in null},
+        "planted": {r["scenario"]: r for r in planted},
+        "worst_share_any_added_without_effects": max(r["share_any_added"] for r in null),
+        "took_s": time.monotonic() - start,
+    }
+    args.out.write_text(json.dumps(report, indent=2) + "\n")
+    for r in [*null, *planted]:
+        print(
+            f"{r['scenario']:<10} planted {r['planted']}: any added {r['share_any_added']:.3f}, "
+            f"period and carry-over added {r['share_period_and_carry_over_added']:.3f} "
+            f"({r['studies']} studies)"
+        )
+
+
+if __name__ == "__main__":
+    main()
