@@ -7,6 +7,8 @@
 #   anova.csv        the mixed ANOVA on participant means (afex, Type II as study's default)
 #   lmm.csv          the mixed model over all trials (lmerTest, Satterthwaite df)
 #   emmeans.csv      the condition's marginal means over the groups and HV - VO (emmeans)
+#   design_checks.csv  the crossover's period, carry-over and trial position (lmerTest),
+#                    Holm over every check of the study
 # Needs R >= 4.2 with afex, lmerTest, emmeans and coin (Debian: r-cran-afex,
 # r-cran-lmertest, r-cran-emmeans, r-cran-coin).
 suppressPackageStartupMessages({
@@ -111,10 +113,17 @@ for (cell in split(means, list(means$task, means$measure, means$group), drop = T
     task = cell$task[1], measure = cell$measure[1], group = cell$group[1],
     n = nrow(wide), test = r$test, statistic = r$statistic, p = r$p)
 }
-comparisons <- do.call(rbind, rows)
+comparisons <- do.call(rbind, rows)  # NULL when no group has 3 pairs
+if (is.null(comparisons)) {
+  comparisons <- data.frame(task = character(), measure = character(), group = character(),
+                            n = integer(), test = character(), statistic = numeric(),
+                            p = numeric())
+}
 # Holm within task x measure, across the testable groups
-comparisons$p_holm <- ave(comparisons$p, comparisons$task, comparisons$measure,
-                          FUN = function(p) { p[!is.na(p)] <- p.adjust(p[!is.na(p)], "holm"); p })
+comparisons$p_holm <- if (nrow(comparisons)) {
+  ave(comparisons$p, comparisons$task, comparisons$measure,
+      FUN = function(p) { p[!is.na(p)] <- p.adjust(p[!is.na(p)], "holm"); p })
+} else numeric()
 write.csv(comparisons, file.path(out, "comparisons.csv"), row.names = FALSE)
 
 # mixed ANOVA on participant means: group between, condition within, Type II
@@ -155,4 +164,45 @@ for (cell in split(long_trials, list(long_trials$task, long_trials$measure), dro
 }
 write.csv(do.call(rbind, lmm_rows), file.path(out, "lmm.csv"), row.names = FALSE)
 write.csv(do.call(rbind, emm_rows), file.path(out, "emmeans.csv"), row.names = FALSE)
+
+# the crossover's checks, on the trials: each participant's blocks of a task are its
+# periods in the order run; `later` = a block after the first, `carry` = VO in a later
+# block than HV, `pos` = the trial's place in its block, centred within the block. The
+# period and the trial position are tested beside each other, the carry-over beside
+# both; a term aliased with the rest of the model is not testable (not reported).
+ctl <- lmerControl(optimizer = "bobyqa",
+                   optCtrl = list(rhobeg = 2e-4, rhoend = 1e-12, maxfun = 1e5))
+check_rows <- list()
+for (cell in split(long_trials, list(long_trials$task, long_trials$measure), drop = TRUE)) {
+  if (length(unique(cell$participant)) < 3) next
+  cell$condition <- relevel(factor(cell$condition), ref = "VO")
+  cell$group <- factor(cell$group)
+  cell$period <- ave(cell$block, cell$participant,
+                     FUN = function(b) match(b, sort(unique(b))))
+  cell$later <- as.numeric(cell$period > 1)
+  cell$carry <- cell$later * (cell$condition == "VO")
+  cell$pos <- cell$trial - ave(cell$trial, cell$participant, cell$period)
+  base <- "value ~ condition * group"
+  full_rank <- function(terms) {
+    X <- model.matrix(as.formula(paste(base, paste(c("", terms), collapse = " + "))), cell)
+    qr(X)$rank == ncol(X)
+  }
+  testable <- c(period = full_rank("later"), carry_over = full_rank(c("later", "carry")),
+                trial_position = max(cell$trial) >= 2)
+  term <- c(period = "later", carry_over = "carry", trial_position = "pos")
+  for (effect in names(term)[testable]) {
+    terms <- term[names(term)[testable]]
+    if (effect != "carry_over") terms <- terms[names(terms) != "carry_over"]
+    fit <- lmer(as.formula(paste(base, "+", paste(terms, collapse = " + "),
+                                 "+ (1 | participant)")), cell, REML = TRUE, control = ctl)
+    co <- summary(fit, ddf = "Satterthwaite")$coefficients[term[[effect]], ]
+    check_rows[[length(check_rows) + 1]] <- data.frame(
+      task = cell$task[1], measure = cell$measure[1], effect = effect,
+      estimate = co[["Estimate"]], df = co[["df"]], p = co[["Pr(>|t|)"]])
+  }
+}
+checks <- do.call(rbind, check_rows)
+checks$p_holm <- p.adjust(checks$p, "holm")
+checks$added <- checks$p_holm < 0.05
+write.csv(checks, file.path(out, "design_checks.csv"), row.names = FALSE)
 cat("written to", out, "\n")
