@@ -1,12 +1,13 @@
-"""`study analyze` against the same analysis in R (`analyze_r.R`), alternately in one run.
+"""`study analyze` against the same analysis in R, alternately in one run.
 
     python benchmarks/analyze_vs_r.py --db demo/demo.db --rounds 5 \\
         --out benchmarks/results/analyze_vs_r.json
 
-The participant means R reads are written from the database first (the long CSV of
-`study.analysis.frames.participant_means`: participant, group, task, condition, measure,
-value; the same file format as tests/data/demo_seed1_means.csv). Each round runs
-`study analyze --db DB --out TMP` and `Rscript benchmarks/analyze_r.R MEANS.csv OUT.txt`
+The study is exported first (`study export`); R's side is the export how-to's script
+(`docs/how-to/reproduce.R`: the within-group tests with coin's exact signed rank, afex's
+mixed ANOVA, lmerTest's mixed model with Satterthwaite df, emmeans's marginal means and
+the crossover's checks), reading that export alone. Each round runs
+`study analyze --db DB --out TMP` and `Rscript docs/how-to/reproduce.R EXPORT OUT`
 (the order alternating), each a fresh process; CPU seconds (user + system of the process
 and its children) and wall seconds, medians, and Python's over R's; the machine's 1-minute
 load average at the start and the end.
@@ -15,7 +16,9 @@ load average at the start and the end.
 from __future__ import annotations
 
 import argparse
+import csv
 import os
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -24,6 +27,11 @@ import alternate  # the sibling module: these scripts run as python benchmarks/N
 from alternate import timed
 
 HERE = Path(__file__).resolve().parent
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
 
 
 def _timed(command: list[str]) -> dict[str, float]:
@@ -36,24 +44,19 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=5)
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
-    from sqlalchemy import create_engine
-
-    from study.analysis.frames import participant_means, tlx_frame, trial_frame
-
     runs: dict[str, list[dict[str, float]]] = {"python": [], "r": []}
     load_start = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
-        engine = create_engine(f"sqlite:///{args.db}")
-        means = participant_means(trial_frame(engine), tlx_frame(engine))
-        engine.dispose()
-        csv = Path(tmp) / "means.csv"
-        means.to_csv(csv, index=False)
-        python = [sys.executable, "-m", "study.cli", "analyze", "--db", args.db]
-        r = ["Rscript", str(HERE / "analyze_r.R"), str(csv)]
+        study = [sys.executable, "-m", "study.cli"]
+        export = Path(tmp) / "export"
+        subprocess.run([*study, "export", "--db", args.db, "--out", str(export)], check=True)
+        participants = len({row["participant"] for row in _rows(export / "trials.csv")})
+        python = [*study, "analyze", "--db", args.db]
+        r = ["Rscript", str(HERE.parent / "docs" / "how-to" / "reproduce.R"), str(export)]
         for i in range(args.rounds):
             jobs = [
                 ("python", [*python, "--out", f"{tmp}/py{i}"]),
-                ("r", [*r, f"{tmp}/r{i}.txt"]),
+                ("r", [*r, f"{tmp}/r{i}"]),
             ]
             for label, command in jobs if i % 2 == 0 else jobs[::-1]:
                 runs[label].append(_timed(command))
@@ -62,7 +65,7 @@ def main() -> None:
     report = {
         "command": " ".join(["python", "benchmarks/analyze_vs_r.py", *sys.argv[1:]]),
         "rounds": args.rounds,
-        "participants": int(means["participant"].nunique()),
+        "participants": participants,
         "nice": os.nice(0),
         "load_average_1min": {"start": load_start, "end": os.getloadavg()[0]},
         "median": medians,
