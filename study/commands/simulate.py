@@ -103,6 +103,11 @@ def simulate(
     model = load_participants(participants_path)
     # refuse a bad gain, or a gain for a task without a dial, before any work
     the_task.haptic_gain(haptic_gain)
+    if condition == "VO" and haptic_gain:
+        raise StudyInputError(
+            f"--haptic-gain {haptic_gain:g} with VO; VO renders no haptic torque "
+            "(expected the gain with HV only)"
+        )
     from teleop_core.loop import kernel
 
     kernel.COMPILE_NOTICE = lambda message: click.echo(f"study simulate: {message}", err=True)

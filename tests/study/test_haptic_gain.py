@@ -97,3 +97,26 @@ def test_the_task_refuses_a_gain_outside_the_design_files_bound(gain: float) -> 
 
 def test_the_task_accepts_the_bound_itself() -> None:
     assert get_task("lcca").haptic_gain(1.0) == 1.0
+
+
+def test_simulate_records_the_vo_gain_as_the_session_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """VO renders no haptic torque: `study simulate` records its gain as 0, as a session's
+    VO trial does, and refuses a gain given with VO."""
+    import json
+
+    base = ["simulate", "--group", "expert", "--max-seconds", "2", "--seed", "3"]
+    assert main([*base, "--condition", "VO", "--out", str(tmp_path / "vo.csv")]) == 0
+    assert json.loads((tmp_path / "vo.json").read_text())["haptic_gain_n_m_per_n"] == 0.0
+    assert main([*base, "--condition", "HV", "--out", str(tmp_path / "hv.csv")]) == 0
+    hv = json.loads((tmp_path / "hv.json").read_text())
+    assert hv["haptic_gain_n_m_per_n"] == HapticParams().haptic_gain_n_m_per_n
+    capsys.readouterr()
+    bad = tmp_path / "bad.csv"
+    assert main([*base, "--condition", "VO", "--haptic-gain", "0.03", "--out", str(bad)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "study simulate: error: --haptic-gain 0.03 with VO; VO renders no haptic torque "
+        "(expected the gain with HV only)"
+    ]
+    assert not bad.exists()

@@ -49,14 +49,17 @@ TRIAL_COLUMNS = {
 
 
 def condition_haptics(condition: str, haptic_gain: float | None = None) -> HapticParams:
-    """VO: haptic torque off (the dial still self-centres); HV: on, at `haptic_gain`."""
+    """VO: haptic torque off (the dial still self-centres), its gain 0 (none rendered,
+    as a session records it); HV: on, at `haptic_gain`."""
     if condition not in CONDITIONS:
         raise StudyInputError(f"condition {condition!r}; expected one of {', '.join(CONDITIONS)}")
     base = HapticParams()
     gain = base.haptic_gain_n_m_per_n if haptic_gain is None else haptic_gain
     if not (math.isfinite(gain) and gain >= 0):
         raise StudyInputError(f"haptic gain {haptic_gain!r}; expected a finite value >= 0 N m/N")
-    return HapticParams(haptics_on=condition == "HV", haptic_gain_n_m_per_n=gain)
+    if condition == "VO":
+        return HapticParams(haptics_on=False, haptic_gain_n_m_per_n=0.0)
+    return HapticParams(haptics_on=True, haptic_gain_n_m_per_n=gain)
 
 
 def wall_contacts(distal_n: np.ndarray, threshold_n: float = CONTACT_THRESHOLD_N) -> int:
