@@ -217,9 +217,21 @@ def _theta(model, design: Design) -> float:  # type: ignore[no-untyped-def]
     if start is None:
         return _polished_theta(model, _start(model))
     model = _unfitted(model)
-    if start == 0.0:  # at or near the boundary: the polish from statsmodels' smallest start
-        return _polished_theta(model, 0.0)
+    if start == 0.0:
+        # at or near the boundary: a rough root from statsmodels' smallest start decides
+        # whether the fit is the boundary's (most are); only an interior one is polished
+        rough = _polished_theta(model, 0.0, rtol=1e-6)
+        if rough == 0.0 or _boundary_fits_as_well(model, rough):
+            return 0.0
+        return _polished_theta(model, rough, width=1e-5, rtol=1e-13)
     return _polished_theta(model, start, width=1e-6, rtol=1e-13)
+
+
+def _boundary_fits_as_well(model, theta: float) -> bool:  # type: ignore[no-untyped-def]
+    """A root this close to 0 that fits no better than theta = 0 is the boundary's."""
+    return 0 < theta < SINGULAR_TOL and model.loglike(np.array([0.0]), profile_fe=True) >= (
+        model.loglike(np.array([theta]), profile_fe=True) - BOUNDARY_TOL
+    )
 
 
 def _unfitted(model):  # type: ignore[no-untyped-def]
@@ -310,10 +322,8 @@ def _fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> F
         warnings.simplefilter("ignore", RuntimeWarning)
         warnings.simplefilter("ignore", UserWarning)
         theta = _theta(model, design)
-        if 0 < theta < SINGULAR_TOL and model.loglike(np.array([0.0]), profile_fe=True) >= (
-            model.loglike(np.array([theta]), profile_fe=True) - BOUNDARY_TOL
-        ):
-            theta = 0.0  # a root this close to 0 that fits no better is the boundary's
+        if _boundary_fits_as_well(model, theta):
+            theta = 0.0
     A, beta, q = design.sums(theta)
     sigma = float(np.sqrt(q / (n - p)))
     return Fit(
