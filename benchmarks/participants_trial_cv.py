@@ -1,14 +1,14 @@
-"""Within-block variability of simulated LCCA trials: a 20/8/8 study's people, 3 trials
-per condition, the shipped estimator; per measure, the mean over blocks of the block's
-SD over its mean, and how many blocks repeat a value exactly.
+"""Within-block variability of simulated trials: a 20/8/8 study's people, 3 trials per
+condition (LCCA with the shipped estimator, or NOTES); per measure, the mean over blocks
+of the block's SD over its mean, and how many blocks repeat a value exactly.
 
-    nice -n 10 python benchmarks/participants_trial_cv.py OUT.json
+    nice -n 10 python benchmarks/participants_trial_cv.py OUT.json [--task notes]
 """
 
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 
 import pandas as pd
 
@@ -18,12 +18,24 @@ from study.protocol.traits import simulated_participant
 from study.tasks.lcca.trial import run_lcca_trial
 from teleop_core.phantom.lcca import LccaPhantom
 
-MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
+MEASURES = {
+    "lcca": ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n"),
+    "notes": (
+        "completion_time_s",
+        "peak_push_n",
+        "peak_pull_n",
+        "peak_torque_demanded_n_m",
+        "peak_tip_force_n",
+    ),
+}
 GROUPS = {"outsider": 20, "novice": 8, "expert": 8}
 
 
-def main(out: str) -> None:
+def main(out: str, task: str) -> None:
+    from study.tasks.notes.trial import run_notes_trial
+
     phantom, estimator = LccaPhantom(), load_estimator()
+    measures = MEASURES[task]
     rows = []
     for group, n in GROUPS.items():
         for k in range(n):
@@ -32,19 +44,24 @@ def main(out: str) -> None:
             for block, condition in enumerate(("VO", "HV"), start=1):
                 for i in range(3):
                     seed = trial_seed(1, code, block, i)
-                    s = run_lcca_trial(person, condition, seed, estimator, phantom=phantom)
+                    if task == "lcca":
+                        s = run_lcca_trial(person, condition, seed, estimator, phantom=phantom)
+                    else:
+                        s = run_notes_trial(person, condition, seed)
                     rows.append(
                         {
                             "code": code,
                             "condition": condition,
-                            **{m: s.summary[m] for m in MEASURES},
+                            **{m: s.summary[m] for m in measures},
                         }
                     )
     trials = pd.DataFrame(rows)
     blocks = trials.groupby(["code", "condition"])
     report = {
         "data_source": "simulated",
-        "command": f"nice -n 10 python benchmarks/participants_trial_cv.py {out}",
+        "task": task,
+        "command": "nice -n 10 python benchmarks/participants_trial_cv.py "
+        + (f"{out} --task {task}" if task != "lcca" else out),
         "groups": GROUPS,
         "trials_per_block": 3,
         "definition": "per measure: the mean over blocks of the block's SD (ddof 1) over "
@@ -57,7 +74,7 @@ def main(out: str) -> None:
                 "blocks_with_equal": int(blocks[m].agg(lambda v: v.nunique() < len(v)).sum()),
                 "blocks": int(blocks.ngroups),
             }
-            for m in MEASURES
+            for m in measures
         },
     }
     with open(out, "w") as f:
@@ -65,4 +82,8 @@ def main(out: str) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out")
+    parser.add_argument("--task", choices=sorted(MEASURES), default="lcca")
+    args = parser.parse_args()
+    main(args.out, args.task)

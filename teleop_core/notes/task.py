@@ -48,6 +48,9 @@ PUSH_OVER_LIMIT_BENCHMARK = 0.2357
 """Mean max pull / push force, CW / CCW torque of 10 surgeons on a porcine model, and the
 share of the procedure's time their push exceeded the device's 5.62 N (IV, [20])."""
 TISSUE = TissueParams()
+TISSUE_STREAM = 1
+"""The second word of the trial tissue's seed ([seed, TISSUE_STREAM]): a stream apart
+from the driver's."""
 FORNIX_M = TISSUE.fornix_depth_m
 """Depth of the posterior fornix from the introitus (`TissueParams.fornix_depth_m`)."""
 FOLD_M = TISSUE.fold_depth_m
@@ -126,10 +129,14 @@ class NotesLoop:
     the columns of `SAMPLE_COLUMNS` (branch as an index into REGIONS).
     """
 
-    def __init__(self, haptics: bool, seed: int = 0) -> None:
+    def __init__(self, haptics: bool, seed: int = 0, tissue: TissueParams | None = None) -> None:
         self.haptics = haptics
         self.rng = np.random.default_rng(seed)
-        self.abdomen = NotesAbdomen()
+        # the trial's tissue from a stream of its own, so the driver's draws stay as
+        # they were; `tissue` given: exactly that tissue (the closed-form checks)
+        if tissue is None:
+            tissue = TISSUE.for_trial(np.random.default_rng([seed, TISSUE_STREAM]))
+        self.abdomen = NotesAbdomen(tissue)
         self.trans = _Axis(TranslationParams())
         self.rot = _Axis(RotationParams())
         self.t_s = 0.0

@@ -53,9 +53,31 @@ R z_s clockwise and -R z_s / eta counter-clockwise with R = r W + F_lat e.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
+from typing import TYPE_CHECKING
 
 from teleop_core.notes.params import NotesParamsError
+
+if TYPE_CHECKING:
+    import numpy as np
+
+TRIAL_CV: dict[str, float] = {
+    "wall_friction_n_per_m": 0.15,
+    "incision_friction_n": 0.15,
+    "fornix_stiffness_n_per_m": 0.15,
+    "fornix_tear_m": 0.15,
+    "cavity_resistance_n_per_m": 0.15,
+    "tip_lateral_force_n": 0.15,
+    "tip_offset_m": 0.15,
+    "roll_damping_n_m_s_per_rad": 0.15,
+}
+"""The tissue's trial-to-trial coefficient of variation of each coefficient that sets a
+peak force or torque (assumption: soft tissue's friction, stiffness and failure strain
+vary by 10-30 % between sites and with hydration and previous passes, the scope meets
+the tissue a little differently each time, and the articulated tip is bent a little
+differently, which moves its lateral offset; 15 % each gives the within-block CV of the
+peak push and torque that docs/explanation/assumptions.md states). `TissueParams.for_trial` draws a
+trial's tissue as these coefficients times lognormal factors of mean 1."""
 
 
 @dataclass(frozen=True)
@@ -134,6 +156,16 @@ class TissueParams:
                 f"fold_depth_m = {self.fold_depth_m!r}; expected beyond the fornix's tear "
                 f"({self.fornix_depth_m + self.fornix_tear_m:g} m)"
             )
+
+    def for_trial(self, rng: np.random.Generator) -> TissueParams:
+        """The tissue as one trial meets it: each coefficient of `TRIAL_CV` times a
+        lognormal factor of mean 1 and that CV, drawn from `rng`."""
+        varied = {}
+        for name, cv in TRIAL_CV.items():
+            # log factor ~ N(-s^2 / 2, s^2), s^2 = log(1 + cv^2): E[factor] = 1, CV = cv
+            sd = math.sqrt(math.log1p(cv * cv))
+            varied[name] = getattr(self, name) * math.exp(rng.normal(-sd * sd / 2, sd))
+        return replace(self, **varied)
 
     def wall_level_n(self, depth_m: float, breached: bool) -> float:
         """Coulomb level W of the canal wall (and the incision once torn), N."""

@@ -218,7 +218,11 @@ class NotesTask(Task):
     def driver_counts(self, driver):
         from study.tasks.notes.trial import NotesParticipant
 
-        return {"stalls_seen": driver.stalls_seen} if isinstance(driver, NotesParticipant) else {}
+        if not isinstance(driver, NotesParticipant):
+            return {}
+        # the person's state in this trial (their traits varied from trial to trial)
+        state = {k: v for k, v in driver.traits.to_dict().items() if k != "group"}
+        return {"stalls_seen": driver.stalls_seen, "trial_state": state}
 
     def live_lines(self, values, condition=None):
         rendered = (

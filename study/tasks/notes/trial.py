@@ -33,7 +33,7 @@ import pandas as pd
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
 from study.protocol.tasks import TrialResult
-from study.protocol.traits import ParticipantTraits
+from study.protocol.traits import ParticipantTraits, trial_state
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
     GRIP_STIFFNESS_N_M_PER_RAD,
@@ -100,11 +100,14 @@ class NotesParticipant(Driver):
     """Decisions at 25 Hz, as the LCCA participant (the endoscope video's frame rate)."""
 
     def __init__(self, traits: ParticipantTraits, give_up_s: float = 180.0) -> None:
+        self.person = traits
+        """The person's traits; `traits` is the person as they are in the current trial."""
         self.traits = traits
         self.give_up_s = give_up_s
 
     def start(self, rng: np.random.Generator) -> None:
         self.rng = rng
+        self.traits = trial_state(self.person, rng)
         self._seen: deque[OperatorView] = deque()
         self.effort = 1.0
         """How much harder than its pace it pushes (or pulls)."""
@@ -292,5 +295,6 @@ def run_notes_trial(
         **measures(frame, loop.success),
         "stalls_seen": participant.stalls_seen,
         "participant": traits.to_dict(),
+        "trial_state": {k: v for k, v in participant.traits.to_dict().items() if k != "group"},
     }
     return TrialResult(frame, summary)
