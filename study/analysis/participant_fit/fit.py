@@ -62,6 +62,8 @@ from study.analysis.participant_fit.observed import (
 )
 from study.analysis.participant_fit.simulate import simulate_settings, worker_pool
 from study.analysis.participant_fit.summaries import (
+    CONDITIONS,
+    DIFFERENCE,
     TRAIT_COLUMNS,
     emulator_discrepancy,
     power_effects,
@@ -96,7 +98,7 @@ class FitSettings:
     """What becomes of the traits the data tell weakly: `prior` holds them at the hand-set
     profile; `shrink` fits them with their group mean under the profile's prior. On three
     seeds of `study bench participants`, shrink put 18-20 of 21 group means
-    within 15 % of the truth (prior: 16-17), but its VO - HV peak-force intervals held
+    within 15 % of the truth (prior: 16-17), but its HV - VO peak-force intervals held
     the truth in 3-6 of 6 (prior: 6 of 6): a weak trait absorbs the emulator's local
     bias (the outsiders' comfort torque came out 25 % low with a narrow interval), and
     the predicted forces follow it. So the default holds them."""
@@ -358,7 +360,7 @@ class GroupResult:
     boots: np.ndarray
     """(bootstrap, 2 * len(TRAITS)) each replicate's trait means then SDs."""
     predicted: dict[str, list[float]]
-    """moment (and `VO-HV:measure`) -> the model's group mean at the fit, then per
+    """moment (and `HV-VO:measure`) -> the model's group mean at the fit, then per
     replicate, on the measures' own scale."""
     fixed_cov: np.ndarray
     """The moments' covariance that the traits not told add to a person's."""
@@ -388,8 +390,13 @@ class GroupResult:
                 "identifiable": j in plan.told,
             }
             if j in plan.free:
-                out["mean_ci95"] = expanded_interval(self.boots[:, j], len(self.y)).tolist()
-                out["sd_ci95"] = expanded_interval(self.boots[:, n + j], len(self.y)).tolist()
+                # a trait and its spread are positive: their intervals on the log scale
+                out["mean_ci95"] = expanded_interval(
+                    self.boots[:, j], len(self.y), positive=True
+                ).tolist()
+                out["sd_ci95"] = expanded_interval(
+                    self.boots[:, n + j], len(self.y), positive=True
+                ).tolist()
             if j not in plan.told:
                 out["prior"] = list(getattr(PROFILES[group], t))
             return out
@@ -475,6 +482,8 @@ class ModelChecks:
     emulator_design_sd: dict[tuple[str, str, str], float] = field(default_factory=dict)
     """(group, measure, condition) -> that mean's SD over the emulator's refits to its
     resampled design (`replicate_design_sd`), which the check counts beside the people's."""
+    gaps: dict[str, Any] | None = None
+    """`checks.summary_gaps` of `table`: observed means beyond their gap's interval."""
     check_table: pd.DataFrame | None = None
     """The summaries the emulator check reads: `table`, or with participant effects
     added, the simulated people's with the effects taken out (the emulator's people
@@ -482,10 +491,11 @@ class ModelChecks:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "line": checks.lacks_line(self.rows, self.outliers, self.misfit),
+            "line": checks.lacks_line(self.rows, self.outliers, self.misfit, self.gaps),
             "tests": self.rows,
             "outliers": self.outliers,
             "group_means": self.misfit,
+            "gaps": self.gaps,
         }
 
 
@@ -540,7 +550,7 @@ def check_model(
         (g, m, label): replicate_prediction(predicted[g][f"{label}:{m}"], settings.check)
         for g in groups
         for m in measures
-        for label in ("VO", "HV", "VO-HV")
+        for label in CONDITIONS
     }
     design_sd = {
         (g, *key): sd
@@ -561,8 +571,9 @@ def check_model(
             ],
             ignore_index=True,
         )
+    gaps = checks.summary_gaps(table, DIFFERENCE)
     return ModelChecks(
-        simulated, table, rows, outlier, misfit, for_simulated, design_sd, check_table
+        simulated, table, rows, outlier, misfit, for_simulated, design_sd, gaps, check_table
     )
 
 
@@ -593,7 +604,7 @@ def replicate_design_sd(
     out = {}
     for m in measures:
         vo, hv = total[:, names.index(f"VO:{m}")], total[:, names.index(f"HV:{m}")]
-        for label, v in (("VO", vo), ("HV", hv), ("VO-HV", vo - hv)):
+        for label, v in (("VO", vo), ("HV", hv), (DIFFERENCE, hv - vo)):
             out[(m, label)] = float(np.std(v, ddof=1))
     return out
 
@@ -790,9 +801,9 @@ def fit_trials(
 
 
 def _predict(est: GroupEstimator, mean: np.ndarray, sd: np.ndarray) -> dict[str, float]:
-    """The model's group means on the measures' own scale (and VO - HV), by the emulator."""
+    """The model's group means on the measures' own scale (and HV - VO), by the emulator."""
     draws = est.emulator.means(est.draws(mean, sd)).mean(axis=0)
     out = dict(zip(est.emulator.moments_, draws.tolist(), strict=True))
     for m in est.emulator.measures_:
-        out[f"VO-HV:{m}"] = out[f"VO:{m}"] - out[f"HV:{m}"]
+        out[f"{DIFFERENCE}:{m}"] = out[f"HV:{m}"] - out[f"VO:{m}"]
     return out

@@ -1,0 +1,142 @@
+"""What the participant fit reports, held to hand-computed values: the intervals of a
+positive measure on the log scale (they stay above zero), the HV - VO sign of the
+summaries' difference (the analysis's), and a gap between the observed and simulated
+means beyond its interval named as a lack."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from study.analysis.participant_fit.checks import lacks_line, summary_gaps
+from study.analysis.participant_fit.estimate import expanded_interval
+from study.analysis.participant_fit.observed import bootstrap_means
+from study.analysis.participant_fit.summaries import (
+    DIFFERENCE,
+    _model_row,
+    condition_values,
+    source_rows,
+)
+
+# four people's peak forces, one of them far out (a skewed measure, as a force is)
+FORCES = np.array([0.3, 0.35, 0.4, 3.0])
+
+
+def test_a_positive_measures_interval_is_widened_on_the_log_scale_and_stays_above_zero() -> None:
+    low, high = bootstrap_means(FORCES, np.random.default_rng(2), 2000)
+    # widened on the force's own scale (t(3) over 4 people), its lower end is below 0 N
+    assert low < 0
+    low, high = bootstrap_means(FORCES, np.random.default_rng(2), 2000, positive=True)
+    # by hand: the same resamples' means, the expanded percentile interval of their logs
+    idx = np.random.default_rng(2).integers(0, 4, (2000, 4))
+    logs = np.log(FORCES[idx].mean(axis=1))
+    p_low, mid, p_high = np.percentile(logs, [2.5, 50.0, 97.5])
+    widen = np.sqrt(4 / 3) * stats.t.ppf(0.975, 3) / stats.norm.ppf(0.975)
+    assert low == pytest.approx(np.exp(mid - widen * (mid - p_low)))
+    assert high == pytest.approx(np.exp(mid + widen * (p_high - mid)))
+    assert 0 < low < FORCES.mean() < high
+
+
+def test_a_replicate_at_zero_leaves_the_ordinary_interval() -> None:
+    boots = np.array([0.0, 1.0, 2.0, 3.0])
+    np.testing.assert_allclose(
+        expanded_interval(boots, 4, positive=True), expanded_interval(boots, 4)
+    )
+
+
+def test_the_model_rows_interval_of_a_positive_measure_is_relative() -> None:
+    draws = np.concatenate([[1.0], np.linspace(0.8, 1.3, 401)])
+    low, high = 0.8125, 1.2875  # the replicates' 2.5 and 97.5 percentiles
+    # a discrepancy of -0.9 (SE 0.2, 5 people): on the measure's own scale the interval
+    # reaches far below 0
+    plain = _model_row(draws, (-0.9, 0.2, 5))
+    assert plain["ci_low"] < 0
+    row = _model_row(draws, (-0.9, 0.2, 5), positive=True)
+    half = stats.t.ppf(0.975, 4) * 0.2
+    centre = 0.1
+    assert row["mean"] == pytest.approx(centre)
+    assert row["ci_low"] == pytest.approx(
+        centre * np.exp(-np.hypot(np.log(1.0 / low), half / centre))
+    )
+    assert row["ci_high"] == pytest.approx(
+        centre * np.exp(np.hypot(np.log(high / 1.0), half / centre))
+    )
+    assert row["ci_low"] > 0
+
+
+def _trials(vo: list[float], hv: list[float], group: str = "outsider") -> pd.DataFrame:
+    rows = []
+    for i, (a, b) in enumerate(zip(vo, hv, strict=True)):
+        rows += [
+            {"group": group, "participant": f"P{i}", "condition": "VO", "force_n": a},
+            {"group": group, "participant": f"P{i}", "condition": "HV", "force_n": b},
+        ]
+    return pd.DataFrame(rows)
+
+
+def test_the_difference_is_hv_minus_vo_as_the_analysis_takes_it() -> None:
+    frame = _trials([2.0, 3.0], [1.5, 2.0])
+    found = {c: v for _, _, c, v in condition_values(frame, ["force_n"], ["outsider"])}
+    assert DIFFERENCE == "HV-VO"
+    assert set(found) == {"VO", "HV", "HV-VO"}
+    # HV lower than VO: a negative difference, as `study analyze`'s mean_diff
+    np.testing.assert_allclose(found["HV-VO"], [-0.5, -1.0])
+    rows = source_rows("observed", frame, ["force_n"], ["outsider"], np.random.default_rng(0), 50)
+    diff = next(r for r in rows if r["condition"] == "HV-VO")
+    assert diff["mean"] == pytest.approx(-0.75)
+
+
+def _table(observed: tuple[float, float, float], simulated: tuple[float, float, float]):
+    cols = ["group", "measure", "condition", "source", "mean", "ci_low", "ci_high"]
+    return pd.DataFrame(
+        [
+            ("outsider", "completion_time_s", "HV", "observed", *observed),
+            ("outsider", "completion_time_s", "HV", "simulated", *simulated),
+            ("outsider", "completion_time_s", "HV", "model", 50.0, 40.0, 60.0),
+        ],
+        columns=cols,
+    )
+
+
+NOTHING = {"flagged": [], "limit": 10.0}
+
+
+def test_a_gap_beyond_its_interval_is_a_lack_not_nothing() -> None:
+    # the observed outsiders' HV time 29.2 s against 54.0 s simulated, as a pilot gave
+    table = _table((29.2, 24.0, 35.0), (54.0, 45.0, 64.0))
+    gaps = summary_gaps(table, DIFFERENCE)
+    (row,) = gaps["rows"]
+    # by hand, on the log scale: log(29.2 / 54.0) = -0.615; the interval's upper end adds
+    # the observed mean's upper and the simulated's lower half-widths in quadrature
+    gap = np.log(29.2 / 54.0)
+    up = np.hypot(np.log(35.0 / 29.2), np.log(54.0 / 45.0))
+    down = np.hypot(np.log(29.2 / 24.0), np.log(64.0 / 54.0))
+    assert row["gap_scale"] == "ratio"
+    assert row["gap"] == pytest.approx(29.2 / 54.0)
+    assert row["gap_ci95"] == pytest.approx([np.exp(gap - down), np.exp(gap + up)])
+    assert row["gap_ci95"][1] < 1
+    assert row["flagged"]
+    misfit = {"rows": [], "flagged": [], "held": []}
+    line = lacks_line([], NOTHING, misfit, gaps)
+    assert "nothing" not in line
+    assert "outsider HV completion_time_s (29.2 observed vs 54 simulated" in line
+
+
+def test_a_gap_within_its_interval_is_nothing() -> None:
+    table = _table((50.0, 40.0, 62.0), (54.0, 45.0, 64.0))
+    gaps = summary_gaps(table, DIFFERENCE)
+    assert gaps["flagged"] == []
+    line = lacks_line([], NOTHING, {"rows": [], "flagged": [], "held": []}, gaps)
+    assert line.startswith("what the participants lack: nothing the checks found")
+    assert "gaps" in line
+
+
+def test_the_difference_gap_is_on_the_measures_own_scale() -> None:
+    table = _table((-1.0, -1.5, -0.5), (0.5, 0.2, 0.8)).assign(condition=DIFFERENCE)
+    (row,) = summary_gaps(table, DIFFERENCE)["rows"]
+    assert row["gap_scale"] == "difference"
+    assert row["gap"] == pytest.approx(-1.5)
+    assert row["gap_ci95"] == pytest.approx([-1.5 - np.hypot(0.5, 0.3), -1.5 + np.hypot(0.5, 0.3)])
+    assert row["flagged"]
