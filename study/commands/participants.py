@@ -193,6 +193,8 @@ def _print(model: dict, table: object) -> None:
             else f"fixed at their priors: {', '.join(model['fixed_at_prior']) or 'none'}"
         )
     )
+    if model.get("probed_but_held_line"):
+        click.echo(model["probed_but_held_line"])
     for group, out in fits.items():
         traits = ", ".join(
             f"{t} {v['mean']:.4g} (95 % {v['mean_ci95'][0]:.4g}-{v['mean_ci95'][1]:.4g}"

@@ -140,3 +140,38 @@ def test_the_difference_gap_is_on_the_measures_own_scale() -> None:
     assert row["gap"] == pytest.approx(-1.5)
     assert row["gap_ci95"] == pytest.approx([-1.5 - np.hypot(0.5, 0.3), -1.5 + np.hypot(0.5, 0.3)])
     assert row["flagged"]
+
+
+def test_a_probed_trait_held_at_its_prior_is_reported_with_why() -> None:
+    from study.analysis.participant_fit.fit import TraitPlan
+    from study.protocol.traits import TRAITS
+
+    # the force-threshold probe: SE 0.0011 N m against the outsiders' prior SD 0.0008
+    info = np.zeros(len(TRAITS))
+    j = TRAITS.index("haptic_threshold_n_m")
+    info[j] = (0.0008 / 0.0011) ** 2  # 0.529
+    fitted = [TRAITS.index("reaction_s")]
+    plan = TraitPlan(
+        told=fitted,
+        free=fitted,
+        weak=[],
+        ratios={"haptic_threshold_n_m": 0.62, "reaction_s": 0.3},
+        held_out=None,
+        sources={},
+        probe_info={"outsider": info},
+        people={"outsider": 4},
+    )
+    why = plan.probed_but_held()
+    # only the probed trait among those held: the others no probe told
+    assert list(why) == ["haptic_threshold_n_m"]
+    w = why["haptic_threshold_n_m"]
+    # by hand: 1 / sqrt(1 + 4 * 0.529 / 1.529) = 0.648; ratio < 0.5 needs
+    # n * 0.529 / 1.529 > 3, so n >= 9
+    assert w["probe_ratio"] == pytest.approx(0.648, abs=1e-3)
+    assert w["probe_se_in_prior_sd"] == pytest.approx(1.375, abs=1e-3)
+    assert w["people_needed"] == 9
+    assert w["ratio"] == 0.62
+    line = plan.held_line()
+    assert line.startswith("probed but too weakly to fit")
+    assert "haptic_threshold_n_m" in line
+    assert "about 9 a group" in line

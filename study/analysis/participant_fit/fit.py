@@ -293,6 +293,11 @@ class TraitPlan:
     sources: dict[str, str]
     """trait -> the source that tells its value instead (e.g. a measurement before the
     task); such a trait is neither fitted from the task's data nor held at its prior."""
+    probe_info: dict[str, np.ndarray] = field(default_factory=dict)
+    """group -> per trait, a person's mean information from the probes in prior SDs
+    (`study.probes.measure.probe_information`; 0 where no probe told it)."""
+    people: dict[str, int] = field(default_factory=dict)
+    """group -> the people whose moments the rule counted."""
 
     def role(self, trait: str) -> str:
         """`fitted`, `prior`, or the name of the source that tells the trait."""
@@ -304,6 +309,52 @@ class TraitPlan:
     def fixed(self) -> list[str]:
         """Traits held at their hand-set profile."""
         return [t for t in TRAITS if self.role(t) == "prior"]
+
+    def probed_but_held(self) -> dict[str, dict[str, Any]]:
+        """Per trait a probe measured but the fit holds at its prior: why. The rule asks
+        a group mean's posterior SD below `IDENTIFIED_RATIO` of its prior SD; a person's
+        probe gives the information I = (prior SD / SE)^2, so n people alone tell the
+        mean to 1 / sqrt(1 + n I / (1 + I)) of it (`estimate.identifiable`, the task's
+        trials adding theirs). Reported in the worst group: that ratio, the probes'
+        typical SE in prior SDs, and the people a group would need at that SE."""
+        out: dict[str, dict[str, Any]] = {}
+        need = 1.0 / IDENTIFIED_RATIO**2 - 1.0  # n I / (1 + I) must pass this
+        for trait in self.fixed:
+            j = TRAITS.index(trait)
+            infos = {g: float(info[j]) for g, info in self.probe_info.items() if info[j] > 0}
+            if not infos:
+                continue
+            ratio = {
+                g: 1.0 / np.sqrt(1.0 + self.people[g] * i / (1.0 + i)) for g, i in infos.items()
+            }
+            worst = max(ratio, key=lambda g: ratio[g])
+            info = infos[worst]
+            out[trait] = {
+                "group": worst,
+                "people": self.people[worst],
+                "probe_se_in_prior_sd": round(float(1.0 / np.sqrt(info)), 3),
+                "probe_ratio": round(float(ratio[worst]), 3),
+                "ratio": round(float(self.ratios.get(trait, float("nan"))), 3),
+                "people_needed": int(np.ceil(need * (1.0 + info) / info)),
+            }
+        return out
+
+    def held_line(self) -> str:
+        """Why each probed trait held at its prior is held, in words."""
+        why = self.probed_but_held()
+        if not why:
+            return ""
+        return (
+            "probed but too weakly to fit, so held at their priors (the rule: a group "
+            f"mean told to below {IDENTIFIED_RATIO:g} of its prior SD): "
+            + "; ".join(
+                f"{t} (probe SE {w['probe_se_in_prior_sd']:.2g} prior SDs; the {w['people']} "
+                f"people of group {w['group']} tell its mean to {w['ratio']:.2f} of it; the "
+                f"probes alone would with about {w['people_needed']} a group, or with more "
+                "probe trials)"
+                for t, w in why.items()
+            )
+        )
 
 
 def plan_traits(
@@ -348,7 +399,8 @@ def plan_traits(
     candidates = [j for j in range(len(TRAITS)) if TRAITS[j] not in sources]
     free = candidates if settings.weak_traits == "shrink" else told
     weak = [j for j in free if j not in told]
-    return TraitPlan(told, free, weak, ratios, held_out, sources)
+    people = {g: int(np.max(data.sizes[g])) for g in data.groups}
+    return TraitPlan(told, free, weak, ratios, held_out, sources, probe_info or {}, people)
 
 
 @dataclass
@@ -686,6 +738,8 @@ class FitResult:
             else dict(zip(TRAITS, np.round(plan.held_out, 6).tolist(), strict=True)),
             "weak_traits": settings.weak_traits,
             "fixed_at_prior": plan.fixed,
+            "probed_but_held": plan.probed_but_held(),
+            "probed_but_held_line": plan.held_line(),
             "shrunk_to_prior": [TRAITS[j] for j in plan.weak],
             "trait_roles": {t: plan.role(t) for t in TRAITS},
             "weak_traits_note": "traits the data tell weakly: held at the hand-set profile "
