@@ -183,7 +183,7 @@ def _print(model: dict, table: object) -> None:
         f"({features['trials_with_samples']} of {model['fitted_from']['trials']} trials "
         "with samples)"
         if features["names"]
-        else "moments: the measures (the task has no sample features)"
+        else f"moments: {features['note']}"
     )
     click.echo(
         f"identifiable from the moments: {', '.join(model['identifiable']) or 'none'}; "

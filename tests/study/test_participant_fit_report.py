@@ -171,7 +171,51 @@ def test_a_probed_trait_held_at_its_prior_is_reported_with_why() -> None:
     assert w["probe_se_in_prior_sd"] == pytest.approx(1.375, abs=1e-3)
     assert w["people_needed"] == 9
     assert w["ratio"] == 0.62
+    # at 4 people the rule needs 4 I / (1 + I) > 3, I > 3: an SE under sqrt(1/3) = 0.577
+    assert w["probe_se_needed"] == pytest.approx(0.577, abs=1e-3)
     line = plan.held_line()
-    assert line.startswith("probed but too weakly to fit")
-    assert "haptic_threshold_n_m" in line
-    assert "about 9 a group" in line
+    assert line.startswith("probed, yet held at their priors")
+    assert "haptic_threshold_n_m (a person's probe SE 1.4 prior SDs" in line
+    assert "group outsider's 4 people tell its mean to 0.62" in line
+    assert "a probe SE under 0.58 prior SDs (more probe trials) or 9 people a group" in line
+    # with 3 people no probe is enough: even an exact one tells the mean to 1 / sqrt(4)
+    plan.people["outsider"] = 3
+    assert plan.probed_but_held()["haptic_threshold_n_m"]["probe_se_needed"] is None
+    assert "or 9 people" not in plan.held_line()
+    assert "9 people a group would tell it" in plan.held_line()
+
+
+def test_a_task_feature_the_design_defines_too_rarely_is_named_as_dropped_not_absent() -> None:
+    from study.analysis.participant_fit.emulator import MIN_DEFINED, MomentEmulator
+    from study.analysis.participant_fit.fit import features_note
+    from tests.study.test_participant_fit_validate import MEASURES, synthetic_trials
+
+    rng = np.random.default_rng(4)
+
+    def emulator(settings: int) -> MomentEmulator:
+        x = rng.uniform(0.5, 1.5, (settings, 7))
+        trials = synthetic_trials(np.zeros((settings, 2)), 1, rng)
+        # one feature every trial shows, one none does
+        trials = trials.assign(stall_s=rng.uniform(0.2, 0.4, len(trials)), approaches=np.nan)
+        return MomentEmulator(mean_surface=False).fit(
+            x, trials, MEASURES, ("stall_s", "approaches")
+        )
+
+    few = emulator(MIN_DEFINED - 4)  # 16 settings x 1 repeat: 16 trials a condition
+    assert few.features_ == []
+    assert few.dropped_features_ == {"stall_s": MIN_DEFINED - 4, "approaches": 0}
+    note = features_note(few.features_, few)
+    assert "no sample features" not in note
+    assert note.startswith("the measures only; 2 of the task's sample features dropped")
+    assert "at most 16 trials of a condition, and a feature needs 20" in note
+    enough = emulator(MIN_DEFINED)
+    assert enough.features_ == ["stall_s"]
+    assert enough.dropped_features_ == {"approaches": 0}
+    assert features_note(enough.features_, enough).startswith("behavioural features")
+    # a task without features
+    none = MomentEmulator(mean_surface=False).fit(
+        rng.uniform(0.5, 1.5, (20, 7)), synthetic_trials(np.zeros((20, 2)), 1, rng), MEASURES
+    )
+    assert features_note(none.features_, none) == (
+        "the task has no sample features: the measures only"
+    )

@@ -41,7 +41,12 @@ from sqlalchemy import Engine
 
 from study.analysis.participant_fit import WEAK_TRAITS, checks, effects, validate
 from study.analysis.participant_fit.effects import EffectSearch
-from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
+from study.analysis.participant_fit.emulator import (
+    MIN_DEFINED,
+    MomentEmulator,
+    design_box,
+    design_settings,
+)
 from study.analysis.participant_fit.estimate import (
     HYPER_SD,
     IDENTIFIED_RATIO,
@@ -186,6 +191,35 @@ def build_emulator(
     return emulator
 
 
+def features_note(features: list[str], emulator: MomentEmulator) -> str:
+    """What the moments hold beyond the measures, and why a task's sample feature is not
+    among them: the task has none, or the emulator's design defines it in fewer than
+    `MIN_DEFINED` trials of a condition (`MomentEmulator.dropped_features_`)."""
+    dropped = getattr(emulator, "dropped_features_", {})
+    if features:
+        note = (
+            "behavioural features read off each trial's samples (the task's "
+            "`fit_features`), beside the measures; a trial without samples (imported) "
+            "gives the measures only"
+        )
+    elif not dropped:
+        return "the task has no sample features: the measures only"
+    else:
+        note = "the measures only"
+    if dropped:
+        most = max(dropped.values())
+        note += (
+            f"; {len(dropped)} of the task's sample features dropped "
+            f"({', '.join(dropped)}): the emulator's design defines each in at most "
+            f"{most} trials of a condition, and a feature needs {MIN_DEFINED} (more "
+            "settings, --design, or repeats, --repeats, give it more)"
+            if most
+            else f"; the task's sample features ({', '.join(dropped)}) are not in the "
+            "emulator's design trials"
+        )
+    return note
+
+
 def fit_study(
     engine: Engine,
     task: str,
@@ -313,10 +347,15 @@ class TraitPlan:
     def probed_but_held(self) -> dict[str, dict[str, Any]]:
         """Per trait a probe measured but the fit holds at its prior: why. The rule asks
         a group mean's posterior SD below `IDENTIFIED_RATIO` of its prior SD; a person's
-        probe gives the information I = (prior SD / SE)^2, so n people alone tell the
-        mean to 1 / sqrt(1 + n I / (1 + I)) of it (`estimate.identifiable`, the task's
-        trials adding theirs). Reported in the worst group: that ratio, the probes'
-        typical SE in prior SDs, and the people a group would need at that SE."""
+        probe gives the information I = (prior SD / SE)^2, and the people spread by one
+        prior SD about their mean, so n people alone tell the mean to
+        1 / sqrt(1 + n I / (1 + I)) of it (`estimate.identifiable`, the task's trials
+        adding theirs). Even an exact probe (I infinite) tells it only to
+        1 / sqrt(1 + n): the rule needs n I / (1 + I) > 1 / ratio^2 - 1 = c, so more
+        than c people, and then a probe SE below sqrt((n - c) / c) prior SDs. Reported
+        in the worst group: the ratio, the probes' typical SE in prior SDs, the SE that
+        would do at the group's size (`probe_se_needed`, None when no probe would), and
+        the people a group would need at the probes' SE."""
         out: dict[str, dict[str, Any]] = {}
         need = 1.0 / IDENTIFIED_RATIO**2 - 1.0  # n I / (1 + I) must pass this
         for trait in self.fixed:
@@ -328,14 +367,17 @@ class TraitPlan:
                 g: 1.0 / np.sqrt(1.0 + self.people[g] * i / (1.0 + i)) for g, i in infos.items()
             }
             worst = max(ratio, key=lambda g: ratio[g])
-            info = infos[worst]
+            info, n = infos[worst], self.people[worst]
             out[trait] = {
                 "group": worst,
-                "people": self.people[worst],
+                "people": n,
                 "probe_se_in_prior_sd": round(float(1.0 / np.sqrt(info)), 3),
                 "probe_ratio": round(float(ratio[worst]), 3),
                 "ratio": round(float(self.ratios.get(trait, float("nan"))), 3),
-                "people_needed": int(np.ceil(need * (1.0 + info) / info)),
+                "probe_se_needed": round(float(np.sqrt((n - need) / need)), 3)
+                if n > need
+                else None,
+                "people_needed": int(np.floor(need * (1.0 + info) / info)) + 1,
             }
         return out
 
@@ -345,13 +387,19 @@ class TraitPlan:
         if not why:
             return ""
         return (
-            "probed but too weakly to fit, so held at their priors (the rule: a group "
-            f"mean told to below {IDENTIFIED_RATIO:g} of its prior SD): "
+            "probed, yet held at their priors: the probes tell these group means too "
+            f"weakly for the rule (posterior SD under {IDENTIFIED_RATIO:g} of the prior "
+            "SD; --weak-traits shrink fits them under their priors): "
             + "; ".join(
-                f"{t} (probe SE {w['probe_se_in_prior_sd']:.2g} prior SDs; the {w['people']} "
-                f"people of group {w['group']} tell its mean to {w['ratio']:.2f} of it; the "
-                f"probes alone would with about {w['people_needed']} a group, or with more "
-                "probe trials)"
+                f"{t} (a person's probe SE {w['probe_se_in_prior_sd']:.2g} prior SDs; group "
+                f"{w['group']}'s {w['people']} people tell its mean to {w['ratio']:.2f} of "
+                "its prior SD; "
+                + (
+                    f"a probe SE under {w['probe_se_needed']:.2g} prior SDs (more probe trials) or "
+                    if w["probe_se_needed"] is not None
+                    else ""
+                )
+                + f"{w['people_needed']} people a group would tell it)"
                 for t, w in why.items()
             )
         )
@@ -723,11 +771,8 @@ class FitResult:
             "features": {
                 "names": features,
                 "trials_with_samples": data.sampled,
-                "note": "behavioural features read off each trial's samples (the task's "
-                "`fit_features`), beside the measures; a trial without samples (imported) "
-                "gives the measures only"
-                if features
-                else "the task has no sample features: the measures only",
+                "dropped": getattr(self.emulator, "dropped_features_", {}),
+                "note": features_note(features, self.emulator),
             },
             "identifiable": [TRAITS[j] for j in plan.told],
             "probes": probe_summary(
