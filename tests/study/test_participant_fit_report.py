@@ -124,13 +124,30 @@ def test_a_gap_beyond_its_interval_is_a_lack_not_nothing() -> None:
     assert "outsider HV completion_time_s (29.2 observed vs 54 simulated" in line
 
 
-def test_a_gap_within_its_interval_is_nothing() -> None:
-    table = _table((50.0, 40.0, 62.0), (54.0, 45.0, 64.0))
+def test_a_gap_within_its_interval_is_named_beside_nothing_found() -> None:
+    # the tutorial's pilot: 4 outsiders, 29.2 s (16.7-45.0) observed, 54.0 s
+    # (25.1-93.0) simulated in HV; a small gap in VO
+    table = pd.concat(
+        [
+            _table((29.2, 16.7, 45.0), (54.0, 25.1, 93.0)),
+            _table((31.1, 21.0, 39.4), (34.6, 24.2, 48.0)).assign(condition="VO"),
+        ]
+    )
     gaps = summary_gaps(table, DIFFERENCE)
+    # by hand: |log(29.2 / 54)| = 0.615 < hypot(log(29.2 / 16.7), log(93 / 54)) = 0.779
     assert gaps["flagged"] == []
     line = lacks_line([], NOTHING, {"rows": [], "flagged": [], "held": []}, gaps)
     assert line.startswith("what the participants lack: nothing the checks found")
     assert "gaps" in line
+    # its upper end: exp(-0.615 + hypot(log(45 / 29.2), log(54 / 25.1))) = 1.30
+    # the larger share of its half-width (0.615 / 0.780 against VO's 0.107 / 0.511)
+    assert (
+        "; the largest gap, outsider HV completion_time_s (29.2 observed vs 54 simulated: "
+        "observed / simulated 0.54, 95 % 0.25-1.30), lies within its 95 % interval" in line
+    )
+    # no gap at all: nothing named
+    same = summary_gaps(_table((50.0, 40.0, 62.0), (50.0, 40.0, 62.0)), DIFFERENCE)
+    assert "largest gap" not in lacks_line([], NOTHING, None, same)
 
 
 def test_the_difference_gap_is_on_the_measures_own_scale() -> None:

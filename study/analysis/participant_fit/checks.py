@@ -399,8 +399,30 @@ def lacks_line(
         *(["gaps"] if gaps is not None else []),
     ]
     if not parts:
-        return f"what the participants lack: nothing the checks found ({', '.join(tested)})"
+        line = f"what the participants lack: nothing the checks found ({', '.join(tested)})"
+        widest = _widest_gap((gaps or {}).get("rows", []))
+        if widest is not None:
+            line += (
+                f"; the largest gap, {_gap_text(widest)}, lies within its 95 % interval "
+                "(too few people to tell it from chance, not shown to be nothing)"
+            )
+        return line
     return "what the participants lack: " + "; ".join(parts)
+
+
+def _widest_gap(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The gap (`summary_gaps`' rows) nearest its interval's edge: the largest share of
+    its half-width towards no gap that it spans (on the log scale for a ratio)."""
+
+    def share(r: dict[str, Any]) -> float:
+        gap, (low, high) = r["gap"], r["gap_ci95"]
+        if r["gap_scale"] == "ratio":
+            gap, low, high = np.log(gap), np.log(low), np.log(high)
+        half = gap - low if gap > 0 else high - gap
+        return float(abs(gap) / half) if half > 0 else 0.0
+
+    spans = [r for r in rows if share(r) > 0]
+    return max(spans, key=share) if spans else None
 
 
 def emulator_check(
