@@ -236,3 +236,34 @@ def test_a_task_feature_the_design_defines_too_rarely_is_named_as_dropped_not_ab
     assert features_note(none.features_, none) == (
         "the task has no sample features: the measures only"
     )
+
+
+def test_the_figure_draws_positive_intervals_above_zero_and_titles_the_difference_hv_minus_vo() -> (
+    None
+):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from study.analysis.participant_fit.figure import fit_figure
+
+    # the four skewed forces in VO, a little lower in HV; both sources alike
+    frame = _trials(list(FORCES), list(FORCES - 0.1)).rename(
+        columns={"force_n": "peak_distal_force_n"}
+    )
+    rng = np.random.default_rng(5)
+    rows = [
+        {**r, "measure": "peak_distal_force_n"}
+        for source in ("observed", "simulated", "model")
+        for r in source_rows(source, frame, ["peak_distal_force_n"], ["outsider"], rng, 500)
+    ]
+    fig = fit_figure(pd.DataFrame(rows), "SIMULATED")
+    vo, hv, diff = fig.axes[:3]
+    assert [vo.get_title(), hv.get_title(), diff.get_title()] == ["VO", "HV", "HV - VO"]
+    for ax in (vo, hv):
+        # every interval's ends (the "_" marks) above 0 N
+        ends = np.concatenate([line.get_ydata() for line in ax.lines if line.get_marker() == "_"])
+        assert len(ends) == 6
+        assert ends.min() > 0
+    # HV lower by 0.1 N in every person: the difference drawn at -0.1
+    means = [line.get_ydata()[0] for line in diff.lines if line.get_marker() == "o"]
+    assert means == pytest.approx([-0.1])
