@@ -172,6 +172,8 @@ def _write(out_path: Path, result: FitResult, seconds: float) -> dict:
 
 
 def _print(model: dict, table: object) -> None:
+    from study.analysis.participant_fit.fit import dropped_text
+
     fits = model["fit"]
     click.echo(
         f"{model['task']}: fitted to {model['fitted_from']['participants']} participants' "
@@ -182,6 +184,7 @@ def _print(model: dict, table: object) -> None:
         f"moments: the measures and {len(features['names'])} sample features "
         f"({features['trials_with_samples']} of {model['fitted_from']['trials']} trials "
         "with samples)"
+        + (f"; {dropped_text(features['dropped'])}" if features.get("dropped") else "")
         if features["names"]
         else f"moments: {features['note']}"
     )

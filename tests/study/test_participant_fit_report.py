@@ -228,7 +228,11 @@ def test_a_task_feature_the_design_defines_too_rarely_is_named_as_dropped_not_ab
     enough = emulator(MIN_DEFINED)
     assert enough.features_ == ["stall_s"]
     assert enough.dropped_features_ == {"approaches": 0}
-    assert features_note(enough.features_, enough).startswith("behavioural features")
+    note = features_note(enough.features_, enough)
+    assert note.startswith("behavioural features")
+    assert note.endswith(
+        "; the task's sample features approaches are not in the emulator's design trials"
+    )
     # a task without features
     none = MomentEmulator(mean_surface=False).fit(
         rng.uniform(0.5, 1.5, (20, 7)), synthetic_trials(np.zeros((20, 2)), 1, rng), MEASURES

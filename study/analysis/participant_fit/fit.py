@@ -206,18 +206,24 @@ def features_note(features: list[str], emulator: MomentEmulator) -> str:
         return "the task has no sample features: the measures only"
     else:
         note = "the measures only"
-    if dropped:
-        most = max(dropped.values())
-        note += (
-            f"; {len(dropped)} of the task's sample features dropped "
-            f"({', '.join(dropped)}): the emulator's design defines each in at most "
-            f"{most} trials of a condition, and a feature needs {MIN_DEFINED} (more "
-            "settings, --design, or repeats, --repeats, give it more)"
-            if most
-            else f"; the task's sample features ({', '.join(dropped)}) are not in the "
-            "emulator's design trials"
+    return note + (f"; {dropped_text(dropped)}" if dropped else "")
+
+
+def dropped_text(dropped: dict[str, int]) -> str:
+    """The task's sample features the emulator dropped (feature -> the most design
+    trials of a condition that define it), and why, in words."""
+    most = max(dropped.values())
+    if not most:
+        return (
+            f"the task's sample features {', '.join(dropped)} are not in the emulator's "
+            "design trials"
         )
-    return note
+    return (
+        f"{len(dropped)} of the task's sample features dropped ({', '.join(dropped)}): the "
+        f"emulator's design defines each in at most {most} trials of a condition, and a "
+        f"feature needs {MIN_DEFINED} (more settings, --design, or repeats, --repeats, "
+        "give it more)"
+    )
 
 
 def fit_study(
