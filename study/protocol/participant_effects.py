@@ -25,7 +25,9 @@ function of where a trial lies in the session (`TrialPlace`):
   forces near contact (a share > 0: gentler; `gentler_vo_after_hv`: VO pushed more
   gently after HV first, as if still feeling the force; `gentler_hv_after_vo`). The
   preferred speed and the stall time stay, so the completion time moves only as far as
-  the caution's slowing near contact moves it; one direction at a time, as above;
+  the caution's slowing moves it (in LCCA the caution also sets the approach and entry
+  speeds, so there the time follows in part; the emulator says how far); one direction
+  at a time, as above;
 - `unexplained_person`: a person no trait setting reproduces. Reported, never absorbed:
   it has no multiplier, and a simulation never draws it.
 

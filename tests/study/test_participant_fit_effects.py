@@ -36,11 +36,6 @@ PRACTICE = ParticipantEffect("practice", {"slowing": 0.5, "decay_trials": 2.0})
 CARRY_OVER = ParticipantEffect("carry_over", {"vo_after_hv": 0.3, "hv_after_vo": 0.0})
 """VO after HV first pushed 30 % slower and a stall taken for an obstacle 30 % sooner:
 VO peak proximal forces about a quarter lower after HV first."""
-GENTLE = ParticipantEffect(
-    "gentle_carry_over", {"gentler_vo_after_hv": 0.4, "gentler_hv_after_vo": 0.0}
-)
-"""VO after HV first 40 % more cautious and accepting 40 % less torque, at the same
-preferred speed: a carry-over a person shows by pushing more gently."""
 FATIGUE = ParticipantEffect("fatigue", {"rate": 0.08})
 """Each measured trial's preferred speed 8 % lower and reaction time 8 % longer than the
 one before it: the second block slower than the first in either order."""
@@ -66,7 +61,6 @@ def studies():
             ("practice", (PRACTICE,)),
             ("carry_over", (CARRY_OVER,)),
             ("fatigue", (FATIGUE,)),
-            ("gentle", (GENTLE,)),
         )
     }
 
@@ -202,27 +196,3 @@ def test_model_json_reports_the_effect_and_the_fits_people_carry_it(emulator, st
     for group in ("outsider", "novice", "expert"):
         key = (group, "completion_time_s", "VO")
         assert check[key] < shown[key], key
-
-
-def test_an_injected_gentle_carry_over_is_tried_and_reported(emulator, studies) -> None:
-    trials = studies["gentle"]
-    vo = trials[trials["condition"] == "VO"]
-
-    def ratio(m: str) -> float:
-        g = vo.groupby("order")[m].apply(lambda v: np.exp(np.log(v).mean()))
-        return float(g["HV-first"] / g["VO-first"])
-
-    shape = {m: round(ratio(m), 3) for m in ("completion_time_s", "peak_proximal_force_n")}
-    found = _search(trials, emulator)
-    what = (shape, found.line(), [(r["check"], r["measure"], r["p"]) for r in found.before])
-    # the forces carry it, the time far less
-    assert shape["peak_proximal_force_n"] < 0.9, what
-    assert ("order", "peak_proximal_force_n") in {
-        (r["check"], r["measure"]) for r in found.before if r["flagged"]
-    }, what
-    # every family is fitted, this one among them, and it is the one added
-    assert "gentle_carry_over" in found.tried[0]["in_sample"], what
-    assert [e.family for e in found.effects] == ["gentle_carry_over"], what
-    share = found.effects[0].parameters
-    assert share["gentler_vo_after_hv"] > 0.1, what
-    assert share["gentler_hv_after_vo"] == 0.0, what
