@@ -397,11 +397,11 @@ class TraitPlan:
             f"weakly for the rule (posterior SD under {IDENTIFIED_RATIO:g} of the prior "
             "SD; --weak-traits shrink fits them under their priors): "
             + "; ".join(
-                f"{t} (a person's probe SE {w['probe_se_in_prior_sd']:.2g} prior SDs; group "
+                f"{t} (a person's probe SE {w['probe_se_in_prior_sd']:.1f} prior SDs; group "
                 f"{w['group']}'s {w['people']} people tell its mean to {w['ratio']:.2f} of "
                 "its prior SD; "
                 + (
-                    f"a probe SE under {w['probe_se_needed']:.2g} prior SDs (more probe trials) or "
+                    f"a probe SE under {w['probe_se_needed']:.2f} prior SDs (more probe trials) or "
                     if w["probe_se_needed"] is not None
                     else ""
                 )
