@@ -21,8 +21,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from study.errors import StudyInputError
-from study.protocol.tasks.declarations import MAX_HAPTIC_GAIN_N_M_PER_N
 from study.protocol.design_sensors import SensorSettings, sensor_settings
+from study.protocol.tasks.declarations import MAX_HAPTIC_GAIN_N_M_PER_N
 
 KNOWN_CONDITIONS = ("VO", "HV")
 MAX_TRIAL_S = 180.0

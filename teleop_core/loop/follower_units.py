@@ -69,8 +69,7 @@ class ForceReading:
             raise CorruptLine(f"non-finite value in forces line {payload!r}")
         if any(abs(v) > MAX_FORCE_N for v in values[1:]):
             raise CorruptLine(
-                f"implausible force in forces line {payload!r}; expected |F| <= "
-                f"{MAX_FORCE_N:g} N"
+                f"implausible force in forces line {payload!r}; expected |F| <= {MAX_FORCE_N:g} N"
             )
         return cls(*values)
 
