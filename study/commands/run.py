@@ -32,9 +32,11 @@ if TYPE_CHECKING:
     from sqlalchemy import Engine
 
     from study.protocol.design import StudyDesign
+    from study.protocol.design_sensors import SensorSettings
     from study.protocol.observer import SessionObserver
     from study.protocol.session import PendingTrial
     from study.protocol.stop_signals import SignalStop
+    from teleop_core.loop.follower_units import ForceSource, PhysicalFollower
     from teleop_core.loop.hardware import HardwareDriver
 
 
@@ -200,7 +202,7 @@ def _hardware_driver(
     names none)."""
     from teleop_core.loop.hardware import HardwareDriver, HardwareError
 
-    forces_port = None
+    sensors = None
     if drive_port is not None:
         engine = open_database(db_url, create=False)
         try:
@@ -213,7 +215,6 @@ def _hardware_driver(
                 'expected a [sensors] table (source = "serial", port = "...") for the '
                 "physical phantom's forces"
             )
-        forces_port = sensors.port
 
     def make_driver() -> HardwareDriver:
         try:
@@ -223,22 +224,37 @@ def _hardware_driver(
                 f"--port {port}: {exc}; expected the serial port of the dial's ESP32, "
                 "e.g. /dev/ttyUSB0"
             ) from None
-        if drive_port is None or forces_port is None:
+        if drive_port is None or sensors is None:
             return dial
-        from teleop_core.loop.follower_units import PhysicalFollower
-
         try:
-            dial.follower = PhysicalFollower.open(drive_port, forces_port)
-        except HardwareError as exc:
+            dial.follower = _open_follower(drive_port, sensors)
+        except BaseException:
             dial.close()
-            where = f"--drive-port {drive_port}" if drive_port in str(exc) else "[sensors] port"
-            raise StudyInputError(
-                f"{where}: {exc}; expected the drive's ESP32 on --drive-port and the forces "
-                f"unit on the design's [sensors] port {forces_port}"
-            ) from None
+            raise
         return dial
 
     return make_driver
+
+
+def _open_follower(drive_port: str, sensors: SensorSettings) -> PhysicalFollower:
+    """The drive unit and the design's force sensors; one line if either fails."""
+    from teleop_core.loop.follower_units import PhysicalFollower
+    from teleop_core.loop.hardware import HardwareError
+
+    def open_stream() -> ForceSource:
+        from study.lsl.forces import LslForces
+
+        return LslForces(sensors.stream, sensors.proximal_channel, sensors.distal_channel)
+
+    forces = open_stream if sensors.source == "lsl" else sensors.port
+    try:
+        return PhysicalFollower.open(drive_port, forces)
+    except HardwareError as exc:
+        where = f"--drive-port {drive_port}" if drive_port in str(exc) else "[sensors]"
+        raise StudyInputError(
+            f"{where}: {exc}; expected the drive's ESP32 on --drive-port and "
+            f"{sensors.where} as the design's [sensors] names"
+        ) from None
 
 
 def _stopped_line(code: str, stop: SignalStop, started: list[PendingTrial], done: int) -> str:

@@ -25,6 +25,7 @@ import threading
 import tty
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 from teleop_core.loop.hardware import (
     CorruptLine,
@@ -39,6 +40,7 @@ __all__ = [
     "EmulatedForceUnit",
     "FollowerReading",
     "ForceReading",
+    "ForceSource",
     "ForceUnit",
     "PhysicalFollower",
 ]
@@ -74,12 +76,33 @@ class ForceReading:
         return cls(*values)
 
 
+class ForceSource(Protocol):
+    """Where the real follower's forces come from: a `ForceUnit`, or an LSL stream
+    (`study.lsl.forces`). `read` raises `HardwareError` when the source is silent or
+    gone."""
+
+    name: str
+    """What the trial's summary names it by (a unit's firmware, a stream's name)."""
+
+    @property
+    def corrupt_lines(self) -> int: ...
+
+    def read(self) -> ForceReading: ...
+
+    def close(self) -> None: ...
+
+
 class ForceUnit:
     """The lab's force sensors behind one serial unit (`forces` role)."""
 
     def __init__(self, unit: Esp32Unit) -> None:
         self.unit = unit
+        self.name = unit.firmware
         self.readings = 0
+
+    @property
+    def corrupt_lines(self) -> int:
+        return self.unit.corrupt_lines
 
     @classmethod
     def open(cls, port: str, baudrate: int = 115200) -> ForceUnit:
@@ -113,21 +136,28 @@ class PhysicalFollower:
     every (t_s, I_q in A, speed in rad/s) handed to the estimator, in order.
     """
 
-    def __init__(self, drive: Esp32Unit, forces: ForceUnit) -> None:
+    def __init__(self, drive: Esp32Unit, forces: ForceSource) -> None:
         if drive.role != "drive":
             raise HardwareError(f"the unit on {drive.port} is a {drive.role!r}; expected 'drive'")
         self.drive, self.forces = drive, forces
         self.inputs: list[tuple[float, float, float]] = []
 
     @classmethod
-    def open(cls, drive_port: str, forces_port: str, baudrate: int = 115200) -> PhysicalFollower:
+    def open(
+        cls,
+        drive_port: str,
+        forces: str | Callable[[], ForceSource],
+        baudrate: int = 115200,
+    ) -> PhysicalFollower:
+        """The drive on `drive_port` and the forces: a forces unit's port, or a function
+        that opens another source."""
         drive = Esp32Unit(drive_port, "drive", baudrate)
         try:
-            forces = ForceUnit.open(forces_port, baudrate)
-        except HardwareError:
+            source = ForceUnit.open(forces, baudrate) if isinstance(forces, str) else forces()
+        except BaseException:
             drive.close()
             raise
-        return cls(drive, forces)
+        return cls(drive, source)
 
     def exchange(self, t_s: float, speed_cmd_rad_s: float) -> FollowerReading:
         """Command the drive's speed (rad/s); its state and the sensors' forces."""
@@ -144,8 +174,8 @@ class PhysicalFollower:
             "drive_firmware": self.drive.firmware,
             "drive_corrupt_lines": self.drive.corrupt_lines,
             "drive_state_lines": len(self.inputs),
-            "force_sensor_firmware": self.forces.unit.firmware,
-            "force_corrupt_lines": self.forces.unit.corrupt_lines,
+            "force_sensor_firmware": self.forces.name,
+            "force_corrupt_lines": self.forces.corrupt_lines,
         }
 
     def close(self) -> None:

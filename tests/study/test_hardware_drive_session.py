@@ -18,7 +18,6 @@ from sqlalchemy.orm import Session
 
 from db.models.trial import Trial, TrialMeasure
 from study.cli import main
-from study.protocol.design import parse_design
 from teleop_core.loop.follower_units import EmulatedForceUnit
 from teleop_core.loop.host_unit import HostUnit
 from tests.firmware_build import host_firmware
@@ -200,22 +199,3 @@ def test_a_drive_port_where_no_one_answers_is_refused_before_a_trial(
     with Session(engine) as s:
         assert s.scalars(select(Trial)).all() == []
     engine.dispose()
-
-
-def test_the_sensors_table_is_read_and_kept_and_a_bad_one_refused() -> None:
-    design = parse_design(_design("/dev/ttyUSB2"))
-    assert design.sensors.source == "serial"
-    assert design.sensors.port == "/dev/ttyUSB2"
-    assert design.to_dict()["sensors"] == {"source": "serial", "port": "/dev/ttyUSB2"}
-    assert type(design).from_dict(design.to_dict()) == design
-    assert "sensors" not in parse_design(DESIGN).to_dict()
-    for table, said in (
-        ('source = "lsl"\nport = "x"', "sensors.source = 'lsl'; expected one of serial"),
-        ('port = ""', "sensors.port = ''; expected the forces unit's serial port"),
-        ("port = 3", "sensors.port = 3; expected"),
-        ('source = "serial"', "sensors.port = None; expected"),
-        ('port = "x"\nrate = 3', "unknown key sensors.rate; expected one of source, port"),
-    ):
-        with pytest.raises(Exception, match=said.replace("[", r"\[")) as info:
-            parse_design(f"{DESIGN}[sensors]\n{table}\n")
-        assert type(info.value).__name__ == "StudyInputError"
