@@ -6,6 +6,7 @@ stored as measured, a drive unplugged or silent mid-trial, and the options refus
 from __future__ import annotations
 
 import csv
+import json
 import math
 import threading
 import time
@@ -119,6 +120,16 @@ def test_a_whole_session_on_real_units_stores_every_trial_as_measured(
         ).scalars()
         assert [round(v, 4) for v in peaks] == [0.3, 0.3]
     engine.dispose()
+    # the analysis calls them measured, forces and all
+    out = tmp_path / "analysis"
+    assert main(["analyze", "--out", str(out), "--db", db]) == 0
+    source = json.loads((out / "analysis.json").read_text())["data_source"]
+    assert (source["label"], source["note"]) == ("hardware", "")
+    methods = (out / "methods.md").read_text()
+    assert "The forces of 2 of them were measured, with the real drive in a physical" in methods
+    assert "simulated" not in methods.lower()
+    with (out / "descriptives.csv").open() as f:
+        assert {r["data_source"] for r in csv.DictReader(f)} == {"hardware"}
 
 
 @pytest.mark.parametrize("failure", ["unplug", "freeze"])
