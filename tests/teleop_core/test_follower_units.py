@@ -53,6 +53,14 @@ def test_the_emulated_forces_unit_answers_its_clock_and_forces() -> None:
     assert readings[1].distal_n == pytest.approx(distal(0.01), abs=1e-4)
 
 
+def test_the_unit_check_refuses_a_forces_unit_with_one_line() -> None:
+    from teleop_core.loop.unit_check import check_unit
+
+    with EmulatedForceUnit() as forces:
+        with pytest.raises(HardwareError, match="is a forces unit \\(firmware emu-1\\)"):
+            check_unit(forces.port, seconds=0.1)
+
+
 def test_a_dial_on_the_drive_port_is_refused(host_firmware: Path) -> None:
     with HostUnit(host_firmware, "dial") as dial, EmulatedForceUnit() as forces:
         with pytest.raises(HardwareError, match="is a 'dial'; expected 'drive'"):
