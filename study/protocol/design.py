@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from study.errors import StudyInputError
-from study.protocol.design_sensors import SensorSettings, sensor_settings
+from study.protocol.design_sensors import SensorSettings, predicate_problem, sensor_settings
 from study.protocol.tasks.declarations import MAX_HAPTIC_GAIN_N_M_PER_N
 
 KNOWN_CONDITIONS = ("VO", "HV")
@@ -398,35 +398,13 @@ def _lsl_settings(table: dict[str, Any], source: str) -> LslSettings:
             )
         lists[key] = tuple(value)
     for query in lists["record"]:
-        problem = _predicate_problem(query)
+        problem = predicate_problem(query)
         if problem:
             raise StudyInputError(
                 f"{source}: lsl.record query {query!r} has {problem}; expected an LSL "
                 "predicate such as type='EMG' or name='Glove' and type='Force'"
             )
     return LslSettings(publish, lists["record"], lists["plot"])
-
-
-def _predicate_problem(query: str) -> str | None:
-    """What is unbalanced in an LSL stream query (liblsl's XPath 1.0 predicate, which
-    would fail only when the session starts recording), or None."""
-    depth, quote = 0, None
-    for c in query:
-        if quote:
-            quote = None if c == quote else quote
-        elif c in "'\"":
-            quote = c
-        elif c in "([":
-            depth += 1
-        elif c in ")]":
-            depth -= 1
-            if depth < 0:
-                return f"a {c!r} without its opening bracket"
-    if quote:
-        return f"an unclosed {quote} quote"
-    if depth:
-        return "an unclosed bracket"
-    return None
 
 
 MAX_EQUIVALENCE_FRACTION = 1.0

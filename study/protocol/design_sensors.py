@@ -4,6 +4,8 @@ With a drive unit in the loop (`study run --driver hardware --drive-port ...`) t
 phantom is the physical one, and its forces (the proximal reference at the insertion
 point, the distal force under the tip) come from the lab's sensors, not from a model.
 The table names them; it lives apart from `design` because only that session reads it.
+`predicate_problem`, the check of an LSL stream predicate, is here too: `design`'s
+`[lsl]` table uses it as well, and `design` imports this module, not the reverse.
 
     [sensors]
     source = "serial"        # a forces unit speaking the units' protocol
@@ -112,9 +114,7 @@ def sensor_settings(table: dict[str, Any], source: str) -> SensorSettings:
         )
         return SensorSettings(kind, port=port)
     stream = _text(table, "stream", source, "an LSL predicate in quotes, e.g. \"name='FT'\"")
-    from study.protocol.design import _predicate_problem  # design reads this module
-
-    problem = _predicate_problem(stream)
+    problem = predicate_problem(stream)
     if problem:
         raise StudyInputError(
             f"{source}: sensors.stream {stream!r} has {problem}; expected an LSL predicate "
@@ -128,3 +128,25 @@ def sensor_settings(table: dict[str, Any], source: str) -> SensorSettings:
             f"sensors.proximal_channel ({proximal})"
         )
     return SensorSettings(kind, stream=stream, proximal_channel=proximal, distal_channel=distal)
+
+
+def predicate_problem(query: str) -> str | None:
+    """What is unbalanced in an LSL stream query (liblsl's XPath 1.0 predicate, which
+    would fail only when the session starts recording), or None."""
+    depth, quote = 0, None
+    for c in query:
+        if quote:
+            quote = None if c == quote else quote
+        elif c in "'\"":
+            quote = c
+        elif c in "([":
+            depth += 1
+        elif c in ")]":
+            depth -= 1
+            if depth < 0:
+                return f"a {c!r} without its opening bracket"
+    if quote:
+        return f"an unclosed {quote} quote"
+    if depth:
+        return "an unclosed bracket"
+    return None
