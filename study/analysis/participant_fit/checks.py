@@ -333,13 +333,8 @@ def _gap_text(r: dict[str, Any]) -> str:
     )
 
 
-def lacks_line(
-    rows: list[dict[str, Any]],
-    outlier: dict[str, Any],
-    misfit: dict[str, Any] | None = None,
-    gaps: dict[str, Any] | None = None,
-) -> str:
-    """The one printed line: what the participant model lacks, or that nothing was found."""
+def _check_parts(rows: list[dict[str, Any]]) -> list[str]:
+    """The flagged trend and condition-order checks, as the line names them."""
     parts = []
     for r in rows:
         if not r["flagged"]:
@@ -358,26 +353,29 @@ def lacks_line(
                 f"observed vs {r['simulated_vo_first_minus_hv_first_pct']:+.1f} % "
                 f"simulated, p_holm = {r['p_holm']:.2g})"
             )
-    if outlier["flagged"]:
-        parts.append(
-            f"participant(s) {', '.join(outlier['flagged'])} that no trait setting "
-            f"reproduces (D^2 above {outlier['limit']:.1f})"
-        )
-    if misfit is not None and misfit["flagged"]:
-        parts.append(
-            "group means the fitted model does not reproduce: "
-            + ", ".join(
-                f"{r['group']} {r['condition']} {r['measure']} ({r['observed']:.3g} observed vs "
-                f"{r['simulated']:.3g} simulated, p_holm = {r['p_holm']:.2g})"
-                for r in misfit["flagged"]
-            )
-            + (
-                f" (held at their priors, and perhaps why: {', '.join(misfit['held'])}; "
-                "--weak-traits shrink fits them)"
-                if misfit["held"]
-                else ""
-            )
-        )
+    return parts
+
+
+def _misfit_part(misfit: dict[str, Any] | None) -> list[str]:
+    """The group means the fitted model does not reproduce (Holm), if any."""
+    if misfit is None or not misfit["flagged"]:
+        return []
+    held = (
+        f" (held at their priors, and perhaps why: {', '.join(misfit['held'])}; "
+        "--weak-traits shrink fits them)"
+        if misfit["held"]
+        else ""
+    )
+    means = ", ".join(
+        f"{r['group']} {r['condition']} {r['measure']} ({r['observed']:.3g} observed vs "
+        f"{r['simulated']:.3g} simulated, p_holm = {r['p_holm']:.2g})"
+        for r in misfit["flagged"]
+    )
+    return [f"group means the fitted model does not reproduce: {means}{held}"]
+
+
+def _gap_part(misfit: dict[str, Any] | None, gaps: dict[str, Any] | None) -> list[str]:
+    """The gaps beyond their own 95 % interval that the misfit test did not flag."""
     tested_misfit = {
         (r["group"], r["measure"], r["condition"]) for r in (misfit or {}).get("flagged", [])
     }
@@ -386,28 +384,45 @@ def lacks_line(
         for r in (gaps or {}).get("flagged", [])
         if (r["group"], r["measure"], r["condition"]) not in tested_misfit
     ]
-    if beyond:
+    if not beyond:
+        return []
+    return [
+        "group means the fitted model misses beyond their gap's 95 % interval (each "
+        "summary's own interval; not significant after Holm over every summary): "
+        + ", ".join(_gap_text(r) for r in beyond)
+    ]
+
+
+def lacks_line(
+    rows: list[dict[str, Any]],
+    outlier: dict[str, Any],
+    misfit: dict[str, Any] | None = None,
+    gaps: dict[str, Any] | None = None,
+) -> str:
+    """The one printed line: what the participant model lacks, or that nothing was found."""
+    parts = _check_parts(rows)
+    if outlier["flagged"]:
         parts.append(
-            "group means the fitted model misses beyond their gap's 95 % interval (each "
-            "summary's own interval; not significant after Holm over every summary): "
-            + ", ".join(_gap_text(r) for r in beyond)
+            f"participant(s) {', '.join(outlier['flagged'])} that no trait setting "
+            f"reproduces (D^2 above {outlier['limit']:.1f})"
         )
+    parts += _misfit_part(misfit) + _gap_part(misfit, gaps)
+    if parts:
+        return "what the participants lack: " + "; ".join(parts)
     tested = [
         *sorted({r["check"] for r in rows}),
         "outliers",
         *(["group means"] if misfit is not None else []),
         *(["gaps"] if gaps is not None else []),
     ]
-    if not parts:
-        line = f"what the participants lack: nothing the checks found ({', '.join(tested)})"
-        widest = _widest_gap((gaps or {}).get("rows", []))
-        if widest is not None:
-            line += (
-                f"; the largest gap, {_gap_text(widest)}, lies within its 95 % interval "
-                "(too few people to tell it from chance, not shown to be nothing)"
-            )
-        return line
-    return "what the participants lack: " + "; ".join(parts)
+    line = f"what the participants lack: nothing the checks found ({', '.join(tested)})"
+    widest = _widest_gap((gaps or {}).get("rows", []))
+    if widest is not None:
+        line += (
+            f"; the largest gap, {_gap_text(widest)}, lies within its 95 % interval "
+            "(too few people to tell it from chance, not shown to be nothing)"
+        )
+    return line
 
 
 def _widest_gap(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
