@@ -26,6 +26,7 @@ from __future__ import annotations
 import logging
 import math
 import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -284,7 +285,10 @@ def _load(path: Path) -> list[dict[str, Any]]:
     logger.setLevel(logging.WARNING)
     logger.propagate = False
     try:
-        streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
+        # numpy's warnings too: a nan clock offset makes pyxdf's fit warn on every line
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
     except Exception as exc:  # pyxdf raises what its parsers raise
         raise XdfInputError(
             f"{path} could not be read as XDF ({_first_line(exc)}); expected a LabRecorder "
