@@ -162,6 +162,10 @@ def _sqlite_path(url: URL) -> Path | None:
     """The file of an SQLite URL; None for in-memory SQLite and for other backends."""
     if url.get_backend_name() != "sqlite" or url.database in (None, "", ":memory:"):
         return None
+    if url.database.startswith("file:") and url.query.get("uri") == "true":
+        from urllib.parse import unquote, urlsplit
+
+        return Path(unquote(urlsplit(url.database).path))  # a URI filename's path
     return Path(url.database)
 
 
@@ -178,7 +182,8 @@ def _reading_connection(url: URL) -> Iterator[Connection]:
     be written is opened read-only and immutable (`readonly_url`). Not `mode=ro` on a
     writable file: a read-only connection to a WAL database leaves its `-wal` and `-shm`
     files behind (it may not delete them), where the last read-write connection removes
-    them, so a refused command leaves the folder as it found it."""
+    them, so a refused command leaves the folder as it found it. A URL that sets `mode`
+    itself (`?mode=ro`) is opened as it says."""
     from urllib.parse import quote
 
     from sqlalchemy import create_engine
@@ -186,7 +191,9 @@ def _reading_connection(url: URL) -> Iterator[Connection]:
 
     path = _sqlite_path(url)
     shown = describe(url)
-    if path is not None and not _writable(path):
+    if path is not None and "mode" in url.query:  # the URL says how (`?mode=ro`)
+        engine = make_engine(url)
+    elif path is not None and not _writable(path):
         engine = make_engine(readonly_url(path))
     elif path is not None:
         plain = URL.create(
