@@ -248,6 +248,7 @@ def open_database(
     path = _sqlite_path(url)
     if path is not None:
         check_sqlite_file(path, must_exist=not create)
+        _refuse_creating_read_only(url, path)
     state, revision = SchemaState.EMPTY, None
     if path is None or path.exists():
         with _reading_connection(url) as conn:
@@ -286,6 +287,17 @@ def open_database(
         engine.dispose()
         raise
     return engine
+
+
+def _refuse_creating_read_only(url: URL, path: Path) -> None:
+    """DbInputError for a missing file that the URL opens read-only: SQLite would make
+    an empty file there and then fail to write the schema into it."""
+    read_only = url.query.get("mode") == "ro" or url.query.get("immutable") == "1"
+    if read_only and not path.exists():
+        raise DbInputError(
+            f"no study database at {path}, and the URL opens it read-only (?mode=ro or "
+            "?immutable=1); expected an existing file, or a URL without them to create one"
+        )
 
 
 def check_sqlite_file(path: Path, *, must_exist: bool) -> None:

@@ -74,3 +74,52 @@ def test_a_trial_id_past_a_database_integer_is_one_line(
     line = _one_line(capsys, ["trial", command, str(2**63 - 1), "--reason", "x", "--db", db])
     assert f"unknown trial id {2**63 - 1}" in line, line
     assert Path(db).read_bytes() == before
+
+
+@pytest.fixture(scope="module")
+def small_study(tmp_path_factory: pytest.TempPathFactory) -> str:
+    design = (
+        'name = "outputs"\ntasks = ["lcca"]\ntrials_per_condition = 1\npractice_trials = 0\n'
+        "[groups]\nnovice = 2\n"
+    )
+    db = init_study(tmp_path_factory.mktemp("outputs"), design, ("novice", "novice"))
+    assert main(["run", "--all", "--db", db]) == 0
+    return db
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["analyze", "--out", "/proc/no-such-folder"],
+        ["figures", "--out", "/proc/no-such-folder"],
+        ["analyze", "--out", "{tmp}/a", "--json", "/proc/no-such-file.json"],
+    ],
+    ids=["analyze --out", "figures --out", "analyze --json"],
+)
+def test_an_output_the_system_will_not_make_is_one_line(
+    small_study: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str]
+) -> None:
+    if not Path("/proc/self").is_dir():
+        pytest.skip("no /proc here")
+    db = small_study
+    args = [a.format(tmp=tmp_path) for a in argv]
+    line = _one_line(capsys, [*args, "--db", db])
+    flag, value = args[-2:]
+    assert line.endswith(
+        f"{flag} {value}: {value} cannot be written (No such file or directory); expected a "
+        "folder or file that can be made and written there"
+    ), line
+
+
+@pytest.mark.parametrize("query", ["mode=ro", "immutable=1", "mode=ro&immutable=1&uri=true"])
+def test_init_on_a_read_only_url_of_a_missing_file_makes_no_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], query: str
+) -> None:
+    from study.protocol.design import TEMPLATE
+
+    (tmp_path / "d.toml").write_text(TEMPLATE)
+    db = tmp_path / "new.db"
+    argv = ["init", "--design", str(tmp_path / "d.toml"), "--db", f"sqlite:///{db}?{query}"]
+    line = _one_line(capsys, argv)
+    assert f"no study database at {db}, and the URL opens it read-only" in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.toml"]
