@@ -81,9 +81,10 @@ def output_failure(ctx: click.Context, exc: BaseException) -> str | None:
         if not isinstance(value, Path) or not isinstance(param, click.Option):
             continue
         target = value.absolute()
-        if failed == target or target in failed.parents:
+        sibling = failed.parent == target.parent and failed.name.startswith(f".{target.name}.")
+        if failed == target or target in failed.parents or sibling:  # sibling: its temp file
             return (
-                f"{param.opts[0]} {value}: {failed} cannot be written "
+                f"{param.opts[0]} {value}: {target if sibling else failed} cannot be written "
                 f"({exc.strerror or type(exc).__name__}); expected a folder or file that can "
                 "be made and written there"
             )

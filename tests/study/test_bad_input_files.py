@@ -93,8 +93,20 @@ def small_study(tmp_path_factory: pytest.TempPathFactory) -> str:
         ["analyze", "--out", "/proc/no-such-folder"],
         ["figures", "--out", "/proc/no-such-folder"],
         ["analyze", "--out", "{tmp}/a", "--json", "/proc/no-such-file.json"],
+        # written through a temporary sibling file (/proc/.no-such-file.csv.XXXX.partial)
+        [
+            "simulate",
+            "--group",
+            "novice",
+            "--condition",
+            "VO",
+            "--max-seconds",
+            "1",
+            "--out",
+            "/proc/no-such-file.csv",
+        ],
     ],
-    ids=["analyze --out", "figures --out", "analyze --json"],
+    ids=["analyze --out", "figures --out", "analyze --json", "simulate --out"],
 )
 def test_an_output_the_system_will_not_make_is_one_line(
     small_study: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str]
@@ -103,7 +115,7 @@ def test_an_output_the_system_will_not_make_is_one_line(
         pytest.skip("no /proc here")
     db = small_study
     args = [a.format(tmp=tmp_path) for a in argv]
-    line = _one_line(capsys, [*args, "--db", db])
+    line = _one_line(capsys, [*args, "--db", db] if args[0] != "simulate" else args)
     flag, value = args[-2:]
     assert line.endswith(
         f"{flag} {value}: {value} cannot be written (No such file or directory); expected a "
