@@ -23,9 +23,10 @@ from teleop_core.loop.follower_units import EmulatedForceUnit
 from teleop_core.loop.host_unit import HostUnit
 from tests.firmware_build import host_firmware
 from tests.study.conftest import init_study, last_sample_s, one_error_line
-from tests.study.test_hardware_session import TRIAL_S, _trials, short_trials
+from tests.study.test_hardware_session import TRIAL_S, _trials, patient_host, short_trials
 
-__all__ = ["host_firmware", "short_trials"]  # the fixtures, imported for the tests below
+# the fixtures, imported for the tests below
+__all__ = ["host_firmware", "patient_host", "short_trials"]
 
 DESIGN = """\
 name = "real units"
@@ -77,7 +78,7 @@ def _samples(tmp_path: Path, db: str) -> list[dict[str, str]]:
 
 
 def test_a_whole_session_on_real_units_stores_every_trial_as_measured(
-    tmp_path: Path, host_firmware: Path, short_trials: None
+    tmp_path: Path, host_firmware: Path, short_trials: None, patient_host: None
 ) -> None:
     with (
         EmulatedForceUnit(proximal, distal) as forces,

@@ -24,9 +24,10 @@ from teleop_core.loop.host_unit import HostUnit
 from teleop_core.loop.layout import SAMPLE_COLUMNS
 from tests.firmware_build import host_firmware
 from tests.study.conftest import init_study, one_error_line
-from tests.study.test_hardware_session import TRIAL_S, _trials, short_trials
+from tests.study.test_hardware_session import TRIAL_S, _trials, patient_host, short_trials
 
-__all__ = ["host_firmware", "short_trials"]  # the fixtures, imported for the tests below
+# the fixtures, imported for the tests below
+__all__ = ["host_firmware", "patient_host", "short_trials"]
 
 PROXIMAL_N, DISTAL_N = 0.42, 0.17
 """What the amplifier's stream sends: channel 2 the proximal force, channel 0 the distal
@@ -112,6 +113,7 @@ def test_a_whole_session_with_forces_from_lsl_is_stored_as_measured(
     tmp_path: Path,
     host_firmware: Path,
     short_trials: None,
+    patient_host: None,
     amplifier: tuple[str, Amplifier],
     capsys: pytest.CaptureFixture[str],
 ) -> None:
