@@ -19,6 +19,7 @@ from typing import ClassVar
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Vertical
+from textual.css.query import NoMatches
 from textual.screen import ModalScreen
 from textual.widgets import Input, Label
 
@@ -53,8 +54,8 @@ class StopScreen(ModalScreen[StopAnswer | None]):
         super().__init__()
         self.code = code
         self._ended_at_open = ended
-        """(trial id, measured, how) of a trial that had ended when the dialog opened."""
-        self.ended: str | None = None
+        """(trial id, measured, how) of the trial once it has ended."""
+        self.ended: str | None = ended[2] if ended is not None else None
         """How the trial ended while the dialog was open (None: it stands held)."""
         self.trial_id: int | None = None
         """The stored trial the dialog now offers to invalidate, if any."""
@@ -71,16 +72,22 @@ class StopScreen(ModalScreen[StopAnswer | None]):
             yield Label("Enter: stop it    Esc: let it go on", id="stop-keys")
 
     def on_mount(self) -> None:
-        if self._ended_at_open is not None:
-            self.trial_ended(*self._ended_at_open)
+        if self.ended is not None:  # told before it was shown
+            self._show_ended()
 
     def trial_ended(self, trial_id: int | None, measured: bool, how: str) -> None:
         """The trial ended before the dialog was answered: `trial_id` stored as `how`
         ("completed", or why not)."""
         self.ended = how
-        if not self.is_mounted:  # told before it was shown: shown so at once
-            self._ended_at_open = (trial_id, measured, how)
-            return
+        self._ended_at_open = (trial_id, measured, how)
+        try:
+            self._show_ended()
+        except NoMatches:  # not composed yet: shown when it is mounted
+            pass
+
+    def _show_ended(self) -> None:
+        assert self._ended_at_open is not None
+        trial_id, measured, how = self._ended_at_open
         self.query_one("#stop-needs", Label).update("")
         question = self.query_one("#question", Label)
         keys = self.query_one("#stop-keys", Label)

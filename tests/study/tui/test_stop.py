@@ -100,10 +100,10 @@ async def test_an_empty_reason_is_answered_and_esc_lets_the_trial_go_on_to_its_e
 async def test_a_trial_that_ended_before_the_answer_is_offered_for_invalidation(
     make_test_app, study_engine
 ) -> None:
-    app = make_test_app(load_estimator=load_estimator, simulated_pace=None)
+    app = make_test_app(load_estimator=load_estimator, simulated_pace=4.0)
     async with app.run_test(size=(80, 24)) as pilot:
         pane = await _start(pilot, "P001")
-        await wait_for(pilot, lambda: pane.run is not None, 10)
+        await wait_for(pilot, lambda: pane.run is not None and pane.run.live.batches > 0, 120)
         run = pane.run
         # x comes as the trial's thread is past its last step: the screen has not yet
         # heard that it ended (the event loop is kept busy until it has)
