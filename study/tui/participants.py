@@ -210,28 +210,40 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.action_add()
 
     def action_add(self) -> None:
+        """Enrol one more of the chosen group; past the group's target (as the database
+        has it now, whoever enrolled meanwhile) asked first."""
         group = self.query_one("#group", Select).value
         if group is Select.NULL:
             return
-        fill = self._fill.get(str(group))
+        self.query_one("#add-status", Label).update(f"enrolling one more {group}...")
+        self._fresh_fill(str(group))
+
+    @work(thread=True, exclusive=True, group="enrol", exit_on_error=False)
+    def _fresh_fill(self, group: str) -> None:
+        roster = self.services.roster()
+        self.app.call_from_thread(self._enrol_or_ask, group, roster)
+
+    def _enrol_or_ask(self, group: str, roster: Roster) -> None:
+        self.app.show_roster(roster)  # type: ignore[attr-defined]
+        fill = roster.groups.get(group)
         if fill is not None and fill["enrolled"] >= fill["target"]:
             from study.tui.confirm import Confirm
 
             def answered(yes: bool | None) -> None:
                 if yes:
-                    self._start_enrolment(str(group))
+                    self._start_enrolment(group)
                 else:
                     self._status(f"not enrolled: the {group} group is full")
 
             self.app.push_screen(
                 Confirm(
-                    f"The {group} group has its {fill['target']} participants. "
-                    f"Enrol one more {group} all the same?"
+                    f"The {group} group has its {fill['target']} participants "
+                    f"({fill['enrolled']} enrolled). Enrol one more {group} all the same?"
                 ),
                 answered,
             )
             return
-        self._start_enrolment(str(group))
+        self._start_enrolment(group)
 
     def _under_cursor(self) -> str | None:
         table = self.query_one("#people", DataTable)

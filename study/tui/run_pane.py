@@ -142,6 +142,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         """The stop dialog last opened over a running trial."""
         self._running_text = ""
         """The status line of the running trial."""
+        self._starting = False
+        """`s` is reading the roster before it decides (a second `s` waits for it)."""
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="run-top"):
@@ -343,8 +345,31 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         )
 
     def action_start(self) -> None:
-        code, nxt = self.code, self._next
-        if self.run is not None or code is None or nxt is None:
+        """Start the picked participant's next trial, decided on the roster as the
+        database has it now (another program may have run or withdrawn them)."""
+        code = self.code
+        if self.run is not None or code is None or self._starting:
+            return
+        self._starting = True
+        self.query_one("#next", Label).update(f"{code}: reading what is next...")
+        self._fresh_start(code)
+
+    @work(thread=True, exclusive=True, group="fresh-start", exit_on_error=False)
+    def _fresh_start(self, code: str) -> None:
+        try:
+            roster = self.services.roster()
+        finally:
+            self.app.call_from_thread(setattr, self, "_starting", False)
+        self.app.call_from_thread(self._start_on, code, roster)
+
+    def _start_on(self, code: str, roster: Roster) -> None:
+        self.app.show_roster(roster)  # type: ignore[attr-defined]
+        self.show(roster)
+        nxt = self._next
+        if self.run is not None or code != self.code:
+            return
+        if nxt is None:
+            self.app.notify(f"{code}: nothing left to run", severity="warning")
             return
         due = self._tlx_due(code)
         if due:  # the session flow: a finished block's questionnaire before the next block
@@ -528,6 +553,9 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             return False, None
 
     def worker_failed(self, group: str, line: str) -> None:
+        if group == "fresh-start":
+            self._show_next()
+            line = f"not started: {line}"
         if group == "prepare":
             self.status = "idle"
             line = f"the simulation could not be prepared: {line}"

@@ -73,7 +73,7 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
         await pilot.press("f3")
         await pilot.press("s")
         label = app.query_one("#next", Label)
-        assert "the NASA-TLX of lcca/VO is due first" in str(label.render())
+        await wait_for(pilot, lambda: "the NASA-TLX of lcca/VO is due first" in str(label.render()))
         assert pane.run is None
         store_tlx(study_engine, "P001", "lcca", "VO", dict.fromkeys(TLX_SUBSCALES, 50))
         app.reload()
