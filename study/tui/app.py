@@ -256,6 +256,20 @@ class StudyApp(SafeWorkers, App[None]):
         if self.overview_shown_s is None:
             self.overview_shown_s = time.monotonic() - self.started_at
             self.call_after_refresh(self._mount_later_panes)
+            self._tell_left_running()
+
+    @work(thread=True, group="left-running", exit_on_error=False)
+    def _tell_left_running(self) -> None:
+        """At start: a trial that a session which has ended left running (the app
+        killed, say) is named, as it counts now (interrupted, repeated next)."""
+        for code, why in self.services.left_running():
+            self.call_from_thread(
+                self.notify,
+                f"{code}: a trial was found running from a session that has ended ({why}); "
+                "it counts as interrupted and is repeated at their next start",
+                severity="warning",
+                timeout=20,
+            )
 
     def _pane(self, tab: str) -> Widget:
         return self.query_one(f"#{tab}-pane")

@@ -126,7 +126,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._redraws: deque[float] = deque(maxlen=50)
         self._next: NextTrial | None = None
         self._checked: set[str] = set()
-        """Participants whose session checklist was confirmed in this app."""
+        """Participants whose session checklist is recorded (in this app or before)."""
         self._breaks: dict[str, float] = {}
         """Participant -> time.monotonic() when their last finished block ended."""
         self._paused_s: dict[str, float] = {}
@@ -163,6 +163,12 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._redraw()
         self.set_interval(1 / REDRAW_HZ, self._redraw)
         self.set_interval(1.0, self._count_down)
+
+    def on_unmount(self) -> None:
+        """The app ends whichever way: a trial still held or running is stopped (kept
+        as interrupted), so its thread does not wait for an answer that cannot come."""
+        if self.run is not None:
+            self.run.stop()
 
     def _count_down(self) -> None:
         """Once a second: the break's clock (held while the participant fills in the
@@ -358,11 +364,14 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
     def _fresh_start(self, code: str) -> None:
         try:
             roster = self.services.roster()
+            checked = code in self._checked or self.services.checklist_recorded(code)
         finally:
             self.app.call_from_thread(setattr, self, "_starting", False)
-        self.app.call_from_thread(self._start_on, code, roster)
+        self.app.call_from_thread(self._start_on, code, roster, checked)
 
-    def _start_on(self, code: str, roster: Roster) -> None:
+    def _start_on(self, code: str, roster: Roster, checked: bool) -> None:
+        if checked:  # recorded before (an earlier start of the app): asked once
+            self._checked.add(code)
         self.app.show_roster(roster)  # type: ignore[attr-defined]
         self.show(roster)
         nxt = self._next

@@ -119,3 +119,19 @@ async def test_a_trial_that_ended_before_the_answer_is_offered_for_invalidation(
         await wait_for(pilot, lambda: _stored(study_engine)[0][2] is not None, 10)
     [(status, _, invalid)] = _stored(study_engine)
     assert (status, invalid) == ("completed", "cable loose")
+
+
+async def test_the_app_ending_under_the_dialog_stops_the_held_trial(
+    make_test_app, study_engine
+) -> None:
+    app = make_test_app(load_estimator=load_estimator, simulated_pace=1.0)
+    async with app.run_test(size=(80, 24)) as pilot:
+        pane = await _start(pilot, "P002", "d")
+        await wait_for(pilot, lambda: pane.run is not None and pane.run.live.batches > 2, 120)
+        run = pane.run
+        await pilot.press("x")
+        await wait_for(pilot, lambda: run.holder.standing.is_set(), 10)
+        app.exit()  # not through ctrl+q (a signal, an error): nothing answers the dialog
+    assert run.finished.wait(30)
+    [(status, samples, _)] = _stored(study_engine)
+    assert status == "interrupted" and samples > 0
