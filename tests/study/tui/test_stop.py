@@ -134,4 +134,5 @@ async def test_the_app_ending_under_the_dialog_stops_the_held_trial(
         app.exit()  # not through ctrl+q (a signal, an error): nothing answers the dialog
     assert run.finished.wait(30)
     [(status, samples, _)] = _stored(study_engine)
-    assert status == "interrupted" and samples > 0
+    assert status == "interrupted"
+    assert samples > 0
