@@ -63,8 +63,9 @@ class StopScreen(ModalScreen[StopAnswer | None]):
     def compose(self) -> ComposeResult:
         with Vertical(id="stop-box"):
             yield Label(
-                f"{self.code}'s trial is held (its samples so far kept). Stop it? It is "
-                "kept as interrupted and repeated later. Why?",
+                f"Stop {self.code}'s running trial? It stands held until answered (its "
+                "samples so far kept); stopped, it is kept as interrupted and repeated "
+                "later. Why?",
                 id="question",
             )
             yield Input(id="reason-text", placeholder="reason", select_on_focus=False)
