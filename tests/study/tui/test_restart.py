@@ -95,5 +95,3 @@ async def test_the_checklist_recorded_before_a_restart_is_not_asked_again(
         await pilot.press("s")  # P001's is recorded: the trial starts without it
         await wait_for(pilot, lambda: pane.run is not None, 10)
         assert not isinstance(app.screen, Confirm)
-        pane.run.stop()
-        await wait_for(pilot, lambda: pane.run is None, 30)
