@@ -668,7 +668,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             return
         if dialog in self.app.screen_stack:
             if dialog.ended is None and not run.stop_requested:
-                dialog.trial_ended(stored, measured, "completed" if stored else "nothing stored")
+                how = "completed" if stored else (outcome.error or "nothing stored")
+                dialog.trial_ended(stored, measured, how)
             return
         if run.stop_requested and stored is not None:  # answered as it ended
             again = StopScreen(run.code, ended=(stored, measured, "completed"))
