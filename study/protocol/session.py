@@ -89,6 +89,47 @@ class SessionStopped(Exception):
     """Raised inside a trial when the session's `stop` event is set."""
 
 
+class TrialHold:
+    """Holds a running trial between two steps while someone decides, then lets it go on
+    (the terminal app's stop dialog: the trial stands while its reason is typed).
+
+    `hold()` and `release()` from any thread. At its next step a held trial commits the
+    samples it has (a crash while it stands loses none of them) and waits in
+    `wait()` until released. The time it stands is not trial time: the loop's clock
+    stands with it, and a paced trial goes on at its pace from where it stood rather
+    than catching the held seconds up. `on_release`, called in the trial's thread as it
+    goes on, may raise to end the trial there (a stop decided while it stood)."""
+
+    def __init__(self, on_release: Callable[[], None] = lambda: None) -> None:
+        self._go = threading.Event()
+        self._go.set()
+        self._on_release = on_release
+        self.standing = threading.Event()
+        """Set while the trial waits, its samples so far committed."""
+
+    @property
+    def held(self) -> bool:
+        return not self._go.is_set()
+
+    def hold(self) -> None:
+        self._go.clear()
+
+    def release(self) -> None:
+        self._go.set()
+
+    def wait(self) -> float:
+        """In the trial's thread: wait while held; the seconds waited."""
+        start = time.monotonic()
+        self.standing.set()
+        try:
+            self._go.wait()
+        finally:
+            self.standing.clear()
+        waited = time.monotonic() - start
+        self._on_release()
+        return waited
+
+
 @dataclass(frozen=True)
 class PendingTrial:
     block: ScheduleBlock
@@ -169,6 +210,7 @@ def run_session(
     participants: ParticipantModel | None = None,
     observer: SessionObserver | None = None,
     on_storage_wait: Callable[[float | None, int], None] | None = None,
+    hold: TrialHold | None = None,
 ) -> list[int]:
     """Run the participant's remaining trials; return the ids of the trials completed.
 
@@ -186,6 +228,7 @@ def run_session(
     `on_storage_wait(waited_s, held)`: given, a lock held by another program does not
     stop the trial: up to `HOLD_S` of its samples wait in memory (`SampleWriter`'s
     `hold_s`) and this is called while they do (None, 0 when they are committed).
+    `hold` (`TrialHold`) lets another thread hold the running trial between two steps.
     """
     study, design, participant_id = _session_start(engine, code, pace)
     observer = observer or SessionObserver()
@@ -233,6 +276,7 @@ def run_session(
                 model=participants.digest if participants is not None else None,
                 observer=observer,
                 effects=participants.participant_effects if participants is not None else (),
+                hold=hold,
             )
             try:
                 trial_id = _run_trial(engine, participant, item, run)
@@ -368,6 +412,8 @@ class TrialSetup:
     observer: SessionObserver = field(default_factory=SessionObserver)
     effects: tuple[ParticipantEffect, ...] = ()
     """The model's participant effects, applied to the simulated person per trial."""
+    hold: TrialHold | None = None
+    """Holds the trial between two steps (`TrialHold`), if given."""
 
 
 def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
@@ -509,6 +555,9 @@ def _run_trial(
     )
     with writer_at as writer, ending, contextlib.closing(driver):
         while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
+            if run.hold is not None and run.hold.held:
+                writer.flush()  # what the trial measured so far is stored while it stands
+                wall0 += run.hold.wait()  # held time is not trial time: no catching up
             run.check()
             samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
             if len(samples):

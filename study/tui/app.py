@@ -3,9 +3,11 @@
 `make_app(services, settings)` builds the app from its dependencies (the database
 engine, the estimator loader, the calibration loop), so `study tui` and the tests build
 it the same way and nothing inside reads global configuration. The app owns only the
-wiring between the screens: it loads the `Roster` (in a worker) at start and whenever a
+wiring between the screens: it loads the `Roster` (in a worker) at start, whenever a
 screen reports a change (a participant enrolled, a trial ended, a questionnaire saved),
-hands it to every screen, and opens the NASA-TLX form when a trial finishes a block.
+on every screen switch and once a second (`POLL_S`: what the command line or another
+lab machine changed shows within two seconds), hands it to every screen when it has
+changed, and opens the NASA-TLX form when a trial finishes a block.
 Quitting in the middle of a trial stops it first, so it is marked interrupted and
 every committed sample stays; closing the terminal (SIGHUP) or SIGTERM quits the same way.
 """
@@ -45,6 +47,8 @@ __all__ = ["TABS", "StudyApp", "TuiSettings", "make_app"]
 SHORT_TITLES = ("Home", "People", "Run", "TLX", "Stats", "Calib")
 """The tab labels below `WIDE_COLUMNS` columns, so that all six stay on the bar."""
 WIDE_COLUMNS = 80
+POLL_S = 1.0
+"""Seconds between two reads of the roster, for the changes made outside the app."""
 
 
 @dataclass(frozen=True)
@@ -190,6 +194,7 @@ class StudyApp(SafeWorkers, App[None]):
     def on_mount(self) -> None:
         self.theme = self.settings.theme
         self.reload()
+        self.set_interval(POLL_S, self._poll)
         # closing the terminal window (SIGHUP) or `kill` (SIGTERM) quits as ctrl+q does:
         # a running trial is stopped and marked interrupted, not left `running`
         loop = asyncio.get_running_loop()
@@ -221,6 +226,29 @@ class StudyApp(SafeWorkers, App[None]):
     def _load_roster(self) -> None:
         self.post_message(self.RosterLoaded(self.services.roster()))
 
+    def _poll(self) -> None:
+        """Once a second: the roster read again, shown if something changed it."""
+        if self.roster is None:
+            return
+        if any(w.group in ("roster", "poll") and not w.is_finished for w in self.workers):
+            return  # a read is under way: its roster is as fresh
+        self._poll_roster()
+
+    @work(thread=True, exclusive=True, group="poll", exit_on_error=False)
+    def _poll_roster(self) -> None:
+        try:
+            roster = self.services.roster()
+        except Exception:  # quiet: the screens' own reads and writes say what is wrong
+            return
+        if roster != self.roster:  # unchanged, the screens keep what they show
+            self.post_message(self.RosterLoaded(roster))
+
+    def show_roster(self, roster: Roster) -> None:
+        """A roster a screen has just read (to decide on fresh data), shown everywhere."""
+        if roster != self.roster:
+            self.roster = roster
+            self._show(roster)
+
     @on(RosterLoaded)
     def _roster_loaded(self, event: RosterLoaded) -> None:
         self.roster = event.roster
@@ -228,6 +256,20 @@ class StudyApp(SafeWorkers, App[None]):
         if self.overview_shown_s is None:
             self.overview_shown_s = time.monotonic() - self.started_at
             self.call_after_refresh(self._mount_later_panes)
+            self._tell_left_running()
+
+    @work(thread=True, group="left-running", exit_on_error=False)
+    def _tell_left_running(self) -> None:
+        """At start: a trial that a session which has ended left running (the app
+        killed, say) is named, as it counts now (interrupted, repeated next)."""
+        for code, why in self.services.left_running():
+            self.call_from_thread(
+                self.notify,
+                f"{code}: a trial was found running from a session that has ended ({why}); "
+                "it counts as interrupted and is repeated at their next start",
+                severity="warning",
+                timeout=20,
+            )
 
     def _pane(self, tab: str) -> Widget:
         return self.query_one(f"#{tab}-pane")
@@ -283,6 +325,7 @@ class StudyApp(SafeWorkers, App[None]):
 
     @on(TabbedContent.TabActivated)
     def _tab_shown(self, event: TabbedContent.TabActivated) -> None:
+        self.reload()  # each screen opens on what the database holds now
         if event.pane.id == "run" and self.settings.prepare_simulation:
             self._pane("run").prepare()  # type: ignore[attr-defined]
 

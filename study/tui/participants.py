@@ -1,5 +1,9 @@
 """The participants screen: enrol one into a group; the list with codes, orders and progress.
 
+A person types words here (the Find field's codes, groups and states), so no action is
+on a key that can be typed: a printable key on the list goes into the Find field, and
+enrolling, withdrawing and the notes are on ctrl keys (each still asks before acting).
+
 Enrolment is `study.protocol.roster.add_participant` in a worker (it takes the write
 lock, which another lab machine may hold for a moment); the new code comes back as a
 message and the app reloads the roster.
@@ -10,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from textual import on, work
+from textual import events, on, work
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
@@ -38,11 +42,12 @@ class ParticipantsPane(SafeWorkers, Vertical):
     ParticipantsPane #detail { height: auto; max-height: 4; color: $text-muted; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
-        Binding("a", "add", "Enrol"),
-        Binding("w", "withdraw", "Withdraw"),
-        Binding("n", "note", "Note"),
-        Binding("o", "session_note", "Session note"),
+        Binding("ctrl+a", "add", "Enrol"),
+        Binding("ctrl+w", "withdraw", "Withdraw"),
+        Binding("ctrl+n", "note", "Note"),
+        Binding("ctrl+o", "session_note", "Session note"),
     ]
+    """Keys no typed word holds (in the Find field ctrl+a and ctrl+w edit the text)."""
 
     @dataclass
     class Added(Message):
@@ -77,7 +82,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         with Horizontal(id="add-row"):
             yield Label("Group")
             yield Select[str]([], id="group", compact=True, prompt="group")
-            yield Button("Add (a)", id="add", compact=True)
+            yield Button("Add (^a)", id="add", compact=True)
             yield Label("", id="add-status")
         with Horizontal(id="filter-row"):
             yield Label("Find ")
@@ -85,6 +90,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
                 id="filter",
                 placeholder="code, group or state (e.g. P01, expert, withdrawn, done)",
                 compact=True,
+                select_on_focus=False,  # a letter typed on the list adds to the word
             )
         table = DataTable(id="people", cursor_type="row", zebra_stripes=True)
         table.add_columns("code", "group", "order", "progress", "next")
@@ -92,8 +98,22 @@ class ParticipantsPane(SafeWorkers, Vertical):
         yield Static("", id="detail")
 
     def focus_first(self) -> None:
-        """F2: the list, so that its keys (a, w, n, o) and the arrows act at once."""
+        """F2: the list, so that its keys (ctrl+a/w/n/o) and the arrows act at once."""
         self.query_one("#people", DataTable).focus()
+
+    def on_key(self, event: events.Key) -> None:
+        """A printable key on the list goes into the Find field: a typed word searches,
+        and opens no dialog."""
+        if not (event.is_printable and event.character):
+            return
+        if event.key in self.app.active_bindings or not isinstance(self.app.focused, DataTable):
+            return  # the app's keys (`?`, the digits 1-6 of the screens) stay theirs
+        event.stop()
+        event.prevent_default()
+        find = self.query_one("#filter", Input)
+        find.focus()
+        find.cursor_position = len(find.value)
+        find.insert_text_at_cursor(event.character)
 
     def show(self, roster: Roster) -> None:
         self._roster = roster
@@ -190,28 +210,40 @@ class ParticipantsPane(SafeWorkers, Vertical):
         self.action_add()
 
     def action_add(self) -> None:
+        """Enrol one more of the chosen group; past the group's target (as the database
+        has it now, whoever enrolled meanwhile) asked first."""
         group = self.query_one("#group", Select).value
         if group is Select.NULL:
             return
-        fill = self._fill.get(str(group))
+        self.query_one("#add-status", Label).update(f"enrolling one more {group}...")
+        self._fresh_fill(str(group))
+
+    @work(thread=True, exclusive=True, group="enrol", exit_on_error=False)
+    def _fresh_fill(self, group: str) -> None:
+        roster = self.services.roster()
+        self.app.call_from_thread(self._enrol_or_ask, group, roster)
+
+    def _enrol_or_ask(self, group: str, roster: Roster) -> None:
+        self.app.show_roster(roster)  # type: ignore[attr-defined]
+        fill = roster.groups.get(group)
         if fill is not None and fill["enrolled"] >= fill["target"]:
             from study.tui.confirm import Confirm
 
             def answered(yes: bool | None) -> None:
                 if yes:
-                    self._start_enrolment(str(group))
+                    self._start_enrolment(group)
                 else:
                     self._status(f"not enrolled: the {group} group is full")
 
             self.app.push_screen(
                 Confirm(
-                    f"The {group} group has its {fill['target']} participants. "
-                    f"Enrol one more {group} all the same?"
+                    f"The {group} group has its {fill['target']} participants "
+                    f"({fill['enrolled']} enrolled). Enrol one more {group} all the same?"
                 ),
                 answered,
             )
             return
-        self._start_enrolment(str(group))
+        self._start_enrolment(group)
 
     def _under_cursor(self) -> str | None:
         table = self.query_one("#people", DataTable)

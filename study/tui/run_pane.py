@@ -39,6 +39,7 @@ from study.tui.picker import ParticipantSelect, picker_rows
 from study.tui.run_live import KeyboardMixin, LiveViewMixin
 from study.tui.scenes import TrackView, scene_class
 from study.tui.services import NextTrial, Roster, StudyServices
+from study.tui.stop_dialog import StopAnswer, StopScreen
 from study.tui.trial_runner import (
     Simulation,
     TrialOutcome,
@@ -125,7 +126,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._redraws: deque[float] = deque(maxlen=50)
         self._next: NextTrial | None = None
         self._checked: set[str] = set()
-        """Participants whose session checklist was confirmed in this app."""
+        """Participants whose session checklist is recorded (in this app or before)."""
         self._breaks: dict[str, float] = {}
         """Participant -> time.monotonic() when their last finished block ended."""
         self._paused_s: dict[str, float] = {}
@@ -137,6 +138,12 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         """The last completed trial's block and when it ended (until the roster knows)."""
         self._trial_task: Task = tasks()[0]
         """The task of the trial running or run last."""
+        self._stop_screen: StopScreen | None = None
+        """The stop dialog last opened over a running trial."""
+        self._running_text = ""
+        """The status line of the running trial."""
+        self._starting = False
+        """`s` is reading the roster before it decides (a second `s` waits for it)."""
 
     def compose(self) -> ComposeResult:
         with Horizontal(id="run-top"):
@@ -156,6 +163,12 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._redraw()
         self.set_interval(1 / REDRAW_HZ, self._redraw)
         self.set_interval(1.0, self._count_down)
+
+    def on_unmount(self) -> None:
+        """The app ends whichever way: a trial still held or running is stopped (kept
+        as interrupted), so its thread does not wait for an answer that cannot come."""
+        if self.run is not None:
+            self.run.stop()
 
     def _count_down(self) -> None:
         """Once a second: the break's clock (held while the participant fills in the
@@ -338,8 +351,34 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         )
 
     def action_start(self) -> None:
-        code, nxt = self.code, self._next
-        if self.run is not None or code is None or nxt is None:
+        """Start the picked participant's next trial, decided on the roster as the
+        database has it now (another program may have run or withdrawn them)."""
+        code = self.code
+        if self.run is not None or code is None or self._starting:
+            return
+        self._starting = True
+        self.query_one("#next", Label).update(f"{code}: reading what is next...")
+        self._fresh_start(code)
+
+    @work(thread=True, exclusive=True, group="fresh-start", exit_on_error=False)
+    def _fresh_start(self, code: str) -> None:
+        try:
+            roster = self.services.roster()
+            checked = code in self._checked or self.services.checklist_recorded(code)
+        finally:
+            self.app.call_from_thread(setattr, self, "_starting", False)
+        self.app.call_from_thread(self._start_on, code, roster, checked)
+
+    def _start_on(self, code: str, roster: Roster, checked: bool) -> None:
+        if checked:  # recorded before (an earlier start of the app): asked once
+            self._checked.add(code)
+        self.app.show_roster(roster)  # type: ignore[attr-defined]
+        self.show(roster)
+        nxt = self._next
+        if self.run is not None or code != self.code:
+            return
+        if nxt is None:
+            self.app.notify(f"{code}: nothing left to run", severity="warning")
             return
         due = self._tlx_due(code)
         if due:  # the session flow: a finished block's questionnaire before the next block
@@ -452,26 +491,47 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._run_trial(self.run, (code, nxt.task, nxt.condition), checklist)
 
     def action_stop(self) -> None:
-        """Stop the running trial, once the operator gives a reason (it is kept as
-        interrupted, the reason in its audit row); Esc leaves it running."""
+        """Hold the running trial at once and ask why it is stopped: a reason stops it
+        (kept as interrupted, the reason in its audit row), Esc lets it go on. A trial
+        that ends while the dialog is open is offered for invalidation instead."""
         if self.run is None:
             return
         run = self.run
+        run.hold()
+        self.status = "held"
+        self.query_one("#next", Label).update(f"held: {run.code}'s trial stands until answered")
 
-        def answered(reason: str | None) -> None:
-            if reason and self.run is run:
+        def answered(answer: StopAnswer | None) -> None:
+            if answer is None:
+                if self.run is run:
+                    run.resume()
+                    self.status = "running"
+                    self._show_running()
+                return
+            if answer.action == "stop":
                 self.status = "stopping"
-                run.stop(reason)
+                run.stop(answer.reason)
+            elif answer.trial_id is not None:
+                self._invalidate(run.code, answer.trial_id, answer.reason)
 
-        from study.tui.confirm import ReasonScreen
+        self._stop_screen = StopScreen(run.code)
+        self.app.push_screen(self._stop_screen, answered)
 
-        self.app.push_screen(
-            ReasonScreen(
-                f"Stop {run.code}'s running trial? It is kept as interrupted and repeated "
-                "later. Why (Esc: keep it running)?"
-            ),
-            answered,
-        )
+    @work(thread=True, group="invalidate", exit_on_error=False)
+    def _invalidate(self, code: str, trial_id: int, reason: str) -> None:
+        """The trial that ended before it could be stopped, marked invalid (audited)."""
+        try:
+            what = self.services.mark_trial(trial_id, False, reason)
+        except ValueError as exc:
+            self.app.call_from_thread(self.app.notify, f"not invalidated: {exc}", severity="error")
+            return
+        line = f"{code}: {what} marked invalid ({reason})"
+        self.app.call_from_thread(self._show_invalidated, line)
+
+    def _show_invalidated(self, line: str) -> None:
+        self.last_outcome = line
+        self.app.notify(line)
+        self.query_one("#next", Label).update(line)
 
     # -- the workers ----------------------------------------------------------------------
 
@@ -502,6 +562,9 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             return False, None
 
     def worker_failed(self, group: str, line: str) -> None:
+        if group == "fresh-start":
+            self._show_next()
+            line = f"not started: {line}"
         if group == "prepare":
             self.status = "idle"
             line = f"the simulation could not be prepared: {line}"
@@ -549,7 +612,14 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         text = f"running: {event.code} {event.description}  x: stop"
         if self.run is not None and self.run.keyboard is not None:
             text += "\n" + self._trial_task.key_hints  # a line of its own: none is cut
-        self.query_one("#next", Label).update(text)
+        self._running_text = text
+        if self.run is not None and self.run.held:
+            self.status = "held"
+        else:
+            self._show_running()
+
+    def _show_running(self) -> None:
+        self.query_one("#next", Label).update(self._running_text)
 
     @on(TrialEnded)
     def _ended(self, event: TrialEnded) -> None:
@@ -584,3 +654,28 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             text = f"{outcome.code}: nothing run"
         self.last_outcome = text
         self._show_next()
+        self._tell_stop_dialog(run, event)
+
+    def _tell_stop_dialog(self, run: TrialRun | None, event: TrialEnded) -> None:
+        """A stop asked for over a trial that ended first is not dropped: the dialog
+        still open learns that it has ended (stored as completed: it then offers to
+        invalidate it), and a stop answered just as it ended asks that again."""
+        dialog, self._stop_screen = self._stop_screen, None
+        outcome = event.outcome
+        stored = outcome.trial_ids[0] if outcome.trial_ids else None
+        measured = not (event.report.practice if event.report is not None else self._practice)
+        if run is None or dialog is None:
+            return
+        if dialog in self.app.screen_stack:
+            if dialog.ended is None and not run.stop_requested:
+                how = "completed" if stored else (outcome.error or "nothing stored")
+                dialog.trial_ended(stored, measured, how)
+            return
+        if run.stop_requested and stored is not None:  # answered as it ended
+            again = StopScreen(run.code, ended=(stored, measured, "completed"))
+
+            def answered(answer: StopAnswer | None) -> None:
+                if answer is not None and answer.trial_id is not None:
+                    self._invalidate(run.code, answer.trial_id, answer.reason)
+
+            self.app.push_screen(again, answered)

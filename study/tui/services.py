@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sqlalchemy import Engine
+from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
 from study.protocol.roster import load_study, schedule
@@ -184,6 +184,44 @@ class StudyServices:
         from study.protocol.withdrawal import record_checklist
 
         record_checklist(self.engine, code)
+
+    def checklist_recorded(self, code: str) -> bool:
+        """Whether `code`'s session checklist is in the audit log (by this app or an
+        earlier start of it), so that it is asked once per participant."""
+        from db.models.audit import AuditEntry
+        from db.models.study import Participant
+
+        with Session(self.engine) as session:
+            found = session.scalar(
+                select(AuditEntry.id)
+                .join(Participant, Participant.id == AuditEntry.entity_id)
+                .where(
+                    AuditEntry.entity == "participant",
+                    AuditEntry.field == "session_checklist",
+                    Participant.code == code,
+                )
+                .limit(1)
+            )
+        return found is not None
+
+    def left_running(self) -> list[tuple[str, str]]:
+        """(code, why) of each participant with a trial still `running` that belongs to
+        no live session (the app or `study run` was killed, a machine lost): it counts
+        as interrupted, and their next session marks it so and repeats it."""
+        from db.models.study import Participant
+        from db.models.trial import Trial
+        from study.protocol.orphans import gone_sessions
+
+        with Session(self.engine) as session:
+            rows = session.execute(
+                select(Participant.id, Participant.code)
+                .join(Trial, Trial.participant_id == Participant.id)
+                .where(Trial.status == "running")
+                .distinct()
+            ).all()
+            codes = {pid: code for pid, code in rows}
+            gone = gone_sessions(session, list(codes))
+        return sorted((codes[pid], why.split("; ")[0]) for pid, why in gone.items())
 
     def withdraw(self, code: str, reason: str) -> None:
         from study.protocol.withdrawal import withdraw

@@ -6,10 +6,14 @@ This module adds what a terminal needs around it:
 
 - `LiveState`: the newest samples, written by the worker (`on_samples`) and read by the
   live view's timer; a lock guards the hand-over, so the UI never waits on the trial.
-- stopping: `TrialRun.stop()` sets an event; the next batch of samples (50 ms of trial
-  time when paced) raises `TrialStopped` inside the runner, the sample writer commits
-  what it holds, and the trial is marked `interrupted` with `recover_interrupted` (an
-  audit entry says why). Closing the app mid-trial goes the same way.
+- holding: `TrialRun.hold()` makes the trial stand at its next step
+  (`study.protocol.session.TrialHold`: its samples so far committed, its clock
+  standing) while the operator is asked why it is stopped; `resume()` lets it go on.
+- stopping: `TrialRun.stop()` sets an event (and lets a held trial go on to see it);
+  the trial's next step, or its next batch of samples (50 ms of trial time when
+  paced), raises `TrialStopped` inside the runner, the sample writer commits what it
+  holds, and the trial is marked `interrupted` with `recover_interrupted` (an audit
+  entry says why). Closing the app mid-trial goes the same way.
 - `TuiKeyboardDriver`: `teleop_core`'s `KeyboardDriver`, ending the trial when the tip
   reaches the target (a person at the keys sees it on the screen). It drives NOTES
   blocks too: the NOTES loop reads the same `Driver` (the dial's aim sets the scope's
@@ -255,16 +259,41 @@ class TrialRun:
         self.finished = threading.Event()
         self.participant_id: int | None = None
         self.probe_line: str | None = None
+        """What the probe step did before the trial (`study.tui.probe_step`), if anything."""
         self.stop_reason = STOPPED_REASON
         """Why the trial was stopped, for the audit log (`stop`)."""
-        """What the probe step did before the trial (`study.tui.probe_step`), if anything."""
+        from study.protocol.session import TrialHold  # loaded with the runner, when run
+
+        self.holder = TrialHold(self._released)
+
+    def hold(self) -> None:
+        """Make the trial stand at its next step (samples so far committed, its clock
+        standing) until `resume` or `stop`."""
+        self.holder.hold()
+
+    def resume(self) -> None:
+        """Let a held trial go on where it stood."""
+        self.holder.release()
+
+    @property
+    def held(self) -> bool:
+        return self.holder.held
 
     def stop(self, reason: str | None = None) -> None:
-        """Ask the trial to stop at its next batch of samples; `reason` (the operator's)
-        goes into the audit row that marks it interrupted."""
+        """Ask the trial to stop at its next step; `reason` (the operator's) goes into
+        the audit row that marks it interrupted."""
         if reason:
             self.stop_reason = f"{STOPPED_REASON}: {reason}"
         self._stop.set()
+        self.holder.release()
+
+    @property
+    def stop_requested(self) -> bool:
+        return self._stop.is_set()
+
+    def _released(self) -> None:
+        if self._stop.is_set():
+            raise TrialStopped
 
     def _on_samples(self, samples: np.ndarray) -> None:
         self.live.push(samples)
@@ -307,6 +336,7 @@ class TrialRun:
                 on_samples=self._on_samples,
                 on_storage_wait=self._on_storage_wait,
                 observer=self.observer,
+                hold=self.holder,
             )
             return TrialOutcome(self.code, ids, 0, time.monotonic() - start)
         except TrialStopped:

@@ -250,7 +250,7 @@ class LabDay:
         # right after start the first `a` is now and then ignored (not diagnosed; a
         # second press enrols): pressed again only while the list shows no `code`
         for _ in range(3):
-            term.keys("a")
+            term.keys("C-a")
             try:
                 term.wait(rf"enrolled {code} \({group}\)", 5)
                 break
@@ -260,11 +260,11 @@ class LabDay:
                     break
                 self.retried_keys += 1
         else:
-            raise Timeout(f"{code} not enrolled after three presses of a\n{term.screen()}")
+            raise Timeout(f"{code} not enrolled after three presses of ctrl+a\n{term.screen()}")
         self.typed.groups[code] = group
 
     def note(self, code: str, text: str) -> None:
-        """The participant's note: F2, the cursor to their row, n, the text, Enter."""
+        """The participant's note: F2, the cursor to their row, ctrl+n, the text, Enter."""
         term = self.term
         self.to_screen("F2", r"a Enrol")  # the list has the focus
         for _ in range(200):
@@ -277,7 +277,7 @@ class LabDay:
             term.wait_until(lambda u=under: _under_cursor(term.screen()) != u, "the cursor")
         else:
             raise Timeout(f"the list's cursor never reached {code}")
-        term.keys("n")
+        term.keys("C-n")
         term.wait(r"contact details", 10)
         term.text(text)
         term.keys("Enter")

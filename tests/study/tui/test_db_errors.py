@@ -52,9 +52,9 @@ async def participants_pane(app) -> AsyncIterator[tuple]:
 
 
 async def _enrol_refused(pilot, pane) -> None:
-    """Press F2 then `a` (enrol one) and wait for the pane to say it was not enrolled."""
+    """Press F2 then ctrl+a (enrol one) and wait for the pane to say it was not enrolled."""
     await pilot.press("f2")
-    await pilot.press("a")
+    await pilot.press("ctrl+a")
     await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 30)
 
 
@@ -85,7 +85,7 @@ async def test_enrolling_on_a_read_only_database_says_so_and_the_app_stays(
             assert pane.last_message.startswith("not enrolled: the database is read-only")
             assert app.is_running
         # writable again: the same key enrols, the app never left
-        await pilot.press("a")
+        await pilot.press("ctrl+a")
         await wait_for(pilot, lambda: pane.last_message.startswith("enrolled P003"), 30)
     assert _participants(study_engine) == 3
 
@@ -211,7 +211,7 @@ async def test_a_note_refused_by_a_read_only_database_is_kept_for_the_next_try(
         table = app.query_one("#people")
         table.focus()
         with pragma(study_engine, "PRAGMA query_only = 1"):
-            await pilot.press("o")
+            await pilot.press("ctrl+o")
             await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
             await pilot.press(*"dial recalibrated", "enter")
             await wait_for(pilot, lambda: pane.last_message.startswith("note not kept"), 30)

@@ -78,14 +78,14 @@ async def test_enrolling_past_a_groups_target_is_asked_first(
     app = make_test_app()
     async with on_screen(app, "f2") as pilot:
         pane = app.query_one("#participants-pane")
-        await pilot.press("a")  # novice, the first group, is preselected
+        await pilot.press("ctrl+a")  # novice, the first group, is preselected
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         assert "has its 2 participants" in str(app.screen.query_one("#question").render())
         await pilot.press("n")
         await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 10)
         assert pane.last_message == "not enrolled: the novice group is full"
         assert _count(study_engine, "novice") == 2
-        await pilot.press("a")
+        await pilot.press("ctrl+a")
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         await pilot.press("y")
         await wait_for(pilot, lambda: pane.last_message.startswith("enrolled"), 30)
@@ -157,11 +157,11 @@ async def test_withdrawing_from_the_list_asks_why_and_marks_the_row(
     app = make_test_app()
     async with on_screen(app, "f2") as pilot:
         table = _people_at_row(app, 1)  # P002
-        await pilot.press("w")
+        await pilot.press("ctrl+w")
         await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
         await pilot.press("escape")  # cancelled: nothing recorded
         await pilot.pause()
-        await pilot.press("w")
+        await pilot.press("ctrl+w")
         await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
         await pilot.press(*"ended early", "enter")
         await wait_for(pilot, lambda: table.get_row("P002")[4] == "withdrawn: ended early", 30)
@@ -265,10 +265,10 @@ async def test_notes_on_a_participant_and_on_their_session_from_the_list(
     async with on_screen(app, "f2") as pilot:
         _people_at_row(app, 1)  # P002
         notes = (
-            ("n", "left-handed grip"),
-            ("o", "dial recalibrated"),
-            ("o", "fire alarm, 5 min pause"),
-            ("n", "; prefers the left hand"),  # added to the note, shown as it stands
+            ("ctrl+n", "left-handed grip"),
+            ("ctrl+o", "dial recalibrated"),
+            ("ctrl+o", "fire alarm, 5 min pause"),
+            ("ctrl+n", "; prefers the left hand"),  # added to the note, shown as it stands
         )
         for key, text in notes:
             await pilot.press(key)
@@ -283,7 +283,7 @@ async def test_notes_on_a_participant_and_on_their_session_from_the_list(
                     10,
                 )
             await pilot.press(*text, "enter")
-            kind = "session note" if key == "o" else "note"
+            kind = "session note" if key == "ctrl+o" else "note"
             await wait_for(
                 pilot,
                 lambda kind=kind: any(

@@ -23,8 +23,9 @@ from study.protocol.tlx import store_tlx
 from study.tasks.lcca.scene import PhantomView
 from study.tasks.notes.scene import NotesView
 from study.tui import StudyServices, TuiSettings, make_app
-from study.tui.confirm import Confirm, ReasonScreen
+from study.tui.confirm import Confirm
 from study.tui.run_pane import RunPane
+from study.tui.stop_dialog import StopScreen
 from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON
 from tests.study.conftest import stored_samples
@@ -73,7 +74,7 @@ async def test_a_simulated_trial_runs_to_its_end_and_opens_the_questionnaire(
         await pilot.press("f3")
         await pilot.press("s")
         label = app.query_one("#next", Label)
-        assert "the NASA-TLX of lcca/VO is due first" in str(label.render())
+        await wait_for(pilot, lambda: "the NASA-TLX of lcca/VO is due first" in str(label.render()))
         assert pane.run is None
         store_tlx(study_engine, "P001", "lcca", "VO", dict.fromkeys(TLX_SUBSCALES, 50))
         app.reload()
@@ -206,15 +207,15 @@ async def test_the_keyboard_drives_a_notes_trial(notes_engine: Engine, tmp_path:
         readout = str(app.query_one("#readout").render())
         assert "insertion-speed aim +" in readout
         assert "dial aim" not in readout
-        # x asks why; Esc keeps the trial running, a reason stops it
+        # x holds it and asks why; Esc lets it go on, a reason stops it
         await pilot.press("x")
-        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+        await wait_for(pilot, lambda: isinstance(app.screen, StopScreen), 10)
         await pilot.press("escape")
         await pilot.pause(0.3)
         assert pane.run is not None
         assert pane.status == "running"
         await pilot.press("x")
-        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+        await wait_for(pilot, lambda: isinstance(app.screen, StopScreen), 10)
         await pilot.press(*"scope fogged", "enter")
         await wait_for(pilot, lambda: pane.status == "interrupted", 30)
     [(status, driver, samples)] = _trials(notes_engine)

@@ -55,7 +55,7 @@ async def test_overview_shows_groups_sessions_and_what_is_next(make_test_app) ->
 async def test_add_participant_from_the_keyboard(make_test_app, study_engine) -> None:
     app = make_test_app()
     async with on_screen(app, "f2") as pilot:
-        await pilot.press("a")  # the first group, novice, is preselected
+        await pilot.press("ctrl+a")  # the first group, novice, is preselected
         table = app.query_one("#people", DataTable)
         await wait_for(pilot, lambda: table.row_count == 3)
         assert table.get_row("P003")[:4] == ["P003", "novice", "HV -> VO", "0/2"]

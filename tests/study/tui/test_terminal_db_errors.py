@@ -76,7 +76,7 @@ class App:
         """The participants screen (F2) and its add key."""
         self.child.send(F2)
         self.child.expect("Enrol")  # its footer
-        self.child.send("a")
+        self.child.send("\x01")  # ctrl+a
 
     def refused(self, *cause: str) -> None:
         """The enrolment fails with a status line and a notification naming `cause`
@@ -221,7 +221,7 @@ def test_a_locked_database_says_so_in_the_terminal_then_enrols_when_released(
         app.refused("locked", "by", "another", "program")
         app.still_answers()
         _release(locker)
-        app.child.send("a")  # the participants screen is open: the same key enrols now
+        app.child.send("\x01")  # the participants screen is open: ctrl+a enrols now
         app.child.expect(words("enrolled", "P003"))
         app.quit()
     finally:

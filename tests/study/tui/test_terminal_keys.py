@@ -72,7 +72,7 @@ def test_a_note_refused_by_a_read_only_database_is_kept(
         app.loaded()
         app.child.send(F2)
         app.child.expect("Session note")
-        app.child.send("o")
+        app.child.send("\x0f")  # ctrl+o
         app.child.expect(words("contact", "details"))
         app.child.send("dial recalibrated\r")
         app.child.expect(words("note", "not", "kept:", "the", "database", "is", "read-only"))

@@ -62,7 +62,7 @@ def test_a_note_on_an_immutable_database_says_read_only_and_is_kept(
         app.loaded()
         app.child.send(F2)
         app.child.expect("Session note")
-        app.child.send("o")
+        app.child.send("\x0f")  # ctrl+o
         app.child.expect(words("contact", "details"))
         app.child.send("dial recalibrated\r")
         app.child.expect(words("note", "not", "kept:", "the", "database", "is", "read-only"))

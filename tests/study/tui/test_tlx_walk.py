@@ -121,7 +121,7 @@ class Walk:
 
     async def enrol(self) -> None:
         await self.pilot.press("f2")
-        await self.pilot.press("a")  # the first group (novice) is preselected
+        await self.pilot.press("ctrl+a")  # the first group (novice) is preselected
         if self.model.groups["novice"] >= GROUP_TARGET:
             await wait_for(self.pilot, lambda: isinstance(self.app.screen, Confirm), 10)
             await self.pilot.press("y")
