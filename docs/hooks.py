@@ -1,6 +1,7 @@
 """MkDocs hooks: the benchmarks page drawn from `benchmarks/results/*.json`, the database
 schema from `db.models` and the command-line reference from the `study` command
-(`study.commands.reference`).
+(`study.commands.reference`); and every citation key (`[endovascular]`) a link to its
+entry in the bibliography.
 
 `docs/benchmarks.md` holds a marker; at build time it is replaced by a table with one
 row per `[[figure]]` of `benchmarks/index.toml`: the value read from its JSON file at
@@ -20,6 +21,7 @@ same file, or `KEY contains WORD` (a list at KEY holds WORD).
 from __future__ import annotations
 
 import json
+import posixpath
 import re
 import tomllib
 from pathlib import Path
@@ -31,6 +33,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 MARKER = "<!-- benchmarks-table -->"
 SCHEMA_MARKER = "<!-- database-schema -->"
 CLI_MARKER = "<!-- cli-reference -->"
+BIBLIOGRAPHY = ROOT / "docs" / "bibliography.md"
 
 
 def lookup(data: Any, key: str) -> Any:
@@ -214,3 +217,58 @@ def on_page_markdown(markdown: str, page: Any, **_: Any) -> str:
 
         markdown = markdown.replace(CLI_MARKER, cli_reference(cli))
     return markdown
+
+
+def citation_keys(bibliography: Path = BIBLIOGRAPHY) -> list[str]:
+    """The keys the bibliography's entries start with (`- **[key]** ...`)."""
+    text = bibliography.read_text(encoding="utf-8")
+    return re.findall(r"^- \*\*\[([\w-]+)\]\*\*", text, re.MULTILINE)
+
+
+# The parts of a page's HTML a citation is never linked in: code, an existing link, a
+# tag itself (its attributes).
+_UNLINKED = re.compile(r"<pre\b.*?</pre>|<code\b.*?</code>|<a\b.*?</a>|<[^>]*>", re.DOTALL)
+
+
+def link_citations(html: str, keys: list[str], bibliography_url: str) -> str:
+    """Each `[key]` of the text (not in code, not already a link) a link to the key's
+    entry at `bibliography_url#key`."""
+    if not keys:
+        return html
+    cited = re.compile(r"\[(" + "|".join(map(re.escape, keys)) + r")\]")
+
+    def link(text: str) -> str:
+        return cited.sub(lambda m: f'<a href="{bibliography_url}#{m[1]}">[{m[1]}]</a>', text)
+
+    out, last = [], 0
+    for match in _UNLINKED.finditer(html):
+        out += [link(html[last : match.start()]), match.group()]
+        last = match.end()
+    out.append(link(html[last:]))
+    return "".join(out)
+
+
+def anchor_entries(html: str, keys: list[str]) -> str:
+    """The bibliography's entries given the ids the citations link to."""
+    for key in keys:
+        html = html.replace(f"<strong>[{key}]</strong>", f'<strong id="{key}">[{key}]</strong>', 1)
+    return html
+
+
+def on_page_content(html: str, page: Any, files: Any, **_: Any) -> str:
+    """Link the citation keys of every page to the bibliography's entries."""
+    keys = citation_keys()
+    if page.file.src_uri == "bibliography.md":
+        return anchor_entries(html, keys)
+    bibliography = files.get_file_from_path("bibliography.md")
+    if bibliography is None:
+        return html
+    return link_citations(html, keys, relative_url(bibliography.url, page.file.url))
+
+
+def relative_url(target: str, page: str) -> str:
+    """The link from a page's URL to a target's (`explanation/models/` to `bibliography/`
+    is `../../bibliography/`); a URL ending in `/` is a folder, else a file in one."""
+    here = page.rstrip("/") if page.endswith("/") else posixpath.dirname(page)
+    url = posixpath.relpath(target.rstrip("/") or ".", here or ".")
+    return url + "/" if target.endswith("/") and not url.endswith("/") else url

@@ -395,3 +395,54 @@ def test_a_list_swallowed_by_a_paragraph_is_seen() -> None:
     )
     [(_, _, plain)] = blocks_of(html)
     assert re.search(r"\n[ \t]*(?:[-*+]|\d+\.) \S", plain)
+
+
+# Citations: every `[key]` of the bibliography a link to its entry.
+
+
+def test_a_citation_key_becomes_a_link_outside_code_and_links() -> None:
+    html = (
+        "<p>the drive ([endovascular], III-B) and [notes]; not [other],</p>"
+        "<pre><code>[endovascular]</code></pre><p><code>[notes]</code> "
+        '<a href="x">[notes]</a> <span title="[notes]">t</span></p>'
+    )
+    linked = hooks.link_citations(html, ["endovascular", "notes"], "../bibliography/")
+    assert linked == (
+        '<p>the drive (<a href="../bibliography/#endovascular">[endovascular]</a>, III-B) '
+        'and <a href="../bibliography/#notes">[notes]</a>; not [other],</p>'
+        "<pre><code>[endovascular]</code></pre><p><code>[notes]</code> "
+        '<a href="x">[notes]</a> <span title="[notes]">t</span></p>'
+    )
+    assert hooks.link_citations(html, [], "b/") == html
+
+
+def test_the_link_to_the_bibliography_from_any_page() -> None:
+    assert hooks.relative_url("bibliography/", "") == "bibliography/"
+    assert hooks.relative_url("bibliography/", "explanation/models/") == "../../bibliography/"
+    assert hooks.relative_url("bibliography.html", "explanation/models.html") == (
+        "../bibliography.html"
+    )
+
+
+def test_the_bibliographys_keys_are_read() -> None:
+    keys = hooks.citation_keys()
+    assert {"endovascular", "notes", "emps"} <= set(keys)
+    entry = hooks.anchor_entries("<li><strong>[notes]</strong> N.</li>", keys)
+    assert entry == '<li><strong id="notes">[notes]</strong> N.</li>'
+
+
+@pytest.mark.slow
+def test_every_citation_on_the_site_links_to_its_entry(site: Path) -> None:
+    keys = hooks.citation_keys()
+    raw = re.compile(r"\[(" + "|".join(map(re.escape, keys)) + r")\]")
+    unlinked = []
+    for page in sorted(site.rglob("index.html")):
+        source = source_of(page, site)
+        html = page.read_text(encoding="utf-8")
+        if source == "bibliography.md":
+            missing = [key for key in keys if f'id="{key}"' not in html]
+            assert not missing, f"bibliography entries without an anchor: {missing}"
+            continue
+        text = re.sub(r"<pre\b.*?</pre>|<code\b.*?</code>|<a\b.*?</a>", "", html, flags=re.DOTALL)
+        unlinked += [f"{source}: [{key}]" for key in raw.findall(text)]
+    assert not unlinked, "citations that are not links: " + ", ".join(sorted(set(unlinked)))
