@@ -446,3 +446,14 @@ def test_every_citation_on_the_site_links_to_its_entry(site: Path) -> None:
         text = re.sub(r"<pre\b.*?</pre>|<code\b.*?</code>|<a\b.*?</a>", "", html, flags=re.DOTALL)
         unlinked += [f"{source}: [{key}]" for key in raw.findall(text)]
     assert not unlinked, "citations that are not links: " + ", ".join(sorted(set(unlinked)))
+
+
+@pytest.mark.slow
+def test_the_built_benchmarks_page_has_each_heading_once_and_a_met_column(site: Path) -> None:
+    blocks = blocks_of((site / "benchmarks" / "index.html").read_text(encoding="utf-8"))
+    headings = [text for tag, text, _ in blocks if tag in ("h2", "h3")]
+    assert len(headings) == len(set(headings)), headings
+    header_cells = [text for tag, text, _ in blocks if tag == "th"]
+    assert header_cells.count("met") == len(headings)  # one met column per area's table
+    counted = [text for tag, text, _ in blocks if tag == "p" and "targets met" in text]
+    assert counted, "the page counts the targets met"
