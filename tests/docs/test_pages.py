@@ -287,8 +287,14 @@ def test_code_blocks_wrap_inside_their_box(site: Path) -> None:
     # (`pre > code` inside the article) with no inline style of their own.
     for page in sorted(site.rglob("index.html")):
         html = page.read_text(encoding="utf-8")
+        links = re.findall(r'<link rel="stylesheet" href="([^"]+)"', html)
+        theme = [i for i, href in enumerate(links) if "/main." in href or href.startswith("main.")]
         for sheet in sheets:
-            assert sheet in html, f"{page} does not link {sheet}"
+            ours = [i for i, href in enumerate(links) if href.endswith(sheet)]
+            assert ours, f"{page} does not link {sheet}"
+            # after the theme's sheet, so that its rules win over the theme's equal ones
+            assert theme, f"{page} links no theme CSS"
+            assert ours[0] > theme[0], f"{page}: {sheet} before the theme's CSS"
         assert not re.search(r"<(pre|code)[^>]*style=", html), f"{page}: a code block with a style"
         for pre in re.findall(r"<pre[^>]*>(.{0,40})", html):
             assert "<code" in pre, f"{page}: a <pre> without <code> inside: {pre}"
