@@ -118,7 +118,10 @@ def _clause(clause: str, figure: dict[str, Any], data: Any, value: Any) -> bool:
     """One clause of a figure's check (see the module's docstring)."""
     match = _CLAUSE.match(clause)
     if not match:
-        raise ValueError(f"benchmarks/index.toml: check {clause!r} of {figure['what']!r}")
+        raise ValueError(
+            f"benchmarks/index.toml: check {clause!r} of {figure['what']!r} is not "
+            "OP NUMBER, OP @KEY or KEY contains WORD"
+        )
     left = lookup(data, match["key"]) if match["key"] else value
     rhs = match["rhs"]
     if match["op"] == "contains":

@@ -360,6 +360,11 @@ def test_a_target_the_build_cannot_read_stops_it(target: str) -> None:
         hooks.judge(figure(target), {}, 1.0)
 
 
+def test_a_check_the_build_cannot_read_stops_it() -> None:
+    with pytest.raises(ValueError, match="is not OP NUMBER, OP @KEY or KEY contains WORD"):
+        hooks.judge(figure("near 1", check="about 1"), {}, 1.0)
+
+
 def test_a_target_in_another_unit_stops_the_build() -> None:
     with pytest.raises(ValueError, match="is in ms, the value in s"):
         hooks.judge(figure("<= 2 ms", unit="s"), {}, 1.0)
