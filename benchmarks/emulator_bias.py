@@ -144,8 +144,8 @@ def _group_predictions(predict_for: Any, emu: MomentEmulator) -> list[float]:
         draws = GroupEstimator(emu, PROFILES[g], list(range(len(TRAITS))), 3.0).draws(mean, sd)
         pred = dict(zip(NAMES, predict_for(g)(draws).mean(axis=0), strict=True))
         for m in MEASURES:
-            for c in ("VO", "HV", "VO-HV"):
-                p = pred[f"VO:{m}"] - pred[f"HV:{m}"] if c == "VO-HV" else pred[f"{c}:{m}"]
+            for c in ("VO", "HV", "HV-VO"):
+                p = pred[f"HV:{m}"] - pred[f"VO:{m}"] if c == "HV-VO" else pred[f"{c}:{m}"]
                 out.append(float(p))
     return out
 
@@ -207,9 +207,9 @@ def _compare(
         people = per.xs(g, level="group")
         for m in MEASURES:
             wide = people[m].unstack()
-            for c in ("VO", "HV", "VO-HV"):
-                v = (wide["VO"] - wide["HV"]) if c == "VO-HV" else wide[c]
-                p = pred[f"VO:{m}"] - pred[f"HV:{m}"] if c == "VO-HV" else pred[f"{c}:{m}"]
+            for c in ("VO", "HV", "HV-VO"):
+                v = (wide["HV"] - wide["VO"]) if c == "HV-VO" else wide[c]
+                p = pred[f"HV:{m}"] - pred[f"VO:{m}"] if c == "HV-VO" else pred[f"{c}:{m}"]
                 se = float(v.std(ddof=1) / np.sqrt(len(v)))
                 rows.append(
                     {

@@ -236,7 +236,7 @@ def main(out: str, emulator_path: str, design_path: str, fresh_seed: int = 511) 
         time_rows = {
             f"{r['group']} {r['condition']}": round(100 * (r["predicted"] / r["fresh"] - 1), 1)
             for r in pop["rows"]
-            if r["measure"] == "completion_time_s" and r["condition"] != "VO-HV"
+            if r["measure"] == "completion_time_s" and r["condition"] != "HV-VO"
         }
         results[label] = {
             "own_traits": own_traits(predict, fresh, traits),

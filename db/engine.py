@@ -77,7 +77,27 @@ def resolve_url(db: str | URL | None = None) -> URL:
         )
     if url.get_backend_name() == "sqlite":
         _check_sqlite_query(url)
+        url = _as_sqlite_uri(url)
     return url
+
+
+def _as_sqlite_uri(url: URL) -> URL:
+    """An SQLite URL whose `mode` or `immutable` takes effect: they are parameters of
+    SQLite's URI filenames, which need `uri=true` (without it pysqlite ignores them, and
+    the database would be opened for writing) and a database written `file:PATH`
+    (pysqlite otherwise takes `PATH?mode=ro` as a file name, and creates an empty
+    database of that name). `sqlite:///PATH?mode=ro` and `...&uri=true` both become
+    `sqlite:///file:PATH?mode=ro&uri=true`."""
+    from urllib.parse import quote
+
+    query = dict(url.query)
+    database = url.database or ""
+    if not {"mode", "immutable"} & set(query) or database in ("", ":memory:"):
+        return url
+    query["uri"] = "true"
+    if not database.startswith("file:"):
+        database = f"file:{quote(str(Path(database).expanduser().absolute()))}"
+    return url.set(database=database, query=query)
 
 
 SQLITE_QUERY = {

@@ -162,6 +162,10 @@ def _sqlite_path(url: URL) -> Path | None:
     """The file of an SQLite URL; None for in-memory SQLite and for other backends."""
     if url.get_backend_name() != "sqlite" or url.database in (None, "", ":memory:"):
         return None
+    if url.database.startswith("file:") and url.query.get("uri") == "true":
+        from urllib.parse import unquote, urlsplit
+
+        return Path(unquote(urlsplit(url.database).path))  # a URI filename's path
     return Path(url.database)
 
 
@@ -178,7 +182,8 @@ def _reading_connection(url: URL) -> Iterator[Connection]:
     be written is opened read-only and immutable (`readonly_url`). Not `mode=ro` on a
     writable file: a read-only connection to a WAL database leaves its `-wal` and `-shm`
     files behind (it may not delete them), where the last read-write connection removes
-    them, so a refused command leaves the folder as it found it."""
+    them, so a refused command leaves the folder as it found it. A URL that sets `mode`
+    itself (`?mode=ro`) is opened as it says."""
     from urllib.parse import quote
 
     from sqlalchemy import create_engine
@@ -186,7 +191,9 @@ def _reading_connection(url: URL) -> Iterator[Connection]:
 
     path = _sqlite_path(url)
     shown = describe(url)
-    if path is not None and not _writable(path):
+    if path is not None and "mode" in url.query:  # the URL says how (`?mode=ro`)
+        engine = make_engine(url)
+    elif path is not None and not _writable(path):
         engine = make_engine(readonly_url(path))
     elif path is not None:
         plain = URL.create(
@@ -241,6 +248,7 @@ def open_database(
     path = _sqlite_path(url)
     if path is not None:
         check_sqlite_file(path, must_exist=not create)
+        _refuse_creating_read_only(url, path)
     state, revision = SchemaState.EMPTY, None
     if path is None or path.exists():
         with _reading_connection(url) as conn:
@@ -279,6 +287,17 @@ def open_database(
         engine.dispose()
         raise
     return engine
+
+
+def _refuse_creating_read_only(url: URL, path: Path) -> None:
+    """DbInputError for a missing file that the URL opens read-only: SQLite would make
+    an empty file there and then fail to write the schema into it."""
+    read_only = url.query.get("mode") == "ro" or url.query.get("immutable") == "1"
+    if read_only and not path.exists():
+        raise DbInputError(
+            f"no study database at {path}, and the URL opens it read-only (?mode=ro or "
+            "?immutable=1); expected an existing file, or a URL without them to create one"
+        )
 
 
 def check_sqlite_file(path: Path, *, must_exist: bool) -> None:

@@ -168,6 +168,9 @@ SLOW_MODULES = frozenset(
         # train a GRU, calibrate, or compile the loop
         "tests/teleop_core/test_firmware.py",  # builds the firmware's host build
         "tests/study/test_hardware_session.py",  # the same, and sessions in real time
+        "tests/study/test_hardware_drive_session.py",  # the same, with a drive unit too
+        "tests/study/lsl/test_lsl_forces.py",  # the same, forces from an LSL stream
+        "tests/teleop_core/test_follower_units.py",  # builds the firmware's host build
         "tests/study/test_stopped_sessions.py",  # sessions in real time, signalled
         "tests/teleop_core/test_gru.py",
         "tests/teleop_core/test_estimator.py",

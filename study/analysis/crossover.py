@@ -35,15 +35,15 @@ Not testable (and then not reported, with a note): a period or carry-over when e
 participant of the task had the same condition order (they are then aliased with the
 condition), a trial position when no block has two trials.
 
-All the checks of a study are one family, Holm-corrected (statsmodels'
-`multipletests(method="holm")`), so that a study without these effects has a term added
-in at most `ALPHA` of studies; a check with p_holm below `ALPHA` is added to the model
-of its task and measure (a carry-over with the period beside it, which defines it), and
-the HV - VO marginal contrast (averaged over the groups, as emmeans) is reported before
-and after, with the residual and participant SDs. Where a carry-over is added, the
-first-period comparison is reported too: HV against VO in the first block only, between
-participants (value ~ condition + group + (1 | participant)), the estimate the
-crossover literature falls back on when carry-over is present.
+All the checks of a study are one family, Holm-corrected (pingouin's
+`multicomp(method="holm")`, as the comparisons), so that a study without these effects
+has a term added in at most `ALPHA` of studies; a check with p_holm below `ALPHA` is
+added to the model of its task and measure (a carry-over with the period beside it,
+which defines it), and the HV - VO marginal contrast (averaged over the groups, as
+emmeans) is reported before and after, with the residual and participant SDs. Where a
+carry-over is added, the first-period comparison is reported too: HV against VO in the
+first block only, between participants (value ~ condition + group + (1 | participant)),
+the estimate the crossover literature falls back on when carry-over is present.
 
 A model is fitted once per task and measure and set of terms (`_Cell.fit`); the base
 model is the one `mixed_model` fits, which `stats_lmm.fit_random_intercept` returns
@@ -258,9 +258,11 @@ def _first_period(cell: _Cell) -> dict[str, Any] | None:
 def _holm(p: list[float]) -> list[float]:
     if not p:
         return []
-    from statsmodels.stats.multitest import multipletests
+    # the comparisons' Holm (pingouin's): statsmodels' runs a full garbage collection
+    # on every call, a tenth of the command's time
+    from study.analysis.comparisons import holm
 
-    return [float(x) for x in multipletests(p, method="holm")[1]]
+    return [float(x) for x in holm(np.array(p, dtype=float))]
 
 
 def design_checks(

@@ -220,6 +220,7 @@ def _data(analysis: Analysis) -> str:
     measures = ", ".join(dict.fromkeys(r["measure"] for r in analysis.descriptive_rows))
     sentences = [
         f"The analysis used {total} trials of {tasks} ({drivers or 'none'}).",
+        *_forces_sentence(analysis),
         f"Participants per group: at most {_groups(analysis)}.",
         f"Measures: {measures or 'none'}.",
         "Each participant's trials of a block were averaged; participant means were the "
@@ -227,6 +228,30 @@ def _data(analysis: Analysis) -> str:
         *exclusion_sentences(analysis.exclusions),
     ]
     return " ".join(sentences)
+
+
+def _forces_sentence(analysis: Analysis) -> list[str]:
+    """Where the forces came from, when any trial's were measured on a physical phantom,
+    or when people drove a simulated follower (their actions measured, not the forces)."""
+    forces = analysis.forces_by_source
+    measured = forces.get("measured", 0)
+    simulated = forces.get("simulated", 0)
+    people = simulated - analysis.source.simulated  # keyboard and dial-only hardware trials
+    if measured:
+        sentence = (
+            f"The forces of {measured} of them were measured, with the real drive in a "
+            "physical phantom (the proximal reference and distal forces from the lab's "
+            "sensors, the proximal estimate from the drive's current)"
+        )
+        if simulated:
+            sentence += f"; those of {simulated} came from the simulated follower and phantom"
+        return [sentence + "."]
+    if people > 0:
+        return [
+            f"The forces of the {people} trials people drove came from the simulated "
+            "follower and phantom (no drive unit in the loop)."
+        ]
+    return []
 
 
 def _results(analysis: Analysis) -> str:

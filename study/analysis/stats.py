@@ -165,6 +165,9 @@ class Analysis:
     """The TOST bounds the comparisons used."""
     task_sources: dict[str, DataSource] = field(default_factory=dict)
     """Each task's analysed trials by driver."""
+    forces_by_source: dict[str, int] = field(default_factory=dict)
+    """The analysed trials by where their forces came from (`study_rows.forces_source`:
+    measured, simulated, unknown)."""
 
     @cached_property
     def descriptives(self) -> pd.DataFrame:
@@ -597,4 +600,14 @@ def analyze_rows(
             task: DataSource.of_drivers([t["driver"] for t in rows if "driver" in t])
             for task, rows in _groups((t["task"], t) for t in trials).items()
         },
+        forces_by_source=_forces_by_source(trials),
     )
+
+
+def _forces_by_source(trials: list[dict[str, Any]]) -> dict[str, int]:
+    """How many trials' forces were measured, simulated or of unknown source."""
+    counts: dict[str, int] = {}
+    for t in trials:
+        if "forces" in t:
+            counts[t["forces"]] = counts.get(t["forces"], 0) + 1
+    return counts

@@ -218,8 +218,15 @@ def _theta(model, design: Design) -> float:  # type: ignore[no-untyped-def]
         return _polished_theta(model, _start(model))
     model = _unfitted(model)
     if start == 0.0:
-        # at or near the boundary: a rough root from statsmodels' smallest start decides
-        # whether the fit is the boundary's (most are); only an interior one is polished
+        # the closed form's deviance rises from the boundary: statsmodels' likelihood
+        # confirms it where it falls at lme4's singular tolerance and is no higher there
+        # than at 0 (most boundary fits); otherwise a rough root from statsmodels' smallest
+        # start decides, and only an interior one is polished
+        edge = np.array([SINGULAR_TOL])
+        if float(model.score(edge, profile_fe=True)[0]) <= 0 and _boundary_fits_as_well(
+            model, SINGULAR_TOL * (1 - 1e-9)
+        ):
+            return 0.0
         rough = _polished_theta(model, 0.0, rtol=1e-6)
         if rough == 0.0 or _boundary_fits_as_well(model, rough):
             return 0.0

@@ -7,7 +7,7 @@
    `groups` (20/8/8) people, `trials` measured trials per condition, counterbalanced.
 2. `study participants fit`'s whole fit runs on it (`fit_study`), timed: the
    target is <= 10 minutes for a 36-participant study on this 2-core machine.
-3. The truth's VO - HV differences of the peak forces: `truth_people` more people per
+3. The truth's HV - VO differences of the peak forces: `truth_people` more people per
    group drawn from the truth and simulated (1 trial per condition, independent seeds),
    their mean difference per group with its standard error. 300 by default: with 60 the
    truth's own standard error (0.02-0.04 N) was half the fitted model's interval, so a
@@ -16,7 +16,7 @@
    for every trait, with the mean of the study's own people beside it: with 8 people
    a group's sample mean is itself off its distribution's by about 7 %; and beside the
    count, how often an oracle would meet it, `oracle_within`); the truth's
-   VO - HV peak-force difference inside the fitted model's reported
+   HV - VO peak-force difference inside the fitted model's reported
    95 % interval (the `model` rows of the summaries: the emulator's prediction over the
    fit's bootstrap replicates, corrected by its discrepancy from the people simulated
    from the fit; the `simulated` rows' own interval is reported beside it). The fit's
@@ -45,6 +45,7 @@ from study.analysis.participant_fit.coverage import coverage, typical_probe_se
 from study.analysis.participant_fit.emulator import MomentEmulator
 from study.analysis.participant_fit.estimate import HIGH, LOW, prior_arrays
 from study.analysis.participant_fit.fit import FitSettings, fit_study, simulate_people
+from study.analysis.participant_fit.summaries import DIFFERENCE
 from study.protocol.demo import run_demo
 from study.protocol.participant_model import FORMAT, load_model
 from study.protocol.session import participant_traits
@@ -186,7 +187,7 @@ def run_participants_bench(
         if coverage_studies
         else None
     )
-    status("the truth's VO - HV differences")
+    status("the truth's HV - VO differences")
     truth_trials = simulate_people(
         "lcca",
         {g: [truth[g]] for g in groups},
@@ -223,11 +224,11 @@ def run_participants_bench(
             )
         wide = means.xs(group, level="group")
         for m in FORCES:
-            d = (wide[m].unstack()["VO"] - wide[m].unstack()["HV"]).to_numpy(float)
+            d = (wide[m].unstack()["HV"] - wide[m].unstack()["VO"]).to_numpy(float)
             rows = table[
                 (table["group"] == group)
                 & (table["measure"] == m)
-                & (table["condition"] == "VO-HV")
+                & (table["condition"] == DIFFERENCE)
             ].set_index("source")
             row, sim = rows.loc["model"], rows.loc["simulated"]
             true_d = float(d.mean())
@@ -428,7 +429,7 @@ def markdown(report: dict[str, Any]) -> str:
         )
     lines += [
         "",
-        "| group | measure | truth VO - HV (SE) | fitted model (95 % CI) | inside "
+        "| group | measure | truth HV - VO (SE) | fitted model (95 % CI) | inside "
         "| emulator alone (95 % CI) | discrepancy (SE) | people simulated from the fit |",
         "|---|---|---|---|---|---|---|---|",
     ]

@@ -4,8 +4,10 @@ One figure per factor and kind (`power_<factor>`, `effect_<factor>`): a panel pe
 measure, a line per group (Okabe-Ito colours, the paper figures' style), with the
 Monte-Carlo 95 % interval as a band. When other factors are swept too, each of their
 combinations gets its own row of panels. A campaign with no factor draws one figure
-of each kind against the groups. Every figure says in its own text that it shows
-simulated participants.
+of each kind against the groups. Every figure's title says what it plots (`plotted`:
+power or the effect, per group, against the swept factor or at the one design every
+factor's single value makes), then the campaign's name, which may promise more than a
+small campaign draws, and that it shows simulated participants.
 """
 
 from __future__ import annotations
@@ -56,6 +58,27 @@ def _rows(summary: pd.DataFrame, factors: list[str], x: str) -> list[tuple[str, 
             (", ".join(f"{f} {v:g}" for f, v in zip(others, values, strict=True)), summary[mask])
         )
     return out
+
+
+KINDS = {
+    "power": "Power of HV vs VO (p < .05) per group",
+    "effect": "Effect of HV vs VO (Hedges' g_av, HV - VO) per group",
+}
+
+
+def plotted(summary: pd.DataFrame, factors: list[str], x: str | None, kind: str) -> str:
+    """What a figure plots, in words: `KINDS[kind]`, against factor `x` (its values
+    named when few), or at the single setting of the factors and group sizes drawn."""
+    fixed = [f for f in factors if f != x and summary[f].nunique() == 1]
+    at = ", ".join(f"{f} {summary[f].iloc[0]:g}" for f in fixed)
+    if x:
+        values = list(dict.fromkeys(summary[x]))
+        return f"{KINDS[kind]} against {FACTOR_LABELS.get(x, x)} ({len(values)} values)" + (
+            f", at {at}" if at else ""
+        )
+    per_group = summary.groupby("group", sort=False)["n"].first()
+    sizes = ", ".join(f"{g} {int(n)}" for g, n in per_group.items())
+    return f"{KINDS[kind]} at one sample size ({sizes}" + (f"; {at})" if at else ")")
 
 
 def plot_factor(
@@ -125,7 +148,7 @@ def plot_factor(
                     else:
                         ax.set_xticks(range(len(groups)), groups)
         axes[0][-1].legend(frameon=False, loc="best")
-        fig.suptitle(f"{title} ({SIMULATED_NOTE})")
+        fig.suptitle(f'{plotted(summary, factors, x, kind)}\n"{title}" ({SIMULATED_NOTE})')
     return fig
 
 

@@ -68,6 +68,29 @@ def database_failure(exc: BaseException, db_url: str | None = None) -> str | Non
     return classify(orig if orig is not None else exc).line(shown)
 
 
+def output_failure(ctx: click.Context, exc: BaseException) -> str | None:
+    """One line for a file or folder a command was told to write (`--out`, `--json`...)
+    that the system will not make there (a folder under /proc, a name too long, no
+    permission), or None for any other error. A full disk is told by the commands
+    themselves, with what they kept."""
+    if not isinstance(exc, OSError) or not exc.filename:
+        return None
+    failed = Path(str(exc.filename)).absolute()
+    for param in ctx.command.params:
+        value = ctx.params.get(param.name or "")
+        if not isinstance(value, Path) or not isinstance(param, click.Option):
+            continue
+        target = value.absolute()
+        sibling = failed.parent == target.parent and failed.name.startswith(f".{target.name}.")
+        if failed == target or target in failed.parents or sibling:  # sibling: its temp file
+            return (
+                f"{param.opts[0]} {value}: {target if sibling else failed} cannot be written "
+                f"({exc.strerror or type(exc).__name__}); expected a folder or file that can "
+                "be made and written there"
+            )
+    return None
+
+
 def _driver_fault(exc: BaseException, module: str) -> bool:
     """Whether `exc` is SQLite's or psycopg's own error for a database that cannot be
     used (not a constraint or a programming error)."""
@@ -167,7 +190,7 @@ class StudyCommand(click.Command):
         except USER_ERRORS as exc:
             raise InputError(str(exc), ctx) from exc
         except Exception as exc:
-            message = database_failure(exc, ctx.params.get("db_url"))
+            message = database_failure(exc, ctx.params.get("db_url")) or output_failure(ctx, exc)
             if message is None:
                 raise
             raise InputError(message, ctx) from exc

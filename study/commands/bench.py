@@ -355,7 +355,7 @@ def bench_startup(
     type=click.IntRange(min=4),
     default=300,
     show_default=True,
-    help="People per group simulated for the truth's VO - HV differences.",
+    help="People per group simulated for the truth's HV - VO differences.",
 )
 @click.option(
     "--truth-shift",

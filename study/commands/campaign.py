@@ -77,9 +77,9 @@ def run(campaign_path: Path, out_dir: Path, workers: int | None, scheduler: str 
             f"--workers {workers} with --scheduler {scheduler}; expected one of them "
             "(the scheduler's workers are started with `dask worker`)"
         )
-    if not campaign_path.is_file():
-        raise StudyInputError(f"campaign file {campaign_path} does not exist")
-    text = campaign_path.read_text()
+    from study.protocol.csv_input import read_text_file
+
+    text = read_text_file(campaign_path, "campaign file", "a UTF-8 TOML file")
     spec = parse_campaign(text, str(campaign_path))
     folder = CampaignDir.open(out_dir, spec, text)
     total = len(spec.units())

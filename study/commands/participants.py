@@ -172,6 +172,8 @@ def _write(out_path: Path, result: FitResult, seconds: float) -> dict:
 
 
 def _print(model: dict, table: object) -> None:
+    from study.analysis.participant_fit.fit import dropped_text
+
     fits = model["fit"]
     click.echo(
         f"{model['task']}: fitted to {model['fitted_from']['participants']} participants' "
@@ -182,8 +184,9 @@ def _print(model: dict, table: object) -> None:
         f"moments: the measures and {len(features['names'])} sample features "
         f"({features['trials_with_samples']} of {model['fitted_from']['trials']} trials "
         "with samples)"
+        + (f"; {dropped_text(features['dropped'])}" if features.get("dropped") else "")
         if features["names"]
-        else "moments: the measures (the task has no sample features)"
+        else f"moments: {features['note']}"
     )
     click.echo(
         f"identifiable from the moments: {', '.join(model['identifiable']) or 'none'}; "
@@ -193,6 +196,8 @@ def _print(model: dict, table: object) -> None:
             else f"fixed at their priors: {', '.join(model['fixed_at_prior']) or 'none'}"
         )
     )
+    if model.get("probed_but_held_line"):
+        click.echo(model["probed_but_held_line"])
     for group, out in fits.items():
         traits = ", ".join(
             f"{t} {v['mean']:.4g} (95 % {v['mean_ci95'][0]:.4g}-{v['mean_ci95'][1]:.4g}"

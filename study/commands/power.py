@@ -156,10 +156,10 @@ def power(
       study power --design design.toml --n-sim 200
     """
     from study.analysis.power import SCALES, power_curve
+    from study.protocol.csv_input import read_text_file
 
-    if not design_path.is_file():
-        raise StudyInputError(f"design file {design_path} does not exist")
-    design = parse_design(design_path.read_text(), str(design_path))
+    text = read_text_file(design_path, "design file", "a UTF-8 TOML file")
+    design = parse_design(text, str(design_path))
     model = load_participants(participants_path)
     if model is None:
         effects = _effects(effect, list(design.groups))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -31,9 +32,12 @@ if TYPE_CHECKING:
     from sqlalchemy import Engine
 
     from study.protocol.design import StudyDesign
+    from study.protocol.design_sensors import SensorSettings
     from study.protocol.observer import SessionObserver
     from study.protocol.session import PendingTrial
     from study.protocol.stop_signals import SignalStop
+    from teleop_core.loop.follower_units import ForceSource, PhysicalFollower
+    from teleop_core.loop.hardware import HardwareDriver
 
 
 @click.command("run", cls=StudyCommand)
@@ -56,6 +60,11 @@ if TYPE_CHECKING:
     "person on the dial (--port).",
 )
 @click.option("--port", help="Serial port of the dial's ESP32 (hardware driver).")
+@click.option(
+    "--drive-port",
+    help="Serial port of the guidewire drive's ESP32 (hardware driver): the real follower "
+    "in a physical phantom, its forces from the design's [sensors] unit.",
+)
 @click.option(
     "--pace",
     type=click.FloatRange(min=MIN_PACE, max=MAX_PACE),
@@ -81,6 +90,7 @@ def run(
     actor: str | None,
     db_url: str | None,
     lsl: bool = False,
+    drive_port: str | None = None,
 ) -> None:
     """Run the participant's remaining scheduled trials and store every sample.
 
@@ -90,6 +100,8 @@ def run(
     \b
     Example:
       study run --participant P001 --driver hardware --port /dev/ttyUSB0
+      study run --participant P001 --driver hardware --port /dev/ttyUSB0 \\
+          --drive-port /dev/ttyUSB1     # and the real drive ([sensors] in the design)
       study run --all     # every participant, simulated
     """
     from study.protocol.actor import current_actor
@@ -126,20 +138,16 @@ def run(
         return
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")
+    if drive_port is not None and driver != "hardware":
+        raise StudyInputError(
+            f"--drive-port with --driver {driver}; expected --driver hardware (the drive "
+            "unit joins the dial unit)"
+        )
     make_driver = None
     if driver == "hardware":
         if not port:
             raise StudyInputError("--driver hardware needs --port, e.g. --port /dev/ttyUSB0")
-        from teleop_core.loop.hardware import HardwareDriver, HardwareError
-
-        def make_driver() -> HardwareDriver:
-            try:
-                return HardwareDriver.open(port)
-            except HardwareError as exc:  # before the trial's row: nothing is written
-                raise StudyInputError(
-                    f"--port {port}: {exc}; expected the serial port of the dial's ESP32, "
-                    "e.g. /dev/ttyUSB0"
-                ) from None
+        make_driver = _hardware_driver(port, drive_port, db_url)
 
     estimator = load_estimator()
     engine = open_database(db_url, create=False)
@@ -184,6 +192,69 @@ def run(
         click.echo(_stopped_line(code, stop, started, len(done)), err=True)
         raise click.exceptions.Exit(stop.exit_status)
     click.echo(f"{code}: {len(done)} trials completed and stored")
+
+
+def _hardware_driver(
+    port: str, drive_port: str | None, db_url: str | None
+) -> Callable[[], HardwareDriver]:
+    """Opens the units for each trial: the dial on `port`, and given `drive_port` the
+    drive and the design's forces unit (refused, before anything runs, if the design
+    names none)."""
+    from teleop_core.loop.hardware import HardwareDriver, HardwareError
+
+    sensors = None
+    if drive_port is not None:
+        engine = open_database(db_url, create=False)
+        try:
+            sensors = _design(engine).sensors
+        finally:
+            engine.dispose()
+        if sensors.source is None:
+            raise StudyInputError(
+                f"--drive-port {drive_port}: the study's design names no force sensors; "
+                'expected a [sensors] table (source = "serial", port = "...") for the '
+                "physical phantom's forces"
+            )
+
+    def make_driver() -> HardwareDriver:
+        try:
+            dial = HardwareDriver.open(port)
+        except HardwareError as exc:  # before the trial's row: nothing is written
+            raise StudyInputError(
+                f"--port {port}: {exc}; expected the serial port of the dial's ESP32, "
+                "e.g. /dev/ttyUSB0"
+            ) from None
+        if drive_port is None or sensors is None:
+            return dial
+        try:
+            dial.follower = _open_follower(drive_port, sensors)
+        except BaseException:
+            dial.close()
+            raise
+        return dial
+
+    return make_driver
+
+
+def _open_follower(drive_port: str, sensors: SensorSettings) -> PhysicalFollower:
+    """The drive unit and the design's force sensors; one line if either fails."""
+    from teleop_core.loop.follower_units import PhysicalFollower
+    from teleop_core.loop.hardware import HardwareError
+
+    def open_stream() -> ForceSource:
+        from study.lsl.forces import LslForces
+
+        return LslForces(sensors.stream, sensors.proximal_channel, sensors.distal_channel)
+
+    forces = open_stream if sensors.source == "lsl" else sensors.port
+    try:
+        return PhysicalFollower.open(drive_port, forces)
+    except HardwareError as exc:
+        where = f"--drive-port {drive_port}" if drive_port in str(exc) else "[sensors]"
+        raise StudyInputError(
+            f"{where}: {exc}; expected the drive's ESP32 on --drive-port and "
+            f"{sensors.where} as the design's [sensors] names"
+        ) from None
 
 
 def _stopped_line(code: str, stop: SignalStop, started: list[PendingTrial], done: int) -> str:

@@ -14,6 +14,8 @@ from study.commands.base import (
 )
 from study.errors import StudyInputError
 
+MAX_ID = 2**63 - 1
+"""The largest id a database row can have (SQLite's and PostgreSQL's 64-bit integers)."""
 REASON_HELP = "Why (kept in the audit log; an invalid trial's reason is listed by the analysis)."
 
 
@@ -98,7 +100,7 @@ def _mark(trial_id: int, valid: bool, reason: str, actor: str | None, db_url: st
 
 
 @trial.command("invalidate")
-@click.argument("trial_id", metavar="ID", type=click.IntRange(min=1))
+@click.argument("trial_id", metavar="ID", type=click.IntRange(min=1, max=MAX_ID))
 @click.option("--reason", required=True, help=REASON_HELP)
 @actor_option
 @not_personal_option
@@ -115,7 +117,7 @@ def trial_invalidate(trial_id: int, reason: str, actor: str | None, db_url: str 
 
 
 @trial.command("revalidate")
-@click.argument("trial_id", metavar="ID", type=click.IntRange(min=1))
+@click.argument("trial_id", metavar="ID", type=click.IntRange(min=1, max=MAX_ID))
 @click.option("--reason", required=True, help=REASON_HELP)
 @actor_option
 @not_personal_option

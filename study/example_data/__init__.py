@@ -68,8 +68,19 @@ def copy_to(folder: Path) -> list[Path]:
     taken = [t for t in targets if t.exists()]
     if taken:
         raise StudyInputError(f"{taken[0]} exists; expected a folder without {taken[0].name}")
-    folder.mkdir(exist_ok=True)
-    for entry, target in zip(ENTRIES, targets, strict=True):
-        with as_file(files(__name__).joinpath(entry)) as source:
-            shutil.copytree(source, target, ignore=_LEFT_OUT)
+    made = not folder.exists()
+    try:
+        folder.mkdir(exist_ok=True)
+        for entry, target in zip(ENTRIES, targets, strict=True):
+            with as_file(files(__name__).joinpath(entry)) as source:
+                shutil.copytree(source, target, ignore=_LEFT_OUT)
+    except OSError as exc:  # a folder that cannot be made there (/proc), a full disk
+        for target in targets:
+            shutil.rmtree(target, ignore_errors=True)
+        if made:
+            shutil.rmtree(folder, ignore_errors=True)
+        raise StudyInputError(
+            f"{folder} cannot be written ({exc.strerror or exc}); expected a folder that "
+            "can be made and written (nothing was left there)"
+        ) from None
     return targets

@@ -57,7 +57,7 @@ def parse(text: str) -> dict[str, Any] | None:
         return None
     try:
         body = json.loads(text)
-    except ValueError:
+    except (ValueError, RecursionError):  # RecursionError: nested too deep to be ours
         return None
     if not isinstance(body, dict) or body.get(KEY) != VERSION or body.get("event") not in EVENTS:
         return None

@@ -12,8 +12,11 @@ database). Each sample's time on the trial's clock is its synchronised stamp min
 
 Refused with one line, nothing stored: a file that is not XDF; a truncated one (a chunk
 running past the end of the file, or a stream without the footer LabRecorder writes
-when it stops); one without the project's markers; markers of another study, or naming
-a trial the database does not have; a trial whose streams were imported already.
+when it stops); one pyxdf can read only in part; a stream with a time stamp, a clock
+offset or a nominal rate that is not a finite number; one without the project's markers;
+a marker field that is missing or not of its type (`TRIAL_FIELDS`), a trial's end that
+disagrees with its start; markers of another study, or naming a trial the database does
+not have; a trial whose streams were imported already.
 pyxdf reads damaged files as far as it can; the structural check is done here, before,
 for that reason.
 """
@@ -23,6 +26,7 @@ from __future__ import annotations
 import logging
 import math
 import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -145,15 +149,15 @@ TRIAL_FIELDS: dict[str, tuple[str, Any]] = {
         ),
     ),
 }
-"""A `trial_start` marker's fields that the import reads, each with what it must be
-(JSON's own types: `"practice": "no"` or `"trial": 1.5` is refused, not read as
-something else)."""
+"""A trial's marker fields that the import reads, each with what it must be (JSON's own
+types: `"practice": "no"` or `"trial": 1.5` is refused, not read as something else).
+`study run` writes them into both the `trial_start` and the `trial_end` marker, and the
+two must agree."""
 
 
 def _check_fields(path: Path, t: float, marker: dict[str, Any]) -> None:
     event = marker["event"]
-    fields = TRIAL_FIELDS if event == "trial_start" else {"trial_id": TRIAL_FIELDS["trial_id"]}
-    for name, (expected, ok) in fields.items():
+    for name, (expected, ok) in TRIAL_FIELDS.items():
         if name not in marker:
             raise XdfInputError(
                 f"{path}: the {event} marker at {t:.3f} s has no field {name!r}; expected "
@@ -179,9 +183,10 @@ def marked_trials(
     """The trials the project's markers delimit, and the indices of the marker streams.
 
     Every `trial_start` and `trial_end` is checked before any is used (`TRIAL_FIELDS`);
-    a trial started or ended twice, or ended without its start, makes the recording
-    inconsistent and is refused. A start without an end is a trial the session did not
-    finish (a crash): it has no span to store samples of, and is left out.
+    a trial started or ended twice, ended without its start, or whose end names other
+    keys than its start makes the recording inconsistent and is refused. A start without
+    an end is a trial the session did not finish (a crash): it has no span to store
+    samples of, and is left out.
     """
     found: list[tuple[float, dict[str, Any]]] = []
     marker_streams: set[int] = set()
@@ -214,6 +219,14 @@ def marked_trials(
             raise _inconsistent(path, t, f"a second trial_end of trial_id {tid}")
         ended.add(tid)
         start_t, start = starts[tid]
+        differs = next((k for k in TRIAL_FIELDS if m[k] != start[k]), None)
+        if differs is not None:
+            raise _inconsistent(
+                path,
+                t,
+                f"a trial_end of trial_id {tid} with {differs} = {_shown(m[differs])} where "
+                f"its trial_start has {_shown(start[differs])}",
+            )
         trials.append(MarkedTrial(start, start_t, t))
     return trials, marker_streams
 
@@ -272,7 +285,10 @@ def _load(path: Path) -> list[dict[str, Any]]:
     logger.setLevel(logging.WARNING)
     logger.propagate = False
     try:
-        streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
+        # numpy's warnings too: a nan clock offset makes pyxdf's fit warn on every line
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            streams, _ = pyxdf.load_xdf(str(path), dejitter_timestamps=False)
     except Exception as exc:  # pyxdf raises what its parsers raise
         raise XdfInputError(
             f"{path} could not be read as XDF ({_first_line(exc)}); expected a LabRecorder "
@@ -290,6 +306,7 @@ def _load(path: Path) -> list[dict[str, Any]]:
             "(nothing was stored)"
         )
     for stream in streams:
+        _check_numbers(path, stream)
         counted = _footer_count(stream)
         read = len(stream.get("time_stamps", ()))
         if counted is not None and counted != read:
@@ -299,6 +316,34 @@ def _load(path: Path) -> list[dict[str, Any]]:
                 "(nothing was stored)"
             )
     return list(streams)
+
+
+def _check_numbers(path: Path, stream: dict[str, Any]) -> None:
+    """XdfInputError for a stream whose time stamps, clock offsets or nominal rate are not
+    finite numbers (pyxdf reads `nan` and `inf` as numbers; nothing a recorder writes)."""
+    name = _info(stream, "name")
+    for what, values in (  # the offsets first: a bad one makes the synchronised stamps nan
+        ("clock offset", stream.get("clock_values", ())),
+        ("clock offset's time", stream.get("clock_times", ())),
+        ("sample time stamp", stream.get("time_stamps", ())),
+    ):
+        numbers = np.asarray(values, dtype=np.float64).ravel()
+        bad = np.flatnonzero(~np.isfinite(numbers))
+        if len(bad):
+            raise XdfInputError(
+                f"{path}: stream {name!r} has {what} number {bad[0] + 1} = {numbers[bad[0]]}; "
+                "expected finite numbers of seconds (nothing was stored)"
+            )
+    text = _info(stream, "nominal_srate", "0")
+    try:
+        rate = float(text)
+    except ValueError:
+        rate = math.nan
+    if not (math.isfinite(rate) and rate >= 0):
+        raise XdfInputError(
+            f"{path}: stream {name!r} has nominal_srate {text!r}; expected a rate in Hz of "
+            "0 (irregular) or more (nothing was stored)"
+        )
 
 
 def _footer_count(stream: dict[str, Any]) -> int | None:

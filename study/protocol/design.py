@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from study.errors import StudyInputError
+from study.protocol.design_sensors import SensorSettings, predicate_problem, sensor_settings
 from study.protocol.tasks.declarations import MAX_HAPTIC_GAIN_N_M_PER_N
 
 KNOWN_CONDITIONS = ("VO", "HV")
@@ -89,6 +90,7 @@ _KEYS: dict[str, type | tuple[type, ...]] = {
     "groups": dict,
     "haptic_gain_n_m_per_n": dict,
     "lsl": dict,
+    "sensors": dict,
     "probes": dict,
     "analysis": dict,
 }
@@ -169,6 +171,8 @@ class StudyDesign:
     """The `[lsl]` table (streams published and recorded); off by default."""
     analysis: AnalysisSettings = field(default_factory=AnalysisSettings)
     """The `[analysis]` table (equivalence bounds); none by default."""
+    sensors: SensorSettings = field(default_factory=SensorSettings)
+    """The `[sensors]` table (a real follower's force sensors); none by default."""
 
     def haptic_gain_for(self, condition: str) -> float | None:
         """The dial's gain in `condition`; None: the task's default (the paper's)."""
@@ -185,6 +189,9 @@ class StudyDesign:
         data["analysis"] = self.analysis.to_dict()
         if not data["analysis"]:
             del data["analysis"]
+        data["sensors"] = self.sensors.to_dict()
+        if not data["sensors"]:
+            del data["sensors"]
         data["probes"] = {"before_block": self.probes_before_block, **self.probes}
         del data["probes_before_block"]
         return data
@@ -240,6 +247,7 @@ def _validate(data: dict[str, Any], source: str = "design") -> StudyDesign:
         probes=probes,
         probes_before_block=before,
         analysis=_analysis_settings(data.get("analysis", {}), tasks, source),
+        sensors=sensor_settings(data.get("sensors", {}), source),
     )
     condition_orders(conditions, scheme, source)  # refuses a scheme that does not fit
     return design
@@ -390,35 +398,13 @@ def _lsl_settings(table: dict[str, Any], source: str) -> LslSettings:
             )
         lists[key] = tuple(value)
     for query in lists["record"]:
-        problem = _predicate_problem(query)
+        problem = predicate_problem(query)
         if problem:
             raise StudyInputError(
                 f"{source}: lsl.record query {query!r} has {problem}; expected an LSL "
                 "predicate such as type='EMG' or name='Glove' and type='Force'"
             )
     return LslSettings(publish, lists["record"], lists["plot"])
-
-
-def _predicate_problem(query: str) -> str | None:
-    """What is unbalanced in an LSL stream query (liblsl's XPath 1.0 predicate, which
-    would fail only when the session starts recording), or None."""
-    depth, quote = 0, None
-    for c in query:
-        if quote:
-            quote = None if c == quote else quote
-        elif c in "'\"":
-            quote = c
-        elif c in "([":
-            depth += 1
-        elif c in ")]":
-            depth -= 1
-            if depth < 0:
-                return f"a {c!r} without its opening bracket"
-    if quote:
-        return f"an unclosed {quote} quote"
-    if depth:
-        return "an unclosed bracket"
-    return None
 
 
 MAX_EQUIVALENCE_FRACTION = 1.0

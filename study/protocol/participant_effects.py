@@ -19,6 +19,15 @@ function of where a trial lies in the session (`TrialPlace`):
   the force; `hv_after_vo`). The fit moves one direction and holds the other at 0: with
   two condition orders the data tell only their difference, and both shares equal
   would be a period effect, which is practice's (or fatigue's) to explain;
+- `gentle_carry_over`: the same place, but what carries over is how hard the person
+  pushes, not how fast they go: the caution times (1 + share) and the torque the person
+  accepts on the dial (`comfort_torque_n_m`) times (1 - share), the traits that set the
+  forces near contact (a share > 0: gentler; `gentler_vo_after_hv`: VO pushed more
+  gently after HV first, as if still feeling the force; `gentler_hv_after_vo`). The
+  preferred speed and the stall time stay, so the completion time moves only as far as
+  the caution's slowing moves it (in LCCA the caution also sets the approach and entry
+  speeds, so there the time follows in part; the emulator says how far); one direction
+  at a time, as above;
 - `unexplained_person`: a person no trait setting reproduces. Reported, never absorbed:
   it has no multiplier, and a simulation never draws it.
 
@@ -45,6 +54,7 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "practice": ("slowing", "decay_trials"),
     "fatigue": ("rate",),
     "carry_over": ("vo_after_hv", "hv_after_vo"),
+    "gentle_carry_over": ("gentler_vo_after_hv", "gentler_hv_after_vo"),
 }
 """Each family the fit may add, with its parameters' names."""
 UNEXPLAINED = "unexplained_person"
@@ -55,6 +65,8 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "rate": (-0.1, 0.1),
     "vo_after_hv": (-0.6, 0.6),
     "hv_after_vo": (-0.6, 0.6),
+    "gentler_vo_after_hv": (-0.6, 0.6),
+    "gentler_hv_after_vo": (-0.6, 0.6),
 }
 """Each parameter's admissible range (a fit stays inside; a file outside is refused)."""
 
@@ -110,9 +122,14 @@ class ParticipantEffect:
         if self.family == "fatigue":
             grow = math.exp(p["rate"] * place.position)
             return {"preferred_speed_m_s": 1.0 / grow, "reaction_s": grow}
-        # carry-over: only a second block that follows the other condition
+        # carry-overs: only a second block that follows the other condition
         if place.block == 0 or place.condition == place.first_condition:
             return {}
+        if self.family == "gentle_carry_over":
+            share = (
+                p["gentler_vo_after_hv"] if place.condition == "VO" else p["gentler_hv_after_vo"]
+            )
+            return {"caution": 1.0 + share, "comfort_torque_n_m": 1.0 - share}
         share = p["vo_after_hv"] if place.condition == "VO" else p["hv_after_vo"]
         return {"preferred_speed_m_s": 1.0 - share, "visual_stall_s": 1.0 - share}
 

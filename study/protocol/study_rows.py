@@ -6,7 +6,8 @@ and `analysis.frames` build their frames from these rows.
 - `trial_rows`: one dict per measured trial (completed, not practice, the latest attempt
   of each slot): participant, group, task, condition, trial (1-based), block (the
   block's place in the participant's schedule, 1-based), completion_time_s, the trial's
-  measures under their names, success, driver.
+  measures under their names, success, driver, forces (`forces_source`: measured on a
+  physical phantom, or simulated).
 - `tlx_rows`: one dict per questionnaire in the order stored: participant, group, task,
   condition, the six ratings, tlx_raw, tlx_weighted (None without the pairwise
   comparisons).
@@ -37,7 +38,7 @@ def measure_columns(tasks: Iterable[str], analysed_only: bool = False) -> list[s
 
 TRIALS_SQL = (
     'SELECT p.code, p."group", t.id, t.task, t.condition, t.block_index, t.trial_index, '
-    "t.completion_time_s, t.success, t.driver "
+    "t.completion_time_s, t.success, t.driver, t.summary "
     "FROM participants p JOIN trials t ON t.participant_id = p.id "
     "WHERE t.status = 'completed' AND NOT t.practice "
     "ORDER BY p.code, t.block_index, t.trial_index, t.attempt"
@@ -72,14 +73,30 @@ def _query(conn: Any, sql: str) -> list[tuple[Any, ...]]:
         cursor.close()
 
 
+def forces_source(driver: str | None, summary: Any) -> str:
+    """Where a trial's forces came from: `measured` (a drive unit in a physical phantom,
+    the lab's force sensors: its summary says ``forces = measured``), `simulated` (the
+    follower and phantom models, whoever drove), or `unknown` (an imported trial).
+    `summary` is the stored JSON, as text (SQLite) or decoded (PostgreSQL)."""
+    import json
+
+    if isinstance(summary, str | bytes):
+        try:
+            summary = json.loads(summary)
+        except ValueError:
+            summary = None
+    if isinstance(summary, dict) and summary.get("forces") == "measured":
+        return "measured"
+    return "unknown" if driver == "imported" else "simulated"
+
+
 def trial_rows(conn: Any) -> list[dict[str, Any]]:
     measures: dict[int, dict[str, float]] = {}
     for trial_id, name, value in _query(conn, MEASURES_SQL):
         measures.setdefault(trial_id, {})[name] = value
     latest: dict[tuple[Any, ...], dict[str, Any]] = {}
-    for code, group, trial_id, task, condition, block, index, time_s, success, driver in _query(
-        conn, TRIALS_SQL
-    ):
+    for row in _query(conn, TRIALS_SQL):
+        code, group, trial_id, task, condition, block, index, time_s, success, driver = row[:10]
         latest[(code, task, condition, index)] = {
             "participant": code,
             "group": group,
@@ -91,6 +108,7 @@ def trial_rows(conn: Any) -> list[dict[str, Any]]:
             **measures.get(trial_id, {}),
             "success": bool(success),
             "driver": driver,
+            "forces": forces_source(driver, row[10]),
         }
     return list(latest.values())
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -44,6 +45,9 @@ from teleop_core.loop.link import (
 )
 from teleop_core.master.dial import D_OMEGA, D_THETA, DIAL_STATE_SIZE, dial_param_vector
 from teleop_core.master.haptics import LOADING, rate_command
+
+if TYPE_CHECKING:
+    from teleop_core.loop.follower_units import PhysicalFollower
 
 __all__ = [  # LoopConfig and the results moved to config.py, the columns to layout.py
     "SAMPLE_COLUMNS",
@@ -131,6 +135,8 @@ class TeleopLoop:
         self._done_s = math.nan
         self._success = False
         self.driver: Driver | None = None
+        self.physical_follower: PhysicalFollower | None = None
+        """The real drive and force sensors (the driver's `follower`), once started."""
 
     def _reserve_draws(self, count: int) -> None:
         pos = int(self._pool_pos[POOL_NEXT])
@@ -208,6 +214,7 @@ class TeleopLoop:
                 )
             self._drv_every = round(ratio)
         driver.start(np.random.default_rng(self.rng.integers(2**63)))
+        self.physical_follower = getattr(driver, "follower", None)
         self.mp[K.M_DIAL_EXTERNAL] = 1.0 if driver.physical_dial else 0.0
         # acquisitions, estimates and the link run inside the kernel between driver
         # events unless something outside it must see each packet
@@ -216,6 +223,7 @@ class TeleopLoop:
             and self.force_override is None
             and not driver.physical_dial
             and not driver.realtime
+            and self.physical_follower is None
         )
         if self._fast:
             self._links = kernel_links(self.to_master.params, self.to_follower.params)
@@ -315,7 +323,8 @@ class TeleopLoop:
                 c.commands_sent += int(loop[K.L_N_CMD])
                 c.estimates += n_est
                 c.forces_sent += n_est
-                self._success = self._success or loop[K.L_SUCCESS] != 0.0
+                if self.physical_follower is None:  # the model's tip reached the target
+                    self._success = self._success or loop[K.L_SUCCESS] != 0.0
             self._last_row = log[n - 1].tolist()  # Python floats: cheap to index
             if self.keep_ticks:
                 logs.append(log[:n].copy())
@@ -416,6 +425,9 @@ class TeleopLoop:
 
     def _acquire(self, rows: list[tuple[float, ...]]) -> None:
         """The follower's ESP32 samples; the estimator runs on every other sample."""
+        if self.physical_follower is not None:
+            self._acquire_physical(rows, self.physical_follower)
+            return
         c, t, row, loop = self.counters, self.t_s, self._last_row, self.loop
         c.acquisitions += 1
         if c.ticks % self._est_every == 0:
@@ -451,6 +463,39 @@ class TeleopLoop:
         rows.append(tuple(sample))
         if row[K.LOG_SUCCESS] and not self._success:
             self._success = True
+
+    def _acquire_physical(self, rows: list[tuple[float, ...]], follower: PhysicalFollower) -> None:
+        """The real follower's acquisition: the drive gets the speed command the
+        follower received over the link; its measured current and speed feed the
+        estimator; the sensors' forces are stored. The tip's pose is unknown (no tracker
+        on a physical phantom: NaN); the region column is the loop's model's."""
+        c, t, row, loop = self.counters, self.t_s, self._last_row, self.loop
+        c.acquisitions += 1
+        reading = follower.exchange(t, float(loop[K.L_SPEED_CMD_RX]))
+        _, iq_a, speed_rad_s = follower.inputs[-1]
+        if self._stream is not None:
+            self._stream.push(t, iq_a, speed_rad_s)
+        if c.ticks % self._est_every == 0:
+            if self._stream is not None:
+                estimate = self._stream.estimate()
+                loop[K.L_FORCE_EST] = estimate[EST_FINAL] if estimate is not None else 0.0
+            else:  # no estimator: the reference sensor's force is rendered
+                loop[K.L_FORCE_EST] = reading.forces.proximal_n
+            c.estimates += 1
+            c.forces_sent += 1
+            self.to_master.send(t, float(loop[K.L_FORCE_EST]))
+        sample = [0.0] * K.SAMPLE_WIDTH
+        sample[K.S_T] = t
+        sample[K.S_INSERTION] = reading.drive.angle_rad * self.config.plant.wheel_radius_m
+        sample[K.S_ROTATION] = row[K.LOG_ROTATION]
+        sample[K.S_TIP_X] = sample[K.S_TIP_Y] = sample[K.S_TIP_Z] = math.nan
+        sample[K.S_BRANCH] = row[K.LOG_BRANCH]
+        sample[K.S_PROXIMAL] = reading.forces.proximal_n
+        sample[K.S_PROXIMAL_EST] = float(loop[K.L_FORCE_EST])
+        sample[K.S_DISTAL] = reading.forces.distal_n
+        sample[K.S_DIAL_ANGLE] = row[K.LOG_DIAL_ANGLE]
+        sample[K.S_DIAL_TORQUE] = row[K.LOG_DIAL_TORQUE]
+        rows.append(tuple(sample))
 
     def _current_noise(self) -> float:
         """INA240 noise on the acquired current, A, drawn in blocks (one call per sample

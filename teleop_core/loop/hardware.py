@@ -12,16 +12,21 @@ upper-case hex digits (as NMEA 0183 does). Fields are separated by one space; nu
 are decimal, SI except the current (mA, as the unit's firmware and eqs. 14-15 use it).
 
 Host -> unit                      Unit -> host
-``HELLO``                         ``OK <role> <firmware>``; role is ``dial`` or ``drive``
+``HELLO``                         ``OK <role> <firmware>``; role is ``dial``, ``drive`` or
+                                  ``forces``
 ``I <current_mA>``                ``S ...`` state line (dial unit: q-current command)
 ``W <speed_rad_s>``               ``S ...`` state line (drive unit: speed command)
 ``Q``                             ``S ...`` state line (query only)
 ``STOP``                          ``OK STOP`` (commands zeroed)
+``F``                             ``F <t_ms> <proximal_N> <distal_N>`` (a forces unit)
                                   ``E <message>`` for a line it cannot accept
 
 State line: ``S <t_ms> <angle_rad> <speed_rad_s> <iq_mA> <joystick>`` with the unit's
 clock in ms, the unwrapped AS5600 angle, the firmware's speed estimate, the measured
 q-axis current and (dial unit) the rotation joystick's axis in [-1, 1] (0 on a drive).
+A forces unit (the lab's proximal load cell and the phantom's distal force sensor on one
+serial line, `teleop_core.loop.follower_units`) answers ``F`` with its clock and the two
+forces in N.
 
 The host sends one command per driver update (100 Hz) and waits for the reply, so a
 unit that stops answering is noticed within `timeout_s` (two update periods by default:
@@ -41,11 +46,14 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import serial
 
 from teleop_core.loop.drivers import Driver, DriverFailure, HandAction, OperatorView
+
+if TYPE_CHECKING:
+    from teleop_core.loop.follower_units import PhysicalFollower
 
 T = TypeVar("T")
 
@@ -59,6 +67,8 @@ MAX_SHAFT_SPEED_RAD_S = 50.0
 limit): a state line whose angle moved faster since the last, or whose clock went
 back, is treated as corrupt (the XOR checksum misses errors that flip the same bit in
 two bytes)."""
+UNIT_ROLES = ("dial", "drive", "forces")
+"""What a unit's greeting may name it."""
 GREETING_S = 2.0
 """How long the host greets a unit it has just opened before it gives up on it."""
 
@@ -237,7 +247,7 @@ class Esp32Unit:
                     raise UnitSilent(
                         f"no greeting from the unit on {self.port} within {wait_s:.1f} s ({exc})"
                     ) from None
-        if len(reply) != 3 or reply[0] != "OK" or reply[1] not in ("dial", "drive"):
+        if len(reply) != 3 or reply[0] != "OK" or reply[1] not in UNIT_ROLES:
             raise HardwareError(f"unexpected greeting from {self.port}: {' '.join(reply)!r}")
         return reply[1], reply[2]
 
@@ -286,15 +296,23 @@ class HardwareDriver(Driver):
 
     The loop calls `exchange` at every driver update with the current Psi asks for and
     receives the dial's measured angle and speed; the rotation joystick on the same unit
-    sets the guidewire's rotation rate.
+    sets the guidewire's rotation rate. `follower`, given, is the real follower (the
+    drive unit and the force sensors, `teleop_core.loop.follower_units`), which the
+    loop then uses in place of its simulated follower and phantom.
     """
 
     physical_dial = True
     realtime = True
 
-    def __init__(self, unit: Esp32Unit, max_rotation_rate_rad_s: float = math.pi / 2) -> None:
+    def __init__(
+        self,
+        unit: Esp32Unit,
+        max_rotation_rate_rad_s: float = math.pi / 2,
+        follower: PhysicalFollower | None = None,
+    ) -> None:
         self.unit = unit
         self.max_rotation_rate_rad_s = max_rotation_rate_rad_s
+        self.follower = follower
         self.last: UnitState | None = None
 
     @classmethod
@@ -310,10 +328,16 @@ class HardwareDriver(Driver):
         return HandAction(rotation_rate_rad_s=joystick * self.max_rotation_rate_rad_s)
 
     def record(self) -> dict[str, str | int]:
+        follower = self.follower.record() if self.follower is not None else {}
         return {
             "dial_firmware": self.unit.firmware,
             "dial_corrupt_lines": self.unit.corrupt_lines,
+            **follower,
         }
 
     def close(self) -> None:
-        self.unit.close()
+        try:
+            self.unit.close()
+        finally:
+            if self.follower is not None:
+                self.follower.close()

@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from teleop_core.loop.hardware import UPDATE_PERIOD_S, Esp32Unit, UnitState
+from teleop_core.loop.hardware import UPDATE_PERIOD_S, Esp32Unit, HardwareError, UnitState
 from teleop_core.loop.host_unit import HOST_SUFFIX
 
 ENCODER_COUNTS = 4096
@@ -103,6 +103,13 @@ def check_unit(
         Nothing answers on the port, or it answers what the protocol does not allow.
     """
     unit = Esp32Unit(port, role, baudrate)
+    if unit.role == "forces":
+        unit.close()
+        raise HardwareError(
+            f"the unit on {port} is a forces unit (firmware {unit.firmware}); this check "
+            "is for a dial or a drive, a session reads a forces unit through the design's "
+            "[sensors] table"
+        )
     try:
         states, round_trips, host_s = _query(unit, seconds, spin_rad_s, on_state)
     finally:

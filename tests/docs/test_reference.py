@@ -72,6 +72,9 @@ def test_every_key_of_the_design_files_sub_tables_is_documented() -> None:
 
     accepted = {f"lsl.{f.name}" for f in fields(design.LslSettings)}
     accepted |= {"probes.before_block", *(f"probes.{name}" for name in probe_names())}
+    from study.protocol.design_sensors import SensorSettings
+
+    accepted |= {f"sensors.{f.name}" for f in fields(SensorSettings)}
     assert accepted <= documented, f"undocumented: {sorted(accepted - documented)}"
 
 

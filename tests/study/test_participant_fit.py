@@ -266,7 +266,7 @@ def test_the_emulator_is_checked_against_the_people_simulated_from_the_fit(fitte
 
     model, _ = fitted
     check = model["emulator_check"]
-    assert len(check["rows"]) == 3 * 3 * 3  # groups x measures x (VO, HV, VO-HV)
+    assert len(check["rows"]) == 3 * 3 * 3  # groups x measures x (VO, HV, HV-VO)
     assert check["outside"] == sum(not r["inside"] for r in check["rows"])
     # the interval counts the emulator's own noise beside the simulated people's
     assert "design noise" in check["interval"]
@@ -317,13 +317,13 @@ def test_the_figure_draws_an_estimate_outside_its_bootstrap_interval() -> None:
     rows = [
         (g, "completion_time_s", c, s, 10.0, 9.0, 11.0)
         for g in ("novice", "expert")
-        for c in ("VO", "HV", "VO-HV")
+        for c in ("VO", "HV", "HV-VO")
         for s in ("observed", "simulated")
     ]
     rows += [
         (g, "completion_time_s", c, "model", 12.0, 9.5, 11.5)
         for g in ("novice", "expert")
-        for c in ("VO", "HV", "VO-HV")
+        for c in ("VO", "HV", "HV-VO")
     ]
     table = pd.DataFrame(
         rows, columns=["group", "measure", "condition", "source", "mean", "ci_low", "ci_high"]

@@ -69,13 +69,14 @@ def test_the_discrepancy_is_the_offset_and_its_se_the_trials_noise_only() -> Non
     # by hand: each person's residual in VO is 0.2 + the mean of their two VO noises
     vo = 0.2 + noise[:, 0].mean(axis=1)  # 0.2, 0.22, 0.18, 0.21
     hv = -0.1 + noise[:, 1].mean(axis=1)  # -0.08, -0.11, -0.08, -0.12
-    for label, r in (("VO", vo), ("HV", hv), ("VO-HV", vo - hv)):
+    for label, r in (("VO", vo), ("HV", hv), ("HV-VO", hv - vo)):
         shift, se, n = found[("novice", "force_n", label)]
         assert n == 4
         assert shift == pytest.approx(r.mean(), abs=1e-12)
         assert se == pytest.approx(r.std(ddof=1) / 2.0, abs=1e-12)
     assert found[("novice", "force_n", "VO")][0] == pytest.approx(0.2025, abs=1e-12)
-    assert found[("novice", "force_n", "VO-HV")][0] == pytest.approx(0.2025 + 0.0975, abs=1e-12)
+    # the difference in the analysis's sign, HV - VO
+    assert found[("novice", "force_n", "HV-VO")][0] == pytest.approx(-0.0975 - 0.2025, abs=1e-12)
     # the people's spread (trait 0 from 0.01 to 0.08: 0.7 N) does not enter the SE: the
     # SE of their plain mean is over ten times larger
     plain = frame[frame["condition"] == "VO"].groupby("participant")["force_n"].mean()
@@ -104,14 +105,14 @@ def test_the_summaries_model_rows_carry_the_correction_and_write_as_strict_json(
     rng = np.random.default_rng(0)
     draws = np.linspace(1.0, 2.0, 41)
     predicted = {
-        "novice": {"VO:force_n": draws, "HV:force_n": draws - 0.5, "VO-HV:force_n": draws * 0 + 0.5}
+        "novice": {"VO:force_n": draws, "HV:force_n": draws - 0.5, "HV-VO:force_n": draws * 0 - 0.5}
     }
     found = emulator_discrepancy(frame, ["force_n"], ["novice"], LinearEmulator())
     rows = pd.DataFrame(summaries(frame, frame, ["force_n"], ["novice"], predicted, rng, 50, found))
     model = rows[rows["source"] == "model"].set_index("condition")
     # exact offsets, no noise: the SE is 0 and the interval is the emulator's, moved
-    assert model.loc["VO-HV", "mean"] == pytest.approx(0.5 + 0.3, abs=1e-12)
-    assert model.loc["VO-HV", "ci_low"] == pytest.approx(0.8, abs=1e-12)
+    assert model.loc["HV-VO", "mean"] == pytest.approx(-0.5 - 0.3, abs=1e-12)
+    assert model.loc["HV-VO", "ci_low"] == pytest.approx(-0.8, abs=1e-12)
     assert model.loc["VO", "discrepancy"] == pytest.approx(0.2, abs=1e-12)
     # the fit writes the rows with NaN (the observed rows have no discrepancy) dropped
     records = [

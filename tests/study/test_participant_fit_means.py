@@ -169,9 +169,9 @@ def _toy_check(design_seed: int, bias: float, people: int = 60) -> dict:
     for c in per:
         per[c] = np.exp(logs[:, None] + sds[:, None] * rng.standard_normal((people, 3, 2))).mean(1)
     for j, m in enumerate(MEASURES):
-        for label in ("VO", "HV", "VO-HV"):
-            v = per["VO"][:, j] - per["HV"][:, j] if label == "VO-HV" else per[label][:, j]
-            p = pred[f"VO:{m}"] - pred[f"HV:{m}"] if label == "VO-HV" else pred[f"{label}:{m}"]
+        for label in ("VO", "HV", "HV-VO"):
+            v = per["HV"][:, j] - per["VO"][:, j] if label == "HV-VO" else per[label][:, j]
+            p = pred[f"HV:{m}"] - pred[f"VO:{m}"] if label == "HV-VO" else pred[f"{label}:{m}"]
             lo, hi = bootstrap_means(v, rng, 400)
             rows += [
                 ("g", m, label, "simulated", v.mean(), lo, hi),

@@ -8,7 +8,7 @@ is found is reported rather than absorbed into the traits:
 
 - **trend over trials** (learning or fatigue): each participant's slope of the log
   measure over their trial position, within condition (the condition means removed, so
-  the VO-HV difference does not pass for a trend); the observed participants' slopes
+  the HV - VO difference does not pass for a trend); the observed participants' slopes
   against the simulated ones, Welch's t-test (`scipy.stats.ttest_ind`). Needs >= 2
   trials per condition.
 - **condition order**: each participant's HV - VO difference of the log measure; its
@@ -19,11 +19,19 @@ is found is reported rather than absorbed into the traits:
   rejections, without the garbage collection it runs on every call, which costs the
   more the larger the fit's heap).
 - **group means the fitted model does not reproduce** (`summary_misfit`, a posterior
-  predictive check): per group, measure and condition (VO, HV and each person's VO - HV),
+  predictive check): per group, measure and condition (VO, HV and each person's HV - VO),
   the observed people's means against the simulated people's, Welch's t-test, Holm over
   all of them at `ALPHA` as a family of its own. The simulated people are fitted to the
   observed, so the check is conservative; what it flags, no trait setting the fit chose
   reproduces (a trait held at its prior may be why, and the line says so).
+- **a gap beyond its interval** (`summary_gaps`): per group, measure and condition, the
+  observed people's mean against the simulated people's, by the interval of their gap:
+  the two means' 95 % intervals (`summaries`) combined in quadrature on each side, on
+  the log scale (the ratio observed / simulated) for a condition's mean of a positive
+  measure, on the measure's own for the HV - VO difference. A gap whose interval
+  excludes zero is a lack the line names, with its interval, even when the Welch test
+  above does not pass Holm over every summary (with 4 people a group it seldom can): a
+  reader sees the gap in the table and the figure, and the line must not say "nothing".
 - **a participant no trait setting reproduces**: the smallest Mahalanobis distance D^2
   between the person's moments and the emulator's over the free traits (the others at
   the group's fitted means; L-BFGS-B within the emulator's range), with the covariance
@@ -256,10 +264,77 @@ def summary_misfit(
     return {"rows": rows, "flagged": [r for r in rows if r["flagged"]], "held": list(held)}
 
 
-def lacks_line(
-    rows: list[dict[str, Any]], outlier: dict[str, Any], misfit: dict[str, Any] | None = None
-) -> str:
-    """The one printed line: what the participant model lacks, or that nothing was found."""
+def _gap(obs: np.ndarray, sim: np.ndarray) -> tuple[float, float, float]:
+    """(gap, low, high): observed minus simulated mean and the gap's 95 % interval from
+    the two means' intervals (each (mean, low, high)), each side's half-widths in
+    quadrature."""
+    o, o_lo, o_hi = obs
+    s, s_lo, s_hi = sim
+    gap = float(o - s)
+    low = gap - float(np.hypot(max(o - o_lo, 0.0), max(s_hi - s, 0.0)))
+    high = gap + float(np.hypot(max(o_hi - o, 0.0), max(s - s_lo, 0.0)))
+    return gap, low, high
+
+
+def summary_gaps(table: pd.DataFrame, difference: str) -> dict[str, Any]:
+    """The summaries (`summaries.summaries`' frame) whose observed mean lies beyond the
+    simulated one by more than their gap's 95 % interval allows: rows of group, measure,
+    condition, observed, simulated, their intervals, and the gap's (`gap_scale`: `ratio`
+    for a condition's mean, observed / simulated; `difference` for the conditions'
+    difference, labelled `difference`); `flagged` those whose gap's interval excludes
+    zero."""
+    keys = ["group", "measure", "condition"]
+    obs = table[table["source"] == "observed"].set_index(keys)
+    sim = table[table["source"] == "simulated"].set_index(keys)
+    rows = []
+    for key, o in obs.iterrows():
+        if key not in sim.index:
+            continue
+        s = sim.loc[key]
+        cols = ["mean", "ci_low", "ci_high"]
+        a, b = o[cols].to_numpy(float), s[cols].to_numpy(float)
+        if not np.all(np.isfinite([*a, *b])):
+            continue
+        # a condition's mean of a positive measure: the gap as a ratio, on the log scale
+        ratio = key[2] != difference and bool(np.all(a > 0) and np.all(b > 0))
+        gap, low, high = _gap(np.log(a), np.log(b)) if ratio else _gap(a, b)
+        rows.append(
+            {
+                **dict(zip(keys, key, strict=True)),
+                "observed": float(o["mean"]),
+                "observed_ci95": [float(o["ci_low"]), float(o["ci_high"])],
+                "simulated": float(s["mean"]),
+                "simulated_ci95": [float(s["ci_low"]), float(s["ci_high"])],
+                "gap_scale": "ratio" if ratio else "difference",
+                "gap": float(np.exp(gap)) if ratio else gap,
+                "gap_ci95": [float(np.exp(low)), float(np.exp(high))] if ratio else [low, high],
+                "flagged": bool(low > 0 or high < 0),
+            }
+        )
+    return {
+        "rule": "observed minus simulated mean (their ratio for a condition's mean of a "
+        "positive measure), 95 % interval from the two means' intervals in quadrature on "
+        "each side; flagged when it excludes no gap",
+        "rows": rows,
+        "flagged": [r for r in rows if r["flagged"]],
+    }
+
+
+def _gap_text(r: dict[str, Any]) -> str:
+    low, high = r["gap_ci95"]
+    gap = (
+        f"observed / simulated {r['gap']:.2f}, 95 % {low:.2f}-{high:.2f}"
+        if r["gap_scale"] == "ratio"
+        else f"observed - simulated {r['gap']:+.3g}, 95 % {low:+.3g} to {high:+.3g}"
+    )
+    return (
+        f"{r['group']} {r['condition']} {r['measure']} ({r['observed']:.3g} observed vs "
+        f"{r['simulated']:.3g} simulated: {gap})"
+    )
+
+
+def _check_parts(rows: list[dict[str, Any]]) -> list[str]:
+    """The flagged trend and condition-order checks, as the line names them."""
     parts = []
     for r in rows:
         if not r["flagged"]:
@@ -278,34 +353,91 @@ def lacks_line(
                 f"observed vs {r['simulated_vo_first_minus_hv_first_pct']:+.1f} % "
                 f"simulated, p_holm = {r['p_holm']:.2g})"
             )
+    return parts
+
+
+def _misfit_part(misfit: dict[str, Any] | None) -> list[str]:
+    """The group means the fitted model does not reproduce (Holm), if any."""
+    if misfit is None or not misfit["flagged"]:
+        return []
+    held = (
+        f" (held at their priors, and perhaps why: {', '.join(misfit['held'])}; "
+        "--weak-traits shrink fits them)"
+        if misfit["held"]
+        else ""
+    )
+    means = ", ".join(
+        f"{r['group']} {r['condition']} {r['measure']} ({r['observed']:.3g} observed vs "
+        f"{r['simulated']:.3g} simulated, p_holm = {r['p_holm']:.2g})"
+        for r in misfit["flagged"]
+    )
+    return [f"group means the fitted model does not reproduce: {means}{held}"]
+
+
+def _gap_part(misfit: dict[str, Any] | None, gaps: dict[str, Any] | None) -> list[str]:
+    """The gaps beyond their own 95 % interval that the misfit test did not flag."""
+    tested_misfit = {
+        (r["group"], r["measure"], r["condition"]) for r in (misfit or {}).get("flagged", [])
+    }
+    beyond = [
+        r
+        for r in (gaps or {}).get("flagged", [])
+        if (r["group"], r["measure"], r["condition"]) not in tested_misfit
+    ]
+    if not beyond:
+        return []
+    return [
+        "group means the fitted model misses beyond their gap's 95 % interval (each "
+        "summary's own interval; not significant after Holm over every summary): "
+        + ", ".join(_gap_text(r) for r in beyond)
+    ]
+
+
+def lacks_line(
+    rows: list[dict[str, Any]],
+    outlier: dict[str, Any],
+    misfit: dict[str, Any] | None = None,
+    gaps: dict[str, Any] | None = None,
+) -> str:
+    """The one printed line: what the participant model lacks, or that nothing was found."""
+    parts = _check_parts(rows)
     if outlier["flagged"]:
         parts.append(
             f"participant(s) {', '.join(outlier['flagged'])} that no trait setting "
             f"reproduces (D^2 above {outlier['limit']:.1f})"
         )
-    if misfit is not None and misfit["flagged"]:
-        parts.append(
-            "group means the fitted model does not reproduce: "
-            + ", ".join(
-                f"{r['group']} {r['condition']} {r['measure']} ({r['observed']:.3g} observed vs "
-                f"{r['simulated']:.3g} simulated, p_holm = {r['p_holm']:.2g})"
-                for r in misfit["flagged"]
-            )
-            + (
-                f" (held at their priors, and perhaps why: {', '.join(misfit['held'])}; "
-                "--weak-traits shrink fits them)"
-                if misfit["held"]
-                else ""
-            )
-        )
+    parts += _misfit_part(misfit) + _gap_part(misfit, gaps)
+    if parts:
+        return "what the participants lack: " + "; ".join(parts)
     tested = [
         *sorted({r["check"] for r in rows}),
         "outliers",
         *(["group means"] if misfit is not None else []),
+        *(["gaps"] if gaps is not None else []),
     ]
-    if not parts:
-        return f"what the participants lack: nothing the checks found ({', '.join(tested)})"
-    return "what the participants lack: " + "; ".join(parts)
+    line = f"what the participants lack: nothing the checks found ({', '.join(tested)})"
+    widest = _widest_gap((gaps or {}).get("rows", []))
+    if widest is not None:
+        line += (
+            f"; the largest gap, {_gap_text(widest)}, lies within its 95 % interval "
+            "(too few people to tell it from chance, not shown to be nothing)"
+        )
+    return line
+
+
+def _widest_gap(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The gap (`summary_gaps`' rows) nearest its interval's edge: the largest share of
+    its half-width towards no gap that it spans (on the log scale for a ratio)."""
+
+    def share(r: dict[str, Any]) -> float:
+        gap, (low, high) = r["gap"], r["gap_ci95"]
+        if r["gap_scale"] == "ratio":
+            gap, low, high = np.log(gap), np.log(low), np.log(high)
+        half = gap - low if gap > 0 else high - gap
+        return float(abs(gap) / half) if half > 0 else 0.0
+
+    spans = [r for r in rows if share(r) > 0]
+    return max(spans, key=share) if spans else None
 
 
 def emulator_check(
@@ -315,7 +447,7 @@ def emulator_check(
 ) -> dict[str, Any]:
     """The emulator against the people simulated from the fit: the estimates rest on the
     emulator's surface, the `simulated` summaries on the simulator itself. Per group,
-    measure and condition (VO, HV, VO-HV): the emulator's mean for the population the
+    measure and condition (VO, HV, HV-VO): the emulator's mean for the population the
     simulated people were drawn from (`for_simulated`, by (group, measure, condition):
     the fit's replicates, `fit.replicate_prediction`; else the `model` rows' best-fit
     prediction) and whether it lies inside a 95 % interval of its difference from the

@@ -2,8 +2,9 @@
 participant effect that explains it, refit, and say how much better the model predicts
 people it was not fitted to.
 
-The families are `study.protocol.participant_effects` (practice, fatigue, carry-over:
-multipliers on traits by a trial's place in the session), so that what the fit adds,
+The families are `study.protocol.participant_effects` (practice, fatigue, carry-over
+of the speed, carry-over of how hard one pushes: multipliers on traits by a trial's
+place in the session), so that what the fit adds,
 every simulation drawn from the model carries. Here:
 
 - **structure** (`structure_tests`): two plain tests per measure on the trials' log
@@ -89,6 +90,7 @@ FREE: dict[str, tuple[tuple[str, ...], ...]] = {
     "practice": (FAMILIES["practice"],),
     "fatigue": (FAMILIES["fatigue"],),
     "carry_over": (("vo_after_hv",), ("hv_after_vo",)),
+    "gentle_carry_over": (("gentler_vo_after_hv",), ("gentler_hv_after_vo",)),
 }
 """The parameters the least squares moves together, per family, and the alternatives
 tried. The carry-over moves one direction at a time, the other held at 0: in a
@@ -102,7 +104,15 @@ FIT_BOUNDS = {**BOUNDS, "rate": (0.0, BOUNDS["rate"][1])}
 negative rate, a session-long speed-up, is learning, which is practice's to name: with
 three trials per condition the two shapes are close, and a fitted negative fatigue
 took the place of an injected practice effect)."""
-START = {"slowing": 0.3, "decay_trials": 2.0, "rate": 0.01, "vo_after_hv": 0.0, "hv_after_vo": 0.0}
+START = {
+    "slowing": 0.3,
+    "decay_trials": 2.0,
+    "rate": 0.01,
+    "vo_after_hv": 0.0,
+    "hv_after_vo": 0.0,
+    "gentler_vo_after_hv": 0.0,
+    "gentler_hv_after_vo": 0.0,
+}
 DEFINITION = (
     "each quarter of the people (dealt within group) held out in turn and the model "
     "(traits and participant effects) fitted to the other three; every held-out trial's "
@@ -347,6 +357,7 @@ TOUCHES: dict[str, tuple[str, ...]] = {
     "practice": ("preferred_speed_m_s",),
     "fatigue": ("preferred_speed_m_s", "reaction_s"),
     "carry_over": ("preferred_speed_m_s", "visual_stall_s"),
+    "gentle_carry_over": ("caution", "comfort_torque_n_m"),
 }
 """The traits each family's multipliers act on (`ParticipantEffect.factors`)."""
 LEVEL = 0.5

@@ -328,7 +328,10 @@ class MomentEmulator:
     trial (a backing-off that did not happen): each moment's surface is fitted on the
     design trials where it is defined, over one shared set of polynomial terms (so the
     prediction stays one matrix product), and `defined_` keeps the share of trials that
-    define it (a person's mean of it rests on that share of their trials).
+    define it (a person's mean of it rests on that share of their trials). A feature
+    defined in fewer than `MIN_DEFINED` design trials of every condition is dropped;
+    `dropped_features_` keeps it with the most design trials of one condition that
+    define it (0: the design's trials do not hold it), so the report can say why.
 
     Parameters
     ----------
@@ -364,15 +367,23 @@ class MomentEmulator:
         self.measures_ = list(measures)
         self.training_ = (settings, trials, tuple(features))
         self.setting_weights_ = None if weights is None else np.asarray(weights, float)
-        features = [f for f in features if f in trials and trials[f].notna().any()]
+        asked = list(features)
+        features = [f for f in asked if f in trials and trials[f].notna().any()]
         names = [*moment_names(measures), *moment_names(features)]
         wide = trial_matrix(trials, [*measures, *features])[names]
         x = settings[wide.index.get_level_values("setting")]
         y = np.column_stack([log_moment(wide[n], floor(n, measures)) for n in wide.columns])
-        keep = np.isfinite(y).sum(axis=0) >= MIN_DEFINED
+        defined = np.isfinite(y).sum(axis=0)
+        keep = defined >= MIN_DEFINED
         keep[: len(self.measures_) * len(KNOWN_CONDITIONS)] = True
         self.moments_ = [n for n, k in zip(wide.columns, keep, strict=True) if k]
         self.features_ = [f for f in features if any(n.endswith(f":{f}") for n in self.moments_)]
+        by_name = dict(zip(wide.columns, defined.tolist(), strict=True))
+        self.dropped_features_ = {
+            f: int(max(by_name.get(f"{c}:{f}", 0) for c in KNOWN_CONDITIONS))
+            for f in asked
+            if f not in self.features_
+        }
         y = y[:, keep]
         setting_w = np.ones(len(settings)) if weights is None else np.asarray(weights, float)
         w = setting_w[wide.index.get_level_values("setting")]
@@ -584,6 +595,7 @@ class MomentEmulator:
             "trials": self.n_trials_,
             "r2": {k: round(float(v), 4) for k, v in self.r2_.items()},
             "features": self.features_,
+            "dropped_features": getattr(self, "dropped_features_", {}),
             **(
                 {
                     "held_out_trait_error": dict(

@@ -55,13 +55,24 @@ from study.analysis.participant_fit.emulator import MomentEmulator
 from study.protocol.traits import TRAIT_BOUNDS, TRAITS, GroupProfile
 
 
-def expanded_interval(boots: np.ndarray, n: int, level: float = 0.95) -> np.ndarray:
+def expanded_interval(
+    boots: np.ndarray, n: int, level: float = 0.95, positive: bool = False
+) -> np.ndarray:
     """(2, ...) the 95 % interval of a statistic from its bootstrap replicates over `n`
     people resampled: the percentile interval widened about the replicates' median by
     sqrt(n / (n - 1)) * t(n - 1) / z, Hesterberg's expanded percentile interval (The
     American Statistician 69:371, 2015). A plain percentile interval of a mean over 8-20
     people is too narrow: the resampled people spread by (n - 1) / n of the people's
-    variance, and z stands where t belongs (`coverage.py` checks it by simulation)."""
+    variance, and z stands where t belongs (`coverage.py` checks it by simulation).
+
+    `positive`: the statistic is a positive quantity (a mean time, force or trait): the
+    interval is widened on the log scale and taken back, so it stays above zero (widened
+    on its own scale, a skewed force's lower end over 4 people fell below 0 N) and is
+    asymmetric as a positive quantity's is. A replicate at or below 0 leaves the
+    ordinary interval."""
+    boots = np.asarray(boots, dtype=float)
+    if positive and np.all(boots > 0):
+        return np.exp(expanded_interval(np.log(boots), n, level))
     tail = 100 * (1 - level) / 2
     low, mid, high = np.percentile(boots, [tail, 50.0, 100 - tail], axis=0)
     if n < 2:

@@ -1,11 +1,13 @@
 """The fit's figure: observed vs simulated summaries per group, condition and measure.
 
-One row per measure, one column per VO, HV and VO - HV; in each panel the groups along
-x, and for each group three marks with 95 % intervals: the observed participants'
-mean (bootstrap over participants), the people simulated from the fitted model (the
-same; each person from one of the fit's bootstrap replicates, so the interval holds the
-fit's uncertainty too), and the emulator's prediction (the fit's bootstrap). The
-caption says what the data were and that the simulated marks are simulated.
+One row per measure, one column per VO, HV and HV - VO (the analysis's sign); in each
+panel the groups along x, and for each group three marks with 95 % intervals: the
+observed participants' mean (bootstrap over participants), the people simulated from
+the fitted model (the same; each person from one of the fit's bootstrap replicates, so
+the interval holds the fit's uncertainty too), and the emulator's prediction (the fit's
+bootstrap). A condition's mean of a positive measure has its interval on the log scale
+(above zero). The caption says what the data were and that the simulated marks are
+simulated.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from study.analysis.figures import FONT_PT, STYLE, WIDTHS_IN, wrap
+from study.analysis.participant_fit.summaries import CONDITIONS, DIFFERENCE
 from study.protocol.tasks import measure_named
 
 SOURCES = {
@@ -24,7 +27,7 @@ SOURCES = {
     "simulated": ("simulated from the fit", "#0072B2", "s"),
     "model": ("the fitted model (emulator + discrepancy)", "#D55E00", "^"),
 }
-COLUMNS = ("VO", "HV", "VO-HV")
+COLUMNS = CONDITIONS
 
 
 def fit_figure(table: pd.DataFrame, note: str) -> plt.Figure:
@@ -55,12 +58,12 @@ def fit_figure(table: pd.DataFrame, note: str) -> plt.Figure:
                     for edge in ("ci_low", "ci_high"):
                         ax.plot(x, rows[edge], "_", color=colour, ms=4, mew=0.8)
                     ax.plot(x, rows["mean"], marker, color=colour, ms=3.5, ls="")
-                if column == "VO-HV":
+                if column == DIFFERENCE:
                     ax.axhline(0.0, color="#999999", lw=0.5)
                 ax.set_xticks(range(len(groups)), groups)
                 ax.set_xlim(-0.6, len(groups) - 0.4)
                 if i == 0:
-                    ax.set_title(column if column != "VO-HV" else "VO - HV")
+                    ax.set_title(column if column != DIFFERENCE else "HV - VO")
                 if j == 0:
                     ax.set_ylabel(label)
         handles = [

@@ -41,7 +41,12 @@ from sqlalchemy import Engine
 
 from study.analysis.participant_fit import WEAK_TRAITS, checks, effects, validate
 from study.analysis.participant_fit.effects import EffectSearch
-from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
+from study.analysis.participant_fit.emulator import (
+    MIN_DEFINED,
+    MomentEmulator,
+    design_box,
+    design_settings,
+)
 from study.analysis.participant_fit.estimate import (
     HYPER_SD,
     IDENTIFIED_RATIO,
@@ -62,6 +67,8 @@ from study.analysis.participant_fit.observed import (
 )
 from study.analysis.participant_fit.simulate import simulate_settings, worker_pool
 from study.analysis.participant_fit.summaries import (
+    CONDITIONS,
+    DIFFERENCE,
     TRAIT_COLUMNS,
     emulator_discrepancy,
     power_effects,
@@ -96,7 +103,7 @@ class FitSettings:
     """What becomes of the traits the data tell weakly: `prior` holds them at the hand-set
     profile; `shrink` fits them with their group mean under the profile's prior. On three
     seeds of `study bench participants`, shrink put 18-20 of 21 group means
-    within 15 % of the truth (prior: 16-17), but its VO - HV peak-force intervals held
+    within 15 % of the truth (prior: 16-17), but its HV - VO peak-force intervals held
     the truth in 3-6 of 6 (prior: 6 of 6): a weak trait absorbs the emulator's local
     bias (the outsiders' comfort torque came out 25 % low with a narrow interval), and
     the predicted forces follow it. So the default holds them."""
@@ -182,6 +189,41 @@ def build_emulator(
     validate.attach(emulator, x, design, settings.repeats)
     progress("validating", 1, 1)
     return emulator
+
+
+def features_note(features: list[str], emulator: MomentEmulator) -> str:
+    """What the moments hold beyond the measures, and why a task's sample feature is not
+    among them: the task has none, or the emulator's design defines it in fewer than
+    `MIN_DEFINED` trials of a condition (`MomentEmulator.dropped_features_`)."""
+    dropped = getattr(emulator, "dropped_features_", {})
+    if features:
+        note = (
+            "behavioural features read off each trial's samples (the task's "
+            "`fit_features`), beside the measures; a trial without samples (imported) "
+            "gives the measures only"
+        )
+    elif not dropped:
+        return "the task has no sample features: the measures only"
+    else:
+        note = "the measures only"
+    return note + (f"; {dropped_text(dropped)}" if dropped else "")
+
+
+def dropped_text(dropped: dict[str, int]) -> str:
+    """The task's sample features the emulator dropped (feature -> the most design
+    trials of a condition that define it), and why, in words."""
+    most = max(dropped.values())
+    if not most:
+        return (
+            f"the task's sample features {', '.join(dropped)} are not in the emulator's "
+            "design trials"
+        )
+    return (
+        f"{len(dropped)} of the task's sample features dropped ({', '.join(dropped)}): the "
+        f"emulator's design defines each in at most {most} trials of a condition, and a "
+        f"feature needs {MIN_DEFINED} (more settings, --design, or repeats, --repeats, "
+        "give it more)"
+    )
 
 
 def fit_study(
@@ -291,6 +333,11 @@ class TraitPlan:
     sources: dict[str, str]
     """trait -> the source that tells its value instead (e.g. a measurement before the
     task); such a trait is neither fitted from the task's data nor held at its prior."""
+    probe_info: dict[str, np.ndarray] = field(default_factory=dict)
+    """group -> per trait, a person's mean information from the probes in prior SDs
+    (`study.probes.measure.probe_information`; 0 where no probe told it)."""
+    people: dict[str, int] = field(default_factory=dict)
+    """group -> the people whose moments the rule counted."""
 
     def role(self, trait: str) -> str:
         """`fitted`, `prior`, or the name of the source that tells the trait."""
@@ -302,6 +349,66 @@ class TraitPlan:
     def fixed(self) -> list[str]:
         """Traits held at their hand-set profile."""
         return [t for t in TRAITS if self.role(t) == "prior"]
+
+    def probed_but_held(self) -> dict[str, dict[str, Any]]:
+        """Per trait a probe measured but the fit holds at its prior: why. The rule asks
+        a group mean's posterior SD below `IDENTIFIED_RATIO` of its prior SD; a person's
+        probe gives the information I = (prior SD / SE)^2, and the people spread by one
+        prior SD about their mean, so n people alone tell the mean to
+        1 / sqrt(1 + n I / (1 + I)) of it (`estimate.identifiable`, the task's trials
+        adding theirs). Even an exact probe (I infinite) tells it only to
+        1 / sqrt(1 + n): the rule needs n I / (1 + I) > 1 / ratio^2 - 1 = c, so more
+        than c people, and then a probe SE below sqrt((n - c) / c) prior SDs. Reported
+        in the worst group: the ratio, the probes' typical SE in prior SDs, the SE that
+        would do at the group's size (`probe_se_needed`, None when no probe would), and
+        the people a group would need at the probes' SE."""
+        out: dict[str, dict[str, Any]] = {}
+        need = 1.0 / IDENTIFIED_RATIO**2 - 1.0  # n I / (1 + I) must pass this
+        for trait in self.fixed:
+            j = TRAITS.index(trait)
+            infos = {g: float(info[j]) for g, info in self.probe_info.items() if info[j] > 0}
+            if not infos:
+                continue
+            ratio = {
+                g: 1.0 / np.sqrt(1.0 + self.people[g] * i / (1.0 + i)) for g, i in infos.items()
+            }
+            worst = max(ratio, key=lambda g: ratio[g])
+            info, n = infos[worst], self.people[worst]
+            out[trait] = {
+                "group": worst,
+                "people": n,
+                "probe_se_in_prior_sd": round(float(1.0 / np.sqrt(info)), 3),
+                "probe_ratio": round(float(ratio[worst]), 3),
+                "ratio": round(float(self.ratios.get(trait, float("nan"))), 3),
+                "probe_se_needed": round(float(np.sqrt((n - need) / need)), 3)
+                if n > need
+                else None,
+                "people_needed": int(np.floor(need * (1.0 + info) / info)) + 1,
+            }
+        return out
+
+    def held_line(self) -> str:
+        """Why each probed trait held at its prior is held, in words."""
+        why = self.probed_but_held()
+        if not why:
+            return ""
+        return (
+            "probed, yet held at their priors: the probes tell these group means too "
+            f"weakly for the rule (posterior SD under {IDENTIFIED_RATIO:g} of the prior "
+            "SD; --weak-traits shrink fits them under their priors): "
+            + "; ".join(
+                f"{t} (a person's probe SE {w['probe_se_in_prior_sd']:.1f} prior SDs; group "
+                f"{w['group']}'s {w['people']} people tell its mean to {w['ratio']:.2f} of "
+                "its prior SD; "
+                + (
+                    f"a probe SE under {w['probe_se_needed']:.2f} prior SDs (more probe trials) or "
+                    if w["probe_se_needed"] is not None
+                    else ""
+                )
+                + f"{w['people_needed']} people a group would tell it)"
+                for t, w in why.items()
+            )
+        )
 
 
 def plan_traits(
@@ -346,7 +453,8 @@ def plan_traits(
     candidates = [j for j in range(len(TRAITS)) if TRAITS[j] not in sources]
     free = candidates if settings.weak_traits == "shrink" else told
     weak = [j for j in free if j not in told]
-    return TraitPlan(told, free, weak, ratios, held_out, sources)
+    people = {g: int(np.max(data.sizes[g])) for g in data.groups}
+    return TraitPlan(told, free, weak, ratios, held_out, sources, probe_info or {}, people)
 
 
 @dataclass
@@ -358,7 +466,7 @@ class GroupResult:
     boots: np.ndarray
     """(bootstrap, 2 * len(TRAITS)) each replicate's trait means then SDs."""
     predicted: dict[str, list[float]]
-    """moment (and `VO-HV:measure`) -> the model's group mean at the fit, then per
+    """moment (and `HV-VO:measure`) -> the model's group mean at the fit, then per
     replicate, on the measures' own scale."""
     fixed_cov: np.ndarray
     """The moments' covariance that the traits not told add to a person's."""
@@ -388,8 +496,13 @@ class GroupResult:
                 "identifiable": j in plan.told,
             }
             if j in plan.free:
-                out["mean_ci95"] = expanded_interval(self.boots[:, j], len(self.y)).tolist()
-                out["sd_ci95"] = expanded_interval(self.boots[:, n + j], len(self.y)).tolist()
+                # a trait and its spread are positive: their intervals on the log scale
+                out["mean_ci95"] = expanded_interval(
+                    self.boots[:, j], len(self.y), positive=True
+                ).tolist()
+                out["sd_ci95"] = expanded_interval(
+                    self.boots[:, n + j], len(self.y), positive=True
+                ).tolist()
             if j not in plan.told:
                 out["prior"] = list(getattr(PROFILES[group], t))
             return out
@@ -475,6 +588,8 @@ class ModelChecks:
     emulator_design_sd: dict[tuple[str, str, str], float] = field(default_factory=dict)
     """(group, measure, condition) -> that mean's SD over the emulator's refits to its
     resampled design (`replicate_design_sd`), which the check counts beside the people's."""
+    gaps: dict[str, Any] | None = None
+    """`checks.summary_gaps` of `table`: observed means beyond their gap's interval."""
     check_table: pd.DataFrame | None = None
     """The summaries the emulator check reads: `table`, or with participant effects
     added, the simulated people's with the effects taken out (the emulator's people
@@ -482,10 +597,11 @@ class ModelChecks:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "line": checks.lacks_line(self.rows, self.outliers, self.misfit),
+            "line": checks.lacks_line(self.rows, self.outliers, self.misfit, self.gaps),
             "tests": self.rows,
             "outliers": self.outliers,
             "group_means": self.misfit,
+            "gaps": self.gaps,
         }
 
 
@@ -540,7 +656,7 @@ def check_model(
         (g, m, label): replicate_prediction(predicted[g][f"{label}:{m}"], settings.check)
         for g in groups
         for m in measures
-        for label in ("VO", "HV", "VO-HV")
+        for label in CONDITIONS
     }
     design_sd = {
         (g, *key): sd
@@ -561,8 +677,9 @@ def check_model(
             ],
             ignore_index=True,
         )
+    gaps = checks.summary_gaps(table, DIFFERENCE)
     return ModelChecks(
-        simulated, table, rows, outlier, misfit, for_simulated, design_sd, check_table
+        simulated, table, rows, outlier, misfit, for_simulated, design_sd, gaps, check_table
     )
 
 
@@ -593,7 +710,7 @@ def replicate_design_sd(
     out = {}
     for m in measures:
         vo, hv = total[:, names.index(f"VO:{m}")], total[:, names.index(f"HV:{m}")]
-        for label, v in (("VO", vo), ("HV", hv), ("VO-HV", vo - hv)):
+        for label, v in (("VO", vo), ("HV", hv), (DIFFERENCE, hv - vo)):
             out[(m, label)] = float(np.std(v, ddof=1))
     return out
 
@@ -660,11 +777,8 @@ class FitResult:
             "features": {
                 "names": features,
                 "trials_with_samples": data.sampled,
-                "note": "behavioural features read off each trial's samples (the task's "
-                "`fit_features`), beside the measures; a trial without samples (imported) "
-                "gives the measures only"
-                if features
-                else "the task has no sample features: the measures only",
+                "dropped": getattr(self.emulator, "dropped_features_", {}),
+                "note": features_note(features, self.emulator),
             },
             "identifiable": [TRAITS[j] for j in plan.told],
             "probes": probe_summary(
@@ -675,6 +789,8 @@ class FitResult:
             else dict(zip(TRAITS, np.round(plan.held_out, 6).tolist(), strict=True)),
             "weak_traits": settings.weak_traits,
             "fixed_at_prior": plan.fixed,
+            "probed_but_held": plan.probed_but_held(),
+            "probed_but_held_line": plan.held_line(),
             "shrunk_to_prior": [TRAITS[j] for j in plan.weak],
             "trait_roles": {t: plan.role(t) for t in TRAITS},
             "weak_traits_note": "traits the data tell weakly: held at the hand-set profile "
@@ -790,9 +906,9 @@ def fit_trials(
 
 
 def _predict(est: GroupEstimator, mean: np.ndarray, sd: np.ndarray) -> dict[str, float]:
-    """The model's group means on the measures' own scale (and VO - HV), by the emulator."""
+    """The model's group means on the measures' own scale (and HV - VO), by the emulator."""
     draws = est.emulator.means(est.draws(mean, sd)).mean(axis=0)
     out = dict(zip(est.emulator.moments_, draws.tolist(), strict=True))
     for m in est.emulator.measures_:
-        out[f"VO-HV:{m}"] = out[f"VO:{m}"] - out[f"HV:{m}"]
+        out[f"{DIFFERENCE}:{m}"] = out[f"HV:{m}"] - out[f"VO:{m}"]
     return out

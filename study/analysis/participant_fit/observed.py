@@ -162,16 +162,17 @@ def data_source(trials: pd.DataFrame) -> tuple[str, dict[str, object]]:
 
 
 def bootstrap_means(
-    values: np.ndarray, rng: np.random.Generator, n_boot: int
+    values: np.ndarray, rng: np.random.Generator, n_boot: int, positive: bool = False
 ) -> tuple[float, float]:
     """95 % interval of the mean of `values` over resampled people: the expanded
     percentile interval (`estimate.expanded_interval`), as the fitted means' are. A
     plain percentile interval of a mean over the few people of a group (8 in a 20/8/8
     study, as many per group as the fit's check simulates) holds the mean less often
     than it claims, and the emulator check (`checks.emulator_check`) then counted an
-    unbiased emulator's predictions outside it."""
+    unbiased emulator's predictions outside it. `positive`: a positive measure's mean,
+    its interval on the log scale (`expanded_interval`), so that it stays above zero."""
     if len(values) < 2:
         return float("nan"), float("nan")
     idx = rng.integers(0, len(values), (n_boot, len(values)))
-    low, high = expanded_interval(values[idx].mean(axis=1), len(values))
+    low, high = expanded_interval(values[idx].mean(axis=1), len(values), positive=positive)
     return float(low), float(high)

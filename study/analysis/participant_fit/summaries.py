@@ -18,6 +18,12 @@ TRAIT_COLUMN = "trait:"
 TRAIT_COLUMNS = [f"{TRAIT_COLUMN}{t}" for t in TRAITS]
 """Those columns, in the order of `TRAITS` (the emulator's)."""
 
+DIFFERENCE = "HV-VO"
+"""The condition label of each person's HV - VO difference: the analysis's sign
+(`study analyze`, `study power`), so a positive value is more in HV."""
+CONDITIONS = ("VO", "HV", DIFFERENCE)
+"""The summaries' conditions: each condition's mean, then the difference."""
+
 Discrepancy = dict[tuple[str, str, str], tuple[float, float, int]]
 """(group, measure, condition) -> the emulator's discrepancy: its mean, SE and people."""
 
@@ -26,8 +32,8 @@ def condition_values(
     frame: pd.DataFrame, measures: Sequence[str], groups: Sequence[str]
 ) -> Iterator[tuple[str, str, str, pd.Series]]:
     """(group, measure, condition, values) per group, measure and condition (VO, HV and
-    each person's VO - HV): the people's means of the measure, people with both
-    conditions only."""
+    each person's HV - VO, `DIFFERENCE`): the people's means of the measure, people with
+    both conditions only."""
     means = frame.groupby(["group", "participant", "condition"])[list(measures)].mean()
     for group in groups:
         g = means.xs(group, level="group")
@@ -35,7 +41,7 @@ def condition_values(
             wide = g[m].unstack().dropna()
             yield group, m, "VO", wide["VO"]
             yield group, m, "HV", wide["HV"]
-            yield group, m, "VO-HV", wide["VO"] - wide["HV"]
+            yield group, m, DIFFERENCE, wide["HV"] - wide["VO"]
 
 
 def emulator_discrepancy(
@@ -45,7 +51,7 @@ def emulator_discrepancy(
     emulator: Any,
 ) -> Discrepancy:
     """What the simulator gives beyond the emulator for the people simulated from the fit:
-    per group, measure and condition (and VO - HV), the mean over those people of their
+    per group, measure and condition (and HV - VO), the mean over those people of their
     mean measure minus the emulator's mean at their own traits (the `TRAIT_COLUMNS`
     columns), its standard error and the number of people (those with both conditions).
 
@@ -70,7 +76,7 @@ def emulator_discrepancy(
                 c: own[(m, c)].to_numpy(float) - expected[:, emulator.moments_.index(f"{c}:{m}")]
                 for c in ("VO", "HV")
             }
-            residual["VO-HV"] = residual["VO"] - residual["HV"]
+            residual[DIFFERENCE] = residual["HV"] - residual["VO"]
             for label, r in residual.items():
                 r = r[np.isfinite(r)]
                 if len(r) >= 2:
@@ -79,11 +85,17 @@ def emulator_discrepancy(
     return out
 
 
-def _model_row(draws: np.ndarray, correction: tuple[float, float, int] | None) -> dict[str, Any]:
+def _model_row(
+    draws: np.ndarray, correction: tuple[float, float, int] | None, positive: bool = False
+) -> dict[str, Any]:
     """The model's predicted mean and 95 % interval from the emulator's `draws` (best fit,
     then the fit's bootstrap replicates) and the emulator's discrepancy (`correction`,
     `emulator_discrepancy`): the prediction moved by the discrepancy, its percentile
-    interval widened on each side by the discrepancy's t interval in quadrature."""
+    interval widened on each side by the discrepancy's t interval in quadrature.
+    `positive` (a condition's mean of a positive measure): the same on the log scale,
+    the discrepancy's half-width relative to the mean (the delta method), so that the
+    interval stays above zero; where the prediction or the interval's end is not
+    positive, the measure's own scale."""
     best = float(draws[0])
     low, high = float(np.percentile(draws[1:], 2.5)), float(np.percentile(draws[1:], 97.5))
     row: dict[str, Any] = {"emulator": best, "emulator_ci": [low, high]}
@@ -92,11 +104,18 @@ def _model_row(draws: np.ndarray, correction: tuple[float, float, int] | None) -
     shift, se, n = correction
     half = float(stats.t.ppf(0.975, n - 1)) * se
     centre = best + shift
+    if positive and min(low, best, centre) > 0:
+        rel = half / centre
+        ci_low = centre * float(np.exp(-np.hypot(max(np.log(best / low), 0.0), rel)))
+        ci_high = centre * float(np.exp(np.hypot(max(np.log(high / best), 0.0), rel)))
+    else:
+        ci_low = centre - float(np.hypot(max(best - low, 0.0), half))
+        ci_high = centre + float(np.hypot(max(high - best, 0.0), half))
     return {
         **row,
         "mean": centre,
-        "ci_low": centre - float(np.hypot(max(best - low, 0.0), half)),
-        "ci_high": centre + float(np.hypot(max(high - best, 0.0), half)),
+        "ci_low": ci_low,
+        "ci_high": ci_high,
         "discrepancy": shift,
         "discrepancy_se": se,
     }
@@ -111,11 +130,14 @@ def source_rows(
     n_boot: int,
 ) -> list[dict[str, Any]]:
     """`summaries`' rows of one source of trials (`observed`, `simulated`): per group,
-    measure and condition (and VO - HV) the mean of the participant means with its
-    bootstrap 95 % interval."""
+    measure and condition (and HV - VO) the mean of the participant means with its
+    bootstrap 95 % interval: on the log scale for a condition's mean of a positive
+    measure (it stays above zero), on the measure's own for the HV - VO difference."""
     rows = []
     for group, m, label, values in condition_values(frame, measures, groups):
-        low, high = bootstrap_means(values.to_numpy(float), rng, n_boot)
+        v = values.to_numpy(float)
+        positive = label != DIFFERENCE and bool(np.all(v > 0))
+        low, high = bootstrap_means(v, rng, n_boot, positive=positive)
         rows.append(
             {
                 "group": group,
@@ -141,7 +163,7 @@ def summaries(
     n_boot: int,
     discrepancy: Discrepancy | None = None,
 ) -> list[dict[str, Any]]:
-    """Per group, measure and condition (and VO - HV): the observed and simulated mean of
+    """Per group, measure and condition (and HV - VO): the observed and simulated mean of
     participant means with bootstrap 95 % intervals, and the fitted model's predicted
     mean with its interval from the fit's bootstrap: the emulator's, corrected by its
     `discrepancy` from the simulated people where given (`_model_row`)."""
@@ -151,7 +173,7 @@ def summaries(
     ]
     for group in groups:
         for m in measures:
-            for label in ("VO", "HV", "VO-HV"):
+            for label in CONDITIONS:
                 draws = np.asarray(predicted[group][f"{label}:{m}"])
                 rows.append(
                     {
@@ -160,7 +182,11 @@ def summaries(
                         "condition": label,
                         "source": "model",
                         "n": len(draws) - 1,
-                        **_model_row(draws, (discrepancy or {}).get((group, m, label))),
+                        **_model_row(
+                            draws,
+                            (discrepancy or {}).get((group, m, label)),
+                            positive=label != DIFFERENCE,
+                        ),
                     }
                 )
     return rows
