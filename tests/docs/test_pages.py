@@ -9,7 +9,6 @@ library's parser; only the page's article is read, not the navigation around it.
 
 from __future__ import annotations
 
-import fnmatch
 import importlib.util
 import json
 import os
@@ -33,29 +32,6 @@ hooks = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(hooks)
 
 MAX_WORDS = 150
-
-# Pages other people are editing now: the checks of the rendered text skip them until
-# those edits are merged (then this set is emptied). Patterns (fnmatch) of paths
-# relative to docs/: the participant fit, the terminal app, the hardware and firmware
-# pages, and the pages on bad input, read-only media, not-personal notes and XDF.
-PENDING_PAGES = {
-    "explanation/participant-fit.md",
-    "tutorials/participants-and-power.md",
-    "reference/tui.md",
-    "tutorials/hardware*.md",
-    "*hardware*",
-    "*firmware*",
-    "reference/bad-input*",
-    "*xdf*",
-    "*read-only*",
-    "*not-personal*",
-}
-
-
-def pending(source: str) -> bool:
-    """Whether a page is one of the PENDING_PAGES, being edited elsewhere."""
-    return any(fnmatch.fnmatch(source, pattern) for pattern in PENDING_PAGES)
-
 
 BLOCK_TAGS = {"p", "li", "dt", "dd", "td", "th", "h1", "h2", "h3", "h4", "h5", "h6"}
 LIST_TAGS = {"ul", "ol", "dl", "table", "pre", "div", "p"}
@@ -169,7 +145,7 @@ def pages(site: Path) -> list[tuple[str, list[tuple[str, str, str]]]]:
     found = []
     for page in sorted(site.rglob("index.html")):
         source = source_of(page, site)
-        if not (DOCS / source).is_file() or pending(source):
+        if not (DOCS / source).is_file():
             continue
         found.append((source, blocks_of(page.read_text(encoding="utf-8"))))
     return found
@@ -199,16 +175,6 @@ def test_source_of_a_built_page() -> None:
     assert source_of(site / "explanation" / "models" / "index.html", site) == (
         "explanation/models.md"
     )
-
-
-def test_pending_pages_are_matched_by_pattern() -> None:
-    assert pending("explanation/participant-fit.md")
-    assert pending("tutorials/hardware.md")
-    assert pending("tutorials/hardware-dial.md")
-    assert pending("how-to/xdf-export.md")
-    assert pending("reference/bad-input.md")
-    assert not pending("explanation/estimator.md")
-    assert not pending("index.md")
 
 
 # The built site.
