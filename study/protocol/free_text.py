@@ -38,7 +38,7 @@ MIN_PHONE_DIGITS = 7
 """Fewer digits than any phone number with its area code (a trial count, a year)."""
 NOT_PHONE = re.compile(
     r"(?<![\d.])(?:"
-    r"(?:19|20)\d\d([-./])\d{1,2}\1\d{1,2}"  # a date, 2025-12-02, 2025/12/02
+    r"(?:19|20)\d\d([-./])\d{1,2}\1\d{1,2}"  # a date, 1999-12-02, 2025/12/02
     r"|\d{1,2}([./])\d{1,2}\2(?:19|20)\d\d"  # a date, 02.12.2025, 2/12/2025
     r"|(?:19|20)\d{6}[-T_]\d{4,6}"  # a timestamp, 20251202-1030
     r"|\d{1,2}:\d\d(?::\d\d)?"  # a time of day, 10:30, 10:30:15

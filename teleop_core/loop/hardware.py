@@ -46,14 +46,11 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, TypeVar
+from typing import TypeVar
 
 import serial
 
 from teleop_core.loop.drivers import Driver, DriverFailure, HandAction, OperatorView
-
-if TYPE_CHECKING:
-    from teleop_core.loop.follower_units import PhysicalFollower
 
 T = TypeVar("T")
 
@@ -297,8 +294,9 @@ class HardwareDriver(Driver):
     The loop calls `exchange` at every driver update with the current Psi asks for and
     receives the dial's measured angle and speed; the rotation joystick on the same unit
     sets the guidewire's rotation rate. `follower`, given, is the real follower (the
-    drive unit and the force sensors, `teleop_core.loop.follower_units`), which the
-    loop then uses in place of its simulated follower and phantom.
+    drive unit and the force sensors, a `teleop_core.loop.follower_units.PhysicalFollower`,
+    held here untyped so that this module, which that one builds on, does not import it),
+    which the loop then uses in place of its simulated follower and phantom.
     """
 
     physical_dial = True
@@ -308,7 +306,7 @@ class HardwareDriver(Driver):
         self,
         unit: Esp32Unit,
         max_rotation_rate_rad_s: float = math.pi / 2,
-        follower: PhysicalFollower | None = None,
+        follower: object | None = None,
     ) -> None:
         self.unit = unit
         self.max_rotation_rate_rad_s = max_rotation_rate_rad_s

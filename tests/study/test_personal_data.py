@@ -48,7 +48,7 @@ NOT_PERSONAL = [
     "size 10.5 x 12.25 x 3.5 mm",
     "trial 3 of 12, block 2, attempt 3",
     "3/4 trials, 50/50 split",
-    "2025-12-02 10:30",
+    "1999-12-02 10:30",
     "02.12.2025 10:30:15",
     "recalibrated 2025/12/02 14:05",
     "log 20251202-1030",
