@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -31,6 +33,7 @@ MAX_JOBS = 64
 if TYPE_CHECKING:
     from sqlalchemy import Engine
 
+    from study.commands.run_keys import ExperimenterKeys
     from study.protocol.design import StudyDesign
     from study.protocol.design_sensors import SensorSettings
     from study.protocol.observer import SessionObserver
@@ -109,15 +112,7 @@ def run(
     from study.protocol.session import run_session
     from study.protocol.stop_signals import stop_on_signals
 
-    if (code is None) == (not run_all):
-        raise StudyInputError("give --participant CODE or --all; expected exactly one")
-    if pace is not None and not math.isfinite(pace):
-        raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
-    if jobs is not None and not run_all:
-        raise StudyInputError(
-            f"--jobs {jobs} with --participant; expected --all (one "
-            "participant's session runs in one process)"
-        )
+    _check_options(code, run_all, pace, jobs)
     who = current_actor(actor)
     model = load_participants(participants_path)
     if model is not None and driver != "simulated":
@@ -173,25 +168,65 @@ def run(
                 )
 
             observer = _lsl_observers(engine, lsl, progress)
-            done = run_session(
-                engine,
-                code,
-                driver,
-                estimator,
-                make_driver,
-                pace,
-                report,
-                actor=who,
-                participants=model,
-                observer=observer,
-                stop=stop,
-            )
+            keys = _experimenter_keys(drive_port, stop, progress)
+            with keys.reading() if keys is not None else contextlib.nullcontext():
+                done = run_session(
+                    engine,
+                    code,
+                    driver,
+                    estimator,
+                    keys.track(make_driver) if keys and make_driver else make_driver,
+                    pace,
+                    report,
+                    actor=who,
+                    participants=model,
+                    observer=observer,
+                    stop=stop,
+                    hold=keys.hold if keys is not None else None,
+                )
     finally:
         engine.dispose()
     if stop.is_set():
         click.echo(_stopped_line(code, stop, started, len(done)), err=True)
         raise click.exceptions.Exit(stop.exit_status)
     click.echo(f"{code}: {len(done)} trials completed and stored")
+
+
+def _check_options(code: str | None, run_all: bool, pace: float | None, jobs: int | None) -> None:
+    """One line for options that cannot go together, before anything runs."""
+    if (code is None) == (not run_all):
+        raise StudyInputError("give --participant CODE or --all; expected exactly one")
+    if pace is not None and not math.isfinite(pace):
+        raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
+    if jobs is not None and not run_all:
+        raise StudyInputError(
+            f"--jobs {jobs} with --participant; expected --all (one "
+            "participant's session runs in one process)"
+        )
+
+
+def _experimenter_keys(
+    drive_port: str | None, stop: SignalStop, progress: Progress
+) -> ExperimenterKeys | None:
+    """With a physical phantom (--drive-port) and a terminal on stdin, the
+    experimenter's keys: Enter ends the trial as reached, `x` stops it."""
+    if drive_port is None:
+        return None
+    from study.commands.run_keys import experimenter_keys
+
+    def say(message: str) -> None:
+        progress.console.print(f"study run: {message}", markup=False)
+
+    def pause(typing: bool) -> None:
+        progress.stop() if typing else progress.start()
+
+    keys = experimenter_keys(sys.stdin, stop, say, pause)
+    if keys is not None:
+        say(
+            "the physical phantom's trials end at the dial's button, or here: Enter when "
+            "the tip has reached the target, x to stop the trial"
+        )
+    return keys
 
 
 def _hardware_driver(

@@ -97,7 +97,7 @@ def test_a_whole_session_on_real_units_stores_every_trial_as_measured(
         assert t.summary["phantom"] == "physical"
         # the estimator was fed one drive state line per stored sample
         assert t.summary["drive_state_lines"] == n
-        assert t.summary["drive_firmware"] == "1.0.0-host"
+        assert t.summary["drive_firmware"] == "1.1.0-host"
         assert t.summary["drive_corrupt_lines"] == 0
         assert t.summary["force_sensor_firmware"] == "emu-1"
         # the peak forces are the sensors' (the unit's clock restarts at each HELLO):
@@ -211,3 +211,93 @@ def test_a_drive_port_where_no_one_answers_is_refused_before_a_trial(
     with Session(engine) as s:
         assert s.scalars(select(Trial)).all() == []
     engine.dispose()
+
+
+PRESS_AFTER_S = 0.9
+"""The button is pressed once a trial has stored this much of its samples, s."""
+
+
+def _press_in_each_trial(db: str, dial: HostUnit, n: int) -> tuple[threading.Thread, list]:
+    """A thread that presses the dial's button once in each of `n` trials, when the trial
+    has stored `PRESS_AFTER_S` of samples; it records (trial id, stored up to, s)."""
+    pressed: list[tuple[int, float]] = []
+
+    def watch() -> None:
+        engine = create_engine(f"sqlite:///{db}")
+        deadline = time.monotonic() + 60
+        try:
+            while len(pressed) < n and time.monotonic() < deadline:
+                with Session(engine) as s:
+                    trial = s.scalar(select(Trial.id).order_by(Trial.id.desc()).limit(1))
+                    kept = None if trial is None else s.scalar(last_sample_s(trial))
+                if kept is not None and kept >= PRESS_AFTER_S and trial not in dict(pressed):
+                    dial.press()
+                    pressed.append((trial, kept))
+                time.sleep(0.02)
+        finally:
+            engine.dispose()
+
+    thread = threading.Thread(target=watch)
+    thread.start()
+    return thread, pressed
+
+
+def test_the_dial_s_button_ends_a_physical_phantom_trial_as_reached(
+    tmp_path: Path, host_firmware: Path, patient_host: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    limit_s = 4.0  # far past the press: only the button ends these trials
+    monkeypatch.setattr("study.protocol.session.MAX_TRIAL_S", limit_s)
+    with (
+        EmulatedForceUnit(proximal, distal) as forces,
+        HostUnit(host_firmware, "dial", hand="0.2") as dial,
+        HostUnit(host_firmware, "drive") as drive,
+    ):
+        db = init_study(tmp_path, _design(forces.port), ("novice",))
+        watcher, pressed = _press_in_each_trial(db, dial, 2)
+        try:
+            assert main(_start(db, dial.port, drive.port)) == 0
+        finally:
+            watcher.join()
+    trials = _trials(db)
+    assert [t.id for t in trials] == [trial for trial, _ in pressed]
+    for t, (_, kept) in zip(trials, pressed, strict=True):
+        assert t.status == "completed"
+        assert t.success is True
+        assert t.summary["end"] == "button"
+        assert t.summary["phantom"] == "physical"
+        # pressed after `kept` s of samples were stored, seen at a later 10 ms update
+        assert kept <= t.completion_time_s < kept + 0.5
+        # the samples end where the trial did
+        assert t.last_s == pytest.approx(t.completion_time_s, abs=0.011)  # type: ignore[attr-defined]
+        assert t.samples_stored == pytest.approx(t.completion_time_s * 100, abs=1.01)  # type: ignore[attr-defined]
+
+
+LIMIT_S = 1.0
+"""The time limit of the time-limit tests, s (short: nothing ends these trials earlier)."""
+
+
+@pytest.mark.parametrize("button", ["0", "1"], ids=["never-pressed", "held-from-the-start"])
+def test_a_physical_phantom_trial_that_reaches_the_time_limit_is_no_success(
+    tmp_path: Path,
+    host_firmware: Path,
+    patient_host: None,
+    monkeypatch: pytest.MonkeyPatch,
+    button: str,
+) -> None:
+    monkeypatch.setattr("study.protocol.session.MAX_TRIAL_S", LIMIT_S)
+    # a button held down since before the trial is no press: it must go up first
+    with (
+        EmulatedForceUnit(proximal) as forces,
+        HostUnit(host_firmware, "dial", hand="0.2", button=button) as dial,
+        HostUnit(host_firmware, "drive") as drive,
+    ):
+        db = init_study(tmp_path, _design(forces.port), ("novice",))
+        assert main(_start(db, dial.port, drive.port)) == 0
+    trials = _trials(db)
+    assert len(trials) == 2
+    for t in trials:
+        assert t.status == "completed"
+        assert t.success is False
+        assert t.summary["end"] == "time_limit"
+        assert t.samples_stored == round(LIMIT_S * 100)  # type: ignore[attr-defined]
+        assert t.completion_time_s == pytest.approx(LIMIT_S, abs=1e-9)  # the limit itself

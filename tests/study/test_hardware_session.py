@@ -86,7 +86,7 @@ def test_a_whole_session_runs_on_the_host_built_dial(
         assert t.status == "completed"
         # every 100 Hz sample of the trial stored, and the unit named in its summary
         assert t.samples_stored == round(TRIAL_S * 100)  # type: ignore[attr-defined]
-        assert t.summary["dial_firmware"] == "1.0.0-host"
+        assert t.summary["dial_firmware"] == "1.1.0-host"
         assert t.summary["dial_corrupt_lines"] == 0
 
 
@@ -156,7 +156,7 @@ def test_hardware_check_passes_on_the_host_built_units(
         argv = ["hardware", "check", "--port", unit.port, "--role", "dial", "--seconds", "1.5"]
         assert main([*argv, "--json", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "unit: dial, firmware 1.0.0-host (the firmware's host build" in printed
+    assert "unit: dial, firmware 1.1.0-host (the firmware's host build" in printed
     assert printed.strip().endswith("check passed")
     result = json.loads(out.read_text())
     assert result["passed"]
