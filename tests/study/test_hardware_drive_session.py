@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import threading
 import time
 from pathlib import Path
@@ -17,6 +18,7 @@ import pytest
 from sqlalchemy import create_engine, select
 from sqlalchemy.orm import Session
 
+from db.models.audit import AuditEntry
 from db.models.trial import Trial, TrialMeasure
 from study.cli import main
 from teleop_core.loop.follower_units import EmulatedForceUnit
@@ -301,3 +303,77 @@ def test_a_physical_phantom_trial_that_reaches_the_time_limit_is_no_success(
         assert t.summary["end"] == "time_limit"
         assert t.samples_stored == round(LIMIT_S * 100)  # type: ignore[attr-defined]
         assert t.completion_time_s == pytest.approx(LIMIT_S, abs=1e-9)  # the limit itself
+
+
+def test_the_experimenter_s_keys_on_a_terminal_end_or_stop_a_physical_phantom_trial(
+    tmp_path: Path,
+    host_firmware: Path,
+    patient_host: None,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    monkeypatch.setattr("study.protocol.session.MAX_TRIAL_S", 4.0)
+    master, slave = os.openpty()  # the experimenter's terminal on stdin
+    terminal = os.fdopen(slave, "r")
+    monkeypatch.setattr("sys.stdin", terminal)
+    typed: list[tuple[int, float]] = []
+
+    def keys() -> None:
+        """Enter in the first trial, `x` and a reason in the second, each once the
+        trial has stored PRESS_AFTER_S of samples."""
+        engine = create_engine(f"sqlite:///{db}")
+        deadline = time.monotonic() + 60
+        try:
+            while len(typed) < 2 and time.monotonic() < deadline:
+                with Session(engine) as s:
+                    trial = s.scalar(select(Trial.id).order_by(Trial.id.desc()).limit(1))
+                    kept = None if trial is None else s.scalar(last_sample_s(trial))
+                if kept is not None and kept >= PRESS_AFTER_S and trial not in dict(typed):
+                    os.write(master, b"\r" if not typed else b"x")
+                    if typed:
+                        time.sleep(0.3)  # the trial stands while the reason is typed
+                        os.write(master, b"cable caught\n")
+                    typed.append((trial, kept))
+                time.sleep(0.02)
+        finally:
+            engine.dispose()
+
+    with (
+        EmulatedForceUnit(proximal) as forces,
+        HostUnit(host_firmware, "dial", hand="0.2") as dial,
+        HostUnit(host_firmware, "drive") as drive,
+    ):
+        db = init_study(tmp_path, _design(forces.port), ("novice",))
+        capsys.readouterr()
+        typist = threading.Thread(target=keys)
+        typist.start()
+        try:
+            status = main(_start(db, dial.port, drive.port))
+        finally:
+            typist.join()
+            terminal.close()
+            os.close(master)
+    err = capsys.readouterr().err
+    assert status == 1
+    assert "Enter when the tip has reached the target, x to stop the trial" in err
+    assert "the trial stands; why stop it?" in err
+    last = err.strip().splitlines()[-1]
+    assert "stopped by the experimenter at the terminal: cable caught" in last
+    assert "1 trial(s) completed and stored" in last
+    first, second = _trials(db)
+    assert (first.id, second.id) == tuple(trial for trial, _ in typed)
+    assert (first.status, first.success, first.summary["end"]) == (
+        "completed",
+        True,
+        "experimenter",
+    )
+    assert typed[0][1] <= first.completion_time_s < typed[0][1] + 0.5
+    assert second.status == "interrupted"
+    assert second.success is None
+    assert second.summary is None
+    assert second.last_s >= typed[1][1]  # type: ignore[attr-defined]  # its samples kept
+    engine = create_engine(f"sqlite:///{db}")
+    with Session(engine) as s:
+        reason = s.scalar(select(AuditEntry.reason).where(AuditEntry.entity_id == second.id))
+    engine.dispose()
+    assert reason == "stopped by the experimenter at the terminal: cable caught"
