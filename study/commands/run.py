@@ -100,6 +100,13 @@ def run(
     One session per participant: while one runs (here or on another machine sharing the
     database), a second is refused; one whose process died is taken over.
 
+    With --drive-port the phantom is the physical one, and a person says when the tip
+    has reached the target: the dial's button, or Enter at this terminal (the trial
+    completed with success); `x` here stops the trial, with a reason typed. A trial
+    that reaches the time limit is stored with success false. The summary's `end`
+    says which (button, experimenter, time_limit). The keys are read only when
+    standard input is a terminal.
+
     \b
     Example:
       study run --participant P001 --driver hardware --port /dev/ttyUSB0
