@@ -8,7 +8,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from study.commands.run_keys import ExperimenterKeys
     from study.protocol.design import StudyDesign
     from study.protocol.design_sensors import SensorSettings
-    from study.protocol.observer import SessionObserver
+    from study.protocol.observer import SessionObserver, TrialInfo
     from study.protocol.session import PendingTrial
     from study.protocol.stop_signals import SignalStop
     from teleop_core.loop.follower_units import ForceSource, PhysicalFollower
@@ -175,6 +175,8 @@ def run(
                 )
 
             observer = _lsl_observers(engine, lsl, progress)
+            if drive_port is not None:
+                observer = _with_end_notice(observer, progress)
             keys = _experimenter_keys(drive_port, stop, progress)
             with keys.reading() if keys is not None else contextlib.nullcontext():
                 done = run_session(
@@ -210,6 +212,26 @@ def _check_options(code: str | None, run_all: bool, pace: float | None, jobs: in
             f"--jobs {jobs} with --participant; expected --all (one "
             "participant's session runs in one process)"
         )
+
+
+def _with_end_notice(observer: SessionObserver | None, progress: Progress) -> SessionObserver:
+    """`observer` and a line above the bar for each physical-phantom trial that reached
+    the time limit (stored with success false: no one said the tip reached the target)."""
+    from study.protocol.observer import Observers, SessionObserver
+
+    class EndNotice(SessionObserver):
+        def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
+            if status != "completed" or outcome.get("end") != "time_limit":
+                return
+            kind = "practice trial" if trial.practice else "trial"
+            progress.console.print(
+                f"study run: {trial.task.name}/{trial.condition} {kind} "
+                f"{trial.trial_index + 1} reached the time limit: stored with success "
+                "false (neither the dial's button nor Enter said the tip reached the target)",
+                markup=False,
+            )
+
+    return Observers([o for o in (observer, EndNotice()) if o is not None])
 
 
 def _experimenter_keys(

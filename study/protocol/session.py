@@ -631,7 +631,7 @@ def _run_trial(
         observer.trial_ended(
             info,
             "completed",
-            {"success": success, COMPLETION_TIME: completion_s, **values},
+            {"success": success, COMPLETION_TIME: completion_s, **values, **ended},
         )
         return trial_id
     observer.trial_ended(info, "interrupted", {"reason": "taken over by another session"})

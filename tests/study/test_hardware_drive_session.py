@@ -284,6 +284,7 @@ def test_a_physical_phantom_trial_that_reaches_the_time_limit_is_no_success(
     host_firmware: Path,
     patient_host: None,
     monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
     button: str,
 ) -> None:
     monkeypatch.setattr("study.protocol.session.MAX_TRIAL_S", LIMIT_S)
@@ -294,7 +295,11 @@ def test_a_physical_phantom_trial_that_reaches_the_time_limit_is_no_success(
         HostUnit(host_firmware, "drive") as drive,
     ):
         db = init_study(tmp_path, _design(forces.port), ("novice",))
+        capsys.readouterr()
         assert main(_start(db, dial.port, drive.port)) == 0
+    said = [line for line in capsys.readouterr().err.splitlines() if "time limit" in line]
+    assert len(said) == 2
+    assert all("stored with success false" in line for line in said)
     trials = _trials(db)
     assert len(trials) == 2
     for t in trials:
