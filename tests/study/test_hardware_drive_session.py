@@ -272,6 +272,11 @@ def test_the_dial_s_button_ends_a_physical_phantom_trial_as_reached(
         # the samples end where the trial did
         assert t.last_s == pytest.approx(t.completion_time_s, abs=0.011)  # type: ignore[attr-defined]
         assert t.samples_stored == pytest.approx(t.completion_time_s * 100, abs=1.01)  # type: ignore[attr-defined]
+    out = tmp_path / "analysis"
+    assert main(["analyze", "--out", str(out), "--db", db]) == 0
+    methods = (out / "methods.md").read_text()
+    assert "a person judged when the tip reached the target" in methods
+    assert "ended the trial as a success: 2 by the participant's button." in methods
 
 
 LIMIT_S = 1.0
