@@ -241,7 +241,10 @@ def _experimenter_keys(
     experimenter's keys: Enter ends the trial as reached, `x` stops it."""
     if drive_port is None:
         return None
-    from study.commands.run_keys import experimenter_keys
+    try:
+        from study.commands.run_keys import experimenter_keys
+    except ImportError:  # no POSIX terminal (Windows): the button and the time limit
+        return None
 
     def say(message: str) -> None:
         progress.console.print(f"study run: {message}", markup=False)

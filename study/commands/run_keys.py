@@ -12,7 +12,8 @@ when it reached the target: the participant with the dial's button
   that reason in the audit log and the session ends, as a signal ends it.
 
 The keys are read only when standard input is a terminal (put in cbreak mode for the
-session, restored after it); otherwise only the button and the time limit end a trial.
+session, restored after it) on a POSIX system; otherwise only the button and the time
+limit end a trial.
 """
 
 from __future__ import annotations
