@@ -21,6 +21,9 @@ trial, drawn from the group's distributions with the study's seed and the code),
 `hardware` (the dial's ESP32 on a serial port). The keyboard drives from the TUI.
 With a fitted participant model (`participants`, MODEL.json) the simulated person is
 drawn from its distributions instead, and each trial's summary names the model.
+With a physical phantom (the hardware driver's real drive) the loop cannot see the tip:
+a person ends the trial as reached (the dial's button, the experimenter's key), or the
+time limit ends it as a failure; the summary's `end` says which (`_trial_end`).
 """
 
 from __future__ import annotations
@@ -473,11 +476,6 @@ def _write_end(
         return done
 
 
-END_BY = ("button", "experimenter", "time_limit")
-"""How a physical-phantom trial's end was decided (the summary's `end`): the dial's
-button pressed, the experimenter's key, or the time limit reached (success false)."""
-
-
 def _trial_end(
     task: Task, loop: Any, driver: Driver, samples: np.ndarray
 ) -> tuple[bool, float, dict[str, str]]:
@@ -487,7 +485,7 @@ def _trial_end(
     completion time is the last sample's. A physical one has no tip tracker: a person
     ends the trial as reached (`HardwareDriver.end`: the dial's button or the
     experimenter), success true at that moment; a trial that runs to the time limit is
-    success false; `end` says which."""
+    success false; `end` says which (`study_rows.TRIAL_ENDS`)."""
     if getattr(loop, "physical_follower", None) is None:
         return bool(loop.success), task.completion_time_s(samples), {}
     end = getattr(driver, "end", None)
