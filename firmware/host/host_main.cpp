@@ -2,7 +2,8 @@
 // motor, served on a pseudo-terminal as a USB serial unit appears.
 //
 //   haptic_unit_host --role dial|drive [--link PATH] [--seed N]
-//                    [--hand PROFILE] [--joystick PROFILE] [--corrupt-every N]
+//                    [--hand PROFILE] [--joystick PROFILE] [--button PROFILE]
+//                    [--corrupt-every N]
 //
 // It opens a pty, prints `PORT <path>` on stdout (and links PATH to it when given, so
 // a restarted unit keeps its port's name), then runs in real time: the simulation
@@ -10,9 +11,11 @@
 // every line the host sends is answered at once. Ending the process (a signal) closes
 // the pty: the host sees an unplugged unit. PROFILE is "t0:v0,t1:v1,..." (s:value,
 // linear between the points, restarted at each HELLO) or one value: the hand's aimed
-// dial angle in rad and the joystick's axis in [-1, 1]. --corrupt-every N garbles every
+// dial angle in rad, the joystick's axis in [-1, 1] and its button (pressed where the
+// profile is 0.5 or more). --corrupt-every N garbles every
 // Nth state line on the wire (its angle field overwritten with 9s, its checksum kept),
-// as electrical noise would, to test the host's handling.
+// as electrical noise would, to test the host's handling. SIGUSR1 presses the dial's
+// button (held down for 0.1 s), as the participant does when the tip reaches the target.
 #include <fcntl.h>
 #include <getopt.h>
 #include <poll.h>
@@ -34,12 +37,18 @@ namespace {
 
 volatile sig_atomic_t g_stop = 0;
 void on_signal(int) { g_stop = 1; }
+volatile sig_atomic_t g_press = 0;
+void on_press(int) { g_press = 1; }
+
+// How long a press (SIGUSR1) holds the dial's button down, s: a finger's short press.
+constexpr double kPressS = 0.1;
 
 struct Options {
   haptic::Role role = haptic::Role::dial;
   std::string link;
   std::string hand = "0";
   std::string joystick = "0";
+  std::string button = "0";
   unsigned long long seed = 1;
   long corrupt_every = 0;
 };
@@ -47,7 +56,8 @@ struct Options {
 [[noreturn]] void usage(const char* message) {
   std::fprintf(stderr,
                "haptic_unit_host: %s\nusage: haptic_unit_host --role dial|drive [--link PATH] "
-               "[--seed N] [--hand PROFILE] [--joystick PROFILE] [--corrupt-every N]\n",
+               "[--seed N] [--hand PROFILE] [--joystick PROFILE] [--button PROFILE] "
+               "[--corrupt-every N]\n",
                message);
   std::exit(2);
 }
@@ -58,6 +68,7 @@ Options parse(int argc, char** argv) {
                                         {"seed", required_argument, nullptr, 's'},
                                         {"hand", required_argument, nullptr, 'h'},
                                         {"joystick", required_argument, nullptr, 'j'},
+                                        {"button", required_argument, nullptr, 'b'},
                                         {"corrupt-every", required_argument, nullptr, 'c'},
                                         {nullptr, 0, nullptr, 0}};
   Options o;
@@ -78,6 +89,8 @@ Options parse(int argc, char** argv) {
       o.hand = value;
     } else if (c == 'j') {
       o.joystick = value;
+    } else if (c == 'b') {
+      o.button = value;
     } else if (c == 'c') {
       o.corrupt_every = std::strtol(value.c_str(), nullptr, 10);
       if (o.corrupt_every < 1) usage("--corrupt-every: expected a count >= 1");
@@ -144,6 +157,9 @@ int main(int argc, char** argv) {
   if (!params.joystick.parse(options.joystick)) {
     usage("--joystick: expected t:value,... or a value");
   }
+  if (!params.button.parse(options.button)) {
+    usage("--button: expected t:value,... or a value (pressed where >= 0.5)");
+  }
   haptic::SimHardware sim(params);
   haptic::Unit unit(options.role, sim.hardware(), haptic::Limits{}, HAPTIC_UNIT_VERSION "-host");
 
@@ -166,6 +182,7 @@ int main(int argc, char** argv) {
   signal(SIGTERM, on_signal);
   signal(SIGINT, on_signal);
   signal(SIGHUP, on_signal);
+  signal(SIGUSR1, on_press);
   std::printf("PORT %s\n", slave_path.c_str());
   std::fflush(stdout);
 
@@ -174,6 +191,10 @@ int main(int argc, char** argv) {
   char buffer[256];
   char reply[haptic::kMaxReply];
   while (g_stop == 0) {
+    if (g_press != 0) {
+      g_press = 0;
+      sim.press(kPressS);
+    }
     // the simulation and the control cycle catch up with the wall clock
     const double target_s = now_s() - start_s;
     while (sim.t_s() + 1.0e-3 <= target_s) {

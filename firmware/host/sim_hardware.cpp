@@ -129,4 +129,9 @@ float SimHardware::axis() {
   return static_cast<float>(std::clamp(p_.joystick.at(t_s_ - script_t0_s_), -1.0, 1.0));
 }
 
+bool SimHardware::pressed() {
+  if (p_.role != Role::dial) return false;
+  return t_s_ < press_until_s_ || p_.button.at(t_s_ - script_t0_s_) >= 0.5;
+}
+
 }  // namespace haptic

@@ -10,7 +10,8 @@
 //
 // A dial unit has a hand on it: a grip stiffness and damping about an aimed angle that
 // follows a script (piecewise-linear in the time since the last HELLO, as a person who
-// starts again at each trial), and a joystick axis that follows another. A drive unit
+// starts again at each trial), a joystick axis that follows another, and the joystick's
+// button, pressed while a third is 0.5 or more. A drive unit
 // pushes a guidewire through a friction wheel against a load that grows with the
 // inserted length.
 #pragma once
@@ -63,6 +64,7 @@ struct SimParams {
   double grip_damping_n_m_s_per_rad = 3.0e-3;
   Profile hand_aim_rad;
   Profile joystick;
+  Profile button;  // pressed where >= 0.5
   // Drive: speed loop (rad/s error -> A), friction wheel and guidewire load.
   double speed_kp_a_s_per_rad = 0.018;
   double speed_ki_a_per_rad = 0.6;
@@ -91,6 +93,8 @@ class SimHardware : public Motor, public Encoder, public CurrentSense, public Jo
   void advance(double dt_s);
   // The hand starts its script again (called at each HELLO).
   void restart_script() { script_t0_s_ = t_s_; }
+  // The button held down for `duration_s` from now (a press from outside the script).
+  void press(double duration_s) { press_until_s_ = t_s_ + duration_s; }
 
   void set_current_q(float current_a) override { current_cmd_a_ = current_a; }
   void set_speed(float speed_rad_s) override { speed_cmd_rad_s_ = speed_rad_s; }
@@ -98,6 +102,7 @@ class SimHardware : public Motor, public Encoder, public CurrentSense, public Jo
   float speed_rad_s() override { return static_cast<float>(speed_est_rad_s_); }
   float current_q_a() override;
   float axis() override;
+  bool pressed() override;
   uint32_t millis() override { return static_cast<uint32_t>(t_s_ * 1000.0); }
 
   double t_s() const { return t_s_; }
@@ -118,6 +123,7 @@ class SimHardware : public Motor, public Encoder, public CurrentSense, public Jo
   std::normal_distribution<double> noise_{0.0, 1.0};
   double t_s_ = 0.0;
   double script_t0_s_ = 0.0;
+  double press_until_s_ = -1.0;
   double theta_rad_ = 0.0, omega_rad_s_ = 0.0, current_a_ = 0.0;
   double quantised_rad_ = 0.0, previous_quantised_rad_ = 0.0, speed_est_rad_s_ = 0.0;
   double integral_a_ = 0.0;

@@ -3,7 +3,8 @@
 // One ESP32 per motor: a 2804 gimbal PMSM (7 pole pairs) on a DRV8313 three-phase driver
 // (BLDCDriver3PWM), two INA240A2 inline current-sense amplifiers on phases A and B
 // (InlineCurrentSense), an AS5600 magnetic encoder on I2C (MagneticSensorI2C), and on
-// the dial unit the rotation joystick's axis on an ADC pin. SimpleFOC runs the
+// the dial unit the rotation joystick's axis on an ADC pin and its push button (the
+// participant's "reached") on a digital pin. SimpleFOC runs the
 // field-oriented current loop (TorqueControlType::foc_current); the dial commands a
 // q-current (MotionControlType::torque), the drive a shaft speed through SimpleFOC's
 // velocity loop (MotionControlType::velocity). The protocol and the watchdog are
@@ -36,6 +37,7 @@ constexpr int kPinSenseB = 35;    // INA240 on phase B, output (ADC1, input only
 constexpr int kPinSda = 21;       // AS5600 SDA
 constexpr int kPinScl = 22;       // AS5600 SCL
 constexpr int kPinJoystick = 32;  // joystick axis wiper (ADC1), dial unit only
+constexpr int kPinButton = 33;    // joystick's switch (SW) to GND, internal pull-up; dial only
 
 // Motor and sensing
 constexpr int kPolePairs = 7;              // 2804 gimbal motor
@@ -46,6 +48,7 @@ constexpr float kSenseGainVPerV = 50.0f;   // INA240A2: 50 V/V, so 0.5 V per A
 constexpr float kCurrentLimitA = 0.7f;     // the drive's continuous current
 constexpr float kVelocityLimitRadS = 20.0f;
 constexpr float kJoystickDeadband = 0.05f;
+constexpr uint32_t kButtonDebounceMs = 20;  // a contact's bounce settles within this
 constexpr uint32_t kI2cHz = 400000;
 
 BLDCMotor motor(kPolePairs);
@@ -85,9 +88,25 @@ class AdcJoystick : public haptic::Joystick {
     if (fabsf(value) < kJoystickDeadband) return 0.0f;
     return value > 1.0f ? 1.0f : (value < -1.0f ? -1.0f : value);
   }
+  // The switch closes to GND (active low); a level counts once it has held for the
+  // debounce time.
+  bool pressed() override {
+    if (kRole != haptic::Role::dial) return false;
+    const bool level = digitalRead(kPinButton) == LOW;
+    const uint32_t now = ::millis();
+    if (level != raw_) {
+      raw_ = level;
+      since_ms_ = now;
+    } else if (now - since_ms_ >= kButtonDebounceMs) {
+      stable_ = level;
+    }
+    return stable_;
+  }
 
  private:
   float centre_ = 2048.0f;
+  bool raw_ = false, stable_ = false;
+  uint32_t since_ms_ = 0;
 };
 
 class ArduinoClock : public haptic::Clock {
@@ -137,6 +156,7 @@ void setup() {
   if (!motor.initFOC()) unit.set_fault("FOC alignment failed (check the encoder and phases)");
   if (kRole == haptic::Role::dial) {
     pinMode(kPinJoystick, INPUT);
+    pinMode(kPinButton, INPUT_PULLUP);
     joystick.calibrate();  // the joystick at rest at power-up is its centre
   }
 }

@@ -221,6 +221,7 @@ def _data(analysis: Analysis) -> str:
     sentences = [
         f"The analysis used {total} trials of {tasks} ({drivers or 'none'}).",
         *_forces_sentence(analysis),
+        *_end_sentence(analysis),
         f"Participants per group: at most {_groups(analysis)}.",
         f"Measures: {measures or 'none'}.",
         "Each participant's trials of a block were averaged; participant means were the "
@@ -252,6 +253,30 @@ def _forces_sentence(analysis: Analysis) -> list[str]:
             "follower and phantom (no drive unit in the loop)."
         ]
     return []
+
+
+def _end_sentence(analysis: Analysis) -> list[str]:
+    """Who decided the success and completion time of the physical-phantom trials
+    (nothing in the loop sees the tip there)."""
+    ends = analysis.ends
+    if not ends:
+        return []
+    said = [
+        f"{ends[key]} by {who}"
+        for key, who in (
+            ("button", "the participant's button"),
+            ("experimenter", "the experimenter"),
+        )
+        if ends.get(key)
+    ]
+    sentence = (
+        f"On the physical phantom a person judged when the tip reached the target, which "
+        f"ended the trial as a success: {' and '.join(said) or 'in no trial'}"
+    )
+    limit = ends.get("time_limit", 0)
+    if limit:
+        sentence += f"; {limit} reached the time limit and count as failures"
+    return [sentence + "."]
 
 
 def _results(analysis: Analysis) -> str:

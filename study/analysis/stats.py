@@ -168,6 +168,9 @@ class Analysis:
     forces_by_source: dict[str, int] = field(default_factory=dict)
     """The analysed trials by where their forces came from (`study_rows.forces_source`:
     measured, simulated, unknown)."""
+    ends: dict[str, int] = field(default_factory=dict)
+    """The analysed physical-phantom trials by who ended them (`study_rows.trial_end`:
+    button, experimenter, time_limit)."""
 
     @cached_property
     def descriptives(self) -> pd.DataFrame:
@@ -601,7 +604,17 @@ def analyze_rows(
             for task, rows in _groups((t["task"], t) for t in trials).items()
         },
         forces_by_source=_forces_by_source(trials),
+        ends=_count(t.get("end") for t in trials),
     )
+
+
+def _count(values: Iterable[str | None]) -> dict[str, int]:
+    """How often each value other than None occurs, in the order first seen."""
+    counts: dict[str, int] = {}
+    for v in values:
+        if v is not None:
+            counts[v] = counts.get(v, 0) + 1
+    return counts
 
 
 def _forces_by_source(trials: list[dict[str, Any]]) -> dict[str, int]:

@@ -40,7 +40,8 @@ def hardware() -> None:
     type=click.FloatRange(0.5, 60.0),
     default=3.0,
     show_default=True,
-    help="How long to read the unit at 100 Hz (turn the dial and the joystick meanwhile).",
+    help="How long to read the unit at 100 Hz (turn the dial and the joystick, press its "
+    "button meanwhile).",
 )
 @click.option(
     "--spin",
@@ -75,7 +76,10 @@ def check(
         raise StudyInputError(f"--spin {spin_rad_s:g} needs --role drive; a dial is not spun")
     live = _LiveLine(sys.stderr.isatty())
     if live.tty:
-        click.echo(f"unit on {port}: greeting it; turn the dial and the joystick", err=True)
+        click.echo(
+            f"unit on {port}: greeting it; turn the dial and the joystick, press its button",
+            err=True,
+        )
     try:
         result = check_unit(port, role, seconds, spin_rad_s, on_state=live)
     except HardwareError as exc:
@@ -142,7 +146,10 @@ def _report(result: UnitCheck) -> list[str]:
         "(at no command: the current sense's offset and noise)",
     ]
     if result.role == "dial":
-        lines.append(f"joystick: {result.joystick_min:+.2f} to {result.joystick_max:+.2f}")
+        lines.append(
+            f"joystick: {result.joystick_min:+.2f} to {result.joystick_max:+.2f}; button "
+            f"pressed {result.button_presses} time(s)"
+        )
     lines += [f"note: {note}" for note in result.notes]
     return lines
 

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
@@ -31,9 +33,10 @@ MAX_JOBS = 64
 if TYPE_CHECKING:
     from sqlalchemy import Engine
 
+    from study.commands.run_keys import ExperimenterKeys
     from study.protocol.design import StudyDesign
     from study.protocol.design_sensors import SensorSettings
-    from study.protocol.observer import SessionObserver
+    from study.protocol.observer import SessionObserver, TrialInfo
     from study.protocol.session import PendingTrial
     from study.protocol.stop_signals import SignalStop
     from teleop_core.loop.follower_units import ForceSource, PhysicalFollower
@@ -97,6 +100,13 @@ def run(
     One session per participant: while one runs (here or on another machine sharing the
     database), a second is refused; one whose process died is taken over.
 
+    With --drive-port the phantom is the physical one, and a person says when the tip
+    has reached the target: the dial's button, or Enter at this terminal (the trial
+    completed with success); `x` here stops the trial, with a reason typed. A trial
+    that reaches the time limit is stored with success false. The summary's `end`
+    says which (button, experimenter, time_limit). The keys are read only when
+    standard input is a terminal.
+
     \b
     Example:
       study run --participant P001 --driver hardware --port /dev/ttyUSB0
@@ -109,15 +119,7 @@ def run(
     from study.protocol.session import run_session
     from study.protocol.stop_signals import stop_on_signals
 
-    if (code is None) == (not run_all):
-        raise StudyInputError("give --participant CODE or --all; expected exactly one")
-    if pace is not None and not math.isfinite(pace):
-        raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
-    if jobs is not None and not run_all:
-        raise StudyInputError(
-            f"--jobs {jobs} with --participant; expected --all (one "
-            "participant's session runs in one process)"
-        )
+    _check_options(code, run_all, pace, jobs)
     who = current_actor(actor)
     model = load_participants(participants_path)
     if model is not None and driver != "simulated":
@@ -173,25 +175,90 @@ def run(
                 )
 
             observer = _lsl_observers(engine, lsl, progress)
-            done = run_session(
-                engine,
-                code,
-                driver,
-                estimator,
-                make_driver,
-                pace,
-                report,
-                actor=who,
-                participants=model,
-                observer=observer,
-                stop=stop,
-            )
+            if drive_port is not None:
+                observer = _with_end_notice(observer, progress)
+            keys = _experimenter_keys(drive_port, stop, progress)
+            with keys.reading() if keys is not None else contextlib.nullcontext():
+                done = run_session(
+                    engine,
+                    code,
+                    driver,
+                    estimator,
+                    keys.track(make_driver) if keys and make_driver else make_driver,
+                    pace,
+                    report,
+                    actor=who,
+                    participants=model,
+                    observer=observer,
+                    stop=stop,
+                    hold=keys.hold if keys is not None else None,
+                )
     finally:
         engine.dispose()
     if stop.is_set():
         click.echo(_stopped_line(code, stop, started, len(done)), err=True)
         raise click.exceptions.Exit(stop.exit_status)
     click.echo(f"{code}: {len(done)} trials completed and stored")
+
+
+def _check_options(code: str | None, run_all: bool, pace: float | None, jobs: int | None) -> None:
+    """One line for options that cannot go together, before anything runs."""
+    if (code is None) == (not run_all):
+        raise StudyInputError("give --participant CODE or --all; expected exactly one")
+    if pace is not None and not math.isfinite(pace):
+        raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
+    if jobs is not None and not run_all:
+        raise StudyInputError(
+            f"--jobs {jobs} with --participant; expected --all (one "
+            "participant's session runs in one process)"
+        )
+
+
+def _with_end_notice(observer: SessionObserver | None, progress: Progress) -> SessionObserver:
+    """`observer` and a line above the bar for each physical-phantom trial that reached
+    the time limit (stored with success false: no one said the tip reached the target)."""
+    from study.protocol.observer import Observers, SessionObserver
+
+    class EndNotice(SessionObserver):
+        def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
+            if status != "completed" or outcome.get("end") != "time_limit":
+                return
+            kind = "practice trial" if trial.practice else "trial"
+            progress.console.print(
+                f"study run: {trial.task.name}/{trial.condition} {kind} "
+                f"{trial.trial_index + 1} reached the time limit: stored with success "
+                "false (neither the dial's button nor Enter said the tip reached the target)",
+                markup=False,
+            )
+
+    return Observers([o for o in (observer, EndNotice()) if o is not None])
+
+
+def _experimenter_keys(
+    drive_port: str | None, stop: SignalStop, progress: Progress
+) -> ExperimenterKeys | None:
+    """With a physical phantom (--drive-port) and a terminal on stdin, the
+    experimenter's keys: Enter ends the trial as reached, `x` stops it."""
+    if drive_port is None:
+        return None
+    try:
+        from study.commands.run_keys import experimenter_keys
+    except ImportError:  # no POSIX terminal (Windows): the button and the time limit
+        return None
+
+    def say(message: str) -> None:
+        progress.console.print(f"study run: {message}", markup=False)
+
+    def pause(typing: bool) -> None:
+        progress.stop() if typing else progress.start()
+
+    keys = experimenter_keys(sys.stdin, stop, say, pause)
+    if keys is not None:
+        say(
+            "the physical phantom's trials end at the dial's button, or here: Enter when "
+            "the tip has reached the target, x to stop the trial"
+        )
+    return keys
 
 
 def _hardware_driver(

@@ -5,7 +5,8 @@ Every marker the session publishes is a JSON object with `"haptic_study": 1`, an
 its keys (`task`, `condition`, `block`, `trial`, `practice`, `attempt`, `trial_id`,
 `clock_rate`) and, at its end, the outcome. Events: `session_start`, `trial_start`,
 `trial_end` (`status`: completed, stopped or interrupted; `success` and the measures
-when completed), `probe`, `questionnaire`, `session_end`. The stream: name
+when completed, and on a physical phantom `end`: button, experimenter or time_limit),
+`probe`, `questionnaire`, `session_end`. The stream: name
 `MARKER_STREAM`, type `Markers`, one string channel, irregular rate; each marker is
 stamped on the LSL clock at the moment it names (a trial's start at its t = 0).
 JSON rather than a bespoke string: PsychoPy, LabRecorder and any XDF reader pass it

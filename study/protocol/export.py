@@ -50,7 +50,11 @@ CODEBOOK = {
     "condition": ("", "VO (visual only) or HV (haptic-visual)"),
     "trial": ("", "measured trial number within the task x condition block, from 1"),
     "completion_time_s": ("s", "time from start to success (or to the time limit)"),
-    "success": ("", "true if the tip reached the target"),
+    "success": (
+        "",
+        "true if the tip reached the target (on a physical phantom: as the participant's "
+        "button or the experimenter said; the trial's summary names which)",
+    ),
     **{s: ("0-100", f"NASA-TLX {s} rating, steps of 5") for s in TLX_SUBSCALES},
     **{
         f"w_{s}": ("count", f"times {s} was chosen in the 15 pairwise comparisons")

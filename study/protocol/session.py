@@ -21,6 +21,9 @@ trial, drawn from the group's distributions with the study's seed and the code),
 `hardware` (the dial's ESP32 on a serial port). The keyboard drives from the TUI.
 With a fitted participant model (`participants`, MODEL.json) the simulated person is
 drawn from its distributions instead, and each trial's summary names the model.
+With a physical phantom (the hardware driver's real drive) the loop cannot see the tip:
+a person ends the trial as reached (the dial's button, the experimenter's key), or the
+time limit ends it as a failure; the summary's `end` says which (`_trial_end`).
 """
 
 from __future__ import annotations
@@ -473,6 +476,24 @@ def _write_end(
         return done
 
 
+def _trial_end(
+    task: Task, loop: Any, driver: Driver, samples: np.ndarray
+) -> tuple[bool, float, dict[str, str]]:
+    """The trial's success, completion time and the summary's record of its end.
+
+    A simulated phantom decides success itself (its model's tip at the target) and the
+    completion time is the last sample's. A physical one has no tip tracker: a person
+    ends the trial as reached (`HardwareDriver.end`: the dial's button or the
+    experimenter), success true at that moment; a trial that runs to the time limit is
+    success false; `end` says which (`study_rows.TRIAL_ENDS`)."""
+    if getattr(loop, "physical_follower", None) is None:
+        return bool(loop.success), task.completion_time_s(samples), {}
+    end = getattr(driver, "end", None)
+    if end is None or not loop.done:
+        return False, task.completion_time_s(samples), {"end": "time_limit"}
+    return True, float(loop.done_s), {"end": end}
+
+
 def _run_trial(
     engine: Engine, participant: Participant, item: PendingTrial, run: TrialSetup
 ) -> int | None:
@@ -571,7 +592,8 @@ def _run_trial(
                 if lag > 0:
                     time.sleep(lag)
     samples = np.concatenate(chunks)
-    values, extras = task.trial_measures(samples, loop.success)
+    success, completion_s, ended = _trial_end(task, loop, driver, samples)
+    values, extras = task.trial_measures(samples, success)
     summary = {
         **extras,
         **_rendered_gain(block.condition, gain),
@@ -580,8 +602,8 @@ def _run_trial(
         **task.driver_counts(driver),
         **driver.record(),
         **({"participant_model": run.model} if run.model and run.make_driver is None else {}),
+        **ended,
     }
-    completion_s = task.completion_time_s(samples)
 
     def complete(conn: Connection) -> bool:
         # only while still ours: a session that took the lease over has recovered it
@@ -591,7 +613,7 @@ def _run_trial(
             .values(
                 status="completed",
                 ended_at=utcnow(),
-                success=bool(loop.success),
+                success=success,
                 summary=summary,
                 **{COMPLETION_TIME: completion_s},
             )
@@ -607,7 +629,7 @@ def _run_trial(
         observer.trial_ended(
             info,
             "completed",
-            {"success": bool(loop.success), COMPLETION_TIME: completion_s, **values},
+            {"success": success, COMPLETION_TIME: completion_s, **values, **ended},
         )
         return trial_id
     observer.trial_ended(info, "interrupted", {"reason": "taken over by another session"})

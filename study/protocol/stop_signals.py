@@ -36,17 +36,29 @@ class SignalStop(threading.Event):
     def __init__(self) -> None:
         super().__init__()
         self.signum: int | None = None
+        self._reason: str | None = None
 
     @property
     def reason(self) -> str:
-        """The audit log's reason for the trial the signal interrupted."""
+        """The audit log's reason for the trial the signal (or a person) interrupted."""
+        if self._reason is not None:
+            return self._reason
         name = signal.Signals(self.signum).name if self.signum is not None else "a signal"
         return f"the session stopped on {name}: its `study run` process was ended"
 
     @property
     def exit_status(self) -> int:
-        """128 + the signal's number, as a shell reports a process ended by it."""
+        """128 + the signal's number, as a shell reports a process ended by it; 1 for a
+        session a person stopped (`stop_by`)."""
+        if self._reason is not None and self.signum is None:
+            return 1
         return 128 + (self.signum or 0)
+
+    def stop_by(self, reason: str) -> None:
+        """A person stops the session (the experimenter's `x` in `study run`): `reason`
+        is the audit log's for the trial it interrupts."""
+        self._reason = reason
+        self.set()
 
     def on_signal(self, signum: int, frame: FrameType | None) -> None:
         self.signum = signum

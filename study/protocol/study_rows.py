@@ -7,7 +7,8 @@ and `analysis.frames` build their frames from these rows.
   of each slot): participant, group, task, condition, trial (1-based), block (the
   block's place in the participant's schedule, 1-based), completion_time_s, the trial's
   measures under their names, success, driver, forces (`forces_source`: measured on a
-  physical phantom, or simulated).
+  physical phantom, or simulated), end (`trial_end`: who ended a physical-phantom trial,
+  else None).
 - `tlx_rows`: one dict per questionnaire in the order stored: participant, group, task,
   condition, the six ratings, tlx_raw, tlx_weighted (None without the pairwise
   comparisons).
@@ -78,16 +79,36 @@ def forces_source(driver: str | None, summary: Any) -> str:
     the lab's force sensors: its summary says ``forces = measured``), `simulated` (the
     follower and phantom models, whoever drove), or `unknown` (an imported trial).
     `summary` is the stored JSON, as text (SQLite) or decoded (PostgreSQL)."""
+    summary = _decoded(summary)
+    if isinstance(summary, dict) and summary.get("forces") == "measured":
+        return "measured"
+    return "unknown" if driver == "imported" else "simulated"
+
+
+TRIAL_ENDS = ("button", "experimenter", "time_limit")
+"""How a physical-phantom trial's end was decided (its summary's `end`)."""
+
+
+def trial_end(summary: Any) -> str | None:
+    """Who ended a physical-phantom trial (its summary's `end`: the participant's
+    `button`, the `experimenter`, or the `time_limit`); None for any other trial, whose
+    success its phantom's model decided."""
+    summary = _decoded(summary)
+    end = summary.get("end") if isinstance(summary, dict) else None
+    return end if end in TRIAL_ENDS else None
+
+
+def _decoded(summary: Any) -> Any:
+    """The stored JSON summary, as text (SQLite) or decoded (PostgreSQL); None if it is
+    no JSON."""
     import json
 
     if isinstance(summary, str | bytes):
         try:
-            summary = json.loads(summary)
+            return json.loads(summary)
         except ValueError:
-            summary = None
-    if isinstance(summary, dict) and summary.get("forces") == "measured":
-        return "measured"
-    return "unknown" if driver == "imported" else "simulated"
+            return None
+    return summary
 
 
 def trial_rows(conn: Any) -> list[dict[str, Any]]:
@@ -109,6 +130,7 @@ def trial_rows(conn: Any) -> list[dict[str, Any]]:
             "success": bool(success),
             "driver": driver,
             "forces": forces_source(driver, row[10]),
+            "end": trial_end(row[10]),
         }
     return list(latest.values())
 

@@ -246,6 +246,11 @@ class TeleopLoop:
     def success(self) -> bool:
         return self._success
 
+    @property
+    def done_s(self) -> float:
+        """The loop time the driver ended the trial at; NaN while it runs."""
+        return self._done_s
+
     def _result(self, chunks: list[np.ndarray], ticks: list[np.ndarray]) -> LoopResult:
         return LoopResult(
             samples=np.concatenate(chunks) if chunks else np.zeros((0, len(SAMPLE_COLUMNS))),

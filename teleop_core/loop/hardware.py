@@ -21,9 +21,13 @@ Host -> unit                      Unit -> host
 ``F``                             ``F <t_ms> <proximal_N> <distal_N>`` (a forces unit)
                                   ``E <message>`` for a line it cannot accept
 
-State line: ``S <t_ms> <angle_rad> <speed_rad_s> <iq_mA> <joystick>`` with the unit's
-clock in ms, the unwrapped AS5600 angle, the firmware's speed estimate, the measured
-q-axis current and (dial unit) the rotation joystick's axis in [-1, 1] (0 on a drive).
+State line: ``S <t_ms> <angle_rad> <speed_rad_s> <iq_mA> <joystick> [<button>]`` with
+the unit's clock in ms, the unwrapped AS5600 angle, the firmware's speed estimate, the
+measured q-axis current, (dial unit) the rotation joystick's axis in [-1, 1] and its
+push button, 1 while held down (both 0 on a drive). The button field is optional (the
+firmware sends it from 1.1.0; a line without it reads as the button up). With a
+physical phantom, a press of the dial's button (up, then down, within the trial) ends
+the trial as reached (`HardwareDriver.end`).
 A forces unit (the lab's proximal load cell and the phantom's distal force sensor on one
 serial line, `teleop_core.loop.follower_units`) answers ``F`` with its clock and the two
 forces in N.
@@ -43,6 +47,7 @@ firmware under `firmware/`, whose host build runs this protocol on a simulated m
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -132,21 +137,26 @@ class UnitState:
     speed_rad_s: float
     iq_ma: float
     joystick: float
+    button: bool = False
+    """The dial's push button held down (False on a drive, or from older firmware)."""
 
     @classmethod
     def parse(cls, payload: str) -> UnitState:
         fields = payload.split()
-        if len(fields) != 6 or fields[0] != "S":
+        if len(fields) not in (6, 7) or fields[0] != "S":
             raise CorruptLine(
-                f"expected a state line 'S t angle speed iq joystick', got {payload!r}"
+                f"expected a state line 'S t angle speed iq joystick [button]', got {payload!r}"
             )
+        button = fields[6] if len(fields) == 7 else "0"
+        if button not in ("0", "1"):
+            raise CorruptLine(f"button field {button!r} in state line {payload!r}; expected 0 or 1")
         try:
-            values = [float(f) for f in fields[1:]]
+            values = [float(f) for f in fields[1:6]]
         except ValueError:
             raise CorruptLine(f"non-numeric field in state line {payload!r}") from None
         if not all(math.isfinite(v) for v in values):
             raise CorruptLine(f"non-finite value in state line {payload!r}")
-        return cls(*values)
+        return cls(*values, button=button == "1")
 
 
 class Esp32Unit:
@@ -297,6 +307,13 @@ class HardwareDriver(Driver):
     drive unit and the force sensors, a `teleop_core.loop.follower_units.PhysicalFollower`,
     held here untyped so that this module, which that one builds on, does not import it),
     which the loop then uses in place of its simulated follower and phantom.
+
+    With a physical phantom nothing in the loop sees the tip, so a person decides that
+    it reached the target: a press of the dial's button (seen up, then down, within the
+    trial: a button still held from the last trial does not end this one), or the
+    experimenter's `reach()` from another thread. Either ends the trial at the next
+    driver update, `end` naming which ("button" or "experimenter"). A simulated phantom
+    decides for itself; the button is then ignored.
     """
 
     physical_dial = True
@@ -312,6 +329,10 @@ class HardwareDriver(Driver):
         self.max_rotation_rate_rad_s = max_rotation_rate_rad_s
         self.follower = follower
         self.last: UnitState | None = None
+        self.end: str | None = None
+        """Who ended the trial as reached: "button", "experimenter", or None."""
+        self._button_up = False
+        self._reached = threading.Event()
 
     @classmethod
     def open(cls, port: str, baudrate: int = 115200) -> HardwareDriver:
@@ -321,9 +342,22 @@ class HardwareDriver(Driver):
         self.last = self.unit.set_current(current_cmd_a)
         return self.last
 
+    def reach(self) -> None:
+        """The experimenter saw the tip reach the target (any thread): with a physical
+        phantom the trial ends, as reached, at the next driver update."""
+        self._reached.set()
+
     def act(self, view: OperatorView) -> HandAction:
         joystick = 0.0 if self.last is None else max(min(self.last.joystick, 1.0), -1.0)
-        return HandAction(rotation_rate_rad_s=joystick * self.max_rotation_rate_rad_s)
+        rate = joystick * self.max_rotation_rate_rad_s
+        if self.follower is None or self.last is None:
+            return HandAction(rotation_rate_rad_s=rate)
+        if self.last.button and self._button_up and self.end is None:
+            self.end = "button"
+        self._button_up = self._button_up or not self.last.button
+        if self._reached.is_set() and self.end is None:
+            self.end = "experimenter"
+        return HandAction(rotation_rate_rad_s=rate, done=self.end is not None)
 
     def record(self) -> dict[str, str | int]:
         follower = self.follower.record() if self.follower is not None else {}

@@ -11,7 +11,8 @@ firmware's own behaviour (its parser, its `E` lines, its watchdog), not a model 
 (`teleop_core.loop.emulator` is the pure-Python stand-in).
 
 A unit can be unplugged (`unplug`: the process is killed and its pty goes away),
-frozen (`freeze` / `thaw`: it stops answering, as a hung unit does) and started again.
+frozen (`freeze` / `thaw`: it stops answering, as a hung unit does) and started again;
+a dial's button can be pressed (`press`).
 Data from it are simulated: its firmware version ends in `-host`.
 """
 
@@ -65,8 +66,9 @@ def build_host_firmware(build_dir: Path, source_dir: Path = FIRMWARE_DIR / "host
 class HostUnit:
     """One host-built unit (`role` "dial" or "drive") on a pty, as a context manager.
 
-    `hand` and `joystick` are the simulated person's scripts on a dial ("t:value,..."
-    in s and rad / axis units, linear between the points, restarted at each HELLO);
+    `hand`, `joystick` and `button` are the simulated person's scripts on a dial
+    ("t:value,..." in s and rad / axis units, linear between the points, restarted at
+    each HELLO; the button is held where its script is 0.5 or more);
     `link`, given, is a symlink to the pty that stays the unit's port across restarts;
     `corrupt_every` > 0 garbles every so many state lines on the wire (their angle field
     overwritten, their checksum kept).
@@ -81,10 +83,12 @@ class HostUnit:
         seed: int = 1,
         link: Path | None = None,
         corrupt_every: int = 0,
+        button: str = "0",
     ) -> None:
         self.binary = Path(build_dir) / "haptic_unit_host"
         self.role, self.hand, self.joystick, self.seed, self.link = role, hand, joystick, seed, link
         self.corrupt_every = corrupt_every
+        self.button = button
         self.process: subprocess.Popen[str] | None = None
         self.port = ""
 
@@ -99,6 +103,8 @@ class HostUnit:
             self.joystick,
             "--seed",
             str(self.seed),
+            "--button",
+            self.button,
         ]
         if self.link is not None:
             command += ["--link", str(self.link)]
@@ -130,6 +136,12 @@ class HostUnit:
     def thaw(self) -> None:
         if self.process is not None:
             os.kill(self.process.pid, signal.SIGCONT)
+
+    def press(self) -> None:
+        """The participant presses the dial's button (held down 0.1 s), as when the tip
+        has reached the target."""
+        if self.process is not None:
+            os.kill(self.process.pid, signal.SIGUSR1)
 
     def stop(self) -> None:
         if self.process is None or self.process.poll() is not None:

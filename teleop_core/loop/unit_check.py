@@ -4,9 +4,10 @@
 update rate for a few seconds while the person turns the dial and the joystick, timing
 every round trip, and summarises what came back: the state lines' rate, the unit's
 clock against the host's, the encoder's range and smallest step (an AS5600 reads whole
-counts of 2 pi / 4096), the measured current at no command (its offset and noise) and
-the joystick's range. `UnitCheck.problems` lists what fails the check; a unit that
-does not answer at all raises `HardwareError` before anything is measured.
+counts of 2 pi / 4096), the measured current at no command (its offset and noise),
+the joystick's range and the presses of its button. `UnitCheck.problems` lists what
+fails the check; a unit that does not answer at all raises `HardwareError` before
+anything is measured.
 
 A drive can be spun at a small speed for the check (`spin_rad_s`); nothing moves a
 motor unless asked to.
@@ -14,6 +15,7 @@ motor unless asked to.
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable
@@ -63,6 +65,8 @@ class UnitCheck:
     current_sd_ma: float
     joystick_min: float
     joystick_max: float
+    button_presses: int
+    """Presses of the dial's button seen (up, then down) during the check."""
     problems: list[str] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
 
@@ -161,6 +165,7 @@ def _summary(
     angle = np.array([s.angle_rad for s in states])
     iq = np.array([s.iq_ma for s in states])
     joystick = np.array([s.joystick for s in states])
+    button = [s.button for s in states]
     steps = np.abs(np.diff(angle))
     steps = steps[steps > 1e-9]
     check = UnitCheck(
@@ -185,6 +190,7 @@ def _summary(
         current_sd_ma=float(iq.std(ddof=1)),
         joystick_min=float(joystick.min()),
         joystick_max=float(joystick.max()),
+        button_presses=sum(1 for a, b in itertools.pairwise(button) if b and not a),
     )
     _judge(check)
     return check
@@ -213,6 +219,11 @@ def _judge(check: UnitCheck) -> None:
         check.problems.append(
             f"{check.corrupt_lines} corrupt line(s); expected none (the cable, its "
             "length, or the baud rate)"
+        )
+    if check.role == "dial" and not check.button_presses:
+        check.notes.append(
+            "the button was not pressed: press it during the check to see it read (a "
+            "physical phantom's trials end at its press)"
         )
     count_rad = 2 * math.pi / ENCODER_COUNTS
     if math.isnan(check.angle_step_rad):

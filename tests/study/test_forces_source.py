@@ -7,10 +7,10 @@ import json
 
 import pytest
 
-from study.analysis.methods import _forces_sentence
+from study.analysis.methods import _end_sentence, _forces_sentence
 from study.analysis.source import DataSource
 from study.analysis.stats import Analysis
-from study.protocol.study_rows import forces_source
+from study.protocol.study_rows import forces_source, trial_end
 
 
 @pytest.mark.parametrize(
@@ -53,3 +53,37 @@ def test_methods_say_which_forces_were_measured() -> None:
     assert _forces_sentence(_analysis(["simulated"] * 3, {"simulated": 3})) == []
     assert _forces_sentence(_analysis(["imported"] * 3, {"unknown": 3})) == []
     assert _forces_sentence(_analysis([], {})) == []
+
+
+@pytest.mark.parametrize(
+    ("summary", "expected"),
+    [
+        (json.dumps({"forces": "measured", "end": "button"}), "button"),
+        ({"end": "experimenter"}, "experimenter"),  # PostgreSQL decodes the JSON
+        (json.dumps({"end": "time_limit"}), "time_limit"),
+        (json.dumps({"forces": "simulated"}), None),  # a simulated phantom decides itself
+        (json.dumps({"end": "someone"}), None),  # not one of the ends
+        ("{not json", None),
+        (None, None),
+    ],
+)
+def test_trial_end(summary: object, expected: str | None) -> None:
+    assert trial_end(summary) == expected
+
+
+def _ended(ends: dict[str, int]) -> Analysis:
+    return Analysis([], [], [], [], source=DataSource.of_drivers(["hardware"]), ends=ends)
+
+
+def test_methods_say_who_ended_the_physical_phantom_s_trials() -> None:
+    (line,) = _end_sentence(_ended({"button": 5, "experimenter": 2, "time_limit": 1}))
+    assert line == (
+        "On the physical phantom a person judged when the tip reached the target, which "
+        "ended the trial as a success: 5 by the participant's button and 2 by the "
+        "experimenter; 1 reached the time limit and count as failures."
+    )
+    (line,) = _end_sentence(_ended({"time_limit": 3}))
+    assert line.endswith("a success: in no trial; 3 reached the time limit and count as failures.")
+    (line,) = _end_sentence(_ended({"button": 1}))
+    assert line.endswith("a success: 1 by the participant's button.")
+    assert _end_sentence(_ended({})) == []  # no physical phantom: nothing to say

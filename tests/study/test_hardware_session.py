@@ -86,7 +86,7 @@ def test_a_whole_session_runs_on_the_host_built_dial(
         assert t.status == "completed"
         # every 100 Hz sample of the trial stored, and the unit named in its summary
         assert t.samples_stored == round(TRIAL_S * 100)  # type: ignore[attr-defined]
-        assert t.summary["dial_firmware"] == "1.0.0-host"
+        assert t.summary["dial_firmware"] == "1.1.0-host"
         assert t.summary["dial_corrupt_lines"] == 0
 
 
@@ -152,11 +152,15 @@ def test_hardware_check_passes_on_the_host_built_units(
     tmp_path: Path, host_firmware: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "check.json"
-    with HostUnit(host_firmware, "dial", hand="0:0,1:0.5", joystick="0:0,1:1") as unit:
+    # the button pressed twice (0.2-0.4 s and 0.8-1.0 s), held at the check's end
+    button = "0:0,0.2:0,0.201:1,0.4:1,0.401:0,0.8:0,0.801:1"
+    with HostUnit(
+        host_firmware, "dial", hand="0:0,1:0.5", joystick="0:0,1:1", button=button
+    ) as unit:
         argv = ["hardware", "check", "--port", unit.port, "--role", "dial", "--seconds", "1.5"]
         assert main([*argv, "--json", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "unit: dial, firmware 1.0.0-host (the firmware's host build" in printed
+    assert "unit: dial, firmware 1.1.0-host (the firmware's host build" in printed
     assert printed.strip().endswith("check passed")
     result = json.loads(out.read_text())
     assert result["passed"]
@@ -167,6 +171,8 @@ def test_hardware_check_passes_on_the_host_built_units(
     assert result["angle_max_rad"] > 0.3
     assert result["angle_step_rad"] == pytest.approx(2 * 3.141592653589793 / 4096, rel=1e-3)
     assert result["joystick_max"] == pytest.approx(1.0)
+    assert result["button_presses"] == 2
+    assert "button pressed 2 time(s)" in printed
     with HostUnit(host_firmware, "drive") as unit:
         argv = ["hardware", "check", "--port", unit.port, "--role", "drive", "--seconds", "1"]
         assert main([*argv, "--spin", "4", "--json", str(out)]) == 0

@@ -50,7 +50,7 @@ def test_the_loop_renders_psi_on_the_host_built_dial(host_firmware: Path) -> Non
     # the simulated hand aims the dial at 0.4 rad over the first second
     with HostUnit(host_firmware, "dial", hand="0:0,1:0.4", joystick="0.5") as unit:
         driver = HardwareDriver.open(unit.port)
-        assert driver.unit.firmware == "1.0.0-host"
+        assert driver.unit.firmware == "1.1.0-host"
         result = TeleopLoop(environment=tube_with_wall()).run(1.5, driver)
         record = driver.record()
         driver.close()
@@ -64,7 +64,7 @@ def test_the_loop_renders_psi_on_the_host_built_dial(host_firmware: Path) -> Non
     assert frame["insertion_m"].iloc[-1] > 0.005
     # the joystick at half of pi/2 rad/s, from the first state line on
     assert frame["rotation_rad"].iloc[-1] == pytest.approx(0.5 * np.pi / 2 * 1.49, rel=0.03)
-    assert record == {"dial_firmware": "1.0.0-host", "dial_corrupt_lines": 0}
+    assert record == {"dial_firmware": "1.1.0-host", "dial_corrupt_lines": 0}
 
 
 def _raw(port: str, line: bytes) -> bytes:

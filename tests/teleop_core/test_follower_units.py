@@ -90,7 +90,7 @@ def test_the_drive_unit_feeds_the_estimator_and_the_sensors_the_stored_forces(
     n = len(frame)
     assert n == 150  # one acquisition per 10 ms
     assert record["drive_state_lines"] == n
-    assert record["drive_firmware"] == "1.0.0-host"
+    assert record["drive_firmware"] == "1.1.0-host"
     assert record["forces"] == "measured"
     assert record["phantom"] == "physical"
     # the stored forces are the sensors' lines, in order (no simulated force)

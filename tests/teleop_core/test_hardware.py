@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from teleop_core.loop.core import TeleopLoop
+from teleop_core.loop.drivers import OperatorView
 from teleop_core.loop.emulator import EmulatedDialUnit
 from teleop_core.loop.environments import tube_with_wall
 from teleop_core.loop.hardware import (
@@ -40,6 +41,64 @@ def test_state_lines_are_parsed_and_checked() -> None:
     assert (state.t_ms, state.angle_rad, state.joystick) == (120.0, 0.5, -0.5)
     with pytest.raises(HardwareError, match="non-finite"):
         UnitState.parse("S 1 nan 0 0 0")
+    assert state.button is False  # a line without the field (firmware before 1.1.0)
+
+
+def test_the_state_line_s_button_field_is_read_and_checked() -> None:
+    assert UnitState.parse("S 120 0.5 1.25 2.0 -0.5 1").button is True
+    assert UnitState.parse("S 120 0.5 1.25 2.0 -0.5 0").button is False
+    for bad in ("2", "1.0", "x", "-1"):
+        with pytest.raises(HardwareError, match=f"button field '{bad}'"):
+            UnitState.parse(f"S 120 0.5 1.25 2.0 -0.5 {bad}")
+    with pytest.raises(HardwareError, match="expected a state line"):
+        UnitState.parse("S 120 0.5 1.25 2.0 -0.5 1 0")  # a field too many
+
+
+def _view() -> OperatorView:
+    return OperatorView(0.0, 0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0), "", False)
+
+
+def _acts(driver: HardwareDriver, buttons: list[bool]) -> list[bool]:
+    """Whether each driver update ends the trial, the unit's button as given."""
+    done = []
+    for button in buttons:
+        driver.last = UnitState(0.0, 0.0, 0.0, 0.0, 0.0, button)
+        done.append(driver.act(_view()).done)
+    return done
+
+
+class _Follower:
+    """Stands in for the real drive: the driver only asks whether there is one."""
+
+    def record(self) -> dict[str, str]:
+        return {}
+
+
+def test_a_press_of_the_dial_s_button_ends_a_physical_phantom_trial() -> None:
+    driver = HardwareDriver(unit=None, follower=_Follower())  # type: ignore[arg-type]
+    # up, up, down: the press ends the trial at the third update, and it stays ended
+    assert _acts(driver, [False, False, True, False]) == [False, False, True, True]
+    assert driver.end == "button"
+
+
+def test_a_button_held_from_the_trial_s_start_is_no_press() -> None:
+    driver = HardwareDriver(unit=None, follower=_Follower())  # type: ignore[arg-type]
+    assert _acts(driver, [True, True, False, True]) == [False, False, False, True]
+
+
+def test_the_button_is_ignored_with_a_simulated_phantom() -> None:
+    driver = HardwareDriver(unit=None)  # type: ignore[arg-type]
+    driver.reach()
+    assert _acts(driver, [False, True, False, True]) == [False] * 4
+    assert driver.end is None
+
+
+def test_the_experimenter_s_reach_ends_a_physical_phantom_trial() -> None:
+    driver = HardwareDriver(unit=None, follower=_Follower())  # type: ignore[arg-type]
+    assert _acts(driver, [False]) == [False]
+    driver.reach()  # from another thread in `study run`
+    assert _acts(driver, [False, True]) == [True, True]
+    assert driver.end == "experimenter"  # the first to decide names the end
 
 
 def test_the_loop_reads_the_real_dial_and_renders_psi_on_it() -> None:

@@ -14,6 +14,7 @@ struct FakeHardware : haptic::Motor, haptic::Encoder, haptic::CurrentSense, hapt
                       haptic::Clock {
   float current_a = -1.0f, speed_cmd = -1.0f;
   float angle = 0.5f, speed = 1.25f, iq = 0.002f, joystick = -0.5f;
+  bool button = false;
   uint32_t now_ms = 120;
   void set_current_q(float a) override { current_a = a; }
   void set_speed(float w) override { speed_cmd = w; }
@@ -21,6 +22,7 @@ struct FakeHardware : haptic::Motor, haptic::Encoder, haptic::CurrentSense, hapt
   float speed_rad_s() override { return speed; }
   float current_q_a() override { return iq; }
   float axis() override { return joystick; }
+  bool pressed() override { return button; }
   uint32_t millis() override { return now_ms; }
   haptic::Hardware hardware() { return haptic::Hardware{*this, *this, *this, *this, *this}; }
 };
@@ -89,16 +91,28 @@ TEST(a_current_command_reaches_the_motor_and_the_state_comes_back) {
   FakeHardware hw;
   haptic::Unit unit(haptic::Role::dial, hw.hardware());
   const std::string reply = send(unit, "I 12.5");
-  // clock 120 ms, angle 0.5 rad, speed 1.25 rad/s, iq 0.002 A = 2 mA, joystick -0.5
-  CHECK(payload_of(reply) == "S 120 0.500000 1.25000 2.0000 -0.5000");
+  // clock 120 ms, angle 0.5 rad, speed 1.25 rad/s, iq 0.002 A = 2 mA, joystick -0.5,
+  // button up
+  CHECK(payload_of(reply) == "S 120 0.500000 1.25000 2.0000 -0.5000 0");
   CHECK_NEAR(hw.current_a, 0.0125f, 1e-7f);  // mA -> A
-  CHECK(payload_of(send(unit, "Q")) == "S 120 0.500000 1.25000 2.0000 -0.5000");
+  CHECK(payload_of(send(unit, "Q")) == "S 120 0.500000 1.25000 2.0000 -0.5000 0");
+}
+
+TEST(the_state_line_ends_with_the_button_while_it_is_held) {
+  FakeHardware hw;
+  haptic::Unit unit(haptic::Role::dial, hw.hardware());
+  hw.button = true;
+  // "S 120 0.500000 1.25000 2.0000 -0.5000 1": its bytes XOR to 0x48
+  CHECK(send(unit, "Q") == "S 120 0.500000 1.25000 2.0000 -0.5000 1*48");
+  hw.button = false;
+  CHECK(payload_of(send(unit, "Q")) == "S 120 0.500000 1.25000 2.0000 -0.5000 0");
 }
 
 TEST(a_drive_takes_speed_and_reports_no_joystick) {
   FakeHardware hw;
+  hw.button = true;  // a drive has neither: both fields 0
   haptic::Unit unit(haptic::Role::drive, hw.hardware());
-  CHECK(payload_of(send(unit, "W -3.5")) == "S 120 0.500000 1.25000 2.0000 0.0000");
+  CHECK(payload_of(send(unit, "W -3.5")) == "S 120 0.500000 1.25000 2.0000 0.0000 0");
   CHECK_NEAR(hw.speed_cmd, -3.5f, 1e-7f);
 }
 

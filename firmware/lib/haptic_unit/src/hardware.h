@@ -39,12 +39,16 @@ class CurrentSense {
   virtual float current_q_a() = 0;
 };
 
-// The rotation joystick (on the dial unit; a drive has none).
+// The rotation joystick (on the dial unit; a drive has none) and its push button (the
+// thumbstick's switch, or a momentary button beside the dial): the participant presses it
+// when the guidewire's tip has reached the target.
 class Joystick {
  public:
   virtual ~Joystick() = default;
   // The axis in [-1, 1].
   virtual float axis() = 0;
+  // True while the button is held down (debounced).
+  virtual bool pressed() = 0;
 };
 
 // The unit's clock.

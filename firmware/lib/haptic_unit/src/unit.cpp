@@ -84,14 +84,16 @@ std::size_t Unit::command_line(char* payload, char* reply, std::size_t cap) {
 }
 
 std::size_t Unit::state(char* reply, std::size_t cap) {
-  const float joystick = role_ == Role::dial ? hw_.joystick.axis() : 0.0f;
+  const bool dial = role_ == Role::dial;
+  const float joystick = dial ? hw_.joystick.axis() : 0.0f;
+  const int button = dial && hw_.joystick.pressed() ? 1 : 0;
   char payload[kMaxReply];
-  std::snprintf(payload, sizeof payload, "S %lu %.6f %.5f %.4f %.4f",
+  std::snprintf(payload, sizeof payload, "S %lu %.6f %.5f %.4f %.4f %d",
                 static_cast<unsigned long>(hw_.clock.millis()),
                 static_cast<double>(hw_.encoder.angle_rad()),
                 static_cast<double>(hw_.encoder.speed_rad_s()),
                 static_cast<double>(hw_.current.current_q_a() * 1000.0f),  // A -> mA
-                static_cast<double>(joystick));
+                static_cast<double>(joystick), button);
   return frame(payload, reply, cap);
 }
 
