@@ -10,7 +10,7 @@ Those imports (scipy.stats, pandas, pingouin and the matplotlib it pulls in, sta
 are most of a fresh app's first analysis; the analysis itself takes a fraction of a
 second on a study's data. `warm_up` imports them in a worker of its own when the screen
 is first shown or `WARM_UP_AFTER_S` after it is mounted (the app has shown its screens
-by then), so the first `r` takes about as long as the next ones.
+by then; not while a trial runs), so the first `r` takes about as long as the next ones.
 
 At 80 columns the table holds every number whole: a task column, measure names broken
 at their underscores over lines, short headers ("p Holm"), the test as "t" (paired t)
@@ -127,7 +127,14 @@ class AnalysisPane(SafeWorkers, Vertical):
         )
 
     def on_mount(self) -> None:
-        self.set_timer(WARM_UP_AFTER_S, self.warm_up)
+        self.set_timer(WARM_UP_AFTER_S, self._warm_up_unasked)
+
+    def _warm_up_unasked(self) -> None:
+        """The timer's warm-up, unless a trial is running: a trial's loop is not shared
+        with seconds of imports nobody asked for (F5 shown then still warms up)."""
+        runs = [getattr(p, "run", None) for p in self.app.query("#run-pane")]
+        if not any(run is not None for run in runs):
+            self.warm_up()
 
     def on_show(self) -> None:
         self.warm_up()  # F5 shown first: no need to wait for the timer

@@ -6,11 +6,12 @@ from __future__ import annotations
 import subprocess
 import sys
 import textwrap
+import time
 
 from textual.widgets import DataTable
 
 from study.tui.analysis_pane import wrapped
-from tests.study.tui.conftest import analysed, store_trials
+from tests.study.tui.conftest import analysed, run_screen, store_trials, wait_for
 
 
 def test_measure_names_break_at_underscores_within_the_width() -> None:
@@ -88,3 +89,26 @@ def test_the_statistics_are_imported_before_the_first_analysis(tmp_path) -> None
     assert out[1] == (
         "warmed ['pingouin', 'scipy.stats', 'statsmodels.formula.api', 'study.analysis.stats'] None"
     )
+
+
+async def test_no_unasked_warm_up_while_a_trial_runs(make_test_app, monkeypatch) -> None:
+    """The timer's warm-up waits for F5 while a trial runs (its loop is not shared)."""
+    import study.tui.analysis_pane as analysis_pane
+    from study.protocol.default_estimator import load_estimator
+    from study.tui.confirm import Confirm
+
+    monkeypatch.setattr(analysis_pane, "WARM_UP_AFTER_S", 6.0)  # time to start a trial
+    app = make_test_app(load_estimator=load_estimator, simulated_pace=1.0)
+    async with app.run_test(size=(80, 24)) as pilot:
+        run_pane = await run_screen(pilot, "P001")
+        await pilot.press("s")
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        await pilot.press("y")
+        await wait_for(pilot, lambda: run_pane.run is not None, 5)
+        pane = app.query_one("#analysis-pane")
+        await wait_for(pilot, lambda: app.started_at + 7.0 < time.monotonic(), 10)
+        assert run_pane.run is not None  # still running (a trial lasts tens of seconds)
+        assert not pane._warming
+        await pilot.press("f5")  # shown: warmed up all the same
+        await pilot.pause()
+        assert pane._warming
