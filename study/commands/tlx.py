@@ -16,7 +16,7 @@ from study.commands.base import (
     not_personal_option,
     opened_database,
 )
-from study.errors import ReasonNeeded, StudyInputError
+from study.errors import StudyInputError
 from study.protocol.roster import load_study
 from study.protocol.tlx import pair_order, response_scores, scored_tlx, store_tlx
 
@@ -101,10 +101,7 @@ def enter_cmd(
 
     chosen = comma_list("--choices", choices, unique=False) if choices is not None else None
     with opened_database(db_url) as engine:
-        try:
-            response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
-        except ReasonNeeded as exc:  # the command line's way to give one
-            raise ReasonNeeded(f"{exc} (--reason TEXT)") from None
+        response, new = store_tlx(engine, code, task, condition, ratings, chosen, reason, actor)
     _, raw, weighted = response_scores(response)
     scores = f"raw TLX {raw:.1f}"
     if weighted is not None:

@@ -128,3 +128,19 @@ def test_a_refused_questionnaire_names_no_flag_in_the_app_and_the_flag_on_the_co
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
     assert err[0].endswith("kept in the audit log (--reason TEXT)"), err
+
+
+async def test_a_note_refused_in_the_app_names_no_command_line_flag(make_test_app) -> None:
+    from tests.study.tui.conftest import on_screen
+
+    app = make_test_app()
+    async with on_screen(app, "f2") as pilot:
+        pane = app.query_one("#participants-pane")
+        await pilot.press("ctrl+n")
+        await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+        await pilot.press(*"mail a@b.org", "enter")
+        await wait_for(pilot, lambda: pane.last_message.startswith("refused"), 10)
+        assert pane.last_message == (
+            "refused: note holds what looks like an e-mail address 'a@b.org'; expected no "
+            "personal data (participants are pseudonymous codes): leave contact details out"
+        )
