@@ -29,6 +29,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import hashlib
+import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -283,6 +284,10 @@ def backup_database(
     part = out_dir / f".{path.name}.part"
     part.unlink(missing_ok=True)
     try:
+        # made empty and private first (VACUUM INTO fills an empty file): the copy holds
+        # what the database holds, so it is read and written by its owner alone, as the
+        # exports are (their temporary files are made 600)
+        os.close(os.open(part, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
         notice(f"copying to {path}")
         with _snapshot(engine) as conn:
             if is_sqlite(conn):

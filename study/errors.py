@@ -7,3 +7,8 @@ one line naming the bad value and what was expected; `study.cli` prints it and e
 
 class StudyInputError(ValueError):
     """Input to the study application that it cannot accept."""
+
+
+class ReasonNeeded(StudyInputError):
+    """A change that needs a reason for the audit log was given none. The message names
+    no way to give one: the command line adds its flag, the app has its own field."""

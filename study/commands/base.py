@@ -188,12 +188,26 @@ class StudyCommand(click.Command):
             refuse_linked_out(ctx)
             return super().invoke(ctx)
         except USER_ERRORS as exc:
-            raise InputError(str(exc), ctx) from exc
+            raise InputError(with_flag(exc), ctx) from exc
         except Exception as exc:
             message = database_failure(exc, ctx.params.get("db_url")) or output_failure(ctx, exc)
             if message is None:
                 raise
             raise InputError(message, ctx) from exc
+
+
+def with_flag(exc: BaseException) -> str:
+    """`exc`'s line with the command line's way out, where the package's message names
+    none (it is shown by the terminal app too, which has its own fields)."""
+    from study.errors import ReasonNeeded
+    from study.protocol.free_text import OPT_OUT, PersonalDataError
+
+    line = str(exc)
+    if isinstance(exc, PersonalDataError):
+        return f"{line}, or give {OPT_OUT} if it only looks like one"
+    if isinstance(exc, ReasonNeeded):
+        return f"{line} (--reason TEXT)"
+    return line
 
 
 def summary(command: click.Command) -> str:

@@ -59,7 +59,9 @@ class NotPersonal(str):
 
 
 class PersonalDataError(StudyInputError):
-    """A free text that looks like personal data (an e-mail address, a phone number)."""
+    """A free text that looks like personal data (an e-mail address, a phone number).
+    The message names no flag: the command line adds `OPT_OUT` (`study.commands.base`),
+    the terminal app has no way to keep such a text."""
 
 
 def looks_personal(text: str) -> str | None:
@@ -117,7 +119,6 @@ def check_free_text(what: str, text: str, *, keep_lookalike: bool = False) -> st
     if found is not None:
         raise PersonalDataError(
             f"{what} holds what looks like {found}; expected no personal data (participants "
-            f"are pseudonymous codes): leave contact details out, or give {OPT_OUT} if it "
-            "only looks like one"
+            "are pseudonymous codes): leave contact details out"
         )
     return value

@@ -29,7 +29,7 @@ from db.models.audit import AuditEntry
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import Trial
-from study.errors import StudyInputError
+from study.errors import ReasonNeeded, StudyInputError
 from study.protocol.actor import current_actor
 from study.protocol.free_text import check_free_text
 from study.protocol.observer import SessionObserver
@@ -378,10 +378,9 @@ def _store_tlx(
                 )
             )
             if not ran and not reason:
-                raise StudyInputError(
+                raise ReasonNeeded(
                     f"{code} {task}/{condition} has no completed trial yet; a questionnaire "
-                    "for a block that has not run needs a reason (--reason TEXT), kept in "
-                    "the audit log"
+                    "for a block that has not run needs a reason, kept in the audit log"
                 )
             response = TlxResponse(
                 participant_id=participant.id,
@@ -427,9 +426,9 @@ def _store_tlx(
             session.expunge(response)
             return response, True
         if not reason:
-            raise StudyInputError(
+            raise ReasonNeeded(
                 f"{code} {task}/{condition} already has a questionnaire; an edit needs a "
-                "reason (--reason TEXT), kept in the audit log"
+                "reason, kept in the audit log"
             )
         if chosen is None:  # keep the stored comparisons when only ratings are edited
             values.update({f"w_{s}": getattr(existing, f"w_{s}") for s in TLX_SUBSCALES})

@@ -5,11 +5,22 @@ The tables are `study.analysis.stats.analyze` on what is stored (the same number
 the terminal; export writes the paper's figures (`study.analysis.paper.write_figures`,
 as `study figures`) to a folder. Everything runs in a worker: the statistics import
 pandas, pingouin and statsmodels on first use.
+
+Those imports (scipy.stats, pandas, pingouin and the matplotlib it pulls in, statsmodels)
+are most of a fresh app's first analysis; the analysis itself takes a fraction of a
+second on a study's data. `warm_up` imports them in a worker of its own when the screen
+is first shown or `WARM_UP_AFTER_S` after it is mounted (the app has shown its screens
+by then; not while a trial runs), so the first `r` takes about as long as the next ones.
+
+At 80 columns the table holds every number whole: a task column, measure names broken
+at their underscores over lines, short headers ("p Holm"), the test as "t" (paired t)
+or "W" (Wilcoxon signed-rank), and the effect size's kind above its value.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -63,7 +74,7 @@ class AnalysisPane(SafeWorkers, Vertical):
     AnalysisPane .row { height: 1; }
     AnalysisPane #measure { width: 28; }
     AnalysisPane #out-dir { width: 1fr; }
-    AnalysisPane #comparisons { height: 1fr; min-height: 5; }
+    AnalysisPane #comparisons { height: 1fr; min-height: 5; scrollbar-size-vertical: 1; }
     AnalysisPane #chart { height: auto; max-height: 9; }
     AnalysisPane #analysis-status { height: auto; }
     """
@@ -96,6 +107,9 @@ class AnalysisPane(SafeWorkers, Vertical):
         self.formats = formats
         self.result: Any = None
         self.exported: list[Path] = []
+        self.warmed = threading.Event()
+        """Set once `warm_up` has imported the statistics' libraries (or given up)."""
+        self._warming = False
 
     def compose(self) -> ComposeResult:
         with Horizontal(classes="row"):
@@ -105,12 +119,50 @@ class AnalysisPane(SafeWorkers, Vertical):
             # select_on_focus off: Tab into the field and a key no longer replaces the path
             yield Input(str(self.figures_dir), id="out-dir", compact=True, select_on_focus=False)
         table = DataTable(id="comparisons", zebra_stripes=True, cursor_type="row")
-        table.add_columns("measure", "group", "n", "VO", "HV", "test", "p (Holm)", "effect size")
+        table.add_columns(*COLUMNS)
         yield table
         yield Static("", id="chart")
         yield Static(
             "r: run the analysis; ctrl+e: export the paper's figures", id="analysis-status"
         )
+
+    def on_mount(self) -> None:
+        self.set_timer(WARM_UP_AFTER_S, self._warm_up_unasked)
+
+    def _warm_up_unasked(self) -> None:
+        """The timer's warm-up, unless a trial is running: a trial's loop is not shared
+        with seconds of imports nobody asked for (F5 shown then still warms up)."""
+        runs = [getattr(p, "run", None) for p in self.app.query("#run-pane")]
+        if not any(run is not None for run in runs):
+            self.warm_up()
+
+    def on_show(self) -> None:
+        self.warm_up()  # F5 shown first: no need to wait for the timer
+
+    def warm_up(self) -> None:
+        """Import what the first analysis needs, once, in a worker (the analysis started
+        meanwhile waits on the same imports rather than repeating them)."""
+        if not self._warming:
+            self._warming = True
+            self._warm_up()
+
+    @work(thread=True, exclusive=True, group="warm-up", exit_on_error=False)
+    def _warm_up(self) -> None:
+        try:
+            import pandas  # noqa: F401
+            import pingouin  # noqa: F401  (and matplotlib.pyplot)
+            import scipy.stats  # noqa: F401
+            import statsmodels.formula.api
+            import statsmodels.regression.mixed_linear_model  # noqa: F401
+
+            import study.analysis.crossover
+            import study.analysis.frames
+            import study.analysis.stats
+            import study.analysis.success  # noqa: F401
+        except Exception:
+            pass
+        finally:
+            self.warmed.set()
 
     def action_analyze(self) -> None:
         self._status("analysing...")
@@ -132,16 +184,18 @@ class AnalysisPane(SafeWorkers, Vertical):
         table = self.query_one("#comparisons", DataTable)
         table.clear()
         for _, r in comparisons.iterrows():
-            table.add_row(
-                r["measure"],
-                r["group"],
+            cells = (
+                str(r["task"]),
+                wrapped(str(r["measure"])),
+                str(r["group"]),
                 str(r["n"]),
                 f"{r['mean_vo']:.3g}",
                 f"{r['mean_hv']:.3g}",
-                r["test"],
+                TEST_LABELS.get(str(r["test"]), str(r["test"])),
                 p_text(r["p_holm"]),
                 _effect(r["effect_size"], r["effect_size_kind"]),
             )
+            table.add_row(*cells, height=max(c.count("\n") + 1 for c in cells))
         measures = list(dict.fromkeys(comparisons["measure"]))
         select = self.query_one("#measure", Select)
         select.set_options([(m, m) for m in measures])
@@ -152,8 +206,9 @@ class AnalysisPane(SafeWorkers, Vertical):
         notes = len(event.result.exclusions) + len(event.result.warnings)
         note = event.result.source.note
         self._status(
-            f"{len(comparisons)} comparisons, {notes} exclusions and notes "
-            "(n: read them, with the mixed ANOVA)" + (f"; data: {note}" if note else "")
+            f"{len(comparisons)} comparisons (test t: paired t, W: Wilcoxon signed-rank), "
+            f"{notes} exclusions and notes (n: read them, with the mixed ANOVA)"
+            + (f"; data: {note}" if note else "")
         )
 
     def action_notes(self) -> None:
@@ -218,10 +273,40 @@ EFFECT_LABELS = {"hedges_g_av": "g_av", "rank_biserial": "r_rb"}
 Wilcoxon), named in each cell so that the two are never read as one scale."""
 
 
+COLUMNS = ("task", "measure", "group", "n", "VO", "HV", "test", "p Holm", "effect")
+"""The comparisons table's headers: short, so that at 80 columns every number is whole."""
+TEST_LABELS = {"paired_t": "t", "wilcoxon": "W"}
+"""The test column's names (the status line says them in full)."""
+MEASURE_CHARS = 15
+"""The widest line of the measure column; a longer name goes on over lines."""
+WARM_UP_AFTER_S = 3.0
+"""Seconds after the screen is mounted before the statistics' libraries are imported,
+if F5 has not been shown by then (the app's start is over)."""
+
+
+def wrapped(name: str, width: int = MEASURE_CHARS) -> str:
+    """`name` over lines of at most `width` characters, broken before an underscore
+    ("peak_proximal" / "_force_n"), a part longer than a line cut where it fills one."""
+    lines: list[str] = []
+    line = ""
+    for k, part in enumerate(name.split("_")):
+        piece = part if k == 0 else "_" + part
+        if line and len(line) + len(piece) > width:
+            lines.append(line)
+            line = ""
+        line += piece
+        while len(line) > width:
+            lines.append(line[:width])
+            line = line[width:]
+    lines.append(line)
+    return "\n".join(x for x in lines if x)
+
+
 def _effect(value: float, kind: str) -> str:
+    """The effect size's kind above its value ("g_av" / "-0.52"), each whole."""
     if value is None or not math.isfinite(value):
         return "n/a"
-    return f"{EFFECT_LABELS.get(kind, kind)} {value:+.2f}"
+    return f"{EFFECT_LABELS.get(kind, kind)}\n{value:+.2f}"
 
 
 def details_text(result: Any) -> str:

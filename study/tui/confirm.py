@@ -83,12 +83,20 @@ class ReasonScreen(ModalScreen[str | None]):
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, question: str, placeholder: str = "reason", value: str = "") -> None:
+    def __init__(
+        self,
+        question: str,
+        placeholder: str = "reason",
+        value: str = "",
+        enter: str = "record it",
+    ) -> None:
         super().__init__()
         self.question = question
         self.placeholder = placeholder
         self.value = value
         """The text the field opens with (a note to read and add to, or one not kept)."""
+        self.enter = enter
+        """What Enter does, on the dialog's key line ("record it", "export there")."""
 
     def compose(self) -> ComposeResult:
         with Vertical(id="reason-box"):
@@ -97,7 +105,7 @@ class ReasonScreen(ModalScreen[str | None]):
             yield Input(
                 self.value, id="reason-text", placeholder=self.placeholder, select_on_focus=False
             )
-            yield Label("Enter: record it    Esc: cancel", id="reason-keys")
+            yield Label(f"Enter: {self.enter}    Esc: cancel", id="reason-keys")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()

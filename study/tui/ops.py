@@ -32,14 +32,15 @@ class OpsMixin(SafeWorkers):
 
     last_ops_line = ""
 
-    def _ask_folder(self, question: str, default: Path, then: Any) -> None:
+    def _ask_folder(self, question: str, default: Path, enter: str, then: Any) -> None:
         from study.tui.confirm import ReasonScreen
 
         def answered(text: str | None) -> None:
             if text:
                 then(Path(text).expanduser())
 
-        self.app.push_screen(ReasonScreen(question, "folder", str(default)), answered)  # type: ignore[attr-defined]
+        screen = ReasonScreen(question, "folder", str(default), enter=enter)
+        self.app.push_screen(screen, answered)  # type: ignore[attr-defined]
 
     def action_export_data(self) -> None:
         """e: trials, NASA-TLX and the codebook, as `study export --out FOLDER` writes them."""
@@ -47,6 +48,7 @@ class OpsMixin(SafeWorkers):
         self._ask_folder(
             "Export the trials, NASA-TLX and codebook (CSV) to the folder:",
             export_folder(settings.exports_dir),
+            "export to this folder",
             self._start_export,
         )
 
@@ -75,6 +77,7 @@ class OpsMixin(SafeWorkers):
         self._ask_folder(
             "End of day: check the database, then copy it (one SQLite file) to the folder:",
             settings.backups_dir,
+            "check, then back up to this folder",
             self._start_backup,
         )
 

@@ -21,8 +21,16 @@ __all__ = ["OverviewPane"]
 
 
 def _bar(done: int, total: int, width: int = 20) -> str:
-    filled = round(width * done / total) if total else 0
+    """`done` of `total` in `width` cells, never more: past the total the bar is full."""
+    filled = min(width, round(width * done / total)) if total > 0 else 0
     return "█" * filled + "░" * (width - filled)
+
+
+def fill_text(enrolled: int, target: int) -> str:
+    """`4 of 3 (over target)`: a group's fill in words, at or past its target said so."""
+    if enrolled > target:
+        return f"{enrolled} of {target} (over target)"
+    return f"{enrolled} of {target}" + (" (full)" if enrolled == target else "")
 
 
 class OverviewPane(OpsMixin, Vertical, can_focus=True):
@@ -69,7 +77,8 @@ class OverviewPane(OpsMixin, Vertical, can_focus=True):
                 group,
                 str(fill["enrolled"]),
                 str(fill["target"]),
-                _bar(fill["enrolled"], fill["target"], 16),
+                _bar(fill["enrolled"], fill["target"], 16)
+                + (" over target" if fill["enrolled"] > fill["target"] else ""),
                 key=group,
             )
         planned = sum(r["trials_planned"] for r in roster.participants)

@@ -228,6 +228,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         fill = roster.groups.get(group)
         if fill is not None and fill["enrolled"] >= fill["target"]:
             from study.tui.confirm import Confirm
+            from study.tui.overview import fill_text
 
             def answered(yes: bool | None) -> None:
                 if yes:
@@ -237,8 +238,8 @@ class ParticipantsPane(SafeWorkers, Vertical):
 
             self.app.push_screen(
                 Confirm(
-                    f"The {group} group has its {fill['target']} participants "
-                    f"({fill['enrolled']} enrolled). Enrol one more {group} all the same?"
+                    f"The {group} group is at {fill_text(fill['enrolled'], fill['target'])}. "
+                    f"Enrol one more {group} all the same?"
                 ),
                 answered,
             )

@@ -98,8 +98,11 @@ class ParticipantPicker(ModalScreen[str | None]):
         table.clear()
         if not text.strip():
             table.add_row("-", "", "", "(no change)", key=KEEP)
-        for row in self.matching(text):
+        rows = self.matching(text)
+        for row in rows:
             table.add_row(*row, key=row[0])
+        if text.strip() and not rows:  # said, not an empty list (Enter keeps the choice)
+            table.add_row("-", "", "", f"no participant {_quoted(text.strip())}", key=KEEP)
         if table.row_count:
             table.move_cursor(row=0)
 
@@ -159,3 +162,8 @@ class ParticipantSelect(Select[str]):
         event.stop()
         event.prevent_default()
         self.action_show_overlay()
+
+
+def _quoted(text: str, limit: int = 40) -> str:
+    """`text` as typed, cut to `limit` characters (a paste does not fill the row)."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."

@@ -416,6 +416,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
                 if yes and self._next == nxt and self.run is None:
                     self._checked.add(code)
                     self._start(code, nxt, checklist=True)
+                elif not yes:  # said on the screen: nothing started, asked again at s
+                    line = f"{code}: not started, the checklist is not confirmed; s asks again"
+                    self.query_one("#next", Label).update(line)
+                    self.app.notify(line, severity="warning")
 
             self.app.push_screen(
                 Confirm(

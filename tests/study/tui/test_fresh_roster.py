@@ -51,7 +51,7 @@ async def test_enrolling_past_a_target_reached_from_outside_is_asked(
         await pilot.press("ctrl+a")  # novice, the first group, is preselected
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
         question = str(app.screen.query_one("#question").render())
-        assert "The novice group has its 2 participants (2 enrolled)" in question
+        assert "The novice group is at 2 of 2 (full)." in question
         await pilot.press("n")
         await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 10)
     with Session(study_engine) as session:

@@ -80,7 +80,7 @@ async def test_enrolling_past_a_groups_target_is_asked_first(
         pane = app.query_one("#participants-pane")
         await pilot.press("ctrl+a")  # novice, the first group, is preselected
         await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
-        assert "has its 2 participants" in str(app.screen.query_one("#question").render())
+        assert "is at 2 of 2 (full)" in str(app.screen.query_one("#question").render())
         await pilot.press("n")
         await wait_for(pilot, lambda: pane.last_message.startswith("not enrolled"), 10)
         assert pane.last_message == "not enrolled: the novice group is full"
@@ -106,9 +106,9 @@ async def test_analysis_prints_p_as_apa_labels_effects_and_shows_notes_and_anova
         table = app.query_one("#comparisons", DataTable)
         rows = [table.get_row_at(k) for k in range(table.row_count)]
         for row in rows:
-            assert re.fullmatch(r"< \.001|\.\d{3}|n/a", row[6]), row[6]  # APA: no "0.000"
-            assert re.fullmatch(r"(g_av|r_rb) [+-]\d\.\d\d|n/a", row[7]), row[7]
-            assert row[7].startswith("g_av") == (row[5] == "paired_t") or row[7] == "n/a"
+            assert re.fullmatch(r"< \.001|\.\d{3}|n/a", row[7]), row[7]  # APA: no "0.000"
+            assert re.fullmatch(r"(g_av|r_rb)\n[+-]\d\.\d\d|n/a", row[8]), row[8]
+            assert row[8].startswith("g_av") == (row[6] == "t") or row[8] == "n/a"
         await pilot.press("n")
         await wait_for(pilot, lambda: len(app.screen.query("#text")) == 1, 10)
         text = str(app.screen.query_one("#text", Static).render())

@@ -177,10 +177,10 @@ async def test_analysis_tables_chart_and_figure_export(
         pane = await analysed(pilot)
         table = app.query_one("#comparisons", DataTable)
         rows = [table.get_row_at(k) for k in range(table.row_count)]
-        peak = {r[1]: r for r in rows if r[0] == "peak_proximal_force_n"}
+        peak = {r[2]: r for r in rows if r[:2] == ["lcca", "peak_proximal\n_force_n"]}
         # means by hand: novice VO (1.0 + 1.2 + 1.4) / 3 = 1.2, HV 0.6; expert 0.9, 0.6
-        assert (peak["novice"][2], peak["novice"][3], peak["novice"][4]) == ("3", "1.2", "0.6")
-        assert (peak["expert"][3], peak["expert"][4]) == ("0.9", "0.6")
+        assert (peak["novice"][3], peak["novice"][4], peak["novice"][5]) == ("3", "1.2", "0.6")
+        assert (peak["expert"][4], peak["expert"][5]) == ("0.9", "0.6")
         # simulated trials: the screen says so beside the tables
         status = _text(app, "#analysis-status")
         assert "Simulated participants: all 12 trials simulated, none measured" in status
