@@ -25,10 +25,10 @@ from teleop_core.loop.follower_units import EmulatedForceUnit
 from teleop_core.loop.host_unit import HostUnit
 from tests.firmware_build import host_firmware
 from tests.study.conftest import init_study, last_sample_s, one_error_line
-from tests.study.test_hardware_session import TRIAL_S, _trials, patient_host, short_trials
+from tests.study.test_hardware_session import TRIAL_S, _trials, short_trials
 
 # the fixtures, imported for the tests below
-__all__ = ["host_firmware", "patient_host", "short_trials"]
+__all__ = ["host_firmware", "short_trials"]
 
 DESIGN = """\
 name = "real units"
@@ -139,6 +139,7 @@ def test_a_whole_session_on_real_units_stores_every_trial_as_measured(
 def test_a_drive_that_goes_away_mid_trial_interrupts_it_with_one_line(
     tmp_path: Path,
     host_firmware: Path,
+    patient_host: None,
     capsys: pytest.CaptureFixture[str],
     failure: str,
 ) -> None:

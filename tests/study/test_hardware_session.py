@@ -42,20 +42,6 @@ def short_trials(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr("study.protocol.session.MAX_TRIAL_S", TRIAL_S)
 
 
-@pytest.fixture
-def patient_host(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The host waits 0.2 s for a reply instead of two update periods: for the tests of a
-    whole session, which a busy machine (the suite's other workers, the units' own
-    processes) can hold up past 20 ms; the tests of a silent unit keep the default."""
-    from teleop_core.loop import hardware
-
-    init = hardware.Esp32Unit.__init__
-    defaults = list(init.__defaults__ or ())
-    names = init.__code__.co_varnames[: init.__code__.co_argcount]
-    defaults[names[-len(defaults) :].index("timeout_s")] = 0.2
-    monkeypatch.setattr(init, "__defaults__", tuple(defaults))
-
-
 def _trials(db: str) -> list[Trial]:
     engine = create_engine(f"sqlite:///{db}")
     with Session(engine, expire_on_commit=False) as s:

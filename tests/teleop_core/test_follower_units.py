@@ -70,6 +70,7 @@ def test_a_dial_on_the_drive_port_is_refused(host_firmware: Path) -> None:
 
 
 def test_the_drive_unit_feeds_the_estimator_and_the_sensors_the_stored_forces(
+    patient_host: None,
     host_firmware: Path,
 ) -> None:
     estimator = load_estimator()
@@ -124,7 +125,9 @@ def test_the_drive_unit_feeds_the_estimator_and_the_sensors_the_stored_forces(
     assert not result.success
 
 
-def test_a_drive_that_stops_answering_ends_the_loop_with_one_error(host_firmware: Path) -> None:
+def test_a_drive_that_stops_answering_ends_the_loop_with_one_error(
+    host_firmware: Path, patient_host: None
+) -> None:
     with (
         HostUnit(host_firmware, "dial") as dial,
         HostUnit(host_firmware, "drive") as drive,
