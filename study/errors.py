@@ -7,3 +7,16 @@ one line naming the bad value and what was expected; `study.cli` prints it and e
 
 class StudyInputError(ValueError):
     """Input to the study application that it cannot accept."""
+
+
+QUOTE_CHARS = 40
+"""At most this many characters of a refused value are quoted in its message."""
+
+
+def quoted(value: object, limit: int = QUOTE_CHARS) -> str:
+    """`value` as a message quotes it (its repr), cut to `limit` characters with an
+    ellipsis: a pasted page, or a number of 300 digits, names itself in one line."""
+    if isinstance(value, str):
+        return repr(value if len(value) <= limit else value[: limit - 1] + "\u2026")
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 1] + "\u2026"

@@ -13,6 +13,9 @@ from textual.containers import Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Input, Label, Static
 
+from study.protocol.free_text import MAX_TEXT_CHARS
+from study.tui.char_count import CharCount
+
 
 class Confirm(ModalScreen[bool]):
     """Dismissed with True (y) or False (n, Esc)."""
@@ -83,12 +86,21 @@ class ReasonScreen(ModalScreen[str | None]):
     """
     BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, question: str, placeholder: str = "reason", value: str = "") -> None:
+    def __init__(
+        self,
+        question: str,
+        placeholder: str = "reason",
+        value: str = "",
+        limit: int | None = MAX_TEXT_CHARS,
+    ) -> None:
         super().__init__()
         self.question = question
         self.placeholder = placeholder
         self.value = value
         """The text the field opens with (a note to read and add to, or one not kept)."""
+        self.limit = limit
+        """The most characters the answer may have, counted below the field (None: no
+        count, for a folder)."""
 
     def compose(self) -> ComposeResult:
         with Vertical(id="reason-box"):
@@ -97,7 +109,13 @@ class ReasonScreen(ModalScreen[str | None]):
             yield Input(
                 self.value, id="reason-text", placeholder=self.placeholder, select_on_focus=False
             )
+            if self.limit is not None:
+                yield CharCount(self.value, self.limit, id="reason-count")
             yield Label("Enter: record it    Esc: cancel", id="reason-keys")
+
+    def on_input_changed(self, event: Input.Changed) -> None:
+        for count in self.query(CharCount):
+            count.count(event.value)
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()

@@ -39,7 +39,7 @@ class OpsMixin(SafeWorkers):
             if text:
                 then(Path(text).expanduser())
 
-        self.app.push_screen(ReasonScreen(question, "folder", str(default)), answered)  # type: ignore[attr-defined]
+        self.app.push_screen(ReasonScreen(question, "folder", str(default), limit=None), answered)  # type: ignore[attr-defined]
 
     def action_export_data(self) -> None:
         """e: trials, NASA-TLX and the codebook, as `study export --out FOLDER` writes them."""

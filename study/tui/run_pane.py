@@ -77,6 +77,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         Binding("p", "pace", "Pace"),
         Binding("n", "next_participant", "Next participant", show=False),
         Binding("v", "participant_page", "Page"),
+        Binding("t", "tlx_due", "NASA-TLX", show=False),
         Binding("up", "dial_forward", "Dial +", show=False),
         Binding("down", "dial_back", "Dial -", show=False),
         Binding("right", "rotate_cw", "Rotate", show=False),
@@ -266,7 +267,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             left = self.break_left_s(code)
             due = self._tlx_due(code)
             if due is not None:
-                text = f"{code}: the NASA-TLX of {due[0]}/{due[1]} is due first (F4), then s"
+                text = f"{code}: the NASA-TLX of {due[0]}/{due[1]} is due first (t), then s"
             elif left > 0:
                 text = f"break: {int(left) // 60}:{int(left) % 60:02d} left, then {text[6:]}"
         if self.run is None:
@@ -386,7 +387,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             self._show_next()
             self.app.notify(
                 f"{code} finished {task}/{condition}: its NASA-TLX comes before "
-                "the next block (F4)",
+                "the next block (t opens it)",
                 severity="warning",
             )
             return
@@ -443,6 +444,12 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         """The picked participant's page (trials, notes, corrections)."""
         if self.code is not None:
             self.app.open_participant(self.code)  # type: ignore[attr-defined]
+
+    def action_tlx_due(self) -> None:
+        """`t`: the picked participant's questionnaire due, on the NASA-TLX screen."""
+        due = self._tlx_due(self.code) if self.run is None and self.code is not None else None
+        if due is not None:
+            self.app._open_tlx(self.code, *due)  # type: ignore[attr-defined]
 
     def action_next_participant(self) -> None:
         """A finished participant leads to the next one."""
