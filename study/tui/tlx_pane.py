@@ -359,7 +359,9 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
             raise SkipAction()
         focused = self.screen.focused
         at = chain.index(focused) if focused in chain else (-1 if step > 0 else 0)
-        chain[(at + step) % len(chain)].focus()
+        # at once, not after the keys already queued (`focus` waits for them): the next
+        # key typed goes to the field this one moved to
+        self.screen.set_focus(chain[(at + step) % len(chain)])
 
     def focus_first(self) -> None:
         """F4: the first rating of the block shown; with none shown, the questionnaire
@@ -524,6 +526,10 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
             self._set_status(f"refused: {why}", notify=True)
             return
         state = self.form_state()
+        if self.editing_id is not None and self._baseline is not None:
+            if _same_answers(state, self._baseline):  # nothing to store, nothing to log
+                self._set_status(f"{block[0]} {block[1]}/{block[2]}: unchanged", notify=True)
+                return
         ratings = {s: _rating_value(v) for s, v in zip(TLX_SUBSCALES, state.ratings, strict=True)}
         reason = state.reason.strip() or None
         errors = self._errors(ratings, state.choices, reason)
@@ -531,10 +537,6 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
             self._set_status("refused: " + "; ".join(errors), notify=True)
             return
         picks = None if state.choices[0] is None else [str(c) for c in state.choices]
-        if self._baseline is not None and self.editing_id is not None:
-            if _same_answers(state, self._baseline):  # nothing to store, nothing to log
-                self._set_status(f"{block[0]} {block[1]}/{block[2]}: unchanged", notify=True)
-                return
         stored_raw = self._baseline is not None and self._baseline.choices[0] is None
         if picks is None and not (self.editing_id is not None and stored_raw):
             self._ask_raw_only(block, ratings, reason)

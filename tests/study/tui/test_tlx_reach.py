@@ -134,9 +134,9 @@ async def test_the_participant_and_block_stay_in_view_while_the_form_scrolls(
         pane = app.query_one(TlxPane)
         pane.open_block("P001", "lcca", "VO")
         await _shown(pilot, pane, ("P001", "lcca", "VO"))
-        app.query_one("#save", Button).focus()
+        app.query_one("#pair-14", PairChoice).focus()
         await pilot.pause(0.2)
-        assert pane.scroll_y > 0  # scrolled down to Save: the first rating out of view
+        assert pane.scroll_y > 0  # scrolled down to the last pair: the ratings out of view
         assert not pane.scrollable_content_region.overlaps(app.query_one("#rating-mental").region)
         # the first two lines of the form are still its header: whose block, the question
         for line, shown in ((0, app.query_one("#tlx-top")), (1, app.query_one("#question"))):
@@ -144,8 +144,15 @@ async def test_the_participant_and_block_stay_in_view_while_the_form_scrolls(
             assert widget is shown or shown in widget.ancestors
         assert app.query_one("#tlx-participant", Select).value == "P001"
         assert app.query_one("#tlx-participant").region.y == pane.region.y
+        assert "Which of the two" in str(app.query_one("#question").render())
         # the focused field is not hidden under the header
-        assert pane.scrollable_content_region.contains_region(app.query_one("#save").region)
+        head = app.query_one("#tlx-top").region.union(app.query_one("#question").region)
+        for field in ("#pair-14", "#save", "#pair-0", "#rating-mental", "#pair-3"):
+            app.query_one(field).focus()
+            await pilot.pause(0.2)
+            region = app.query_one(field).region
+            assert pane.scrollable_content_region.contains_region(region), field
+            assert not head.overlaps(region), field
 
 
 async def test_tab_cycles_through_the_forms_fields_each_with_a_focus_style(
@@ -234,6 +241,11 @@ async def test_saving_an_unchanged_stored_form_says_so_and_logs_nothing(
         await _shown(pilot, pane, ("P001", "lcca", "VO"))
         app.query_one("#rating-mental", Input).value = "040"  # the same number
         app.query_one("#reason", Input).value = "checked"
+        await pilot.press("ctrl+s")
+        await wait_for(pilot, lambda: pane.status == "P001 lcca/VO: unchanged", 10)
+        # with no reason typed too: nothing to give a reason for
+        app.query_one("#reason", Input).value = ""
+        pane._set_status("")
         await pilot.press("ctrl+s")
         await wait_for(pilot, lambda: pane.status == "P001 lcca/VO: unchanged", 10)
         await pilot.pause(0.3)

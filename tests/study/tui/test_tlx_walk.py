@@ -183,12 +183,15 @@ class Walk:
         await self.settled()
 
     async def pick_participant(self) -> None:
-        """The participant list: the form is left empty until a block is picked."""
+        """The participant list: the block shown stays, now the new participant's; with
+        none shown, the form is left empty until a block is picked."""
         code = self.rng.choice(self.model.codes)
         await self.to_form()
         self.app.query_one("#tlx-participant", Select).value = code
-        if code != self.model.on_participant:
-            self.model.shown, self.model.on_participant = None, code
+        if code != self.model.on_participant:  # the block picked stays: they all have it
+            shown = self.model.shown
+            self.model.shown = None if shown is None else (code, *shown[1:])
+            self.model.on_participant = code
         await self.pilot.pause()
         await self.settled()
 
