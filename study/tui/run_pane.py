@@ -259,6 +259,9 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             text = f"{code} withdrew ({self.roster.withdrawn(code)}): no more sessions"
         elif nxt is None:
             text = f"{code}: every scheduled trial is done"
+            due = self._questionnaire_due(code)
+            if due is not None:  # shorter, so that all three fit on 80 columns
+                text = f"{code}: every trial is done; the NASA-TLX of {due[0]}/{due[1]} is due (t)"
             after = self.next_participant()
             if after is not None:
                 text += f"; n: on to {after}"
@@ -447,9 +450,10 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
 
     def action_tlx_due(self) -> None:
         """`t`: the picked participant's questionnaire due, on the NASA-TLX screen."""
-        due = self._tlx_due(self.code) if self.run is None and self.code is not None else None
-        if due is not None:
-            self.app._open_tlx(self.code, *due)  # type: ignore[attr-defined]
+        code = self.code
+        due = self._questionnaire_due(code) if self.run is None and code is not None else None
+        if code is not None and due is not None:
+            self.app._open_tlx(code, *due)  # type: ignore[attr-defined]
 
     def action_next_participant(self) -> None:
         """A finished participant leads to the next one."""
@@ -463,7 +467,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         design says it comes first (`tlx_before_next_block`)."""
         if self.roster is None or not self.roster.tlx_first:
             return None
-        due = [b for b in self.roster.tlx_due() if b[0] == code]
+        return self._questionnaire_due(code)
+
+    def _questionnaire_due(self, code: str) -> tuple[str, str] | None:
+        """(task, condition) of `code`'s first finished block without its questionnaire."""
+        due = [b for b in self.roster.tlx_due() if b[0] == code] if self.roster else []
         return (due[0][1], due[0][2]) if due else None
 
     def break_left_s(self, code: str) -> float:
