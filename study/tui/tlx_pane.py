@@ -210,6 +210,8 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
         """The form as filled from the database (what counts as nothing typed)."""
         self.drafts: dict[Block, Draft] = {}
         """What was typed for a block and not saved, kept when another block is shown."""
+        self.raw_only_ok: set[Block] = set()
+        """Blocks whose raw-only save was confirmed (not asked again, say after a refusal)."""
 
     def compose(self) -> ComposeResult:
         # whose block and which question: docked, in view however far the form scrolls
@@ -538,7 +540,8 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
             return
         picks = None if state.choices[0] is None else [str(c) for c in state.choices]
         stored_raw = self._baseline is not None and self._baseline.choices[0] is None
-        if picks is None and not (self.editing_id is not None and stored_raw):
+        asked = block in self.raw_only_ok or (self.editing_id is not None and stored_raw)
+        if picks is None and not asked:
             self._ask_raw_only(block, ratings, reason)
             return
         self._store(block, ratings, picks, reason)
@@ -549,6 +552,7 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
 
         def answered(yes: bool | None) -> None:
             if yes and self.loaded_block == block:
+                self.raw_only_ok.add(block)
                 self._store(block, ratings, None, reason)
             elif not yes:
                 self._set_status("not stored: pick the 15 pairwise choices, or store the raw score")
