@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import re
 
-from study.errors import StudyInputError
+from study.errors import StudyInputError, quoted
 
 MAX_TEXT_CHARS = 500
 
@@ -102,16 +102,16 @@ def check_free_text(what: str, text: str, *, keep_lookalike: bool = False) -> st
     StudyInputError
         Control characters, empty, too long; `PersonalDataError` for contact details.
     """
-    shown = text if len(text) <= 60 else text[:57] + "..."
+    shown = quoted(text)
     if not text.isprintable():  # a newline, a tab, a terminal's escape sequence
         raise StudyInputError(
-            f"{what} {shown!r} holds control characters; expected 1-{MAX_TEXT_CHARS} "
+            f"{what} {shown} holds control characters; expected 1-{MAX_TEXT_CHARS} "
             "printable characters on one line"
         )
     value = " ".join(text.split())
     if not value or len(value) > MAX_TEXT_CHARS:
         raise StudyInputError(
-            f"{what} {shown!r} ({len(value)} characters); expected 1-{MAX_TEXT_CHARS} "
+            f"{what} {shown} ({len(value)} characters); expected 1-{MAX_TEXT_CHARS} "
             "characters of text"
         )
     kept = keep_lookalike or isinstance(text, NotPersonal)

@@ -29,7 +29,7 @@ from db.models.audit import AuditEntry
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import Trial
-from study.errors import ReasonNeeded, StudyInputError
+from study.errors import ReasonNeeded, StudyInputError, quoted
 from study.protocol.actor import current_actor
 from study.protocol.free_text import check_free_text
 from study.protocol.observer import SessionObserver
@@ -73,7 +73,7 @@ def check_rating(subscale: str, value: object) -> int:
     """
     if not _whole_number(value, 100) or int(value) % 5:
         raise StudyInputError(
-            f"{subscale} rating {value!r} is off the scale; expected 0-100 in steps of 5"
+            f"{subscale} rating {quoted(value)} is off the scale; expected 0-100 in steps of 5"
         )
     return int(value)
 

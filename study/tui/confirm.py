@@ -13,6 +13,9 @@ from textual.containers import Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Input, Label, Static
 
+from study.protocol.free_text import MAX_TEXT_CHARS
+from study.tui.char_count import CharCount
+
 
 class Confirm(ModalScreen[bool]):
     """Dismissed with True (y) or False (n, Esc)."""
@@ -89,6 +92,7 @@ class ReasonScreen(ModalScreen[str | None]):
         placeholder: str = "reason",
         value: str = "",
         enter: str = "record it",
+        limit: int | None = MAX_TEXT_CHARS,
     ) -> None:
         super().__init__()
         self.question = question
@@ -97,6 +101,9 @@ class ReasonScreen(ModalScreen[str | None]):
         """The text the field opens with (a note to read and add to, or one not kept)."""
         self.enter = enter
         """What Enter does, on the dialog's key line ("record it", "export there")."""
+        self.limit = limit
+        """The most characters the answer may have, counted below the field (None: no
+        count, for a folder)."""
 
     def compose(self) -> ComposeResult:
         with Vertical(id="reason-box"):
@@ -105,7 +112,13 @@ class ReasonScreen(ModalScreen[str | None]):
             yield Input(
                 self.value, id="reason-text", placeholder=self.placeholder, select_on_focus=False
             )
+            if self.limit is not None:
+                yield CharCount(self.value, self.limit, id="reason-count")
             yield Label(f"Enter: {self.enter}    Esc: cancel", id="reason-keys")
+
+    def on_input_changed(self, event: Input.Changed) -> None:
+        for count in self.query(CharCount):
+            count.count(event.value)
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()

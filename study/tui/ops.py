@@ -39,7 +39,7 @@ class OpsMixin(SafeWorkers):
             if text:
                 then(Path(text).expanduser())
 
-        screen = ReasonScreen(question, "folder", str(default), enter=enter)
+        screen = ReasonScreen(question, "folder", str(default), enter=enter, limit=None)
         self.app.push_screen(screen, answered)  # type: ignore[attr-defined]
 
     def action_export_data(self) -> None:

@@ -6,7 +6,7 @@ lists in `StudyApp.COMMANDS` beside Textual's own (theme, keys, quit). It offers
 - the screens (F1-F6), each by its title;
 - enrolling a participant in each group, with the group's fill;
 - per participant: their page, the next trial (started as `s` starts it, checklist and
-  all), a note, a withdrawal; each NASA-TLX due;
+  all), a note, a withdrawal; each NASA-TLX due, and each stored one (to read or edit);
 - every key the screens show in their footers (analyse, export figures, calibrate,
   whatever a screen binds), run on its screen as the key would.
 
@@ -57,6 +57,16 @@ def study_commands(app: StudyApp) -> list[Command]:
                 partial(app._open_tlx, code, task, condition),
             )
         )
+    for r in roster.participants:
+        for b in r["blocks"]:
+            if (r["code"], b["task"], b["condition"]) in roster.answered:
+                out.append(
+                    (
+                        f"NASA-TLX of {r['code']} {b['task']}/{b['condition']} (stored)",
+                        "opens it filled in; an edit needs a reason (F4)",
+                        partial(app._open_tlx, r["code"], b["task"], b["condition"]),
+                    )
+                )
     for r in roster.participants:
         code, group = r["code"], r["group"]
         out.append(

@@ -77,6 +77,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         Binding("p", "pace", "Pace"),
         Binding("n", "next_participant", "Next participant", show=False),
         Binding("v", "participant_page", "Page"),
+        Binding("t", "tlx_due", "NASA-TLX", show=False),
         Binding("up", "dial_forward", "Dial +", show=False),
         Binding("down", "dial_back", "Dial -", show=False),
         Binding("right", "rotate_cw", "Rotate", show=False),
@@ -258,6 +259,9 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             text = f"{code} withdrew ({self.roster.withdrawn(code)}): no more sessions"
         elif nxt is None:
             text = f"{code}: every scheduled trial is done"
+            due = self._questionnaire_due(code)
+            if due is not None:  # shorter, so that all three fit on 80 columns
+                text = f"{code}: every trial is done; the NASA-TLX of {due[0]}/{due[1]} is due (t)"
             after = self.next_participant()
             if after is not None:
                 text += f"; n: on to {after}"
@@ -266,7 +270,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             left = self.break_left_s(code)
             due = self._tlx_due(code)
             if due is not None:
-                text = f"{code}: the NASA-TLX of {due[0]}/{due[1]} is due first (F4), then s"
+                text = f"{code}: the NASA-TLX of {due[0]}/{due[1]} is due first (t), then s"
             elif left > 0:
                 text = f"break: {int(left) // 60}:{int(left) % 60:02d} left, then {text[6:]}"
         if self.run is None:
@@ -386,7 +390,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             self._show_next()
             self.app.notify(
                 f"{code} finished {task}/{condition}: its NASA-TLX comes before "
-                "the next block (F4)",
+                "the next block (t opens it)",
                 severity="warning",
             )
             return
@@ -448,6 +452,13 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         if self.code is not None:
             self.app.open_participant(self.code)  # type: ignore[attr-defined]
 
+    def action_tlx_due(self) -> None:
+        """`t`: the picked participant's questionnaire due, on the NASA-TLX screen."""
+        code = self.code
+        due = self._questionnaire_due(code) if self.run is None and code is not None else None
+        if code is not None and due is not None:
+            self.app._open_tlx(code, *due)  # type: ignore[attr-defined]
+
     def action_next_participant(self) -> None:
         """A finished participant leads to the next one."""
         if self.run is None and self.code is not None and self._next is None:
@@ -460,7 +471,11 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         design says it comes first (`tlx_before_next_block`)."""
         if self.roster is None or not self.roster.tlx_first:
             return None
-        due = [b for b in self.roster.tlx_due() if b[0] == code]
+        return self._questionnaire_due(code)
+
+    def _questionnaire_due(self, code: str) -> tuple[str, str] | None:
+        """(task, condition) of `code`'s first finished block without its questionnaire."""
+        due = [b for b in self.roster.tlx_due() if b[0] == code] if self.roster else []
         return (due[0][1], due[0][2]) if due else None
 
     def break_left_s(self, code: str) -> float:

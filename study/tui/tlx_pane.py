@@ -7,7 +7,13 @@ right keys. Saving goes through `study.protocol.tlx.store_tlx`, the same checks 
 `study tlx enter`: an off-scale rating or a missing choice is refused with a message
 and nothing is stored. A block that already has its questionnaire opens filled in;
 saving it again is an edit, which needs a reason and is written to the audit log
-(shown below the form).
+(shown below the form). Saving a stored questionnaire unchanged stores nothing; one
+with ratings and no pairwise choices (a raw TLX, with no weighted score) is stored once
+the operator has said so.
+
+The participant, block and question lines are docked above the form, so they stay in
+view while it scrolls; Tab and shift+Tab cycle through the form's own fields and its
+button (and nothing else), each with the app's focus style.
 """
 
 from __future__ import annotations
@@ -19,7 +25,7 @@ from textual import events, on, work
 from textual.actions import SkipAction
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
-from textual.containers import Horizontal, VerticalScroll
+from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.message import Message
 from textual.widget import Widget
 from textual.widgets import Button, Input, Label, Select, Static
@@ -27,6 +33,7 @@ from textual.widgets import Button, Input, Label, Select, Static
 from db.models.tlx import TLX_SUBSCALES
 from study.errors import StudyInputError
 from study.protocol.tlx import check_rating, pair_order
+from study.tui.char_count import CharCount
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import Roster, StudyServices
 
@@ -105,6 +112,12 @@ class PairChoice(Widget, can_focus=True):
         return f"{self.number:>2}. {left} or {right}"
 
 
+def _same_answers(a: FormState, b: FormState) -> bool:
+    """The same ratings (as numbers: `050` is 50) and the same choices."""
+    ratings = [[_rating_value(v.strip()) for v in s.ratings] for s in (a, b)]
+    return ratings[0] == ratings[1] and a.choices == b.choices
+
+
 def _rating_value(text: str) -> object:
     """The typed rating as a number when it is one (check_rating then judges the scale)."""
     from study.protocol.csv_input import whole_number
@@ -139,7 +152,7 @@ class Draft:
     over: FormState
 
 
-class TlxPane(SafeWorkers, VerticalScroll):
+class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
     """Enter or edit the questionnaire of one participant's block."""
 
     DEFAULT_CSS = """
@@ -151,7 +164,9 @@ class TlxPane(SafeWorkers, VerticalScroll):
     TlxPane Input { width: 8; }
     TlxPane #tlx-top Select { width: 16; }
     TlxPane #tlx-status { height: auto; }
+    TlxPane #tlx-head { dock: top; height: 2; background: $surface; }
     TlxPane #question { height: 1; color: $text-muted; }
+    TlxPane #reason-count { padding: 0 1; }
     TlxPane #audit { height: auto; color: $text-muted; }
     TlxPane #reason { width: 1fr; }
     """
@@ -163,7 +178,11 @@ class TlxPane(SafeWorkers, VerticalScroll):
         # key typed right after one of them then goes to the new field, not the old one
         *(
             Binding(key, f"move_focus({step})", "Next field", show=False, priority=True)
-            for key, step in (("down", 1), ("up", -1), ("tab", 1), ("shift+tab", -1))
+            for key, step in (("down", 1), ("up", -1))
+        ),
+        *(
+            Binding(key, f"cycle_focus({step})", "Next field", show=False, priority=True)
+            for key, step in (("tab", 1), ("shift+tab", -1))
         ),
     ]
 
@@ -191,14 +210,18 @@ class TlxPane(SafeWorkers, VerticalScroll):
         """The form as filled from the database (what counts as nothing typed)."""
         self.drafts: dict[Block, Draft] = {}
         """What was typed for a block and not saved, kept when another block is shown."""
+        self.raw_only_ok: set[Block] = set()
+        """Blocks whose raw-only save was confirmed (not asked again, say after a refusal)."""
 
     def compose(self) -> ComposeResult:
-        with Horizontal(id="tlx-top", classes="row"):
-            yield Label("Participant ")
-            yield Select[str]([], id="tlx-participant", compact=True, prompt="pick")
-            yield Label(" Block ")
-            yield Select[str]([], id="tlx-block", compact=True, prompt="pick")
-        yield Label("", id="question")
+        # whose block and which question: docked, in view however far the form scrolls
+        with Vertical(id="tlx-head"):
+            with Horizontal(id="tlx-top", classes="row"):
+                yield Label("Participant ")
+                yield Select[str]([], id="tlx-participant", compact=True, prompt="pick")
+                yield Label(" Block ")
+                yield Select[str]([], id="tlx-block", compact=True, prompt="pick")
+            yield Label("", id="question")
         for s in TLX_SUBSCALES:
             title, _, low, high = TLX_SCALES[s]
             with Horizontal(classes="row"):
@@ -212,8 +235,11 @@ class TlxPane(SafeWorkers, VerticalScroll):
         with Horizontal(classes="row"):
             yield Label("Reason ")
             yield Input(
-                id="reason", placeholder="for an edit, or a block not run yet", compact=True
+                id="reason",
+                placeholder="for an edit, or a block not run yet",
+                compact=True,
             )
+            yield CharCount(id="reason-count")
         yield Button("Save (ctrl+s)", id="save", compact=True)
         yield Static("", id="tlx-status")
         yield Static("", id="audit")
@@ -274,9 +300,24 @@ class TlxPane(SafeWorkers, VerticalScroll):
         if event.value is Select.NULL or event.value != event.select.value:
             return
         code = str(event.value)
-        if code != self._blocks_code:
-            self._switch(None)  # no block of the new participant picked yet
-            self._set_blocks(code)
+        if code == self._blocks_code:
+            return
+        kept = self._same_block_of(code)
+        self._switch(kept)  # None: no block of the new participant picked yet
+        self._set_blocks(code)
+        if kept is not None:  # the block picked stands for the new participant too
+            self.query_one("#tlx-block", Select).value = f"{kept[1]}/{kept[2]}"
+
+    def _same_block_of(self, code: str) -> Block | None:
+        """`code`'s block of the task and condition shown now, if `code` has one."""
+        if self._shown is None or self.roster is None:
+            return None
+        _, task, condition = self._shown
+        row = next((r for r in self.roster.participants if r["code"] == code), None)
+        blocks = row["blocks"] if row else []
+        if any(b["task"] == task and b["condition"] == condition for b in blocks):
+            return (code, task, condition)
+        return None
 
     @on(Select.Changed, "#tlx-block")
     def _block_changed(self, event: Select.Changed) -> None:
@@ -309,17 +350,42 @@ class TlxPane(SafeWorkers, VerticalScroll):
         focused = self.screen.focused
         if focused is None or any(isinstance(w, Select) for w in (focused, *focused.ancestors)):
             raise SkipAction()
-        if step > 0:
-            self.screen.focus_next()
-        else:
-            self.screen.focus_previous()
+        self.action_cycle_focus(step)
+
+    def action_cycle_focus(self, step: int) -> None:
+        """Tab / shift+Tab: the next or previous of the form's own fields and its
+        button, round from the last to the first (never the tab bar, nor a stop that
+        shows no focus)."""
+        chain = [w for w in self.screen.focus_chain if self in w.ancestors]
+        if not chain:
+            raise SkipAction()
+        focused = self.screen.focused
+        at = chain.index(focused) if focused in chain else (-1 if step > 0 else 0)
+        # at once, not after the keys already queued (`focus` waits for them): the next
+        # key typed goes to the field this one moved to
+        self.screen.set_focus(chain[(at + step) % len(chain)])
 
     def focus_first(self) -> None:
-        """F4: the first rating of the block shown, else the participant list."""
+        """F4: the first rating of the block shown; with none shown, the questionnaire
+        due (of the participant picked on the run screen first), else the participant
+        list."""
+        if self._shown is None:
+            due = self._due_block()
+            if due is not None:
+                self.open_block(*due)
+                return
         if self._shown is not None:
             self._to_first_rating()
         else:
             self.query_one("#tlx-participant", Select).focus()
+
+    def _due_block(self) -> Block | None:
+        due = self.roster.tlx_due() if self.roster is not None else []
+        if not due:
+            return None
+        runs = self.app.query("#run-pane")  # the participant picked there comes first
+        picked = getattr(runs.first(), "code", None) if runs else None
+        return next((b for b in due if b[0] == picked), due[0])
 
     def on_descendant_focus(self, event: events.DescendantFocus) -> None:
         """The question of the focused rating above the form, and the focused field in
@@ -336,6 +402,10 @@ class TlxPane(SafeWorkers, VerticalScroll):
             text = "Which of the two contributed more to your workload? left / right"
         self.query_one("#question", Label).update(text)
         widget.scroll_visible(animate=False)
+
+    @on(Input.Changed, "#reason")
+    def _reason_typed(self, event: Input.Changed) -> None:
+        self.query_one("#reason-count", CharCount).count(event.value)
 
     @on(Input.Changed)
     def _rating_typed(self, event: Input.Changed) -> None:
@@ -458,6 +528,10 @@ class TlxPane(SafeWorkers, VerticalScroll):
             self._set_status(f"refused: {why}", notify=True)
             return
         state = self.form_state()
+        if self.editing_id is not None and self._baseline is not None:
+            if _same_answers(state, self._baseline):  # nothing to store, nothing to log
+                self._set_status(f"{block[0]} {block[1]}/{block[2]}: unchanged", notify=True)
+                return
         ratings = {s: _rating_value(v) for s, v in zip(TLX_SUBSCALES, state.ratings, strict=True)}
         reason = state.reason.strip() or None
         errors = self._errors(ratings, state.choices, reason)
@@ -465,7 +539,31 @@ class TlxPane(SafeWorkers, VerticalScroll):
             self._set_status("refused: " + "; ".join(errors), notify=True)
             return
         picks = None if state.choices[0] is None else [str(c) for c in state.choices]
+        stored_raw = self._baseline is not None and self._baseline.choices[0] is None
+        asked = block in self.raw_only_ok or (self.editing_id is not None and stored_raw)
+        if picks is None and not asked:
+            self._ask_raw_only(block, ratings, reason)
+            return
         self._store(block, ratings, picks, reason)
+
+    def _ask_raw_only(self, block: Block, ratings: dict[str, object], reason: str | None) -> None:
+        """Ratings without the pairwise choices have no weighted score: asked once."""
+        from study.tui.confirm import Confirm
+
+        def answered(yes: bool | None) -> None:
+            if yes and self.loaded_block == block:
+                self.raw_only_ok.add(block)
+                self._store(block, ratings, None, reason)
+            elif not yes:
+                self._set_status("not stored: pick the 15 pairwise choices, or store the raw score")
+
+        self.app.push_screen(
+            Confirm(
+                f"{block[0]} {block[1]}/{block[2]}: no pairwise choices: store the raw "
+                "score only? (no weighted score then)"
+            ),
+            answered,
+        )
 
     def _errors(
         self, ratings: dict[str, object], choices: tuple[str | None, ...], reason: str | None

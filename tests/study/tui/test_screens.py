@@ -15,6 +15,7 @@ from db.models.calibration import Calibration
 from db.models.study import Participant
 from db.models.tlx import TLX_SUBSCALES
 from study.protocol.tlx import load_tlx, store_tlx
+from study.tui.confirm import Confirm
 from study.tui.services import calibrate_recording
 from study.tui.tlx_pane import PairChoice, TlxPane
 from tests.study.tui.conftest import (
@@ -313,6 +314,8 @@ async def test_a_questionnaire_for_a_block_not_run_needs_a_reason(
         pane = await _open_form(pilot, "P002", "lcca/HV")  # P002 has run nothing
         await _type_ratings(pilot, RATINGS)
         await pilot.press("ctrl+s")
+        await wait_for(pilot, lambda: isinstance(app.screen, Confirm), 10)
+        await pilot.press("y")  # ratings only: the raw score (asked once for the block)
         await wait_for(pilot, lambda: pane.status.startswith("refused"), 30)
         assert "P002 lcca/HV has no completed trial yet" in pane.status
         assert load_tlx(study_engine, "P002", "lcca", "HV") is None

@@ -75,12 +75,13 @@ async def test_saved_ratings_are_not_carried_to_the_next_participant(
         assert _ratings(app) == ("",) * 6
         assert _choices(app) == [None] * 15
         assert pane.status == "new"
-        # merely picking another participant on the list clears the form too
+        # merely picking another participant on the list shows their (empty) form of the
+        # same block
         pane.open_block("P001", "lcca", "VO")
         await _shown(pilot, pane, "P001", "lcca", "VO")
         assert _ratings(app) == P001_RATINGS
         app.query_one("#tlx-participant", Select).value = "P002"
-        await wait_for(pilot, lambda: pane.loaded_block is None, 10)
+        await _shown(pilot, pane, "P002", "lcca", "VO")
         await pilot.pause(0.2)
         assert _ratings(app) == ("",) * 6
         assert _choices(app) == [None] * 15
@@ -98,19 +99,16 @@ async def test_switching_participant_and_back_keeps_the_drafts_choices(make_test
         await _type(pilot, P001_RATINGS, SIDES)
         typed = _choices(app)
         assert None not in typed
-        # to P002 by the list, a block of theirs, then back to P001 by the list
+        # to P002 by the list (the same block, theirs), then back to P001 by the list
         app.query_one("#tlx-participant", Select).value = "P002"
-        await wait_for(pilot, lambda: pane.loaded_block is None, 10)
-        await pilot.pause(0.1)
-        app.query_one("#tlx-block", Select).value = "lcca/VO"
         await _shown(pilot, pane, "P002", "lcca", "VO")
+        await pilot.pause(0.1)
+        assert app.query_one("#tlx-block", Select).value == "lcca/VO"
         assert _ratings(app) == ("",) * 6
         assert _choices(app) == [None] * 15
         app.query_one("#tlx-participant", Select).value = "P001"
-        await wait_for(pilot, lambda: pane.loaded_block is None, 10)
-        await pilot.pause(0.1)
-        app.query_one("#tlx-block", Select).value = "lcca/VO"
         await _shown(pilot, pane, "P001", "lcca", "VO")
+        await pilot.pause(0.1)
         assert pane.status.startswith("draft restored")
         assert _ratings(app) == P001_RATINGS
         assert _choices(app) == typed

@@ -66,6 +66,8 @@ class Model:
     typed: dict[Block, Form] = field(default_factory=dict)
     shown: Block | None = None
     on_participant: str | None = None
+    raw_only_ok: set[Block] = field(default_factory=set)
+    """Blocks whose raw-only save was confirmed since the app started."""
 
     def stored_form(self, block: Block) -> Form:
         return self.stored.get(block, EMPTY)
@@ -102,8 +104,17 @@ class Walk:
         return self.app.query_one(TlxPane)
 
     async def to_form(self) -> None:
-        if self.app.query_one("#tabs").active != "tlx":
-            await self.pilot.press("f4")
+        """F4; with no block shown it opens the questionnaire due (the run screen's
+        participant's first), as the roster the form holds says."""
+        if self.app.query_one("#tabs").active == "tlx":
+            return
+        due = self.pane.roster.tlx_due() if self.pane.roster is not None else []
+        picked = self.app.query_one("#run-pane").code
+        await self.pilot.press("f4")
+        if self.model.shown is None and due:
+            block = next((b for b in due if b[0] == picked), due[0])
+            self.model.shown, self.model.on_participant = block, block[0]
+            await self.settled()
 
     async def settled(self) -> None:
         """Wait until the form holds the block the model says it shows."""
@@ -183,12 +194,15 @@ class Walk:
         await self.settled()
 
     async def pick_participant(self) -> None:
-        """The participant list: the form is left empty until a block is picked."""
+        """The participant list: the block shown stays, now the new participant's; with
+        none shown, the form is left empty until a block is picked."""
         code = self.rng.choice(self.model.codes)
         await self.to_form()
         self.app.query_one("#tlx-participant", Select).value = code
-        if code != self.model.on_participant:
-            self.model.shown, self.model.on_participant = None, code
+        if code != self.model.on_participant:  # the block picked stays: they all have it
+            shown = self.model.shown
+            self.model.shown = None if shown is None else (code, *shown[1:])
+            self.model.on_participant = code
         await self.pilot.pause()
         await self.settled()
 
@@ -290,10 +304,28 @@ class Walk:
         if m.shown is None:
             assert self.pane.status.startswith("refused: pick a participant")
             return
+        code, task, condition = m.shown
+        ratings, choices, _ = m.form(m.shown)
+        if m.shown in m.stored and m.stored[m.shown][:2] == (ratings, choices):
+            # nothing changed: said so, nothing stored (a reason or none)
+            unchanged = f"{code} {task}/{condition}: unchanged"
+            await wait_for(self.pilot, lambda: self.pane.status == unchanged, 10)
+            return
         if m.refusals(m.shown):
             assert self.pane.status.startswith("refused"), (m.form(m.shown), self.pane.status)
             return
-        code, task, condition = m.shown
+        stored_raw = m.shown in m.stored and m.stored[m.shown][1][0] is None
+        asked = stored_raw or m.shown in m.raw_only_ok
+        if choices[0] is None and not asked:  # ratings only: asked once first
+            await wait_for(self.pilot, lambda: isinstance(self.app.screen, Confirm), 10)
+            question = str(self.app.screen.query_one("#question").render())
+            assert "no pairwise choices: store the raw score only?" in question
+            if self.rng.random() < 0.3:
+                await self.pilot.press("n")
+                await wait_for(self.pilot, lambda: self.pane.status.startswith("not stored"))
+                return
+            await self.pilot.press("y")
+            m.raw_only_ok.add(m.shown)
         done = (f"{code} {task}/{condition}: stored", f"{code} {task}/{condition}: updated")
         await wait_for(
             self.pilot,
@@ -301,7 +333,6 @@ class Walk:
             20,
         )
         assert self.pane.status != before or before.startswith(done)
-        ratings, choices, _ = m.form(m.shown)
         m.stored[m.shown] = (ratings, choices, "")
         m.typed.pop(m.shown)
 
@@ -313,6 +344,7 @@ class Walk:
         if not unsaved:
             await wait_for(self.pilot, lambda: not self.app.is_running, 20)
             m.shown = m.on_participant = None
+            m.raw_only_ok.clear()
             return True
         await wait_for(self.pilot, lambda: isinstance(self.app.screen, Confirm), 10)
         question = str(self.app.screen.query_one("#question").render())
@@ -326,6 +358,7 @@ class Walk:
         await wait_for(self.pilot, lambda: not self.app.is_running, 20)
         m.typed.clear()
         m.shown = m.on_participant = None
+        m.raw_only_ok.clear()
         return True
 
     # -- the invariants ---------------------------------------------------------------
@@ -389,7 +422,7 @@ async def test_walk(seed: int, make_test_app, study_engine, shared_estimator) ->
         async with app.run_test(size=(80, 24)) as pilot:
             walk.pilot = pilot
             await loaded(pilot)
-            await pilot.press("f4")
+            await walk.to_form()
             while steps < STEPS:
                 name = rng.choices(names, weights=list(STEP_WEIGHTS.values()))[0]
                 if walk.model.groups["novice"] >= 4 and name == "enrol":
