@@ -20,20 +20,16 @@ firmware on the amplifier's microcontroller, or a bridge from the lab's amplifie
 from __future__ import annotations
 
 import math
-import os
-import threading
-import tty
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
+from teleop_core.loop.emulator import PtyUnit
 from teleop_core.loop.hardware import (
     CorruptLine,
     Esp32Unit,
     HardwareError,
     UnitState,
-    checksum,
-    encode,
 )
 
 __all__ = [
@@ -183,7 +179,7 @@ class PhysicalFollower:
         self.forces.close()
 
 
-class EmulatedForceUnit:
+class EmulatedForceUnit(PtyUnit):
     """A forces unit on a pty: the two forces follow functions of the unit's clock,
     which advances `period_ms` per line; `silent` stops its answers; `close` unplugs it.
     """
@@ -195,32 +191,12 @@ class EmulatedForceUnit:
         firmware: str = "emu-1",
         period_ms: float = 10.0,
     ) -> None:
+        super().__init__()
         self.proximal, self.distal, self.firmware = proximal, distal, firmware
         self.period_ms = period_ms
         self.t_ms = 0.0
-        self.silent = False
         self.sent: list[tuple[float, float, float]] = []
         """Every (t_ms, proximal_N, distal_N) answered, as sent (rounded to the line)."""
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)
-        self.port = os.ttyname(self._slave)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._serve, daemon=True)
-
-    def __enter__(self) -> EmulatedForceUnit:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def close(self) -> None:
-        if self._stop.is_set():
-            return
-        self._stop.set()
-        os.close(self._master)
-        os.close(self._slave)
-        self._thread.join(timeout=1.0)
 
     def _reply(self, payload: str) -> str:
         if payload == "HELLO":
@@ -236,23 +212,5 @@ class EmulatedForceUnit:
             return "OK STOP"
         return f"E unknown command: '{payload}'"
 
-    def _serve(self) -> None:
-        buffer = b""
-        while not self._stop.is_set():
-            try:
-                chunk = os.read(self._master, 256)
-            except OSError:
-                return
-            buffer += chunk
-            while b"\n" in buffer:
-                raw, buffer = buffer.split(b"\n", 1)
-                text = raw.decode("ascii", "replace").rstrip("\r")
-                payload, _, received = text.rpartition("*")
-                reply = (
-                    self._reply(payload) if checksum(payload) == received else "E checksum mismatch"
-                )
-                if not self.silent:
-                    try:
-                        os.write(self._master, encode(reply))
-                    except OSError:
-                        return
+    def _bad_checksum(self, payload: str, received: str) -> str:
+        return "E checksum mismatch"
