@@ -91,6 +91,19 @@ async def loaded(pilot) -> None:
     await wait_for(pilot, lambda: pilot.app.ready and pilot.app.roster is not None)
 
 
+async def tlx_form(pilot, block: tuple[str, str, str] = ("P001", "lcca", "VO")) -> Any:
+    """F4 with `block` (participant, task, condition) open on the NASA-TLX form, once the
+    app has loaded; the form's pane."""
+    from study.tui.tlx_pane import TlxPane
+
+    await loaded(pilot)
+    await pilot.press("f4")
+    pane = pilot.app.query_one(TlxPane)
+    pane.open_block(*block)
+    await wait_for(pilot, lambda: pane.loaded_block == block, 10)
+    return pane
+
+
 async def run_screen(pilot, code: str) -> Any:
     """The run screen (F3) with participant `code` picked, once the app has loaded."""
     from study.tui.run_pane import RunPane

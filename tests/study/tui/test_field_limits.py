@@ -10,8 +10,7 @@ from textual.widgets import Input, Label
 from study.errors import quoted
 from study.tui.char_count import CharCount
 from study.tui.confirm import ReasonScreen
-from study.tui.tlx_pane import TlxPane
-from tests.study.tui.conftest import loaded, wait_for
+from tests.study.tui.conftest import loaded, tlx_form, wait_for
 
 
 def test_a_quote_is_cut_to_40_characters_with_an_ellipsis() -> None:
@@ -28,11 +27,7 @@ def test_a_quote_is_cut_to_40_characters_with_an_ellipsis() -> None:
 async def test_a_pasted_rating_is_refused_in_one_short_line(make_test_app) -> None:
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "VO")
-        await wait_for(pilot, lambda: pane.loaded_block == ("P001", "lcca", "VO"), 10)
+        pane = await tlx_form(pilot)
         app.query_one("#rating-mental", Input).value = "9" * 300
         await pilot.press("ctrl+s")
         await wait_for(pilot, lambda: pane.status.startswith("refused"), 10)
@@ -82,11 +77,7 @@ async def test_a_folder_question_counts_nothing(make_test_app) -> None:
 async def test_the_tlx_reason_shows_its_limit(make_test_app) -> None:
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "VO")
-        await wait_for(pilot, lambda: pane.loaded_block == ("P001", "lcca", "VO"), 10)
+        pane = await tlx_form(pilot)
         count = pane.query_one("#reason-count", CharCount)
         assert str(count.render()) == "0/500 characters"
         pane.query_one("#reason", Input).focus()

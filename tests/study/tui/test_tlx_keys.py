@@ -6,7 +6,7 @@ from __future__ import annotations
 from textual.widgets import Button, Input, Label
 
 from study.tui.tlx_pane import TLX_SCALES, PairChoice, TlxPane
-from tests.study.tui.conftest import loaded, wait_for
+from tests.study.tui.conftest import loaded, tlx_form, wait_for
 
 
 async def test_the_form_by_keyboard(make_test_app) -> None:
@@ -51,11 +51,7 @@ async def test_keys_typed_ahead_land_in_their_own_fields(make_test_app) -> None:
 
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "VO")
-        await wait_for(pilot, lambda: pane.loaded_block == ("P001", "lcca", "VO"), 10)
+        pane = await tlx_form(pilot)
         await wait_for(pilot, lambda: app.focused is app.query_one("#rating-mental"), 10)
         burst = ["4", "0", "down", "3", "5", "down", "1", "0", "0", "down"]
         burst += ["0", "down", "6", "5", "down", "2", "5", "down"]
@@ -80,11 +76,7 @@ async def test_the_question_is_the_focused_fields_when_focus_events_come_late(
 
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "VO")
-        await wait_for(pilot, lambda: pane.loaded_block == ("P001", "lcca", "VO"), 10)
+        pane = await tlx_form(pilot)
         await wait_for(pilot, lambda: app.focused is app.query_one("#rating-mental"), 10)
         await pilot.pause()
         pane.post_message(events.DescendantFocus(app.query_one("#tlx-participant")))
@@ -98,11 +90,7 @@ async def test_a_form_opens_with_its_block_and_question_in_view(make_test_app) -
     # block's form opened scrolled down, its participant, block and question hidden
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "VO")
-        await wait_for(pilot, lambda: pane.loaded_block == ("P001", "lcca", "VO"), 10)
+        pane = await tlx_form(pilot)
         app.query_one("#save", Button).focus()
         await wait_for(pilot, lambda: pane.scroll_y > 0, 10)
         for how in ("open_block", "f4"):

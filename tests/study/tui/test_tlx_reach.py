@@ -15,7 +15,7 @@ from study.protocol.tlx import load_tlx, pair_order, store_tlx
 from study.tui.confirm import Confirm
 from study.tui.palette import study_commands
 from study.tui.tlx_pane import PairChoice, TlxPane
-from tests.study.tui.conftest import complete_block, loaded, run_screen, wait_for
+from tests.study.tui.conftest import complete_block, loaded, run_screen, tlx_form, wait_for
 
 RATINGS = dict(zip(TLX_SUBSCALES, (40, 35, 45, 30, 60, 25), strict=True))
 SEED = 3  # the conftest design's
@@ -111,11 +111,7 @@ async def test_the_palette_finds_stored_questionnaires_too(make_test_app, study_
 async def test_switching_participant_keeps_a_block_they_also_have(make_test_app) -> None:
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "HV")
-        await _shown(pilot, pane, ("P001", "lcca", "HV"))
+        pane = await tlx_form(pilot, ("P001", "lcca", "HV"))
         app.query_one("#tlx-participant", Select).value = "P002"
         await _shown(pilot, pane, ("P002", "lcca", "HV"))
         await pilot.pause(0.2)  # the block Select's own Changed message
@@ -129,11 +125,7 @@ async def test_the_participant_and_block_stay_in_view_while_the_form_scrolls(
 ) -> None:
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "VO")
-        await _shown(pilot, pane, ("P001", "lcca", "VO"))
+        pane = await tlx_form(pilot)
         app.query_one("#pair-14", PairChoice).focus()
         await pilot.pause(0.2)
         assert pane.scroll_y > 0  # scrolled down to the last pair: the ratings out of view
@@ -160,11 +152,7 @@ async def test_tab_cycles_through_the_forms_fields_each_with_a_focus_style(
 ) -> None:
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "VO")
-        await _shown(pilot, pane, ("P001", "lcca", "VO"))
+        pane = await tlx_form(pilot)
         start = app.query_one("#rating-mental", Input)
         start.focus()
         await pilot.pause()
@@ -234,11 +222,7 @@ async def test_saving_an_unchanged_stored_form_says_so_and_logs_nothing(
     before = _audit_rows(study_engine)
     app = make_test_app()
     async with app.run_test(size=(80, 24)) as pilot:
-        await loaded(pilot)
-        await pilot.press("f4")
-        pane = app.query_one(TlxPane)
-        pane.open_block("P001", "lcca", "VO")
-        await _shown(pilot, pane, ("P001", "lcca", "VO"))
+        pane = await tlx_form(pilot)
         app.query_one("#rating-mental", Input).value = "040"  # the same number
         app.query_one("#reason", Input).value = "checked"
         await pilot.press("ctrl+s")
