@@ -38,6 +38,7 @@ from study.cli import main
 from study.lsl.markers import KEY, MARKER_STREAM, VERSION
 from study.lsl.xdf import TRIAL_FIELDS
 from tests.study.lsl.test_import_xdf import _emg, study_db
+from tests.study.lsl.test_import_xdf_faults import _keys
 from tests.study.lsl.xdf_writer import XdfStream, write_xdf
 
 __all__ = ["study_db"]  # the fixture, shared with the import's own tests
@@ -100,22 +101,6 @@ class TestMutatedRecordings:
 
     # -- the seed and the check ---------------------------------------------------------
 
-    @staticmethod
-    def keys(trial: Trial) -> dict[str, Any]:
-        return {
-            "study": "xdf import",
-            "participant": "P001",
-            "group": "novice",
-            "trial_id": trial.id,
-            "task": trial.task,
-            "condition": trial.condition,
-            "block": trial.block_index,
-            "trial": trial.trial_index,
-            "practice": trial.practice,
-            "attempt": trial.attempt,
-            "clock_rate": 1.0,
-        }
-
     def streams(
         self,
         trial: Trial,
@@ -127,7 +112,7 @@ class TestMutatedRecordings:
         (`_DROP` removes one), `events` the (stamp, event) sequence."""
         texts = {}
         for event, edits in (("trial_start", start), ("trial_end", end)):
-            fields = {KEY: VERSION, "event": event, **self.keys(trial), **(edits or {})}
+            fields = {KEY: VERSION, "event": event, **_keys(trial), **(edits or {})}
             texts[event] = json.dumps({k: v for k, v in fields.items() if v is not _DROP})
         sequence = events or [(100.0, "trial_start"), (103.0, "trial_end")]
         markers = XdfStream(
@@ -346,7 +331,7 @@ class TestMutatedRecordings:
         db, trials = study_db
         if self.wrong_for(field, other):
             return  # a wrong value, not another trial: the field family's
-        start = self.keys(trials[0])[field]
+        start = _keys(trials[0])[field]
         if other == start and type(other) is type(start):
             return
         streams = list(self.streams(trials[0], end={field: other}))
