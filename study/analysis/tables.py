@@ -109,11 +109,29 @@ class Table:
         """NAME.csv (raw numbers; a data_source column, for a table may travel alone),
         NAME.md and NAME.tex (formatted, captioned)."""
         paths = [folder / f"{self.name}.{ext}" for ext in ("csv", "md", "tex")]
-        rows = [{**r, "data_source": data_source} for r in self.rows]
-        write_csv(paths[0], [*self.columns, "data_source"], rows)
+        columns, rows = flat_columns(self.columns, self.rows)
+        rows = [{**r, "data_source": data_source} for r in rows]
+        write_csv(paths[0], [*columns, "data_source"], rows)
         paths[1].write_text(self.markdown())
         paths[2].write_text(self.latex())
         return paths
+
+
+def flat_columns(columns: Sequence[str], rows: list[Row]) -> tuple[list[str], list[Row]]:
+    """`rows` with one scalar per cell, as a CSV (and R's `read.csv`) wants them: an
+    interval `[low, high]` under `NAME_low` and `NAME_high`, a record (the condition
+    effect before and after) under `NAME_KEY` for each of its keys, recursively."""
+
+    def flat(name: str, value: Any) -> dict[str, Any]:
+        if isinstance(value, dict):
+            return {k: v for key, x in value.items() for k, v in flat(f"{name}_{key}", x).items()}
+        if isinstance(value, list | tuple) and len(value) == 2:
+            return {f"{name}_low": value[0], f"{name}_high": value[1]}
+        return {name: value}
+
+    out = [{k: v for c in columns for k, v in flat(c, r.get(c)).items()} for r in rows]
+    names = list(dict.fromkeys(k for r in out for k in r)) if out else list(columns)
+    return names, out
 
 
 def _is_number(value: Any) -> bool:

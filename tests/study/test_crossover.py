@@ -51,3 +51,24 @@ def test_a_study_without_them_adds_nothing(tmp_path: Path) -> None:
     assert not any(c["added"] for c in result["design_checks"])
     assert all(f["first_period"] is None for f in result["design_fit"])
     assert "the model was kept as it was" in result["methods"]
+
+
+def test_design_checks_csv_holds_one_number_per_cell(tmp_path: Path) -> None:
+    """The CSV a reviewer reads into R: intervals and the condition effect before and
+    after spread over columns of their own, each equal to analysis.json's value."""
+    import csv
+
+    result = _analyze(tmp_path, seed=0, period=0.1, carry_over=0.2)
+    with (tmp_path / "a" / "design_checks.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(result["design_checks"])
+    for row, check in zip(rows, result["design_checks"], strict=True):
+        assert not any(v.startswith(("{", "[")) for v in row.values())
+        assert float(row["ci_low"]) == check["ci"][0]
+        assert float(row["ci_high"]) == check["ci"][1]
+        for when in ("before", "after"):
+            effect = check[f"condition_{when}"]
+            assert float(row[f"condition_{when}_estimate"]) == effect["estimate"]
+            assert float(row[f"condition_{when}_ci_high"]) == effect["ci"][1]
+            assert float(row[f"condition_{when}_df"]) == effect["df"]
+        assert row["data_source"] == result["data_source"]["label"]
