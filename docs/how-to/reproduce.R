@@ -3,19 +3,23 @@
 #   Rscript reproduce.R export/ [out/]
 #
 # reads export/trials.csv and export/tlx.csv and writes to out/ (default: export/r/):
-#   comparisons.csv  HV vs VO within each group, Holm within task x measure
+#   comparisons.csv  HV vs VO within each group, Holm within task x measure: the test,
+#                    the mean difference with its 95 % CI, d_z with its CI, Hedges'
+#                    g_av, the rank-biserial r and the JZS Bayes factor BF10
+#   success.csv      task success per group, the exact McNemar test, Holm within task
 #   anova.csv        the mixed ANOVA on participant means (afex, Type II as study's default)
 #   lmm.csv          the mixed model over all trials (lmerTest, Satterthwaite df)
 #   emmeans.csv      the condition's marginal means over the groups and HV - VO (emmeans)
 #   design_checks.csv  the crossover's period, carry-over and trial position (lmerTest),
 #                    Holm over every check of the study
-# Needs R >= 4.2 with afex, lmerTest, emmeans and coin (Debian: r-cran-afex,
-# r-cran-lmertest, r-cran-emmeans, r-cran-coin).
+# Needs R >= 4.2 with afex, lmerTest, emmeans, coin and BayesFactor (Debian: r-cran-afex,
+# r-cran-lmertest, r-cran-emmeans, r-cran-coin, r-cran-bayesfactor).
 suppressPackageStartupMessages({
   library(afex)
   library(lmerTest)
   library(emmeans)
   library(coin)
+  library(BayesFactor)
 })
 
 args <- commandArgs(trailingOnly = TRUE)
@@ -88,18 +92,62 @@ signed_rank_p <- function(d) {
   pvalue(wilcoxsign_test(y ~ x, data = data.frame(y = d, x = 0), distribution = dist))
 }
 
+# d_z's interval: the noncentrality whose t distribution has the observed t at the
+# interval's quantile (the pivot of MBESS::ci.smd), by uniroot in a widening bracket
+ncp_root <- function(t, df, q) {
+  f <- function(ncp) pt(t, df, ncp) - q
+  direction <- if (f(t) > 0) 1 else -1
+  near <- t
+  step <- 1
+  repeat {
+    far <- t + direction * step
+    if ((f(far) > 0) != (f(near) > 0)) {
+      return(uniroot(f, sort(c(near, far)), tol = 1e-12)$root)
+    }
+    near <- far
+    step <- step * 2
+  }
+}
+
+# the numbers of differences with a spread: t, the mean difference's CI, d_z with its
+# CI, Hedges' g_av (Lakens' d_av times J = 1 - 3 / (4 (n - 1) - 1)), BF10 (JZS, r = .707)
+t_parts <- function(vo, hv) {
+  n <- length(vo)
+  t <- t.test(hv, vo, paired = TRUE)
+  stat <- unname(t$statistic)
+  d_av <- (mean(hv) - mean(vo)) / ((sd(vo) + sd(hv)) / 2)
+  bf <- ttestBF(x = hv, y = vo, paired = TRUE, rscale = sqrt(2) / 2)
+  list(t = stat, p_t = t$p.value, diff_ci_low = t$conf.int[1], diff_ci_high = t$conf.int[2],
+       dz = stat / sqrt(n), dz_ci_low = ncp_root(stat, n - 1, 0.975) / sqrt(n),
+       dz_ci_high = ncp_root(stat, n - 1, 0.025) / sqrt(n),
+       g_av = d_av * (1 - 3 / (4 * (n - 1) - 1)), bf10 = exp(bf@bayesFactor$bf))
+}
+
+rank_biserial <- function(d) {
+  r <- rank(abs(d))
+  plus <- sum(r[d > 0])
+  minus <- sum(r[d < 0])
+  if (plus + minus == 0) 0 else (plus - minus) / (plus + minus)
+}
+
+none <- list(t = NA, p_t = NA, diff_ci_low = NA, diff_ci_high = NA, dz = NA, dz_ci_low = NA,
+             dz_ci_high = NA, g_av = NA, bf10 = NA)
+
 compare <- function(vo, hv) {
   d <- at_resolution(hv - vo, max(abs(c(vo, hv))))
   if (all(d == d[1])) {
-    if (d[1] == 0) return(list(test = "none", statistic = NA, p = NA))
-    return(list(test = "wilcoxon", statistic = sum(rank(abs(d))[d > 0]),
-                p = signed_rank_p(d)))
+    if (d[1] == 0) return(c(list(test = "none", statistic = NA, p = NA, effect_size = NA),
+                            none))
+    return(c(list(test = "wilcoxon", statistic = sum(rank(abs(d))[d > 0]),
+                  p = signed_rank_p(d), effect_size = rank_biserial(d)), none))
   }
+  parts <- t_parts(vo, hv)
   if (shapiro.test(d)$p.value >= 0.05) {
-    t <- t.test(hv, vo, paired = TRUE)
-    return(list(test = "paired_t", statistic = unname(t$statistic), p = t$p.value))
+    return(c(list(test = "paired_t", statistic = parts$t, p = parts$p_t,
+                  effect_size = parts$g_av), parts))
   }
-  list(test = "wilcoxon", statistic = sum(rank(abs(d))[d > 0]), p = signed_rank_p(d))
+  c(list(test = "wilcoxon", statistic = sum(rank(abs(d))[d > 0]), p = signed_rank_p(d),
+         effect_size = rank_biserial(d)), parts)
 }
 
 rows <- list()
@@ -111,13 +159,19 @@ for (cell in split(means, list(means$task, means$measure, means$group), drop = T
   r <- compare(wide$value.VO, wide$value.HV)
   rows[[length(rows) + 1]] <- data.frame(
     task = cell$task[1], measure = cell$measure[1], group = cell$group[1],
-    n = nrow(wide), test = r$test, statistic = r$statistic, p = r$p)
+    n = nrow(wide), test = r$test, statistic = r$statistic, p = r$p,
+    effect_size = r$effect_size, mean_diff = mean(wide$value.HV - wide$value.VO),
+    diff_ci_low = r$diff_ci_low, diff_ci_high = r$diff_ci_high, dz = r$dz,
+    dz_ci_low = r$dz_ci_low, dz_ci_high = r$dz_ci_high, g_av = r$g_av, bf10 = r$bf10)
 }
 comparisons <- do.call(rbind, rows)  # NULL when no group has 3 pairs
 if (is.null(comparisons)) {
   comparisons <- data.frame(task = character(), measure = character(), group = character(),
                             n = integer(), test = character(), statistic = numeric(),
-                            p = numeric())
+                            p = numeric(), effect_size = numeric(), mean_diff = numeric(),
+                            diff_ci_low = numeric(), diff_ci_high = numeric(), dz = numeric(),
+                            dz_ci_low = numeric(), dz_ci_high = numeric(), g_av = numeric(),
+                            bf10 = numeric())
 }
 # Holm within task x measure, across the testable groups
 comparisons$p_holm <- if (nrow(comparisons)) {
@@ -125,6 +179,33 @@ comparisons$p_holm <- if (nrow(comparisons)) {
       FUN = function(p) { p[!is.na(p)] <- p.adjust(p[!is.na(p)], "holm"); p })
 } else numeric()
 write.csv(comparisons, file.path(out, "comparisons.csv"), row.names = FALSE)
+
+# task success: a participant succeeded in a condition when every trial of it did; the
+# exact McNemar test is the binomial test of the discordant pairs, Holm within task
+if ("success" %in% names(trials)) {
+  outcome <- trials[!is.na(trials$success) & trials$success != "", ]
+  outcome$ok <- outcome$success %in% c(TRUE, "True", "true", "TRUE", 1, "1")
+  by_block <- aggregate(ok ~ participant + group + task + condition, outcome, all)
+  success_rows <- list()
+  for (cell in split(by_block, list(by_block$task, by_block$group), drop = TRUE)) {
+    wide <- reshape(cell[, c("participant", "condition", "ok")], idvar = "participant",
+                    timevar = "condition", direction = "wide")
+    if (!all(c("ok.VO", "ok.HV") %in% names(wide))) next
+    wide <- wide[complete.cases(wide), ]
+    if (!nrow(wide)) next
+    b <- sum(wide$ok.VO & !wide$ok.HV)
+    c <- sum(wide$ok.HV & !wide$ok.VO)
+    success_rows[[length(success_rows) + 1]] <- data.frame(
+      task = cell$task[1], group = cell$group[1], n = nrow(wide),
+      success_vo = sum(wide$ok.VO), success_hv = sum(wide$ok.HV), vo_only = b, hv_only = c,
+      p = if (b + c) binom.test(b, b + c)$p.value else 1)
+  }
+  success <- do.call(rbind, success_rows)
+  if (!is.null(success)) {
+    success$p_holm <- ave(success$p, success$task, FUN = function(p) p.adjust(p, "holm"))
+    write.csv(success, file.path(out, "success.csv"), row.names = FALSE)
+  }
+}
 
 # mixed ANOVA on participant means: group between, condition within, Type II
 # (`study analyze --ss-type 3`: type = 3)
