@@ -1,13 +1,16 @@
 """The mixed ANOVA's arithmetic (`stats.mixed_anova`): with two conditions it is two
-one-way between-subject models, computed here in closed form.
+one-way between-subject models, each fitted by statsmodels' OLS and tested by its
+nested-model F test (`OLSResults.compare_f_test`).
 
-Written by hand rather than through statsmodels' `anova_lm(OLS.from_formula(...))`:
-the sums of squares of a one-way model are a few lines, and the formula parser and two
-model fits per measure were most of `study analyze`'s time. The values equal R's
-afex `aov_ez(type = 2|3)` (tests/study/test_analysis.py quotes them). Not
-`pingouin.mixed_anova` either: it gives Type II only (equal to this one on unequal groups,
-which the tests check), and `study analyze --ss-type 3` (afex's default) needs Type III,
-so one closed form serves both types.
+The split is the multivariate approach car::Anova and afex use for a within factor of two
+levels: the participant sums s = (a + b) / sqrt 2 carry the group effect; the
+differences d = (b - a) / sqrt 2 carry the condition effect (the mean of d) and the
+interaction (the group term of d ~ group). The design matrices are built here from the
+group labels (sum-to-zero contrasts) rather than through a formula: the models are fixed,
+and statsmodels' formula layer would parse six formulas per measure to build the same
+columns. Not `pingouin.mixed_anova`: it gives Type II only, and `study analyze --ss-type 3`
+(afex's default) needs Type III. The values equal R's afex `aov_ez(type = 2|3)`
+(tests/study/test_analysis.py quotes them).
 """
 
 from __future__ import annotations
@@ -17,30 +20,52 @@ from typing import Any
 
 import numpy as np
 
+from study.analysis.paired import RESOLUTION_REL, magnitude
 
-def one_way(y: np.ndarray, group: np.ndarray) -> dict[str, Any]:
-    """The sums of squares of the one-way model y ~ C(group, Sum), in closed form (what
-    statsmodels' `anova_lm(OLS.from_formula(...), typ=3)` gives, without a formula
-    parser and two model fits per measure).
 
-    Group: sum over groups of n_g (mean_g - mean)^2, df G - 1 (one factor: Types I-III
-    agree); residual: the within-group SS, df N - G. The intercept: Type II, N mean^2
-    (the participant-weighted mean); Type III with sum contrasts, the unweighted mean of
-    the group means m, m^2 / (sum_g 1 / n_g / G^2), its SS over the residual variance.
-    """
+def _sum_coded(group: np.ndarray) -> np.ndarray:
+    """The group's sum-to-zero contrast columns (R's `contr.sum`: the last level -1)."""
     labels, index = np.unique(group, return_inverse=True)
-    n_g = np.bincount(index).astype(float)
-    mean_g = np.bincount(index, weights=y) / n_g
-    n, k = len(y), len(labels)
-    unweighted = mean_g.mean()
-    # numpy scalars, as statsmodels' table holds: a zero residual gives F = inf (or nan)
-    # with a warning, not an exception
-    f64 = np.float64
+    k = len(labels)
+    coding = np.vstack([np.eye(k - 1), -np.ones(k - 1)]) if k > 1 else np.zeros((1, 0))
+    return coding[index]
+
+
+def _f_test(
+    y: np.ndarray, full: np.ndarray, restricted: np.ndarray, zero_ss: float
+) -> dict[str, float]:
+    """statsmodels' F test of the OLS model `full` against the nested `restricted`.
+
+    The effect's sum of squares is the restricted model's residual SS minus the full
+    one's. A residual SS at most `zero_ss` (the data's resolution: every participant of a
+    group alike, up to rounding) is an exact fit with no error to test against: no F, no
+    p (`exact_fit` True), where the ratio of rounding errors would give F ~ 1e30.
+    """
+    from statsmodels.regression.linear_model import OLS
+
+    fit = OLS(y, full).fit()
+    reduced = OLS(y, restricted).fit() if restricted.shape[1] else None
+    ssr_restricted = reduced.ssr if reduced is not None else float(y @ y)
+    df_effect = full.shape[1] - restricted.shape[1]
+    effect = max(ssr_restricted - fit.ssr, 0.0)
+    if fit.ssr <= zero_ss:
+        f = p = np2 = math.nan
+    elif reduced is not None:
+        f, p, _ = fit.compare_f_test(reduced)
+        np2 = effect / (effect + fit.ssr)
+    else:  # no column left: the restricted model predicts 0
+        from scipy.stats import f as f_dist
+
+        f = effect / df_effect / (fit.ssr / fit.df_resid)
+        p = f_dist.sf(f, df_effect, fit.df_resid)
+        np2 = effect / (effect + fit.ssr)
     return {
-        "group": {"sum_sq": f64(n_g @ (mean_g - y.mean()) ** 2), "df": f64(k - 1)},
-        "residual": {"sum_sq": f64(((y - mean_g[index]) ** 2).sum()), "df": f64(n - k)},
-        "intercept_ii": f64(n * y.mean() ** 2),
-        "intercept_iii": f64(unweighted**2 / ((1.0 / n_g).sum() / k**2)),
+        "F": float(f),
+        "df1": float(df_effect),
+        "df2": float(fit.df_resid),
+        "p": float(p),
+        "np2": float(np2),
+        "exact_fit": bool(fit.ssr <= zero_ss),
     }
 
 
@@ -50,43 +75,28 @@ def anova_rows(
     """Group (between) x condition (two levels, within), one participant per element:
     their group and their means in the two conditions `a` and `b`.
 
-    With two conditions the mixed ANOVA splits into two between-subject models (the
-    multivariate approach car::Anova and afex use): the participant sums
-    s = (a + b) / sqrt 2 carry the group effect; the differences d = (b - a) / sqrt 2
-    carry the condition effect (the intercept of d ~ group) and the interaction (the
-    group term of d ~ group), both one-way models with sum-to-zero group contrasts
-    (`one_way`): Type III condition is the sum-coded intercept's SS, Type II the
-    intercept's alone, N mean(d)^2.
+    Group: s ~ 1 + group against s ~ 1. Interaction: d ~ 1 + group against d ~ 1.
+    Condition, Type III: d ~ 1 + group (sum-coded) against the same without the intercept
+    (the unweighted mean of the group means is 0); Type II: against the group columns
+    centred on their participant-weighted means, no intercept (the participants' mean
+    difference is 0; its SS is N mean(d)^2). A term whose model fits exactly has
+    `exact_fit` True and no F or p.
     """
-    from scipy.stats import f as f_dist
-
-    between = one_way((a + b) / math.sqrt(2), group)
-    within = one_way((b - a) / math.sqrt(2), group)
-    # Type II: SS(condition) = N dbar^2; Type III: the sum-coded intercept's SS
-    ss_condition = within["intercept_ii"] if ss_type == 2 else within["intercept_iii"]
-    terms = (
-        ("group", between["group"], between["residual"]),
-        ("condition", {"sum_sq": ss_condition, "df": 1.0}, within["residual"]),
-        ("interaction", within["group"], within["residual"]),
+    y_between = (a + b) / math.sqrt(2)
+    y_within = (b - a) / math.sqrt(2)
+    codes = _sum_coded(np.asarray(group))
+    ones = np.ones((len(y_within), 1))
+    full = np.column_stack([ones, codes])
+    condition_restricted = codes if ss_type == 3 else codes - codes.mean(axis=0)
+    tests = (
+        ("group", y_between, ones),
+        ("condition", y_within, condition_restricted),
+        ("interaction", y_within, ones),
     )
-    rows = []
-    for source, effect, error in terms:
-        # F = (SS_effect / df_effect) / (SS_error / df_error); partial eta^2 = SS / (SS + SS_err).
-        # No error variance (every participant answered alike): F is inf when the effect is
-        # not zero (p = 0, as R's F on an exact fit) and undefined (nan) when it is; numpy's
-        # float64 division gives exactly these, so its warnings are silenced, not its values.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            f = (effect["sum_sq"] / effect["df"]) / (error["sum_sq"] / error["df"])
-            np2 = effect["sum_sq"] / (effect["sum_sq"] + error["sum_sq"])
-        rows.append(
-            {
-                "source": source,
-                "F": float(f),
-                "df1": float(effect["df"]),
-                "df2": float(error["df"]),
-                "p": float(f_dist.sf(float(f), float(effect["df"]), float(error["df"]))),
-                "np2": float(np2),
-                "ss_type": ss_type,
-            }
-        )
-    return rows
+    # the data's resolution (as the paired comparisons'): 9 significant digits of the
+    # values' magnitude, per participant
+    zero_ss = len(a) * (RESOLUTION_REL * magnitude(a, b)) ** 2
+    return [
+        {"source": source, **_f_test(y, full, restricted, zero_ss), "ss_type": ss_type}
+        for source, y, restricted in tests
+    ]

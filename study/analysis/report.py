@@ -75,7 +75,7 @@ def _strict(v: Any) -> Any:
 
 
 def _records(rows: list[Row], keys: tuple[str, ...]) -> list[dict[str, Any]]:
-    # NaN, and the infinite F of a residual that is exactly zero: null (strict JSON)
+    # NaN (no F where a model fits exactly, a mean of nothing): null (strict JSON)
     return [{k: _strict(row[k]) for k in keys} for row in rows]
 
 

@@ -475,7 +475,19 @@ def _anova_of(
     if all(np.var(v[group == g], ddof=1) == 0 for g in sizes for v in (va, vb)):
         notes.append(f"{label}: mixed ANOVA skipped (no variance within groups)")
         return [], notes
-    return anova_rows(group, va, vb, ss_type), notes
+    rows = anova_rows(group, va, vb, ss_type)
+    exact = [r["source"] for r in rows if r.pop("exact_fit")]
+    if "group" in exact:
+        notes.append(
+            f"{label}: mixed ANOVA group not testable (the participants' means do not "
+            "vary within groups)"
+        )
+    if "condition" in exact:
+        notes.append(
+            f"{label}: mixed ANOVA condition and interaction not testable (the HV - VO "
+            "differences do not vary within groups)"
+        )
+    return rows, notes
 
 
 def _missing_questionnaires(trials: list[Row], long: Long) -> list[str]:
