@@ -12,8 +12,9 @@
   one task x measure, and each row names its family.
 - `mixed_anova`: group (between) x condition (within) with partial eta squared and
   Type II (default) or Type III sums of squares, equal to R's afex `aov_ez(type = 2|3)`.
-  pingouin's `mixed_anova` has Type II only, so both come from two one-way models in
-  closed form (`anova.py` says how); unequal group sizes are stated.
+  pingouin's `mixed_anova` has Type II only, so both come from two one-way models
+  fitted by statsmodels' OLS and its nested F tests (`anova.py` says how); unequal group
+  sizes are stated, and a term whose model fits exactly is not testable.
 - `mixed_model` (`study.analysis.mixed_model`): a linear mixed model over all trials,
   value ~ condition * group with a random intercept per participant, REML at lme4's
   optimum, t tests with Satterthwaite df (lmerTest) or Kenward-Roger's, and the
