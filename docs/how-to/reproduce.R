@@ -60,16 +60,15 @@ tlx_scores <- data.frame(tlx[, c("participant", "group", "task", "condition")],
                          setNames(as.data.frame(ratings), paste0("tlx_", subs)))
 long_tlx <- do.call(rbind, lapply(setdiff(names(tlx_scores), keys), function(m) {
   d <- tlx_scores[!is.na(tlx_scores[[m]]), c("participant", "group", "task", "condition")]
+  if (!nrow(d)) return(NULL)  # a study without questionnaires
   d$measure <- m
   d$value <- tlx_scores[!is.na(tlx_scores[[m]]), m]
   d
 }))
 
 # participant means: the unit of the comparisons and of the ANOVA
-means <- rbind(
-  aggregate(value ~ participant + group + task + condition + measure, long_trials, mean),
-  aggregate(value ~ participant + group + task + condition + measure, long_tlx, mean)
-)
+means <- do.call(rbind, lapply(Filter(Negate(is.null), list(long_trials, long_tlx)),
+  function(d) aggregate(value ~ participant + group + task + condition + measure, d, mean)))
 
 # differences at the data's resolution (9 significant digits of its magnitude):
 # values closer than that to zero are zero, runs closer than that are one value
@@ -277,9 +276,18 @@ for (cell in split(long_trials, list(long_trials$task, long_trials$measure), dro
     fit <- lmer(as.formula(paste(base, "+", paste(terms, collapse = " + "),
                                  "+ (1 | participant)")), cell, REML = TRUE, control = ctl)
     co <- summary(fit, ddf = "Satterthwaite")$coefficients[term[[effect]], ]
+    df <- co[["df"]]
+    if (effect != "carry_over" && isSingular(fit)) {
+      # a singular fit's pooled residual is too small for a within-participant term:
+      # test it against the within-participant residual (participants as fixed effects)
+      within <- lm(as.formula(paste(base, "+ participant +", paste(terms, collapse = " + "))),
+                   cell)
+      co <- summary(within)$coefficients[term[[effect]], ]
+      df <- within$df.residual
+    }
     check_rows[[length(check_rows) + 1]] <- data.frame(
       task = cell$task[1], measure = cell$measure[1], effect = effect,
-      estimate = co[["Estimate"]], df = co[["df"]], p = co[["Pr(>|t|)"]])
+      estimate = co[["Estimate"]], df = df, p = co[["Pr(>|t|)"]])
   }
 }
 checks <- do.call(rbind, check_rows)

@@ -45,6 +45,17 @@ carry-over is added, the first-period comparison is reported too: HV against VO 
 first block only, between participants (value ~ condition + group + (1 | participant)),
 the estimate the crossover literature falls back on when carry-over is present.
 
+A singular fit (the participant SD estimated at zero, lme4's `isSingular`) pools the
+between-participant residual into sigma, and a between-participant spread smaller than
+the within-participant one is why the fit is singular: the pooled sigma is then too
+small for a within-participant term, whose t is too large (at one trial a block and no
+true participant spread, 6-7 % of such checks fell below .05 against 5 %). So at a
+singular fit the period and the trial position are tested against the
+within-participant residual alone (participants as fixed effects, statsmodels' OLS),
+as the classical crossover analysis does (Jones and Kenward, ch. 2); at an interior fit
+that is the mixed model's own test. The carry-over, between participants, keeps the
+mixed model's test (the pooled sigma is larger than its own error there: conservative).
+
 A model is fitted once per task and measure and set of terms (`_Cell.fit`); the base
 model is the one `mixed_model` fits, which `stats_lmm.fit_random_intercept` returns
 from its cache.
@@ -62,7 +73,7 @@ from study.analysis.mixed_model import (
     marginal_weights,
     reference_condition,
 )
-from study.analysis.stats_lmm import Contrast, Fit, fit_random_intercept
+from study.analysis.stats_lmm import SINGULAR_TOL, Contrast, Fit, fit_random_intercept
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -216,17 +227,48 @@ def _fit_summary(fit: Fit) -> dict[str, Any]:
     }
 
 
+def _design(cell: _Cell, terms: tuple[str, ...]) -> np.ndarray:
+    """The base design of `cell` with the columns of `terms`."""
+    columns = [cell.column(e) for e in terms]
+    return np.column_stack([cell.X, *columns]) if terms else cell.X
+
+
 def _fit(cell: _Cell, effects: list[str]) -> tuple[Fit, list[str]]:
     """The base model of `cell` plus `effects`, fitted once per set of terms."""
     terms = tuple(e for e in EFFECTS if e in effects)
     if terms not in cell.fits:
-        columns = [cell.column(e) for e in terms]
-        X = np.column_stack([cell.X, *columns]) if terms else cell.X
         cell.fits[terms] = (
-            fit_random_intercept(X, cell.y, cell.participant),
+            fit_random_intercept(_design(cell, terms), cell.y, cell.participant),
             [*cell.names, *terms],
         )
     return cell.fits[terms]
+
+
+def _within_participants(cell: _Cell, effects: list[str], effect: str) -> Contrast:
+    """The t test of `effect` against the within-participant residual: y on one
+    intercept per participant and the columns of the model that vary within a
+    participant (statsmodels' OLS; the columns constant within every participant are
+    the intercepts' span)."""
+    from statsmodels.regression.linear_model import OLS
+
+    terms = tuple(e for e in EFFECTS if e in effects)
+    X = _design(cell, terms)
+    people, index = np.unique(cell.participant.astype(str), return_inverse=True)
+    means = np.zeros((len(people), X.shape[1]))
+    np.add.at(means, index, X)
+    means /= np.bincount(index)[:, None]
+    varies = np.abs(X - means[index]).max(axis=0) > 1e-12
+    dummies = (index[:, None] == np.arange(len(people))[None, :]).astype(float)
+    names = [*cell.names, *terms]
+    kept = [n for n, v in zip(names, varies, strict=True) if v]
+    design = np.column_stack([dummies, X[:, varies]])
+    fit = OLS(cell.y, design).fit()
+    L = np.zeros(design.shape[1])
+    L[len(people) + kept.index(effect)] = 1.0
+    test = fit.t_test(L)
+    return Contrast.of(
+        float(np.ravel(test.effect)[0]), float(np.ravel(test.sd)[0]), float(fit.df_resid)
+    )
 
 
 def _test_model(effect: str, testable: list[str]) -> list[str]:
@@ -341,7 +383,10 @@ def _check_cell(
         except (np.linalg.LinAlgError, ValueError) as exc:
             result.notes.append(f"{label}: {effect} could not be fitted: {exc}")
             continue
-        c = fit.contrast(np.eye(len(names))[names.index(effect)])
+        if effect != "carry_over" and fit.theta < SINGULAR_TOL:
+            c = _within_participants(cell, _test_model(effect, testable), effect)
+        else:
+            c = fit.contrast(np.eye(len(names))[names.index(effect)])
         result.checks.append(
             {
                 "task": task,

@@ -31,7 +31,10 @@ def design_checks_method() -> str:
         "carry-over is VO after HV minus HV after VO, estimable between participants only. "
         "When a block held several trials, the trial position within the block entered "
         "too, centred, as a slope per trial. Each term was tested by its t with "
-        "Satterthwaite df. All checks of the study were one "
+        "Satterthwaite df; where the participant variance was estimated at zero (a "
+        "singular fit), the period and the trial position were tested against the "
+        "within-participant residual, participants as fixed effects. All checks of the "
+        "study were one "
         f"family, Holm-corrected; a check with a corrected p below {ALPHA_TEXT} was added "
         "to the model, and the HV - VO effect (marginal means over the groups) is reported "
         "before and after. Where a carry-over was added, the first-period comparison "
@@ -43,6 +46,10 @@ def design_checks_json() -> dict[str, Any]:
     return {
         "effects": dict(EFFECT_WORDS),
         "test": "t test of the added term in the mixed model, Satterthwaite df",
+        "singular_fit": (
+            "period and trial position tested against the within-participant residual "
+            "(participants as fixed effects)"
+        ),
         "correction": "Holm across every check of the study",
         "added_when": f"p_holm < {ALPHA_TEXT}",
         "condition_effect": "HV - VO marginal contrast, groups weighted equally",
