@@ -14,7 +14,9 @@ forces), condition orders alternating within each group, drawn with numpy:
 Without planted effects, the share of studies with any term added is the checks'
 family-wise error rate (Holm over every check of the study, target at most 5 %). With
 `--period 0.1 --carry-over 0.2` (shares of the mean completion time, planted in the
-completion time only), the share where both are added is the checks' power.
+completion time only), the share where both are added is the checks' power; beside it
+the closed-form power of the carry-over's between-participant t test at Holm's level
+(`carry_over_power`), the most any test of a carry-over in these designs can reach.
 
     python benchmarks/crossover_checks.py OUT.json [--seeds 200]
 """
@@ -84,11 +86,14 @@ def run(name: str, seeds: int, period: float, carry_over: float, start: float) -
     both added to the completion time."""
     any_added = both_added = 0
     checks = 0
+    each = {"period": 0, "carry_over": 0}
     for seed in range(seeds):
         result = design_checks(draw(SCENARIOS[name], seed, period, carry_over))
         checks = len(result.checks)
         added = {(c["measure"], c["effect"]) for c in result.checks if c["added"]}
         any_added += bool(added)
+        for effect in each:
+            each[effect] += ("completion_time_s", effect) in added
         both_added += {("completion_time_s", "period"), ("completion_time_s", "carry_over")} <= (
             added
         )
@@ -105,7 +110,33 @@ def run(name: str, seeds: int, period: float, carry_over: float, start: float) -
         "studies": seeds,
         "share_any_added": any_added / seeds,
         "share_period_and_carry_over_added": both_added / seeds,
+        "share_added_completion_time": {k: v / seeds for k, v in each.items()},
     }
+
+
+def carry_over_power(name: str, carry_over: float, rank: int) -> float:
+    """The closed-form power of the carry-over's between-participant t test (Grizzle's:
+    the participants' mean over their trials, condition orders compared within groups)
+    in scenario `name` (normal only), at Holm's level for the `rank`-th smallest p of
+    the study's checks: alpha / (checks - rank + 1).
+
+    A participant's mean over their 2 x trials trials has variance sd_p^2 + sd_e^2 /
+    (2 trials); the carry-over enters half of the HV-first participants' trials, so its
+    estimate is twice the difference of the orders' means, SE = 2 sqrt(var (1/n_AB +
+    1/n_BA)), df = participants - 2 x groups (two orders in each group).
+    """
+    from scipy import stats
+
+    scenario = SCENARIOS[name]
+    people = sum(scenario["groups"].values())
+    var = 3.0**2 + 3.0**2 / (2 * scenario["trials"])
+    se = 2 * np.sqrt(var * (2 / people + 2 / people))
+    df = people - 2 * len(scenario["groups"])
+    checks = 3 * (3 if scenario["trials"] > 1 else 2)
+    alpha = 0.05 / (checks - rank + 1)
+    crit = stats.t.ppf(1 - alpha / 2, df)
+    nc = carry_over * MEAN_S / se
+    return float(stats.nct.sf(crit, df, nc) + stats.nct.cdf(-crit, df, nc))
 
 
 def main() -> None:
@@ -122,6 +153,10 @@ def main() -> None:
         "without_effects": {r["scenario"]: r for r in null},
         "planted": {r["scenario"]: r for r in planted},
         "worst_share_any_added_without_effects": max(r["share_any_added"] for r in null),
+        # the period's p comes first in Holm's order, the carry-over second
+        "carry_over_power_closed_form": {
+            name: carry_over_power(name, 0.2, rank=2) for name in ("normal", "one_trial")
+        },
         "took_s": time.monotonic() - start,
     }
     args.out.write_text(json.dumps(report, indent=2) + "\n")
