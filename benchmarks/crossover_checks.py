@@ -16,7 +16,7 @@ family-wise error rate (Holm over every check of the study, target at most 5 %).
 `--period 0.1 --carry-over 0.2` (shares of the mean completion time, planted in the
 completion time only), the share where both are added is the checks' power; beside it
 the closed-form power of the carry-over's between-participant t test at Holm's level
-(`carry_over_power`), the most any test of a carry-over in these designs can reach.
+(`carry_over_power`): what the standard test of a carry-over reaches in these designs.
 
     python benchmarks/crossover_checks.py OUT.json [--seeds 200]
 """
