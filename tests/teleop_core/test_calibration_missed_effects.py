@@ -65,3 +65,55 @@ def test_a_15_ms_delay_below_one_jnd_is_named_delay(seed: int) -> None:
     (delay,) = report["effects_added"]
     assert delay["params"]["lag_s"] == pytest.approx(0.015, abs=1e-9)
     assert report["rmse_after"] <= 1.05 * oracle
+
+
+def reverse_gain(s: dict[str, np.ndarray]) -> np.ndarray:
+    """A torque per amp that differs by direction: the current's force in reverse only."""
+    return s["drive"] * (s["speed"] < 0)
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_a_gain_that_differs_by_direction_is_named_direction_asymmetry(seed: int) -> None:
+    # it used to leave its shape (a force proportional to the current, in reverse
+    # only) to the speed families, at twice the oracle's error or more
+    data, oracle = planted(reverse_gain, seed, size_jnd=1.5)
+    report = Calibrator(FollowerBase()).fit(data).report()
+    assert names(report) == ["direction_asymmetry"]
+    assert report["ambiguous_effects"] == []
+    (effect,) = report["effects_added"]
+    # the planted force per amp in reverse, in N m per A through the wheel's radius
+    scale = 1.5 * JND_N / np.sqrt(np.mean(reverse_gain(_true(seed)) ** 2))
+    r = FollowerBase().wheel_radius_m
+    gain = effect["params"]["extra_gain_reverse_n_m_per_drive_unit"]
+    assert gain == pytest.approx(scale * r, rel=0.15)
+    assert report["rmse_after"] <= 1.5 * oracle
+
+
+def _true(seed: int, seconds: float = 60.0, rate_hz: float = 200.0) -> dict:
+    true: dict = {}
+    follower_recording(seconds, (), rate_hz=rate_hz, seed=seed, noise_free=true)
+    return true
+
+
+def test_a_direction_asymmetry_saved_without_its_reverse_gain_still_loads() -> None:
+    # a model saved before the follower's direction asymmetry had its third column: two
+    # coefficients for it, read back as the two-column form, predicting as it was fitted
+    from teleop_core.calibration.effects import DirectionAsymmetry
+    from teleop_core.calibration.fitting import CalibratedModel, design
+
+    data, _ = planted(reverse_gain, 1, size_jnd=1.5, seconds=10.0)
+    model = FollowerBase(sign_speed_rad_s=0.3)
+    chain = [(DirectionAsymmetry(), float("nan"))]
+    X, _ = design(model, data.signals, chain)
+    coef = np.linalg.lstsq(X, data.y, rcond=None)[0]
+    saved = CalibratedModel(model, chain, coef, {"sign_speed_rad_s": 0.3}).to_dict()
+    assert "reverse_gain" not in saved["effects"][0]
+    loaded = CalibratedModel.from_dict(saved)
+    np.testing.assert_allclose(loaded.predict(data), X @ coef, rtol=1e-12)
+    # and one saved now keeps its three columns
+    now = [(model.effect("direction_asymmetry"), float("nan"))]
+    X3, _ = design(model, data.signals, now)
+    assert X3.shape[1] == 5 + 3
+    fitted = CalibratedModel(model, now, np.linalg.lstsq(X3, data.y, rcond=None)[0])
+    again = CalibratedModel.from_dict(fitted.to_dict())
+    np.testing.assert_allclose(again.predict(data), X3 @ fitted.coef, rtol=1e-12)
