@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from teleop_core.calibration import Calibrator, FollowerBase
+from teleop_core.calibration.effects import play_operator
 from teleop_core.calibration.models import CalibrationData
 from teleop_core.calibration.synthetic import JND_N, follower_recording
 
@@ -117,3 +118,33 @@ def test_a_direction_asymmetry_saved_without_its_reverse_gain_still_loads() -> N
     fitted = CalibratedModel(model, now, np.linalg.lstsq(X3, data.y, rcond=None)[0])
     again = CalibratedModel.from_dict(fitted.to_dict())
     np.testing.assert_allclose(again.predict(data), X3 @ fitted.coef, rtol=1e-12)
+
+
+def gap_losing_the_drive(half_gap_rad: float) -> Shape:
+    """A gap in the drive that passes none of the current's force at a turn and all of
+    it once crossed: the current's force times (|h| - 1), h the play operator of the
+    true angle (+-1 once the gap is crossed)."""
+    return lambda s: (np.abs(play_operator(s["angle"], half_gap_rad)) - 1.0) * s["drive"]
+
+
+@pytest.mark.parametrize(("half_gap_rad", "seed"), [(0.3, 1), (0.05, 2)])
+def test_a_gap_that_loses_the_drives_force_is_named_backlash(
+    half_gap_rad: float, seed: int
+) -> None:
+    # the backlash term held only a force across the gap; a gap that loses the drive's
+    # force while it is open (six times the bench's widest, and one inside it) ended at
+    # ten times the oracle's error with nothing named
+    data, oracle = planted(gap_losing_the_drive(half_gap_rad), seed, size_jnd=1.5)
+    report = Calibrator(FollowerBase()).fit(data).report()
+    assert names(report) == ["backlash"]
+    (term,) = report["discovered_terms"]
+    assert term["params"]["half_gap"] == pytest.approx(half_gap_rad, rel=0.2)
+    assert report["rmse_after"] <= 1.3 * oracle
+
+
+def test_a_clean_recording_stays_white_with_nothing_added() -> None:
+    data, _ = planted(lambda s: np.zeros_like(s["t"]), 4)
+    report = Calibrator(FollowerBase()).fit(data).report()
+    assert names(report) == []
+    assert report["ambiguous_effects"] == []
+    assert report["verdict"] == "white"
