@@ -17,8 +17,9 @@ Per family:
 - `right_first`: share whose first name is a right one (`general.NAMES`; for a
   mixture, one of its members'); families without a right name are left out (None);
 - `wrong_named`: share where any name given is not a right one for what was injected;
-- `honest`: share that is within 2x the oracle or ends `structure_remains` (a clean
-  recording: nothing added and `white`).
+- `honest`: share that is within 2x the oracle or ends `structure_remains` with what
+  would tell its suspects apart (`to_tell_apart`: a channel and an excitation); a clean
+  recording: nothing added and `white`.
 
 Each run is appended to DIR/calibrate_general_runs.jsonl as it finishes, so a run cut
 off keeps what it measured; the summary goes to the JSON and a Markdown table.
@@ -125,8 +126,10 @@ def run_one(
     ambiguous = [a["families"] for a in report.get("ambiguous_effects", [])]
     right = frozenset().union(*(NAMES[f] for f in families)) if families else frozenset()
     ratio = report["rmse_after"] / floor
+    told = report.get("to_tell_apart", [])
     if families:
-        honest = ratio <= 2.0 or report["verdict"] == "structure_remains"
+        # not explained: honest only where it says so and says what would tell
+        honest = ratio <= 2.0 or (report["verdict"] == "structure_remains" and bool(told))
     else:
         honest = not named and not ambiguous and report["verdict"] == "white"
     return {
@@ -145,6 +148,7 @@ def run_one(
         "right_first": (bool(named) and named[0] in right) if right else None,
         "wrong_named": any(n not in right for n in named),
         "verdict": report["verdict"],
+        "to_tell_apart": told,
         "honest": honest,
         "seconds": seconds,
     }
@@ -197,6 +201,9 @@ def _overall(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "clean_untouched": _share(clean, "honest"),
         "not_explained_end_structure_remains": all(
             r["verdict"] == "structure_remains" for r in effects if not r["within_2x_oracle"]
+        ),
+        "not_explained_say_what_would_tell": all(
+            bool(r.get("to_tell_apart")) for r in effects if not r["within_2x_oracle"]
         ),
         "slowest_s": float(max(r["seconds"] for r in runs)) if runs else None,
     }
@@ -262,7 +269,9 @@ def markdown(report: dict[str, Any]) -> str:
         "shown: a gain change after the training block's end), wrong family named "
         f"{pct(o['wrong_named'])} (target <= 5 %); "
         f"clean untouched {pct(o['clean_untouched'])} (target >= 95 %); every recording "
-        f"not explained ends structure_remains: {o['not_explained_end_structure_remains']}; "
+        f"not explained ends structure_remains: {o['not_explained_end_structure_remains']}, "
+        "and names the channel and excitation that would tell: "
+        f"{o.get('not_explained_say_what_would_tell', False)}; "
         f"slowest calibration {o['slowest_s']:.0f} s (target <= 60 s).",
         "",
     ]

@@ -76,6 +76,7 @@ from teleop_core.calibration.library import OPEN_TERMS, OpenTerm, term_report
 from teleop_core.calibration.models import BaseModel, CalibrationData
 from teleop_core.calibration.plausibility import effect_coefficients, implausible
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
+from teleop_core.calibration.tell_apart import tell_apart
 from teleop_core.calibration.validation import Validation, validate
 from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
@@ -621,6 +622,9 @@ class Calibrator:
             "residual_tests_after": self.tests_after_,
             "verdict": self.verdict_,
             "unexplained": self.unexplained_ if self.verdict_ == "structure_remains" else None,
+            "to_tell_apart": tell_apart(
+                [a["families"] for a in ambiguous], self.verdict_, self.unexplained_
+            ),
             "fit_percent_before": self.fit_percent_[0],
             "fit_percent_after": self.fit_percent_[1],
             "model": self.model.name,

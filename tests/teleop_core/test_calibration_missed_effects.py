@@ -148,3 +148,38 @@ def test_a_clean_recording_stays_white_with_nothing_added() -> None:
     assert names(report) == []
     assert report["ambiguous_effects"] == []
     assert report["verdict"] == "white"
+
+
+def test_a_slip_is_reported_with_the_channel_and_excitation_that_would_tell() -> None:
+    # the whole force saturated (a wheel that slips past a traction limit): no family
+    # has its shape; the report names the look-alikes and what would tell them apart,
+    # the load side's own position under a slowly rising current against a stop
+    def slip(s: dict[str, np.ndarray]) -> np.ndarray:
+        level = np.quantile(np.abs(s["force"]), 0.8)
+        return np.clip(s["force"], -level, level) - s["force"]
+
+    data, _ = planted(slip, 3)
+    report = Calibrator(FollowerBase()).fit(data).report()
+    told = report["to_tell_apart"]
+    assert told, report["verdict"]
+    slip_rule = [t for t in told if "force_saturation" in t["effects"]]
+    assert slip_rule
+    assert "load side's own position" in slip_rule[0]["channel"]
+    assert "rising current" in slip_rule[0]["excitation"]
+
+
+def test_what_would_tell_follows_the_ambiguity_and_the_remaining_structure() -> None:
+    from teleop_core.calibration.tell_apart import DYNAMICS, GAP, LAG, OTHER, tell_apart
+
+    where = {"quantity": "distance since reversal", "share_beyond_chance": 0.1}
+    (lag, gap) = tell_apart([["delay", "first_order_lag"]], "structure_remains", where)
+    assert (lag["effects"], lag["channel"]) == (["delay", "first_order_lag"], LAG.channel)
+    assert (gap["channel"], gap["along"]) == (GAP.channel, "distance since reversal")
+    # structure smooth in time that no quantity explains beyond chance: a dynamic
+    weak = {"quantity": "angle", "share_beyond_chance": 0.001}
+    (dynamic,) = tell_apart([], "structure_remains", weak)
+    assert dynamic["channel"] == DYNAMICS.channel
+    # a white verdict with nothing ambiguous leaves no question open
+    assert tell_apart([], "white", None) == []
+    (other,) = tell_apart([["stribeck", "gain_change"]], "white", None)
+    assert other["channel"] == OTHER.channel
