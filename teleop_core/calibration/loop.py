@@ -28,6 +28,7 @@ what the library has no family for, a first-order lag of the whole force
 the force alike at the speeds a recording holds, and the recording names the delay
 only where the lag, both with the regressors' noise filtered without a shift, predicts
 the held-out block significantly worse or fits the training block decisively worse.
+
 A winner that a second term
 of a family already in the model replaces as well (`_refinement_alike`) is reported
 ambiguous with that family: it may be no effect of its own but a correction of the
