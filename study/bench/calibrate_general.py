@@ -7,7 +7,10 @@ recordings: simulated follower recordings with random parameters over the ranges
 `general.RANGES` and strengths of 0.5-3 JND, each calibrated from eq. 1 by the loop
 with its defaults. Per recording: the held-out RMSE against the oracle's
 (`general.oracle_rmse`), what the loop named (effects added, then open terms), the
-look-alikes it reported as ambiguous, the verdict and the time.
+look-alikes it reported as ambiguous, the verdict, what would tell the suspects apart
+and the time. The extra families of `general.EXTRA` (a gain that differs by direction,
+a gap that loses the drive's force while open) run only when named with `--family`,
+seeded apart from the default plan.
 
 Per family:
 - `within_2x_oracle`: share with held-out RMSE at most twice the oracle's, of the
@@ -37,6 +40,7 @@ import numpy as np
 
 from teleop_core.calibration import Calibrator, FollowerBase
 from teleop_core.calibration.general import (
+    EXTRA,
     FAMILIES,
     NAMES,
     RANGES,
@@ -100,11 +104,16 @@ def plan(config: GeneraliseConfig) -> list[tuple[str, tuple[str, ...], int]]:
             if i < len(recs):
                 seed += 1
                 out.append((name, recs[i], seed))
+    # the extra families only where asked for, seeded apart from the default plan
+    for k, family in enumerate(f for f in EXTRA if f in config.only):
+        start = 10_000 * (config.seed + 1) + 5_000 + 100 * k
+        out += [(family, (family,), start + i + 1) for i in range(config.per_family)]
     return [r for r in out if _selected(r[0], config.only)]
 
 
-GROUP_WORDS = ("mixtures", "clean")
-"""Group names `GeneraliseConfig.only` takes besides the families."""
+GROUP_WORDS = ("mixtures", "clean", *EXTRA)
+"""Group names `GeneraliseConfig.only` takes besides the default plan's families (the
+extra families run only when named)."""
 
 
 def _selected(group: str, only: tuple[str, ...]) -> bool:
