@@ -163,10 +163,14 @@ class DirectionAsymmetry(Effect):
         }
 
 
-REVERSE_GAIN_SIGN_RAD_S = 0.1
-"""Width of the smoothed sign that switches a reverse gain on, rad/s: sharper than eq.
-1's 0.3, since the current a gain multiplies is largest where the axis pushes slowly
-against its load, yet ten times the speed sensor's noise SD, so noise does not flip it."""
+def reverse_gain_sign_width(speed: Float1D) -> float:
+    """Width of the smoothed sign that switches a reverse gain on, in the speed's units:
+    three noise SDs of the recorded speed (`noise_sd`), and at least a thousandth of its
+    range. Sharper than eq. 1's 0.3 rad/s: the current a gain multiplies is largest
+    where the axis pushes slowly against its load, and a wider step there left the
+    gain's switch at each reversal to another term (a narrow backlash)."""
+    top = float(np.percentile(np.abs(speed), 99)) if len(speed) else 0.0
+    return max(3.0 * noise_sd(speed), 1e-3 * top, 1e-12)
 
 
 class DriveDirectionAsymmetry(DirectionAsymmetry):
@@ -183,7 +187,7 @@ class DriveDirectionAsymmetry(DirectionAsymmetry):
         w = s["direction"]
         sign = s["direction_sign"] if "direction_sign" in s else smooth_sign(w)
         # extra Coulomb, viscous friction and drive gain while w < 0
-        gain = -np.minimum(smooth_sign(w, REVERSE_GAIN_SIGN_RAD_S), 0.0) * s["drive"]
+        gain = -np.minimum(smooth_sign(w, reverse_gain_sign_width(w)), 0.0) * s["drive"]
         return np.column_stack([-np.minimum(sign, 0.0), -np.minimum(w, 0.0), gain])
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:

@@ -183,3 +183,17 @@ def test_what_would_tell_follows_the_ambiguity_and_the_remaining_structure() -> 
     assert tell_apart([], "white", None) == []
     (other,) = tell_apart([["stribeck", "gain_change"]], "white", None)
     assert other["channel"] == OTHER.channel
+
+
+def test_the_reverse_gains_switch_is_three_noise_sds_of_the_speed_wide() -> None:
+    from teleop_core.calibration.effects import reverse_gain_sign_width
+
+    rng = np.random.default_rng(0)
+    t = np.arange(20_000) * 0.005
+    speed = 2.0 * np.sin(0.5 * t)
+    noisy = speed + rng.normal(0.0, 0.02, len(t))
+    assert reverse_gain_sign_width(noisy) == pytest.approx(3 * 0.02, rel=0.05)
+    # a noise-free ramp (its steps all equal: no noise): a thousandth of the speed's
+    # range (its 99th percentile of |w|)
+    ramp = np.linspace(-2.0, 2.0, 1001)
+    assert reverse_gain_sign_width(ramp) == pytest.approx(1e-3 * 1.98, rel=1e-6)
