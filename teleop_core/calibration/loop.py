@@ -246,8 +246,15 @@ class Calibrator:
         force before the round)."""
         y_test = data.y[self.test_]
         alike = self._look_alikes(best, passing, y_test)
+        winner = (best[1], best[0].searched_value)
         if best[1].family == "delay":
-            alike += self._lag_alike(data, chain, (best[1], best[0].searched_value))
+            alike += self._lag_alike(data, chain, [*chain, winner])
+        elif any(LAG_ALTERNATIVE in a for a in self.ambiguous_):
+            # a delay that a lag explains as well is in the model: a later winner may be
+            # no effect of its own but what the delay leaves of the lag
+            undelayed = [(e, v) for e, v in chain if e.family != "delay"]
+            extra = best[4] - self._fit_chain(data, chain)[2]
+            alike += self._lag_alike(data, undelayed, [*chain, winner], extra)
         if best[1].family == "current_nonlinearity":
             alike += self._saturation_alike(data, chain, pred, data.y - best[3])
         return alike + self._refinement_alike(data, chain, best)
@@ -287,13 +294,15 @@ class Calibrator:
         return out
 
     def _lag_alike(
-        self, data: CalibrationData, chain: Chain, delay: tuple[Effect, float]
+        self, data: CalibrationData, chain: Chain, delayed: Chain, extra: int = 0
     ) -> list[str]:
-        """[`first_order_lag`] when a first-order lag of the whole force, in place of the
-        `delay` that won, predicts the held-out block about as well.
+        """[`first_order_lag`] when a first-order lag of the whole force after base +
+        `chain`, in place of the `delay` in `delayed` (`chain` with the delay that won,
+        or the chain with its delay and a later winner), predicts the held-out block
+        about as well.
 
         The lag acts on the model's force as on the recording's: every column of the
-        design of base + `chain` (the effects before the delay) through
+        design of base + `chain` (the effects without the delay) through
         y_k = a y_{k-1} + (1 - a) x_k, a = exp(-dt / tau), tau searched on the training
         block. Filtering the columns also filters the current's noise, which alone cuts
         the error of any recording, so both are judged with the same kind of noise
@@ -303,13 +312,19 @@ class Calibrator:
         by filtering the noise. The lag is an alternative when its held-out RMSE is
         within `min_gain` of the delay's (or below), the delay's errors are not
         significantly smaller (one-sided Diebold-Mariano at `alpha`), and its training
-        BIC is not `BIC_DECISIVE` behind the delay's."""
+        BIC is not `BIC_DECISIVE` behind the delay's (`extra`: the parameters `delayed`
+        holds beyond the delay, charged to it).
+
+        With a later winner in `delayed` the question is whether that winner is an
+        effect of its own or what the delay leaves of a lag: a 55 ms lag held by a
+        delay left, after each reversal, a shape a wide backlash took."""
         sse_lag, lag = self._filtered_errors(data, chain, lagged=True)
-        sse_delay, delayed = self._filtered_errors(data, [*chain, delay], lagged=False)
-        # both have one searched value and the filter's cutoff
-        behind = len(data.y[self.train_]) * np.log(sse_lag / sse_delay) > BIC_DECISIVE
-        near = _rmse(lag) * (1.0 - self.min_gain) <= _rmse(delayed)
-        alike = near and diebold_mariano(lag, delayed) >= self.alpha and not behind
+        sse_delay, e_delay = self._filtered_errors(data, delayed, lagged=False)
+        # a delay has one searched value and the filter's cutoff, as the lag has
+        n = len(data.y[self.train_])
+        behind = n * np.log(sse_lag / sse_delay) - extra * np.log(n) > BIC_DECISIVE
+        near = _rmse(lag) * (1.0 - self.min_gain) <= _rmse(e_delay)
+        alike = near and diebold_mariano(lag, e_delay) >= self.alpha and not behind
         return [LAG_ALTERNATIVE] if alike else []
 
     def _saturation_alike(

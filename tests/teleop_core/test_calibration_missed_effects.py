@@ -197,3 +197,21 @@ def test_the_reverse_gains_switch_is_three_noise_sds_of_the_speed_wide() -> None
     # range (its 99th percentile of |w|)
     ramp = np.linspace(-2.0, 2.0, 1001)
     assert reverse_gain_sign_width(ramp) == pytest.approx(1e-3 * 1.98, rel=1e-6)
+
+
+def test_what_a_delay_leaves_of_a_long_lag_is_not_named_backlash() -> None:
+    # a 55 ms first-order lag of the whole force (the generalisation bench's recording
+    # of seed 10103): the delay that holds most of it is ambiguous with the lag, and
+    # the backlash that took what it left after each reversal is ambiguous with the
+    # lag too, not named
+    from teleop_core.calibration.general import general_recording
+
+    drawn = general_recording(("lag",), 10103, 240.0, 200.0)
+    assert drawn.truth[0]["params"]["time_constant_s"] == pytest.approx(0.0547, abs=1e-4)
+    report = Calibrator(FollowerBase()).fit(drawn.data).report()
+    assert names(report) == []
+    assert [a["families"][-1] for a in report["ambiguous_effects"]] == ["first_order_lag"] * len(
+        report["ambiguous_effects"]
+    )
+    assert report["verdict"] == "structure_remains"
+    assert report["to_tell_apart"][0]["effects"][-1] == "first_order_lag"
