@@ -7,7 +7,10 @@ recordings: simulated follower recordings with random parameters over the ranges
 `general.RANGES` and strengths of 0.5-3 JND, each calibrated from eq. 1 by the loop
 with its defaults. Per recording: the held-out RMSE against the oracle's
 (`general.oracle_rmse`), what the loop named (effects added, then open terms), the
-look-alikes it reported as ambiguous, the verdict and the time.
+look-alikes it reported as ambiguous, the verdict, what would tell the suspects apart
+and the time. The extra families of `general.EXTRA` (a gain that differs by direction,
+a gap that loses the drive's force while open) run only when named with `--family`,
+seeded apart from the default plan.
 
 Per family:
 - `within_2x_oracle`: share with held-out RMSE at most twice the oracle's, of the
@@ -17,8 +20,9 @@ Per family:
 - `right_first`: share whose first name is a right one (`general.NAMES`; for a
   mixture, one of its members'); families without a right name are left out (None);
 - `wrong_named`: share where any name given is not a right one for what was injected;
-- `honest`: share that is within 2x the oracle or ends `structure_remains` (a clean
-  recording: nothing added and `white`).
+- `honest`: share that is within 2x the oracle or ends `structure_remains` with what
+  would tell its suspects apart (`to_tell_apart`: a channel and an excitation); a clean
+  recording: nothing added and `white`.
 
 Each run is appended to DIR/calibrate_general_runs.jsonl as it finishes, so a run cut
 off keeps what it measured; the summary goes to the JSON and a Markdown table.
@@ -36,6 +40,7 @@ import numpy as np
 
 from teleop_core.calibration import Calibrator, FollowerBase
 from teleop_core.calibration.general import (
+    EXTRA,
     FAMILIES,
     NAMES,
     RANGES,
@@ -99,11 +104,16 @@ def plan(config: GeneraliseConfig) -> list[tuple[str, tuple[str, ...], int]]:
             if i < len(recs):
                 seed += 1
                 out.append((name, recs[i], seed))
+    # the extra families only where asked for, seeded apart from the default plan
+    for k, family in enumerate(f for f in EXTRA if f in config.only):
+        start = 10_000 * (config.seed + 1) + 5_000 + 100 * k
+        out += [(family, (family,), start + i + 1) for i in range(config.per_family)]
     return [r for r in out if _selected(r[0], config.only)]
 
 
-GROUP_WORDS = ("mixtures", "clean")
-"""Group names `GeneraliseConfig.only` takes besides the families."""
+GROUP_WORDS = ("mixtures", "clean", *EXTRA)
+"""Group names `GeneraliseConfig.only` takes besides the default plan's families (the
+extra families run only when named)."""
 
 
 def _selected(group: str, only: tuple[str, ...]) -> bool:
@@ -125,8 +135,10 @@ def run_one(
     ambiguous = [a["families"] for a in report.get("ambiguous_effects", [])]
     right = frozenset().union(*(NAMES[f] for f in families)) if families else frozenset()
     ratio = report["rmse_after"] / floor
+    told = report.get("to_tell_apart", [])
     if families:
-        honest = ratio <= 2.0 or report["verdict"] == "structure_remains"
+        # not explained: honest only where it says so and says what would tell
+        honest = ratio <= 2.0 or (report["verdict"] == "structure_remains" and bool(told))
     else:
         honest = not named and not ambiguous and report["verdict"] == "white"
     return {
@@ -145,6 +157,7 @@ def run_one(
         "right_first": (bool(named) and named[0] in right) if right else None,
         "wrong_named": any(n not in right for n in named),
         "verdict": report["verdict"],
+        "to_tell_apart": told,
         "honest": honest,
         "seconds": seconds,
     }
@@ -197,6 +210,9 @@ def _overall(runs: list[dict[str, Any]]) -> dict[str, Any]:
         "clean_untouched": _share(clean, "honest"),
         "not_explained_end_structure_remains": all(
             r["verdict"] == "structure_remains" for r in effects if not r["within_2x_oracle"]
+        ),
+        "not_explained_say_what_would_tell": all(
+            bool(r.get("to_tell_apart")) for r in effects if not r["within_2x_oracle"]
         ),
         "slowest_s": float(max(r["seconds"] for r in runs)) if runs else None,
     }
@@ -262,7 +278,9 @@ def markdown(report: dict[str, Any]) -> str:
         "shown: a gain change after the training block's end), wrong family named "
         f"{pct(o['wrong_named'])} (target <= 5 %); "
         f"clean untouched {pct(o['clean_untouched'])} (target >= 95 %); every recording "
-        f"not explained ends structure_remains: {o['not_explained_end_structure_remains']}; "
+        f"not explained ends structure_remains: {o['not_explained_end_structure_remains']}, "
+        "and names the channel and excitation that would tell: "
+        f"{o.get('not_explained_say_what_would_tell', False)}; "
         f"slowest calibration {o['slowest_s']:.0f} s (target <= 60 s).",
         "",
     ]

@@ -308,6 +308,9 @@ def calibrate(
             f"  ambiguous: {first} or {' or '.join(others)} (the held-out block does not tell "
             f"them apart; modelled as {first}) -> {effect['rmse_after_step']:.4f} {unit}"
         )
+    for tell in report["to_tell_apart"]:
+        what = " or ".join(tell["effects"]) or "what remains"
+        click.echo(f"  to tell {what} apart: record {tell['channel']}; run {tell['excitation']}")
     for warning in report["warnings"]:
         click.echo(f"note: {warning}")
 
@@ -341,4 +344,6 @@ def _verdict_line(report: dict[str, Any]) -> str:
         )
     else:
         place = "no recorded channel or derived quantity explains it beyond chance"
-    return f"verdict: structure remains, unexplained; {place}"
+    remains = [t for t in report.get("to_tell_apart", []) if "along" in t]
+    suspects = f"; suspects: {', '.join(remains[0]['effects'])}" if remains else ""
+    return f"verdict: structure remains, unexplained; {place}{suspects}"

@@ -16,7 +16,8 @@ The families and their names are the report's contract:
 |------------------------|----------------------------------------|-----------------|
 | `stribeck`             | -exp(-(w/w_s)^2) sgn(w)                | w_s, rad/s      |
 | `viscous_nonlinear`    | -sgn(w) abs(w)^p                       | p               |
-| `direction_asymmetry`  | friction and damping while w < 0       | -               |
+| `direction_asymmetry`  | friction and damping (and, on the      | -               |
+|                        | follower, drive gain) while w < 0      |                 |
 | `position_periodic`    | sin, cos of 2 pi theta / P             | P, rad          |
 | `hysteresis`           | play operator of the drive current     | half-width      |
 | `delay`                | signals taken at t - d                 | d, s            |
@@ -30,7 +31,7 @@ hysteresis operator, and it has to run over tens of thousands of samples per gri
 from __future__ import annotations
 
 import math
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -84,6 +85,10 @@ class Effect:
     log_search: ClassVar[bool] = True
     refine: ClassVar[bool] = True
     """Whether the best grid value is refined by a bounded scalar search."""
+    saved_settings: ClassVar[dict[str, Any]] = {}
+    """What a saved model's entry says of this form of the family (`CalibratedModel`)."""
+    saved_before: ClassVar[Effect | None] = None
+    """The form a saved entry without those settings was fitted with."""
 
     def grid(self, s: Signals) -> Float1D:
         """Values of the searched parameter to try (empty for a linear effect)."""
@@ -155,6 +160,40 @@ class DirectionAsymmetry(Effect):
         return {
             f"extra_coulomb_reverse_{unit}": coef[0] * out,
             f"extra_viscous_reverse_{unit}_s_per_rad": coef[1] * out,
+        }
+
+
+def reverse_gain_sign_width(speed: Float1D) -> float:
+    """Width of the smoothed sign that switches a reverse gain on, in the speed's units:
+    three noise SDs of the recorded speed (`noise_sd`), and at least a thousandth of its
+    range. Sharper than eq. 1's 0.3 rad/s: the current a gain multiplies is largest
+    where the axis pushes slowly against its load, and a wider step there left the
+    gain's switch at each reversal to another term (a narrow backlash)."""
+    top = float(np.percentile(np.abs(speed), 99)) if len(speed) else 0.0
+    return max(3.0 * noise_sd(speed), 1e-3 * top, 1e-12)
+
+
+class DriveDirectionAsymmetry(DirectionAsymmetry):
+    """On a model whose drive is a current that acts in either direction of motion (the
+    follower's): besides the friction and damping in reverse, the drive's own gain in
+    reverse (a torque per amp, or a transmission's efficiency, that differs with the
+    direction). Without it a gain that differs by direction left its shape (a force
+    proportional to the current, in reverse only) to the speed families."""
+
+    needs = ("direction", "drive")
+    saved_settings: ClassVar[dict[str, Any]] = {"reverse_gain": True}
+
+    def columns(self, s: Signals, value: float) -> Float2D:
+        w = s["direction"]
+        sign = s["direction_sign"] if "direction_sign" in s else smooth_sign(w)
+        # extra Coulomb, viscous friction and drive gain while w < 0
+        gain = -np.minimum(smooth_sign(w, reverse_gain_sign_width(w)), 0.0) * s["drive"]
+        return np.column_stack([-np.minimum(sign, 0.0), -np.minimum(w, 0.0), gain])
+
+    def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
+        return {
+            **super().physical(coef[:2], value, out, unit),
+            f"extra_gain_reverse_{unit}_per_drive_unit": coef[2] * out,
         }
 
 
@@ -307,6 +346,8 @@ class CurrentNonlinearity(Effect):
         p = self.LEGACY_EXPONENT if math.isnan(value) else value
         return {f"gain_{unit}_per_drive_unit_pow_p": coef[0] * out, "exponent": p}
 
+
+DriveDirectionAsymmetry.saved_before = DirectionAsymmetry()
 
 EFFECTS: dict[str, Effect] = {
     e.family: e

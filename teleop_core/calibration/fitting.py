@@ -256,7 +256,9 @@ class CalibratedModel:
         return {
             "base": self.model.name,
             "base_settings": self.settings,
-            "effects": [{"family": e.family, "searched_value": v} for e, v in self.chain],
+            "effects": [
+                {"family": e.family, "searched_value": v, **e.saved_settings} for e, v in self.chain
+            ],
             "coefficients": [float(c) for c in self.coef],
         }
 
@@ -269,11 +271,21 @@ class CalibratedModel:
             settings = dict(d.get("base_settings", {}))
             if settings:
                 base = type(base)(**settings)
-            chain = [(base.effect(e["family"]), float(e["searched_value"])) for e in d["effects"]]
+            chain = [(_saved_effect(base, e), float(e["searched_value"])) for e in d["effects"]]
             coef = np.asarray(d["coefficients"], float)
         except (KeyError, TypeError, ValueError) as exc:
             raise TeleopInputError(f"calibrated model is damaged: {exc!r}") from None
         return cls(base, chain, coef, settings)
+
+
+def _saved_effect(base: BaseModel, saved: dict[str, Any]) -> Effect:
+    """The effect of a saved model's entry: the family as `base` uses it, or the form
+    it had when saved where the entry lacks that form's settings (a follower's
+    direction asymmetry saved before it had its reverse gain column)."""
+    effect = base.effect(saved["family"])
+    if any(saved.get(k) != v for k, v in effect.saved_settings.items()):
+        return effect.saved_before or effect
+    return effect
 
 
 def determined_columns(X: Float2D) -> tuple[Float1D, Float1D]:

@@ -59,10 +59,17 @@ RANGES: dict[str, dict[str, tuple[float, float, str]]] = {
     "lag": {"time_constant_s": (0.005, 0.06, "log")},
     "backlash": {"half_gap_rad": (0.005, 0.1, "log")},
     "slip": {},
+    "direction_gain": {},
+    "gap_loss": {"half_gap_rad": (0.005, 0.5, "log")},
 }
 """Per family, each drawn parameter: (low, high, "log" | "lin")."""
-FAMILIES = tuple(RANGES)
-"""Every family of the bench: the loop's eight and the open ones."""
+EXTRA = ("direction_gain", "gap_loss")
+"""Families drawn only when asked for by name (`--family`), outside the default plan
+(whose recordings keep their seeds): a torque per amp that differs by direction of
+motion, and a gap in the drive that passes none of the current's force at a turn and
+all of it once crossed, over a range of gaps five times the `backlash` group's."""
+FAMILIES = tuple(f for f in RANGES if f not in EXTRA)
+"""Every family of the default bench: the loop's eight and the open ones."""
 NAMED = FAMILIES[:8]
 OPEN = FAMILIES[8:]
 WRAPPING = ("delay", "lag")
@@ -76,6 +83,8 @@ NAMES: dict[str, frozenset[str]] = {
     "lag": frozenset({"first_order_lag"}),
     "backlash": frozenset({"backlash"}),
     "slip": frozenset(),
+    "direction_gain": frozenset({"direction_asymmetry"}),
+    "gap_loss": frozenset({"backlash"}),
 }
 """Report names that count as the right family for an injected one."""
 
@@ -133,6 +142,12 @@ def _shape(family: str, p: dict[str, float], s: dict[str, Float1D], rng) -> Floa
         return np.sin(2 * np.pi * theta * p["cycles_per_rad_1"] + ph[0]) + 0.7 * np.sin(
             2 * np.pi * theta * p["cycles_per_rad_2"] + ph[1]
         )
+    if family == "direction_gain":
+        # the current's force while the wheel turns backwards
+        return iq * (w < 0)
+    if family == "gap_loss":
+        h = play_operator(np.ascontiguousarray(theta), p["half_gap_rad"])
+        return (np.abs(h) - 1.0) * iq
     if family == "backlash":
         # the force carried through a gap: while the wheel crosses it after a reversal
         # the force held by the load's side changes linearly with the position

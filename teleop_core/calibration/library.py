@@ -10,8 +10,9 @@ recorded channels and their history with at most one searched parameter:
 | `gain_change`       | drive * [t >= t_c]                    | t_c (s)  | a gain change point     |
 | `presliding_memory` | -sgn(w) exp(-d / delta), d = distance | delta    | pre-sliding friction    |
 |                     | since reversal                        |          |                         |
-| `backlash`          | play operator of the angle            | half gap | a gap in the drive      |
-|                     | (+-1 after 2 half gaps of travel)     |          |                         |
+| `backlash`          | play operator h of the angle (+-1     | half gap | a gap in the drive      |
+|                     | after 2 half gaps of travel), and     |          |                         |
+|                     | (abs(h) - 1) drive                    |          |                         |
 
 None maps to a named family. `presliding_memory` and `backlash` both change the
 friction over the travel after a reversal (an exponential approach against a linear
@@ -112,11 +113,13 @@ class PreslidingMemory(OpenTerm):
 
 class Backlash(OpenTerm):
     """A gap in the drive: after each reversal the force the load side holds changes
-    linearly with the travel until the gap is crossed, then stays (the play operator of
-    the angle, the same operator as `hysteresis` has on the drive)."""
+    linearly with the travel until the gap is crossed, then stays (the play operator h
+    of the angle, the same operator as `hysteresis` has on the drive), and the drive's
+    force passes on only as the gap closes (the current's force times |h| - 1: all of
+    it lost at the turn, none once the gap is crossed)."""
 
     family = "backlash"
-    needs = ("angle",)
+    needs = ("angle", "drive")
     searched = "half_gap"
     formula = "play_operator(angle, half_gap)"
 
@@ -131,10 +134,17 @@ class Backlash(OpenTerm):
         return np.geomspace(min(max(2.0 * count, 1e-4 * top), top / 4.0), top / 2.0, 30)
 
     def columns(self, s: Signals, value: float) -> Float2D:
-        return play_operator(np.ascontiguousarray(s["angle"]), value)[:, None]
+        h = play_operator(np.ascontiguousarray(s["angle"]), value)
+        # the force held across the gap, and the drive's force that the open gap does
+        # not pass on (all of it at the turn, none once the gap is crossed)
+        return np.column_stack([h, (np.abs(h) - 1.0) * s["drive"]])
 
     def physical(self, coef: Float1D, value: float, out: float, unit: str) -> dict[str, float]:
-        return {f"force_across_gap_{unit}": coef[0] * out, "half_gap": value}
+        return {
+            f"force_across_gap_{unit}": coef[0] * out,
+            f"drive_force_lost_in_gap_{unit}_per_drive_unit": coef[1] * out,
+            "half_gap": value,
+        }
 
 
 _LAST_TURNS: list[tuple[Float1D, Float1D]] = []

@@ -26,7 +26,10 @@ its alternatives instead of naming it. A `delay` that wins is also checked again
 what the library has no family for, a first-order lag of the whole force
 (`_lag_alike`, `first_order_lag`): a pure delay and a lag of a few tens of ms shift
 the force alike at the speeds a recording holds, and the recording names the delay
-only where the lag predicts the held-out block significantly worse. A winner that a second term
+only where the lag, both with the regressors' noise filtered without a shift, predicts
+the held-out block significantly worse or fits the training block decisively worse.
+
+A winner that a second term
 of a family already in the model replaces as well (`_refinement_alike`) is reported
 ambiguous with that family: it may be no effect of its own but a correction of the
 first one's shape.
@@ -46,7 +49,7 @@ import numpy as np
 from scipy import signal
 from statsmodels.stats.stattools import durbin_watson
 
-from teleop_core._typing import Float1D, Rows
+from teleop_core._typing import Float1D, Float2D, Rows
 from teleop_core.blas import one_blas_thread
 from teleop_core.calibration.candidates import (
     OPEN,
@@ -74,6 +77,7 @@ from teleop_core.calibration.library import OPEN_TERMS, OpenTerm, term_report
 from teleop_core.calibration.models import BaseModel, CalibrationData
 from teleop_core.calibration.plausibility import effect_coefficients, implausible
 from teleop_core.calibration.residual import diebold_mariano, residual_tests
+from teleop_core.calibration.tell_apart import tell_apart
 from teleop_core.calibration.validation import Validation, validate
 from teleop_core.calibration.verdict import fit_percent, unexplained, verdict
 from teleop_core.errors import TeleopInputError
@@ -88,6 +92,9 @@ SATURATION_QUANTILES = np.linspace(0.2, 0.99, 20)
 """Saturation levels tried, as quantiles of the model's |force| on the training block."""
 LAG_GRID = 24
 """Time constants tried for that lag, log-spaced from one sample period to 0.2 s."""
+ZERO_PHASE_CUTOFFS = (0.005, 0.01, 0.02, 0.04, 0.08, 0.16, 0.25)
+"""Cutoffs of the zero-phase noise filter in the delay-or-lag comparison, as fractions
+of the sampling rate (up to half the Nyquist frequency)."""
 BIC_DECISIVE = 10.0
 """Training-BIC difference that decides between two candidates (Kass and Raftery
 1995: above 10 is "very strong" evidence): a look-alike further behind is no
@@ -239,8 +246,15 @@ class Calibrator:
         force before the round)."""
         y_test = data.y[self.test_]
         alike = self._look_alikes(best, passing, y_test)
+        winner = (best[1], best[0].searched_value)
         if best[1].family == "delay":
-            alike += self._lag_alike(data, chain, (best[1], best[0].searched_value))
+            alike += self._lag_alike(data, chain, [*chain, winner])
+        elif any(LAG_ALTERNATIVE in a for a in self.ambiguous_):
+            # a delay that a lag explains as well is in the model: a later winner may be
+            # no effect of its own but what the delay leaves of the lag
+            undelayed = [(e, v) for e, v in chain if e.family != "delay"]
+            extra = best[4] - self._fit_chain(data, chain)[2]
+            alike += self._lag_alike(data, undelayed, [*chain, winner], extra)
         if best[1].family == "current_nonlinearity":
             alike += self._saturation_alike(data, chain, pred, data.y - best[3])
         return alike + self._refinement_alike(data, chain, best)
@@ -280,23 +294,37 @@ class Calibrator:
         return out
 
     def _lag_alike(
-        self, data: CalibrationData, chain: Chain, delay: tuple[Effect, float]
+        self, data: CalibrationData, chain: Chain, delayed: Chain, extra: int = 0
     ) -> list[str]:
-        """[`first_order_lag`] when a first-order lag of the whole force, in place of the
-        `delay` that won, predicts the held-out block about as well.
+        """[`first_order_lag`] when a first-order lag of the whole force after base +
+        `chain`, in place of the `delay` in `delayed` (`chain` with the delay that won,
+        or the chain with its delay and a later winner), predicts the held-out block
+        about as well.
 
         The lag acts on the model's force as on the recording's: every column of the
-        design of base + `chain` (the effects before the delay) through
+        design of base + `chain` (the effects without the delay) through
         y_k = a y_{k-1} + (1 - a) x_k, a = exp(-dt / tau), tau searched on the training
         block. Filtering the columns also filters the current's noise, which alone cuts
-        the error of any recording, so the delay is judged with the same filter after
-        it (its own tau searched alike): the lag is an alternative when its held-out
-        RMSE is within `min_gain` of the filtered delay's (or below) and the delay's
-        errors are not significantly smaller (one-sided Diebold-Mariano at `alpha`)."""
-        lag = self._filtered_errors(data, chain)
-        delayed = self._filtered_errors(data, [*chain, delay])
-        near = _rmse(lag) * (1.0 - self.min_gain) <= _rmse(delayed)
-        alike = near and diebold_mariano(lag, delayed) >= self.alpha
+        the error of any recording, so both are judged with the same kind of noise
+        filter after them: a zero-phase low-pass (`_zero_phase`), which cuts the
+        regressors' noise without shifting them. A causal filter there would add a lag
+        of its own to the delay, and a lag of a few tens of ms then beat a 15 ms delay
+        by filtering the noise. The lag is an alternative when its held-out RMSE is
+        within `min_gain` of the delay's (or below), the delay's errors are not
+        significantly smaller (one-sided Diebold-Mariano at `alpha`), and its training
+        BIC is not `BIC_DECISIVE` behind the delay's (`extra`: the parameters `delayed`
+        holds beyond the delay, charged to it).
+
+        With a later winner in `delayed` the question is whether that winner is an
+        effect of its own or what the delay leaves of a lag: a 55 ms lag held by a
+        delay left, after each reversal, a shape a wide backlash took."""
+        sse_lag, lag = self._filtered_errors(data, chain, lagged=True)
+        sse_delay, e_delay = self._filtered_errors(data, delayed, lagged=False)
+        # a delay has one searched value and the filter's cutoff, as the lag has
+        n = len(data.y[self.train_])
+        behind = n * np.log(sse_lag / sse_delay) - extra * np.log(n) > BIC_DECISIVE
+        near = _rmse(lag) * (1.0 - self.min_gain) <= _rmse(e_delay)
+        alike = near and diebold_mariano(lag, e_delay) >= self.alpha and not behind
         return [LAG_ALTERNATIVE] if alike else []
 
     def _saturation_alike(
@@ -336,16 +364,25 @@ class Calibrator:
         better = len(train) * np.log(sse_sat / float(train @ train)) < -BIC_DECISIVE
         return [SATURATION_ALTERNATIVE] if tied or better else []
 
-    def _filtered_errors(self, data: CalibrationData, chain: Chain) -> Float1D:
-        """Held-out errors of base + `chain` with every column through the first-order
-        lag whose tau fits the training block best."""
+    def _filtered_errors(
+        self, data: CalibrationData, chain: Chain, lagged: bool
+    ) -> tuple[float, Float1D]:
+        """Training SSE and held-out errors of base + `chain` with every column through
+        the zero-phase low-pass of `ZERO_PHASE_CUTOFFS` (and, `lagged`, the first-order
+        lag of `LAG_GRID`) that fits the training block best."""
         X, _ = design(self.base_, data.signals, chain)
         dt = float(np.median(np.diff(data.signals["t"])))
-        y = data.y
-        poles = (float(np.exp(-dt / tau)) for tau in np.geomspace(dt, 2 * MAX_LAG_S, LAG_GRID))
-        lagged = (signal.lfilter([1.0 - a], [1.0, -a], X, axis=0, zi=a * X[:1])[0] for a in poles)
-        _, fit = best_training_fit(lagged, y, self.train_)
-        return y[self.test_] - fit[self.test_]
+        smoothed = [_zero_phase(X, f) for f in ZERO_PHASE_CUTOFFS]
+        taus = np.geomspace(dt, 2 * MAX_LAG_S, LAG_GRID) if lagged else np.empty(0)
+        poles = [float(np.exp(-dt / tau)) for tau in taus]
+        designs = (
+            (signal.lfilter([1.0 - a], [1.0, -a], Z, axis=0, zi=a * Z[:1])[0] for a in poles)
+            if lagged
+            else iter([Z])
+            for Z in smoothed
+        )
+        sse, fit = best_training_fit(itertools.chain.from_iterable(designs), data.y, self.train_)
+        return sse, data.y[self.test_] - fit[self.test_]
 
     @one_blas_thread
     def fit(
@@ -601,6 +638,9 @@ class Calibrator:
             "residual_tests_after": self.tests_after_,
             "verdict": self.verdict_,
             "unexplained": self.unexplained_ if self.verdict_ == "structure_remains" else None,
+            "to_tell_apart": tell_apart(
+                [a["families"] for a in ambiguous], self.verdict_, self.unexplained_
+            ),
             "fit_percent_before": self.fit_percent_[0],
             "fit_percent_after": self.fit_percent_[1],
             "model": self.model.name,
@@ -659,6 +699,14 @@ class Calibrator:
                     "it (a step's time between two samples, or a term that is a sum of others)"
                 )
         return notes
+
+
+def _zero_phase(X: Float2D, cutoff_fraction: float) -> Float2D:
+    """The columns of X through a 2nd-order Butterworth low-pass at `cutoff_fraction` of
+    the sampling rate, run forwards and backwards (`scipy.signal.filtfilt`: no
+    phase shift, so no lag)."""
+    b, a = signal.butter(2, 2.0 * cutoff_fraction)
+    return signal.filtfilt(b, a, X, axis=0)
 
 
 def _rmse(e: Float1D) -> float:

@@ -31,6 +31,7 @@ from teleop_core.calibration.effects import (
     EFFECTS,
     FAMILIES,
     SIGN_SPEED_RAD_S,
+    DriveDirectionAsymmetry,
     Effect,
     Hysteresis,
     Signals,
@@ -178,6 +179,7 @@ class FollowerBase(BaseModel):
     name = "follower"
     unit = "n_m"
     plot_against = ("t", "speed", "angle")
+    overrides = {"direction_asymmetry": DriveDirectionAsymmetry()}  # noqa: RUF012 - read only
     passive_loop_sign = +1
     """The load is what the speed loop's current answers: the force leads the current
     drawn for it, so a loss between them reads as a force above eq. 1 while the current

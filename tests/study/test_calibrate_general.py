@@ -223,3 +223,29 @@ def test_a_gain_change_after_the_training_block_is_not_counted_against_the_2x_sh
     assert s["per_group"]["a"]["within_2x_oracle_all"] == 0.5
     assert s["per_group"]["a"]["not_shown_in_training"] == 1
     assert (s["overall"]["within_2x_oracle"], s["overall"]["within_2x_oracle_all"]) == (1.0, 0.5)
+
+
+def test_the_extra_families_run_only_when_named_and_leave_the_plans_seeds() -> None:
+    from teleop_core.calibration.general import EXTRA
+
+    whole = GeneraliseConfig(per_family=2, mixtures_of_two=2, mixtures_of_three=1, clean=2)
+    default = plan(whole)
+    assert not {g for g, _, _ in default} & set(EXTRA)
+    asked = plan(replace(whole, only=("gap_loss", "backlash")))
+    assert [r for r in asked if r[0] == "backlash"] == [r for r in default if r[0] == "backlash"]
+    extra = [r for r in asked if r[0] == "gap_loss"]
+    assert [f for _, f, _ in extra] == [("gap_loss",)] * 2
+    assert not {s for *_, s in extra} & {s for *_, s in default}
+
+
+def test_a_gap_loss_loses_the_current_force_while_the_gap_is_open() -> None:
+    from teleop_core.calibration.effects import play_operator
+
+    true: dict = {}
+    follower_recording(30.0, (), rate_hz=100.0, seed=6, noise_free=true)
+    drawn = general_recording(("gap_loss",), seed=6, duration_s=30.0, rate_hz=100.0)
+    (truth,) = drawn.truth
+    h = play_operator(true["angle"], truth["params"]["half_gap_rad"])
+    shape = (np.abs(h) - 1.0) * true["drive"]
+    expected = truth["rms_n"] * shape / np.sqrt(np.mean(shape**2))
+    np.testing.assert_allclose(drawn.deviation, expected, rtol=1e-9, atol=1e-12)
