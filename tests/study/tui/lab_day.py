@@ -338,19 +338,38 @@ class LabDay:
         self.typed.notes[code] = text
 
     def enrol_from_command_line(self, code: str, group: str) -> None:
-        """`study participant add` in a subprocess while the app shows the participants
-        list: the seconds from the command's end to `code` on the screen."""
+        """`study participant add` in a subprocess while the participants screen's Find
+        field holds the next code (a long list scrolls): the seconds from the command's
+        end to `code`'s row on the screen."""
         term = self.term
         self.to_screen("F2", r"a Enrol")
+        self._type_in_find(code)
+        row = rf"^\s+{code}\s+{group}\s"
+        assert re.search(row, term.screen(), re.MULTILINE) is None, term.screen()
         study = Path(sys.executable).with_name("study")
         command = [str(study), "participant", "add", "--group", group, "--db", str(self.db)]
         out = subprocess.run(command, capture_output=True, text=True, cwd=self.workdir)
         assert out.returncode == 0, out.stderr
         assert out.stdout.startswith(f"{code} ({group})"), out.stdout
         done = time.monotonic()
-        term.wait(rf"^\s+{code}\s+{group}\s", 30)
+        term.wait(row, 30)
         self.typed.cli[code] = time.monotonic() - done
         self.typed.groups[code] = group
+        term.keys("C-u")  # the field emptied: the whole list again
+        term.wait(r"^ Find code, group or state", 10)
+
+    def _type_in_find(self, word: str) -> None:
+        """`word` typed on the list a key at a time, each key seen in the Find field
+        (a key never seen is typed again, and reported)."""
+        term = self.term
+        for k, ch in enumerate(word):
+            term.text(ch)
+            try:
+                term.wait(rf"^ Find {re.escape(word[: k + 1])}\s*$", 5)
+            except Timeout:
+                self.typed.lost_keys.append(f"{ch!r} of {word!r} on F2")
+                term.text(ch)
+                term.wait(rf"^ Find {re.escape(word[: k + 1])}\s*$", 10)
 
     def search_words(self) -> None:
         """Every word of the Find field's hint typed on the list, a key at a time: the
@@ -358,14 +377,7 @@ class LabDay:
         term = self.term
         for word in HINT_WORDS:
             self.to_screen("F2", r"a Enrol")  # the list has the focus
-            for k, ch in enumerate(word):  # a key at a time, each seen in the field
-                term.text(ch)
-                try:
-                    term.wait(rf"^ Find {re.escape(word[: k + 1])}\s*$", 5)
-                except Timeout:  # not seen: typed again, and reported
-                    self.typed.lost_keys.append(f"{ch!r} of {word!r} on F2")
-                    term.text(ch)
-                    term.wait(rf"^ Find {re.escape(word[: k + 1])}\s*$", 10)
+            self._type_in_find(word)
             time.sleep(0.3)  # a dialog a key opened would be drawn by now
             screen = term.screen()
             self.typed.dialogs += [w for w in DIALOG_WORDS if w in screen]
