@@ -14,7 +14,7 @@ block, no trial left running, the notes, and no traceback with exit status 0.
 The pairwise choices are recorded as the subscale named on the screen on the side that
 was picked (the pair lines read off the terminal), not from the app's own pair order.
 
-Run as a script with more participants (the test runs 10):
+Run as a script with more participants (the test runs 6, with a quick typist):
 
     python -m tests.study.tui.lab_day --participants 30 --pace 200 --typing-s 5
 """
