@@ -123,7 +123,7 @@ class LiveReadout(Widget):
     so a redraw renders one text block and changes no layout."""
 
     DEFAULT_CSS = """
-    LiveReadout { width: 38; height: 1fr; }
+    LiveReadout { width: 38; height: 1fr; padding-bottom: 1; }
     """
 
     def __init__(self, **kwargs: object) -> None:

@@ -22,6 +22,7 @@ from textual.containers import Vertical
 from textual.screen import ModalScreen, Screen
 from textual.widgets import DataTable, Footer, Input, Label, Select, Static
 
+from study.protocol.tasks import Measure, get_task, is_task
 from study.tui.db_errors import SafeWorkers
 
 if TYPE_CHECKING:
@@ -34,26 +35,36 @@ NOTES_SHOWN = 4
 """Notes listed under the trials (the newest); all of them are in the audit log."""
 
 
+def _shown_measures(t: TrialRow) -> list[Measure]:
+    """The stored measures of `t` in its task's order, as the task declares them (a
+    task no longer registered: its stored names, unlabelled)."""
+    declared = {m.name: m for m in get_task(t.task).measures} if is_task(t.task) else {}
+    return [declared.get(n) or Measure(n, "", n, "", analysed=False) for n in t.measures]
+
+
 def trial_cells(t: TrialRow) -> tuple[str, ...]:
-    """One row of the page's trial table (short cells: 80 columns hold them all; the
-    reasons are on the line under the table)."""
-    forces = [n for n in t.measures if n.startswith("peak_") and n.endswith("_n")]
+    """One row of the page's trial table. The cells are short, so that 80 columns hold
+    them all with a four-digit id: the trial is its number (`p2`: practice trial 2),
+    the peaks are the forces the analysis compares (the others are in the detail line
+    under the table), and validity is the last column."""
+    forces = [m.name for m in _shown_measures(t) if m.unit == "N" and m.analysed]
     measured = t.status == "completed" and not t.practice
     return (
         str(t.id),
         f"{t.block_index + 1} {t.task}/{t.condition}",
-        t.label(),
+        f"p{t.number}" if t.practice else str(t.number),
         str(t.attempt),
         t.status,
         "-" if t.completion_time_s is None else f"{t.completion_time_s:.1f}",
         "-" if t.success is None else ("yes" if t.success else "no"),
-        "/".join(f"{t.measures[n]:.2f}" for n in forces) + (" N" if forces else "-"),
+        "/".join(f"{t.measures[n]:.2f}" for n in forces) or "-",
         ("NO" if t.invalid_reason else "yes") if measured else "-",
     )
 
 
 def trial_detail(t: TrialRow) -> str:
-    """The highlighted trial in full: why it was interrupted, its measures, validity."""
+    """The highlighted trial in full: why it was interrupted, validity, every measure
+    by its label (a line of its own)."""
     line = f"trial {t.id}, {t.task}/{t.condition} {t.label()}, attempt {t.attempt}: {t.status}"
     if t.why and t.status in ("interrupted", "aborted"):
         line += f" ({t.why})"
@@ -61,12 +72,13 @@ def trial_detail(t: TrialRow) -> str:
         line += f" in {t.completion_time_s:.2f} s"
     if t.success is not None:
         line += ", success" if t.success else ", no success"
-    measures = ", ".join(f"{n} {t.measures[n]:.3g}" for n in t.measures)
-    if measures:
-        line += f"; {measures}"
     if t.invalid_reason:
         line += f"; INVALID: {t.invalid_reason}"
-    return line
+    measures = ", ".join(
+        f"{m.label} {t.measures[m.name]:.3g}{' ' + m.unit if m.unit else ''}"
+        for m in _shown_measures(t)
+    )
+    return f"{line}\n{measures}" if measures else line
 
 
 def schedule_line(record: ParticipantRecord) -> str:
@@ -126,9 +138,9 @@ class ParticipantPage(SafeWorkers, Screen[None]):
     ParticipantPage #who { height: auto; text-style: bold; padding: 0 1; }
     ParticipantPage #schedule, ParticipantPage #probes { height: auto; padding: 0 1; }
     ParticipantPage #trials { height: 1fr; }
-    ParticipantPage #trial-detail { height: auto; max-height: 3; padding: 0 1; }
+    ParticipantPage #trial-detail { height: auto; max-height: 7; padding: 0 1; }
     ParticipantPage #notes { height: auto; max-height: 6; padding: 0 1; color: $text-muted; }
-    ParticipantPage #page-status { height: auto; padding: 0 1; }
+    ParticipantPage #page-status { width: 100%; height: auto; padding: 0 1; }
     """
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("escape", "back", "Back"),
@@ -153,7 +165,7 @@ class ParticipantPage(SafeWorkers, Screen[None]):
         yield Static("", id="probes", markup=False)
         table = DataTable(id="trials", cursor_type="row", zebra_stripes=True)
         table.add_columns(
-            "id", "block", "trial", "att", "status", "time s", "success", "peaks", "valid"
+            "id", "block", "trial", "att", "status", "time s", "ok", "peaks N", "valid"
         )
         yield table
         yield Static("", id="trial-detail", markup=False)

@@ -103,14 +103,18 @@ class ParticipantsPane(SafeWorkers, Vertical):
 
     def on_key(self, event: events.Key) -> None:
         """A printable key on the list goes into the Find field: a typed word searches,
-        and opens no dialog."""
+        and opens no dialog. The app's keys (`?`, the digits 1-6 of the screens) stay
+        theirs while the field is empty; once a word is begun they are part of it (the
+        list still has the focus for the keys typed quickly after the first: `P01`)."""
         if not (event.is_printable and event.character):
             return
-        if event.key in self.app.active_bindings or not isinstance(self.app.focused, DataTable):
-            return  # the app's keys (`?`, the digits 1-6 of the screens) stay theirs
+        find = self.query_one("#filter", Input)
+        if not isinstance(self.app.focused, DataTable):
+            return
+        if event.key in self.app.active_bindings and not find.value:
+            return
         event.stop()
         event.prevent_default()
-        find = self.query_one("#filter", Input)
         find.focus()
         find.cursor_position = len(find.value)
         find.insert_text_at_cursor(event.character)

@@ -15,6 +15,7 @@ from rich.text import Text
 
 from study.tui.live_view import LiveReadout, gauge, sparkline
 from study.tui.scenes import scene_class, scene_title
+from study.tui.trial_summary import report_lines
 
 if TYPE_CHECKING:
     from study.protocol.tasks import Task
@@ -43,7 +44,8 @@ def task_lines(frame: LiveFrame) -> list[str]:
 
 
 class LiveViewMixin:
-    """The live view of `RunPane` (which provides run, status, last_outcome, _redraws)."""
+    """The live view of `RunPane` (which provides run, status, last_outcome, last_report,
+    _redraws)."""
 
     def _show_task(self, task: Task) -> None:
         """The live view of `task`'s trials: the scene its package brings
@@ -70,7 +72,7 @@ class LiveViewMixin:
             self._redraws.clear()
             text = Text(f"status: {self.status}")
             if run is None and self.last_outcome:
-                text.append(f"\n{self.last_outcome}", "bold")
+                text.append(f"\n{self._outcome_text(readout)}", "bold")
             readout.show(text)
             return
         self._redraws.append(time.monotonic())
@@ -80,6 +82,15 @@ class LiveViewMixin:
         self.query_one(scene_class(frame.task)).update_frame(frame)
         text.append_text(self._readout(frame, width, run))
         readout.show(text)
+
+    def _outcome_text(self, readout: LiveReadout) -> str:
+        """The last outcome in the readout's rows under the status line (a block's
+        summary whole, before the trial's own figures)."""
+        shown = self.last_report
+        if shown is None or shown[2] != self.last_outcome:
+            return self.last_outcome
+        code, report, _ = shown
+        return "\n".join(report_lines(code, report, max(readout.content_size.height - 1, 3)))
 
     def _readout(self, frame: LiveFrame, width: int, run: TrialRun) -> Text:
         """The task's two live forces (gauge and history), then its own lines."""

@@ -123,6 +123,9 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self.status = "idle"
         self.simulation = Simulation(services.load_estimator)
         self.last_outcome = ""
+        self.last_report: tuple[str, TrialReport, str] | None = None
+        """The last stored trial's code, figures and `last_outcome` text: the readout
+        lays the figures out in the rows it has while that text is the one shown."""
         self._codes: list[str] = []
         self._redraws: deque[float] = deque(maxlen=50)
         self._next: NextTrial | None = None
@@ -659,6 +662,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             text = f"{outcome.code}: trial stored (id {outcome.trial_ids[0]}{peaks})"
             if event.report is not None:
                 text = "\n".join(report_lines(outcome.code, event.report))
+                self.last_report = (outcome.code, event.report, text)
         elif outcome.error:
             self.status = "failed"
             text = (

@@ -5,7 +5,8 @@ a block the block's summary.
 give, not the live view's estimate): its completion time, success and every measure of
 its task (the peaks among them); when the trial completed its block, each measure's
 mean and SD over the block's measured trials (practice trials and interrupted attempts
-left out). `report_lines` lays it out in lines that fit the readout (38 columns).
+left out). `report_lines` lays it out in lines that fit the readout (38 columns, and
+as many rows as it has: a long block summary before the trial's own figures).
 """
 
 from __future__ import annotations
@@ -112,20 +113,43 @@ def _number(value: float, unit: str) -> str:
     return f"{text} {unit}" if unit else text
 
 
-def report_lines(code: str, report: TrialReport) -> list[str]:
-    """The readout's lines: the trial, then (at a block's end) the block's summary."""
+def report_lines(code: str, report: TrialReport, rows: int | None = None) -> list[str]:
+    """The readout's lines: the trial, then (at a block's end) the block's summary.
+
+    With `rows` (the lines the readout has), a block's summary that does not fit under
+    the trial's figures is shown in full and the trial's own figures are left out (its
+    line says where they are: the participant page, `v`); a summary longer than `rows`
+    ends on a line that counts the measures left out.
+    """
     kind = "practice" if report.practice else "trial"
     success = {True: "yes", False: "no", None: "not recorded"}[report.success]
+    head = f"{code}: {report.task}/{report.condition} {kind} {report.trial_index + 1} stored"
     lines = [
-        f"{code}: {report.task}/{report.condition} {kind} {report.trial_index + 1} stored",
+        head,
         f"  success {success}",
         *(f"  {label} {_number(value, unit)}" for label, unit, value in report.measures),
     ]
-    if report.block is not None:
-        n = max(s.n for s in report.block) if report.block else 0
-        lines.append(f"block {report.task}/{report.condition} done:")
-        lines.append(f"  {n} measured trial{'' if n == 1 else 's'}, mean ± SD")
-        for s in report.block:
-            spread = "" if s.sd is None else f" ± {_number(s.sd, '').strip()}"
-            lines.append(f"  {s.label} {_number(s.mean, '').strip()}{spread} {s.unit}".rstrip())
+    if report.block is None:
+        return lines
+    block = _block_lines(report)
+    if rows is None or len(lines) + len(block) <= rows:
+        return lines + block
+    lines = [head, f"  success {success} (its figures: v)", *block]
+    if len(lines) > rows:
+        left = len(lines) - rows + 1
+        lines = [*lines[: rows - 1], f"  {left} more measure{'' if left == 1 else 's'}: v"]
+    return lines
+
+
+def _block_lines(report: TrialReport) -> list[str]:
+    """The block's summary: its measured trials, each measure's mean ± SD."""
+    assert report.block is not None
+    n = max(s.n for s in report.block) if report.block else 0
+    lines = [
+        f"block {report.task}/{report.condition} done:",
+        f"  {n} measured trial{'' if n == 1 else 's'}, mean ± SD",
+    ]
+    for s in report.block:
+        spread = "" if s.sd is None else f" ± {_number(s.sd, '').strip()}"
+        lines.append(f"  {s.label} {_number(s.mean, '').strip()}{spread} {s.unit}".rstrip())
     return lines

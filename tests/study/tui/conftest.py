@@ -87,6 +87,19 @@ async def wait_for(pilot, condition: Callable[[], bool], timeout_s: float = 60.0
         await pilot.pause(0.05)
 
 
+def screen_text(app: StudyApp) -> str:
+    """The app's screen as the terminal shows it, one line a row (what `tmux
+    capture-pane -p` gives), for asserting that nothing is cut."""
+    import io
+
+    from rich.console import Console
+
+    width, height = app.size
+    console = Console(width=width, height=height, file=io.StringIO(), record=True)
+    console.print(app.screen._compositor.render_update(full=True))
+    return console.export_text()
+
+
 async def loaded(pilot) -> None:
     await wait_for(pilot, lambda: pilot.app.ready and pilot.app.roster is not None)
 

@@ -14,9 +14,9 @@ block, no trial left running, the notes, and no traceback with exit status 0.
 The pairwise choices are recorded as the subscale named on the screen on the side that
 was picked (the pair lines read off the terminal), not from the app's own pair order.
 
-Run as a script with more participants (the test runs 10):
+Run as a script with more participants (the test runs 6, with a quick typist):
 
-    python -m tests.study.tui.lab_day --participants 30 --pace 200
+    python -m tests.study.tui.lab_day --participants 30 --pace 200 --typing-s 5
 """
 
 from __future__ import annotations
@@ -48,6 +48,14 @@ TITLES = {  # as the NASA-TLX form names them
     "Frustration": "frustration",
 }
 PAIR_LINE = re.compile(r"^\s*(\d+)\.\s+(.+?)\s{2}or\s{2}(.+?)\s*[▌▐▁▂▃▄▅▆▇█]*\s*$")
+HINT_WORDS = ("P01", "expert", "withdrawn", "done")
+"""The examples of the Find field's hint, typed on the participants screen."""
+STOPPED_REASON = "stopped from the terminal app in the middle of the trial"
+"""The audit log's reason of a trial stopped with `x`, before the typed one
+(`study.tui.trial_runner.STOPPED_REASON`, quoted: the reference is not the app's own)."""
+REASON_WORDS = ("dial", "slipped", "phone", "rang", "cable", "loose", "asked", "pause")
+DIALOG_WORDS = ("Why?", "Withdraw ", "contact details", "A note", "beyond", "target?")
+"""Words of the participants screen's dialogs (withdraw, notes, enrolling past a target)."""
 NOTE_WORDS = ("left-handed", "glasses", "tired", "calm", "fast", "careful", "asked", "dial")
 
 
@@ -172,11 +180,42 @@ class Typed:
         default_factory=dict
     )  # block -> (ratings, [(left, right, chosen)] as seen on the screen)
     unsaved: tuple[str, str, str] | None = None  # the block typed in part and not saved
+    stops: dict[str, tuple[str, str, str]] = field(default_factory=dict)
+    """code -> (task, condition, reason) of the trial stopped with x."""
+    lost_stops: list[str] = field(default_factory=list)
+    """Stops whose trial ended before the reason was answered (what the screen said)."""
+    raw_only: set[tuple[str, str, str]] = field(default_factory=set)
+    """Blocks whose questionnaire was saved with ratings only."""
+    raw_questions: int = 0
+    """How often the raw-only question was seen (once per raw-only save)."""
+    found: dict[str, list[str]] = field(default_factory=dict)
+    """A word typed in the Find field -> the codes the list showed."""
+    lost_keys: list[str] = field(default_factory=list)
+    """Keys typed in the Find field that it never showed (typed again)."""
+    dialogs: list[str] = field(default_factory=list)
+    """A dialog seen while a word was typed on the participants screen."""
+    cli: dict[str, float] = field(default_factory=dict)
+    """code enrolled from the command line -> seconds until the list showed it."""
+    headers_in_view: int = 0
+    """Forms whose participant and block lines were in view with the reason field."""
 
 
 class LabDay:
-    def __init__(self, db: Path, workdir: Path, pace: float, rng: random.Random) -> None:
+    def __init__(
+        self,
+        db: Path,
+        workdir: Path,
+        pace: float,
+        rng: random.Random,
+        typing_s: float = 5.0,
+        stop_within_s: float = 12.0,
+    ) -> None:
         self.db, self.workdir, self.pace, self.rng = db, workdir, pace, rng
+        self.typing_s = typing_s
+        """Seconds a stop's reason takes to type, character by character."""
+        self.stop_within_s = stop_within_s
+        """x comes at a moment drawn uniformly from the trial's first seconds (at 1x,
+        every trial of the study lasts longer)."""
         self.typed = Typed()
         self.term: Terminal | None = None
         self.group_shown = GROUPS[0]  # the group list's value (the first group at start)
@@ -197,7 +236,10 @@ class LabDay:
 
     def start(self) -> None:
         study = Path(sys.executable).with_name("study")
-        command = [str(study), "tui", "--db", str(self.db), "--pace", f"{self.pace:g}"]
+        # p is remembered in the user's settings: this day's own
+        config = f"XDG_CONFIG_HOME={self.workdir / 'config'}"
+        command = ["env", config, str(study), "tui", "--db", str(self.db)]
+        command += ["--pace", f"{self.pace:g}"]
         self.term = Terminal(command, self.workdir)
         self.term.wait(r"Study: lab day", 60)
         # the other screens are mounted after the overview shows: F2 acts once they are
@@ -240,12 +282,22 @@ class LabDay:
             # back along the fields (the list, the find field, the Add button, the group
             # list) until the group list has the focus: it opens with Down, which does
             # nothing on the others (Enter would press Add)
-            term.until(r"esc Dismiss menu", "BTab", "Down", tries=20, each_s=1.0)
-            # the group typed (the open list searches as one types), not counted in
-            # rows: a Down sent while the list was opening has moved its highlight
-            term.text(group)
-            term.keys("Enter")
-            term.wait(rf"Group {group}\b", 10)
+            for _ in range(3):
+                term.until(r"esc Dismiss menu", "BTab", "Down", tries=20, each_s=1.0)
+                # the group typed (the open list searches as one types), not counted in
+                # rows: a Down sent while the list was opening has moved its highlight
+                term.text(group)
+                term.keys("Enter")
+                try:
+                    term.wait(rf"Group {group}\b", 10)
+                    break
+                except Timeout:  # on a loaded machine the list may miss the word
+                    self.retried_keys += 1
+                    if "esc Dismiss menu" in term.screen():
+                        term.keys("Escape")
+                        term.wait_until(lambda: "esc Dismiss menu" not in term.screen(), "")
+            else:
+                raise Timeout(f"group {group} not chosen in three tries\n{term.screen()}")
             self.group_shown = group
         # right after start the first `a` is now and then ignored (not diagnosed; a
         # second press enrols): pressed again only while the list shows no `code`
@@ -285,6 +337,56 @@ class LabDay:
         term.wait(rf"{code}: note kept|note: {re.escape(text)}", 30)
         self.typed.notes[code] = text
 
+    def enrol_from_command_line(self, code: str, group: str) -> None:
+        """`study participant add` in a subprocess while the participants screen's Find
+        field holds the next code (a long list scrolls): the seconds from the command's
+        end to `code`'s row on the screen."""
+        term = self.term
+        self.to_screen("F2", r"a Enrol")
+        self._type_in_find(code)
+        row = rf"^\s+{code}\s+{group}\s"
+        assert re.search(row, term.screen(), re.MULTILINE) is None, term.screen()
+        study = Path(sys.executable).with_name("study")
+        command = [str(study), "participant", "add", "--group", group, "--db", str(self.db)]
+        out = subprocess.run(command, capture_output=True, text=True, cwd=self.workdir)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.startswith(f"{code} ({group})"), out.stdout
+        done = time.monotonic()
+        term.wait(row, 30)
+        self.typed.cli[code] = time.monotonic() - done
+        self.typed.groups[code] = group
+        term.keys("C-u")  # the field emptied: the whole list again
+        term.wait(r"^ Find code, group or state", 10)
+
+    def _type_in_find(self, word: str) -> None:
+        """`word` typed on the list a key at a time, each key seen in the Find field
+        (a key never seen is typed again, and reported)."""
+        term = self.term
+        for k, ch in enumerate(word):
+            term.text(ch)
+            try:
+                term.wait(rf"^ Find {re.escape(word[: k + 1])}\s*$", 5)
+            except Timeout:
+                self.typed.lost_keys.append(f"{ch!r} of {word!r} on F2")
+                term.text(ch)
+                term.wait(rf"^ Find {re.escape(word[: k + 1])}\s*$", 10)
+
+    def search_words(self) -> None:
+        """Every word of the Find field's hint typed on the list, a key at a time: the
+        field takes it (no dialog opens) and the list shows the rows holding it."""
+        term = self.term
+        for word in HINT_WORDS:
+            self.to_screen("F2", r"a Enrol")  # the list has the focus
+            self._type_in_find(word)
+            time.sleep(0.3)  # a dialog a key opened would be drawn by now
+            screen = term.screen()
+            self.typed.dialogs += [w for w in DIALOG_WORDS if w in screen]
+            self.typed.found[word] = re.findall(
+                rf"^\s+(P\d{{3}})\s+(?:{'|'.join(GROUPS)})\s", screen, re.MULTILINE
+            )
+            term.keys("C-u")  # the field emptied: the whole list again
+            term.wait(r"^ Find code, group or state", 10)
+
     # -- sessions ------------------------------------------------------------------------
 
     def pick(self, code: str, position: int) -> None:
@@ -302,25 +404,79 @@ class LabDay:
         term.wait(rf"next: {code} ", 20)
         self.picked = code
 
-    def run_block(self, code: str, last: bool) -> tuple[str, str]:
+    def run_block(
+        self, code: str, last: bool, stop: bool = False, raw_only: bool = False
+    ) -> tuple[str, str]:
         """s (and the checklist's y): the next trial, which ends the block; the NASA-TLX
         form opens, is typed as one burst and saved with ctrl+s (unless `last`, whose
-        form is typed in part and left unsaved)."""
+        form is typed in part and left unsaved; with `raw_only`, the ratings only). With
+        `stop`, the block's first try is stopped with x first (`stop_trial`)."""
         term = self.term
         term.keys("F3")
         nxt = term.wait(rf"next: {code} (\w+)/(\w+) trial 1", 20)
         task, condition = nxt.group(1), nxt.group(2)
+        if stop:
+            with self.timed("stops (1x, x, the reason typed)"):
+                self.stop_trial(code, task, condition)
         with self.timed("trials (s to the form shown)"):
-            term.keys("s")
-            shown = term.wait(rf"consent confirmed|running: {code}|Block {task}/{condition}", 30)
-            if "consent" in shown.group(0):
-                term.keys("y")
+            self._start_trial(code, task, condition)
             term.wait(rf"Participant {code}\s+▼\s+Block {task}/{condition}\s+▼", 120)
             term.wait(r"How mentally demanding was the task\?", 10)  # the first rating focused
         with self.timed("forms (typed, read, saved)"):
-            return self._fill_form(code, task, condition, last)
+            return self._fill_form(code, task, condition, last, raw_only)
 
-    def _fill_form(self, code: str, task: str, condition: str, last: bool) -> tuple[str, str]:
+    def _start_trial(self, code: str, task: str, condition: str) -> None:
+        term = self.term
+        term.keys("s")
+        shown = term.wait(rf"consent confirmed|running: {code}|Block {task}/{condition}", 30)
+        if "consent" in shown.group(0):
+            term.keys("y")
+
+    def set_pace(self, shown: str) -> None:
+        """p until the run screen says `pace: {shown} (p)`, a press at a time."""
+        term = self.term
+        for _ in range(6):
+            now = term.wait(r"pace: (.+?) \(p\)", 10).group(1)
+            if now == shown:
+                return
+            term.keys("p")
+            term.wait_until(
+                lambda n=now: re.search(rf"pace: {re.escape(n)} \(p\)", term.screen()) is None,
+                "the pace to change",
+            )
+        raise Timeout(f"pace {shown} not reached with p\n{term.screen()}")
+
+    def stop_trial(self, code: str, task: str, condition: str) -> None:
+        """The block's trial at 1x, x at a random moment of its first seconds, a reason
+        typed a character at a time over `typing_s`, Enter: stopped, to be repeated."""
+        term = self.term
+        self.set_pace("1x")
+        self._start_trial(code, task, condition)
+        term.wait(rf"running: {code} ", 30)
+        time.sleep(self.rng.uniform(0.2, self.stop_within_s))
+        term.keys("x")
+        asked = term.wait(rf"Stop {code}'s running trial\?|ended before it was stopped", 20)
+        reason = f"{self.rng.choice(REASON_WORDS)} {self.rng.choice(REASON_WORDS)} {code}"
+        if "ended before" in asked.group(0):
+            self.typed.lost_stops.append(f"{code} {task}/{condition}: the trial ended first")
+            term.keys("Escape")
+        else:
+            for ch in reason:
+                term.text(ch)
+                time.sleep(self.typing_s / len(reason))
+            term.keys("Enter")
+            ended = term.wait(rf"{code}: trial stopped; kept as|ended before it", 30)
+            if "ended before" in ended.group(0):
+                self.typed.lost_stops.append(f"{code} {task}/{condition}: ended while typed")
+                term.keys("Escape")
+            else:
+                self.typed.stops[code] = (task, condition, reason)
+        self.set_pace(f"{self.pace:g}x")
+        term.wait(rf"next: {code} {task}/{condition} trial 1", 20)
+
+    def _fill_form(
+        self, code: str, task: str, condition: str, last: bool, raw_only: bool = False
+    ) -> tuple[str, str]:
         term = self.term
         first = term.screen()
         block = (code, task, condition)
@@ -333,11 +489,19 @@ class LabDay:
                 term.keys(*keys)
                 self.typed.unsaved = block
                 return task, condition
+        if raw_only:
+            return self._save_raw_only(block, keys, ratings)
         for side in sides:
             keys += ["Left" if side == 0 else "Right", "Down"]
         term.keys(*keys)
-        # the burst ends on the reason field, scrolled into view below the last pairs
+        # the burst ends on the reason field, scrolled into view below the last pairs;
+        # the participant and block lines stay in view above the scrolled form
         term.wait(r"^ Reason ", 20)
+        end_screen = term.screen()
+        header = rf"Participant {code}\s+▼\s+Block {task}/{condition}\s+▼"
+        scrolled = re.search(r"^ Mental demand\b", end_screen, re.MULTILINE) is None
+        if re.search(header, end_screen) and scrolled:  # the first rating's row scrolled off
+            self.typed.headers_in_view += 1
         pairs = _pairs(first)
         end = time.monotonic() + 20  # a notification may cover a pair for a while
         while len(pairs) < 15 and time.monotonic() < end:
@@ -350,11 +514,40 @@ class LabDay:
         self.typed.tlx[block] = (ratings, chosen)
         return task, condition
 
-    def session(self, code: str, position: int, last: bool = False) -> None:
+    def _save_raw_only(
+        self, block: tuple[str, str, str], keys: list[str], ratings: dict[str, int]
+    ) -> tuple[str, str]:
+        """The six ratings and ctrl+s: asked once whether to store the raw score only,
+        y, stored, and not asked again."""
+        term = self.term
+        code, task, condition = block
+        term.keys(*keys, "C-s")
+        question = rf"{code} {task}/{condition}: no pairwise choices: store the raw"
+        term.wait(question, 20)
+        self.typed.raw_questions += 1
+        term.keys("y")
+        term.wait(rf"{code} {task}/{condition}: stored", 30)
+        time.sleep(0.5)  # a second question would be up by now
+        self.typed.raw_questions += bool(re.search(question, term.screen()))
+        self.typed.tlx[block] = (ratings, None)
+        self.typed.raw_only.add(block)
+        return task, condition
+
+    def session(self, code: str, position: int, last: bool = False, raw_only: int = -1) -> None:
+        """Every block of `code`, one of them (at random) with a stopped trial first;
+        block `raw_only` (if any) saved with its ratings only."""
         self.pick(code, position)
         order = []
+        stopped = self.rng.randrange(len(TASK_BLOCKS))
         for k in range(len(TASK_BLOCKS)):
-            order.append(self.run_block(code, last=last and k == len(TASK_BLOCKS) - 1))
+            order.append(
+                self.run_block(
+                    code,
+                    last=last and k == len(TASK_BLOCKS) - 1,
+                    stop=k == stopped,
+                    raw_only=k == raw_only,
+                )
+            )
         self.typed.blocks[code] = order
         if not last:
             self.term.keys("F3")
@@ -383,7 +576,14 @@ def _pairs(screen: str) -> dict[int, tuple[str, str]]:
     return found
 
 
-def run_lab_day(workdir: Path, participants: int = 10, pace: float = 200.0, seed: int = 0) -> dict:
+def run_lab_day(
+    workdir: Path,
+    participants: int = 10,
+    pace: float = 200.0,
+    seed: int = 0,
+    typing_s: float = 5.0,
+    stop_within_s: float = 12.0,
+) -> dict:
     """The whole day in `workdir`; returns what was typed and the figures of the run."""
     from db.migrate import open_database
     from study.protocol.design import parse_design
@@ -401,16 +601,21 @@ def run_lab_day(workdir: Path, participants: int = 10, pace: float = 200.0, seed
     enrolment = [g for g, n in groups.items() for _ in range(n)]
     rng.shuffle(enrolment)
     codes = [f"P{k + 1:03d}" for k in range(participants)]
-    day = LabDay(db, workdir, pace, rng)
+    day = LabDay(db, workdir, pace, rng, typing_s, stop_within_s)
     day.start()
     try:
-        for code, group in zip(codes, enrolment, strict=True):
+        for code, group in zip(codes[:-1], enrolment[:-1], strict=True):
             with day.timed("enrolment"):
                 day.enrol(code, group)
+        with day.timed("enrolment"):  # the last one from the command line, the app open
+            day.enrol_from_command_line(codes[-1], enrolment[-1])
+        with day.timed("find words"):
+            day.search_words()
         restart_after = math.ceil(participants / 2) - 1
+        raw_only = rng.randrange(len(TASK_BLOCKS))  # the first participant's raw-only block
         for k, code in enumerate(codes):
             last = k == participants - 1
-            day.session(code, k, last=last)
+            day.session(code, k, last=last, raw_only=raw_only if k == 0 else -1)
             with day.timed("notes"):
                 day.note(code, f"{rng.choice(NOTE_WORDS)} {rng.choice(NOTE_WORDS)} {k}")
             if k == restart_after and not last:  # the app quit and started again
@@ -431,17 +636,25 @@ def run_lab_day(workdir: Path, participants: int = 10, pace: float = 200.0, seed
     }
 
 
+def expected_found(typed: Typed, word: str) -> list[str]:
+    """The codes whose row holds `word` when it was typed (before any block was run):
+    the code or the group; no one was withdrawn or done then."""
+    return [c for c, g in sorted(typed.groups.items()) if word.lower() in (c + " " + g).lower()]
+
+
 def compare(db: Path, typed: Typed) -> list[str]:
-    """Every difference between the database and what was typed, one line each."""
+    """Every difference between the database (and the screen) and what was typed, one
+    line each."""
     from sqlalchemy import select
     from sqlalchemy.orm import Session
 
     from db.migrate import open_database
+    from db.models.audit import AuditEntry
     from db.models.study import Participant
     from db.models.tlx import TlxResponse
     from db.models.trial import Trial
 
-    wrong: list[str] = []
+    wrong = _compare_screen(typed)
     engine = open_database(str(db), create=False)
     try:
         with Session(engine) as session:
@@ -452,45 +665,109 @@ def compare(db: Path, typed: Typed) -> list[str]:
             notes = {c: p.note for c, p in people.items() if p.note}
             if notes != typed.notes:
                 wrong.append(f"notes: stored {notes}, typed {typed.notes}")
+            wrong += [f"{c} withdrawn" for c, p in people.items() if p.withdrawn_at is not None]
             stored = {}
             for r in session.scalars(select(TlxResponse)):
                 block = (r.participant.code, r.task, r.condition)
                 ratings = {s: getattr(r, s) for s in SUBSCALES}
                 pairs = [tuple(p) for p in r.pairwise] if r.pairwise else None
                 stored[block] = (ratings, pairs)
-            for block in sorted(set(stored) | set(typed.tlx)):
-                if block not in typed.tlx:
-                    wrong.append(f"{block}: a questionnaire stored for a block never saved")
-                elif block not in stored:
-                    wrong.append(f"{block}: typed and saved, not stored")
-                else:
-                    for s in SUBSCALES:
-                        if stored[block][0][s] != typed.tlx[block][0][s]:
-                            wrong.append(
-                                f"{block} {s}: stored {stored[block][0][s]}, "
-                                f"typed {typed.tlx[block][0][s]}"
-                            )
-                    for k, (got, want) in enumerate(
-                        zip(stored[block][1] or [None] * 15, typed.tlx[block][1], strict=True)
-                    ):
-                        if got != want:
-                            wrong.append(f"{block} pair {k + 1}: stored {got}, typed {want}")
+            wrong += _compare_tlx(stored, typed)
+            audit = {
+                e.entity_id: e.reason
+                for e in session.scalars(
+                    select(AuditEntry).where(
+                        AuditEntry.entity == "trial", AuditEntry.new_value == "interrupted"
+                    )
+                )
+            }
             trials = session.scalars(select(Trial).order_by(Trial.id)).all()
             for code in typed.groups:
                 mine = [t for t in trials if t.participant.code == code]
-                run = [(t.task, t.condition) for t in mine]
-                if run != typed.blocks.get(code):
-                    wrong.append(f"{code}: trials {run}, blocks run {typed.blocks.get(code)}")
-                if sorted(run) != sorted(tuple(b.split("/")) for b in TASK_BLOCKS):
-                    wrong.append(f"{code}: trials {run}; expected one in each block")
-                for t in mine:
-                    if (t.status, t.driver, t.trial_index) != ("completed", "simulated", 0):
-                        wrong.append(
-                            f"{code} {t.task}/{t.condition}: trial {t.status} {t.driver} "
-                            f"index {t.trial_index}; expected completed simulated 0"
-                        )
+                wrong += _compare_trials(code, mine, typed, audit)
     finally:
         engine.dispose()
+    return wrong
+
+
+def _compare_screen(typed: Typed) -> list[str]:
+    """What the screen showed against what it should have: stops answered, no dialog
+    from a typed word, the rows a word finds, the raw-only question once, the form's
+    header in view."""
+    wrong = [f"stop lost: {line}" for line in typed.lost_stops]
+    wrong += [f"a dialog opened while a word was typed on F2: {w!r}" for w in typed.dialogs]
+    for word in HINT_WORDS:
+        if typed.found.get(word) != expected_found(typed, word):
+            wrong.append(
+                f"Find {word!r}: the list showed {typed.found.get(word)}, "
+                f"expected {expected_found(typed, word)}"
+            )
+    if typed.raw_questions != len(typed.raw_only):
+        wrong.append(
+            f"the raw-only question seen {typed.raw_questions} times for "
+            f"{len(typed.raw_only)} raw-only saves"
+        )
+    walked = len(typed.tlx) - len(typed.raw_only)
+    if typed.headers_in_view != walked:
+        wrong.append(
+            f"participant and block lines in view at the form's end in {typed.headers_in_view}"
+            f" of {walked} forms"
+        )
+    return wrong
+
+
+def _compare_tlx(stored: dict, typed: Typed) -> list[str]:
+    wrong = []
+    for block in sorted(set(stored) | set(typed.tlx)):
+        if block not in typed.tlx:
+            wrong.append(f"{block}: a questionnaire stored for a block never saved")
+            continue
+        if block not in stored:
+            wrong.append(f"{block}: typed and saved, not stored")
+            continue
+        (got_ratings, got_pairs), (ratings, pairs) = stored[block], typed.tlx[block]
+        for s in SUBSCALES:
+            if got_ratings[s] != ratings[s]:
+                wrong.append(f"{block} {s}: stored {got_ratings[s]}, typed {ratings[s]}")
+        if pairs is None or got_pairs is None:
+            if pairs != got_pairs:
+                wrong.append(f"{block} pairs: stored {got_pairs}, typed {pairs}")
+            continue
+        for k, (got, want) in enumerate(zip(got_pairs, pairs, strict=True)):
+            if got != want:
+                wrong.append(f"{block} pair {k + 1}: stored {got}, typed {want}")
+    return wrong
+
+
+def _compare_trials(code: str, mine: list, typed: Typed, audit: dict[int, str | None]) -> list:
+    """`code`'s trials: one completed in each block, in the order run; the stopped one
+    stored interrupted with its reason audited, its block's completed trial attempt 2."""
+    wrong = []
+    done = [t for t in mine if t.status == "completed"]
+    run = [(t.task, t.condition) for t in done]
+    if run != typed.blocks.get(code):
+        wrong.append(f"{code}: trials {run}, blocks run {typed.blocks.get(code)}")
+    if sorted(run) != sorted(tuple(b.split("/")) for b in TASK_BLOCKS):
+        wrong.append(f"{code}: trials {run}; expected one in each block")
+    stop = typed.stops.get(code)
+    for t in done:
+        attempt = 2 if stop is not None and (t.task, t.condition) == stop[:2] else 1
+        if (t.driver, t.trial_index, t.attempt) != ("simulated", 0, attempt):
+            wrong.append(
+                f"{code} {t.task}/{t.condition}: trial {t.driver} index {t.trial_index} "
+                f"attempt {t.attempt}; expected simulated 0 attempt {attempt}"
+            )
+    stopped = [t for t in mine if t.status != "completed"]
+    want = [] if stop is None else [(stop[0], stop[1], "interrupted")]
+    if [(t.task, t.condition, t.status) for t in stopped] != want:
+        wrong.append(
+            f"{code}: not completed {[(t.task, t.condition, t.status) for t in stopped]}, "
+            f"stopped {want}"
+        )
+    for t in stopped:
+        reason = f"{STOPPED_REASON}: {stop[2]}" if stop is not None else None
+        if audit.get(t.id) != reason:
+            wrong.append(f"{code} trial {t.id}: audited {audit.get(t.id)!r}, typed {reason!r}")
     return wrong
 
 
@@ -500,6 +777,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pace", type=float, default=200.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
+        "--typing-s", type=float, default=5.0, help="seconds to type a stop's reason"
+    )
+    parser.add_argument(
+        "--stop-within-s",
+        type=float,
+        default=12.0,
+        help="x at a moment drawn from this many first seconds of the trial (at 1x)",
+    )
+    parser.add_argument(
         "--keep", type=Path, help="folder to run in and keep (default: a temporary one)"
     )
     args = parser.parse_args(argv)
@@ -507,7 +793,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--participants {args.participants}; expected 3 or more (three groups)")
     workdir = args.keep or Path(tempfile.mkdtemp(prefix="labday-"))
     workdir.mkdir(parents=True, exist_ok=True)
-    result = run_lab_day(workdir, args.participants, args.pace, args.seed)
+    result = run_lab_day(
+        workdir, args.participants, args.pace, args.seed, args.typing_s, args.stop_within_s
+    )
     wrong = compare(result["db"], result["typed"])
     typed = result["typed"]
     print(
@@ -515,6 +803,15 @@ def main(argv: list[str] | None = None) -> int:
         f"and saved (+1 typed in part, not saved), {sum(map(len, typed.blocks.values()))} "
         f"blocks run at pace {args.pace:g}, {result['seconds']:.0f} s; "
         f"{len(wrong)} differences from what was typed"
+    )
+    print(
+        f"  stops: {len(typed.stops)} stored interrupted with their reason typed in "
+        f"{args.typing_s:g} s, {len(typed.lost_stops)} lost; Find words: "
+        + ", ".join(f"{w} {len(typed.found.get(w, []))} rows" for w in HINT_WORDS)
+        + f"; raw-only saves {len(typed.raw_only)} (asked {typed.raw_questions} times); "
+        + "enrolled from the command line: "
+        + ", ".join(f"{c} on the list {s:.2f} s after" for c, s in typed.cli.items())
+        + f"; keys lost in Find: {typed.lost_keys or 'none'}"
     )
     parts = ", ".join(f"{k} {v:.0f} s" for k, v in result["parts_s"].items())
     print(f"  time: {parts}; keys pressed again: {result['retried_keys']}")

@@ -44,6 +44,24 @@ async def test_a_word_typed_on_the_list_goes_into_find_and_opens_no_dialog(
     assert _audit_rows(study_engine) == audited
 
 
+@pytest.mark.parametrize("word", ["P01", "P002", "expert 2"])
+async def test_a_word_typed_in_one_burst_stays_whole_in_find(make_test_app, word: str) -> None:
+    """A quick typist's keys reach the app before the focus has moved to the field: the
+    digits after the first letter are the word's, not the screens' 1-6."""
+    from textual import events
+
+    app = make_test_app()
+    async with on_screen(app, "f2") as pilot:
+        assert isinstance(app.focused, DataTable)
+        for key in word:  # all sent before the app handles the first
+            event = events.Key("space" if key == " " else key, key)
+            event.set_sender(app)
+            app._driver.send_message(event)
+        await pilot.pause(0.3)
+        assert app.query_one("#filter", Input).value == word
+        assert app.query_one("#tabs").active == "participants"
+
+
 async def test_the_find_field_narrows_the_list_to_the_typed_word(make_test_app) -> None:
     app = make_test_app()
     async with on_screen(app, "f2") as pilot:

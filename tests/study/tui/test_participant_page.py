@@ -105,18 +105,8 @@ async def test_the_page_shows_what_is_stored_and_makes_audited_corrections(
         table = page.query_one("#trials", DataTable)
         rows = [table.get_row_at(k) for k in range(table.row_count)]
         assert rows == [
-            [str(stopped_id), f"1 lcca/{a}", "trial 1", "1", "interrupted", "-", "-", "-", "-"],
-            [
-                str(done_id),
-                f"1 lcca/{a}",
-                "trial 1",
-                "2",
-                "completed",
-                "31.5",
-                "yes",
-                "1.25/0.50 N",
-                "yes",
-            ],
+            [str(stopped_id), f"1 lcca/{a}", "1", "1", "interrupted", "-", "-", "-", "-"],
+            [str(done_id), f"1 lcca/{a}", "1", "2", "completed", "31.5", "yes", "1.25/0.50", "yes"],
         ]
         # the highlighted row in full: why it was interrupted
         assert _text(app, "#trial-detail") == (
@@ -145,7 +135,7 @@ async def test_the_page_shows_what_is_stored_and_makes_audited_corrections(
         await wait_for(pilot, lambda: table.get_row_at(1)[8] == "NO")
         assert _text(app, "#trial-detail") == (
             f"trial {done_id}, lcca/{a} trial 1, attempt 2: completed in 31.50 s, success; "
-            "peak_proximal_force_n 1.25, peak_distal_force_n 0.5; INVALID: sensor cable loose"
+            "INVALID: sensor cable loose\npeak proximal force 1.25 N, peak distal force 0.5 N"
         )
         # i again: valid again
         await pilot.press("i")
@@ -345,3 +335,118 @@ async def test_f5_leaves_an_invalid_trial_out_and_lists_it_with_its_reason(
         await pilot.press("n")
         await wait_for(pilot, lambda: isinstance(app.screen, TextScreen), 10)
         assert line in app.screen.text
+
+
+NOTES_DESIGN = """\
+name = "notes page"
+seed = 3
+tasks = ["notes"]
+trials_per_condition = 2
+practice_trials = 0
+[groups]
+novice = 2
+"""
+NOTES_PEAKS = {  # a NOTES trial's stored measures, distinct values, in the task's order
+    "peak_force_demanded_n": 10.11,
+    "peak_tip_force_n": 6.94,
+    "peak_force_rendered_n": 5.98,
+    "peak_torque_demanded_n_m": 0.0698,
+    "peak_torque_rendered_n_m": 0.0704,
+    "peak_push_n": 10.11,
+    "peak_pull_n": 4.95,
+    "peak_torque_cw_n_m": 0.0634,
+    "peak_torque_ccw_n_m": 0.0671,
+    "push_over_capacity_fraction": 0.199,
+}
+NOTES_SHOWN = (  # the detail line of such a trial, three significant figures, by hand
+    "peak demanded force 10.1 N, peak tip force 6.94 N, peak rendered force 5.98 N, "
+    "peak demanded torque 0.0698 N m, peak rendered torque 0.0704 N m, peak push 10.1 N, "
+    "peak pull 4.95 N, peak CW torque 0.0634 N m, peak CCW torque 0.0671 N m, "
+    "push over capacity 0.199"
+)
+
+
+async def test_a_notes_trial_is_shown_whole_at_80_columns(tmp_path) -> None:
+    from db.migrate import open_database
+    from study.protocol.design import parse_design
+    from study.protocol.roster import create_study
+    from study.tui import StudyServices, TuiSettings, make_app
+    from tests.study.tui.conftest import screen_text
+
+    engine = open_database(str(tmp_path / "notes.db"), create=True)
+    create_study(engine, parse_design(NOTES_DESIGN), NOTES_DESIGN)
+    add_participant(engine, "novice")
+    with Session(engine) as session, session.begin():
+        p = session.scalars(select(Participant)).one()
+        first = p.blocks[0]
+        cond = first.condition
+        for k in range(2):
+            session.add(
+                Trial(
+                    participant_id=p.id,
+                    block_id=first.id,
+                    task="notes",
+                    condition=first.condition,
+                    block_index=0,
+                    trial_index=k,
+                    status="completed",
+                    completion_time_s=40.36,
+                    success=True,
+                    driver="simulated",
+                    measure_values=NOTES_PEAKS,
+                )
+            )
+    reason = (
+        "the phantom slipped on the table, the fornix insert moved by two centimetres "
+        "and was put back"
+    )
+    app = make_app(StudyServices(engine, None), TuiSettings(prepare_simulation=False))
+    try:
+        async with app.run_test(size=(80, 24)) as pilot:
+            await loaded(pilot)
+            await pilot.press("f2", "enter")
+            await wait_for(pilot, lambda: isinstance(app.screen, ParticipantPage), 10)
+            page = app.screen
+            await wait_for(pilot, lambda: page.record is not None, 10)
+            await pilot.press("down", "i")
+            await wait_for(pilot, lambda: isinstance(app.screen, ReasonScreen), 10)
+            await pilot.press(*reason, "enter")
+            await wait_for(pilot, lambda: "marked invalid" in page.last_message, 10)
+            table = page.query_one("#trials", DataTable)
+            await wait_for(pilot, lambda: table.get_row_at(1)[8] == "NO", 10)
+            await pilot.pause(0.2)
+            rows = screen_text(app).splitlines()
+    finally:
+        engine.dispose()
+    # every column in view, the validity last, the analysed peaks whole
+    header = next(r for r in rows if r.lstrip().startswith("id "))
+    assert header.split() == [
+        "id",
+        "block",
+        "trial",
+        "att",
+        "status",
+        "time",
+        "s",
+        "ok",
+        "peaks",
+        "N",
+        "valid",
+    ]
+    trial_rows = [
+        r.split()
+        for r in rows
+        if r.split()[1:3] + r.split()[5:6] == ["1", f"notes/{cond}", "completed"]
+    ]
+    assert [r[-3:] for r in trial_rows] == [
+        ["yes", "10.11/6.94", "yes"],
+        ["yes", "10.11/6.94", "NO"],
+    ]
+    # the highlighted trial's every measure and its reason, and the confirmation, uncut
+    text = " ".join(r.strip() for r in rows)
+    assert f"INVALID: {reason} {NOTES_SHOWN}" in text
+    ids = [r[0] for r in trial_rows]
+    assert (
+        f"trial {ids[1]} (P001 notes/{cond} trial 2 (attempt 1)) marked invalid ({reason})" in text
+    )
+    assert "(P001 notes" not in rows[-1]  # the key line stays the last row

@@ -126,3 +126,20 @@ def test_the_block_summary_is_the_mean_and_sd_of_its_measured_trials(tmp_path) -
     assert "  wall contacts 4" in lines  # the trial's count, a whole number
     assert "  wall contacts 2.00 ± 2.00" in lines  # the block's mean and SD
     assert all(len(line) <= 38 for line in lines)  # the readout's width
+    # in 12 rows both fit; in 8 the block's summary whole, the trial's own figures left
+    # out; in 6 the summary cut, the line saying how many measures are not shown
+    assert report_lines("P001", report, rows=12) == lines
+    assert report_lines("P001", report, rows=8) == [
+        f"P001: lcca/{condition} trial 3 stored",
+        "  success no (its figures: v)",
+        f"block lcca/{condition} done:",
+        "  3 measured trials, mean ± SD",
+        "  completion time 25.0 ± 5.57 s",
+        "  peak proximal force 1.50 ± 0.50 N",
+        "  peak distal force 0.38 ± 0.12 N",
+        "  wall contacts 2.00 ± 2.00",
+    ]
+    assert report_lines("P001", report, rows=6)[4:] == [
+        "  completion time 25.0 ± 5.57 s",
+        "  3 more measures: v",
+    ]

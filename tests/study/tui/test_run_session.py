@@ -19,6 +19,7 @@ from db.models.trial import SampleChunk, Trial
 from study.protocol.default_estimator import load_estimator
 from study.protocol.design import parse_design
 from study.protocol.roster import add_participant, create_study
+from study.protocol.tasks import get_task
 from study.protocol.tlx import store_tlx
 from study.tasks.lcca.scene import PhantomView
 from study.tasks.notes.scene import NotesView
@@ -29,7 +30,7 @@ from study.tui.stop_dialog import StopScreen
 from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON
 from tests.study.conftest import stored_samples
-from tests.study.tui.conftest import run_screen, wait_for
+from tests.study.tui.conftest import run_screen, screen_text, wait_for
 
 
 def _trials(engine) -> list[tuple[str, str, int]]:
@@ -151,6 +152,14 @@ novice = 1
 """
 
 
+def trial_condition(engine: Engine) -> str:
+    """The condition of the one participant's first block."""
+    with Session(engine) as session:
+        return session.scalars(
+            select(ScheduleBlock.condition).order_by(ScheduleBlock.block_index)
+        ).first()
+
+
 @pytest.fixture
 def notes_engine(tmp_path: Path) -> Iterator[Engine]:
     """A NOTES-only study with P001 (novice) enrolled."""
@@ -188,6 +197,21 @@ async def test_a_notes_trial_shows_the_scope_and_stores_its_samples(
         peak = float(text)
         # half a unit of the last digit shown (three significant figures)
         shown_to = 0.5 * 10.0 ** -(len(text.split(".")[1]) if "." in text else 0)
+        # the block's summary in the readout beside the scene (the form opened for the
+        # block: back to F3): every NOTES measure, the last one inside the box's height
+        await pilot.press("f3")
+        await pilot.pause(0.3)
+        rows = screen_text(app).splitlines()
+        box = app.query_one("#phantom-box").region
+        beside = [r[box.right :].strip() for r in rows[box.y : box.bottom]]
+        summary = beside[beside.index(f"block notes/{trial_condition(notes_engine)} done:") :]
+        labels = [m.label for m in get_task("notes").all_measures]
+        summary = summary[: summary.index("")]
+        assert len(summary) == 2 + len(labels)
+        assert all(
+            line.startswith(f"{label} ") for line, label in zip(summary[2:], labels, strict=True)
+        )
+        assert beside[-1] == ""  # the row of the box's bottom border
     with Session(notes_engine) as session:
         trial = session.scalars(select(Trial)).one()
         n = session.scalar(select(func.coalesce(func.sum(SampleChunk.n_samples), 0)))
