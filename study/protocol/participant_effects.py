@@ -26,8 +26,8 @@ function of where a trial lies in the session (`TrialPlace`):
   gently after HV first, as if still feeling the force; `gentler_hv_after_vo`). The
   preferred speed and the stall time stay, so the completion time moves only as far as
   the caution's slowing moves it (in LCCA the caution also sets the approach and entry
-  speeds, so there the time follows in part; the emulator says how far); one direction
-  at a time, as above;
+  speeds, so there the time follows in part; the emulator says how far; on the forces
+  alone it is `force_carry_over`); one direction at a time, as above;
 - `force_carry_over`: the same place, an effect on the forces alone: the person aims
   the tip at the ostium with more care (`steering_error_rad` times (1 - share);
   `softer_vo_after_hv`: in VO after HV first, as if the felt resistance had taught
