@@ -26,8 +26,23 @@ function of where a trial lies in the session (`TrialPlace`):
   gently after HV first, as if still feeling the force; `gentler_hv_after_vo`). The
   preferred speed and the stall time stay, so the completion time moves only as far as
   the caution's slowing moves it (in LCCA the caution also sets the approach and entry
-  speeds, so there the time follows in part; the emulator says how far); one direction
-  at a time, as above;
+  speeds, so there the time follows in part; the emulator says how far; on the forces
+  alone it is `force_carry_over`); one direction at a time, as above;
+- `force_carry_over`: the same place, an effect on the forces alone: the person aims
+  the tip at the ostium with more care (`steering_error_rad` times (1 - share);
+  `softer_vo_after_hv`: in VO after HV first, as if the felt resistance had taught
+  what a caught tip costs; `softer_hv_after_vo`) and advances a little slower while
+  doing so (`preferred_speed_m_s` times (1 - share)^0.1). Fewer tips catch an
+  ostium's edge, where the peak forces of a trial are set; the failed attempts saved
+  make up for the slower advance (the exponent is set so on LCCA's simulator), so the
+  completion time keeps its course;
+- `time_carry_over`: the same place, an effect on the time alone: the person goes
+  slower (`preferred_speed_m_s` times (1 - share); `slower_vo_after_hv`,
+  `slower_hv_after_vo`) and takes as much longer to give up pushing on a stalled or
+  resisting tip (`visual_stall_s` and `haptic_threshold_n_m` divided by
+  (1 - share)^1.5): the slower push builds the force into an obstacle more slowly and
+  drags less, and the later back-off makes up for both (the exponent is set so on
+  LCCA's simulator), so the peak forces stay;
 - `unexplained_person`: a person no trait setting reproduces. Reported, never absorbed:
   it has no multiplier, and a simulation never draws it.
 
@@ -55,6 +70,8 @@ FAMILIES: dict[str, tuple[str, ...]] = {
     "fatigue": ("rate",),
     "carry_over": ("vo_after_hv", "hv_after_vo"),
     "gentle_carry_over": ("gentler_vo_after_hv", "gentler_hv_after_vo"),
+    "force_carry_over": ("softer_vo_after_hv", "softer_hv_after_vo"),
+    "time_carry_over": ("slower_vo_after_hv", "slower_hv_after_vo"),
 }
 """Each family the fit may add, with its parameters' names."""
 UNEXPLAINED = "unexplained_person"
@@ -67,6 +84,10 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "hv_after_vo": (-0.6, 0.6),
     "gentler_vo_after_hv": (-0.6, 0.6),
     "gentler_hv_after_vo": (-0.6, 0.6),
+    "softer_vo_after_hv": (-0.6, 0.6),
+    "softer_hv_after_vo": (-0.6, 0.6),
+    "slower_vo_after_hv": (-0.5, 0.5),
+    "slower_hv_after_vo": (-0.5, 0.5),
 }
 """Each parameter's admissible range (a fit stays inside; a file outside is refused)."""
 
@@ -125,12 +146,20 @@ class ParticipantEffect:
         # carry-overs: only a second block that follows the other condition
         if place.block == 0 or place.condition == place.first_condition:
             return {}
+        vo_name, hv_name = FAMILIES[self.family]
+        share = p[vo_name] if place.condition == "VO" else p[hv_name]
         if self.family == "gentle_carry_over":
-            share = (
-                p["gentler_vo_after_hv"] if place.condition == "VO" else p["gentler_hv_after_vo"]
-            )
             return {"caution": 1.0 + share, "comfort_torque_n_m": 1.0 - share}
-        share = p["vo_after_hv"] if place.condition == "VO" else p["hv_after_vo"]
+        if self.family == "force_carry_over":
+            return {"steering_error_rad": 1.0 - share, "preferred_speed_m_s": (1.0 - share) ** 0.1}
+        if self.family == "time_carry_over":
+            # the later back-off: (1 - share)^-1.5 keeps LCCA's simulated peak forces
+            later = (1.0 - share) ** -1.5
+            return {
+                "preferred_speed_m_s": 1.0 - share,
+                "visual_stall_s": later,
+                "haptic_threshold_n_m": later,
+            }
         return {"preferred_speed_m_s": 1.0 - share, "visual_stall_s": 1.0 - share}
 
     def applies_to(self, group: str) -> bool:

@@ -22,9 +22,10 @@ import pandas as pd
 import pytest
 
 from study.analysis.participant_fit import effects
-from study.analysis.participant_fit.emulator import MomentEmulator, design_box, design_settings
-from study.protocol.participant_effects import ParticipantEffect, apply_effects, session_place
-from study.protocol.traits import TRAITS, ParticipantTraits, draw_traits
+from study.analysis.participant_fit.emulator import MomentEmulator
+from study.protocol.participant_effects import ParticipantEffect
+from study.protocol.traits import TRAITS, ParticipantTraits
+from tests.study.closed_form_effects import closed_form_emulator, closed_form_study
 
 MEASURES = ["completion_time_s", "peak_proximal_force_n", "peak_distal_force_n"]
 NOISE = {"completion_time_s": 0.10, "peak_proximal_force_n": 0.15, "peak_distal_force_n": 0.20}
@@ -47,41 +48,11 @@ def measures(t: ParticipantTraits, condition: str, rng: np.random.Generator) -> 
 
 @pytest.fixture(scope="module")
 def emulator() -> MomentEmulator:
-    x = design_settings(200, 3, design_box())
-    rng = np.random.default_rng(3)
-    rows = []
-    for k, row in enumerate(x):
-        t = ParticipantTraits("design", *row)
-        rows += [
-            {"setting": k, "repeat": 0, "condition": c, **measures(t, c, rng)} for c in ("VO", "HV")
-        ]
-    return MomentEmulator().fit(x, pd.DataFrame(rows), MEASURES)
+    return closed_form_emulator(measures, MEASURES)
 
 
 def study(injected: tuple[ParticipantEffect, ...], seed: int = 5) -> pd.DataFrame:
-    rng = np.random.default_rng(seed)
-    rows = []
-    for group, n in SIZES.items():
-        for i in range(n):
-            person = draw_traits(group, rng)
-            order = ["VO", "HV"] if i % 2 == 0 else ["HV", "VO"]
-            code = f"{group[0].upper()}{i:02d}"
-            for block, condition in enumerate(order):
-                for r in range(K):
-                    place = session_place(order, block, r, K)
-                    t = apply_effects(person, injected, place)
-                    rows.append(
-                        {
-                            "participant": code,
-                            "group": group,
-                            "order": f"{order[0]}-first",
-                            "condition": condition,
-                            "position": place.position,
-                            "trial": r + 1,
-                            **measures(t, condition, rng),
-                        }
-                    )
-    return pd.DataFrame(rows)
+    return closed_form_study(measures, injected, SIZES, K, seed)
 
 
 def _search(trials: pd.DataFrame, emulator: MomentEmulator) -> effects.EffectSearch:

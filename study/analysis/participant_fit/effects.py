@@ -3,9 +3,9 @@ participant effect that explains it, refit, and say how much better the model pr
 people it was not fitted to.
 
 The families are `study.protocol.participant_effects` (practice, fatigue, carry-over
-of the speed, carry-over of how hard one pushes: multipliers on traits by a trial's
-place in the session), so that what the fit adds,
-every simulation drawn from the model carries. Here:
+of the speed, carry-over of how hard one pushes, carry-overs on the forces alone and on
+the time alone: multipliers on traits by a trial's place in the session), so that what
+the fit adds, every simulation drawn from the model carries. Here:
 
 - **structure** (`structure_tests`): two plain tests per measure on the trials' log
   measure (before an effect is added) or on it with the added effects taken out (after):
@@ -91,6 +91,8 @@ FREE: dict[str, tuple[tuple[str, ...], ...]] = {
     "fatigue": (FAMILIES["fatigue"],),
     "carry_over": (("vo_after_hv",), ("hv_after_vo",)),
     "gentle_carry_over": (("gentler_vo_after_hv",), ("gentler_hv_after_vo",)),
+    "force_carry_over": (("softer_vo_after_hv",), ("softer_hv_after_vo",)),
+    "time_carry_over": (("slower_vo_after_hv",), ("slower_hv_after_vo",)),
 }
 """The parameters the least squares moves together, per family, and the alternatives
 tried. The carry-over moves one direction at a time, the other held at 0: in a
@@ -112,6 +114,10 @@ START = {
     "hv_after_vo": 0.0,
     "gentler_vo_after_hv": 0.0,
     "gentler_hv_after_vo": 0.0,
+    "softer_vo_after_hv": 0.0,
+    "softer_hv_after_vo": 0.0,
+    "slower_vo_after_hv": 0.0,
+    "slower_hv_after_vo": 0.0,
 }
 DEFINITION = (
     "each quarter of the people (dealt within group) held out in turn and the model "
@@ -358,6 +364,8 @@ TOUCHES: dict[str, tuple[str, ...]] = {
     "fatigue": ("preferred_speed_m_s", "reaction_s"),
     "carry_over": ("preferred_speed_m_s", "visual_stall_s"),
     "gentle_carry_over": ("caution", "comfort_torque_n_m"),
+    "force_carry_over": ("steering_error_rad", "preferred_speed_m_s"),
+    "time_carry_over": ("preferred_speed_m_s", "visual_stall_s", "haptic_threshold_n_m"),
 }
 """The traits each family's multipliers act on (`ParticipantEffect.factors`)."""
 LEVEL = 0.5
