@@ -121,24 +121,6 @@ class LccaTask(Task):
 
         return lcca_loop(condition, seed, estimator, haptic_gain_n_m_per_n, context, link)
 
-    def simulate(
-        self,
-        traits,
-        condition,
-        seed,
-        max_s,
-        *,
-        haptic_gain_n_m_per_n=None,
-        estimator=None,
-        link=None,
-        context=None,
-    ):
-        from study.tasks.lcca.trial import run_lcca_trial
-
-        return run_lcca_trial(
-            traits, condition, seed, estimator, haptic_gain_n_m_per_n, max_s, context, link
-        )
-
     def summary_line(self, summary):
         return (
             f"peak proximal {summary['peak_proximal_force_n']:.3f} N, "
@@ -194,6 +176,7 @@ class LccaTask(Task):
             # the person's state in this trial (their traits varied from trial to trial)
             state = {k: v for k, v in driver.traits.to_dict().items() if k != "group"}
             return {
+                "attempts": driver.attempt,
                 "obstacles_felt": driver.obstacles_felt,
                 "obstacles_seen": driver.obstacles_seen,
                 "trial_state": state,
@@ -201,10 +184,9 @@ class LccaTask(Task):
         return {}
 
     def trial_frame(self, samples):
-        from study.tasks.lcca.trial import TRIAL_COLUMNS
+        from study.tasks.lcca.trial import trial_frame
 
-        frame = super().trial_frame(samples)
-        return frame[list(TRIAL_COLUMNS.values())]
+        return trial_frame(samples)
 
     def live_lines(self, values, condition=None):
         # VO renders no force on the dial: the stored torque is the return spring's and

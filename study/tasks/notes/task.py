@@ -176,23 +176,6 @@ class NotesTask(Task):
         self.haptic_gain(haptic_gain_n_m_per_n)  # refuses a gain: the device has no dial
         return notes_loop(condition, seed)
 
-    def simulate(
-        self,
-        traits,
-        condition,
-        seed,
-        max_s,
-        *,
-        haptic_gain_n_m_per_n=None,
-        estimator=None,
-        link=None,
-        context=None,
-    ):
-        from study.tasks.notes.trial import run_notes_trial
-
-        self.haptic_gain(haptic_gain_n_m_per_n)
-        return run_notes_trial(traits, condition, seed, max_s)
-
     def summary_line(self, summary):
         return (
             f"peak force demanded {summary['peak_force_demanded_n']:.2f} N / rendered "
