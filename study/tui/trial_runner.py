@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from study.protocol.tasks import LiveTrace, Task
+from study.tui.task_views import live_view
 from teleop_core.loop.drivers import HandAction, KeyboardDriver, OperatorView
 
 STOPPED_REASON = "stopped from the terminal app in the middle of the trial"
@@ -158,7 +159,7 @@ class LiveFrame:
 
     def trace(self, k: int) -> float:
         """The newest value of live trace `k` (0 or 1), as its gauge shows it."""
-        trace = self.task.live_traces[k]
+        trace = live_view(self.task).traces[k]
         value = self.values[trace.column]
         return abs(value) if trace.magnitude else value
 
@@ -202,8 +203,9 @@ class LiveState:
         task = self.task
         if task is None:
             raise RuntimeError("LiveState.push before start(task)")
-        first, second = (self._column(samples, t) for t in task.live_traces)
-        peaks = [float(self._column(samples, t).max()) for t in task.live_peaks]
+        view = live_view(task)
+        first, second = (self._column(samples, t) for t in view.traces)
+        peaks = [float(self._column(samples, t).max()) for t in view.shown_peaks]
         with self._lock:
             self._last = samples[-1].copy()
             self._first.extend(first.tolist())

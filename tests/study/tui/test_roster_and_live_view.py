@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from study.protocol.tasks import get_task
-from study.tasks.lcca.scene import PhantomFrame
-from study.tasks.notes.scene import notes_scene
 from study.tui.live_view import BrailleCanvas, gauge, sparkline
+from study.tui.scene_lcca import PhantomFrame
+from study.tui.scene_notes import notes_scene
 from study.tui.services import Roster
 from study.tui.trial_runner import LiveFrame, LiveState
 from teleop_core.notes.task import REGIONS
