@@ -43,7 +43,7 @@ SAMPLE_COLUMNS = (
     SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "haptic dial angle"),
     SampleColumn("dial_torque_n_m", "dial_torque_n_m", "N m", "torque on the hand"),
 )
-"""The loop's rows (`teleop_core.loop.layout.SAMPLE_COLUMNS`' roles, in order)."""
+"""The loop's rows, under its names (`teleop_core.loop.layout.SAMPLE_COLUMNS`), in order."""
 MEASURES = (
     Measure(
         "peak_proximal_force_n",

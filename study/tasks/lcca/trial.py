@@ -28,21 +28,22 @@ CONDITIONS = KNOWN_CONDITIONS
 CONTACT_THRESHOLD_N = 0.2
 """Distal force above which the tip is taken to press a wall (above the ~0.1 N the
 angled tip exerts passing the LCCA's curve); assumption."""
-TRIAL_COLUMNS = {
-    "t_s": "t_s",
-    "insertion_m": "insertion_m",
-    "rotation_rad": "rotation_rad",
-    "tip_x_m": "tip_x_m",
-    "tip_y_m": "tip_y_m",
-    "tip_z_m": "tip_z_m",
-    "branch": "branch",
-    "proximal_force_est_n": "proximal_force_n",
-    "proximal_force_n": "reference_force_n",
-    "distal_force_n": "distal_force_n",
-    "dial_angle_rad": "dial_angle_rad",
-    "dial_torque_n_m": "dial_torque_n_m",
-}
-"""Loop sample column -> TRIAL.csv column: the one `proximal` column is the estimate."""
+TRIAL_COLUMNS = (
+    "t_s",
+    "insertion_m",
+    "rotation_rad",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "branch",
+    "proximal_force_n",
+    "reference_force_n",
+    "distal_force_n",
+    "dial_angle_rad",
+    "dial_torque_n_m",
+)
+"""TRIAL.csv's columns, the loop's under their own names (the estimate the dial renders,
+`proximal_force_n`, before the true force it estimates, `reference_force_n`)."""
 
 
 def condition_haptics(condition: str, haptic_gain: float | None = None) -> HapticParams:
@@ -103,15 +104,15 @@ def measures(frame: pd.DataFrame, success: bool) -> dict[str, Any]:
 
 
 def trial_frame(samples: np.ndarray) -> pd.DataFrame:
-    """TRIAL.csv straight from the loop's sample array (TRIAL_COLUMNS' columns only, the
-    vessels named in full): no frame of every loop column is made first (a participant
-    fit makes one per simulated trial)."""
+    """TRIAL.csv straight from the loop's sample array (TRIAL_COLUMNS' order, the vessels
+    named in full): no frame of every loop column is made first (a participant fit makes
+    one per simulated trial)."""
     names = np.asarray(REGIONS, dtype=object)
     return pd.DataFrame(
         {
-            new: names[samples[:, SAMPLE_COLUMNS.index(old)].astype(int)]
-            if old == "branch"
-            else samples[:, SAMPLE_COLUMNS.index(old)]
-            for old, new in TRIAL_COLUMNS.items()
+            name: names[samples[:, SAMPLE_COLUMNS.index(name)].astype(int)]
+            if name == "branch"
+            else samples[:, SAMPLE_COLUMNS.index(name)]
+            for name in TRIAL_COLUMNS
         }
     )

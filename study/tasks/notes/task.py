@@ -51,7 +51,7 @@ SAMPLE_COLUMNS = (
         "tissue resistance to roll, positive resisting clockwise roll",
     ),
 )
-"""The NOTES loop's rows (`teleop_core.notes.task.SAMPLE_COLUMNS`' roles, in order)."""
+"""The NOTES loop's rows, under its names (`teleop_core.notes.task.SAMPLE_COLUMNS`), in order."""
 MEASURES = (
     Measure(
         "peak_force_demanded_n",

@@ -62,14 +62,6 @@ ROLL_RATE_RAD_S = 1.0
 ROLL_PACE_M_S = 0.017
 """Fastest roll: 1 rad/s for a participant whose preferred speed is an expert's mean
 (`PROFILES`), in proportion for the others (one pace for both hands); assumption."""
-TRIAL_COLUMNS = {c: c for c in task.SAMPLE_COLUMNS} | {
-    "proximal_force_n": "force_demanded_n",
-    "proximal_force_est_n": "force_rendered_n",
-    "distal_force_n": "tip_force_n",
-    "dial_torque_n_m": "torque_rendered_n_m",
-    "branch": "region",
-}
-"""Sample column -> NOTES TRIAL.csv column."""
 
 
 class NotesParticipant(Driver):
