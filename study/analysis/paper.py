@@ -62,7 +62,7 @@ def _samples(engine: Engine, trial_id: int, task: str, columns: Sequence[str]) -
         batches = list(reader.trial(trial_id))
     if not batches:
         return pd.DataFrame({c: pd.Series(dtype=float) for c in columns})
-    table = the_task.stored_table(pa.Table.from_batches(batches))
+    table = the_task.sample_table(pa.Table.from_batches(batches))
     return table.select(list(columns)).to_pandas()
 
 

@@ -26,12 +26,13 @@ def trial_plot(task: Task, frame: pd.DataFrame, title: str) -> plt.Figure:
 
 def traces_plot(task: Task, frame: pd.DataFrame, title: str) -> plt.Figure:
     """Insertion (top) and the view's traced forces (bottom) against time."""
-    t = frame[task.stored_name("t_s")]
+    t = frame[task.sample_columns[0].name]
     with plt.rc_context(STYLE):
         fig, (top, bottom) = plt.subplots(
             2, 1, sharex=True, figsize=(WIDTHS_IN["single"], 2.6), layout="constrained"
         )
-        top.plot(t, frame[task.stored_name("insertion_m")] * 1e3, color="black", lw=0.8)
+        depth = frame[task.sample_columns[1].name]  # `pose_columns`: time, insertion, ...
+        top.plot(t, depth * 1e3, color="black", lw=0.8)
         top.set_ylabel("inserted (mm)")
         for trace, color in zip(figure_view(task).traces, ("#0072B2", "#D55E00"), strict=False):
             unit = next(c.unit for c in task.sample_columns if c.name == trace.column)

@@ -120,8 +120,8 @@ class LiveFrame:
     """What the live view draws at one redraw: the newest sample by the task's column
     names (`values`), and the history of the task's two live traces (`live_traces`).
 
-    The properties read the columns every task stores (`Task.stored_name`): where the
-    tip is, how far in, its roll, the dial."""
+    The properties read the columns every task's rows start with (`pose_columns`, by
+    their place) and its region: where the tip is, how far in, its roll."""
 
     task: Task
     values: dict[str, float]
@@ -130,32 +130,29 @@ class LiveFrame:
     condition: str | None = None
     """The trial's condition (VO renders no force on the hand), if known."""
 
-    def _stored(self, column: str) -> float:
-        return self.values[self.task.stored_name(column)]
+    def _pose(self, k: int) -> float:
+        """The newest value of pose column `k` (`pose_columns`' order)."""
+        return self.values[self.task.sample_columns[k].name]
 
     @property
     def t_s(self) -> float:
-        return self._stored("t_s")
+        return self._pose(0)
 
     @property
     def branch(self) -> int:
-        return int(self._stored("branch"))
+        return int(self.values[self.task.region_column])
 
     @property
     def insertion_m(self) -> float:
-        return self._stored("insertion_m")
+        return self._pose(1)
 
     @property
     def rotation_rad(self) -> float:
-        return self._stored("rotation_rad")
+        return self._pose(2)
 
     @property
     def tip_xz_m(self) -> tuple[float, float]:
-        return (self._stored("tip_x_m"), self._stored("tip_z_m"))
-
-    @property
-    def dial_angle_rad(self) -> float:
-        return self._stored("dial_angle_rad")
+        return (self._pose(3), self._pose(5))
 
     def trace(self, k: int) -> float:
         """The newest value of live trace `k` (0 or 1), as its gauge shows it."""

@@ -212,16 +212,11 @@ def test_old_chunks_move_to_their_tasks_own_schemas_and_back(db_url: str) -> Non
         from db.sample_reader import SampleReader
 
         with SampleReader(engine) as reader:
-            table = get_task("notes").stored_table(pa.Table.from_batches(list(reader.trial(2))))
+            table = get_task("notes").sample_table(pa.Table.from_batches(list(reader.trial(2))))
         assert table.column_names == ["seq", *NOTES_NAMES]
         assert table["force_rendered_n"].to_pylist() == [
             v for b in written[2] for v in b["proximal_force_est_n"].to_pylist()
         ]
-        # and an old-layout LCCA chunk (a writer given no schema) under the LCCA's names
-        legacy = pa.Table.from_batches(written[1])
-        mapped = get_task("lcca").stored_table(legacy)
-        assert mapped["reference_force_n"] == legacy["proximal_force_n"]
-        assert mapped["proximal_force_n"] == legacy["proximal_force_est_n"]
     finally:
         engine.dispose()
 

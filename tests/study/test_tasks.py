@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from db.models.trial import SAMPLE_COLUMNS as DB_SAMPLE_COLUMNS
 from study.errors import StudyInputError
 from study.protocol.tasks import get_task, task_names
 from teleop_core.loop.core import SAMPLE_COLUMNS as LOOP_COLUMNS
@@ -35,18 +34,13 @@ def test_the_lcca_task_stores_the_loops_columns_in_order_under_the_loops_names()
     assert tuple(c.name for c in lcca.sample_columns) == LOOP_COLUMNS
     assert LOOP_COLUMNS[7:9] == ("reference_force_n", "proximal_force_n")
     assert "estimated" in lcca.sample_columns[8].description
-    # the layout of before the tasks' own schemas, by role, for reading old chunks
-    assert tuple(c.stored_as for c in lcca.sample_columns) == DB_SAMPLE_COLUMNS
     assert lcca.regions == REGION_ABBREVIATIONS
 
 
 def test_the_notes_task_names_the_notes_loops_columns() -> None:
     task = get_task("notes")
     assert tuple(c.name for c in task.sample_columns) == notes.SAMPLE_COLUMNS
-    # the old layout's roles; it had no place for the demanded torque
-    stored = [c.stored_as for c in task.sample_columns]
-    assert stored[: len(DB_SAMPLE_COLUMNS)] == list(DB_SAMPLE_COLUMNS)
-    assert stored[-1] is None
+    assert task.region_column == "region"
     assert task.sample_columns[-1].name == notes.SAMPLE_COLUMNS[-1] == "torque_demanded_n_m"
     assert task.regions == notes.REGIONS
     assert not task.has_dial

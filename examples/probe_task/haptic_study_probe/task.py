@@ -21,10 +21,10 @@ DECLARATION = TaskDeclaration(
             insertion_name="depth_m",
             rotation_name="roll_rad",
         ),
-        SampleColumn("where", "branch", "", "medium or at depth"),
-        SampleColumn("push_force_n", "proximal_force_n", "N", "the medium's push back"),
-        SampleColumn("aim_rad", "dial_angle_rad", "rad", "the hand's aim"),
-        SampleColumn("medium_speed_m_s", None, "m/s", "the probe's speed through the medium"),
+        SampleColumn("where", "", "medium or at depth"),
+        SampleColumn("push_force_n", "N", "the medium's push back"),
+        SampleColumn("aim_rad", "rad", "the hand's aim"),
+        SampleColumn("medium_speed_m_s", "m/s", "the probe's speed through the medium"),
     ),
     measures=(
         Measure(
@@ -35,6 +35,7 @@ DECLARATION = TaskDeclaration(
             max_value=10.0,
         ),
     ),
+    region_column="where",
 )
 
 

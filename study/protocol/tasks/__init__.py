@@ -75,18 +75,20 @@ def register(task: Task) -> Task:
     Raises
     ------
     ValueError
-        Its name is not an identifier of at most 16 characters, or it stores no sample
-        column as one of ``t_s``, ``branch``, ``insertion_m``, ``rotation_rad``.
+        Its name is not an identifier of at most 16 characters, or its sample columns
+        do not start with the six `pose_columns` or lack its region column.
     """
     if not getattr(task, "name", "") or not task.name.isidentifier() or len(task.name) > 16:
         raise ValueError(
             f"task name {getattr(task, 'name', None)!r}; expected an identifier "
             "of at most 16 characters"
         )
-    stored = [c.stored_as for c in task.sample_columns]
-    for required in ("t_s", "branch", "insertion_m", "rotation_rad"):
-        if required not in stored:
-            raise ValueError(f"task {task.name}: no sample column stored as {required!r}")
+    names = [c.name for c in task.sample_columns]
+    if names[:1] != ["t_s"] or len(names) < 6 or task.region_column not in names:
+        raise ValueError(
+            f"task {task.name}: sample columns {names}; expected the six `pose_columns` "
+            f"first and the region column {task.region_column!r} among them"
+        )
     _REGISTRY[task.name] = task
     return task
 

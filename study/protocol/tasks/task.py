@@ -79,6 +79,9 @@ class TaskDeclaration:
     """The columns of the loop's sample rows, in order (`pose_columns` first)."""
     measures: tuple[Measure, ...]
     """The trial's summary measures after `completion_time_s` (see `Task.all_measures`)."""
+    region_column: str
+    """The sample column of the region: the loop's index in `regions`, stored as the
+    region's name."""
     has_dial: bool = False
     """The haptic dial renders force in HV at a gain (`haptic_gain_n_m_per_n`)."""
     default_haptic_gain_n_m_per_n: float | None = None
@@ -254,7 +257,7 @@ class Task(ABC):
         """
         if not len(samples):
             return 0.0
-        return float(samples[-1, self.column_index()[self.stored_name("t_s")]])
+        return float(samples[-1, 0])  # `t_s`, the first column (`pose_columns`)
 
     def summary_line(self, summary: Mapping[str, Any]) -> str:
         """The measures of a simulated trial's summary, for one printed line.
@@ -339,30 +342,10 @@ class Task(ABC):
         """
         return tuple(m.name for m in self.all_measures if m.analysed)
 
-    def stored_name(self, stored_as: str) -> str:
-        """The task's name of the sample column stored as `stored_as`.
-
-        Parameters
-        ----------
-        stored_as : str
-            A role in the loop's layout (`SampleColumn.stored_as`), e.g. ``"t_s"``.
-
-        Returns
-        -------
-        str
-            The `SampleColumn.name` of the task's column with that role.
-
-        Raises
-        ------
-        StopIteration
-            No sample column of the task has that role.
-        """
-        return next(c.name for c in self.sample_columns if c.stored_as == stored_as)
-
     @property
     def region_column(self) -> str:
-        """The sample column `samples.branch` stores: the region's index in `regions`."""
-        return self.stored_name("branch")
+        """The sample column of the region (the loop's index in `regions`)."""
+        return self.declaration.region_column
 
     def column_index(self) -> dict[str, int]:
         """Where each sample column sits in the loop's rows.
@@ -419,34 +402,30 @@ class Task(ABC):
                 out[column.name] = values
         return out
 
-    def stored_table(self, table: pa.Table) -> pa.Table:
-        """Samples read from the database under the task's own columns.
-
-        Chunks stored in the layout of before the tasks' own schemas
-        (`SampleColumn.stored_as`) are renamed; a column they lack is NULL.
+    def sample_table(self, table: pa.Table) -> pa.Table:
+        """Samples read from the database, in the task's columns and types.
 
         Parameters
         ----------
         table : pyarrow.Table
-            Samples as `db.sample_reader` reads them, in either layout.
+            Samples as `db.sample_reader` reads them: the key columns and the columns
+            of the chunks' schema (the task's, perhaps of an older version of it).
 
         Returns
         -------
         pyarrow.Table
             The key columns (`trial_id`, `seq`) kept in front, then every sample column
-            in the task's order, typed as in `sample_schema`.
+            in the task's order, typed as in `sample_schema`, by name; a column the
+            chunks lack is NULL.
         """
         import pyarrow as pa
 
         keys = [k for k in ("trial_id", "seq") if k in table.column_names]
-        values = [n for n in table.column_names if n not in keys]
-        own = values == [c.name for c in self.sample_columns]
         arrays = [table[k] for k in keys]
         fields = [table.schema.field(k) for k in keys]
-        for column, own_field in zip(self.sample_columns, self.sample_schema(), strict=True):
-            source = column.name if own else column.stored_as
-            if source is not None and source in values:
-                arrays.append(table[source].cast(own_field.type))
+        for own_field in self.sample_schema():
+            if own_field.name in table.column_names:
+                arrays.append(table[own_field.name].cast(own_field.type))
             else:
                 arrays.append(pa.nulls(table.num_rows, own_field.type))
             fields.append(own_field)

@@ -26,22 +26,20 @@ a typo or a unit slip: the drive (K_t 0.043 N m/A, wheel radius 10 mm) would nee
 
 SAMPLE_COLUMNS = (
     *pose_columns("guidewire inserted", "guidewire roll", "tip position, phantom frame"),
-    SampleColumn("branch", "branch", "", "vessel the tip is in (DAo, arch, ...)"),
+    SampleColumn("branch", "", "vessel the tip is in (DAo, arch, ...)"),
     SampleColumn(
         "reference_force_n",
-        "proximal_force_n",
         "N",
         "true proximal insertion force (simulation) or reference sensor",
     ),
     SampleColumn(
         "proximal_force_n",
-        "proximal_force_est_n",
         "N",
         "proximal force estimated from the motor current (what is rendered)",
     ),
-    SampleColumn("distal_force_n", "distal_force_n", "N", "tip force on the vessel wall"),
-    SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "haptic dial angle"),
-    SampleColumn("dial_torque_n_m", "dial_torque_n_m", "N m", "torque on the hand"),
+    SampleColumn("distal_force_n", "N", "tip force on the vessel wall"),
+    SampleColumn("dial_angle_rad", "rad", "haptic dial angle"),
+    SampleColumn("dial_torque_n_m", "N m", "torque on the hand"),
 )
 """The loop's rows, under its names (`teleop_core.loop.layout.SAMPLE_COLUMNS`), in order."""
 MEASURES = (
@@ -75,6 +73,7 @@ DECLARATION = TaskDeclaration(
     regions=("DAo", "arch", "AAo", "LSA", "LCCA", "BCT"),
     sample_columns=SAMPLE_COLUMNS,
     measures=MEASURES,
+    region_column="branch",
     has_dial=True,
     # the paper's G_h (`teleop_core.master.params.HapticParams`; a test keeps them equal)
     default_haptic_gain_n_m_per_n=0.02,

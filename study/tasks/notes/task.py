@@ -23,30 +23,26 @@ MAX_FORCE_N = 25.0
 beyond it an imported value is a typo or a unit slip."""
 SAMPLE_COLUMNS = (
     *pose_columns("scope depth from the introitus", "scope roll", "tip position"),
-    SampleColumn("region", "branch", "", "where the tip is (canal, fornix, ...)"),
+    SampleColumn("region", "", "where the tip is (canal, fornix, ...)"),
     SampleColumn(
         "force_demanded_n",
-        "proximal_force_n",
         "N",
         "tissue resistance on the scope, positive resisting insertion",
     ),
     SampleColumn(
         "force_rendered_n",
-        "proximal_force_est_n",
         "N",
         "force the device renders (saturates at its continuous limit)",
     ),
     SampleColumn(
         "tip_force_n",
-        "distal_force_n",
         "N",
         "the tissue's push on the tip (the fornix or the fold)",
     ),
-    SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "the hand's aim (rate input)"),
-    SampleColumn("torque_rendered_n_m", "dial_torque_n_m", "N m", "torque rendered"),
+    SampleColumn("dial_angle_rad", "rad", "the hand's aim (rate input)"),
+    SampleColumn("torque_rendered_n_m", "N m", "torque rendered"),
     SampleColumn(
         "torque_demanded_n_m",
-        None,
         "N m",
         "tissue resistance to roll, positive resisting clockwise roll",
     ),
@@ -135,6 +131,7 @@ DECLARATION = TaskDeclaration(
     regions=("canal", "fornix", "cavity", "target", "fold"),
     sample_columns=SAMPLE_COLUMNS,
     measures=MEASURES,
+    region_column="region",
 )
 
 
