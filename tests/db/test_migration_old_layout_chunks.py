@@ -66,6 +66,7 @@ def test_the_old_layout_chunks_of_a_database_of_revision_0009_take_their_tasks_n
         assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == (
             "0009_trial_validity"
         )
+        schemas_before = conn.execute(text("SELECT count(*) FROM sample_schemas")).scalar()
     session_chunks = _chunks(before, 1)
     assert session_chunks
     assert session_chunks[0][1].names[7:9] == [
@@ -78,6 +79,10 @@ def test_the_old_layout_chunks_of_a_database_of_revision_0009_take_their_tasks_n
     with engine.connect() as conn:
         assert conn.execute(text("SELECT version_num FROM alembic_version")).scalar() == (
             head_revision()
+        )
+        # one schema more: the probe's (the LCCA's and the NOTES' were stored by 0006)
+        assert conn.execute(text("SELECT count(*) FROM sample_schemas")).scalar() == (
+            schemas_before + 1
         )
     # the session's chunks: the same bytes in the same schema
     assert [(d, s) for d, s, _ in _chunks(engine, 1)] == [(d, s) for d, s, _ in session_chunks]

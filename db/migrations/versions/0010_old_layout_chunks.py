@@ -181,9 +181,9 @@ def _schemas(conn: sa.Connection) -> dict[int, pa.Schema]:
     }
 
 
-def _recode(conn: sa.Connection, task: str, from_ids: set[int], recode, schema_id: int) -> None:
-    """Re-encode with `recode(batch)` every chunk of `task`'s trials whose schema is one
-    of `from_ids`, in keyset pages."""
+def _recode(conn: sa.Connection, task: str, from_ids: set[int], recode, schema: pa.Schema) -> None:
+    """Re-encode with `recode(batch)` into `schema` (stored only if a chunk needs it)
+    every chunk of `task`'s trials whose schema is one of `from_ids`, in keyset pages."""
     chunks = _chunks_table()
     trials = sa.table("trials", sa.column("id", sa.Integer()), sa.column("task", sa.String()))
     schemas = _schemas(conn)
@@ -194,7 +194,9 @@ def _recode(conn: sa.Connection, task: str, from_ids: set[int], recode, schema_i
         .where(trials.c.task == task, chunks.c.schema_id.in_(sorted(from_ids)))
         .order_by(chunks.c.trial_id)
     ).scalars()
-    for trial_id in list(ids):
+    trial_ids = list(ids)
+    schema_id = _schema_id(conn, schema) if trial_ids else 0
+    for trial_id in trial_ids:
         last = -1
         while True:
             page = conn.execute(
@@ -236,7 +238,7 @@ def upgrade() -> None:
             ]
             return pa.RecordBatch.from_arrays(arrays, schema=schema)
 
-        _recode(conn, task, old, recode, _schema_id(conn, schema))
+        _recode(conn, task, old, recode, schema)
 
 
 def downgrade() -> None:
@@ -254,4 +256,4 @@ def downgrade() -> None:
         ]
         return pa.RecordBatch.from_arrays(arrays, schema=OLD_SCHEMA)
 
-    _recode(conn, "probe", own, recode, _schema_id(conn, OLD_SCHEMA))
+    _recode(conn, "probe", own, recode, OLD_SCHEMA)
