@@ -59,8 +59,9 @@ class TrialRun:
     extras: dict[str, Any]
     """Further summary values of the task's `trial_measures`."""
     rendered_gain: dict[str, float]
-    """``{"haptic_gain_n_m_per_n": G}``: the gain the dial rendered at (0 in VO, which
-    renders none); empty for a task without a dial."""
+    """The summary's record of the gain the dial rendered at, under
+    `haptic_gain_n_m_per_n` (0 in VO, which renders none); empty for a task without a
+    dial."""
     ended: dict[str, str] = field(default_factory=dict)
     """How a trial at a physical phantom ended (`end`), empty for a simulated one."""
 
