@@ -49,7 +49,7 @@ def main() -> None:
     estimator = load_estimator(None)
     phantom = LccaPhantom()
 
-    def trial(seed: int, condition: str):  # the loop alone, as run_lcca_trial runs it
+    def trial(seed: int, condition: str):  # the loop alone, without the measures
         traits = simulated_participant("outsider", seed)
         loop = lcca_loop(condition, seed, estimator, None, phantom)
         participant = SimulatedParticipant(traits, phantom, give_up_s=args.max_s)

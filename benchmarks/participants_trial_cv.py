@@ -14,9 +14,10 @@ import pandas as pd
 
 from study.campaign.unit import trial_seed
 from study.protocol.default_estimator import load_estimator
+from study.protocol.design import MAX_TRIAL_S
+from study.protocol.tasks import get_task
 from study.protocol.traits import simulated_participant
-from study.tasks.lcca.trial import run_lcca_trial
-from teleop_core.phantom.lcca import LccaPhantom
+from study.protocol.trial_run import simulate_trial
 
 MEASURES = {
     "lcca": ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n"),
@@ -32,9 +33,8 @@ GROUPS = {"outsider": 20, "novice": 8, "expert": 8}
 
 
 def main(out: str, task: str) -> None:
-    from study.tasks.notes.trial import run_notes_trial
-
-    phantom, estimator = LccaPhantom(), load_estimator()
+    the_task = get_task(task)
+    context, estimator = the_task.session_context(), load_estimator() if task == "lcca" else None
     measures = MEASURES[task]
     rows = []
     for group, n in GROUPS.items():
@@ -44,10 +44,15 @@ def main(out: str, task: str) -> None:
             for block, condition in enumerate(("VO", "HV"), start=1):
                 for i in range(3):
                     seed = trial_seed(1, code, block, i)
-                    if task == "lcca":
-                        s = run_lcca_trial(person, condition, seed, estimator, phantom=phantom)
-                    else:
-                        s = run_notes_trial(person, condition, seed)
+                    s = simulate_trial(
+                        the_task,
+                        person,
+                        condition,
+                        seed,
+                        MAX_TRIAL_S,
+                        estimator=estimator,
+                        context=context,
+                    )
                     rows.append(
                         {
                             "code": code,

@@ -2,5 +2,5 @@
 that a reader can check a database's revision without importing SQLAlchemy
 (`db.plain`)."""
 
-HEAD_REVISION = "0009_trial_validity"
+HEAD_REVISION = "0010_old_layout_chunks"
 """The newest revision in `db/migrations/versions` (kept equal to it by a test)."""

@@ -20,8 +20,9 @@ The format, for anyone reading a study database without this package:
 
 In Python: `pyarrow.ipc.read_record_batch(pyarrow.decompress(data, raw_bytes,
 codec="zstd"), pyarrow.ipc.read_schema(pyarrow.py_buffer(schema_data)))`. Chunks
-written before revision 0006 of a task it did not know keep `CHUNK_SCHEMA`, the one
-layout all trials had then (`SAMPLE_COLUMNS`). The message without its schema (which
+still in `CHUNK_SCHEMA`, the one layout all trials had before revision 0006
+(`SAMPLE_COLUMNS`), are those of a task revision 0010 did not know, or of a writer
+given no schema: they are read by their column names. The message without its schema (which
 is stored once per distinct schema, not in every chunk) keeps a 100-sample chunk (a
 100 Hz trial's second) at about 48 bytes a sample, against 80 with a schema in every
 chunk, and decodes three times faster. pyarrow does the encoding, compression and

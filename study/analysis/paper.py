@@ -39,6 +39,7 @@ from study.analysis.figures import (
 from study.analysis.frames import participant_means, tlx_frame, trial_frame, without_withdrawn
 from study.analysis.source import DataSource, restrict
 from study.analysis.stream_figure import DrawnStream, trial_streams_figure
+from study.analysis.task_figures import figure_view, trace_measure
 from study.analysis.tlx_figure import NOTE as TLX_PROFILE_CAPTION
 from study.analysis.tlx_figure import tlx_profile
 from study.analysis.trace_figure import force_traces
@@ -61,7 +62,7 @@ def _samples(engine: Engine, trial_id: int, task: str, columns: Sequence[str]) -
         batches = list(reader.trial(trial_id))
     if not batches:
         return pd.DataFrame({c: pd.Series(dtype=float) for c in columns})
-    table = the_task.stored_table(pa.Table.from_batches(batches))
+    table = the_task.sample_table(pa.Table.from_batches(batches))
     return table.select(list(columns)).to_pandas()
 
 
@@ -73,7 +74,7 @@ def _trace_trials(engine: Engine, task: str, driver: str | None = None) -> list[
     session worker committed first."""
     recorded = exists().where(SampleChunk.trial_id == Trial.id)
     measured = (Trial.status == "completed", Trial.practice.is_(False), Trial.task == task)
-    traced = get_task(task).trace_measure
+    traced = trace_measure(get_task(task))
     pick = (
         select(TrialMeasure.value)
         .where(TrialMeasure.trial_id == Trial.id, TrialMeasure.name == traced)
@@ -232,12 +233,12 @@ def draw_figures(
             fig = label_source(fig12(shown, t_comp, width, labels), note)
             caption = fig12_caption(shown, t_comp, width, labels)
             drawn.append(DrawnFigure(f"fig12_groups_{name}", fig, marks, _captioned(note, caption)))
-        drawn_columns = ["t_s", *get_task(name).trace_names]
+        drawn_columns = ["t_s", *figure_view(get_task(name)).traced_names()]
         traced = _trace_trials(engine, name, driver)
         panels = [(_samples(engine, i, name, drawn_columns), title) for i, title in traced]
         if panels:
             fig = label_source(force_traces(panels, name, width), note)
-            caption = _captioned(note, get_task(name).sign_note)
+            caption = _captioned(note, figure_view(get_task(name)).sign_note)
             drawn.append(DrawnFigure(f"fig9_forces_{name}", fig, caption=caption))
         with_streams = _with_streams(engine, [i for i, _ in traced], panels)
         if with_streams:

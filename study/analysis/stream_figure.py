@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from study.analysis.figures import STYLE, WIDTHS_IN
+from study.analysis.task_figures import figure_view
 from study.protocol.tasks import get_task
 
 COLORS = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9")
@@ -63,7 +64,7 @@ def trial_streams_figure(
         )
         for col, (samples, title, streams) in enumerate(trials):
             top = axes[0, col]
-            for k, (column, label) in enumerate(the_task.trace_names.items()):
+            for k, (column, label) in enumerate(figure_view(the_task).traced_names().items()):
                 if column in samples:
                     top.plot(
                         samples["t_s"],

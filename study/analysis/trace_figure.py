@@ -2,7 +2,7 @@
 
 VO and HV panels share the time axis and the y-axis so that the forces compare at a glance; the
 reference force is drawn above (zorder) the estimate it is compared with; the caption
-(`captions.md`, from `Task.sign_note`) states the sign convention of the task's model:
+(`captions.md`, from `FigureView.sign_note`) states the sign convention of the task's model:
 
 - lcca (`teleop_core.phantom.lcca`): the proximal force is what the drive feels, the
   wall and sliding friction resisting the wire; positive while inserting, negative
@@ -12,10 +12,9 @@ reference force is drawn above (zorder) the estimate it is compared with; the ca
   the scope, positive resisting insertion; the rendered force is what the device
   applies (it saturates at its continuous limit); the tip force is the fornix's push.
 
-Sample columns as `db.models.trial.Sample` stores them; which of them a task traces,
-under what names and with which sign convention, its `Task` says (`trace_names`,
-`sign_note`): a NOTES trial keeps the demanded force in `proximal_force_n` and the
-rendered one in `proximal_force_est_n`.
+Sample columns under the task's own names; which of them a task traces, under what
+labels and with which sign convention, its figure view says
+(`study.analysis.task_figures.FigureView`: `trace_names`, `sign_note`).
 """
 
 from __future__ import annotations
@@ -24,6 +23,7 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from study.analysis.figures import STYLE, WIDTHS_IN, figure_legend
+from study.analysis.task_figures import figure_view
 from study.protocol.tasks import get_task
 
 STYLES = (
@@ -52,7 +52,7 @@ def force_traces(
         'single' (panels stacked) or 'double' (side by side).
     """
     the_task = get_task(task)
-    names = the_task.trace_names
+    names = figure_view(the_task).traced_names()
     with plt.rc_context(STYLE):
         rows, cols = (len(trials), 1) if width == "single" else (1, len(trials))
         height = 1.6 * rows + 1.1

@@ -38,6 +38,7 @@ from db.samples import SampleWriter
 from study.bench.db_write import scratch_database
 from study.protocol.design import TEMPLATE, parse_design
 from study.protocol.roster import create_study
+from study.protocol.tasks import get_task
 from teleop_core.progress import Progress, no_progress
 
 TRIALS_PER_PARTICIPANT = 8
@@ -91,8 +92,8 @@ def _columns(rng: np.random.Generator, n: int) -> dict[str, object]:
         "tip_y_m": rng.normal(0, 0.05, n),
         "tip_z_m": rng.normal(0, 0.05, n),
         "branch": names[rng.integers(0, len(names), n)],
+        "reference_force_n": np.abs(rng.normal(0.5, 0.2, n)),
         "proximal_force_n": np.abs(rng.normal(0.5, 0.2, n)),
-        "proximal_force_est_n": np.abs(rng.normal(0.5, 0.2, n)),
         "distal_force_n": np.abs(rng.normal(0.1, 0.05, n)),
         "dial_angle_rad": rng.normal(0.0, 0.3, n),
         "dial_torque_n_m": rng.normal(0.0, 0.01, n),
@@ -142,10 +143,11 @@ def build_study(
     writing = 0.0
     written = 0
     measures: dict[int, dict[str, float]] = {}
+    schema = get_task("lcca").sample_schema()  # the trials' task's, as a session writes
     for trial_id, n in zip(ids, per_trial, strict=True):
         columns = _columns(rng, int(n))
         start = time.perf_counter()
-        with SampleWriter(engine, trial_id) as writer:
+        with SampleWriter(engine, trial_id, schema=schema) as writer:
             for lo in range(0, int(n), int(RATE_HZ)):
                 writer.extend({k: v[lo : lo + int(RATE_HZ)] for k, v in columns.items()})
         writing += time.perf_counter() - start

@@ -33,9 +33,10 @@ import pandas as pd
 from scipy.stats import wilcoxon
 
 from study.analysis.figures import label_source
+from study.protocol.tasks import get_task
 from study.protocol.traits import GROUPS, simulated_participant
+from study.protocol.trial_run import simulate_trial
 from study.tasks.lcca.figures import CONDITION_COLORS, plot_tip_paths
-from study.tasks.lcca.trial import run_lcca_trial
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.phantom.lcca import LccaPhantom
 from teleop_core.progress import Progress, no_progress
@@ -124,14 +125,15 @@ def _gain_zero(
         seed = config.seed + 1000 * GROUPS.index(config.gain_zero_group) + i
         traits = simulated_participant(config.gain_zero_group, seed)
         for condition, gain, loop_seed in (("VO", None, seed), ("HV", 0.0, seed + 500)):
-            s = run_lcca_trial(
+            s = simulate_trial(
+                get_task("lcca"),
                 traits,
                 condition,
                 loop_seed,
-                estimator,
-                haptic_gain=gain,
-                max_s=config.max_s,
-                phantom=phantom,
+                config.max_s,
+                haptic_gain_n_m_per_n=gain,
+                estimator=estimator,
+                context=phantom,
             ).summary
             zero_rows.append(
                 {"participant": i, "condition": condition, **{m: s[m] for m in MEASURES}}
@@ -149,9 +151,10 @@ def run_lcca_bench(
     out_dir.mkdir(parents=True, exist_ok=True)
     phantom = LccaPhantom()
     progress("compiling the loop")
-    run_lcca_trial(
-        simulated_participant("expert", 0), "HV", 0, estimator, max_s=1.0, phantom=phantom
-    )  # numba compiles here, outside the timing
+    lcca = get_task("lcca")
+    expert = simulated_participant("expert", 0)
+    # numba compiles here, outside the timing
+    simulate_trial(lcca, expert, "HV", 0, 1.0, estimator=estimator, context=phantom)
     publisher = _publisher() if config.publish_lsl else None
     rows, factors, paths = [], [], []
     loop_walls, publish_walls = [], []
@@ -167,8 +170,14 @@ def run_lcca_bench(
             progress(f"participant {k}/{total} ({group})")
             for condition in ("VO", "HV"):
                 start = time.perf_counter()
-                result = run_lcca_trial(
-                    traits, condition, seed, estimator, max_s=config.max_s, phantom=phantom
+                result = simulate_trial(
+                    lcca,
+                    traits,
+                    condition,
+                    seed,
+                    config.max_s,
+                    estimator=estimator,
+                    context=phantom,
                 )
                 wall = time.perf_counter() - start
                 loop_walls.append(wall)

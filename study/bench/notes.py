@@ -91,8 +91,12 @@ TRIAL_MEASURES = (
 def notes_trials(config: NotesBenchConfig, progress: Progress) -> tuple[pd.DataFrame, float]:
     """`trials` simulated NOTES trials per group and condition; (measures, wall seconds)."""
     from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
+    from study.protocol.design import MAX_TRIAL_S
+    from study.protocol.tasks import get_task
     from study.protocol.traits import GROUPS, simulated_participant
-    from study.tasks.notes.trial import run_notes_trial
+    from study.protocol.trial_run import simulate_trial
+
+    notes = get_task("notes")
 
     rows = []
     t0 = time.perf_counter()
@@ -101,7 +105,9 @@ def notes_trials(config: NotesBenchConfig, progress: Progress) -> tuple[pd.DataF
             traits = simulated_participant(group, config.seed * 1000 + k)
             for condition in CONDITIONS:
                 progress(f"NOTES trial {group} {condition} {k + 1}/{config.trials}")
-                s = run_notes_trial(traits, condition, config.seed * 1000 + k).summary
+                s = simulate_trial(
+                    notes, traits, condition, config.seed * 1000 + k, MAX_TRIAL_S
+                ).summary
                 rows.append(
                     {
                         "group": group,

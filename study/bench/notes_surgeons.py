@@ -71,8 +71,12 @@ def surgeons_summary(trials: pd.DataFrame) -> pd.DataFrame:
 def surgeons_trials(n: int, seed: int, progress: Progress = no_progress) -> pd.DataFrame:
     """One NOTES trial per simulated expert in VO and in HV (the same person, seed for
     seed); one row per trial with the measures of `PAPER`, completion and success."""
+    from study.protocol.design import MAX_TRIAL_S
+    from study.protocol.tasks import get_task
     from study.protocol.traits import simulated_participant
-    from study.tasks.notes.trial import run_notes_trial
+    from study.protocol.trial_run import simulate_trial
+
+    notes = get_task("notes")
 
     rows = []
     for k in range(n):
@@ -80,7 +84,7 @@ def surgeons_trials(n: int, seed: int, progress: Progress = no_progress) -> pd.D
         traits = simulated_participant(GROUP, person)
         for condition in (CONDITION, "HV"):
             progress(f"surgeons' benchmark: simulated expert {k + 1}/{n}, {condition}")
-            s = run_notes_trial(traits, condition, person).summary
+            s = simulate_trial(notes, traits, condition, person, MAX_TRIAL_S).summary
             rows.append(
                 {
                     "participant": k,

@@ -52,10 +52,12 @@ def warm_up(task: str) -> None:
     from study.campaign.unit import _estimator
     from study.protocol.tasks import get_task
     from study.protocol.traits import simulated_participant
+    from study.protocol.trial_run import simulate_trial
 
     the_task = get_task(task)
     estimator = _estimator() if the_task.has_dial else None
-    the_task.simulate(simulated_participant("expert", 0), "HV", 0, 1.0, estimator=estimator)
+    traits = simulated_participant("expert", 0)
+    simulate_trial(the_task, traits, "HV", 0, 1.0, estimator=estimator)
 
 
 def compute_unit(spec: CampaignSpec, cell: Cell, replicate: int) -> tuple[pd.DataFrame, float]:

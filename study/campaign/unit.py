@@ -36,6 +36,7 @@ from study.protocol.roster import CODE_DIGITS, plan_blocks
 from study.protocol.session import MAX_TRIAL_S, participant_traits
 from study.protocol.tasks import get_task
 from study.protocol.traits import ParticipantTraits
+from study.protocol.trial_run import simulate_trial
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.link import LinkParams
 
@@ -100,7 +101,8 @@ def run_trial(
     link = LinkParams(
         delay_s=v["link_delay_ms"] / 1e3, jitter_s=v["link_jitter_ms"] / 1e3, loss=v["link_loss"]
     )
-    s = the_task.simulate(
+    s = simulate_trial(
+        the_task,
         traits,
         condition,
         seed,

@@ -63,9 +63,10 @@ def _effects(text: str, groups: list[str]) -> dict[str, float]:
 
 def model_measure(model: ParticipantModel) -> str:
     """The measure whose effect `study power` takes from a model by default."""
+    from study.analysis.task_figures import trace_measure
     from study.protocol.tasks import get_task
 
-    return get_task(model.task).trace_measure
+    return trace_measure(get_task(model.task))
 
 
 def _model_effects(

@@ -94,6 +94,7 @@ def simulate(
     """
     from study.protocol.default_estimator import load_estimator
     from study.protocol.traits import simulated_participant
+    from study.protocol.trial_run import simulate_trial
     from teleop_core.estimation.recording import write_csv_atomically
 
     for path in (out_csv, plot_path):
@@ -120,7 +121,8 @@ def simulate(
         first = session_place([condition], 0, 0, 1)
         traits = apply_effects(traits, model.participant_effects, first)
     with Console(stderr=True).status(f"simulating a {group} participant, {task}, {condition}"):
-        result = the_task.simulate(
+        result = simulate_trial(
+            the_task,
             traits,
             condition,
             seed,
@@ -130,6 +132,8 @@ def simulate(
         )
     write_csv_atomically(result.frame, out_csv)
     summary_path = out_csv.with_suffix(".json")
+    if estimator is not None:
+        result.summary["estimator"] = "physics + GRU + EKF"
     if model is not None:
         result.summary["participant_model"] = {
             "path": str(participants_path),

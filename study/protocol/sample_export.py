@@ -223,7 +223,7 @@ _Encoded = tuple[int, "pa.Table | pa.Buffer"]
 
 class _Keys:
     """The key columns of the exported trials, looked up by `trial_id` row by row, and
-    each row's values under the export's columns (its task's, by `Task.stored_table`)."""
+    each row's values under the export's columns (its task's, by `Task.sample_table`)."""
 
     def __init__(self, trials: list[ExportTrial], schema: pa.Schema) -> None:
         ids = np.array([t.trial_id for t in trials], dtype=np.int64)
@@ -245,7 +245,7 @@ class _Keys:
         keys = [values.take(index) for values in self._values]
         row_task = self._task_of[rows]
         present = np.unique(row_task)
-        mapped = {k: self._tasks[k].stored_table(span) for k in present}
+        mapped = {k: self._tasks[k].sample_table(span) for k in present}
         values = []  # each export column: its task's, NULL for a row of a task without it
         for field in list(self.schema)[len(_KEY_FIELDS) + 1 :]:
             column: pa.Array | pa.ChunkedArray = pa.nulls(span.num_rows, field.type)

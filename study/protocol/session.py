@@ -33,7 +33,7 @@ import math
 import threading
 import time
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -70,6 +70,7 @@ from study.protocol.roster import find_participant, load_study
 from study.protocol.stop_signals import stop_reason
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
 from study.protocol.traits import ParticipantTraits, draw_traits
+from study.protocol.trial_run import TrialSteps, run_trial
 from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.drivers import Driver, DriverFailure
 
@@ -419,14 +420,6 @@ class TrialSetup:
     """Holds the trial between two steps (`TrialHold`), if given."""
 
 
-def _rendered_gain(condition: str, gain: float | None) -> dict[str, float]:
-    """The summary's record of the dial's gain the trial rendered with (VO renders
-    nothing); empty where the task has no dial."""
-    if gain is None:
-        return {}
-    return {"haptic_gain_n_m_per_n": 0.0 if condition == "VO" else gain}
-
-
 def _place(participant: Participant, item: PendingTrial) -> TrialPlace:
     """Where the trial lies in the participant's session of its task."""
     blocks = sorted(
@@ -476,24 +469,6 @@ def _write_end(
         return done
 
 
-def _trial_end(
-    task: Task, loop: Any, driver: Driver, samples: np.ndarray
-) -> tuple[bool, float, dict[str, str]]:
-    """The trial's success, completion time and the summary's record of its end.
-
-    A simulated phantom decides success itself (its model's tip at the target) and the
-    completion time is the last sample's. A physical one has no tip tracker: a person
-    ends the trial as reached (`HardwareDriver.end`: the dial's button or the
-    experimenter), success true at that moment; a trial that runs to the time limit is
-    success false; `end` says which (`study_rows.TRIAL_ENDS`)."""
-    if getattr(loop, "physical_follower", None) is None:
-        return bool(loop.success), task.completion_time_s(samples), {}
-    end = getattr(driver, "end", None)
-    if end is None or not loop.done:
-        return False, task.completion_time_s(samples), {"end": "time_limit"}
-    return True, float(loop.done_s), {"end": end}
-
-
 def _run_trial(
     engine: Engine, participant: Participant, item: PendingTrial, run: TrialSetup
 ) -> int | None:
@@ -532,39 +507,14 @@ def _run_trial(
         f"{run.study_seed}/{participant.code}/{block.block_index}/{int(item.practice)}/"
         f"{item.trial_index}/{attempt}".encode()
     )
-    gain = task.haptic_gain(run.design.haptic_gain_for(block.condition)) if task.has_dial else None
-    loop = task.make_loop(
-        block.condition,
-        seed,
-        haptic_gain_n_m_per_n=gain,
-        estimator=run.estimator,
-        context=run.context,
-    )
+    gain = run.design.haptic_gain_for(block.condition) if task.has_dial else None
     if driver is None:
         traits = apply_effects(run.traits, run.effects, _place(participant, item))
         driver = task.simulated_driver(traits, MAX_TRIAL_S, run.context)
-    loop.start(driver)
-    chunks = []
     realtime = bool(getattr(driver, "realtime", False))
     # paced or at a real device: short steps, so a watcher sees it live and a failing
     # device loses no more than a step of samples
     step_s = STEP_S if run.pace is None and not realtime else PACED_STEP_S
-    wall0 = time.monotonic()
-    info = TrialInfo(
-        trial_id,
-        task,
-        block.condition,
-        block.block_index,
-        item.trial_index,
-        item.practice,
-        attempt,
-        clock_origin_s=wall0,
-        clock_rate=run.pace or 1.0,
-        realtime=run.pace is not None or realtime,
-    )
-    observer = run.observer
-    observer.trial_started(info)
-    ending = trial_ending(observer, info, loop, SessionStopped)
     hold_s = HOLD_S if run.on_storage_wait is not None else 0.0
     writer_at = SampleWriter(
         engine,
@@ -574,29 +524,28 @@ def _run_trial(
         hold_s=hold_s,
         on_wait=run.on_storage_wait,
     )
-    with writer_at as writer, ending, contextlib.closing(driver):
-        while loop.t_s < MAX_TRIAL_S - 1e-9 and not loop.done:
-            if run.hold is not None and run.hold.held:
-                writer.flush()  # what the trial measured so far is stored while it stands
-                wall0 += run.hold.wait()  # held time is not trial time: no catching up
-            run.check()
-            samples = loop.advance(min(step_s, MAX_TRIAL_S - loop.t_s))
-            if len(samples):
-                writer.extend(task.stored_columns(samples))
-                chunks.append(samples)
-                if run.on_samples is not None:
-                    run.on_samples(samples)
-            observer.samples(info, samples)
-            if run.pace:
-                lag = wall0 + loop.t_s / run.pace - time.monotonic()
-                if lag > 0:
-                    time.sleep(lag)
-    samples = np.concatenate(chunks)
-    success, completion_s, ended = _trial_end(task, loop, driver, samples)
-    values, extras = task.trial_measures(samples, success)
+    with writer_at as writer, contextlib.closing(driver):
+        steps = _StoredSteps(run, writer, realtime, (trial_id, block, item, attempt))
+        with steps.ending():
+            result = run_trial(
+                task,
+                block.condition,
+                seed,
+                driver,
+                MAX_TRIAL_S,
+                haptic_gain_n_m_per_n=gain,
+                estimator=run.estimator,
+                context=run.context,
+                step_s=step_s,
+                steps=steps,
+            )
+    info, observer = steps.info, run.observer
+    assert info is not None  # the trial started
+    success, completion_s, ended = result.success, result.completion_time_s, result.ended
+    values = result.measures
     summary = {
-        **extras,
-        **_rendered_gain(block.condition, gain),
+        **result.extras,
+        **result.rendered_gain,
         "seed": seed,
         "samples": writer.rows_committed,
         **task.driver_counts(driver),
@@ -634,3 +583,78 @@ def _run_trial(
         return trial_id
     observer.trial_ended(info, "interrupted", {"reason": "taken over by another session"})
     return None
+
+
+class _StoredSteps(TrialSteps):
+    """A session's trial step by step: each step's samples to the sample writer (one
+    committed chunk per second of trial time) and the observers, paced to `pace` times
+    real time, held (`TrialHold`) and stopped (`TrialSetup.check`) between two steps."""
+
+    def __init__(
+        self,
+        run: TrialSetup,
+        writer: SampleWriter,
+        realtime: bool,
+        place: tuple[int, ScheduleBlock, PendingTrial, int],
+    ) -> None:
+        self.run, self.writer, self.realtime, self.place = run, writer, realtime, place
+        self.info: TrialInfo | None = None
+        self.loop: Any = None
+        self.wall0 = 0.0
+
+    @property
+    def t_s(self) -> float:
+        """The running trial's time, s (0 before it started)."""
+        return 0.0 if self.loop is None else float(self.loop.t_s)
+
+    def started(self, loop: Any) -> None:
+        trial_id, block, item, attempt = self.place
+        self.loop, self.wall0 = loop, time.monotonic()
+        self.info = TrialInfo(
+            trial_id,
+            self.run.task,
+            block.condition,
+            block.block_index,
+            item.trial_index,
+            item.practice,
+            attempt,
+            clock_origin_s=self.wall0,
+            clock_rate=self.run.pace or 1.0,
+            realtime=self.run.pace is not None or self.realtime,
+        )
+        self.run.observer.trial_started(self.info)
+
+    def before_step(self, loop: Any) -> None:
+        hold = self.run.hold
+        if hold is not None and hold.held:
+            self.writer.flush()  # what the trial measured so far is stored while it stands
+            self.wall0 += hold.wait()  # held time is not trial time: no catching up
+        self.run.check()
+
+    def after_step(self, loop: Any, samples: np.ndarray) -> None:
+        run = self.run
+        if len(samples):
+            self.writer.extend(run.task.stored_columns(samples))
+            if run.on_samples is not None:
+                run.on_samples(samples)
+        assert self.info is not None  # started before the first step
+        run.observer.samples(self.info, samples)
+        if run.pace:
+            lag = self.wall0 + loop.t_s / run.pace - time.monotonic()
+            if lag > 0:
+                time.sleep(lag)
+
+    def finished(self, loop: Any) -> None:
+        self.writer.flush()  # every sample committed before the trial is measured
+
+    @contextlib.contextmanager
+    def ending(self) -> Iterator[None]:
+        """Tell the observers of a trial that started and ends on an exception
+        (`trial_ending`: stopped or interrupted)."""
+        try:
+            yield
+        except BaseException:
+            if self.info is None:
+                raise
+            with trial_ending(self.run.observer, self.info, self, SessionStopped):
+                raise

@@ -1,8 +1,8 @@
 """What every task's live view shares: a Braille canvas (`BrailleCanvas`, 2 x 4 dots per
-terminal cell, on which the LCCA task's phantom is drawn: `study.tasks.lcca.scene`), the
+terminal cell, on which the LCCA task's phantom is drawn: `study.tui.scene_lcca`), the
 force gauges and their histories (`gauge`, `sparkline`, `LiveReadout`). The scene beside
-the readout is the task's own (`Task.live_scene`), or the insertion along a track
-(`study.tui.scenes`).
+the readout is the task's view's own (`study.tui.task_views.LiveView.scene`), or the
+insertion along a track (`study.tui.scenes`).
 
 Colours are from the Okabe-Ito palette (`study.analysis.figures`), which stays readable
 on dark and light backgrounds; the vessels are drawn in the theme's dimmed foreground.

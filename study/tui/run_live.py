@@ -1,9 +1,9 @@
 """The run screen's live view and keyboard, as mixins of `RunPane`.
 
 `LiveViewMixin`: what the 30 Hz timer draws from `LiveState` (never from the worker):
-the scene the trial's task brings (`Task.live_scene`, or the insertion along a track)
-and the readout of the task's two live forces and its
-own lines. `KeyboardMixin`: the pane's key actions, handed to the keyboard driver.
+the scene of the trial's task's view (`study.tui.task_views.LiveView`, or the insertion
+along a track) and the readout of the view's two live forces and its own lines.
+`KeyboardMixin`: the pane's key actions, handed to the keyboard driver.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from rich.text import Text
 
 from study.tui.live_view import LiveReadout, gauge, sparkline
 from study.tui.scenes import scene_class, scene_title
+from study.tui.task_views import live_view
 from study.tui.trial_summary import report_lines
 
 if TYPE_CHECKING:
@@ -33,14 +34,8 @@ KEY_ACTIONS = {
 
 
 def task_lines(frame: LiveFrame) -> list[str]:
-    """The task's readout lines for `frame`, told the trial's condition when the task's
-    `live_lines` takes one (a task written before it was passed need not)."""
-    import inspect
-
-    live_lines = frame.task.live_lines
-    if "condition" in inspect.signature(live_lines).parameters:
-        return live_lines(frame.values, condition=frame.condition)
-    return live_lines(frame.values)
+    """The readout lines of the task's view (`LiveView.lines`) for `frame`."""
+    return live_view(frame.task).lines(frame.task, frame.values, frame.condition)
 
 
 class LiveViewMixin:
@@ -48,8 +43,8 @@ class LiveViewMixin:
     _redraws)."""
 
     def _show_task(self, task: Task) -> None:
-        """The live view of `task`'s trials: the scene its package brings
-        (`Task.live_scene`), mounted on first use, or the insertion along a track."""
+        """The live view of `task`'s trials: the scene of its view
+        (`LiveView.scene`), mounted on first use, or the insertion along a track."""
         shown = scene_class(task)
         box = self.query_one("#phantom-box")
         box.border_title = scene_title(task)
@@ -96,7 +91,7 @@ class LiveViewMixin:
         """The task's two live forces (gauge and history), then its own lines."""
         text = Text()
         histories = (frame.first_history, frame.second_history)
-        for k, trace in enumerate(frame.task.live_traces):
+        for k, trace in enumerate(live_view(frame.task).traces):
             value = frame.values[trace.column]  # signed; the bar shows |value| if magnitude
             text.append_text(
                 gauge(trace.label, value, trace.full_scale, 14, magnitude=trace.magnitude)
@@ -111,7 +106,8 @@ class LiveViewMixin:
                 f"{wait[0]:.0f} s: {wait[1]} samples held, none lost",
             )
         if run.keyboard is not None:
-            lines.append(f"{frame.task.keyboard_aim_label} {run.keyboard.aim_rad:+4.2f} rad")
+            aim = live_view(frame.task).keyboard_aim_label
+            lines.append(f"{aim} {run.keyboard.aim_rad:+4.2f} rad")
         text.append("\n".join(lines))
         return text
 

@@ -40,6 +40,7 @@ from study.tui.run_live import KeyboardMixin, LiveViewMixin
 from study.tui.scenes import TrackView, scene_class
 from study.tui.services import NextTrial, Roster, StudyServices
 from study.tui.stop_dialog import StopAnswer, StopScreen
+from study.tui.task_views import live_view
 from study.tui.trial_runner import (
     Simulation,
     TrialOutcome,
@@ -633,7 +634,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         self._practice = event.practice
         text = f"running: {event.code} {event.description}  x: stop"
         if self.run is not None and self.run.keyboard is not None:
-            text += "\n" + self._trial_task.key_hints  # a line of its own: none is cut
+            text += "\n" + live_view(self._trial_task).key_hints  # a line of its own: none is cut
         self._running_text = text
         if self.run is not None and self.run.held:
             self.status = "held"
@@ -654,7 +655,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
             self.status = "completed"
             peaks = ""
             if run is not None and run.live.task is not None:
-                first, second = run.live.task.live_peaks
+                first, second = live_view(run.live.task).shown_peaks
                 peaks = (
                     f", peaks {run.live.peaks[0]:.2f} N {first.label},"
                     f" {run.live.peaks[1]:.2f} N {second.label}"

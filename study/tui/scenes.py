@@ -1,12 +1,11 @@
-"""What the run screen draws beside its readout: the scene the trial's task brings
-(`Task.live_scene`, a widget of the task's own package, found by its dotted name), or,
-for a task without one, its insertion along a track (`TrackView`). `SceneView` is the
-base of scenes redrawn whole at each frame of the live view.
+"""What the run screen draws beside its readout: the scene of the trial's task's view
+(`study.tui.task_views.LiveView.scene`), or, for a view without one, the insertion along
+a track (`TrackView`). `SceneView` is the base of scenes redrawn whole at each frame of
+the live view.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 from typing import TYPE_CHECKING
 
@@ -14,6 +13,7 @@ from rich.text import Text
 from textual.widget import Widget
 
 from study.tui.live_view import TIP_STYLE
+from study.tui.task_views import live_view
 from study.tui.trial_runner import LiveFrame
 
 if TYPE_CHECKING:
@@ -44,7 +44,7 @@ class SceneView(Widget):
 
 
 def track_scene(frame: LiveFrame | None, cols: int) -> Text:
-    """Any task's tip as text: its insertion along a bar of the task's `track_length_m`,
+    """Any task's tip as text: its insertion along a bar of its view's `track_length_m`,
     the region it is in, and its roll."""
     cols = max(cols, 20)
     text = Text(no_wrap=True, overflow="crop")
@@ -54,7 +54,7 @@ def track_scene(frame: LiveFrame | None, cols: int) -> Text:
     task = frame.task
     region = task.regions[frame.branch] if 0 <= frame.branch < len(task.regions) else "?"
     text.append(f"inserted {frame.insertion_m * 1000:5.0f} mm   in {region}\n")
-    at = axis_column(frame.insertion_m, 0.0, task.track_length_m, cols)
+    at = axis_column(frame.insertion_m, 0.0, live_view(task).track_length_m, cols)
     text.append("━" * at, "bold")
     text.append("●", TIP_STYLE)
     text.append("─" * max(cols - at - 1, 0) + "\n", "dim")
@@ -74,13 +74,11 @@ class TrackView(SceneView):
 
 
 def scene_class(task: Task) -> type[Widget]:
-    """The widget class of `task`'s live scene (`module:Class`), else `TrackView`."""
-    if task.live_scene is None:
-        return TrackView
-    module, _, name = task.live_scene.partition(":")
-    return getattr(importlib.import_module(module), name)
+    """The widget class of `task`'s live scene, else `TrackView`."""
+    scene = live_view(task).scene
+    return TrackView if scene is None else scene
 
 
 def scene_title(task: Task) -> str:
     """The live view's border title for `task`."""
-    return task.live_scene_title.format(title=task.title)
+    return live_view(task).scene_title.format(title=task.title)

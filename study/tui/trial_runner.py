@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from study.protocol.tasks import LiveTrace, Task
+from study.tui.task_views import live_view
 from teleop_core.loop.drivers import HandAction, KeyboardDriver, OperatorView
 
 STOPPED_REASON = "stopped from the terminal app in the middle of the trial"
@@ -119,8 +120,8 @@ class LiveFrame:
     """What the live view draws at one redraw: the newest sample by the task's column
     names (`values`), and the history of the task's two live traces (`live_traces`).
 
-    The properties read the columns every task stores (`Task.stored_name`): where the
-    tip is, how far in, its roll, the dial."""
+    The properties read the columns every task's rows start with (`pose_columns`, by
+    their place) and its region: where the tip is, how far in, its roll."""
 
     task: Task
     values: dict[str, float]
@@ -129,36 +130,33 @@ class LiveFrame:
     condition: str | None = None
     """The trial's condition (VO renders no force on the hand), if known."""
 
-    def _stored(self, column: str) -> float:
-        return self.values[self.task.stored_name(column)]
+    def _pose(self, k: int) -> float:
+        """The newest value of pose column `k` (`pose_columns`' order)."""
+        return self.values[self.task.sample_columns[k].name]
 
     @property
     def t_s(self) -> float:
-        return self._stored("t_s")
+        return self._pose(0)
 
     @property
     def branch(self) -> int:
-        return int(self._stored("branch"))
+        return int(self.values[self.task.region_column])
 
     @property
     def insertion_m(self) -> float:
-        return self._stored("insertion_m")
+        return self._pose(1)
 
     @property
     def rotation_rad(self) -> float:
-        return self._stored("rotation_rad")
+        return self._pose(2)
 
     @property
     def tip_xz_m(self) -> tuple[float, float]:
-        return (self._stored("tip_x_m"), self._stored("tip_z_m"))
-
-    @property
-    def dial_angle_rad(self) -> float:
-        return self._stored("dial_angle_rad")
+        return (self._pose(3), self._pose(5))
 
     def trace(self, k: int) -> float:
         """The newest value of live trace `k` (0 or 1), as its gauge shows it."""
-        trace = self.task.live_traces[k]
+        trace = live_view(self.task).traces[k]
         value = self.values[trace.column]
         return abs(value) if trace.magnitude else value
 
@@ -202,8 +200,9 @@ class LiveState:
         task = self.task
         if task is None:
             raise RuntimeError("LiveState.push before start(task)")
-        first, second = (self._column(samples, t) for t in task.live_traces)
-        peaks = [float(self._column(samples, t).max()) for t in task.live_peaks]
+        view = live_view(task)
+        first, second = (self._column(samples, t) for t in view.traces)
+        peaks = [float(self._column(samples, t).max()) for t in view.shown_peaks]
         with self._lock:
             self._last = samples[-1].copy()
             self._first.extend(first.tolist())

@@ -124,13 +124,16 @@ SAMPLE_COLUMNS = (
     "tip_y_m",
     "tip_z_m",
     "branch",
+    "reference_force_n",
     "proximal_force_n",
-    "proximal_force_est_n",
     "distal_force_n",
     "dial_angle_rad",
     "dial_torque_n_m",
 )
-"""One row per acquisition: the database's sample columns (branch as its code)."""
+"""One row per acquisition (branch as its code), under the names the LCCA task stores,
+exports and draws them by: `reference_force_n` is the true proximal force (the
+simulation's, or a reference sensor's), `proximal_force_n` the estimate from the motor
+current that the dial renders."""
 SAMPLE_WIDTH = len(SAMPLE_COLUMNS)
 (
     S_T,

@@ -75,11 +75,20 @@ SAMPLE_RATE_HZ = 100.0
 REGIONS = ("canal", "fornix", "cavity", "target", "fold")
 """Region names, stored as the samples' `branch` (the fold last, so older codes keep
 their meaning): "fold" is the tip against the fold, the screen's red-out."""
-SAMPLE_COLUMNS = (*LOOP_SAMPLE_COLUMNS, "torque_demanded_n_m")
-"""Per sample: the loop's columns (as `teleop_core.loop.layout.SAMPLE_COLUMNS`) read the
-NOTES way: proximal_force_n = demanded force, proximal_force_est_n = rendered force,
-distal_force_n = the tissue's force on the tip (fornix or fold), dial_torque_n_m =
-rendered torque; plus the demanded torque."""
+SAMPLE_COLUMNS = (
+    *LOOP_SAMPLE_COLUMNS[:6],
+    "region",
+    "force_demanded_n",
+    "force_rendered_n",
+    "tip_force_n",
+    "dial_angle_rad",
+    "torque_rendered_n_m",
+    "torque_demanded_n_m",
+)
+"""Per sample, under the names the NOTES task stores them by: the loop's pose columns
+(`teleop_core.loop.layout.SAMPLE_COLUMNS`), the region's code, the force the tissue
+demands and the force the device renders, the tissue's force on the tip (fornix or
+fold), the dial's angle, the torque rendered and the torque demanded."""
 
 
 class NotesAbdomen(TissueAbdomen):

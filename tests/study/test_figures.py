@@ -35,6 +35,7 @@ from study.cli import main
 from study.protocol.design import TEMPLATE
 from study.protocol.exchange import TLX_COLUMNS, TLX_WEIGHT_COLUMNS
 from study.protocol.export import trial_columns
+from study.protocol.tasks import get_task
 
 GROUPS = {"outsider": 6, "novice": 5, "expert": 5}
 
@@ -90,12 +91,12 @@ def _give_samples(engine: Engine) -> None:
         session.execute(update(Trial).values(driver="simulated"))
         session.commit()
     for trial_id, gain in gains.items():
-        with SampleWriter(engine, trial_id) as writer:
+        with SampleWriter(engine, trial_id, schema=get_task("lcca").sample_schema()) as writer:
             writer.extend(
                 {
                     "t_s": t,
-                    "proximal_force_n": 2.5 * gain * push,
-                    "proximal_force_est_n": 2.5 * gain * push + 0.05,
+                    "reference_force_n": 2.5 * gain * push,
+                    "proximal_force_n": 2.5 * gain * push + 0.05,
                     "distal_force_n": np.maximum(gain * push, 0.0),
                 }
             )
@@ -579,5 +580,5 @@ def _give_samples_to(engine: Engine, code: str) -> None:
             .where(Participant.code == code, Trial.task == "lcca", Trial.trial_index == 0)
         ).all()
     for trial_id in ids:
-        with SampleWriter(engine, trial_id) as writer:
-            writer.extend({"t_s": t, "proximal_force_n": t, "distal_force_n": t})
+        with SampleWriter(engine, trial_id, schema=get_task("lcca").sample_schema()) as writer:
+            writer.extend({"t_s": t, "reference_force_n": t, "distal_force_n": t})

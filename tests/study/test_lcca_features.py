@@ -8,6 +8,7 @@ import pandas as pd
 import pytest
 
 from study.protocol.tasks import get_task
+from study.protocol.trial_run import simulate_trial
 from study.tasks.lcca.features import AIM_FLOOR_RAD, FEATURES, lcca_features
 
 OSTIUM_M = 0.25
@@ -116,7 +117,7 @@ def test_the_task_reads_its_features_off_a_simulated_trial() -> None:
     mean = {t: m for t, (m, _) in PROFILES["expert"].__dict__.items()}
     traits = ParticipantTraits(group="expert", **mean)
     context = task.session_context()
-    result = task.simulate(traits, "VO", 3, 60.0, context=context)
+    result = simulate_trial(task, traits, "VO", 3, 60.0, context=context)
     f = task.trial_features(result.frame, context)
     # the advance speed is the participant's preferred speed (the dial's speed gain
     # times its aim, the hand's grip against the return spring taking a share)

@@ -9,10 +9,14 @@ import math
 import numpy as np
 import pytest
 
+from study.protocol.design import MAX_TRIAL_S
+from study.protocol.tasks import get_task
 from study.protocol.traits import TRIAL_CV, simulated_participant
-from study.tasks.notes.trial import run_notes_trial
+from study.protocol.trial_run import simulate_trial
 from teleop_core.notes import tissue
 from teleop_core.notes.task import TISSUE, NotesLoop
+
+NOTES = get_task("notes")
 
 
 def test_a_trials_tissue_varies_about_the_nominal_with_the_stated_cv() -> None:
@@ -37,7 +41,10 @@ def test_the_trials_seed_sets_its_tissue_and_a_given_tissue_is_kept() -> None:
 def test_no_two_trials_of_a_block_share_a_peak_and_the_person_state_is_recorded() -> None:
     person = simulated_participant("novice", 7)
     for condition in ("VO", "HV"):
-        block = [run_notes_trial(person, condition, seed).summary for seed in (101, 102, 103)]
+        block = [
+            simulate_trial(NOTES, person, condition, seed, MAX_TRIAL_S).summary
+            for seed in (101, 102, 103)
+        ]
         for measure in ("peak_push_n", "peak_torque_demanded_n_m", "peak_tip_force_n"):
             values = [s[measure] for s in block]
             assert len(set(values)) == 3, (condition, measure, values)

@@ -47,6 +47,7 @@ def test_three_trials_of_one_block_differ_to_the_stored_precision() -> None:
     longer repeat one another's completion time."""
     from study.protocol.default_estimator import load_estimator
     from study.protocol.tasks import get_task
+    from study.protocol.trial_run import simulate_trial
 
     task = get_task("lcca")
     context, estimator = task.session_context(), load_estimator()
@@ -54,7 +55,9 @@ def test_three_trials_of_one_block_differ_to_the_stored_precision() -> None:
     times = []
     for i in range(3):
         seed = zlib.crc32(f"1/P001/1/0/{i}/1".encode())
-        s = task.simulate(person, "HV", seed, 60.0, estimator=estimator, context=context).summary
+        s = simulate_trial(
+            task, person, "HV", seed, 60.0, estimator=estimator, context=context
+        ).summary
         times.append(round(s["completion_time_s"], 4))
     assert len(set(times)) == 3, times
 

@@ -10,8 +10,10 @@ import pytest
 from scipy.stats import wilcoxon
 
 from study.errors import StudyInputError
+from study.protocol.tasks import get_task
 from study.protocol.traits import GROUPS, draw_traits, simulated_participant
-from study.tasks.lcca.trial import run_lcca_trial, wall_contacts
+from study.protocol.trial_run import simulate_trial
+from study.tasks.lcca.trial import wall_contacts
 from teleop_core.loop.drivers import OperatorView
 from teleop_core.phantom.lcca import LccaPhantom
 
@@ -47,6 +49,9 @@ def test_wall_contacts_count_rising_crossings() -> None:
     assert wall_contacts(np.array([0.5, 0.1])) == 1
 
 
+LCCA = get_task("lcca")
+
+
 @pytest.fixture(scope="module")
 def phantom() -> LccaPhantom:
     return LccaPhantom()
@@ -54,8 +59,8 @@ def phantom() -> LccaPhantom:
 
 def test_hv_at_zero_gain_is_vo_draw_for_draw(phantom: LccaPhantom) -> None:
     traits = simulated_participant("outsider", 3)
-    vo = run_lcca_trial(traits, "VO", 3, None, phantom=phantom, max_s=60)
-    hv0 = run_lcca_trial(traits, "HV", 3, None, haptic_gain=0.0, phantom=phantom, max_s=60)
+    vo = simulate_trial(LCCA, traits, "VO", 3, 60, context=phantom)
+    hv0 = simulate_trial(LCCA, traits, "HV", 3, 60, haptic_gain_n_m_per_n=0.0, context=phantom)
     assert vo.frame.equals(hv0.frame)
 
 
@@ -67,13 +72,13 @@ def test_hv_at_zero_gain_is_statistically_indistinguishable_from_vo(
         traits = simulated_participant("novice", 100 + i)
         # separate runs: each condition with its own noise, as two real trials would be
         peaks["VO"].append(
-            run_lcca_trial(traits, "VO", 10 + i, None, phantom=phantom, max_s=90).summary[
+            simulate_trial(LCCA, traits, "VO", 10 + i, 90, context=phantom).summary[
                 "peak_proximal_force_n"
             ]
         )
         peaks["HV"].append(
-            run_lcca_trial(
-                traits, "HV", 50 + i, None, haptic_gain=0.0, phantom=phantom, max_s=90
+            simulate_trial(
+                LCCA, traits, "HV", 50 + i, 90, haptic_gain_n_m_per_n=0.0, context=phantom
             ).summary["peak_proximal_force_n"]
         )
     assert wilcoxon(peaks["VO"], peaks["HV"]).pvalue > 0.05
@@ -86,8 +91,8 @@ def test_felt_torque_lowers_peak_forces(phantom: LccaPhantom) -> None:
     vo, hv = [], []
     for i in range(16):
         traits = simulated_participant("outsider", 200 + i)
-        vo.append(run_lcca_trial(traits, "VO", i, None, phantom=phantom, max_s=120).summary)
-        hv.append(run_lcca_trial(traits, "HV", i, None, phantom=phantom, max_s=120).summary)
+        vo.append(simulate_trial(LCCA, traits, "VO", i, 120, context=phantom).summary)
+        hv.append(simulate_trial(LCCA, traits, "HV", i, 120, context=phantom).summary)
     assert np.mean([s["peak_distal_force_n"] for s in hv]) < np.mean(
         [s["peak_distal_force_n"] for s in vo]
     )

@@ -28,6 +28,7 @@ from db.samples import SampleReader, SampleWriter
 from study.cli import main
 from study.protocol.design import TEMPLATE
 from study.protocol.export import export_data
+from study.protocol.tasks import get_task
 from tests.conftest import decode_stored_chunk
 
 LCCA_COLUMNS = (
@@ -46,9 +47,8 @@ LCCA_COLUMNS = (
 )
 """The LCCA task's own sample columns, written out here."""
 SAMPLE_EXPORT_COLUMNS = ("participant", "task", "condition", "trial", "seq", *LCCA_COLUMNS)
-OLD_TO_LCCA = {"proximal_force_n": "reference_force_n", "proximal_force_est_n": "proximal_force_n"}
-"""The trials here are written in the layout of before the tasks' own schemas (the
-writer's default): the export gives them under the LCCA's names."""
+LCCA_SCHEMA = get_task("lcca").sample_schema()
+"""The trials here are written in the LCCA's own schema, as the session writes them."""
 
 _REFERENCE_SQL = """
 SELECT p.code, t.task, t.condition, t.trial_index + 1, c.first_seq, c.raw_bytes, c.data,
@@ -74,8 +74,8 @@ def _columns(rng: np.random.Generator, n: int, start_null: bool) -> dict[str, ob
         "insertion_m": rng.uniform(0, 0.3, n),
         "rotation_rad": rng.normal(0, 3, n),
         "branch": branch,
-        "proximal_force_n": np.abs(rng.normal(0.5, 0.2, n)),
-        "proximal_force_est_n": np.round(rng.normal(0.5, 0.2, n), 1),  # 1.0, 0.1, ...
+        "reference_force_n": np.abs(rng.normal(0.5, 0.2, n)),
+        "proximal_force_n": np.round(rng.normal(0.5, 0.2, n), 1),  # 1.0, 0.1, ...
         "distal_force_n": distal,
         "dial_angle_rad": rng.normal(0, 1e-300, n),
         # tip_* and dial_torque_n_m stay NULL, as for a task that does not produce them.
@@ -135,10 +135,10 @@ def _build_study(db: str, tmp_path: Path, sizes: dict[tuple[str, str, int], int]
             ids = {k: t.id for k, t in trials.items()}
             extra_ids = [t.id for t in extra]
         for key, n in sizes.items():
-            with SampleWriter(engine, ids[key]) as writer:
+            with SampleWriter(engine, ids[key], schema=LCCA_SCHEMA) as writer:
                 writer.extend(_columns(rng, n, start_null=key[2] == 1))
         for trial_id in extra_ids:
-            with SampleWriter(engine, trial_id) as writer:
+            with SampleWriter(engine, trial_id, schema=LCCA_SCHEMA) as writer:
                 writer.extend(_columns(rng, 50, start_null=False))
     finally:
         engine.dispose()
@@ -166,7 +166,7 @@ def _reference(db: str) -> pd.DataFrame:
         cursor = conn.execute(_REFERENCE_SQL)
     frames = []
     for code, task, condition, trial, first_seq, raw_bytes, data, schema in cursor.fetchall():
-        chunk = decode_stored_chunk(data, raw_bytes, schema).to_pandas().rename(columns=OLD_TO_LCCA)
+        chunk = decode_stored_chunk(data, raw_bytes, schema).to_pandas()
         key = {"participant": code, "task": task, "condition": condition, "trial": trial}
         key["seq"] = first_seq + np.arange(len(chunk))
         frames.append(pd.concat([pd.DataFrame(key), chunk], axis=1))

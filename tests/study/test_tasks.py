@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from db.models.trial import SAMPLE_COLUMNS as DB_SAMPLE_COLUMNS
 from study.errors import StudyInputError
 from study.protocol.tasks import get_task, task_names
 from teleop_core.loop.core import SAMPLE_COLUMNS as LOOP_COLUMNS
@@ -29,20 +28,19 @@ def test_the_builtin_tasks_are_known_and_an_unknown_one_gets_one_line() -> None:
         get_task("probe")
 
 
-def test_the_lcca_task_stores_the_loops_columns_in_order() -> None:
+def test_the_lcca_task_stores_the_loops_columns_in_order_under_the_loops_names() -> None:
     lcca = get_task("lcca")
-    assert tuple(c.stored_as for c in lcca.sample_columns) == LOOP_COLUMNS
-    assert set(LOOP_COLUMNS) == set(DB_SAMPLE_COLUMNS)
+    # one name per quantity from the loop to the database
+    assert tuple(c.name for c in lcca.sample_columns) == LOOP_COLUMNS
+    assert LOOP_COLUMNS[7:9] == ("reference_force_n", "proximal_force_n")
+    assert "estimated" in lcca.sample_columns[8].description
     assert lcca.regions == REGION_ABBREVIATIONS
 
 
 def test_the_notes_task_names_the_notes_loops_columns() -> None:
     task = get_task("notes")
-    assert len(task.sample_columns) == len(notes.SAMPLE_COLUMNS)
-    # the loop's first columns are the database's; the demanded torque is not stored
-    stored = [c.stored_as for c in task.sample_columns]
-    assert stored[: len(LOOP_COLUMNS)] == list(LOOP_COLUMNS)
-    assert stored[-1] is None
+    assert tuple(c.name for c in task.sample_columns) == notes.SAMPLE_COLUMNS
+    assert task.region_column == "region"
     assert task.sample_columns[-1].name == notes.SAMPLE_COLUMNS[-1] == "torque_demanded_n_m"
     assert task.regions == notes.REGIONS
     assert not task.has_dial

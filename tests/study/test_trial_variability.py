@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from study.campaign.unit import trial_seed
+from study.protocol.tasks import get_task
 from study.protocol.traits import simulated_participant
+from study.protocol.trial_run import simulate_trial
 from study.tasks.lcca.simulated_participant import SimulatedParticipant
-from study.tasks.lcca.trial import run_lcca_trial
 from teleop_core.errors import TeleopInputError
 from teleop_core.phantom.lcca import H_DISTAL_OFFSET, H_LTIP, GuidewireParams, LccaPhantom
 
@@ -32,8 +33,13 @@ def test_no_two_trials_of_a_block_are_equal() -> None:
         person = simulated_participant(group, 3)
         block = 1 if condition == "VO" else 2
         summaries = [
-            run_lcca_trial(
-                person, condition, trial_seed(7, code, block, i), None, max_s=90.0, phantom=phantom
+            simulate_trial(
+                get_task("lcca"),
+                person,
+                condition,
+                trial_seed(7, code, block, i),
+                90.0,
+                context=phantom,
             ).summary
             for i in range(3)
         ]

@@ -95,7 +95,7 @@ def test_the_drive_unit_feeds_the_estimator_and_the_sensors_the_stored_forces(
     assert record["forces"] == "measured"
     assert record["phantom"] == "physical"
     # the stored forces are the sensors' lines, in order (no simulated force)
-    assert np.allclose(frame["proximal_force_n"], sent[:n, 1])
+    assert np.allclose(frame["reference_force_n"], sent[:n, 1])
     assert np.allclose(frame["distal_force_n"], sent[:n, 2])
     assert np.allclose(sent[:n, 1], [proximal(k * 0.01) for k in range(n)], atol=1e-4)
     # the tip's pose is not measured on a physical phantom
@@ -119,7 +119,7 @@ def test_the_drive_unit_feeds_the_estimator_and_the_sensors_the_stored_forces(
             out = stream.estimate()
             held = out[EST_FINAL] if out is not None else 0.0
         expected.append(held)
-    assert np.allclose(frame["proximal_force_est_n"], expected)
+    assert np.allclose(frame["proximal_force_n"], expected)
     assert np.any(np.abs(expected) > 0)
     # a physical phantom tells no success: the trial runs to its limit
     assert not result.success
@@ -148,8 +148,8 @@ def test_a_drive_that_stops_answering_ends_the_loop_with_one_error(
     assert len(kept) == 30
     # without an estimator the reference sensor's force is rendered
     est, reference = (
-        SAMPLE_COLUMNS.index("proximal_force_est_n"),
         SAMPLE_COLUMNS.index("proximal_force_n"),
+        SAMPLE_COLUMNS.index("reference_force_n"),
     )
     assert np.allclose(kept[1::2, est], kept[1::2, reference])
     assert kept[-1, reference] == pytest.approx(proximal(0.29), abs=1e-4)

@@ -132,8 +132,8 @@ def test_the_estimator_in_the_loop_tracks_the_proximal_force(small_estimator) ->
         .to_frame()
     )
     moving = frame[frame["t_s"] > 1.0]
-    error = moving["proximal_force_est_n"] - moving["proximal_force_n"]
-    assert moving["proximal_force_n"].max() > 0.5
+    error = moving["proximal_force_n"] - moving["reference_force_n"]
+    assert moving["reference_force_n"].max() > 0.5
     assert math.sqrt(np.mean(error**2)) < 0.2
 
 
@@ -275,7 +275,7 @@ def test_float32_gru_keeps_the_vo_samples_of_the_libm_gru(small_estimator, monke
     old_run = old.run(6.0, SimulatedOperator(target_depth_m=0.3))
     assert new._fast
     assert not old._fast
-    est = SAMPLE_COLUMNS.index("proximal_force_est_n")
+    est = SAMPLE_COLUMNS.index("proximal_force_n")
     others = [i for i in range(len(SAMPLE_COLUMNS)) if i != est]
     assert np.array_equal(new_run.samples[:, others], old_run.samples[:, others])
     estimate_new, estimate_old = new_run.samples[:, est], old_run.samples[:, est]
@@ -314,7 +314,7 @@ def test_hv_samples_against_the_libm_gru_path(small_estimator, monkeypatch) -> N
     assert new_run.counters == old_run.counters
     a, b = new_run.samples, old_run.samples
     assert a.shape == b.shape
-    est = SAMPLE_COLUMNS.index("proximal_force_est_n")
+    est = SAMPLE_COLUMNS.index("proximal_force_n")
     others = [i for i in range(len(SAMPLE_COLUMNS)) if i != est]
     assert np.count_nonzero(b[:, est]) > 100  # the GRU ran
     assert np.ptp(b[:, SAMPLE_COLUMNS.index("dial_torque_n_m")]) > 0.01  # the dial felt it

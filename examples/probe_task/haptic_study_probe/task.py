@@ -1,21 +1,19 @@
-"""The probe task as haptic-study sees it: its regions, sample columns, measures, live
-traces and figure. The entry point `haptic_study.tasks: probe` names `TASK`; the
-registry registers it when a design or a command asks for the task.
+"""The probe task as haptic-study sees it: its declaration (regions, sample columns,
+measures) and the three hooks of a `Task`. The entry point `haptic_study.tasks: probe`
+names `TASK`; the registry registers it when a design or a command asks for the task.
+How the run screen and the figures draw it is in `live.py` and `figures.py`.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 from haptic_study_probe.loop import AIM_RAD, ProbeDriver, ProbeLoop
-from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, pose_columns
+from study.protocol.tasks import Measure, SampleColumn, Task, TaskDeclaration, pose_columns
 
-
-class ProbeTask(Task):
-    name = "probe"
-    title = "Probe insertion"
-    regions = ("medium", "depth")
-    sample_columns = (
+DECLARATION = TaskDeclaration(
+    name="probe",
+    title="Probe insertion",
+    regions=("medium", "depth"),
+    sample_columns=(
         *pose_columns(
             "probe depth",
             "probe roll (none)",
@@ -23,12 +21,12 @@ class ProbeTask(Task):
             insertion_name="depth_m",
             rotation_name="roll_rad",
         ),
-        SampleColumn("where", "branch", "", "medium or at depth"),
-        SampleColumn("push_force_n", "proximal_force_n", "N", "the medium's push back"),
-        SampleColumn("aim_rad", "dial_angle_rad", "rad", "the hand's aim"),
-        SampleColumn("medium_speed_m_s", None, "m/s", "the probe's speed through the medium"),
-    )
-    measures = (
+        SampleColumn("where", "", "medium or at depth"),
+        SampleColumn("push_force_n", "N", "the medium's push back"),
+        SampleColumn("aim_rad", "rad", "the hand's aim"),
+        SampleColumn("medium_speed_m_s", "m/s", "the probe's speed through the medium"),
+    ),
+    measures=(
         Measure(
             "peak_push_force_n",
             "N",
@@ -36,12 +34,13 @@ class ProbeTask(Task):
             "largest push of the medium",
             max_value=10.0,
         ),
-    )
-    live_traces = (LiveTrace("push_force_n", "push", 2.0), LiveTrace("aim_rad", "aim", 1.0))
-    live_peaks = live_traces
-    trace_names: ClassVar[dict[str, str]] = {"push_force_n": "push (medium)"}
-    sign_note = "Push force: positive resists insertion."
-    track_length_m = 0.1
+    ),
+    region_column="where",
+)
+
+
+class ProbeTask(Task):
+    declaration = DECLARATION
 
     def make_loop(
         self,

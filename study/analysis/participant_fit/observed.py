@@ -117,7 +117,7 @@ def with_features(
     values = np.full((len(trials), len(names)), np.nan)
     with SampleReader(engine) as reader:
         for done, (i, tid) in enumerate(todo):
-            table = the_task.stored_table(pa.Table.from_batches(list(reader.trial(tid))))
+            table = the_task.sample_table(pa.Table.from_batches(list(reader.trial(tid))))
             features = the_task.trial_features(table.to_pandas(), context)
             values[i] = [features.get(f, np.nan) for f in names]
             progress("samples", done + 1, len(todo))

@@ -41,6 +41,7 @@ from study.protocol.design import KNOWN_CONDITIONS, MAX_TRIAL_S
 from study.protocol.participant_effects import ParticipantEffect, apply_effects, session_place
 from study.protocol.tasks import get_task
 from study.protocol.traits import ParticipantTraits
+from study.protocol.trial_run import simulate_trial
 from teleop_core.progress import Progress, no_progress
 
 
@@ -87,7 +88,8 @@ def simulate_setting(
         for condition in KNOWN_CONDITIONS:
             place = session_place(order, order.index(condition), r, repeats)
             traits = apply_effects(person, effects, place)
-            result = the_task.simulate(
+            result = simulate_trial(
+                the_task,
                 traits,
                 condition,
                 trial_seed(index, r, salt, "" if salt == "fit" else condition),

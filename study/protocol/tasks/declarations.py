@@ -43,13 +43,8 @@ class SampleColumn:
     drawn under `name` (the task's chunks' schema is its columns, `Task.sample_schema`)."""
 
     name: str
-    """The task's own name for it (TRIAL.csv, the stored samples, the export, figures)."""
-    stored_as: str | None
-    """Its role in the loop's layout, and the column of the one layout every task's
-    samples had before each chunk carried its task's schema (`db.models.trial.
-    SAMPLE_COLUMNS`; `t_s`, `insertion_m`, `rotation_rad` and `branch` are required):
-    how a database of that time is read under the task's names. None: a column that
-    layout had no place for."""
+    """The one name of the quantity, from the loop's rows to TRIAL.csv, the stored
+    samples, the export and the figures."""
     unit: str
     description: str
 
@@ -62,13 +57,14 @@ def pose_columns(
     insertion_name: str = "insertion_m",
     rotation_name: str = "rotation_rad",
 ) -> tuple[SampleColumn, ...]:
-    """The first six columns every task's rows start with (the loop's layout): time,
-    insertion depth, roll and the tip's position, each described in the task's words."""
+    """The first six columns every task's rows start with, in this order: time,
+    insertion depth, roll and the tip's position, each described in the task's words
+    (the live view and the figures find them by their place)."""
     return (
-        SampleColumn("t_s", "t_s", "s", "time since the trial started"),
-        SampleColumn(insertion_name, "insertion_m", "m", insertion),
-        SampleColumn(rotation_name, "rotation_rad", "rad", rotation),
-        *(SampleColumn(f"tip_{axis}_m", f"tip_{axis}_m", "m", tip) for axis in "xyz"),
+        SampleColumn("t_s", "s", "time since the trial started"),
+        SampleColumn(insertion_name, "m", insertion),
+        SampleColumn(rotation_name, "rad", rotation),
+        *(SampleColumn(f"tip_{axis}_m", "m", tip) for axis in "xyz"),
     )
 
 

@@ -1,4 +1,5 @@
-"""Figures of LCCA trials: forces over time, and tip paths drawn on the phantom."""
+"""Figures of LCCA trials: forces over time, and tip paths drawn on the phantom; `FIGURES`
+is the LCCA task as the figures draw it (`study.analysis.task_figures`)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ import matplotlib.pyplot as plt
 import pandas as pd
 from matplotlib.axes import Axes
 
+from study.analysis.task_figures import FigureView, register_figures
+from study.protocol.tasks import LiveTrace
 from teleop_core.phantom.lcca import LccaPhantom
 
 CONDITION_COLORS = {"VO": "C3", "HV": "C0"}
@@ -113,3 +116,29 @@ def plot_trial(frame: pd.DataFrame, phantom: LccaPhantom, title: str = "") -> pl
     draw_phantom(phantom, path_ax)
     path_ax.plot(frame["tip_x_m"] * 1000, frame["tip_z_m"] * 1000, color="C0", lw=0.9)
     return fig
+
+
+def trial_figure(frame: pd.DataFrame, title: str) -> plt.Figure:
+    """`plot_trial` on the task's phantom: the figure `study simulate --plot` draws."""
+    return plot_trial(frame, LccaPhantom(), title)
+
+
+FIGURES = register_figures(
+    "lcca",
+    FigureView(
+        traces=(
+            LiveTrace("proximal_force_n", "proximal", 2.0),
+            LiveTrace("distal_force_n", "distal", 1.0),
+        ),
+        trace_names={
+            "reference_force_n": "proximal, reference",
+            "proximal_force_n": "proximal, estimated",
+            "distal_force_n": "distal (tip on wall)",
+        },
+        sign_note=(
+            "Proximal force: positive resists insertion (pushing the wire in), negative "
+            "resists withdrawal. Distal force: tip-wall contact, ≥\u00a00."
+        ),
+        trial_figure=trial_figure,
+    ),
+)

@@ -7,9 +7,16 @@ this module says what they are to the rest of the tool (`study.protocol.tasks`).
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
-from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, pose_columns, register
+from study.protocol.tasks import (
+    Measure,
+    SampleColumn,
+    Task,
+    TaskDeclaration,
+    pose_columns,
+    register,
+)
 
 MAX_FORCE_N = 20.0
 """Largest peak force the guidewire drive can produce, N; beyond it an imported value is
@@ -17,75 +24,78 @@ a typo or a unit slip: the drive (K_t 0.043 N m/A, wheel radius 10 mm) would nee
 4.7 A, above a 2804 gimbal motor's rating (assumption, see teleop_core.follower.params)."""
 
 
+SAMPLE_COLUMNS = (
+    *pose_columns("guidewire inserted", "guidewire roll", "tip position, phantom frame"),
+    SampleColumn("branch", "", "vessel the tip is in (DAo, arch, ...)"),
+    SampleColumn(
+        "reference_force_n",
+        "N",
+        "true proximal insertion force (simulation) or reference sensor",
+    ),
+    SampleColumn(
+        "proximal_force_n",
+        "N",
+        "proximal force estimated from the motor current (what is rendered)",
+    ),
+    SampleColumn("distal_force_n", "N", "tip force on the vessel wall"),
+    SampleColumn("dial_angle_rad", "rad", "haptic dial angle"),
+    SampleColumn("dial_torque_n_m", "N m", "torque on the hand"),
+)
+"""The loop's rows, under its names (`teleop_core.loop.layout.SAMPLE_COLUMNS`), in order."""
+MEASURES = (
+    Measure(
+        "peak_proximal_force_n",
+        "N",
+        "peak proximal force",
+        "largest proximal insertion force (the drive's estimate)",
+        max_value=MAX_FORCE_N,
+    ),
+    Measure(
+        "peak_distal_force_n",
+        "N",
+        "peak distal force",
+        "largest distal force on the phantom",
+        max_value=MAX_FORCE_N,
+    ),
+    Measure(
+        "wall_contacts",
+        "",
+        "wall contacts",
+        "times the distal force rose through 0.2 N",
+        analysed=False,
+        integer=True,
+    ),
+)
+DECLARATION = TaskDeclaration(
+    name="lcca",
+    title="LCCA guidewire navigation",
+    # `teleop_core.phantom.anatomy.REGION_ABBREVIATIONS` (a test keeps them equal)
+    regions=("DAo", "arch", "AAo", "LSA", "LCCA", "BCT"),
+    sample_columns=SAMPLE_COLUMNS,
+    measures=MEASURES,
+    region_column="branch",
+    has_dial=True,
+    # the paper's G_h (`teleop_core.master.params.HapticParams`; a test keeps them equal)
+    default_haptic_gain_n_m_per_n=0.02,
+    has_link=True,
+    # `study.tasks.lcca.features.FEATURES` (a test keeps them equal)
+    fit_features=(
+        "advance_speed_m_s",
+        "approach_m",
+        "approaches",
+        "target_speed_ratio",
+        "aim_error_rad",
+        "turn_peak_s",
+        "turn_swing_s",
+        "stall_s",
+        "stall_backoffs",
+        "peak_felt_rise_n_m",
+    ),
+)
+
+
 class LccaTask(Task):
-    name = "lcca"
-    title = "LCCA guidewire navigation"
-    has_dial = True
-    default_haptic_gain_n_m_per_n = 0.02
-    """The paper's G_h (`teleop_core.master.params.HapticParams`; a test keeps them equal)."""
-    has_link = True
-    regions = ("DAo", "arch", "AAo", "LSA", "LCCA", "BCT")
-    """`teleop_core.phantom.anatomy.REGION_ABBREVIATIONS` (a test keeps them equal)."""
-    sample_columns = (
-        *pose_columns("guidewire inserted", "guidewire roll", "tip position, phantom frame"),
-        SampleColumn("branch", "branch", "", "vessel the tip is in (DAo, arch, ...)"),
-        SampleColumn(
-            "reference_force_n",
-            "proximal_force_n",
-            "N",
-            "true proximal insertion force (simulation) or reference sensor",
-        ),
-        SampleColumn(
-            "proximal_force_n",
-            "proximal_force_est_n",
-            "N",
-            "proximal force estimated from the motor current (what is rendered)",
-        ),
-        SampleColumn("distal_force_n", "distal_force_n", "N", "tip force on the vessel wall"),
-        SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "haptic dial angle"),
-        SampleColumn("dial_torque_n_m", "dial_torque_n_m", "N m", "torque on the hand"),
-    )
-    measures = (
-        Measure(
-            "peak_proximal_force_n",
-            "N",
-            "peak proximal force",
-            "largest proximal insertion force (the drive's estimate)",
-            max_value=MAX_FORCE_N,
-        ),
-        Measure(
-            "peak_distal_force_n",
-            "N",
-            "peak distal force",
-            "largest distal force on the phantom",
-            max_value=MAX_FORCE_N,
-        ),
-        Measure(
-            "wall_contacts",
-            "",
-            "wall contacts",
-            "times the distal force rose through 0.2 N",
-            analysed=False,
-            integer=True,
-        ),
-    )
-    live_traces = (
-        LiveTrace("proximal_force_n", "proximal", 2.0),
-        LiveTrace("distal_force_n", "distal", 1.0),
-    )
-    live_peaks = live_traces
-    live_scene = "study.tasks.lcca.scene:PhantomView"
-    live_scene_title = "LCCA phantom (frontal)"
-    key_hints = "↑↓ dial ←→ rotate space let go e end"
-    trace_names: ClassVar[dict[str, str]] = {
-        "reference_force_n": "proximal, reference",
-        "proximal_force_n": "proximal, estimated",
-        "distal_force_n": "distal (tip on wall)",
-    }
-    sign_note = (
-        "Proximal force: positive resists insertion (pushing the wire in), negative "
-        "resists withdrawal. Distal force: tip-wall contact, ≥\u00a00."
-    )
+    declaration = DECLARATION
 
     def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
         """`gain_n_m_per_n` (finite, >= 0 N m/N), else the paper's G_h."""
@@ -101,12 +111,6 @@ class LccaTask(Task):
 
         return LccaPhantom()
 
-    def trial_figure(self, frame, title):
-        from study.tasks.lcca.figures import plot_trial
-        from teleop_core.phantom.lcca import LccaPhantom
-
-        return plot_trial(frame, LccaPhantom(), title)
-
     def make_loop(
         self,
         condition,
@@ -120,24 +124,6 @@ class LccaTask(Task):
         from study.tasks.lcca.trial import lcca_loop
 
         return lcca_loop(condition, seed, estimator, haptic_gain_n_m_per_n, context, link)
-
-    def simulate(
-        self,
-        traits,
-        condition,
-        seed,
-        max_s,
-        *,
-        haptic_gain_n_m_per_n=None,
-        estimator=None,
-        link=None,
-        context=None,
-    ):
-        from study.tasks.lcca.trial import run_lcca_trial
-
-        return run_lcca_trial(
-            traits, condition, seed, estimator, haptic_gain_n_m_per_n, max_s, context, link
-        )
 
     def summary_line(self, summary):
         return (
@@ -160,20 +146,6 @@ class LccaTask(Task):
             "peak_proximal_reference_force_n": result["peak_proximal_reference_force_n"]
         }
 
-    fit_features = (
-        "advance_speed_m_s",
-        "approach_m",
-        "approaches",
-        "target_speed_ratio",
-        "aim_error_rad",
-        "turn_peak_s",
-        "turn_swing_s",
-        "stall_s",
-        "stall_backoffs",
-        "peak_felt_rise_n_m",
-    )
-    """`study.tasks.lcca.features.FEATURES` (a test keeps them equal)."""
-
     def trial_features(self, frame, context):
         from study.tasks.lcca.features import lcca_features
         from teleop_core.master.params import HapticParams
@@ -194,6 +166,7 @@ class LccaTask(Task):
             # the person's state in this trial (their traits varied from trial to trial)
             state = {k: v for k, v in driver.traits.to_dict().items() if k != "group"}
             return {
+                "attempts": driver.attempt,
                 "obstacles_felt": driver.obstacles_felt,
                 "obstacles_seen": driver.obstacles_seen,
                 "trial_state": state,
@@ -201,26 +174,9 @@ class LccaTask(Task):
         return {}
 
     def trial_frame(self, samples):
-        from study.tasks.lcca.trial import TRIAL_COLUMNS
+        from study.tasks.lcca.trial import trial_frame
 
-        frame = super().trial_frame(samples)
-        return frame[list(TRIAL_COLUMNS.values())]
-
-    def live_lines(self, values, condition=None):
-        # VO renders no force on the dial: the stored torque is the return spring's and
-        # the model's, none of it felt as feedback
-        torque = (
-            "torque on the hand: none (VO, no haptic feedback)"
-            if condition == "VO"
-            else f"torque on the hand {values['dial_torque_n_m'] * 1000:+5.1f} mN m"
-        )
-        return [
-            f"tip in {self.regions[int(values['branch'])]}, inserted "
-            f"{values['insertion_m'] * 1000:5.0f} mm",
-            f"rotation {values['rotation_rad']:+5.2f} rad",
-            f"dial {values['dial_angle_rad']:+5.2f} rad",
-            torque,
-        ]
+        return trial_frame(samples)
 
 
 TASK = register(LccaTask())

@@ -16,36 +16,34 @@ import pandas as pd
 
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS
-from study.protocol.tasks import TrialResult
-from study.protocol.traits import ParticipantTraits
-from study.tasks.lcca.simulated_participant import SimulatedParticipant
 from teleop_core.estimation.estimator import ForceEstimator
-from teleop_core.loop.config import LoopResult
 from teleop_core.loop.core import LoopConfig, TeleopLoop
 from teleop_core.loop.layout import SAMPLE_COLUMNS
 from teleop_core.loop.link import LinkParams
 from teleop_core.master.params import HapticParams
+from teleop_core.phantom.anatomy import REGIONS
 from teleop_core.phantom.lcca import LccaPhantom
 
 CONDITIONS = KNOWN_CONDITIONS
 CONTACT_THRESHOLD_N = 0.2
 """Distal force above which the tip is taken to press a wall (above the ~0.1 N the
 angled tip exerts passing the LCCA's curve); assumption."""
-TRIAL_COLUMNS = {
-    "t_s": "t_s",
-    "insertion_m": "insertion_m",
-    "rotation_rad": "rotation_rad",
-    "tip_x_m": "tip_x_m",
-    "tip_y_m": "tip_y_m",
-    "tip_z_m": "tip_z_m",
-    "branch": "branch",
-    "proximal_force_est_n": "proximal_force_n",
-    "proximal_force_n": "reference_force_n",
-    "distal_force_n": "distal_force_n",
-    "dial_angle_rad": "dial_angle_rad",
-    "dial_torque_n_m": "dial_torque_n_m",
-}
-"""Loop sample column -> TRIAL.csv column: the one `proximal` column is the estimate."""
+TRIAL_COLUMNS = (
+    "t_s",
+    "insertion_m",
+    "rotation_rad",
+    "tip_x_m",
+    "tip_y_m",
+    "tip_z_m",
+    "branch",
+    "proximal_force_n",
+    "reference_force_n",
+    "distal_force_n",
+    "dial_angle_rad",
+    "dial_torque_n_m",
+)
+"""TRIAL.csv's columns, the loop's under their own names (the estimate the dial renders,
+`proximal_force_n`, before the true force it estimates, `reference_force_n`)."""
 
 
 def condition_haptics(condition: str, haptic_gain: float | None = None) -> HapticParams:
@@ -105,54 +103,16 @@ def measures(frame: pd.DataFrame, success: bool) -> dict[str, Any]:
     }
 
 
-def run_lcca_trial(
-    traits: ParticipantTraits,
-    condition: str,
-    seed: int,
-    estimator: ForceEstimator | None,
-    haptic_gain: float | None = None,
-    max_s: float = 180.0,
-    phantom: LccaPhantom | None = None,
-    link: LinkParams | None = None,
-) -> TrialResult:
-    """Run one headless trial to success or `max_s`."""
-    phantom = phantom or LccaPhantom()
-    loop = lcca_loop(condition, seed, estimator, haptic_gain, phantom, link)
-    participant = SimulatedParticipant(traits, phantom, give_up_s=max_s)
-    result = loop.run(max_s, participant)
-    frame = result_frame(result)
-    summary = {
-        "task": "lcca",
-        "group": traits.group,
-        "condition": condition,
-        "haptic_gain_n_m_per_n": loop.config.haptics.haptic_gain_n_m_per_n,
-        "seed": seed,
-        **measures(frame, result.success),
-        "attempts": participant.attempt,
-        "obstacles_felt": participant.obstacles_felt,
-        "obstacles_seen": participant.obstacles_seen,
-        "estimator": "physics + GRU + EKF" if estimator is not None else "ideal sensor",
-        "participant": traits.to_dict(),
-    }
-    return TrialResult(frame, summary)
-
-
-def trial_frame(raw: pd.DataFrame) -> pd.DataFrame:
-    """TRIAL.csv's columns from the loop's sample frame."""
-    return raw[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
-
-
-def result_frame(result: LoopResult) -> pd.DataFrame:
-    """`trial_frame(result.to_frame())` straight from the loop's sample array: only
-    TRIAL.csv's columns are made, not a frame of every loop column first (a fit makes
+def trial_frame(samples: np.ndarray) -> pd.DataFrame:
+    """TRIAL.csv straight from the loop's sample array (TRIAL_COLUMNS' order, the vessels
+    named in full): no frame of every loop column is made first (a participant fit makes
     one per simulated trial)."""
-    names = np.asarray(result.branches, dtype=object)
-    samples = result.samples
+    names = np.asarray(REGIONS, dtype=object)
     return pd.DataFrame(
         {
-            new: names[samples[:, SAMPLE_COLUMNS.index(old)].astype(int)]
-            if old == "branch"
-            else samples[:, SAMPLE_COLUMNS.index(old)]
-            for old, new in TRIAL_COLUMNS.items()
+            name: names[samples[:, SAMPLE_COLUMNS.index(name)].astype(int)]
+            if name == "branch"
+            else samples[:, SAMPLE_COLUMNS.index(name)]
+            for name in TRIAL_COLUMNS
         }
     )

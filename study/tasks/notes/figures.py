@@ -1,5 +1,6 @@
 """The figure of one NOTES trial (`study simulate --plot`): depth, demanded vs rendered
-force and torque over time, with the device's continuous force limit.
+force and torque over time, with the device's continuous force limit. `FIGURES` is the
+NOTES task as the figures draw it (`study.analysis.task_figures`).
 
 House style of `study.analysis.figures` (IEEE widths, Okabe-Ito colours).
 """
@@ -10,6 +11,8 @@ import matplotlib.pyplot as plt
 import pandas as pd
 
 from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN
+from study.analysis.task_figures import FigureView, register_figures
+from study.protocol.tasks import LiveTrace
 
 MEASURED = OKABE_ITO["grey"]
 MODEL = OKABE_ITO["HV"]
@@ -35,3 +38,24 @@ def notes_trial_plot(frame: pd.DataFrame, title: str = "") -> plt.Figure:
         a2.set_xlabel("time (s)")
         fig.tight_layout()
     return fig
+
+
+FIGURES = register_figures(
+    "notes",
+    FigureView(
+        traces=(
+            LiveTrace("force_demanded_n", "demanded", 10.0, magnitude=True),
+            LiveTrace("force_rendered_n", "rendered", 10.0, magnitude=True),
+        ),
+        trace_names={
+            "force_demanded_n": "demanded (tissue)",
+            "force_rendered_n": "rendered (device)",
+            "tip_force_n": "tip (fornix)",
+        },
+        sign_note=(
+            "Force on the scope: positive resists insertion (pushing in), negative "
+            "resists withdrawal. Tip force: the fornix on the tip, ≥\u00a00."
+        ),
+        trial_figure=notes_trial_plot,
+    ),
+)

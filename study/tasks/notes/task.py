@@ -9,157 +9,134 @@ continuous limits, VO nothing.
 
 from __future__ import annotations
 
-from typing import ClassVar
-
-from study.protocol.tasks import LiveTrace, Measure, SampleColumn, Task, pose_columns, register
+from study.protocol.tasks import (
+    Measure,
+    SampleColumn,
+    Task,
+    TaskDeclaration,
+    pose_columns,
+    register,
+)
 
 MAX_FORCE_N = 25.0
 """Largest force the NOTES hand can push (`teleop_core.notes.task.HAND_MAX_FORCE_N`);
 beyond it an imported value is a typo or a unit slip."""
-FULL_SCALE_N = 10.0
-"""Full scale of the live force gauges: the surgeons' mean max push, 9.9 N, near which
-the fornix tears (`teleop_core.notes.task.PUSH_BENCHMARK_N`)."""
+SAMPLE_COLUMNS = (
+    *pose_columns("scope depth from the introitus", "scope roll", "tip position"),
+    SampleColumn("region", "", "where the tip is (canal, fornix, ...)"),
+    SampleColumn(
+        "force_demanded_n",
+        "N",
+        "tissue resistance on the scope, positive resisting insertion",
+    ),
+    SampleColumn(
+        "force_rendered_n",
+        "N",
+        "force the device renders (saturates at its continuous limit)",
+    ),
+    SampleColumn(
+        "tip_force_n",
+        "N",
+        "the tissue's push on the tip (the fornix or the fold)",
+    ),
+    SampleColumn("dial_angle_rad", "rad", "the hand's aim (rate input)"),
+    SampleColumn("torque_rendered_n_m", "N m", "torque rendered"),
+    SampleColumn(
+        "torque_demanded_n_m",
+        "N m",
+        "tissue resistance to roll, positive resisting clockwise roll",
+    ),
+)
+"""The NOTES loop's rows, under its names (`teleop_core.notes.task.SAMPLE_COLUMNS`), in order."""
+MEASURES = (
+    Measure(
+        "peak_force_demanded_n",
+        "N",
+        "peak demanded force",
+        "largest |force| the tissue demanded of the scope",
+        max_value=MAX_FORCE_N,
+    ),
+    Measure(
+        "peak_tip_force_n",
+        "N",
+        "peak tip force",
+        "largest force of the fornix or the fold on the tip",
+        max_value=MAX_FORCE_N,
+    ),
+    Measure(
+        "peak_force_rendered_n",
+        "N",
+        "peak rendered force",
+        "largest |force| the device rendered",
+        analysed=False,
+        max_value=MAX_FORCE_N,
+    ),
+    Measure(
+        "peak_torque_demanded_n_m",
+        "N m",
+        "peak demanded torque",
+        "largest |torque| the tissue demanded",
+        analysed=False,
+    ),
+    Measure(
+        "peak_torque_rendered_n_m",
+        "N m",
+        "peak rendered torque",
+        "largest |torque| the device rendered",
+        analysed=False,
+    ),
+    Measure(
+        "peak_push_n",
+        "N",
+        "peak push",
+        "largest demanded push (force resisting insertion), as the surgeons' max push of [notes]",
+        analysed=False,
+        max_value=MAX_FORCE_N,
+    ),
+    Measure(
+        "peak_pull_n",
+        "N",
+        "peak pull",
+        "largest demanded pull (force resisting withdrawal), a magnitude",
+        analysed=False,
+        max_value=MAX_FORCE_N,
+    ),
+    Measure(
+        "peak_torque_cw_n_m",
+        "N m",
+        "peak CW torque",
+        "largest demanded torque resisting a clockwise roll",
+        analysed=False,
+    ),
+    Measure(
+        "peak_torque_ccw_n_m",
+        "N m",
+        "peak CCW torque",
+        "largest demanded torque resisting a counter-clockwise roll, a magnitude",
+        analysed=False,
+    ),
+    Measure(
+        "push_over_capacity_fraction",
+        "",
+        "push over capacity",
+        "share of samples with the demanded push above the device's continuous force (5.62 N)",
+        analysed=False,
+        max_value=1.0,
+    ),
+)
+DECLARATION = TaskDeclaration(
+    name="notes",
+    title="NOTES endoscopy",
+    # `teleop_core.notes.task.REGIONS` (a test keeps them equal)
+    regions=("canal", "fornix", "cavity", "target", "fold"),
+    sample_columns=SAMPLE_COLUMNS,
+    measures=MEASURES,
+    region_column="region",
+)
 
 
 class NotesTask(Task):
-    name = "notes"
-    title = "NOTES endoscopy"
-    has_dial = False
-    regions = ("canal", "fornix", "cavity", "target", "fold")
-    """`teleop_core.notes.task.REGIONS` (a test keeps them equal)."""
-    sample_columns = (
-        *pose_columns("scope depth from the introitus", "scope roll", "tip position"),
-        SampleColumn("region", "branch", "", "where the tip is (canal, fornix, ...)"),
-        SampleColumn(
-            "force_demanded_n",
-            "proximal_force_n",
-            "N",
-            "tissue resistance on the scope, positive resisting insertion",
-        ),
-        SampleColumn(
-            "force_rendered_n",
-            "proximal_force_est_n",
-            "N",
-            "force the device renders (saturates at its continuous limit)",
-        ),
-        SampleColumn(
-            "tip_force_n",
-            "distal_force_n",
-            "N",
-            "the tissue's push on the tip (the fornix or the fold)",
-        ),
-        SampleColumn("dial_angle_rad", "dial_angle_rad", "rad", "the hand's aim (rate input)"),
-        SampleColumn("torque_rendered_n_m", "dial_torque_n_m", "N m", "torque rendered"),
-        SampleColumn(
-            "torque_demanded_n_m",
-            None,
-            "N m",
-            "tissue resistance to roll, positive resisting clockwise roll",
-        ),
-    )
-    measures = (
-        Measure(
-            "peak_force_demanded_n",
-            "N",
-            "peak demanded force",
-            "largest |force| the tissue demanded of the scope",
-            max_value=MAX_FORCE_N,
-        ),
-        Measure(
-            "peak_tip_force_n",
-            "N",
-            "peak tip force",
-            "largest force of the fornix or the fold on the tip",
-            max_value=MAX_FORCE_N,
-        ),
-        Measure(
-            "peak_force_rendered_n",
-            "N",
-            "peak rendered force",
-            "largest |force| the device rendered",
-            analysed=False,
-            max_value=MAX_FORCE_N,
-        ),
-        Measure(
-            "peak_torque_demanded_n_m",
-            "N m",
-            "peak demanded torque",
-            "largest |torque| the tissue demanded",
-            analysed=False,
-        ),
-        Measure(
-            "peak_torque_rendered_n_m",
-            "N m",
-            "peak rendered torque",
-            "largest |torque| the device rendered",
-            analysed=False,
-        ),
-        Measure(
-            "peak_push_n",
-            "N",
-            "peak push",
-            "largest demanded push (force resisting "
-            "insertion), as the surgeons' max push of [notes]",
-            analysed=False,
-            max_value=MAX_FORCE_N,
-        ),
-        Measure(
-            "peak_pull_n",
-            "N",
-            "peak pull",
-            "largest demanded pull (force resisting withdrawal), a magnitude",
-            analysed=False,
-            max_value=MAX_FORCE_N,
-        ),
-        Measure(
-            "peak_torque_cw_n_m",
-            "N m",
-            "peak CW torque",
-            "largest demanded torque resisting a clockwise roll",
-            analysed=False,
-        ),
-        Measure(
-            "peak_torque_ccw_n_m",
-            "N m",
-            "peak CCW torque",
-            "largest demanded torque resisting a counter-clockwise roll, a magnitude",
-            analysed=False,
-        ),
-        Measure(
-            "push_over_capacity_fraction",
-            "",
-            "push over capacity",
-            "share of samples with the demanded push above the device's continuous force (5.62 N)",
-            analysed=False,
-            max_value=1.0,
-        ),
-    )
-    live_traces = (
-        LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
-        LiveTrace("force_rendered_n", "rendered", FULL_SCALE_N, magnitude=True),
-    )
-    live_peaks = (
-        LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
-        LiveTrace("tip_force_n", "on the fornix", FULL_SCALE_N, magnitude=True),
-    )
-    live_scene = "study.tasks.notes.scene:NotesView"
-    live_scene_title = "NOTES: scope depth and roll"
-    keyboard_aim_label = "insertion-speed aim"
-    key_hints = "↑↓ push/pull ←→ roll space let go e end"
-    trace_names: ClassVar[dict[str, str]] = {
-        "force_demanded_n": "demanded (tissue)",
-        "force_rendered_n": "rendered (device)",
-        "tip_force_n": "tip (fornix)",
-    }
-    sign_note = (
-        "Force on the scope: positive resists insertion (pushing in), negative "
-        "resists withdrawal. Tip force: the fornix on the tip, ≥\u00a00."
-    )
-
-    def trial_figure(self, frame, title):
-        from study.tasks.notes.figures import notes_trial_plot
-
-        return notes_trial_plot(frame, title)
+    declaration = DECLARATION
 
     def make_loop(
         self,
@@ -175,23 +152,6 @@ class NotesTask(Task):
 
         self.haptic_gain(haptic_gain_n_m_per_n)  # refuses a gain: the device has no dial
         return notes_loop(condition, seed)
-
-    def simulate(
-        self,
-        traits,
-        condition,
-        seed,
-        max_s,
-        *,
-        haptic_gain_n_m_per_n=None,
-        estimator=None,
-        link=None,
-        context=None,
-    ):
-        from study.tasks.notes.trial import run_notes_trial
-
-        self.haptic_gain(haptic_gain_n_m_per_n)
-        return run_notes_trial(traits, condition, seed, max_s)
 
     def summary_line(self, summary):
         return (
@@ -223,18 +183,6 @@ class NotesTask(Task):
         # the person's state in this trial (their traits varied from trial to trial)
         state = {k: v for k, v in driver.traits.to_dict().items() if k != "group"}
         return {"stalls_seen": driver.stalls_seen, "trial_state": state}
-
-    def live_lines(self, values, condition=None):
-        rendered = (
-            "torque rendered: none (VO, no haptic feedback)"
-            if condition == "VO"
-            else f"torque rendered {values['torque_rendered_n_m'] * 1000:+6.1f} mN m"
-        )
-        return [
-            f"tip on the fornix {values['tip_force_n']:5.2f} N",
-            f"torque demanded {values['torque_demanded_n_m'] * 1000:+6.1f} mN m",
-            rendered,
-        ]
 
 
 TASK = register(NotesTask())

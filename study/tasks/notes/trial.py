@@ -32,7 +32,6 @@ import pandas as pd
 
 from study.errors import StudyInputError
 from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
-from study.protocol.tasks import TrialResult
 from study.protocol.traits import ParticipantTraits, trial_state
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
@@ -63,14 +62,6 @@ ROLL_RATE_RAD_S = 1.0
 ROLL_PACE_M_S = 0.017
 """Fastest roll: 1 rad/s for a participant whose preferred speed is an expert's mean
 (`PROFILES`), in proportion for the others (one pace for both hands); assumption."""
-TRIAL_COLUMNS = {c: c for c in task.SAMPLE_COLUMNS} | {
-    "proximal_force_n": "force_demanded_n",
-    "proximal_force_est_n": "force_rendered_n",
-    "distal_force_n": "tip_force_n",
-    "dial_torque_n_m": "torque_rendered_n_m",
-    "branch": "region",
-}
-"""Sample column -> NOTES TRIAL.csv column."""
 
 
 class NotesParticipant(Driver):
@@ -235,13 +226,6 @@ def notes_loop(condition: str, seed: int) -> task.NotesLoop:
     return task.NotesLoop(haptics=condition == "HV", seed=seed)
 
 
-def trial_frame(samples: np.ndarray) -> pd.DataFrame:
-    """NOTES TRIAL.csv's columns from the loop's samples."""
-    frame = pd.DataFrame(samples, columns=list(task.SAMPLE_COLUMNS))
-    frame["branch"] = np.asarray(task.REGIONS, dtype=object)[frame["branch"].astype(int)]
-    return frame[list(TRIAL_COLUMNS)].rename(columns=TRIAL_COLUMNS)
-
-
 def measures(frame: pd.DataFrame, success: bool) -> dict[str, Any]:
     """The NOTES summary of one trial from its TRIAL frame."""
     n = len(frame)
@@ -274,27 +258,3 @@ def measures(frame: pd.DataFrame, success: bool) -> dict[str, Any]:
             "torque_n_m": RotationParams().max_continuous_torque_n_m,
         },
     }
-
-
-def run_notes_trial(
-    traits: ParticipantTraits, condition: str, seed: int, max_s: float = 180.0
-) -> TrialResult:
-    """Run one headless NOTES trial to success or `max_s`."""
-    loop = notes_loop(condition, seed)
-    participant = NotesParticipant(traits, give_up_s=max_s)
-    loop.start(participant)
-    chunks = []
-    while loop.t_s < max_s - 1e-9 and not loop.done:
-        chunks.append(loop.advance(min(1.0, max_s - loop.t_s)))
-    frame = trial_frame(np.concatenate(chunks))
-    summary = {
-        "task": "notes",
-        "group": traits.group,
-        "condition": condition,
-        "seed": seed,
-        **measures(frame, loop.success),
-        "stalls_seen": participant.stalls_seen,
-        "participant": traits.to_dict(),
-        "trial_state": {k: v for k, v in participant.traits.to_dict().items() if k != "group"},
-    }
-    return TrialResult(frame, summary)

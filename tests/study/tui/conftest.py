@@ -166,6 +166,7 @@ def store_trials(engine: Engine) -> None:
     from db.models.study import Participant
     from db.models.trial import Trial
     from db.samples import SampleWriter
+    from study.protocol.tasks import get_task
 
     for _ in range(2):
         add_participant(engine, "novice")
@@ -200,13 +201,13 @@ def store_trials(engine: Engine) -> None:
         session.commit()
         ids = session.scalars(select(Trial.id)).all()
     for trial_id in ids:
-        with SampleWriter(engine, trial_id) as out:
+        with SampleWriter(engine, trial_id, schema=get_task("lcca").sample_schema()) as out:
             force = [0.1, 0.2]
             out.extend(
                 {
                     "t_s": [0.0, 0.01],
+                    "reference_force_n": force,
                     "proximal_force_n": force,
-                    "proximal_force_est_n": force,
                     "distal_force_n": [0.0, 0.1],
                 }
             )

@@ -205,10 +205,10 @@ def test_the_example_task_runs_through_session_export_import_analysis_and_figure
 
 async def test_the_run_screen_shows_the_example_task(probe: Any, tmp_path: Path) -> None:
     from study.protocol.default_estimator import load_estimator
-    from study.tasks.lcca.scene import PhantomView
-    from study.tasks.notes.scene import NotesView
     from study.tui import StudyServices, TuiSettings, make_app
     from study.tui.confirm import Confirm
+    from study.tui.scene_lcca import PhantomView
+    from study.tui.scene_notes import NotesView
     from study.tui.scenes import TrackView
     from tests.study.tui.conftest import run_screen, wait_for
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from study.protocol.tasks import get_task
-from study.tasks.lcca.scene import PhantomFrame
-from study.tasks.notes.scene import notes_scene
 from study.tui.live_view import BrailleCanvas, gauge, sparkline
+from study.tui.scene_lcca import PhantomFrame
+from study.tui.scene_notes import notes_scene
 from study.tui.services import Roster
 from study.tui.trial_runner import LiveFrame, LiveState
 from teleop_core.notes.task import REGIONS
@@ -143,9 +143,9 @@ def test_live_state_reads_notes_samples_the_notes_way() -> None:
         ((3.0, 2.5, 1.0, 0.02), (-6.0, -5.6, 0.0, -0.05))
     ):
         samples[k, col["t_s"]] = 0.01 * (k + 1)
-        samples[k, col["proximal_force_n"]] = demanded
-        samples[k, col["proximal_force_est_n"]] = rendered
-        samples[k, col["distal_force_n"]] = tip
+        samples[k, col["force_demanded_n"]] = demanded
+        samples[k, col["force_rendered_n"]] = rendered
+        samples[k, col["tip_force_n"]] = tip
         samples[k, col["torque_demanded_n_m"]] = torque
         samples[k, col["insertion_m"]] = 0.05 * (k + 1)
     live = LiveState()

@@ -21,11 +21,11 @@ from study.protocol.design import parse_design
 from study.protocol.roster import add_participant, create_study
 from study.protocol.tasks import get_task
 from study.protocol.tlx import store_tlx
-from study.tasks.lcca.scene import PhantomView
-from study.tasks.notes.scene import NotesView
 from study.tui import StudyServices, TuiSettings, make_app
 from study.tui.confirm import Confirm
 from study.tui.run_pane import RunPane
+from study.tui.scene_lcca import PhantomView
+from study.tui.scene_notes import NotesView
 from study.tui.stop_dialog import StopScreen
 from study.tui.tlx_pane import TlxPane
 from study.tui.trial_runner import STOPPED_REASON

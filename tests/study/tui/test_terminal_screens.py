@@ -19,6 +19,7 @@ from study.tui.analysis_pane import AnalysisPane
 from study.tui.calibration_pane import CalibrationPane
 from study.tui.participants import ParticipantsPane
 from study.tui.run_pane import RunPane
+from study.tui.task_views import live_view
 from study.tui.tlx_pane import TlxPane
 from tests.study.tui.lab_day import Terminal
 
@@ -163,7 +164,7 @@ def test_the_task_keys_are_whole_during_a_keyboard_trial(
         term.wait(r"consent confirmed")
         term.keys("y")
         term.wait(r"running: P001", 240)
-        hints = get_task(task).key_hints
+        hints = live_view(get_task(task)).key_hints
         line = term.wait(rf"^ *{_literal(hints)} *$")
         assert line.group(0).strip() == hints
         term.keys("x")

@@ -141,7 +141,7 @@ def test_keyboard_driver_moves_the_scope(haptics: bool) -> None:
 
         reference = solve_ivp(speed, (0.0, 2.0), [0.0], rtol=1e-8).y[0, -1]
         assert depth[-1] == pytest.approx(reference, rel=0.05)
-    rendered = samples[:, task.SAMPLE_COLUMNS.index("proximal_force_est_n")]
+    rendered = samples[:, task.SAMPLE_COLUMNS.index("force_rendered_n")]
     # canal friction is rendered only in HV
     assert bool(abs(rendered[-1]) > 0.1) is haptics
     keys.press("stop")

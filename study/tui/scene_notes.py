@@ -1,22 +1,29 @@
 """The NOTES task's live scene, drawn beside the run screen's readout: the scope's depth
 along the canal (introitus, posterior fornix, peritoneal cavity, target) and its roll
-against the target roll (`notes_scene`), a widget redrawn whole at each frame.
+against the target roll (`notes_scene`), a widget redrawn whole at each frame. `VIEW` is
+the NOTES task's view on the run screen (`study.tui.task_views`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 from rich.text import Text
 
+from study.protocol.tasks import LiveTrace, Task
 from study.tui.live_view import TARGET_STYLE, TIP_STYLE
 from study.tui.scenes import SceneView, axis_column
+from study.tui.task_views import LiveView, register_view
 from study.tui.trial_runner import LiveFrame
 
 NOTES_DEPTH_PAST_TARGET_M = 0.02
 """How far past the NOTES target the depth axis runs."""
 NOTES_ROLL_SPAN_RAD = math.pi / 2
 """The roll axis runs from -90 to +90 degrees."""
+FULL_SCALE_N = 10.0
+"""Full scale of the live force gauges: the surgeons' mean max push, 9.9 N, near which
+the fornix tears (`teleop_core.notes.task.PUSH_BENCHMARK_N`)."""
 
 
 def notes_region(code: int) -> str:
@@ -100,3 +107,37 @@ class NotesView(SceneView):
 
     def scene(self, frame: LiveFrame | None, cols: int) -> Text:
         return notes_scene(frame, cols)
+
+
+def notes_lines(task: Task, values: Mapping[str, float], condition: str | None) -> list[str]:
+    """The readout: the fornix on the tip, the torque demanded and rendered."""
+    rendered = (
+        "torque rendered: none (VO, no haptic feedback)"
+        if condition == "VO"
+        else f"torque rendered {values['torque_rendered_n_m'] * 1000:+6.1f} mN m"
+    )
+    return [
+        f"tip on the fornix {values['tip_force_n']:5.2f} N",
+        f"torque demanded {values['torque_demanded_n_m'] * 1000:+6.1f} mN m",
+        rendered,
+    ]
+
+
+VIEW = register_view(
+    "notes",
+    LiveView(
+        traces=(
+            LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
+            LiveTrace("force_rendered_n", "rendered", FULL_SCALE_N, magnitude=True),
+        ),
+        peaks=(
+            LiveTrace("force_demanded_n", "demanded", FULL_SCALE_N, magnitude=True),
+            LiveTrace("tip_force_n", "on the fornix", FULL_SCALE_N, magnitude=True),
+        ),
+        scene=NotesView,
+        scene_title="NOTES: scope depth and roll",
+        keyboard_aim_label="insertion-speed aim",
+        key_hints="↑↓ push/pull ←→ roll space let go e end",
+        lines=notes_lines,
+    ),
+)

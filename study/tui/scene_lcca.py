@@ -4,11 +4,13 @@ terminal cell, so the aortic arch and its three branches keep their shape at 80 
 Terminal cells are about twice as tall as wide, which makes Braille dots about square,
 so one scale serves both axes. The view frames the arch and the branches (the straight
 20 cm access run below them is cut, with the tip's distance to the arch written
-instead). The vessels are drawn once per size; each redraw adds only the tip. The run
-screen finds it by the task's `live_scene`.
+instead). The vessels are drawn once per size; each redraw adds only the tip. `VIEW` is
+the LCCA task's view on the run screen (`study.tui.task_views`).
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import numpy as np
 from rich.segment import Segment
@@ -18,7 +20,9 @@ from textual.geometry import Region
 from textual.strip import Strip
 from textual.widget import Widget
 
+from study.protocol.tasks import LiveTrace, Task
 from study.tui.live_view import TARGET_STYLE, TIP_STYLE, BrailleCanvas
+from study.tui.task_views import LiveView, register_view
 from study.tui.trial_runner import LiveFrame
 from teleop_core.phantom.anatomy import STEP_M, ArchAnatomy, build_paths
 
@@ -160,3 +164,36 @@ class PhantomView(Widget):
         if y in self._overlay:
             return self._overlay[y]
         return self._base[y] if y < len(self._base) else Strip.blank(self.size.width)
+
+
+def lcca_lines(task: Task, values: Mapping[str, float], condition: str | None) -> list[str]:
+    """The readout: the vessel, insertion, roll, the dial and the torque on the hand."""
+    # VO renders no force on the dial: the stored torque is the return spring's and
+    # the model's, none of it felt as feedback
+    torque = (
+        "torque on the hand: none (VO, no haptic feedback)"
+        if condition == "VO"
+        else f"torque on the hand {values['dial_torque_n_m'] * 1000:+5.1f} mN m"
+    )
+    return [
+        f"tip in {task.regions[int(values['branch'])]}, inserted "
+        f"{values['insertion_m'] * 1000:5.0f} mm",
+        f"rotation {values['rotation_rad']:+5.2f} rad",
+        f"dial {values['dial_angle_rad']:+5.2f} rad",
+        torque,
+    ]
+
+
+VIEW = register_view(
+    "lcca",
+    LiveView(
+        traces=(
+            LiveTrace("proximal_force_n", "proximal", 2.0),
+            LiveTrace("distal_force_n", "distal", 1.0),
+        ),
+        scene=PhantomView,
+        scene_title="LCCA phantom (frontal)",
+        key_hints="↑↓ dial ←→ rotate space let go e end",
+        lines=lcca_lines,
+    ),
+)
