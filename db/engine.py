@@ -27,9 +27,7 @@ from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
 
 from db.errors import DatabaseGoneError, DbInputError
-
-DEFAULT_URL = "sqlite:///study.db"
-"""`./study.db` in the working directory, used when neither `--db` nor `STUDY_DB` is set."""
+from db.plain import DEFAULT_URL
 
 SQLITE_BUSY_TIMEOUT_MS = 30_000
 

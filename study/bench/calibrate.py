@@ -72,9 +72,9 @@ def _run(effects: list[str], config: CalibrateBenchConfig, seed: int) -> dict[st
 
 def estimator_before_after(config: CalibrateBenchConfig) -> dict[str, Any]:
     """Calibrate a simulated drive recording and train the estimator with and without it."""
-    from teleop_core.estimation.estimator import train_estimator
     from teleop_core.estimation.extended import ExtendedPhysics
     from teleop_core.estimation.gru import GruConfig
+    from teleop_core.estimation.training import train_estimator
     from teleop_core.follower import scenarios
     from teleop_core.follower.params import FollowerSensorParams
     from teleop_core.follower.plant import FollowerDrive

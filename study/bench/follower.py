@@ -47,11 +47,11 @@ from teleop_core.estimation.estimator import ForceEstimator, inputs_of
 from teleop_core.estimation.gru import GruConfig
 from teleop_core.estimation.gru_torch import train_gru
 from teleop_core.estimation.metrics import error_summary, tracking_score
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.training import train_estimator
 from teleop_core.follower import scenarios
 from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.plant import FollowerDrive
+from teleop_core.follower.recording import FollowerRecording
 from teleop_core.follower.sensors import acquire, decimation, reference_velocity
 from teleop_core.progress import Progress, no_progress
 

@@ -34,8 +34,8 @@ from teleop_core.calibration.synthetic import JND_N, follower_recording
 from teleop_core.estimation.estimator import ForceEstimator, inputs_of
 from teleop_core.estimation.gru import GruConfig, make_windows
 from teleop_core.estimation.metrics import rmse
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.training import train_estimator
+from teleop_core.follower.recording import FollowerRecording
 from teleop_core.progress import Progress, no_progress
 
 EFFECTS = ("stribeck", "hysteresis", "direction_asymmetry", "drift")

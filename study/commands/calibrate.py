@@ -226,7 +226,7 @@ def calibrate(
         validation_figure,
     )
     from teleop_core.calibration.verdict import quantities
-    from teleop_core.estimation.recording import write_csv_atomically
+    from teleop_core.follower.recording import write_csv_atomically
 
     out_dir, json_path, pred_path = output_paths(recording, out_dir, json_path, pred_path)
     calibrator = run_calibration(

@@ -51,8 +51,8 @@ def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
     """
     from study.analysis.figures import save
     from study.analysis.notes_figures import bode, compensation_table, ramp_hysteresis
-    from teleop_core.estimation.recording import write_csv_atomically
     from teleop_core.files import write_atomically
+    from teleop_core.follower.recording import write_csv_atomically
     from teleop_core.notes.characterize import characterize_simulated
     from teleop_core.notes.params import DOFS, default_params
 

@@ -21,7 +21,7 @@ from study.errors import StudyInputError
 
 if TYPE_CHECKING:
     from teleop_core.estimation.estimator import EstimateResult, ForceEstimator
-    from teleop_core.estimation.recording import FollowerRecording
+    from teleop_core.follower.recording import FollowerRecording
 
 _err = Console(stderr=True)
 
@@ -160,11 +160,11 @@ def train_cmd(
       study estimator train bench.csv --out model/
     """
     from teleop_core.errors import TeleopInputError
-    from teleop_core.estimation.estimator import train_estimator
     from teleop_core.estimation.extended import ExtendedPhysics
     from teleop_core.estimation.gru import GruConfig
     from teleop_core.estimation.memory import MemorySpec
-    from teleop_core.estimation.recording import FollowerRecording
+    from teleop_core.estimation.training import train_estimator
+    from teleop_core.follower.recording import FollowerRecording
     from teleop_core.recording_checks import check_varies
 
     if out_dir.exists() and any(out_dir.iterdir()) and not force:
@@ -308,7 +308,7 @@ def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
     """
     from teleop_core.estimation.estimator import ForceEstimator
     from teleop_core.estimation.metrics import rmse
-    from teleop_core.estimation.recording import FollowerRecording, write_csv_atomically
+    from teleop_core.follower.recording import FollowerRecording, write_csv_atomically
 
     model = ForceEstimator.load(model_dir)
     data = FollowerRecording.from_csv(recording, min_rows=model.window)

@@ -23,6 +23,7 @@ from study.commands.base import (
     progress_bar,
 )
 from study.errors import StudyInputError
+from study.protocol.parallel import compile_loop_once, run_participants
 from study.protocol.roster import schedule
 
 MIN_PACE, MAX_PACE = 0.01, 1000.0
@@ -157,11 +158,7 @@ def run(
     try:
         with stop_on_signals() as stop, _progress() as progress:
             bar = progress.add_task(f"session {code}", total=None)
-            from teleop_core.loop import kernel
-
-            kernel.COMPILE_NOTICE = lambda m: progress.console.print(
-                f"study run: {m}", markup=False
-            )
+            compile_loop_once(lambda m: progress.console.print(f"study run: {m}", markup=False))
 
             def report(item, k, n) -> None:
                 started.append(item)
@@ -384,8 +381,6 @@ def _lsl_notice(db_url: str | None) -> None:
 def _run_all(
     db_url: str | None, jobs: int, pace: float | None, actor: str, participants: Path | None
 ) -> None:
-    from study.protocol.parallel import run_participants
-
     engine = open_database(db_url, create=False)
     try:
         codes = [p["code"] for p in schedule(engine)["participants"] if not p["withdrawn"]]
