@@ -20,13 +20,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 
 from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, save
 from teleop_core.calibration.verdict import SHARE_STRUCTURE
+
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
 
 COLOURS = {"before": OKABE_ITO["grey"], "after": OKABE_ITO["HV"]}
 AXIS_LABELS = {
@@ -35,7 +38,7 @@ AXIS_LABELS = {
     "angle": "wheel angle (rad)",
     "drive": "current",
 }
-CAL_STYLE = {
+CAL_STYLE: dict[RcKeyType, Any] = {
     **STYLE,
     "font.size": 8,
     "axes.titlesize": 8,

@@ -52,7 +52,7 @@ def _recording() -> Iterator[list[Text]]:
     drawn: list[Text] = []
     original = Text.draw
 
-    def record(self: Text, renderer) -> None:  # type: ignore[no-untyped-def]
+    def record(self: Text, renderer) -> None:
         original(self, renderer)
         if self.get_visible() and self.get_text().strip():
             drawn.append(self)

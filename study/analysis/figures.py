@@ -25,6 +25,7 @@ import textwrap
 import zlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -37,11 +38,14 @@ from matplotlib.lines import Line2D
 
 from study.analysis.figcheck import MARK_GID, stars
 
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
+
 WIDTHS_IN = {"single": 3.5, "double": 7.16}
 """IEEE column widths."""
 FONT_PT = 8
 OKABE_ITO = {"VO": "#D55E00", "HV": "#0072B2", "grey": "#999999"}
-STYLE = {
+STYLE: dict[RcKeyType, Any] = {
     "font.size": FONT_PT,
     "axes.titlesize": FONT_PT,
     "axes.labelsize": FONT_PT,
@@ -170,10 +174,13 @@ longer labels keep their two lines."""
 
 
 def _legend_handles() -> list[Line2D]:
-    point = {"ls": "none", "marker": "o", "ms": 3.5}
     return [
-        Line2D([], [], color=OKABE_ITO["VO"], label="VO, participant", **point),
-        Line2D([], [], color=OKABE_ITO["HV"], label="HV, participant", **point),
+        Line2D(
+            [], [], color=OKABE_ITO["VO"], label="VO, participant", ls="none", marker="o", ms=3.5
+        ),
+        Line2D(
+            [], [], color=OKABE_ITO["HV"], label="HV, participant", ls="none", marker="o", ms=3.5
+        ),
         Line2D([], [], color=OKABE_ITO["grey"], lw=0.6, label="same participant"),
         Line2D([], [], color="black", lw=1.4, label="group mean"),
     ]

@@ -173,7 +173,7 @@ class Contrast:
         return cls(estimate, se, float(df), float(t), p, estimate - half, estimate + half)
 
 
-def _polished_theta(  # type: ignore[no-untyped-def]
+def _polished_theta(
     model, start: float, width: float = 0.5, rtol: float = 4 * np.finfo(float).eps
 ) -> float:
     """The root of statsmodels' profiled REML score in theta, bracketed from `start`
@@ -197,7 +197,7 @@ def _polished_theta(  # type: ignore[no-untyped-def]
     return float(brentq(score, lo, hi, xtol=1e-300, rtol=rtol, maxiter=500))
 
 
-def _start(model) -> float:  # type: ignore[no-untyped-def]
+def _start(model) -> float:
     """statsmodels' REML estimate of theta (BFGS, Powell if BFGS fails: L-BFGS's first
     steps can reach a variance at which X' V^-1 X is singular)."""
     for method in ("bfgs", "powell"):
@@ -209,7 +209,7 @@ def _start(model) -> float:  # type: ignore[no-untyped-def]
     return 1.0
 
 
-def _theta(model, design: Design) -> float:  # type: ignore[no-untyped-def]
+def _theta(model, design: Design) -> float:
     """The REML theta: statsmodels' score's root (or the boundary where statsmodels'
     score falls from it), started from `_bracket`, or from statsmodels' own fit where
     `_bracket` has no start."""
@@ -234,14 +234,14 @@ def _theta(model, design: Design) -> float:  # type: ignore[no-untyped-def]
     return _polished_theta(model, start, width=1e-6, rtol=1e-13)
 
 
-def _boundary_fits_as_well(model, theta: float) -> bool:  # type: ignore[no-untyped-def]
+def _boundary_fits_as_well(model, theta: float) -> bool:
     """A root this close to 0 that fits no better than theta = 0 is the boundary's."""
     return 0 < theta < SINGULAR_TOL and model.loglike(np.array([0.0]), profile_fe=True) >= (
         model.loglike(np.array([theta]), profile_fe=True) - BOUNDARY_TOL
     )
 
 
-def _unfitted(model):  # type: ignore[no-untyped-def]
+def _unfitted(model):
     """`model` set up for its REML score as `MixedLM.fit` sets it (no penalties, every
     parameter free), without the fit."""
     model.reml, model.cov_pen, model.fe_pen, model._cov_sing, model._freepat = (

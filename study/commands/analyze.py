@@ -193,7 +193,7 @@ def _echo_probe_drivers(covariate: str, probe_trials: pd.DataFrame) -> None:
     )
 
 
-def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:  # type: ignore[type-arg]
+def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:
     """The trials, questionnaires, withdrawn participants and trials marked invalid
     (`study_rows`): from an
     SQLite file at the current schema through `sqlite3` alone (`db.plain`), otherwise
@@ -207,7 +207,7 @@ def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], d
         withdrawn_rows,
     )
 
-    def rows(conn: Any) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:  # type: ignore[type-arg]
+    def rows(conn: Any) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:
         return (
             trial_rows(conn),
             tlx_rows(conn),
@@ -233,7 +233,7 @@ def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], d
         engine.dispose()
 
 
-def _covariate(trials, values, trait: str, out_dir: Path) -> None:  # type: ignore[no-untyped-def]
+def _covariate(trials, values, trait: str, out_dir: Path) -> None:
     """The covariate's mixed model and ANCOVA-style table: written, and the table printed."""
     from study.analysis.covariate import covariate_model
     from study.protocol.tasks import get_task

@@ -310,7 +310,7 @@ def bench_startup(
             runs, db_url, rows, progress=status_progress(status), demo_runs=demo_runs
         )
 
-    def line(name: str, t) -> str:  # type: ignore[no-untyped-def]
+    def line(name: str, t) -> str:
         each = ", ".join(f"{s:.2f}" for s in t.seconds)
         n = len(t.seconds)
         return f"{name}: {t.median_s:.2f} s (median of {n}; {each}); target <= {t.target_s} s"

@@ -139,7 +139,7 @@ def _markers(engine: Engine, publish: bool) -> Iterator[SessionObserver | None]:
             observer.close()
 
 
-def _trials(frame):  # type: ignore[no-untyped-def]
+def _trials(frame):
     from study.probes.base import ProbeTrial
 
     return [

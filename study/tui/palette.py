@@ -169,7 +169,7 @@ class StudyCommands(Provider):
     """The app's own commands in the palette (see the module docstring)."""
 
     def _commands(self) -> list[Command]:
-        return study_commands(self.app)  # type: ignore[arg-type]
+        return study_commands(self.app)
 
     async def discover(self) -> Hits:
         for name, help_text, callback in self._commands():

@@ -252,7 +252,7 @@ class Delay(Effect):
 
     def grid(self, s: Signals) -> Float1D:
         dt = float(np.median(np.diff(s["t"])))
-        return dt * np.arange(1, max(2, round(MAX_LAG_S / dt)) + 1)
+        return np.arange(1.0, max(2, round(MAX_LAG_S / dt)) + 1.0) * dt
 
     def transform(self, s: Signals, value: float) -> Signals:
         t = s["t"]

@@ -71,11 +71,19 @@ class ExtendedPhysics:
         # a later part of the training's clock: one sample (a copy of the first) at the
         # origin, so that time since the start counts from there; its estimate is dropped
         first = recording.slice(0, 1)
+
+        def joined_column(k: str) -> Float1D:
+            return np.concatenate(
+                [[origin] if k == "t" else getattr(first, k), getattr(recording, k)]
+            )
+
         joined = FollowerRecording(
-            *(
-                np.concatenate([[origin] if k == "t" else getattr(first, k), getattr(recording, k)])
-                for k in ("t", "iq", "theta", "omega", "f_ref", "alpha")
-            ),
+            joined_column("t"),
+            joined_column("iq"),
+            joined_column("theta"),
+            joined_column("omega"),
+            joined_column("f_ref"),
+            joined_column("alpha"),
             name=recording.name,
         )
         return self.calibrated.predict(model.data(joined))[1:]

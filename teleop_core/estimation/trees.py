@@ -110,7 +110,7 @@ class TreeArrays:
 
 
 @njit(cache=True)
-def _predict_trees(  # type: ignore[no-untyped-def]  # pragma: no cover
+def _predict_trees(  # pragma: no cover
     x, feature, threshold, left, right, is_leaf, missing_left, value, roots, baseline
 ):
     out = np.full(x.shape[0], baseline)

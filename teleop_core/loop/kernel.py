@@ -21,6 +21,7 @@ import os
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from teleop_core.files import write_atomically
 from teleop_core.loop.aot import (
@@ -32,12 +33,12 @@ from teleop_core.loop.aot import (
 )
 from teleop_core.loop.tick import _make
 
-_KERNELS: dict[object, Callable[..., None]] = {}
+_KERNELS: dict[object, Callable[..., int]] = {}
 
 
 def kernel_for(
     env_fn: Callable[..., None], notice: Callable[[str], None] | None = None
-) -> Callable[..., None]:
+) -> Callable[..., int]:
     """The compiled tick with `env_fn` bound in (compiled on first use, then reused).
 
     An environment importable by name (a module-level numba function) gets the tick from
@@ -132,7 +133,7 @@ def _kernel_module(env_fn: Callable[..., None]) -> tuple[str, str, str] | None:
 
 def _cached_kernel(
     env_fn: Callable[..., None], notice: Callable[[str], None] | None = None
-) -> Callable[..., None] | None:
+) -> Callable[..., int] | None:
     """The kernel compiled ahead of time (`aot.py`), else through numba's on-disk cache;
     None where neither can be kept (an environment not importable by name, an
     unwritable cache folder); `notice` is told before a first compilation."""
@@ -153,18 +154,17 @@ def _cached_kernel(
     return build_ahead_of_time(folder, key, jit.py_func, jit) or jit
 
 
-def _jit_kernel(folder: Path, module: str, name: str, key: str) -> tuple[Callable[..., None], bool]:
-    """The kernel through numba's on-disk cache: its source written once into a module
-    of its own that imports the environment as a global (numba caches a module-level
-    function, not a closure); and whether the source was written just now."""
+def _jit_kernel(folder: Path, module: str, name: str, key: str) -> tuple[Any, bool]:
+    """The kernel through numba's on-disk cache (numba's dispatcher): its source written
+    once into a module of its own that imports the environment as a global (numba caches
+    a module-level function, not a closure); and whether the source was written just now."""
     path = folder / f"loop_kernel_{key}.py"
     first = not path.is_file()
     if first:
         folder.mkdir(parents=True, exist_ok=True)
         write_atomically(path, _kernel_source(module, name))
     generated = import_cached(f"_haptic_study_{path.stem}", path)
-    kernel: Callable[..., None] = generated.run_ticks
-    return kernel, first
+    return generated.run_ticks, first
 
 
 _DIGEST = ""
