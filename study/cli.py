@@ -168,9 +168,12 @@ def _one_line(message: str) -> str:
 
 def _command_path(args: list[str]) -> str:
     """`study SUB CMD` as far as `args` name known commands (for errors without a context)."""
-    path, group = ["study"], cli
+    path = ["study"]
+    group: click.Command = cli
     for token in args:
-        command = group.get_command(None, token) if isinstance(group, click.Group) else None
+        if not isinstance(group, click.Group):
+            break
+        command = group.get_command(click.Context(group), token)
         if command is None:
             break
         path.append(token)

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, save
+from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_of, save
 from teleop_core.calibration.verdict import SHARE_STRUCTURE
 
 if TYPE_CHECKING:
@@ -180,9 +180,9 @@ def residual_figures(
     with plt.rc_context(CAL_STYLE):
         for key in against:
             ax = residual_against(signals[key], before, after, labels[key], unit=unit)
-            paths += save(ax.figure, out_dir, f"residual_vs_{key}", ["png"])
+            paths += save(figure_of(ax), out_dir, f"residual_vs_{key}", ["png"])
         ax = autocorrelation(tests_before["autocorrelation"], tests_after["autocorrelation"])
-        paths += save(ax.figure, out_dir, "residual_acf", ["png"])
+        paths += save(figure_of(ax), out_dir, "residual_acf", ["png"])
     return paths
 
 
@@ -380,12 +380,12 @@ def overview_figures(
     paths: list[Path] = []
     with plt.rc_context(CAL_STYLE):
         axes = residual_blocks(t, before, after, held_out, unit)
-        paths += save(axes[0].figure, out_dir, "residual_blocks", ["png"])
+        paths += save(figure_of(axes[0]), out_dir, "residual_blocks", ["png"])
         where = report.get("unexplained")
         if report.get("verdict") == "structure_remains" and where and unexplained_x is not None:
             label = quantity_label(where["quantity"], model, unit, position_unit)
             ax = residual_against_unexplained(unexplained_x, after[held_out], where, label, unit)
-            paths += save(ax.figure, out_dir, "residual_vs_unexplained", ["png"])
+            paths += save(figure_of(ax), out_dir, "residual_vs_unexplained", ["png"])
     return paths
 
 

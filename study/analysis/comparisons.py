@@ -212,7 +212,7 @@ def holm_within_families(rows: list[Row]) -> None:
     for family in families.values():
         members = [r for r in family if _finite(r["p"])]
         named = ", ".join(str(r["group"]) for r in members)
-        adjusted = holm(np.array([r["p"] for r in members])) if members else []
+        adjusted = holm(np.array([r["p"] for r in members])) if members else np.zeros(0)
         for r, p in zip(members, adjusted, strict=True):
             r["p_holm"] = float(p)
             r["holm_family"] = named

@@ -220,7 +220,12 @@ def _fit(cell: _Cell, effects: list[str]) -> tuple[Fit, list[str]]:
     """The base model of `cell` plus `effects`, fitted once per set of terms."""
     terms = tuple(e for e in EFFECTS if e in effects)
     if terms not in cell.fits:
-        columns = [cell.column(e) for e in terms]
+        columns = []
+        for e in terms:
+            column = cell.column(e)
+            if column is None:  # pragma: no cover - the effects are the testable ones
+                raise ValueError(f"effect {e!r} is not testable in this cell")
+            columns.append(column)
         X = np.column_stack([cell.X, *columns]) if terms else cell.X
         cell.fits[terms] = (
             fit_random_intercept(X, cell.y, cell.participant),

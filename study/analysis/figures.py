@@ -25,7 +25,7 @@ import textwrap
 import zlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 import matplotlib
 
@@ -138,7 +138,7 @@ def jitter(n: int, key: str, half_width: float = JITTER) -> np.ndarray:
     return rng.uniform(-half_width, half_width, n)
 
 
-def tested(row: pd.Series | None) -> bool:
+def tested(row: pd.Series | None) -> TypeGuard[pd.Series]:
     """Whether a comparisons row holds a test with a p (not: no row, or not testable)."""
     if row is None or str(row.get("not_testable") or "") or row["test"] == "none":
         return False
@@ -359,6 +359,14 @@ def freeze_layout(fig: plt.Figure) -> None:
         return
     engine.execute(fig)
     fig.set_layout_engine("none")
+
+
+def figure_of(ax: plt.Axes) -> plt.Figure:
+    """The figure `ax` is drawn in (the figures here have no subfigures)."""
+    fig = ax.get_figure()
+    if not isinstance(fig, plt.Figure):  # pragma: no cover - a subfigure's or a detached axes
+        raise TypeError(f"axes {ax!r} is not drawn in a figure of its own")
+    return fig
 
 
 def save(fig: plt.Figure, out_dir: Path, name: str, formats: Sequence[str]) -> list[Path]:

@@ -15,6 +15,8 @@ writes it to `captions.md` beside the figure, as the paper figures' captions are
 
 from __future__ import annotations
 
+import math
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -99,7 +101,8 @@ def plot_power_curve(
         if has_interaction:
             ax = axes.ravel()[1]
             totals = [sum(r.sizes.values()) for _, r in curve]
-            rates = [r.interaction for _, r in curve]
+            # every size of a curve with an interaction has its rate
+            rates = [math.nan if r.interaction is None else r.interaction for _, r in curve]
             low, high = monte_carlo_band(rates, n_sim)
             ax.fill_between(totals, low, high, color="black", alpha=0.15, lw=0)
             if first.interaction_is_power:

@@ -337,16 +337,16 @@ def run_follower_bench(
         report["generalisation"] = generalisation.run_generalisation(
             config.generalisation, out_dir, progress
         )
-    recording = None  # the training recording, simulated once for the parts that use it
     if {"tables", "training"} & set(config.parts):
+        # the training recording, simulated once for the parts that use it
         progress("simulating the training recording")
         recording = training_recording(config.train_seconds, config.seed)
-    if "tables" in config.parts:
-        run_tables(config, recording, out_dir, report, progress)
-    if "training" in config.parts:
-        report["training_time"] = training_time.run_training_time(
-            recording, config.epochs, config.seed, progress
-        )
+        if "tables" in config.parts:
+            run_tables(config, recording, out_dir, report, progress)
+        if "training" in config.parts:
+            report["training_time"] = training_time.run_training_time(
+                recording, config.epochs, config.seed, progress
+            )
     (out_dir / "follower_bench.md").write_text(markdown(report))
     (out_dir / "follower_bench.json").write_text(json.dumps(report, indent=2) + "\n")
     return report

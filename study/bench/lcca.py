@@ -153,8 +153,11 @@ def run_lcca_bench(
         simulated_participant("expert", 0), "HV", 0, estimator, max_s=1.0, phantom=phantom
     )  # numba compiles here, outside the timing
     publisher = _publisher() if config.publish_lsl else None
-    rows, factors, paths = [], [], []
-    loop_walls, publish_walls = [], []
+    rows: list[dict[str, Any]] = []
+    factors: list[float] = []
+    paths: list[tuple[Any, str]] = []  # an outsider's trial: its frame and condition
+    loop_walls: list[float] = []
+    publish_walls: list[float] = []
     total = sum(config.group_sizes.values())
     k = 0
     for group, n in config.group_sizes.items():
@@ -184,7 +187,7 @@ def run_lcca_bench(
     # HV at zero gain against VO: the participants must not tell them apart
     progress("HV with haptic gain 0")
     gain_zero = _gain_zero(config, estimator, phantom)
-    report = {
+    report: dict[str, Any] = {
         "config": asdict(config),
         "groups": groups,
         "tests": tests,

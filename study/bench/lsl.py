@@ -90,7 +90,8 @@ def run_lsl_bench(
         try:
             if device.stdout is None or device.stdout.readline().strip() != "ready":
                 raise RuntimeError("the simulated instrument did not start")
-            origins, notices = Origins(), []
+            origins = Origins()
+            notices: list[str] = []
             recorder = Recorder(engine, (f"name='{name}'",), notices.append)
             progress(f"paced session: {config.trials} trials of {config.trial_s:g} s")
             start = time.monotonic()

@@ -302,9 +302,10 @@ def count_option(
 
 
 def positive_option(
-    flag: str, default: float, help: str | None = None, *, dest: str | None = None
+    flag: str, default: float | None, help: str | None = None, *, dest: str | None = None
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """An option taking a number above 0, its default shown."""
+    """An option taking a number above 0, its default shown (None: no default, and the
+    help says what applies without one)."""
     names = (flag, dest) if dest else (flag,)
     kind = click.FloatRange(min=0, min_open=True)
     return click.option(*names, type=kind, default=default, show_default=True, help=help)

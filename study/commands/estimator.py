@@ -180,15 +180,7 @@ def train_cmd(
     )
     validation = [(path, FollowerRecording.from_csv(path, min_rows=window)) for path in validate]
     extension = ExtendedPhysics.read(calibration) if calibration is not None else None
-    regularisation = {
-        k: v
-        for k, v in (
-            ("weight_decay", weight_decay),
-            ("dropout", dropout),
-            ("input_noise", input_noise),
-        )
-        if v is not None
-    }
+    defaults = GruConfig()
     config = GruConfig(
         window=window,
         hidden_size=hidden_size,
@@ -196,7 +188,9 @@ def train_cmd(
         max_epochs=epochs,
         patience=patience,
         memory=MemorySpec.parse(memory),
-        **regularisation,
+        weight_decay=defaults.weight_decay if weight_decay is None else weight_decay,
+        dropout=defaults.dropout if dropout is None else dropout,
+        input_noise=defaults.input_noise if input_noise is None else input_noise,
     )
     with progress_bar(
         TextColumn("training GRU"),

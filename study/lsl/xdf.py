@@ -193,11 +193,11 @@ def marked_trials(
     for i, stream in enumerate(streams):
         if _info(stream, "channel_format") != "string":
             continue
-        ours = [
+        parsed = [
             (float(t), parse(str(v[0]) if len(v) else ""))
             for t, v in zip(stream["time_stamps"], stream["time_series"], strict=True)
         ]
-        ours = [(t, m) for t, m in ours if m is not None]
+        ours = [(t, m) for t, m in parsed if m is not None]
         if ours:
             marker_streams.add(i)
             found += ours

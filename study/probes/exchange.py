@@ -106,7 +106,7 @@ def read_probe_file(path: Path) -> list[dict]:
         if not (r["probe_trial"].isdigit() and 1 <= int(r["probe_trial"]) <= 100000):
             p.add(i, "probe_trial", f"{r['probe_trial']!r}; expected a whole number from 1")
             continue
-        values = {}
+        values: dict[str, float | None] = {}
         for column in ("stimulus", "response"):
             cell = r[column]
             if cell == "":

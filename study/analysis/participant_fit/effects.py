@@ -160,7 +160,9 @@ def trial_arrays(trials: pd.DataFrame, emulator: MomentEmulator) -> TrialArrays:
 
 
 def factor_matrix(
-    effects: Sequence[ParticipantEffect], places: Sequence[TrialPlace], groups: Sequence[str]
+    effects: Sequence[ParticipantEffect],
+    places: Sequence[TrialPlace],
+    groups: Sequence[str] | np.ndarray,
 ) -> np.ndarray:
     """(trials, len(TRAITS)) the effects' multiplier on each trait at each trial, by
     `ParticipantEffect.factors` once per distinct (place, group)."""

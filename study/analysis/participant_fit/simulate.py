@@ -30,7 +30,7 @@ import os
 import zlib
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from contextlib import contextmanager, nullcontext
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from contextvars import ContextVar
 from functools import lru_cache
 from typing import Any
@@ -172,6 +172,7 @@ def simulate_settings(
             progress("simulating", k + 1, n)
     else:
         shared = _POOL.get()
+        opened: AbstractContextManager[object]
         if shared is not None and shared[:2] == (task, jobs):
             opened, pool = nullcontext(), shared[2]
         else:
