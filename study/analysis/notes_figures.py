@@ -42,9 +42,14 @@ BEFORE = OKABE_ITO["VO"]
 class FittedAxis(Protocol):
     """What `bode` draws: `AxisCharacterisation` or a recorded `ChirpFit`."""
 
-    dof: str
-    frfs: list[Frf]
-    fit: GreyBoxFit
+    @property
+    def dof(self) -> str: ...
+
+    @property
+    def frfs(self) -> list[Frf]: ...
+
+    @property
+    def fit(self) -> GreyBoxFit: ...
 
     @property
     def bandwidth_hz(self) -> float: ...

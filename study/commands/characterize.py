@@ -72,11 +72,14 @@ def notes(json_path: Path, out_dir: Path, noise: float, seed: int) -> None:
     payload = {ch.dof: ch.to_dict() for ch in results}
     write_atomically(json_path, json.dumps(payload, indent=2, default=_finite) + "\n")
     for ch in results:
+        hysteresis, asymmetry = f"{ch.before.hysteresis:.3g}", f"{ch.before.asymmetry:.1%}"
+        if ch.after is not None:  # the compensated ramp (every simulated axis has one)
+            hysteresis += f" -> {ch.after.hysteresis:.3g}"
+            asymmetry += f" -> {ch.after.asymmetry:.1%}"
         click.echo(
             f"{ch.dof}: bandwidth {ch.bandwidth_hz:.2f} Hz, settling {ch.settling_time_s:.3f} s, "
-            f"max continuous {ch.before.max_continuous:.5g}, hysteresis "
-            f"{ch.before.hysteresis:.3g} -> {ch.after.hysteresis:.3g}, asymmetry "
-            f"{ch.before.asymmetry:.1%} -> {ch.after.asymmetry:.1%}"
+            f"max continuous {ch.before.max_continuous:.5g}, hysteresis {hysteresis}, "
+            f"asymmetry {asymmetry}"
         )
     click.echo(f"json: {json_path}; figures and compensation.csv: {out_dir}")
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -64,7 +65,7 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
         NotesRecordingError,
     )
     found, chirp = identify_recording(rec, default_params(dof).linear, dof)
-    result = {"dof": dof, "recording": str(recording), **found}
+    result: dict[str, Any] = {"dof": dof, "recording": str(recording), **found}
     write_atomically(json_path, json.dumps(result, indent=2) + "\n")
     if out_dir is not None and chirp is not None:
         from study.analysis.figures import save

@@ -24,6 +24,8 @@ from study.commands.base import (
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
+    from rich.progress import TaskID
+
     from study.analysis.participant_fit.fit import FitResult
 
 
@@ -123,7 +125,7 @@ def fit(
     )
     start = time.monotonic()
     with opened_database(db_url) as engine, progress_bar() as bar:
-        bars: dict[str, object] = {}
+        bars: dict[str, TaskID] = {}
 
         def progress(step: str, k: int = 0, n: int = 0) -> None:
             if step not in bars:

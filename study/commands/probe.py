@@ -12,8 +12,10 @@ from study.commands.base import StudyGroup, db_option, opened_database, progress
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
+    from rich.progress import TaskID
     from sqlalchemy import Engine
 
+    from study.probes.runner import Responder
     from study.protocol.observer import SessionObserver
 
 DRIVERS = ("simulated", "keyboard", "hardware")
@@ -74,9 +76,7 @@ def run(
 
     for name in only:
         get_probe(name)  # an unknown probe: one line before anything runs
-    if driver == "hardware" and port is None:
-        raise StudyInputError("--driver hardware without --port; expected the dial unit's port")
-    responder = None
+    responder: Responder | None = None
     if driver == "keyboard":
         from study.probes.runner import KeyboardResponder
 
@@ -84,6 +84,8 @@ def run(
             read_key=input, show=lambda text: click.echo(text, nl=text != ".")
         )
     elif driver == "hardware":
+        if port is None:
+            raise StudyInputError("--driver hardware without --port; expected the dial unit's port")
         from study.probes.runner import DeviceResponder
         from teleop_core.loop.hardware import HardwareDriver, HardwareError
 
@@ -99,7 +101,7 @@ def run(
             stored = run_participant_probes(engine, code, responder, only, observer=observer)
         else:
             with progress_bar() as bar:
-                tasks: dict[str, object] = {}
+                tasks: dict[str, TaskID] = {}
 
                 def progress(name: str, k: int = 0, n: int = 0) -> None:
                     if name not in tasks:

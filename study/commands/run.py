@@ -139,6 +139,7 @@ def run(
         _lsl_notice(db_url)
         _run_all(db_url, jobs or 1, pace, who, participants_path)
         return
+    assert code is not None  # _check_options: --participant CODE without --all
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")
     if drive_port is not None and driver != "hardware":

@@ -106,11 +106,11 @@ class CalibrationPane(SafeWorkers, Vertical):
             else "ctrl+r: run the calibration loop on the recording",
             id="calib-summary",
         )
-        table = DataTable(id="effects", zebra_stripes=True, cursor_type="row")
+        table: DataTable[str] = DataTable(id="effects", zebra_stripes=True, cursor_type="row")
         table.add_columns("step", "effect added", "held-out RMSE (N)", "parameters")
         yield table
         yield Label("Stored calibrations (newest first)")
-        stored = DataTable(id="stored", zebra_stripes=True, cursor_type="row")
+        stored: DataTable[str] = DataTable(id="stored", zebra_stripes=True, cursor_type="row")
         stored.add_columns(
             "id", "when (UTC)", "model", "recording", "RMSE before -> after", "verdict"
         )

@@ -12,11 +12,20 @@ from __future__ import annotations
 import shutil
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from textual import work
 
 from study.tui.db_errors import SafeWorkers
+
+if TYPE_CHECKING:
+    from textual.widget import Widget
+
+    from study.tui.app import StudyApp
+
+    _Pane = Widget
+else:
+    _Pane = object  # the pane it joins is the widget
 
 __all__ = ["OpsMixin", "export_folder"]
 
@@ -27,10 +36,15 @@ def export_folder(base: Path, now: datetime | None = None) -> Path:
     return base / stamp
 
 
-class OpsMixin(SafeWorkers):
+class OpsMixin(SafeWorkers, _Pane):
     """Export and end-of-day backup for a pane with an `#ops-status` Static."""
 
     last_ops_line = ""
+
+    @property
+    def _study(self) -> StudyApp:
+        """The app the pane is in: its settings and services."""
+        return cast("StudyApp", self.app)
 
     def _ask_folder(self, question: str, default: Path, enter: str, then: Any) -> None:
         from study.tui.confirm import ReasonScreen
@@ -40,11 +54,11 @@ class OpsMixin(SafeWorkers):
                 then(Path(text).expanduser())
 
         screen = ReasonScreen(question, "folder", str(default), enter=enter, limit=None)
-        self.app.push_screen(screen, answered)  # type: ignore[attr-defined]
+        self.app.push_screen(screen, answered)
 
     def action_export_data(self) -> None:
         """e: trials, NASA-TLX and the codebook, as `study export --out FOLDER` writes them."""
-        settings = self.app.settings  # type: ignore[attr-defined]
+        settings = self._study.settings
         self._ask_folder(
             "Export the trials, NASA-TLX and codebook (CSV) to the folder:",
             export_folder(settings.exports_dir),
@@ -62,7 +76,7 @@ class OpsMixin(SafeWorkers):
 
         created = not folder.exists()
         try:
-            written = export_data(self.app.services.engine, folder, "csv")  # type: ignore[attr-defined]
+            written = export_data(self._study.services.engine, folder, "csv")
         except BaseException:
             if created and folder.is_dir():  # nothing half-written: the folder made goes
                 shutil.rmtree(folder, ignore_errors=True)
@@ -73,7 +87,7 @@ class OpsMixin(SafeWorkers):
 
     def action_backup(self) -> None:
         """b: the integrity check, then a checked copy (`study db backup`)."""
-        settings = self.app.settings  # type: ignore[attr-defined]
+        settings = self._study.settings
         self._ask_folder(
             "End of day: check the database, then copy it (one SQLite file) to the folder:",
             settings.backups_dir,
@@ -93,14 +107,14 @@ class OpsMixin(SafeWorkers):
         def notice(line: str) -> None:
             self.app.call_from_thread(self._ops_status, f"{line}...")
 
-        engine = self.app.services.engine  # type: ignore[attr-defined]
+        engine = self._study.services.engine
         result = backup_database(engine, folder, notice=notice, replace_file=replace_durably)
         ok = result.source.ok and result.copy.ok
         self.app.call_from_thread(self._ops_done, result.line(), ok)
 
     def _ops_done(self, line: str, ok: bool) -> None:
         self._ops_status(line)
-        self.app.notify(line, severity="information" if ok else "error", timeout=15)  # type: ignore[attr-defined]
+        self.app.notify(line, severity="information" if ok else "error", timeout=15)
 
     def worker_failed(self, group: str, line: str) -> None:
         what = {"export": "not exported", "backup": "no backup made"}.get(group, "failed")
@@ -112,4 +126,4 @@ class OpsMixin(SafeWorkers):
         from textual.widgets import Static
 
         self.last_ops_line = text
-        self.query_one("#ops-status", Static).update(text)  # type: ignore[attr-defined]
+        self.query_one("#ops-status", Static).update(text)

@@ -151,7 +151,7 @@ class ParticipantPage(SafeWorkers, Screen[None]):
         yield Label(f"{self.code}: loading...", id="who")
         yield Static("", id="schedule", markup=False)
         yield Static("", id="probes", markup=False)
-        table = DataTable(id="trials", cursor_type="row", zebra_stripes=True)
+        table: DataTable[str] = DataTable(id="trials", cursor_type="row", zebra_stripes=True)
         table.add_columns(
             "id", "block", "trial", "att", "status", "time s", "success", "peaks", "valid"
         )

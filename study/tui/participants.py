@@ -92,7 +92,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
                 compact=True,
                 select_on_focus=False,  # a letter typed on the list adds to the word
             )
-        table = DataTable(id="people", cursor_type="row", zebra_stripes=True)
+        table: DataTable[str] = DataTable(id="people", cursor_type="row", zebra_stripes=True)
         table.add_columns("code", "group", "order", "progress", "next")
         yield table
         yield Static("", id="detail")

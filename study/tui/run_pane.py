@@ -29,7 +29,8 @@ from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
-from textual.widgets import Label, Select
+from textual.widget import Widget
+from textual.widgets import Label, Select, TabbedContent
 
 from study.protocol.observer import SessionObserver
 from study.protocol.tasks import Task, get_task, tasks
@@ -154,7 +155,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         yield Label("", id="next")
         with Horizontal(id="live"):
             with Vertical(id="phantom-box"):
-                for scene in dict.fromkeys([*map(scene_class, tasks()), TrackView]):
+                scenes: list[type[Widget]] = [*map(scene_class, tasks()), TrackView]
+                for scene in dict.fromkeys(scenes):
                     yield scene()
             yield LiveReadout(id="readout")
 
@@ -193,7 +195,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
 
     def _filling_in_tlx(self, code: str) -> bool:
         """The NASA-TLX screen is shown while `code` has a questionnaire to fill in."""
-        if self.roster is None or self.app.query_one("#tabs").active != "tlx":
+        if self.roster is None or self.app.query_one("#tabs", TabbedContent).active != "tlx":
             return False
         return any(b[0] == code for b in self.roster.tlx_due())
 
