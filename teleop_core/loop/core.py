@@ -50,13 +50,7 @@ if TYPE_CHECKING:
     from teleop_core.loop.follower_units import PhysicalFollower
     from teleop_core.loop.hardware import HardwareDriver
 
-__all__ = [  # LoopConfig and the results moved to config.py, the columns to layout.py
-    "SAMPLE_COLUMNS",
-    "LoopConfig",
-    "LoopCounters",
-    "LoopResult",
-    "TeleopLoop",
-]
+__all__ = ["TeleopLoop"]
 
 
 def _hand_to_loop(action: HandAction, loop: np.ndarray) -> None:

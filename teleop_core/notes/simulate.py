@@ -30,8 +30,8 @@ from teleop_core.notes.karnopp import (
     COMP_ON,
     compensated_command,
 )
-from teleop_core.notes.params import CHIRP_BAND_HZ as CHIRP_BAND_HZ  # re-exported
 from teleop_core.notes.params import (
+    CHIRP_BAND_HZ,
     MSD_B_M,
     MSD_B_S,
     MSD_K_S,
