@@ -58,6 +58,7 @@ def anova_rows(
     (`one_way`): Type III condition is the sum-coded intercept's SS, Type II the
     intercept's alone, N mean(d)^2.
     """
+    # lazy: scipy.stats costs 0.7 s at start-up
     from scipy.stats import f as f_dist
 
     between = one_way((a + b) / math.sqrt(2), group)

@@ -97,6 +97,7 @@ class CrossoverResult:
     notes: list[str] = field(default_factory=list)
 
     def to_frames(self) -> tuple[pd.DataFrame, pd.DataFrame]:
+        # lazy: pandas costs 0.3 s at start-up
         import pandas as pd
 
         return (
@@ -294,6 +295,7 @@ def design_checks(
         criterion before and after, the first-period comparison where a carry-over is
         added); `notes`: the checks that could not be made, and why.
     """
+    # lazy: study.protocol.tasks costs 7 ms at start-up
     from study.protocol.tasks import get_task
 
     rows = trials if isinstance(trials, list) else trials.to_dict("records")

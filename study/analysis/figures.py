@@ -79,6 +79,7 @@ TLX_SCORES = tuple(TLX_LABELS)
 def fig12_labels(task: str, tlx_score: str = "weighted") -> dict[str, str]:
     """Fig. 12's measures of `task` (its analysed measures and the NASA-TLX score
     `tlx_score`, weighted or raw), each with its y-label on two lines."""
+    # lazy: study.protocol.tasks costs 6 ms at start-up
     from study.protocol.tasks import get_task
 
     out = {}

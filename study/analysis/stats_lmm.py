@@ -165,6 +165,7 @@ class Contrast:
 
     @classmethod
     def of(cls, estimate: float, se: float, df: float) -> Contrast:
+        # lazy: scipy costs 0.7 s at start-up
         from scipy import stats
 
         t = estimate / se if se > 0 else float("nan")
@@ -179,6 +180,7 @@ def _polished_theta(
     """The root of statsmodels' profiled REML score in theta, bracketed from `start`
     (start x (1 -/+ width), widened until the score changes sign; 0 when the
     log-likelihood falls from the boundary), to `rtol` relative."""
+    # lazy: scipy.optimize costs 0.4 s at start-up
     from scipy.optimize import brentq
 
     def score(theta: float) -> float:
@@ -256,6 +258,7 @@ def _bracket(d: Design) -> float | None:
     polish on statsmodels' score, which decides the optimum, so that the model is not
     fitted twice (statsmodels' BFGS, then the polish). None when it has no root in
     (1e-6, 1e6) (a boundary fit or a flat criterion: statsmodels' own fit starts)."""
+    # lazy: scipy.optimize costs 0.4 s at start-up
     from scipy.optimize import brentq
 
     n, p = d.X.shape
@@ -315,6 +318,8 @@ def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fi
 def _fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fit:
     # the one module, not statsmodels.api (which imports every model and data set)
     from statsmodels.regression.mixed_linear_model import MixedLM
+
+    # lazy: statsmodels.tools.sm_exceptions costs 0.5 s at start-up
     from statsmodels.tools.sm_exceptions import ConvergenceWarning
 
     design = Design.of(X, y, groups)
@@ -362,6 +367,7 @@ def satterthwaite_df(fit: Fit, L: np.ndarray) -> float:
     float
         2 (L V L')^2 / (g' A g).
     """
+    # lazy: scipy.differentiate costs 0.1 s at start-up
     from scipy.differentiate import derivative
 
     d, sigma = fit.design, fit.sigma

@@ -90,8 +90,13 @@ TRIAL_MEASURES = (
 
 def notes_trials(config: NotesBenchConfig, progress: Progress) -> tuple[pd.DataFrame, float]:
     """`trials` simulated NOTES trials per group and condition; (measures, wall seconds)."""
+    # lazy: study.protocol.design costs 18 ms at start-up
     from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
+
+    # lazy: study.protocol.traits costs 20 ms at start-up
     from study.protocol.traits import GROUPS, simulated_participant
+
+    # lazy: study.tasks.notes.trial costs 23 ms at start-up
     from study.tasks.notes.trial import run_notes_trial
 
     rows = []

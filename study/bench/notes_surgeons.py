@@ -71,7 +71,10 @@ def surgeons_summary(trials: pd.DataFrame) -> pd.DataFrame:
 def surgeons_trials(n: int, seed: int, progress: Progress = no_progress) -> pd.DataFrame:
     """One NOTES trial per simulated expert in VO and in HV (the same person, seed for
     seed); one row per trial with the measures of `PAPER`, completion and success."""
+    # lazy: study.protocol.traits costs 22 ms at start-up
     from study.protocol.traits import simulated_participant
+
+    # lazy: study.tasks.notes.trial costs 24 ms at start-up
     from study.tasks.notes.trial import run_notes_trial
 
     rows = []

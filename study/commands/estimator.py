@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,6 +19,7 @@ from study.commands.base import (
     progress_bar,
 )
 from study.errors import StudyInputError
+from teleop_core.errors import TeleopInputError
 
 if TYPE_CHECKING:
     from teleop_core.estimation.estimator import EstimateResult, ForceEstimator
@@ -159,12 +161,22 @@ def train_cmd(
     Example:
       study estimator train bench.csv --out model/
     """
-    from teleop_core.errors import TeleopInputError
+    # lazy: teleop_core.estimation.extended (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.estimation.extended import ExtendedPhysics
+
+    # lazy: teleop_core.estimation.gru (with numpy) costs 75 ms at start-up
     from teleop_core.estimation.gru import GruConfig
+
+    # lazy: teleop_core.estimation.memory (with numpy) costs 66 ms at start-up
     from teleop_core.estimation.memory import MemorySpec
+
+    # lazy: teleop_core.estimation.training (with scipy, pandas, pyarrow) costs 0.6 s at start-up
     from teleop_core.estimation.training import train_estimator
+
+    # lazy: teleop_core.follower.recording (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.follower.recording import FollowerRecording
+
+    # lazy: teleop_core.recording_checks (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.recording_checks import check_varies
 
     if out_dir.exists() and any(out_dir.iterdir()) and not force:
@@ -256,7 +268,10 @@ def _validation(
     stage, `rmse_final`: after the EKF, `fit_percent` of the final estimate,
     `samples`: the estimates, one per sample with a full window) and physics +
     residual stage's RMSE."""
+    # lazy: teleop_core.calibration.verdict costs 1.3 s at start-up
     from teleop_core.calibration.verdict import fit_percent
+
+    # lazy: teleop_core.estimation.metrics (with numpy) costs 64 ms at start-up
     from teleop_core.estimation.metrics import rmse
 
     result = model.predict(model.conform(recording))
@@ -300,8 +315,13 @@ def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
     Example:
       study estimator run model/ bench.csv --out forces.csv
     """
+    # lazy: teleop_core.estimation.estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.estimation.estimator import ForceEstimator
+
+    # lazy: teleop_core.estimation.metrics (with numpy) costs 64 ms at start-up
     from teleop_core.estimation.metrics import rmse
+
+    # lazy: teleop_core.follower.recording (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.follower.recording import FollowerRecording, write_csv_atomically
 
     model = ForceEstimator.load(model_dir)
@@ -347,8 +367,8 @@ def _regimes_of(
     model_dir: Path, recording: FollowerRecording, result: EstimateResult
 ) -> dict[str, dict[str, float]]:
     """RMSE per regime label, with the thresholds the model was trained with (if kept)."""
-    import json
 
+    # lazy: teleop_core.estimation.regimes (with scipy, numpy) costs 0.3 s at start-up
     from teleop_core.estimation.regimes import RegimeRules, label_samples, regime_rmse
 
     rules = json.loads((model_dir / "summary.json").read_text()).get("regime_rules")

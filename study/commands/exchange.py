@@ -177,7 +177,10 @@ def export_cmd(
     Example:
       study export --out export/ --samples
     """
+    # lazy: study.protocol.export (with pandas, pyarrow, sqlalchemy) costs 0.5 s at start-up
     from study.protocol.export import export_data
+
+    # lazy: study.protocol.sample_export (with pandas, pyarrow, sqlalchemy) costs 0.5 s at start-up
     from study.protocol.sample_export import SampleSelection
 
     selection = SampleSelection(participants, tasks, conditions, trials, from_s, to_s)

@@ -99,6 +99,7 @@ def load_pylsl() -> ModuleType:
             f"{ENV}={path!r}; expected the path of a liblsl configuration file for this "
             "lab's network (`study lsl-config FILE` writes one that stays on this machine)"
         )
+    # lazy: pylsl costs 94 ms at start-up
     import pylsl
 
     return pylsl

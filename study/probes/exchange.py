@@ -211,6 +211,7 @@ def store_imported(session: Session, rows: list[dict], path: Path) -> int:
 
 def import_probes(engine: Engine, path: Path, rows: list[dict]) -> int:
     """Store the checked `rows` in one transaction."""
+    # lazy: db.engine costs 5 ms at start-up
     from db.engine import write_transaction
 
     with write_transaction(engine) as conn, Session(bind=conn) as session:

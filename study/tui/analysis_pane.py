@@ -213,6 +213,7 @@ class AnalysisPane(SafeWorkers, Vertical):
 
     def action_notes(self) -> None:
         """The exclusions, the analysis's notes and the mixed ANOVA, over the screen."""
+        # lazy: study.tui.confirm costs 4 ms at start-up
         from study.tui.confirm import TextScreen
 
         if self.result is None:

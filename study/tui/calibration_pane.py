@@ -22,6 +22,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import DataTable, Input, Label, Select, Static
 
+from study.protocol.calibrations import list_calibrations, store_calibration
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import StudyServices
 from teleop_core.progress import describe
@@ -121,7 +122,6 @@ class CalibrationPane(SafeWorkers, Vertical):
 
     @work(thread=True, exclusive=True, group="calibrations", exit_on_error=False)
     def _list(self) -> None:
-        from study.protocol.calibrations import list_calibrations
 
         self.post_message(self.Listed(list_calibrations(self.services.engine)))
 
@@ -174,7 +174,6 @@ class CalibrationPane(SafeWorkers, Vertical):
             self.app.call_from_thread(self._summary, f"refused: {exc}")
             return
         self.post_message(self.Done(report))
-        from study.protocol.calibrations import list_calibrations, store_calibration
 
         calibration_id, stored_at = store_calibration(
             self.services.engine, model, path, report, self.out_dir

@@ -12,22 +12,44 @@ from __future__ import annotations
 import shutil
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 from textual import work
+from textual.widgets import Static
 
 from study.tui.db_errors import SafeWorkers
+from teleop_core.files import replace_durably
 
 if TYPE_CHECKING:
     from textual.widget import Widget
 
-    from study.tui.app import StudyApp
+    from study.tui.services import StudyServices
 
     _Pane = Widget
 else:
     _Pane = object  # the pane it joins is the widget
 
 __all__ = ["OpsMixin", "export_folder"]
+
+
+class _Folders(Protocol):
+    """The folders of the app's settings (`TuiSettings`) the keys write in."""
+
+    @property
+    def exports_dir(self) -> Path: ...
+
+    @property
+    def backups_dir(self) -> Path: ...
+
+
+class _OpsApp(Protocol):
+    """What the keys ask of the app (`StudyApp`, which imports this module's pane)."""
+
+    @property
+    def settings(self) -> _Folders: ...
+
+    @property
+    def services(self) -> StudyServices: ...
 
 
 def export_folder(base: Path, now: datetime | None = None) -> Path:
@@ -42,11 +64,12 @@ class OpsMixin(SafeWorkers, _Pane):
     last_ops_line = ""
 
     @property
-    def _study(self) -> StudyApp:
+    def _study(self) -> _OpsApp:
         """The app the pane is in: its settings and services."""
-        return cast("StudyApp", self.app)
+        return cast("_OpsApp", self.app)
 
     def _ask_folder(self, question: str, default: Path, enter: str, then: Any) -> None:
+        # here, not at the top: importing study.tui.confirm imports this module
         from study.tui.confirm import ReasonScreen
 
         def answered(text: str | None) -> None:
@@ -72,6 +95,7 @@ class OpsMixin(SafeWorkers, _Pane):
 
     @work(thread=True, exclusive=True, group="export", exit_on_error=False)
     def _export(self, folder: Path) -> None:
+        # lazy: study.protocol.export (with pandas, pyarrow, numpy) costs 0.4 s at start-up
         from study.protocol.export import export_data
 
         created = not folder.exists()
@@ -101,8 +125,8 @@ class OpsMixin(SafeWorkers, _Pane):
 
     @work(thread=True, exclusive=True, group="backup", exit_on_error=False)
     def _backup(self, folder: Path) -> None:
+        # lazy: db.maintenance costs 8 ms at start-up
         from db.maintenance import backup_database
-        from teleop_core.files import replace_durably
 
         def notice(line: str) -> None:
             self.app.call_from_thread(self._ops_status, f"{line}...")
@@ -123,7 +147,6 @@ class OpsMixin(SafeWorkers, _Pane):
         super().worker_failed(group, line)
 
     def _ops_status(self, text: str) -> None:
-        from textual.widgets import Static
 
         self.last_ops_line = text
         self.query_one("#ops-status", Static).update(text)

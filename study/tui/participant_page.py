@@ -237,6 +237,7 @@ class ParticipantPage(SafeWorkers, Screen[None]):
     # -- corrections ----------------------------------------------------------------------
 
     def _ask(self, question: str, then, value: str = "", placeholder: str = "reason") -> None:
+        # lazy: study.tui.confirm costs 4 ms at start-up
         from study.tui.confirm import ReasonScreen
 
         def answered(text: str | None) -> None:

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import asyncio
 import json
+import resource
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from db.migrate import open_database
@@ -88,8 +90,6 @@ def print_analysis_figures_peak(db_url: str, folder: str) -> None:
     40): the overview, then F5, `r` (the analysis) and ctrl+e (the paper's figures, as
     PNG, into `folder`); prints JSON with the seconds, the figure files and the peak
     resident memory of this process in MB (`study bench export`)."""
-    import resource
-    from pathlib import Path
 
     engine = open_database(db_url, create=False)
     settings = TuiSettings(figures_dir=Path(folder), figure_formats=("png",))

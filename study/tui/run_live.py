@@ -8,6 +8,7 @@ own lines. `KeyboardMixin`: the pane's key actions, handed to the keyboard drive
 
 from __future__ import annotations
 
+import inspect
 import time
 from typing import TYPE_CHECKING, cast
 
@@ -42,7 +43,6 @@ KEY_ACTIONS = {
 def task_lines(frame: LiveFrame) -> list[str]:
     """The task's readout lines for `frame`, told the trial's condition when the task's
     `live_lines` takes one (a task written before it was passed need not)."""
-    import inspect
 
     live_lines = frame.task.live_lines
     if "condition" in inspect.signature(live_lines).parameters:

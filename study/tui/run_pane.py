@@ -37,6 +37,7 @@ from study.protocol.tasks import Task, get_task, tasks
 from study.tui.db_errors import SafeWorkers, plain_line
 from study.tui.live_view import LiveReadout
 from study.tui.picker import ParticipantSelect, picker_rows
+from study.tui.preferences import RunChoices, save_run_choices
 from study.tui.run_live import KeyboardMixin, LiveViewMixin
 from study.tui.scenes import TrackView, scene_class
 from study.tui.services import NextTrial, Roster, StudyServices
@@ -307,7 +308,6 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         """Keep the driver and pace for the app's next start on this database."""
         if self.preferences_file is None:
             return
-        from study.tui.preferences import RunChoices, save_run_choices
 
         try:
             choices = RunChoices(self.driver_kind, self.pace)
@@ -341,6 +341,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         if self._practice:
             self._press("end_trial")
             return
+        # lazy: study.tui.confirm costs 4 ms at start-up
         from study.tui.confirm import Confirm
 
         def answered(yes: bool | None) -> None:

@@ -262,6 +262,7 @@ class CalibratedModel:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> CalibratedModel:
+        # here, not at the top: importing teleop_core.calibration.registry imports this module
         from teleop_core.calibration.registry import BASE_MODELS
 
         try:

@@ -388,6 +388,7 @@ def mat_to_frame(path: str | Path, *, q: str, u: str, t: str) -> pd.DataFrame:
     vector times a scalar gain). Every other vector with as many samples becomes an
     extra channel under its own name; scalars (gains) are left out.
     """
+    # lazy: scipy.io costs 19 ms at start-up
     from scipy.io import loadmat
 
     path = Path(path)

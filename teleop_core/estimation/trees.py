@@ -212,6 +212,7 @@ def train_trees(
 ) -> TreesModel:
     """Fit the trees to `residual` on the training windows `train_idx` (window i ends at
     sample i + window - 1); the standardisation comes from those windows' samples."""
+    # lazy: sklearn.ensemble costs 1.2 s at start-up
     from sklearn.ensemble import HistGradientBoostingRegressor
 
     config = config or TreesConfig()

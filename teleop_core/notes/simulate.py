@@ -176,6 +176,7 @@ def simulate_response(
     """
     if boundary not in BOUNDARIES:
         raise NotesParamsError(f"boundary {boundary!r}; expected one of {', '.join(BOUNDARIES)}")
+    # lazy: teleop_core.notes.compensation costs 8 ms at start-up
     from teleop_core.notes.compensation import NO_COMPENSATION
 
     p = params if nonlinear else params.without_nonlinearities()

@@ -66,6 +66,7 @@ from scipy.optimize import least_squares
 from study.analysis.participant_fit.checks import holm_flags
 from study.analysis.participant_fit.emulator import MomentEmulator, floor, log_moment
 from study.analysis.participant_fit.estimate import DRAWS, HIGH, LOW, GroupEstimator, GroupFit
+from study.analysis.participant_fit.observed import person_moments
 from study.protocol.participant_effects import (
     BOUNDS,
     FAMILIES,
@@ -313,7 +314,6 @@ def fit_traits(
     trials: pd.DataFrame, emulator: MomentEmulator, free: list[int], weak: list[int], seed: int
 ) -> PeopleFit:
     """Each group's trait distribution and each person's traits (no bootstrap)."""
-    from study.analysis.participant_fit.observed import person_moments
 
     people = person_moments(trials, emulator.measures_, emulator.features_)
     out = PeopleFit({}, {})
