@@ -92,10 +92,9 @@ def simulate(
     Example:
       study simulate --group novice --condition HV --out trial.csv --plot trial.png
     """
-    from teleop_core.estimation.recording import write_csv_atomically
-
     from study.protocol.default_estimator import load_estimator
     from study.protocol.traits import simulated_participant
+    from teleop_core.estimation.recording import write_csv_atomically
 
     for path in (out_csv, plot_path):
         if path is not None and not path.parent.is_dir():
