@@ -15,11 +15,13 @@ same `write_transaction` serialises competing writers with an advisory lock.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 from sqlalchemy import Connection, Engine, create_engine, event
 from sqlalchemy.engine import URL, make_url
@@ -27,9 +29,7 @@ from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 from sqlalchemy.orm import Session, sessionmaker
 
 from db.errors import DatabaseGoneError, DbInputError
-
-DEFAULT_URL = "sqlite:///study.db"
-"""`./study.db` in the working directory, used when neither `--db` nor `STUDY_DB` is set."""
+from db.plain import DEFAULT_URL
 
 SQLITE_BUSY_TIMEOUT_MS = 30_000
 
@@ -88,7 +88,6 @@ def _as_sqlite_uri(url: URL) -> URL:
     (pysqlite otherwise takes `PATH?mode=ro` as a file name, and creates an empty
     database of that name). `sqlite:///PATH?mode=ro` and `...&uri=true` both become
     `sqlite:///file:PATH?mode=ro&uri=true`."""
-    from urllib.parse import quote
 
     query = dict(url.query)
     database = url.database or ""
@@ -133,7 +132,6 @@ def _check_sqlite_query(url: URL) -> None:
 
 def _seconds(text: str) -> float | None:
     """A timeout in seconds, 0 to a day, or None."""
-    import math
 
     try:
         seconds = float(text)

@@ -30,6 +30,7 @@ import contextlib
 import errno
 import hashlib
 import os
+import sqlite3
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -228,7 +229,6 @@ def _copy_failure(exc: BaseException, part: Path) -> OSError | None:
     SQLite reports a full or failing target of `VACUUM INTO` (and of the PostgreSQL
     copy's SQLite file) as a database error; it is the copy's folder that is full, not
     the study database, so the caller's message must name the folder."""
-    import sqlite3
 
     cause = getattr(exc, "orig", exc)  # SQLAlchemy wraps the driver's error
     if not isinstance(cause, sqlite3.Error):

@@ -18,14 +18,17 @@ start-up budget. A test keeps `HEAD_REVISION` equal to the head of the shipped s
 
 from __future__ import annotations
 
+import errno
 import os
 import sqlite3
+import stat
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from enum import Enum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+from urllib.parse import quote
 
 from sqlalchemy import (
     URL,
@@ -34,12 +37,14 @@ from sqlalchemy import (
     Integer,
     String,
     column,
+    create_engine,
     func,
     inspect,
     select,
     table,
 )
 from sqlalchemy.exc import DBAPIError
+from sqlalchemy.pool import NullPool
 
 from db.engine import busy_timeout_ms, describe, make_engine, resolve_url, write_transaction
 from db.errors import (
@@ -75,6 +80,7 @@ def alembic_config(
     `version_locations` adds directories of further revisions (tests use it to stage a
     newer revision than the installed one).
     """
+    # lazy: alembic.config costs 0.2 s at start-up
     from alembic.config import Config
 
     cfg = Config()
@@ -88,6 +94,7 @@ def alembic_config(
 
 
 def script_directory(version_locations: Sequence[Path] = ()) -> ScriptDirectory:
+    # lazy: alembic.script costs 0.2 s at start-up
     from alembic.script import ScriptDirectory
 
     return ScriptDirectory.from_config(alembic_config(version_locations=version_locations))
@@ -184,10 +191,6 @@ def _reading_connection(url: URL) -> Iterator[Connection]:
     files behind (it may not delete them), where the last read-write connection removes
     them, so a refused command leaves the folder as it found it. A URL that sets `mode`
     itself (`?mode=ro`) is opened as it says."""
-    from urllib.parse import quote
-
-    from sqlalchemy import create_engine
-    from sqlalchemy.pool import NullPool
 
     path = _sqlite_path(url)
     shown = describe(url)
@@ -304,7 +307,6 @@ def check_sqlite_file(path: Path, *, must_exist: bool) -> None:
     """DbInputError unless `path` can be an SQLite study database: its folder exists, and
     the path is a regular file (a named pipe or a device would block the open or read
     as an empty database), or is missing where `must_exist` is False."""
-    import stat
 
     if not path.parent.is_dir():
         raise DbInputError(f"folder {path.parent} for database {path} does not exist")
@@ -337,7 +339,6 @@ def check_sqlite_file(path: Path, *, must_exist: bool) -> None:
 
 def _writable(path: Path) -> bool:
     """Whether SQLite can write `path` (and its journal and WAL files beside it)."""
-    import errno
 
     if not (os.access(path, os.W_OK) and os.access(path.parent, os.W_OK)):
         return False
@@ -361,7 +362,6 @@ def readonly_url(path: Path) -> URL:
             "not yet in the file; expected a checkpointed file (open it once where it can be "
             "written, or copy it with `study db backup`)"
         )
-    from urllib.parse import quote
 
     return URL.create(
         "sqlite",

@@ -19,7 +19,8 @@ from urllib.parse import quote
 from db.revision import HEAD_REVISION
 
 DEFAULT_URL = "sqlite:///study.db"
-"""`db.engine.DEFAULT_URL` (a test keeps them equal)."""
+"""`./study.db` in the working directory, used when neither `--db` nor `STUDY_DB` is set
+(here rather than in `db.engine`, which imports SQLAlchemy)."""
 
 
 def sqlite_file(db: str | None) -> Path | None:

@@ -26,7 +26,7 @@ writer waits for the lock (up to `hold_s` of wall time at `close`). No sample is
 chunks are committed in order, or the error is raised.
 
 Reading (Arrow record batches of bounded size, one trial or many in parallel) is
-`db.sample_reader`; `SampleReader` and `SAMPLE_SCHEMA` are re-exported here.
+`db.sample_reader`.
 """
 
 from __future__ import annotations
@@ -51,9 +51,8 @@ from db.sample_codec import (
     schema_bytes,
     schema_fingerprint,
 )
-from db.sample_reader import SAMPLE_SCHEMA, SampleReader
 
-__all__ = ["SAMPLE_SCHEMA", "SampleReader", "SampleWriter"]
+__all__ = ["SampleWriter"]
 
 LOCK_POLL_MS = 50
 """How long one commit attempt waits for another program's lock while samples are held."""

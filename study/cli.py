@@ -149,10 +149,16 @@ def cli() -> None:
 
 
 def _print_version(ctx: click.Context) -> None:
-    """`study --version` (click's version_option needs the version when `study` starts)."""
-    import study
+    """`study --version`, read from the installed metadata (click's version_option would
+    need the version whenever `study` starts)."""
+    # lazy: importlib.metadata costs `study tui` some 30 ms at start-up
+    from importlib.metadata import PackageNotFoundError, version
 
-    click.echo(f"study, version {study.__version__}")
+    try:
+        installed = version("haptic-study")
+    except PackageNotFoundError:  # running from a source tree that was never installed
+        installed = "0+unknown"
+    click.echo(f"study, version {installed}")
     ctx.exit()
 
 
@@ -162,9 +168,12 @@ def _one_line(message: str) -> str:
 
 def _command_path(args: list[str]) -> str:
     """`study SUB CMD` as far as `args` name known commands (for errors without a context)."""
-    path, group = ["study"], cli
+    path = ["study"]
+    group: click.Command = cli
     for token in args:
-        command = group.get_command(None, token) if isinstance(group, click.Group) else None
+        if not isinstance(group, click.Group):
+            break
+        command = group.get_command(click.Context(group), token)
         if command is None:
             break
         path.append(token)

@@ -26,6 +26,7 @@ def numba_module() -> Any:
     """numba, with the typeof hook that lets compiled code call a `LazyJit`: what code
     that compiles with numba directly imports it through."""
     global _HOOKED
+    # lazy: numba costs 0.3 s at start-up
     import numba
 
     if not _HOOKED:

@@ -13,5 +13,7 @@ Float3D: TypeAlias = npt.NDArray[np.float64]
 """A 3-D float64 array, shape (n, t, m)."""
 Int1D: TypeAlias = npt.NDArray[np.intp]
 """A 1-D array of indices, shape (n,)."""
+Bool1D: TypeAlias = npt.NDArray[np.bool_]
+"""A 1-D mask, shape (n,)."""
 Rows: TypeAlias = slice | Int1D
 """Rows of a recording: a contiguous slice or an index array (blocked hold-out)."""

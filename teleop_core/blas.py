@@ -26,6 +26,7 @@ def one_blas_thread(func: Callable[_P, _R]) -> Callable[_P, _R]:
 
     @functools.wraps(func)
     def limited(*args: _P.args, **kwargs: _P.kwargs) -> _R:
+        # lazy: threadpoolctl costs 13 ms at start-up
         from threadpoolctl import threadpool_limits
 
         with threadpool_limits(limits=1, user_api="blas"):

@@ -25,7 +25,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from typing import Protocol
+from typing import Protocol, Self
 
 __all__ = [
     "HEARTBEAT_S",
@@ -229,7 +229,7 @@ class Heartbeat:
         while not self._stop.wait(max(self.interval_s - (self.clock() - self.last_s), 0.05)):
             self.poll()
 
-    def __enter__(self) -> Heartbeat:
+    def __enter__(self) -> Self:
         self.started_s = self.last_s = self.clock()
         self._stop.clear()
         self._thread = threading.Thread(target=self._beat, name="progress-lines", daemon=True)

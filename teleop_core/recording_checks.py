@@ -28,6 +28,7 @@ pass them in, so callers catching `RecordingError` or `NotesRecordingError` stil
 from __future__ import annotations
 
 import csv
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -94,7 +95,6 @@ def _check_header_length(path: Path, error: ErrorType) -> None:
     """Refuse a file that is not a regular file (a named pipe never ends), or with a
     line longer than `MAX_LINE_BYTES`, before pandas reads it (pandas would spend minutes
     splitting one endless line into millions of fields)."""
-    import stat
 
     try:
         if not stat.S_ISREG(path.stat().st_mode):

@@ -86,6 +86,6 @@ def test_importing_all_of_teleop_core_loads_no_database_app_or_ui() -> None:
 def test_the_loop_and_the_database_agree_on_the_sample_columns() -> None:
     """teleop_core cannot import db, so both name the sample columns; they must agree."""
     from db.models.trial import SAMPLE_COLUMNS as STORED
-    from teleop_core.loop.core import SAMPLE_COLUMNS as PRODUCED
+    from teleop_core.loop.layout import SAMPLE_COLUMNS as PRODUCED
 
     assert PRODUCED == STORED

@@ -20,13 +20,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 
-from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, save
+from study.analysis.figures import OKABE_ITO, STYLE, WIDTHS_IN, figure_of, save
 from teleop_core.calibration.verdict import SHARE_STRUCTURE
+
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
 
 COLOURS = {"before": OKABE_ITO["grey"], "after": OKABE_ITO["HV"]}
 AXIS_LABELS = {
@@ -35,7 +38,7 @@ AXIS_LABELS = {
     "angle": "wheel angle (rad)",
     "drive": "current",
 }
-CAL_STYLE = {
+CAL_STYLE: dict[RcKeyType, Any] = {
     **STYLE,
     "font.size": 8,
     "axes.titlesize": 8,
@@ -177,9 +180,9 @@ def residual_figures(
     with plt.rc_context(CAL_STYLE):
         for key in against:
             ax = residual_against(signals[key], before, after, labels[key], unit=unit)
-            paths += save(ax.figure, out_dir, f"residual_vs_{key}", ["png"])
+            paths += save(figure_of(ax), out_dir, f"residual_vs_{key}", ["png"])
         ax = autocorrelation(tests_before["autocorrelation"], tests_after["autocorrelation"])
-        paths += save(ax.figure, out_dir, "residual_acf", ["png"])
+        paths += save(figure_of(ax), out_dir, "residual_acf", ["png"])
     return paths
 
 
@@ -377,12 +380,12 @@ def overview_figures(
     paths: list[Path] = []
     with plt.rc_context(CAL_STYLE):
         axes = residual_blocks(t, before, after, held_out, unit)
-        paths += save(axes[0].figure, out_dir, "residual_blocks", ["png"])
+        paths += save(figure_of(axes[0]), out_dir, "residual_blocks", ["png"])
         where = report.get("unexplained")
         if report.get("verdict") == "structure_remains" and where and unexplained_x is not None:
             label = quantity_label(where["quantity"], model, unit, position_unit)
             ax = residual_against_unexplained(unexplained_x, after[held_out], where, label, unit)
-            paths += save(ax.figure, out_dir, "residual_vs_unexplained", ["png"])
+            paths += save(figure_of(ax), out_dir, "residual_vs_unexplained", ["png"])
     return paths
 
 

@@ -26,6 +26,7 @@ from scipy import stats
 from statsmodels.regression.mixed_linear_model import MixedLM
 
 from study.errors import StudyInputError
+from study.probes import probes
 
 LMM_COLUMNS = ("task", "measure", "term", "estimate", "se", "p", "p_method")
 ANCOVA_COLUMNS = (
@@ -51,7 +52,7 @@ INTERACTION_TERM = "C(condition, Treatment('VO'))[T.HV]:cov"
 def covariate_values(probe_trials: pd.DataFrame, name: str) -> tuple[str, pd.Series]:
     """(the trait, participant -> its probe estimate) for `name`, a probe or its trait;
     one line when no probe goes by that name or none of its trials are stored."""
-    from study.probes import probes
+    # lazy: study.probes.measure costs 7 ms at start-up
     from study.probes.measure import probe_table
 
     known = {p.name: p.trait for p in probes()}

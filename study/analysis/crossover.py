@@ -108,6 +108,7 @@ class CrossoverResult:
     notes: list[str] = field(default_factory=list)
 
     def to_frames(self) -> tuple[pd.DataFrame, pd.DataFrame]:
+        # lazy: pandas costs 0.3 s at start-up
         import pandas as pd
 
         return (
@@ -229,7 +230,12 @@ def _fit_summary(fit: Fit) -> dict[str, Any]:
 
 def _design(cell: _Cell, terms: tuple[str, ...]) -> np.ndarray:
     """The base design of `cell` with the columns of `terms`."""
-    columns = [cell.column(e) for e in terms]
+    columns = []
+    for e in terms:
+        column = cell.column(e)
+        if column is None:  # pragma: no cover - the effects are the testable ones
+            raise ValueError(f"effect {e!r} is not testable in this cell")
+        columns.append(column)
     return np.column_stack([cell.X, *columns]) if terms else cell.X
 
 
@@ -331,6 +337,7 @@ def design_checks(
         criterion before and after, the first-period comparison where a carry-over is
         added); `notes`: the checks that could not be made, and why.
     """
+    # lazy: study.protocol.tasks costs 7 ms at start-up
     from study.protocol.tasks import get_task
 
     rows = trials if isinstance(trials, list) else trials.to_dict("records")

@@ -52,12 +52,13 @@ def _recording() -> Iterator[list[Text]]:
     drawn: list[Text] = []
     original = Text.draw
 
-    def record(self: Text, renderer) -> None:  # type: ignore[no-untyped-def]
+    def record(self: Text, renderer) -> None:
         original(self, renderer)
         if self.get_visible() and self.get_text().strip():
             drawn.append(self)
 
-    Text.draw = record  # type: ignore[method-assign]
+    # matplotlib's stubs type Text.draw as Artist's (any Artist); it draws a Text
+    Text.draw = record  # type: ignore[method-assign, assignment]
     try:
         yield drawn
     finally:
@@ -100,12 +101,13 @@ def check_figure(
         Smallest font size allowed, pt.
     """
     texts = drawn_texts(fig)
-    renderer = fig.canvas.get_renderer()
     problems = []
     for t in texts:
-        if t.get_fontsize() < min_font_pt - 1e-9:
-            problems.append(f"text {_describe(t)} at {t.get_fontsize():g} pt < {min_font_pt:g} pt")
-    boxes = [(t, t.get_window_extent(renderer)) for t in texts]
+        size_pt = float(t.get_fontsize())  # points (the stubs allow a size's name)
+        if size_pt < min_font_pt - 1e-9:
+            problems.append(f"text {_describe(t)} at {size_pt:g} pt < {min_font_pt:g} pt")
+    # on the renderer of the draw just made (the figure's)
+    boxes = [(t, t.get_window_extent()) for t in texts]
     page = fig.bbox
     for t, box in boxes:
         if (

@@ -25,6 +25,7 @@ import textwrap
 import zlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 import matplotlib
 
@@ -37,11 +38,14 @@ from matplotlib.lines import Line2D
 
 from study.analysis.figcheck import MARK_GID, stars
 
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
+
 WIDTHS_IN = {"single": 3.5, "double": 7.16}
 """IEEE column widths."""
 FONT_PT = 8
 OKABE_ITO = {"VO": "#D55E00", "HV": "#0072B2", "grey": "#999999"}
-STYLE = {
+STYLE: dict[RcKeyType, Any] = {
     "font.size": FONT_PT,
     "axes.titlesize": FONT_PT,
     "axes.labelsize": FONT_PT,
@@ -75,6 +79,7 @@ TLX_SCORES = tuple(TLX_LABELS)
 def fig12_labels(task: str, tlx_score: str = "weighted") -> dict[str, str]:
     """Fig. 12's measures of `task` (its analysed measures and the NASA-TLX score
     `tlx_score`, weighted or raw), each with its y-label on two lines."""
+    # lazy: study.protocol.tasks costs 6 ms at start-up
     from study.protocol.tasks import get_task
 
     out = {}
@@ -134,7 +139,7 @@ def jitter(n: int, key: str, half_width: float = JITTER) -> np.ndarray:
     return rng.uniform(-half_width, half_width, n)
 
 
-def tested(row: pd.Series | None) -> bool:
+def tested(row: pd.Series | None) -> TypeGuard[pd.Series]:
     """Whether a comparisons row holds a test with a p (not: no row, or not testable)."""
     if row is None or str(row.get("not_testable") or "") or row["test"] == "none":
         return False
@@ -170,10 +175,13 @@ longer labels keep their two lines."""
 
 
 def _legend_handles() -> list[Line2D]:
-    point = {"ls": "none", "marker": "o", "ms": 3.5}
     return [
-        Line2D([], [], color=OKABE_ITO["VO"], label="VO, participant", **point),
-        Line2D([], [], color=OKABE_ITO["HV"], label="HV, participant", **point),
+        Line2D(
+            [], [], color=OKABE_ITO["VO"], label="VO, participant", ls="none", marker="o", ms=3.5
+        ),
+        Line2D(
+            [], [], color=OKABE_ITO["HV"], label="HV, participant", ls="none", marker="o", ms=3.5
+        ),
         Line2D([], [], color=OKABE_ITO["grey"], lw=0.6, label="same participant"),
         Line2D([], [], color="black", lw=1.4, label="group mean"),
     ]
@@ -352,6 +360,14 @@ def freeze_layout(fig: plt.Figure) -> None:
         return
     engine.execute(fig)
     fig.set_layout_engine("none")
+
+
+def figure_of(ax: plt.Axes) -> plt.Figure:
+    """The figure `ax` is drawn in (the figures here have no subfigures)."""
+    fig = ax.get_figure()
+    if not isinstance(fig, plt.Figure):  # pragma: no cover - a subfigure's or a detached axes
+        raise TypeError(f"axes {ax!r} is not drawn in a figure of its own")
+    return fig
 
 
 def save(fig: plt.Figure, out_dir: Path, name: str, formats: Sequence[str]) -> list[Path]:

@@ -26,7 +26,7 @@ from study.analysis.means import (
     withdrawal_notes,
     without_invalid_rows,
 )
-from study.protocol.study_rows import tlx_rows
+from study.protocol.study_rows import invalid_rows, tlx_rows
 from study.protocol.trial_table import (
     TRIAL_KEYS,
     driver_connection,
@@ -65,6 +65,7 @@ def without_withdrawn(
     withdrawn before any data is listed too, so every withdrawal is accounted for. The
     trials marked invalid (`study.protocol.corrections.mark_trial`) are left out as
     well, each listed with its reason."""
+    # lazy: study.protocol.withdrawal (with sqlalchemy) costs 0.2 s at start-up
     from study.protocol.withdrawal import withdrawn_participants
 
     withdrawn = withdrawn_participants(engine)
@@ -80,8 +81,6 @@ def without_withdrawn(
 
 def _without_invalid(engine: Engine, trials: pd.DataFrame) -> tuple[pd.DataFrame, list[str]]:
     """`trials` without the trials marked invalid, and one exclusion note per trial."""
-    from study.protocol.study_rows import invalid_rows
-    from study.protocol.trial_table import driver_connection
 
     with driver_connection(engine) as conn:
         invalid = invalid_rows(conn)

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from study.analysis.stats_lmm import DDF_METHODS, SINGULAR_TOL, fit_random_intercept
+from study.errors import StudyInputError
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -178,6 +179,7 @@ def mixed_model(
         A trial names a task that is not known (with `measures` None), or `ddf` is
         not one of `stats_lmm.DDF_METHODS`.
     """
+    # lazy: pandas costs 0.3 s at start-up
     import pandas as pd
 
     rows, notes = mixed_model_rows(trials.to_dict("records"), measures, ddf)
@@ -217,7 +219,7 @@ def mixed_model_rows(
     notes : list of str
         One line per skipped or failed fit and per singular fit.
     """
-    from study.errors import StudyInputError
+    # lazy: study.protocol.tasks costs 6 ms at start-up
     from study.protocol.tasks import get_task
 
     if ddf not in DDF_METHODS:

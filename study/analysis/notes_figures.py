@@ -13,7 +13,7 @@ House style of `figures.py` (IEEE widths, Okabe-Ito colours, `save`).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
+from typing import Any, Protocol
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -24,7 +24,7 @@ from teleop_core.notes.characterize import AxisCharacterisation
 from teleop_core.notes.identify import Frf, GreyBoxFit
 from teleop_core.notes.transfer import frequency_response
 
-UNITS = {
+UNITS: dict[str, dict[str, Any]] = {
     "translation": {"F": "N/N", "V": "m/s per N", "Z": "N s/m", "force": "N", "scale": 1.0},
     "rotation": {
         "F": "N m/N m",
@@ -42,9 +42,14 @@ BEFORE = OKABE_ITO["VO"]
 class FittedAxis(Protocol):
     """What `bode` draws: `AxisCharacterisation` or a recorded `ChirpFit`."""
 
-    dof: str
-    frfs: list[Frf]
-    fit: GreyBoxFit
+    @property
+    def dof(self) -> str: ...
+
+    @property
+    def frfs(self) -> list[Frf]: ...
+
+    @property
+    def fit(self) -> GreyBoxFit: ...
 
     @property
     def bandwidth_hz(self) -> float: ...

@@ -150,6 +150,7 @@ def rank_biserial(d: np.ndarray) -> float:
     """Matched-pairs rank-biserial correlation [kerby2014] of differences at the data's
     resolution: (R+ - R-) / (R+ + R-) over the ranks of |d| (zeros ranked, no sign, as
     the signed-rank test ranks them); 0 when every difference is zero."""
+    # lazy: scipy.stats costs 0.7 s at start-up
     from scipy.stats import rankdata
 
     ranks = rankdata(np.abs(d))
@@ -190,6 +191,7 @@ def dz_interval(t: float, n: int, level: float = 0.95) -> tuple[float, float]:
 def _nct_cdf(t: float, df: int, ncp: float) -> float:
     """cdf(t; df, ncp) of the noncentral t, falling from 1 to 0 as ncp grows; where
     scipy's value is NaN (far in a tail) the limit on that side."""
+    # lazy: scipy.stats costs 0.7 s at start-up
     from scipy.stats import nct
 
     p = float(nct.cdf(t, df, ncp))
@@ -200,6 +202,7 @@ def _nct_cdf(t: float, df: int, ncp: float) -> float:
 
 def _ncp_root(t: float, df: int, q: float) -> float:
     """The noncentrality whose distribution has `t` at its `q` quantile."""
+    # lazy: scipy.optimize costs 0.3 s at start-up
     from scipy.optimize import brentq
 
     def f(ncp: float) -> float:
@@ -238,6 +241,7 @@ def _constant_row(d: np.ndarray) -> Row:
 def _t_parts(vo: np.ndarray, hv: np.ndarray, bound: float | None) -> Row:
     """The t-based numbers of differences with a spread: t, its df and p, the mean
     difference's interval, d_z with its interval, TOST and BF10."""
+    # lazy: scipy costs 0.7 s at start-up
     from scipy import stats
 
     n = len(vo)
@@ -266,6 +270,7 @@ def _t_parts(vo: np.ndarray, hv: np.ndarray, bound: float | None) -> Row:
 
 
 def _bf10(t: float, n: int) -> float:
+    # lazy: pingouin costs 1.4 s at start-up
     import pingouin
 
     return float(pingouin.bayesfactor_ttest(t, n, paired=True, r=JZS_SCALE))
@@ -274,6 +279,7 @@ def _bf10(t: float, n: int) -> float:
 def paired_p(vo: np.ndarray, hv: np.ndarray) -> float:
     """The two-sided p of the test `paired_comparison` picks, alone (`study power`
     runs it on thousands of simulated groups); NaN when not testable."""
+    # lazy: scipy.stats costs 0.7 s at start-up
     from scipy.stats import shapiro, ttest_rel
 
     vo, hv = np.asarray(vo, dtype=float), np.asarray(hv, dtype=float)
@@ -319,6 +325,7 @@ def paired_comparison(vo: np.ndarray, hv: np.ndarray, bound: float | None = None
         row["mean_diff"] = float(d[0])
         row.update(_constant_row(d))
         return row
+    # lazy: scipy.stats costs 0.7 s at start-up
     from scipy.stats import shapiro
 
     row["shapiro_p"] = float(shapiro(d).pvalue)

@@ -158,7 +158,10 @@ def _with_streams(
 ) -> list[tuple[pd.DataFrame, str, list[DrawnStream]]]:
     """Fig. 9's trials with the recorded streams the design's `[lsl] plot` asks for
     (by name or type); [] when it asks for none or none was recorded."""
+    # lazy: db.lsl_streams costs 3 ms at start-up
     from db.lsl_streams import read_stream, trial_streams
+
+    # lazy: study.protocol.roster costs 23 ms at start-up
     from study.protocol.roster import load_study
 
     with Session(engine) as session:
@@ -296,6 +299,7 @@ def write_figures_at(db_url: str, out_dir: Path, width: str = "double") -> list[
     """`write_figures` (every format) for the database at `db_url`, opened and closed
     here: what `study demo` hands a session worker, which draws one width while the
     command draws the other."""
+    # lazy: db.migrate costs 10 ms at start-up
     from db.migrate import open_database
 
     engine = open_database(db_url, create=False)

@@ -15,6 +15,8 @@ writes it to `captions.md` beside the figure, as the paper figures' captions are
 
 from __future__ import annotations
 
+import math
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -33,6 +35,7 @@ LINESTYLES = ("-", "--", ":", "-.", (0, (5, 1)), (0, (1, 1)))
 
 def monte_carlo_band(rates: list[float], n_sim: int) -> tuple[np.ndarray, np.ndarray]:
     """The 95 % Wilson interval of each rate, a share of `n_sim` simulated studies."""
+    # lazy: statsmodels.stats.proportion costs 10 ms at start-up
     from statsmodels.stats.proportion import proportion_confint
 
     hits = np.round(np.asarray(rates, dtype=float) * n_sim)
@@ -99,7 +102,8 @@ def plot_power_curve(
         if has_interaction:
             ax = axes.ravel()[1]
             totals = [sum(r.sizes.values()) for _, r in curve]
-            rates = [r.interaction for _, r in curve]
+            # every size of a curve with an interaction has its rate
+            rates = [math.nan if r.interaction is None else r.interaction for _, r in curve]
             low, high = monte_carlo_band(rates, n_sim)
             ax.fill_between(totals, low, high, color="black", alpha=0.15, lw=0)
             if first.interaction_is_power:

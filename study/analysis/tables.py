@@ -57,6 +57,7 @@ class Table:
     @property
     def display(self) -> pd.DataFrame:
         """The formatted cells as a pandas frame."""
+        # lazy: pandas costs 0.4 s at start-up
         import pandas as pd
 
         return pd.DataFrame(self.cells, columns=list(self.header))
@@ -492,6 +493,7 @@ def all_tables(analysis: Analysis) -> list[Table]:
 
 def design_checks_table(analysis: Analysis) -> Table:
     """The crossover's checks (`crossover`): one row per task, measure and effect."""
+    # lazy: study.analysis.crossover costs 4 ms at start-up
     from study.analysis.crossover import CHECK_COLUMNS
 
     header, cells = design_checks_cells(analysis.design_checks)

@@ -26,8 +26,16 @@ from typing import Any
 
 import numpy as np
 
-from teleop_core.calibration import FAMILIES, Calibrator, FollowerBase, MasterBase
+from teleop_core.calibration import FAMILIES, Calibrator, FollowerBase, MasterBase, NotesBase
 from teleop_core.calibration.synthetic import JND_N, follower_recording, master_recording
+from teleop_core.estimation.extended import ExtendedPhysics
+from teleop_core.follower import scenarios
+from teleop_core.follower.params import FollowerSensorParams
+from teleop_core.follower.plant import FollowerDrive
+from teleop_core.follower.sensors import acquire
+from teleop_core.notes.params import default_params
+from teleop_core.notes.recording import NotesRecording
+from teleop_core.notes.simulate import simulate_recording
 from teleop_core.progress import Progress, no_progress
 
 
@@ -72,13 +80,11 @@ def _run(effects: list[str], config: CalibrateBenchConfig, seed: int) -> dict[st
 
 def estimator_before_after(config: CalibrateBenchConfig) -> dict[str, Any]:
     """Calibrate a simulated drive recording and train the estimator with and without it."""
-    from teleop_core.estimation.estimator import train_estimator
-    from teleop_core.estimation.extended import ExtendedPhysics
+    # lazy: teleop_core.estimation.gru costs 11 ms at start-up
     from teleop_core.estimation.gru import GruConfig
-    from teleop_core.follower import scenarios
-    from teleop_core.follower.params import FollowerSensorParams
-    from teleop_core.follower.plant import FollowerDrive
-    from teleop_core.follower.sensors import acquire
+
+    # lazy: teleop_core.estimation.training costs 32 ms at start-up
+    from teleop_core.estimation.training import train_estimator
 
     rng = np.random.default_rng(config.seed)
     cmd, load = scenarios.teleoperation(config.estimator_duration_s, rng, max_load_n=1.6)
@@ -103,10 +109,6 @@ def estimator_before_after(config: CalibrateBenchConfig) -> dict[str, Any]:
 
 def notes_runs(config: CalibrateBenchConfig) -> dict[str, Any]:
     """Calibrate simulated clamped ramp and chirp runs of both NOTES axes."""
-    from teleop_core.calibration import NotesBase
-    from teleop_core.notes.params import default_params
-    from teleop_core.notes.recording import NotesRecording
-    from teleop_core.notes.simulate import simulate_recording
 
     runs = {}
     for dof in ("translation", "rotation"):
@@ -135,7 +137,10 @@ def run_calibrate_bench(
     only_open: bool = False,
 ) -> dict[str, Any]:
     """Run every part, write `calibrate_bench.md` and `calibrate.json` to `out_dir`."""
+    # lazy: study.bench.calibrate_open costs 5 ms at start-up
     from study.bench.calibrate_open import markdown as open_markdown
+
+    # lazy: study.bench.calibrate_open costs 5 ms at start-up
     from study.bench.calibrate_open import open_part
 
     say = progress

@@ -89,7 +89,7 @@ def plan(config: GeneraliseConfig) -> list[tuple[str, tuple[str, ...], int]]:
     for f in config.families:
         groups[f] = [(f,)] * config.per_family
     for k, count in ((2, config.mixtures_of_two), (3, config.mixtures_of_three)):
-        mixes = []
+        mixes: list[tuple[str, ...]] = []
         while len(mixes) < count:
             pick = tuple(sorted(rng.choice(config.families, size=k, replace=False).tolist()))
             if not ({"delay", "lag"} <= set(pick)):

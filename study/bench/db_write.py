@@ -42,7 +42,7 @@ class WriteBenchResult:
 
 
 @contextmanager
-def scratch_database(db: str | None) -> Iterator[Engine]:
+def scratch_database(db: str | URL | None) -> Iterator[Engine]:
     """A fresh study database: a temporary SQLite file when `db` is None, else a private
     schema on the PostgreSQL server `db` names (SQLite URLs are refused: the benchmark
     never writes into a real study file)."""

@@ -81,7 +81,7 @@ class ExportBenchResult:
         return asdict(self)
 
 
-def _columns(rng: np.random.Generator, n: int) -> dict[str, object]:
+def _columns(rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
     t = np.arange(n) / RATE_HZ
     names = np.array(["DAo", "arch", "AAo", "LSA", "LCCA", "BCT"], dtype=object)
     return {
@@ -152,9 +152,9 @@ def build_study(
                 writer.extend({k: v[lo : lo + int(RATE_HZ)] for k, v in columns.items()})
         writing += time.perf_counter() - start
         measures[trial_id] = {
-            "completion_time_s": float(columns["t_s"][-1]),  # type: ignore[index]
-            "peak_proximal_force_n": float(np.max(columns["proximal_force_n"])),  # type: ignore[call-overload]
-            "peak_distal_force_n": float(np.max(columns["distal_force_n"])),  # type: ignore[call-overload]
+            "completion_time_s": float(columns["t_s"][-1]),
+            "peak_proximal_force_n": float(np.max(columns["proximal_force_n"])),
+            "peak_distal_force_n": float(np.max(columns["distal_force_n"])),
         }
         written += int(n)
         progress("writing the study's samples", written, samples)
@@ -181,7 +181,7 @@ def _db_bytes(engine: Engine) -> int:
     with engine.connect() as conn:
         if is_sqlite(conn):
             conn.exec_driver_sql("PRAGMA wal_checkpoint(TRUNCATE)")
-            return Path(engine.url.database).stat().st_size
+            return Path(str(engine.url.database)).stat().st_size
         return int(conn.scalar(text("SELECT pg_total_relation_size('sample_chunks')")))
 
 

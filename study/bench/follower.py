@@ -47,11 +47,11 @@ from teleop_core.estimation.estimator import ForceEstimator, inputs_of
 from teleop_core.estimation.gru import GruConfig
 from teleop_core.estimation.gru_torch import train_gru
 from teleop_core.estimation.metrics import error_summary, tracking_score
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.training import train_estimator
 from teleop_core.follower import scenarios
 from teleop_core.follower.params import FollowerSensorParams
 from teleop_core.follower.plant import FollowerDrive
+from teleop_core.follower.recording import FollowerRecording
 from teleop_core.follower.sensors import acquire, decimation, reference_velocity
 from teleop_core.progress import Progress, no_progress
 
@@ -337,16 +337,16 @@ def run_follower_bench(
         report["generalisation"] = generalisation.run_generalisation(
             config.generalisation, out_dir, progress
         )
-    recording = None  # the training recording, simulated once for the parts that use it
     if {"tables", "training"} & set(config.parts):
+        # the training recording, simulated once for the parts that use it
         progress("simulating the training recording")
         recording = training_recording(config.train_seconds, config.seed)
-    if "tables" in config.parts:
-        run_tables(config, recording, out_dir, report, progress)
-    if "training" in config.parts:
-        report["training_time"] = training_time.run_training_time(
-            recording, config.epochs, config.seed, progress
-        )
+        if "tables" in config.parts:
+            run_tables(config, recording, out_dir, report, progress)
+        if "training" in config.parts:
+            report["training_time"] = training_time.run_training_time(
+                recording, config.epochs, config.seed, progress
+            )
     (out_dir / "follower_bench.md").write_text(markdown(report))
     (out_dir / "follower_bench.json").write_text(json.dumps(report, indent=2) + "\n")
     return report

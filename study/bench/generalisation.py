@@ -32,10 +32,11 @@ import numpy as np
 
 from teleop_core.calibration.synthetic import JND_N, follower_recording
 from teleop_core.estimation.estimator import ForceEstimator, inputs_of
+from teleop_core.estimation.extended import physics_force
 from teleop_core.estimation.gru import GruConfig, make_windows
 from teleop_core.estimation.metrics import rmse
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.training import train_estimator
+from teleop_core.follower.recording import FollowerRecording
 from teleop_core.progress import Progress, no_progress
 
 EFFECTS = ("stribeck", "hysteresis", "direction_asymmetry", "drift")
@@ -83,6 +84,7 @@ class WindowBaseline:
         self.seed = seed
 
     def fit(self, features: np.ndarray, residual: np.ndarray) -> WindowBaseline:
+        # lazy: sklearn.ensemble costs 0.3 s at start-up
         from sklearn.ensemble import HistGradientBoostingRegressor
 
         self.mean_ = features.mean(axis=0)
@@ -107,7 +109,6 @@ def baseline_estimate(
     estimator: ForceEstimator, train: FollowerRecording, test: FollowerRecording, seed: int
 ) -> np.ndarray:
     """physics + the baseline's residual over `test` (N), aligned with `predict`'s rows."""
-    from teleop_core.estimation.extended import physics_force
 
     T = estimator.window
     residual = train.f_ref - physics_force(estimator.physics, estimator.extension, train)

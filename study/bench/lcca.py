@@ -26,6 +26,8 @@ from typing import Any
 
 import matplotlib
 
+from study.protocol.tasks import get_task
+
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
@@ -33,7 +35,6 @@ import pandas as pd
 from scipy.stats import wilcoxon
 
 from study.analysis.figures import label_source
-from study.protocol.tasks import get_task
 from study.protocol.traits import GROUPS, simulated_participant
 from study.protocol.trial_run import simulate_trial
 from study.tasks.lcca.figures import CONDITION_COLORS, plot_tip_paths
@@ -156,8 +157,11 @@ def run_lcca_bench(
     # numba compiles here, outside the timing
     simulate_trial(lcca, expert, "HV", 0, 1.0, estimator=estimator, context=phantom)
     publisher = _publisher() if config.publish_lsl else None
-    rows, factors, paths = [], [], []
-    loop_walls, publish_walls = [], []
+    rows: list[dict[str, Any]] = []
+    factors: list[float] = []
+    paths: list[tuple[Any, str]] = []  # an outsider's trial: its frame and condition
+    loop_walls: list[float] = []
+    publish_walls: list[float] = []
     total = sum(config.group_sizes.values())
     k = 0
     for group, n in config.group_sizes.items():
@@ -193,7 +197,7 @@ def run_lcca_bench(
     # HV at zero gain against VO: the participants must not tell them apart
     progress("HV with haptic gain 0")
     gain_zero = _gain_zero(config, estimator, phantom)
-    report = {
+    report: dict[str, Any] = {
         "config": asdict(config),
         "groups": groups,
         "tests": tests,
@@ -234,7 +238,10 @@ def run_lcca_bench(
 
 
 def _publisher() -> Any:
+    # lazy: study.lsl.publish costs 10 ms at start-up
     from study.lsl.publish import Publisher
+
+    # lazy: study.protocol.observer costs 3 ms at start-up
     from study.protocol.observer import SessionInfo
 
     publisher = Publisher()
@@ -246,9 +253,11 @@ def _publish(publisher: Any, frame: pd.DataFrame, condition: str, k: int) -> flo
     """Publish one trial's samples in the session runner's steps (`STEP_S`); the wall
     time it took, s (the loop hands the session its rows as arrays: turning the trial's
     frame back into them is not timed)."""
+    # lazy: study.protocol.observer costs 3 ms at start-up
     from study.protocol.observer import TrialInfo
+
+    # lazy: study.protocol.session (with sqlalchemy) costs 0.4 s at start-up
     from study.protocol.session import STEP_S
-    from study.protocol.tasks import get_task
 
     task = get_task("lcca")
     names = [c.name for c in task.sample_columns]

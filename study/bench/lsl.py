@@ -65,7 +65,10 @@ def run_lsl_bench(
     config: LslBenchConfig, out_dir: Path, progress: Progress = no_progress
 ) -> dict[str, Any]:
     """Run the bench (module docstring); writes lsl_bench.json and .md to `out_dir`."""
+    # lazy: study.lsl.publish (with pandas, pyarrow, numpy) costs 0.3 s at start-up
     from study.lsl.publish import Publisher
+
+    # lazy: study.lsl.record (with pyarrow, sqlalchemy) costs 0.4 s at start-up
     from study.lsl.record import Recorder
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -90,7 +93,8 @@ def run_lsl_bench(
         try:
             if device.stdout is None or device.stdout.readline().strip() != "ready":
                 raise RuntimeError("the simulated instrument did not start")
-            origins, notices = Origins(), []
+            origins = Origins()
+            notices: list[str] = []
             recorder = Recorder(engine, (f"name='{name}'",), notices.append)
             progress(f"paced session: {config.trials} trials of {config.trial_s:g} s")
             start = time.monotonic()
@@ -130,8 +134,13 @@ def run_lsl_bench(
 
 def _scratch_study(folder: Path, trials: int) -> tuple[Any, str]:
     """A study of one novice with `trials` LCCA trials in a SQLite file in `folder`."""
+    # lazy: db.migrate (with sqlalchemy) costs 0.3 s at start-up
     from db.migrate import open_database
+
+    # lazy: study.protocol.design costs 17 ms at start-up
     from study.protocol.design import parse_design
+
+    # lazy: study.protocol.roster (with sqlalchemy) costs 0.3 s at start-up
     from study.protocol.roster import add_participant, create_study
 
     text = (
@@ -147,9 +156,16 @@ def _paced_session(
     engine: Any, code: str, config: LslBenchConfig, observers: list[SessionObserver]
 ) -> list[int]:
     """The participant's trials at real time, each ended after `config.trial_s`."""
+    # lazy: study.protocol.default_estimator (with pandas, pyarrow, numpy) costs 0.3 s at start-up
     from study.protocol.default_estimator import load_estimator
+
+    # lazy: study.protocol.session (with pandas, pyarrow, sqlalchemy) costs 0.7 s at start-up
     from study.protocol.session import participant_traits, run_session
+
+    # lazy: study.tasks.lcca.simulated_participant costs 38 ms at start-up
     from study.tasks.lcca.simulated_participant import SimulatedParticipant
+
+    # lazy: teleop_core.phantom.lcca costs 9 ms at start-up
     from teleop_core.phantom.lcca import LccaPhantom
 
     phantom = LccaPhantom()
@@ -168,10 +184,16 @@ def _paced_session(
 
 def _alignment(engine: Any, origins: Origins) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """Per stored stream: each sample's stored trial time minus where it belongs."""
+    # lazy: sqlalchemy costs 0.2 s at start-up
     from sqlalchemy import select
+
+    # lazy: sqlalchemy.orm costs 0.3 s at start-up
     from sqlalchemy.orm import Session
 
+    # lazy: db.lsl_streams (with pyarrow, sqlalchemy) costs 0.3 s at start-up
     from db.lsl_streams import read_stream
+
+    # lazy: db.models.lsl (with sqlalchemy) costs 0.3 s at start-up
     from db.models.lsl import LslStream
 
     with Session(engine) as s:

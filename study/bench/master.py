@@ -34,7 +34,8 @@ import numpy as np
 
 from study.analysis.figures import label_source
 from teleop_core.estimation.estimator import ForceEstimator
-from teleop_core.loop.core import LoopConfig, TeleopLoop
+from teleop_core.loop.config import LoopConfig
+from teleop_core.loop.core import TeleopLoop
 from teleop_core.loop.drivers import (
     GRIP_DAMPING_N_M_S_PER_RAD,
     Driver,

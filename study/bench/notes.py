@@ -90,9 +90,12 @@ TRIAL_MEASURES = (
 
 def notes_trials(config: NotesBenchConfig, progress: Progress) -> tuple[pd.DataFrame, float]:
     """`trials` simulated NOTES trials per group and condition; (measures, wall seconds)."""
+    # lazy: study.protocol.design costs 18 ms at start-up
     from study.protocol.design import KNOWN_CONDITIONS as CONDITIONS
     from study.protocol.design import MAX_TRIAL_S
     from study.protocol.tasks import get_task
+
+    # lazy: study.protocol.traits costs about 20 ms at start-up
     from study.protocol.traits import GROUPS, simulated_participant
     from study.protocol.trial_run import simulate_trial
 

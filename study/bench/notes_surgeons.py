@@ -73,6 +73,8 @@ def surgeons_trials(n: int, seed: int, progress: Progress = no_progress) -> pd.D
     seed); one row per trial with the measures of `PAPER`, completion and success."""
     from study.protocol.design import MAX_TRIAL_S
     from study.protocol.tasks import get_task
+
+    # lazy: study.protocol.traits costs about 20 ms at start-up
     from study.protocol.traits import simulated_participant
     from study.protocol.trial_run import simulate_trial
 

@@ -39,8 +39,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sqlalchemy import select
+from sqlalchemy.orm import Session
 
 from db.migrate import open_database
+from db.models.study import Participant, Study
 from study.analysis.participant_fit.coverage import coverage, typical_probe_se
 from study.analysis.participant_fit.emulator import MomentEmulator
 from study.analysis.participant_fit.estimate import HIGH, LOW, prior_arrays
@@ -352,10 +355,6 @@ def _probe_se(result: Any, probes: bool) -> dict[str, list[float]] | None:
 
 def _realized(engine: Any, model_path: Path) -> dict[str, dict[str, float]]:
     """Each group's mean of its study people's own traits (as the session drew them)."""
-    from sqlalchemy import select
-    from sqlalchemy.orm import Session
-
-    from db.models.study import Participant, Study
 
     model = load_model(model_path)
     with Session(engine) as session:

@@ -29,6 +29,7 @@ imports it in the subprocess it times.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import shutil
@@ -190,7 +191,6 @@ def _reference_insert(
     file `path` (the layout up to revision 0004; the writer now stores chunks): WAL,
     synchronous=FULL, one statement and one commit per 1,000 rows, 14 columns; foreign
     keys checked if `foreign_keys`."""
-    import itertools
 
     rows = len(columns["t_s"])
     conn = sqlite3.connect(path, isolation_level=None)
@@ -230,7 +230,10 @@ def _reference_insert(
 def bench_writer(rows: int, runs: int, rate_hz: float = 1000.0) -> WriterRatio:
     """The writer's rows/s and the plain sqlite3 reference's over the same rows, the two
     alternating, `runs` each (a fresh temporary SQLite file every time)."""
+    # lazy: db.models.trial (with sqlalchemy) costs 0.3 s at start-up
     from db.models.trial import SAMPLE_COLUMNS
+
+    # lazy: study.bench.db_write (with pyarrow, sqlalchemy, numpy) costs 0.4 s at start-up
     from study.bench.db_write import (
         bench_sample_write,
         scratch_database,
@@ -247,7 +250,7 @@ def bench_writer(rows: int, runs: int, rate_hz: float = 1000.0) -> WriterRatio:
         for foreign_keys, rates in reference.items():
             with scratch_database(None) as engine:
                 trial_id = scratch_trial(engine)
-                path = Path(engine.url.database)  # type: ignore[arg-type]
+                path = Path(str(engine.url.database))
                 engine.dispose()
                 seconds = _reference_insert(path, trial_id, columns, names, foreign_keys)
                 rates.append(rows / seconds)

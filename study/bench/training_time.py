@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from teleop_core.estimation.gru import GruConfig
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.estimation.training import train_estimator
+from teleop_core.follower.recording import FollowerRecording
 from teleop_core.progress import Progress
 
 TARGET_S = 600.0

@@ -170,7 +170,10 @@ def _drain_until_exit(proc: subprocess.Popen, master: int, timeout_s: float = 20
 def bench_tui(db_url: str, app_seconds: Callable[[str], float], runs: int = 5) -> TuiBenchResult:
     """`runs` starts of `study tui` on a terminal, and `runs` of the app's own part
     (`app_seconds(db_url)`: make_app to the overview, `study.tui.probes`)."""
+    # lazy: db.migrate (with sqlalchemy) costs 0.2 s at start-up
     from db.migrate import open_database
+
+    # lazy: study.protocol.roster (with sqlalchemy) costs 0.4 s at start-up
     from study.protocol.roster import schedule
 
     engine = open_database(db_url, create=False)

@@ -28,7 +28,10 @@ from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 
 from study.campaign.spec import CampaignSpec, Cell, unit_id
 from study.campaign.store import CampaignDir
+from study.campaign.unit import _estimator, run_unit
 from study.errors import StudyInputError
+from study.protocol.tasks import get_task
+from study.protocol.traits import simulated_participant
 
 CONNECT_TIMEOUT_S = 20.0
 """How long to wait for `--scheduler` before saying it cannot be reached."""
@@ -49,9 +52,6 @@ class WarmUp(WorkerPlugin):
 
 def warm_up(task: str) -> None:
     """One second of a trial of `task` (LCCA: numba compiles the kernel)."""
-    from study.campaign.unit import _estimator
-    from study.protocol.tasks import get_task
-    from study.protocol.traits import simulated_participant
     from study.protocol.trial_run import simulate_trial
 
     the_task = get_task(task)
@@ -62,7 +62,6 @@ def warm_up(task: str) -> None:
 
 def compute_unit(spec: CampaignSpec, cell: Cell, replicate: int) -> tuple[pd.DataFrame, float]:
     """The task a worker runs (a module-level function, so workers import it by name)."""
-    from study.campaign.unit import run_unit
 
     return run_unit(spec, cell, replicate)
 

@@ -36,6 +36,7 @@ FACTOR_LABELS = {
 
 def _measure_label(name: str) -> str:
     """The task's label of a measure (`study.protocol.tasks`), or its name."""
+    # lazy: study.protocol.tasks costs 7 ms at start-up
     from study.protocol.tasks import measure_named
 
     measure = measure_named(name)
@@ -155,7 +156,8 @@ def plot_factor(
 def draw_figures(summary: pd.DataFrame, factors: list[str], title: str, out: Path) -> list[Path]:
     """Every figure of a campaign as PDF and PNG in `out`; the paths written."""
     out.mkdir(parents=True, exist_ok=True)
-    swept = [f for f in factors if summary[f].nunique() > 1] or [None]
+    swept: list[str | None] = [f for f in factors if summary[f].nunique() > 1]
+    swept = swept or [None]  # nothing swept: one figure over the groups
     paths: list[Path] = []
     for x in swept:
         for kind in ("power", "effect"):

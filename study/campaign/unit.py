@@ -30,6 +30,7 @@ from study.analysis.comparisons import compare_conditions
 from study.analysis.paired import hedges_g_av
 from study.analysis.stats import ALPHA
 from study.campaign.spec import CampaignSpec, Cell, study_seed
+from study.protocol.default_estimator import load_estimator
 from study.protocol.design import KNOWN_CONDITIONS, StudyDesign, next_order
 from study.protocol.participant_effects import apply_effects, session_place
 from study.protocol.roster import CODE_DIGITS, plan_blocks
@@ -66,7 +67,6 @@ UNIT_COLUMNS = (
 @lru_cache(maxsize=1)
 def _estimator() -> ForceEstimator:
     """The shipped estimator, loaded once per worker process."""
-    from study.protocol.default_estimator import load_estimator
 
     return load_estimator()
 

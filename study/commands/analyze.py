@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from db.plain import plain_sqlite
 from study.analysis.source import DRIVERS
 from study.commands.base import StudyCommand, check_parent_folder, db_option
 from study.errors import StudyInputError
@@ -89,13 +90,18 @@ def analyze(
     Example:
       study analyze --out results/
     """
+    # lazy: study.analysis.means costs 9 ms at start-up
     from study.analysis.means import (
         choiceless_notes,
         participant_mean_rows,
         restrict_rows,
         tlx_measure_rows,
     )
+
+    # lazy: study.analysis.report (with numpy) costs 0.1 s at start-up
     from study.analysis.report import write
+
+    # lazy: study.analysis.stats (with numpy) costs 84 ms at start-up
     from study.analysis.stats import analyze_rows
 
     if json_path is not None:
@@ -143,7 +149,10 @@ def _usable_rows(
     """The trials and questionnaires to analyse (`_read`) without the withdrawn
     participants and the trials marked invalid, the notes saying who and which were
     left out, and the design's equivalence bounds."""
+    # lazy: study.analysis.means costs 9 ms at start-up
     from study.analysis.means import without_invalid_rows, without_withdrawn_rows
+
+    # lazy: study.analysis.paired (with numpy) costs 64 ms at start-up
     from study.analysis.paired import EquivalenceBounds
 
     trials, tlx, withdrawn_codes, invalid, analysis = _read(db_url)
@@ -159,8 +168,13 @@ def _usable_rows(
 def _probe_covariate(db_url: str | None, covariate: str) -> tuple[pd.DataFrame, str, pd.Series]:
     """The stored probe trials, and the trait `covariate` names with its estimate per
     participant (`covariate_values`)."""
+    # lazy: db.migrate (with sqlalchemy) costs 0.3 s at start-up
     from db.migrate import open_database
+
+    # lazy: study.analysis.covariate (with scipy, statsmodels, pandas) costs 1.2 s at start-up
     from study.analysis.covariate import covariate_values
+
+    # lazy: study.probes.store (with pandas, pyarrow, sqlalchemy) costs 0.7 s at start-up
     from study.probes.store import probe_frame
 
     engine = open_database(db_url, create=False)
@@ -193,12 +207,12 @@ def _echo_probe_drivers(covariate: str, probe_trials: pd.DataFrame) -> None:
     )
 
 
-def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:  # type: ignore[type-arg]
+def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:
     """The trials, questionnaires, withdrawn participants and trials marked invalid
     (`study_rows`): from an
     SQLite file at the current schema through `sqlite3` alone (`db.plain`), otherwise
     through `open_database` (which upgrades an older schema and serves PostgreSQL)."""
-    from db.plain import plain_sqlite
+    # lazy: study.protocol.study_rows costs 8 ms at start-up
     from study.protocol.study_rows import (
         design_analysis,
         invalid_rows,
@@ -207,7 +221,7 @@ def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], d
         withdrawn_rows,
     )
 
-    def rows(conn: Any) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:  # type: ignore[type-arg]
+    def rows(conn: Any) -> tuple[list[dict], list[dict], dict[str, str], dict, dict]:
         return (
             trial_rows(conn),
             tlx_rows(conn),
@@ -222,7 +236,10 @@ def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], d
             return rows(conn)
         finally:
             conn.close()
+    # lazy: db.migrate (with sqlalchemy) costs 0.3 s at start-up
     from db.migrate import open_database
+
+    # lazy: study.protocol.trial_table (with pandas, pyarrow, sqlalchemy) costs 0.5 s at start-up
     from study.protocol.trial_table import driver_connection
 
     engine = open_database(db_url, create=False)
@@ -233,10 +250,15 @@ def _read(db_url: str | None) -> tuple[list[dict], list[dict], dict[str, str], d
         engine.dispose()
 
 
-def _covariate(trials, values, trait: str, out_dir: Path) -> None:  # type: ignore[no-untyped-def]
+def _covariate(trials, values, trait: str, out_dir: Path) -> None:
     """The covariate's mixed model and ANCOVA-style table: written, and the table printed."""
+    # lazy: study.analysis.covariate (with scipy, statsmodels, pandas) costs 1.2 s at start-up
     from study.analysis.covariate import covariate_model
+
+    # lazy: study.protocol.tasks costs 6 ms at start-up
     from study.protocol.tasks import get_task
+
+    # lazy: teleop_core.files costs 5 ms at start-up
     from teleop_core.files import atomic_path
 
     measures = {t: get_task(t).analysed_measures for t in trials["task"].unique()}

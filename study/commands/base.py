@@ -3,6 +3,8 @@ input errors into one-line usage errors, and the common `--db` option."""
 
 from __future__ import annotations
 
+import json
+import math
 import re
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -12,8 +14,12 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from db.errors import DatabaseGoneError, DbInputError
-from study.errors import StudyInputError
+from db.failures import classify
+from study.commands.typed import strict_params
+from study.errors import ReasonNeeded, StudyInputError
+from study.protocol.free_text import OPT_OUT, NotPersonal, PersonalDataError
 from teleop_core.errors import TeleopInputError
+from teleop_core.progress import Heartbeat, describe
 
 if TYPE_CHECKING:
     from rich.console import Console
@@ -58,8 +64,8 @@ def database_failure(exc: BaseException, db_url: str | None = None) -> str | Non
         orig = exc
     else:
         return None
+    # lazy: db.engine (with sqlalchemy) costs 0.2 s at start-up
     from db.engine import describe, resolve_url
-    from db.failures import classify
 
     try:
         shown = describe(resolve_url(db_url))
@@ -115,7 +121,6 @@ def refuse_non_finite(ctx: click.Context) -> None:
     """StudyInputError for a number option given as nan or +-inf: click's FloatRange lets
     them through (nan compares False with both bounds), and no option of `study` means
     anything by them."""
-    import math
 
     for param in ctx.command.params:
         value = ctx.params.get(param.name or "")
@@ -155,7 +160,6 @@ def keep_lookalike_text(ctx: click.Context) -> None:
     looks like contact details (`NotPersonal`), which the free-text check keeps."""
     if not ctx.params.pop("not_personal", False):
         return
-    from study.protocol.free_text import NotPersonal
 
     for name in FREE_TEXT_PARAMS:
         if isinstance(ctx.params.get(name), str):
@@ -177,7 +181,6 @@ class StudyCommand(click.Command):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        from study.commands.typed import strict_params
 
         strict_params(self.params)
 
@@ -199,8 +202,6 @@ class StudyCommand(click.Command):
 def with_flag(exc: BaseException) -> str:
     """`exc`'s line with the command line's way out, where the package's message names
     none (it is shown by the terminal app too, which has its own fields)."""
-    from study.errors import ReasonNeeded
-    from study.protocol.free_text import OPT_OUT, PersonalDataError
 
     line = str(exc)
     if isinstance(exc, PersonalDataError):
@@ -265,6 +266,7 @@ def load_participants(path: Path | None, task: str | None = None) -> Participant
     """The model at `path` (one line and exit 2 if it is bad), or None."""
     if path is None:
         return None
+    # lazy: study.protocol.participant_model (with numpy) costs 0.1 s at start-up
     from study.protocol.participant_model import load_model
 
     return load_model(path, task)
@@ -302,9 +304,10 @@ def count_option(
 
 
 def positive_option(
-    flag: str, default: float, help: str | None = None, *, dest: str | None = None
+    flag: str, default: float | None, help: str | None = None, *, dest: str | None = None
 ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """An option taking a number above 0, its default shown."""
+    """An option taking a number above 0, its default shown (None: no default, and the
+    help says what applies without one)."""
     names = (flag, dest) if dest else (flag,)
     kind = click.FloatRange(min=0, min_open=True)
     return click.option(*names, type=kind, default=default, show_default=True, help=help)
@@ -335,7 +338,10 @@ def progress_bar(*columns: Any, transient: bool = True, console: Console | None 
     """The bar long commands show on stderr: by default what runs, k of n done, time
     remaining; `columns`: other Rich columns (Rich is imported only when a command shows
     it)."""
+    # lazy: rich.console costs 23 ms at start-up
     from rich.console import Console
+
+    # lazy: rich.progress costs 32 ms at start-up
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
 
     if not columns:
@@ -357,11 +363,13 @@ def progress_bar(*columns: Any, transient: bool = True, console: Console | None 
 def progress_status(text: str, console: Console | None = None) -> Status | LineStatus:
     """The spinner long commands show on stderr with the step `text`; where stderr is no
     terminal, a line every ten seconds with the latest step instead."""
+    # lazy: rich.console costs 23 ms at start-up
     from rich.console import Console
 
     console = console or Console(stderr=True)
     if console.is_terminal:
         return console.status(text)
+    # lazy: study.commands.progress_lines (with rich) costs 35 ms at start-up
     from study.commands.progress_lines import LineStatus
 
     return LineStatus(text, console)
@@ -384,7 +392,6 @@ def bar_progress(bar: Progress, task: TaskID, *, describe: bool = True) -> progr
 def status_progress(status: Status | LineStatus, prefix: str = "") -> progress.Progress:
     """The `teleop_core.progress.Progress` that shows each step on a Rich status line
     (`prefix`, then the step and its count), or that a `LineStatus` writes."""
-    from teleop_core.progress import Heartbeat, describe
 
     if isinstance(status, Heartbeat):
         return as_prefixed(status, prefix)
@@ -407,8 +414,8 @@ def as_prefixed(heartbeat: progress.Progress, prefix: str) -> progress.Progress:
 def write_json_atomically(data: dict[str, Any], path: Path) -> None:
     """JSON to `path` through a temporary sibling, so a failure leaves no partial file
     (numpy numbers are written as plain numbers)."""
-    import json
 
+    # lazy: teleop_core.files costs 5 ms at start-up
     from teleop_core.files import write_atomically
 
     write_atomically(path, json.dumps(data, indent=2, default=float) + "\n")
@@ -423,6 +430,7 @@ def check_parent_folder(path: Path) -> None:
 @contextmanager
 def opened_database(db_url: str | None) -> Iterator[Engine]:
     """The existing study database of `--db`, disposed of when the block ends."""
+    # lazy: db.migrate (with sqlalchemy) costs 0.3 s at start-up
     from db.migrate import open_database
 
     engine = open_database(db_url, create=False)

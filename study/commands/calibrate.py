@@ -55,7 +55,10 @@ def _base_model(
     """The base model of `model_name`; the rigid axis's with its derivative cutoff fitted
     on the training share and its axis from `units`, else from the recording's unit
     suffixes, else linear."""
+    # lazy: teleop_core.calibration (with scipy, statsmodels, pandas) costs 1.3 s at start-up
     from teleop_core.calibration import BASE_MODELS
+
+    # lazy: teleop_core.calibration.rigid_axis costs 1.3 s at start-up
     from teleop_core.calibration.rigid_axis import RigidAxisBase, recording_axis
 
     if recording.suffix.lower() == ".mat" and (model_name != "rigid-axis" or not mat_columns):
@@ -89,6 +92,7 @@ def run_calibration(
     """Read RECORDING for `model_name` (and each recording of `validate`, as RECORDING
     was read: all are refused before the loop runs) and run the loop with a progress
     display; the fitted model then predicts each of `validate` in full."""
+    # lazy: teleop_core.calibration (with scipy, statsmodels, pandas) costs 1.3 s at start-up
     from teleop_core.calibration import Calibrator
 
     model = _base_model(recording, model_name, held_out, mat_columns, units)
@@ -216,8 +220,10 @@ def calibrate(
     Example:
       study calibrate bench.csv --model follower     # writes bench-calibration/
     """
+    # lazy: pandas costs 0.4 s at start-up
     import pandas as pd
 
+    # lazy: study.analysis.calibration_figures costs 1.7 s at start-up
     from study.analysis.calibration_figures import (
         held_out_mask,
         overview_figures,
@@ -225,8 +231,12 @@ def calibrate(
         signal_labels,
         validation_figure,
     )
+
+    # lazy: teleop_core.calibration.verdict costs 1.3 s at start-up
     from teleop_core.calibration.verdict import quantities
-    from teleop_core.estimation.recording import write_csv_atomically
+
+    # lazy: teleop_core.follower.recording (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+    from teleop_core.follower.recording import write_csv_atomically
 
     out_dir, json_path, pred_path = output_paths(recording, out_dir, json_path, pred_path)
     calibrator = run_calibration(
@@ -297,6 +307,7 @@ def calibrate(
             f"{v['rmse_final']:.4f} {unit} (calibrated), fit {v['fit_percent']:.1f} % over "
             f"all {v['samples']} samples"
         )
+    # lazy: teleop_core.calibration.fitting costs 1.3 s at start-up
     from teleop_core.calibration.fitting import params_text
 
     for effect in report["effects_added"]:

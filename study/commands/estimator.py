@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,10 +19,11 @@ from study.commands.base import (
     progress_bar,
 )
 from study.errors import StudyInputError
+from teleop_core.errors import TeleopInputError
 
 if TYPE_CHECKING:
     from teleop_core.estimation.estimator import EstimateResult, ForceEstimator
-    from teleop_core.estimation.recording import FollowerRecording
+    from teleop_core.follower.recording import FollowerRecording
 
 _err = Console(stderr=True)
 
@@ -159,12 +161,22 @@ def train_cmd(
     Example:
       study estimator train bench.csv --out model/
     """
-    from teleop_core.errors import TeleopInputError
-    from teleop_core.estimation.estimator import train_estimator
+    # lazy: teleop_core.estimation.extended (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.estimation.extended import ExtendedPhysics
+
+    # lazy: teleop_core.estimation.gru (with numpy) costs 75 ms at start-up
     from teleop_core.estimation.gru import GruConfig
+
+    # lazy: teleop_core.estimation.memory (with numpy) costs 66 ms at start-up
     from teleop_core.estimation.memory import MemorySpec
-    from teleop_core.estimation.recording import FollowerRecording
+
+    # lazy: teleop_core.estimation.training (with scipy, pandas, pyarrow) costs 0.6 s at start-up
+    from teleop_core.estimation.training import train_estimator
+
+    # lazy: teleop_core.follower.recording (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+    from teleop_core.follower.recording import FollowerRecording
+
+    # lazy: teleop_core.recording_checks (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.recording_checks import check_varies
 
     if out_dir.exists() and any(out_dir.iterdir()) and not force:
@@ -180,15 +192,7 @@ def train_cmd(
     )
     validation = [(path, FollowerRecording.from_csv(path, min_rows=window)) for path in validate]
     extension = ExtendedPhysics.read(calibration) if calibration is not None else None
-    regularisation = {
-        k: v
-        for k, v in (
-            ("weight_decay", weight_decay),
-            ("dropout", dropout),
-            ("input_noise", input_noise),
-        )
-        if v is not None
-    }
+    defaults = GruConfig()
     config = GruConfig(
         window=window,
         hidden_size=hidden_size,
@@ -196,7 +200,9 @@ def train_cmd(
         max_epochs=epochs,
         patience=patience,
         memory=MemorySpec.parse(memory),
-        **regularisation,
+        weight_decay=defaults.weight_decay if weight_decay is None else weight_decay,
+        dropout=defaults.dropout if dropout is None else dropout,
+        input_noise=defaults.input_noise if input_noise is None else input_noise,
     )
     with progress_bar(
         TextColumn("training GRU"),
@@ -262,7 +268,10 @@ def _validation(
     stage, `rmse_final`: after the EKF, `fit_percent` of the final estimate,
     `samples`: the estimates, one per sample with a full window) and physics +
     residual stage's RMSE."""
+    # lazy: teleop_core.calibration.verdict costs 1.3 s at start-up
     from teleop_core.calibration.verdict import fit_percent
+
+    # lazy: teleop_core.estimation.metrics (with numpy) costs 64 ms at start-up
     from teleop_core.estimation.metrics import rmse
 
     result = model.predict(model.conform(recording))
@@ -306,9 +315,14 @@ def run_cmd(model_dir: Path, recording: Path, out_csv: Path) -> None:
     Example:
       study estimator run model/ bench.csv --out forces.csv
     """
+    # lazy: teleop_core.estimation.estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.estimation.estimator import ForceEstimator
+
+    # lazy: teleop_core.estimation.metrics (with numpy) costs 64 ms at start-up
     from teleop_core.estimation.metrics import rmse
-    from teleop_core.estimation.recording import FollowerRecording, write_csv_atomically
+
+    # lazy: teleop_core.follower.recording (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+    from teleop_core.follower.recording import FollowerRecording, write_csv_atomically
 
     model = ForceEstimator.load(model_dir)
     data = FollowerRecording.from_csv(recording, min_rows=model.window)
@@ -353,8 +367,8 @@ def _regimes_of(
     model_dir: Path, recording: FollowerRecording, result: EstimateResult
 ) -> dict[str, dict[str, float]]:
     """RMSE per regime label, with the thresholds the model was trained with (if kept)."""
-    import json
 
+    # lazy: teleop_core.estimation.regimes (with scipy, numpy) costs 0.3 s at start-up
     from teleop_core.estimation.regimes import RegimeRules, label_samples, regime_rmse
 
     rules = json.loads((model_dir / "summary.json").read_text()).get("regime_rules")

@@ -77,7 +77,7 @@ def import_cmd(
             check_not_stored(engine, probes, probes_csv)
         n_trials, n_tlx = import_data(engine, trials_csv, tlx_csv, actor, enrol_new=enrol_new)
         n_probes = 0
-        if probes is not None:
+        if probes_csv is not None and probes is not None:
             from study.probes.exchange import import_probes
 
             n_probes = import_probes(engine, probes_csv, probes)
@@ -177,7 +177,10 @@ def export_cmd(
     Example:
       study export --out export/ --samples
     """
+    # lazy: study.protocol.export (with pandas, pyarrow, sqlalchemy) costs 0.5 s at start-up
     from study.protocol.export import export_data
+
+    # lazy: study.protocol.sample_export (with pandas, pyarrow, sqlalchemy) costs 0.5 s at start-up
     from study.protocol.sample_export import SampleSelection
 
     selection = SampleSelection(participants, tasks, conditions, trials, from_s, to_s)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -46,10 +47,19 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
     Example:
       study identify notes chirp.csv --dof translation --json fit.json
     """
+    # lazy: teleop_core.files costs 4 ms at start-up
     from teleop_core.files import write_atomically
+
+    # lazy: teleop_core.notes.characterize (with scipy, pandas, pyarrow) costs 1.1 s at start-up
     from teleop_core.notes.characterize import identify_recording
+
+    # lazy: teleop_core.notes.params costs 6 ms at start-up
     from teleop_core.notes.params import default_params
+
+    # lazy: teleop_core.notes.recording (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.notes.recording import NotesRecording, NotesRecordingError
+
+    # lazy: teleop_core.recording_checks (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.recording_checks import check_varies
 
     check_parent_folder(json_path)
@@ -64,7 +74,7 @@ def notes(recording: Path, dof: str, json_path: Path, out_dir: Path | None) -> N
         NotesRecordingError,
     )
     found, chirp = identify_recording(rec, default_params(dof).linear, dof)
-    result = {"dof": dof, "recording": str(recording), **found}
+    result: dict[str, Any] = {"dof": dof, "recording": str(recording), **found}
     write_atomically(json_path, json.dumps(result, indent=2) + "\n")
     if out_dir is not None and chirp is not None:
         from study.analysis.figures import save

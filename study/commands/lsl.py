@@ -33,6 +33,7 @@ def import_xdf(xdf: Path, db_url: str | None) -> None:
     Example:
       study import-xdf session.xdf
     """
+    # lazy: study.lsl.xdf (with pyarrow, sqlalchemy, numpy) costs 0.2 s at start-up
     from study.lsl.xdf import import_xdf as run_import
 
     engine = open_database(db_url, create=False)
@@ -61,6 +62,7 @@ def lsl_config(path: Path) -> None:
     Example:
       study lsl-config lsl_api.cfg && export LSLAPICFG=$PWD/lsl_api.cfg
     """
+    # lazy: study.lsl.config costs 28 ms at start-up
     from study.lsl.config import write_loopback_config
 
     if path.exists() or path.is_symlink():

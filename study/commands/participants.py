@@ -19,11 +19,14 @@ from study.commands.base import (
     count_option,
     db_option,
     file_option,
+    opened_database,
     progress_bar,
 )
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
+    from rich.progress import TaskID
+
     from study.analysis.participant_fit.fit import FitResult
 
 
@@ -103,9 +106,13 @@ def fit(
     Example:
       study participants fit --out MODEL.json
     """
+    # lazy: db.engine (with sqlalchemy) costs 0.2 s at start-up
     from db.engine import describe, resolve_url
+
+    # lazy: study.analysis.participant_fit.fit (with scipy, sklearn, pandas) costs 1.7 s at start-up
     from study.analysis.participant_fit.fit import FitSettings, fit_study
-    from study.commands.base import opened_database
+
+    # lazy: study.protocol.tasks costs 6 ms at start-up
     from study.protocol.tasks import get_task
 
     get_task(task)  # an unknown task: one line before anything runs
@@ -123,7 +130,7 @@ def fit(
     )
     start = time.monotonic()
     with opened_database(db_url) as engine, progress_bar() as bar:
-        bars: dict[str, object] = {}
+        bars: dict[str, TaskID] = {}
 
         def progress(step: str, k: int = 0, n: int = 0) -> None:
             if step not in bars:
@@ -155,6 +162,7 @@ def fit(
 
 def _write(out_path: Path, result: FitResult, seconds: float) -> dict:
     """MODEL.png, then MODEL.json (by the fit's result), each written whole or not at all."""
+    # lazy: study.analysis.participant_fit.figure costs 2.1 s at start-up
     from study.analysis.participant_fit.figure import fit_figure
 
     source = result.data.source
@@ -164,6 +172,7 @@ def _write(out_path: Path, result: FitResult, seconds: float) -> dict:
         "simulated marks are SIMULATED people drawn from the fitted model"
     )
     png = out_path.with_suffix(".png")
+    # lazy: teleop_core.files costs 5 ms at start-up
     from teleop_core.files import atomic_path
 
     with atomic_path(png, suffix=".png") as tmp_png:
@@ -172,6 +181,7 @@ def _write(out_path: Path, result: FitResult, seconds: float) -> dict:
 
 
 def _print(model: dict, table: object) -> None:
+    # lazy: study.analysis.participant_fit.fit (with scipy, sklearn, pandas) costs 1.7 s at start-up
     from study.analysis.participant_fit.fit import dropped_text
 
     fits = model["fit"]

@@ -8,7 +8,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
+from click.core import ParameterSource
 
+from study.analysis.task_figures import trace_measure
 from study.commands.base import (
     SEED,
     StudyCommand,
@@ -21,6 +23,7 @@ from study.commands.base import (
 )
 from study.errors import StudyInputError
 from study.protocol.design import parse_design
+from study.protocol.tasks import get_task
 
 if TYPE_CHECKING:
     from study.protocol.participant_model import ParticipantModel
@@ -63,9 +66,6 @@ def _effects(text: str, groups: list[str]) -> dict[str, float]:
 
 def model_measure(model: ParticipantModel) -> str:
     """The measure whose effect `study power` takes from a model by default."""
-    from study.analysis.task_figures import trace_measure
-    from study.protocol.tasks import get_task
-
     return trace_measure(get_task(model.task))
 
 
@@ -73,7 +73,6 @@ def _model_effects(
     ctx: click.Context, model: ParticipantModel, groups: list[str], measure: str | None
 ) -> tuple[dict[str, float], float]:
     """The fitted model's standardised effect per group and its mean VO-HV correlation."""
-    from click.core import ParameterSource
 
     for name, option in (("effect", "--effect"), ("rho", "--correlation")):
         if ctx.get_parameter_source(name) is not ParameterSource.DEFAULT:
@@ -156,7 +155,10 @@ def power(
     Example:
       study power --design design.toml --n-sim 200
     """
+    # lazy: study.analysis.power (with scipy, numpy) costs 0.8 s at start-up
     from study.analysis.power import SCALES, power_curve
+
+    # lazy: study.protocol.csv_input (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.protocol.csv_input import read_text_file
 
     text = read_text_file(design_path, "design file", "a UTF-8 TOML file")
@@ -170,6 +172,7 @@ def power(
         task = bar.add_task("simulated studies", total=n_sim * len(SCALES))
         told = bar_progress(bar, task, describe=False)
         curve = power_curve(design.groups, effects, rho, n_sim, seed, told)
+    # lazy: study.analysis.power (with scipy, numpy) costs 0.8 s at start-up
     from study.analysis.power import CORRECTION, dz_of
 
     at_design = next(r for s, r in curve if s == 1.0)

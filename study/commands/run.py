@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+from sqlalchemy.orm import Session
 
 from db.migrate import open_database
 from study.commands.base import (
@@ -23,7 +24,9 @@ from study.commands.base import (
     progress_bar,
 )
 from study.errors import StudyInputError
-from study.protocol.roster import schedule
+from study.protocol.actor import current_actor
+from study.protocol.roster import load_study, schedule
+from study.protocol.stop_signals import stop_on_signals
 
 MIN_PACE, MAX_PACE = 0.01, 1000.0
 """--pace's range: a hundredth of real time (a 30 s trial in under an hour) to a thousand
@@ -114,10 +117,11 @@ def run(
           --drive-port /dev/ttyUSB1     # and the real drive ([sensors] in the design)
       study run --all     # every participant, simulated
     """
-    from study.protocol.actor import current_actor
+    # lazy: study.protocol.default_estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.protocol.default_estimator import load_estimator
+
+    # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.protocol.session import run_session
-    from study.protocol.stop_signals import stop_on_signals
 
     _check_options(code, run_all, pace, jobs)
     who = current_actor(actor)
@@ -138,6 +142,7 @@ def run(
         _lsl_notice(db_url)
         _run_all(db_url, jobs or 1, pace, who, participants_path)
         return
+    assert code is not None  # _check_options: --participant CODE without --all
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")
     if drive_port is not None and driver != "hardware":
@@ -151,17 +156,16 @@ def run(
             raise StudyInputError("--driver hardware needs --port, e.g. --port /dev/ttyUSB0")
         make_driver = _hardware_driver(port, drive_port, db_url)
 
+    # lazy: study.protocol.parallel (multiprocessing) costs 20 ms at start-up
+    from study.protocol.parallel import compile_loop_once
+
     estimator = load_estimator()
     engine = open_database(db_url, create=False)
     started: list[PendingTrial] = []
     try:
         with stop_on_signals() as stop, _progress() as progress:
             bar = progress.add_task(f"session {code}", total=None)
-            from teleop_core.loop import kernel
-
-            kernel.COMPILE_NOTICE = lambda m: progress.console.print(
-                f"study run: {m}", markup=False
-            )
+            compile_loop_once(lambda m: progress.console.print(f"study run: {m}", markup=False))
 
             def report(item, k, n) -> None:
                 started.append(item)
@@ -217,6 +221,7 @@ def _check_options(code: str | None, run_all: bool, pace: float | None, jobs: in
 def _with_end_notice(observer: SessionObserver | None, progress: Progress) -> SessionObserver:
     """`observer` and a line above the bar for each physical-phantom trial that reached
     the time limit (stored with success false: no one said the tip reached the target)."""
+    # lazy: study.protocol.observer costs 3 ms at start-up
     from study.protocol.observer import Observers, SessionObserver
 
     class EndNotice(SessionObserver):
@@ -267,6 +272,7 @@ def _hardware_driver(
     """Opens the units for each trial: the dial on `port`, and given `drive_port` the
     drive and the design's forces unit (refused, before anything runs, if the design
     names none)."""
+    # lazy: teleop_core.loop.hardware (with serial, numpy) costs 74 ms at start-up
     from teleop_core.loop.hardware import HardwareDriver, HardwareError
 
     sensors = None
@@ -305,10 +311,14 @@ def _hardware_driver(
 
 def _open_follower(drive_port: str, sensors: SensorSettings) -> PhysicalFollower:
     """The drive unit and the design's force sensors; one line if either fails."""
+    # lazy: teleop_core.loop.follower_units (with serial, numpy) costs 79 ms at start-up
     from teleop_core.loop.follower_units import PhysicalFollower
+
+    # lazy: teleop_core.loop.hardware (with serial, numpy) costs 74 ms at start-up
     from teleop_core.loop.hardware import HardwareError
 
     def open_stream() -> ForceSource:
+        # lazy: study.lsl.forces (with serial, numpy) costs 87 ms at start-up
         from study.lsl.forces import LslForces
 
         return LslForces(sensors.stream, sensors.proximal_channel, sensors.distal_channel)
@@ -342,6 +352,7 @@ def _stopped_line(code: str, stop: SignalStop, started: list[PendingTrial], done
 
 def _lsl_observers(engine: Engine, publish: bool, progress: Progress) -> SessionObserver | None:
     """The design's `[lsl]` streams (and --lsl's), their notices printed above the bar."""
+    # lazy: study.lsl.observers costs 4 ms at start-up
     from study.lsl.observers import session_observers
 
     design = _design(engine)
@@ -353,9 +364,6 @@ def _lsl_observers(engine: Engine, publish: bool, progress: Progress) -> Session
 
 
 def _design(engine: Engine) -> StudyDesign:
-    from sqlalchemy.orm import Session
-
-    from study.protocol.roster import load_study
 
     with Session(engine) as session:
         return load_study(session)[1]
@@ -384,6 +392,7 @@ def _lsl_notice(db_url: str | None) -> None:
 def _run_all(
     db_url: str | None, jobs: int, pace: float | None, actor: str, participants: Path | None
 ) -> None:
+    # lazy: study.protocol.parallel (multiprocessing) costs 20 ms at start-up
     from study.protocol.parallel import run_participants
 
     engine = open_database(db_url, create=False)

@@ -95,7 +95,7 @@ def simulate(
     from study.protocol.default_estimator import load_estimator
     from study.protocol.traits import simulated_participant
     from study.protocol.trial_run import simulate_trial
-    from teleop_core.estimation.recording import write_csv_atomically
+    from teleop_core.follower.recording import write_csv_atomically
 
     for path in (out_csv, plot_path):
         if path is not None and not path.parent.is_dir():
@@ -109,9 +109,9 @@ def simulate(
             f"--haptic-gain {haptic_gain:g} with VO; VO renders no haptic torque "
             "(expected the gain with HV only)"
         )
-    from teleop_core.loop import kernel
+    from study.protocol.parallel import compile_loop_once
 
-    kernel.COMPILE_NOTICE = lambda message: click.echo(f"study simulate: {message}", err=True)
+    compile_loop_once(lambda message: click.echo(f"study simulate: {message}", err=True))
     estimator = load_estimator(model_dir) if the_task.has_dial else None
     traits = simulated_participant(group, seed, model)
     if model is not None:

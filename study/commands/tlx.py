@@ -16,6 +16,7 @@ from study.commands.base import (
     not_personal_option,
     opened_database,
 )
+from study.commands.typed import comma_list
 from study.errors import StudyInputError
 from study.protocol.roster import load_study
 from study.protocol.tlx import pair_order, response_scores, scored_tlx, store_tlx
@@ -97,7 +98,6 @@ def enter_cmd(
       study tlx enter --participant P001 --task lcca --condition HV --mental 55 \
           --physical 30 --temporal 40 --performance 25 --effort 50 --frustration 20
     """
-    from study.commands.typed import comma_list
 
     chosen = comma_list("--choices", choices, unique=False) if choices is not None else None
     with opened_database(db_url) as engine:

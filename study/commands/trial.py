@@ -47,6 +47,7 @@ def trial_list(old_code: str | None, code: str | None, db_url: str | None) -> No
     Example:
       study trial list --participant P001
     """
+    # lazy: study.protocol.participant_record (with sqlalchemy) costs 0.4 s at start-up
     from study.protocol.participant_record import participant_record
 
     code = _participant(old_code, code)
@@ -86,6 +87,7 @@ def _participant(old_code: str | None, code: str | None) -> str:
 
 
 def _mark(trial_id: int, valid: bool, reason: str, actor: str | None, db_url: str | None) -> None:
+    # lazy: study.protocol.corrections (with sqlalchemy) costs 0.4 s at start-up
     from study.protocol.corrections import mark_trial
 
     with opened_database(db_url) as engine:

@@ -38,9 +38,16 @@ def tui(figures_dir: Path, pace: float | None, light: bool, lsl: bool, db_url: s
     Example:
       study tui --db lab.db
     """
+    # lazy: db.migrate (with sqlalchemy) costs 0.3 s at start-up
     from db.migrate import open_database
+
+    # lazy: study.tui (with sqlalchemy, textual, rich) costs 0.5 s at start-up
     from study.tui import StudyServices, TuiSettings, make_app
+
+    # lazy: study.tui.preferences (with sqlalchemy, textual, rich) costs 0.5 s at start-up
     from study.tui.preferences import RunChoices, load_run_choices, preferences_path
+
+    # lazy: study.tui.services (with sqlalchemy, textual, rich) costs 0.5 s at start-up
     from study.tui.services import calibrate_recording, load_shipped_estimator
 
     if lsl:

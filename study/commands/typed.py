@@ -18,10 +18,13 @@ one, with its bounds, its help text and its error message.
 from __future__ import annotations
 
 import re
+import stat
 from pathlib import Path
 from typing import Any
 
 import click
+
+from study.errors import StudyInputError
 
 WHOLE = re.compile(r"[+-]?[0-9]+")
 DECIMAL = re.compile(r"[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?")
@@ -106,7 +109,6 @@ class StrictPath(click.Path):
 
 def _kind(path: Path) -> str | None:
     """What `path` is (None: nothing there)."""
-    import stat
 
     try:
         mode = path.stat().st_mode
@@ -162,7 +164,6 @@ def comma_list(
     """The items of a comma-separated option value, each stripped: an empty item
     (`pdf,,png`, a trailing comma), an item not `allowed`, or (when `unique`) one given
     twice is refused with one line naming it."""
-    from study.errors import StudyInputError
 
     items = [item.strip() for item in text.split(",")]
     among = f" of {','.join(allowed)}" if allowed else ""

@@ -71,7 +71,9 @@ def use_config(path: Path) -> None:
 def read_config(path: Path) -> dict[str, dict[str, str]]:
     """A liblsl configuration file as {section: {key: value}} (INI, as liblsl reads it)."""
     parser = configparser.ConfigParser(inline_comment_prefixes=(";",))
-    parser.optionxform = str  # liblsl's keys are case sensitive
+    # liblsl's keys are case sensitive (typeshed declares optionxform a method, which
+    # configparser's documentation says to replace)
+    parser.optionxform = str  # type: ignore[assignment, method-assign]
     parser.read_string(path.read_text(encoding="utf-8"))
     return {s: dict(parser[s]) for s in parser.sections()}
 
@@ -97,6 +99,7 @@ def load_pylsl() -> ModuleType:
             f"{ENV}={path!r}; expected the path of a liblsl configuration file for this "
             "lab's network (`study lsl-config FILE` writes one that stays on this machine)"
         )
+    # lazy: pylsl costs 94 ms at start-up
     import pylsl
 
     return pylsl

@@ -44,6 +44,7 @@ def event_publisher(
     publisher's (`SUBSCRIBE_S` by default)."""
     if not (publish or design.lsl.publish):
         return None
+    # lazy: study.lsl.publish (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.lsl.publish import Publisher
 
     wait_s = SUBSCRIBE_S if wait_for_consumers_s is None else wait_for_consumers_s

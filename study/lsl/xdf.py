@@ -23,6 +23,7 @@ for that reason.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import struct
@@ -171,7 +172,6 @@ def _check_fields(path: Path, t: float, marker: dict[str, Any]) -> None:
 
 
 def _shown(value: Any) -> str:
-    import json
 
     text = json.dumps(value, ensure_ascii=True)
     return text if len(text) <= 40 else text[:37] + "..."
@@ -193,11 +193,11 @@ def marked_trials(
     for i, stream in enumerate(streams):
         if _info(stream, "channel_format") != "string":
             continue
-        ours = [
+        parsed = [
             (float(t), parse(str(v[0]) if len(v) else ""))
             for t, v in zip(stream["time_stamps"], stream["time_series"], strict=True)
         ]
-        ours = [(t, m) for t, m in ours if m is not None]
+        ours = [(t, m) for t, m in parsed if m is not None]
         if ours:
             marker_streams.add(i)
             found += ours
@@ -276,6 +276,7 @@ def _load(path: Path) -> list[dict[str, Any]]:
     """The recording's streams as pyxdf reads them, or one line if pyxdf could read only
     part of it: an error it logged (a stream whose data do not fit its header), or a
     stream with fewer samples than its footer counts."""
+    # lazy: pyxdf costs 5 ms at start-up
     import pyxdf
 
     logger = logging.getLogger("pyxdf")

@@ -41,6 +41,7 @@ _LOADED = _ENTRY_POINTS_LOADED = False
 
 def register(probe: Probe) -> Probe:
     """Add `probe` to the registry (replacing one of the same name); returns it."""
+    # here, not at the top: importing study.probes.base imports this module
     from study.probes.base import Probe
 
     name = getattr(probe, "name", "")

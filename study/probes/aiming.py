@@ -73,7 +73,10 @@ class Aiming:
         )
         if len(errors) < 5:
             return None
+        # lazy: scipy.optimize costs 0.4 s at start-up
         from scipy.optimize import minimize_scalar
+
+        # lazy: scipy.stats costs 0.7 s at start-up
         from scipy.stats import norm
 
         lapse = LAPSE_RATE

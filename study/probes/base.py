@@ -25,6 +25,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from teleop_core._typing import Float1D
+
 DEVICE_COLUMNS = ("t_s", "dial_angle_rad", "rotation_rad", "button")
 """A hardware probe trial's samples, one row each (`Probe.from_device`): time since the
 stimulus, s; the dial's angle and the rotation joystick's, rad; the confirm button (0/1)."""
@@ -146,7 +148,7 @@ class Probe(Protocol):
 class FixedProcedure:
     """A procedure whose stimuli are drawn up front (the non-adaptive probes)."""
 
-    def __init__(self, stimuli: Sequence[float]) -> None:
+    def __init__(self, stimuli: Sequence[float] | Float1D) -> None:
         self._stimuli = list(stimuli)
         self._k = 0
 

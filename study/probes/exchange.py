@@ -106,7 +106,7 @@ def read_probe_file(path: Path) -> list[dict]:
         if not (r["probe_trial"].isdigit() and 1 <= int(r["probe_trial"]) <= 100000):
             p.add(i, "probe_trial", f"{r['probe_trial']!r}; expected a whole number from 1")
             continue
-        values = {}
+        values: dict[str, float | None] = {}
         for column in ("stimulus", "response"):
             cell = r[column]
             if cell == "":
@@ -211,6 +211,7 @@ def store_imported(session: Session, rows: list[dict], path: Path) -> int:
 
 def import_probes(engine: Engine, path: Path, rows: list[dict]) -> int:
     """Store the checked `rows` in one transaction."""
+    # lazy: db.engine costs 5 ms at start-up
     from db.engine import write_transaction
 
     with write_transaction(engine) as conn, Session(bind=conn) as session:

@@ -50,6 +50,7 @@ PAPER_GAIN_N_M_PER_N = 0.02
 
 
 def _quest(stimuli: np.ndarray = STIMULI_N) -> Any:
+    # lazy: questplus costs 0.4 s at start-up
     from questplus import QuestPlus
 
     return QuestPlus(

@@ -42,6 +42,7 @@ PROBE_COLUMNS = (
 def probe_context(design: StudyDesign) -> dict[str, float]:
     """The settings every probe trial of the study runs with: the dial's HV gain (the
     paper's when the design names none)."""
+    # lazy: teleop_core.master.params costs 4 ms at start-up
     from teleop_core.master.params import HapticParams
 
     gain = design.haptic_gain_for("HV")
@@ -90,6 +91,7 @@ def run_participant_probes(
     from `model`, a `ParticipantModel`, when the trials were). `observer` is told each
     probe trial as it is answered (a `probe` event: the participant's keys, the probe, the
     trial's index, stimulus, response and whether it was correct)."""
+    # lazy: study.protocol.session costs 59 ms at start-up
     from study.protocol.session import participant_traits
 
     with Session(engine) as session:

@@ -3,8 +3,10 @@ spreadsheet numbers it: the header is row 1), the column and what was expected."
 
 from __future__ import annotations
 
+import csv
 import math
 import re
+import stat
 from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +15,7 @@ import pandas as pd
 
 from study.errors import StudyInputError
 from study.protocol.export_files import unescape_cell
+from teleop_core.recording_checks import MAX_LINE_BYTES, longest_line_over
 
 DECIMAL = re.compile(r"^[+-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][+-]?[0-9]+)?$")
 WHOLE = re.compile(r"^[+-]?[0-9]+$")
@@ -56,7 +59,6 @@ def read_csv(
     `text_columns` unescaped as an export escaped them."""
     if not path.is_file():
         raise StudyInputError(f"{path} does not exist")
-    from teleop_core.recording_checks import MAX_LINE_BYTES, longest_line_over
 
     long_line = longest_line_over(path, MAX_LINE_BYTES)
     if long_line is not None:
@@ -95,7 +97,6 @@ def _check_shape(path: Path) -> None:
     """A header without repeated names, and every row with one field per header column:
     pandas renames a repeated column ('success.1') and shifts a row with extra fields
     into an index, so both are looked at in the file itself."""
-    import csv
 
     with path.open(newline="", encoding="utf-8") as f:
         reader = csv.reader(f)
@@ -150,7 +151,6 @@ def read_text_file(
 ) -> str:
     """The UTF-8 text of the regular file at `path`, read at most `max_bytes` far (a
     device or a named pipe would block or never end), or one line naming the file."""
-    import stat
 
     try:
         mode = path.stat().st_mode

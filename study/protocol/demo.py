@@ -8,6 +8,7 @@ analysis and the figures.
 
 from __future__ import annotations
 
+import json
 import re
 import zlib
 from collections.abc import Callable
@@ -18,9 +19,10 @@ from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
 from db.migrate import open_database
-from db.models.study import Participant
+from db.models.study import Participant, Study
 from db.models.tlx import TlxResponse
 from db.models.trial import Trial
+from study.errors import StudyInputError
 from study.protocol.demo_marks import COMPLETE, STARTED, demo_state, mark_demo
 from study.protocol.design import TEMPLATE, StudyDesign, parse_design
 from study.protocol.parallel import Workers, start_workers
@@ -183,7 +185,6 @@ def run_demo(
 def _options(
     seed: int, quick: bool, sizes: dict[str, int] | None, trials_per_condition: int | None
 ) -> str:
-    import json
 
     return json.dumps(
         {"seed": seed, "quick": quick, "sizes": sizes, "trials_per_condition": trials_per_condition}
@@ -199,8 +200,6 @@ def check_resumable(
 ) -> None:
     """StudyInputError unless the database is new, or holds an incomplete demo started
     with these options (then `run_demo` goes on with it)."""
-    from db.models.study import Study
-    from study.errors import StudyInputError
 
     state = demo_state(engine)
     if state is None:

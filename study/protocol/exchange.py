@@ -39,6 +39,7 @@ text is exported with a leading single quote, which an import removes again.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import re
@@ -56,6 +57,7 @@ from db.models.study import CODE_PATTERN, Participant, ScheduleBlock
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import Trial, TrialMeasure
 from study.errors import StudyInputError
+from study.protocol.actor import current_actor
 from study.protocol.csv_input import BOOL, DECIMAL, Problems, number, read_csv
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.roster import load_study, plan_blocks
@@ -405,7 +407,6 @@ def _check_enrolled(rows: list[dict[str, Any]], existing: Iterable[str], source:
 
 
 def _file_hash(path: Path) -> str:
-    import hashlib
 
     digest = hashlib.sha256()
     with path.open("rb") as f:
@@ -428,7 +429,6 @@ def import_data(
     `enrol_new`: then one first seen here is enrolled with the design's schedule
     (conditions in the design's order), so `study run` runs the blocks and trials the
     file did not hold."""
-    from study.protocol.actor import current_actor
 
     who = current_actor(actor)
     with Session(engine) as session:

@@ -36,8 +36,9 @@ from study.protocol.stream_export import (
     collect_streams,
     write_streams,
 )
+from study.protocol.study_rows import invalid_rows, withdrawn_rows
 from study.protocol.tasks import COMPLETION_TIME, SampleColumn, get_task
-from study.protocol.trial_table import measure_columns, trial_frame
+from study.protocol.trial_table import driver_connection, measure_columns, trial_frame
 from teleop_core.progress import Progress, no_progress
 
 if TYPE_CHECKING:
@@ -125,6 +126,7 @@ def export_data(
     (default: one per CPU, at most 4). Every file is written under a temporary
     name and renamed only once all of them are complete.
     """
+    # lazy: study.protocol.sample_export costs 11 ms at start-up
     from study.protocol.sample_export import SampleSelection, select_trials
 
     if fmt not in ("csv", "parquet"):
@@ -200,7 +202,10 @@ def _frames(
     engine: Engine, tasks: tuple[str, ...], tlx_rows: list[dict[str, object]]
 ) -> dict[str, pd.DataFrame]:
     """The trials and TLX tables (and the probes' trials, if the study ran probes)."""
+    # lazy: study.probes.exchange costs 3 ms at start-up
     from study.probes.exchange import export_frame
+
+    # lazy: study.probes.store costs 8 ms at start-up
     from study.probes.store import probe_frame
 
     trials = trial_frame(engine, tasks)
@@ -222,8 +227,6 @@ def _provenance(
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The trials and questionnaires with `PROVENANCE_COLUMNS` (and the questionnaires'
     `TLX_PROVENANCE_COLUMNS`): what the analysis needs besides the numbers."""
-    from study.protocol.study_rows import invalid_rows, withdrawn_rows
-    from study.protocol.trial_table import driver_connection
 
     with driver_connection(engine) as conn:
         withdrawn = withdrawn_rows(conn)
@@ -272,7 +275,10 @@ def _codebook_frame(
 ) -> pd.DataFrame:
     """One row (column, unit, meaning) per column of the files written, in the
     codebook's order."""
+    # lazy: study.probes.exchange costs 3 ms at start-up
     from study.probes.exchange import codebook as probe_codebook
+
+    # lazy: study.protocol.sample_export costs 11 ms at start-up
     from study.protocol.sample_export import sample_export_columns
 
     columns = [c for f in frames.values() for c in f.columns]
@@ -319,6 +325,7 @@ def _write_sample_files(
     tasks: tuple[str, ...],
 ) -> list[Path]:
     """The samples file (or, `per_trial`, the files under `samples/`, written and kept)."""
+    # lazy: study.protocol.sample_export costs 11 ms at start-up
     from study.protocol.sample_export import write_samples, write_samples_per_trial
 
     if per_trial:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import importlib
 import multiprocessing
 import os
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -61,7 +62,10 @@ def _worker_init(
     participants: str | None = None,
     durable: bool = True,
 ) -> None:
+    # lazy: study.protocol.default_estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.protocol.default_estimator import load_estimator
+
+    # lazy: study.protocol.participant_model (with numpy) costs 0.1 s at start-up
     from study.protocol.participant_model import load_model
 
     importlib.import_module("study.protocol.session")  # here, not at the first session
@@ -94,6 +98,7 @@ def _worker_engine() -> Any:
 
 
 def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
+    # lazy: study.protocol.session (with pandas, pyarrow, sqlalchemy) costs 0.8 s at start-up
     from study.protocol.session import run_session
 
     idle: threading.Event = _WORKER["idle"]  # type: ignore[assignment]
@@ -123,7 +128,6 @@ def quiet_resource_tracker() -> None:
     -W options) unlinks the pool's semaphores then, which is its job after a crash, but
     its warning told the person who killed `study run` nothing they could act on. Set
     before the pool starts the tracker; the cleanup itself is unchanged."""
-    import sys
 
     if TRACKER_WARNING not in sys.warnoptions:
         sys.warnoptions.append(TRACKER_WARNING)
@@ -134,7 +138,10 @@ def compile_loop_once(notice: Callable[[str], None] | None = None) -> bool:
     install, or after an upgrade), say so through `notice` and compile it here, once,
     before any worker starts: the workers then load it instead of each compiling it at
     the same time. Returns whether it compiled."""
+    # lazy: teleop_core.loop (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from teleop_core.loop import kernel
+
+    # lazy: teleop_core.phantom.lcca (with numpy) costs 82 ms at start-up
     from teleop_core.phantom.lcca import lcca_phantom
 
     if not kernel.needs_compiling(lcca_phantom):
@@ -202,6 +209,7 @@ class Workers:
     ) -> Iterator[tuple[str, int]]:
         """Run the sessions of `codes`; yield (code, trials) as each finishes (see
         `run_participants`)."""
+        # lazy: study.protocol.lease (with sqlalchemy) costs 0.3 s at start-up
         from study.protocol.lease import SessionBusyError
 
         def busy(code: str, exc: SessionBusyError) -> tuple[str, int]:
@@ -284,8 +292,10 @@ def _checkpoint(db_url: str) -> None:
     database's write-ahead log full: fold it into the database file
     (`db.engine.checkpoint`), so the file alone holds every trial. A database that
     cannot be opened now (never created, or gone) is left to the error that says so."""
+    # lazy: sqlalchemy.exc costs 0.2 s at start-up
     from sqlalchemy.exc import OperationalError
 
+    # lazy: db.engine (with sqlalchemy) costs 0.2 s at start-up
     from db.engine import checkpoint, make_engine, resolve_url
 
     engine = make_engine(resolve_url(db_url))

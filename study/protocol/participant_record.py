@@ -22,6 +22,7 @@ from db.models.tlx import TlxResponse
 from db.models.trial import Trial
 from study.protocol.orphans import gone_sessions
 from study.protocol.roster import find_participant, load_study
+from study.protocol.tasks import get_task
 
 __all__ = ["BlockRow", "NoteRow", "ParticipantRecord", "TrialRow", "participant_record"]
 
@@ -95,7 +96,6 @@ class ParticipantRecord:
 def _in_task_order(task: str, values: dict[str, float]) -> dict[str, float]:
     """`values` in the order the task declares its measures (a task this version does not
     know: as stored)."""
-    from study.protocol.tasks import get_task
 
     try:
         names = [m.name for m in get_task(task).all_measures]

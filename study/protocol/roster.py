@@ -20,6 +20,7 @@ from db.models.audit import AuditEntry
 from db.models.study import CODE_PATTERN, Participant, ScheduleBlock, Study
 from db.models.trial import Trial
 from study.errors import StudyInputError
+from study.protocol.actor import current_actor
 from study.protocol.design import StudyDesign, next_order
 from study.protocol.orphans import gone_sessions
 
@@ -129,7 +130,6 @@ def enrol(
     """Enrol the next `count` participants of `group` in one transaction (all or none),
     each with an audit row (group, site, condition order, who). Refused when it would take
     the group past its target in the design, unless `beyond_target` (a replacement)."""
-    from study.protocol.actor import current_actor
 
     who = current_actor(actor)
     with write_transaction(engine) as conn, Session(bind=conn) as session:

@@ -17,6 +17,7 @@ and `analysis.frames` build their frames from these rows.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable
 from typing import Any
 
@@ -101,7 +102,6 @@ def trial_end(summary: Any) -> str | None:
 def _decoded(summary: Any) -> Any:
     """The stored JSON summary, as text (SQLite) or decoded (PostgreSQL); None if it is
     no JSON."""
-    import json
 
     if isinstance(summary, str | bytes):
         try:
@@ -168,7 +168,6 @@ def tlx_rows(conn: Any) -> list[dict[str, Any]]:
 
 def design_analysis(conn: Any) -> dict[str, Any]:
     """The stored design's `[analysis]` table ({} when it has none)."""
-    import json
 
     rows = _query(conn, DESIGN_SQL)
     if not rows:

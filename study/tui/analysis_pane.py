@@ -118,7 +118,7 @@ class AnalysisPane(SafeWorkers, Vertical):
             yield Label(" Figures to ")
             # select_on_focus off: Tab into the field and a key no longer replaces the path
             yield Input(str(self.figures_dir), id="out-dir", compact=True, select_on_focus=False)
-        table = DataTable(id="comparisons", zebra_stripes=True, cursor_type="row")
+        table: DataTable[str] = DataTable(id="comparisons", zebra_stripes=True, cursor_type="row")
         table.add_columns(*COLUMNS)
         yield table
         yield Static("", id="chart")
@@ -213,6 +213,7 @@ class AnalysisPane(SafeWorkers, Vertical):
 
     def action_notes(self) -> None:
         """The exclusions, the analysis's notes and the mixed ANOVA, over the screen."""
+        # lazy: study.tui.confirm costs 4 ms at start-up
         from study.tui.confirm import TextScreen
 
         if self.result is None:

@@ -28,7 +28,7 @@ from textual.binding import Binding, BindingType
 from textual.css.query import NoMatches
 from textual.message import Message
 from textual.widget import Widget
-from textual.widgets import Footer, TabbedContent, TabPane
+from textual.widgets import Footer, Input, Select, SelectionList, TabbedContent, TabPane
 
 from study.tui.db_errors import SafeWorkers
 from study.tui.overview import OverviewPane
@@ -153,9 +153,17 @@ class StudyApp(SafeWorkers, App[None]):
         # imported here, not at the top: the run screen alone pulls in the teleoperation
         # core, and none of them is needed for the first paint (`study bench tui`)
         from study.tui.analysis_pane import AnalysisPane
+
+        # here, not at the top: importing study.tui.calibration_pane imports this module
         from study.tui.calibration_pane import CalibrationPane
+
+        # here, not at the top: importing study.tui.participants imports this module
         from study.tui.participants import ParticipantsPane
+
+        # here, not at the top: importing study.tui.run_pane imports this module
         from study.tui.run_pane import RunPane
+
+        # here, not at the top: importing study.tui.tlx_pane imports this module
         from study.tui.tlx_pane import TlxPane
 
         return {
@@ -316,6 +324,7 @@ class StudyApp(SafeWorkers, App[None]):
 
     def open_participant(self, code: str) -> ParticipantPage:
         """`code`'s page over the screens (`study.tui.participant_page`); Esc comes back."""
+        # here, not at the top: importing study.tui.participant_page imports this module
         from study.tui.participant_page import ParticipantPage
 
         groups = list(self.roster.groups) if self.roster is not None else []
@@ -415,8 +424,8 @@ class StudyApp(SafeWorkers, App[None]):
 
 
 def _is_form_field(widget: Widget) -> bool:
-    from textual.widgets import Input, Select, SelectionList
 
+    # here, not at the top: importing study.tui.tlx_pane imports this module
     from study.tui.tlx_pane import PairChoice
 
     chain = [widget, *widget.ancestors]

@@ -22,6 +22,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import DataTable, Input, Label, Select, Static
 
+from study.protocol.calibrations import list_calibrations, store_calibration
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import StudyServices
 from teleop_core.progress import describe
@@ -106,11 +107,11 @@ class CalibrationPane(SafeWorkers, Vertical):
             else "ctrl+r: run the calibration loop on the recording",
             id="calib-summary",
         )
-        table = DataTable(id="effects", zebra_stripes=True, cursor_type="row")
+        table: DataTable[str] = DataTable(id="effects", zebra_stripes=True, cursor_type="row")
         table.add_columns("step", "effect added", "held-out RMSE (N)", "parameters")
         yield table
         yield Label("Stored calibrations (newest first)")
-        stored = DataTable(id="stored", zebra_stripes=True, cursor_type="row")
+        stored: DataTable[str] = DataTable(id="stored", zebra_stripes=True, cursor_type="row")
         stored.add_columns(
             "id", "when (UTC)", "model", "recording", "RMSE before -> after", "verdict"
         )
@@ -121,7 +122,6 @@ class CalibrationPane(SafeWorkers, Vertical):
 
     @work(thread=True, exclusive=True, group="calibrations", exit_on_error=False)
     def _list(self) -> None:
-        from study.protocol.calibrations import list_calibrations
 
         self.post_message(self.Listed(list_calibrations(self.services.engine)))
 
@@ -174,7 +174,6 @@ class CalibrationPane(SafeWorkers, Vertical):
             self.app.call_from_thread(self._summary, f"refused: {exc}")
             return
         self.post_message(self.Done(report))
-        from study.protocol.calibrations import list_calibrations, store_calibration
 
         calibration_id, stored_at = store_calibration(
             self.services.engine, model, path, report, self.out_dir

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 from textual.worker import Worker, WorkerState
 
 # (what the driver's message contains, what the user reads): the first match wins
@@ -63,7 +64,6 @@ def plain_line(error: BaseException | None) -> str:
     """One line for the status bar: the cause and what to do."""
     if error is None:
         return "the operation failed for an unknown reason"
-    from sqlalchemy.exc import DBAPIError, SQLAlchemyError
 
     if isinstance(error, SQLAlchemyError):
         orig = error.orig if isinstance(error, DBAPIError) else None

@@ -55,7 +55,7 @@ class OverviewPane(OpsMixin, Vertical, can_focus=True):
 
     def compose(self) -> ComposeResult:
         yield Static("loading the study...", id="study-title")
-        table = DataTable(id="groups", cursor_type="row", zebra_stripes=True)
+        table: DataTable[str] = DataTable(id="groups", cursor_type="row", zebra_stripes=True)
         table.add_columns("group", "enrolled", "target", "fill")
         yield table
         yield Static("", id="progress")

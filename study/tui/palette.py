@@ -21,6 +21,7 @@ from functools import partial
 from typing import Any
 
 from textual.command import DiscoveryHit, Hit, Hits, Provider
+from textual.widgets import DataTable, Input, Select
 
 __all__ = ["StudyCommands", "study_commands"]
 
@@ -32,6 +33,7 @@ StudyApp = Any
 
 def study_commands(app: StudyApp) -> list[Command]:
     """The palette's commands for the app as it stands."""
+    # here, not at the top: importing study.tui.tabs imports this module
     from study.tui.tabs import TABS, TITLES
 
     out: list[Command] = [
@@ -96,6 +98,7 @@ def study_commands(app: StudyApp) -> list[Command]:
 
 def _screen_keys(app: StudyApp) -> Iterator[Command]:
     """Every key a later screen shows in its footer, run on that screen."""
+    # here, not at the top: importing study.tui.tabs imports this module
     from study.tui.tabs import TABS, TITLES
 
     for k, tab in enumerate(TABS[1:], start=1):
@@ -125,7 +128,6 @@ async def _run_key(app: StudyApp, tab: str, action: str) -> None:
 
 def enrol(app: StudyApp, group: str) -> None:
     """Enrol one more participant in `group`, as F2 then `a` does (asked past its target)."""
-    from textual.widgets import Select
 
     app.action_tab("participants")
     pane: Any = app._pane("participants")
@@ -153,7 +155,6 @@ def note(app: StudyApp, code: str) -> None:
 
 def withdraw(app: StudyApp, code: str) -> None:
     """The participants list on `code`, and the withdrawal's question."""
-    from textual.widgets import DataTable, Input
 
     app.action_tab("participants")
     pane: Any = app._pane("participants")
@@ -169,7 +170,7 @@ class StudyCommands(Provider):
     """The app's own commands in the palette (see the module docstring)."""
 
     def _commands(self) -> list[Command]:
-        return study_commands(self.app)  # type: ignore[arg-type]
+        return study_commands(self.app)
 
     async def discover(self) -> Hits:
         for name, help_text, callback in self._commands():

@@ -163,7 +163,7 @@ class ParticipantPage(SafeWorkers, Screen[None]):
         yield Label(f"{self.code}: loading...", id="who")
         yield Static("", id="schedule", markup=False)
         yield Static("", id="probes", markup=False)
-        table = DataTable(id="trials", cursor_type="row", zebra_stripes=True)
+        table: DataTable[str] = DataTable(id="trials", cursor_type="row", zebra_stripes=True)
         table.add_columns(
             "id", "block", "trial", "att", "status", "time s", "ok", "peaks N", "valid"
         )
@@ -249,6 +249,7 @@ class ParticipantPage(SafeWorkers, Screen[None]):
     # -- corrections ----------------------------------------------------------------------
 
     def _ask(self, question: str, then, value: str = "", placeholder: str = "reason") -> None:
+        # lazy: study.tui.confirm costs 4 ms at start-up
         from study.tui.confirm import ReasonScreen
 
         def answered(text: str | None) -> None:

@@ -92,7 +92,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
                 compact=True,
                 select_on_focus=False,  # a letter typed on the list adds to the word
             )
-        table = DataTable(id="people", cursor_type="row", zebra_stripes=True)
+        table: DataTable[str] = DataTable(id="people", cursor_type="row", zebra_stripes=True)
         table.add_columns("code", "group", "order", "progress", "next")
         yield table
         yield Static("", id="detail")
@@ -260,6 +260,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         code = self._under_cursor()
         if code is None:
             return
+        # lazy: study.tui.confirm costs 5 ms at start-up
         from study.tui.confirm import ReasonScreen
 
         if session:
@@ -287,6 +288,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         """The note dialog again on `code`, holding the text the database refused."""
         table = self.query_one("#people", DataTable)
         codes = [str(table.get_row_at(k)[0]) for k in range(table.row_count)]
+        # lazy: study.tui.confirm costs 5 ms at start-up
         from study.tui.confirm import ReasonScreen
 
         if code in codes and not isinstance(self.app.screen, ReasonScreen):
@@ -315,6 +317,7 @@ class ParticipantsPane(SafeWorkers, Vertical):
         if table.row_count == 0:
             return
         code = str(table.get_row_at(table.cursor_row)[0])
+        # lazy: study.tui.confirm costs 5 ms at start-up
         from study.tui.confirm import ReasonScreen
 
         def answered(reason: str | None) -> None:

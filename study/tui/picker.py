@@ -69,7 +69,9 @@ class ParticipantPicker(ModalScreen[str | None]):
     def compose(self) -> ComposeResult:
         with Vertical(id="picker-box"):
             yield Input(id="picker-search", placeholder="search: code or group (e.g. P01)")
-            table = DataTable(id="picker-table", cursor_type="row", zebra_stripes=True)
+            table: DataTable[str] = DataTable(
+                id="picker-table", cursor_type="row", zebra_stripes=True
+            )
             table.add_columns("code", "group", "done", "next trial")
             yield table
             yield Label("type to search  Up/Down: move  Enter: pick  Esc: cancel", id="picker-keys")

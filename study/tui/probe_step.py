@@ -22,6 +22,7 @@ from study.protocol.roster import find_participant, load_study
 def due_probes(engine: Engine, code: str) -> list[str]:
     """The design's probes `code` has not stored, if the next block is the one they run
     before or a later one; empty otherwise."""
+    # lazy: study.probes.store (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.probes.store import stored_probes
 
     with Session(engine) as session:
@@ -53,6 +54,7 @@ def run_due_probes(
             f"{code} has probes due before this block ({', '.join(due)}): run "
             f"`study probe run --participant {code} --driver {driver_kind}`"
         )
+    # lazy: study.probes.store (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.probes.store import run_participant_probes
 
     stored = run_participant_probes(engine, code, only=tuple(due), observer=observer)

@@ -10,13 +10,24 @@ from __future__ import annotations
 
 import asyncio
 import json
+import resource
 import time
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from db.migrate import open_database
 from study.errors import StudyInputError
 from study.tui.app import TuiSettings, make_app
 from study.tui.services import StudyServices, load_shipped_estimator
+
+if TYPE_CHECKING:
+    from teleop_core.estimation.model import ForceEstimator
+
+
+def _no_estimator() -> ForceEstimator:
+    """The estimator of a timing that runs no trial: asked for, it is a mistake."""
+    raise RuntimeError("this timing of the terminal app runs no trial; it has no estimator")
+
 
 POLL_S = 0.05
 """How often the run-screen probe looks, s: its resolution. Each look waits for the app
@@ -29,7 +40,7 @@ def overview_seconds(db_url: str) -> float:
     engine = open_database(db_url, create=False)
 
     async def run() -> float:
-        app = make_app(StudyServices(engine, lambda: None), TuiSettings())
+        app = make_app(StudyServices(engine, _no_estimator), TuiSettings())
         async with app.run_test(size=(80, 24)) as pilot:
             while not app.ready:  # the overview shows first, the other screens follow
                 await pilot.pause(0.01)
@@ -79,14 +90,12 @@ def print_analysis_figures_peak(db_url: str, folder: str) -> None:
     40): the overview, then F5, `r` (the analysis) and ctrl+e (the paper's figures, as
     PNG, into `folder`); prints JSON with the seconds, the figure files and the peak
     resident memory of this process in MB (`study bench export`)."""
-    import resource
-    from pathlib import Path
 
     engine = open_database(db_url, create=False)
     settings = TuiSettings(figures_dir=Path(folder), figure_formats=("png",))
 
     async def run() -> list[str]:
-        app = make_app(StudyServices(engine, lambda: None), settings)
+        app = make_app(StudyServices(engine, _no_estimator), settings)
         async with app.run_test(size=(120, 40)) as pilot:
             while not app.ready:
                 _give_up_after(app.started_at)

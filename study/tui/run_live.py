@@ -9,18 +9,27 @@ along a track) and the readout of the view's two live forces and its own lines.
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 from rich.text import Text
 
 from study.tui.live_view import LiveReadout, gauge, sparkline
-from study.tui.scenes import scene_class, scene_title
+from study.tui.scenes import LiveScene, scene_class, scene_title
 from study.tui.task_views import live_view
 from study.tui.trial_summary import report_lines
 
 if TYPE_CHECKING:
+    from collections import deque
+
+    from textual.widget import Widget
+
     from study.protocol.tasks import Task
     from study.tui.trial_runner import LiveFrame, TrialRun
+    from study.tui.trial_summary import TrialReport
+
+    _Pane = Widget
+else:
+    _Pane = object  # the pane it joins (RunPane) is the widget
 
 KEY_ACTIONS = {
     "dial_forward": "advance",
@@ -38,9 +47,15 @@ def task_lines(frame: LiveFrame) -> list[str]:
     return live_view(frame.task).lines(frame.task, frame.values, frame.condition)
 
 
-class LiveViewMixin:
+class LiveViewMixin(_Pane):
     """The live view of `RunPane` (which provides run, status, last_outcome, last_report,
     _redraws)."""
+
+    run: TrialRun | None
+    status: str
+    last_outcome: str
+    last_report: tuple[str, TrialReport, str] | None
+    _redraws: deque[float]
 
     def _show_task(self, task: Task) -> None:
         """The live view of `task`'s trials: the scene of its view
@@ -74,7 +89,8 @@ class LiveViewMixin:
         width = max(readout.content_size.width, 10)
         text = Text(f"t {frame.t_s:6.1f} s   status: {self.status}\n", no_wrap=True)
         text.append(f"view {self.redraw_hz:4.1f} Hz\n", "dim")
-        self.query_one(scene_class(frame.task)).update_frame(frame)
+        scene = cast("LiveScene", self.query_one(scene_class(frame.task)))
+        scene.update_frame(frame)
         text.append_text(self._readout(frame, width, run))
         readout.show(text)
 
@@ -114,6 +130,8 @@ class LiveViewMixin:
 
 class KeyboardMixin:
     """The pane's keys, pressed on the running trial's keyboard driver."""
+
+    run: TrialRun | None
 
     def _press(self, action: str) -> None:
         run = self.run

@@ -29,13 +29,15 @@ from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
-from textual.widgets import Label, Select
+from textual.widget import Widget
+from textual.widgets import Label, Select, TabbedContent
 
 from study.protocol.observer import SessionObserver
 from study.protocol.tasks import Task, get_task, tasks
 from study.tui.db_errors import SafeWorkers, plain_line
 from study.tui.live_view import LiveReadout
 from study.tui.picker import ParticipantSelect, picker_rows
+from study.tui.preferences import RunChoices, save_run_choices
 from study.tui.run_live import KeyboardMixin, LiveViewMixin
 from study.tui.scenes import TrackView, scene_class
 from study.tui.services import NextTrial, Roster, StudyServices
@@ -158,7 +160,8 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         yield Label("", id="next")
         with Horizontal(id="live"):
             with Vertical(id="phantom-box"):
-                for scene in dict.fromkeys([*map(scene_class, tasks()), TrackView]):
+                scenes: list[type[Widget]] = [*map(scene_class, tasks()), TrackView]
+                for scene in dict.fromkeys(scenes):
                     yield scene()
             yield LiveReadout(id="readout")
 
@@ -197,7 +200,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
 
     def _filling_in_tlx(self, code: str) -> bool:
         """The NASA-TLX screen is shown while `code` has a questionnaire to fill in."""
-        if self.roster is None or self.app.query_one("#tabs").active != "tlx":
+        if self.roster is None or self.app.query_one("#tabs", TabbedContent).active != "tlx":
             return False
         return any(b[0] == code for b in self.roster.tlx_due())
 
@@ -309,7 +312,6 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         """Keep the driver and pace for the app's next start on this database."""
         if self.preferences_file is None:
             return
-        from study.tui.preferences import RunChoices, save_run_choices
 
         try:
             choices = RunChoices(self.driver_kind, self.pace)
@@ -343,6 +345,7 @@ class RunPane(SafeWorkers, LiveViewMixin, KeyboardMixin, Vertical, can_focus=Tru
         if self._practice:
             self._press("end_trial")
             return
+        # lazy: study.tui.confirm costs 4 ms at start-up
         from study.tui.confirm import Confirm
 
         def answered(yes: bool | None) -> None:

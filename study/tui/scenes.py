@@ -7,7 +7,7 @@ the live view.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from rich.text import Text
 from textual.widget import Widget
@@ -23,6 +23,12 @@ if TYPE_CHECKING:
 def axis_column(value: float, lo: float, hi: float, cols: int) -> int:
     """The column of `value` on an axis from lo (column 0) to hi (column cols - 1)."""
     return min(max(round((cols - 1) * (value - lo) / (hi - lo)), 0), cols - 1)
+
+
+class LiveScene(Protocol):
+    """What the run screen asks of a task's live scene (`Task.live_scene`, a widget)."""
+
+    def update_frame(self, frame: LiveFrame | None) -> None: ...
 
 
 class SceneView(Widget):

@@ -18,7 +18,12 @@ from typing import TYPE_CHECKING, Any
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
-from study.protocol.roster import load_study, schedule
+from db.models.audit import AuditEntry
+from db.models.study import Participant
+from db.models.trial import Trial
+from study.errors import StudyInputError
+from study.protocol.orphans import gone_sessions
+from study.protocol.roster import add_participant, load_study, schedule
 from teleop_core.progress import Progress, no_progress
 
 if TYPE_CHECKING:
@@ -163,6 +168,7 @@ class StudyServices:
             observer.close()
 
     def roster(self) -> Roster:
+        # lazy: study.protocol.tlx costs 10 ms at start-up
         from study.protocol.tlx import answered_blocks
 
         with Session(self.engine) as session:
@@ -181,6 +187,7 @@ class StudyServices:
 
     def record_checklist(self, code: str) -> None:
         """The session checklist (consent confirmed, device checked) as an audit row."""
+        # lazy: study.protocol.withdrawal costs 4 ms at start-up
         from study.protocol.withdrawal import record_checklist
 
         record_checklist(self.engine, code)
@@ -188,8 +195,6 @@ class StudyServices:
     def checklist_recorded(self, code: str) -> bool:
         """Whether `code`'s session checklist is in the audit log (by this app or an
         earlier start of it), so that it is asked once per participant."""
-        from db.models.audit import AuditEntry
-        from db.models.study import Participant
 
         with Session(self.engine) as session:
             found = session.scalar(
@@ -208,9 +213,6 @@ class StudyServices:
         """(code, why) of each participant with a trial still `running` that belongs to
         no live session (the app or `study run` was killed, a machine lost): it counts
         as interrupted, and their next session marks it so and repeats it."""
-        from db.models.study import Participant
-        from db.models.trial import Trial
-        from study.protocol.orphans import gone_sessions
 
         with Session(self.engine) as session:
             rows = session.execute(
@@ -224,12 +226,14 @@ class StudyServices:
         return sorted((codes[pid], why.split("; ")[0]) for pid, why in gone.items())
 
     def withdraw(self, code: str, reason: str) -> None:
+        # lazy: study.protocol.withdrawal costs 4 ms at start-up
         from study.protocol.withdrawal import withdraw
 
         withdraw(self.engine, code, reason)
 
     def note(self, code: str, text: str, session: bool = False) -> None:
         """Set `code`'s note, or (`session`) add a note on their session (audited)."""
+        # lazy: study.protocol.withdrawal costs 4 ms at start-up
         from study.protocol.withdrawal import add_session_note, set_note
 
         (add_session_note if session else set_note)(self.engine, code, text)
@@ -238,43 +242,48 @@ class StudyServices:
 
     def participant_record(self, code: str) -> Any:
         """`study.protocol.participant_record.ParticipantRecord` of `code`."""
+        # lazy: study.protocol.participant_record costs 5 ms at start-up
         from study.protocol.participant_record import participant_record
 
         return participant_record(self.engine, code)
 
     def mark_trial(self, trial_id: int, valid: bool, reason: str) -> str:
         """Mark a measured trial invalid or valid again (audited); its description."""
+        # lazy: study.protocol.corrections costs 6 ms at start-up
         from study.protocol.corrections import mark_trial
 
         return mark_trial(self.engine, trial_id, valid, reason)
 
     def reinstate(self, code: str, reason: str) -> None:
         """Undo `code`'s withdrawal (audited)."""
+        # lazy: study.protocol.corrections costs 6 ms at start-up
         from study.protocol.corrections import reinstate
 
         reinstate(self.engine, code, reason)
 
     def correct_group(self, code: str, group: str, reason: str) -> tuple[str, ...]:
         """Move `code` to `group` before their first trial (audited); the new order."""
+        # lazy: study.protocol.corrections costs 6 ms at start-up
         from study.protocol.corrections import correct_group
 
         return correct_group(self.engine, code, group, reason, beyond_target=True)
 
     def add_participant(self, group: str) -> str:
-        from study.protocol.roster import add_participant
 
         return add_participant(self.engine, group).code
 
     def analysis(self) -> Any:
         """`study.analysis.stats.Analysis` of everything stored."""
+        # lazy: study.analysis.frames (with pandas, pyarrow, numpy) costs 0.4 s at start-up
         from study.analysis.frames import (
             participant_means,
             tlx_frame,
             trial_frame,
             without_withdrawn,
         )
+
+        # lazy: study.analysis.stats (with numpy) costs 85 ms at start-up
         from study.analysis.stats import analyze
-        from study.errors import StudyInputError
 
         trials, tlx, withdrawn = without_withdrawn(
             self.engine, trial_frame(self.engine), tlx_frame(self.engine)
@@ -286,6 +295,7 @@ class StudyServices:
     def export_figures(
         self, folder: Path, formats: tuple[str, ...] = ("pdf", "svg", "png")
     ) -> list[Path]:
+        # lazy: study.analysis.paper (with scipy, pandas, pyarrow) costs 1.5 s at start-up
         from study.analysis.paper import write_figures
 
         return write_figures(self.engine, folder, formats)
@@ -299,6 +309,7 @@ def calibrate_recording(
     The same steps as the command (`BASE_MODELS[model].read`, `Calibrator.fit`,
     `report()`), without the files it writes; the app passes this into `make_app`.
     """
+    # lazy: teleop_core.calibration (with scipy, statsmodels, pandas) costs 1.3 s at start-up
     from teleop_core.calibration import BASE_MODELS, Calibrator
 
     if model not in BASE_MODELS:
@@ -316,6 +327,7 @@ def calibrate_recording(
 def load_shipped_estimator() -> ForceEstimator:
     """The estimator shipped with haptic-study, imported when first needed (its module
     loads torch); `study tui` passes this into `make_app`."""
+    # lazy: study.protocol.default_estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.protocol.default_estimator import load_estimator
 
     return load_estimator()

@@ -32,8 +32,9 @@ from textual.widgets import Button, Input, Label, Select, Static
 
 from db.models.tlx import TLX_SUBSCALES
 from study.errors import StudyInputError
-from study.protocol.tlx import check_rating, pair_order
+from study.protocol.tlx import check_rating, load_tlx, pair_order, store_tlx, tlx_audit
 from study.tui.char_count import CharCount
+from study.tui.confirm import Confirm
 from study.tui.db_errors import SafeWorkers
 from study.tui.services import Roster, StudyServices
 
@@ -120,6 +121,7 @@ def _same_answers(a: FormState, b: FormState) -> bool:
 
 def _rating_value(text: str) -> object:
     """The typed rating as a number when it is one (check_rating then judges the scale)."""
+    # lazy: study.protocol.csv_input (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.protocol.csv_input import whole_number
 
     value = whole_number(text)
@@ -419,7 +421,6 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
 
     @work(thread=True, exclusive=True, group="tlx-load", exit_on_error=False)
     def _load_worker(self, block: Block, note: str) -> None:
-        from study.protocol.tlx import load_tlx, tlx_audit
 
         response = load_tlx(self.services.engine, *block)
         audit = tlx_audit(self.services.engine, response.id) if response is not None else []
@@ -548,7 +549,6 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
 
     def _ask_raw_only(self, block: Block, ratings: dict[str, object], reason: str | None) -> None:
         """Ratings without the pairwise choices have no weighted score: asked once."""
-        from study.tui.confirm import Confirm
 
         def answered(yes: bool | None) -> None:
             if yes and self.loaded_block == block:
@@ -587,7 +587,6 @@ class TlxPane(SafeWorkers, VerticalScroll, can_focus=False):
 
     @work(thread=True, exclusive=True, group="tlx-store", exit_on_error=False)
     def _store(self, block: Block, ratings, chosen, reason) -> None:
-        from study.protocol.tlx import store_tlx
 
         try:
             observer = self.services.lsl_observer()

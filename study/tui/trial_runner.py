@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from study.protocol.tasks import LiveTrace, Task
+from study.protocol.tasks import LiveTrace, Task, get_task
 from study.tui.task_views import live_view
 from teleop_core.loop.drivers import HandAction, KeyboardDriver, OperatorView
 
@@ -304,6 +304,7 @@ class TrialRun:
 
     def run(self, on_start: Callable[[object], None] = lambda _: None) -> TrialOutcome:
         """Run the participant's next trial; returns when it ends or is stopped."""
+        # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
         from study.protocol.session import recover_interrupted, run_session
 
         start = time.monotonic()
@@ -311,7 +312,6 @@ class TrialRun:
             return TrialOutcome(self.code, [], 0, 0.0)
 
         def started(item, _k: int, _n: int) -> None:
-            from study.protocol.tasks import get_task
 
             self.participant_id = item.block.participant_id
             self.live.start(get_task(item.block.task), item.block.condition)

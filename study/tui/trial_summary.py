@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import statistics
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from sqlalchemy import Engine, select
@@ -95,7 +96,7 @@ def trial_report(engine: Engine, trial_id: int) -> TrialReport:
         )
 
 
-def _block_stats(task, trials: list[Trial]) -> list[BlockStat]:
+def _block_stats(task, trials: Sequence[Trial]) -> list[BlockStat]:
     stats = []
     for m in task.all_measures:
         values = [v for t in trials if (v := _value(t, m.name)) is not None]

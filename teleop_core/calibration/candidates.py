@@ -40,20 +40,42 @@ class Candidate:
     """Why it was not added ('' when it passed)."""
 
 
+@dataclass(frozen=True)
+class ChainFit:
+    """A chain of effects on the base model, fitted on the training block."""
+
+    coef: Float1D
+    """The design's coefficients."""
+    pred: Float1D
+    """The prediction over every sample (N, or N m for a torque model)."""
+    n_params: int
+    """Coefficients and searched values: what the BIC counts."""
+
+
+@dataclass(frozen=True)
+class Found:
+    """A candidate of a round: its evaluation, its effect and the fit of the chain with
+    it."""
+
+    candidate: Candidate
+    effect: Effect
+    fit: ChainFit
+
+
 OPEN = "(open library)"
 """Marks where in a round the open library's terms join the candidates."""
 REPEATABLE = {"position_periodic": 3}
 """Families that may enter more than once (several ripple periods), and how often."""
 
 
-def _best(passing: list, min_gain: float):  # type: ignore[no-untyped-def]
+def _best(passing: list[Found], min_gain: float) -> Found:
     """The passing candidate with the lowest held-out error; a named family keeps its
     place unless an open library term cuts the error by `min_gain` more than it."""
-    best = min(passing, key=lambda f: f[0].rmse_held_out_n)
-    named = [f for f in passing if not isinstance(f[1], OpenTerm)]
-    if named and isinstance(best[1], OpenTerm):
-        top = min(named, key=lambda f: f[0].rmse_held_out_n)
-        if best[0].rmse_held_out_n > (1.0 - min_gain) * top[0].rmse_held_out_n:
+    best = min(passing, key=lambda f: f.candidate.rmse_held_out_n)
+    named = [f for f in passing if not isinstance(f.effect, OpenTerm)]
+    if named and isinstance(best.effect, OpenTerm):
+        top = min(named, key=lambda f: f.candidate.rmse_held_out_n)
+        if best.candidate.rmse_held_out_n > (1.0 - min_gain) * top.candidate.rmse_held_out_n:
             return top
     return best
 

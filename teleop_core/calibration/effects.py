@@ -148,7 +148,7 @@ class DirectionAsymmetry(Effect):
     gives one, is its smoothed sign on the model's own scale."""
 
     family = "direction_asymmetry"
-    needs = ("direction",)
+    needs: ClassVar[tuple[str, ...]] = ("direction",)
 
     def columns(self, s: Signals, value: float) -> Float2D:
         w = s["direction"]
@@ -180,7 +180,7 @@ class DriveDirectionAsymmetry(DirectionAsymmetry):
     direction). Without it a gain that differs by direction left its shape (a force
     proportional to the current, in reverse only) to the speed families."""
 
-    needs = ("direction", "drive")
+    needs: ClassVar[tuple[str, ...]] = ("direction", "drive")
     saved_settings: ClassVar[dict[str, Any]] = {"reverse_gain": True}
 
     def columns(self, s: Signals, value: float) -> Float2D:
@@ -291,7 +291,7 @@ class Delay(Effect):
 
     def grid(self, s: Signals) -> Float1D:
         dt = float(np.median(np.diff(s["t"])))
-        return dt * np.arange(1, max(2, round(MAX_LAG_S / dt)) + 1)
+        return np.arange(1.0, max(2, round(MAX_LAG_S / dt)) + 1.0) * dt
 
     def transform(self, s: Signals, value: float) -> Signals:
         t = s["t"]

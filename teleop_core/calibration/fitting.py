@@ -27,7 +27,7 @@ from scipy.linalg import cho_factor, cho_solve, qr
 from scipy.optimize import minimize_scalar
 from statsmodels.regression.linear_model import OLS
 
-from teleop_core._typing import Float1D, Float2D, Rows
+from teleop_core._typing import Bool1D, Float1D, Float2D, Int1D, Rows
 from teleop_core.calibration.effects import Effect, Signals
 from teleop_core.calibration.models import BaseModel, CalibrationData
 from teleop_core.errors import TeleopInputError
@@ -264,6 +264,7 @@ class CalibratedModel:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> CalibratedModel:
+        # here, not at the top: importing teleop_core.calibration.registry imports this module
         from teleop_core.calibration.registry import BASE_MODELS
 
         try:
@@ -288,7 +289,7 @@ def _saved_effect(base: BaseModel, saved: dict[str, Any]) -> Effect:
     return effect
 
 
-def determined_columns(X: Float2D) -> tuple[Float1D, Float1D]:
+def determined_columns(X: Float2D) -> tuple[Int1D, Bool1D]:
     """Of the columns of `X` (scaled to comparable size): a set spanning the same space
     with none a combination of the others (QR with column pivoting, numpy's rank
     tolerance), and the mask of the columns whose coefficient the least-squares fit
@@ -369,14 +370,14 @@ def confidence(
     # a physical parameter that moves with an undetermined one has no interval
     undetermined = np.any(G[:, free] != 0.0, axis=1)
     results, pos = [], 0
-    for d in base_values:
+    for group in base_values:
         ci: dict[str, list[float] | None] = {
             k: None
             if undetermined[pos + j]
             else [float(val - Z_95 * se[pos + j]), float(val + Z_95 * se[pos + j])]
-            for j, (k, val) in enumerate(d.items())
+            for j, (k, val) in enumerate(group.items())
         }
-        results.append(({k: float(v) for k, v in d.items()}, ci))
-        pos += len(d)
+        results.append(({k: float(v) for k, v in group.items()}, ci))
+        pos += len(group)
     base_params, base_ci = results[0]
     return base_params, base_ci, [{"params": p, "ci": c} for p, c in results[1:]]

@@ -107,7 +107,7 @@ def _draw(family: str, rng: np.random.Generator) -> dict[str, float]:
     return out
 
 
-def _shape(family: str, p: dict[str, float], s: dict[str, Float1D], rng) -> Float1D:  # type: ignore[no-untyped-def]
+def _shape(family: str, p: dict[str, float], s: dict[str, Float1D], rng) -> Float1D:
     """Unit shape of an additive effect."""
     w, theta, t, iq = s["speed"], s["angle"], s["t"], s["drive"]
     sign = smooth_sign(w)

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, is_dataclass
 from typing import Any
 
 import numpy as np
@@ -56,6 +56,8 @@ from teleop_core.calibration.candidates import (
     REPEATABLE,
     UNLOCATED_AT,
     Candidate,
+    ChainFit,
+    Found,
     _best,
     _candidate_dict,
     _remaining,
@@ -99,10 +101,6 @@ BIC_DECISIVE = 10.0
 """Training-BIC difference that decides between two candidates (Kass and Raftery
 1995: above 10 is "very strong" evidence): a look-alike further behind is no
 alternative, whatever the held-out block says."""
-
-
-_Found = tuple[Candidate, Effect, Float1D, Float1D, int]
-"""A candidate, its effect, the chain's coefficients, prediction and parameter count."""
 
 
 @dataclass(frozen=True)
@@ -154,6 +152,52 @@ class Calibrator:
     max_effects: int = 4
     max_lag: int = 25
     candidates_: list[Candidate] = field(default_factory=list, init=False)
+    """Every candidate of every round, in order (`fit`)."""
+    # what `fit` sets (scikit-learn's manner: the names end in `_`, absent before it)
+    train_: Rows = field(init=False, repr=False)
+    """The training rows."""
+    test_: Rows = field(init=False, repr=False)
+    """The held-out rows."""
+    base_: BaseModel = field(init=False, repr=False)
+    """The base model with its own assumptions fitted on the training rows."""
+    base_prediction_: Float1D = field(init=False, repr=False)
+    """The base model's prediction over every sample."""
+    base_model_: CalibratedModel = field(init=False, repr=False)
+    """The base model alone, fitted on the training rows."""
+    rmse_before_: float = field(init=False, repr=False)
+    """Held-out RMSE of the base model alone."""
+    step_rmse_: list[float] = field(init=False, repr=False)
+    """Held-out RMSE after each round."""
+    ambiguous_: list[list[str]] = field(init=False, repr=False)
+    """Per round, the families the recording does not tell apart from its winner."""
+    rmse_after_: float = field(init=False, repr=False)
+    """Held-out RMSE of the calibrated model."""
+    model_: CalibratedModel = field(init=False, repr=False)
+    """The calibrated model: the base and the effects added."""
+    prediction_: Float1D = field(init=False, repr=False)
+    """The calibrated model's prediction over every sample."""
+    chain_: Chain = field(init=False, repr=False)
+    """The effects added, with their searched values."""
+    tests_before_: dict[str, Any] = field(init=False, repr=False)
+    """The residual tests of the base model on the held-out block."""
+    tests_after_: dict[str, Any] = field(init=False, repr=False)
+    """The residual tests of the calibrated model on the held-out block."""
+    unexplained_: dict[str, Any] = field(init=False, repr=False)
+    """Where the calibrated model's held-out error is left (`verdict.unexplained`)."""
+    verdict_: str = field(init=False, repr=False)
+    """The verdict on the held-out error (`verdict.verdict`)."""
+    fit_percent_: tuple[float, float] = field(init=False, repr=False)
+    """Held-out fit percentages of the base and of the calibrated model."""
+    base_params_: dict[str, float] = field(init=False, repr=False)
+    """The base model's physical parameters (`fitting.confidence`)."""
+    base_ci_: dict[str, list[float] | None] = field(init=False, repr=False)
+    """Their 95 % intervals (None where the fit does not determine one)."""
+    effect_params_: list[dict[str, Any]] = field(init=False, repr=False)
+    """Each effect's parameters and intervals, in chain order."""
+    data_: CalibrationData = field(init=False, repr=False)
+    """The recording fitted."""
+    validation_: list[Validation] = field(init=False, repr=False)
+    """One `Validation` per recording given to `fit` as `validation`."""
 
     def __post_init__(self) -> None:
         if not 0.05 <= self.held_out_fraction <= 0.5:
@@ -179,17 +223,17 @@ class Calibrator:
             held[stop - round((stop - start) * self.held_out_fraction) : stop] = True
         return np.flatnonzero(~held), np.flatnonzero(held)
 
-    def _fit_chain(self, data: CalibrationData, chain: Chain) -> tuple[Float1D, Float1D, int]:
+    def _fit_chain(self, data: CalibrationData, chain: Chain) -> ChainFit:
         """Coefficients on the training block, predictions everywhere, parameter count."""
         X, _ = design(self.base_, data.signals, chain)
         coef = solve(X[self.train_], data.y[self.train_])
         searched = sum(e.searched is not None for e, _ in chain)
-        return coef, X @ coef, X.shape[1] + searched
+        return ChainFit(coef, X @ coef, X.shape[1] + searched)
 
-    def _bic(self, data: CalibrationData, pred: Float1D, k: int) -> float:
-        e = data.y[self.train_] - pred[self.train_]
+    def _bic(self, data: CalibrationData, fit: ChainFit) -> float:
+        e = data.y[self.train_] - fit.pred[self.train_]
         n = len(e)
-        return float(n * np.log(np.mean(e * e)) + k * np.log(n))
+        return float(n * np.log(np.mean(e * e)) + fit.n_params * np.log(n))
 
     def _reason(self, cand: Candidate, effect: Effect, coef: Float1D, data: CalibrationData) -> str:
         """Why a candidate is refused ("" when it passes): the held-out rules, then
@@ -214,7 +258,7 @@ class Calibrator:
             reason = f"not located: {edge[1]}"
         return reason
 
-    def _look_alikes(self, best, passing, y_test: Float1D) -> list[str]:  # type: ignore[no-untyped-def]
+    def _look_alikes(self, best: Found, passing: list[Found], y_test: Float1D) -> list[str]:
         """The other passing candidates of the round that neither block tells apart
         from its winner: on the held-out block the winner's errors are not
         significantly smaller than theirs (one-sided Diebold-Mariano at `alpha`), and
@@ -226,19 +270,21 @@ class Calibrator:
         with few speeds in one direction, pre-sliding memory and a direction
         asymmetry or a Stribeck dip on one with few reversals."""
         out = []
-        e_best = y_test - best[3][self.test_]
-        for cand, effect, _, c_pred, _ in passing:
-            if cand is best[0] or cand.bic_change - best[0].bic_change > BIC_DECISIVE:
+        winner = best.candidate
+        e_best = y_test - best.fit.pred[self.test_]
+        for other in passing:
+            cand = other.candidate
+            if cand is winner or cand.bic_change - winner.bic_change > BIC_DECISIVE:
                 continue
-            alike_of = getattr(effect, "look_alike", True)
-            if alike_of is False or (alike_of is not True and best[1].family not in alike_of):
+            alike_of = getattr(other.effect, "look_alike", True)
+            if alike_of is False or (alike_of is not True and best.effect.family not in alike_of):
                 continue
-            if diebold_mariano(y_test - c_pred[self.test_], e_best) >= self.alpha:
+            if diebold_mariano(y_test - other.fit.pred[self.test_], e_best) >= self.alpha:
                 out.append(cand.family)
         return out
 
-    def _alternatives(  # type: ignore[no-untyped-def]
-        self, data: CalibrationData, chain: Chain, pred: Float1D, best, passing
+    def _alternatives(
+        self, data: CalibrationData, chain: Chain, pred: Float1D, best: Found, passing: list[Found]
     ) -> list[str]:
         """What the recording does not tell apart from the round's winner `best`: the
         passing look-alikes, and for a `delay` a first-order lag, for a
@@ -246,20 +292,20 @@ class Calibrator:
         force before the round)."""
         y_test = data.y[self.test_]
         alike = self._look_alikes(best, passing, y_test)
-        winner = (best[1], best[0].searched_value)
-        if best[1].family == "delay":
+        winner = (best.effect, best.candidate.searched_value)
+        if best.effect.family == "delay":
             alike += self._lag_alike(data, chain, [*chain, winner])
         elif any(LAG_ALTERNATIVE in a for a in self.ambiguous_):
             # a delay that a lag explains as well is in the model: a later winner may be
             # no effect of its own but what the delay leaves of the lag
             undelayed = [(e, v) for e, v in chain if e.family != "delay"]
-            extra = best[4] - self._fit_chain(data, chain)[2]
+            extra = best.fit.n_params - self._fit_chain(data, chain).n_params
             alike += self._lag_alike(data, undelayed, [*chain, winner], extra)
-        if best[1].family == "current_nonlinearity":
-            alike += self._saturation_alike(data, chain, pred, data.y - best[3])
+        if best.effect.family == "current_nonlinearity":
+            alike += self._saturation_alike(data, chain, pred, data.y - best.fit.pred)
         return alike + self._refinement_alike(data, chain, best)
 
-    def _refinement_alike(self, data: CalibrationData, chain: Chain, best) -> list[str]:  # type: ignore[no-untyped-def]
+    def _refinement_alike(self, data: CalibrationData, chain: Chain, best: Found) -> list[str]:
         """The families already in `chain` whose second term (the same family at another
         searched value, on top of the chain) predicts the held-out block about as well
         as the round's winner `best`: its held-out RMSE within `min_gain` of the
@@ -274,20 +320,20 @@ class Calibrator:
         than a correction of the first, and the winner is reported ambiguous with it."""
         out: list[str] = []
         y_test = data.y[self.test_]
-        e_best = y_test - best[3][self.test_]
+        e_best = y_test - best.fit.pred[self.test_]
         rmse_best = _rmse(e_best)
-        bic_best = self._bic(data, best[3], best[4])
+        bic_best = self._bic(data, best.fit)
         for effect, _ in chain:
             if effect.searched is None or effect.family in REPEATABLE or effect.family in out:
                 continue
             if type(effect).transform is not Effect.transform:
                 continue
             value = search(self.base_, data, self.train_, chain, effect)
-            _, c_pred, c_k = self._fit_chain(data, [*chain, (effect, value)])
-            e = y_test - c_pred[self.test_]
+            refined = self._fit_chain(data, [*chain, (effect, value)])
+            e = y_test - refined.pred[self.test_]
             if _rmse(e) * (1.0 - self.min_gain) > rmse_best:
                 continue
-            if self._bic(data, c_pred, c_k) - bic_best > BIC_DECISIVE:
+            if self._bic(data, refined) - bic_best > BIC_DECISIVE:
                 continue
             if diebold_mariano(e, e_best) >= self.alpha:
                 out.append(effect.family)
@@ -436,55 +482,57 @@ class Calibrator:
         self.base_ = self.model.fitted_to(data, self.train_)
         y_test = data.y[self.test_]
         chain: Chain = []
-        coef, pred, k = self._fit_chain(data, chain)
-        self.base_prediction_ = pred
-        self.base_model_ = CalibratedModel(self.base_, [], coef, _settings(self.base_))
-        rmse = _rmse(y_test - pred[self.test_])
+        fit = self._fit_chain(data, chain)
+        self.base_prediction_ = fit.pred
+        self.base_model_ = CalibratedModel(self.base_, [], fit.coef, _settings(self.base_))
+        rmse = _rmse(y_test - fit.pred[self.test_])
         self.rmse_before_ = rmse
-        self.step_rmse_: list[float] = []
+        self.step_rmse_ = []
         self.candidates_ = []
-        self.ambiguous_: list[list[str]] = []
+        self.ambiguous_ = []
         round_ = 0
         while len(chain) < self.max_effects:
             remaining = _remaining(families, chain, marker=bool(open_terms))
             if not remaining:
                 break
-            step = _Round(round_ + 1, chain, pred, rmse, self._bic(data, pred, k))
+            step = _Round(round_ + 1, chain, fit.pred, rmse, self._bic(data, fit))
             found = self._candidates(data, step, remaining, open_terms, progress)
-            passing = [f for f in found if not f[0].reason]
-            self.candidates_.extend(f[0] for f in found)
+            passing = [f for f in found if not f.candidate.reason]
+            self.candidates_.extend(f.candidate for f in found)
             progress(f"round {round_ + 1} done", len(remaining), len(remaining))
             if not passing:
                 break
             best = _best(passing, self.min_gain)
-            best[0].accepted = True
-            self.ambiguous_.append(self._alternatives(data, chain, pred, best, passing))
+            best.candidate.accepted = True
+            self.ambiguous_.append(self._alternatives(data, chain, fit.pred, best, passing))
             for other in passing:
                 if other is not best:
-                    other[0].reason = f"passed, but {best[0].family} cut the error more"
-            chain.append((best[1], best[0].searched_value))
-            coef, pred, k = best[2], best[3], best[4]
-            rmse = best[0].rmse_held_out_n
+                    other.candidate.reason = (
+                        f"passed, but {best.candidate.family} cut the error more"
+                    )
+            chain.append((best.effect, best.candidate.searched_value))
+            fit = best.fit
+            rmse = best.candidate.rmse_held_out_n
             backfitted = self._backfit(data, chain)
             if backfitted != chain:
                 chain[:] = backfitted
-                coef, pred, k = self._fit_chain(data, chain)
-                rmse = _rmse(y_test - pred[self.test_])
+                fit = self._fit_chain(data, chain)
+                rmse = _rmse(y_test - fit.pred[self.test_])
             refitted = self.model.fitted_to(data, self.train_, chain)
             if refitted != self.base_:
                 # the base model's own assumptions again, now that the effect no longer
                 # fills the training error: what they got wrong before would otherwise
                 # be left for a wrong family to take in the next round
                 self.base_ = refitted
-                coef, pred, k = self._fit_chain(data, chain)
-                rmse = _rmse(y_test - pred[self.test_])
+                fit = self._fit_chain(data, chain)
+                rmse = _rmse(y_test - fit.pred[self.test_])
             self.step_rmse_.append(rmse)
             round_ += 1
         self.rmse_after_ = rmse
-        self.model_ = CalibratedModel(self.base_, chain, coef, _settings(self.base_))
-        self.prediction_ = pred
+        self.model_ = CalibratedModel(self.base_, chain, fit.coef, _settings(self.base_))
+        self.prediction_ = fit.pred
         self.chain_ = chain
-        self._diagnose(data, pred)
+        self._diagnose(data, fit.pred)
         self.validation_ = self._validations(validation)
         return self
 
@@ -528,11 +576,11 @@ class Calibrator:
         remaining: list[str],
         open_terms: list[str],
         progress: Progress,
-    ) -> list[_Found]:
+    ) -> list[Found]:
         """Each remaining family (the open terms in place of their marker) searched,
         fitted after `step.chain` and judged on the held-out block."""
         y_test = data.y[self.test_]
-        found: list[_Found] = []
+        found: list[Found] = []
         for i, family in enumerate(remaining):
             if family == OPEN:
                 remaining.extend(_remaining(open_terms, step.chain, marker=False))
@@ -540,9 +588,9 @@ class Calibrator:
             progress(f"round {step.number}: {family}", i, len(remaining))
             effect = self.base_.effect(family)
             value = search(self.base_, data, self.train_, step.chain, effect)
-            c_coef, c_pred, c_k = self._fit_chain(data, [*step.chain, (effect, value)])
-            c_rmse = _rmse(y_test - c_pred[self.test_])
-            p = diebold_mariano(y_test - step.pred[self.test_], y_test - c_pred[self.test_])
+            c_fit = self._fit_chain(data, [*step.chain, (effect, value)])
+            c_rmse = _rmse(y_test - c_fit.pred[self.test_])
+            p = diebold_mariano(y_test - step.pred[self.test_], y_test - c_fit.pred[self.test_])
             cand = Candidate(
                 family,
                 step.number,
@@ -550,10 +598,10 @@ class Calibrator:
                 c_rmse,
                 1.0 - c_rmse / step.rmse,
                 p,
-                self._bic(data, c_pred, c_k) - step.bic,
+                self._bic(data, c_fit) - step.bic,
             )
-            found.append((cand, effect, c_coef, c_pred, c_k))
-            cand.reason = self._reason(cand, effect, c_coef, data)
+            found.append(Found(cand, effect, c_fit))
+            cand.reason = self._reason(cand, effect, c_fit.coef, data)
         return found
 
     def _diagnose(self, data: CalibrationData, pred: Float1D) -> None:
@@ -720,4 +768,4 @@ def _fitted_settings(cal: Calibrator) -> dict[str, Any]:
 
 
 def _settings(model: BaseModel) -> dict[str, Any]:
-    return asdict(model) if hasattr(model, "__dataclass_fields__") else {}
+    return asdict(model) if is_dataclass(model) and not isinstance(model, type) else {}

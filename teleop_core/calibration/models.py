@@ -145,6 +145,7 @@ class BaseModel:
 
     def effect(self, family: str) -> Effect:
         """The candidate `family` (or open library term) as this model uses it."""
+        # here, not at the top: importing teleop_core.calibration.library imports this module
         from teleop_core.calibration.library import OPEN_TERMS
 
         if family in OPEN_TERMS and family not in self.overrides:

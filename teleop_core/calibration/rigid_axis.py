@@ -243,6 +243,7 @@ class RigidAxisBase(BaseModel):
 
     def read(self, path: str | Path) -> CalibrationData:
         path = Path(path)
+        said: dict[str, str] = {}
         if path.suffix.lower() == ".mat":
             if self.mat_columns is None:
                 raise RecordingError(
@@ -250,10 +251,9 @@ class RigidAxisBase(BaseModel):
                     "variables for t, q and u (mat_columns, e.g. t, qm, gtau*vir)"
                 )
             t, q, u = self.mat_columns
-            said = {"q": q, "u": u}
+            said.update(q=q, u=u)
             frame = mat_to_frame(path, q=q, u=u, t=t)
         else:
-            said: dict[str, str] = {}
             frame = read_numeric_csv(path, RIGID_COLUMNS, said)
         axis = axis_of(said, path)
         if axis is not None and axis != self.axis:
@@ -265,7 +265,7 @@ class RigidAxisBase(BaseModel):
         return self.data_from_frame(frame, path.name)
 
 
-def fit_cutoff(t: Float1D, q: Float1D, u: Float1D, columns, n_train: int) -> float:  # type: ignore[no-untyped-def]
+def fit_cutoff(t: Float1D, q: Float1D, u: Float1D, columns, n_train: int) -> float:
     """The derivative cutoff whose base fit has the lowest training RMSE (see above)."""
     fs = 1.0 / float(np.median(np.diff(t)))
     cutoffs = np.geomspace(fs / 200.0, fs / 5.0, 16)
@@ -388,6 +388,7 @@ def mat_to_frame(path: str | Path, *, q: str, u: str, t: str) -> pd.DataFrame:
     vector times a scalar gain). Every other vector with as many samples becomes an
     extra channel under its own name; scalars (gains) are left out.
     """
+    # lazy: scipy.io costs 19 ms at start-up
     from scipy.io import loadmat
 
     path = Path(path)
@@ -409,7 +410,7 @@ def mat_to_frame(path: str | Path, *, q: str, u: str, t: str) -> pd.DataFrame:
                     f"{path}: variable {name!r} not found; expected one of "
                     f"{', '.join(sorted(variables))}"
                 )
-            out = out * variables[name].astype(float).ravel()  # type: ignore[assignment]
+            out = out * variables[name].astype(float).ravel()
         return np.asarray(out, float)
 
     columns = {"t": value(t), "q": value(q), "u": value(u)}

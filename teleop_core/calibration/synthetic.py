@@ -128,7 +128,7 @@ def follower_recording(
     dt = 1.0 / rate_hz
     omega, load = teleoperation(duration_s, rng, dt_s=dt)
     n = len(omega)
-    t = np.arange(1, n + 1) * dt
+    t = np.arange(1.0, n + 1.0) * dt
     theta = np.cumsum(omega) * dt
     alpha = np.diff(omega, prepend=omega[0]) / dt
     truth = {f: _draw(f, rng, duration_s) for f in effects}
@@ -181,7 +181,7 @@ def master_recording(
     while len(levels) < duration_s:  # one turning point about every 1-4 s
         levels.append(float(rng.uniform(0.0, top)))
     knots = np.cumsum(np.r_[0.0, rng.uniform(1.0, 4.0, len(levels) - 1)])
-    t_fine = np.arange(round(duration_s / dt)) * dt
+    t_fine = np.arange(float(round(duration_s / dt))) * dt
     current_ma = np.interp(t_fine, knots, levels)
     force = gauge_force(params, current_ma / 1000.0, dt, rng)
     m = max(1, round(1.0 / (rate_hz * dt)))

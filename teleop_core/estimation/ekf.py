@@ -10,7 +10,7 @@ backward difference make it speed- and rate-dependent), plus each estimator's ow
 model error (the physics fit's and the GRU's residual variance on training data). R_z,
 the variance of I_q and theta_d, comes from the recording while the wheel is at rest
 ([endovascular], IV-C). Both forces follow random walks with process noise Q (settable; by
-default tuned like the paper's, see `estimator.tune_process_noise`).
+default tuned like the paper's, see `training.tune_process_noise`).
 
 Written by hand rather than with filterpy (which the paper used): two states and a
 closed-form 2x2 inverse, compiled with numba, cost about a microsecond per update,

@@ -2,14 +2,11 @@
 
 The public face of the estimator (split along its seams): the model and its
 folder (`ForceEstimator`, `CausalEstimator`) are in `model.py`, the streaming steps the
-loop kernel calls in `stream.py`, training in `training.py`. Every name stays
-importable from here; training's only on first use, since it imports PyTorch (and
-imports `model.py`, which is why it is not here).
+loop kernel calls in `stream.py`, training in `training.py` (imported from there: it
+imports PyTorch, which running a trained estimator does not need, and `model.py`).
 """
 
 from __future__ import annotations
-
-from typing import Any
 
 from teleop_core.estimation.model import (
     MODEL_FILES,
@@ -46,14 +43,3 @@ __all__ = [
     "stream_estimate",
     "stream_push",
 ]
-
-_MOVED = ("train_estimator", "tune_process_noise", "TrainingSummary")
-
-
-def __getattr__(name: str) -> Any:
-    """Training moved to `training.py`; its names are still importable from here."""
-    if name in _MOVED:
-        from teleop_core.estimation import training
-
-        return getattr(training, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -60,6 +60,7 @@ class ExtendedPhysics:
 
     def force(self, recording: FollowerRecording) -> Float1D:
         """F_physics (N) over every sample: eq. 1 plus the calibrated effects."""
+        # lazy: teleop_core.calibration.models costs 0.9 s at start-up
         from teleop_core.calibration.models import FollowerBase
 
         model = self.calibrated.model
@@ -71,11 +72,19 @@ class ExtendedPhysics:
         # a later part of the training's clock: one sample (a copy of the first) at the
         # origin, so that time since the start counts from there; its estimate is dropped
         first = recording.slice(0, 1)
+
+        def joined_column(k: str) -> Float1D:
+            return np.concatenate(
+                [[origin] if k == "t" else getattr(first, k), getattr(recording, k)]
+            )
+
         joined = FollowerRecording(
-            *(
-                np.concatenate([[origin] if k == "t" else getattr(first, k), getattr(recording, k)])
-                for k in ("t", "iq", "theta", "omega", "f_ref", "alpha")
-            ),
+            joined_column("t"),
+            joined_column("iq"),
+            joined_column("theta"),
+            joined_column("omega"),
+            joined_column("f_ref"),
+            joined_column("alpha"),
             name=recording.name,
         )
         return self.calibrated.predict(model.data(joined))[1:]
@@ -91,7 +100,10 @@ class ExtendedPhysics:
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str = "") -> ExtendedPhysics:
         """From a `study calibrate` report (or `to_dict`'s output)."""
+        # lazy: teleop_core.calibration.fitting costs 0.9 s at start-up
         from teleop_core.calibration.fitting import CalibratedModel
+
+        # lazy: teleop_core.calibration.models costs 0.9 s at start-up
         from teleop_core.calibration.models import FollowerBase
 
         if "calibrated_model" not in d:
@@ -166,7 +178,10 @@ def find_effects(
     a physical term with its parameter fitted does. Returns the effects as the hybrid
     stage's first part (None when the loop adds none) and the loop's report.
     """
+    # lazy: teleop_core.calibration.loop (with scipy, statsmodels, numpy) costs 0.9 s at start-up
     from teleop_core.calibration.loop import Calibrator
+
+    # lazy: teleop_core.calibration.models (with scipy, statsmodels, numpy) costs 0.9 s at start-up
     from teleop_core.calibration.models import FollowerBase
 
     model = FollowerBase(wheel_radius_m=wheel_radius_m)

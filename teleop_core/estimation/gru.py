@@ -165,7 +165,9 @@ class GruWeights:
     def save_npz(self, path: Path) -> None:
         """The weights as plain float64 arrays (`gru.npz`): what inference reads."""
         with open(path, "wb") as f:
-            np.savez(f, **{name: np.asarray(getattr(self, name)) for name in _WEIGHT_NAMES})
+            arrays = {name: np.asarray(getattr(self, name)) for name in _WEIGHT_NAMES}
+            # numpy's stubs read any keyword of savez as its allow_pickle flag
+            np.savez(f, **arrays)  # type: ignore[arg-type]
 
     def kernel_weights(self) -> tuple[Float2D, Float2D, Float1D, Float1D, Float1D, float]:
         """(w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out): the arguments `_window_forward`
@@ -221,7 +223,7 @@ _WEIGHT_NAMES = ("w_ih", "w_hh", "b_ih", "b_hh", "w_out", "b_out")
 
 
 @njit(cache=True, fastmath={"reassoc", "contract", "arcp", "nsz", "afn"})
-def _window_forward_libm(x, w_ih, w_hh, b_ih, b_hh, w_out, b_out):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _window_forward_libm(x, w_ih, w_hh, b_ih, b_hh, w_out, b_out):  # pragma: no cover
     # The reference form: torch's weight layout, libm's exp and tanh per unit. What the
     # loop ran before `_window_forward`; kept so that tests hold the two within a stated
     # tolerance of each other.
@@ -294,7 +296,7 @@ _HALF, _ONE = _F32(0.5), _F32(1.0)
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"}, inline="always")
-def _tanh32(x):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _tanh32(x):  # pragma: no cover
     """tanh of a float32 within 3e-7 (the rational form above)."""
     x = min(max(x, -_TANH_CLAMP), _TANH_CLAMP)
     x2 = x * x
@@ -313,14 +315,14 @@ def _tanh32(x):  # type: ignore[no-untyped-def]  # pragma: no cover
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _tanh32_into(v, out):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _tanh32_into(v, out):  # pragma: no cover
     """out[j] = `_tanh32`(v[j]) (for tests of the approximation)."""
     for j in range(v.shape[0]):
         out[j] = _tanh32(v[j])
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
-def _window_forward(x, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _window_forward(x, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out):  # pragma: no cover
     """The GRU's output for one standardised window `x` (T, inputs), in float32 as the
     network was trained; weights as `GruWeights.kernel_weights` gives them (float32,
     transposed: w_ih_t (inputs, 3H), w_hh_t (H, 3H)).
@@ -380,7 +382,7 @@ def _window_forward(x, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out):  # type: ignor
 
 
 @njit(cache=True)
-def _batch_forward(windows, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _batch_forward(windows, w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out):  # pragma: no cover
     out = np.empty(windows.shape[0])
     for i in range(windows.shape[0]):
         out[i] = _window_forward(windows[i], w_ih_t, w_hh_t, b_ih, b_hh, w_out, b_out)

@@ -146,7 +146,7 @@ def ema_step(e: float, x: float, dt: float, inv_tau: float) -> float:  # pragma:
 
 
 @njit(cache=True)
-def _ema_residuals(t, base, table, out):  # type: ignore[no-untyped-def]  # pragma: no cover
+def _ema_residuals(t, base, table, out):  # pragma: no cover
     for j in range(table.shape[0]):
         col, inv_tau = int(table[j, 0]), table[j, 1]
         e = base[0, col]

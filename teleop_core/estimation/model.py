@@ -625,6 +625,7 @@ def _load_gru_weights(folder: Path) -> GruWeights:
     """`gru.npz` without PyTorch; a folder written before it existed has only `gru.pt`."""
     if (folder / "gru.npz").is_file():
         return GruWeights.load_npz(folder / "gru.npz")
+    # lazy: teleop_core.estimation.gru_torch (with torch) costs 1.2 s at start-up
     from teleop_core.estimation.gru_torch import load_torch_weights
 
     return load_torch_weights(folder / "gru.pt")

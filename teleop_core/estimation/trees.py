@@ -110,7 +110,7 @@ class TreeArrays:
 
 
 @njit(cache=True)
-def _predict_trees(  # type: ignore[no-untyped-def]  # pragma: no cover
+def _predict_trees(  # pragma: no cover
     x, feature, threshold, left, right, is_leaf, missing_left, value, roots, baseline
 ):
     out = np.full(x.shape[0], baseline)
@@ -212,6 +212,7 @@ def train_trees(
 ) -> TreesModel:
     """Fit the trees to `residual` on the training windows `train_idx` (window i ends at
     sample i + window - 1); the standardisation comes from those windows' samples."""
+    # lazy: sklearn.ensemble costs 1.2 s at start-up
     from sklearn.ensemble import HistGradientBoostingRegressor
 
     config = config or TreesConfig()

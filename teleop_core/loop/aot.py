@@ -22,13 +22,17 @@ that is not released yet); nothing else compiles a numba kernel ahead of time.
 
 from __future__ import annotations
 
+import importlib
+import importlib.abc
 import importlib.machinery
 import importlib.util
 import sys
 import tempfile
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from importlib.machinery import ModuleSpec
 from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -40,6 +44,34 @@ SUFFIX = importlib.machinery.EXTENSION_SUFFIXES[0]
 
 def _name(key: str) -> str:
     return f"_haptic_study_loop_aot_{key}"
+
+
+class _CacheFolderFinder(importlib.abc.MetaPathFinder):
+    """Finds the kernel modules of a kernel cache folder by their names (`import_cached`),
+    so that they are imported as any module is: once per process, and found by name
+    where numba's on-disk cache looks a compiled function's module up."""
+
+    def __init__(self) -> None:
+        self.files: dict[str, Path] = {}
+
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None = None, target: ModuleType | None = None
+    ) -> ModuleSpec | None:
+        file = self.files.get(fullname)
+        return None if file is None else importlib.util.spec_from_file_location(fullname, file)
+
+
+_FINDER = _CacheFolderFinder()
+
+
+def import_cached(name: str, file: Path) -> ModuleType:
+    """The module `name` of the file `file` in a kernel cache folder (a C extension or
+    Python source), imported through the import system; a name already imported in this
+    process is that module (a kernel's name holds the digest of its source)."""
+    if _FINDER not in sys.meta_path:
+        sys.meta_path.append(_FINDER)
+    _FINDER.files.setdefault(name, file)
+    return importlib.import_module(name)
 
 
 # `run_ticks`'s argument types (`tick.py`): (dtype, ndim) of a C-contiguous array, ndim 0
@@ -131,15 +163,7 @@ def load_ahead_of_time(
     gives the JIT kernel for a call whose argument types it refuses."""
     if not is_built(folder, key):
         return None
-    path, name = folder / f"{_name(key)}{SUFFIX}", _name(key)
-    module = sys.modules.get(name)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(name, path)
-        if spec is None or spec.loader is None:  # pragma: no cover - a file path has one
-            return None
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        sys.modules[name] = module
+    module = import_cached(_name(key), folder / f"{_name(key)}{SUFFIX}")
     return _with_fallback(module.run_ticks, jit)
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -48,14 +48,9 @@ from teleop_core.master.haptics import LOADING, rate_command
 
 if TYPE_CHECKING:
     from teleop_core.loop.follower_units import PhysicalFollower
+    from teleop_core.loop.hardware import HardwareDriver
 
-__all__ = [  # LoopConfig and the results moved to config.py, the columns to layout.py
-    "SAMPLE_COLUMNS",
-    "LoopConfig",
-    "LoopCounters",
-    "LoopResult",
-    "TeleopLoop",
-]
+__all__ = ["TeleopLoop"]
 
 
 def _hand_to_loop(action: HandAction, loop: np.ndarray) -> None:
@@ -137,6 +132,16 @@ class TeleopLoop:
         self.driver: Driver | None = None
         self.physical_follower: PhysicalFollower | None = None
         """The real drive and force sensors (the driver's `follower`), once started."""
+        self._links: tuple[Any, ...] = NO_LINKS
+        """The in-kernel links (`link.kernel_links`) of the fast path, once started."""
+        self._pool = np.zeros(0)
+        self._pool_pos = np.zeros(1)
+
+    def _started_driver(self) -> Driver:
+        """The driver of `start`, which the loop needs from its first step on."""
+        if self.driver is None:
+            raise RuntimeError("the loop is advanced before start(driver)")
+        return self.driver
 
     def _reserve_draws(self, count: int) -> None:
         pos = int(self._pool_pos[POOL_NEXT])
@@ -364,9 +369,10 @@ class TeleopLoop:
         if len(self._log) < drv:
             self._log = np.zeros((drv, K.LOG_WIDTH))
         kernel, log, env = self._kernel, self._log, self.environment
-        fixed = (self.loop, mp, self.dial, self.dp, self.follower, self.fp, self.f_enc_step)
-        fixed += (env.state, env.params, log, NO_PACKETS, self._est_arrays, self._noise)
-        links, act, view = self._links, self.driver.act, self._row_view  # type: ignore[union-attr]
+        fixed: tuple[Any, ...] = (self.loop, mp, self.dial, self.dp, self.follower, self.fp)
+        fixed += (self.f_enc_step, env.state, env.params, log, NO_PACKETS, self._est_arrays)
+        fixed += (self._noise,)
+        links, act, view = self._links, self._started_driver().act, self._row_view
         loop[K.L_N_ACQ] = loop[K.L_N_EST] = loop[K.L_N_CMD] = 0.0
         defer = -1.0
         filled, updates = 0, 0
@@ -420,7 +426,9 @@ class TeleopLoop:
         if self.to_master.next_arrival_s() <= t + 1e-12:
             self.loop[K.L_FORCE_RX] = self.to_master.receive(t)
         if self.to_follower.next_arrival_s() <= t + 1e-12:
-            self.loop[K.L_SPEED_CMD_RX], self.loop[K.L_ROT_RATE_RX] = self.to_follower.receive(t)
+            command = self.to_follower.receive(t)
+            if command is not None:  # a packet arrived: the link holds its value
+                self.loop[K.L_SPEED_CMD_RX], self.loop[K.L_ROT_RATE_RX] = command
 
     def _packets(self, k: int, nxt: int) -> np.ndarray:
         schedule, self._schedule = packet_schedule(
@@ -532,16 +540,18 @@ class TeleopLoop:
         """The driver decides what the hand does until its next update."""
         c = self.counters
         c.driver_updates += 1
-        if self.driver.realtime:
+        driver = self._started_driver()
+        if driver.realtime:
             # keep pace with the wall clock: the person at the hardware lives in it
             lag = self._wall_start + self.t_s - time.monotonic()
             if lag > 0:
                 time.sleep(lag)
-        if self.driver.physical_dial:
+        if driver.physical_dial:
             # the real dial: send Psi's current, read the angle the person set
-            state = self.driver.exchange(self.loop[K.L_I_CMD_MA] / 1000.0)  # mA -> A
+            dial = cast("HardwareDriver", driver)  # the one driver with physical_dial
+            state = dial.exchange(self.loop[K.L_I_CMD_MA] / 1000.0)  # mA -> A
             self.dial[D_THETA], self.dial[D_OMEGA] = state.angle_rad, state.speed_rad_s
-        action = self.driver.act(self.view())
+        action = driver.act(self.view())
         self._action = action
         _hand_to_loop(action, self.loop)
         if action.done:

@@ -51,7 +51,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Protocol, TypeVar
 
 import serial
 
@@ -151,12 +151,21 @@ class UnitState:
         if button not in ("0", "1"):
             raise CorruptLine(f"button field {button!r} in state line {payload!r}; expected 0 or 1")
         try:
-            values = [float(f) for f in fields[1:6]]
+            t_ms, angle_rad, speed_rad_s, iq_ma, joystick = (float(f) for f in fields[1:6])
         except ValueError:
             raise CorruptLine(f"non-numeric field in state line {payload!r}") from None
-        if not all(math.isfinite(v) for v in values):
+        if not all(math.isfinite(v) for v in (t_ms, angle_rad, speed_rad_s, iq_ma, joystick)):
             raise CorruptLine(f"non-finite value in state line {payload!r}")
-        return cls(*values, button=button == "1")
+        return cls(t_ms, angle_rad, speed_rad_s, iq_ma, joystick, button=button == "1")
+
+
+class JoinedFollower(Protocol):
+    """What the dial's driver asks of the follower that joins it (`follower_units`, which
+    builds on this module): its record for the trial, and to close."""
+
+    def record(self) -> dict[str, str | int]: ...
+
+    def close(self) -> None: ...
 
 
 class Esp32Unit:
@@ -323,7 +332,7 @@ class HardwareDriver(Driver):
         self,
         unit: Esp32Unit,
         max_rotation_rate_rad_s: float = math.pi / 2,
-        follower: object | None = None,
+        follower: JoinedFollower | None = None,
     ) -> None:
         self.unit = unit
         self.max_rotation_rate_rad_s = max_rotation_rate_rad_s

@@ -18,25 +18,27 @@ import importlib.metadata
 import importlib.util
 import inspect
 import os
-import sys
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from teleop_core.files import write_atomically
-from teleop_core.loop import layout
-from teleop_core.loop.aot import build_ahead_of_time, can_build, is_built, load_ahead_of_time
+from teleop_core.loop.aot import (
+    build_ahead_of_time,
+    can_build,
+    import_cached,
+    is_built,
+    load_ahead_of_time,
+)
 from teleop_core.loop.tick import _make
 
-_KERNELS: dict[object, Callable[..., None]] = {}
-
-COMPILE_NOTICE: Callable[[str], None] | None = None
-"""Told (for example by the `study` command, on stderr) when a kernel is compiled for the
-first time on this machine rather than loaded from the on-disk cache."""
+_KERNELS: dict[object, Callable[..., int]] = {}
 
 
-def kernel_for(env_fn: Callable[..., None]) -> Callable[..., None]:
+def kernel_for(
+    env_fn: Callable[..., None], notice: Callable[[str], None] | None = None
+) -> Callable[..., int]:
     """The compiled tick with `env_fn` bound in (compiled on first use, then reused).
 
     An environment importable by name (a module-level numba function) gets the tick from
@@ -44,9 +46,11 @@ def kernel_for(env_fn: Callable[..., None]) -> Callable[..., None]:
     on-disk cache of the kernel's source written once into a module of its own that
     imports the environment as a global (numba caches a module-level function, not a
     closure). Anything else, or an unwritable cache folder, is compiled in the process.
+    `notice` (for example the `study` command's, on stderr) is told when the kernel is
+    compiled for the first time on this machine rather than loaded from the cache folder.
     """
     if env_fn not in _KERNELS:
-        _KERNELS[env_fn] = _cached_kernel(env_fn) or _make(env_fn)
+        _KERNELS[env_fn] = _cached_kernel(env_fn, notice) or _make(env_fn)
     return _KERNELS[env_fn]
 
 
@@ -127,10 +131,12 @@ def _kernel_module(env_fn: Callable[..., None]) -> tuple[str, str, str] | None:
     return module, name, hashlib.sha256(f"{_DIGEST}{source}".encode()).hexdigest()[:16]
 
 
-def _cached_kernel(env_fn: Callable[..., None]) -> Callable[..., None] | None:
+def _cached_kernel(
+    env_fn: Callable[..., None], notice: Callable[[str], None] | None = None
+) -> Callable[..., int] | None:
     """The kernel compiled ahead of time (`aot.py`), else through numba's on-disk cache;
     None where neither can be kept (an environment not importable by name, an
-    unwritable cache folder)."""
+    unwritable cache folder); `notice` is told before a first compilation."""
     try:
         found = _kernel_module(env_fn)
         if found is None:
@@ -143,36 +149,22 @@ def _cached_kernel(env_fn: Callable[..., None]) -> Callable[..., None] | None:
         jit, first = _jit_kernel(folder, module, name, key)
     except (OSError, ImportError, AttributeError, SyntaxError):
         return None
-    if (first or can_build(folder, key)) and COMPILE_NOTICE is not None:
-        COMPILE_NOTICE(f"compiling the simulation loop for {name} (once; later runs load it)")
+    if (first or can_build(folder, key)) and notice is not None:
+        notice(f"compiling the simulation loop for {name} (once; later runs load it)")
     return build_ahead_of_time(folder, key, jit.py_func, jit) or jit
 
 
-def _jit_kernel(folder: Path, module: str, name: str, key: str) -> tuple[Callable[..., None], bool]:
-    """The kernel through numba's on-disk cache: its source written once into a module
-    of its own that imports the environment as a global (numba caches a module-level
-    function, not a closure); and whether the source was written just now."""
+def _jit_kernel(folder: Path, module: str, name: str, key: str) -> tuple[Any, bool]:
+    """The kernel through numba's on-disk cache (numba's dispatcher): its source written
+    once into a module of its own that imports the environment as a global (numba caches
+    a module-level function, not a closure); and whether the source was written just now."""
     path = folder / f"loop_kernel_{key}.py"
     first = not path.is_file()
     if first:
         folder.mkdir(parents=True, exist_ok=True)
         write_atomically(path, _kernel_source(module, name))
-    spec = importlib.util.spec_from_file_location(f"_haptic_study_{path.stem}", path)
-    if spec is None or spec.loader is None:  # pragma: no cover - a file path always has one
-        raise ImportError(str(path))
-    generated = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = generated  # numba's cache finds the module by name
-    spec.loader.exec_module(generated)
-    kernel: Callable[..., None] = generated.run_ticks
-    return kernel, first
+    generated = import_cached(f"_haptic_study_{path.stem}", path)
+    return generated.run_ticks, first
 
 
 _DIGEST = ""
-
-
-def __getattr__(name: str) -> Any:
-    """The environment's outputs (`E_*`, `ENV_OUT`) are defined in `layout.py`; an
-    environment may still import them from here, where they were first."""
-    if name == "ENV_OUT" or name.startswith("E_"):
-        return getattr(layout, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

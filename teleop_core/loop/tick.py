@@ -150,7 +150,7 @@ from teleop_core.master.dial import D_OMEGA, D_THETA, dial_tick
 from teleop_core.master.haptics import haptic_torque, psi, rate_command, return_torque
 
 
-def _make(env_fn: Callable[..., None]) -> Callable[..., None]:
+def _make(env_fn: Callable[..., None]) -> Callable[..., int]:
     numba = numba_module()
 
     @numba.njit

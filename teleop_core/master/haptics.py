@@ -121,6 +121,7 @@ class InverseMap:
     """
 
     def __init__(self, polynomials: CalibrationPolynomials | None = None) -> None:
+        # lazy: numpy costs 67 ms at start-up
         import numpy as np
 
         self.polynomials = polynomials or CalibrationPolynomials()

@@ -138,8 +138,9 @@ def identify_recording(
         "rows": len(recording.t),
     }
     if recording.experiment == "ramp":
-        out["ramp"] = ramp_measures(recording).to_dict()
-        out["max_continuous"] = out["ramp"]["max_continuous"]  # type: ignore[index]
+        ramp = ramp_measures(recording).to_dict()
+        out["ramp"] = ramp
+        out["max_continuous"] = ramp["max_continuous"]
         out["compensator"] = KarnoppCompensator().fit(recording).to_dict()
         return out, None
     frfs = [measure_frf(recording)]

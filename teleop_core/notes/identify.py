@@ -121,7 +121,8 @@ def measure_frf(recording: NotesRecording) -> Frf:
         which = "F"
         u_raw = u
     fs = recording.rate_hz
-    f = np.fft.rfftfreq(len(u), 1.0 / fs)
+    # numpy's stubs type rfftfreq as floating[Any]; it returns float64
+    f: Float1D = np.fft.rfftfreq(len(u), 1.0 / fs)  # type: ignore[assignment]
     uf, yf = np.fft.rfft(u - u.mean()), np.fft.rfft(y - y.mean())
     lo, hi = CHIRP_BAND_HZ
     band = (f >= lo) & (f <= hi)
@@ -158,7 +159,8 @@ class GreyBoxFit:
     """
 
     start: MsdParams
-    params_: MsdParams | None = field(default=None, init=False)
+    params_: MsdParams = field(init=False, repr=False)
+    """The fitted parameters (set by `fit`)."""
     fit_percent_: dict[str, float] = field(default_factory=dict, init=False)
     free_: tuple[str, ...] = field(default=(), init=False)
     cost_: float = field(default=float("nan"), init=False)

@@ -30,8 +30,8 @@ from teleop_core.notes.karnopp import (
     COMP_ON,
     compensated_command,
 )
-from teleop_core.notes.params import CHIRP_BAND_HZ as CHIRP_BAND_HZ  # re-exported
 from teleop_core.notes.params import (
+    CHIRP_BAND_HZ,
     MSD_B_M,
     MSD_B_S,
     MSD_K_S,
@@ -176,6 +176,7 @@ def simulate_response(
     """
     if boundary not in BOUNDARIES:
         raise NotesParamsError(f"boundary {boundary!r}; expected one of {', '.join(BOUNDARIES)}")
+    # lazy: teleop_core.notes.compensation costs 8 ms at start-up
     from teleop_core.notes.compensation import NO_COMPENSATION
 
     p = params if nonlinear else params.without_nonlinearities()

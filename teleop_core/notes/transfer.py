@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import signal
+from scipy.optimize import brentq
 
 from teleop_core._typing import Float1D
 from teleop_core.notes.params import MsdParams
@@ -103,7 +104,6 @@ def force_bandwidth_hz(p: MsdParams, f_max_hz: float = 1000.0) -> float:
 
     Found on a fine logarithmic grid and refined with `scipy.optimize.brentq`.
     """
-    from scipy.optimize import brentq
 
     f = np.logspace(-2, np.log10(f_max_hz), 4000)
     gap = np.abs(frequency_response(p, "F", f)) - 1 / np.sqrt(2)

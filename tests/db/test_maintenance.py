@@ -14,7 +14,8 @@ from sqlalchemy import Engine, select
 
 from db.maintenance import backup_database, check_database
 from db.migrate import inspect_database, open_database
-from db.samples import SampleReader, SampleWriter
+from db.sample_reader import SampleReader
+from db.samples import SampleWriter
 from study.cli import main
 from tests.db.test_samples import _trial
 

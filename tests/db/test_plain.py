@@ -8,14 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from db.engine import DEFAULT_URL
 from db.migrate import HEAD_REVISION, open_database
-from db.plain import DEFAULT_URL as PLAIN_DEFAULT_URL
 from db.plain import plain_sqlite, sqlite_file
-
-
-def test_the_default_database_is_the_engines() -> None:
-    assert PLAIN_DEFAULT_URL == DEFAULT_URL
 
 
 def test_a_current_sqlite_file_opens_read_only(tmp_path: Path) -> None:

@@ -15,7 +15,8 @@ from sqlalchemy import Engine, func, select
 from db.engine import make_session_factory
 from db.errors import DbInputError
 from db.models import Participant, SampleChunk, Study, Trial
-from db.samples import SampleReader, SampleWriter
+from db.sample_reader import SampleReader
+from db.samples import SampleWriter
 
 
 def _trial(engine: Engine) -> int:
@@ -174,7 +175,8 @@ _WRITE_THEN_DIE = """
 import os, signal, sys
 import numpy as np
 from db.migrate import open_database
-from db.samples import SampleReader, SampleWriter
+from db.sample_reader import SampleReader
+from db.samples import SampleWriter
 engine = open_database(sys.argv[1])
 writer = SampleWriter(engine, int(sys.argv[2]), chunk_s=1.0)
 for k in range(2600):  # 2.6 s at 1 kHz, one sample at a time as a live session does

@@ -14,7 +14,8 @@ from sqlalchemy.exc import OperationalError
 
 from db.migrate import open_database
 from db.models import SampleChunk
-from db.samples import SampleReader, SampleWriter
+from db.sample_reader import SampleReader
+from db.samples import SampleWriter
 from tests.db.test_samples import _stored, _trial
 
 

@@ -271,7 +271,7 @@ def test_without_pytorch_a_trained_model_runs_and_saves_without_gru_pt(
     model_dir: Path, recording_csv: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from teleop_core.estimation.estimator import ForceEstimator
-    from teleop_core.estimation.recording import FollowerRecording
+    from teleop_core.follower.recording import FollowerRecording
 
     _without_torch(monkeypatch)
     estimator = ForceEstimator.load(model_dir)  # reads gru.npz

@@ -32,7 +32,7 @@ from study.cli import main
 from teleop_core.calibration.models import MASTER_COLUMNS
 from teleop_core.calibration.rigid_axis import RIGID_COLUMNS, read_numeric_csv
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.recording import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, read_checked_csv
+from teleop_core.follower.recording import OPTIONAL_COLUMNS, REQUIRED_COLUMNS, read_checked_csv
 from teleop_core.notes.recording import NotesRecording
 from teleop_core.recording_checks import MAX_ABS_VALUE, MAX_RATE_HZ, MIN_RATE_HZ
 

@@ -24,7 +24,8 @@ from sqlalchemy.engine import make_url
 from db.engine import make_session_factory
 from db.migrate import open_database
 from db.models import Participant, Trial
-from db.samples import SampleReader, SampleWriter
+from db.sample_reader import SampleReader
+from db.samples import SampleWriter
 from study.cli import main
 from study.protocol.design import TEMPLATE
 from study.protocol.export import export_data

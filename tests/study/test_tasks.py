@@ -6,7 +6,7 @@ import pytest
 
 from study.errors import StudyInputError
 from study.protocol.tasks import get_task, task_names
-from teleop_core.loop.core import SAMPLE_COLUMNS as LOOP_COLUMNS
+from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_COLUMNS
 from teleop_core.notes import task as notes
 from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.follower import scenarios
 from teleop_core.follower.params import FollowerPlantParams, FollowerSensorParams
 from teleop_core.follower.plant import FollowerDrive
+from teleop_core.follower.recording import FollowerRecording
 from teleop_core.follower.sensors import acquire
 
 
@@ -33,8 +33,8 @@ def short_recording() -> FollowerRecording:
 @pytest.fixture(scope="session")
 def small_estimator(short_recording: FollowerRecording):
     """A physics + GRU + EKF estimator trained for two epochs (loop tests need one)."""
-    from teleop_core.estimation.estimator import train_estimator
     from teleop_core.estimation.gru import GruConfig
+    from teleop_core.estimation.training import train_estimator
 
     estimator, _ = train_estimator(short_recording, GruConfig(max_epochs=2), seed=0)
     return estimator

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from teleop_core.loop import kernel
+from teleop_core.loop import kernel, layout
 from teleop_core.loop.aot import SUFFIX
 from teleop_core.loop.core import TeleopLoop
 from teleop_core.loop.drivers import SimulatedOperator
-from teleop_core.loop.environments import tube_with_wall
+from teleop_core.loop.environments import Environment, tube_with_wall
 
 TRIAL = """
 import json, sys
@@ -182,13 +182,11 @@ def test_an_environment_defined_in_a_function_still_runs(tmp_path: Path) -> None
     @numba.njit
     def wall(state, params, insertion_m, speed_m_s, rotation_rad, dt_s, out):  # type: ignore[no-untyped-def]
         out[:] = 0.0
-        out[kernel.E_PROXIMAL] = 10.0 * max(insertion_m - 0.05, 0.0)
-        out[kernel.E_TIP_X] = insertion_m
+        out[layout.E_PROXIMAL] = 10.0 * max(insertion_m - 0.05, 0.0)
+        out[layout.E_TIP_X] = insertion_m
 
     assert kernel._cached_kernel(wall) is None  # not importable by name: compiled here
     base = tube_with_wall(friction_n_per_m=8.0)
-    from teleop_core.loop.environments import Environment
-
     run = TeleopLoop(environment=Environment(wall, base.params), seed=5).run(
         2.0, SimulatedOperator()
     )

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from teleop_core.estimation.ekf import EkfSettings, ForceEkf, filter_forces
-from teleop_core.estimation.estimator import tune_process_noise
 from teleop_core.estimation.metrics import lag_samples
-from teleop_core.estimation.physics import PhysicsParams
+from teleop_core.estimation.training import tune_process_noise
+from teleop_core.follower.physics import PhysicsParams
 
 PHYSICS = PhysicsParams()
 

@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.estimator import MODEL_FILES, ForceEstimator, train_estimator
+from teleop_core.estimation.estimator import MODEL_FILES, ForceEstimator
 from teleop_core.estimation.gru import GruConfig
-from teleop_core.estimation.recording import FollowerRecording
+from teleop_core.estimation.training import train_estimator
+from teleop_core.follower.recording import FollowerRecording
 
 SMALL = GruConfig(window=8, hidden_size=8, learning_rate=3e-3, max_epochs=3)
 

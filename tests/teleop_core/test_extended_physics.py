@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.estimator import ForceEstimator, train_estimator
+from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.estimation.extended import ExtendedPhysics
 from teleop_core.estimation.gru import GruConfig
+from teleop_core.estimation.training import train_estimator
 from tests.teleop_core.conftest import calibrated_folder
 
 TINY = GruConfig(window=6, hidden_size=8, max_epochs=1)

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 import torch
 
-from teleop_core.estimation.estimator import train_estimator
 from teleop_core.estimation.gru import (
     GruConfig,
     GruWeights,
@@ -17,8 +16,9 @@ from teleop_core.estimation.gru import (
     block_split,
 )
 from teleop_core.estimation.gru_torch import GruNet, state_dict_of, weights_from_net
-from teleop_core.estimation.physics import PhysicsParams
-from teleop_core.estimation.recording import FollowerRecording
+from teleop_core.estimation.training import train_estimator
+from teleop_core.follower.physics import PhysicsParams
+from teleop_core.follower.recording import FollowerRecording
 
 SHIPPED = Path(__file__).resolve().parents[2] / "study" / "models" / "follower_estimator"
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.loop.core import SAMPLE_COLUMNS, LoopConfig, TeleopLoop
+from teleop_core.loop.config import LoopConfig
+from teleop_core.loop.core import TeleopLoop
 from teleop_core.loop.drivers import (
     Driver,
     HandAction,
@@ -19,6 +20,7 @@ from teleop_core.loop.drivers import (
     SimulatedOperator,
 )
 from teleop_core.loop.environments import free_space, tube_with_wall
+from teleop_core.loop.layout import SAMPLE_COLUMNS
 from teleop_core.loop.link import LinkParams
 from teleop_core.master.params import HapticParams
 from tests.teleop_core.test_gru import GRU_F32_TOLERANCE

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.estimation.estimator import ForceEstimator, train_estimator
+from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.estimation.gru import GruConfig
 from teleop_core.estimation.memory import MemorySpec, ema_residuals, memory_inputs
-from teleop_core.estimation.recording import FollowerRecording
+from teleop_core.estimation.training import train_estimator
+from teleop_core.follower.recording import FollowerRecording
 
 SHIPPED = Path(__file__).resolve().parents[2] / "study" / "models" / "follower_estimator"
 

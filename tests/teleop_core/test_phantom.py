@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from teleop_core.errors import TeleopInputError
-from teleop_core.loop.kernel import E_BRANCH, E_DISTAL, E_PROXIMAL, E_SUCCESS, ENV_OUT
+from teleop_core.loop.layout import E_BRANCH, E_DISTAL, E_PROXIMAL, E_SUCCESS, ENV_OUT
 from teleop_core.phantom.anatomy import G_THETA, REGIONS, ArchAnatomy
 from teleop_core.phantom.lcca import (
     CATCH_DEPTH_M,

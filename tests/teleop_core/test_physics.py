@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from teleop_core.estimation.physics import PhysicsParams, fit_physics
-from teleop_core.estimation.recording import FollowerRecording
 from teleop_core.follower.params import FollowerPlantParams, FollowerSensorParams
+from teleop_core.follower.physics import PhysicsParams, fit_physics
+from teleop_core.follower.recording import FollowerRecording
 
 from .conftest import simulate_recording
 

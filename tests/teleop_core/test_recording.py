@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from teleop_core.estimation.recording import FollowerRecording, RecordingError
+from teleop_core.follower.recording import FollowerRecording, RecordingError
 
 
 def _write(path: Path, header: str, rows: list[str]) -> Path:

@@ -66,6 +66,7 @@ from scipy.optimize import least_squares
 from study.analysis.participant_fit.checks import holm_flags
 from study.analysis.participant_fit.emulator import MomentEmulator, floor, log_moment
 from study.analysis.participant_fit.estimate import DRAWS, HIGH, LOW, GroupEstimator, GroupFit
+from study.analysis.participant_fit.observed import person_moments
 from study.protocol.participant_effects import (
     BOUNDS,
     FAMILIES,
@@ -166,7 +167,9 @@ def trial_arrays(trials: pd.DataFrame, emulator: MomentEmulator) -> TrialArrays:
 
 
 def factor_matrix(
-    effects: Sequence[ParticipantEffect], places: Sequence[TrialPlace], groups: Sequence[str]
+    effects: Sequence[ParticipantEffect],
+    places: Sequence[TrialPlace],
+    groups: Sequence[str] | np.ndarray,
 ) -> np.ndarray:
     """(trials, len(TRAITS)) the effects' multiplier on each trait at each trial, by
     `ParticipantEffect.factors` once per distinct (place, group)."""
@@ -317,7 +320,6 @@ def fit_traits(
     trials: pd.DataFrame, emulator: MomentEmulator, free: list[int], weak: list[int], seed: int
 ) -> PeopleFit:
     """Each group's trait distribution and each person's traits (no bootstrap)."""
-    from study.analysis.participant_fit.observed import person_moments
 
     people = person_moments(trials, emulator.measures_, emulator.features_)
     out = PeopleFit({}, {})

@@ -346,6 +346,14 @@ class MomentEmulator:
         fold emulators, which use the log surface only, go without it.
     """
 
+    # set after `fit`, and absent until then: by `local` and by the held-out validation
+    local_: dict[str, float]
+    """`local`'s widening of the prior and the effective number of settings."""
+    design_: tuple[np.ndarray, pd.DataFrame, int]
+    """The design's settings, trials and repeats (`validate.attach`)."""
+    held_out_error_: np.ndarray
+    """The held-out error of each trait (`validate.attach`)."""
+
     def __init__(
         self, degree: int = 2, alphas: Sequence[float] = ALPHAS, mean_surface: bool = True
     ) -> None:

@@ -83,6 +83,7 @@ from study.protocol.participant_model import FORMAT
 from study.protocol.tasks import get_task
 from study.protocol.traits import PROFILES, TRAITS, GroupProfile, draw_traits
 from teleop_core.blas import one_blas_thread
+from teleop_core.files import write_atomically
 from teleop_core.progress import Progress, as_step, no_progress
 
 
@@ -836,7 +837,6 @@ class FitResult:
 
     def write(self, path: Path, extra: dict[str, Any] | None = None) -> dict[str, Any]:
         """MODEL.json at `path`, written whole or not at all; its content."""
-        from teleop_core.files import write_atomically
 
         model = {**self.to_dict(), **(extra or {})}
         write_atomically(path, json.dumps(model, indent=2, default=float) + "\n")

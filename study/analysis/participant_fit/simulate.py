@@ -30,7 +30,7 @@ import os
 import zlib
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from contextlib import contextmanager, nullcontext
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from contextvars import ContextVar
 from functools import lru_cache
 from typing import Any
@@ -54,6 +54,7 @@ def trial_seed(setting: int, repeat: int, salt: str = "fit", condition: str = ""
 
 @lru_cache(maxsize=1)
 def _estimator() -> Any:
+    # lazy: study.protocol.default_estimator costs 36 ms at start-up
     from study.protocol.default_estimator import load_estimator
 
     return load_estimator()
@@ -174,6 +175,7 @@ def simulate_settings(
             progress("simulating", k + 1, n)
     else:
         shared = _POOL.get()
+        opened: AbstractContextManager[object]
         if shared is not None and shared[:2] == (task, jobs):
             opened, pool = nullcontext(), shared[2]
         else:
