@@ -960,3 +960,34 @@ def test_type_ii_mixed_anova_equals_pingouin_on_unequal_groups() -> None:
             assert r["p"] == pytest.approx(expected["p_unc"], rel=1e-9)
             assert r["np2"] == pytest.approx(expected["np2"], rel=1e-10)
             assert (r["df1"], r["df2"]) == (expected["DF1"], expected["DF2"])
+
+
+def test_study_analyze_computes_on_one_blas_thread(tmp_path: Path) -> None:
+    """A fresh `study analyze` loads OpenBLAS with one thread (the models are small; more
+    threads only spin beside the one computing), unless the user set another count."""
+    import os
+    import subprocess
+    import sys
+
+    db = init_study(tmp_path)
+    _import_small_study(tmp_path, db)
+    probe = (
+        "from study.cli import main\n"
+        "from threadpoolctl import threadpool_info\n"
+        f"assert main(['analyze', '--out', {str(tmp_path / 'a')!r}, '--db', {db!r}]) == 0\n"
+        "print([i['num_threads'] for i in threadpool_info() if i['internal_api'] == 'openblas'])\n"
+    )
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+    }
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, env=env
+    )
+    counts = json.loads(out.stdout.strip().splitlines()[-1])
+    assert counts
+    assert set(counts) == {1}
+    env["OPENBLAS_NUM_THREADS"] = "2"
+    out = subprocess.run(
+        [sys.executable, "-c", probe], capture_output=True, text=True, check=True, env=env
+    )
+    assert set(json.loads(out.stdout.strip().splitlines()[-1])) == {2}
