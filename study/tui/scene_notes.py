@@ -27,7 +27,7 @@ the fornix tears (`teleop_core.notes.task.PUSH_BENCHMARK_N`)."""
 
 
 def notes_region(code: int) -> str:
-    from teleop_core.notes.task import REGIONS
+    from teleop_core.notes.regions import REGIONS
 
     return REGIONS[code] if 0 <= code < len(REGIONS) else "?"
 

@@ -37,6 +37,7 @@ import numpy as np
 from teleop_core.loop.drivers import GRIP_STIFFNESS_N_M_PER_RAD, Driver, HandAction, OperatorView
 from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 from teleop_core.notes.params import RotationParams, TranslationParams
+from teleop_core.notes.regions import REGIONS
 from teleop_core.notes.tissue import NotesAbdomen as TissueAbdomen
 from teleop_core.notes.tissue import TissueParams
 
@@ -72,9 +73,6 @@ HAND_MAX_TORQUE_N_M = 0.4
 """Strongest push and twist a hand applies to the scope; assumptions."""
 DEVICE_RATE_HZ = 1000.0
 SAMPLE_RATE_HZ = 100.0
-REGIONS = ("canal", "fornix", "cavity", "target", "fold")
-"""Region names, stored as the samples' `branch` (the fold last, so older codes keep
-their meaning): "fold" is the tip against the fold, the screen's red-out."""
 SAMPLE_COLUMNS = (
     *LOOP_SAMPLE_COLUMNS[:6],
     "region",

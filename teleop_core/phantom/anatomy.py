@@ -68,18 +68,6 @@ class ArchAnatomy:
     """How far past its ostium the tip must be in the target branch for success."""
 
 
-REGIONS = (
-    "descending aorta",
-    "aortic arch",
-    "ascending aorta",
-    "left subclavian",
-    "left common carotid",
-    "brachiocephalic",
-)
-"""Region codes (index) the phantom writes as the tip's branch."""
-REGION_ABBREVIATIONS = ("DAo", "arch", "AAo", "LSA", "LCCA", "BCT")
-"""Short names of REGIONS, as the sample table stores them (16 characters at most)."""
-
 # geometry columns
 G_X, G_Y, G_Z, G_THETA, G_KAPPA, G_REGION, G_BEND = range(7)
 GEOMETRY_COLUMNS = 7

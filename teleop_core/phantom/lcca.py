@@ -24,7 +24,7 @@ A reduced guidewire model, cheap enough for a numba tick yet physical in its eff
 - In curved vessel the tip bears on the outer wall with EI kappa / l_tip.
 
 Outputs per tick: proximal force (what the drive feels), distal force (tip on the
-wall), tip position, region code (`anatomy.REGIONS`) and success (tip `target_depth_m`
+wall), tip position, region code (`regions.REGIONS`) and success (tip `target_depth_m`
 inside the LCCA).
 """
 
@@ -56,11 +56,11 @@ from teleop_core.phantom.anatomy import (
     G_Y,
     G_Z,
     GEOMETRY_COLUMNS,
-    REGIONS,
     STEP_M,
     ArchAnatomy,
     build_paths,
 )
+from teleop_core.phantom.regions import REGIONS
 from teleop_core.validation import require_positive
 
 

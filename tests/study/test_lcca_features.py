@@ -111,7 +111,6 @@ def test_a_trial_without_backing_off_or_target_has_those_features_undefined() ->
 
 def test_the_task_reads_its_features_off_a_simulated_trial() -> None:
     task = get_task("lcca")
-    assert task.fit_features == FEATURES
     from study.protocol.traits import PROFILES, ParticipantTraits
 
     mean = {t: m for t, (m, _) in PROFILES["expert"].__dict__.items()}

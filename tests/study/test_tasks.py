@@ -8,7 +8,6 @@ from study.errors import StudyInputError
 from study.protocol.tasks import get_task, task_names
 from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_COLUMNS
 from teleop_core.notes import task as notes
-from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS
 
 
 def test_the_builtin_tasks_are_known_and_an_unknown_one_gets_one_line() -> None:
@@ -34,7 +33,8 @@ def test_the_lcca_task_stores_the_loops_columns_in_order_under_the_loops_names()
     assert tuple(c.name for c in lcca.sample_columns) == LOOP_COLUMNS
     assert LOOP_COLUMNS[7:9] == ("reference_force_n", "proximal_force_n")
     assert "estimated" in lcca.sample_columns[8].description
-    assert lcca.regions == REGION_ABBREVIATIONS
+    # the branch names as the phantom's sample rows and the database store them
+    assert lcca.regions == ("DAo", "arch", "AAo", "LSA", "LCCA", "BCT")
 
 
 def test_the_notes_task_names_the_notes_loops_columns() -> None:
@@ -42,7 +42,8 @@ def test_the_notes_task_names_the_notes_loops_columns() -> None:
     assert tuple(c.name for c in task.sample_columns) == notes.SAMPLE_COLUMNS
     assert task.region_column == "region"
     assert task.sample_columns[-1].name == notes.SAMPLE_COLUMNS[-1] == "torque_demanded_n_m"
-    assert task.regions == notes.REGIONS
+    # the regions the NOTES loop writes as the tip's place, by index
+    assert task.regions == ("canal", "fornix", "cavity", "target", "fold")
     assert not task.has_dial
     assert get_task("lcca").has_dial
 

@@ -9,7 +9,7 @@ import pytest
 
 from teleop_core.errors import TeleopInputError
 from teleop_core.loop.layout import E_BRANCH, E_DISTAL, E_PROXIMAL, E_SUCCESS, ENV_OUT
-from teleop_core.phantom.anatomy import G_THETA, REGIONS, ArchAnatomy
+from teleop_core.phantom.anatomy import G_THETA, ArchAnatomy
 from teleop_core.phantom.lcca import (
     CATCH_DEPTH_M,
     STATE_SIZE,
@@ -17,6 +17,7 @@ from teleop_core.phantom.lcca import (
     LccaPhantom,
     lcca_phantom,
 )
+from teleop_core.phantom.regions import REGIONS
 
 
 class Wire:

@@ -53,6 +53,8 @@ import math
 import numpy as np
 import pandas as pd
 
+from study.tasks.lcca.task import FIT_FEATURES
+
 GRID_S = 0.01
 APPROACH_M = 0.06
 """Beyond the longest approach zone of a simulated participant (0.05 m)."""
@@ -65,18 +67,7 @@ RISE_FLOOR_N_M = 1e-4
 MIN_STALL_S = 0.15
 """A backing-off counts in `stall_backoffs` when the tip stood still at least this long."""
 START_S = 2.0
-FEATURES = (
-    "advance_speed_m_s",
-    "approach_m",
-    "approaches",
-    "target_speed_ratio",
-    "aim_error_rad",
-    "turn_peak_s",
-    "turn_swing_s",
-    "stall_s",
-    "stall_backoffs",
-    "peak_felt_rise_n_m",
-)
+FEATURES = FIT_FEATURES
 
 
 def _grid(frame: pd.DataFrame, column: str, t: np.ndarray) -> np.ndarray:

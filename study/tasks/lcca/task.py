@@ -17,6 +17,8 @@ from study.protocol.tasks import (
     pose_columns,
     register,
 )
+from teleop_core.master.params import HapticParams
+from teleop_core.phantom.regions import REGION_ABBREVIATIONS, REGIONS
 
 MAX_FORCE_N = 20.0
 """Largest peak force the guidewire drive can produce, N; beyond it an imported value is
@@ -66,31 +68,31 @@ MEASURES = (
         integer=True,
     ),
 )
+FIT_FEATURES = (
+    "advance_speed_m_s",
+    "approach_m",
+    "approaches",
+    "target_speed_ratio",
+    "aim_error_rad",
+    "turn_peak_s",
+    "turn_swing_s",
+    "stall_s",
+    "stall_backoffs",
+    "peak_felt_rise_n_m",
+)
+"""The participant fit's features of a trial (`study.tasks.lcca.features.lcca_features`)."""
 DECLARATION = TaskDeclaration(
     name="lcca",
     title="LCCA guidewire navigation",
-    # `teleop_core.phantom.anatomy.REGION_ABBREVIATIONS` (a test keeps them equal)
-    regions=("DAo", "arch", "AAo", "LSA", "LCCA", "BCT"),
+    regions=REGION_ABBREVIATIONS,
     sample_columns=SAMPLE_COLUMNS,
     measures=MEASURES,
     region_column="branch",
     has_dial=True,
-    # the paper's G_h (`teleop_core.master.params.HapticParams`; a test keeps them equal)
-    default_haptic_gain_n_m_per_n=0.02,
+    # the paper's G_h
+    default_haptic_gain_n_m_per_n=HapticParams().haptic_gain_n_m_per_n,
     has_link=True,
-    # `study.tasks.lcca.features.FEATURES` (a test keeps them equal)
-    fit_features=(
-        "advance_speed_m_s",
-        "approach_m",
-        "approaches",
-        "target_speed_ratio",
-        "aim_error_rad",
-        "turn_peak_s",
-        "turn_swing_s",
-        "stall_s",
-        "stall_backoffs",
-        "peak_felt_rise_n_m",
-    ),
+    fit_features=FIT_FEATURES,
 )
 
 
@@ -149,7 +151,6 @@ class LccaTask(Task):
     def trial_features(self, frame, context):
         from study.tasks.lcca.features import lcca_features
         from teleop_core.master.params import HapticParams
-        from teleop_core.phantom.anatomy import REGION_ABBREVIATIONS, REGIONS
 
         target = context.anatomy.target
         phi = next(b.phi_rad for b in context.anatomy.branches if b.name == target)

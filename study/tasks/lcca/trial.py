@@ -21,8 +21,8 @@ from teleop_core.loop.core import LoopConfig, TeleopLoop
 from teleop_core.loop.layout import SAMPLE_COLUMNS
 from teleop_core.loop.link import LinkParams
 from teleop_core.master.params import HapticParams
-from teleop_core.phantom.anatomy import REGIONS
 from teleop_core.phantom.lcca import LccaPhantom
+from teleop_core.phantom.regions import REGIONS
 
 CONDITIONS = KNOWN_CONDITIONS
 CONTACT_THRESHOLD_N = 0.2

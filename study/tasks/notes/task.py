@@ -17,6 +17,7 @@ from study.protocol.tasks import (
     pose_columns,
     register,
 )
+from teleop_core.notes.regions import REGIONS
 
 MAX_FORCE_N = 25.0
 """Largest force the NOTES hand can push (`teleop_core.notes.task.HAND_MAX_FORCE_N`);
@@ -127,8 +128,7 @@ MEASURES = (
 DECLARATION = TaskDeclaration(
     name="notes",
     title="NOTES endoscopy",
-    # `teleop_core.notes.task.REGIONS` (a test keeps them equal)
-    regions=("canal", "fornix", "cavity", "target", "fold"),
+    regions=REGIONS,
     sample_columns=SAMPLE_COLUMNS,
     measures=MEASURES,
     region_column="region",
