@@ -35,7 +35,7 @@ import math
 import numpy as np
 
 from teleop_core.loop.drivers import GRIP_STIFFNESS_N_M_PER_RAD, Driver, HandAction, OperatorView
-from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
+from teleop_core.notes.layout import SAMPLE_COLUMNS
 from teleop_core.notes.params import RotationParams, TranslationParams
 from teleop_core.notes.regions import REGIONS
 from teleop_core.notes.tissue import NotesAbdomen as TissueAbdomen
@@ -73,20 +73,6 @@ HAND_MAX_TORQUE_N_M = 0.4
 """Strongest push and twist a hand applies to the scope; assumptions."""
 DEVICE_RATE_HZ = 1000.0
 SAMPLE_RATE_HZ = 100.0
-SAMPLE_COLUMNS = (
-    *LOOP_SAMPLE_COLUMNS[:6],
-    "region",
-    "force_demanded_n",
-    "force_rendered_n",
-    "tip_force_n",
-    "dial_angle_rad",
-    "torque_rendered_n_m",
-    "torque_demanded_n_m",
-)
-"""Per sample, under the names the NOTES task stores them by: the loop's pose columns
-(`teleop_core.loop.layout.SAMPLE_COLUMNS`), the region's code, the force the tissue
-demands and the force the device renders, the tissue's force on the tip (fornix or
-fold), the dial's angle, the torque rendered and the torque demanded."""
 
 
 class NotesAbdomen(TissueAbdomen):

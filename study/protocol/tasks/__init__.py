@@ -21,7 +21,13 @@ from __future__ import annotations
 import importlib
 
 from study.errors import StudyInputError
-from study.protocol.tasks.declarations import LiveTrace, Measure, SampleColumn, pose_columns
+from study.protocol.tasks.declarations import (
+    LiveTrace,
+    Measure,
+    SampleColumn,
+    described,
+    pose_columns,
+)
 from study.protocol.tasks.task import (
     COMPLETION_TIME,
     Task,
@@ -43,6 +49,7 @@ __all__ = [
     "Traits",
     "TrialLoop",
     "TrialResult",
+    "described",
     "get_task",
     "is_task",
     "measure_named",

@@ -6,6 +6,7 @@ registry (`study.protocol.tasks`) re-exports them.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 MAX_HAPTIC_GAIN_N_M_PER_N = 1.0
@@ -66,6 +67,30 @@ def pose_columns(
         SampleColumn(rotation_name, "rad", rotation),
         *(SampleColumn(f"tip_{axis}_m", "m", tip) for axis in "xyz"),
     )
+
+
+def described(
+    names: Sequence[str], meanings: Mapping[str, tuple[str, str]]
+) -> tuple[SampleColumn, ...]:
+    """A task's sample columns from its loop's layout: the column names in the order the
+    loop writes them (the loop's one declaration of them, e.g.
+    `teleop_core.loop.layout.SAMPLE_COLUMNS`), each with the unit and meaning the task
+    gives it in `meanings` (name -> (unit, description)).
+
+    Raises
+    ------
+    ValueError
+        A column of the layout has no meaning, or a meaning names no column of it (a
+        layout and a task that disagree fail where the task is declared, not in a trial).
+    """
+    missing = [n for n in names if n not in meanings]
+    extra = [n for n in meanings if n not in names]
+    if missing or extra:
+        raise ValueError(
+            f"sample columns: the layout's {missing} have no meaning, "
+            f"the meanings of {extra} name no column of the layout"
+        )
+    return tuple(SampleColumn(n, *meanings[n]) for n in names)
 
 
 @dataclass(frozen=True)

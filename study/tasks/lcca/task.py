@@ -11,12 +11,13 @@ from typing import Any
 
 from study.protocol.tasks import (
     Measure,
-    SampleColumn,
     Task,
     TaskDeclaration,
+    described,
     pose_columns,
     register,
 )
+from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 from teleop_core.master.params import HapticParams
 from teleop_core.phantom.regions import REGION_ABBREVIATIONS, REGIONS
 
@@ -26,24 +27,31 @@ a typo or a unit slip: the drive (K_t 0.043 N m/A, wheel radius 10 mm) would nee
 4.7 A, above a 2804 gimbal motor's rating (assumption, see teleop_core.follower.params)."""
 
 
-SAMPLE_COLUMNS = (
-    *pose_columns("guidewire inserted", "guidewire roll", "tip position, phantom frame"),
-    SampleColumn("branch", "", "vessel the tip is in (DAo, arch, ...)"),
-    SampleColumn(
-        "reference_force_n",
-        "N",
-        "true proximal insertion force (simulation) or reference sensor",
-    ),
-    SampleColumn(
-        "proximal_force_n",
-        "N",
-        "proximal force estimated from the motor current (what is rendered)",
-    ),
-    SampleColumn("distal_force_n", "N", "tip force on the vessel wall"),
-    SampleColumn("dial_angle_rad", "rad", "haptic dial angle"),
-    SampleColumn("dial_torque_n_m", "N m", "torque on the hand"),
+SAMPLE_COLUMNS = described(
+    LOOP_SAMPLE_COLUMNS,
+    {
+        **{
+            c.name: (c.unit, c.description)
+            for c in pose_columns(
+                "guidewire inserted", "guidewire roll", "tip position, phantom frame"
+            )
+        },
+        "branch": ("", "vessel the tip is in (DAo, arch, ...)"),
+        "reference_force_n": (
+            "N",
+            "true proximal insertion force (simulation) or reference sensor",
+        ),
+        "proximal_force_n": (
+            "N",
+            "proximal force estimated from the motor current (what is rendered)",
+        ),
+        "distal_force_n": ("N", "tip force on the vessel wall"),
+        "dial_angle_rad": ("rad", "haptic dial angle"),
+        "dial_torque_n_m": ("N m", "torque on the hand"),
+    },
 )
-"""The loop's rows, under its names (`teleop_core.loop.layout.SAMPLE_COLUMNS`), in order."""
+"""The loop's rows in the loop's order, under its names (the loop declares them once:
+`teleop_core.loop.layout.SAMPLE_COLUMNS`), each with its unit and meaning."""
 MEASURES = (
     Measure(
         "peak_proximal_force_n",

@@ -11,44 +11,39 @@ from __future__ import annotations
 
 from study.protocol.tasks import (
     Measure,
-    SampleColumn,
     Task,
     TaskDeclaration,
+    described,
     pose_columns,
     register,
 )
+from teleop_core.notes.layout import SAMPLE_COLUMNS as NOTES_SAMPLE_COLUMNS
 from teleop_core.notes.regions import REGIONS
 
 MAX_FORCE_N = 25.0
 """Largest force the NOTES hand can push (`teleop_core.notes.task.HAND_MAX_FORCE_N`);
 beyond it an imported value is a typo or a unit slip."""
-SAMPLE_COLUMNS = (
-    *pose_columns("scope depth from the introitus", "scope roll", "tip position"),
-    SampleColumn("region", "", "where the tip is (canal, fornix, ...)"),
-    SampleColumn(
-        "force_demanded_n",
-        "N",
-        "tissue resistance on the scope, positive resisting insertion",
-    ),
-    SampleColumn(
-        "force_rendered_n",
-        "N",
-        "force the device renders (saturates at its continuous limit)",
-    ),
-    SampleColumn(
-        "tip_force_n",
-        "N",
-        "the tissue's push on the tip (the fornix or the fold)",
-    ),
-    SampleColumn("dial_angle_rad", "rad", "the hand's aim (rate input)"),
-    SampleColumn("torque_rendered_n_m", "N m", "torque rendered"),
-    SampleColumn(
-        "torque_demanded_n_m",
-        "N m",
-        "tissue resistance to roll, positive resisting clockwise roll",
-    ),
+SAMPLE_COLUMNS = described(
+    NOTES_SAMPLE_COLUMNS,
+    {
+        **{
+            c.name: (c.unit, c.description)
+            for c in pose_columns("scope depth from the introitus", "scope roll", "tip position")
+        },
+        "region": ("", "where the tip is (canal, fornix, ...)"),
+        "force_demanded_n": ("N", "tissue resistance on the scope, positive resisting insertion"),
+        "force_rendered_n": ("N", "force the device renders (saturates at its continuous limit)"),
+        "tip_force_n": ("N", "the tissue's push on the tip (the fornix or the fold)"),
+        "dial_angle_rad": ("rad", "the hand's aim (rate input)"),
+        "torque_rendered_n_m": ("N m", "torque rendered"),
+        "torque_demanded_n_m": (
+            "N m",
+            "tissue resistance to roll, positive resisting clockwise roll",
+        ),
+    },
 )
-"""The NOTES loop's rows, under its names (`teleop_core.notes.task.SAMPLE_COLUMNS`), in order."""
+"""The NOTES loop's rows in the loop's order, under its names (the loop declares them
+once: `teleop_core.notes.layout.SAMPLE_COLUMNS`), each with its unit and meaning."""
 MEASURES = (
     Measure(
         "peak_force_demanded_n",

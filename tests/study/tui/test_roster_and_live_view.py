@@ -10,8 +10,8 @@ from study.tui.scene_lcca import PhantomFrame
 from study.tui.scene_notes import notes_scene
 from study.tui.services import Roster
 from study.tui.trial_runner import LiveFrame, LiveState
+from teleop_core.notes.layout import SAMPLE_COLUMNS as NOTES_COLUMNS
 from teleop_core.notes.regions import REGIONS
-from teleop_core.notes.task import SAMPLE_COLUMNS as NOTES_COLUMNS
 from teleop_core.phantom.anatomy import ArchAnatomy
 
 
