@@ -29,8 +29,9 @@ from study.protocol.participant_effects import (
     TrialPlace,
     apply_effects,
 )
+from study.protocol.tasks import get_task
 from study.protocol.traits import GROUPS, ParticipantTraits, draw_traits
-from study.tasks.lcca.trial import run_lcca_trial
+from study.protocol.trial_run import simulate_trial
 
 MEASURES = ("completion_time_s", "peak_proximal_force_n", "peak_distal_force_n")
 REPEATS = 2
@@ -48,8 +49,8 @@ def change(
         changed = apply_effects(person, (effect,), place)
         for r in range(REPEATS):
             seed = 1000 * i + r
-            a = run_lcca_trial(person, condition, seed, None).summary
-            b = run_lcca_trial(changed, condition, seed, None).summary
+            a = simulate_trial(get_task("lcca"), person, condition, seed, 180.0).summary
+            b = simulate_trial(get_task("lcca"), changed, condition, seed, 180.0).summary
             logs.append([math.log(b[m] / a[m]) for m in MEASURES])
     d = np.array(logs)
     se = d.std(axis=0, ddof=1) / math.sqrt(len(d))

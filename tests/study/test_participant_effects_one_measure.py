@@ -27,8 +27,9 @@ import pytest
 from study.analysis.participant_fit import effects
 from study.analysis.participant_fit.emulator import MomentEmulator
 from study.protocol.participant_effects import ParticipantEffect, TrialPlace, apply_effects
+from study.protocol.tasks import get_task
 from study.protocol.traits import TRAITS, ParticipantTraits, draw_traits
-from study.tasks.lcca.trial import run_lcca_trial
+from study.protocol.trial_run import simulate_trial
 from tests.study.closed_form_effects import closed_form_emulator, closed_form_study
 
 MEASURES = ["completion_time_s", "peak_proximal_force_n", "peak_distal_force_n"]
@@ -78,8 +79,8 @@ def _lcca_change(effect: ParticipantEffect, people: int = 16) -> dict[str, float
             changed = apply_effects(person, (effect,), VO_AFTER_HV)
             for r in range(2):
                 seed = 1000 * len(logs) + r
-                a = run_lcca_trial(person, "VO", seed, None).summary
-                b = run_lcca_trial(changed, "VO", seed, None).summary
+                a = simulate_trial(get_task("lcca"), person, "VO", seed, 180.0).summary
+                b = simulate_trial(get_task("lcca"), changed, "VO", seed, 180.0).summary
                 logs.append([math.log(b[m] / a[m]) for m in MEASURES])
     mean = np.mean(logs, axis=0)
     return {m: math.expm1(mean[k]) for k, m in enumerate(MEASURES)}

@@ -94,7 +94,8 @@ def test_the_named_channels_are_the_stored_forces_and_a_silent_stream_ends_the_t
         finally:
             driver.close()
     assert len(kept) == 50
-    proximal = kept[:, SAMPLE_COLUMNS.index("proximal_force_n")]
+    # the sensor is the reference: the true force, beside the estimate from the current
+    proximal = kept[:, SAMPLE_COLUMNS.index("reference_force_n")]
     distal = kept[:, SAMPLE_COLUMNS.index("distal_force_n")]
     assert np.all(proximal == PROXIMAL_N)
     assert np.all(distal == DISTAL_N)
