@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import math
 import sys
 import time
 from collections.abc import Callable
@@ -122,8 +121,9 @@ def run(
 
     # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.protocol.session import run_session
+    from study.protocol.session_settings import SessionSettings
 
-    _check_options(code, run_all, pace, jobs)
+    _check_options(code, run_all, jobs)
     who = current_actor(actor)
     model = load_participants(participants_path)
     if model is not None and driver != "simulated":
@@ -183,20 +183,17 @@ def run(
                 observer = _with_end_notice(observer, progress)
             keys = _experimenter_keys(drive_port, stop, progress)
             with keys.reading() if keys is not None else contextlib.nullcontext():
-                done = run_session(
-                    engine,
-                    code,
+                settings = SessionSettings(
                     driver,
                     estimator,
                     keys.track(make_driver) if keys and make_driver else make_driver,
                     pace,
-                    report,
                     actor=who,
-                    participants=model,
-                    observer=observer,
                     stop=stop,
+                    participants=model,
                     hold=keys.hold if keys is not None else None,
                 )
+                done = run_session(engine, code, settings, observer, on_trial=report)
     finally:
         engine.dispose()
     if stop.is_set():
@@ -205,12 +202,10 @@ def run(
     click.echo(f"{code}: {len(done)} trials completed and stored")
 
 
-def _check_options(code: str | None, run_all: bool, pace: float | None, jobs: int | None) -> None:
+def _check_options(code: str | None, run_all: bool, jobs: int | None) -> None:
     """One line for options that cannot go together, before anything runs."""
     if (code is None) == (not run_all):
         raise StudyInputError("give --participant CODE or --all; expected exactly one")
-    if pace is not None and not math.isfinite(pace):
-        raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
     if jobs is not None and not run_all:
         raise StudyInputError(
             f"--jobs {jobs} with --participant; expected --all (one "

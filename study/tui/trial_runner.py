@@ -306,6 +306,7 @@ class TrialRun:
         """Run the participant's next trial; returns when it ends or is stopped."""
         # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
         from study.protocol.session import recover_interrupted, run_session
+        from study.protocol.session_settings import SessionSettings
 
         start = time.monotonic()
         if self._stop.is_set():
@@ -323,19 +324,22 @@ class TrialRun:
 
         self.probe_line = run_due_probes(self.engine, self.code, self.driver_kind, self.observer)
         try:
-            ids = run_session(
-                self.engine,
-                self.code,
+            settings = SessionSettings(
                 self.driver_kind,
                 self.estimator,
                 make_driver=(lambda: keyboard) if keyboard is not None else None,
                 pace=self.pace,
-                on_trial=started,
                 max_trials=1,
+                hold=self.holder,
+            )
+            ids = run_session(
+                self.engine,
+                self.code,
+                settings,
+                self.observer,
+                on_trial=started,
                 on_samples=self._on_samples,
                 on_storage_wait=self._on_storage_wait,
-                observer=self.observer,
-                hold=self.holder,
             )
             return TrialOutcome(self.code, ids, 0, time.monotonic() - start)
         except TrialStopped:

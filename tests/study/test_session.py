@@ -173,6 +173,7 @@ from db.migrate import open_database
 from study.protocol.default_estimator import load_estimator
 from study.tasks.lcca.simulated_participant import SimulatedParticipant
 from study.protocol.session import participant_traits, run_session
+from study.protocol.session_settings import SessionSettings
 from teleop_core.phantom.lcca import LccaPhantom
 
 die_at_s = float(sys.argv[2])
@@ -188,8 +189,10 @@ class DiesAt(SimulatedParticipant):
 
 
 traits = participant_traits(3, "P001", "novice")
-run_session(engine, "P001", "simulated", load_estimator(),
-            make_driver=lambda: DiesAt(traits, phantom, 180.0))
+settings = SessionSettings(
+    "simulated", load_estimator(), make_driver=lambda: DiesAt(traits, phantom, 180.0)
+)
+run_session(engine, "P001", settings)
 """
 
 
@@ -224,6 +227,7 @@ def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) 
     from db.migrate import open_database
     from study.protocol.default_estimator import load_estimator
     from study.protocol.session import SessionStorageError, run_session
+    from study.protocol.session_settings import SessionSettings
 
     db = _study(tmp_path)
     engine = open_database(db, create=False)
@@ -237,7 +241,7 @@ def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) 
     engine.dispose()  # new connections get the limit
     try:
         with pytest.raises(SessionStorageError) as caught:
-            run_session(engine, "P001", "simulated", load_estimator())
+            run_session(engine, "P001", SessionSettings("simulated", load_estimator()))
     finally:
         engine.dispose()
     message = str(caught.value)
@@ -307,6 +311,7 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
     from db.migrate import open_database
     from study.protocol.default_estimator import load_estimator
     from study.protocol.session import run_session
+    from study.protocol.session_settings import SessionSettings
     from study.protocol.tasks import get_task
 
     db = _study(tmp_path)
@@ -332,9 +337,8 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
                 holder.execute("ROLLBACK")
 
         try:
-            ids = run_session(
-                engine, "P001", "simulated", load_estimator(), max_trials=1, on_storage_wait=on_wait
-            )
+            settings = SessionSettings("simulated", load_estimator(), max_trials=1)
+            ids = run_session(engine, "P001", settings, on_storage_wait=on_wait)
         finally:
             if holder.in_transaction:
                 holder.execute("ROLLBACK")
@@ -344,3 +348,26 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
     assert [w for w, _ in waits[:3]] == sorted(w for w, _ in waits[:3])
     assert all(w is not None and held == 0 for w, held in waits[:3])
     assert waits[3:] == [(None, 0)]  # the wait ended, said once
+
+
+@pytest.mark.parametrize(
+    ("values", "line"),
+    [
+        ({"pace": 0.0}, "pace 0.0; expected a finite number > 0 (times real time)"),
+        ({"pace": -2.0}, "pace -2.0; expected a finite number > 0 (times real time)"),
+        ({"pace": float("nan")}, "pace nan; expected a finite number > 0 (times real time)"),
+        ({"pace": float("inf")}, "pace inf; expected a finite number > 0 (times real time)"),
+        ({"max_trials": -1}, "max_trials -1; expected a whole number >= 0"),
+    ],
+)
+def test_session_settings_refuse_a_value_out_of_range_as_they_are_made(
+    values: dict[str, float], line: str
+) -> None:
+    """The settings check each value once, where it enters: before any database is
+    opened, with one line naming the value and what was expected."""
+    from study.errors import StudyInputError
+    from study.protocol.session_settings import SessionSettings
+
+    with pytest.raises(StudyInputError) as caught:
+        SessionSettings("simulated", None, **values)  # type: ignore[arg-type]
+    assert str(caught.value) == line
