@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import click
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn
 from sqlalchemy.orm import Session
 
 from db.migrate import open_database
@@ -167,18 +167,8 @@ def run(
             bar = progress.add_task(f"session {code}", total=None)
             compile_loop_once(lambda m: progress.console.print(f"study run: {m}", markup=False))
 
-            def report(item, k, n) -> None:
-                started.append(item)
-                kind = "practice" if item.practice else "trial"
-                progress.update(
-                    bar,
-                    total=n,
-                    completed=k,
-                    description=f"{code} {item.block.task}/{item.block.condition} "
-                    f"{kind} {item.trial_index + 1}",
-                )
-
             observer = _lsl_observers(engine, lsl, progress)
+            observer = _with_progress(observer, progress, bar, code, started)
             if drive_port is not None:
                 observer = _with_end_notice(observer, progress)
             keys = _experimenter_keys(drive_port, stop, progress)
@@ -193,7 +183,7 @@ def run(
                     participants=model,
                     hold=keys.hold if keys is not None else None,
                 )
-                done = run_session(engine, code, settings, observer, on_trial=report)
+                done = run_session(engine, code, settings, observer)
     finally:
         engine.dispose()
     if stop.is_set():
@@ -211,6 +201,33 @@ def _check_options(code: str | None, run_all: bool, jobs: int | None) -> None:
             f"--jobs {jobs} with --participant; expected --all (one "
             "participant's session runs in one process)"
         )
+
+
+def _with_progress(
+    observer: SessionObserver | None,
+    progress: Progress,
+    bar: TaskID,
+    code: str,
+    started: list[PendingTrial],
+) -> SessionObserver:
+    """`observer` and the bar's line: the trial running now, and k of n done; each trial
+    as it comes appended to `started` (for the line of a stopped session)."""
+    # lazy: study.protocol.observer costs 3 ms at start-up
+    from study.protocol.observer import Observers, SessionObserver
+
+    class Report(SessionObserver):
+        def trial_progress(self, pending: PendingTrial, k: int, n: int) -> None:
+            started.append(pending)
+            kind = "practice" if pending.practice else "trial"
+            progress.update(
+                bar,
+                total=n,
+                completed=k,
+                description=f"{code} {pending.block.task}/{pending.block.condition} "
+                f"{kind} {pending.trial_index + 1}",
+            )
+
+    return Observers([o for o in (Report(), observer) if o is not None])
 
 
 def _with_end_notice(observer: SessionObserver | None, progress: Progress) -> SessionObserver:

@@ -199,28 +199,19 @@ def pending_trials(session: Session, participant: Participant) -> list[PendingTr
 
 
 def run_session(
-    engine: Engine,
-    code: str,
-    settings: SessionSettings,
-    observer: SessionObserver | None = None,
-    on_trial: Callable[[PendingTrial, int, int], None] = lambda *_: None,
-    on_samples: Callable[[np.ndarray], None] | None = None,
-    on_storage_wait: Callable[[float | None, int], None] | None = None,
+    engine: Engine, code: str, settings: SessionSettings, observer: SessionObserver | None = None
 ) -> list[int]:
     """Run the participant's remaining trials with `settings` (`SessionSettings`);
     return the ids of the trials completed.
 
-    `on_trial(pending, k, n)` reports progress; `on_samples(rows)` sees every batch of
-    samples (the task's `sample_columns`, the region as its index) as it is written.
-    An exception raised by a callback or the driver stops the session: the committed
+    `observer` is told the session's events (`study.protocol.observer`): each trial's
+    place (progress), its samples as they are written (the task's `sample_columns`, the
+    region as its index), a wait for another program's lock (a watched session), its
+    end; publishing them, recording other instruments beside the trials.
+    An exception raised by the observer or the driver stops the session: the committed
     samples stay and the trial stays `running` until `recover_interrupted`.
     A set `settings.stop` ends the session at its next step, the running trial marked
     interrupted (`STOPPED_WITH_PARENT`), and returns.
-    `observer` is told the session's events (`study.protocol.observer`): publishing them,
-    recording other instruments beside the trials.
-    `on_storage_wait(waited_s, held)`: given, a lock held by another program does not
-    stop the trial: up to `HOLD_S` of its samples wait in memory (`SampleWriter`'s
-    `hold_s`) and this is called while they do (None, 0 when they are committed).
     """
     actor, stop, participants = settings.actor, settings.stop, settings.participants
     study, design, participant_id = _session_start(engine, code)
@@ -251,7 +242,7 @@ def run_session(
             lease.check()
             if stop is not None and stop.is_set():
                 break
-            on_trial(item, k, len(todo))
+            observer.trial_progress(item, k, len(todo))
             task = tasks[item.block.task]
             if task.name not in contexts:
                 contexts[task.name] = task.session_context()
@@ -262,8 +253,6 @@ def run_session(
                 traits=traits,
                 design=design,
                 study_seed=study.seed,
-                on_samples=on_samples,
-                on_storage_wait=on_storage_wait,
                 check=lambda: _check_stop(lease, stop),
                 model=participants.digest if participants is not None else None,
                 observer=observer,
@@ -390,8 +379,6 @@ class TrialSetup:
     traits: ParticipantTraits
     design: StudyDesign
     study_seed: int
-    on_samples: Callable[[np.ndarray], None] | None = None
-    on_storage_wait: Callable[[float | None, int], None] | None = None
     check: Callable[[], None] = lambda: None
     model: str | None = None
     """The digest of the fitted participant model the traits came from, if any."""
@@ -496,14 +483,15 @@ def _run_trial(
     # paced or at a real device: short steps, so a watcher sees it live and a failing
     # device loses no more than a step of samples
     step_s = STEP_S if run.settings.pace is None and not realtime else PACED_STEP_S
-    hold_s = HOLD_S if run.on_storage_wait is not None else 0.0
+    on_wait = run.observer.storage_wait if run.settings.wait_out_storage else None
+    hold_s = HOLD_S if on_wait is not None else 0.0
     writer_at = SampleWriter(
         engine,
         trial_id,
         chunk_s=1.0,
         schema=task.sample_schema(),
         hold_s=hold_s,
-        on_wait=run.on_storage_wait,
+        on_wait=on_wait,
     )
     with writer_at as writer, contextlib.closing(driver):
         steps = _StoredSteps(run, writer, realtime, (trial_id, block, item, attempt))
@@ -555,7 +543,7 @@ def _run_trial(
             )
         return done.rowcount == 1
 
-    if _write_end(engine, complete, run.on_storage_wait):
+    if _write_end(engine, complete, on_wait):
         observer.trial_ended(
             info,
             "completed",
@@ -616,8 +604,6 @@ class _StoredSteps(TrialSteps):
         run = self.run
         if len(samples):
             self.writer.extend(run.task.stored_columns(samples))
-            if run.on_samples is not None:
-                run.on_samples(samples)
         assert self.info is not None  # started before the first step
         run.observer.samples(self.info, samples)
         pace = run.settings.pace

@@ -46,6 +46,10 @@ class SessionSettings:
     """The fitted model simulated people are drawn from (else the group's profiles)."""
     hold: TrialHold | None = None
     """Lets another thread hold the running trial between two steps."""
+    wait_out_storage: bool = False
+    """A watched session: a lock held by another program does not stop the trial; up to
+    `study.protocol.session.HOLD_S` of its samples wait in memory (`SampleWriter`'s
+    `hold_s`) and the observer's `storage_wait` is told while they do."""
 
     def __post_init__(self) -> None:
         pace = self.pace

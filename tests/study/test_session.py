@@ -302,7 +302,7 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
 ) -> None:
     """Another program takes the write lock between the trial's last samples and its
     `completed` write, and keeps it longer than the busy timeout. A watched session
-    (`on_storage_wait`, as the terminal app runs it), which keeps its samples through
+    (`wait_out_storage`, as the terminal app runs it), which keeps its samples through
     such a lock, waits this one out too, saying so, and completes the trial rather than
     leave it `running` for the next session to repeat."""
     import sqlite3
@@ -310,6 +310,7 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
 
     from db.migrate import open_database
     from study.protocol.default_estimator import load_estimator
+    from study.protocol.observer import SessionObserver
     from study.protocol.session import run_session
     from study.protocol.session_settings import SessionSettings
     from study.protocol.tasks import get_task
@@ -330,15 +331,18 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
         monkeypatch.setattr(task_class, "completion_time_s", lock_then_measure)
         waits: list[tuple[float | None, int]] = []
 
-        def on_wait(waited_s: float | None, held: int) -> None:
-            waits.append((waited_s, held))
-            # the other program is done once the runner has said it waits for it
-            if waited_s is not None and len(waits) == 3:
-                holder.execute("ROLLBACK")
+        class Waits(SessionObserver):
+            def storage_wait(self, waited_s: float | None, held: int) -> None:
+                waits.append((waited_s, held))
+                # the other program is done once the runner has said it waits for it
+                if waited_s is not None and len(waits) == 3:
+                    holder.execute("ROLLBACK")
 
         try:
-            settings = SessionSettings("simulated", load_estimator(), max_trials=1)
-            ids = run_session(engine, "P001", settings, on_storage_wait=on_wait)
+            settings = SessionSettings(
+                "simulated", load_estimator(), max_trials=1, wait_out_storage=True
+            )
+            ids = run_session(engine, "P001", settings, Waits())
         finally:
             if holder.in_transaction:
                 holder.execute("ROLLBACK")
