@@ -150,24 +150,25 @@ def run(
             f"--drive-port with --driver {driver}; expected --driver hardware (the drive "
             "unit joins the dial unit)"
         )
-    make_driver = None
-    if driver == "hardware":
-        if not port:
-            raise StudyInputError("--driver hardware needs --port, e.g. --port /dev/ttyUSB0")
-        make_driver = _hardware_driver(port, drive_port, db_url)
+    if driver == "hardware" and not port:
+        raise StudyInputError("--driver hardware needs --port, e.g. --port /dev/ttyUSB0")
 
     # lazy: study.protocol.parallel (multiprocessing) costs 20 ms at start-up
     from study.protocol.parallel import compile_loop_once
 
-    estimator = load_estimator()
     engine = open_database(db_url, create=False)
     started: list[PendingTrial] = []
     try:
+        design = _design(engine)  # read once: its [sensors], its [lsl], the session's
+        make_driver = None
+        if port is not None and driver == "hardware":
+            make_driver = _hardware_driver(port, drive_port, design.sensors)
+        estimator = load_estimator()
         with stop_on_signals() as stop, _progress() as progress:
             bar = progress.add_task(f"session {code}", total=None)
             compile_loop_once(lambda m: progress.console.print(f"study run: {m}", markup=False))
 
-            observer = _lsl_observers(engine, lsl, progress)
+            observer = _lsl_observers(engine, design, lsl, progress)
             observer = _with_progress(observer, progress, bar, code, started)
             if drive_port is not None:
                 observer = _with_end_notice(observer, progress)
@@ -182,6 +183,7 @@ def run(
                     stop=stop,
                     participants=model,
                     hold=keys.hold if keys is not None else None,
+                    design=design,
                 )
                 done = run_session(engine, code, settings, observer)
     finally:
@@ -279,21 +281,15 @@ def _experimenter_keys(
 
 
 def _hardware_driver(
-    port: str, drive_port: str | None, db_url: str | None
+    port: str, drive_port: str | None, sensors: SensorSettings
 ) -> Callable[[], HardwareDriver]:
     """Opens the units for each trial: the dial on `port`, and given `drive_port` the
-    drive and the design's forces unit (refused, before anything runs, if the design
-    names none)."""
+    drive and the design's forces unit `sensors` (refused, before anything runs, if the
+    design names none)."""
     # lazy: teleop_core.loop.hardware (with serial, numpy) costs 74 ms at start-up
     from teleop_core.loop.hardware import HardwareDriver, HardwareError
 
-    sensors = None
     if drive_port is not None:
-        engine = open_database(db_url, create=False)
-        try:
-            sensors = _design(engine).sensors
-        finally:
-            engine.dispose()
         if sensors.source is None:
             raise StudyInputError(
                 f"--drive-port {drive_port}: the study's design names no force sensors; "
@@ -309,7 +305,7 @@ def _hardware_driver(
                 f"--port {port}: {exc}; expected the serial port of the dial's ESP32, "
                 "e.g. /dev/ttyUSB0"
             ) from None
-        if drive_port is None or sensors is None:
+        if drive_port is None:
             return dial
         try:
             dial.follower = _open_follower(drive_port, sensors)
@@ -362,12 +358,12 @@ def _stopped_line(code: str, stop: SignalStop, started: list[PendingTrial], done
     )
 
 
-def _lsl_observers(engine: Engine, publish: bool, progress: Progress) -> SessionObserver | None:
+def _lsl_observers(
+    engine: Engine, design: StudyDesign, publish: bool, progress: Progress
+) -> SessionObserver | None:
     """The design's `[lsl]` streams (and --lsl's), their notices printed above the bar."""
     # lazy: study.lsl.observers costs 4 ms at start-up
     from study.lsl.observers import session_observers
-
-    design = _design(engine)
 
     def notice(message: str) -> None:
         progress.console.print(f"study run: {message}", markup=False)

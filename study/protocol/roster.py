@@ -50,10 +50,16 @@ def create_study(engine: Engine, design: StudyDesign, design_toml: str) -> Study
     return study
 
 
-def load_study(session: Session) -> tuple[Study, StudyDesign]:
+def find_study(session: Session) -> Study:
+    """The database's study row (its design as stored, not read: `load_study`)."""
     study = session.scalars(select(Study)).first()
     if study is None:
         raise StudyInputError("the database holds no study; run `study init --design FILE` first")
+    return study
+
+
+def load_study(session: Session) -> tuple[Study, StudyDesign]:
+    study = find_study(session)
     return study, StudyDesign.from_dict(study.design)
 
 

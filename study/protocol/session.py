@@ -65,7 +65,7 @@ from study.protocol.participant_effects import (
     session_place,
 )
 from study.protocol.participant_model import ParticipantModel
-from study.protocol.roster import find_participant, load_study
+from study.protocol.roster import find_participant, find_study, load_study
 from study.protocol.session_settings import SessionSettings
 from study.protocol.stop_signals import stop_reason
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
@@ -214,7 +214,7 @@ def run_session(
     interrupted (`STOPPED_WITH_PARENT`), and returns.
     """
     actor, stop, participants = settings.actor, settings.stop, settings.participants
-    study, design, participant_id = _session_start(engine, code)
+    study, design, participant_id = _session_start(engine, code, settings.design)
     observer = observer or SessionObserver()
     with hold_lease(engine, participant_id, code, actor) as lease, session_ending(observer):
         # read the schedule and what is done only once no other session can change it
@@ -282,11 +282,16 @@ def run_session(
     return completed
 
 
-def _session_start(engine: Engine, code: str) -> tuple[Study, StudyDesign, int]:
-    """The study, its design and the participant's id; StudyInputError for a participant
-    who withdrew."""
+def _session_start(
+    engine: Engine, code: str, design: StudyDesign | None
+) -> tuple[Study, StudyDesign, int]:
+    """The study, its design (`design`, read from the study when None) and the
+    participant's id; StudyInputError for a participant who withdrew."""
     with Session(engine) as session:
-        study, design = load_study(session)
+        if design is None:
+            study, design = load_study(session)
+        else:
+            study = find_study(session)
         participant = find_participant(session, study, code)
         if participant.withdrawn_at is not None:
             raise StudyInputError(

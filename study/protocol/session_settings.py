@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 from study.errors import StudyInputError
 
 if TYPE_CHECKING:
+    from study.protocol.design import StudyDesign
     from study.protocol.participant_model import ParticipantModel
     from study.protocol.session import TrialHold
     from teleop_core.estimation.estimator import ForceEstimator
@@ -46,6 +47,10 @@ class SessionSettings:
     """The fitted model simulated people are drawn from (else the group's profiles)."""
     hold: TrialHold | None = None
     """Lets another thread hold the running trial between two steps."""
+    design: StudyDesign | None = None
+    """The study's design as the caller already read it from the same database (for
+    its `[lsl]` or `[sensors]` tables), so a session reads it once; None: the runner
+    reads it."""
     wait_out_storage: bool = False
     """A watched session: a lock held by another program does not stop the trial; up to
     `study.protocol.session.HOLD_S` of its samples wait in memory (`SampleWriter`'s

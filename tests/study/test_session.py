@@ -375,3 +375,25 @@ def test_session_settings_refuse_a_value_out_of_range_as_they_are_made(
     with pytest.raises(StudyInputError) as caught:
         SessionSettings("simulated", None, **values)  # type: ignore[arg-type]
     assert str(caught.value) == line
+
+
+def test_study_run_reads_the_design_once_for_the_session(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`study run` reads the study's design once (its `[lsl]` and `[sensors]` tables,
+    the session's gains and time limit) and hands it on; it read it twice before the
+    first trial, once for the streams and once in the runner."""
+    from study.protocol.design import StudyDesign
+
+    db = _study(tmp_path)
+    reads: list[str] = []
+    read = StudyDesign.from_dict.__func__  # type: ignore[attr-defined]
+
+    def counted(cls, data):  # type: ignore[no-untyped-def]
+        reads.append(data["name"])
+        return read(cls, data)
+
+    monkeypatch.setattr(StudyDesign, "from_dict", classmethod(counted))
+    assert main(["run", "--participant", "P001", "--db", db]) == 0
+    assert reads == ["session test"]
+    assert [t[2] for t in _trials(db)] == ["completed"] * 4
