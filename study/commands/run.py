@@ -39,6 +39,7 @@ if TYPE_CHECKING:
     from study.protocol.design import StudyDesign
     from study.protocol.design_sensors import SensorSettings
     from study.protocol.observer import SessionObserver, TrialInfo
+    from study.protocol.participant_model import ParticipantModel
     from study.protocol.session import PendingTrial
     from study.protocol.stop_signals import SignalStop
     from teleop_core.loop.follower_units import ForceSource, PhysicalFollower
@@ -116,13 +117,6 @@ def run(
           --drive-port /dev/ttyUSB1     # and the real drive ([sensors] in the design)
       study run --all     # every participant, simulated
     """
-    # lazy: study.protocol.default_estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
-    from study.protocol.default_estimator import load_estimator
-
-    # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
-    from study.protocol.session import run_session
-    from study.protocol.session_settings import SessionSettings
-
     _check_options(code, run_all, jobs)
     who = current_actor(actor)
     model = load_participants(participants_path)
@@ -143,6 +137,29 @@ def run(
         _run_all(db_url, jobs or 1, pace, who, participants_path)
         return
     assert code is not None  # _check_options: --participant CODE without --all
+    _run_participant(code, driver, port, drive_port, pace, lsl, who, model, db_url)
+
+
+def _run_participant(
+    code: str,
+    driver: str,
+    port: str | None,
+    drive_port: str | None,
+    pace: float | None,
+    lsl: bool,
+    who: str,
+    model: ParticipantModel | None,
+    db_url: str | None,
+) -> None:
+    """One participant's session, its progress on a bar and its streams as the design
+    and --lsl say."""
+    # lazy: study.protocol.default_estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+    from study.protocol.default_estimator import load_estimator
+
+    # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+    from study.protocol.session import run_session
+    from study.protocol.session_settings import SessionSettings
+
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")
     if drive_port is not None and driver != "hardware":
