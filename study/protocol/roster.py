@@ -63,6 +63,13 @@ def load_study(session: Session) -> tuple[Study, StudyDesign]:
     return study, StudyDesign.from_dict(study.design)
 
 
+def read_design(engine: Engine) -> StudyDesign:
+    """The study's design, read once for what a session does around its trials (its
+    probes, its streams) and handed on (`SessionSettings.design`)."""
+    with Session(engine) as session:
+        return load_study(session)[1]
+
+
 def find_participant(session: Session, study: Study, code: str) -> Participant:
     """The participant `code` of `study`; a one-line error naming it when there is none."""
     participant = session.scalars(

@@ -323,6 +323,7 @@ class TrialRun:
     def run(self, on_start: Callable[[object], None] = lambda _: None) -> TrialOutcome:
         """Run the participant's next trial; returns when it ends or is stopped."""
         # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+        from study.protocol.roster import read_design
         from study.protocol.session import recover_interrupted, run_session
         from study.protocol.session_settings import SessionSettings
 
@@ -334,7 +335,10 @@ class TrialRun:
         # the session flow: the probes the design names before this block, then the block
         from study.tui.probe_step import run_due_probes
 
-        self.probe_line = run_due_probes(self.engine, self.code, self.driver_kind, self.observer)
+        design = read_design(self.engine)  # once: the probe step's and the session's
+        self.probe_line = run_due_probes(
+            self.engine, self.code, self.driver_kind, self.observer, design
+        )
         try:
             settings = SessionSettings(
                 self.driver_kind,
@@ -343,6 +347,7 @@ class TrialRun:
                 pace=self.pace,
                 max_trials=1,
                 hold=self.holder,
+                design=design,
                 wait_out_storage=True,
             )
             watch = _TrialWatch(self, on_start)

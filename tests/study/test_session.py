@@ -397,3 +397,32 @@ def test_study_run_reads_the_design_once_for_the_session(
     assert main(["run", "--participant", "P001", "--db", db]) == 0
     assert reads == ["session test"]
     assert [t[2] for t in _trials(db)] == ["completed"] * 4
+
+
+def test_a_terminal_apps_trial_reads_the_design_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The terminal app's trial (its probe step, then its session of one trial) reads
+    the design once and hands it on; the probe step and the runner each read it."""
+    from db.migrate import open_database
+    from study.protocol.default_estimator import load_estimator
+    from study.protocol.design import StudyDesign
+    from study.tui.trial_runner import TrialRun
+
+    db = _study(tmp_path)
+    engine = open_database(db, create=False)
+    estimator = load_estimator()
+    reads: list[str] = []
+    read = StudyDesign.from_dict.__func__  # type: ignore[attr-defined]
+
+    def counted(cls, data):  # type: ignore[no-untyped-def]
+        reads.append(data["name"])
+        return read(cls, data)
+
+    monkeypatch.setattr(StudyDesign, "from_dict", classmethod(counted))
+    try:
+        outcome = TrialRun(engine, estimator, "P001", "simulated", None).run()
+    finally:
+        engine.dispose()
+    assert len(outcome.trial_ids) == 1
+    assert reads == ["session test"]
