@@ -161,6 +161,7 @@ def _paced_session(
 
     # lazy: study.protocol.session (with pandas, pyarrow, sqlalchemy) costs 0.7 s at start-up
     from study.protocol.session import participant_traits, run_session
+    from study.protocol.session_settings import SessionSettings
 
     # lazy: study.tasks.lcca.simulated_participant costs 38 ms at start-up
     from study.tasks.lcca.simulated_participant import SimulatedParticipant
@@ -170,16 +171,14 @@ def _paced_session(
 
     phantom = LccaPhantom()
     traits = participant_traits(1, code, "novice")
-    return run_session(
-        engine,
-        code,
+    settings = SessionSettings(
         "simulated",
         load_estimator(),
         make_driver=lambda: SimulatedParticipant(traits, phantom, give_up_s=config.trial_s),
         pace=1.0,
-        observer=Observers(observers),
         max_trials=config.trials,
     )
+    return run_session(engine, code, settings, Observers(observers))
 
 
 def _alignment(engine: Any, origins: Origins) -> tuple[list[np.ndarray], list[dict[str, Any]]]:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import math
 import sys
 import time
 from collections.abc import Callable
@@ -11,7 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import click
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn
 from sqlalchemy.orm import Session
 
 from db.migrate import open_database
@@ -40,6 +39,7 @@ if TYPE_CHECKING:
     from study.protocol.design import StudyDesign
     from study.protocol.design_sensors import SensorSettings
     from study.protocol.observer import SessionObserver, TrialInfo
+    from study.protocol.participant_model import ParticipantModel
     from study.protocol.session import PendingTrial
     from study.protocol.stop_signals import SignalStop
     from teleop_core.loop.follower_units import ForceSource, PhysicalFollower
@@ -117,13 +117,7 @@ def run(
           --drive-port /dev/ttyUSB1     # and the real drive ([sensors] in the design)
       study run --all     # every participant, simulated
     """
-    # lazy: study.protocol.default_estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
-    from study.protocol.default_estimator import load_estimator
-
-    # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
-    from study.protocol.session import run_session
-
-    _check_options(code, run_all, pace, jobs)
+    _check_options(code, run_all, jobs)
     who = current_actor(actor)
     model = load_participants(participants_path)
     if model is not None and driver != "simulated":
@@ -143,6 +137,29 @@ def run(
         _run_all(db_url, jobs or 1, pace, who, participants_path)
         return
     assert code is not None  # _check_options: --participant CODE without --all
+    _run_participant(code, driver, port, drive_port, pace, lsl, who, model, db_url)
+
+
+def _run_participant(
+    code: str,
+    driver: str,
+    port: str | None,
+    drive_port: str | None,
+    pace: float | None,
+    lsl: bool,
+    who: str,
+    model: ParticipantModel | None,
+    db_url: str | None,
+) -> None:
+    """One participant's session, its progress on a bar and its streams as the design
+    and --lsl say."""
+    # lazy: study.protocol.default_estimator (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+    from study.protocol.default_estimator import load_estimator
+
+    # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+    from study.protocol.session import run_session
+    from study.protocol.session_settings import SessionSettings
+
     if driver == "keyboard":
         raise StudyInputError("the keyboard driver needs the terminal app; expected `study tui`")
     if drive_port is not None and driver != "hardware":
@@ -150,53 +167,42 @@ def run(
             f"--drive-port with --driver {driver}; expected --driver hardware (the drive "
             "unit joins the dial unit)"
         )
-    make_driver = None
-    if driver == "hardware":
-        if not port:
-            raise StudyInputError("--driver hardware needs --port, e.g. --port /dev/ttyUSB0")
-        make_driver = _hardware_driver(port, drive_port, db_url)
+    if driver == "hardware" and not port:
+        raise StudyInputError("--driver hardware needs --port, e.g. --port /dev/ttyUSB0")
 
     # lazy: study.protocol.parallel (multiprocessing) costs 20 ms at start-up
     from study.protocol.parallel import compile_loop_once
 
-    estimator = load_estimator()
     engine = open_database(db_url, create=False)
     started: list[PendingTrial] = []
     try:
+        design = _design(engine)  # read once: its [sensors], its [lsl], the session's
+        make_driver = None
+        if port is not None and driver == "hardware":
+            make_driver = _hardware_driver(port, drive_port, design.sensors)
+        estimator = load_estimator()
         with stop_on_signals() as stop, _progress() as progress:
             bar = progress.add_task(f"session {code}", total=None)
             compile_loop_once(lambda m: progress.console.print(f"study run: {m}", markup=False))
 
-            def report(item, k, n) -> None:
-                started.append(item)
-                kind = "practice" if item.practice else "trial"
-                progress.update(
-                    bar,
-                    total=n,
-                    completed=k,
-                    description=f"{code} {item.block.task}/{item.block.condition} "
-                    f"{kind} {item.trial_index + 1}",
-                )
-
-            observer = _lsl_observers(engine, lsl, progress)
+            observer = _lsl_observers(engine, design, lsl, progress)
+            observer = _with_progress(observer, progress, bar, code, started)
             if drive_port is not None:
                 observer = _with_end_notice(observer, progress)
             keys = _experimenter_keys(drive_port, stop, progress)
             with keys.reading() if keys is not None else contextlib.nullcontext():
-                done = run_session(
-                    engine,
-                    code,
+                settings = SessionSettings(
                     driver,
                     estimator,
                     keys.track(make_driver) if keys and make_driver else make_driver,
                     pace,
-                    report,
                     actor=who,
-                    participants=model,
-                    observer=observer,
                     stop=stop,
+                    participants=model,
                     hold=keys.hold if keys is not None else None,
+                    design=design,
                 )
+                done = run_session(engine, code, settings, observer)
     finally:
         engine.dispose()
     if stop.is_set():
@@ -205,17 +211,42 @@ def run(
     click.echo(f"{code}: {len(done)} trials completed and stored")
 
 
-def _check_options(code: str | None, run_all: bool, pace: float | None, jobs: int | None) -> None:
+def _check_options(code: str | None, run_all: bool, jobs: int | None) -> None:
     """One line for options that cannot go together, before anything runs."""
     if (code is None) == (not run_all):
         raise StudyInputError("give --participant CODE or --all; expected exactly one")
-    if pace is not None and not math.isfinite(pace):
-        raise StudyInputError(f"--pace {pace!r}; expected a finite number > 0 (times real time)")
     if jobs is not None and not run_all:
         raise StudyInputError(
             f"--jobs {jobs} with --participant; expected --all (one "
             "participant's session runs in one process)"
         )
+
+
+def _with_progress(
+    observer: SessionObserver | None,
+    progress: Progress,
+    bar: TaskID,
+    code: str,
+    started: list[PendingTrial],
+) -> SessionObserver:
+    """`observer` and the bar's line: the trial running now, and k of n done; each trial
+    as it comes appended to `started` (for the line of a stopped session)."""
+    # lazy: study.protocol.observer costs 3 ms at start-up
+    from study.protocol.observer import Observers, SessionObserver
+
+    class Report(SessionObserver):
+        def trial_progress(self, pending: PendingTrial, k: int, n: int) -> None:
+            started.append(pending)
+            kind = "practice" if pending.practice else "trial"
+            progress.update(
+                bar,
+                total=n,
+                completed=k,
+                description=f"{code} {pending.block.task}/{pending.block.condition} "
+                f"{kind} {pending.trial_index + 1}",
+            )
+
+    return Observers([o for o in (Report(), observer) if o is not None])
 
 
 def _with_end_notice(observer: SessionObserver | None, progress: Progress) -> SessionObserver:
@@ -267,21 +298,15 @@ def _experimenter_keys(
 
 
 def _hardware_driver(
-    port: str, drive_port: str | None, db_url: str | None
+    port: str, drive_port: str | None, sensors: SensorSettings
 ) -> Callable[[], HardwareDriver]:
     """Opens the units for each trial: the dial on `port`, and given `drive_port` the
-    drive and the design's forces unit (refused, before anything runs, if the design
-    names none)."""
+    drive and the design's forces unit `sensors` (refused, before anything runs, if the
+    design names none)."""
     # lazy: teleop_core.loop.hardware (with serial, numpy) costs 74 ms at start-up
     from teleop_core.loop.hardware import HardwareDriver, HardwareError
 
-    sensors = None
     if drive_port is not None:
-        engine = open_database(db_url, create=False)
-        try:
-            sensors = _design(engine).sensors
-        finally:
-            engine.dispose()
         if sensors.source is None:
             raise StudyInputError(
                 f"--drive-port {drive_port}: the study's design names no force sensors; "
@@ -297,7 +322,7 @@ def _hardware_driver(
                 f"--port {port}: {exc}; expected the serial port of the dial's ESP32, "
                 "e.g. /dev/ttyUSB0"
             ) from None
-        if drive_port is None or sensors is None:
+        if drive_port is None:
             return dial
         try:
             dial.follower = _open_follower(drive_port, sensors)
@@ -350,12 +375,12 @@ def _stopped_line(code: str, stop: SignalStop, started: list[PendingTrial], done
     )
 
 
-def _lsl_observers(engine: Engine, publish: bool, progress: Progress) -> SessionObserver | None:
+def _lsl_observers(
+    engine: Engine, design: StudyDesign, publish: bool, progress: Progress
+) -> SessionObserver | None:
     """The design's `[lsl]` streams (and --lsl's), their notices printed above the bar."""
     # lazy: study.lsl.observers costs 4 ms at start-up
     from study.lsl.observers import session_observers
-
-    design = _design(engine)
 
     def notice(message: str) -> None:
         progress.console.print(f"study run: {message}", markup=False)

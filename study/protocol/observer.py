@@ -1,7 +1,8 @@
 """What a session tells the world outside its database while it runs.
 
-The session runner hands each event of a session (its start, each trial's start, every
-batch of samples, each trial's end with its outcome, the session's end) to an observer,
+The session runner hands each event of a session (its start, each trial's place in it and
+its start, every batch of samples, a wait for the database, each trial's end with its
+outcome, the session's end) to an observer (several: `Observers`),
 so that publishing them (the Lab Streaming Layer, `study.lsl`) or recording other
 instruments beside the trials plugs in without the runner knowing how. Other parts of
 a session (probes, the questionnaire) report theirs through `event`.
@@ -22,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
+    from study.protocol.session import PendingTrial
     from study.protocol.tasks import Task
 
 
@@ -73,12 +75,21 @@ class SessionObserver:
     def session_started(self, session: SessionInfo) -> None:
         """Before the first trial (the participant's lease is held)."""
 
+    def trial_progress(self, pending: PendingTrial, k: int, n: int) -> None:
+        """Before each trial, its driver opened or its row written: `pending` is the
+        `k`-th (from 0) of the `n` trials this session runs."""
+
     def trial_started(self, trial: TrialInfo) -> None:
         """The trial's row is `running`, its loop started, its clock at 0."""
 
     def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
         """After each step of the loop: the rows acquired (the task's `sample_columns`,
         possibly none), already handed to the sample writer."""
+
+    def storage_wait(self, waited_s: float | None, held: int) -> None:
+        """A watched session (`SessionSettings.wait_out_storage`) waits for a lock another
+        program holds: `waited_s` so far, `held` samples kept in memory meanwhile; (None,
+        0) once they are committed."""
 
     def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
         """`status`: `completed` (outcome: success and the measures), `stopped` (the
@@ -103,6 +114,10 @@ class Observers(SessionObserver):
         for o in self.observers:
             o.session_started(session)
 
+    def trial_progress(self, pending: PendingTrial, k: int, n: int) -> None:
+        for o in self.observers:
+            o.trial_progress(pending, k, n)
+
     def trial_started(self, trial: TrialInfo) -> None:
         for o in self.observers:
             o.trial_started(trial)
@@ -110,6 +125,10 @@ class Observers(SessionObserver):
     def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
         for o in self.observers:
             o.samples(trial, rows)
+
+    def storage_wait(self, waited_s: float | None, held: int) -> None:
+        for o in self.observers:
+            o.storage_wait(waited_s, held)
 
     def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
         for o in self.observers:
@@ -151,11 +170,17 @@ class LastingObserver(SessionObserver):
             raise
         self.session = session
 
+    def trial_progress(self, pending: PendingTrial, k: int, n: int) -> None:
+        self.observer.trial_progress(pending, k, n)
+
     def trial_started(self, trial: TrialInfo) -> None:
         self.observer.trial_started(trial)
 
     def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
         self.observer.samples(trial, rows)
+
+    def storage_wait(self, waited_s: float | None, held: int) -> None:
+        self.observer.storage_wait(waited_s, held)
 
     def trial_ended(self, trial: TrialInfo, status: str, outcome: dict[str, Any]) -> None:
         self.observer.trial_ended(trial, status, outcome)

@@ -100,13 +100,12 @@ def _worker_engine() -> Any:
 def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
     # lazy: study.protocol.session (with pandas, pyarrow, sqlalchemy) costs 0.8 s at start-up
     from study.protocol.session import run_session
+    from study.protocol.session_settings import SessionSettings
 
     idle: threading.Event = _WORKER["idle"]  # type: ignore[assignment]
     idle.clear()
     try:
-        done = run_session(
-            _worker_engine(),
-            code,
+        settings = SessionSettings(
             "simulated",
             _WORKER["estimator"],  # type: ignore[arg-type]
             pace=pace,
@@ -114,6 +113,7 @@ def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
             stop=_WORKER["stop"],  # type: ignore[arg-type]
             participants=_WORKER["participants"],  # type: ignore[arg-type]
         )
+        done = run_session(_worker_engine(), code, settings)
     finally:
         idle.set()
     return code, len(done)

@@ -50,11 +50,24 @@ def create_study(engine: Engine, design: StudyDesign, design_toml: str) -> Study
     return study
 
 
-def load_study(session: Session) -> tuple[Study, StudyDesign]:
+def find_study(session: Session) -> Study:
+    """The database's study row (its design as stored, not read: `load_study`)."""
     study = session.scalars(select(Study)).first()
     if study is None:
         raise StudyInputError("the database holds no study; run `study init --design FILE` first")
+    return study
+
+
+def load_study(session: Session) -> tuple[Study, StudyDesign]:
+    study = find_study(session)
     return study, StudyDesign.from_dict(study.design)
+
+
+def read_design(engine: Engine) -> StudyDesign:
+    """The study's design, read once for what a session does around its trials (its
+    probes, its streams) and handed on (`SessionSettings.design`)."""
+    with Session(engine) as session:
+        return load_study(session)[1]
 
 
 def find_participant(session: Session, study: Study, code: str) -> Participant:

@@ -29,7 +29,6 @@ time limit ends it as a failure; the summary's `end` says which (`_trial_end`).
 from __future__ import annotations
 
 import contextlib
-import math
 import threading
 import time
 import zlib
@@ -66,12 +65,12 @@ from study.protocol.participant_effects import (
     session_place,
 )
 from study.protocol.participant_model import ParticipantModel
-from study.protocol.roster import find_participant, load_study
+from study.protocol.roster import find_participant, find_study, load_study
+from study.protocol.session_settings import SessionSettings
 from study.protocol.stop_signals import stop_reason
 from study.protocol.tasks import COMPLETION_TIME, Task, get_task
 from study.protocol.traits import ParticipantTraits, draw_traits
 from study.protocol.trial_run import TrialSteps, run_trial
-from teleop_core.estimation.estimator import ForceEstimator
 from teleop_core.loop.drivers import Driver, DriverFailure
 
 STEP_S = 1.0
@@ -200,41 +199,22 @@ def pending_trials(session: Session, participant: Participant) -> list[PendingTr
 
 
 def run_session(
-    engine: Engine,
-    code: str,
-    driver_kind: str,
-    estimator: ForceEstimator,
-    make_driver: Callable[[], Driver] | None = None,
-    pace: float | None = None,
-    on_trial: Callable[[PendingTrial, int, int], None] = lambda *_: None,
-    max_trials: int | None = None,
-    on_samples: Callable[[np.ndarray], None] | None = None,
-    actor: str | None = None,
-    stop: threading.Event | None = None,
-    participants: ParticipantModel | None = None,
-    observer: SessionObserver | None = None,
-    on_storage_wait: Callable[[float | None, int], None] | None = None,
-    hold: TrialHold | None = None,
+    engine: Engine, code: str, settings: SessionSettings, observer: SessionObserver | None = None
 ) -> list[int]:
-    """Run the participant's remaining trials; return the ids of the trials completed.
+    """Run the participant's remaining trials with `settings` (`SessionSettings`);
+    return the ids of the trials completed.
 
-    `pace` slows a simulated session to `pace` times real time (to watch it, or to stop
-    it in the middle); `on_trial(pending, k, n)` reports progress; `on_samples(rows)`
-    sees every batch of samples (the task's `sample_columns`, the region as its index)
-    as it is written.
-    An exception raised by a callback or the driver stops the session: the committed
+    `observer` is told the session's events (`study.protocol.observer`): each trial's
+    place (progress), its samples as they are written (the task's `sample_columns`, the
+    region as its index), a wait for another program's lock (a watched session), its
+    end; publishing them, recording other instruments beside the trials.
+    An exception raised by the observer or the driver stops the session: the committed
     samples stay and the trial stays `running` until `recover_interrupted`.
-    `actor` is recorded with the lease; a set `stop` ends the session at its next step,
-    the running trial marked interrupted (`STOPPED_WITH_PARENT`), and returns.
-    `participants`: the fitted model simulated people are drawn from (else PROFILES).
-    `observer` is told the session's events (`study.protocol.observer`): publishing them,
-    recording other instruments beside the trials.
-    `on_storage_wait(waited_s, held)`: given, a lock held by another program does not
-    stop the trial: up to `HOLD_S` of its samples wait in memory (`SampleWriter`'s
-    `hold_s`) and this is called while they do (None, 0 when they are committed).
-    `hold` (`TrialHold`) lets another thread hold the running trial between two steps.
+    A set `settings.stop` ends the session at its next step, the running trial marked
+    interrupted (`STOPPED_WITH_PARENT`), and returns.
     """
-    study, design, participant_id = _session_start(engine, code, pace)
+    actor, stop, participants = settings.actor, settings.stop, settings.participants
+    study, design, participant_id = _session_start(engine, code, settings.design)
     observer = observer or SessionObserver()
     with hold_lease(engine, participant_id, code, actor) as lease, session_ending(observer):
         # read the schedule and what is done only once no other session can change it
@@ -250,37 +230,33 @@ def run_session(
         tasks = {name: get_task(name) for name in sorted({p.block.task for p in todo})}
         first = tuple(tasks[name] for name in dict.fromkeys(p.block.task for p in todo))
         observer.session_started(
-            SessionInfo(study.name, code, participant.group, driver_kind, pace, first)
+            SessionInfo(
+                study.name, code, participant.group, settings.driver_kind, settings.pace, first
+            )
         )
         contexts: dict[str, Any] = {}
         traits = participant_traits(study.seed, code, participant.group, participants)
         completed: list[int] = []
-        todo = todo[:max_trials] if max_trials is not None else todo
+        todo = todo[: settings.max_trials] if settings.max_trials is not None else todo
         for k, item in enumerate(todo):
             lease.check()
             if stop is not None and stop.is_set():
                 break
-            on_trial(item, k, len(todo))
+            observer.trial_progress(item, k, len(todo))
             task = tasks[item.block.task]
             if task.name not in contexts:
                 contexts[task.name] = task.session_context()
             run = TrialSetup(
                 task=task,
                 context=contexts[task.name],
-                driver_kind=driver_kind,
-                estimator=estimator,
+                settings=settings,
                 traits=traits,
-                make_driver=make_driver,
-                pace=pace,
                 design=design,
                 study_seed=study.seed,
-                on_samples=on_samples,
-                on_storage_wait=on_storage_wait,
                 check=lambda: _check_stop(lease, stop),
                 model=participants.digest if participants is not None else None,
                 observer=observer,
                 effects=participants.participant_effects if participants is not None else (),
-                hold=hold,
             )
             try:
                 trial_id = _run_trial(engine, participant, item, run)
@@ -306,13 +282,16 @@ def run_session(
     return completed
 
 
-def _session_start(engine: Engine, code: str, pace: float | None) -> tuple[Study, StudyDesign, int]:
-    """The study, its design and the participant's id; StudyInputError for a pace that
-    is no speed, or a participant who withdrew."""
-    if pace is not None and not (math.isfinite(pace) and pace > 0):
-        raise StudyInputError(f"pace {pace!r}; expected a finite number > 0 (times real time)")
+def _session_start(
+    engine: Engine, code: str, design: StudyDesign | None
+) -> tuple[Study, StudyDesign, int]:
+    """The study, its design (`design`, read from the study when None) and the
+    participant's id; StudyInputError for a participant who withdrew."""
     with Session(engine) as session:
-        study, design = load_study(session)
+        if design is None:
+            study, design = load_study(session)
+        else:
+            study = find_study(session)
         participant = find_participant(session, study, code)
         if participant.withdrawn_at is not None:
             raise StudyInputError(
@@ -401,23 +380,16 @@ class TrialSetup:
     task: Task
     context: Any
     """The task's `session_context()` (the LCCA phantom), built once per session."""
-    driver_kind: str
-    estimator: ForceEstimator
+    settings: SessionSettings
     traits: ParticipantTraits
-    make_driver: Callable[[], Driver] | None
-    pace: float | None
     design: StudyDesign
     study_seed: int
-    on_samples: Callable[[np.ndarray], None] | None = None
-    on_storage_wait: Callable[[float | None, int], None] | None = None
     check: Callable[[], None] = lambda: None
     model: str | None = None
     """The digest of the fitted participant model the traits came from, if any."""
     observer: SessionObserver = field(default_factory=SessionObserver)
     effects: tuple[ParticipantEffect, ...] = ()
     """The model's participant effects, applied to the simulated person per trial."""
-    hold: TrialHold | None = None
-    """Holds the trial between two steps (`TrialHold`), if given."""
 
 
 def _place(participant: Participant, item: PendingTrial) -> TrialPlace:
@@ -476,7 +448,8 @@ def _run_trial(
     session took the lease over and recovered it)."""
     block, task = item.block, run.task
     # the driver first: a port that cannot be opened leaves no trial behind
-    driver: Driver | None = run.make_driver() if run.make_driver else None
+    make_driver = run.settings.make_driver
+    driver: Driver | None = make_driver() if make_driver else None
     with write_transaction(engine) as conn, Session(bind=conn) as session:
         attempts = session.scalars(
             select(Trial.attempt).where(
@@ -495,7 +468,7 @@ def _run_trial(
             trial_index=item.trial_index,
             practice=item.practice,
             attempt=max(attempts, default=0) + 1,
-            driver=run.driver_kind,
+            driver=run.settings.driver_kind,
             status="running",
             started_at=utcnow(),
         )
@@ -514,15 +487,16 @@ def _run_trial(
     realtime = bool(getattr(driver, "realtime", False))
     # paced or at a real device: short steps, so a watcher sees it live and a failing
     # device loses no more than a step of samples
-    step_s = STEP_S if run.pace is None and not realtime else PACED_STEP_S
-    hold_s = HOLD_S if run.on_storage_wait is not None else 0.0
+    step_s = STEP_S if run.settings.pace is None and not realtime else PACED_STEP_S
+    on_wait = run.observer.storage_wait if run.settings.wait_out_storage else None
+    hold_s = HOLD_S if on_wait is not None else 0.0
     writer_at = SampleWriter(
         engine,
         trial_id,
         chunk_s=1.0,
         schema=task.sample_schema(),
         hold_s=hold_s,
-        on_wait=run.on_storage_wait,
+        on_wait=on_wait,
     )
     with writer_at as writer, contextlib.closing(driver):
         steps = _StoredSteps(run, writer, realtime, (trial_id, block, item, attempt))
@@ -534,7 +508,7 @@ def _run_trial(
                 driver,
                 MAX_TRIAL_S,
                 haptic_gain_n_m_per_n=gain,
-                estimator=run.estimator,
+                estimator=run.settings.estimator,
                 context=run.context,
                 step_s=step_s,
                 steps=steps,
@@ -550,7 +524,7 @@ def _run_trial(
         "samples": writer.rows_committed,
         **task.driver_counts(driver),
         **driver.record(),
-        **({"participant_model": run.model} if run.model and run.make_driver is None else {}),
+        **({"participant_model": run.model} if run.model and make_driver is None else {}),
         **ended,
     }
 
@@ -574,7 +548,7 @@ def _run_trial(
             )
         return done.rowcount == 1
 
-    if _write_end(engine, complete, run.on_storage_wait):
+    if _write_end(engine, complete, on_wait):
         observer.trial_ended(
             info,
             "completed",
@@ -619,13 +593,13 @@ class _StoredSteps(TrialSteps):
             item.practice,
             attempt,
             clock_origin_s=self.wall0,
-            clock_rate=self.run.pace or 1.0,
-            realtime=self.run.pace is not None or self.realtime,
+            clock_rate=self.run.settings.pace or 1.0,
+            realtime=self.run.settings.pace is not None or self.realtime,
         )
         self.run.observer.trial_started(self.info)
 
     def before_step(self, loop: Any) -> None:
-        hold = self.run.hold
+        hold = self.run.settings.hold
         if hold is not None and hold.held:
             self.writer.flush()  # what the trial measured so far is stored while it stands
             self.wall0 += hold.wait()  # held time is not trial time: no catching up
@@ -635,12 +609,11 @@ class _StoredSteps(TrialSteps):
         run = self.run
         if len(samples):
             self.writer.extend(run.task.stored_columns(samples))
-            if run.on_samples is not None:
-                run.on_samples(samples)
         assert self.info is not None  # started before the first step
         run.observer.samples(self.info, samples)
-        if run.pace:
-            lag = self.wall0 + loop.t_s / run.pace - time.monotonic()
+        pace = run.settings.pace
+        if pace:
+            lag = self.wall0 + loop.t_s / pace - time.monotonic()
             if lag > 0:
                 time.sleep(lag)
 

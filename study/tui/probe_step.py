@@ -11,22 +11,31 @@ or the dial unit. The line is kept on the run (`TrialRun.probe_line`).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from sqlalchemy import Engine, select
 from sqlalchemy.orm import Session
 
 from db.models.trial import Trial
 from study.protocol.observer import SessionObserver
-from study.protocol.roster import find_participant, load_study
+from study.protocol.roster import find_participant, find_study, load_study
+
+if TYPE_CHECKING:
+    from study.protocol.design import StudyDesign
 
 
-def due_probes(engine: Engine, code: str) -> list[str]:
+def due_probes(engine: Engine, code: str, design: StudyDesign | None = None) -> list[str]:
     """The design's probes `code` has not stored, if the next block is the one they run
-    before or a later one; empty otherwise."""
+    before or a later one; empty otherwise. `design`: the study's, already read (else
+    read here)."""
     # lazy: study.probes.store (with pandas, pyarrow, numpy) costs 0.4 s at start-up
     from study.probes.store import stored_probes
 
     with Session(engine) as session:
-        study, design = load_study(session)
+        if design is None:
+            study, design = load_study(session)
+        else:
+            study = find_study(session)
         if not design.probes:
             return []
         participant = find_participant(session, study, code)
@@ -42,11 +51,15 @@ def due_probes(engine: Engine, code: str) -> list[str]:
 
 
 def run_due_probes(
-    engine: Engine, code: str, driver_kind: str, observer: SessionObserver | None = None
+    engine: Engine,
+    code: str,
+    driver_kind: str,
+    observer: SessionObserver | None = None,
+    design: StudyDesign | None = None,
 ) -> str | None:
     """Run `code`'s due probes with the simulated person; a line for the screen (None
-    when none were due). `observer` is told each probe trial."""
-    due = due_probes(engine, code)
+    when none were due). `observer` is told each probe trial; `design` as `due_probes`."""
+    due = due_probes(engine, code, design)
     if not due:
         return None
     if driver_kind != "simulated":

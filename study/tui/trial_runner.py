@@ -4,7 +4,8 @@ The trial itself is `study.protocol.session.run_session` with `max_trials=1`: th
 `running` row, the same 1 s committed sample chunks, the same summary as `study run`.
 This module adds what a terminal needs around it:
 
-- `LiveState`: the newest samples, written by the worker (`on_samples`) and read by the
+- `LiveState`: the newest samples, written by the worker (the session's observer,
+  `_TrialWatch`) and read by the
   live view's timer; a lock guards the hand-over, so the UI never waits on the trial.
 - holding: `TrialRun.hold()` makes the trial stand at its next step
   (`study.protocol.session.TrialHold`: its samples so far committed, its clock
@@ -34,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from study.protocol.observer import Observers, SessionObserver, TrialInfo
 from study.protocol.tasks import LiveTrace, Task, get_task
 from study.tui.task_views import live_view
 from teleop_core.loop.drivers import HandAction, KeyboardDriver, OperatorView
@@ -220,6 +222,30 @@ class LiveState:
         return LiveFrame(task, values, first, second, condition)
 
 
+class _TrialWatch(SessionObserver):
+    """The session's events a terminal trial shows: the live view started with the
+    trial's task, each batch of samples on it, a wait for another program's lock as its
+    notice; a stop asked for (`TrialRun.stop`) raises `TrialStopped` at the next batch."""
+
+    def __init__(self, run: TrialRun, on_start: Callable[[object], None]) -> None:
+        self.run, self.on_start = run, on_start
+
+    def trial_progress(self, pending, k: int, n: int) -> None:
+        self.run.participant_id = pending.block.participant_id
+        self.run.live.start(get_task(pending.block.task), pending.block.condition)
+        self.on_start(pending)
+
+    def samples(self, trial: TrialInfo, rows: np.ndarray) -> None:
+        if not len(rows):
+            return
+        self.run.live.push(rows)
+        if self.run.stop_requested:
+            raise TrialStopped
+
+    def storage_wait(self, waited_s: float | None, held: int) -> None:
+        self.run.live.storage_wait = None if waited_s is None else (waited_s, held)
+
+
 @dataclass(frozen=True)
 class TrialOutcome:
     """How a trial run from the app ended."""
@@ -294,49 +320,39 @@ class TrialRun:
         if self._stop.is_set():
             raise TrialStopped
 
-    def _on_samples(self, samples: np.ndarray) -> None:
-        self.live.push(samples)
-        if self._stop.is_set():
-            raise TrialStopped
-
-    def _on_storage_wait(self, waited_s: float | None, held: int) -> None:
-        self.live.storage_wait = None if waited_s is None else (waited_s, held)
-
     def run(self, on_start: Callable[[object], None] = lambda _: None) -> TrialOutcome:
         """Run the participant's next trial; returns when it ends or is stopped."""
         # lazy: study.protocol.session (with pandas, pyarrow, numpy) costs 0.4 s at start-up
+        from study.protocol.roster import read_design
         from study.protocol.session import recover_interrupted, run_session
+        from study.protocol.session_settings import SessionSettings
 
         start = time.monotonic()
         if self._stop.is_set():
             return TrialOutcome(self.code, [], 0, 0.0)
 
-        def started(item, _k: int, _n: int) -> None:
-
-            self.participant_id = item.block.participant_id
-            self.live.start(get_task(item.block.task), item.block.condition)
-            on_start(item)
-
         keyboard = self.keyboard
         # the session flow: the probes the design names before this block, then the block
         from study.tui.probe_step import run_due_probes
 
-        self.probe_line = run_due_probes(self.engine, self.code, self.driver_kind, self.observer)
+        design = read_design(self.engine)  # once: the probe step's and the session's
+        self.probe_line = run_due_probes(
+            self.engine, self.code, self.driver_kind, self.observer, design
+        )
         try:
-            ids = run_session(
-                self.engine,
-                self.code,
+            settings = SessionSettings(
                 self.driver_kind,
                 self.estimator,
                 make_driver=(lambda: keyboard) if keyboard is not None else None,
                 pace=self.pace,
-                on_trial=started,
                 max_trials=1,
-                on_samples=self._on_samples,
-                on_storage_wait=self._on_storage_wait,
-                observer=self.observer,
                 hold=self.holder,
+                design=design,
+                wait_out_storage=True,
             )
+            watch = _TrialWatch(self, on_start)
+            observer = Observers([watch, self.observer]) if self.observer else watch
+            ids = run_session(self.engine, self.code, settings, observer)
             return TrialOutcome(self.code, ids, 0, time.monotonic() - start)
         except TrialStopped:
             n = 0

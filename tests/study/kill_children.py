@@ -13,6 +13,7 @@ import types
 from pathlib import Path
 
 from study.protocol.session import participant_traits, run_session
+from study.protocol.session_settings import SessionSettings
 from study.tasks.lcca.simulated_participant import SimulatedParticipant
 
 PRELOAD = [__name__, "tests.study.kill_warmup"]
@@ -48,7 +49,8 @@ def session_killed_at(url: str, code: str, after_trials: int, die_at_s: float, l
             f.write("start\n")
         return DiesAt(traits, phantom, 180.0)
 
-    run_session(engine, code, "simulated", load_estimator(), make_driver=make_driver)
+    settings = SessionSettings("simulated", load_estimator(), make_driver=make_driver)
+    run_session(engine, code, settings)
 
 
 PACE = 20.0

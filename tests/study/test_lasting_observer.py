@@ -70,3 +70,33 @@ def test_a_session_that_failed_to_start_is_ended_and_not_kept() -> None:
             pass
     lasting.close()
     assert log.calls == [("start", "P001", "simulated", 1.0), ("end",)] * 2
+
+
+def test_progress_and_storage_waits_reach_every_observer_through_both_wrappers() -> None:
+    """The session's progress and its waits for the database are observer events like
+    the others: `Observers` tells each observer in order, `LastingObserver` passes them on."""
+    from study.protocol.observer import Observers
+
+    class Waits(SessionObserver):
+        def __init__(self, name: str, calls: list[tuple[Any, ...]]) -> None:
+            self.name, self.calls = name, calls
+
+        def trial_progress(self, pending: Any, k: int, n: int) -> None:
+            self.calls.append((self.name, "progress", pending, k, n))
+
+        def storage_wait(self, waited_s: float | None, held: int) -> None:
+            self.calls.append((self.name, "wait", waited_s, held))
+
+    calls: list[tuple[Any, ...]] = []
+    both = LastingObserver(Observers([Waits("a", calls), Waits("b", calls)]))
+    both.trial_progress("first", 0, 2)
+    both.storage_wait(0.25, 40)
+    both.storage_wait(None, 0)
+    assert calls == [
+        ("a", "progress", "first", 0, 2),
+        ("b", "progress", "first", 0, 2),
+        ("a", "wait", 0.25, 40),
+        ("b", "wait", 0.25, 40),
+        ("a", "wait", None, 0),
+        ("b", "wait", None, 0),
+    ]

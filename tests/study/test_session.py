@@ -173,6 +173,7 @@ from db.migrate import open_database
 from study.protocol.default_estimator import load_estimator
 from study.tasks.lcca.simulated_participant import SimulatedParticipant
 from study.protocol.session import participant_traits, run_session
+from study.protocol.session_settings import SessionSettings
 from teleop_core.phantom.lcca import LccaPhantom
 
 die_at_s = float(sys.argv[2])
@@ -188,8 +189,10 @@ class DiesAt(SimulatedParticipant):
 
 
 traits = participant_traits(3, "P001", "novice")
-run_session(engine, "P001", "simulated", load_estimator(),
-            make_driver=lambda: DiesAt(traits, phantom, 180.0))
+settings = SessionSettings(
+    "simulated", load_estimator(), make_driver=lambda: DiesAt(traits, phantom, 180.0)
+)
+run_session(engine, "P001", settings)
 """
 
 
@@ -224,6 +227,7 @@ def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) 
     from db.migrate import open_database
     from study.protocol.default_estimator import load_estimator
     from study.protocol.session import SessionStorageError, run_session
+    from study.protocol.session_settings import SessionSettings
 
     db = _study(tmp_path)
     engine = open_database(db, create=False)
@@ -237,7 +241,7 @@ def test_a_full_disk_mid_trial_is_one_line_saying_what_was_kept(tmp_path: Path) 
     engine.dispose()  # new connections get the limit
     try:
         with pytest.raises(SessionStorageError) as caught:
-            run_session(engine, "P001", "simulated", load_estimator())
+            run_session(engine, "P001", SessionSettings("simulated", load_estimator()))
     finally:
         engine.dispose()
     message = str(caught.value)
@@ -298,7 +302,7 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
 ) -> None:
     """Another program takes the write lock between the trial's last samples and its
     `completed` write, and keeps it longer than the busy timeout. A watched session
-    (`on_storage_wait`, as the terminal app runs it), which keeps its samples through
+    (`wait_out_storage`, as the terminal app runs it), which keeps its samples through
     such a lock, waits this one out too, saying so, and completes the trial rather than
     leave it `running` for the next session to repeat."""
     import sqlite3
@@ -306,7 +310,9 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
 
     from db.migrate import open_database
     from study.protocol.default_estimator import load_estimator
+    from study.protocol.observer import SessionObserver
     from study.protocol.session import run_session
+    from study.protocol.session_settings import SessionSettings
     from study.protocol.tasks import get_task
 
     db = _study(tmp_path)
@@ -325,16 +331,18 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
         monkeypatch.setattr(task_class, "completion_time_s", lock_then_measure)
         waits: list[tuple[float | None, int]] = []
 
-        def on_wait(waited_s: float | None, held: int) -> None:
-            waits.append((waited_s, held))
-            # the other program is done once the runner has said it waits for it
-            if waited_s is not None and len(waits) == 3:
-                holder.execute("ROLLBACK")
+        class Waits(SessionObserver):
+            def storage_wait(self, waited_s: float | None, held: int) -> None:
+                waits.append((waited_s, held))
+                # the other program is done once the runner has said it waits for it
+                if waited_s is not None and len(waits) == 3:
+                    holder.execute("ROLLBACK")
 
         try:
-            ids = run_session(
-                engine, "P001", "simulated", load_estimator(), max_trials=1, on_storage_wait=on_wait
+            settings = SessionSettings(
+                "simulated", load_estimator(), max_trials=1, wait_out_storage=True
             )
+            ids = run_session(engine, "P001", settings, Waits())
         finally:
             if holder.in_transaction:
                 holder.execute("ROLLBACK")
@@ -344,3 +352,77 @@ def test_a_lock_taken_as_a_watched_trial_ends_is_waited_out_and_the_trial_comple
     assert [w for w, _ in waits[:3]] == sorted(w for w, _ in waits[:3])
     assert all(w is not None and held == 0 for w, held in waits[:3])
     assert waits[3:] == [(None, 0)]  # the wait ended, said once
+
+
+@pytest.mark.parametrize(
+    ("values", "line"),
+    [
+        ({"pace": 0.0}, "pace 0.0; expected a finite number > 0 (times real time)"),
+        ({"pace": -2.0}, "pace -2.0; expected a finite number > 0 (times real time)"),
+        ({"pace": float("nan")}, "pace nan; expected a finite number > 0 (times real time)"),
+        ({"pace": float("inf")}, "pace inf; expected a finite number > 0 (times real time)"),
+        ({"max_trials": -1}, "max_trials -1; expected a whole number >= 0"),
+    ],
+)
+def test_session_settings_refuse_a_value_out_of_range_as_they_are_made(
+    values: dict[str, float], line: str
+) -> None:
+    """The settings check each value once, where it enters: before any database is
+    opened, with one line naming the value and what was expected."""
+    from study.errors import StudyInputError
+    from study.protocol.session_settings import SessionSettings
+
+    with pytest.raises(StudyInputError) as caught:
+        SessionSettings("simulated", None, **values)  # type: ignore[arg-type]
+    assert str(caught.value) == line
+
+
+def test_study_run_reads_the_design_once_for_the_session(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`study run` reads the study's design once (its `[lsl]` and `[sensors]` tables,
+    the session's gains and time limit) and hands it on; it read it twice before the
+    first trial, once for the streams and once in the runner."""
+    from study.protocol.design import StudyDesign
+
+    db = _study(tmp_path)
+    reads: list[str] = []
+    read = StudyDesign.from_dict.__func__  # type: ignore[attr-defined]
+
+    def counted(cls, data):  # type: ignore[no-untyped-def]
+        reads.append(data["name"])
+        return read(cls, data)
+
+    monkeypatch.setattr(StudyDesign, "from_dict", classmethod(counted))
+    assert main(["run", "--participant", "P001", "--db", db]) == 0
+    assert reads == ["session test"]
+    assert [t[2] for t in _trials(db)] == ["completed"] * 4
+
+
+def test_a_terminal_apps_trial_reads_the_design_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The terminal app's trial (its probe step, then its session of one trial) reads
+    the design once and hands it on; the probe step and the runner each read it."""
+    from db.migrate import open_database
+    from study.protocol.default_estimator import load_estimator
+    from study.protocol.design import StudyDesign
+    from study.tui.trial_runner import TrialRun
+
+    db = _study(tmp_path)
+    engine = open_database(db, create=False)
+    estimator = load_estimator()
+    reads: list[str] = []
+    read = StudyDesign.from_dict.__func__  # type: ignore[attr-defined]
+
+    def counted(cls, data):  # type: ignore[no-untyped-def]
+        reads.append(data["name"])
+        return read(cls, data)
+
+    monkeypatch.setattr(StudyDesign, "from_dict", classmethod(counted))
+    try:
+        outcome = TrialRun(engine, estimator, "P001", "simulated", None).run()
+    finally:
+        engine.dispose()
+    assert len(outcome.trial_ids) == 1
+    assert reads == ["session test"]

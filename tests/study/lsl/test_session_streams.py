@@ -84,6 +84,7 @@ def _session(
 ) -> list[int]:
     from study.protocol.default_estimator import load_estimator
     from study.protocol.session import participant_traits, run_session
+    from study.protocol.session_settings import SessionSettings
     from study.tasks.lcca.simulated_participant import SimulatedParticipant
     from teleop_core.phantom.lcca import LccaPhantom
 
@@ -91,16 +92,14 @@ def _session(
     phantom = LccaPhantom()
     traits = participant_traits(1, "P001", "novice")
     try:
-        return run_session(
-            engine,
-            "P001",
+        settings = SessionSettings(
             "simulated",
             load_estimator(),
             make_driver=lambda: SimulatedParticipant(traits, phantom, give_up_s=trial_s),
             pace=1.0,
-            observer=Observers(observers),
             max_trials=max_trials,
         )
+        return run_session(engine, "P001", settings, Observers(observers))
     finally:
         engine.dispose()
 

@@ -15,6 +15,7 @@ from db.models.trial import Trial
 from study.protocol.default_estimator import load_estimator
 from study.protocol.roster import add_participant
 from study.protocol.session import run_session
+from study.protocol.session_settings import SessionSettings
 from study.tui.confirm import Confirm
 from tests.study.tui.conftest import on_screen, run_screen, wait_for
 
@@ -67,7 +68,7 @@ async def test_s_after_study_run_finished_the_participant_offers_no_old_trial(
         label = app.query_one("#next", Label)
         assert str(label.render()).startswith("next: P001 lcca/")
         # `study run` runs all of P001's trials while the app is open
-        run_session(study_engine, "P001", "simulated", load_estimator())
+        run_session(study_engine, "P001", SessionSettings("simulated", load_estimator()))
         await pilot.press("s")
         await wait_for(pilot, lambda: "trial is done" in str(label.render()), 10)
         await pilot.pause()
