@@ -107,15 +107,6 @@ DECLARATION = TaskDeclaration(
 class LccaTask(Task):
     declaration = DECLARATION
 
-    def haptic_gain(self, gain_n_m_per_n: float | None) -> float | None:
-        """`gain_n_m_per_n` (finite, >= 0 N m/N), else the paper's G_h."""
-        from study.tasks.lcca.trial import condition_haptics
-
-        gain = super().haptic_gain(gain_n_m_per_n)
-        if gain is not None:
-            condition_haptics("HV", gain)
-        return gain
-
     def session_context(self) -> Any:
         from teleop_core.phantom.lcca import LccaPhantom
 

@@ -8,7 +8,6 @@ success, and wall contacts (distal force rising through `CONTACT_THRESHOLD_N`).
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -48,13 +47,12 @@ TRIAL_COLUMNS = (
 
 def condition_haptics(condition: str, haptic_gain: float | None = None) -> HapticParams:
     """VO: haptic torque off (the dial still self-centres), its gain 0 (none rendered,
-    as a session records it); HV: on, at `haptic_gain`."""
+    as a session records it); HV: on, at `haptic_gain`. The gain was checked where it
+    entered (the design file, `study simulate --haptic-gain`, `run_trial`'s
+    `Task.haptic_gain`); `HapticParams` refuses a negative one of its own."""
     if condition not in CONDITIONS:
         raise StudyInputError(f"condition {condition!r}; expected one of {', '.join(CONDITIONS)}")
-    base = HapticParams()
-    gain = base.haptic_gain_n_m_per_n if haptic_gain is None else haptic_gain
-    if not (math.isfinite(gain) and gain >= 0):
-        raise StudyInputError(f"haptic gain {haptic_gain!r}; expected a finite value >= 0 N m/N")
+    gain = HapticParams().haptic_gain_n_m_per_n if haptic_gain is None else haptic_gain
     if condition == "VO":
         return HapticParams(haptics_on=False, haptic_gain_n_m_per_n=0.0)
     return HapticParams(haptics_on=True, haptic_gain_n_m_per_n=gain)
