@@ -38,9 +38,8 @@ if TYPE_CHECKING:
     from study.commands.run_keys import ExperimenterKeys
     from study.protocol.design import StudyDesign
     from study.protocol.design_sensors import SensorSettings
-    from study.protocol.observer import SessionObserver, TrialInfo
+    from study.protocol.observer import PendingTrial, SessionObserver, TrialInfo
     from study.protocol.participant_model import ParticipantModel
-    from study.protocol.session import PendingTrial
     from study.protocol.stop_signals import SignalStop
     from teleop_core.loop.follower_units import ForceSource, PhysicalFollower
     from teleop_core.loop.hardware import HardwareDriver

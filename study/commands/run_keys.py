@@ -28,7 +28,7 @@ import tty
 from collections.abc import Callable, Iterator
 from typing import IO, Any
 
-from study.protocol.session import TrialHold
+from study.protocol.session_settings import TrialHold
 from study.protocol.stop_signals import SignalStop
 
 POLL_S = 0.05

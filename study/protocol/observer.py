@@ -23,8 +23,18 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
-    from study.protocol.session import PendingTrial
+    from db.models.study import ScheduleBlock
     from study.protocol.tasks import Task
+
+
+@dataclass(frozen=True)
+class PendingTrial:
+    """A trial of the participant's schedule still to run: its block, whether it is a
+    practice trial, and its place in the block."""
+
+    block: ScheduleBlock
+    practice: bool
+    trial_index: int
 
 
 @dataclass(frozen=True)

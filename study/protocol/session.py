@@ -52,6 +52,7 @@ from study.protocol.actor import current_actor
 from study.protocol.design import MAX_TRIAL_S, StudyDesign
 from study.protocol.lease import LeaseHandle, hold_lease
 from study.protocol.observer import (
+    PendingTrial,
     SessionInfo,
     SessionObserver,
     TrialInfo,
@@ -90,54 +91,6 @@ STOPPED_WITH_PARENT = "the session stopped because its parent `study run` proces
 
 class SessionStopped(Exception):
     """Raised inside a trial when the session's `stop` event is set."""
-
-
-class TrialHold:
-    """Holds a running trial between two steps while someone decides, then lets it go on
-    (the terminal app's stop dialog: the trial stands while its reason is typed).
-
-    `hold()` and `release()` from any thread. At its next step a held trial commits the
-    samples it has (a crash while it stands loses none of them) and waits in
-    `wait()` until released. The time it stands is not trial time: the loop's clock
-    stands with it, and a paced trial goes on at its pace from where it stood rather
-    than catching the held seconds up. `on_release`, called in the trial's thread as it
-    goes on, may raise to end the trial there (a stop decided while it stood)."""
-
-    def __init__(self, on_release: Callable[[], None] = lambda: None) -> None:
-        self._go = threading.Event()
-        self._go.set()
-        self._on_release = on_release
-        self.standing = threading.Event()
-        """Set while the trial waits, its samples so far committed."""
-
-    @property
-    def held(self) -> bool:
-        return not self._go.is_set()
-
-    def hold(self) -> None:
-        self._go.clear()
-
-    def release(self) -> None:
-        self._go.set()
-
-    def wait(self) -> float:
-        """In the trial's thread: wait while held; the seconds waited."""
-        start = time.monotonic()
-        self.standing.set()
-        try:
-            self._go.wait()
-        finally:
-            self.standing.clear()
-        waited = time.monotonic() - start
-        self._on_release()
-        return waited
-
-
-@dataclass(frozen=True)
-class PendingTrial:
-    block: ScheduleBlock
-    practice: bool
-    trial_index: int
 
 
 def participant_traits(

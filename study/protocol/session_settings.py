@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -19,9 +20,49 @@ from study.errors import StudyInputError
 if TYPE_CHECKING:
     from study.protocol.design import StudyDesign
     from study.protocol.participant_model import ParticipantModel
-    from study.protocol.session import TrialHold
     from teleop_core.estimation.estimator import ForceEstimator
     from teleop_core.loop.drivers import Driver
+
+
+class TrialHold:
+    """Holds a running trial between two steps while someone decides, then lets it go on
+    (the terminal app's stop dialog: the trial stands while its reason is typed).
+
+    `hold()` and `release()` from any thread. At its next step a held trial commits the
+    samples it has (a crash while it stands loses none of them) and waits in
+    `wait()` until released. The time it stands is not trial time: the loop's clock
+    stands with it, and a paced trial goes on at its pace from where it stood rather
+    than catching the held seconds up. `on_release`, called in the trial's thread as it
+    goes on, may raise to end the trial there (a stop decided while it stood)."""
+
+    def __init__(self, on_release: Callable[[], None] = lambda: None) -> None:
+        self._go = threading.Event()
+        self._go.set()
+        self._on_release = on_release
+        self.standing = threading.Event()
+        """Set while the trial waits, its samples so far committed."""
+
+    @property
+    def held(self) -> bool:
+        return not self._go.is_set()
+
+    def hold(self) -> None:
+        self._go.clear()
+
+    def release(self) -> None:
+        self._go.set()
+
+    def wait(self) -> float:
+        """In the trial's thread: wait while held; the seconds waited."""
+        start = time.monotonic()
+        self.standing.set()
+        try:
+            self._go.wait()
+        finally:
+            self.standing.clear()
+        waited = time.monotonic() - start
+        self._on_release()
+        return waited
 
 
 @dataclass(frozen=True)

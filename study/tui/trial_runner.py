@@ -287,7 +287,7 @@ class TrialRun:
         """What the probe step did before the trial (`study.tui.probe_step`), if anything."""
         self.stop_reason = STOPPED_REASON
         """Why the trial was stopped, for the audit log (`stop`)."""
-        from study.protocol.session import TrialHold  # loaded with the runner, when run
+        from study.protocol.session_settings import TrialHold  # loaded with the runner, when run
 
         self.holder = TrialHold(self._released)
 

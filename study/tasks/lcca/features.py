@@ -53,7 +53,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from study.tasks.lcca.task import FIT_FEATURES
+from study.tasks.lcca.feature_names import FIT_FEATURES
 
 GRID_S = 0.01
 APPROACH_M = 0.06

@@ -17,6 +17,7 @@ from study.protocol.tasks import (
     pose_columns,
     register,
 )
+from study.tasks.lcca.feature_names import FIT_FEATURES
 from teleop_core.loop.layout import SAMPLE_COLUMNS as LOOP_SAMPLE_COLUMNS
 from teleop_core.master.params import HapticParams
 from teleop_core.phantom.regions import REGION_ABBREVIATIONS, REGIONS
@@ -76,19 +77,6 @@ MEASURES = (
         integer=True,
     ),
 )
-FIT_FEATURES = (
-    "advance_speed_m_s",
-    "approach_m",
-    "approaches",
-    "target_speed_ratio",
-    "aim_error_rad",
-    "turn_peak_s",
-    "turn_swing_s",
-    "stall_s",
-    "stall_backoffs",
-    "peak_felt_rise_n_m",
-)
-"""The participant fit's features of a trial (`study.tasks.lcca.features.lcca_features`)."""
 DECLARATION = TaskDeclaration(
     name="lcca",
     title="LCCA guidewire navigation",
