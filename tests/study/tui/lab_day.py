@@ -396,7 +396,7 @@ class LabDay:
         self.to_screen("F3", r"s Start")
         if self.picked is None:  # nobody picked: the list has the focus
             term.keys("Enter")
-            term.wait(r"Enter: pick", 10)  # the picker is open on "(no change)"
+            term.wait(r"Enter: pick|\(no change\)", 30)  # the picker is open on "(no change)"
             term.keys(*["Down"] * (position + 1), "Enter")
         else:  # the one before is done: n goes on to the next
             term.wait(rf"{self.picked}: every scheduled trial is done; n: on to {code}", 20)
