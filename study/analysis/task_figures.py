@@ -10,12 +10,12 @@ its first two sample columns after the pose and the region.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from study.protocol.tasks import COMPLETION_TIME, LiveTrace, Task
+from study.protocol.tasks.views import ViewRegistry, default_traces
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -23,7 +23,6 @@ if TYPE_CHECKING:
 BUILTIN = ("study.tasks.lcca.figures", "study.tasks.notes.figures")
 """The modules of the built-in tasks' figures, each registering its `FIGURES`."""
 ENTRY_POINT_GROUP = "haptic_study.figure_views"
-POSE = ("t_s", "tip_x_m", "tip_y_m", "tip_z_m")
 
 
 @dataclass(frozen=True)
@@ -50,40 +49,22 @@ class FigureView:
         return dict(self.trace_names) or {t.column: t.label for t in self.traces}
 
 
-_VIEWS: dict[str, FigureView] = {}
-_LOADED = False
+_VIEWS: ViewRegistry[FigureView] = ViewRegistry(BUILTIN, ENTRY_POINT_GROUP)
 
 
 def register_figures(name: str, view: FigureView) -> FigureView:
     """Draw the task called `name` with `view` (replacing one it had); `view` returned."""
-    _VIEWS[name] = view
-    return view
-
-
-def _load() -> None:
-    global _LOADED
-    if _LOADED:
-        return
-    _LOADED = True
-    for module in BUILTIN:
-        importlib.import_module(module)
-    from importlib.metadata import entry_points
-
-    for entry in entry_points(group=ENTRY_POINT_GROUP):
-        _VIEWS.setdefault(entry.name, entry.load())
+    return _VIEWS.register(name, view)
 
 
 def default_figures(task: Task) -> FigureView:
     """The figures of a task nobody registered a view for: its first two sample columns
     after the pose and the region, under their names."""
-    skip = {*POSE, task.region_column, task.sample_columns[1].name, task.sample_columns[2].name}
-    rest = [c for c in task.sample_columns if c.name not in skip] or list(task.sample_columns)
-    return FigureView(tuple(LiveTrace(c.name, c.name, 1.0) for c in rest[:2]))
+    return FigureView(tuple(dict.fromkeys(default_traces(task))))  # one column: one trace
 
 
 def figure_view(task: Task) -> FigureView:
     """The view `task` is drawn with: its registered one, else `default_figures`."""
-    _load()
     view = _VIEWS.get(task.name)
     return view if view is not None else default_figures(task)
 

@@ -11,12 +11,12 @@ pose and the region, and the insertion along a bar.
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from study.protocol.tasks import LiveTrace, Task
+from study.protocol.tasks.views import ViewRegistry, default_traces
 
 if TYPE_CHECKING:
     from textual.widget import Widget
@@ -24,7 +24,6 @@ if TYPE_CHECKING:
 BUILTIN = ("study.tui.scene_lcca", "study.tui.scene_notes")
 """The modules of the built-in tasks' views, each registering its `VIEW`."""
 ENTRY_POINT_GROUP = "haptic_study.live_views"
-POSE = ("t_s", "tip_x_m", "tip_y_m", "tip_z_m")
 
 
 def pose_lines(task: Task, values: Mapping[str, float], condition: str | None) -> list[str]:
@@ -80,42 +79,21 @@ class LiveView:
         return self.peaks if self.peaks is not None else self.traces
 
 
-_VIEWS: dict[str, LiveView] = {}
-_LOADED = False
+_VIEWS: ViewRegistry[LiveView] = ViewRegistry(BUILTIN, ENTRY_POINT_GROUP)
 
 
 def register_view(name: str, view: LiveView) -> LiveView:
     """Draw the task called `name` with `view` (replacing one it had); `view` returned."""
-    _VIEWS[name] = view
-    return view
-
-
-def _load() -> None:
-    global _LOADED
-    if _LOADED:
-        return
-    _LOADED = True
-    for module in BUILTIN:
-        importlib.import_module(module)
-    from importlib.metadata import entry_points
-
-    for entry in entry_points(group=ENTRY_POINT_GROUP):
-        _VIEWS.setdefault(entry.name, entry.load())
+    return _VIEWS.register(name, view)
 
 
 def default_view(task: Task) -> LiveView:
     """The view of a task nobody registered one for: its first two sample columns after
     the pose and the region, each on a gauge of full scale 1 in its unit."""
-    skip = {*POSE, task.region_column, task.sample_columns[1].name, task.sample_columns[2].name}
-    rest = [c for c in task.sample_columns if c.name not in skip] or list(task.sample_columns)
-    first, second = (rest * 2)[:2]
-    return LiveView(
-        (LiveTrace(first.name, first.name, 1.0), LiveTrace(second.name, second.name, 1.0))
-    )
+    return LiveView(default_traces(task))
 
 
 def live_view(task: Task) -> LiveView:
     """The view `task` is drawn with: its registered one, else `default_view`."""
-    _load()
     view = _VIEWS.get(task.name)
     return view if view is not None else default_view(task)
