@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -125,6 +126,11 @@ class Fit:
     @property
     def singular(self) -> bool:
         return self.theta < SINGULAR_TOL
+
+    @cached_property
+    def varpar_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`varpar_covariance` of this fit, computed once for all its contrasts."""
+        return varpar_covariance(self)
 
     def contrast(self, L: np.ndarray, ddf: str = "Satterthwaite") -> Contrast:
         """The t test of L beta = 0 with `ddf`'s degrees of freedom.
@@ -351,10 +357,6 @@ def _fit_random_intercept(X: np.ndarray, y: np.ndarray, groups: np.ndarray) -> F
 def satterthwaite_df(fit: Fit, L: np.ndarray) -> float:
     """Satterthwaite's df of L beta, as lmerTest (module docstring).
 
-    The derivatives in sigma are closed forms; those in theta are closed forms for the
-    first derivative (beta_hat's own derivative drops out of q' at the GLS optimum) and
-    `scipy.differentiate.derivative` of it for the second.
-
     Parameters
     ----------
     fit : Fit
@@ -367,6 +369,22 @@ def satterthwaite_df(fit: Fit, L: np.ndarray) -> float:
     float
         2 (L V L')^2 / (g' A g).
     """
+    sigma = fit.sigma
+    A, Ai, dA = fit.varpar_parts
+    # Var(beta) = sigma^2 A^-1: d/d theta = -sigma^2 A^-1 A' A^-1, d/d sigma = 2 sigma A^-1
+    g = np.array([-(sigma**2) * L @ Ai @ dA @ Ai @ L, 2 * sigma * L @ Ai @ L])
+    return float(2 * (L @ fit.vcov @ L) ** 2 / (g @ A @ g))
+
+
+def varpar_covariance(fit: Fit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, (X' V0^-1 X)^-1, its derivative in theta): A = 2 H^-1 the asymptotic covariance
+    of varpar = (theta, sigma), H the REML deviance's Hessian in varpar (module docstring).
+
+    The derivatives in sigma are closed forms; those in theta are closed forms for the
+    first derivative (beta_hat's own derivative drops out of q' at the GLS optimum) and
+    `scipy.differentiate.derivative` of it for the second. They depend on the fit alone,
+    not on the contrast: `Fit.varpar_parts` keeps them for every contrast of one fit.
+    """
     # lazy: scipy.differentiate costs 0.1 s at start-up
     from scipy.differentiate import derivative
 
@@ -374,12 +392,12 @@ def satterthwaite_df(fit: Fit, L: np.ndarray) -> float:
     n, p = d.X.shape
     _, _, q = d.sums(fit.theta)
     _, dq, Ai, dA = _theta_derivatives(d, fit.theta)
-    h_tt = derivative(
-        np.vectorize(
-            lambda th: _theta_derivatives(d, th)[0] + _theta_derivatives(d, th)[1] / sigma**2
-        ),
-        fit.theta,
-    ).df
+
+    def first(theta: float) -> float:
+        dlogdet, dq_theta, _, _ = _theta_derivatives(d, theta)
+        return dlogdet + dq_theta / sigma**2
+
+    h_tt = derivative(np.vectorize(first), fit.theta).df
     # d^2 dev / d theta d sigma = -2 q' / sigma^3
     # d^2 dev / d sigma^2 = 6 q / sigma^4 - 2 (N - p) / sigma^2
     H = np.array(
@@ -388,10 +406,7 @@ def satterthwaite_df(fit: Fit, L: np.ndarray) -> float:
             [-2 * dq / sigma**3, 6 * q / sigma**4 - 2 * (n - p) / sigma**2],
         ]
     )
-    A = 2 * np.linalg.inv(H)
-    # Var(beta) = sigma^2 A^-1: d/d theta = -sigma^2 A^-1 A' A^-1, d/d sigma = 2 sigma A^-1
-    g = np.array([-(sigma**2) * L @ Ai @ dA @ Ai @ L, 2 * sigma * L @ Ai @ L])
-    return float(2 * (L @ fit.vcov @ L) ** 2 / (g @ A @ g))
+    return 2 * np.linalg.inv(H), Ai, dA
 
 
 def _theta_derivatives(d: Design, theta: float) -> tuple[float, float, np.ndarray, np.ndarray]:
