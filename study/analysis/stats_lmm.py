@@ -45,6 +45,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
@@ -128,7 +129,7 @@ class Fit:
         return self.theta < SINGULAR_TOL
 
     @cached_property
-    def varpar_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def varpar_parts(self) -> VarparParts:
         """`varpar_covariance` of this fit, computed once for all its contrasts."""
         return varpar_covariance(self)
 
@@ -370,15 +371,27 @@ def satterthwaite_df(fit: Fit, L: np.ndarray) -> float:
         2 (L V L')^2 / (g' A g).
     """
     sigma = fit.sigma
-    A, Ai, dA = fit.varpar_parts
+    parts = fit.varpar_parts
+    Ai, dA = parts.A_inv, parts.dA
     # Var(beta) = sigma^2 A^-1: d/d theta = -sigma^2 A^-1 A' A^-1, d/d sigma = 2 sigma A^-1
     g = np.array([-(sigma**2) * L @ Ai @ dA @ Ai @ L, 2 * sigma * L @ Ai @ L])
-    return float(2 * (L @ fit.vcov @ L) ** 2 / (g @ A @ g))
+    return float(2 * (L @ fit.vcov @ L) ** 2 / (g @ parts.cov @ g))
 
 
-def varpar_covariance(fit: Fit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(A, (X' V0^-1 X)^-1, its derivative in theta): A = 2 H^-1 the asymptotic covariance
-    of varpar = (theta, sigma), H the REML deviance's Hessian in varpar (module docstring).
+class VarparParts(NamedTuple):
+    """What Satterthwaite's df take from a fit, whatever the contrast."""
+
+    cov: np.ndarray
+    """2 H^-1, the asymptotic covariance of varpar = (theta, sigma); H the REML
+    deviance's Hessian in varpar (module docstring); shape (2, 2)."""
+    A_inv: np.ndarray
+    """(X' V0^-1 X)^-1 at the fit's theta; shape (p, p)."""
+    dA: np.ndarray
+    """d (X' V0^-1 X) / d theta; shape (p, p)."""
+
+
+def varpar_covariance(fit: Fit) -> VarparParts:
+    """The fit's `VarparParts`.
 
     The derivatives in sigma are closed forms; those in theta are closed forms for the
     first derivative (beta_hat's own derivative drops out of q' at the GLS optimum) and
@@ -406,7 +419,7 @@ def varpar_covariance(fit: Fit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             [-2 * dq / sigma**3, 6 * q / sigma**4 - 2 * (n - p) / sigma**2],
         ]
     )
-    return 2 * np.linalg.inv(H), Ai, dA
+    return VarparParts(2 * np.linalg.inv(H), Ai, dA)
 
 
 def _theta_derivatives(d: Design, theta: float) -> tuple[float, float, np.ndarray, np.ndarray]:
