@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import click
@@ -41,6 +42,37 @@ def test_installed_console_script_lists_the_commands() -> None:
     assert result.returncode == 0
     for name in ("db", "bench"):
         assert f"  {name} " in result.stdout
+
+
+_EXIT_PROBE = """
+import atexit, gc, sys
+import study.cli
+class Cycle:
+    def __del__(self):
+        print("finalised", flush=True)
+def report():
+    print(f"frozen {gc.get_freeze_count()}", flush=True)
+atexit.register(report)
+a = Cycle(); a.me = a; del a
+sys.argv = ["study", *sys.argv[1:]]
+study.cli.entry()
+"""
+
+
+@pytest.mark.parametrize(("args", "status"), [(("--help",), 0), (("no-such-command",), 2)])
+def test_console_entry_keeps_status_then_freezes(args: tuple[str, ...], status: int) -> None:
+    # the console entry collects the command's garbage (a cycle's finaliser runs) and
+    # freezes what remains before the interpreter's exit, keeping main's exit status
+    result = subprocess.run(
+        [sys.executable, "-c", _EXIT_PROBE, *args], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == status, result.stderr
+    lines = result.stdout.splitlines()
+    assert "finalised" in lines
+    frozen = [int(line.split()[1]) for line in lines if line.startswith("frozen ")]
+    assert frozen
+    assert frozen[0] > 1000
+    assert lines.index("finalised") < lines.index(f"frozen {frozen[0]}")
 
 
 def _error(capsys: pytest.CaptureFixture[str], *args: str) -> str:
