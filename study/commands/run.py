@@ -132,7 +132,6 @@ def run(
             )
         if driver != "simulated":
             raise StudyInputError(f"--all runs simulated participants; got --driver {driver}")
-        _lsl_notice(db_url)
         _run_all(db_url, jobs or 1, pace, who, participants_path)
         return
     assert code is not None  # _check_options: --participant CODE without --all
@@ -398,14 +397,9 @@ def _progress() -> Progress:
     return progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
 
 
-def _lsl_notice(db_url: str | None) -> None:
+def _lsl_notice(design: StudyDesign) -> None:
     """Say that --all leaves the design's `[lsl]` table aside."""
-    engine = open_database(db_url, create=False)
-    try:
-        lsl = _design(engine).lsl
-    finally:
-        engine.dispose()
-    if lsl.publish or lsl.record:
+    if design.lsl.publish or design.lsl.record:
         click.echo(
             "study run: the design's [lsl] streams are published and recorded by one "
             "participant's session (--participant CODE), not by --all",
@@ -421,9 +415,11 @@ def _run_all(
 
     engine = open_database(db_url, create=False)
     try:
-        codes = [p["code"] for p in schedule(engine)["participants"] if not p["withdrawn"]]
+        design = _design(engine)  # read once, here: the notice, the roster, every session
+        codes = [p["code"] for p in schedule(engine, design)["participants"] if not p["withdrawn"]]
     finally:
         engine.dispose()
+    _lsl_notice(design)
     start = time.monotonic()
     total = 0
     busy: list[str] = []
@@ -439,7 +435,9 @@ def _run_all(
         def notice(message: str) -> None:
             progress.console.print(f"study run: {message}", markup=False)
 
-        runs = run_participants(db_url, codes, jobs, pace, actor, skipped, model, notice)
+        runs = run_participants(
+            db_url, codes, jobs, pace, actor, skipped, model, notice, design=design
+        )
         for code, n in runs:
             total += n
             progress.update(bar, advance=1, description=f"participants ({code} done)")

@@ -23,7 +23,10 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from types import TracebackType
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
+
+if TYPE_CHECKING:
+    from study.protocol.design import StudyDesign
 
 T = TypeVar("T")
 _WORKER: dict[str, object] = {}
@@ -97,7 +100,9 @@ def _worker_engine() -> Any:
     return _WORKER["engine"]
 
 
-def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
+def _worker_run(
+    code: str, pace: float | None = None, design: StudyDesign | None = None
+) -> tuple[str, int]:
     # lazy: study.protocol.session (with pandas, pyarrow, sqlalchemy) costs 0.8 s at start-up
     from study.protocol.session import run_session
     from study.protocol.session_settings import SessionSettings
@@ -112,6 +117,7 @@ def _worker_run(code: str, pace: float | None = None) -> tuple[str, int]:
             actor=_WORKER["actor"],  # type: ignore[arg-type]
             stop=_WORKER["stop"],  # type: ignore[arg-type]
             participants=_WORKER["participants"],  # type: ignore[arg-type]
+            design=design,
         )
         done = run_session(_worker_engine(), code, settings)
     finally:
@@ -206,6 +212,7 @@ class Workers:
         codes: list[str],
         pace: float | None = None,
         on_busy: Callable[[str, str], None] | None = None,
+        design: StudyDesign | None = None,
     ) -> Iterator[tuple[str, int]]:
         """Run the sessions of `codes`; yield (code, trials) as each finishes (see
         `run_participants`)."""
@@ -221,11 +228,11 @@ class Workers:
         if self._pool is None:
             for code in codes:
                 try:
-                    yield _worker_run(code, pace)
+                    yield _worker_run(code, pace, design)
                 except SessionBusyError as exc:
                     yield busy(code, exc)
             return
-        futures = {self._pool.submit(_worker_run, code, pace): code for code in codes}
+        futures = {self._pool.submit(_worker_run, code, pace, design): code for code in codes}
         for future in as_completed(futures):
             try:
                 yield future.result()
@@ -271,6 +278,7 @@ def run_participants(
     participants: str | None = None,
     notice: Callable[[str], None] | None = None,
     durable: bool = True,
+    design: StudyDesign | None = None,
 ) -> Iterator[tuple[str, int]]:
     """Run simulated sessions for `codes` in `jobs` processes; yield (code, trials) as each
     finishes. Each process opens its own connection and loads the estimator once, and
@@ -282,9 +290,11 @@ def run_participants(
     `notice` is told when the loop's kernel is compiled first (`compile_loop_once`).
     `durable=False`: the workers' commits are not synced one by one
     (`db.engine.make_engine`), for a database thrown away when it is not finished.
+    `design`: the study's design as the caller read it from the same database, handed to
+    every session with its participant (each session reads it itself when None).
     """
     with start_workers(db_url, jobs, actor, participants, notice, durable) as workers:
-        yield from workers.run(codes, pace, on_busy)
+        yield from workers.run(codes, pace, on_busy, design)
 
 
 def _checkpoint(db_url: str) -> None:

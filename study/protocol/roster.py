@@ -215,8 +215,9 @@ class BlockProgress:
     interrupted: int
 
 
-def schedule(engine: Engine) -> dict[str, Any]:
-    """The plan and progress of every participant, and each group's fill.
+def schedule(engine: Engine, design: StudyDesign | None = None) -> dict[str, Any]:
+    """The plan and progress of every participant, and each group's fill (`design`: the
+    study's design as the caller already read it from the same database, else read here).
 
     Three queries whatever the study's size (the study, its participants with their
     blocks, the trial counts): per-participant queries made 76 round trips for 36
@@ -224,7 +225,10 @@ def schedule(engine: Engine) -> dict[str, Any]:
     terminal app's overview in start-up time.
     """
     with Session(engine) as session:
-        study, design = load_study(session)
+        if design is None:
+            study, design = load_study(session)
+        else:
+            study = find_study(session)
         participants = session.scalars(
             select(Participant)
             .where(Participant.study_id == study.id)

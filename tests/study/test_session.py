@@ -399,6 +399,30 @@ def test_study_run_reads_the_design_once_for_the_session(
     assert [t[2] for t in _trials(db)] == ["completed"] * 4
 
 
+def test_study_run_all_reads_the_design_once(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`study run --all` reads the design once for the notice on its `[lsl]` table, the
+    roster and every participant's session (with one job the sessions run in this
+    process, so every read is counted); it read it once more for the notice, once for
+    the roster and once per session."""
+    from study.protocol.design import StudyDesign
+
+    db = _study(tmp_path)
+    assert main(["participant", "add", "--group", "novice", "--db", db]) == 0
+    reads: list[str] = []
+    read = StudyDesign.from_dict.__func__  # type: ignore[attr-defined]
+
+    def counted(cls, data):  # type: ignore[no-untyped-def]
+        reads.append(data["name"])
+        return read(cls, data)
+
+    monkeypatch.setattr(StudyDesign, "from_dict", classmethod(counted))
+    assert main(["run", "--all", "--jobs", "1", "--db", db]) == 0
+    assert reads == ["session test"]
+    assert [t[2] for t in _trials(db)] == ["completed"] * 8
+
+
 def test_a_terminal_apps_trial_reads_the_design_once(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
