@@ -30,8 +30,9 @@ that layout and are read, like every chunk, by their stored schema.
 
 The message without its schema (which is stored once per distinct schema, not in every
 chunk) keeps a 100-sample chunk (a 100 Hz trial's second) at about 48 bytes a sample,
-against 80 with a schema in every chunk, and decodes three times faster. pyarrow does the encoding, compression and
-decoding; what is written here is only which columns go where.
+against 80 with a schema in every chunk, and decodes three times faster. pyarrow does
+the encoding, compression and decoding; what is written here is only which columns go
+where.
 """
 
 from __future__ import annotations
