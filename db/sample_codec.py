@@ -10,23 +10,29 @@ instead of a thousand (`study bench export`; the figures are on the Benchmarks p
 The format, for anyone reading a study database without this package:
 
 - `data` is the zstd-compressed Arrow IPC *message* of one record batch (no schema
-  message) whose schema is the row of `sample_schemas` that `schema_id` names: an Arrow
-  IPC schema message (`pyarrow.ipc.read_schema`), the trial's task's own sample columns
-  in the task's order, `t_s` float64 not null first, text columns utf8, every other
-  column float64 (NULL where a value is missing), each field's metadata holding its
-  `unit` and `description`;
+  message) whose schema is the row of `sample_schemas` that `schema_id` names (every
+  chunk names one): an Arrow IPC schema message (`pyarrow.ipc.read_schema`), the
+  trial's task's own sample columns in the task's order, `t_s` float64 not null first,
+  text columns utf8, every other column float64 (NULL where a value is missing), each
+  field's metadata holding its `unit` and `description`;
 - `raw_bytes` is the message's size before compression;
 - sample `k` of the chunk has `seq = first_seq + k`.
 
 In Python: `pyarrow.ipc.read_record_batch(pyarrow.decompress(data, raw_bytes,
-codec="zstd"), pyarrow.ipc.read_schema(pyarrow.py_buffer(schema_data)))`. Chunks
-still in `CHUNK_SCHEMA`, the one layout all trials had before revision 0006
-(`SAMPLE_COLUMNS`), are those of a task revision 0010 did not know, or of a writer
-given no schema: they are read by their column names. The message without its schema (which
-is stored once per distinct schema, not in every chunk) keeps a 100-sample chunk (a
-100 Hz trial's second) at about 48 bytes a sample, against 80 with a schema in every
-chunk, and decodes three times faster. pyarrow does the encoding, compression and
-decoding; what is written here is only which columns go where.
+codec="zstd"), pyarrow.ipc.read_schema(pyarrow.py_buffer(schema_data)))`.
+
+One schema row is not a task's: the layout all trials had before revision 0006 (`t_s`,
+`insertion_m`, `rotation_rad`, `tip_x_m`, `tip_y_m`, `tip_z_m`, `branch` utf8,
+`proximal_force_n`, `proximal_force_est_n`, `distal_force_n`, `dial_angle_rad`,
+`dial_torque_n_m`; no field metadata). The upgrades moved the chunks of the tasks they
+knew to those tasks' own names (revisions 0006 and 0010); chunks of any other task keep
+that layout and are read, like every chunk, by their stored schema.
+
+The message without its schema (which is stored once per distinct schema, not in every
+chunk) keeps a 100-sample chunk (a 100 Hz trial's second) at about 48 bytes a sample,
+against 80 with a schema in every chunk, and decodes three times faster. pyarrow does
+the encoding, compression and decoding; what is written here is only which columns go
+where.
 """
 
 from __future__ import annotations
@@ -38,18 +44,8 @@ import numpy as np
 import pyarrow as pa
 
 from db.errors import DbInputError
-from db.models.trial import SAMPLE_COLUMNS
 
 CODEC = "zstd"
-
-CHUNK_SCHEMA = pa.schema(
-    [
-        pa.field(name, pa.string() if name == "branch" else pa.float64(), name != "t_s")
-        for name in SAMPLE_COLUMNS
-    ]
-)
-"""The legacy chunk schema (`SAMPLE_COLUMNS`, no key: the chunk's row holds it), and the
-schema of a writer given none."""
 
 
 def sample_field(name: str, unit: str, description: str, *, text: bool = False) -> pa.Field:
@@ -97,12 +93,12 @@ def column_array(
     name: str,
     values: Sequence[object] | np.ndarray | pa.Array | None,
     n: int,
-    schema: pa.Schema = CHUNK_SCHEMA,
+    schema: pa.Schema,
 ) -> pa.Array:
-    """`values` of sample column `name` as the chunk's Arrow type; NaN and None are NULL.
+    """`values` of sample column `name` as its Arrow type in `schema`; NaN and None are NULL.
 
     A column not given (`values` None) is all NULL. A value that is not a number (or,
-    for `branch`, not text) is refused with a line naming the column.
+    for a text column, not text) is refused with a line naming the column.
     """
     field = schema.field(name)
     if values is None:
@@ -119,12 +115,14 @@ def column_array(
 
 
 def encode(batch: pa.RecordBatch) -> tuple[bytes, int]:
-    """The stored form of `batch` (`CHUNK_SCHEMA`): compressed bytes and their raw size."""
+    """The stored form of `batch` (its schema is stored apart, `schema_bytes`):
+    compressed bytes and their raw size."""
     message = batch.serialize()
     return pa.compress(message, codec=CODEC, asbytes=True), message.size
 
 
-def decode(data: bytes, raw_bytes: int, schema: pa.Schema = CHUNK_SCHEMA) -> pa.RecordBatch:
-    """The record batch stored as `data` (see the module's description of the format)."""
+def decode(data: bytes, raw_bytes: int, schema: pa.Schema) -> pa.RecordBatch:
+    """The record batch stored as `data` in `schema`, the chunk's stored schema (see the
+    module's description of the format)."""
     message = pa.decompress(data, decompressed_size=raw_bytes, codec=CODEC)
     return pa.ipc.read_record_batch(message, schema)

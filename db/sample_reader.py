@@ -43,7 +43,7 @@ from sqlalchemy.orm import Session
 
 from db.errors import DbInputError
 from db.models.trial import SampleChunk, SampleSchema, Trial
-from db.sample_codec import CHUNK_SCHEMA, decode, read_schema
+from db.sample_codec import decode, read_schema
 
 
 def sample_schema(chunk_schema: pa.Schema) -> pa.Schema:
@@ -57,9 +57,9 @@ def span_schema(chunk_schema: pa.Schema) -> pa.Schema:
     return pa.schema([pa.field("trial_id", pa.int64(), False), *sample_schema(chunk_schema)])
 
 
-SAMPLE_SCHEMA = sample_schema(CHUNK_SCHEMA)
-"""`sample_schema` of the legacy chunks (`db.sample_codec.CHUNK_SCHEMA`)."""
-SPAN_SCHEMA = span_schema(CHUNK_SCHEMA)
+_NO_SAMPLES = pa.schema([pa.field("t_s", pa.float64(), False)])
+"""The chunk schema of a span whose trials have no stored samples: the one column every
+chunk schema has."""
 
 _BATCH_ROWS = 65_536
 SPAN_ROWS = 65_536
@@ -152,12 +152,16 @@ class SampleReader:
         self, span: SampleSpan, *, from_s: float | None = None, to_s: float | None = None
     ) -> pa.Table:
         """A span's samples (`span_schema` of its chunks' schema) in trial and `seq` order,
-        `from_s <= t_s < to_s`."""
-        chunks = list(self._chunks(list(span.trial_ids), span.seq_from, span.seq_to, from_s, to_s))
-        if not chunks:
-            schema = CHUNK_SCHEMA if span.schema_id is None else self.schema(span.schema_id)
-            return span_schema(schema).empty_table()
-        return _joined(chunks, span.seq_from, span.seq_to, from_s, to_s)
+        `from_s <= t_s < to_s`; none read, an empty table of the span's stored schema
+        (`span.schema_id`, else its trials', else `t_s` alone: they have no samples)."""
+        trial_ids = list(span.trial_ids)
+        chunks = list(self._chunks(trial_ids, span.seq_from, span.seq_to, from_s, to_s))
+        if chunks:
+            return _joined(chunks, span.seq_from, span.seq_to, from_s, to_s)
+        if span.schema_id is not None:
+            return span_schema(self.schema(span.schema_id)).empty_table()
+        stored = list(self._stored_schemas(trial_ids).values())
+        return span_schema(stored[0] if stored else _NO_SAMPLES).empty_table()
 
     def _chunks(
         self,
@@ -241,9 +245,7 @@ def _joined(
     to_s: float | None,
 ) -> pa.Table:
     """Chunks (of one schema) as one `span_schema` table, cut to `seq_from <= seq < seq_to`
-    and `from_s <= t_s < to_s` (each bound applied when given)."""
-    if not chunks:
-        return SPAN_SCHEMA.empty_table()
+    and `from_s <= t_s < to_s` (each bound applied when given); at least one chunk."""
     first = chunks[0][2].schema
     if any(batch.schema is not first and not batch.schema.equals(first) for *_, batch in chunks):
         raise DbInputError("samples of trials stored under different schemas in one span")

@@ -44,7 +44,6 @@ from sqlalchemy.exc import IntegrityError, OperationalError
 from db.errors import DbInputError
 from db.models.trial import SampleChunk, SampleSchema
 from db.sample_codec import (
-    CHUNK_SCHEMA,
     check_schema,
     column_array,
     encode,
@@ -67,13 +66,14 @@ class SampleWriter:
         Engine of the study database.
     trial_id
         The trial the samples belong to (must exist).
+    schema
+        The chunks' Arrow schema: the trial's task's declared sample columns
+        (`study.protocol.tasks.Task.sample_schema`, fields made by
+        `db.sample_codec.sample_field`), `t_s` first.
     chunk_s
         Longest span of trial time, in s, held in memory before a commit; > 0.
     start_seq
         Sequence number of the first sample (continue a stream after a restart).
-    schema
-        The chunks' Arrow schema: the trial's task's sample columns
-        (`db.sample_codec.sample_field`), `t_s` first; default `CHUNK_SCHEMA`.
     hold_s
         Trial time, in s, of samples held in memory while another program holds the
         database's lock (0: each commit waits for the lock, up to the busy timeout).
@@ -85,7 +85,8 @@ class SampleWriter:
 
     Examples
     --------
-    >>> with SampleWriter(engine, trial.id) as out:          # doctest: +SKIP
+    >>> schema = get_task(trial.task).sample_schema()        # doctest: +SKIP
+    >>> with SampleWriter(engine, trial.id, schema=schema) as out:  # doctest: +SKIP
     ...     out.append(t_s=0.001, proximal_force_n=0.12)
     """
 
@@ -94,9 +95,9 @@ class SampleWriter:
         engine: Engine,
         trial_id: int,
         *,
+        schema: pa.Schema,
         chunk_s: float = 1.0,
         start_seq: int = 0,
-        schema: pa.Schema = CHUNK_SCHEMA,
         hold_s: float = 0.0,
         on_wait: Callable[[float | None, int], None] | None = None,
     ) -> None:

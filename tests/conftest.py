@@ -24,7 +24,6 @@ from sqlalchemy.engine import make_url
 
 from db.engine import make_engine
 from db.migrate import open_database
-from db.models.trial import SAMPLE_COLUMNS
 from study.lsl.config import ENV as LSL_ENV
 from study.lsl.config import write_loopback_config
 
@@ -49,30 +48,12 @@ PYLSL_LOADED_BEFORE_CONFIG = "pylsl" in sys.modules
 """Whether pylsl was already loaded when the config was set (it must not be)."""
 
 
-STORED_CHUNK_SCHEMA = pa.schema(
-    [
-        ("t_s", pa.float64()),
-        *((c, pa.float64()) for c in SAMPLE_COLUMNS[1:6]),
-        ("branch", pa.string()),
-        *((c, pa.float64()) for c in SAMPLE_COLUMNS[7:]),
-    ]
-)
-"""The legacy chunk layout (the schema of a writer given none), as the format's
-description (`db.sample_codec`) gives it."""
-
-
-def decode_stored_chunk(
-    data: bytes, raw_bytes: int, schema_data: bytes | None = None
-) -> pa.RecordBatch:
+def decode_stored_chunk(data: bytes, raw_bytes: int, schema_data: bytes) -> pa.RecordBatch:
     """A `sample_chunks.data` value decoded with plain pyarrow, as the format's
     description says (independently of `db.sample_reader`): in the schema stored as
-    `schema_data` (`sample_schemas.data`), else the legacy layout."""
+    `schema_data` (`sample_schemas.data`)."""
     message = pa.decompress(bytes(data), decompressed_size=raw_bytes, codec="zstd")
-    schema = (
-        STORED_CHUNK_SCHEMA
-        if schema_data is None
-        else pa.ipc.read_schema(pa.py_buffer(bytes(schema_data)))
-    )
+    schema = pa.ipc.read_schema(pa.py_buffer(bytes(schema_data)))
     return pa.ipc.read_record_batch(message, schema)
 
 

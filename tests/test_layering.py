@@ -81,15 +81,3 @@ def test_importing_all_of_teleop_core_loads_no_database_app_or_ui() -> None:
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"
-
-
-def test_the_databases_legacy_layout_is_the_loops_row_under_its_names_before_0010() -> None:
-    """db's legacy chunk layout (chunks stored before each carried its task's schema) is
-    the LCCA loop's row column by column; revision 0010 renamed its two proximal forces
-    (the true force to `reference_force_n`, the estimate to `proximal_force_n`), and
-    every other name is the loop's."""
-    from db.models.trial import SAMPLE_COLUMNS as LEGACY
-    from teleop_core.loop.layout import SAMPLE_COLUMNS as PRODUCED
-
-    renamed = {"proximal_force_n": "reference_force_n", "proximal_force_est_n": "proximal_force_n"}
-    assert tuple(renamed.get(c, c) for c in LEGACY) == PRODUCED

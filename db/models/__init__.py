@@ -12,7 +12,6 @@ from db.models.probe import ProbeTrial
 from db.models.study import Participant, ScheduleBlock, Study
 from db.models.tlx import TLX_SUBSCALES, TlxResponse
 from db.models.trial import (
-    SAMPLE_COLUMNS,
     TRIAL_STATUSES,
     SampleChunk,
     SampleSchema,
@@ -21,7 +20,6 @@ from db.models.trial import (
 )
 
 __all__ = [
-    "SAMPLE_COLUMNS",
     "TLX_SUBSCALES",
     "TRIAL_STATUSES",
     "AuditEntry",

@@ -111,26 +111,6 @@ class TrialMeasure(Base):
     value: Mapped[float]
 
 
-SAMPLE_COLUMNS = (
-    "t_s",
-    "insertion_m",
-    "rotation_rad",
-    "tip_x_m",
-    "tip_y_m",
-    "tip_z_m",
-    "branch",
-    "proximal_force_n",
-    "proximal_force_est_n",
-    "distal_force_n",
-    "dial_angle_rad",
-    "dial_torque_n_m",
-)
-"""The columns of the one layout every trial's samples had before each chunk carried its
-task's own schema (revisions 0001-0005; `branch` text, `t_s` not null, the rest float):
-the schema of the chunks revision 0006 could not name by a task it knew, and of a
-writer given no schema."""
-
-
 class SampleSchema(Base):
     """The Arrow schema of stored chunks (each distinct schema once): its fields are a
     task's sample columns, with their units and descriptions in the fields' metadata."""

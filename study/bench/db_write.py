@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 from sqlalchemy import URL, Engine, func, select, text
 
 from db.engine import describe, make_engine, make_session_factory, resolve_url
@@ -24,7 +25,16 @@ from db.errors import DbInputError
 from db.migrate import open_database
 from db.models import Participant, SampleChunk, Study, Trial
 from db.samples import SampleWriter
+from study.protocol.tasks import get_task
 from teleop_core.progress import Progress, no_progress
+
+BENCH_TASK = "lcca"
+"""The scratch trial's task: the writer stores its samples in the task's declared schema."""
+
+
+def bench_schema() -> pa.Schema:
+    """The scratch trial's sample schema (`BENCH_TASK`'s, as a session writes it)."""
+    return get_task(BENCH_TASK).sample_schema()
 
 
 @dataclass(frozen=True)
@@ -80,7 +90,7 @@ def scratch_trial(engine: Engine) -> int:
         participant = Participant(study=study, code="P001", group="bench", condition_order=[])
         trial = Trial(
             participant=participant,
-            task="lcca",
+            task=BENCH_TASK,
             condition="HV",
             block_index=0,
             trial_index=0,
@@ -99,8 +109,8 @@ def synthetic_columns(rows: int, rate_hz: float, seed: int) -> dict[str, np.ndar
         "t_s": t,
         "insertion_m": 0.002 * t,
         "rotation_rad": np.sin(0.1 * t),
+        "reference_force_n": np.abs(rng.normal(0.5, 0.2, rows)),
         "proximal_force_n": np.abs(rng.normal(0.5, 0.2, rows)),
-        "proximal_force_est_n": np.abs(rng.normal(0.5, 0.2, rows)),
         "distal_force_n": np.abs(rng.normal(0.1, 0.05, rows)),
         "dial_angle_rad": rng.normal(0.0, 0.3, rows),
         "dial_torque_n_m": rng.normal(0.0, 0.01, rows),
@@ -122,7 +132,7 @@ def bench_sample_write(
         columns = synthetic_columns(rows, rate_hz, seed)
         per_second = max(1, int(rate_hz))
         start = time.perf_counter()
-        with SampleWriter(engine, trial_id, chunk_s=chunk_s) as writer:
+        with SampleWriter(engine, trial_id, schema=bench_schema(), chunk_s=chunk_s) as writer:
             for lo in range(0, rows, per_second):
                 writer.extend({k: v[lo : lo + per_second] for k, v in columns.items()})
                 progress("writing samples", min(lo + per_second, rows), rows)

@@ -230,18 +230,16 @@ def _reference_insert(
 def bench_writer(rows: int, runs: int, rate_hz: float = 1000.0) -> WriterRatio:
     """The writer's rows/s and the plain sqlite3 reference's over the same rows, the two
     alternating, `runs` each (a fresh temporary SQLite file every time)."""
-    # lazy: db.models.trial (with sqlalchemy) costs 0.3 s at start-up
-    from db.models.trial import SAMPLE_COLUMNS
-
     # lazy: study.bench.db_write (with pyarrow, sqlalchemy, numpy) costs 0.4 s at start-up
     from study.bench.db_write import (
         bench_sample_write,
+        bench_schema,
         scratch_database,
         scratch_trial,
         synthetic_columns,
     )
 
-    names = ("trial_id", "seq", *SAMPLE_COLUMNS)
+    names = ("trial_id", "seq", *bench_schema().names)  # the task's declared columns
     columns = synthetic_columns(rows, rate_hz, seed=0)  # bench_sample_write's rows
     writer: list[float] = []
     reference: dict[bool, list[float]] = {False: [], True: []}

@@ -17,13 +17,13 @@ from db.migrate import inspect_database, open_database
 from db.sample_reader import SampleReader
 from db.samples import SampleWriter
 from study.cli import main
-from tests.db.test_samples import _trial
+from tests.db.test_samples import SCHEMA, _trial
 
 
 def _with_samples(engine: Engine) -> tuple[int, np.ndarray]:
     trial_id = _trial(engine)
     t = np.arange(250) / 100.0  # 2.5 s at 100 Hz: three chunks
-    with SampleWriter(engine, trial_id) as out:
+    with SampleWriter(engine, trial_id, schema=SCHEMA) as out:
         out.extend({"t_s": t, "proximal_force_n": np.cos(t)})
     return trial_id, t
 

@@ -18,8 +18,9 @@ from sqlalchemy import Engine
 from db.engine import make_session_factory
 from db.errors import DbInputError
 from db.models import Participant, Study, Trial
-from db.sample_reader import SPAN_SCHEMA, SampleSpan, plan_spans, read_spans
+from db.sample_reader import SampleSpan, plan_spans, read_spans, span_schema
 from db.samples import SampleWriter
+from tests.db.test_samples import SCHEMA
 
 
 def _trials(engine: Engine, sizes: list[int], start_seq: int = 0) -> list[int]:
@@ -35,7 +36,7 @@ def _trials(engine: Engine, sizes: list[int], start_seq: int = 0) -> list[int]:
         session.flush()
         ids = [t.id for t in trials]
     for trial_id, n in zip(ids, sizes, strict=True):
-        with SampleWriter(engine, trial_id, start_seq=start_seq) as writer:
+        with SampleWriter(engine, trial_id, schema=SCHEMA, start_seq=start_seq) as writer:
             t = np.arange(n) / 1000.0
             writer.extend({"t_s": t, "distal_force_n": trial_id + t})
     return ids
@@ -86,7 +87,7 @@ def test_spans_read_every_sample_once_in_order(engine: Engine, workers: int) -> 
     tables = list(
         read_spans(engine, spans, lambda span, table: table, workers=workers, from_s=0.1, to_s=2.2)
     )
-    assert all(t.schema.equals(SPAN_SCHEMA) for t in tables)
+    assert all(t.schema.equals(span_schema(SCHEMA)) for t in tables)
     assert max(t.num_rows for t in tables) <= 700
     got = pa.concat_tables(tables)
     assert len(got) == len(want) == sum(min(n, 2200) - min(n, 100) for n in sizes)
@@ -148,3 +149,32 @@ def test_the_reader_waits_for_a_lock_as_the_study_connections_do(tmp_path) -> No
             assert reader._conn.exec_driver_sql("PRAGMA busy_timeout").all() == [(7000,)]
     finally:
         engine.dispose()
+
+
+def test_a_span_that_reads_nothing_has_its_trials_stored_columns(engine: Engine) -> None:
+    """An empty span's table has the columns of its trials' stored schema (the LCCA
+    task's names here), or `t_s` alone for trials without samples."""
+    from db.sample_reader import SampleReader
+
+    lcca, empty = _trials(engine, [100, 0])
+    with SampleReader(engine) as reader:
+        late = reader.span(SampleSpan((lcca,)), from_s=5.0)
+        none = reader.span(SampleSpan((empty,)))
+    assert late.num_rows == 0
+    assert late.column_names == [
+        "trial_id",
+        "seq",
+        "t_s",
+        "insertion_m",
+        "rotation_rad",
+        "tip_x_m",
+        "tip_y_m",
+        "tip_z_m",
+        "branch",
+        "reference_force_n",
+        "proximal_force_n",
+        "distal_force_n",
+        "dial_angle_rad",
+        "dial_torque_n_m",
+    ]
+    assert (none.num_rows, none.column_names) == (0, ["trial_id", "seq", "t_s"])

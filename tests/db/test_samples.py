@@ -17,6 +17,10 @@ from db.errors import DbInputError
 from db.models import Participant, SampleChunk, Study, Trial
 from db.sample_reader import SampleReader
 from db.samples import SampleWriter
+from study.protocol.tasks import get_task
+
+SCHEMA = get_task("lcca").sample_schema()
+"""The schema the samples of `_trial`'s trial (an LCCA trial) are stored in."""
 
 
 def _trial(engine: Engine) -> int:
@@ -38,7 +42,7 @@ def _stored(engine: Engine, trial_id: int) -> int:
 def test_commits_one_chunk_per_second_of_trial_time(engine: Engine) -> None:
     trial_id = _trial(engine)
     t = np.arange(3500) / 1000.0  # 3.5 s at 1 kHz
-    writer = SampleWriter(engine, trial_id, chunk_s=1.0)
+    writer = SampleWriter(engine, trial_id, schema=SCHEMA, chunk_s=1.0)
     writer.extend({"t_s": t[:1500], "proximal_force_n": np.full(1500, 0.25)})
     # [0, 1) s and [1, 1.5) s are committed: holding [1, 1.5) s while the caller computes
     # its next 1.5 s step would put 2 s at risk.
@@ -62,7 +66,7 @@ def test_one_connection_for_the_writers_life_given_back_at_close(engine: Engine)
     def _checkout(*_args: object) -> None:
         checkouts.append(1)
 
-    writer = SampleWriter(engine, trial_id, chunk_s=1.0)
+    writer = SampleWriter(engine, trial_id, schema=SCHEMA, chunk_s=1.0)
     writer.__enter__()  # the schema's row: its own short transaction
     event.listen(engine, "checkout", _checkout)
     try:
@@ -85,7 +89,7 @@ def test_held_plus_the_next_step_never_exceeds_one_second(engine: Engine, step_s
     trial_id = _trial(engine)
     per_step = round(step_s * 100)  # 100 Hz, as the loops sample
     handed = 0
-    with SampleWriter(engine, trial_id, chunk_s=1.0) as writer:
+    with SampleWriter(engine, trial_id, schema=SCHEMA, chunk_s=1.0) as writer:
         for _ in range(round(6 / step_s)):
             t = (handed + np.arange(per_step)) / 100
             writer.extend({"t_s": t})
@@ -98,7 +102,7 @@ def test_held_plus_the_next_step_never_exceeds_one_second(engine: Engine, step_s
 
 def test_single_appends_follow_the_same_chunking(engine: Engine) -> None:
     trial_id = _trial(engine)
-    with SampleWriter(engine, trial_id, chunk_s=0.5) as writer:
+    with SampleWriter(engine, trial_id, schema=SCHEMA, chunk_s=0.5) as writer:
         for k in range(250):  # 2.5 s at 100 Hz
             writer.append(t_s=k / 100, distal_force_n=0.01 * k)
             # Never more than half a second of samples unsaved.
@@ -111,7 +115,7 @@ def test_values_round_trip_exactly_with_nulls_for_missing_columns(engine: Engine
     trial_id = _trial(engine)
     rng = np.random.default_rng(3)
     force = rng.normal(0.3, 0.1, 20)
-    with SampleWriter(engine, trial_id, start_seq=100) as writer:
+    with SampleWriter(engine, trial_id, schema=SCHEMA, start_seq=100) as writer:
         writer.extend(
             {
                 "t_s": np.arange(20) / 100,
@@ -155,7 +159,7 @@ def test_bad_samples_are_refused_without_writing_them(
     engine: Engine, columns: dict[str, list[float]], message: str
 ) -> None:
     trial_id = _trial(engine)
-    writer = SampleWriter(engine, trial_id)
+    writer = SampleWriter(engine, trial_id, schema=SCHEMA)
     with pytest.raises(DbInputError, match=message):
         writer.extend(columns)
     writer.close()
@@ -164,7 +168,7 @@ def test_bad_samples_are_refused_without_writing_them(
 
 def test_time_must_not_go_back_across_calls(engine: Engine) -> None:
     trial_id = _trial(engine)
-    with SampleWriter(engine, trial_id) as writer:
+    with SampleWriter(engine, trial_id, schema=SCHEMA) as writer:
         writer.extend({"t_s": [0.0, 0.5]})
         with pytest.raises(DbInputError, match=r"t_s=0\.4 at sample 2 goes back"):
             writer.append(t_s=0.4)
@@ -177,8 +181,10 @@ import numpy as np
 from db.migrate import open_database
 from db.sample_reader import SampleReader
 from db.samples import SampleWriter
+from study.protocol.tasks import get_task
 engine = open_database(sys.argv[1])
-writer = SampleWriter(engine, int(sys.argv[2]), chunk_s=1.0)
+schema = get_task("lcca").sample_schema()
+writer = SampleWriter(engine, int(sys.argv[2]), schema=schema, chunk_s=1.0)
 for k in range(2600):  # 2.6 s at 1 kHz, one sample at a time as a live session does
     writer.append(t_s=k / 1000, proximal_force_n=0.5)
 print(writer.rows_committed, flush=True)

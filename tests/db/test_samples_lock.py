@@ -16,7 +16,7 @@ from db.migrate import open_database
 from db.models import SampleChunk
 from db.sample_reader import SampleReader
 from db.samples import SampleWriter
-from tests.db.test_samples import _stored, _trial
+from tests.db.test_samples import SCHEMA, _stored, _trial
 
 
 @pytest.fixture
@@ -62,7 +62,11 @@ def test_a_lock_during_the_trial_holds_the_samples_and_commits_them_after(
     trial_id = _trial(sqlite_engine)
     waits: list[tuple[float | None, int]] = []
     writer = SampleWriter(
-        sqlite_engine, trial_id, hold_s=60.0, on_wait=lambda s, n: waits.append((s, n))
+        sqlite_engine,
+        trial_id,
+        schema=SCHEMA,
+        hold_s=60.0,
+        on_wait=lambda s, n: waits.append((s, n)),
     )
     t = np.arange(1000) / 100.0  # 10 s at 100 Hz, handed in 0.5 s steps
     writer.extend(_columns(t[:150]))  # 1.5 s: committed (the writer commits ahead)
@@ -98,7 +102,7 @@ def test_past_its_hold_the_writer_waits_then_raises_and_keeps_what_it_had(
     sqlite_engine: Engine,
 ) -> None:
     trial_id = _trial(sqlite_engine)
-    writer = SampleWriter(sqlite_engine, trial_id, hold_s=2.0)
+    writer = SampleWriter(sqlite_engine, trial_id, schema=SCHEMA, hold_s=2.0)
     t = np.arange(600) / 100.0
     locker = Locker(sqlite_engine.url.database)
     try:

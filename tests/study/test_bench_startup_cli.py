@@ -8,15 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from db.models.trial import SAMPLE_COLUMNS
-from study.bench.db_write import scratch_database, scratch_trial, synthetic_columns
+from study.bench.db_write import bench_schema, scratch_database, scratch_trial, synthetic_columns
 from study.bench.startup import _reference_insert, bench_demo
 from study.cli import main
 
 
 def test_the_sqlite3_reference_stores_the_rows_the_writer_is_handed(tmp_path: Path) -> None:
     columns = synthetic_columns(2500, 1000.0, seed=0)
-    names = ("trial_id", "seq", *SAMPLE_COLUMNS)
+    names = ("trial_id", "seq", *bench_schema().names)
     with scratch_database(None) as engine:
         trial_id = scratch_trial(engine)
         path = Path(engine.url.database)  # type: ignore[arg-type]
