@@ -39,11 +39,18 @@ the fit adds, every simulation drawn from the model carries. Here:
   floor (the RMS of their standard errors: the held-out people's own scatter, which no
   model removes) and the RMS of each measure alone; with `known` effects instead of
   fitted ones, the error a model that had the true effect reaches on the same people.
-- **the loop** (`search`): while the structure tests flag something, each family not
-  yet added is fitted, the one that lowers the trials' squared error most is taken if
+- **the loop** (`search`): while the structure tests flag something, the families not
+  yet added are tried in turns (`shaped_candidates`), first those whose shape the
+  flagged tests show: an effect of condition order on the time measures alone (no
+  trend) tries `time_carry_over`, then `carry_over`; on the force measures alone,
+  `force_carry_over`, then `gentle_carry_over`; on both, every carry-over at once; a
+  flagged trend adds practice and fatigue to the first turn. Practice and fatigue are
+  otherwise tried only after the shaped families, with the rest. In a turn, each
+  family is fitted and the one that lowers the trials' squared error most is taken if
   that drop passes a likelihood-ratio test (`LR_ALPHA`) and it lowers the held-out
-  prediction error; then the tests run on the residual again. The verdict is `white`
-  when nothing is flagged at the end, else `structure_remains` with what remains.
+  prediction error; else the next turn is tried. Then the tests run on the residual
+  again. The verdict is `white` when nothing is flagged at the end, else
+  `structure_remains` with what remains.
 
 A person no trait setting reproduces (`checks.outliers`) is reported as
 `unexplained_person`, never absorbed: no effect is fitted to one person.
@@ -73,11 +80,27 @@ from study.protocol.participant_effects import (
     ParticipantEffect,
     TrialPlace,
 )
+from study.protocol.tasks import measure_named
 from study.protocol.traits import PROFILES, TRAITS
 from teleop_core.progress import Progress, no_progress
 
 ALPHA = 0.05
 """Family-wise error rate of the structure tests (Holm)."""
+CARRY_OVERS = ("carry_over", "gentle_carry_over", "force_carry_over", "time_carry_over")
+SHAPED: dict[str, tuple[str, ...]] = {
+    "time": ("time_carry_over", "carry_over"),
+    "force": ("force_carry_over", "gentle_carry_over"),
+}
+"""The carry-overs tried first, one at a time in this order, when the condition order's
+effect is flagged on the time measures alone (`time`) or on the force measures alone
+(`force`): the family that moves that measure alone, then the one that moves it with the
+other. The one fitting the trials best is not the one to take: a carry-over that moves
+both measures also lowers the order difference in the forces that people show without
+an effect, so it can fit a time-only carry-over's trials better than the time-only
+family does."""
+TRENDS = ("practice", "fatigue")
+"""The families tried first when a trend over trials is flagged: a session-long change.
+A carry-over moves one condition's second block and has no slope within a block."""
 LR_ALPHA = 0.01
 """A family is added when its likelihood-ratio test (the drop of the trials' squared
 standardised error against chi-square) passes at this level and it lowers the held-out
@@ -734,12 +757,50 @@ class EffectSearch:
                 "structure_before": self.before,
                 "structure_after": self.after,
                 "tried": self.tried,
-                "rule": f"structure tests Holm at {ALPHA}; a family is added when its "
+                "rule": f"structure tests Holm at {ALPHA}; the families whose shape the "
+                "flagged tests show are tried first (an order effect on the time alone: "
+                "time_carry_over, then carry_over; on the forces alone: force_carry_over, "
+                "then gentle_carry_over; on both: every carry-over; a trend: practice and "
+                "fatigue beside them), then the others; a family is added when its "
                 f"likelihood-ratio test passes at {LR_ALPHA} and it lowers the held-out "
                 "prediction error",
             },
             "effects_line": self.line(),
         }
+
+
+def measure_kind(measure: str) -> str | None:
+    """`time` for a measure in seconds, `force` for one in newtons (its `Measure.unit`,
+    else the unit its name ends in), None for any other."""
+    declared = measure_named(measure)
+    unit = declared.unit if declared is not None else measure.rsplit("_", 1)[-1]
+    return {"s": "time", "n": "force"}.get(unit.lower())
+
+
+def shaped_candidates(rows: Sequence[dict[str, Any]], added: Sequence[str]) -> list[list[str]]:
+    """The families the loop tries, turn by turn, those not yet `added`: first the ones
+    whose shape the flagged structure tests (`rows`) show, then every other family.
+
+    An effect of condition order flagged on the time measures alone, or on the force
+    measures alone, with no trend: the carry-over on that measure alone first
+    (`SHAPED`), then the carry-over that moves it with the other. Flagged on both
+    kinds (or on a measure of another kind): every carry-over (`CARRY_OVERS`) in one
+    turn. A trend flagged: practice and fatigue (`TRENDS`) in the first turn beside
+    them, as a session-long change shows an order effect too (the second block slower
+    or faster in either order)."""
+    flagged = [r for r in rows if r["flagged"]]
+    kinds = {measure_kind(r["measure"]) for r in flagged if r["check"] == "order"}
+    trend = any(r["check"] == "trend" for r in flagged)
+    one = next(iter(kinds)) if len(kinds) == 1 else None
+    shape = SHAPED.get(one or "", CARRY_OVERS) if kinds else ()
+    if one in SHAPED and not trend:
+        turns = [[f] for f in shape]
+    else:
+        turns = [[*shape, *(TRENDS if trend else ())]]
+    turns = [[f for f in t if f not in added] for t in turns]
+    seen = {f for t in turns for f in t}
+    turns.append([f for f in FAMILIES if f not in added and f not in seen])
+    return [t for t in turns if t]
 
 
 def search(
@@ -761,32 +822,36 @@ def search(
     sse_now = _sse(trials, emulator, fit)
     steps = 0
     while any(r["flagged"] for r in after) and len(added) < len(FAMILIES):
-        candidates = [f for f in FAMILIES if f not in added]
-        scored = []
-        for family in candidates:
-            progress("effects", steps, len(FAMILIES) + 1)
-            steps += 1
-            trial_fit = fit_effects(trials, emulator, [*added, family], free, weak, seed)
-            scored.append((_sse(trials, emulator, trial_fit), family))
-        sse, best = min(scored)
-        error = prediction_error(trials, emulator, [*added, best], free, weak, seed)
-        # the drop in squared standardised error, against chi-square with the new
-        # parameters' degrees of freedom (a likelihood-ratio test of the family)
-        lr = sse_now - sse
-        tried.append(
-            {
-                "family": best,
-                "in_sample": {f: round(s, 3) for s, f in scored},
-                "likelihood_ratio": lr,
-                "held_out_error": error.error,
-                "held_out_error_without": error_now.error,
-            }
-        )
-        significant = lr >= stats.chi2.ppf(1 - LR_ALPHA, len(FAMILIES[best]))
-        if not significant or error.error >= error_now.error:
+        taken = None
+        for turn in shaped_candidates(after, added):
+            scored = []
+            for family in turn:
+                progress("effects", steps, len(FAMILIES) + 1)
+                steps += 1
+                trial_fit = fit_effects(trials, emulator, [*added, family], free, weak, seed)
+                scored.append((_sse(trials, emulator, trial_fit), family))
+            sse, best = min(scored)
+            error = prediction_error(trials, emulator, [*added, best], free, weak, seed)
+            # the drop in squared standardised error, against chi-square with the new
+            # parameters' degrees of freedom (a likelihood-ratio test of the family)
+            lr = sse_now - sse
+            tried.append(
+                {
+                    "family": best,
+                    "in_sample": {f: round(s, 3) for s, f in scored},
+                    "likelihood_ratio": lr,
+                    "held_out_error": error.error,
+                    "held_out_error_without": error_now.error,
+                }
+            )
+            significant = lr >= stats.chi2.ppf(1 - LR_ALPHA, len(FAMILIES[best]))
+            if significant and error.error < error_now.error:
+                taken = best, error, sse
+                break
+        if taken is None:
             break
+        best, error_now, sse_now = taken
         added.append(best)
-        error_now, sse_now = error, sse
         fit = fit_effects(trials, emulator, added, free, weak, seed, bootstrap)
         after = residual_structure(trials, emulator, fit)
     progress("effects", len(FAMILIES) + 1, len(FAMILIES) + 1)
