@@ -41,16 +41,17 @@ the fit adds, every simulation drawn from the model carries. Here:
   fitted ones, the error a model that had the true effect reaches on the same people.
 - **the loop** (`search`): while the structure tests flag something, the families not
   yet added are tried in turns (`shaped_candidates`), first those whose shape the
-  flagged tests show: an effect of condition order on the time measures alone (no
-  trend) tries `time_carry_over`, then `carry_over`; on the force measures alone,
-  `force_carry_over`, then `gentle_carry_over`; on both, every carry-over at once; a
-  flagged trend adds practice and fatigue to the first turn. Practice and fatigue are
-  otherwise tried only after the shaped families, with the rest. In a turn, each
-  family is fitted and the one that lowers the trials' squared error most is taken if
-  that drop passes a likelihood-ratio test (`LR_ALPHA`) and it lowers the held-out
-  prediction error; else the next turn is tried. Then the tests run on the residual
-  again. The verdict is `white` when nothing is flagged at the end, else
-  `structure_remains` with what remains.
+  flagged tests show. An effect of condition order on the time measures alone:
+  `time_carry_over`, practice and fatigue (these two make the second block slower or
+  faster in either order), then `carry_over`, which moves the forces too; on the force
+  measures alone: `force_carry_over`, then `gentle_carry_over` (practice and fatigue
+  beside the first when a trend is flagged); then the rest. On both kinds of measure,
+  or a trend alone, every family in one turn. In a turn, each family is fitted and the
+  one that lowers the trials' squared error most is taken if that drop passes a
+  likelihood-ratio test (`LR_ALPHA`) and it lowers the held-out prediction error; else
+  the next turn is tried. Then the tests run on the residual again. The verdict is
+  `white` when nothing is flagged at the end, else `structure_remains` with what
+  remains.
 
 A person no trait setting reproduces (`checks.outliers`) is reported as
 `unexplained_person`, never absorbed: no effect is fitted to one person.
@@ -86,21 +87,23 @@ from teleop_core.progress import Progress, no_progress
 
 ALPHA = 0.05
 """Family-wise error rate of the structure tests (Holm)."""
-CARRY_OVERS = ("carry_over", "gentle_carry_over", "force_carry_over", "time_carry_over")
-SHAPED: dict[str, tuple[str, ...]] = {
-    "time": ("time_carry_over", "carry_over"),
-    "force": ("force_carry_over", "gentle_carry_over"),
-}
-"""The carry-overs tried first, one at a time in this order, when the condition order's
-effect is flagged on the time measures alone (`time`) or on the force measures alone
-(`force`): the family that moves that measure alone, then the one that moves it with the
-other. The one fitting the trials best is not the one to take: a carry-over that moves
-both measures also lowers the order difference in the forces that people show without
-an effect, so it can fit a time-only carry-over's trials better than the time-only
-family does."""
 TRENDS = ("practice", "fatigue")
-"""The families tried first when a trend over trials is flagged: a session-long change.
-A carry-over moves one condition's second block and has no slope within a block."""
+SHAPED: dict[str, tuple[tuple[str, ...], ...]] = {
+    "time": (("time_carry_over", *TRENDS), ("carry_over",)),
+    "force": (("force_carry_over",), ("gentle_carry_over",)),
+}
+"""The turns tried first when the condition order's effect is flagged on the time
+measures alone (`time`) or on the force measures alone (`force`): the carry-over that
+moves that measure alone, then the one that moves it with the other (the rest after).
+The one fitting the trials best is not the one to take: a carry-over that moves both
+measures also takes up the order difference in the forces that people show without
+an effect, so it can fit a time-only carry-over's trials better than the time-only
+family does. Practice and fatigue act on the speed and make the second block faster
+or slower in either order, an order effect on the time whether or not the trend test
+sees it (with few trials per condition it may not), so on the time they compete with
+the time-only carry-over in the first turn; on the forces, only when a trend is
+flagged. Flagged on both kinds of measure, on another kind, or not at all (a trend
+alone), every family competes in one turn."""
 LR_ALPHA = 0.01
 """A family is added when its likelihood-ratio test (the drop of the trials' squared
 standardised error against chi-square) passes at this level and it lowers the held-out
@@ -759,11 +762,10 @@ class EffectSearch:
                 "tried": self.tried,
                 "rule": f"structure tests Holm at {ALPHA}; the families whose shape the "
                 "flagged tests show are tried first (an order effect on the time alone: "
-                "time_carry_over, then carry_over; on the forces alone: force_carry_over, "
-                "then gentle_carry_over; on both: every carry-over; a trend: practice and "
-                "fatigue beside them), then the others; a family is added when its "
-                f"likelihood-ratio test passes at {LR_ALPHA} and it lowers the held-out "
-                "prediction error",
+                "time_carry_over, practice and fatigue, then carry_over; on the forces "
+                "alone: force_carry_over, then gentle_carry_over), then the others; a "
+                f"family is added when its likelihood-ratio test passes at {LR_ALPHA} "
+                "and it lowers the held-out prediction error",
             },
             "effects_line": self.line(),
         }
@@ -778,29 +780,22 @@ def measure_kind(measure: str) -> str | None:
 
 
 def shaped_candidates(rows: Sequence[dict[str, Any]], added: Sequence[str]) -> list[list[str]]:
-    """The families the loop tries, turn by turn, those not yet `added`: first the ones
-    whose shape the flagged structure tests (`rows`) show, then every other family.
-
-    An effect of condition order flagged on the time measures alone, or on the force
-    measures alone, with no trend: the carry-over on that measure alone first
-    (`SHAPED`), then the carry-over that moves it with the other. Flagged on both
-    kinds (or on a measure of another kind): every carry-over (`CARRY_OVERS`) in one
-    turn. A trend flagged: practice and fatigue (`TRENDS`) in the first turn beside
-    them, as a session-long change shows an order effect too (the second block slower
-    or faster in either order)."""
+    """The families the loop tries, turn by turn, those not yet `added` (`SHAPED`):
+    first those whose shape the flagged structure tests (`rows`) show, then the others.
+    In a turn, the one that lowers the trials' squared error most is the candidate."""
     flagged = [r for r in rows if r["flagged"]]
     kinds = {measure_kind(r["measure"]) for r in flagged if r["check"] == "order"}
-    trend = any(r["check"] == "trend" for r in flagged)
     one = next(iter(kinds)) if len(kinds) == 1 else None
-    shape = SHAPED.get(one or "", CARRY_OVERS) if kinds else ()
-    if one in SHAPED and not trend:
-        turns = [[f] for f in shape]
-    else:
-        turns = [[*shape, *(TRENDS if trend else ())]]
-    turns = [[f for f in t if f not in added] for t in turns]
-    seen = {f for t in turns for f in t}
-    turns.append([f for f in FAMILIES if f not in added and f not in seen])
-    return [t for t in turns if t]
+    turns = [list(t) for t in SHAPED.get(one or "", ())]
+    if turns and any(r["check"] == "trend" for r in flagged):
+        turns[0] += [f for f in TRENDS if f not in turns[0]]
+    out, seen = [], set(added)
+    for turn in [*turns, list(FAMILIES)]:
+        fresh = [f for f in turn if f not in seen]
+        seen.update(fresh)
+        if fresh:
+            out.append(fresh)
+    return out
 
 
 def search(
