@@ -80,33 +80,64 @@ def _row(check: str, measure: str, flagged: bool = True) -> dict:
     return {"check": check, "measure": measure, "flagged": flagged}
 
 
+def _turns(rows: list[dict], added: tuple[str, ...] = ()) -> list[tuple[list[str], str | None]]:
+    return [(list(t.families), t.preferred) for t in effects.shaped_candidates(rows, added)]
+
+
 def test_the_families_are_tried_in_the_shape_the_flagged_tests_show() -> None:
     on_time = [_row("order", TIME), _row("order", FORCES[0], False), _row("trend", TIME, False)]
-    # the time-only carry-over with practice and fatigue (a period effect is an order
-    # effect on the time too), then the carry-over that moves the forces as well
-    assert effects.shaped_candidates(on_time, []) == [
-        ["time_carry_over", "practice", "fatigue"],
-        ["carry_over"],
-        ["gentle_carry_over", "force_carry_over"],
+    # the time-only carry-over first, practice and fatigue beside it (a period effect is
+    # an order effect on the time too), then the carry-over that moves the forces as well
+    assert _turns(on_time) == [
+        (["time_carry_over", "practice", "fatigue"], "time_carry_over"),
+        (["carry_over"], "carry_over"),
+        (["gentle_carry_over", "force_carry_over"], None),
     ]
     on_forces = [_row("order", FORCES[0]), _row("order", FORCES[1])]
-    assert effects.shaped_candidates(on_forces, []) == [
-        ["force_carry_over"],
-        ["gentle_carry_over"],
-        ["practice", "fatigue", "carry_over", "time_carry_over"],
+    assert _turns(on_forces) == [
+        (["force_carry_over", "gentle_carry_over"], "force_carry_over"),
+        (["carry_over"], "carry_over"),
+        (["practice", "fatigue", "time_carry_over"], None),
     ]
-    # a trend beside an order effect on the forces: practice and fatigue in the first turn
+    # a flagged trend: practice and fatigue compete with the shaped family on equal terms
     trend = [*on_forces, _row("trend", TIME)]
-    assert effects.shaped_candidates(trend, [])[0] == ["force_carry_over", "practice", "fatigue"]
-    # on both kinds of measure, or a trend alone: every family in one turn
+    assert _turns(trend)[0] == (
+        ["force_carry_over", "gentle_carry_over", "practice", "fatigue"],
+        None,
+    )
+    # on both kinds of measure, or a trend alone: every family in one turn, as equals
     both = [_row("order", TIME), _row("order", FORCES[1])]
-    assert effects.shaped_candidates(both, []) == [list(FAMILIES)]
-    assert effects.shaped_candidates([_row("trend", TIME)], []) == [list(FAMILIES)]
+    assert _turns(both) == [(list(FAMILIES), None)]
+    assert _turns([_row("trend", TIME)]) == [(list(FAMILIES), None)]
     # what is added is not tried again
-    assert effects.shaped_candidates(on_time, ["time_carry_over"])[:2] == [
-        ["practice", "fatigue"],
-        ["carry_over"],
+    assert _turns(on_time, ("time_carry_over",))[:2] == [
+        (["practice", "fatigue"], None),
+        (["carry_over"], "carry_over"),
     ]
+
+
+def test_another_family_displaces_the_shaped_one_only_by_the_likelihood_ratio_margin() -> None:
+    # chi-square quantiles at 1 - 0.01: 6.635 (fatigue, one parameter), 9.210 (practice)
+    assert effects._candidate(
+        [(500.0, "time_carry_over"), (494.0, "fatigue")], "time_carry_over"
+    ) == (
+        500.0,
+        "time_carry_over",
+    )
+    assert effects._candidate(
+        [(500.0, "time_carry_over"), (493.0, "fatigue")], "time_carry_over"
+    ) == (
+        493.0,
+        "fatigue",
+    )
+    assert (
+        effects._candidate([(500.0, "time_carry_over"), (491.0, "practice")], "time_carry_over")[1]
+        == "time_carry_over"
+    )
+    assert effects._candidate([(500.0, "time_carry_over"), (494.0, "fatigue")], None) == (
+        494.0,
+        "fatigue",
+    )
 
 
 @pytest.mark.parametrize("seed", [7, 11, 13])
@@ -132,8 +163,8 @@ def test_an_order_effect_on_the_forces_alone_is_named_the_forces_carry_over(emul
     assert flagged & {("order", m) for m in FORCES}
     assert ("order", TIME) not in flagged
     assert [e.family for e in found.effects] == ["force_carry_over"]
-    # tried first, alone
-    assert list(found.tried[0]["in_sample"]) == ["force_carry_over"]
+    # tried first, beside the gentle one, not the carry-over that moves the time too
+    assert list(found.tried[0]["in_sample"]) == ["force_carry_over", "gentle_carry_over"]
     share = found.effects[0].parameters
     assert 0.35 < share["softer_vo_after_hv"] <= 0.6
     assert share["softer_hv_after_vo"] == 0.0
