@@ -39,11 +39,21 @@ the fit adds, every simulation drawn from the model carries. Here:
   floor (the RMS of their standard errors: the held-out people's own scatter, which no
   model removes) and the RMS of each measure alone; with `known` effects instead of
   fitted ones, the error a model that had the true effect reaches on the same people.
-- **the loop** (`search`): while the structure tests flag something, each family not
-  yet added is fitted, the one that lowers the trials' squared error most is taken if
-  that drop passes a likelihood-ratio test (`LR_ALPHA`) and it lowers the held-out
-  prediction error; then the tests run on the residual again. The verdict is `white`
-  when nothing is flagged at the end, else `structure_remains` with what remains.
+- **the loop** (`search`): while the structure tests flag something, the families not
+  yet added are tried in turns (`shaped_candidates`), first those whose shape the
+  flagged tests show. An effect of condition order on the time measures alone:
+  `time_carry_over`, with practice and fatigue beside it (they make the second block
+  slower or faster in either order); on the force measures alone: `force_carry_over`,
+  with `gentle_carry_over` beside it; then `carry_over`, which moves both; then the
+  rest. On both kinds of measure, or a trend alone, every family in one turn. In a
+  turn, each family is fitted; the candidate is the one that lowers the trials' squared
+  error most, but with no trend flagged the one-measure family the shape names stays
+  the candidate unless another lowers the error below its own by the likelihood-ratio
+  threshold (`Turn.preferred`; a flagged trend puts practice and fatigue in the first
+  turn on equal terms). The candidate is taken if its drop passes a likelihood-ratio
+  test (`LR_ALPHA`) and it lowers the held-out prediction error; else the next turn is
+  tried. Then the tests run on the residual again. The verdict is `white` when nothing
+  is flagged at the end, else `structure_remains` with what remains.
 
 A person no trait setting reproduces (`checks.outliers`) is reported as
 `unexplained_person`, never absorbed: no effect is fitted to one person.
@@ -73,11 +83,32 @@ from study.protocol.participant_effects import (
     ParticipantEffect,
     TrialPlace,
 )
+from study.protocol.tasks import measure_named
 from study.protocol.traits import PROFILES, TRAITS
 from teleop_core.progress import Progress, no_progress
 
 ALPHA = 0.05
 """Family-wise error rate of the structure tests (Holm)."""
+TRENDS = ("practice", "fatigue")
+SHAPED: dict[str, tuple[tuple[str, ...], ...]] = {
+    "time": (("time_carry_over", *TRENDS), ("carry_over",)),
+    "force": (("force_carry_over", "gentle_carry_over"), ("carry_over",)),
+}
+"""The turns tried first when the condition order's effect is flagged on the time
+measures alone (`time`) or on the force measures alone (`force`): the families that act
+on that measure, the one that moves it alone named first (`Turn.preferred`), then the
+carry-over that moves the time and the forces together (the rest after). The one
+fitting the trials best is not simply the one to take: a carry-over that moves both
+measures also takes up the order difference in the forces that people show without an
+effect, so it can fit a time-only carry-over's trials better than the time-only family
+does. Practice and fatigue act on the speed and make the second block faster or slower
+in either order, an order effect on the time whether or not the trend test sees it
+(with few trials per condition it may not), so they are tried beside the time-only
+carry-over, which they displace only by a clear margin: with few trials per block a
+fatigue fits a carry-over's trials about as well. On the forces, the gentle carry-over
+(how hard one pushes) beside the forces-only one, on the same terms. Flagged on both
+kinds of measure, on another kind, or not at all (a trend alone), every family competes
+in one turn."""
 LR_ALPHA = 0.01
 """A family is added when its likelihood-ratio test (the drop of the trials' squared
 standardised error against chi-square) passes at this level and it lowers the held-out
@@ -734,12 +765,67 @@ class EffectSearch:
                 "structure_before": self.before,
                 "structure_after": self.after,
                 "tried": self.tried,
-                "rule": f"structure tests Holm at {ALPHA}; a family is added when its "
+                "rule": f"structure tests Holm at {ALPHA}; the families whose shape the "
+                "flagged tests show are tried first (an order effect on the time alone: "
+                "time_carry_over, with practice and fatigue beside it; on the forces "
+                "alone: force_carry_over, with gentle_carry_over beside it; then "
+                "carry_over), then the others; in a turn the family fitting the trials "
+                "best, but without a flagged trend the one the shape names unless another "
+                "fits better by the likelihood-ratio threshold; it is added when its "
                 f"likelihood-ratio test passes at {LR_ALPHA} and it lowers the held-out "
                 "prediction error",
             },
             "effects_line": self.line(),
         }
+
+
+def measure_kind(measure: str) -> str | None:
+    """`time` for a measure in seconds, `force` for one in newtons (its `Measure.unit`,
+    else the unit its name ends in), None for any other."""
+    declared = measure_named(measure)
+    unit = declared.unit if declared is not None else measure.rsplit("_", 1)[-1]
+    return {"s": "time", "n": "force"}.get(unit.lower())
+
+
+@dataclass(frozen=True)
+class Turn:
+    """Families fitted side by side in one turn of the loop."""
+
+    families: tuple[str, ...]
+    preferred: str | None = None
+    """The family the flagged tests' shape names: another of the turn is the candidate
+    only when it lowers the trials' squared standardised error below this one's by the
+    likelihood-ratio test's threshold (`LR_ALPHA`, its parameters)."""
+
+
+def shaped_candidates(rows: Sequence[dict[str, Any]], added: Sequence[str]) -> list[Turn]:
+    """The families the loop tries, turn by turn, those not yet `added` (`SHAPED`):
+    first those whose shape the flagged structure tests (`rows`) show, then the others."""
+    flagged = [r for r in rows if r["flagged"]]
+    kinds = {measure_kind(r["measure"]) for r in flagged if r["check"] == "order"}
+    one = next(iter(kinds)) if len(kinds) == 1 else None
+    trend = any(r["check"] == "trend" for r in flagged)
+    turns = [Turn(t, None if trend else t[0]) for t in SHAPED.get(one or "", ())]
+    if turns and trend:
+        turns[0] = Turn((*turns[0].families, *(f for f in TRENDS if f not in turns[0].families)))
+    out, seen = [], set(added)
+    for turn in [*turns, Turn(tuple(FAMILIES))]:
+        fresh = tuple(f for f in turn.families if f not in seen)
+        seen.update(fresh)
+        if fresh:
+            out.append(Turn(fresh, turn.preferred if turn.preferred in fresh else None))
+    return out
+
+
+def _candidate(scored: Sequence[tuple[float, str]], preferred: str | None) -> tuple[float, str]:
+    """The turn's (squared error, family): the lowest, unless the `preferred` family's
+    is within the likelihood-ratio threshold of it."""
+    best = min(scored)
+    if preferred is None:
+        return best
+    mine = next(s for s in scored if s[1] == preferred)
+    margin = stats.chi2.ppf(1 - LR_ALPHA, len(FAMILIES[best[1]]))
+    return mine if mine[0] - best[0] < margin else best
 
 
 def search(
@@ -761,32 +847,36 @@ def search(
     sse_now = _sse(trials, emulator, fit)
     steps = 0
     while any(r["flagged"] for r in after) and len(added) < len(FAMILIES):
-        candidates = [f for f in FAMILIES if f not in added]
-        scored = []
-        for family in candidates:
-            progress("effects", steps, len(FAMILIES) + 1)
-            steps += 1
-            trial_fit = fit_effects(trials, emulator, [*added, family], free, weak, seed)
-            scored.append((_sse(trials, emulator, trial_fit), family))
-        sse, best = min(scored)
-        error = prediction_error(trials, emulator, [*added, best], free, weak, seed)
-        # the drop in squared standardised error, against chi-square with the new
-        # parameters' degrees of freedom (a likelihood-ratio test of the family)
-        lr = sse_now - sse
-        tried.append(
-            {
-                "family": best,
-                "in_sample": {f: round(s, 3) for s, f in scored},
-                "likelihood_ratio": lr,
-                "held_out_error": error.error,
-                "held_out_error_without": error_now.error,
-            }
-        )
-        significant = lr >= stats.chi2.ppf(1 - LR_ALPHA, len(FAMILIES[best]))
-        if not significant or error.error >= error_now.error:
+        taken = None
+        for turn in shaped_candidates(after, added):
+            scored = []
+            for family in turn.families:
+                progress("effects", steps, len(FAMILIES) + 1)
+                steps += 1
+                trial_fit = fit_effects(trials, emulator, [*added, family], free, weak, seed)
+                scored.append((_sse(trials, emulator, trial_fit), family))
+            sse, best = _candidate(scored, turn.preferred)
+            error = prediction_error(trials, emulator, [*added, best], free, weak, seed)
+            # the drop in squared standardised error, against chi-square with the new
+            # parameters' degrees of freedom (a likelihood-ratio test of the family)
+            lr = sse_now - sse
+            tried.append(
+                {
+                    "family": best,
+                    "in_sample": {f: round(s, 3) for s, f in scored},
+                    "likelihood_ratio": lr,
+                    "held_out_error": error.error,
+                    "held_out_error_without": error_now.error,
+                }
+            )
+            significant = lr >= stats.chi2.ppf(1 - LR_ALPHA, len(FAMILIES[best]))
+            if significant and error.error < error_now.error:
+                taken = best, error, sse
+                break
+        if taken is None:
             break
+        best, error_now, sse_now = taken
         added.append(best)
-        error_now, sse_now = error, sse
         fit = fit_effects(trials, emulator, added, free, weak, seed, bootstrap)
         after = residual_structure(trials, emulator, fit)
     progress("effects", len(FAMILIES) + 1, len(FAMILIES) + 1)
