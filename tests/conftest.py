@@ -181,6 +181,7 @@ SLOW_MODULES = frozenset(
         "tests/study/test_participant_effects_closed_form.py",
         "tests/study/test_participant_effects_one_measure.py",
         "tests/study/test_participant_fit_effects.py",
+        "tests/study/test_participant_fit_one_measure.py",
         "tests/study/test_participant_fit_notes.py",
         "tests/study/test_participant_fit_samples.py",
         "tests/study/test_participant_fit_validate.py",
