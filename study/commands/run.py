@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING, Any
 
 import click
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn
-from sqlalchemy.orm import Session
 
 from db.migrate import open_database
 from study.commands.base import (
@@ -24,7 +23,7 @@ from study.commands.base import (
 )
 from study.errors import StudyInputError
 from study.protocol.actor import current_actor
-from study.protocol.roster import load_study, schedule
+from study.protocol.roster import read_design, schedule
 from study.protocol.stop_signals import stop_on_signals
 
 MIN_PACE, MAX_PACE = 0.01, 1000.0
@@ -174,7 +173,7 @@ def _run_participant(
     engine = open_database(db_url, create=False)
     started: list[PendingTrial] = []
     try:
-        design = _design(engine)  # read once: its [sensors], its [lsl], the session's
+        design = read_design(engine)  # read once: its [sensors], its [lsl], the session's
         make_driver = None
         if port is not None and driver == "hardware":
             make_driver = _hardware_driver(port, drive_port, design.sensors)
@@ -386,12 +385,6 @@ def _lsl_observers(
     return session_observers(engine, design, publish, notice)
 
 
-def _design(engine: Engine) -> StudyDesign:
-
-    with Session(engine) as session:
-        return load_study(session)[1]
-
-
 def _progress() -> Progress:
     """The bar both run modes show on stderr: what runs now, and k of n done."""
     return progress_bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn())
@@ -415,7 +408,7 @@ def _run_all(
 
     engine = open_database(db_url, create=False)
     try:
-        design = _design(engine)  # read once, here: the notice, the roster, every session
+        design = read_design(engine)  # read once, here: the notice, the roster, every session
         codes = [p["code"] for p in schedule(engine, design)["participants"] if not p["withdrawn"]]
     finally:
         engine.dispose()
